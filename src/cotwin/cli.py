@@ -1,0 +1,55 @@
+"""The `cotwin` command."""
+
+from __future__ import annotations
+
+import sys
+from collections import Counter
+
+import click
+
+from .diagnostics import CotwinError, Severity
+
+
+def _report(findings, stream=None) -> None:
+    stream = stream or sys.stderr
+    for f in findings:
+        click.echo(str(f), file=stream)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="cotwin")
+def main() -> None:
+    """cotwin: RoboSim models to FMI-based digital twins."""
+
+
+@main.command()
+@click.argument("paths", nargs=-1, required=True)
+def check(paths: tuple[str, ...]) -> None:
+    """Parse, resolve and type-check RoboSim models (files or folders of .rst and .pm)."""
+    from .robosim.check import check_paths
+    from .robosim.summary import summarise
+
+    result = check_paths(paths)
+    _report(result.findings)
+    if not result.ok:
+        errors = sum(f.severity is Severity.ERROR for f in result.findings)
+        click.echo(f"{errors} error(s)", file=sys.stderr)
+        sys.exit(1)
+    warnings = Counter(f.location.path for f in result.findings if f.severity is Severity.WARNING)
+    for source in (f for project in result.projects for f in project.files):
+        extra = f", {warnings[source.path]} warning(s)" if warnings[source.path] else ""
+        click.echo(f"{source.path}: ok ({summarise(source)}{extra})")
+
+
+def run() -> None:
+    """Entry point that turns any CotwinError escaping a command into a clean report."""
+    try:
+        main(standalone_mode=False)
+    except CotwinError as err:
+        _report(err.findings)
+        sys.exit(1)
+    except click.exceptions.Abort:
+        sys.exit(130)
+    except click.ClickException as err:
+        err.show()
+        sys.exit(err.exit_code)

@@ -1,0 +1,84 @@
+"""Findings (errors and warnings with a location) and the one exception type cotwin raises for bad input."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+from typing import Iterable
+
+
+
+@dataclass(frozen=True, order=True)
+class Location:
+    """A position in a source file: 1-based line and column."""
+
+    path: str
+    line: int
+    column: int
+
+    def __str__(self) -> str:
+        return f"{self.path}:{self.line}:{self.column}"
+
+
+class Severity(str, Enum):
+    ERROR = "error"
+    WARNING = "warning"
+
+
+@dataclass(frozen=True, order=True)
+class Finding:
+    location: Location
+    severity: Severity
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.location}: {self.severity.value}: {self.message}"
+
+
+class CotwinError(Exception):
+    """Bad input: carries every finding, each with its location. Never a bare traceback."""
+
+    def __init__(self, findings: Iterable[Finding] | str):
+        if isinstance(findings, str):
+            findings = [Finding(Location("<input>", 0, 0), Severity.ERROR, findings)]
+        self.findings = sorted(findings)
+        super().__init__("\n".join(str(f) for f in self.findings))
+
+
+class Diagnostics:
+    """Collects findings so that all problems are reported together."""
+
+    def __init__(self) -> None:
+        self._findings: list[Finding] = []
+        self._seen: set[Finding] = set()
+
+    def error(self, loc: Location, message: str) -> None:
+        self._add(Finding(loc, Severity.ERROR, message))
+
+    def warning(self, loc: Location, message: str) -> None:
+        self._add(Finding(loc, Severity.WARNING, message))
+
+    def extend(self, findings: Iterable[Finding]) -> None:
+        for f in findings:
+            self._add(f)
+
+    def _add(self, finding: Finding) -> None:
+        if finding not in self._seen:
+            self._seen.add(finding)
+            self._findings.append(finding)
+
+    @property
+    def findings(self) -> list[Finding]:
+        return sorted(self._findings)
+
+    @property
+    def errors(self) -> list[Finding]:
+        return [f for f in self.findings if f.severity is Severity.ERROR]
+
+    @property
+    def has_errors(self) -> bool:
+        return any(f.severity is Severity.ERROR for f in self._findings)
+
+    def raise_if_errors(self) -> None:
+        if self.has_errors:
+            raise CotwinError(self._findings)

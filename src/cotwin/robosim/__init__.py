@@ -1,0 +1,1 @@
+"""The RoboSim front end: grammars, parser, typed model, name and type resolution."""

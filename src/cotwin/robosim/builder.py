@@ -1,0 +1,592 @@
+"""Turn a Lark parse tree into the typed model (dataclasses), recording where each element was written.
+
+Block contents arrive as a flat list of item objects; containers sort them by type. Small private
+classes tag items that have no model class of their own (a cycleDef, an exec flag, an equation).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from lark import Token, Transformer, v_args
+
+from ..diagnostics import Diagnostics, Location
+from . import syntax as s
+from .declarations import (
+    ClockDecl, EnumDecl, EnumLiteral, EventDecl, FunctionDecl, Import, OperationSig, Param,
+    PrimitiveDecl, RecordDecl, SourceFile, VarDecl,
+)
+from .dmodel_elements import (
+    Connection, Controller, Final, OperationDef, Initial, Interface, InterfaceUse, Junction, MachineRef, Module,
+    RoboticPlatform, State, StateMachine, Transition,
+)
+from .pmodel_elements import (
+    AnnotationEntry, AnnotationRecord, Body, Device, DeviceRef, FixedTo, Inertial, JointRef, Link,
+    Mapping, MappingInputEvent, MappingOperation, PartRef, PModel, Pose, Shape,
+)
+
+
+# ---- item tags --------------------------------------------------------------------------------
+
+
+class _Group(tuple):
+    """Several declarations from one `var a: T, b: U` line; flattened into the container."""
+
+
+class _Params(tuple):
+    pass
+
+
+class _Args(tuple):
+    pass
+
+
+@dataclass(frozen=True)
+class _Tagged:
+    tag: str
+    value: object
+    loc: Location
+
+
+def _flatten(items) -> list:
+    out = []
+    for item in items:
+        if isinstance(item, _Group):
+            out.extend(item)
+        else:
+            out.append(item)
+    return out
+
+
+def _of(items, cls) -> tuple:
+    return tuple(i for i in items if isinstance(i, cls))
+
+
+def _tagged(items, tag: str) -> list[_Tagged]:
+    return [i for i in items if isinstance(i, _Tagged) and i.tag == tag]
+
+
+def _ident(token: Token) -> str:
+    text = str(token)
+    return text[1:] if text.startswith("^") else text
+
+
+_POSE_KEYS = ("x", "y", "z", "roll", "pitch", "yaw")
+
+
+@v_args(meta=True, inline=True)
+class Builder(Transformer):
+    def __init__(self, path: str, notation: str, diagnostics: Diagnostics):
+        super().__init__()
+        self.path = path
+        self.notation = notation
+        self.diag = diagnostics
+
+    # ---- helpers ----
+    def _loc(self, meta) -> Location:
+        if getattr(meta, "empty", True):
+            return Location(self.path, 1, 1)
+        return Location(self.path, meta.line, meta.column)
+
+    def _tok_loc(self, token: Token) -> Location:
+        return Location(self.path, token.line or 1, token.column or 1)
+
+    def _single(self, items: list[_Tagged], what: str, where: str):
+        """The one item of a kind allowed once in a block (later ones are reported)."""
+        for extra in items[1:]:
+            self.diag.error(extra.loc, f"{what} given more than once in {where}")
+        return items[0].value if items else None
+
+    # ---- names, imports, types ----
+    def qn(self, meta, *ids):
+        return s.QName(tuple(_ident(i) for i in ids), self._tok_loc(ids[0]))
+
+    def import_decl(self, meta, name, wildcard=None):
+        return Import(name, wildcard is not None, self._loc(meta))
+
+    def named_type(self, meta, name):
+        return s.NamedType(name, name.loc)
+
+    def vector_type(self, meta, element, size):
+        return s.VectorType(element, size, self._loc(meta))
+
+    def matrix_type(self, meta, element, rows, columns):
+        return s.MatrixType(element, rows, columns, self._loc(meta))
+
+    def set_type(self, meta, element):
+        return s.CollectionType("Set", element, self._loc(meta))
+
+    def seq_type(self, meta, element):
+        return s.CollectionType("Seq", element, self._loc(meta))
+
+    def product_type(self, meta, *items):
+        return s.ProductType(tuple(i for i in items if not isinstance(i, Token)), self._loc(meta))
+
+    def function_type(self, meta, argument, result):
+        return s.FunctionType(argument, result, self._loc(meta))
+
+    # ---- declarations ----
+    def var_kind(self, meta, token):
+        return str(token)
+
+    port_kind = var_kind
+    device_kind = var_kind
+    shape_kind = var_kind
+    pose_key = var_kind
+    quant_kind = var_kind
+
+    def var_item(self, meta, name, type_, init=None):
+        return (_ident(name), type_, init, self._tok_loc(name))
+
+    def var_list(self, meta, kind, *items):
+        return _Group(VarDecl(n, t, i, kind, loc) for n, t, i, loc in items)
+
+    port_list = var_list
+
+    def param(self, meta, name, type_):
+        return Param(_ident(name), type_, self._tok_loc(name))
+
+    field = param
+
+    def params(self, meta, *items):
+        return _Params(items)
+
+    def primitive_type(self, meta, name):
+        return PrimitiveDecl(_ident(name), self._tok_loc(name))
+
+    def record_type(self, meta, name, *fields):
+        return RecordDecl(_ident(name), tuple(fields), self._tok_loc(name))
+
+    def enum_literal(self, meta, name, *types):
+        return EnumLiteral(_ident(name), tuple(types), self._tok_loc(name))
+
+    def enum_type(self, meta, name, *literals):
+        return EnumDecl(_ident(name), tuple(literals), self._tok_loc(name))
+
+    def precondition(self, meta, expr):
+        return _Tagged("pre", expr, self._loc(meta))
+
+    def postcondition(self, meta, expr):
+        return _Tagged("post", expr, self._loc(meta))
+
+    def function(self, meta, name, *rest):
+        params = next((r for r in rest if isinstance(r, _Params)), _Params())
+        others = [r for r in rest if not isinstance(r, (_Params, _Tagged))]
+        return FunctionDecl(
+            _ident(name), tuple(params), others[0],
+            tuple(t.value for t in _tagged(rest, "pre")), tuple(t.value for t in _tagged(rest, "post")),
+            self._tok_loc(name),
+        )
+
+    # ---- expressions ----
+    def binary(self, meta, left, op, right):
+        return s.Binary(str(op), left, right, self._loc(meta))
+
+    def not_expr(self, meta, operand):
+        return s.Unary("not", operand, self._loc(meta))
+
+    def neg_expr(self, meta, _minus, operand):
+        return s.Unary("-", operand, self._loc(meta))
+
+    def field_expr(self, meta, base, name):
+        return s.FieldAccess(base, _ident(name), self._tok_loc(name))
+
+    def index_expr(self, meta, base, index):
+        return s.IndexAccess(base, index, self._loc(meta))
+
+    def call_expr(self, meta, function, args=()):
+        return s.Call(function, tuple(args), self._loc(meta))
+
+    def int_lit(self, meta, token):
+        return s.Literal(int(token), self._tok_loc(token))
+
+    def real_lit(self, meta, token):
+        return s.Literal(float(token), self._tok_loc(token))
+
+    def string_lit(self, meta, token):
+        return s.Literal(str(token)[1:-1], self._tok_loc(token))
+
+    def bool_lit(self, meta, token):
+        return s.Literal(str(token) == "true", self._tok_loc(token))
+
+    def name_expr(self, meta, name):
+        return s.Name(name, name.loc)
+
+    def event_expr(self, meta, name):
+        return s.EventTest(name, None, self._loc(meta))
+
+    def event_bind_expr(self, meta, name, bind):
+        return s.EventTest(name, _ident(bind), self._loc(meta))
+
+    def cycle_expr(self, meta):
+        return s.CycleExpr(self._loc(meta))
+
+    def since_expr(self, meta, clock):
+        return s.SinceExpr(_ident(clock), self._loc(meta))
+
+    def tuple_expr(self, meta, args):
+        return s.TupleExpr(tuple(args), self._loc(meta))
+
+    def vector_expr(self, meta, args):
+        return s.VectorExpr(tuple(args), self._loc(meta))
+
+    def if_expr(self, meta, condition, then, otherwise):
+        return s.IfExpr(condition, then, otherwise, self._loc(meta))
+
+    def args(self, meta, *items):
+        return _Args(items)
+
+    def binder(self, meta, name, type_):
+        return (_ident(name), type_)
+
+    def quantified(self, meta, kind, *rest):
+        return s.Quantified(kind, tuple(rest[:-1]), rest[-1], self._loc(meta))
+
+    def let_binding(self, meta, name, _eq, value):
+        return (_ident(name), value)
+
+    def let_expr(self, meta, *rest):
+        return s.LetExpr(tuple(rest[:-1]), rest[-1], self._loc(meta))
+
+    # ---- statements ----
+    def stmt(self, meta, *basics):
+        if len(basics) == 1:
+            return basics[0]
+        return s.Sequence(tuple(basics), self._loc(meta))
+
+    def exec_stmt(self, meta):
+        return s.Exec(self._loc(meta))
+
+    def skip_stmt(self, meta):
+        return s.Skip(self._loc(meta))
+
+    def send_stmt(self, meta, event, value=None):
+        return s.Send(event, value, self._loc(meta))
+
+    def platform_call_stmt(self, meta, operation, args=()):
+        return s.PlatformCall(operation, tuple(args), self._loc(meta))
+
+    def call_stmt(self, meta, operation, args=()):
+        return s.CallStmt(operation, tuple(args), self._loc(meta))
+
+    def assign_stmt(self, meta, target, value):
+        return s.Assign(target, value, self._loc(meta))
+
+    def if_stmt(self, meta, condition, then, otherwise=None):
+        return s.IfStmt(condition, then, otherwise, self._loc(meta))
+
+    def clock_reset_stmt(self, meta, clock):
+        return s.ClockReset(_ident(clock), self._loc(meta))
+
+    def field_suffix(self, meta, name):
+        return ("field", _ident(name), self._tok_loc(name))
+
+    def index_suffix(self, meta, index):
+        return ("index", index, self._loc(meta))
+
+    def lvalue(self, meta, name, *suffixes):
+        loc = self._tok_loc(name)
+        target: s.Expr = s.Name(s.QName((_ident(name),), loc), loc)
+        for kind, value, where in suffixes:
+            target = s.FieldAccess(target, value, where) if kind == "field" else s.IndexAccess(target, value, where)
+        return target
+
+    # ---- d-model ----
+    def rst_file(self, meta, *items):
+        return self._source(items)
+
+    def pm_file(self, meta, *items):
+        return self._source(items)
+
+    def _source(self, items) -> SourceFile:
+        items = _flatten(items)
+        package = next((i.value for i in _tagged(items, "package")), None)
+        return SourceFile(
+            self.path, self.notation, package, list(_of(items, Import)),
+            [i for i in items if not isinstance(i, (Import, _Tagged))],
+        )
+
+    def package(self, meta, name):
+        return _Tagged("package", name, self._loc(meta))
+
+    def op_sig(self, meta, name, params=()):
+        return OperationSig(_ident(name), tuple(params), self._tok_loc(name))
+
+    def event(self, meta, name, type_=None):
+        return EventDecl(_ident(name), type_, self._tok_loc(name))
+
+    def clock(self, meta, name):
+        return ClockDecl(_ident(name), self._tok_loc(name))
+
+    def uses(self, meta, name):
+        return InterfaceUse("uses", name, self._loc(meta))
+
+    def provides(self, meta, name):
+        return InterfaceUse("provides", name, self._loc(meta))
+
+    def requires(self, meta, name):
+        return InterfaceUse("requires", name, self._loc(meta))
+
+    def cycle_def(self, meta, expr):
+        return _Tagged("cycleDef", expr, self._loc(meta))
+
+    def interface(self, meta, name, *items):
+        items = _flatten(items)
+        return Interface(_ident(name), _of(items, OperationSig), _of(items, EventDecl), _of(items, VarDecl),
+                         _of(items, ClockDecl), self._tok_loc(name))
+
+    def platform(self, meta, name, *items):
+        items = _flatten(items)
+        return RoboticPlatform(_ident(name), _of(items, InterfaceUse), _of(items, VarDecl),
+                               _of(items, OperationSig), _of(items, EventDecl), self._tok_loc(name))
+
+    def cref(self, meta, name, target):
+        return MachineRef(_ident(name), target, self._tok_loc(name))
+
+    def module(self, meta, name, *items):
+        where = f"module {name}"
+        platforms = _of(items, RoboticPlatform)
+        for extra in platforms[1:]:
+            self.diag.error(extra.loc, f"more than one robotic platform in {where}")
+        return Module(_ident(name), self._single(_tagged(items, "cycleDef"), "cycleDef", where),
+                      platforms[0] if platforms else None, _of(items, Controller), _of(items, MachineRef),
+                      _of(items, Connection), self._tok_loc(name))
+
+    def async_flag(self, meta):
+        return _Tagged("async", True, self._loc(meta))
+
+    def connection(self, meta, source, source_event, target, target_event, is_async=None):
+        return Connection(_ident(source), _ident(source_event), _ident(target), _ident(target_event),
+                          is_async is not None, self._loc(meta))
+
+    def controller(self, meta, name, *items):
+        items = _flatten(items)
+        machines = _of(items, StateMachine)
+        return Controller(
+            _ident(name), self._single(_tagged(items, "cycleDef"), "cycleDef", f"controller {name}"),
+            _of(items, InterfaceUse), _of(items, VarDecl), _of(items, EventDecl),
+            tuple(m for m in machines if isinstance(m, OperationDef)),
+            tuple(m for m in machines if not isinstance(m, OperationDef)),
+            _of(items, MachineRef), _of(items, Connection), self._tok_loc(name),
+        )
+
+    def input_context(self, meta, *items):
+        return _Tagged("input", tuple(items), self._loc(meta))
+
+    def output_context(self, meta, *items):
+        return _Tagged("output", tuple(items), self._loc(meta))
+
+    def _machine(self, cls, name, items, params=()):
+        items = _flatten(items)
+        where = f"state machine {name}"
+        inputs = tuple(x for t in _tagged(items, "input") for x in t.value)
+        outputs = tuple(x for t in _tagged(items, "output") for x in t.value)
+        nodes = tuple(i for i in items if isinstance(i, (State, Initial, Junction, Final)))
+        return cls(
+            _ident(name), self._single(_tagged(items, "cycleDef"), "cycleDef", where),
+            _of(items, InterfaceUse), inputs, outputs, _of(items, VarDecl), _of(items, ClockDecl),
+            nodes, _of(items, Transition), self._tok_loc(name), tuple(params),
+        )
+
+    def stm(self, meta, name, *items):
+        return self._machine(StateMachine, name, items)
+
+    def operation_def(self, meta, name, *items):
+        params = next((i for i in items if isinstance(i, _Params)), ())
+        return self._machine(OperationDef, name, [i for i in items if not isinstance(i, _Params)], params)
+
+    def state(self, meta, name, *items):
+        where = f"state {name}"
+        return State(
+            _ident(name), tuple(i for i in items if isinstance(i, (State, Initial, Junction, Final))),
+            _of(items, Transition), self._single(_tagged(items, "entry"), "entry action", where),
+            self._single(_tagged(items, "during"), "during action", where),
+            self._single(_tagged(items, "exit"), "exit action", where), self._tok_loc(name),
+        )
+
+    def entry_action(self, meta, stmt):
+        return _Tagged("entry", stmt, self._loc(meta))
+
+    def during_action(self, meta, stmt):
+        return _Tagged("during", stmt, self._loc(meta))
+
+    def exit_action(self, meta, stmt):
+        return _Tagged("exit", stmt, self._loc(meta))
+
+    def initial(self, meta, name):
+        return Initial(_ident(name), self._tok_loc(name))
+
+    def junction(self, meta, name):
+        return Junction(_ident(name), self._tok_loc(name))
+
+    def final(self, meta, name):
+        return Final(_ident(name), self._tok_loc(name))
+
+    def exec_flag(self, meta):
+        return _Tagged("exec", True, self._loc(meta))
+
+    def clock_reset(self, meta, name):
+        return _Tagged("reset", _ident(name), self._loc(meta))
+
+    def condition(self, meta, expr):
+        return _Tagged("condition", expr, self._loc(meta))
+
+    def else_condition(self, meta):
+        return _Tagged("else", None, self._loc(meta))
+
+    def action(self, meta, stmt):
+        return _Tagged("action", stmt, self._loc(meta))
+
+    def transition(self, meta, name, source, target, *items):
+        condition = _tagged(items, "condition")
+        actions = _tagged(items, "action")
+        return Transition(
+            _ident(name), _ident(source), _ident(target), bool(_tagged(items, "exec")),
+            tuple(t.value for t in _tagged(items, "reset")), condition[0].value if condition else None,
+            bool(_tagged(items, "else")), actions[0].value if actions else None, self._tok_loc(name),
+            self._tok_loc(source), self._tok_loc(target),
+        )
+
+    # ---- p-model ----
+    def equation(self, meta, expr):
+        return _Tagged("equation", expr, self._loc(meta))
+
+    def device(self, meta, kind, name, *items):
+        items = _flatten(items)
+        return Device(kind, _ident(name), _of(items, VarDecl), tuple(t.value for t in _tagged(items, "equation")),
+                      _of(items, AnnotationRecord), self._tok_loc(name))
+
+    def annotation_entry(self, meta, key, value):
+        return AnnotationEntry(_ident(key), value, self._tok_loc(key))
+
+    def annotation(self, meta, name, *entries):
+        return AnnotationRecord(_ident(name), tuple(entries), self._tok_loc(name))
+
+    annotation_record = annotation
+
+    def named_value(self, meta, name, value):
+        return (_ident(name), value, self._tok_loc(name))
+
+    def pose_field(self, meta, key, value):
+        return (key, value, self._loc(meta))
+
+    def pose(self, meta, *fields):
+        seen: dict[str, Location] = {}
+        for key, _, loc in fields:
+            if key in seen:
+                self.diag.error(loc, f"pose field '{key}' given twice (first at line {seen[key].line})")
+            seen[key] = loc
+        return Pose(tuple(fields), self._loc(meta))
+
+    def shape(self, meta, kind, *params):
+        return Shape(kind, tuple(params), self._loc(meta))
+
+    def mass(self, meta, value, unit=None):
+        return _Tagged("mass", (value, str(unit) if unit is not None else None), self._loc(meta))
+
+    def inertia_matrix(self, meta, *values):
+        return _Tagged("inertia", tuple(values), self._loc(meta))
+
+    def inertial(self, meta, *items):
+        where = "inertial information"
+        mass = self._single(_tagged(items, "mass"), "mass", where)
+        poses = _of(items, Pose)
+        return Inertial(mass[0] if mass else None, mass[1] if mass else None,
+                        self._single(_tagged(items, "inertia"), "inertia matrix", where) or (),
+                        poses[0] if poses else None, self._loc(meta))
+
+    def link_def(self, meta, *items):
+        return _Tagged("def", tuple(_flatten(items)), self._loc(meta))
+
+    def local_body(self, meta, name, *items):
+        shapes = tuple(x for d in _tagged(items, "def") for x in d.value if isinstance(x, Shape))
+        return Body(_ident(name), shapes, self._one_pose(items, f"body {name}"), self._tok_loc(name))
+
+    def _one_pose(self, items, where: str) -> Pose | None:
+        poses = _of(items, Pose)
+        for extra in poses[1:]:
+            self.diag.error(extra.loc, f"more than one pose in {where}")
+        return poses[0] if poses else None
+
+    def fixed_to(self, meta, link, _in, part):
+        return FixedTo(_ident(link), _ident(part), self._tok_loc(link))
+
+    def instantiation(self, meta, name, value):
+        return _Tagged("instantiation", (_ident(name), value, self._tok_loc(name)), self._loc(meta))
+
+    def relation(self, meta, expr):
+        return _Tagged("relation", expr, self._loc(meta))
+
+    def flexibly_connected(self, meta, child, *rest):
+        part = _ident(rest[-1]) if rest else None
+        return _Tagged("child", (_ident(child), part, self._tok_loc(child)), self._loc(meta))
+
+    def _device_ref(self, kind, meta, name, device, items):
+        return DeviceRef(kind, _ident(name), device, tuple(t.value for t in _tagged(items, "relation")),
+                         tuple(t.value for t in _tagged(items, "instantiation")), self._tok_loc(name))
+
+    def sref(self, meta, name, target, *items):
+        if self.notation == "rst":
+            return MachineRef(_ident(name), target, self._tok_loc(name))
+        return self._device_ref("sref", meta, name, target, items)
+
+    def aref(self, meta, name, target, *items):
+        return self._device_ref("aref", meta, name, target, items)
+
+    def jref(self, meta, name, joint, *items):
+        where = f"joint {name}"
+        child = self._single(_tagged(items, "child"), "flexibly connected to", where)
+        return JointRef(
+            _ident(name), joint, _of(items, AnnotationRecord),
+            tuple(t.value for t in _tagged(items, "instantiation")),
+            tuple(i for i in items if isinstance(i, DeviceRef)),
+            child[0] if child else None, child[1] if child else None, child[2] if child else None,
+            self._one_pose(items, where), self._tok_loc(name),
+        )
+
+    def local_link(self, meta, name, *items):
+        where = f"link {name}"
+        definition = [x for d in _tagged(items, "def") for x in d.value]
+        inertials = _of(definition, Inertial)
+        for extra in inertials[1:]:
+            self.diag.error(extra.loc, f"more than one inertial information in {where}")
+        refs = _of(items, DeviceRef)
+        return Link(
+            _ident(name), inertials[0] if inertials else None, _of(definition, Shape),
+            _of(definition, AnnotationRecord), _of(definition, VarDecl),
+            tuple(t.value for t in _tagged(definition, "equation")), self._one_pose(items, where),
+            _of(items, Body), _of(items, JointRef), tuple(r for r in refs if r.kind == "sref"),
+            tuple(r for r in refs if r.kind == "aref"), _of(items, FixedTo), self._tok_loc(name),
+        )
+
+    def part(self, meta, name, pmodel, *items):
+        return PartRef(_ident(name), pmodel, self._one_pose(items, f"part {name}"),
+                       tuple(t.value for t in _tagged(items, "instantiation")), self._tok_loc(name))
+
+    def pmodel(self, meta, name, *items):
+        items = _flatten(items)
+        return PModel(_ident(name), _of(items, VarDecl), _of(items, Link), _of(items, PartRef), self._tok_loc(name))
+
+    # ---- mapping ----
+    def map_action(self, meta, target, value):
+        return _Tagged("action", (target, value, self._loc(meta)), self._loc(meta))
+
+    def predicate(self, meta, expr):
+        return _Tagged("predicate", expr, self._loc(meta))
+
+    def map_operation(self, meta, name, *items):
+        items = _flatten(items)
+        return MappingOperation(_ident(name), _of(items, VarDecl), tuple(t.value for t in _tagged(items, "equation")),
+                                tuple(t.value for t in _tagged(items, "action")), self._tok_loc(name))
+
+    def map_input_event(self, meta, name, *items):
+        bind = _ident(items[0]) if items and isinstance(items[0], Token) else None
+        items = _flatten(i for i in items if not isinstance(i, Token))
+        return MappingInputEvent(_ident(name), bind, tuple(t.value for t in _tagged(items, "equation")),
+                                 tuple(t.value for t in _tagged(items, "predicate")), _of(items, VarDecl),
+                                 self._tok_loc(name))
+
+    def mapping(self, meta, name, dmodel, pmodel, *items):
+        items = _flatten(items)
+        return Mapping(_ident(name), dmodel, pmodel, _of(items, VarDecl), _of(items, MappingOperation),
+                       _of(items, MappingInputEvent), self._tok_loc(name))

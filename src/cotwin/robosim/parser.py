@@ -1,0 +1,149 @@
+"""Parse RoboSim text into a typed SourceFile, turning every syntax problem into a located Finding."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+
+import lark
+from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken, VisitError
+
+from ..diagnostics import CotwinError, Diagnostics, Finding, Location, Severity
+from .builder import Builder
+from .declarations import SourceFile
+
+NOTATIONS = {".rst": "rst", ".pm": "pm"}
+_START = {"rst": "rst_file", "pm": "pm_file"}
+_GRAMMAR = {"rst": "dmodel.lark", "pm": "pmodel.lark"}
+
+# Terminal names shown to a user as the text they stand for.
+_TERMINAL_TEXT = {
+    "ID": "a name", "INT": "an integer", "FLOAT": "a real number", "STRING": "a string",
+    "LBRACE": "'{'", "RBRACE": "'}'", "LPAR": "'('", "RPAR": "')'", "COLON": "':'", "COMMA": "','",
+    "EQUAL": "'='", "DOLLAR": "'$'", "SEMICOLON": "';'", "$END": "end of file",
+}
+
+
+def _grammar_text(name: str) -> str:
+    folder = resources.files("cotwin.robosim") / "grammar"
+    return (folder / name).read_text(encoding="utf-8") + "\n" + (folder / "common.lark").read_text(encoding="utf-8")
+
+
+@lru_cache(maxsize=None)
+def lark_parser(notation: str) -> lark.Lark:
+    """The LALR parser of one notation ("rst" or "pm"), built once per process."""
+    return lark.Lark(
+        _grammar_text(_GRAMMAR[notation]),
+        start=_START[notation],
+        parser="lalr",
+        lexer="contextual",
+        propagate_positions=True,
+        maybe_placeholders=False,
+        cache=True,
+    )
+
+
+def notation_of(path: str | Path) -> str | None:
+    return NOTATIONS.get(Path(path).suffix)
+
+
+def _describe_expected(expected: set[str], parser: lark.Lark) -> str:
+    names = []
+    for term in sorted(expected):
+        if term in _TERMINAL_TEXT:
+            names.append(_TERMINAL_TEXT[term])
+            continue
+        try:
+            pattern = parser.get_terminal(term).pattern
+        except KeyError:
+            names.append(term)
+            continue
+        names.append(f"'{pattern.value}'" if pattern.type == "str" else term.lower())
+    names = sorted(set(names))
+    if len(names) > 8:
+        return ", ".join(names[:8]) + ", ..."
+    return ", ".join(names)
+
+
+def _syntax_finding(err: UnexpectedInput, path: str, parser: lark.Lark) -> Finding:
+    line = getattr(err, "line", 0) or 0
+    column = getattr(err, "column", 0) or 0
+    if isinstance(err, UnexpectedToken):
+        token = err.token
+        found = "end of file" if token.type == "$END" else f"'{token}'"
+        message = f"unexpected {found}, expected {_describe_expected(err.expected, parser)}"
+        if token.type == "$END":
+            line, column = _end_position(err)
+    elif isinstance(err, UnexpectedCharacters):
+        message = f"unexpected character '{err.char}'"
+        if err.allowed:
+            message += f", expected {_describe_expected(err.allowed, parser)}"
+    elif isinstance(err, UnexpectedEOF):
+        message = f"unexpected end of file, expected {_describe_expected(set(err.expected), parser)}"
+    else:  # pragma: no cover - lark has no other kinds today
+        message = "syntax error"
+    return Finding(Location(path, max(line, 1), max(column, 1)), Severity.ERROR, message)
+
+
+def _end_position(err: UnexpectedToken) -> tuple[int, int]:
+    token = err.token
+    line = getattr(token, "end_line", None) or getattr(token, "line", None)
+    column = getattr(token, "end_column", None) or getattr(token, "column", None)
+    if line and column and line > 0:
+        return line, column
+    return 1, 1
+
+
+def parse_text(text: str, path: str, notation: str | None = None) -> tuple[SourceFile | None, list[Finding]]:
+    """Parse one file's text. Returns the file (None on a syntax error) and every finding."""
+    notation = notation or notation_of(path)
+    if notation not in _START:
+        return None, [Finding(Location(path, 1, 1), Severity.ERROR,
+                              "unknown file kind: expected a .rst d-model or a .pm p-model/mapping")]
+    parser = lark_parser(notation)
+    try:
+        tree = parser.parse(text)
+    except UnexpectedInput as err:
+        if isinstance(err, UnexpectedToken) and err.token.type == "$END":
+            line, column = _last_position(text)
+            f = _syntax_finding(err, path, parser)
+            return None, [Finding(Location(path, line, column), f.severity, f.message)]
+        return None, [_syntax_finding(err, path, parser)]
+    diagnostics = Diagnostics()
+    try:
+        source = Builder(path, notation, diagnostics).transform(tree)
+    except VisitError as err:  # a builder bug must still not escape as a traceback
+        inner = err.orig_exc
+        if isinstance(inner, RecursionError):
+            message = "expression nested too deeply"
+        else:
+            message = f"internal error while reading the model: {type(inner).__name__}: {inner}"
+        return None, [Finding(Location(path, 1, 1), Severity.ERROR, message)]
+    except RecursionError:
+        return None, [Finding(Location(path, 1, 1), Severity.ERROR, "expression nested too deeply")]
+    return source, diagnostics.findings
+
+
+def _last_position(text: str) -> tuple[int, int]:
+    lines = text.split("\n")
+    return len(lines), len(lines[-1]) + 1
+
+
+def parse_file(path: str | Path) -> tuple[SourceFile | None, list[Finding]]:
+    """Read and parse a file; unreadable files are findings too."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        return None, [Finding(Location(str(path), 1, 1), Severity.ERROR, f"cannot read file: {err}")]
+    return parse_text(text, str(path))
+
+
+def parse(text: str, path: str = "<text>", notation: str | None = None) -> SourceFile:
+    """Parse text or raise CotwinError with the findings."""
+    source, findings = parse_text(text, path, notation)
+    errors = [f for f in findings if f.severity is Severity.ERROR]
+    if source is None or errors:
+        raise CotwinError(findings)
+    return source
