@@ -201,8 +201,7 @@ class DModelChecker:
             if isinstance(node.node, State):
                 for stmt in (node.node.entry, node.node.during, node.node.exit):
                     checker.statement(stmt, operations, outputs, local_ops)
-        for edge in graph.edges:
-            t = edge.transition
+        for t in graph.transitions:
             if t.condition is not None:
                 checker.condition(t.condition, f"condition of transition {t.name}")
             checker.statement(t.action, operations, outputs, local_ops)

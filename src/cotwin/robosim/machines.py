@@ -130,6 +130,11 @@ class MachineGraph:
         self.edges.append(edge)
         source.outgoing.append(edge)
 
+    @property
+    def transitions(self) -> list[Transition]:
+        """Every declared transition, resolved or not, in container order."""
+        return [t for _, _, transitions in self._containers for t in transitions]
+
     def initial_of(self, container: NodeInfo | None) -> NodeInfo | None:
         return next((n for n in self.children_of(container) if isinstance(n.node, Initial)), None)
 

@@ -66,15 +66,46 @@ def _describe_expected(expected: set[str], parser: lark.Lark) -> str:
     return ", ".join(names)
 
 
-def _syntax_finding(err: UnexpectedInput, path: str, parser: lark.Lark) -> Finding:
+# Words that open a declaration or a block item; seen as a plain name just before a syntax error,
+# they usually mean an earlier block was not closed.
+_OPENERS = frozenset(
+    "interface stm state transition controller module robotic datatype record enumeration function "
+    "operation connection initial junction final entry during exit pmodel local sensor actuator joint "
+    "map jref sref aref part import".split())
+
+
+def _keyword_before(err: UnexpectedToken, text: str) -> tuple[int, int, str] | None:
+    """A block keyword that the lexer read as a name right before the unexpected token."""
+    start = getattr(err.token, "start_pos", None)
+    if start is None or err.token.type == "$END":
+        return None
+    end = start
+    while end > 0 and text[end - 1].isspace():
+        end -= 1
+    begin = end
+    while begin > 0 and (text[begin - 1].isalnum() or text[begin - 1] == "_"):
+        begin -= 1
+    word = text[begin:end]
+    if word not in _OPENERS or begin == end:
+        return None
+    line = text.count("\n", 0, begin) + 1
+    column = begin - (text.rfind("\n", 0, begin) + 1) + 1
+    return line, column, word
+
+
+def _syntax_finding(err: UnexpectedInput, path: str, parser: lark.Lark, text: str = "") -> Finding:
     line = getattr(err, "line", 0) or 0
     column = getattr(err, "column", 0) or 0
+    if isinstance(err, UnexpectedToken) and (opener := _keyword_before(err, text)) is not None:
+        line, column, word = opener
+        return Finding(Location(path, line, column), Severity.ERROR,
+                       f"unexpected '{word}' (is a '}}' missing before it?)")
     if isinstance(err, UnexpectedToken):
         token = err.token
         found = "end of file" if token.type == "$END" else f"'{token}'"
         message = f"unexpected {found}, expected {_describe_expected(err.expected, parser)}"
-        if token.type == "$END":
-            line, column = _end_position(err)
+        if "RBRACE" in err.expected:
+            message += " (a '}' is missing)" if token.type == "$END" else " (is a '}' missing before it?)"
     elif isinstance(err, UnexpectedCharacters):
         message = f"unexpected character '{err.char}'"
         if err.allowed:
@@ -84,15 +115,6 @@ def _syntax_finding(err: UnexpectedInput, path: str, parser: lark.Lark) -> Findi
     else:  # pragma: no cover - lark has no other kinds today
         message = "syntax error"
     return Finding(Location(path, max(line, 1), max(column, 1)), Severity.ERROR, message)
-
-
-def _end_position(err: UnexpectedToken) -> tuple[int, int]:
-    token = err.token
-    line = getattr(token, "end_line", None) or getattr(token, "line", None)
-    column = getattr(token, "end_column", None) or getattr(token, "column", None)
-    if line and column and line > 0:
-        return line, column
-    return 1, 1
 
 
 def parse_text(text: str, path: str, notation: str | None = None) -> tuple[SourceFile | None, list[Finding]]:
@@ -109,7 +131,7 @@ def parse_text(text: str, path: str, notation: str | None = None) -> tuple[Sourc
             line, column = _last_position(text)
             f = _syntax_finding(err, path, parser)
             return None, [Finding(Location(path, line, column), f.severity, f.message)]
-        return None, [_syntax_finding(err, path, parser)]
+        return None, [_syntax_finding(err, path, parser, text)]
     diagnostics = Diagnostics()
     try:
         source = Builder(path, notation, diagnostics).transform(tree)

@@ -1,0 +1,150 @@
+"""Broken inputs give the right message at the right line and column, all findings together."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from cotwin.diagnostics import Severity
+
+DMODEL = """interface I {
+	event go: int
+	event halt
+	move(x: int)
+}
+stm M {
+	var n: int
+	var flag: boolean
+	input context { uses I }
+	output context { requires I }
+	initial i
+	state A { entry $move(n) }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $go?n }
+}
+"""
+
+PMODEL = """import physmod::joints::*
+import physmod::sensors::*
+pmodel P {
+	local link base {
+		def { inertial information { mass 1.0 kg } }
+		jref j = Revolute { flexibly connected to tip }
+		sref S = VelocitySensor
+	}
+	local link tip { def { inertial information { mass 1.0 kg } } }
+}
+"""
+
+MODULE = """module Mod {
+	robotic platform RP { uses I provides I }
+}
+"""
+
+MAPPING = """map Map dmodel Mod to pmodel P {
+	var speed: real
+	operation move { action speed = x }
+	input event halt { equation P::base::S.output_vel == 0.0 }
+	input event go { equation speed > 1.0 }
+}
+"""
+
+
+def errors(result):
+    return [(f.location.path.rsplit("/", 1)[-1], f.location.line, f.location.column, f.message)
+            for f in result.findings if f.severity is Severity.ERROR]
+
+
+def test_valid_baseline(check_texts):
+    result = check_texts({"m.rst": DMODEL + MODULE, "p.pm": PMODEL, "map.pm": MAPPING})
+    assert errors(result) == []
+
+
+def test_missing_brace(check_texts):
+    text = DMODEL.replace("\tmove(x: int)\n}", "\tmove(x: int)\n")
+    result = check_texts({"m.rst": text})
+    [(path, line, col, message)] = errors(result)
+    assert (path, line, col) == ("m.rst", 6, 1)
+    assert message.startswith("unexpected 'stm'") and "is a '}' missing before it?" in message
+
+
+def test_missing_final_brace_at_end_of_file(check_texts):
+    result = check_texts({"m.rst": DMODEL.rstrip()[:-1]})
+    [(path, line, col, message)] = errors(result)
+    assert (path, line, col) == ("m.rst", 15, 1)
+    assert "end of file" in message and "'}' is missing" in message
+
+
+def test_unknown_state_in_transition(check_texts):
+    text = DMODEL.replace("transition t1 { from A to A exec", "transition t1 { from A to B exec")
+    result = check_texts({"m.rst": text})
+    assert errors(result) == [("m.rst", 14, 28, "transition t1: unknown target state 'B'")]
+
+
+def test_undeclared_event(check_texts):
+    text = DMODEL.replace("condition $go?n", "condition $went")
+    result = check_texts({"m.rst": text})
+    assert errors(result) == [("m.rst", 14, 46, "unknown input event 'went'")]
+
+
+def test_type_mismatch_in_event_binding(check_texts):
+    text = DMODEL.replace("condition $go?n", "condition $go?flag")
+    result = check_texts({"m.rst": text})
+    assert errors(result) == [("m.rst", 14, 45, "event 'go' carries int but 'flag' is boolean")]
+
+
+def test_type_mismatch_in_operation_argument(check_texts):
+    text = DMODEL.replace("entry $move(n)", "entry $move(flag)")
+    result = check_texts({"m.rst": text})
+    assert errors(result) == [("m.rst", 12, 24, "argument 1 of 'move': expected int, got boolean")]
+
+
+def test_unknown_sensor_path_in_mapping(check_texts):
+    text = MAPPING.replace("P::base::S.output_vel", "P::base::T.output_vel")
+    result = check_texts({"m.rst": DMODEL + MODULE, "p.pm": PMODEL, "map.pm": text})
+    assert errors(result) == [("map.pm", 4, 30, "link 'base' of p-model 'P' has no sensor or actuator 'T'")]
+
+
+def test_unknown_sensor_port_in_mapping(check_texts):
+    text = MAPPING.replace("S.output_vel", "S.speed")
+    result = check_texts({"m.rst": DMODEL + MODULE, "p.pm": PMODEL, "map.pm": text})
+    assert errors(result) == [("map.pm", 4, 41, "sensor 'VelocitySensor' has no port 'speed'")]
+
+
+def test_mapping_operation_must_exist_on_platform(check_texts):
+    text = MAPPING.replace("operation move {", "operation jump {")
+    result = check_texts({"m.rst": DMODEL + MODULE, "p.pm": PMODEL, "map.pm": text})
+    found = errors(result)
+    assert ("map.pm", 3, 12, "operation 'jump' is not an operation of robotic platform 'RP'") in found
+    # `x` is a parameter of `move` only, so inside `jump` it is unknown: reported too, not hidden
+    assert ("map.pm", 3, 34, "unknown name 'x'") in found
+
+
+def test_duplicate_names(check_texts):
+    text = DMODEL.replace("\tvar flag: boolean\n", "\tvar flag: boolean\n\tvar n: real\n")
+    result = check_texts({"m.rst": text, "other.rst": "interface I { event e }\n"})
+    found = errors(result)
+    assert ("m.rst", 9, 6, "duplicate variable 'n' in state machine M (first at line 7)") in found
+    assert any(p == "other.rst" and (l, c) == (1, 11) and m.startswith("duplicate interface 'I' (first declared at")
+               for p, l, c, m in found)
+
+
+def test_all_findings_reported_together(check_texts):
+    text = (DMODEL.replace("to A exec", "to B exec").replace("$go?n", "$go?flag")
+            .replace("entry $move(n)", "entry $move(flag)"))
+    result = check_texts({"m.rst": text})
+    assert len(errors(result)) == 3
+
+
+def test_cli_reports_findings_on_stderr_and_exits_1(tmp_path):
+    (tmp_path / "m.rst").write_text(DMODEL.replace("to A exec", "to B exec"))
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "check", str(tmp_path)], capture_output=True, text=True)
+    assert proc.returncode == 1
+    assert f"{tmp_path / 'm.rst'}:14:28: error: transition t1: unknown target state 'B'" in proc.stderr
+    assert "Traceback" not in proc.stderr and proc.stdout == ""
+
+
+def test_cli_missing_path_is_a_finding(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "check", str(tmp_path / "nope.rst")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 1 and "no such file or folder" in proc.stderr and "Traceback" not in proc.stderr
