@@ -41,6 +41,23 @@ def check(paths: tuple[str, ...]) -> None:
         click.echo(f"{source.path}: ok ({summarise(source)}{extra})")
 
 
+@main.command("build-dmodel")
+@click.argument("model", nargs=-1, required=True)
+@click.option("--module", "module_name", help="the module to build (default: the only one)")
+@click.option("-o", "--output", required=True, help="the FMU file to write")
+@click.option("--cc", default="cc", show_default=True, help="C compiler")
+def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, cc: str) -> None:
+    """Generate C from a d-model module and package it as an FMI 2.0 co-simulation FMU."""
+    from .dmodel.fmu import build_fmu
+    from .dmodel.program import build_program
+    from .robosim.check import load_checked
+
+    program = build_program(load_checked(model), module_name)
+    path = build_fmu(program, output, cc=cc)
+    click.echo(f"{path}: module {program.module.name}, {len(program.machines)} state machine(s), "
+               f"{len(program.inputs)} input event(s), {len(program.operations)} operation(s)")
+
+
 def run() -> None:
     """Entry point that turns any CotwinError escaping a command into a clean report."""
     try:

@@ -1,0 +1,1 @@
+"""d-model execution: reference interpreter, C code generator, FMU builder, verifier."""

@@ -1,0 +1,120 @@
+"""Drive a built d-model FMU through FMPy with the interpreter's vocabulary (events in, outputs out).
+
+Used by differential tests and benchmarks: same inputs as `Interpreter.step`, same `Output` list back.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from pathlib import Path
+
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+
+from .interpreter import Output
+from .fmu import PortLayout
+from .program import Program
+
+
+def _set_path(value: dict, path: tuple[str, ...], leaf):
+    for key in path[:-1]:
+        value = value.setdefault(key, {})
+    value[path[-1]] = leaf
+
+
+def _get_path(value, path: tuple[str, ...]):
+    for key in path:
+        value = value[key]
+    return value
+
+
+class FMUDriver:
+    def __init__(self, program: Program, fmu_path: str | Path, parameters: dict | None = None,
+                 step_size: float = 1.0, instance_name: str = "dmodel"):
+        self.program = program
+        self.layout = PortLayout(program)
+        self.vr = {v.name: v for v in self.layout.variables}
+        self.folder = extract(str(fmu_path))
+        md = read_model_description(self.folder)
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self.folder,
+                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance_name)
+        self.fmu.instantiate()
+        self.fmu.setupExperiment(startTime=0.0)
+        self.fmu.enterInitializationMode()
+        for name, value in (parameters or {}).items():
+            self._set(name, value)
+        self.fmu.exitInitializationMode()
+        self.time = 0.0
+        self.h = step_size
+        self._events = [ev.name for ev in program.inputs]
+
+    def _set(self, name: str, value) -> None:
+        var = self.vr[name]
+        if var.fmi_type == "Real":
+            self.fmu.setReal([var.vr], [float(value)])
+        elif var.fmi_type == "Integer":
+            self.fmu.setInteger([var.vr], [int(value)])
+        else:
+            self.fmu.setBoolean([var.vr], [bool(value)])
+
+    def _get(self, name: str):
+        var = self.vr[name]
+        if var.fmi_type == "Real":
+            return self.fmu.getReal([var.vr])[0]
+        if var.fmi_type == "Integer":
+            return self.fmu.getInteger([var.vr])[0]
+        return bool(self.fmu.getBoolean([var.vr])[0])
+
+    def step(self, inputs: dict | None = None) -> list[Output]:
+        inputs = inputs or {}
+        for ev in self.program.inputs:
+            present = ev.name in inputs
+            self._set(ev.name, present)
+            if present and ev.ty is not None:
+                for port, sc in ev.value_ports:
+                    value = inputs[ev.name]
+                    self._set(port, _get_path(value, sc.path) if sc.path else value)
+        self.fmu.doStep(currentCommunicationPoint=self.time, communicationStepSize=self.h)
+        self.time += self.h
+        return self.outputs()
+
+    def outputs(self) -> list[Output]:
+        """The operation calls and output events of the last step, in the program's port order."""
+        out = []
+        for op in self.program.operations:
+            if self._get(op.name):
+                args = []
+                for (pname, ty), group in zip(op.params, op.arg_ports):
+                    if len(group) == 1 and not group[0][1].path:
+                        args.append(self._typed(self._get(group[0][0]), group[0][1]))
+                    else:
+                        value: dict = {}
+                        for port, sc in group:
+                            _set_path(value, sc.path, self._typed(self._get(port), sc))
+                        args.append(value)
+                out.append(Output("operation", op.name, tuple(args)))
+        for ev in self.program.outputs:
+            if self._get(ev.name):
+                args = ()
+                if ev.value_ports:
+                    value: dict = {}
+                    for port, sc in ev.value_ports:
+                        _set_path(value, sc.path, self._typed(self._get(port), sc)) if sc.path else None
+                    args = (value if value else self._get(ev.value_ports[0][0]),)
+                out.append(Output("event", ev.name, args))
+        return out
+
+    @staticmethod
+    def _typed(value, scalar):
+        return float(value) if scalar.fmi_type == "Real" else value
+
+    def state(self, machine: int = 0) -> int:
+        return self._get(self.program.state_port(self.program.machines[machine]))
+
+    def close(self) -> None:
+        try:
+            self.fmu.terminate()
+            self.fmu.freeInstance()
+        finally:
+            shutil.rmtree(self.folder, ignore_errors=True)
