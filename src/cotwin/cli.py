@@ -58,6 +58,38 @@ def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, c
                f"{len(program.inputs)} input event(s), {len(program.operations)} operation(s)")
 
 
+def _parse_domain(text: str) -> tuple[str, list]:
+    name, sep, values = text.partition("=")
+    if not sep or not name or not values:
+        raise click.BadParameter(f"'{text}': expected PORT=LOW..HIGH or PORT=v1,v2,...", param_hint="--domain")
+    try:
+        if ".." in values:
+            low, high = values.split("..", 1)
+            return name, list(range(int(low), int(high) + 1))
+        return name, [float(v) if "." in v else int(v) for v in values.split(",")]
+    except ValueError:
+        raise click.BadParameter(f"'{text}': values must be numbers", param_hint="--domain") from None
+
+
+@main.command()
+@click.argument("model", nargs=-1, required=True)
+@click.option("--module", "module_name", help="the module to verify (default: the only one)")
+@click.option("--domain", "domains", multiple=True, metavar="PORT=LOW..HIGH",
+              help="values of an event's value port, e.g. MovementArgs_target_X=0..15 (repeatable)")
+@click.option("--max-states", default=100_000, show_default=True, help="stop exploring after this many states")
+def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, ...], max_states: int) -> None:
+    """Explore every state of a d-model module under every input combination; check the core
+    properties (timelock, determinism, divergence, repeated outputs) and reachability."""
+    from .dmodel.program import build_program
+    from .dmodel.verify import format_report, verify as explore
+    from .robosim.check import load_checked
+
+    program = build_program(load_checked(model), module_name)
+    report = explore(program, dict(_parse_domain(d) for d in domains), max_states=max_states)
+    click.echo(format_report(program, report))
+    sys.exit(0 if report.ok else 1)
+
+
 def run() -> None:
     """Entry point that turns any CotwinError escaping a command into a clean report."""
     try:

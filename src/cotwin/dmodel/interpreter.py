@@ -198,6 +198,7 @@ class Interpreter:
             mine = {p.name: params.get(p.port, p.default) for p in program.parameters if p.machine == m.index}
             self.evaluators.append(Evaluator(program, m, mine))
         self.warnings: list[str] = []
+        self.taken: set[tuple[int, int]] | None = None  # (machine, edge) taken, when the verifier asks
         self.reset()
 
     def reset(self) -> None:
@@ -405,6 +406,8 @@ class _Cycle:
                 names = ", ".join(e.transition.name for e in enabled)
                 self.interp.warnings.append(f"nondeterminism in {self.where()}: {names} enabled; took {enabled[0].transition.name}")
             edge = enabled[0]
+            if self.interp.taken is not None:
+                self.interp.taken.add((self.m.index, edge.index))
             self.bind(edge)
             completion = completion_tasks(self.graph, edge)
             if edge.transition.is_exec:
