@@ -17,6 +17,8 @@ install: $(STAMP)
 
 demo: install
 	$(VENV)/bin/cotwin check examples/ur5e
+	$(VENV)/bin/cotwin build-dmodel examples/ur5e/arm.rst -o $(OUT)/arm.fmu
+	$(VENV)/bin/cotwin verify examples/ur5e/arm.rst
 
 test: install
 	$(PY) -m pytest -q
