@@ -148,3 +148,13 @@ def test_cli_missing_path_is_a_finding(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "cotwin", "check", str(tmp_path / "nope.rst")],
                           capture_output=True, text=True)
     assert proc.returncode == 1 and "no such file or folder" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_unterminated_comment_is_reported_without_blowing_up(tmp_path):
+    # an unterminated /* once made the comment regex backtrack exponentially; run it in a child
+    # process with a generous limit so a regression fails instead of hanging the suite
+    (tmp_path / "m.rst").write_text(DMODEL + "/* never closed\n" + "x\n" * 2000)
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "check", str(tmp_path)], capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 1
+    assert f"{tmp_path / 'm.rst'}:16:1: error: unterminated comment" in proc.stderr

@@ -96,6 +96,11 @@ def _keyword_before(err: UnexpectedToken, text: str) -> tuple[int, int, str] | N
 def _syntax_finding(err: UnexpectedInput, path: str, parser: lark.Lark, text: str = "") -> Finding:
     line = getattr(err, "line", 0) or 0
     column = getattr(err, "column", 0) or 0
+    position = err.pos_in_stream if isinstance(err, UnexpectedCharacters) else getattr(
+        getattr(err, "token", None), "start_pos", None)
+    if position is not None and text.startswith("/*", position):
+        return Finding(Location(path, max(line, 1), max(column, 1)), Severity.ERROR,
+                       "unterminated comment: '/*' without a closing '*/'")
     if isinstance(err, UnexpectedToken) and (opener := _keyword_before(err, text)) is not None:
         line, column, word = opener
         return Finding(Location(path, line, column), Severity.ERROR,
