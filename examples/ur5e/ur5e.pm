@@ -427,8 +427,8 @@ pmodel Gripper2FG7 {
 				}
 			}
 			aref LFM = ServoMotor {
-				instantiation Kp = 2000.0
-				instantiation Kd = 50.0
+				instantiation Kp = 10000.0
+				instantiation Kd = 200.0
 				relation left_finger_joint.tau == LFM.T
 			}
 			flexibly connected to left_finger
@@ -445,8 +445,8 @@ pmodel Gripper2FG7 {
 				}
 			}
 			aref RFM = ServoMotor {
-				instantiation Kp = 2000.0
-				instantiation Kd = 50.0
+				instantiation Kp = 10000.0
+				instantiation Kd = 200.0
 				relation right_finger_joint.tau == RFM.T
 			}
 			flexibly connected to right_finger

@@ -58,6 +58,31 @@ def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, c
                f"{len(program.inputs)} input event(s), {len(program.operations)} operation(s)")
 
 
+@main.command("export-pmodel")
+@click.argument("model", nargs=-1, required=True)
+@click.option("--pmodel", "pmodel_name", help="the p-model to export (default: the one not used as a part)")
+@click.option("--format", "fmt", type=click.Choice(["sdf", "urdf", "mjcf"]), required=True)
+@click.option("-o", "--output", required=True, help="the file to write")
+def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, output: str) -> None:
+    """Write a p-model as SDF 1.6, URDF or MJCF (all three from one kinematic tree)."""
+    from pathlib import Path
+
+    from .pmodel.mjcf import to_mjcf
+    from .pmodel.sdf import to_sdf
+    from .pmodel.tree import build_tree
+    from .pmodel.urdf import to_urdf
+    from .robosim.check import load_checked
+
+    tree = build_tree(load_checked(model), pmodel_name)
+    text = {"sdf": to_sdf, "urdf": to_urdf, "mjcf": to_mjcf}[fmt](tree)
+    path = Path(output)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    kinds = {k: sum(j.kind == k for j in tree.joints) for k in ("revolute", "prismatic", "fixed")}
+    click.echo(f"{path}: {fmt} of p-model {tree.name}: {len(tree.links)} links, {kinds['revolute']} revolute, "
+               f"{kinds['prismatic']} prismatic and {kinds['fixed']} fixed joints, {len(tree.sensors)} sensor ports")
+
+
 def _parse_domain(text: str) -> tuple[str, list]:
     name, sep, values = text.partition("=")
     if not sep or not name or not values:

@@ -1,0 +1,1 @@
+"""p-model: kinematic tree, SDF/URDF/MJCF export, the MuJoCo platform simulator and the Flex-cell scene."""

@@ -1,0 +1,149 @@
+"""p-model -> MJCF (MuJoCo XML): nested bodies in p-model link frames, a position servo per actuated
+joint, a MuJoCo sensor per p-model sensor, and optionally the Flex-cell scene around the robot.
+
+Documented defaults, used where the p-model gives no value:
+- every joint gets an armature (reflected rotor inertia of its gearbox) of 0.1 kg m^2 or 0.1 kg;
+- servo gains: `Kp`/`Kd` instantiated on the joint's actuator (aref), else kp = min(5000 N m/rad or
+  2000 N/m, I (0.15 / dt)^2) and kv = 2 sqrt(kp I), critical damping, where I is the inertia moved by
+  the joint at zero plus its armature; any kp is capped at I (0.5 / dt)^2, beyond which the explicit
+  stiffness of a 1 ms step would make the simulation unstable;
+- the arm's own weight is compensated (`gravcomp`), as a UR controller does, so servos hold targets
+  without steady-state sag; payloads (bricks) are not compensated;
+- the robot does not collide with itself; it collides with the plate and the bricks;
+- joint position limits become the joint range and the servo's control range; effort limits become
+  the servo's force range; velocity limits are the trajectory generator's job (cotwin.mapping).
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from .tree import Geom, KinematicTree, TJoint, inverse
+from .xmltext import num, nums, quat, sub, to_text
+
+DEFAULT_KP = {"revolute": 5000.0, "prismatic": 2000.0}
+ARMATURE = {"revolute": 0.1, "prismatic": 0.1}
+TIMESTEP = 0.001  # s: the physics step
+ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 1  # robot geoms touch the world and bricks, not each other
+WORLD_CONTYPE, WORLD_CONAFFINITY = 1, 3
+
+
+def sensor_name(pmodel: str, link: str, sref: str, port: str) -> str:
+    """The MJCF name of a p-model sensor port: the mapping's path, `pmodel::link::sref.port`."""
+    return f"{pmodel}::{link}::{sref}.{port}"
+
+
+def servo_name(joint: TJoint) -> str:
+    return joint.servos[0].name if joint.servos else f"{joint.name}_servo"
+
+
+def _pose_attrs(T: np.ndarray) -> dict:
+    attrs = {}
+    if np.linalg.norm(T[:3, 3]) > 0:
+        attrs["pos"] = nums(T[:3, 3])
+    q = quat(T[:3, :3])
+    if abs(q[0] - 1.0) > 1e-15:
+        attrs["quat"] = nums(q)
+    return attrs
+
+
+def _geom(parent: ET.Element, g: Geom, **extra) -> None:
+    if g.kind == "box":
+        size = [g.size["length"] / 2, g.size["width"] / 2, g.size["height"] / 2]
+    elif g.kind in ("cylinder", "capsule"):
+        size = [g.size["radius"], g.size["length"] / 2]
+    else:
+        size = [g.size["radius"]]
+    sub(parent, "geom", name=g.name, type=g.kind, size=nums(size), **_pose_attrs(g.pose), **extra)
+
+
+def joint_inertia(tree: KinematicTree, joint: TJoint) -> float:
+    """Inertia of everything beyond a joint about its axis (or mass along it), at zero: for servo damping."""
+    beyond = {joint.child}
+    for j in tree.joints:
+        if j.parent in beyond:
+            beyond.add(j.child)
+    axis = joint.pose[:3, :3] @ joint.axis
+    origin = joint.pose[:3, 3]
+    total = 0.0
+    for link in tree.links:
+        if link.name not in beyond:
+            continue
+        com = link.pose @ link.com
+        if joint.kind == "prismatic":
+            total += link.mass
+            continue
+        R = com[:3, :3]
+        I = R @ link.inertia @ R.T
+        r = com[:3, 3] - origin
+        r_perp = r - axis * (r @ axis)
+        total += axis @ I @ axis + link.mass * (r_perp @ r_perp)
+    return max(total, 1e-6)
+
+
+def servo_gains(tree: KinematicTree, joint: TJoint, timestep: float = TIMESTEP) -> tuple[float, float]:
+    servo = joint.servos[0] if joint.servos else None
+    inertia = joint_inertia(tree, joint) + ARMATURE[joint.kind]
+    kp = servo.kp if servo and servo.kp else min(DEFAULT_KP[joint.kind], inertia * (0.15 / timestep) ** 2)
+    kp = min(kp, inertia * (0.5 / timestep) ** 2)
+    kd = servo.kd if servo and servo.kd else 2.0 * np.sqrt(kp * inertia)
+    return float(kp), float(kd)
+
+
+def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP) -> str:
+    """MJCF of the robot, alone or inside a scene (an object with `add_to(worldbody)`)."""
+    root = ET.Element("mujoco", {"model": tree.name})
+    sub(root, "compiler", angle="radian", autolimits="true")
+    sub(root, "option", timestep=num(timestep), gravity="0 0 -9.81", integrator="implicitfast", cone="elliptic",
+        impratio="10")
+    visual = sub(root, "visual")
+    sub(visual, "global", offwidth="1280", offheight="960")
+    default = sub(root, "default")
+    sub(default, "geom", condim="4", friction="1 0.02 0.001", solref="0.004 1")
+    worldbody = sub(root, "worldbody")
+    sub(worldbody, "light", name="sun", pos="0.5 0.3 3", dir="0 0 -1", directional="true")
+    if scene is not None:
+        scene.add_to(worldbody)
+    bodies = {}
+    for link in tree.links:
+        if link is tree.root:
+            parent_el, local = worldbody, link.pose
+        else:
+            joint = next(j for j in tree.joints if j.child == link.name)
+            parent_el = bodies[joint.parent]
+            local = inverse(tree.link(joint.parent).pose) @ link.pose
+        body = sub(parent_el, "body", name=link.name, gravcomp="1", **_pose_attrs(local))
+        bodies[link.name] = body
+        I = link.inertia
+        sub(body, "inertial", mass=num(link.mass), fullinertia=nums([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]]),
+            **({"pos": "0 0 0"} | _pose_attrs(link.com)))
+        if link is not tree.root:
+            joint = next(j for j in tree.joints if j.child == link.name)
+            if joint.kind != "fixed":
+                in_child = inverse(link.pose) @ joint.pose
+                attrs = {"name": joint.name, "type": "hinge" if joint.kind == "revolute" else "slide",
+                         "pos": nums(in_child[:3, 3]), "axis": nums(in_child[:3, :3] @ joint.axis),
+                         "damping": num(joint.damping), "armature": num(ARMATURE[joint.kind])}
+                if joint.lower is not None and joint.upper is not None:
+                    attrs["range"] = f"{num(joint.lower)} {num(joint.upper)}"
+                sub(body, "joint", **attrs)
+        for g in link.geoms:
+            _geom(body, g, contype=str(ROBOT_CONTYPE), conaffinity=str(ROBOT_CONAFFINITY), rgba="0.6 0.65 0.7 1")
+    actuator = sub(root, "actuator")
+    for j in tree.actuated:
+        kp, kd = servo_gains(tree, j, timestep)
+        attrs = {"name": servo_name(j), "joint": j.name, "kp": num(kp), "kv": num(kd)}
+        if j.lower is not None and j.upper is not None:
+            attrs["ctrlrange"] = f"{num(j.lower)} {num(j.upper)}"
+        if j.effort:
+            attrs["forcerange"] = f"{num(-j.effort)} {num(j.effort)}"
+        sub(actuator, "position", **attrs)
+    sensor = sub(root, "sensor")
+    kinds = {"position": "jointpos", "velocity": "jointvel", "effort": "jointactuatorfrc"}
+    for s_ in tree.sensors:
+        if s_.joint is None or s_.quantity not in kinds:
+            continue
+        sub(sensor, kinds[s_.quantity], name=sensor_name(tree.name, s_.link, s_.name, s_.port), joint=s_.joint)
+    return to_text(root)

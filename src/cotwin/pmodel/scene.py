@@ -1,0 +1,90 @@
+"""The Flex-cell scene of the UR5e case study: a plate with a grid of holes, and bricks on it.
+
+The grid comes from the mapping's constants (the paper's `mapping.pm` and ours use the same names,
+read case-insensitively): HOLE_DIST, x_max, y_max, XMAX, YMAX and Z_table_level (or Z_TABLE). A hole
+(X, Y) is at x = x_max - (Y + 1) HOLE_DIST, y = y_max - X HOLE_DIST, in the robot base frame, exactly
+as the mapping computes movediscrete targets; the plate's top is at z = 0, under the robot base.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+
+from ..diagnostics import CotwinError
+from ..robosim.consteval import const_env, evaluate
+from ..robosim.pmodel_elements import Mapping
+from .mjcf import WORLD_CONAFFINITY, WORLD_CONTYPE
+from .xmltext import num, nums, sub
+
+_NAMES = {"hole_dist": ("hole_dist",), "x_max": ("x_max",), "y_max": ("y_max",), "xmax": ("xmax",),
+          "ymax": ("ymax",), "z_table": ("z_table_level", "z_table")}
+
+
+@dataclass(frozen=True)
+class Brick:
+    name: str
+    hole: tuple[int, int]  # (X, Y) grid hole it stands on
+    size: tuple[float, float, float] = (0.045, 0.045, 0.06)  # fits the 2FG7's 35-73 mm stroke
+    mass: float = 0.1
+
+
+@dataclass
+class FlexCell:
+    hole_dist: float = 0.05
+    x_max: float = 1.128
+    y_max: float = 0.711
+    xmax: int = 15
+    ymax: int = 23
+    z_table: float = 0.02
+    thickness: float = 0.02
+    bricks: list[Brick] = field(default_factory=list)
+
+    @classmethod
+    def from_mapping(cls, mapping: Mapping, bricks: list[Brick] | None = None) -> "FlexCell":
+        consts = {v.name.lower(): v for v in mapping.variables if v.is_const and v.init is not None}
+        env = const_env([v for v in mapping.variables if v.is_const])
+        values = {}
+        for key, names in _NAMES.items():
+            decl = next((consts[n] for n in names if n in consts), None)
+            if decl is None:
+                raise CotwinError(f"mapping {mapping.name} has no constant {' or '.join(n.upper() for n in names)} "
+                                  "for the Flex-cell grid")
+            values[key] = evaluate(decl.init, env)
+        return cls(values["hole_dist"], values["x_max"], values["y_max"], int(values["xmax"]), int(values["ymax"]),
+                   values["z_table"], bricks=list(bricks or []))
+
+    def hole(self, X: int, Y: int, Z: int = 0) -> tuple[float, float, float]:
+        """The point the mapping's movediscrete aims at for grid target (X, Y, Z)."""
+        return (self.x_max - (Y + 1) * self.hole_dist, self.y_max - X * self.hole_dist, self.z_table + Z * self.hole_dist)
+
+    def in_grid(self, X: int, Y: int) -> bool:
+        return 0 <= X <= self.xmax and 0 <= Y <= self.ymax
+
+    def extent(self) -> tuple[float, float, float, float]:
+        xs = [self.hole(0, Y)[0] for Y in (0, self.ymax)]
+        ys = [self.hole(X, 0)[1] for X in (0, self.xmax)]
+        margin = self.hole_dist / 2
+        return min(xs) - margin, max(xs) + margin, min(ys) - margin, max(ys) + margin
+
+    def add_to(self, worldbody: ET.Element) -> None:
+        x0, x1, y0, y1 = self.extent()
+        sub(worldbody, "geom", name="floor", type="plane", size="3 3 0.1", pos=f"0 0 {num(-0.8)}", rgba="0.3 0.3 0.3 1",
+            contype=str(WORLD_CONTYPE), conaffinity=str(WORLD_CONAFFINITY))
+        plate = sub(worldbody, "body", name="plate", pos=nums([(x0 + x1) / 2, (y0 + y1) / 2, -self.thickness / 2]))
+        sub(plate, "geom", name="plate", type="box", size=nums([(x1 - x0) / 2, (y1 - y0) / 2, self.thickness / 2]),
+            rgba="0.75 0.75 0.78 1", contype=str(WORLD_CONTYPE), conaffinity=str(WORLD_CONAFFINITY))
+        for X in range(self.xmax + 1):
+            for Y in range(self.ymax + 1):
+                x, y, _ = self.hole(X, Y)
+                sub(worldbody, "site", name=f"hole_{X}_{Y}", type="cylinder", size="0.006 0.0005",
+                    pos=nums([x, y, 0.0005]), rgba="0.2 0.2 0.2 1")
+        for brick in self.bricks:
+            if not self.in_grid(*brick.hole):
+                raise CotwinError(f"brick {brick.name} stands on hole {brick.hole}, outside the grid")
+            x, y, _ = self.hole(*brick.hole)
+            body = sub(worldbody, "body", name=brick.name, pos=nums([x, y, brick.size[2] / 2 + 1e-4]))
+            sub(body, "freejoint", name=f"{brick.name}_free")
+            sub(body, "geom", name=brick.name, type="box", size=nums([v / 2 for v in brick.size]), mass=num(brick.mass),
+                rgba="0.8 0.3 0.2 1", friction="1.2 0.02 0.001", contype=str(WORLD_CONTYPE),
+                conaffinity=str(WORLD_CONAFFINITY))

@@ -1,0 +1,162 @@
+"""The embedded platform simulator: MuJoCo running the MJCF generated from the p-model.
+
+Names come from the p-model: sensors are read as `pmodel::link::sref.port` (the mapping's paths),
+actuators are written by joint name, servo (aref) name or `pmodel::link::joint::aref.dangle`.
+The physics step (1 ms by default) is sub-stepped inside `advance(dt)`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from ..diagnostics import CotwinError
+from .mjcf import TIMESTEP, sensor_name, servo_name, to_mjcf
+from .tree import KinematicTree
+
+
+@dataclass(frozen=True)
+class SimState:
+    """A snapshot for what-if forks: everything MuJoCo needs to continue identically."""
+
+    time: float
+    qpos: np.ndarray
+    qvel: np.ndarray
+    act: np.ndarray
+    ctrl: np.ndarray
+    qacc_warmstart: np.ndarray
+
+
+class PlatformSimulator:
+    def __init__(self, tree: KinematicTree, scene=None, timestep: float = TIMESTEP):
+        self.tree = tree
+        self.scene = scene
+        self.xml = to_mjcf(tree, scene, timestep)
+        try:
+            self.model = mujoco.MjModel.from_xml_string(self.xml)
+        except ValueError as err:
+            raise CotwinError(f"MuJoCo rejected the generated model: {err}") from None
+        self.data = mujoco.MjData(self.model)
+        self.timestep = timestep
+        self._joint_qpos = {j.name: self.model.joint(j.name).qposadr[0] for j in tree.actuated}
+        self._joint_dof = {j.name: self.model.joint(j.name).dofadr[0] for j in tree.actuated}
+        self._actuator: dict[str, int] = {}
+        for j in tree.actuated:
+            index = self.model.actuator(servo_name(j)).id
+            self._actuator[j.name] = index
+            self._actuator[servo_name(j)] = index
+            for servo in j.servos:
+                source = next(l.source for l in tree.links if l.name == j.parent)
+                self._actuator[f"{tree.name}::{source}::{_unprefixed(j, tree)}::{servo.name}.dangle"] = index
+        self._sensors: dict[str, tuple[int, int]] = {}
+        for sensor in tree.sensors:
+            name = sensor_name(tree.name, sensor.link, sensor.name, sensor.port)
+            try:
+                s = self.model.sensor(name)
+            except KeyError:
+                continue
+            self._sensors[name] = (s.adr[0], s.dim[0])
+        self._ctrl_range = self.model.actuator_ctrlrange.copy()
+        self.reset()
+
+    # ---- names ----
+    @property
+    def sensor_names(self) -> list[str]:
+        return list(self._sensors)
+
+    @property
+    def joint_names(self) -> list[str]:
+        return list(self._joint_qpos)
+
+    # ---- the API ----
+    def reset(self, q: dict[str, float] | None = None) -> None:
+        """Back to the model's initial state (joints at q, default 0), servos holding that position."""
+        mujoco.mj_resetData(self.model, self.data)
+        for name, value in (q or {}).items():
+            self.data.qpos[self._joint_adr(name)] = value
+        for name, adr in self._joint_qpos.items():
+            self.data.ctrl[self._actuator[name]] = self.data.qpos[adr]
+        mujoco.mj_forward(self.model, self.data)
+
+    def _joint_adr(self, name: str) -> int:
+        if name not in self._joint_qpos:
+            raise CotwinError(f"unknown joint '{name}' (joints: {', '.join(self._joint_qpos)})")
+        return self._joint_qpos[name]
+
+    def write_actuators(self, targets: dict[str, float]) -> None:
+        """Set servo targets (rad or m). Unknown names and non-finite values are errors; values outside
+        a joint's limits are clipped to them."""
+        for name, value in targets.items():
+            if name not in self._actuator:
+                raise CotwinError(f"unknown actuator '{name}' (use a joint or servo name of p-model {self.tree.name})")
+            if not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise CotwinError(f"actuator '{name}': target {value!r} is not a finite number")
+            index = self._actuator[name]
+            low, high = self._ctrl_range[index]
+            self.data.ctrl[index] = min(max(float(value), low), high) if high > low else float(value)
+
+    def read_sensors(self) -> dict[str, float]:
+        """Every p-model sensor port, keyed by its mapping path."""
+        data = self.data.sensordata
+        return {name: float(data[adr]) for name, (adr, _) in self._sensors.items()}
+
+    def joint_positions(self) -> dict[str, float]:
+        return {n: float(self.data.qpos[a]) for n, a in self._joint_qpos.items()}
+
+    def joint_velocities(self) -> dict[str, float]:
+        return {n: float(self.data.qvel[a]) for n, a in self._joint_dof.items()}
+
+    def advance(self, dt: float) -> float:
+        """Simulate dt seconds in physics steps of `timestep`; returns the simulation time."""
+        if dt < 0 or not math.isfinite(dt):
+            raise CotwinError(f"cannot advance by {dt!r} s")
+        steps = int(round(dt / self.timestep))
+        for _ in range(steps):
+            mujoco.mj_step(self.model, self.data)
+        if not np.all(np.isfinite(self.data.qpos)):
+            raise CotwinError(f"the physics became unstable at t = {self.data.time:.3f} s (non-finite state)")
+        return self.time
+
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+    def get_state(self) -> SimState:
+        d = self.data
+        return SimState(float(d.time), d.qpos.copy(), d.qvel.copy(), d.act.copy(), d.ctrl.copy(), d.qacc_warmstart.copy())
+
+    def set_state(self, state: SimState) -> None:
+        d = self.data
+        d.time = state.time
+        d.qpos[:] = state.qpos
+        d.qvel[:] = state.qvel
+        d.act[:] = state.act
+        d.ctrl[:] = state.ctrl
+        d.qacc_warmstart[:] = state.qacc_warmstart
+        mujoco.mj_forward(self.model, d)
+
+    def body_pose(self, name: str) -> np.ndarray:
+        try:
+            body = self.model.body(name)
+        except KeyError:
+            raise CotwinError(f"no body '{name}' in the simulation") from None
+        T = np.eye(4)
+        T[:3, :3] = self.data.xmat[body.id].reshape(3, 3)
+        T[:3, 3] = self.data.xpos[body.id]
+        return T
+
+    def write_mjcf(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.write_text(self.xml)
+        return path
+
+
+def _unprefixed(joint, tree: KinematicTree) -> str:
+    """A joint's name as written in its p-model (without the part prefix)."""
+    link = next(l for l in tree.links if l.name == joint.parent)
+    prefix = link.name[: len(link.name) - len(link.source)]
+    return joint.name[len(prefix):] if joint.name.startswith(prefix) else joint.name

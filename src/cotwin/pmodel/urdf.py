@@ -1,0 +1,66 @@
+"""p-model -> URDF. URDF has no separate link frames: a child link's frame is its joint's frame, so
+geometry and inertia are re-expressed there; the root link's frame is the model frame."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from .tree import Geom, KinematicTree, inverse, matrix_rpy
+from .xmltext import num, nums, sub, to_text
+
+
+def _origin(parent: ET.Element, T: np.ndarray) -> None:
+    sub(parent, "origin", xyz=nums(T[:3, 3]), rpy=nums(matrix_rpy(T[:3, :3])))
+
+
+def _geometry(parent: ET.Element, g: Geom) -> None:
+    geometry = sub(parent, "geometry")
+    if g.kind == "box":
+        sub(geometry, "box", size=nums([g.size["length"], g.size["width"], g.size["height"]]))
+    elif g.kind in ("cylinder", "capsule"):
+        sub(geometry, "cylinder", radius=num(g.size["radius"]), length=num(g.size["length"]))
+    else:
+        sub(geometry, "sphere", radius=num(g.size["radius"]))
+
+
+def urdf_frames(tree: KinematicTree) -> dict[str, np.ndarray]:
+    """The model-frame pose of each URDF link frame (the joint frame; the identity for the root)."""
+    frames = {tree.root.name: np.eye(4)}
+    for j in tree.joints:
+        frames[j.child] = j.pose
+    return frames
+
+
+def to_urdf(tree: KinematicTree) -> str:
+    frames = urdf_frames(tree)
+    robot = ET.Element("robot", {"name": tree.name})
+    for link in tree.links:
+        el = sub(robot, "link", name=link.name)
+        local = inverse(frames[link.name]) @ link.pose  # p-model link frame in the URDF link frame
+        inertial = sub(el, "inertial")
+        com = local @ link.com
+        _origin(inertial, com)
+        sub(inertial, "mass", value=num(link.mass))
+        I = link.inertia
+        sub(inertial, "inertia", ixx=num(I[0, 0]), ixy=num(I[0, 1]), ixz=num(I[0, 2]), iyy=num(I[1, 1]),
+            iyz=num(I[1, 2]), izz=num(I[2, 2]))
+        for g in link.geoms:
+            for tag in ("visual", "collision"):
+                part = sub(el, tag, name=f"{g.name}_{tag}")
+                _origin(part, local @ g.pose)
+                _geometry(part, g)
+    for j in tree.joints:
+        el = sub(robot, "joint", name=j.name, type=j.kind)
+        _origin(el, inverse(frames[j.parent]) @ j.pose)
+        sub(el, "parent", link=j.parent)
+        sub(el, "child", link=j.child)
+        if j.kind != "fixed":
+            sub(el, "axis", xyz=nums(j.axis))
+            limits = {k: num(getattr(j, k)) for k in ("lower", "upper", "effort", "velocity") if getattr(j, k) is not None}
+            limits.setdefault("effort", "0")
+            limits.setdefault("velocity", "0")
+            sub(el, "limit", **limits)
+            sub(el, "dynamics", damping=num(j.damping))
+    return to_text(robot)
