@@ -1,6 +1,7 @@
 // cotwin example: how the FlexCellArm d-model's operations and events are realised on the ur5e
-// p-model (our own mapping). Operations set mapping variables; the platform endpoint drives the
-// servo targets from them. Several equations of an input event are a conjunction.
+// p-model (our own mapping). An operation's actions set mapping variables and its equations
+// `actuator.port == e` command the servos (the endpoint moves there smoothly within the joints'
+// velocity limits). The equations of an input event are a conjunction over variables and sensors.
 import physmod::math::*
 
 enumeration Feasibility {
@@ -24,13 +25,13 @@ map FlexCellMapping dmodel FlexCellArm to pmodel ur5e {
 	const XMAX: int = 15
 	const YMAX: int = 23
 	const ZMAX: int = 4
-	const POSITION_TOLERANCE: real = 0.01
+	const POSITION_TOLERANCE: real = 0.002
 	const VELOCITY_TOLERANCE: real = 0.02
 	const COLLISION_TORQUE: real = 140.0
 	const FINGER_TOLERANCE: real = 0.002
 	const HALF_MIN_WIDTH: real = 0.0175
 
-	var target_q: vector(real, 6)
+	var target_q: vector(real, 6) = [| 0.0, 0.0, 0.0, 0.0, 0.0, 0.0 |]
 	var feasibility: Feasibility = Feasibility::none
 	var motion: Motion = Motion::idle
 	var finger_target: real = 0.0
@@ -45,30 +46,54 @@ map FlexCellMapping dmodel FlexCellArm to pmodel ur5e {
 		var z: real = Z_TABLE + target_Z * HOLE_DIST
 		var in_grid: boolean = 0 <= target_X /\ target_X <= XMAX /\ 0 <= target_Y /\ target_Y <= YMAX
 			/\ 0 <= target_Z /\ target_Z <= ZMAX
-		action target_q = inverse_kinematics(x, y, z)
-		action feasibility = if in_grid /\ reachable(x, y, z) then Feasibility::feasible else Feasibility::infeasible end
-		action motion = if in_grid /\ reachable(x, y, z) then Motion::moving else Motion::idle end
+		var ok: boolean = in_grid /\ reachable(x, y, z)
+		action target_q = if ok then inverse_kinematics(x, y, z) else target_q end
+		action feasibility = if ok then Feasibility::feasible else Feasibility::infeasible end
+		action motion = if ok then Motion::moving else motion end
+		equation ur5e::base_link::shoulder_pan_joint::M1.dangle == target_q[0]
+		equation ur5e::shoulder_link::shoulder_lift_joint::M2.dangle == target_q[1]
+		equation ur5e::upper_arm_link::elbow_joint::M3.dangle == target_q[2]
+		equation ur5e::forearm_link::wrist_1_joint::M4.dangle == target_q[3]
+		equation ur5e::wrist_1_link::wrist_2_joint::M5.dangle == target_q[4]
+		equation ur5e::wrist_2_link::wrist_3_joint::M6.dangle == target_q[5]
 	}
 
 	operation movejoint {
 		action target_q = [| target_q0, target_q1, target_q2, target_q3, target_q4, target_q5 |]
 		action motion = Motion::moving
+		equation ur5e::base_link::shoulder_pan_joint::M1.dangle == target_q[0]
+		equation ur5e::shoulder_link::shoulder_lift_joint::M2.dangle == target_q[1]
+		equation ur5e::upper_arm_link::elbow_joint::M3.dangle == target_q[2]
+		equation ur5e::forearm_link::wrist_1_joint::M4.dangle == target_q[3]
+		equation ur5e::wrist_1_link::wrist_2_joint::M5.dangle == target_q[4]
+		equation ur5e::wrist_2_link::wrist_3_joint::M6.dangle == target_q[5]
 	}
 
+	// stop: hold the arm where it is
 	operation stop {
 		action motion = Motion::idle
+		equation ur5e::base_link::shoulder_pan_joint::M1.dangle == ur5e::base_link::PS1.output_position
+		equation ur5e::shoulder_link::shoulder_lift_joint::M2.dangle == ur5e::shoulder_link::PS2.output_position
+		equation ur5e::upper_arm_link::elbow_joint::M3.dangle == ur5e::upper_arm_link::PS3.output_position
+		equation ur5e::forearm_link::wrist_1_joint::M4.dangle == ur5e::forearm_link::PS4.output_position
+		equation ur5e::wrist_1_link::wrist_2_joint::M5.dangle == ur5e::wrist_1_link::PS5.output_position
+		equation ur5e::wrist_2_link::wrist_3_joint::M6.dangle == ur5e::wrist_2_link::PS6.output_position
 	}
 
 	operation pick {
 		action finger_target = max(0.0, diameter / 2 - HALF_MIN_WIDTH)
 		action gripper_closing = true
 		action gripper_opening = false
+		equation ur5e::gripper_body::left_finger_joint::LFM.dangle == finger_target
+		equation ur5e::gripper_body::right_finger_joint::RFM.dangle == finger_target
 	}
 
 	operation place {
 		action finger_target = max(0.0, diameter / 2 - HALF_MIN_WIDTH)
 		action gripper_opening = true
 		action gripper_closing = false
+		equation ur5e::gripper_body::left_finger_joint::LFM.dangle == finger_target
+		equation ur5e::gripper_body::right_finger_joint::RFM.dangle == finger_target
 	}
 
 	input event feasibleMoveDiscreteCommand {

@@ -83,6 +83,38 @@ def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, out
                f"{kinds['prismatic']} prismatic and {kinds['fixed']} fixed joints, {len(tree.sensors)} sensor ports")
 
 
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("-o", "--output", "out", required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
+def build(project: str, out: str) -> None:
+    """Build every artefact of a twin project (cotwin.toml)."""
+    from .pipeline import Twin, load_twin_project
+
+    written = Twin(load_twin_project(project)).build(out)
+    for name, path in written.items():
+        click.echo(f"{path}")
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("-o", "--output", "out", required=True, help="folder for outputs.csv, figure.png and the artefacts")
+@click.option("--step", type=float, help="communication step size (s)")
+@click.option("--end", type=float, help="end time (s)")
+@click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
+def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None) -> None:
+    """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
+    from rich.progress import Progress
+
+    from .pipeline import Twin, load_twin_project
+
+    twin = Twin(load_twin_project(project))
+    with Progress(transient=True) as bar:
+        task = bar.add_task("co-simulating", total=1)
+        result = twin.run(out, step, end, algorithm, progress=lambda k, n: bar.update(task, completed=k, total=n))
+    click.echo(f"{result.csv_path}: {result.rows} rows to t = {result.end_time:g} s in {result.wall_seconds:.2f} s "
+               f"(real-time factor {result.end_time / max(result.wall_seconds, 1e-9):.1f})")
+
+
 def _parse_domain(text: str) -> tuple[str, list]:
     name, sep, values = text.partition("=")
     if not sep or not name or not values:
@@ -115,7 +147,7 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
     sys.exit(0 if report.ok else 1)
 
 
-def run() -> None:
+def entry() -> None:
     """Entry point that turns any CotwinError escaping a command into a clean report."""
     try:
         main(standalone_mode=False)

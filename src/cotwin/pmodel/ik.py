@@ -2,10 +2,10 @@
 approach axis along a given direction (down, for the Flex-cell). Damped least squares, numeric
 Jacobian, joint limits respected, several seeds.
 
-The tool: the link that carries two or more prismatic joints (the gripper body); the tool point is the
-centre of the finger pads (the mean of the fingers' geometry centres, or of their link origins when
-they have no geometry), between the fingers, and the approach axis points from the gripper body's
-origin to it. Without a gripper, the last link's origin and z axis.
+The tool: the link that carries two or more prismatic joints (the gripper body); the approach axis
+points from the gripper body's origin to the centre between the fingers, and the tool point is the
+fingertip: between the fingers, where their geometry ends along the approach axis (their link
+origins when they have no geometry). A grid target's height is where the fingertips go. Without a gripper, the last link's origin and z axis.
 """
 
 from __future__ import annotations
@@ -35,18 +35,35 @@ def _frame_with_z(z: np.ndarray, origin: np.ndarray) -> np.ndarray:
     return T
 
 
+def _corners(g) -> list[np.ndarray]:
+    """Corners of a geometry's bounding box in its own frame."""
+    if g.kind == "box":
+        half = np.array([g.size["length"], g.size["width"], g.size["height"]]) / 2
+    elif g.kind in ("cylinder", "capsule"):
+        r = g.size["radius"]
+        half = np.array([r, r, g.size["length"] / 2 + (r if g.kind == "capsule" else 0.0)])
+    else:
+        half = np.full(3, g.size.get("radius", 0.0))
+    return [half * np.array([sx, sy, sz]) for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
+
+
 def find_tool(tree: KinematicTree) -> Tool:
     for link in reversed(tree.links):
         fingers = [j for j in tree.joints if j.parent == link.name and j.kind == "prismatic"]
         if len(fingers) >= 2:
-            centres = []
+            centres, corners = [], []
             for j in fingers:
                 child = tree.link(j.child)
-                points = [child.pose @ g.pose[:, 3] for g in child.geoms] or [child.pose[:, 3]]
-                centres.append(inverse(link.pose) @ np.mean(points, axis=0))
-            mid = np.mean(centres, axis=0)[:3]
-            approach = mid if np.linalg.norm(mid) > 1e-9 else np.array([0.0, 0.0, 1.0])
-            return Tool(link.name, _frame_with_z(approach, mid), tuple(j.name for j in fingers))
+                local = inverse(link.pose) @ child.pose
+                points = [local @ g.pose[:, 3] for g in child.geoms] or [local[:, 3]]
+                centres.append(np.mean(points, axis=0)[:3])
+                for g in child.geoms:
+                    corners.extend((local @ g.pose @ np.append(c, 1.0))[:3] for c in _corners(g))
+            mid = np.mean(centres, axis=0)
+            approach = mid / np.linalg.norm(mid) if np.linalg.norm(mid) > 1e-9 else np.array([0.0, 0.0, 1.0])
+            reach = max((c @ approach for c in corners), default=mid @ approach)
+            tip = mid + (reach - mid @ approach) * approach
+            return Tool(link.name, _frame_with_z(approach, tip), tuple(j.name for j in fingers))
     last = tree.links[-1]
     return Tool(last.name, np.eye(4), ())
 

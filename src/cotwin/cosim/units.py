@@ -1,0 +1,163 @@
+"""Co-simulation units behind one interface: FMI 2.0 FMUs loaded with FMPy, and in-process Python units.
+
+A unit has typed input and output ports, `initialize`, `set`, `step(t, h)`, `get` and `terminate`.
+Every FMI call of an FMU that fails is raised as UnitError naming the unit, the time and the call.
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+
+from ..diagnostics import CotwinError
+
+
+class UnitError(CotwinError):
+    def __init__(self, unit: str, time: float, call: str, detail: str):
+        super().__init__(f"unit {unit}: {call} failed at t = {time:g} s: {detail}")
+        self.unit, self.time, self.call = unit, time, call
+
+
+@dataclass(frozen=True)
+class Port:
+    name: str
+    type: str  # Real | Integer | Boolean
+    causality: str  # input | output | parameter
+
+
+class Unit:
+    """The interface the master drives."""
+
+    name: str
+    ports: dict[str, Port]
+
+    def inputs(self) -> list[str]:
+        return [p.name for p in self.ports.values() if p.causality == "input"]
+
+    def outputs(self) -> list[str]:
+        return [p.name for p in self.ports.values() if p.causality == "output"]
+
+    def instantiate(self, start: float) -> None: ...
+    def set(self, values: dict[str, object]) -> None: ...
+    def initialize(self) -> None: ...
+    def step(self, t: float, h: float) -> None: ...
+    def get(self, names: list[str]) -> dict[str, object]: ...
+    def terminate(self) -> None: ...
+
+
+class FMUUnit(Unit):
+    def __init__(self, name: str, path: str | Path):
+        self.name = name
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise CotwinError(f"unit {name}: no FMU at {self.path}")
+        try:
+            self.md = read_model_description(str(self.path))
+        except Exception as err:  # FMPy raises many kinds for a bad zip or XML
+            raise CotwinError(f"unit {name}: cannot read {self.path}: {err}") from None
+        if self.md.coSimulation is None:
+            raise CotwinError(f"unit {name}: {self.path} is not a co-simulation FMU")
+        self.ports = {}
+        self.vr = {}
+        for v in self.md.modelVariables:
+            if v.type in ("Real", "Integer", "Boolean") and v.causality in ("input", "output", "parameter"):
+                self.ports[v.name] = Port(v.name, v.type, v.causality)
+                self.vr[v.name] = v.valueReference
+        self.fmu = None
+        self.folder = None
+        self.time = 0.0
+
+    def _call(self, call: str, fn, *args):
+        try:
+            return fn(*args)
+        except Exception as err:
+            raise UnitError(self.name, self.time, call, str(err)) from None
+
+    def instantiate(self, start: float) -> None:
+        self.time = start
+        self.folder = extract(str(self.path))
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.folder,
+                             modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=self.name)
+        self._call("fmi2Instantiate", self.fmu.instantiate)
+        self._call("fmi2SetupExperiment", lambda: self.fmu.setupExperiment(startTime=start))
+        self._call("fmi2EnterInitializationMode", self.fmu.enterInitializationMode)
+
+    def set(self, values: dict[str, object]) -> None:
+        groups: dict[str, tuple[list, list]] = {"Real": ([], []), "Integer": ([], []), "Boolean": ([], [])}
+        for name, value in values.items():
+            port = self.ports.get(name)
+            if port is None:
+                raise CotwinError(f"unit {self.name} has no port '{name}'")
+            refs, vals = groups[port.type]
+            refs.append(self.vr[name])
+            vals.append(float(value) if port.type == "Real" else int(value) if port.type == "Integer" else bool(value))
+        if groups["Real"][0]:
+            self._call("fmi2SetReal", self.fmu.setReal, *groups["Real"])
+        if groups["Integer"][0]:
+            self._call("fmi2SetInteger", self.fmu.setInteger, *groups["Integer"])
+        if groups["Boolean"][0]:
+            self._call("fmi2SetBoolean", self.fmu.setBoolean, *groups["Boolean"])
+
+    def initialize(self) -> None:
+        self._call("fmi2ExitInitializationMode", self.fmu.exitInitializationMode)
+
+    def step(self, t: float, h: float) -> None:
+        self.time = t
+        self._call("fmi2DoStep", lambda: self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h))
+
+    def get(self, names: list[str]) -> dict[str, object]:
+        out = {}
+        by_type: dict[str, list[str]] = {"Real": [], "Integer": [], "Boolean": []}
+        for n in names:
+            by_type[self.ports[n].type].append(n)
+        if by_type["Real"]:
+            out.update(zip(by_type["Real"], self._call("fmi2GetReal", self.fmu.getReal, [self.vr[n] for n in by_type["Real"]])))
+        if by_type["Integer"]:
+            out.update(zip(by_type["Integer"], self._call("fmi2GetInteger", self.fmu.getInteger, [self.vr[n] for n in by_type["Integer"]])))
+        if by_type["Boolean"]:
+            vals = self._call("fmi2GetBoolean", self.fmu.getBoolean, [self.vr[n] for n in by_type["Boolean"]])
+            out.update((n, bool(v)) for n, v in zip(by_type["Boolean"], vals))
+        return out
+
+    def terminate(self) -> None:
+        if self.fmu is not None:
+            try:
+                self.fmu.terminate()
+                self.fmu.freeInstance()
+            except Exception:
+                pass
+            self.fmu = None
+        if self.folder:
+            shutil.rmtree(self.folder, ignore_errors=True)
+            self.folder = None
+
+
+class PythonUnit(Unit):
+    """An in-process unit: subclasses keep their port values in `self.values`."""
+
+    def __init__(self, name: str, ports: list[Port]):
+        self.name = name
+        self.ports = {p.name: p for p in ports}
+        self.values: dict[str, object] = {p.name: (False if p.type == "Boolean" else 0) for p in ports}
+
+    def instantiate(self, start: float) -> None:
+        self.time = start
+
+    def set(self, values: dict[str, object]) -> None:
+        for name, value in values.items():
+            if name not in self.ports:
+                raise CotwinError(f"unit {self.name} has no port '{name}'")
+            self.values[name] = value
+
+    def initialize(self) -> None:
+        pass
+
+    def get(self, names: list[str]) -> dict[str, object]:
+        return {n: self.values[n] for n in names}
+
+    def terminate(self) -> None:
+        pass

@@ -1,0 +1,112 @@
+"""Platform endpoints: where a mapping's actuator commands go and its sensor readings come from.
+
+An endpoint takes servo goals by p-model path (`pmodel::link::joint::aref.port`) and moves each joint
+there along a smooth (quintic) trajectory whose peak speed respects the joint's velocity limit, all
+joints arriving together; it reads sensors by path (`pmodel::link::sref.port`). The MuJoCo simulator
+is the default; any object with this interface plugs in without touching the mapping.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from ..diagnostics import CotwinError
+from ..pmodel.simulator import PlatformSimulator
+from ..pmodel.tree import KinematicTree
+
+CONTROL_PERIOD = 0.002  # s between trajectory set-points sent to the servos
+QUINTIC_PEAK = 1.875  # peak of d/dtau of 10 tau^3 - 15 tau^4 + 6 tau^5
+
+
+class Endpoint(Protocol):
+    tree: KinematicTree
+
+    def start(self) -> None: ...
+    def stop(self) -> None: ...
+    def read_sensors(self) -> dict[str, float]: ...
+    def command(self, goals: dict[str, float]) -> None: ...
+    def advance(self, dt: float) -> None: ...
+    def joint_positions(self) -> dict[str, float]: ...
+
+
+@dataclass
+class Segment:
+    start: dict[str, float]
+    goal: dict[str, float]
+    t0: float
+    duration: float
+
+    def at(self, t: float) -> dict[str, float]:
+        tau = 1.0 if self.duration <= 0 else min(max((t - self.t0) / self.duration, 0.0), 1.0)
+        s = tau ** 3 * (10 - 15 * tau + 6 * tau * tau)
+        return {j: self.start[j] + s * (self.goal[j] - self.start[j]) for j in self.goal}
+
+
+def segment_duration(tree: KinematicTree, start: dict[str, float], goal: dict[str, float]) -> float:
+    """Shortest quintic duration in which no joint exceeds its velocity limit (0 if nothing moves)."""
+    duration = 0.0
+    limits = {j.name: j.velocity for j in tree.actuated}
+    for name, target in goal.items():
+        delta = abs(target - start.get(name, 0.0))
+        vmax = limits.get(name) or 1.0
+        duration = max(duration, QUINTIC_PEAK * delta / vmax)
+    return duration
+
+
+class SimulatedEndpoint:
+    """The embedded MuJoCo platform with a trajectory generator in front of its servos."""
+
+    def __init__(self, simulator: PlatformSimulator):
+        self.sim = simulator
+        self.tree = simulator.tree
+        self._path_to_joint: dict[str, str] = {}
+        for j in self.tree.actuated:
+            for key, index in simulator._actuator.items():
+                if index == simulator._actuator[j.name]:
+                    self._path_to_joint[key] = j.name
+        self.segment: Segment | None = None
+
+    def start(self) -> None:
+        self.segment = None
+
+    def stop(self) -> None:
+        self.segment = None
+
+    def read_sensors(self) -> dict[str, float]:
+        return self.sim.read_sensors()
+
+    def joint_positions(self) -> dict[str, float]:
+        return self.sim.joint_positions()
+
+    def joint(self, name: str) -> str:
+        if name not in self._path_to_joint:
+            raise CotwinError(f"the endpoint has no actuator '{name}'")
+        return self._path_to_joint[name]
+
+    def command(self, goals: dict[str, float]) -> None:
+        """New servo goals (by actuator path, servo or joint name); joints not named keep their goal."""
+        now = self.sim.time
+        current = self.segment.at(now) if self.segment else self.sim.joint_positions()
+        previous = dict(self.segment.goal) if self.segment else dict(current)
+        goal = dict(previous)
+        for name, value in goals.items():
+            if not np.isfinite(value):
+                raise CotwinError(f"actuator '{name}': goal {value!r} is not a finite number")
+            goal[self.joint(name)] = float(value)
+        start = {j: current.get(j, goal[j]) for j in goal}
+        self.segment = Segment(start, goal, now, segment_duration(self.tree, start, goal))
+
+    def advance(self, dt: float) -> None:
+        end = self.sim.time + dt - 1e-12
+        while self.sim.time < end:
+            chunk = min(CONTROL_PERIOD, end - self.sim.time + 1e-12)
+            if self.segment is not None:
+                self.sim.write_actuators(self.segment.at(self.sim.time + chunk))
+            self.sim.advance(chunk)
+
+    @property
+    def time(self) -> float:
+        return self.sim.time

@@ -1,0 +1,298 @@
+"""The platform-mapping interface of the paper (`InputEvent`, `Operation`, `Mapping` with
+`start_mapping`, `get_event`, `execute_operation`, `stop_mapping`), driven by the mapping model.
+
+Readings of the mapping (see also docs/robosim-notation.md, section 4):
+- `execute_operation(op, args)`: the d-model's arguments bind the operation's parameters; its local
+  `var`s are evaluated in order, then its `action x = e` assign mapping variables, then each
+  equation `actuator.port == e` (a path `pmodel::link::joint::aref.port`) sends e to that actuator;
+- `get_event(e)`: e occurs iff all its equations and predicates hold (a conjunction), evaluated over
+  the mapping's variables and the platform's sensors (`pmodel::link::sref.port`);
+- functions the models leave abstract come from a registry (`inverse_kinematics`, `reachable`, math);
+- mapping variables q0..qN and qd0..qdN mirror the arm joints' positions and velocities (kinematic
+  order), so they can be logged as in the paper.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+
+from ..diagnostics import CotwinError
+from ..pmodel import ik
+from ..robosim import syntax as s
+from ..robosim.check_mapping import device_path, mapping_targets
+from ..robosim.declarations import EnumDecl
+from ..robosim.pmodel_elements import Mapping as MappingModel
+from ..robosim.types import EnumTy, TypeResolver
+from ..diagnostics import Diagnostics
+
+MATH = {
+    "sqrt": math.sqrt, "sin": math.sin, "cos": math.cos, "tan": math.tan, "asin": math.asin, "acos": math.acos,
+    "atan": math.atan, "atan2": math.atan2, "exp": math.exp, "log": math.log, "abs": abs, "min": min,
+    "max": max, "pow": math.pow,
+}
+
+
+class FunctionRegistry:
+    """Implementations of functions the models leave abstract, bound to the platform's kinematics."""
+
+    def __init__(self, endpoint):
+        self.endpoint = endpoint
+        self.tree = endpoint.tree
+        self.tool = ik.find_tool(self.tree)
+        self.arm = ik.arm_joints(self.tree, self.tool)
+        self._cache: dict[tuple, ik.IKResult] = {}
+
+    def _solve(self, x, y, z) -> ik.IKResult:
+        key = (round(float(x), 9), round(float(y), 9), round(float(z), 9))
+        if key not in self._cache:
+            seed = self.endpoint.joint_positions()
+            self._cache[key] = ik.solve(self.tree, np.array(key), approach=(0.0, 0.0, -1.0), seed=seed, tool=self.tool)
+        return self._cache[key]
+
+    def inverse_kinematics(self, x, y, z):
+        """Joint values (arm joints, kinematic order) putting the tool at (x, y, z) pointing down."""
+        result = self._solve(x, y, z)
+        return tuple(result.q[j] for j in self.arm)
+
+    def reachable(self, x, y, z) -> bool:
+        return self._solve(x, y, z).ok(position_tol=1e-3, angle_tol=1e-2)
+
+    def functions(self) -> dict:
+        return {"inverse_kinematics": self.inverse_kinematics, "reachable": self.reachable, **MATH}
+
+
+class _Env:
+    """Evaluates mapping expressions over variables, constants, sensors and registry functions."""
+
+    def __init__(self, runtime: "Mapping"):
+        self.rt = runtime
+
+    def eval(self, e: s.Expr, scope: dict):
+        rt = self.rt
+        if isinstance(e, s.Literal):
+            return e.value
+        if isinstance(e, s.Name):
+            if len(e.name.parts) == 1:
+                n = e.name.last
+                if n in scope:
+                    return scope[n]
+                if n in rt.variables:
+                    return rt.variables[n]
+                raise CotwinError(f"{e.loc}: '{n}' has no value")
+            return rt.enum_value(e.name)
+        if isinstance(e, s.FieldAccess) and isinstance(e.base, s.Name) and len(e.base.name.parts) >= 3:
+            key = f"{e.base.name}.{e.field}"
+            readings = rt.sensor_readings()
+            if key not in readings:
+                raise CotwinError(f"{e.loc}: the platform does not provide sensor '{key}'")
+            return readings[key]
+        if isinstance(e, s.FieldAccess):
+            return self.eval(e.base, scope)[e.field]
+        if isinstance(e, s.IndexAccess):
+            return self.eval(e.base, scope)[int(self.eval(e.index, scope))]
+        if isinstance(e, s.Unary):
+            v = self.eval(e.operand, scope)
+            return (not v) if e.op == "not" else -v
+        if isinstance(e, s.Binary):
+            if e.op == "\\/":
+                return bool(self.eval(e.left, scope)) or bool(self.eval(e.right, scope))
+            if e.op == "/\\":
+                return bool(self.eval(e.left, scope)) and bool(self.eval(e.right, scope))
+            a, b = self.eval(e.left, scope), self.eval(e.right, scope)
+            ops = {"+": lambda: a + b, "-": lambda: a - b, "*": lambda: a * b,
+                   "/": lambda: a / b if isinstance(a, float) or isinstance(b, float) else int(a / b),
+                   "%": lambda: a % b, "==": lambda: a == b, "!=": lambda: a != b, "<": lambda: a < b,
+                   "<=": lambda: a <= b, ">": lambda: a > b, ">=": lambda: a >= b,
+                   "=>": lambda: (not a) or b, "iff": lambda: bool(a) == bool(b)}
+            try:
+                return ops[e.op]()
+            except ZeroDivisionError:
+                raise CotwinError(f"{e.loc}: division by zero") from None
+        if isinstance(e, s.IfExpr):
+            return self.eval(e.then if self.eval(e.condition, scope) else e.otherwise, scope)
+        if isinstance(e, (s.VectorExpr, s.TupleExpr)):
+            return tuple(self.eval(i, scope) for i in e.items)
+        if isinstance(e, s.Call) and isinstance(e.function, s.Name):
+            name = e.function.name.last
+            fn = rt.functions.get(name)
+            if fn is None:
+                raise CotwinError(f"{e.loc}: function '{name}' has no implementation in cotwin's registry")
+            return fn(*(self.eval(a, scope) for a in e.args))
+        raise CotwinError(f"{e.loc}: {type(e).__name__} is not supported in mappings")
+
+
+class InputEvent:
+    """An input event of the platform: occurs when all its equations hold."""
+
+    def __init__(self, runtime: "Mapping", model):
+        self.runtime = runtime
+        self.model = model
+        self.name = model.name
+
+    def occurs(self) -> bool:
+        scope = {}
+        for var in self.model.variables:
+            if var.init is not None:
+                scope[var.name] = self.runtime.env.eval(var.init, scope)
+        conditions = (*self.model.equations, *self.model.predicates)
+        return bool(conditions) and all(bool(self.runtime.env.eval(c, scope)) for c in conditions)
+
+
+class Operation:
+    """An operation of the platform: sets mapping variables and commands actuators."""
+
+    def __init__(self, runtime: "Mapping", model, params: list[str]):
+        self.runtime = runtime
+        self.model = model
+        self.name = model.name
+        self.params = params
+        self.commands: list[tuple[str, s.Expr]] = []
+        self.constraints: list[s.Expr] = []
+        for eq in model.equations:
+            target = _actuator_port(eq)
+            if target is not None:
+                self.commands.append((target, eq.right))
+            else:
+                self.constraints.append(eq)
+
+    def execute(self, args) -> None:
+        rt = self.runtime
+        if isinstance(args, dict):
+            unknown = [k for k in args if k not in self.params]
+            if unknown:
+                raise CotwinError(f"operation {self.name}: unknown argument(s) {', '.join(unknown)}")
+            scope = {p: args.get(p, 0) for p in self.params}
+        else:
+            args = list(args or ())
+            if len(args) != len(self.params):
+                raise CotwinError(f"operation {self.name} takes {len(self.params)} argument(s), got {len(args)}")
+            scope = dict(zip(self.params, args))
+        for var in self.model.variables:
+            scope[var.name] = rt.env.eval(var.init, scope) if var.init is not None else 0
+        for target, value, _ in self.model.actions:
+            root = s.root_name(target)
+            if not isinstance(target, s.Name) or root is None:
+                raise CotwinError(f"{target.loc}: only mapping variables can be assigned by an action")
+            if root.name.last not in rt.variables:
+                raise CotwinError(f"{target.loc}: '{root.name}' is not a mapping variable")
+            rt.variables[root.name.last] = rt.env.eval(value, scope)
+        goals = {path: float(rt.env.eval(value, scope)) for path, value in self.commands}
+        if goals:
+            rt.endpoint.command(goals)
+
+
+def _actuator_port(eq: s.Expr) -> str | None:
+    if isinstance(eq, s.Binary) and eq.op == "==" and isinstance(eq.left, s.FieldAccess) \
+            and isinstance(eq.left.base, s.Name) and len(eq.left.base.name.parts) == 4:
+        return f"{eq.left.base.name}.{eq.left.field}"
+    return None
+
+
+class Mapping:
+    """The platform-mapping interface: one instance per mapping model and endpoint."""
+
+    def __init__(self, project, endpoint, mapping_name: str | None = None):
+        mappings = project.elements(MappingModel)
+        if mapping_name is not None:
+            model = project.lookup("mapping", mapping_name)
+        elif len(mappings) == 1:
+            model = mappings[0]
+        else:
+            model = None
+        if model is None:
+            raise CotwinError("choose a mapping: " + ", ".join(m.name for m in mappings) if mappings else "no mapping model")
+        self.project = project
+        self.model = model
+        self.endpoint = endpoint
+        self.source = project.file_of(model)
+        module, pmodel, members = mapping_targets(project, model, self.source)
+        if members is None or pmodel is None:
+            raise CotwinError(f"mapping {model.name}: its d-model module or p-model is missing")
+        self.members = members
+        self.pmodel = pmodel
+        self.resolver = TypeResolver(project, self.source, Diagnostics())
+        self.registry = FunctionRegistry(endpoint)
+        self.functions = self.registry.functions()
+        self.env = _Env(self)
+        self.events = {ev.name: InputEvent(self, ev) for ev in model.input_events}
+        self.operations = {op.name: Operation(self, op, [p.name for p in members.operations[op.name].params])
+                           for op in model.operations if op.name in members.operations}
+        self.variables: dict[str, object] = {}
+        self._readings: dict[str, float] | None = None
+        self._mirrors = self._mirror_variables()
+        for path, _ in (c for op in self.operations.values() for c in op.commands):
+            endpoint.joint(path)  # every commanded actuator exists on the endpoint
+        self.started = False
+
+    def enum_value(self, name: s.QName) -> int:
+        decl = self.project.lookup("type", s.QName(name.parts[:-1]), self.source)
+        if not isinstance(decl, EnumDecl) or decl.literal(name.last) is None:
+            raise CotwinError(f"{name.loc}: unknown name '{name}'")
+        return [lit.name for lit in decl.literals].index(name.last)
+
+    def _mirror_variables(self) -> dict[str, tuple[str, str]]:
+        """q<i>/qd<i> mapping variables -> (joint, position|velocity) of the i-th arm joint."""
+        out = {}
+        names = {v.name for v in self.model.variables}
+        for i, joint in enumerate(self.registry.arm):
+            for prefix, kind in (("q", "position"), ("qd", "velocity")):
+                if f"{prefix}{i}" in names:
+                    out[f"{prefix}{i}"] = (joint, kind)
+        return out
+
+    # ---- the paper's API ----
+    def start_mapping(self) -> None:
+        self.endpoint.start()
+        self.variables = {}
+        for var in self.model.variables:
+            ty, init = self.resolver.declared(var)
+            if init is not None:
+                self.variables[var.name] = self.env.eval(init, {})
+            elif isinstance(ty, EnumTy):
+                self.variables[var.name] = 0
+            else:
+                self.variables[var.name] = {"boolean": False, "real": 0.0}.get(str(ty), 0)
+        self._sync()
+        self.started = True
+
+    def get_event(self, name: str, args=None) -> bool:
+        if name not in self.events:
+            raise CotwinError(f"mapping {self.model.name} has no input event '{name}'")
+        return self.events[name].occurs()
+
+    def execute_operation(self, name: str, args=None) -> None:
+        if name not in self.operations:
+            raise CotwinError(f"mapping {self.model.name} has no operation '{name}'")
+        self.operations[name].execute(args or ())
+
+    def stop_mapping(self) -> None:
+        self.endpoint.stop()
+        self.started = False
+
+    # ---- time ----
+    def step(self, dt: float) -> None:
+        """Let the platform run for dt seconds, then refresh sensor readings and mirrored variables."""
+        self.endpoint.advance(dt)
+        self._sync()
+
+    def _sync(self) -> None:
+        self._readings = None
+        if self._mirrors:
+            q = self.endpoint.joint_positions()
+            qd = getattr(self.endpoint, "sim", None)
+            velocities = qd.joint_velocities() if qd is not None else {}
+            for var, (joint, kind) in self._mirrors.items():
+                self.variables[var] = q.get(joint, 0.0) if kind == "position" else velocities.get(joint, 0.0)
+
+    def sensor_readings(self) -> dict[str, float]:
+        if self._readings is None:
+            self._readings = self.endpoint.read_sensors()
+        return self._readings
+
+    @property
+    def monitored(self) -> list[str]:
+        """Mapping variables worth logging: the q/qd mirrors, in order."""
+        return sorted(self._mirrors, key=lambda n: (n.startswith("qd"), int(re.sub(r"\D", "", n))))

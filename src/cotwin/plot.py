@@ -1,0 +1,55 @@
+"""A figure like the paper's Fig. 16 from a Maestro-format outputs.csv: commands and their arguments,
+the d-model's operation calls, and the joint angles over time."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def read_csv(path: str | Path) -> dict[str, list]:
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    header, data = rows[0], rows[1:]
+    columns: dict[str, list] = {h: [] for h in header}
+    for row in data:
+        for h, v in zip(header, row):
+            columns[h].append(1.0 if v == "true" else 0.0 if v == "false" else float(v) if v else float("nan"))
+    return columns
+
+
+def figure(csv_path: str | Path, png_path: str | Path, title: str = "") -> Path:
+    cols = read_csv(csv_path)
+    t = cols["time"]
+
+    def pick(prefix: str, names=None):
+        return {k: v for k, v in cols.items() if k.startswith(prefix) and (names is None or k.split(".")[-1] in names)}
+
+    commands = {k: v for k, v in pick("{controller}.controller.").items() if not k.split(".")[-1].startswith("MovementArgs")}
+    arguments = {k: v for k, v in pick("{controller}.controller.").items() if k.split(".")[-1].startswith("MovementArgs")}
+    operations = {k: v for k, v in pick("{dmodel}.dmodel.").items() if k.split(".")[-1] in ("movediscrete", "stop", "pick", "place")}
+    op_args = pick("{dmodel}.dmodel.", {"target_X", "target_Y", "target_Z"})
+    joints = pick("{mapping}.mapping.", {f"q{i}" for i in range(6)})
+    fig, axes = plt.subplots(5, 1, figsize=(10, 12), sharex=True)
+    panels = [(commands, "(1) commands", "steps-post"), (arguments, "(2) command arguments", "steps-post"),
+              (operations, "(3) d-model operation calls", "steps-post"), (op_args, "(3b) operation arguments", "steps-post"),
+              (joints, "(4) joint angles [rad]", "default")]
+    for ax, (series, label, style) in zip(axes, panels):
+        for name, values in series.items():
+            ax.plot(t, values, drawstyle=style, label=name.split(".")[-1])
+        ax.set_ylabel(label, fontsize=8)
+        ax.grid(True, alpha=0.3)
+        if series:
+            ax.legend(fontsize=7, loc="upper right", ncol=3)
+    axes[-1].set_xlabel("time [s]")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=90)
+    plt.close(fig)
+    return Path(png_path)
