@@ -35,6 +35,7 @@ class MappingUnit(PythonUnit):
         self.calls = [(op.name, [(p, [port for port, _ in group]) for (p, _), group in zip(op.params, op.arg_ports)])
                       for op in program.operations if op.name in mapping.operations]
         self.event_ports = [p for p in self.ports.values() if p.causality == "output" and p.name in mapping.events]
+        self.executed: list[tuple[float, str, dict]] = []  # (step start time, operation, arguments)
 
     def instantiate(self, start: float) -> None:
         super().instantiate(start)
@@ -46,6 +47,7 @@ class MappingUnit(PythonUnit):
             if self.values.get(op):
                 args = {p: self.values[ports[0]] for p, ports in params if len(ports) == 1}
                 self.mapping.execute_operation(op, args)
+                self.executed.append((t, op, args))
         self.mapping.step(h)
         self._report()
 
