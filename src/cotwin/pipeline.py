@@ -58,6 +58,17 @@ class TwinProject:
         return [self.dmodel, self.pmodel, self.mapping]
 
 
+def python_unit(project: str | Path, role: str):
+    """A cotwin in-process unit of a twin project by role (used inside cotwin's Python FMUs)."""
+    twin = Twin(load_twin_project(project))
+    controller = twin.controller_unit()
+    if role == "controller":
+        return controller
+    if role == "mapping":
+        return twin.mapping_unit(controller.command_events)
+    raise CotwinError(f"unknown unit role '{role}'")
+
+
 def load_twin_project(path: str | Path) -> TwinProject:
     """Read cotwin.toml, reporting unknown keys, wrong types and missing files with the file's name."""
     path = Path(path)
@@ -146,23 +157,72 @@ class Twin:
                            (f"{self.tree.name}_scene.xml", to_mjcf(self.tree, self.scene))):
             (out / name).write_text(text)
             written[name] = out / name
+        written.update(self.python_fmus(out))
         written["multimodel"] = out / "multimodel.json"
         written["multimodel"].write_text(json.dumps(self.multimodel(), indent=2) + "\n")
         return written
 
+    def python_fmus(self, out: str | Path) -> dict[str, Path]:
+        """mapping.fmu and controller.fmu: the in-process units packaged with pythonfmu (they need
+        cotwin installed where they run), so the multimodel runs in Maestro or any FMI importer."""
+        import shutil
+        import tempfile
+
+        from pythonfmu import FmuBuilder
+
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        written = {}
+        spec = self.spec
+        with tempfile.TemporaryDirectory(prefix="cotwin-pyfmu-") as tmp:
+            stage = Path(tmp) / "twin"
+            stage.mkdir()
+            names = {}
+            for key, path in (("dmodel", spec.dmodel), ("pmodel", spec.pmodel), ("mapping", spec.mapping),
+                              ("scenario", spec.scenario)):
+                shutil.copy(path, stage / path.name)
+                names[key] = path.name
+            scenario_key = "commands" if spec.scenario.suffix == ".toml" else "plan"
+            bricks = ", ".join(f"[{x}, {y}]" for x, y in spec.bricks)
+            (stage / "cotwin.toml").write_text(
+                f'[models]\ndmodel = "{names["dmodel"]}"\npmodel = "{names["pmodel"]}"\nmapping = "{names["mapping"]}"\n'
+                + (f'module = "{spec.module}"\n' if spec.module else "")
+                + f'[scenario]\n{scenario_key} = "{names["scenario"]}"\n[platform]\nbricks = [{bricks}]\n'
+                + f"[cosim]\nstep = {spec.step}\nend = {spec.end}\n")
+            script = Path(__file__).parent / "cosim" / "pythonfmu_slave.py"
+            for role in ("mapping", "controller"):
+                (stage / "cotwin_unit.json").write_text(json.dumps({"role": role, "project": "twin/cotwin.toml"}))
+                work = Path(tmp) / role
+                work.mkdir()
+                shutil.copy(script, work / "pythonfmu_slave.py")
+                shutil.copytree(stage, work / "twin")
+                shutil.copy(stage / "cotwin_unit.json", work / "cotwin_unit.json")
+                fmu = FmuBuilder.build_FMU(work / "pythonfmu_slave.py", dest=work,
+                                           project_files=[work / "twin", work / "cotwin_unit.json"])
+                target = out / f"{role}.fmu"
+                shutil.move(str(fmu), target)
+                written[role] = target
+        return written
+
     def units(self, dmodel_fmu: Path):
-        from .cosim.scenario import ScenarioUnit
         from .cosim.units import FMUUnit
+
+        controller = self.controller_unit()
+        return controller, FMUUnit(DMODEL, dmodel_fmu), self.mapping_unit(controller.command_events)
+
+    def controller_unit(self):
+        from .cosim.scenario import ScenarioUnit
+
+        return ScenarioUnit(CONTROLLER, self.program, self.commands)
+
+    def mapping_unit(self, commands: set[str]):
         from .mapping.endpoint import SimulatedEndpoint
         from .mapping.runtime import Mapping
         from .mapping.unit import MappingUnit
         from .pmodel.simulator import PlatformSimulator
 
-        controller = ScenarioUnit(CONTROLLER, self.program, self.commands)
         endpoint = SimulatedEndpoint(PlatformSimulator(self.tree, self.scene))
-        mapping = MappingUnit(MAPPING, self.program, Mapping(self.project, endpoint), controller.command_events)
-        dmodel = FMUUnit(DMODEL, dmodel_fmu)
-        return controller, dmodel, mapping
+        return MappingUnit(MAPPING, self.program, Mapping(self.project, endpoint), commands)
 
     def connections(self, controller, dmodel, mapping):
         from .cosim.master import Connection

@@ -1,0 +1,132 @@
+"""Maestro multimodel JSON in: units, connections, parameters, logged variables, algorithm, times.
+
+Maestro ignores unknown keys, so a typo passes silently there; here unknown keys, malformed ports
+(`{key}.instance.variable`) and ports the FMUs do not have are reported together, with the file.
+The key `cotwin` (ignored by Maestro) may hold {"delayed": [units], "algorithm": "gauss-seidel"}.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..diagnostics import CotwinError, Finding, Location, Severity
+from .master import Connection, Master
+from .units import FMUUnit
+
+KNOWN_KEYS = {"fmus", "connections", "parameters", "logVariables", "algorithm", "startTime", "endTime",
+              "simulationProgramDelay", "cotwin", "livestream", "overrideLogLevel", "loggingOn", "visible",
+              "parallelSimulation", "stabalizationEnabled", "global_absolute_tolerance", "global_relative_tolerance"}
+PORT = re.compile(r"^(\{[^}]+\})\.([A-Za-z_][\w]*)\.(.+)$")
+
+
+@dataclass
+class MultiModel:
+    path: Path
+    fmus: dict[str, Path]
+    connections: list[tuple[str, str, str, str, str, str]]  # (key, inst, var) -> (key, inst, var)
+    parameters: dict[tuple[str, str], dict[str, object]]
+    log: dict[tuple[str, str], list[str]]
+    step: float
+    start: float
+    end: float
+    realtime: bool
+    algorithm: str = "jacobi"
+    delayed: set[tuple[str, str]] = field(default_factory=set)
+
+    @property
+    def instances(self) -> list[tuple[str, str]]:
+        seen = []
+        for c in self.connections:
+            for inst in ((c[0], c[1]), (c[3], c[4])):
+                if inst not in seen:
+                    seen.append(inst)
+        for inst in (*self.parameters, *self.log):
+            if inst not in seen:
+                seen.append(inst)
+        return seen
+
+
+def read_multimodel(path: str | Path) -> MultiModel:
+    path = Path(path)
+    problems: list[str] = []
+    try:
+        data = json.loads(path.read_text())
+    except OSError as err:
+        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, f"cannot read: {err}")]) from None
+    except json.JSONDecodeError as err:
+        raise CotwinError([Finding(Location(str(path), err.lineno, err.colno), Severity.ERROR, f"bad JSON: {err.msg}")]) from None
+    if not isinstance(data, dict):
+        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, "a multimodel is a JSON object")])
+    for key in data:
+        if key not in KNOWN_KEYS:
+            problems.append(f"unknown key '{key}' (Maestro would ignore it silently)")
+    fmus = {}
+    for key, file in (data.get("fmus") or {}).items():
+        if not re.fullmatch(r"\{[^}]+\}", key):
+            problems.append(f"fmus: key '{key}' must look like '{{name}}'")
+        fmus[key] = (path.parent / file) if not Path(file).is_absolute() else Path(file)
+        if not fmus[key].is_file():
+            problems.append(f"fmus: {key}: no file {fmus[key]}")
+
+    def port(text: str, where: str):
+        m = PORT.match(text) if isinstance(text, str) else None
+        if m is None:
+            problems.append(f"{where}: '{text}' is not a port '{{key}}.instance.variable'")
+            return None
+        if m.group(1) not in fmus:
+            problems.append(f"{where}: '{text}' names FMU {m.group(1)}, which 'fmus' does not list")
+            return None
+        return m.group(1), m.group(2), m.group(3)
+
+    connections = []
+    for out, targets in (data.get("connections") or {}).items():
+        src = port(out, "connections")
+        for target in targets if isinstance(targets, list) else [targets]:
+            dst = port(target, "connections")
+            if src and dst:
+                connections.append((*src, *dst))
+    parameters: dict[tuple[str, str], dict] = {}
+    for name, value in (data.get("parameters") or {}).items():
+        p = port(name, "parameters")
+        if p:
+            parameters.setdefault(p[:2], {})[p[2]] = value
+    log: dict[tuple[str, str], list[str]] = {}
+    for inst, names in (data.get("logVariables") or {}).items():
+        m = re.match(r"^(\{[^}]+\})\.([A-Za-z_]\w*)$", inst)
+        if m is None or m.group(1) not in fmus:
+            problems.append(f"logVariables: '{inst}' is not a known '{{key}}.instance'")
+            continue
+        log[(m.group(1), m.group(2))] = list(names)
+    algorithm = data.get("algorithm") or {}
+    if algorithm.get("type", "fixed-step") != "fixed-step" or not isinstance(algorithm.get("size"), (int, float)):
+        problems.append("algorithm: only {'type': 'fixed-step', 'size': seconds} is supported")
+    extra = data.get("cotwin") or {}
+    delayed = set()
+    for inst in extra.get("delayed", []):
+        m = re.match(r"^(\{[^}]+\})\.([A-Za-z_]\w*)$", inst)
+        if m:
+            delayed.add((m.group(1), m.group(2)))
+        else:
+            problems.append(f"cotwin.delayed: '{inst}' is not a '{{key}}.instance'")
+    if problems:
+        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, p) for p in problems])
+    return MultiModel(path, fmus, connections, parameters, log, float(algorithm.get("size", 0.1)),
+                      float(data.get("startTime", 0.0)), float(data.get("endTime", 10.0)),
+                      bool(data.get("simulationProgramDelay", False)), extra.get("algorithm", "jacobi"), delayed)
+
+
+def unit_name(instance: tuple[str, str]) -> str:
+    return f"{instance[0]}.{instance[1]}"
+
+
+def master_for(mm: MultiModel, step: float | None = None, end: float | None = None,
+               algorithm: str | None = None) -> Master:
+    units = [FMUUnit(unit_name(inst), mm.fmus[inst[0]]) for inst in mm.instances]
+    connections = [Connection(unit_name(c[:2]), c[2], unit_name(c[3:5]), c[5]) for c in mm.connections]
+    return Master(units, connections, step or mm.step, end or mm.end, start=mm.start,
+                  algorithm=algorithm or mm.algorithm, delayed={unit_name(d) for d in mm.delayed},
+                  log={unit_name(k): v for k, v in mm.log.items()},
+                  parameters={unit_name(k): v for k, v in mm.parameters.items()}, realtime=mm.realtime)
