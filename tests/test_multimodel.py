@@ -1,0 +1,121 @@
+"""The generated multimodel: every FMU validates, cotwin's master and libcosim run it alike."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+
+import pytest
+from fmpy.validation import validate_fmu
+
+from cotwin.cosim.libcosim import run_libcosim
+from cotwin.cosim.master import Connection, Master, topological_order
+from cotwin.cosim.multimodel import read_multimodel
+from cotwin.diagnostics import CotwinError
+from cotwin.pipeline import Twin, load_twin_project
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    from conftest import EXAMPLES
+
+    out = tmp_path_factory.mktemp("twin")
+    Twin(load_twin_project(EXAMPLES / "ur5e" / "cotwin.toml")).build(out)
+    return out
+
+
+def test_every_fmu_of_the_multimodel_validates(built):
+    for name in ("dmodel.fmu", "mapping.fmu", "controller.fmu"):
+        assert validate_fmu(str(built / name)) == [], name
+
+
+def test_simulate_runs_the_multimodel_through_fmpy(built):
+    out = built / "fmpy.csv"
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "simulate", str(built / "multimodel.json"), "--end", "4",
+                           "-o", str(out)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    rows = list(csv.DictReader(open(out)))
+    assert len(rows) == 41 and rows[0]["time"] == "0.0"
+    assert any(r["{dmodel}.dmodel.movediscrete"] == "true" for r in rows)
+    assert abs(float(rows[-1]["{mapping}.mapping.q0"])) > 0.5  # the arm moved towards (0, 23, 1)
+
+
+def test_libcosim_runs_the_same_multimodel_with_the_same_trajectory(built):
+    mm = read_multimodel(built / "multimodel.json")
+    joints = [f"q{i}" for i in range(6)]
+    theirs = run_libcosim(mm, {"{mapping}.mapping": joints, "{dmodel}.dmodel": ["state"]}, end=4.0)
+    master_csv = built / "ours.csv"
+    from cotwin.cosim.multimodel import master_for
+
+    master_for(mm, end=4.0, algorithm="jacobi").run(master_csv)
+    ours = {r["time"]: r for r in csv.DictReader(open(master_csv))}
+    assert len(theirs["time"]) == 40
+    for k, t in enumerate(theirs["time"]):
+        row = ours[repr(round(t, 12))]
+        assert int(row["{dmodel}.dmodel.state"]) == theirs["{dmodel}.dmodel.state"][k]
+        for q in joints:
+            assert float(row[f"{{mapping}}.mapping.{q}"]) == pytest.approx(theirs[f"{{mapping}}.mapping.{q}"][k], abs=1e-6)
+
+
+def test_multimodel_typos_are_reported(built, tmp_path):
+    data = json.loads((built / "multimodel.json").read_text())
+    data["conections"] = {}
+    data["connections"]["{dmodel}.dmodel.movediscret"] = ["{mapping}.mapping.movediscrete"]
+    data["connections"]["{robot}.x.y"] = ["{mapping}.mapping.movediscrete"]
+    data["fmus"] = {k: str(built / v) for k, v in data["fmus"].items()}
+    path = tmp_path / "mm.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(CotwinError) as err:
+        read_multimodel(path)
+    assert "unknown key 'conections'" in str(err.value) and "names FMU {robot}" in str(err.value)
+    del data["conections"], data["connections"]["{robot}.x.y"]
+    path.write_text(json.dumps(data))
+    from cotwin.cosim.multimodel import master_for
+
+    with pytest.raises(CotwinError, match="unit {dmodel}.dmodel has no output 'movediscret'"):
+        master_for(read_multimodel(path))
+    path.write_text("{ bad json")
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "simulate", str(path)], capture_output=True, text=True)
+    assert proc.returncode == 1 and f"{path}:1:3: error: bad JSON" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_cycles_are_reported_unless_a_unit_is_delayed():
+    connections = [Connection("a", "x", "b", "x"), Connection("b", "y", "a", "y")]
+    with pytest.raises(CotwinError, match="cycle a -> b -> a"):
+        topological_order(["a", "b"], connections, set())
+    assert topological_order(["a", "b"], connections, {"b"}) == ["a", "b"]
+
+
+class _Failing:
+    """A unit whose step fails at t = 0.3: the master must flush the CSV and terminate every unit."""
+
+    def __init__(self, name):
+        from cotwin.cosim.units import Port, PythonUnit
+
+        self.unit = PythonUnit(name, [Port("out", "Real", "output")])
+        self.unit.terminated = False
+
+        def step(t, h, unit=self.unit):
+            if t >= 0.3 - 1e-9:
+                from cotwin.cosim.units import UnitError
+
+                raise UnitError(unit.name, t, "fmi2DoStep", "returned fmi2Error")
+            unit.values["out"] = t + h
+
+        def terminate(unit=self.unit):
+            unit.terminated = True
+
+        self.unit.step = step
+        self.unit.terminate = terminate
+
+
+def test_failure_names_unit_time_and_call_and_keeps_the_rows(tmp_path):
+    failing = _Failing("{f}.f").unit
+    master = Master([failing], [], step=0.1, end=1.0, log={"{f}.f": ["out"]})
+    with pytest.raises(CotwinError, match=r"unit \{f\}.f: fmi2DoStep failed at t = 0.3 s"):
+        master.run(tmp_path / "out.csv")
+    rows = list(csv.reader(open(tmp_path / "out.csv")))
+    assert rows[0] == ["time", "{f}.f.out"] and [r[0] for r in rows[1:]] == ["0.0", "0.1", "0.2", "0.3"]
+    assert failing.terminated
