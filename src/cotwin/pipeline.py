@@ -8,7 +8,9 @@
     [scenario]
     plan = "plan.csv"              # or: commands = "scenario.toml"
     [platform]
-    endpoint = "mujoco"            # the embedded simulator (default)
+    endpoint = "mujoco"            # the embedded simulator (default), or "broker": a robot behind
+    queue = "cotwin.robot"         #   RabbitMQ answering on this queue (cotwin.mapping.broker)
+    url = "amqp://guest:guest@127.0.0.1:5672/%2F"
     bricks = [[8, 10]]             # optional: bricks on holes (X, Y)
     [cosim]
     step = 0.1
@@ -28,7 +30,7 @@ from .diagnostics import CotwinError, Finding, Location, Severity
 
 DMODEL, MAPPING, CONTROLLER = "{dmodel}.dmodel", "{mapping}.mapping", "{controller}.controller"
 _KEYS = {"models": {"dmodel", "pmodel", "mapping", "module", "pmodel_name"},
-         "scenario": {"plan", "commands"}, "platform": {"endpoint", "bricks"},
+         "scenario": {"plan", "commands"}, "platform": {"endpoint", "bricks", "queue", "url"},
          "cosim": {"step", "end", "algorithm", "log", "realtime"}}
 
 
@@ -52,6 +54,8 @@ class TwinProject:
     algorithm: str = "jacobi"
     log: list[str] | None = None
     realtime: bool = False
+    queue: str = "cotwin.robot"
+    url: str = "amqp://guest:guest@127.0.0.1:5672/%2F"
 
     @property
     def model_files(self) -> list[Path]:
@@ -109,8 +113,8 @@ def load_twin_project(path: str | Path) -> TwinProject:
             problems.append(f"[cosim] {key} must be a positive number, got {cosim[key]!r}")
     if cosim.get("algorithm", "jacobi") not in ("jacobi", "gauss-seidel"):
         problems.append(f"[cosim] algorithm must be 'jacobi' or 'gauss-seidel', got {cosim['algorithm']!r}")
-    if platform.get("endpoint", "mujoco") not in ("mujoco",):
-        problems.append(f"[platform] endpoint {platform['endpoint']!r} is not known (known: mujoco)")
+    if platform.get("endpoint", "mujoco") not in ("mujoco", "broker"):
+        problems.append(f"[platform] endpoint {platform['endpoint']!r} is not known (known: mujoco, broker)")
     bricks = platform.get("bricks", [])
     if not (isinstance(bricks, list) and all(isinstance(b, list) and len(b) == 2 and all(isinstance(v, int) for v in b)
                                              for b in bricks)):
@@ -121,7 +125,8 @@ def load_twin_project(path: str | Path) -> TwinProject:
     return TwinProject(path, files["dmodel"], files["pmodel"], files["mapping"], base / scen, models.get("module"),
                        models.get("pmodel_name"), platform.get("endpoint", "mujoco"), [tuple(b) for b in bricks],
                        float(cosim.get("step", 0.1)), float(cosim.get("end", 20.0)), cosim.get("algorithm", "jacobi"),
-                       cosim.get("log"), bool(cosim.get("realtime", False)))
+                       cosim.get("log"), bool(cosim.get("realtime", False)), platform.get("queue", "cotwin.robot"),
+                       platform.get("url", "amqp://guest:guest@127.0.0.1:5672/%2F"))
 
 
 class Twin:
@@ -221,7 +226,12 @@ class Twin:
         from .mapping.unit import MappingUnit
         from .pmodel.simulator import PlatformSimulator
 
-        endpoint = SimulatedEndpoint(PlatformSimulator(self.tree, self.scene))
+        if self.spec.endpoint == "broker":
+            from .mapping.broker import BrokerEndpoint
+
+            endpoint = BrokerEndpoint(self.tree, self.spec.queue, self.spec.url)
+        else:
+            endpoint = SimulatedEndpoint(PlatformSimulator(self.tree, self.scene))
         return MappingUnit(MAPPING, self.program, Mapping(self.project, endpoint), commands)
 
     def connections(self, controller, dmodel, mapping):

@@ -30,6 +30,8 @@ class Endpoint(Protocol):
     def command(self, goals: dict[str, float]) -> None: ...
     def advance(self, dt: float) -> None: ...
     def joint_positions(self) -> dict[str, float]: ...
+    def joint_velocities(self) -> dict[str, float]: ...
+    def joint(self, name: str) -> str: ...
 
 
 @dataclass
@@ -80,6 +82,12 @@ class SimulatedEndpoint:
 
     def joint_positions(self) -> dict[str, float]:
         return self.sim.joint_positions()
+
+    def joint_velocities(self) -> dict[str, float]:
+        return self.sim.joint_velocities()
+
+    def actuator_names(self) -> list[str]:
+        return list(self._path_to_joint)
 
     def joint(self, name: str) -> str:
         if name not in self._path_to_joint:

@@ -282,8 +282,7 @@ class Mapping:
         self._readings = None
         if self._mirrors:
             q = self.endpoint.joint_positions()
-            qd = getattr(self.endpoint, "sim", None)
-            velocities = qd.joint_velocities() if qd is not None else {}
+            velocities = self.endpoint.joint_velocities()
             for var, (joint, kind) in self._mirrors.items():
                 self.variables[var] = q.get(joint, 0.0) if kind == "position" else velocities.get(joint, 0.0)
 
