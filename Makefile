@@ -17,8 +17,12 @@ install: $(STAMP)
 
 demo: install
 	$(VENV)/bin/cotwin check examples/ur5e
-	$(VENV)/bin/cotwin build-dmodel examples/ur5e/arm.rst -o $(OUT)/arm.fmu
 	$(VENV)/bin/cotwin verify examples/ur5e/arm.rst
+	$(VENV)/bin/cotwin build examples/ur5e/cotwin.toml -o $(OUT)
+	$(VENV)/bin/cotwin run examples/ur5e/cotwin.toml -o $(OUT)
+	$(VENV)/bin/cotwin run examples/ur5e/cotwin.toml -o $(OUT)/gauss-seidel --algorithm gauss-seidel
+	$(VENV)/bin/cotwin run examples/ur5e/pick_place_project.toml -o $(OUT)/pick-place
+	@echo "results: $(OUT)/outputs.csv, $(OUT)/figure.png, $(OUT)/gauss-seidel/, $(OUT)/pick-place/ (multimodel: $(OUT)/multimodel.json)"
 
 test: install
 	$(PY) -m pytest -q
