@@ -11,14 +11,12 @@ from fmpy.validation import validate_fmu
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cotwin.diagnostics import CotwinError
 from cotwin.dmodel.fmu import PortLayout, build_fmu, fmu_sources
 from cotwin.dmodel.interpreter import ExecutionError, Interpreter
 from cotwin.dmodel.program import build_program
 from cotwin.dmodel.runner import FMUDriver
 from cotwin.dmodel.verify import verify
 from cotwin.robosim.check import load_checked
-from cotwin.robosim.parser import parse
 
 ARGS = {"target_X": 0, "target_Y": 23, "target_Z": 1}
 # docs/robosim-notation.md, section 5: inputs per cycle -> outputs

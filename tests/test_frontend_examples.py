@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import math
 
 import pytest
 
-from cotwin.diagnostics import Diagnostics
 from cotwin.robosim.check import check_paths
 from cotwin.robosim.check_pmodel import pmodel_constants
-from cotwin.robosim.consteval import ConstError, evaluate
+from cotwin.robosim.consteval import ConstError
 from cotwin.robosim.parser import parse
 
 

@@ -119,3 +119,17 @@ def test_failure_names_unit_time_and_call_and_keeps_the_rows(tmp_path):
     rows = list(csv.reader(open(tmp_path / "out.csv")))
     assert rows[0] == ["time", "{f}.f.out"] and [r[0] for r in rows[1:]] == ["0.0", "0.1", "0.2", "0.3"]
     assert failing.terminated
+
+
+def test_realtime_pacing_keeps_wall_clock_behind_simulated_time():
+    import time
+
+    from cotwin.cosim.units import Port, PythonUnit
+
+    unit = PythonUnit("{u}.u", [Port("out", "Real", "output")])
+    unit.step = lambda t, h: None
+    master = Master([unit], [], step=0.05, end=0.3, log={"{u}.u": ["out"]}, realtime=True)
+    started = time.perf_counter()
+    result = master.run(None)
+    assert time.perf_counter() - started >= 0.3 - 1e-3
+    assert result.rows == 7

@@ -248,7 +248,7 @@ class CGenerator:
         out("case -1: return 0;  /* terminated */")
         for number, label in self.resumes:
             out(f"case {number}: goto {label};")
-        out(f'default: return fail(M, "corrupt resume point");')
+        out('default: return fail(M, "corrupt resume point");')
         out("}")
         out.lines.extend(body.lines)
         out.depth = 0

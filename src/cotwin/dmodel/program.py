@@ -20,7 +20,7 @@ from ..robosim.interfaces import machine_io, platform_members
 from ..robosim.machines import MachineGraph
 from ..robosim.project import Project
 from ..robosim.types import (
-    BOOL, INT, NAT, REAL, UNKNOWN, EnumTy, PrimTy, RecordTy, Ty, TypeResolver,
+    BOOL, INT, NAT, REAL, EnumTy, RecordTy, Ty, TypeResolver,
 )
 
 

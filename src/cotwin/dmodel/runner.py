@@ -6,7 +6,6 @@ Used by differential tests and benchmarks: same inputs as `Interpreter.step`, sa
 from __future__ import annotations
 
 import shutil
-import tempfile
 from pathlib import Path
 
 from fmpy import extract, read_model_description

@@ -22,7 +22,7 @@ import numpy as np
 from ..diagnostics import CotwinError
 from ..pmodel import ik
 from ..robosim import syntax as s
-from ..robosim.check_mapping import device_path, mapping_targets
+from ..robosim.check_mapping import mapping_targets
 from ..robosim.declarations import EnumDecl
 from ..robosim.pmodel_elements import Mapping as MappingModel
 from ..robosim.types import EnumTy, TypeResolver

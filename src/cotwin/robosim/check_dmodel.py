@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from ..diagnostics import Diagnostics
+from .checker import Checker
 from . import syntax as s
-from .consteval import ConstEnv, const_env, evaluate, ConstError
-from .declarations import EnumDecl, RecordDecl, SourceFile, VarDecl
+from .declarations import EnumDecl, RecordDecl
 from .dmodel_elements import (
     Connection, Controller, Final, Initial, Interface, Junction, Module, RoboticPlatform, State,
     StateMachine,
@@ -13,16 +12,10 @@ from .dmodel_elements import (
 from .interfaces import interface_of, machine_io, platform_members
 from .machines import MachineGraph
 from .typecheck import ExprChecker, Scope, Symbol
-from .types import BOOL, TypeResolver, assignable
+from .types import assignable
 
 
-class DModelChecker:
-    def __init__(self, project, source: SourceFile, diag: Diagnostics):
-        self.project = project
-        self.source = source
-        self.diag = diag
-        self.types = TypeResolver(project, source, diag)
-        self.functions = project.visible_functions(source)
+class DModelChecker(Checker):
 
     def check(self) -> None:
         for element in self.source.elements:

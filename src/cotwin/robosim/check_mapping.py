@@ -8,6 +8,7 @@ when the operation is called.
 from __future__ import annotations
 
 from ..diagnostics import Diagnostics
+from .checker import Checker
 from . import syntax as s
 from .check_pmodel import flatten_links
 from .consteval import const_env, try_evaluate
@@ -16,7 +17,7 @@ from .dmodel_elements import Module
 from .interfaces import Members, platform_members
 from .pmodel_elements import Mapping, PModel
 from .typecheck import ExprChecker, Scope, Symbol
-from .types import BOOL, UNKNOWN, DeviceTy, Ty, TypeResolver
+from .types import BOOL, UNKNOWN, DeviceTy, Ty
 
 
 def mapping_targets(project, mapping: Mapping, source: SourceFile | None, diag: Diagnostics | None = None):
@@ -66,13 +67,7 @@ def device_path(project, pmodel: PModel, name: s.QName):
     return link, ref, device
 
 
-class MappingChecker:
-    def __init__(self, project, source: SourceFile, diag: Diagnostics):
-        self.project = project
-        self.source = source
-        self.diag = diag
-        self.types = TypeResolver(project, source, diag)
-        self.functions = project.visible_functions(source)
+class MappingChecker(Checker):
 
     def check(self) -> None:
         for element in self.source.elements:

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..diagnostics import Diagnostics
+from .checker import Checker
 from . import syntax as s
 from .consteval import UNITS, ConstEnv, const_env, try_evaluate
-from .declarations import SourceFile, VarDecl
+from .declarations import VarDecl
 from .pmodel_elements import AnnotationRecord, Device, DeviceRef, JointRef, Link, PModel, Pose, Shape
 from .typecheck import ExprChecker, Scope, Symbol
-from .types import REAL, TypeResolver
+from .types import REAL
 
 SHAPE_PARAMS = {
     "box": ("length", "width", "height"),
@@ -53,13 +53,7 @@ def flatten_links(project, pmodel: PModel, _seen: frozenset = frozenset()) -> di
     return out
 
 
-class PModelChecker:
-    def __init__(self, project, source: SourceFile, diag: Diagnostics):
-        self.project = project
-        self.source = source
-        self.diag = diag
-        self.types = TypeResolver(project, source, diag)
-        self.functions = project.visible_functions(source)
+class PModelChecker(Checker):
 
     def check(self) -> None:
         for element in self.source.elements:
