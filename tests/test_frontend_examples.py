@@ -43,7 +43,9 @@ def test_constant_arithmetic_like_the_published_pmodel():
     assert _const("const A: real = -2*3.0 + 1", "A") == pytest.approx(-5.0)
     assert _const("const Q: real = sqrt(4.0)", "Q") == pytest.approx(2.0)
     assert _const("const V: real = (|0,0,1|)", "V") == (0, 0, 1)
-    assert _const("const T: real = 7 / 2", "T") == 3  # integer division between ints
+    assert _const("const T: real = 7 / 2", "T") == 3  # integer division between ints, as in C
+    assert _const("const N: real = -7 / 2", "N") == -3  # truncates toward zero (not Python's floor)
+    assert _const("const M: real = -7 % 2", "M") == -1  # the remainder takes the dividend's sign
 
 
 def test_cyclic_constants_are_reported():

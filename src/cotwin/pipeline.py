@@ -147,6 +147,12 @@ class Twin:
         mappings = self.project.elements(MappingModel)
         self.scene = FlexCell.from_mapping(mappings[0], [Brick(f"brick{i + 1}", b) for i, b in enumerate(twin.bricks)])
         self.commands = read_scenario(twin.scenario, self.program)
+        self.mapping_model = mappings[0]
+        from .mapping.runtime import mirror_variables
+        from .pmodel import ik
+
+        arm = ik.arm_joints(self.tree, ik.find_tool(self.tree))
+        self.monitored = list(mirror_variables([v.name for v in self.mapping_model.variables], arm))
 
     # ---- artefacts ----
     def build(self, out: str | Path) -> dict[str, Path]:
@@ -234,56 +240,50 @@ class Twin:
             endpoint = SimulatedEndpoint(PlatformSimulator(self.tree, self.scene))
         return MappingUnit(MAPPING, self.program, Mapping(self.project, endpoint), commands)
 
-    def connections(self, controller, dmodel, mapping):
+    def wiring(self):
+        """Every connection of the twin, derived once from the models and used both by `run` and by
+        the multimodel: scenario -> d-model commands, d-model calls -> mapping, mapping events ->
+        d-model (the mapping's outputs are declared delayed: they break the d-model/mapping cycle)."""
         from .cosim.master import Connection
+        from .cosim.scenario import scenario_ports
+        from .dmodel.fmu import PortLayout
+        from .mapping.unit import mapping_ports
 
-        out = []
-        for port in controller.outputs():
-            out.append(Connection(CONTROLLER, port, DMODEL, port))
-        for port in dmodel.outputs():
-            if port in mapping.ports and mapping.ports[port].causality == "input":
-                out.append(Connection(DMODEL, port, MAPPING, port))
-        for port in mapping.outputs():
-            if port in dmodel.ports and dmodel.ports[port].causality == "input":
-                out.append(Connection(MAPPING, port, DMODEL, port))
+        commands = {p for c in self.commands for p, _ in c.values}
+        command_events = commands & {ev.name for ev in self.program.inputs}
+        mapped = {ev.name for ev in self.mapping_model.input_events}
+        dmodel_inputs = {v.name for v in PortLayout(self.program).variables if v.causality == "input"}
+        out = [Connection(CONTROLLER, p, DMODEL, p) for p in scenario_ports(self.program) if p in commands]
+        for port in mapping_ports(self.program, mapped, command_events, self.monitored):
+            if port.causality == "input":
+                out.append(Connection(DMODEL, port.name, MAPPING, port.name))
+            elif port.name in dmodel_inputs:
+                out.append(Connection(MAPPING, port.name, DMODEL, port.name))
         return out
 
-    def log_variables(self, mapping) -> dict[str, list[str]]:
-        names = self.spec.log if self.spec.log is not None else mapping.mapping.monitored
-        unknown = [n for n in names if n not in mapping.ports]
+    def log_variables(self) -> dict[str, list[str]]:
+        names = self.spec.log if self.spec.log is not None else self.monitored
+        unknown = [n for n in names if n not in self.monitored]
         if unknown:
-            raise _err(self.spec.path, f"[cosim] log: unknown mapping variable(s) {', '.join(unknown)}")
-        states = [p for p in ("state",) if p]
-        return {MAPPING: list(names), DMODEL: states}
+            raise _err(self.spec.path, f"[cosim] log: unknown mapping variable(s) {', '.join(unknown)} "
+                       f"(monitored: {', '.join(self.monitored) or 'none'})")
+        return {MAPPING: list(names), DMODEL: [self.program.state_port(m) for m in self.program.machines]}
 
     def multimodel(self) -> dict:
         """The Maestro multimodel of this twin; `cotwin` holds what Maestro ignores (delays)."""
-        from .dmodel.fmu import PortLayout
-        from .cosim.scenario import scenario_ports
-
-        commands = {p for c in self.commands for p, _ in c.values}
-        events = {ev.name for ev in self.program.inputs}
-        layout = PortLayout(self.program)
         connections: dict[str, list[str]] = {}
-        for port in sorted(commands, key=list(scenario_ports(self.program)).index):
-            connections[f"{{controller}}.controller.{port}"] = [f"{{dmodel}}.dmodel.{port}"]
-        for var in layout.variables:
-            if var.causality == "output" and not var.name.startswith("state"):
-                connections[f"{{dmodel}}.dmodel.{var.name}"] = [f"{{mapping}}.mapping.{var.name}"]
-        for ev in self.program.inputs:
-            if ev.name not in commands and ev.name in events:
-                connections[f"{{mapping}}.mapping.{ev.name}"] = [f"{{dmodel}}.dmodel.{ev.name}"]
+        for c in self.wiring():
+            connections.setdefault(f"{c.source}.{c.output}", []).append(f"{c.target}.{c.input}")
         return {
             "fmus": {"{dmodel}": "dmodel.fmu", "{mapping}": "mapping.fmu", "{controller}": "controller.fmu"},
             "connections": connections,
             "parameters": {},
-            "logVariables": {"{mapping}.mapping": self.spec.log or ["q0", "q1", "q2", "q3", "q4", "q5"],
-                             "{dmodel}.dmodel": ["state"]},
+            "logVariables": self.log_variables(),
             "algorithm": {"type": "fixed-step", "size": self.spec.step},
             "startTime": 0.0,
             "endTime": self.spec.end,
             "simulationProgramDelay": self.spec.realtime,
-            "cotwin": {"delayed": ["{mapping}.mapping"], "algorithm": self.spec.algorithm},
+            "cotwin": {"delayed": [MAPPING], "algorithm": self.spec.algorithm},
         }
 
     def run(self, out: str | Path, step: float | None = None, end: float | None = None,
@@ -297,9 +297,9 @@ class Twin:
         if not fmu.is_file():
             self.build(out)
         controller, dmodel, mapping = self.units(fmu)
-        master = Master([controller, dmodel, mapping], self.connections(controller, dmodel, mapping),
-                        step or self.spec.step, end or self.spec.end, algorithm=algorithm or self.spec.algorithm,
-                        delayed={MAPPING}, log=self.log_variables(mapping), realtime=self.spec.realtime)
+        master = Master([controller, dmodel, mapping], self.wiring(), step or self.spec.step, end or self.spec.end,
+                        algorithm=algorithm or self.spec.algorithm, delayed={MAPPING}, log=self.log_variables(),
+                        realtime=self.spec.realtime)
         self.last_mapping = mapping
         result = master.run(out / "outputs.csv", progress=progress)
         if plot:

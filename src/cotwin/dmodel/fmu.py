@@ -64,6 +64,7 @@ class PortLayout:
         self.from_model: list[str] = []   # C: after a cycle, copy outputs out
         self.params_to_model: list[str] = []
         self.input_flags: list[str] = []  # C lvalues of the Model's input event flags
+        self.state_ports: set[str] = set()  # the `state` outputs (not operations or events)
         self._build()
 
     def _add(self, name, fmi_type, causality, variability, start, description="") -> Variable:
@@ -119,6 +120,7 @@ class PortLayout:
             self.from_model.append(f"if (M->out_{ev.name}) {{ inst->{self.slot(flag)} = true; {' '.join(copies)} }}")
         for m in p.machines:
             names = ", ".join(f"{k}={n}" for k, n in enumerate(p.leaf_names(m)))
+            self.state_ports.add(p.state_port(m))
             var = self._add(p.state_port(m), "Integer", "output", "discrete", None,
                             f"active leaf state of {m.machine.name}: {names}; -1 = none")
             self.from_model.append(f"inst->{self.slot(var)} = model_state(M, {m.index});")

@@ -15,13 +15,13 @@ Work items of a continuation:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..robosim import syntax as s
 from ..robosim.declarations import EnumDecl
 from ..robosim.dmodel_elements import Final, Initial, Junction, State
+from ..robosim.operators import MATH, SHORT_CIRCUIT, binary, short_circuit
 from .program import MachineInstance, Program, default_value
 
 MAX_STEPS = 10_000  # instantaneous steps in one cycle before it counts as divergence
@@ -70,36 +70,6 @@ def thaw(value):
     return value
 
 
-def c_div(a, b, loc):
-    """Division as in C: integers truncate toward zero; reals follow IEEE 754."""
-    if isinstance(a, int) and isinstance(b, int) and not isinstance(a, bool) and not isinstance(b, bool):
-        if b == 0:
-            raise ExecutionError("division", "integer division by zero", loc)
-        q = abs(a) // abs(b)
-        return q if (a >= 0) == (b >= 0) else -q
-    a, b = float(a), float(b)
-    if b == 0.0:
-        if a == 0.0 or math.isnan(a):
-            return math.nan
-        return math.copysign(math.inf, a) * math.copysign(1.0, b)
-    return a / b
-
-
-def c_mod(a, b, loc):
-    if isinstance(a, int) and isinstance(b, int):
-        if b == 0:
-            raise ExecutionError("division", "integer remainder by zero", loc)
-        return a - b * c_div(a, b, loc)
-    return math.fmod(float(a), float(b))
-
-
-MATH = {
-    "sqrt": math.sqrt, "sin": math.sin, "cos": math.cos, "tan": math.tan, "asin": math.asin, "acos": math.acos,
-    "atan": math.atan, "atan2": math.atan2, "exp": math.exp, "log": math.log, "abs": abs, "min": min, "max": max,
-    "pow": math.pow,
-}
-
-
 @dataclass
 class MachineState:
     active: int = -1
@@ -144,39 +114,15 @@ class Evaluator:
             v = self.eval(e.operand, variables, inputs)
             return (not v) if e.op == "not" else -v
         if isinstance(e, s.Binary):
-            op = e.op
-            if op == "\\/":
-                return bool(self.eval(e.left, variables, inputs)) or bool(self.eval(e.right, variables, inputs))
-            if op == "/\\":
-                return bool(self.eval(e.left, variables, inputs)) and bool(self.eval(e.right, variables, inputs))
-            if op == "=>":
-                return (not self.eval(e.left, variables, inputs)) or bool(self.eval(e.right, variables, inputs))
-            a, b = self.eval(e.left, variables, inputs), self.eval(e.right, variables, inputs)
-            if op == "iff":
-                return bool(a) == bool(b)
-            if op == "+":
-                return a + b
-            if op == "-":
-                return a - b
-            if op == "*":
-                return a * b
-            if op == "/":
-                return c_div(a, b, e.loc)
-            if op == "%":
-                return c_mod(a, b, e.loc)
-            if op == "==":
-                return a == b
-            if op == "!=":
-                return a != b
-            if op == "<":
-                return a < b
-            if op == "<=":
-                return a <= b
-            if op == ">":
-                return a > b
-            if op == ">=":
-                return a >= b
-            raise ExecutionError("unsupported", f"operator '{op}' is not executable", e.loc)
+            left = self.eval(e.left, variables, inputs)
+            if e.op in SHORT_CIRCUIT:
+                return short_circuit(e.op, left, lambda: self.eval(e.right, variables, inputs))
+            try:
+                return binary(e.op, left, self.eval(e.right, variables, inputs))
+            except ZeroDivisionError as err:
+                raise ExecutionError("division", str(err), e.loc) from None
+            except KeyError:
+                raise ExecutionError("unsupported", f"operator '{e.op}' is not executable", e.loc) from None
         if isinstance(e, s.FieldAccess):
             return self.eval(e.base, variables, inputs)[e.field]
         if isinstance(e, s.IfExpr):

@@ -55,6 +55,29 @@ def scalars(ty: Ty, resolver: TypeResolver, prefix: str = "", path: tuple[str, .
     return [Scalar(prefix, fmi_type(ty), path, ty)]
 
 
+def set_path(value: dict, path: tuple[str, ...], leaf) -> None:
+    """Store one scalar into a (nested) record dict at its field path."""
+    for key in path[:-1]:
+        value = value.setdefault(key, {})
+    value[path[-1]] = leaf
+
+
+def get_path(value, path: tuple[str, ...]):
+    for key in path:
+        value = value[key]
+    return value
+
+
+def assemble(group: list[tuple[str, "Scalar"]], read) -> object:
+    """A value from its scalar ports: read(port) for each; a record dict, or the single scalar."""
+    if len(group) == 1 and not group[0][1].path:
+        return read(group[0][0])
+    value: dict = {}
+    for port, sc in group:
+        set_path(value, sc.path, read(port))
+    return value
+
+
 def default_value(ty: Ty, resolver: TypeResolver):
     if isinstance(ty, RecordTy):
         return {f.name: default_value(resolver.resolve(f.type), resolver) for f in ty.decl.fields}

@@ -13,19 +13,7 @@ from fmpy.fmi2 import FMU2Slave
 
 from .interpreter import Output
 from .fmu import PortLayout
-from .program import Program
-
-
-def _set_path(value: dict, path: tuple[str, ...], leaf):
-    for key in path[:-1]:
-        value = value.setdefault(key, {})
-    value[path[-1]] = leaf
-
-
-def _get_path(value, path: tuple[str, ...]):
-    for key in path:
-        value = value[key]
-    return value
+from .program import Program, assemble, get_path
 
 
 class FMUDriver:
@@ -73,7 +61,7 @@ class FMUDriver:
             if present and ev.ty is not None:
                 for port, sc in ev.value_ports:
                     value = inputs[ev.name]
-                    self._set(port, _get_path(value, sc.path) if sc.path else value)
+                    self._set(port, get_path(value, sc.path) if sc.path else value)
         self.fmu.doStep(currentCommunicationPoint=self.time, communicationStepSize=self.h)
         self.time += self.h
         return self.outputs()
@@ -83,30 +71,17 @@ class FMUDriver:
         out = []
         for op in self.program.operations:
             if self._get(op.name):
-                args = []
-                for (pname, ty), group in zip(op.params, op.arg_ports):
-                    if len(group) == 1 and not group[0][1].path:
-                        args.append(self._typed(self._get(group[0][0]), group[0][1]))
-                    else:
-                        value: dict = {}
-                        for port, sc in group:
-                            _set_path(value, sc.path, self._typed(self._get(port), sc))
-                        args.append(value)
-                out.append(Output("operation", op.name, tuple(args)))
+                args = tuple(assemble(group, self._read) for group in op.arg_ports)
+                out.append(Output("operation", op.name, args))
         for ev in self.program.outputs:
             if self._get(ev.name):
-                args = ()
-                if ev.value_ports:
-                    value: dict = {}
-                    for port, sc in ev.value_ports:
-                        _set_path(value, sc.path, self._typed(self._get(port), sc)) if sc.path else None
-                    args = (value if value else self._get(ev.value_ports[0][0]),)
+                args = (assemble(ev.value_ports, self._read),) if ev.value_ports else ()
                 out.append(Output("event", ev.name, args))
         return out
 
-    @staticmethod
-    def _typed(value, scalar):
-        return float(value) if scalar.fmi_type == "Real" else value
+    def _read(self, port: str):
+        value = self._get(port)
+        return float(value) if self.vr[port].fmi_type == "Real" else value
 
     def state(self, machine: int = 0) -> int:
         return self._get(self.program.state_port(self.program.machines[machine]))

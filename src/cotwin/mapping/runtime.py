@@ -14,25 +14,27 @@ Readings of the mapping (see also docs/robosim-notation.md, section 4):
 
 from __future__ import annotations
 
-import math
-import re
-
 import numpy as np
 
 from ..diagnostics import CotwinError
 from ..pmodel import ik
 from ..robosim import syntax as s
+from ..robosim.operators import MATH, SHORT_CIRCUIT, binary, short_circuit
 from ..robosim.check_mapping import mapping_targets
 from ..robosim.declarations import EnumDecl
 from ..robosim.pmodel_elements import Mapping as MappingModel
 from ..robosim.types import EnumTy, TypeResolver
 from ..diagnostics import Diagnostics
 
-MATH = {
-    "sqrt": math.sqrt, "sin": math.sin, "cos": math.cos, "tan": math.tan, "asin": math.asin, "acos": math.acos,
-    "atan": math.atan, "atan2": math.atan2, "exp": math.exp, "log": math.log, "abs": abs, "min": min,
-    "max": max, "pow": math.pow,
-}
+def mirror_variables(variables: list[str], arm: list[str]) -> dict[str, tuple[str, str]]:
+    """Mapping variables q<i> / qd<i> -> (i-th arm joint, position | velocity): q0.. first, then qd0.."""
+    names = set(variables)
+    out = {}
+    for prefix, kind in (("q", "position"), ("qd", "velocity")):
+        for i, joint in enumerate(arm):
+            if f"{prefix}{i}" in names:
+                out[f"{prefix}{i}"] = (joint, kind)
+    return out
 
 
 class FunctionRegistry:
@@ -97,20 +99,15 @@ class _Env:
             v = self.eval(e.operand, scope)
             return (not v) if e.op == "not" else -v
         if isinstance(e, s.Binary):
-            if e.op == "\\/":
-                return bool(self.eval(e.left, scope)) or bool(self.eval(e.right, scope))
-            if e.op == "/\\":
-                return bool(self.eval(e.left, scope)) and bool(self.eval(e.right, scope))
-            a, b = self.eval(e.left, scope), self.eval(e.right, scope)
-            ops = {"+": lambda: a + b, "-": lambda: a - b, "*": lambda: a * b,
-                   "/": lambda: a / b if isinstance(a, float) or isinstance(b, float) else int(a / b),
-                   "%": lambda: a % b, "==": lambda: a == b, "!=": lambda: a != b, "<": lambda: a < b,
-                   "<=": lambda: a <= b, ">": lambda: a > b, ">=": lambda: a >= b,
-                   "=>": lambda: (not a) or b, "iff": lambda: bool(a) == bool(b)}
+            left = self.eval(e.left, scope)
+            if e.op in SHORT_CIRCUIT:
+                return short_circuit(e.op, left, lambda: self.eval(e.right, scope))
             try:
-                return ops[e.op]()
-            except ZeroDivisionError:
-                raise CotwinError(f"{e.loc}: division by zero") from None
+                return binary(e.op, left, self.eval(e.right, scope))
+            except ZeroDivisionError as err:
+                raise CotwinError(f"{e.loc}: {err}") from None
+            except KeyError:
+                raise CotwinError(f"{e.loc}: operator '{e.op}' is not supported in mappings") from None
         if isinstance(e, s.IfExpr):
             return self.eval(e.then if self.eval(e.condition, scope) else e.otherwise, scope)
         if isinstance(e, (s.VectorExpr, s.TupleExpr)):
@@ -222,7 +219,7 @@ class Mapping:
                            for op in model.operations if op.name in members.operations}
         self.variables: dict[str, object] = {}
         self._readings: dict[str, float] | None = None
-        self._mirrors = self._mirror_variables()
+        self._mirrors = mirror_variables([v.name for v in model.variables], self.registry.arm)
         for path, _ in (c for op in self.operations.values() for c in op.commands):
             endpoint.joint(path)  # every commanded actuator exists on the endpoint
         self.started = False
@@ -232,16 +229,6 @@ class Mapping:
         if not isinstance(decl, EnumDecl) or decl.literal(name.last) is None:
             raise CotwinError(f"{name.loc}: unknown name '{name}'")
         return [lit.name for lit in decl.literals].index(name.last)
-
-    def _mirror_variables(self) -> dict[str, tuple[str, str]]:
-        """q<i>/qd<i> mapping variables -> (joint, position|velocity) of the i-th arm joint."""
-        out = {}
-        names = {v.name for v in self.model.variables}
-        for i, joint in enumerate(self.registry.arm):
-            for prefix, kind in (("q", "position"), ("qd", "velocity")):
-                if f"{prefix}{i}" in names:
-                    out[f"{prefix}{i}"] = (joint, kind)
-        return out
 
     # ---- the paper's API ----
     def start_mapping(self) -> None:
@@ -294,4 +281,4 @@ class Mapping:
     @property
     def monitored(self) -> list[str]:
         """Mapping variables worth logging: the q/qd mirrors, in order."""
-        return sorted(self._mirrors, key=lambda n: (n.startswith("qd"), int(re.sub(r"\D", "", n))))
+        return list(self._mirrors)

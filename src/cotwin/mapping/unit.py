@@ -9,30 +9,29 @@ from __future__ import annotations
 
 from ..cosim.units import Port, PythonUnit
 from ..dmodel.fmu import PortLayout
-from ..dmodel.program import Program
+from ..dmodel.program import Program, assemble
 from .runtime import Mapping
 
 
-def mapping_ports(program: Program, mapping: Mapping, commands: set[str]) -> list[Port]:
+def mapping_ports(program: Program, mapped_events: set[str], commands: set[str], monitored: list[str]) -> list[Port]:
+    """The mapping unit's ports, from the models alone: the d-model FMU's outputs (but its `state`) as
+    inputs; the platform events the mapping defines (but the scenario's commands) and the monitored
+    variables as outputs."""
     layout = PortLayout(program)
-    ports = []
-    for var in layout.variables:
-        if var.causality == "output" and not var.name.startswith("state"):
-            ports.append(Port(var.name, var.fmi_type, "input"))
-    for ev in program.inputs:
-        if ev.name not in commands and ev.name in mapping.events:
-            ports.append(Port(ev.name, "Boolean", "output"))
-    for name in mapping.monitored:
-        ports.append(Port(name, "Real", "output"))
+    ports = [Port(v.name, v.fmi_type, "input") for v in layout.variables
+             if v.causality == "output" and v.name not in layout.state_ports]
+    ports.extend(Port(ev.name, "Boolean", "output") for ev in program.inputs
+                 if ev.name not in commands and ev.name in mapped_events)
+    ports.extend(Port(name, "Real", "output") for name in monitored)
     return ports
 
 
 class MappingUnit(PythonUnit):
     def __init__(self, name: str, program: Program, mapping: Mapping, commands: set[str]):
-        super().__init__(name, mapping_ports(program, mapping, commands))
+        super().__init__(name, mapping_ports(program, set(mapping.events), commands, mapping.monitored))
         self.program = program
         self.mapping = mapping
-        self.calls = [(op.name, [(p, [port for port, _ in group]) for (p, _), group in zip(op.params, op.arg_ports)])
+        self.calls = [(op.name, list(zip((p for p, _ in op.params), op.arg_ports)))
                       for op in program.operations if op.name in mapping.operations]
         self.event_ports = [p for p in self.ports.values() if p.causality == "output" and p.name in mapping.events]
         self.executed: list[tuple[float, str, dict]] = []  # (step start time, operation, arguments)
@@ -45,7 +44,7 @@ class MappingUnit(PythonUnit):
     def step(self, t: float, h: float) -> None:
         for op, params in self.calls:
             if self.values.get(op):
-                args = {p: self.values[ports[0]] for p, ports in params if len(ports) == 1}
+                args = {p: assemble(group, self.values.__getitem__) for p, group in params}
                 self.mapping.execute_operation(op, args)
                 self.executed.append((t, op, args))
         self.mapping.step(h)

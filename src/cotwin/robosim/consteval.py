@@ -8,20 +8,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable
 
 from ..diagnostics import Diagnostics
 from . import syntax as s
+from .operators import MATH, binary
 
 #: unit -> factor to SI
 UNITS = {"kg": 1.0, "g": 1e-3, "m": 1.0, "cm": 1e-2, "mm": 1e-3, "rad": 1.0, "deg": math.pi / 180, "s": 1.0}
-
-FUNCTIONS: dict[str, Callable[..., float]] = {
-    "sqrt": math.sqrt, "sin": math.sin, "cos": math.cos, "tan": math.tan, "asin": math.asin,
-    "acos": math.acos, "atan": math.atan, "atan2": math.atan2, "exp": math.exp, "log": math.log,
-    "abs": abs, "min": min, "max": max, "pow": math.pow,
-}
-
 
 class ConstError(Exception):
     def __init__(self, loc, message: str):
@@ -91,10 +84,10 @@ def evaluate(expr: s.Expr, env: ConstEnv) -> object:
         return tuple(evaluate(i, env) for i in expr.items)
     if isinstance(expr, s.IfExpr):
         return evaluate(expr.then if evaluate(expr.condition, env) else expr.otherwise, env)
-    if isinstance(expr, s.Call) and isinstance(expr.function, s.Name) and expr.function.name.last in FUNCTIONS:
+    if isinstance(expr, s.Call) and isinstance(expr.function, s.Name) and expr.function.name.last in MATH:
         args = [_num(evaluate(a, env), a.loc) for a in expr.args]
         try:
-            return FUNCTIONS[expr.function.name.last](*args)
+            return MATH[expr.function.name.last](*args)
         except (ValueError, TypeError) as err:
             raise ConstError(expr.loc, f"cannot evaluate {expr.function.name.last}: {err}") from None
     raise ConstError(expr.loc, "not a constant expression")
@@ -106,32 +99,15 @@ def _binary(expr: s.Binary, left, right):
         if not isinstance(left, bool) or not isinstance(right, bool):
             raise ConstError(loc, f"'{op}' needs booleans")
         return {"\\/": left or right, "/\\": left and right, "=>": (not left) or right, "iff": left == right}[op]
-    if op == "==":
-        return left == right
-    if op == "!=":
-        return left != right
+    if op in ("==", "!="):
+        return binary(op, left, right)
     a, b = _num(left, expr.left.loc), _num(right, expr.right.loc)
-    if op == "+":
-        return a + b
-    if op == "-":
-        return a - b
-    if op == "*":
-        return a * b
-    if op in ("/", "%"):
-        if b == 0:
-            raise ConstError(expr.right.loc, "division by zero")
-        if op == "%":
-            return a % b
-        return a // b if isinstance(a, int) and isinstance(b, int) else a / b
-    if op == "<":
-        return a < b
-    if op == "<=":
-        return a <= b
-    if op == ">":
-        return a > b
-    if op == ">=":
-        return a >= b
-    raise ConstError(loc, f"operator '{op}' is not allowed in a constant")
+    try:
+        return binary(op, a, b)
+    except ZeroDivisionError:
+        raise ConstError(expr.right.loc, "division by zero") from None
+    except KeyError:
+        raise ConstError(loc, f"operator '{op}' is not allowed in a constant") from None
 
 
 def const_env(declarations, outer: ConstEnv | None = None) -> ConstEnv:
