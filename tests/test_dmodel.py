@@ -11,6 +11,7 @@ from fmpy.validation import validate_fmu
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from cotwin.diagnostics import CotwinError
 from cotwin.dmodel.fmu import PortLayout, build_fmu, fmu_sources
 from cotwin.dmodel.interpreter import ExecutionError, Interpreter
 from cotwin.dmodel.program import build_program
@@ -188,7 +189,7 @@ def test_verify_reports_the_paper_models_findings_with_traces(paper_program):
     # replaying the counterexample shows the overlap
     interp = Interpreter(paper_program)
     interp.step(idle[0].trace[0])
-    assert interp.warnings and "nondeterminism" in interp.warnings[0]
+    assert interp.warnings and interp.warnings[0].node == "Idle" and len(interp.warnings[0].enabled) == 2
     assert by_kind["repeated-output"][0].trace == [
         {"moveDiscreteCommand": {"target_X": 0, "target_Y": 0, "target_Z": 0}, "nonfeasibleMoveDiscreteCommand": None}]
     assert "timelock" not in by_kind and report.unreached_states == []
@@ -248,3 +249,13 @@ def test_build_dmodel_without_module_is_a_clean_error(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "cotwin", "build-dmodel", str(tmp_path / "i.rst"), "-o",
                            str(tmp_path / "x.fmu")], capture_output=True, text=True)
     assert proc.returncode == 1 and "no module" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_unsupported_variable_types_are_located(tmp_path):
+    text = TIMELOCK.replace("input context { uses I }", "var v: vector(real, 3)\n\tinput context { uses I }")
+    (tmp_path / "v.rst").write_text(text)
+    with pytest.raises(CotwinError) as err:
+        build_program(load_checked([tmp_path / "v.rst"]))
+    [finding] = err.value.findings
+    assert (finding.location.line, finding.location.column) == (3, 6)
+    assert "vector(real, 3) cannot be executed yet" in finding.message

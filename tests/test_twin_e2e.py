@@ -144,3 +144,13 @@ def test_out_of_range_command_is_not_feasible(twin, tmp_path):
     idle = twin.program.leaf_names(twin.program.machines[0]).index("Idle")
     assert int(rows[-1]["{dmodel}.dmodel.state"]) == idle
     shutil.rmtree(tmp_path, ignore_errors=True)
+
+
+def test_unwritable_output_is_a_readable_error(tmp_path):
+    from conftest import EXAMPLES
+
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "run", str(EXAMPLES / "ur5e" / "cotwin.toml"), "-o",
+                           str(blocker / "out")], capture_output=True, text=True)
+    assert proc.returncode == 1 and proc.stderr.startswith("error: ") and "Traceback" not in proc.stderr

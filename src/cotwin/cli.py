@@ -173,6 +173,9 @@ def entry() -> None:
     except CotwinError as err:
         _report(err.findings)
         sys.exit(1)
+    except OSError as err:  # a file or folder that cannot be read or written
+        click.echo(f"error: {err.strerror or err}{f': {err.filename}' if err.filename else ''}", err=True)
+        sys.exit(1)
     except click.exceptions.Abort:
         sys.exit(130)
     except click.ClickException as err:

@@ -32,7 +32,11 @@ class Finding:
     message: str
 
     def __str__(self) -> str:
-        return f"{self.location}: {self.severity.value}: {self.message}"
+        if self.location.line > 0:
+            return f"{self.location}: {self.severity.value}: {self.message}"
+        if self.location.path.startswith("<"):  # no place to name: the message says what it is about
+            return f"{self.severity.value}: {self.message}"
+        return f"{self.location.path}: {self.severity.value}: {self.message}"
 
 
 class CotwinError(Exception):

@@ -62,6 +62,15 @@ class TwinProject:
         return [self.dmodel, self.pmodel, self.mapping]
 
 
+def _toml(tables: dict[str, dict]) -> str:
+    """TOML for flat tables of strings, numbers and lists (JSON's quoting is valid TOML)."""
+    lines = []
+    for table, values in tables.items():
+        lines.append(f"[{table}]")
+        lines.extend(f"{key} = {json.dumps(value)}" for key, value in values.items())
+    return "\n".join(lines) + "\n"
+
+
 def python_unit(project: str | Path, role: str):
     """A cotwin in-process unit of a twin project by role (used inside cotwin's Python FMUs)."""
     twin = Twin(load_twin_project(project))
@@ -194,12 +203,10 @@ class Twin:
                 shutil.copy(path, stage / path.name)
                 names[key] = path.name
             scenario_key = "commands" if spec.scenario.suffix == ".toml" else "plan"
-            bricks = ", ".join(f"[{x}, {y}]" for x, y in spec.bricks)
-            (stage / "cotwin.toml").write_text(
-                f'[models]\ndmodel = "{names["dmodel"]}"\npmodel = "{names["pmodel"]}"\nmapping = "{names["mapping"]}"\n'
-                + (f'module = "{spec.module}"\n' if spec.module else "")
-                + f'[scenario]\n{scenario_key} = "{names["scenario"]}"\n[platform]\nbricks = [{bricks}]\n'
-                + f"[cosim]\nstep = {spec.step}\nend = {spec.end}\n")
+            models = {k: names[k] for k in ("dmodel", "pmodel", "mapping")} | ({"module": spec.module} if spec.module else {})
+            (stage / "cotwin.toml").write_text(_toml({
+                "models": models, "scenario": {scenario_key: names["scenario"]},
+                "platform": {"bricks": [list(b) for b in spec.bricks]}, "cosim": {"step": spec.step, "end": spec.end}}))
             script = Path(__file__).parent / "cosim" / "pythonfmu_slave.py"
             for role in ("mapping", "controller"):
                 (stage / "cotwin_unit.json").write_text(json.dumps({"role": role, "project": "twin/cotwin.toml"}))

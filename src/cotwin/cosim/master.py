@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..diagnostics import CotwinError
-from .units import Unit, UnitError
+from .units import Unit
 
 
 @dataclass(frozen=True)
@@ -119,11 +119,13 @@ class Master:
         self.previous: dict[tuple[str, str], object] = {}
 
     def _inputs_for(self, unit: str, current: bool) -> dict[str, object]:
+        """Inputs from the sources' latest outputs; under Gauss-Seidel, a delayed source's are those of
+        the previous step (under Jacobi all inputs are set before any unit steps, so latest = previous)."""
         out = {}
         for c in self.incoming[unit]:
-            use_previous = not current or c.source in self.delayed
-            source = self.previous if use_previous else self.values
-            out[c.input] = source.get((c.source, c.output), self.values.get((c.source, c.output)))
+            key = (c.source, c.output)
+            source = self.previous if current and c.source in self.delayed and key in self.previous else self.values
+            out[c.input] = source.get(key)
         return out
 
     def _read(self, unit: str) -> None:
@@ -163,8 +165,7 @@ class Master:
             for k in range(n_steps):
                 t = self.start + k * self.step_size
                 h = self.step_size
-                self.previous = dict(self.values)
-                if self.algorithm == "jacobi":
+                if self.algorithm == "jacobi":  # inputs are all set before any unit steps: no copy needed
                     for name in self.order:
                         inputs = self._inputs_for(name, current=False)
                         if inputs:
@@ -174,6 +175,8 @@ class Master:
                     for name in self.order:
                         self._read(name)
                 else:
+                    if self.delayed:  # delayed connections read the previous step's values
+                        self.previous = dict(self.values)
                     for name in self.order:
                         inputs = self._inputs_for(name, current=True)
                         if inputs:
@@ -189,10 +192,6 @@ class Master:
                     ahead = (t - self.start) - (wallclock.perf_counter() - started)
                     if ahead > 0:
                         wallclock.sleep(ahead)
-        except UnitError:
-            raise
-        except CotwinError:
-            raise
         finally:
             for unit in self.units.values():
                 unit.terminate()

@@ -124,7 +124,10 @@ def unit_name(instance: tuple[str, str]) -> str:
 
 def master_for(mm: MultiModel, step: float | None = None, end: float | None = None,
                algorithm: str | None = None) -> Master:
-    units = [FMUUnit(unit_name(inst), mm.fmus[inst[0]]) for inst in mm.instances]
+    try:
+        units = [FMUUnit(unit_name(inst), mm.fmus[inst[0]]) for inst in mm.instances]
+    except CotwinError as err:  # name the multimodel that points at the bad FMU
+        raise CotwinError([Finding(Location(str(mm.path), 0, 0), f.severity, f.message) for f in err.findings]) from None
     connections = [Connection(unit_name(c[:2]), c[2], unit_name(c[3:5]), c[5]) for c in mm.connections]
     return Master(units, connections, step or mm.step, end or mm.end, start=mm.start,
                   algorithm=algorithm or mm.algorithm, delayed={unit_name(d) for d in mm.delayed},

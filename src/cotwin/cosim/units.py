@@ -70,6 +70,7 @@ class FMUUnit(Unit):
         self.fmu = None
         self.folder = None
         self.time = 0.0
+        self._plans: dict[tuple[str, ...], list] = {}
 
     def _call(self, call: str, fn, *args):
         try:
@@ -86,21 +87,30 @@ class FMUUnit(Unit):
         self._call("fmi2SetupExperiment", lambda: self.fmu.setupExperiment(startTime=start))
         self._call("fmi2EnterInitializationMode", self.fmu.enterInitializationMode)
 
+    def _plan(self, names: tuple[str, ...]) -> list[tuple[str, list[str], list[int]]]:
+        """Ports grouped by FMI type with their value references, computed once per list of names
+        (the master asks for the same ports every step)."""
+        plan = self._plans.get(names)
+        if plan is None:
+            unknown = [n for n in names if n not in self.ports]
+            if unknown:
+                raise CotwinError(f"unit {self.name} has no port(s) {', '.join(unknown)}")
+            plan = []
+            for kind in ("Real", "Integer", "Boolean"):
+                chosen = [n for n in names if self.ports[n].type == kind]
+                if chosen:
+                    plan.append((kind, chosen, [self.vr[n] for n in chosen]))
+            self._plans[names] = plan
+        return plan
+
     def set(self, values: dict[str, object]) -> None:
-        groups: dict[str, tuple[list, list]] = {"Real": ([], []), "Integer": ([], []), "Boolean": ([], [])}
-        for name, value in values.items():
-            port = self.ports.get(name)
-            if port is None:
-                raise CotwinError(f"unit {self.name} has no port '{name}'")
-            refs, vals = groups[port.type]
-            refs.append(self.vr[name])
-            vals.append(float(value) if port.type == "Real" else int(value) if port.type == "Integer" else bool(value))
-        if groups["Real"][0]:
-            self._call("fmi2SetReal", self.fmu.setReal, *groups["Real"])
-        if groups["Integer"][0]:
-            self._call("fmi2SetInteger", self.fmu.setInteger, *groups["Integer"])
-        if groups["Boolean"][0]:
-            self._call("fmi2SetBoolean", self.fmu.setBoolean, *groups["Boolean"])
+        for kind, names, refs in self._plan(tuple(values)):
+            if kind == "Real":
+                self._call("fmi2SetReal", self.fmu.setReal, refs, [float(values[n]) for n in names])
+            elif kind == "Integer":
+                self._call("fmi2SetInteger", self.fmu.setInteger, refs, [int(values[n]) for n in names])
+            else:
+                self._call("fmi2SetBoolean", self.fmu.setBoolean, refs, [bool(values[n]) for n in names])
 
     def initialize(self) -> None:
         self._call("fmi2ExitInitializationMode", self.fmu.exitInitializationMode)
@@ -111,16 +121,13 @@ class FMUUnit(Unit):
 
     def get(self, names: list[str]) -> dict[str, object]:
         out = {}
-        by_type: dict[str, list[str]] = {"Real": [], "Integer": [], "Boolean": []}
-        for n in names:
-            by_type[self.ports[n].type].append(n)
-        if by_type["Real"]:
-            out.update(zip(by_type["Real"], self._call("fmi2GetReal", self.fmu.getReal, [self.vr[n] for n in by_type["Real"]])))
-        if by_type["Integer"]:
-            out.update(zip(by_type["Integer"], self._call("fmi2GetInteger", self.fmu.getInteger, [self.vr[n] for n in by_type["Integer"]])))
-        if by_type["Boolean"]:
-            vals = self._call("fmi2GetBoolean", self.fmu.getBoolean, [self.vr[n] for n in by_type["Boolean"]])
-            out.update((n, bool(v)) for n, v in zip(by_type["Boolean"], vals))
+        for kind, chosen, refs in self._plan(tuple(names)):
+            if kind == "Real":
+                out.update(zip(chosen, self._call("fmi2GetReal", self.fmu.getReal, refs)))
+            elif kind == "Integer":
+                out.update(zip(chosen, self._call("fmi2GetInteger", self.fmu.getInteger, refs)))
+            else:
+                out.update((n, bool(v)) for n, v in zip(chosen, self._call("fmi2GetBoolean", self.fmu.getBoolean, refs)))
         return out
 
     def terminate(self) -> None:

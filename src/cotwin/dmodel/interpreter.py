@@ -28,11 +28,31 @@ MAX_STEPS = 10_000  # instantaneous steps in one cycle before it counts as diver
 
 
 class ExecutionError(CotwinError):
-    """A run-time model error: timelock, divergence, an output repeated in one cycle."""
+    """A run-time model error: timelock, divergence, an output repeated in one cycle. `site` says
+    where, as data (machine, node, and what was repeated), so that it can be compared."""
 
-    def __init__(self, kind: str, message: str, loc: Location | None = None):
+    def __init__(self, kind: str, message: str, loc: Location | None = None, site: tuple = ()):
         self.kind = kind
+        self.site = site
         super().__init__([Finding(loc or Location("<run>", 0, 0), Severity.ERROR, message)])
+
+
+@dataclass(frozen=True)
+class Nondeterminism:
+    """Several transitions were enabled at once; the first in source order was taken."""
+
+    machine: str
+    node: str
+    enabled: tuple[str, ...]
+    cycle: int
+
+    @property
+    def site(self) -> tuple:
+        return (self.machine, self.node, self.enabled)
+
+    def __str__(self) -> str:
+        return (f"nondeterminism in state machine {self.machine}, node {self.node}, cycle {self.cycle}: "
+                f"{', '.join(self.enabled)} enabled; took {self.enabled[0]}")
 
 
 @dataclass(frozen=True)
@@ -57,15 +77,19 @@ def _show(value) -> str:
     return repr(value) if isinstance(value, float) else str(value)
 
 
+class FrozenRecord(tuple):
+    """A record in a snapshot: its (field, value) pairs, hashable, and told apart from other tuples."""
+
+
 def freeze(value):
     """A hashable form of a value (records are dicts while running)."""
     if isinstance(value, dict):
-        return tuple((k, freeze(v)) for k, v in value.items())
+        return FrozenRecord((k, freeze(v)) for k, v in value.items())
     return value
 
 
 def thaw(value):
-    if isinstance(value, tuple) and value and isinstance(value[0], tuple) and len(value[0]) == 2 and isinstance(value[0][0], str):
+    if isinstance(value, FrozenRecord):
         return {k: thaw(v) for k, v in value}
     return value
 
@@ -143,7 +167,7 @@ class Interpreter:
         for m in program.machines:
             mine = {p.name: params.get(p.port, p.default) for p in program.parameters if p.machine == m.index}
             self.evaluators.append(Evaluator(program, m, mine))
-        self.warnings: list[str] = []
+        self.warnings: list[Nondeterminism] = []
         self.taken: set[tuple[int, int]] | None = None  # (machine, edge) taken, when the verifier asks
         self.reset()
 
@@ -232,15 +256,21 @@ class _Cycle:
         self.graph = m.graph
         self.steps = 0
 
+    def node_name(self) -> str:
+        return self.graph.nodes[self.st.active].name if self.st.active >= 0 else "(start)"
+
     def where(self) -> str:
-        node = self.graph.nodes[self.st.active].name if self.st.active >= 0 else "(start)"
-        return f"state machine {self.m.machine.name}, node {node}, cycle {self.interp.cycle}"
+        return f"state machine {self.m.machine.name}, node {self.node_name()}, cycle {self.interp.cycle}"
+
+    def site(self, *extra) -> tuple:
+        return (self.m.machine.name, self.node_name(), *extra)
 
     def run(self, tasks: list) -> tuple:
         while tasks:
             self.steps += 1
             if self.steps > MAX_STEPS:
-                raise ExecutionError("divergence", f"divergence: no exec reached after {MAX_STEPS} steps in {self.where()}")
+                raise ExecutionError("divergence", f"divergence: no exec reached after {MAX_STEPS} steps in {self.where()}",
+                                     site=self.site())
             task = tasks.pop(0)
             kind = task[0]
             if kind == "final":
@@ -263,7 +293,8 @@ class _Cycle:
                 if result[0] == "end":
                     return result[1]
                 tasks[0:0] = result[1]
-        raise ExecutionError("timelock", f"timelock: the cycle ends without reaching exec in {self.where()}")
+        raise ExecutionError("timelock", f"timelock: the cycle ends without reaching exec in {self.where()}",
+                             site=self.site())
 
     def exit_to(self, container: int) -> None:
         nodes = self.graph.nodes
@@ -320,7 +351,8 @@ class _Cycle:
 
     def emit(self, out: Output, loc) -> None:
         if any(o.kind == out.kind and o.name == out.name for o in self.outputs):
-            raise ExecutionError("repeated-output", f"{out.kind} '{out.name}' emitted twice in one cycle ({self.where()})", loc)
+            raise ExecutionError("repeated-output", f"{out.kind} '{out.name}' emitted twice in one cycle ({self.where()})",
+                                 loc, self.site(out.name))
         self.outputs.append(out)
 
     def send(self, event: str, value, loc) -> None:
@@ -331,7 +363,8 @@ class _Cycle:
         for machine, target in program.internal_routes.get(key, ()):
             box = self.interp.pending.setdefault(machine, {})
             if target in box:
-                raise ExecutionError("repeated-output", f"event '{event}' sent twice in one cycle ({self.where()})", loc)
+                raise ExecutionError("repeated-output", f"event '{event}' sent twice in one cycle ({self.where()})",
+                                     loc, self.site(event))
             box[target] = value
 
     def settle(self, index: int):
@@ -349,8 +382,8 @@ class _Cycle:
             if not enabled:
                 continue
             if len(enabled) > 1:
-                names = ", ".join(e.transition.name for e in enabled)
-                self.interp.warnings.append(f"nondeterminism in {self.where()}: {names} enabled; took {enabled[0].transition.name}")
+                self.interp.warnings.append(Nondeterminism(self.m.machine.name, node.name,
+                                                           tuple(e.transition.name for e in enabled), self.interp.cycle))
             edge = enabled[0]
             if self.interp.taken is not None:
                 self.interp.taken.add((self.m.index, edge.index))
@@ -363,7 +396,7 @@ class _Cycle:
             return ("go", [("stmts", (node.node.during,)), ("wait", index)])
         what = "junction" if isinstance(node.node, (Junction, Initial)) else "state"
         raise ExecutionError("timelock", f"timelock: no transition enabled from {what} {node.name} in {self.where()}",
-                             node.node.loc)
+                             node.node.loc, self.site())
 
     def _inside(self, active: int, container: int) -> bool:
         if active < 0 or active == container:

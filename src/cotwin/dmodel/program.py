@@ -78,6 +78,14 @@ def assemble(group: list[tuple[str, "Scalar"]], read) -> object:
     return value
 
 
+def executable(ty: Ty, resolver: TypeResolver) -> bool:
+    """Types the interpreter and the C code can hold: boolean, int, nat, real, enumerations, and
+    records of these."""
+    if isinstance(ty, RecordTy):
+        return all(executable(resolver.resolve(f.type), resolver) for f in ty.decl.fields)
+    return ty in (BOOL, INT, NAT, REAL) or isinstance(ty, EnumTy)
+
+
 def default_value(ty: Ty, resolver: TypeResolver):
     if isinstance(ty, RecordTy):
         return {f.name: default_value(resolver.resolve(f.type), resolver) for f in ty.decl.fields}
@@ -259,6 +267,11 @@ class _Builder:
                 except ConstError as err:
                     raise CotwinError(f"{err.loc}: constant {v.name}: {err.message}") from None
         variables = [(v.name, resolver.resolve(v.type), v.init) for v in machine.variables if not v.is_const]
+        for v in machine.variables:
+            ty = resolver.resolve(v.type)
+            if not executable(ty, resolver):
+                self.diag.error(v.loc, f"{v.name}: values of type {ty} cannot be executed yet "
+                                "(boolean, int, nat, real, enumerations and records of them can)")
         parameters = [v.name for v in machine.variables if v.is_const and v.init is None]
         return MachineInstance(
             index, name, machine, MachineGraph(machine), source, variables, constants, parameters,

@@ -198,15 +198,14 @@ def verify(program: Program, domains: dict[str, list] | None = None, max_states:
             try:
                 interp.step(inputs)
             except ExecutionError as err:
-                message = err.findings[0].message
-                key = (err.kind, _generic(message))
-                if key not in found:
-                    found[key] = Violation(err.kind, message, trace_to(snap, inputs))
+                key = (err.kind, err.site or err.findings[0].message)
+                if key not in found:  # breadth first: the first one found has a shortest trace
+                    found[key] = Violation(err.kind, err.findings[0].message, trace_to(snap, inputs))
                 continue
             for w in interp.warnings:
-                key = ("determinism", _generic(w))
+                key = ("determinism", w.site)
                 if key not in found:
-                    found[key] = Violation("determinism", w, trace_to(snap, inputs))
+                    found[key] = Violation("determinism", str(w), trace_to(snap, inputs))
             nxt = interp.snapshot()
             if nxt not in parent:
                 if len(parent) >= max_states:
@@ -228,11 +227,6 @@ def verify(program: Program, domains: dict[str, list] | None = None, max_states:
                 report.unreached_transitions.append(f"{m.machine.name}: transition {e.transition.name}")
     report.seconds = time.perf_counter() - started
     return report
-
-
-def _generic(message: str) -> str:
-    """A violation's identity without the cycle number (so each is reported once)."""
-    return message.split(", cycle ")[0].split(" cycle ")[0]
 
 
 def format_report(program: Program, report: Report) -> str:

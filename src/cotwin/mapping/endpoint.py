@@ -64,11 +64,7 @@ class SimulatedEndpoint:
     def __init__(self, simulator: PlatformSimulator):
         self.sim = simulator
         self.tree = simulator.tree
-        self._path_to_joint: dict[str, str] = {}
-        for j in self.tree.actuated:
-            for key, index in simulator._actuator.items():
-                if index == simulator._actuator[j.name]:
-                    self._path_to_joint[key] = j.name
+        self._path_to_joint = simulator.actuators()
         self.segment: Segment | None = None
 
     def start(self) -> None:

@@ -50,8 +50,7 @@ class PlatformSimulator:
             self._actuator[j.name] = index
             self._actuator[servo_name(j)] = index
             for servo in j.servos:
-                source = next(l.source for l in tree.links if l.name == j.parent)
-                self._actuator[f"{tree.name}::{source}::{_unprefixed(j, tree)}::{servo.name}.dangle"] = index
+                self._actuator[f"{tree.name}::{j.source_link}::{j.source}::{servo.name}.dangle"] = index
         self._sensors: dict[str, tuple[int, int]] = {}
         for sensor in tree.sensors:
             name = sensor_name(tree.name, sensor.link, sensor.name, sensor.port)
@@ -71,6 +70,11 @@ class PlatformSimulator:
     @property
     def joint_names(self) -> list[str]:
         return list(self._joint_qpos)
+
+    def actuators(self) -> dict[str, str]:
+        """Every name an actuator answers to (joint, servo, `pmodel::link::joint::aref.dangle`) -> joint."""
+        joint_of = {self._actuator[j]: j for j in self._joint_qpos}
+        return {name: joint_of[index] for name, index in self._actuator.items()}
 
     # ---- the API ----
     def reset(self, q: dict[str, float] | None = None) -> None:
@@ -153,10 +157,3 @@ class PlatformSimulator:
         path = Path(path)
         path.write_text(self.xml)
         return path
-
-
-def _unprefixed(joint, tree: KinematicTree) -> str:
-    """A joint's name as written in its p-model (without the part prefix)."""
-    link = next(l for l in tree.links if l.name == joint.parent)
-    prefix = link.name[: len(link.name) - len(link.source)]
-    return joint.name[len(prefix):] if joint.name.startswith(prefix) else joint.name

@@ -129,7 +129,8 @@ class TJoint:
     effort: float | None = None
     damping: float = 0.0
     servos: list[Servo] = field(default_factory=list)
-    source_link: str = ""  # the p-model link that declares it
+    source_link: str = ""  # the p-model link that declares it (as written)
+    source: str = ""  # the joint's name as written (without a part prefix)
 
 
 @dataclass
@@ -302,7 +303,7 @@ class _TreeBuilder:
             return
         pose = self.links[parent].pose @ self.pose(ref.pose, env, f"joint {ref.name}")
         axis = np.array([0.0, 0.0, 1.0])
-        joint = TJoint(prefix + ref.name, kind, parent, child, pose, axis, source_link=source_link)
+        joint = TJoint(prefix + ref.name, kind, parent, child, pose, axis, source_link=source_link, source=ref.name)
         for ann in ref.annotations:
             ax = ann.get("axis")
             if not isinstance(ax, AnnotationRecord):
@@ -374,8 +375,10 @@ def build_tree(project, pmodel_name: str | None = None) -> KinematicTree:
     else:
         used = {p.pmodel.last for pm in pmodels for p in pm.parts}
         top = [p for p in pmodels if p.name not in used]
+        if not pmodels:
+            raise CotwinError("the model files hold no p-model (a .pm file with `pmodel NAME { ... }`)")
         if len(top) != 1:
-            raise CotwinError("choose a p-model with --pmodel: " + ", ".join(p.name for p in top or pmodels))
+            raise CotwinError("several p-models: choose one with --pmodel: " + ", ".join(p.name for p in top or pmodels))
         pmodel = top[0]
     diag = Diagnostics()
     builder = _TreeBuilder(project, diag)
