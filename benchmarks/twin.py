@@ -15,8 +15,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from cotwin.cosim.libcosim import run_libcosim  # noqa: E402
-from cotwin.cosim.multimodel import master_for, read_multimodel  # noqa: E402
-from cotwin.pipeline import Twin, load_twin_project  # noqa: E402
+from cotwin.cosim.multimodel import execution_for, read_multimodel  # noqa: E402
+from cotwin.twin.build import build  # noqa: E402
+from cotwin.twin.run import load, run_twin  # noqa: E402
 
 
 def overhead(dmodel_fmu: Path, folder: Path, steps: int = 20_000) -> None:
@@ -31,7 +32,7 @@ def overhead(dmodel_fmu: Path, folder: Path, steps: int = 20_000) -> None:
     path.write_text(json.dumps(mm))
     model = read_multimodel(path)
     t0 = time.perf_counter()
-    master_for(model).run(None)
+    execution_for(model).run(model.end)
     ours = time.perf_counter() - t0
     t0 = time.perf_counter()
     run_libcosim(model, {"{d}.c": ["state"]})
@@ -46,23 +47,24 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
         t0 = time.perf_counter()
-        twin = Twin(load_twin_project(project))
+        twin = load(project)
         t_models = time.perf_counter() - t0
         t0 = time.perf_counter()
-        twin.build(out / "build")
+        build(twin, out / "build")
         t_build = time.perf_counter() - t0
         print(f"models -> checked, flattened, tree: {t_models:.2f} s; build (C FMU, 2 Python FMUs, SDF/URDF/MJCF, "
               f"multimodel): {t_build:.2f} s")
         for step in (0.1, 0.01):
             run = out / f"run{step}"
             run.mkdir()
-            shutil.copy(out / "build" / "dmodel.fmu", run / "dmodel.fmu")
-            result = twin.run(run, step=step, plot=False)
+            for name in ("dmodel.fmu", "build.json"):
+                shutil.copy(out / "build" / name, run / name)
+            result = run_twin(twin, run, step=step, plot=False).result
             print(f"20 s experiment, step {step:g} s, physics 1 ms (in-process mapping): wall {result.wall_seconds:.2f} s, "
                   f"real-time factor {20 / result.wall_seconds:.1f}x")
         mm = read_multimodel(out / "build" / "multimodel.json")
         t0 = time.perf_counter()
-        master_for(mm).run(out / "fmus.csv")
+        execution_for(mm, out / "fmus.csv").run(mm.end)
         ours = time.perf_counter() - t0
         t0 = time.perf_counter()
         run_libcosim(mm, {"{mapping}.mapping": ["q0"]})

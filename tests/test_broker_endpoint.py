@@ -14,7 +14,7 @@ import pytest
 from cotwin.diagnostics import CotwinError
 from cotwin.mapping.broker import BrokerEndpoint, RobotServer, validate_request
 from cotwin.mapping.endpoint import SimulatedEndpoint
-from cotwin.pipeline import Twin, load_twin_project
+from cotwin.twin.run import load, run_twin
 from cotwin.pmodel.simulator import PlatformSimulator
 
 
@@ -38,14 +38,14 @@ def broker():
 def twin():
     from conftest import EXAMPLES
 
-    return Twin(load_twin_project(EXAMPLES / "ur5e" / "cotwin.toml"))
+    return load(EXAMPLES / "ur5e" / "cotwin.toml")
 
 
 @pytest.fixture()
 def robot(broker, twin):
     """A robot (the MuJoCo platform) answering on its own queue in a thread."""
     queue = f"cotwin.test.{uuid.uuid4().hex[:8]}"
-    server = RobotServer(SimulatedEndpoint(PlatformSimulator(twin.tree, twin.scene)), queue)
+    server = RobotServer(SimulatedEndpoint(PlatformSimulator(twin.models.tree, twin.models.scene)), queue)
     thread = threading.Thread(target=server.serve, daemon=True)
     thread.start()
     assert server.ready.wait(10)
@@ -55,13 +55,13 @@ def robot(broker, twin):
 
 
 def test_twin_runs_unchanged_against_a_robot_behind_the_broker(twin, robot, tmp_path):
-    direct = twin.run(tmp_path / "direct", end=8.0, plot=False)
+    direct = run_twin(twin, tmp_path / "direct", end=8.0, plot=False)
     twin.spec.endpoint, twin.spec.queue = "broker", robot.queue
-    remote = twin.run(tmp_path / "remote", end=8.0, plot=False)
-    twin.last_mapping.mapping.endpoint.close()
+    remote = run_twin(twin, tmp_path / "remote", end=8.0, plot=False)
+    remote.mapping.mapping.endpoint.close()
     assert robot.requests > 80  # every step went through the broker
-    a = list(csv.DictReader(open(direct.csv_path)))
-    b = list(csv.DictReader(open(remote.csv_path)))
+    a = list(csv.DictReader(open(direct.csv)))
+    b = list(csv.DictReader(open(remote.csv)))
     assert len(a) == len(b) == 81
     for ra, rb in zip(a, b):
         assert ra["{dmodel}.dmodel.state"] == rb["{dmodel}.dmodel.state"]
@@ -70,7 +70,7 @@ def test_twin_runs_unchanged_against_a_robot_behind_the_broker(twin, robot, tmp_
 
 
 def test_ill_formed_requests_get_errors_naming_the_field(twin, robot):
-    endpoint = BrokerEndpoint(twin.tree, robot.queue)
+    endpoint = BrokerEndpoint(twin.models.tree, robot.queue)
     try:
         with pytest.raises(CotwinError, match="goal 'M1' must be a finite number"):
             endpoint.call({"op": "command", "goals": {"M1": "fast"}})

@@ -12,7 +12,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from cotwin.diagnostics import CotwinError
-from cotwin.dmodel.fmu import PortLayout, build_fmu, fmu_sources
+from cotwin.dmodel.fmu import build_fmu, fmu_sources
+from cotwin.dmodel.ports import PortLayout
 from cotwin.dmodel.interpreter import ExecutionError, Interpreter
 from cotwin.dmodel.program import build_program
 from cotwin.dmodel.runner import FMUDriver

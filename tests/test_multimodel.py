@@ -11,10 +11,14 @@ import pytest
 from fmpy.validation import validate_fmu
 
 from cotwin.cosim.libcosim import run_libcosim
-from cotwin.cosim.master import Connection, Master, topological_order
-from cotwin.cosim.multimodel import read_multimodel
+from cotwin.cosim.algorithm import Jacobi
+from cotwin.cosim.execution import Execution
+from cotwin.cosim.multimodel import execution_for, read_multimodel
+from cotwin.cosim.observers import CSVWriter, RealTimePacer
+from cotwin.cosim.system import Connection, System, topological_order
 from cotwin.diagnostics import CotwinError
-from cotwin.pipeline import Twin, load_twin_project
+from cotwin.twin.build import build
+from cotwin.twin.run import load
 
 
 @pytest.fixture(scope="module")
@@ -22,7 +26,7 @@ def built(tmp_path_factory):
     from conftest import EXAMPLES
 
     out = tmp_path_factory.mktemp("twin")
-    Twin(load_twin_project(EXAMPLES / "ur5e" / "cotwin.toml")).build(out)
+    build(load(EXAMPLES / "ur5e" / "cotwin.toml"), out)
     return out
 
 
@@ -47,9 +51,7 @@ def test_libcosim_runs_the_same_multimodel_with_the_same_trajectory(built):
     joints = [f"q{i}" for i in range(6)]
     theirs = run_libcosim(mm, {"{mapping}.mapping": joints, "{dmodel}.dmodel": ["state"]}, end=4.0)
     master_csv = built / "ours.csv"
-    from cotwin.cosim.multimodel import master_for
-
-    master_for(mm, end=4.0, algorithm="jacobi").run(master_csv)
+    execution_for(mm, master_csv, algorithm="jacobi").run(4.0)
     ours = {r["time"]: r for r in csv.DictReader(open(master_csv))}
     assert len(theirs["time"]) == 40
     for k, t in enumerate(theirs["time"]):
@@ -72,10 +74,8 @@ def test_multimodel_typos_are_reported(built, tmp_path):
     assert "unknown key 'conections'" in str(err.value) and "names FMU {robot}" in str(err.value)
     del data["conections"], data["connections"]["{robot}.x.y"]
     path.write_text(json.dumps(data))
-    from cotwin.cosim.multimodel import master_for
-
     with pytest.raises(CotwinError, match="unit {dmodel}.dmodel has no output 'movediscret'"):
-        master_for(read_multimodel(path))
+        execution_for(read_multimodel(path))
     path.write_text("{ bad json")
     proc = subprocess.run([sys.executable, "-m", "cotwin", "simulate", str(path)], capture_output=True, text=True)
     assert proc.returncode == 1 and f"{path}:1:3: error: bad JSON" in proc.stderr and "Traceback" not in proc.stderr
@@ -111,13 +111,17 @@ class _Failing:
         self.unit.terminate = terminate
 
 
-def test_failure_names_unit_time_and_call_and_keeps_the_rows(tmp_path):
+def test_failure_names_unit_time_and_call_keeps_the_rows_and_the_previous_result(tmp_path):
+    previous = "time,{f}.f.out\n0.0,0\n"
+    (tmp_path / "out.csv").write_text(previous)
     failing = _Failing("{f}.f").unit
-    master = Master([failing], [], step=0.1, end=1.0, log={"{f}.f": ["out"]})
+    system = System.of([failing], [], log={"{f}.f": ["out"]})
+    execution = Execution(system, Jacobi(), 0.1, observers=[CSVWriter(tmp_path / "out.csv")])
     with pytest.raises(CotwinError, match=r"unit \{f\}.f: fmi2DoStep failed at t = 0.3 s"):
-        master.run(tmp_path / "out.csv")
-    rows = list(csv.reader(open(tmp_path / "out.csv")))
+        execution.run(1.0)
+    rows = list(csv.reader(open(tmp_path / "out.partial.csv")))
     assert rows[0] == ["time", "{f}.f.out"] and [r[0] for r in rows[1:]] == ["0.0", "0.1", "0.2", "0.3"]
+    assert (tmp_path / "out.csv").read_text() == previous  # the earlier good result is untouched
     assert failing.terminated
 
 
@@ -128,8 +132,8 @@ def test_realtime_pacing_keeps_wall_clock_behind_simulated_time():
 
     unit = PythonUnit("{u}.u", [Port("out", "Real", "output")])
     unit.step = lambda t, h: None
-    master = Master([unit], [], step=0.05, end=0.3, log={"{u}.u": ["out"]}, realtime=True)
+    execution = Execution(System.of([unit], [], log={"{u}.u": ["out"]}), Jacobi(), 0.05, observers=[RealTimePacer()])
     started = time.perf_counter()
-    result = master.run(None)
+    result = execution.run(0.3)
     assert time.perf_counter() - started >= 0.3 - 1e-3
     assert result.rows == 7

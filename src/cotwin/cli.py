@@ -83,54 +83,80 @@ def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, out
                f"{kinds['prismatic']} prismatic and {kinds['fixed']} fixed joints, {len(tree.sensors)} sensor ports")
 
 
+def _show_warnings(findings) -> None:
+    for f in findings:
+        if f.severity is Severity.WARNING:
+            click.echo(str(f), err=True)
+
+
 @main.command()
 @click.argument("project", type=click.Path())
 @click.option("-o", "--output", "out", required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
-def build(project: str, out: str) -> None:
-    """Build every artefact of a twin project (cotwin.toml)."""
-    from .pipeline import Twin, load_twin_project
+@click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+def build(project: str, out: str, cc: str) -> None:
+    """Build every artefact of a twin project (cotwin.toml); unchanged artefacts are kept."""
+    from pathlib import Path
 
-    written = Twin(load_twin_project(project)).build(out)
-    for name, path in written.items():
+    from .twin.build import build as build_all, folder_lock
+    from .twin.run import load
+
+    system = load(project)
+    with folder_lock(Path(out)):
+        written = build_all(system, out, cc)
+    for path in written.values():
         click.echo(f"{path}")
 
 
 @main.command()
 @click.argument("project", type=click.Path())
 @click.option("-o", "--output", "out", required=True, help="folder for outputs.csv, figure.png and the artefacts")
-@click.option("--step", type=float, help="communication step size (s)")
-@click.option("--end", type=float, help="end time (s)")
+@click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
+@click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
-def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None) -> None:
+@click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
+@click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
+        realtime: bool | None, cc: str) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
     from rich.progress import Progress
 
-    from .pipeline import Twin, load_twin_project
+    from .twin.run import load, run_twin
 
-    twin = Twin(load_twin_project(project))
-    with Progress(transient=True) as bar:
+    _finite(step=step, end=end)
+    system = load(project)
+    with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
         task = bar.add_task("co-simulating", total=1)
-        result = twin.run(out, step, end, algorithm, progress=lambda k, n: bar.update(task, completed=k, total=n))
-    click.echo(f"{result.csv_path}: {result.rows} rows to t = {result.end_time:g} s in {result.wall_seconds:.2f} s "
-               f"(real-time factor {result.end_time / max(result.wall_seconds, 1e-9):.1f})")
+        ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc,
+                       progress=lambda k, n: bar.update(task, completed=k, total=n))
+    r = ran.result
+    click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
+               f"(real-time factor {r.real_time_factor:.1f})")
+
+
+def _finite(**options) -> None:
+    import math
+
+    for name, value in options.items():
+        if value is not None and not math.isfinite(value):
+            raise click.BadParameter(f"{value!r} is not a finite number", param_hint=f"--{name}")
 
 
 @main.command()
 @click.argument("multimodel", type=click.Path())
 @click.option("-o", "--output", "out", default=None, help="the CSV to write (default: outputs.csv beside it)")
-@click.option("--step", type=float)
-@click.option("--end", type=float)
+@click.option("--step", type=click.FloatRange(min=0, min_open=True))
+@click.option("--end", type=click.FloatRange(min=0, min_open=True))
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
 def simulate(multimodel: str, out: str | None, step: float | None, end: float | None, algorithm: str | None) -> None:
     """Run any Maestro multimodel JSON with cotwin's master (FMUs through FMPy)."""
     from pathlib import Path
 
-    from .cosim.multimodel import master_for, read_multimodel
+    from .cosim.multimodel import execution_for, read_multimodel
 
+    _finite(step=step, end=end)
     mm = read_multimodel(multimodel)
     csv_path = Path(out) if out else Path(multimodel).parent / "outputs.csv"
-    master = master_for(mm, step, end, algorithm)
-    result = master.run(csv_path)
+    result = execution_for(mm, csv_path, step, algorithm).run(mm.end if end is None else end)
     click.echo(f"{csv_path}: {result.rows} rows to t = {result.end_time:g} s in {result.wall_seconds:.2f} s")
 
 

@@ -42,10 +42,11 @@ class Finding:
 class CotwinError(Exception):
     """Bad input: carries every finding, each with its location. Never a bare traceback."""
 
-    def __init__(self, findings: Iterable[Finding] | str):
+    def __init__(self, findings: Iterable[Finding | str] | str):
         if isinstance(findings, str):
-            findings = [Finding(Location("<input>", 0, 0), Severity.ERROR, findings)]
-        self.findings = sorted(findings)
+            findings = [findings]
+        self.findings = sorted(f if isinstance(f, Finding) else Finding(Location("<input>", 0, 0), Severity.ERROR, f)
+                               for f in findings)
         super().__init__("\n".join(str(f) for f in self.findings))
 
 

@@ -13,7 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..diagnostics import CotwinError, Finding, Location, Severity
-from .master import Connection, Master
+from .algorithm import algorithm as make_algorithm
+from .execution import Execution
+from .observers import CSVWriter, Observer, RealTimePacer
+from .system import Connection, System
 from .units import FMUUnit
 
 KNOWN_KEYS = {"fmus", "connections", "parameters", "logVariables", "algorithm", "startTime", "endTime",
@@ -122,14 +125,25 @@ def unit_name(instance: tuple[str, str]) -> str:
     return f"{instance[0]}.{instance[1]}"
 
 
-def master_for(mm: MultiModel, step: float | None = None, end: float | None = None,
-               algorithm: str | None = None) -> Master:
+def system_of(mm: MultiModel) -> System:
+    """The multimodel's units (one FMU instance each) and connections, checked."""
     try:
         units = [FMUUnit(unit_name(inst), mm.fmus[inst[0]]) for inst in mm.instances]
-    except CotwinError as err:  # name the multimodel that points at the bad FMU
+        connections = [Connection(unit_name(c[:2]), c[2], unit_name(c[3:5]), c[5]) for c in mm.connections]
+        return System.of(units, connections, delayed={unit_name(d) for d in mm.delayed},
+                         log={unit_name(k): v for k, v in mm.log.items()},
+                         parameters={unit_name(k): v for k, v in mm.parameters.items()})
+    except CotwinError as err:  # name the multimodel that holds the problem
         raise CotwinError([Finding(Location(str(mm.path), 0, 0), f.severity, f.message) for f in err.findings]) from None
-    connections = [Connection(unit_name(c[:2]), c[2], unit_name(c[3:5]), c[5]) for c in mm.connections]
-    return Master(units, connections, step or mm.step, end or mm.end, start=mm.start,
-                  algorithm=algorithm or mm.algorithm, delayed={unit_name(d) for d in mm.delayed},
-                  log={unit_name(k): v for k, v in mm.log.items()},
-                  parameters={unit_name(k): v for k, v in mm.parameters.items()}, realtime=mm.realtime)
+
+
+def execution_for(mm: MultiModel, csv_path: str | Path | None = None, step: float | None = None,
+                  algorithm: str | None = None, observers: list[Observer] | None = None) -> Execution:
+    """An execution of the multimodel (FMUs through FMPy), writing Maestro's CSV when given a path and
+    pacing to wall-clock time when the multimodel asks for it (`simulationProgramDelay`)."""
+    observers = list(observers or [])
+    if csv_path is not None:
+        observers.insert(0, CSVWriter(csv_path))
+    if mm.realtime:
+        observers.append(RealTimePacer())
+    return Execution(system_of(mm), make_algorithm(algorithm or mm.algorithm), step or mm.step, mm.start, observers)

@@ -6,6 +6,7 @@ Every FMI call of an FMU that fails is raised as UnitError naming the unit, the 
 
 from __future__ import annotations
 
+import math
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,10 +17,36 @@ from fmpy.fmi2 import FMU2Slave
 from ..diagnostics import CotwinError
 
 
+INT32 = (-(2 ** 31), 2 ** 31 - 1)
+
+
 class UnitError(CotwinError):
     def __init__(self, unit: str, time: float, call: str, detail: str):
         super().__init__(f"unit {unit}: {call} failed at t = {time:g} s: {detail}")
         self.unit, self.time, self.call = unit, time, call
+
+
+def checked_value(unit: str, port: "Port", value) -> object:
+    """`value` as the port's FMI type, or CotwinError naming the port: integers must fit int32 (never
+    wrapped), reals must be finite numbers, Booleans must be Booleans (or 0/1)."""
+    kind = port.type
+    if kind == "Boolean":
+        if isinstance(value, bool):
+            return value
+        if isinstance(value, int) and value in (0, 1):
+            return bool(value)
+    elif kind == "Integer":
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        if isinstance(value, int) and not isinstance(value, bool) and INT32[0] <= value <= INT32[1]:
+            return value
+        if isinstance(value, int) and not isinstance(value, bool):
+            raise CotwinError(f"unit {unit}: {port.name} = {value} does not fit an FMI Integer (int32)")
+    elif kind == "Real":
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+            return float(value)
+    raise CotwinError(f"unit {unit}: {port.name} takes a{'n' if kind[0] in 'IA' else ''} {kind}, "
+                      f"not {value!r}" + (" (not finite)" if isinstance(value, float) else ""))
 
 
 @dataclass(frozen=True)
@@ -70,20 +97,35 @@ class FMUUnit(Unit):
         self.fmu = None
         self.folder = None
         self.time = 0.0
+        self.status = "new"  # new | instantiated | error | fatal
         self._plans: dict[tuple[str, ...], list] = {}
 
     def _call(self, call: str, fn, *args):
+        """Every FMI call goes through here: a failure becomes a UnitError naming the unit, the time and
+        the call, and the unit remembers an fmi2Error or fmi2Fatal so that `terminate` only makes the
+        calls FMI still allows."""
         try:
             return fn(*args)
-        except Exception as err:
+        except Exception as err:  # FMPy raises FMICallException, ctypes and OS errors their own kinds
+            status = getattr(err, "status", None)
+            self.status = "fatal" if status == 4 else "error"
             raise UnitError(self.name, self.time, call, str(err)) from None
 
     def instantiate(self, start: float) -> None:
         self.time = start
-        self.folder = extract(str(self.path))
-        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.folder,
-                             modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=self.name)
-        self._call("fmi2Instantiate", self.fmu.instantiate)
+        try:
+            self.folder = extract(str(self.path))
+        except Exception as err:  # a bad zip
+            raise UnitError(self.name, start, "extract", str(err)) from None
+        self.fmu = self._call("load", lambda: FMU2Slave(
+            guid=self.md.guid, unzipDirectory=self.folder, modelIdentifier=self.md.coSimulation.modelIdentifier,
+            instanceName=self.name))
+        try:
+            self._call("fmi2Instantiate", self.fmu.instantiate)
+        except UnitError:
+            self.fmu = None  # no instance: nothing to free
+            raise
+        self.status = "instantiated"
         self._call("fmi2SetupExperiment", lambda: self.fmu.setupExperiment(startTime=start))
         self._call("fmi2EnterInitializationMode", self.fmu.enterInitializationMode)
 
@@ -105,12 +147,13 @@ class FMUUnit(Unit):
 
     def set(self, values: dict[str, object]) -> None:
         for kind, names, refs in self._plan(tuple(values)):
+            checked = [checked_value(self.name, self.ports[n], values[n]) for n in names]
             if kind == "Real":
-                self._call("fmi2SetReal", self.fmu.setReal, refs, [float(values[n]) for n in names])
+                self._call("fmi2SetReal", self.fmu.setReal, refs, checked)
             elif kind == "Integer":
-                self._call("fmi2SetInteger", self.fmu.setInteger, refs, [int(values[n]) for n in names])
+                self._call("fmi2SetInteger", self.fmu.setInteger, refs, checked)
             else:
-                self._call("fmi2SetBoolean", self.fmu.setBoolean, refs, [bool(values[n]) for n in names])
+                self._call("fmi2SetBoolean", self.fmu.setBoolean, refs, checked)
 
     def initialize(self) -> None:
         self._call("fmi2ExitInitializationMode", self.fmu.exitInitializationMode)
@@ -131,12 +174,20 @@ class FMUUnit(Unit):
         return out
 
     def terminate(self) -> None:
+        """End the instance as FMI 2.0 allows from its state: fmi2Terminate then fmi2FreeInstance when
+        healthy, only fmi2FreeInstance after an fmi2Error, and no call at all after fmi2Fatal (the FMU's
+        memory is then leaked rather than touched)."""
         if self.fmu is not None:
-            try:
-                self.fmu.terminate()
-                self.fmu.freeInstance()
-            except Exception:
-                pass
+            if self.status == "instantiated":
+                try:
+                    self.fmu.terminate()
+                except Exception:  # noqa: BLE001 - still free the instance
+                    pass
+            if self.status != "fatal":
+                try:
+                    self.fmu.freeInstance()
+                except Exception:  # noqa: BLE001
+                    pass
             self.fmu = None
         if self.folder:
             shutil.rmtree(self.folder, ignore_errors=True)

@@ -16,7 +16,6 @@ import subprocess
 import tempfile
 import uuid
 import zipfile
-from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import escape
 
@@ -24,22 +23,11 @@ import fmpy
 
 from ..diagnostics import CotwinError
 from .ccode import generate_c
+from .ports import PortLayout, Variable
 from .program import Program
 
 _FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)
-
-
-@dataclass
-class Variable:
-    name: str
-    vr: int
-    fmi_type: str  # Real | Integer | Boolean
-    causality: str  # parameter | input | output
-    variability: str  # fixed | discrete
-    start: object | None
-    slot: int  # index into the wrapper's array of that type
-    description: str = ""
 
 
 def _start_text(var: Variable) -> str:
@@ -52,88 +40,38 @@ def _start_text(var: Variable) -> str:
     return f' start="{int(var.start)}"'
 
 
-class PortLayout:
-    """Every scalar variable of the FMU with its value reference and the C that moves its value."""
-
-    def __init__(self, program: Program):
-        self.program = program
-        self.variables: list[Variable] = []
-        self.counts = {"Real": 0, "Integer": 0, "Boolean": 0}
-        self.to_model: list[str] = []     # C: copy inputs and parameters into the Model
-        self.clear_outputs: list[str] = []  # C: reset output flags at the start of a step
-        self.from_model: list[str] = []   # C: after a cycle, copy outputs out
-        self.params_to_model: list[str] = []
-        self.input_flags: list[str] = []  # C lvalues of the Model's input event flags
-        self.state_ports: set[str] = set()  # the `state` outputs (not operations or events)
-        self._build()
-
-    def _add(self, name, fmi_type, causality, variability, start, description="") -> Variable:
-        if any(v.name == name for v in self.variables):
-            raise CotwinError(f"two FMU ports would be called '{name}'; rename an event, operation or parameter")
-        var = Variable(name, len(self.variables), fmi_type, causality, variability, start, self.counts[fmi_type],
-                       description)
-        self.counts[fmi_type] += 1
-        self.variables.append(var)
-        return var
-
-    @staticmethod
-    def slot(var: Variable) -> str:
-        return {"Real": "r", "Integer": "i", "Boolean": "b"}[var.fmi_type] + f"[{var.slot}]"
-
-    def _build(self) -> None:
-        p = self.program
-        period = self._add("cycle_period", "Real", "parameter", "fixed", 0.0,
-                           "seconds per d-model cycle; 0 = one cycle per FMU step")
-        self.period_slot = self.slot(period)
-        for par in p.parameters:
-            var = self._add(par.port, _fmi(par.ty), "parameter", "fixed", par.default,
-                            f"constant {par.name} of state machine {p.machines[par.machine].machine.name}")
-            self.params_to_model.append(f"M->m{par.machine}.p_{par.name} = {self._cast(var, 'inst->' + self.slot(var))};")
-        for ev in p.inputs:
-            flag = self._add(ev.name, "Boolean", "input", "discrete", False, f"input event {ev.name}")
-            self.to_model.append(f"M->in_{ev.name} = inst->{self.slot(flag)};")
-            self.input_flags.append(f"M->in_{ev.name}")
-            for port, sc in ev.value_ports:
-                var = self._add(port, sc.fmi_type, "input", "discrete", 0 if sc.fmi_type != "Boolean" else False)
-                field = "".join(f".{f}" for f in sc.path)
-                self.to_model.append(f"M->in_{ev.name}_v{field} = {self._cast(var, 'inst->' + self.slot(var))};")
-        shared: dict[str, Variable] = {}
-        for op in p.operations:
-            flag = self._add(op.name, "Boolean", "output", "discrete", None, f"operation {op.name} called")
-            self.clear_outputs.append(f"inst->{self.slot(flag)} = false;")
-            copies = []
-            for (pname, _), group in zip(op.params, op.arg_ports):
-                for port, sc in group:
-                    var = shared.get(port) or self._add(port, sc.fmi_type, "output", "discrete", None)
-                    shared[port] = var
-                    field = "".join(f".{f}" for f in sc.path)
-                    copies.append(f"inst->{self.slot(var)} = M->arg_{op.name}_{pname}{field};")
-            self.from_model.append(f"if (M->op_{op.name}) {{ inst->{self.slot(flag)} = true; {' '.join(copies)} }}")
-        for ev in p.outputs:
-            flag = self._add(ev.name, "Boolean", "output", "discrete", None, f"output event {ev.name}")
-            self.clear_outputs.append(f"inst->{self.slot(flag)} = false;")
-            copies = []
-            for port, sc in ev.value_ports:
-                var = self._add(port, sc.fmi_type, "output", "discrete", None)
-                field = "".join(f".{f}" for f in sc.path)
-                copies.append(f"inst->{self.slot(var)} = M->out_{ev.name}_v{field};")
-            self.from_model.append(f"if (M->out_{ev.name}) {{ inst->{self.slot(flag)} = true; {' '.join(copies)} }}")
-        for m in p.machines:
-            names = ", ".join(f"{k}={n}" for k, n in enumerate(p.leaf_names(m)))
-            self.state_ports.add(p.state_port(m))
-            var = self._add(p.state_port(m), "Integer", "output", "discrete", None,
-                            f"active leaf state of {m.machine.name}: {names}; -1 = none")
-            self.from_model.append(f"inst->{self.slot(var)} = model_state(M, {m.index});")
-
-    @staticmethod
-    def _cast(var: Variable, value: str) -> str:
-        return {"Real": value, "Integer": f"(int64_t){value}", "Boolean": f"(bool){value}"}[var.fmi_type]
+_CAST = {"Real": "{}", "Integer": "(int64_t){}", "Boolean": "(bool){}"}
 
 
-def _fmi(ty) -> str:
-    from .program import fmi_type
+def _field(path: tuple[str, ...]) -> str:
+    return "".join(f".{f}" for f in path)
 
-    return fmi_type(ty)
+
+def _wrapper_code(layout: PortLayout) -> dict[str, list[str]]:
+    """The wrapper's C statements that move port values in and out of the model, from the layout."""
+    slot = layout.slot
+    code: dict[str, list[str]] = {"params": [], "to_model": [], "flags": [], "clear": [], "from_model": []}
+    for par in layout.parameters:
+        code["params"].append(f"M->m{par.machine}.p_{par.name} = "
+                              f"{_CAST[par.var.fmi_type].format('inst->' + slot(par.var))};")
+    for ev in layout.inputs:
+        code["to_model"].append(f"M->in_{ev.name} = inst->{slot(ev.flag)};")
+        code["flags"].append(f"M->in_{ev.name}")
+        for v in ev.values:
+            code["to_model"].append(f"M->in_{ev.name}_v{_field(v.path)} = "
+                                    f"{_CAST[v.var.fmi_type].format('inst->' + slot(v.var))};")
+    for op in layout.operations:
+        code["clear"].append(f"inst->{slot(op.flag)} = false;")
+        copies = [f"inst->{slot(v.var)} = M->arg_{op.name}_{pname}{_field(v.path)};"
+                  for pname, values in op.args for v in values]
+        code["from_model"].append(f"if (M->op_{op.name}) {{ inst->{slot(op.flag)} = true; {' '.join(copies)} }}")
+    for ev in layout.outputs:
+        code["clear"].append(f"inst->{slot(ev.flag)} = false;")
+        copies = [f"inst->{slot(v.var)} = M->out_{ev.name}_v{_field(v.path)};" for v in ev.values]
+        code["from_model"].append(f"if (M->out_{ev.name}) {{ inst->{slot(ev.flag)} = true; {' '.join(copies)} }}")
+    for st in layout.states:
+        code["from_model"].append(f"inst->{slot(st.var)} = model_state(M, {st.machine});")
+    return code
 
 
 def model_identifier(program: Program) -> str:
@@ -179,6 +117,7 @@ def model_description(program: Program, layout: PortLayout, guid: str) -> str:
 
 def wrapper_source(program: Program, layout: PortLayout) -> str:
     n = layout.counts
+    code = _wrapper_code(layout)
     ind = "\n    "
     text = f"""/* Generated by cotwin: the FMI 2.0 co-simulation interface of module {program.module.name}. */
 #include <math.h>
@@ -217,19 +156,19 @@ static void defaults(Instance *inst) {{
 
 static void start_model(Instance *inst) {{
     Model *M = &inst->model;
-    {ind.join(layout.params_to_model)}
+    {ind.join(code['params'])}
     model_init(M);
     inst->initialised = 1;
 }}
 
 static int run_cycle(Instance *inst, int first) {{
     Model *M = &inst->model;
-    {ind.join(layout.to_model)}
+    {ind.join(code['to_model'])}
     if (!first) {{  /* input events are present in the first cycle of a step only */
-        {(ind + '    ').join(f"{flag} = false;" for flag in layout.input_flags)}
+        {(ind + '    ').join(f"{flag} = false;" for flag in code['flags'])}
     }}
     if (model_step(M)) return 1;
-    {ind.join(layout.from_model)}
+    {ind.join(code['from_model'])}
     return 0;
 }}
 
@@ -311,9 +250,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
     Instance *inst = (Instance *)c;
     (void)t; (void)noSetPrior;
     if (!inst->initialised) start_model(inst);
-    double period = inst->{layout.period_slot};
+    double period = inst->{layout.slot(layout.period)};
     long cycles = period > 0.0 ? lround(h / period) : 1;
-    {ind.join(layout.clear_outputs)}
+    {ind.join(code['clear'])}
     for (long k = 0; k < cycles; k++) {{
         if (run_cycle(inst, k == 0)) {{ log_error(inst, inst->model.message); return fmi2Error; }}
     }}

@@ -12,7 +12,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 from .interpreter import Output
-from .fmu import PortLayout
+from .ports import PortLayout
 from .program import Program, assemble, get_path
 
 

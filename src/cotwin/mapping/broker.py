@@ -21,8 +21,9 @@ import uuid
 import pika
 
 from ..diagnostics import CotwinError
+from .amqp import connect
 
-DEFAULT_URL = "amqp://guest:guest@127.0.0.1:5672/%2F"
+DEFAULT_URL = "amqp://127.0.0.1:5672/%2F"
 _FIELDS = {"describe": set(), "command": {"goals"}, "advance": {"dt"}, "state": set(), "stop": set()}
 
 
@@ -91,7 +92,7 @@ class RobotServer:
             return {"ok": False, "error": err.findings[0].message}
 
     def serve(self) -> None:
-        connection = pika.BlockingConnection(pika.URLParameters(self.url))
+        connection = connect(self.url, f"cotwin robot server {self.queue}")
         channel = connection.channel()
         channel.queue_declare(queue=self.queue, auto_delete=True)
         self.ready.set()
@@ -124,10 +125,7 @@ class BrokerEndpoint:
         self.tree = tree
         self.queue = queue
         self.timeout = timeout
-        try:
-            self.connection = pika.BlockingConnection(pika.URLParameters(url))
-        except pika.exceptions.AMQPError as err:
-            raise CotwinError(f"cannot reach the broker at {url}: {err!r}") from None
+        self.connection = connect(url, f"cotwin robot client {queue}")
         self.channel = self.connection.channel()
         result = self.channel.queue_declare(queue="", exclusive=True)
         self.reply_queue = result.method.queue

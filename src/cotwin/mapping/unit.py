@@ -8,7 +8,7 @@ In a step: run the operations called in it, let the platform move for h, then re
 from __future__ import annotations
 
 from ..cosim.units import Port, PythonUnit
-from ..dmodel.fmu import PortLayout
+from ..dmodel.ports import PortLayout
 from ..dmodel.program import Program, assemble
 from .runtime import Mapping
 

@@ -1,4 +1,4 @@
-"""The one pythonfmu slave behind cotwin's Python FMUs (the platform mapping and the controller).
+"""The one pythonfmu slave behind cotwin's Python FMUs (the platform mapping and the command sources).
 
 pythonfmu packages this file; at instantiation the slave reads `cotwin_unit.json` from its resources
 (the unit's role and the twin project copied beside it), rebuilds that cotwin unit and exposes its
@@ -15,11 +15,11 @@ _TYPES = {"Boolean": Boolean, "Integer": Integer, "Real": Real}
 
 class CotwinUnit(Fmi2Slave):
     author = "cotwin"
-    description = "a cotwin co-simulation unit (platform mapping or scenario controller)"
+    description = "a cotwin co-simulation unit (platform mapping or command source)"
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        from cotwin.pipeline import python_unit
+        from cotwin.twin.run import python_unit
 
         config = json.loads((Path(self.resources) / "cotwin_unit.json").read_text())
         self.unit = python_unit(Path(self.resources) / config["project"], config["role"])
@@ -32,6 +32,9 @@ class CotwinUnit(Fmi2Slave):
                 variability=Fmi2Variability.discrete, initial=None if is_input else Fmi2Initial.exact,
                 getter=lambda n=port.name: self.unit.values[n],
                 setter=lambda v, n=port.name: self.unit.set({n: v})))
+
+    def exit_initialization_mode(self):
+        self.unit.initialize()
 
     def do_step(self, current_time, step_size):
         self.unit.step(current_time, step_size)

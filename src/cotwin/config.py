@@ -1,0 +1,196 @@
+"""Strictly read TOML configuration (projects, scenarios, calibrations): every problem is a finding at
+the file, line and column of the offending key, all reported together.
+
+`tomllib` gives values without positions, so `TomlFile` scans the text once for where each table and
+key is written (headers, `key =` lines, dotted keys, keys of inline tables) and a `Schema` checks
+values by declared kind: a string is never read as a Boolean (`realtime = "no"` is an error, not
+true), numbers must be finite, unknown keys are reported with the known ones.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from .diagnostics import CotwinError, Finding, Location, Severity
+
+_HEADER = re.compile(r'^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?')
+_KEY = r'(?:[A-Za-z0-9_-]+|"[^"\n]*"|\'[^\'\n]*\')'
+_ASSIGN = re.compile(rf'^\s*({_KEY}(?:\s*\.\s*{_KEY})*)\s*=')
+_INLINE_KEY = re.compile(rf'[{{,]\s*({_KEY})\s*=')
+_DECODE_AT = re.compile(r"\(at line (\d+), column (\d+)\)")
+
+
+def _keys(text: str) -> tuple[str, ...]:
+    parts = re.findall(_KEY, text)
+    return tuple(p[1:-1] if p[:1] in "\"'" else p for p in parts)
+
+
+class TomlFile:
+    """A TOML file's data and where each key path was written."""
+
+    def __init__(self, path: str | Path, what: str = "file"):
+        self.path = Path(path)
+        try:
+            raw = self.path.read_bytes()
+        except OSError as err:
+            raise self.error(f"cannot read {what}: {err.strerror or err}") from None
+        try:
+            self.text = raw.decode("utf-8")
+        except UnicodeDecodeError as err:
+            line = raw[:err.start].count(b"\n") + 1
+            column = err.start - (raw.rfind(b"\n", 0, err.start) + 1) + 1
+            raise self.error(f"the {what} is not UTF-8 text (byte 0x{raw[err.start]:02x})", line, column) from None
+        try:
+            self.data: dict = tomllib.loads(self.text)
+        except tomllib.TOMLDecodeError as err:
+            message = str(err)
+            at = _DECODE_AT.search(message)
+            line, column = (int(at.group(1)), int(at.group(2))) if at else (1, 1)
+            raise self.error(f"bad TOML: {_DECODE_AT.sub('', message).strip()}", line, column) from None
+        self.where: dict[tuple, tuple[int, int]] = {}
+        self._scan()
+
+    def _scan(self) -> None:
+        table: tuple = ()
+        arrays: dict[tuple, int] = {}
+        for number, line in enumerate(self.text.splitlines(), start=1):
+            header = _HEADER.match(line)
+            if header and not _ASSIGN.match(line):
+                name = _keys(header.group(2))
+                if header.group(1) == "[[":
+                    arrays[name] = arrays.get(name, -1) + 1
+                    table = name + (arrays[name],)
+                else:
+                    table = name
+                self.where.setdefault(table, (number, header.start(1) + 1))
+                continue
+            assign = _ASSIGN.match(line)
+            if assign:
+                key = table + _keys(assign.group(1))
+                self.where.setdefault(key, (number, assign.start(1) + 1))
+                for inner in _INLINE_KEY.finditer(line, assign.end()):
+                    self.where.setdefault(key + _keys(inner.group(1)), (number, inner.start(1) + 1))
+
+    def location(self, key: tuple = ()) -> Location:
+        """Where `key` (a path of table names, array indices and keys) was written, or its nearest
+        written parent; the file's start when nothing of it was written."""
+        for n in range(len(key), 0, -1):
+            if key[:n] in self.where:
+                return Location(str(self.path), *self.where[key[:n]])
+        return Location(str(self.path), 1, 1)
+
+    def error(self, message: str, line: int = 1, column: int = 1) -> CotwinError:
+        return CotwinError([Finding(Location(str(self.path), line, column), Severity.ERROR, message)])
+
+
+# ---- schemas ------------------------------------------------------------------------------------
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+@dataclass(frozen=True)
+class Key:
+    """One key of a table: its kind, whether it must be given, its default and an extra check.
+
+    Kinds: "str", "bool", "int", "number", "positive" (number > 0), "nonnegative", "list[str]",
+    "list", "table" (checked by `table`), "any". `choices` restricts a string; `check(value)` returns
+    a message when the value is wrong.
+    """
+
+    kind: str
+    default: Any = None
+    required: bool = False
+    choices: tuple = ()
+    table: "Schema | None" = None
+    check: Callable[[Any], str | None] | None = None
+
+
+_KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "str": (lambda v: isinstance(v, str), "a string"),
+    "bool": (lambda v: isinstance(v, bool), "true or false (a TOML Boolean, not a string)"),
+    "int": (lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer"),
+    "number": (_is_number, "a finite number"),
+    "positive": (lambda v: _is_number(v) and v > 0, "a positive number"),
+    "nonnegative": (lambda v: _is_number(v) and v >= 0, "a number >= 0"),
+    "list[str]": (lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v), "a list of strings"),
+    "list": (lambda v: isinstance(v, list), "a list"),
+    "table": (lambda v: isinstance(v, dict), "a table"),
+    "any": (lambda v: True, "anything"),
+}
+
+
+@dataclass
+class Schema:
+    """The keys a table may hold (`open` tables also take keys they do not list, checked by `values`)."""
+
+    keys: dict[str, Key] = field(default_factory=dict)
+    open: bool = False
+    values: Key | None = None
+
+    def read(self, data: dict, file: TomlFile, at: tuple = (), problems: list[Finding] | None = None) -> dict:
+        """The table's values with defaults filled in; problems are appended, not raised."""
+        problems = [] if problems is None else problems
+        name = table_name(at)
+        out: dict = {}
+        for key, value in data.items():
+            spec = self.keys.get(key) or (self.values if self.open else None)
+            where = at + (key,)
+            if spec is None:
+                known = ", ".join(self.keys) or "none"
+                problems.append(Finding(file.location(where), Severity.ERROR,
+                                        f"unknown key '{key}' in {name} (known: {known})"))
+                continue
+            out[key] = _value(spec, value, file, where, problems, key_name(where))
+        for key, spec in self.keys.items():
+            if key not in data:
+                if spec.required:
+                    problems.append(Finding(file.location(at), Severity.ERROR, f"{name} needs '{key}'"))
+                elif spec.kind == "table" and spec.table is not None:
+                    out[key] = None if spec.default is None else spec.table.read(
+                        dict(spec.default), file, at + (key,), problems)
+                else:
+                    out[key] = spec.default
+        return out
+
+
+def table_name(at: tuple) -> str:
+    """`[scenario.rabbitmq]`, `[[command]] 2`, or `the file` for the top level."""
+    if not at:
+        return "the file"
+    names = [str(a) for a in at if not isinstance(a, int)]
+    index = [a for a in at if isinstance(a, int)]
+    return f"[{'.'.join(names)}]" + (f" {index[-1] + 1}" if index else "")
+
+
+def key_name(where: tuple) -> str:
+    return f"{table_name(where[:-1])} {where[-1]}" if len(where) > 1 else f"'{where[0]}'"
+
+
+def _value(spec: Key, value, file: TomlFile, where: tuple, problems: list[Finding], name: str):
+    test, words = _KINDS[spec.kind]
+    if not test(value):
+        problems.append(Finding(file.location(where), Severity.ERROR, f"{name} must be {words}, got {value!r}"))
+        return spec.default
+    if spec.choices and value not in spec.choices:
+        problems.append(Finding(file.location(where), Severity.ERROR,
+                                f"{name} must be one of {', '.join(map(repr, spec.choices))}, got {value!r}"))
+        return spec.default
+    if spec.kind == "table" and spec.table is not None:
+        return spec.table.read(value, file, where, problems)
+    if spec.check is not None:
+        message = spec.check(value)
+        if message:
+            problems.append(Finding(file.location(where), Severity.ERROR, f"{name}: {message}"))
+            return spec.default
+    return value
+
+
+def raise_problems(problems: list[Finding]) -> None:
+    if any(p.severity is Severity.ERROR for p in problems):
+        raise CotwinError(problems)

@@ -1,0 +1,171 @@
+"""Observers of an execution (libcosim's `observer`): they watch values after initialisation and after
+every step, and never change the simulation. A result writer, a progress report, real-time pacing
+and live publishers are all observers, so the step loop knows none of them.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import queue
+import time as wallclock
+from pathlib import Path
+from typing import Callable
+
+
+class Observer:
+    """Callbacks of an execution; each is optional."""
+
+    def simulation_initialized(self, execution) -> None: ...
+
+    def step_complete(self, execution) -> None: ...
+
+    def simulation_ended(self, execution, error: BaseException | None) -> None: ...
+
+
+def format_value(value) -> str:
+    """Maestro's CSV spelling: Booleans true/false, reals as Python's shortest repr, nothing as ''."""
+    if value is None:
+        return ""
+    if value is True or value is False:
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+class CSVWriter(Observer):
+    """Writes Maestro's outputs.csv: header `time,{key}.inst.var,...`, a row at the start and after every step.
+
+    Rows go to `<name>.part` in whole lines, written at most every `flush_seconds` (and at the end),
+    so a crash loses at most that much and never leaves half a line. A run that ends well renames the
+    file into place; a failed run leaves the previous result untouched and keeps its own rows in
+    `<stem>.partial.csv` (`partial_path`), which the error names.
+    """
+
+    def __init__(self, path: str | Path, columns: list[tuple[str, str]] | None = None,
+                 column_name: Callable[[str, str], str] | None = None, flush_seconds: float = 0.5):
+        self.path = Path(path)
+        self.columns = columns
+        self.column_name = column_name or (lambda unit, var: f"{unit}.{var}")
+        self.flush_seconds = flush_seconds
+        self.part = self.path.with_name(self.path.name + ".part")
+        self.partial_path = self.path.with_name(f"{self.path.stem}.partial{self.path.suffix}")
+        self.rows = 0
+        self._fd: int | None = None
+        self._lines: list[str] = []
+        self._last_flush = 0.0
+
+    def simulation_initialized(self, execution) -> None:
+        self.columns = self.columns if self.columns is not None else execution.system.observed()
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fd = os.open(self.part, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        header = ["time"] + [self.column_name(u, v) for u, v in self.columns]
+        self._lines.append(",".join(_csv_cell(h) for h in header) + "\n")
+        self._keys = list(self.columns)
+        self._row(execution)
+        self._flush()
+
+    def step_complete(self, execution) -> None:
+        self._row(execution)
+        now = wallclock.monotonic()
+        if now - self._last_flush >= self.flush_seconds:
+            self._flush()
+
+    def _row(self, execution) -> None:
+        values = execution.values
+        self._lines.append(",".join([format_value(round(execution.time, 12))]
+                                    + [format_value(values.get(key)) for key in self._keys]) + "\n")
+        self.rows += 1
+
+    def _flush(self) -> None:
+        if self._fd is not None and self._lines:
+            os.write(self._fd, "".join(self._lines).encode())
+            self._lines.clear()
+        self._last_flush = wallclock.monotonic()
+
+    def simulation_ended(self, execution, error: BaseException | None) -> None:
+        if self._fd is None:
+            return
+        self._flush()
+        os.close(self._fd)
+        self._fd = None
+        os.replace(self.part, self.partial_path if error is not None else self.path)
+
+
+def _csv_cell(text: str) -> str:
+    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n') else text
+
+
+class Progress(Observer):
+    """Calls report(step, total) after every step."""
+
+    def __init__(self, report: Callable[[int, int], None]):
+        self.report = report
+
+    def step_complete(self, execution) -> None:
+        self.report(execution.steps, execution.total_steps)
+
+
+class RealTimePacer(Observer):
+    """Keeps simulated time from running ahead of wall-clock time (scaled by `factor`): after a step that
+    ends at t, waits until factor * (wall time since initialisation) >= t - start."""
+
+    def __init__(self, factor: float = 1.0):
+        if not (factor > 0 and math.isfinite(factor)):
+            raise ValueError("the real-time factor must be a positive number")
+        self.factor = factor
+        self.started = 0.0
+
+    def simulation_initialized(self, execution) -> None:
+        self.started = wallclock.perf_counter()
+
+    def step_complete(self, execution) -> None:
+        ahead = (execution.time - execution.start) / self.factor - (wallclock.perf_counter() - self.started)
+        if ahead > 0:
+            wallclock.sleep(ahead)
+
+
+class LiveFeed(Observer):
+    """Publishes a sample {time, wall, values} per step to subscribers' bounded queues, never blocking
+    the run: a subscriber that falls behind loses its oldest samples (counted in `dropped`)."""
+
+    def __init__(self, variables: list[tuple[str, str]] | None = None, every: int = 1):
+        self.variables = variables
+        self.every = max(1, int(every))
+        self.subscribers: list[queue.Queue] = []
+        self.dropped = 0
+
+    def subscribe(self, maxsize: int = 1000) -> queue.Queue:
+        q: queue.Queue = queue.Queue(maxsize=maxsize)
+        self.subscribers.append(q)
+        return q
+
+    def unsubscribe(self, q: queue.Queue) -> None:
+        if q in self.subscribers:
+            self.subscribers.remove(q)
+
+    def simulation_initialized(self, execution) -> None:
+        self.variables = self.variables if self.variables is not None else execution.system.observed()
+        self._publish(execution)
+
+    def step_complete(self, execution) -> None:
+        if execution.steps % self.every == 0:
+            self._publish(execution)
+
+    def _publish(self, execution) -> None:
+        if not self.subscribers:
+            return
+        values = execution.values
+        sample = {"time": execution.time, "wall": wallclock.time(),
+                  "values": {f"{u}.{v}": values.get((u, v)) for u, v in self.variables}}
+        for q in list(self.subscribers):
+            try:
+                q.put_nowait(sample)
+            except queue.Full:
+                try:
+                    q.get_nowait()
+                    self.dropped += 1
+                    q.put_nowait(sample)
+                except (queue.Empty, queue.Full):
+                    self.dropped += 1

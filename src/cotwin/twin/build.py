@@ -1,0 +1,220 @@
+"""The artefacts of a twin project, built into an output folder and kept only while still valid.
+
+Every artefact is content-addressed: `DIR/build.json` records, per file, a key made from what it was
+built from (the model texts, the options, cotwin's version and generator sources); a file whose key
+differs, or that is missing, is rebuilt. Files are written under a temporary name and renamed into
+place, and the record is written after the file, so a build killed midway is redone next time.
+A folder is used by one run at a time (`folder_lock`).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+from .. import __version__
+from ..diagnostics import CotwinError
+from .system import TwinSystem
+
+RECORD = "build.json"
+_GENERATORS = ("dmodel/ccode.py", "dmodel/fmu.py", "dmodel/ports.py", "dmodel/program.py", "dmodel/interpreter.py")
+
+
+@contextmanager
+def folder_lock(folder: Path):
+    """Hold DIR/.cotwin.lock for the duration; another run into the same folder is refused."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / ".cotwin.lock"
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "another process"
+            raise CotwinError(f"{folder} is in use by another cotwin run ({holder}); choose another output folder "
+                              "or wait for it to finish") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()}".encode(), 0)
+        yield
+    finally:
+        os.close(fd)
+
+
+def _digest(*parts: bytes | str) -> str:
+    h = hashlib.sha256()
+    for part in parts:
+        data = part.encode() if isinstance(part, str) else part
+        h.update(len(data).to_bytes(8, "little"))
+        h.update(data)
+    return h.hexdigest()
+
+
+def _cotwin_sources(names=_GENERATORS) -> list[bytes]:
+    root = Path(__file__).resolve().parents[1]
+    return [(root / n).read_bytes() for n in names if (root / n).is_file()]
+
+
+def model_texts(system: TwinSystem) -> list[bytes]:
+    """Every model file the twin was checked from, in a stable order."""
+    return [Path(f.path).read_bytes() for f in sorted(system.models.project.files, key=lambda f: str(f.path))
+            if not str(f.path).startswith("<")]
+
+
+class Record:
+    """DIR/build.json: artefact name -> the key it was built with."""
+
+    def __init__(self, folder: Path):
+        self.path = folder / RECORD
+        try:
+            self.keys = json.loads(self.path.read_text()) if self.path.is_file() else {}
+            if not isinstance(self.keys, dict):
+                self.keys = {}
+        except (OSError, ValueError):
+            self.keys = {}
+
+    def fresh(self, target: Path, key: str) -> bool:
+        return target.is_file() and self.keys.get(target.name) == key
+
+    def done(self, target: Path, key: str) -> None:
+        self.keys[target.name] = key
+        part = self.path.with_name(self.path.name + ".part")
+        part.write_text(json.dumps(self.keys, indent=1, sort_keys=True) + "\n")
+        part.replace(self.path)
+
+    def forget(self, target: Path) -> None:
+        self.keys.pop(target.name, None)
+
+
+def write_text(target: Path, text: str) -> Path:
+    part = target.with_name(target.name + ".part")
+    part.write_text(text)
+    part.replace(target)
+    return target
+
+
+def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: Record | None = None) -> Path:
+    """DIR/dmodel.fmu, rebuilt only when the models, the module, the compiler or cotwin changed."""
+    from ..dmodel.fmu import build_fmu
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    record = record or Record(folder)
+    target = folder / "dmodel.fmu"
+    key = _digest(__version__, *model_texts(system), str(system.spec.module), cc, *_cotwin_sources())
+    if not record.fresh(target, key):
+        record.forget(target)
+        build_fmu(system.models.program, target, cc=cc)
+        record.done(target, key)
+    return target
+
+
+def build(system: TwinSystem, out: str | Path, cc: str = "cc") -> dict[str, Path]:
+    """Every artefact: the d-model FMU, SDF/URDF/MJCF, the Python FMUs and multimodel.json."""
+    from ..pmodel.mjcf import to_mjcf
+    from ..pmodel.sdf import to_sdf
+    from ..pmodel.urdf import to_urdf
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    record = Record(out)
+    written = {"dmodel": dmodel_fmu(system, out, cc, record)}
+    tree, scene = system.models.tree, system.models.scene
+    for name, text in ((f"{tree.name}.sdf", to_sdf(tree)), (f"{tree.name}.urdf", to_urdf(tree)),
+                       (f"{tree.name}_scene.xml", to_mjcf(tree, scene))):
+        written[name] = write_text(out / name, text)
+    written.update(python_fmus(system, out, record))
+    written["multimodel"] = write_text(out / "multimodel.json", json.dumps(system.multimodel(), indent=2) + "\n")
+    return written
+
+
+def staged_project(system: TwinSystem, stage: Path) -> None:
+    """A copy of the project's models and settings in `stage`, as the Python FMUs carry it: the
+    platform endpoint and the command source included, so the FMUs drive the same robot."""
+    spec = system.spec
+    stage.mkdir(parents=True, exist_ok=True)
+    names: dict[Path, str] = {}
+
+    def copy(path: Path | None) -> str | None:
+        if path is None:
+            return None
+        if path not in names:
+            name = path.name if path.name not in names.values() else f"{len(names)}_{path.name}"
+            shutil.copy(path, stage / name)
+            names[path] = name
+        return names[path]
+
+    models = {"dmodel": copy(spec.dmodel), "pmodel": copy(spec.pmodel), "mapping": copy(spec.mapping),
+              "module": spec.module, "pmodel_name": spec.pmodel_name}
+    scenario: dict = {}
+    if spec.plan is not None:
+        scenario["commands" if spec.plan.suffix == ".toml" else "plan"] = copy(spec.plan)
+    if spec.rabbitmq is not None:
+        scenario["rabbitmq"] = dict(vars(spec.rabbitmq))
+    platform = {"endpoint": spec.endpoint, "queue": spec.queue, "url": spec.url, "scene": spec.scene,
+                "bricks": [list(b) for b in spec.bricks], "calibration": copy(spec.calibration)}
+    cosim = {"step": spec.step, "end": spec.end, "algorithm": spec.algorithm, "realtime": spec.realtime,
+             "log": spec.log}
+    (stage / "cotwin.toml").write_text(toml_text({"models": models, "scenario": scenario, "platform": platform,
+                                                  "cosim": cosim}))
+
+
+def toml_text(tables: dict[str, dict]) -> str:
+    """TOML for tables of strings, numbers, Booleans, lists and inline tables (None values left out)."""
+
+    def value(v) -> str:
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items() if x is not None) + " }"
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return json.dumps(v)
+
+    lines = []
+    for table, values in tables.items():
+        lines.append(f"[{table}]")
+        lines.extend(f"{key} = {value(v)}" for key, v in values.items() if v is not None)
+    return "\n".join(lines) + "\n"
+
+
+def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = None) -> dict[str, Path]:
+    """The mapping and the command source as FMUs (one generic pythonfmu slave; they need cotwin installed
+    where they run), so the multimodel runs in Maestro or any FMI importer."""
+    from pythonfmu import FmuBuilder
+
+    out = Path(out)
+    record = record or Record(out)
+    roles = [u for u in system.units if u.role != "dmodel"]
+    written = {}
+    with tempfile.TemporaryDirectory(prefix="cotwin-pyfmu-") as tmp:
+        stage = Path(tmp) / "twin"
+        staged_project(system, stage)
+        staged = [p.read_bytes() for p in sorted(stage.rglob("*")) if p.is_file()]
+        script = Path(__file__).parent / "fmu_slave.py"
+        base_key = _digest(__version__, script.read_bytes(), *staged,
+                           *_cotwin_sources(("mapping/runtime.py", "mapping/unit.py", "twin/rabbitmq.py")))
+        for unit in roles:
+            target = out / unit.fmu
+            key = _digest(base_key, unit.instance)
+            written[unit.instance] = target
+            if record.fresh(target, key):
+                continue
+            record.forget(target)
+            work = Path(tmp) / unit.instance
+            work.mkdir()
+            shutil.copy(script, work / "fmu_slave.py")
+            shutil.copytree(stage, work / "twin")
+            (work / "cotwin_unit.json").write_text(json.dumps({"role": unit.instance, "project": "twin/cotwin.toml"}))
+            fmu = FmuBuilder.build_FMU(work / "fmu_slave.py", dest=work,
+                                       project_files=[work / "twin", work / "cotwin_unit.json"])
+            part = target.with_name(target.name + ".part")
+            shutil.move(str(fmu), part)
+            part.replace(target)
+            record.done(target, key)
+    return written

@@ -1,0 +1,215 @@
+"""A twin project (`cotwin.toml`): the three models, where commands come from, the platform, the
+co-simulation settings and, for a live twin, the physical twin, deviation checking and history.
+
+    [models]                        # paths relative to this file
+    dmodel = "arm.rst"
+    pmodel = "ur5e.pm"
+    mapping = "mapping.pm"
+    module = "FlexCellArm"          # optional: the d-model module; pmodel_name likewise
+    [scenario]                      # where commands come from: one of
+    plan = "plan.csv"               #   a TwinManager plan (ms, port values)
+    commands = "scenario.toml"      #   a TOML list of [[command]]
+    rabbitmq = { exchange = "fmi_digital_twin_dt" }   # live, as the RMQ FMU takes them
+                                    #   (url, to_cosim, from_cosim, maxage_ms, timeout_s: see RabbitMQ)
+    [platform]                      # the DT's robot
+    endpoint = "mujoco"             # the embedded simulator, or "broker": a robot behind RabbitMQ
+    queue = "cotwin.robot"          #   (its request queue and broker url)
+    scene = "flexcell"              # scene around the robot built from the mapping's constants, or "none"
+    bricks = [[8, 10]]              # Flex-cell: bricks standing on holes (X, Y)
+    [cosim]
+    step = 0.1
+    end = 20.0
+    algorithm = "jacobi"            # or "gauss-seidel"
+    realtime = false                # pace to wall-clock time
+    log = ["q0", "q1"]              # mapping variables to log (default: every monitored one)
+    [pt]                            # the physical twin of `cotwin twin`
+    endpoint = "opcua"              # opcua | replay | broker | rtde
+    url = "opc.tcp://127.0.0.1:4840"
+    log = "rtde_run1.csv"           # replay: the recorded log
+    [deviation]
+    variables = ["q0", "q1"]        # default: the logged variables
+    absolute = 0.05                 # alarm when |PT - DT| > max(absolute, relative * |PT|)
+    relative = 0.0
+    lag_steps = 3                   # a DT lagging by at most this many steps is not deviating
+    debounce_steps = 2              # consecutive deviating steps before an alarm is raised
+    [history]
+    url = "sqlite:///history.sqlite"  # or postgresql://...; default: DIR/history.sqlite
+
+Every problem is reported at its key's line and column, all together (cotwin.config).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..config import Key, Schema, TomlFile, raise_problems
+from ..diagnostics import Finding, Severity
+
+ENDPOINTS = ("mujoco", "broker")
+PT_ENDPOINTS = ("opcua", "replay", "broker", "rtde")
+
+
+def _pairs(value) -> str | None:
+    if not all(isinstance(b, list) and len(b) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in b)
+               for b in value):
+        return "must be a list of [X, Y] hole pairs"
+    return None
+
+
+def _amqp_url(value: str) -> str | None:
+    if not value.startswith(("amqp://", "amqps://")):
+        return f"'{value}' is not an amqp:// or amqps:// URL"
+    from ..mapping.amqp import url_has_password
+
+    if url_has_password(value):
+        return ("a password in the project file is refused: give credentials in the environment "
+                "(COTWIN_AMQP_USER, COTWIN_AMQP_PASSWORD) or a file (COTWIN_AMQP_CREDENTIALS)")
+    return None
+
+
+RABBITMQ = Schema({
+    "exchange": Key("str", required=True),
+    "url": Key("str", "amqp://127.0.0.1:5672/%2F", check=_amqp_url),
+    "to_cosim": Key("str", "data.to_cosim"),
+    "from_cosim": Key("str", "data.from_cosim"),
+    "maxage_ms": Key("positive", 1000),
+    "timeout_s": Key("positive", 60),
+})
+
+SCHEMA = Schema({
+    "models": Key("table", required=True, table=Schema({
+        "dmodel": Key("str", required=True), "pmodel": Key("str", required=True), "mapping": Key("str", required=True),
+        "module": Key("str"), "pmodel_name": Key("str")})),
+    "scenario": Key("table", {}, table=Schema({
+        "plan": Key("str"), "commands": Key("str"), "rabbitmq": Key("table", table=RABBITMQ)})),
+    "platform": Key("table", {}, table=Schema({
+        "endpoint": Key("str", "mujoco", choices=ENDPOINTS), "queue": Key("str", "cotwin.robot"),
+        "url": Key("str", "amqp://127.0.0.1:5672/%2F", check=_amqp_url), "bricks": Key("list", [], check=_pairs),
+        "scene": Key("str", "flexcell", choices=("flexcell", "none")), "calibration": Key("str")})),
+    "cosim": Key("table", {}, table=Schema({
+        "step": Key("positive", 0.1), "end": Key("positive", 20.0),
+        "algorithm": Key("str", "jacobi", choices=("jacobi", "gauss-seidel")),
+        "realtime": Key("bool", False), "log": Key("list[str]")})),
+    "pt": Key("table", table=Schema({
+        "endpoint": Key("str", required=True, choices=PT_ENDPOINTS), "url": Key("str"), "log": Key("str"),
+        "queue": Key("str", "cotwin.robot"), "offset": Key("number")})),
+    "deviation": Key("table", {}, table=Schema({
+        "variables": Key("list[str]"), "absolute": Key("nonnegative", 0.05), "relative": Key("nonnegative", 0.0),
+        "lag_steps": Key("int", 3, check=lambda v: None if v >= 0 else "must be >= 0"),
+        "debounce_steps": Key("int", 2, check=lambda v: None if v >= 1 else "must be >= 1"),
+        "exchange": Key("str", "cotwin.twin"), "routing_key": Key("str", "twin.alarm")})),
+    "history": Key("table", {}, table=Schema({"url": Key("str")})),
+})
+
+
+@dataclass(frozen=True)
+class RabbitMQSettings:
+    exchange: str
+    url: str = "amqp://127.0.0.1:5672/%2F"
+    to_cosim: str = "data.to_cosim"
+    from_cosim: str = "data.from_cosim"
+    maxage_ms: float = 1000
+    timeout_s: float = 60
+
+
+@dataclass(frozen=True)
+class PTSettings:
+    endpoint: str
+    url: str | None = None
+    log: Path | None = None
+    queue: str = "cotwin.robot"
+    offset: float | None = None  # replay: log time at co-simulation time 0 (default: aligned on the first motion)
+
+
+@dataclass(frozen=True)
+class DeviationSettings:
+    variables: tuple[str, ...] | None = None
+    absolute: float = 0.05
+    relative: float = 0.0
+    lag_steps: int = 3
+    debounce_steps: int = 2
+    exchange: str = "cotwin.twin"
+    routing_key: str = "twin.alarm"
+
+
+@dataclass
+class TwinProject:
+    path: Path
+    dmodel: Path
+    pmodel: Path
+    mapping: Path
+    module: str | None = None
+    pmodel_name: str | None = None
+    plan: Path | None = None  # a plan CSV or a TOML command list
+    rabbitmq: RabbitMQSettings | None = None
+    endpoint: str = "mujoco"
+    queue: str = "cotwin.robot"
+    url: str = "amqp://127.0.0.1:5672/%2F"
+    scene: str = "flexcell"
+    bricks: list[tuple[int, int]] = field(default_factory=list)
+    calibration: Path | None = None
+    step: float = 0.1
+    end: float = 20.0
+    algorithm: str = "jacobi"
+    realtime: bool = False
+    log: list[str] | None = None
+    pt: PTSettings | None = None
+    deviation: DeviationSettings = field(default_factory=DeviationSettings)
+    history_url: str | None = None
+
+    @property
+    def model_files(self) -> list[Path]:
+        return [self.dmodel, self.pmodel, self.mapping]
+
+    @property
+    def scenario(self) -> Path | None:
+        return self.plan
+
+
+def load_project(path: str | Path) -> TwinProject:
+    """Read and check cotwin.toml; every problem is reported at its key, all together."""
+    file = TomlFile(path, "project file")
+    problems: list[Finding] = []
+    data = SCHEMA.read(file.data, file, (), problems)
+    base = file.path.parent
+
+    def existing(table: str, key: str, value: str | None) -> Path | None:
+        if value is None:
+            return None
+        target = base / value
+        if not target.is_file():
+            problems.append(Finding(file.location((table, key)), Severity.ERROR, f"[{table}] {key}: no file {target}"))
+        return target
+
+    models = data["models"] or {}
+    files = {k: existing("models", k, models.get(k)) for k in ("dmodel", "pmodel", "mapping")}
+    scenario = data["scenario"] or {}
+    sources = [k for k in ("plan", "commands", "rabbitmq") if scenario.get(k) is not None]
+    if len(sources) > 1:
+        problems.append(Finding(file.location(("scenario",)), Severity.ERROR,
+                                f"[scenario] takes one source of commands, got {', '.join(sources)}"))
+    plan = existing("scenario", sources[0], scenario[sources[0]]) if sources and sources[0] != "rabbitmq" else None
+    rabbitmq = RabbitMQSettings(**scenario["rabbitmq"]) if scenario.get("rabbitmq") else None
+    platform, cosim = data["platform"] or {}, data["cosim"] or {}
+    pt = None
+    if data["pt"]:
+        raw = data["pt"]
+        if raw["endpoint"] in ("opcua", "rtde") and not raw.get("url"):
+            problems.append(Finding(file.location(("pt", "endpoint")), Severity.ERROR,
+                                    f"[pt] endpoint {raw['endpoint']!r} needs a url"))
+        if raw["endpoint"] == "replay" and not raw.get("log"):
+            problems.append(Finding(file.location(("pt", "endpoint")), Severity.ERROR,
+                                    "[pt] endpoint 'replay' needs log = \"<recorded log>\""))
+        pt = PTSettings(raw["endpoint"], raw.get("url"), existing("pt", "log", raw.get("log")), raw["queue"],
+                        raw.get("offset"))
+    dev = data["deviation"] or {}
+    deviation = DeviationSettings(**{k: (tuple(v) if k == "variables" and v is not None else v)
+                                     for k, v in dev.items()}) if dev else DeviationSettings()
+    calibration = existing("platform", "calibration", platform.get("calibration"))
+    raise_problems(problems)
+    return TwinProject(
+        file.path, files["dmodel"], files["pmodel"], files["mapping"], models.get("module"), models.get("pmodel_name"),
+        plan, rabbitmq, platform["endpoint"], platform["queue"], platform["url"], platform["scene"],
+        [tuple(b) for b in platform["bricks"]], calibration, float(cosim["step"]), float(cosim["end"]),
+        cosim["algorithm"], cosim["realtime"], cosim["log"], pt, deviation, (data["history"] or {}).get("url"))

@@ -1,0 +1,101 @@
+"""Run one twin (`cotwin run`): its TwinSystem against the project's platform, a Maestro-format CSV and a
+figure; and the units cotwin's Python FMUs carry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..cosim.algorithm import algorithm as make_algorithm
+from ..cosim.execution import Execution, RunResult
+from ..cosim.observers import CSVWriter, Observer, Progress, RealTimePacer
+from ..cosim.system import System
+from ..diagnostics import CotwinError
+from .build import dmodel_fmu, folder_lock
+from .project import TwinProject, load_project
+from .system import MAPPING, TwinSystem
+
+
+def dt_endpoint(system: TwinSystem):
+    """The platform of the project's (digital) twin: the embedded simulator, or a robot behind the broker."""
+    from ..mapping.endpoint import SimulatedEndpoint
+    from ..pmodel.simulator import PlatformSimulator
+
+    spec, models = system.spec, system.models
+    if spec.endpoint == "broker":
+        from ..mapping.broker import BrokerEndpoint
+
+        return BrokerEndpoint(models.tree, spec.queue, spec.url)
+    return SimulatedEndpoint(PlatformSimulator(models.tree, models.scene))
+
+
+def python_unit(project: str | Path, role: str):
+    """A cotwin in-process unit of a twin project by role (inside cotwin's Python FMUs)."""
+    system = TwinSystem(load_project(project))
+    if role == "mapping":
+        return system.mapping_unit(dt_endpoint(system))
+    if system.source is not None and role == system.source.instance:
+        return system.source_unit()
+    raise CotwinError(f"unknown unit role '{role}' for {project}")
+
+
+@dataclass
+class TwinRun:
+    """What `run_twin` ran: the execution's result, where it wrote, and the units (for inspection)."""
+
+    result: RunResult
+    csv: Path
+    figure: Path | None
+    system: System
+    units: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def mapping(self):
+        return self.units["mapping"]
+
+
+def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end: float | None = None,
+             algorithm: str | None = None, realtime: bool | None = None, observers: list[Observer] | None = None,
+             progress=None, plot: bool = True, endpoint=None, source=None, cc: str = "cc") -> TwinRun:
+    """Co-simulate the twin into `out` (outputs.csv, figure.png), building the d-model FMU if it is
+    missing or stale. The folder is locked for the run; a failed run keeps the previous result."""
+    out = Path(out)
+    spec = system.spec
+    end = spec.end if end is None else end
+    step = spec.step if step is None else step
+    if not (step > 0 and end > 0):
+        raise CotwinError(f"need a positive step and end time (step {step!r}, end {end!r})")
+    with folder_lock(out):
+        fmu = dmodel_fmu(system, out, cc)
+        cosim = system.instantiate(fmu, endpoint if endpoint is not None else dt_endpoint(system), source=source)
+        units = {u.role if u.role != "source" else "source": cosim.units[u.name] for u in system.units}
+        writer = CSVWriter(out / "outputs.csv")
+        chain: list[Observer] = [writer, *(observers or [])]
+        if progress is not None:
+            chain.append(Progress(progress))
+        if spec.realtime if realtime is None else realtime:
+            chain.append(RealTimePacer())
+        execution = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain)
+        try:
+            result = execution.run(end)
+        except CotwinError as err:
+            if writer.rows:
+                raise CotwinError([*err.findings, *CotwinError(
+                    f"the {writer.rows} row(s) computed before the failure are in {writer.partial_path}").findings]) from None
+            raise
+        figure = None
+        if plot:
+            from ..plot import figure as draw
+
+            figure = draw(out / "outputs.csv", out / "figure.png",
+                          title=f"{system.models.program.module.name}: step {step:g} s, {result.algorithm}")
+        return TwinRun(result, out / "outputs.csv", figure, cosim, units)
+
+
+def load(project: str | Path | TwinProject) -> TwinSystem:
+    """The TwinSystem of a project file (or an already read project)."""
+    return TwinSystem(project if isinstance(project, TwinProject) else load_project(project))
+
+
+__all__ = ["MAPPING", "TwinRun", "dt_endpoint", "load", "python_unit", "run_twin"]

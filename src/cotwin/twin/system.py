@@ -1,0 +1,189 @@
+"""The TwinSystem: a twin project's co-simulation, derived once from its models and settings.
+
+It names the units (a command source, the d-model FMU, the platform mapping), every connection
+between them, the logged variables and the delayed units; `cotwin build` writes it as Maestro's
+multimodel.json, `cotwin run` executes it, and the live runtime instantiates it twice (PT and DT),
+so the three cannot disagree.
+
+Connections come from the models alone: source -> d-model command events and their values; d-model
+operation calls and arguments -> mapping; mapping platform events -> d-model (the mapping's outputs
+are declared delayed, which breaks the d-model/mapping cycle under Gauss-Seidel); the mapping's
+monitored variables -> the source, when the source echoes them (the RabbitMQ bridge, as Listing 5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..cosim.system import Connection, System
+from ..cosim.units import Unit
+from ..diagnostics import CotwinError, Finding, Location, Severity
+from .project import TwinProject
+
+
+@dataclass(frozen=True)
+class UnitSpec:
+    """One unit of the twin as Maestro names it: `{key}.instance`, from `fmu`; `role` says what it is."""
+
+    key: str
+    instance: str
+    fmu: str
+    role: str  # source | dmodel | mapping
+
+    @property
+    def name(self) -> str:
+        return f"{self.key}.{self.instance}"
+
+
+DMODEL = UnitSpec("{dmodel}", "dmodel", "dmodel.fmu", "dmodel")
+MAPPING = UnitSpec("{mapping}", "mapping", "mapping.fmu", "mapping")
+CONTROLLER = UnitSpec("{controller}", "controller", "controller.fmu", "source")
+RABBITMQ = UnitSpec("{rabbitmq}", "rabbitmq", "rabbitmq.fmu", "source")
+
+
+@dataclass
+class TwinModels:
+    """The checked models of a project and what is derived from them once."""
+
+    project: object  # cotwin.robosim.project.Project
+    program: object  # cotwin.dmodel.program.Program
+    tree: object  # cotwin.pmodel.tree.KinematicTree
+    mapping_model: object  # cotwin.robosim.pmodel_elements.Mapping
+    scene: object | None
+    monitored: list[str]
+
+
+def load_models(spec: TwinProject) -> TwinModels:
+    from ..dmodel.program import build_program
+    from ..mapping.runtime import mirror_variables
+    from ..pmodel import ik
+    from ..pmodel.scene import Brick, FlexCell
+    from ..pmodel.tree import build_tree
+    from ..robosim.check import load_checked
+    from ..robosim.pmodel_elements import Mapping as MappingModel
+
+    project = load_checked(spec.model_files)
+    program = build_program(project, spec.module)
+    tree = build_tree(project, spec.pmodel_name)
+    mappings = project.elements(MappingModel)
+    if len(mappings) != 1:
+        raise CotwinError([Finding(Location(str(spec.mapping), 1, 1), Severity.ERROR,
+                                   f"a twin needs exactly one mapping, found {len(mappings)}")])
+    mapping = mappings[0]
+    scene = None
+    if spec.scene == "flexcell":
+        scene = FlexCell.from_mapping(mapping, [Brick(f"brick{i + 1}", b) for i, b in enumerate(spec.bricks)])
+    arm = ik.arm_joints(tree, ik.find_tool(tree))
+    monitored = list(mirror_variables([v.name for v in mapping.variables], arm))
+    return TwinModels(project, program, tree, mapping, scene, monitored)
+
+
+class TwinSystem:
+    """Units, connections, logged variables and delayed units of a twin project (see module doc)."""
+
+    def __init__(self, spec: TwinProject, models: TwinModels | None = None):
+        from ..dmodel.ports import PortLayout
+        from ..mapping.unit import mapping_ports
+        from .scenario import read_scenario, scenario_ports
+
+        self.spec = spec
+        self.models = models or load_models(spec)
+        program = self.models.program
+        self.commands = read_scenario(spec.plan, program) if spec.plan is not None else []
+        mapped = {ev.name for ev in self.models.mapping_model.input_events}
+        command_ports = scenario_ports(program)
+        if spec.plan is not None:
+            used = {p for c in self.commands for p, _ in c.values}
+            self.source_ports = [p for p in command_ports if p in used]
+            self.source = CONTROLLER
+        elif spec.rabbitmq is not None:  # every d-model input the platform does not produce
+            events = [ev for ev in program.inputs if ev.name not in mapped]
+            self.source_ports = [p for ev in events for p in [ev.name, *(port for port, _ in ev.value_ports)]]
+            self.source = RABBITMQ
+        else:  # an autonomous robot: no commands from outside
+            self.source_ports = []
+            self.source = None
+        self.command_events = set(self.source_ports) & {ev.name for ev in program.inputs}
+        self.units = [u for u in (self.source, DMODEL, MAPPING) if u is not None]
+        layout = PortLayout(program)
+        dmodel_inputs = {v.name for v in layout.variables if v.causality == "input"}
+        connections = []
+        if self.source is not None:
+            connections += [Connection(self.source.name, p, DMODEL.name, p) for p in self.source_ports]
+        for port in mapping_ports(program, mapped, self.command_events, self.models.monitored):
+            if port.causality == "input":
+                connections.append(Connection(DMODEL.name, port.name, MAPPING.name, port.name))
+            elif port.name in dmodel_inputs:
+                connections.append(Connection(MAPPING.name, port.name, DMODEL.name, port.name))
+        if self.source is RABBITMQ:  # the bridge publishes the monitored variables back (Listing 5)
+            connections += [Connection(MAPPING.name, v, RABBITMQ.name, v) for v in self.models.monitored]
+        self.connections = connections
+        self.delayed = {MAPPING.name}
+        self.log = self._log_variables()
+
+    def _log_variables(self) -> dict[str, list[str]]:
+        monitored = self.models.monitored
+        names = self.spec.log if self.spec.log is not None else monitored
+        unknown = [n for n in names if n not in monitored]
+        if unknown:
+            raise CotwinError([Finding(Location(str(self.spec.path), 1, 1), Severity.ERROR,
+                                       f"[cosim] log: unknown mapping variable(s) {', '.join(unknown)} "
+                                       f"(monitored: {', '.join(monitored) or 'none'})")])
+        program = self.models.program
+        return {MAPPING.name: list(names), DMODEL.name: [program.state_port(m) for m in program.machines]}
+
+    # ---- descriptions ----
+    def multimodel(self, realtime: bool | None = None) -> dict:
+        """Maestro's multimodel.json; the `cotwin` key (which Maestro ignores) holds the delays."""
+        connections: dict[str, list[str]] = {}
+        for c in self.connections:
+            connections.setdefault(f"{c.source}.{c.output}", []).append(f"{c.target}.{c.input}")
+        return {
+            "fmus": {u.key: u.fmu for u in self.units},
+            "connections": connections,
+            "parameters": {},
+            "logVariables": self.log,
+            "algorithm": {"type": "fixed-step", "size": self.spec.step},
+            "startTime": 0.0,
+            "endTime": self.spec.end,
+            "simulationProgramDelay": self.spec.realtime if realtime is None else realtime,
+            "cotwin": {"delayed": sorted(self.delayed), "algorithm": self.spec.algorithm},
+        }
+
+    # ---- instances ----
+    def mapping_unit(self, endpoint) -> Unit:
+        from ..mapping.runtime import Mapping
+        from ..mapping.unit import MappingUnit
+
+        return MappingUnit(MAPPING.name, self.models.program, Mapping(self.models.project, endpoint),
+                           self.command_events)
+
+    def source_unit(self, bridge=None) -> Unit | None:
+        """The command source: the scenario's controller, or the RabbitMQ unit reading from `bridge`
+        (a started RabbitMQBridge; one is made from the project's settings if not given)."""
+        from .scenario import ScenarioUnit
+
+        if self.source is CONTROLLER:
+            return ScenarioUnit(CONTROLLER.name, self.models.program, self.commands)
+        if self.source is RABBITMQ:
+            from .rabbitmq import RabbitMQUnit, port_types
+
+            return RabbitMQUnit(RABBITMQ.name, port_types(self.models.program, self.source_ports),
+                                self.models.monitored, self.spec.rabbitmq, bridge=bridge)
+        return None
+
+    def instantiate(self, dmodel_fmu: str | Path, endpoint, source: Unit | None = None,
+                    dmodel: Unit | None = None) -> System:
+        """A fresh, checked co-simulation of this twin against `endpoint` (the platform)."""
+        from ..cosim.units import FMUUnit
+
+        units = []
+        if self.source is not None:
+            units.append(source if source is not None else self.source_unit())
+        units.append(dmodel if dmodel is not None else FMUUnit(DMODEL.name, dmodel_fmu))
+        units.append(self.mapping_unit(endpoint))
+        return System.of(units, self.connections, delayed=self.delayed, log=self.log)
+
+    def units_by_role(self, system: System) -> dict[str, Unit]:
+        return {u.role: system.units[u.name] for u in self.units}
