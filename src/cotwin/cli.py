@@ -160,6 +160,41 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
     click.echo(f"{csv_path}: {result.rows} rows to t = {result.end_time:g} s in {result.wall_seconds:.2f} s")
 
 
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("--plan", "plan", type=click.Path(), help="the commands to publish (default: the project's plan)")
+@click.option("--period", type=click.FloatRange(min=0.01), default=0.5, show_default=True,
+              help="seconds of wall time between messages")
+@click.option("--exchange", help="the twin's exchange (default: the project's [scenario] rabbitmq exchange)")
+def publish(project: str, plan: str | None, period: float, exchange: str | None) -> None:
+    """Publish commands to a live twin over RabbitMQ, as the paper's UR5e publisher does: wait for the
+    ready message, then every PERIOD send the command due at the echoed simulation time, else idle."""
+    from dataclasses import replace
+
+    from .twin.project import RabbitMQSettings
+    from .twin.publisher import Publisher, idle_values
+    from .twin.rabbitmq import port_types
+    from .twin.run import load
+    from .twin.scenario import read_scenario
+
+    system = load(project)
+    settings = system.spec.rabbitmq or RabbitMQSettings(exchange or "fmi_digital_twin_dt")
+    if exchange:
+        settings = replace(settings, exchange=exchange)
+    program = system.models.program
+    if plan is None and system.spec.plan is None:
+        raise click.BadParameter("the project has no plan: give one with --plan", param_hint="--plan")
+    commands = read_scenario(plan or system.spec.plan, program)
+    ports = system.source_ports if system.source is not None and system.source.role == "source" \
+        and system.spec.rabbitmq else sorted({p for c in commands for p, _ in c.values})
+    publisher = Publisher(settings, commands, idle_values(port_types(program, ports)), period=period,
+                          end=system.spec.end)
+    click.echo(f"publishing {len(commands)} command(s) on exchange {settings.exchange} ({settings.to_cosim}); "
+               "waiting for the twin's ready message", err=True)
+    publisher.run()
+    click.echo(f"sent {len(publisher.sent)} message(s), {sum(1 for *_, m in publisher.sent if any(m.get(c.values[0][0]) for c in commands))} command(s)")
+
+
 def _parse_domain(text: str) -> tuple[str, list]:
     name, sep, values = text.partition("=")
     if not sep or not name or not values:

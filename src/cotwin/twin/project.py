@@ -10,7 +10,9 @@ co-simulation settings and, for a live twin, the physical twin, deviation checki
     plan = "plan.csv"               #   a TwinManager plan (ms, port values)
     commands = "scenario.toml"      #   a TOML list of [[command]]
     rabbitmq = { exchange = "fmi_digital_twin_dt" }   # live, as the RMQ FMU takes them
-                                    #   (url, to_cosim, from_cosim, maxage_ms, timeout_s: see RabbitMQ)
+                                    #   (url, to_cosim, from_cosim, maxage_ms, timeout_s: see twin.rabbitmq;
+                                    #   commands: the d-model events it sends, default those the
+                                    #   mapping does not produce)
     [platform]                      # the DT's robot
     endpoint = "mujoco"             # the embedded simulator, or "broker": a robot behind RabbitMQ
     queue = "cotwin.robot"          #   (its request queue and broker url)
@@ -75,6 +77,7 @@ RABBITMQ = Schema({
     "from_cosim": Key("str", "data.from_cosim"),
     "maxage_ms": Key("positive", 1000),
     "timeout_s": Key("positive", 60),
+    "commands": Key("list[str]"),
 })
 
 SCHEMA = Schema({
@@ -111,6 +114,7 @@ class RabbitMQSettings:
     from_cosim: str = "data.from_cosim"
     maxage_ms: float = 1000
     timeout_s: float = 60
+    commands: tuple[str, ...] | None = None  # d-model input events taken from the broker (default: external ones)
 
 
 @dataclass(frozen=True)
@@ -190,7 +194,11 @@ def load_project(path: str | Path) -> TwinProject:
         problems.append(Finding(file.location(("scenario",)), Severity.ERROR,
                                 f"[scenario] takes one source of commands, got {', '.join(sources)}"))
     plan = existing("scenario", sources[0], scenario[sources[0]]) if sources and sources[0] != "rabbitmq" else None
-    rabbitmq = RabbitMQSettings(**scenario["rabbitmq"]) if scenario.get("rabbitmq") else None
+    rabbitmq = None
+    if scenario.get("rabbitmq"):
+        raw = dict(scenario["rabbitmq"])
+        raw["commands"] = tuple(raw["commands"]) if raw.get("commands") is not None else None
+        rabbitmq = RabbitMQSettings(**raw)
     platform, cosim = data["platform"] or {}, data["cosim"] or {}
     pt = None
     if data["pt"]:

@@ -79,6 +79,19 @@ def load_models(spec: TwinProject) -> TwinModels:
     return TwinModels(project, program, tree, mapping, scene, monitored)
 
 
+def external_events(program, mapping_model) -> list[str]:
+    """The d-model input events that come from outside the platform: those the mapping does not define,
+    or defines as never occurring (every condition the literal `false`)."""
+    from ..robosim import syntax as s
+
+    def never(ev) -> bool:
+        conditions = (*ev.equations, *ev.predicates)
+        return bool(conditions) and all(isinstance(c, s.Literal) and c.value is False for c in conditions)
+
+    defined = {ev.name: ev for ev in mapping_model.input_events}
+    return [ev.name for ev in program.inputs if ev.name not in defined or never(defined[ev.name])]
+
+
 class TwinSystem:
     """Units, connections, logged variables and delayed units of a twin project (see module doc)."""
 
@@ -97,8 +110,15 @@ class TwinSystem:
             used = {p for c in self.commands for p, _ in c.values}
             self.source_ports = [p for p in command_ports if p in used]
             self.source = CONTROLLER
-        elif spec.rabbitmq is not None:  # every d-model input the platform does not produce
-            events = [ev for ev in program.inputs if ev.name not in mapped]
+        elif spec.rabbitmq is not None:
+            names = spec.rabbitmq.commands if spec.rabbitmq.commands is not None else \
+                external_events(program, self.models.mapping_model)
+            unknown = [n for n in names if n not in {ev.name for ev in program.inputs}]
+            if unknown:
+                raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
+                                           f"[scenario] rabbitmq commands: {', '.join(unknown)} are not input events "
+                                           f"of the d-model (it has {', '.join(ev.name for ev in program.inputs)})")])
+            events = [ev for ev in program.inputs if ev.name in names]
             self.source_ports = [p for ev in events for p in [ev.name, *(port for port, _ in ev.value_ports)]]
             self.source = RABBITMQ
         else:  # an autonomous robot: no commands from outside
@@ -159,9 +179,10 @@ class TwinSystem:
         return MappingUnit(MAPPING.name, self.models.program, Mapping(self.models.project, endpoint),
                            self.command_events)
 
-    def source_unit(self, bridge=None) -> Unit | None:
+    def source_unit(self, bridge=None, stream=None, echo: bool = True) -> Unit | None:
         """The command source: the scenario's controller, or the RabbitMQ unit reading from `bridge`
-        (a started RabbitMQBridge; one is made from the project's settings if not given)."""
+        and `stream` (made from the project's settings when not given; a live twin shares one of each
+        between its PT and DT, so both get every command in the same step)."""
         from .scenario import ScenarioUnit
 
         if self.source is CONTROLLER:
@@ -170,7 +191,8 @@ class TwinSystem:
             from .rabbitmq import RabbitMQUnit, port_types
 
             return RabbitMQUnit(RABBITMQ.name, port_types(self.models.program, self.source_ports),
-                                self.models.monitored, self.spec.rabbitmq, bridge=bridge)
+                                self.models.monitored, self.spec.rabbitmq, bridge=bridge, stream=stream,
+                                events=self.command_events, echo=echo)
         return None
 
     def instantiate(self, dmodel_fmu: str | Path, endpoint, source: Unit | None = None,

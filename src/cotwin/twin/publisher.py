@@ -1,0 +1,109 @@
+"""A command publisher that follows the RMQ FMU protocol as the paper's UR5e publisher does.
+
+It binds its own queue to `from_cosim` on the twin's direct exchange, waits for the ready message
+("waiting for input data for simulation"), then every `period` seconds of wall time publishes one
+message on `to_cosim`, choosing it from the last `simstep` the co-simulation echoed: a planned command
+once the echoed simulation time is within half a period of its time (each command once, in order),
+otherwise the idle message (events false, values zero). It stops when told to, when the echoed time
+passes `end`, or when the co-simulation has been silent for `silence` seconds after it started.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time as wallclock
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+
+from ..diagnostics import CotwinError
+from ..mapping.amqp import connect
+from .project import RabbitMQSettings
+from .rabbitmq import READY
+from .scenario import Command
+
+
+def now_iso() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+
+
+@dataclass
+class Publisher:
+    settings: RabbitMQSettings
+    commands: list[Command]
+    idle: dict[str, object]  # every command port with its resting value
+    period: float = 0.5
+    end: float | None = None
+    silence: float = 5.0
+    name: str = "cotwin publisher"
+    sent: list[tuple[float, float, dict]] = field(default_factory=list)  # (wall, echoed sim time, message)
+    ready: threading.Event = field(default_factory=threading.Event)
+
+    def _message(self, values: dict[str, object]) -> dict:
+        return {"time": now_iso(), **values}
+
+    def run(self, stop: threading.Event | None = None, ready_timeout: float = 60.0) -> None:
+        stop = stop or threading.Event()
+        s = self.settings
+        connection = connect(s.url, self.name)
+        try:
+            channel = connection.channel()
+            channel.exchange_declare(s.exchange, exchange_type="direct", durable=False, auto_delete=False)
+            own = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
+            channel.queue_bind(own, s.exchange, routing_key=s.from_cosim)
+            state = {"ready": False, "sim": None, "last": wallclock.monotonic()}
+
+            def on_echo(ch, method, props, body):
+                try:
+                    data = json.loads(body)
+                except ValueError:
+                    return
+                if not isinstance(data, dict):
+                    return
+                if READY["internal_message"] in str(data.get("internal_message", "")):
+                    state["ready"] = True
+                if "simstep" in data:
+                    try:
+                        state["sim"] = float(data["simstep"]) / 1000.0
+                        state["last"] = wallclock.monotonic()
+                    except (TypeError, ValueError):
+                        pass
+
+            channel.basic_consume(own, on_echo, auto_ack=True)
+            self.ready.set()  # bound: the co-simulation may start now
+            deadline = wallclock.monotonic() + ready_timeout
+            while not state["ready"] and not stop.is_set():
+                connection.process_data_events(time_limit=0.05)
+                if wallclock.monotonic() > deadline:
+                    raise CotwinError(f"no ready message on '{s.from_cosim}' within {ready_timeout:g} s")
+            state["last"] = wallclock.monotonic()
+            pending = sorted(self.commands, key=lambda c: c.time)
+            next_tick = wallclock.monotonic()
+            while not stop.is_set():
+                sim = state["sim"]
+                values = dict(self.idle)
+                if pending and sim is not None and sim >= pending[0].time - self.period / 2:
+                    values.update(dict(pending.pop(0).values))
+                message = self._message(values)
+                channel.basic_publish(s.exchange, s.to_cosim, json.dumps(message).encode())
+                self.sent.append((wallclock.time(), sim if sim is not None else float("nan"), message))
+                next_tick += self.period
+                while not stop.is_set():
+                    left = next_tick - wallclock.monotonic()
+                    if left <= 0:
+                        break
+                    connection.process_data_events(time_limit=min(left, 0.05))
+                sim = state["sim"]
+                if self.end is not None and sim is not None and sim >= self.end - 1e-9:
+                    break
+                if wallclock.monotonic() - state["last"] > self.silence:
+                    break
+        finally:
+            try:
+                connection.close()
+            except Exception:  # noqa: BLE001
+                pass
+
+
+def idle_values(types: dict[str, str]) -> dict[str, object]:
+    return {p: (False if kind == "Boolean" else 0.0 if kind == "Real" else 0) for p, kind in types.items()}

@@ -1,0 +1,437 @@
+"""Live commands from RabbitMQ, wire-compatible with the INTO-CPS RabbitMQ FMU ("RMQ FMU").
+
+Three parts, each with one job:
+- `parse_message`: one message in, typed values out, or the reason it is refused;
+- `CommandStream`: the RMQ FMU's time semantics over received messages: t0 is the newest timestamp
+  held when every output first has a value; a message's simulation time is its time minus t0; a step
+  to t+h applies, per variable in time order, the values with simulation time <= t+h that are strictly
+  newer than the held one (later or equal times are dropped); it then needs every value to be at most
+  `maxage` old, waiting up to `timeout_s` for fresh data, and never extrapolates;
+- `RabbitMQBridge`: the AMQP link on its own thread (a direct exchange, non-durable, not auto-delete;
+  a named queue bound to `to_cosim` that outlives a dropped connection, so commands published while the
+  bridge reconnects are delivered afterwards; the ready message once bound; echoes on `from_cosim`).
+
+`RabbitMQUnit` is the co-simulation unit over them (`rabbitmq.fmu` packages the same unit for Maestro).
+
+Differences from the RMQ FMU, on purpose: every dropped or refused message is logged with its reason
+(logger `cotwin.rabbitmq`, and `CommandStream.refused`); a missing value ends the run with an error
+naming the variable, the time and the age of what it had; and a d-model input *event* (a Boolean
+port the d-model reads as an event) is true in the one step that applies a `true` message, not held
+until a `false` arrives, so each published command is delivered exactly once.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import queue
+import re
+import threading
+import time as wallclock
+import uuid
+from collections import deque
+from dataclasses import dataclass, field
+from datetime import datetime, timedelta, timezone
+
+import pika
+
+from ..cosim.units import INT32, Port, PythonUnit
+from ..diagnostics import CotwinError
+from ..mapping.amqp import connect, redact
+from .project import RabbitMQSettings
+
+log = logging.getLogger("cotwin.rabbitmq")
+
+READY = {"internal_status": "ready", "internal_message": "waiting for input data for simulation"}
+_ISO = re.compile(r"^(\d{4})-(\d{2})-(\d{2})[T ](\d{2}):(\d{2}):(\d{2})(?:[.,](\d{1,9}))?(Z|z|[+-]\d{2}:?\d{2})$")
+MAX_BYTES = 1 << 16  # a command message is a flat object of a few keys
+
+
+def parse_time(text: str) -> datetime:
+    """An ISO 8601 time with 0-9 fraction digits and a zone (Z or +hh:mm); ValueError otherwise."""
+    m = _ISO.match(text) if isinstance(text, str) else None
+    if m is None:
+        raise ValueError(f"'time' {text!r} is not an ISO 8601 time with a zone (e.g. 2025-01-31T16:01:03.066+01:00)")
+    year, month, day, hour, minute, second = (int(m.group(k)) for k in range(1, 7))
+    fraction = m.group(7) or ""
+    micro = int((fraction + "000000")[:6]) if fraction else 0
+    zone = m.group(8)
+    if zone in ("Z", "z"):
+        tz = timezone.utc
+    else:
+        sign = 1 if zone[0] == "+" else -1
+        digits = zone[1:].replace(":", "")
+        tz = timezone(sign * timedelta(hours=int(digits[:2]), minutes=int(digits[2:])))
+    try:
+        return datetime(year, month, day, hour, minute, second, micro, tzinfo=tz)
+    except ValueError as err:
+        raise ValueError(f"'time' {text!r}: {err}") from None
+
+
+def port_types(program, ports: list[str]) -> dict[str, str]:
+    """FMI types of a d-model's input ports, for the named ones."""
+    from .scenario import scenario_ports
+
+    types = scenario_ports(program)
+    return {p: types[p] for p in ports}
+
+
+@dataclass(frozen=True)
+class Parsed:
+    time: datetime
+    values: dict[str, object]
+    dropped: tuple[str, ...]  # reasons for values of this message that were not taken
+
+
+def parse_message(body: bytes, types: dict[str, str]) -> Parsed:
+    """A message's time and typed values, or ValueError saying why the whole message is refused.
+    Booleans take a JSON bool, Integers an int or a double (truncated, within int32), Reals a finite
+    number; a wrongly typed value is dropped (and said so) while the others are kept; unknown keys and
+    keys starting with `internal_` or `simAtTime` are ignored."""
+    if len(body) > MAX_BYTES:
+        raise ValueError(f"message of {len(body)} bytes (at most {MAX_BYTES})")
+    try:
+        text = body.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ValueError(f"not UTF-8 (byte 0x{body[err.start]:02x} at {err.start})") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise ValueError(f"bad JSON: {err.msg} at line {err.lineno} column {err.colno}") from None
+    except RecursionError:
+        raise ValueError("bad JSON: nested too deeply") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"expected a JSON object, got {type(data).__name__}")
+    if "time" not in data:
+        raise ValueError("no 'time'")
+    stamp = parse_time(data["time"])
+    values: dict[str, object] = {}
+    dropped: list[str] = []
+    for key, value in data.items():
+        if key == "time" or key.startswith(("internal_", "simAtTime")):
+            continue
+        kind = types.get(key)
+        if kind is None:
+            dropped.append(f"unknown key '{key}' ignored")
+            continue
+        try:
+            values[key] = _typed(value, kind)
+        except ValueError as err:
+            dropped.append(f"{key}: {err}")
+    if not values:
+        raise ValueError("no known variable (" + ("; ".join(dropped) if dropped else "only 'time'") + ")")
+    return Parsed(stamp, values, tuple(dropped))
+
+
+def _typed(value, kind: str):
+    if kind == "Boolean":
+        if isinstance(value, bool):
+            return value
+        raise ValueError(f"{value!r} is not a JSON Boolean")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{value!r} is not a number")
+    if not math.isfinite(value):
+        raise ValueError(f"{value!r} is not finite")
+    if kind == "Integer":
+        value = int(value)  # a double is truncated, as the RMQ FMU does
+        if not INT32[0] <= value <= INT32[1]:
+            raise ValueError(f"{value} does not fit an FMI Integer (int32)")
+        return value
+    return float(value)
+
+
+@dataclass
+class Received:
+    body: bytes
+    wall: float  # time.time() at receipt
+
+
+@dataclass
+class _Held:
+    sim: float  # simulation time of the held value
+    value: object
+
+
+@dataclass
+class CommandStream:
+    """The RMQ FMU's time semantics (see module doc) over messages taken from `receive(timeout)`."""
+
+    types: dict[str, str]
+    events: set[str]
+    receive: object  # callable(timeout_s) -> list[Received]; raises CotwinError when the link is lost
+    maxage: float = 1.0  # s
+    timeout: float = 60.0  # s
+    t0: datetime | None = None
+    refused: list[tuple[float, str]] = field(default_factory=list)  # (wall time, reason)
+    applied: list[tuple[float, str, object, float]] = field(default_factory=list)  # (sim, var, value, step end)
+
+    def __post_init__(self) -> None:
+        self.pending: list[tuple[datetime, dict[str, object], bytes]] = []  # before t0 is known
+        self.queues: dict[str, list[tuple[float, object]]] = {v: [] for v in self.types}
+        self.held: dict[str, _Held] = {}
+        self._last: tuple[float, dict[str, object]] | None = None
+        self.latest_wall: float | None = None
+
+    def _refuse(self, reason: str, body: bytes = b"") -> None:
+        excerpt = body[:80].decode("utf-8", "replace") if body else ""
+        self.refused.append((wallclock.time(), reason))
+        log.warning("message dropped: %s%s", reason, f" [{excerpt}]" if excerpt else "")
+
+    def _take(self, messages: list[Received]) -> None:
+        for m in messages:
+            try:
+                parsed = parse_message(m.body, self.types)
+            except ValueError as err:
+                self._refuse(str(err), m.body)
+                continue
+            for reason in parsed.dropped:
+                self._refuse(reason, m.body)
+            self.latest_wall = m.wall
+            if self.t0 is None:
+                self.pending.append((parsed.time, parsed.values, m.body))
+            else:
+                self._queue(parsed.time, parsed.values)
+
+    def _queue(self, stamp: datetime, values: dict[str, object]) -> None:
+        sim = (stamp - self.t0).total_seconds()
+        for var, value in values.items():
+            self.queues[var].append((sim, value))
+
+    def start(self) -> None:
+        """Wait (up to the timeout) until every variable has a value; t0 := the newest time then held."""
+        deadline = wallclock.monotonic() + self.timeout
+        latest: dict[str, tuple[datetime, object]] = {}
+        while True:
+            for stamp, values, _ in self.pending:
+                for var, value in values.items():
+                    if var not in latest or stamp > latest[var][0]:
+                        latest[var] = (stamp, value)
+            self.pending.clear()
+            missing = [v for v in self.types if v not in latest]
+            if not missing:
+                break
+            left = deadline - wallclock.monotonic()
+            if left <= 0:
+                raise CotwinError(f"no value for {', '.join(missing)} within {self.timeout:g} s of waiting for the "
+                                  "first complete set of commands (is a publisher sending on to_cosim?)")
+            self._take(self.receive(min(left, 0.5)))
+        self.t0 = max(stamp for stamp, _ in latest.values())
+        for var, (stamp, value) in latest.items():
+            self.held[var] = _Held((stamp - self.t0).total_seconds(), value)
+
+    def values_for(self, t: float, h: float) -> dict[str, object]:
+        """The variables' values for the step from t to t + h (computed once per step: units sharing
+        the stream in lockstep get the same values)."""
+        if self._last is not None and self._last[0] == t:
+            return self._last[1]
+        if self.t0 is None:
+            self.start()
+        until = t + h
+        self._take(self.receive(0.0))
+        fired = self._apply(until, t + h)
+        deadline = wallclock.monotonic() + self.timeout
+        while True:
+            stale = [(v, held) for v, held in self.held.items() if until - held.sim > self.maxage + 1e-9]
+            if not stale:
+                break
+            left = deadline - wallclock.monotonic()
+            if left <= 0:
+                v, held = stale[0]
+                raise CotwinError(f"RabbitMQ: no fresh value of '{v}' for the step to t = {until:g} s: the newest "
+                                  f"is from t = {held.sim:g} s, {until - held.sim:.3f} s old (maxage "
+                                  f"{self.maxage:g} s), and none came within {self.timeout:g} s")
+            self._take(self.receive(min(left, 0.2)))
+            fired |= self._apply(until, t + h)
+        out = {v: (v in fired and bool(held.value)) if v in self.events else held.value
+               for v, held in self.held.items()}
+        self._last = (t, out)
+        return out
+
+    def _apply(self, until: float, step_end: float) -> set[str]:
+        """Apply queued values with simulation time <= until; return the events that fired."""
+        fired = set()
+        for var, items in self.queues.items():
+            if not items:
+                continue
+            items.sort(key=lambda x: x[0])
+            keep = []
+            for sim, value in items:
+                if sim > until + 1e-9:
+                    keep.append((sim, value))
+                    continue
+                held = self.held.get(var)
+                if held is not None and sim <= held.sim:
+                    self._refuse(f"{var} at t = {sim:.3f} s is not newer than the value held (t = {held.sim:.3f} s)")
+                    continue
+                self.held[var] = _Held(sim, value)
+                self.applied.append((sim, var, value, step_end))
+                if var in self.events and value is True:
+                    fired.add(var)
+            self.queues[var] = keep
+        return fired
+
+
+class RabbitMQBridge:
+    """The AMQP link of a live twin, on its own thread (see module doc). `receive` hands the messages
+    received so far to the co-simulation thread; `publish` is thread-safe."""
+
+    def __init__(self, settings: RabbitMQSettings, name: str = "cotwin bridge", expires_s: float = 600.0):
+        self.settings = settings
+        self.name = name
+        self.queue_name = f"cotwin.{settings.exchange}.{uuid.uuid4().hex[:12]}"
+        self.expires_ms = int(expires_s * 1000)
+        self.inbox: queue.Queue[Received] = queue.Queue()
+        self.outbox: deque[tuple[str, bytes]] = deque()
+        self.connected = threading.Event()
+        self.reconnects = 0
+        self.error: CotwinError | None = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._connection = None
+        self._channel = None
+
+    # ---- the link thread ----
+    def _open(self) -> None:
+        s = self.settings
+        self._connection = connect(s.url, self.name)
+        channel = self._connection.channel()
+        channel.exchange_declare(s.exchange, exchange_type="direct", durable=False, auto_delete=False)
+        channel.queue_declare(self.queue_name, durable=False, auto_delete=False,
+                              arguments={"x-expires": self.expires_ms})
+        channel.queue_bind(self.queue_name, s.exchange, routing_key=s.to_cosim)
+        channel.basic_consume(self.queue_name, self._on_message, auto_ack=True)
+        self._channel = channel
+
+    def _on_message(self, channel, method, props, body) -> None:
+        self.inbox.put(Received(body, wallclock.time()))
+
+    def _flush(self) -> None:
+        while self.outbox:
+            key, body = self.outbox[0]
+            self._channel.basic_publish(self.settings.exchange, key, body)
+            self.outbox.popleft()
+
+    def _run(self) -> None:
+        lost_at: float | None = None
+        while not self._stop.is_set():
+            try:
+                if self._connection is None or not self._connection.is_open:
+                    self._open()
+                    if lost_at is not None:
+                        self.reconnects += 1
+                        log.warning("reconnected to %s after %.1f s", redact(self.settings.url),
+                                    wallclock.monotonic() - lost_at)
+                    lost_at = None
+                    self.connected.set()
+                self._flush()
+                self._connection.process_data_events(time_limit=0.02)
+            except (pika.exceptions.AMQPError, CotwinError, OSError) as err:
+                self.connected.clear()
+                self._connection = None
+                now = wallclock.monotonic()
+                if lost_at is None:
+                    lost_at = now
+                    log.warning("lost the broker connection (%s); reconnecting", type(err).__name__)
+                if now - lost_at > self.settings.timeout_s:
+                    self.error = CotwinError(f"RabbitMQ: the link to {redact(self.settings.url)} was lost and not "
+                                             f"restored within {self.settings.timeout_s:g} s ({type(err).__name__})")
+                    return
+                self._stop.wait(0.2)
+        try:
+            if self._connection is not None and self._connection.is_open:
+                self._flush()
+                self._connection.close()
+        except Exception:  # noqa: BLE001 - closing a dead link
+            pass
+
+    # ---- the co-simulation side ----
+    def start(self, timeout: float = 10.0) -> "RabbitMQBridge":
+        """Connect, bind and announce readiness; CotwinError if the broker cannot be reached."""
+        self._open()  # in the caller's thread first, so a wrong URL is reported at once
+        self.connected.set()
+        self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
+        self._thread.start()
+        self.publish(self.settings.from_cosim, READY)
+        return self
+
+    def publish(self, routing_key: str, message: dict) -> None:
+        self.outbox.append((routing_key, json.dumps(message, sort_keys=True).encode()))
+
+    def receive(self, timeout: float) -> list[Received]:
+        if self.error is not None:
+            raise self.error
+        out = []
+        try:
+            out.append(self.inbox.get(timeout=timeout) if timeout > 0 else self.inbox.get_nowait())
+            while True:
+                out.append(self.inbox.get_nowait())
+        except queue.Empty:
+            pass
+        return out
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5)
+            self._thread = None
+        elif self._connection is not None:
+            try:
+                self._connection.close()
+            except Exception:  # noqa: BLE001
+                pass
+
+
+def echo_message(inputs: dict[str, object], t: float, h: float) -> dict:
+    """What the RMQ FMU publishes at the start of a step: its inputs, the wall-clock time and
+    `simstep` (t + h in ms, as a string); Booleans as 1/0 (keys sorted when sent)."""
+    out = {k: (int(v) if isinstance(v, bool) else v) for k, v in inputs.items()}
+    out["time"] = datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+    out["simstep"] = f"{(t + h) * 1000:.6f}"
+    return out
+
+
+class RabbitMQUnit(PythonUnit):
+    """The command source of a live twin: outputs the commands as the RMQ FMU does (see module doc),
+    inputs are echoed on `from_cosim` every step (the monitored joints, as in the paper)."""
+
+    def __init__(self, name: str, types: dict[str, str], echoed: list[str], settings: RabbitMQSettings,
+                 bridge: RabbitMQBridge | None = None, stream: CommandStream | None = None,
+                 events: set[str] | None = None, echo: bool = True):
+        ports = [Port(p, kind, "output") for p, kind in types.items()]
+        ports += [Port(v, "Real", "input") for v in echoed]
+        super().__init__(name, ports)
+        self.types = types
+        self.echoed = list(echoed)
+        self.settings = settings
+        self.events = set(events) if events is not None else {p for p, k in types.items() if k == "Boolean"}
+        self.bridge = bridge
+        self.stream = stream
+        self.echo = echo
+        self.reconnects = 0
+        self._own_bridge = bridge is None
+
+    def instantiate(self, start: float) -> None:
+        super().instantiate(start)
+        if self.bridge is None:
+            self.bridge = RabbitMQBridge(self.settings, f"cotwin {self.name}").start()
+        if self.stream is None:
+            self.stream = CommandStream(self.types, self.events, self.bridge.receive, self.settings.maxage_ms / 1000,
+                                        self.settings.timeout_s)
+
+    def initialize(self) -> None:
+        if self.stream.t0 is None:
+            self.stream.start()
+        self.values.update({v: held.value if v not in self.events else False for v, held in self.stream.held.items()})
+
+    def step(self, t: float, h: float) -> None:
+        if self.echo:
+            self.bridge.publish(self.settings.from_cosim, echo_message({v: self.values[v] for v in self.echoed}, t, h))
+        self.values.update(self.stream.values_for(t, h))
+
+    def terminate(self) -> None:
+        if self.bridge is not None:
+            self.reconnects = self.bridge.reconnects
+        if self._own_bridge and self.bridge is not None:
+            self.bridge.close()
+            self.bridge = None
