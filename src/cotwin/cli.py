@@ -162,6 +162,98 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
 
 @main.command()
 @click.argument("project", type=click.Path())
+@click.option("-o", "--output", "out", required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
+@click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
+@click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
+@click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
+@click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
+@click.option("--pt-log", type=click.Path(), help="replay this recorded log as the PT (overrides [pt])")
+@click.option("--rabbitmq", "exchange", help="take commands live from RabbitMQ on this exchange (overrides [scenario])")
+@click.option("--history", "history", help="history database URL (default: [history] url, else DIR/history.sqlite)")
+@click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+def twin(project: str, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
+         pt_log: str | None, exchange: str | None, history: str | None, cc: str) -> None:
+    """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
+    with deviation checking, alarms and history."""
+    import signal
+    from dataclasses import replace
+    from pathlib import Path
+
+    from .twin.project import PTSettings, RabbitMQSettings, load_project
+    from .twin.run import load
+    from .twin.runtime import LiveTwin
+
+    _finite(step=step, end=end)
+    spec = load_project(project)
+    if pt_log is not None:
+        if not Path(pt_log).is_file():
+            raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
+        spec.pt = replace(spec.pt, endpoint="replay", log=Path(pt_log)) if spec.pt else PTSettings("replay", log=Path(pt_log))
+    if exchange is not None:
+        spec.plan = None
+        spec.rabbitmq = replace(spec.rabbitmq, exchange=exchange) if spec.rabbitmq else RabbitMQSettings(exchange)
+        spec.realtime = True if realtime is None else realtime
+    live = LiveTwin(load(spec), out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
+                    cc=cc)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: live.stop())
+    result = live.run()
+    r = result.pt
+    state = "stopped early" if r.steps < live.steps or live._stop else "done"
+    click.echo(f"{result.out}: PT and DT, {r.steps} steps each to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
+               f"(real-time factor {r.real_time_factor:.1f}), {state}")
+    click.echo(f"deviation: {result.deviation['alarms']} alarm(s); report {result.out / 'deviation.json'}; "
+               f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
+
+
+@main.group()
+def history() -> None:
+    """The twin's history store: list runs, export one as CSV."""
+
+
+def _db(db: str | None, folder: str | None) -> str:
+    from pathlib import Path
+
+    from .twin.history import database_url
+
+    if db is None and folder is None:
+        raise click.UsageError("give --db URL or --dir DIR (a twin's output folder, with history.sqlite)")
+    if folder is not None and not (Path(folder) / "history.sqlite").is_file():
+        raise click.BadParameter(f"no history.sqlite in {folder}", param_hint="--dir")
+    return database_url(db, Path(folder) if folder else None)
+
+
+@history.command("list")
+@click.option("--db", help="database URL (sqlite:///file, postgresql://...)")
+@click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
+def history_list(db: str | None, folder: str | None) -> None:
+    """List the runs of a history store."""
+    import datetime
+
+    from .twin.history import list_runs
+
+    for run in list_runs(_db(db, folder)):
+        started = datetime.datetime.fromtimestamp(run["started"]).isoformat(timespec="seconds")
+        click.echo(f"{run['id']:>5}  {started}  {run['kind']:<5} {run['status']:<10} step {run['step']:g} s  "
+                   f"{run['samples']} samples  {run['alarms']} alarm(s)  {run['project']}")
+
+
+@history.command("export")
+@click.argument("run_id", type=int)
+@click.option("--db", help="database URL (sqlite:///file, postgresql://...)")
+@click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
+@click.option("--side", default="dt", show_default=True, help="pt or dt")
+@click.option("-o", "--output", "out", required=True, help="the CSV to write")
+def history_export(run_id: int, db: str | None, folder: str | None, side: str, out: str) -> None:
+    """Export one side of a run as a Maestro-format CSV."""
+    from .twin.history import export_csv
+
+    path = export_csv(_db(db, folder), run_id, side, out)
+    click.echo(str(path))
+
+
+@main.command()
+@click.argument("project", type=click.Path())
 @click.option("--plan", "plan", type=click.Path(), help="the commands to publish (default: the project's plan)")
 @click.option("--period", type=click.FloatRange(min=0.01), default=0.5, show_default=True,
               help="seconds of wall time between messages")

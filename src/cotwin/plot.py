@@ -53,3 +53,38 @@ def figure(csv_path: str | Path, png_path: str | Path, title: str = "") -> Path:
     fig.savefig(png_path, dpi=90)
     plt.close(fig)
     return Path(png_path)
+
+
+def twin_figure(pt_csv: str | Path, dt_csv: str | Path, alarms: list[dict], png_path: str | Path,
+                variables: list[str], title: str = "") -> Path:
+    """The live twin's figure: each monitored variable of the PT (solid) and the DT (dashed) over time,
+    deviation alarms shaded from raised to cleared."""
+    pt, dt = read_csv(pt_csv), read_csv(dt_csv)
+    names = [v for v in variables if v in pt and v in dt]
+    fig, axes = plt.subplots(max(len(names), 1), 1, figsize=(10, 1.7 * max(len(names), 1) + 1.2), sharex=True,
+                             squeeze=False)
+    end = pt["time"][-1] if pt["time"] else 0.0
+    for ax, name in zip(axes[:, 0], names):
+        short = name.split(".")[-1]
+        ax.plot(pt["time"], pt[name], label="PT", color="tab:blue")
+        ax.plot(dt["time"], dt[name], label="DT", color="tab:orange", linestyle="--")
+        raised = {}
+        for e in alarms:
+            if e["variable"] != short:
+                continue
+            if e["state"] == "raised":
+                raised[short] = e["time"]
+            elif short in raised:
+                ax.axvspan(raised.pop(short), e["time"], color="tab:red", alpha=0.2)
+        if short in raised:
+            ax.axvspan(raised.pop(short), end, color="tab:red", alpha=0.2)
+        ax.set_ylabel(short, fontsize=8)
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(fontsize=7, loc="upper right", ncol=2)
+    axes[-1, 0].set_xlabel("time [s] (red: deviation alarm)")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=90)
+    plt.close(fig)
+    return Path(png_path)

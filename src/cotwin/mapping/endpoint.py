@@ -73,6 +73,12 @@ class SimulatedEndpoint:
     def stop(self) -> None:
         self.segment = None
 
+    def place(self, positions: dict[str, float]) -> None:
+        """Put the robot at rest at these joint positions (a live twin starts its DT where the PT is)."""
+        known = {n: v for n, v in positions.items() if n in self.sim.joint_names}
+        self.sim.reset(known)
+        self.segment = None
+
     def read_sensors(self) -> dict[str, float]:
         return self.sim.read_sensors()
 

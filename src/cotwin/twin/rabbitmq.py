@@ -435,3 +435,50 @@ class RabbitMQUnit(PythonUnit):
         if self._own_bridge and self.bridge is not None:
             self.bridge.close()
             self.bridge = None
+
+
+class EventPublisher:
+    """Publishes the twin's events (deviation alarms) as JSON on a topic exchange, from its own thread:
+    the twin never waits for the broker; events that cannot be delivered are logged and dropped (they
+    are also in the history and in deviation.json)."""
+
+    def __init__(self, url: str, exchange: str, name: str = "cotwin events"):
+        self.url, self.exchange, self.name = url, exchange, name
+        self._queue: queue.Queue = queue.Queue(maxsize=10_000)
+        self.sent = 0
+        self.failed = 0
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def publish(self, routing_key: str, event: dict) -> None:
+        try:
+            self._queue.put_nowait((routing_key, json.dumps(event, sort_keys=True).encode()))
+        except queue.Full:
+            self.failed += 1
+
+    def _run(self) -> None:
+        connection = channel = None
+        while True:
+            item = self._queue.get()
+            if item is None:
+                break
+            try:
+                if connection is None or not connection.is_open:
+                    connection = connect(self.url, self.name)
+                    channel = connection.channel()
+                    channel.exchange_declare(self.exchange, exchange_type="topic", durable=False, auto_delete=False)
+                channel.basic_publish(self.exchange, item[0], item[1])
+                self.sent += 1
+            except (pika.exceptions.AMQPError, CotwinError, OSError) as err:
+                self.failed += 1
+                connection = None
+                log.warning("event not published on %s (%s)", self.exchange, type(err).__name__)
+        if connection is not None and connection.is_open:
+            try:
+                connection.close()
+            except Exception:  # noqa: BLE001
+                pass
+
+    def close(self) -> None:
+        self._queue.put(None)
+        self._thread.join(10)

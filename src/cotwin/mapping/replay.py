@@ -1,0 +1,137 @@
+"""A recorded robot as a platform endpoint: the physical twin's sensors come from a log.
+
+`ReplayEndpoint` plays a `Recording` (times, arm joint positions and velocities, in the p-model's
+convention) against the mapping: commands are taken (and kept, for the report) but move nothing,
+since the recording already holds what the robot did; joint readings are interpolated linearly at
+the endpoint's time. Time alignment: with an `offset`, recording time = offset + simulation time;
+without one, the recording is aligned on its first motion: the first command the mapping sends
+starts the recorded move, so a planned time and the controller's clock need not agree. Before the
+recording starts and after it ends, the first and last samples hold. Sensors read what the log
+has: joint position and velocity; an effort sensor reads 0 (a UR log has currents, not torques).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..diagnostics import CotwinError
+from ..pmodel.tree import KinematicTree
+
+
+@dataclass
+class Recording:
+    times: np.ndarray  # s, increasing
+    q: np.ndarray  # (n, joints) rad, p-model convention
+    qd: np.ndarray  # (n, joints) rad/s
+    joints: list[str]  # p-model joint names of the columns
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if len(self.times) < 2 or np.any(np.diff(self.times) <= 0):
+            raise CotwinError(f"{self.source}: a recording needs at least two samples at increasing times")
+
+    def onsets(self, speed: float = 0.02, settle: float = 0.3) -> list[float]:
+        """Times at which a move starts: the joint speed rises above `speed` rad/s after at least
+        `settle` s below it."""
+        moving = np.max(np.abs(self.qd), axis=1) > speed
+        out, still_since = [], self.times[0] - settle
+        for t, m in zip(self.times, moving):
+            if m and t - still_since >= settle:
+                out.append(float(t))
+            if m:
+                still_since = float("inf")
+            elif still_since == float("inf"):
+                still_since = float(t)
+        return out
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        q = np.array([np.interp(t, self.times, self.q[:, k]) for k in range(len(self.joints))])
+        qd = np.array([np.interp(t, self.times, self.qd[:, k]) for k in range(len(self.joints))])
+        return q, qd
+
+
+@dataclass
+class ReplayEndpoint:
+    tree: KinematicTree
+    recording: Recording
+    offset: float | None = None  # recording time at simulation time 0 (None: align on the first command)
+    time: float = 0.0
+    goals: list[tuple[float, dict[str, float]]] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self._path_to_joint: dict[str, str] = {}
+        for j in self.tree.actuated:
+            self._path_to_joint[j.name] = j.name
+            for servo in j.servos:
+                self._path_to_joint[servo.name] = j.name
+                self._path_to_joint[f"{self.tree.name}::{j.source_link}::{j.source}::{servo.name}.dangle"] = j.name
+        unknown = [j for j in self.recording.joints if j not in {a.name for a in self.tree.actuated}]
+        if unknown:
+            raise CotwinError(f"{self.recording.source}: the recording's joints {', '.join(unknown)} are not joints "
+                              f"of p-model {self.tree.name}")
+        self._held: dict[str, float] = {j.name: 0.0 for j in self.tree.actuated}
+        onsets = self.recording.onsets()
+        self._first_onset = onsets[0] if onsets else float(self.recording.times[0])
+
+    # ---- the endpoint interface ----
+    def start(self) -> None:
+        self.time = 0.0
+
+    def stop(self) -> None:
+        pass
+
+    def joint(self, name: str) -> str:
+        if name not in self._path_to_joint:
+            raise CotwinError(f"the recorded robot has no actuator '{name}'")
+        return self._path_to_joint[name]
+
+    def actuator_names(self) -> list[str]:
+        return list(self._path_to_joint)
+
+    def command(self, goals: dict[str, float]) -> None:
+        if self.offset is None:
+            self.offset = self._first_onset - self.time
+        self.goals.append((self.time, dict(goals)))
+        for name, value in goals.items():
+            joint = self.joint(name)
+            if joint not in self.recording.joints:
+                self._held[joint] = float(value)  # e.g. gripper fingers the log does not record
+
+    def advance(self, dt: float) -> None:
+        self.time += dt
+
+    def recording_time(self) -> float:
+        offset = self.offset if self.offset is not None else float(self.recording.times[0])
+        return offset + self.time
+
+    def joint_positions(self) -> dict[str, float]:
+        q, _ = self.recording.at(self.recording_time())
+        return self._held | dict(zip(self.recording.joints, map(float, q)))
+
+    def joint_velocities(self) -> dict[str, float]:
+        _, qd = self.recording.at(self.recording_time())
+        return {j: 0.0 for j in self._held} | dict(zip(self.recording.joints, map(float, qd)))
+
+    def read_sensors(self) -> dict[str, float]:
+        positions, velocities = self.joint_positions(), self.joint_velocities()
+        out = {}
+        for s in self.tree.sensors:
+            if s.joint is None:
+                continue
+            value = {"position": positions, "velocity": velocities}.get(s.quantity, {}).get(s.joint, 0.0)
+            out[f"{self.tree.name}::{s.link}::{s.name}.{s.port}"] = value
+        return out
+
+
+UR_TO_MODEL = np.array([0.0, np.pi / 2, 0.0, np.pi / 2, 0.0, 0.0])  # q_model = q_ur + this (interop.md)
+
+
+def read_rtde_log(path, joints: list[str], offsets=UR_TO_MODEL) -> Recording:
+    """The arm joints of a UR RTDE log (space-separated, header row; actual_q_*, actual_qd_*) as a Recording."""
+    from .rtde import read_rtde
+
+    log = read_rtde(path)
+    return Recording(log.times, log.q + np.asarray(offsets)[: log.q.shape[1]], log.qd, joints[: log.q.shape[1]],
+                     str(path))

@@ -1,0 +1,274 @@
+"""The live twin (`cotwin twin`): a physical twin (PT) and a digital twin (DT) co-simulated in lockstep.
+
+Both are the same TwinSystem (same d-model FMU, same mapping) instantiated twice, differing only in
+their platform endpoint, as in the paper's Fig. 15. One clock steps both: step k of the PT, then
+step k of the DT, then the services look at both. Commands come from one source: a scenario (each
+side plays the same commands) or one RabbitMQ bridge and command stream shared by both sides, so
+every command reaches both in the same step exactly once; only the PT's unit echoes on `from_cosim`.
+
+After every step: deviation checking (DeviationMonitor), history (HistoryRecorder), alarms published
+on the broker (EventPublisher), and any observer (e.g. the dashboard's live feed). Results:
+DIR/pt/outputs.csv and DIR/dt/outputs.csv (Maestro format), DIR/deviation.json, DIR/figure.png and
+the history store (DIR/history.sqlite unless the project names a database).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time as wallclock
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..cosim.algorithm import algorithm as make_algorithm
+from ..cosim.execution import Execution, RunResult
+from ..cosim.observers import CSVWriter
+from ..diagnostics import CotwinError
+from .build import dmodel_fmu, folder_lock
+from .deviation import DeviationMonitor
+from .system import DMODEL, MAPPING, RABBITMQ, TwinSystem
+
+log = logging.getLogger("cotwin.twin")
+
+
+def pt_endpoint(system: TwinSystem):
+    """The physical twin's platform, from the project's [pt] table."""
+    pt = system.spec.pt
+    if pt is None:
+        raise CotwinError(f"{system.spec.path}: a live twin needs a [pt] table (endpoint = opcua | replay | broker | rtde)")
+    tree = system.models.tree
+    if pt.endpoint == "opcua":
+        from ..mapping.opcua import OPCUAEndpoint
+
+        return OPCUAEndpoint(tree, pt.url)
+    if pt.endpoint == "broker":
+        from ..mapping.broker import BrokerEndpoint
+
+        return BrokerEndpoint(tree, pt.queue, pt.url or system.spec.url)
+    if pt.endpoint == "replay":
+        from ..mapping.replay import ReplayEndpoint, read_rtde_log
+        from ..pmodel import ik
+
+        arm = ik.arm_joints(tree, ik.find_tool(tree))
+        return ReplayEndpoint(tree, read_rtde_log(pt.log, arm), pt.offset)
+    if pt.endpoint == "rtde":
+        from ..mapping.urrtde import RTDEEndpoint
+
+        return RTDEEndpoint(tree, pt.url)
+    raise CotwinError(f"unknown PT endpoint {pt.endpoint!r}")
+
+
+@dataclass
+class Side:
+    """One of the two co-simulations of a live twin."""
+
+    name: str  # pt | dt
+    execution: Execution
+    writer: CSVWriter
+    units: dict[str, object]
+
+    def values(self, unit: str, names: list[str]) -> dict[str, float]:
+        values = self.execution.values
+        return {n: values.get((unit, n)) for n in names}
+
+
+@dataclass
+class LiveResult:
+    pt: RunResult
+    dt: RunResult
+    deviation: dict
+    out: Path
+    history_url: str
+    run_id: int | None
+    sides: dict[str, Side] = field(default_factory=dict)
+    alarms: list[dict] = field(default_factory=list)
+
+
+class LiveTwin:
+    """A PT and a DT of one TwinSystem in lockstep (see module doc). `observers` get
+    `twin_step(twin, k, t)` after every step and `twin_started(twin)` once both are initialised."""
+
+    def __init__(self, system: TwinSystem, out: str | Path, pt=None, dt=None, step: float | None = None,
+                 end: float | None = None, algorithm: str | None = None, realtime: bool | None = None,
+                 history_url: str | None = None, alarms_url: str | None = None, observers=(), cc: str = "cc"):
+        spec = system.spec
+        self.system = system
+        self.out = Path(out)
+        self.pt_endpoint, self.dt_endpoint = pt, dt
+        self.step_size = spec.step if step is None else step
+        self.end = spec.end if end is None else end
+        if not (self.step_size > 0 and self.end > 0):
+            raise CotwinError(f"need a positive step and end time (step {self.step_size!r}, end {self.end!r})")
+        self.algorithm = algorithm or spec.algorithm
+        self.realtime = spec.realtime if realtime is None else realtime
+        self.history_url = history_url if history_url is not None else spec.history_url
+        self.alarms_url = alarms_url
+        self.observers = list(observers)
+        self.cc = cc
+        self.sides: dict[str, Side] = {}
+        self.steps = 0
+        self.time = 0.0
+        dev = spec.deviation
+        self.variables = list(dev.variables) if dev.variables is not None else list(system.log[MAPPING.name])
+        unknown = [v for v in self.variables if v not in system.models.monitored]
+        if unknown:
+            raise CotwinError(f"{spec.path}: [deviation] variables {', '.join(unknown)} are not monitored mapping "
+                              f"variables ({', '.join(system.models.monitored) or 'none'})")
+        self.monitor = DeviationMonitor(self.variables, dev.absolute, dev.relative, dev.lag_steps, dev.debounce_steps,
+                                        publish=self._alarm, twin=spec.path.stem)
+        self._publisher = None
+        self._history = None
+        self._bridge = None
+        self._stop = False
+
+    # ---- services ----
+    def _alarm(self, event: dict) -> None:
+        log.warning("deviation alarm %s: %s = %.4g at t = %.3f s (threshold %.4g)", event["state"], event["variable"],
+                    event["deviation"], event["time"], event["threshold"])
+        if self._history is not None:
+            self._history.record_alarm(event)
+        if self._publisher is not None:
+            self._publisher.publish(self.system.spec.deviation.routing_key, event)
+
+    def stop(self) -> None:
+        """Ask the run to end after the current step (from another thread, e.g. a signal handler)."""
+        self._stop = True
+
+    # ---- building ----
+    def _sources(self):
+        system = self.system
+        if system.source is RABBITMQ:
+            from .rabbitmq import CommandStream, RabbitMQBridge, port_types
+
+            settings = system.spec.rabbitmq
+            self._bridge = RabbitMQBridge(settings, "cotwin live twin").start()
+            stream = CommandStream(port_types(system.models.program, system.source_ports), system.command_events,
+                                   self._bridge.receive, settings.maxage_ms / 1000, settings.timeout_s)
+            return (system.source_unit(self._bridge, stream, echo=True),
+                    system.source_unit(self._bridge, stream, echo=False))
+        return system.source_unit(), system.source_unit()
+
+    def _side(self, name: str, fmu: Path, endpoint, source) -> Side:
+        cosim = self.system.instantiate(fmu, endpoint, source=source)
+        writer = CSVWriter(self.out / name / "outputs.csv")
+        execution = Execution(cosim, make_algorithm(self.algorithm), self.step_size, 0.0, [writer])
+        units = {u.role: cosim.units[u.name] for u in self.system.units}
+        return Side(name, execution, writer, units)
+
+    # ---- running ----
+    def run(self) -> LiveResult:
+        from .history import HistoryRecorder, database_url
+        from .run import dt_endpoint
+
+        spec = self.system.spec
+        self.out.mkdir(parents=True, exist_ok=True)
+        with folder_lock(self.out):
+            fmu = dmodel_fmu(self.system, self.out, self.cc)
+            pt_ep = self.pt_endpoint if self.pt_endpoint is not None else pt_endpoint(self.system)
+            dt_ep = self.dt_endpoint if self.dt_endpoint is not None else dt_endpoint(self.system)
+            pt_source, dt_source = self._sources()
+            try:
+                self.sides = {"pt": self._side("pt", fmu, pt_ep, pt_source), "dt": self._side("dt", fmu, dt_ep, dt_source)}
+                url = database_url(self.history_url, self.out)
+                columns = {n: [f"{u}.{v}" for u, v in s.execution.system.observed()] for n, s in self.sides.items()}
+                self._history = HistoryRecorder(url, str(spec.path), "twin", self.step_size, self.algorithm, columns)
+                self._publisher = self._alarm_publisher()
+                return self._loop(url)
+            finally:
+                for side in self.sides.values():
+                    side.execution.close()
+                if self._publisher is not None:
+                    self._publisher.close()
+                if self._bridge is not None:
+                    self._bridge.close()
+
+    def _alarm_publisher(self):
+        url = self.alarms_url or (self.system.spec.rabbitmq.url if self.system.spec.rabbitmq else None)
+        if url is None:
+            return None
+        from .rabbitmq import EventPublisher
+
+        return EventPublisher(url, self.system.spec.deviation.exchange, "cotwin alarms")
+
+    def _record(self, k: int) -> None:
+        history = self._history
+        program = self.system.models.program
+        for name, side in self.sides.items():
+            keys = side.execution.system.observed()
+            values = side.execution.values
+            history.record_sample(name, k, side.execution.time, [values.get(key) for key in keys])
+            for m in program.machines:
+                state = values.get((DMODEL.name, program.state_port(m)))
+                if isinstance(state, int):
+                    leaves = program.leaf_names(m)
+                    history.record_state(name, k, side.execution.time, m.name, state,
+                                         leaves[state] if 0 <= state < len(leaves) else "none")
+        source = self.system.source
+        if source is not None:
+            values = self.sides["pt"].execution.values
+            for port in self.system.source_ports:
+                value = values.get((source.name, port))
+                if port in self.system.command_events and value is True:
+                    history.record_command(k, self.time, port, value)
+                    for other in self.system.source_ports:
+                        if other not in self.system.command_events:
+                            history.record_command(k, self.time, other, values.get((source.name, other)))
+
+    def _loop(self, url: str) -> LiveResult:
+        pt, dt = self.sides["pt"], self.sides["dt"]
+        total = int(round(self.end / self.step_size))
+        status, message = "failed", None
+        try:
+            pt.execution.total_steps = dt.execution.total_steps = total
+            pt.execution.initialize()
+            place = getattr(self.sides["dt"].units["mapping"].mapping.endpoint, "place", None)
+            if place is not None:  # the DT starts where the PT is
+                place(self.sides["pt"].units["mapping"].mapping.endpoint.joint_positions())
+            dt.execution.initialize()
+            self._record(0)
+            for o in self.observers:
+                getattr(o, "twin_started", lambda twin: None)(self)
+            started = wallclock.perf_counter()
+            while self.steps < total and not self._stop:
+                pt.execution.step()
+                dt.execution.step()
+                self.steps += 1
+                self.time = pt.execution.time
+                self.monitor.observe(self.time, pt.values(MAPPING.name, self.variables),
+                                     dt.values(MAPPING.name, self.variables))
+                self._record(self.steps)
+                for o in self.observers:
+                    o.twin_step(self, self.steps, self.time)
+                if self.realtime:
+                    ahead = self.time - (wallclock.perf_counter() - started)
+                    if ahead > 0:
+                        wallclock.sleep(ahead)
+            status = "done" if not self._stop else "stopped"
+        except CotwinError as err:
+            message = "; ".join(f.message for f in err.findings)
+            raise
+        except KeyboardInterrupt:
+            status, message = "stopped", "interrupted"
+            raise
+        finally:
+            error = None if status in ("done", "stopped") else RuntimeError(message or "failed")
+            for side in (pt, dt):
+                side.execution.close(error)
+            report = self.monitor.report()
+            report["pt"] = self.system.spec.pt.endpoint if self.system.spec.pt else "custom"
+            (self.out / "deviation.json").write_text(json.dumps(report, indent=1) + "\n")
+            if self._history is not None:
+                self._history.close(status, message)
+        if status == "done":
+            self._figure()
+        return LiveResult(pt.execution.result(), dt.execution.result(), report, self.out, url,
+                          self._history.run_id if self._history else None, dict(self.sides), list(self.monitor.events))
+
+    def _figure(self) -> None:
+        from ..plot import twin_figure
+
+        twin_figure(self.out / "pt" / "outputs.csv", self.out / "dt" / "outputs.csv", self.monitor.events,
+                    self.out / "figure.png", [f"{MAPPING.name}.{v}" for v in self.variables],
+                    title=f"{self.system.models.program.module.name}: PT ({self.system.spec.pt.endpoint if self.system.spec.pt else 'custom'}) "
+                          f"and DT, step {self.step_size:g} s, {self.algorithm}")
+

@@ -1,0 +1,132 @@
+"""The live twin: deviation checking, a PT replaying the real UR5e's log beside the DT, and the history
+store in SQLite and in PostgreSQL."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import socket
+import subprocess
+import sys
+import uuid
+from pathlib import Path
+
+import pytest
+
+from cotwin.twin.deviation import DeviationMonitor
+from cotwin.twin.history import database_url, export_csv, list_runs, read_run
+from cotwin.twin.run import load
+from cotwin.twin.runtime import LiveTwin
+
+ROOT = Path(__file__).resolve().parents[1]
+RTDE_LOG = ROOT.parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"
+
+
+def test_deviation_is_symmetric_in_sign_tolerates_lag_and_is_debounced():
+    monitor = DeviationMonitor(["q"], absolute=0.1, relative=0.0, lag_steps=2, debounce_steps=2)
+    ramp = [0.0, -0.2, -0.4, -0.6, -0.8, -1.0, -1.0, -1.0, -1.0]
+    for k, p in enumerate(ramp):  # the DT follows the same ramp two steps late: not deviating
+        monitor.observe(k * 0.1, {"q": p}, {"q": ramp[max(0, k - 2)]})
+    assert monitor.events == [] and monitor.report()["variables"]["q"]["max_deviation"] == 0.0
+    monitor = DeviationMonitor(["q"], absolute=0.1, relative=0.0, lag_steps=0, debounce_steps=2)
+    for k, p in enumerate([-1.0, -1.3, -1.0, -1.3, -1.3, -1.3, -1.0, -1.0, -1.0]):  # negative angles
+        monitor.observe(k * 0.1, {"q": p}, {"q": -1.0})
+    states = [(e["state"], round(e["time"], 1)) for e in monitor.events]
+    assert states == [("raised", 0.4), ("cleared", 0.7)]  # one-step blips do not alarm
+    alarm = monitor.report()["variables"]["q"]["alarms"][0]
+    assert alarm["first_deviating"] == pytest.approx(0.3) and alarm["peak"] == pytest.approx(0.3)
+    relative = DeviationMonitor(["q"], absolute=0.0, relative=0.1, lag_steps=0, debounce_steps=1)
+    relative.observe(0.0, {"q": -2.0}, {"q": -2.15})  # within 10 % of |-2|
+    relative.observe(0.1, {"q": -2.0}, {"q": -2.3})
+    assert [e["state"] for e in relative.events] == ["raised"]
+    assert monitor.report()["variables"]["q"]["rmse"] == pytest.approx((4 * 0.09 / 9) ** 0.5)
+
+
+@pytest.fixture
+def recorded() -> Path:
+    if not RTDE_LOG.is_file():
+        pytest.skip(f"the real UR5e's recorded log is not at {RTDE_LOG} (only in the project workspace)")
+    return RTDE_LOG
+
+
+def test_replayed_pt_beside_the_dt_gives_a_deviation_report(recorded, tmp_path):
+    from conftest import EXAMPLES
+
+    system = load(EXAMPLES / "ur5e" / "replay.toml")
+    system.spec.pt = type(system.spec.pt)("replay", log=recorded)
+    result = LiveTwin(system, tmp_path, end=12.0).run()
+    assert result.pt.steps == result.dt.steps == 120
+    pt = list(csv.DictReader(open(tmp_path / "pt" / "outputs.csv")))
+    dt = list(csv.DictReader(open(tmp_path / "dt" / "outputs.csv")))
+    assert len(pt) == len(dt) == 121
+    command = "{controller}.controller.moveDiscreteCommand"
+    assert [r["time"] for r in pt if r[command] == "true"] == [r["time"] for r in dt if r[command] == "true"]
+    report = json.loads((tmp_path / "deviation.json").read_text())
+    assert set(report["variables"]) == {f"q{i}" for i in range(6)} and report["steps"] == 120
+    q0 = report["variables"]["q0"]
+    assert q0["samples"] == 120 and q0["rmse"] > 0 and q0["max_deviation"] >= q0["rmse"] * 0.5
+    # the PT is the recording: its joints at rest equal the log's first sample in the p-model convention
+    from cotwin.mapping.replay import read_rtde_log
+
+    log = read_rtde_log(recorded, [f"j{i}" for i in range(6)])
+    assert float(pt[0]["{mapping}.mapping.q1"]) == pytest.approx(log.q[0, 1], abs=1e-9)
+    assert float(dt[0]["{mapping}.mapping.q1"]) == pytest.approx(log.q[0, 1], abs=1e-3)  # the DT starts there too
+    assert (tmp_path / "figure.png").stat().st_size > 10_000
+    runs = list_runs(result.history_url)
+    assert runs[-1]["samples"] == 2 * 121 and runs[-1]["status"] == "done"
+
+
+def _postgres_up() -> bool:
+    try:
+        with socket.create_connection(("127.0.0.1", 5432), timeout=1):
+            return True
+    except OSError:
+        return False
+
+
+@pytest.fixture
+def postgres():
+    if not _postgres_up():
+        if os.environ.get("CI"):
+            pytest.fail("PostgreSQL is not listening on 127.0.0.1:5432 (.ci/run should have started it)")
+        pytest.skip("no PostgreSQL on 127.0.0.1:5432")
+    import psycopg
+
+    name = f"cotwin_test_{uuid.uuid4().hex[:8]}"
+    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    yield f"postgresql://postgres@127.0.0.1:5432/{name}"
+    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
+        conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+
+
+def test_history_in_sqlite_and_postgresql_has_the_same_content_and_round_trips(postgres, tmp_path):
+    from conftest import EXAMPLES
+
+    from cotwin.mapping.endpoint import SimulatedEndpoint
+    from cotwin.pmodel.simulator import PlatformSimulator
+
+    system = load(EXAMPLES / "ur5e" / "cotwin.toml")
+    contents = {}
+    for name, url in (("sqlite", None), ("postgresql", postgres)):
+        out = tmp_path / name
+        pt = SimulatedEndpoint(PlatformSimulator(system.models.tree, system.models.scene))
+        result = LiveTwin(system, out, pt=pt, end=4.0, history_url=url).run()
+        data = read_run(result.history_url, result.run_id)
+        contents[name] = (data["columns"], data["samples"], [(c["step"], c["port"], c["value"]) for c in data["commands"]],
+                          [(s["side"], s["step"], s["name"]) for s in data["states"]])
+        for side in ("pt", "dt"):  # the store gives back exactly what the run wrote
+            exported = export_csv(result.history_url, result.run_id, side, out / f"{side}.csv")
+            assert exported.read_text() == (out / side / "outputs.csv").read_text()
+    assert contents["sqlite"] == contents["postgresql"]
+    columns, samples, commands, states = contents["sqlite"]
+    assert len(samples["pt"]) == len(samples["dt"]) == 41
+    assert ("moveDiscreteCommand" in {c[1] for c in commands}) and any(s[2] == "Idle" for s in states)
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "history", "list", "--db", postgres],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0 and "twin  done" in proc.stdout and "82 samples" in proc.stdout
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "history", "export", "7", "--db", postgres, "-o",
+                           str(tmp_path / "x.csv")], capture_output=True, text=True)
+    assert proc.returncode == 1 and "no run 7" in proc.stderr and "Traceback" not in proc.stderr
+    assert database_url("postgresql://u@h/db").startswith("postgresql+psycopg://")
