@@ -86,8 +86,10 @@ def test_stream_follows_the_rmq_fmu_time_semantics():
     assert stream.values_for(0.1, 0.3) is second  # computed once per step (PT and DT share it)
     third = stream.values_for(0.4, 0.4)
     assert third == {"moveDiscreteCommand": False, "MovementArgs_target_X": 7, "speed": 3.0}  # an event fires once
+    feed.items = [msg(1.25, moveDiscreteCommand=True), msg(1.26, moveDiscreteCommand=False)]
+    assert stream.values_for(0.8, 0.3)["moveDiscreteCommand"] is True  # a command followed at once by idle
     feed.items = [msg(0.7, speed=9.0)]  # 0.5 s: older than the held 0.7 s value
-    stream.values_for(0.8, 0.1)
+    stream.values_for(1.1, 0.1)
     assert stream.held["speed"].value == 3.0 and any("not newer" in r for _, r in stream.refused)
     with pytest.raises(CotwinError, match=r"no fresh value of '\w+' for the step to t = 3 s: the newest is from "
                                           r"t = -?0\.?\d* s, [\d.]+ s old"):

@@ -107,9 +107,19 @@ class Progress(Observer):
         self.report(execution.steps, execution.total_steps)
 
 
+def epoch_of(units, now: float, slack: float = 1.0) -> float | None:
+    """The wall-clock time (time.time()) of simulation time 0 announced by a unit (`epoch`, e.g. the
+    RabbitMQ source's t0), kept within [now - slack, now] so that a far-off publisher clock cannot
+    stall or rush the run; None when no unit announces one."""
+    epochs = [e for e in (getattr(u, "epoch", None) for u in units) if e is not None]
+    return min(max(min(epochs), now - slack), now) if epochs else None
+
+
 class RealTimePacer(Observer):
     """Keeps simulated time from running ahead of wall-clock time (scaled by `factor`): after a step that
-    ends at t, waits until factor * (wall time since initialisation) >= t - start."""
+    ends at t, waits until factor * (wall time since the epoch) >= t - start. The epoch is when the
+    run was initialised, or the wall time of simulation time 0 a unit announces (a live command
+    source), so that the run keeps to the publisher's clock."""
 
     def __init__(self, factor: float = 1.0):
         if not (factor > 0 and math.isfinite(factor)):
@@ -119,6 +129,9 @@ class RealTimePacer(Observer):
 
     def simulation_initialized(self, execution) -> None:
         self.started = wallclock.perf_counter()
+        epoch = epoch_of(execution.system.units.values(), wallclock.time())
+        if epoch is not None:
+            self.started -= wallclock.time() - epoch
 
     def step_complete(self, execution) -> None:
         ahead = (execution.time - execution.start) / self.factor - (wallclock.perf_counter() - self.started)

@@ -243,8 +243,8 @@ class CommandStream:
                                   f"{self.maxage:g} s), and none came within {self.timeout:g} s")
             self._take(self.receive(min(left, 0.2)))
             fired |= self._apply(until, t + h)
-        out = {v: (v in fired and bool(held.value)) if v in self.events else held.value
-               for v, held in self.held.items()}
+        # an event is true in the step that applied a `true`, even if a `false` followed within the step
+        out = {v: (v in fired) if v in self.events else held.value for v, held in self.held.items()}
         self._last = (t, out)
         return out
 
@@ -346,8 +346,14 @@ class RabbitMQBridge:
             pass
 
     # ---- the co-simulation side ----
-    def start(self, timeout: float = 10.0) -> "RabbitMQBridge":
-        """Connect, bind and announce readiness; CotwinError if the broker cannot be reached."""
+    @property
+    def started(self) -> bool:
+        return self._thread is not None
+
+    def start(self) -> "RabbitMQBridge":
+        """Connect, bind and announce readiness (once); CotwinError if the broker cannot be reached."""
+        if self._thread is not None:
+            return self
         self._open()  # in the caller's thread first, so a wrong URL is reported at once
         self.connected.set()
         self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
@@ -411,15 +417,20 @@ class RabbitMQUnit(PythonUnit):
         self.reconnects = 0
         self._own_bridge = bridge is None
 
-    def instantiate(self, start: float) -> None:
-        super().instantiate(start)
+    @property
+    def epoch(self) -> float | None:
+        """Wall-clock time of simulation time 0: the publisher's t0 (for real-time pacing)."""
+        return self.stream.t0.timestamp() if self.stream is not None and self.stream.t0 is not None else None
+
+    def initialize(self) -> None:
+        """Bind and announce readiness in initialisation mode, as the RMQ FMU does, then wait for the
+        first complete set of values."""
         if self.bridge is None:
-            self.bridge = RabbitMQBridge(self.settings, f"cotwin {self.name}").start()
+            self.bridge = RabbitMQBridge(self.settings, f"cotwin {self.name}")
+        self.bridge.start()
         if self.stream is None:
             self.stream = CommandStream(self.types, self.events, self.bridge.receive, self.settings.maxage_ms / 1000,
                                         self.settings.timeout_s)
-
-    def initialize(self) -> None:
         if self.stream.t0 is None:
             self.stream.start()
         self.values.update({v: held.value if v not in self.events else False for v, held in self.stream.held.items()})

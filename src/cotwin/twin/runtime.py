@@ -22,7 +22,7 @@ from pathlib import Path
 
 from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution, RunResult
-from ..cosim.observers import CSVWriter
+from ..cosim.observers import CSVWriter, epoch_of
 from ..diagnostics import CotwinError
 from .build import dmodel_fmu, folder_lock
 from .deviation import DeviationMonitor
@@ -141,7 +141,7 @@ class LiveTwin:
             from .rabbitmq import CommandStream, RabbitMQBridge, port_types
 
             settings = system.spec.rabbitmq
-            self._bridge = RabbitMQBridge(settings, "cotwin live twin").start()
+            self._bridge = RabbitMQBridge(settings, "cotwin live twin")  # started by the PT's unit when it initialises
             stream = CommandStream(port_types(system.models.program, system.source_ports), system.command_events,
                                    self._bridge.receive, settings.maxage_ms / 1000, settings.timeout_s)
             return (system.source_unit(self._bridge, stream, echo=True),
@@ -229,6 +229,9 @@ class LiveTwin:
             for o in self.observers:
                 getattr(o, "twin_started", lambda twin: None)(self)
             started = wallclock.perf_counter()
+            epoch = epoch_of(pt.execution.system.units.values(), wallclock.time())
+            if epoch is not None:  # keep to the live publisher's clock
+                started -= wallclock.time() - epoch
             while self.steps < total and not self._stop:
                 pt.execution.step()
                 dt.execution.step()
@@ -259,10 +262,11 @@ class LiveTwin:
             (self.out / "deviation.json").write_text(json.dumps(report, indent=1) + "\n")
             if self._history is not None:
                 self._history.close(status, message)
+        result = LiveResult(pt.execution.result(), dt.execution.result(), report, self.out, url,
+                            self._history.run_id if self._history else None, dict(self.sides), list(self.monitor.events))
         if status == "done":
             self._figure()
-        return LiveResult(pt.execution.result(), dt.execution.result(), report, self.out, url,
-                          self._history.run_id if self._history else None, dict(self.sides), list(self.monitor.events))
+        return result
 
     def _figure(self) -> None:
         from ..plot import twin_figure
