@@ -92,7 +92,7 @@ def test_stream_follows_the_rmq_fmu_time_semantics():
     stream.values_for(1.1, 0.1)
     assert stream.held["speed"].value == 3.0 and any("not newer" in r for _, r in stream.refused)
     with pytest.raises(CotwinError, match=r"no fresh value of '\w+' for the step to t = 3 s: the newest is from "
-                                          r"t = -?0\.?\d* s, [\d.]+ s old"):
+                                          r"t = [\d.]+ s, [\d.]+ s old"):
         stream.values_for(2.9, 0.1)
 
 
