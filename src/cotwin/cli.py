@@ -304,7 +304,8 @@ def _parse_domain(text: str) -> tuple[str, list]:
 @click.option("--module", "module_name", help="the module to verify (default: the only one)")
 @click.option("--domain", "domains", multiple=True, metavar="PORT=LOW..HIGH",
               help="values of an event's value port, e.g. MovementArgs_target_X=0..15 (repeatable)")
-@click.option("--max-states", default=100_000, show_default=True, help="stop exploring after this many states")
+@click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1),
+              help="stop exploring after this many states")
 def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, ...], max_states: int) -> None:
     """Explore every state of a d-model module under every input combination; check the core
     properties (timelock, determinism, divergence, repeated outputs) and reachability."""
@@ -313,23 +314,50 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
     from .robosim.check import load_checked
 
     program = build_program(load_checked(model), module_name)
-    report = explore(program, dict(_parse_domain(d) for d in domains), max_states=max_states)
+    parsed = dict(_parse_domain(d) for d in domains)
+    known = [port for ev in program.inputs for port, _ in ev.value_ports]
+    unknown = [name for name in parsed if name not in known]
+    if unknown:
+        raise click.BadParameter(f"{', '.join(unknown)}: not a value port of an input event of module "
+                                 f"{program.module.name} (ports: {', '.join(known) or 'none'})", param_hint="--domain")
+    report = explore(program, parsed, max_states=max_states)
     click.echo(format_report(program, report))
     sys.exit(0 if report.ok else 1)
 
 
+def _terminate(signum, frame) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 def entry() -> None:
-    """Entry point that turns any CotwinError escaping a command into a clean report."""
+    """Entry point: every error escaping a command is reported as a message, never a traceback.
+    SIGTERM ends a run like Ctrl-C: units are ended properly and the rows so far are kept."""
+    import signal
+
+    signal.signal(signal.SIGTERM, _terminate)
     try:
         main(standalone_mode=False)
     except CotwinError as err:
         _report(err.findings)
-        sys.exit(1)
+        sys.exit(130 if getattr(err, "interrupted", False) else 1)
     except OSError as err:  # a file or folder that cannot be read or written
         click.echo(f"error: {err.strerror or err}{f': {err.filename}' if err.filename else ''}", err=True)
         sys.exit(1)
-    except click.exceptions.Abort:
+    except (click.exceptions.Abort, KeyboardInterrupt):
+        click.echo("interrupted", err=True)
         sys.exit(130)
     except click.ClickException as err:
         err.show()
         sys.exit(err.exit_code)
+    except RecursionError:
+        click.echo("error: the input is nested too deeply to process", err=True)
+        sys.exit(1)
+    except Exception as err:  # noqa: BLE001 - a bug of cotwin's: say so in one line, keep the details
+        import tempfile
+        import traceback
+
+        with tempfile.NamedTemporaryFile("w", prefix="cotwin-crash-", suffix=".txt", delete=False) as f:
+            traceback.print_exc(file=f)
+        click.echo(f"internal error: {type(err).__name__}: {str(err)[:300]} (a cotwin bug; details in {f.name})",
+                   err=True)
+        sys.exit(70)

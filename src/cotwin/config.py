@@ -165,7 +165,9 @@ def table_name(at: tuple) -> str:
         return "the file"
     names = [str(a) for a in at if not isinstance(a, int)]
     index = [a for a in at if isinstance(a, int)]
-    return f"[{'.'.join(names)}]" + (f" {index[-1] + 1}" if index else "")
+    if index:
+        return f"[[{'.'.join(names)}]] {index[-1] + 1}"
+    return f"[{'.'.join(names)}]"
 
 
 def key_name(where: tuple) -> str:

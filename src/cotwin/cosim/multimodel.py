@@ -8,6 +8,7 @@ The key `cotwin` (ignored by Maestro) may hold {"delayed": [units], "algorithm":
 from __future__ import annotations
 
 import json
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,9 +57,17 @@ def read_multimodel(path: str | Path) -> MultiModel:
     path = Path(path)
     problems: list[str] = []
     try:
-        data = json.loads(path.read_text())
+        raw = path.read_bytes()
+        text = raw.decode("utf-8")
+        data = json.loads(text)
     except OSError as err:
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, f"cannot read: {err}")]) from None
+        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, f"cannot read: {err.strerror or err}")]) from None
+    except UnicodeDecodeError as err:
+        line = raw[:err.start].count(b"\n") + 1
+        raise CotwinError([Finding(Location(str(path), line, err.start - raw.rfind(b"\n", 0, err.start)), Severity.ERROR,
+                                   f"not UTF-8 text (byte 0x{raw[err.start]:02x})")]) from None
+    except RecursionError:
+        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, "bad JSON: nested too deeply")]) from None
     except json.JSONDecodeError as err:
         raise CotwinError([Finding(Location(str(path), err.lineno, err.colno), Severity.ERROR, f"bad JSON: {err.msg}")]) from None
     if not isinstance(data, dict):
@@ -114,11 +123,38 @@ def read_multimodel(path: str | Path) -> MultiModel:
             delayed.add((m.group(1), m.group(2)))
         else:
             problems.append(f"cotwin.delayed: '{inst}' is not a '{{key}}.instance'")
+    problems.extend(_phantoms(connections, log))
+    for key, value in (("startTime", data.get("startTime", 0.0)), ("endTime", data.get("endTime", 10.0)),
+                       ("algorithm.size", algorithm.get("size", 0.1))):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            problems.append(f"{key} must be a finite number, got {value!r}")
+    if isinstance(algorithm.get("size"), (int, float)) and not algorithm["size"] > 0:
+        problems.append(f"algorithm.size must be positive, got {algorithm['size']!r}")
+    if not isinstance(data.get("simulationProgramDelay", False), bool):
+        problems.append(f"simulationProgramDelay must be true or false, got {data['simulationProgramDelay']!r}")
     if problems:
         raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, p) for p in problems])
     return MultiModel(path, fmus, connections, parameters, log, float(algorithm.get("size", 0.1)),
                       float(data.get("startTime", 0.0)), float(data.get("endTime", 10.0)),
                       bool(data.get("simulationProgramDelay", False)), extra.get("algorithm", "jacobi"), delayed)
+
+
+def _phantoms(connections, log) -> list[str]:
+    """Instances that take inputs while nothing reads or logs their outputs, beside another instance of
+    the same FMU: almost always a misspelt instance name, which Maestro would run as a second, silent
+    copy (and the intended instance would miss those inputs)."""
+    feeds, targets = set(), set()
+    for c in connections:
+        feeds.add(c[:2])
+        targets.add(c[3:5])
+    out = []
+    for inst in sorted(targets - feeds - set(log)):
+        twins = sorted({i for i in feeds | targets | set(log) if i[0] == inst[0] and i != inst})
+        if twins:
+            out.append(f"instance {inst[0]}.{inst[1]} receives inputs but nothing reads its outputs or logs it, beside "
+                       f"{', '.join(f'{k}.{n}' for k, n in twins)} of the same FMU: a misspelt instance name? (log one "
+                       "of its variables if it is meant to be a separate instance)")
+    return out
 
 
 def unit_name(instance: tuple[str, str]) -> str:

@@ -7,6 +7,8 @@ In a step: run the operations called in it, let the platform move for h, then re
 
 from __future__ import annotations
 
+from typing import Callable
+
 from ..cosim.units import Port, PythonUnit
 from ..dmodel.ports import PortLayout
 from ..dmodel.program import Program, assemble
@@ -27,17 +29,30 @@ def mapping_ports(program: Program, mapped_events: set[str], commands: set[str],
 
 
 class MappingUnit(PythonUnit):
-    def __init__(self, name: str, program: Program, mapping: Mapping, commands: set[str]):
-        super().__init__(name, mapping_ports(program, set(mapping.events), commands, mapping.monitored))
+    """`mapping` is a Mapping, or a function making one when the unit is instantiated (then `events` and
+    `monitored` give the ports), so that describing the unit (e.g. packaging it as an FMU) never
+    connects to its platform."""
+
+    def __init__(self, name: str, program: Program, mapping: Mapping | Callable[[], Mapping], commands: set[str],
+                 events: set[str] | None = None, monitored: list[str] | None = None):
+        made = isinstance(mapping, Mapping)
+        events = set(mapping.events) if made else set(events or ())
+        monitored = list(mapping.monitored) if made else list(monitored or [])
+        super().__init__(name, mapping_ports(program, events, commands, monitored))
         self.program = program
-        self.mapping = mapping
-        self.calls = [(op.name, list(zip((p for p, _ in op.params), op.arg_ports)))
-                      for op in program.operations if op.name in mapping.operations]
-        self.event_ports = [p for p in self.ports.values() if p.causality == "output" and p.name in mapping.events]
+        self.mapping: Mapping | None = mapping if made else None
+        self._make = None if made else mapping
+        self.monitored = monitored
+        self.event_ports = [p for p in self.ports.values() if p.causality == "output" and p.name in events]
+        self.calls: list = []
         self.executed: list[tuple[float, str, dict]] = []  # (step start time, operation, arguments)
 
     def instantiate(self, start: float) -> None:
         super().instantiate(start)
+        if self.mapping is None:
+            self.mapping = self._make()
+        self.calls = [(op.name, list(zip((p for p, _ in op.params), op.arg_ports)))
+                      for op in self.program.operations if op.name in self.mapping.operations]
         self.mapping.start_mapping()
         self._report()
 
@@ -57,5 +72,5 @@ class MappingUnit(PythonUnit):
             self.values[name] = float(self.mapping.variables[name])
 
     def terminate(self) -> None:
-        if self.mapping.started:
+        if self.mapping is not None and self.mapping.started:
             self.mapping.stop_mapping()

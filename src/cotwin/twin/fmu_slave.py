@@ -23,7 +23,7 @@ class CotwinUnit(Fmi2Slave):
 
         config = json.loads((Path(self.resources) / "cotwin_unit.json").read_text())
         self.unit = python_unit(Path(self.resources) / config["project"], config["role"])
-        self.unit.instantiate(0.0)
+        self.start_time = 0.0
         for port in self.unit.ports.values():
             is_input = port.causality == "input"
             # outputs start with the unit's initial values (exact), so they need no initial unknowns
@@ -32,6 +32,12 @@ class CotwinUnit(Fmi2Slave):
                 variability=Fmi2Variability.discrete, initial=None if is_input else Fmi2Initial.exact,
                 getter=lambda n=port.name: self.unit.values[n],
                 setter=lambda v, n=port.name: self.unit.set({n: v})))
+
+    def setup_experiment(self, start_time, stop_time, tolerance):
+        self.start_time = start_time
+
+    def enter_initialization_mode(self):
+        self.unit.instantiate(self.start_time)  # connects to the platform or broker: not when described
 
     def exit_initialization_mode(self):
         self.unit.initialize()

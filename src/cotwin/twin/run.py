@@ -34,7 +34,7 @@ def python_unit(project: str | Path, role: str):
     """A cotwin in-process unit of a twin project by role (inside cotwin's Python FMUs)."""
     system = TwinSystem(load_project(project))
     if role == "mapping":
-        return system.mapping_unit(dt_endpoint(system))
+        return system.mapping_unit(lambda: dt_endpoint(system))
     if system.source is not None and role == system.source.instance:
         return system.source_unit()
     raise CotwinError(f"unknown unit role '{role}' for {project}")
@@ -79,11 +79,13 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         execution = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain)
         try:
             result = execution.run(end)
-        except CotwinError as err:
-            if writer.rows:
-                raise CotwinError([*err.findings, *CotwinError(
-                    f"the {writer.rows} row(s) computed before the failure are in {writer.partial_path}").findings]) from None
-            raise
+        except (CotwinError, KeyboardInterrupt) as err:
+            kept = f"the {writer.rows} row(s) computed are in {writer.partial_path}" if writer.rows else "no rows computed"
+            if isinstance(err, KeyboardInterrupt):
+                stopped = CotwinError(f"interrupted at t = {execution.time:g} s; {kept}")
+                stopped.interrupted = True
+                raise stopped from None
+            raise CotwinError([*err.findings, *CotwinError(kept).findings]) from None
         figure = None
         if plot:
             from ..plot import figure as draw

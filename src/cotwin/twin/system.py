@@ -173,11 +173,17 @@ class TwinSystem:
 
     # ---- instances ----
     def mapping_unit(self, endpoint) -> Unit:
+        """The platform mapping against `endpoint`, or against what `endpoint()` returns when the unit is
+        instantiated (a function: describing the unit then never connects to the robot)."""
         from ..mapping.runtime import Mapping
         from ..mapping.unit import MappingUnit
 
-        return MappingUnit(MAPPING.name, self.models.program, Mapping(self.models.project, endpoint),
-                           self.command_events)
+        models = self.models
+        if callable(endpoint):
+            return MappingUnit(MAPPING.name, models.program, lambda: Mapping(models.project, endpoint()),
+                               self.command_events, {ev.name for ev in models.mapping_model.input_events},
+                               models.monitored)
+        return MappingUnit(MAPPING.name, models.program, Mapping(models.project, endpoint), self.command_events)
 
     def source_unit(self, bridge=None, stream=None, echo: bool = True) -> Unit | None:
         """The command source: the scenario's controller, or the RabbitMQ unit reading from `bridge`
