@@ -130,3 +130,36 @@ def test_history_in_sqlite_and_postgresql_has_the_same_content_and_round_trips(p
                            str(tmp_path / "x.csv")], capture_output=True, text=True)
     assert proc.returncode == 1 and "no run 7" in proc.stderr and "Traceback" not in proc.stderr
     assert database_url("postgresql://u@h/db").startswith("postgresql+psycopg://")
+
+
+def test_rtde_field_mapping_agrees_with_the_logs_own_tcp_poses(recorded):
+    """The RTDE endpoint's field mapping (UR joint angles -> p-model joints) checked against the recorded
+    log's columns: through our kinematics, the robot's reported TCP must sit at one fixed point of the
+    flange frame over the whole run (a wrong offset or sign would make it wander), and the replay
+    endpoint reads exactly what the mapping gives."""
+    import numpy as np
+
+    from conftest import EXAMPLES
+    from cotwin.mapping.replay import ReplayEndpoint, read_rtde_log
+    from cotwin.mapping.rtde import read_rtde
+    from cotwin.mapping.urrtde import fields_to_state
+    from cotwin.pmodel import ik
+
+    tree = load(EXAMPLES / "ur5e" / "cotwin.toml").models.tree
+    arm = ik.arm_joints(tree, ik.find_tool(tree))
+    flange = next(j.child for j in tree.joints if j.name == arm[-1])
+    log = read_rtde(recorded)
+    replay = ReplayEndpoint(tree, read_rtde_log(recorded, arm), offset=0.0)
+    in_flange = []
+    for i in range(0, len(log.data), 7):
+        row = dict(zip(log.columns, log.data[i]))
+        q, qd = fields_to_state(row, arm)
+        tcp_ur = np.array([row[f"actual_TCP_pose_{k}"] for k in range(3)])
+        tcp = np.array([-tcp_ur[0], -tcp_ur[1], tcp_ur[2], 1.0])  # the UR base frame turned by pi about z
+        in_flange.append((np.linalg.inv(tree.forward(q)[flange]) @ tcp)[:3])
+        replay.time = row["timestamp"]
+        assert all(replay.joint_positions()[j] == pytest.approx(v, abs=1e-12) for j, v in q.items())
+    spread = np.ptp(np.array(in_flange), axis=0)
+    # one rigid tool point, to 6 mm: a real arm's kinematics differ from the nominal model by millimetres;
+    # a wrong joint offset or sign would move the point by tens of centimetres
+    assert np.all(spread < 0.006), spread

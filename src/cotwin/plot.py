@@ -23,30 +23,23 @@ def read_csv(path: str | Path) -> dict[str, list]:
     return columns
 
 
-def figure(csv_path: str | Path, png_path: str | Path, title: str = "") -> Path:
+def figure(csv_path: str | Path, png_path: str | Path, panels: list[tuple[str, list[str], str]],
+           title: str = "") -> Path:
+    """A figure like the paper's Fig. 16 from a Maestro-format outputs.csv: one panel per (label,
+    columns, draw style); the twin chooses the columns from its models (see `twin_panels`)."""
     cols = read_csv(csv_path)
     t = cols["time"]
-
-    def pick(prefix: str, names=None):
-        return {k: v for k, v in cols.items() if k.startswith(prefix) and (names is None or k.split(".")[-1] in names)}
-
-    commands = {k: v for k, v in pick("{controller}.controller.").items() if not k.split(".")[-1].startswith("MovementArgs")}
-    arguments = {k: v for k, v in pick("{controller}.controller.").items() if k.split(".")[-1].startswith("MovementArgs")}
-    operations = {k: v for k, v in pick("{dmodel}.dmodel.").items() if k.split(".")[-1] in ("movediscrete", "stop", "pick", "place")}
-    op_args = pick("{dmodel}.dmodel.", {"target_X", "target_Y", "target_Z"})
-    joints = pick("{mapping}.mapping.", {f"q{i}" for i in range(6)})
-    fig, axes = plt.subplots(5, 1, figsize=(10, 12), sharex=True)
-    panels = [(commands, "(1) commands", "steps-post"), (arguments, "(2) command arguments", "steps-post"),
-              (operations, "(3) d-model operation calls", "steps-post"), (op_args, "(3b) operation arguments", "steps-post"),
-              (joints, "(4) joint angles [rad]", "default")]
-    for ax, (series, label, style) in zip(axes, panels):
-        for name, values in series.items():
-            ax.plot(t, values, drawstyle=style, label=name.split(".")[-1])
+    panels = [(label, [c for c in names if c in cols], style) for label, names, style in panels]
+    panels = [p for p in panels if p[1]] or [("(no variables)", [], "default")]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 2.3 * len(panels) + 0.6), sharex=True, squeeze=False)
+    for ax, (label, names, style) in zip(axes[:, 0], panels):
+        for name in names:
+            ax.plot(t, cols[name], drawstyle=style, label=name.split(".")[-1])
         ax.set_ylabel(label, fontsize=8)
         ax.grid(True, alpha=0.3)
-        if series:
+        if names:
             ax.legend(fontsize=7, loc="upper right", ncol=3)
-    axes[-1].set_xlabel("time [s]")
+    axes[-1, 0].set_xlabel("time [s]")
     if title:
         fig.suptitle(title)
     fig.tight_layout()

@@ -125,13 +125,11 @@ class ReplayEndpoint:
         return out
 
 
-UR_TO_MODEL = np.array([0.0, np.pi / 2, 0.0, np.pi / 2, 0.0, 0.0])  # q_model = q_ur + this (interop.md)
-
-
-def read_rtde_log(path, joints: list[str], offsets=UR_TO_MODEL) -> Recording:
-    """The arm joints of a UR RTDE log (space-separated, header row; actual_q_*, actual_qd_*) as a Recording."""
+def read_rtde_log(path, joints: list[str]) -> Recording:
+    """The arm joints of a UR RTDE log (space-separated, header row; actual_q_*, actual_qd_*) as a Recording
+    in the p-model's convention (the field mapping of the RTDE endpoint)."""
     from .rtde import read_rtde
+    from .urrtde import to_model
 
     log = read_rtde(path)
-    return Recording(log.times, log.q + np.asarray(offsets)[: log.q.shape[1]], log.qd, joints[: log.q.shape[1]],
-                     str(path))
+    return Recording(log.times, np.array([to_model(q) for q in log.q]), log.qd, joints[: log.q.shape[1]], str(path))

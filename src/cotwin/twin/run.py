@@ -90,9 +90,28 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         if plot:
             from ..plot import figure as draw
 
-            figure = draw(out / "outputs.csv", out / "figure.png",
+            figure = draw(out / "outputs.csv", out / "figure.png", figure_panels(system),
                           title=f"{system.models.program.module.name}: step {step:g} s, {result.algorithm}")
         return TwinRun(result, out / "outputs.csv", figure, cosim, units)
+
+
+def figure_panels(system: TwinSystem) -> list[tuple[str, list[str], str]]:
+    """The panels of the paper's Fig. 16, chosen from the models: the commands and their values, the
+    d-model's operation calls and their arguments, and the mapping's monitored variables."""
+    from ..dmodel.ports import PortLayout
+
+    source = system.source.name if system.source is not None else None
+    events = [p for p in system.source_ports if p in system.command_events]
+    values = [p for p in system.source_ports if p not in system.command_events]
+    layout = PortLayout(system.models.program)
+    calls = [op.flag.name for op in layout.operations]
+    args = list(dict.fromkeys(v.var.name for op in layout.operations for _, vs in op.args for v in vs))
+    dmodel = "{dmodel}.dmodel"
+    return [("(1) commands", [f"{source}.{p}" for p in events], "steps-post"),
+            ("(2) command values", [f"{source}.{p}" for p in values], "steps-post"),
+            ("(3) d-model operation calls", [f"{dmodel}.{c}" for c in calls], "steps-post"),
+            ("(3b) operation arguments", [f"{dmodel}.{a}" for a in args], "steps-post"),
+            ("(4) monitored variables", [f"{MAPPING.name}.{v}" for v in system.log[MAPPING.name]], "default")]
 
 
 def load(project: str | Path | TwinProject) -> TwinSystem:

@@ -1,0 +1,116 @@
+"""A real Universal Robots arm over RTDE as the physical twin's endpoint (the `rtde` extra: ur-rtde).
+
+One field mapping serves the live robot and its recorded logs (cotwin.mapping.rtde, the replay
+endpoint): RTDE's `actual_q_k` / `actual_qd_k` (k = 0..5, UR convention) become the p-model's arm
+joints with `to_model` (q_model = q_ur + (0, pi/2, 0, pi/2, 0, 0), interop.md); goals go the other way
+with `to_ur`. A command is a synchronised joint move (URScript's movej through ur-rtde's moveJ, with the
+project's speed and acceleration), asynchronous so the twin keeps stepping; `advance(dt)` waits until
+dt of wall time has passed since the last step, since a real robot runs on its own clock.
+"""
+
+from __future__ import annotations
+
+import math
+import time as wallclock
+from typing import Mapping
+
+import numpy as np
+
+from ..diagnostics import CotwinError
+
+UR_TO_MODEL = np.array([0.0, math.pi / 2, 0.0, math.pi / 2, 0.0, 0.0])
+
+
+def to_model(q_ur) -> np.ndarray:
+    return np.asarray(q_ur, float) + UR_TO_MODEL[: len(q_ur)]
+
+
+def to_ur(q_model) -> np.ndarray:
+    return np.asarray(q_model, float) - UR_TO_MODEL[: len(q_model)]
+
+
+def fields_to_state(fields: Mapping[str, float], arm: list[str]) -> tuple[dict[str, float], dict[str, float]]:
+    """Arm joint positions and velocities (p-model names and convention) from RTDE output fields named as
+    in a log's header (`actual_q_0`.., `actual_qd_0`..)."""
+    try:
+        q = [float(fields[f"actual_q_{k}"]) for k in range(len(arm))]
+        qd = [float(fields[f"actual_qd_{k}"]) for k in range(len(arm))]
+    except KeyError as err:
+        raise CotwinError(f"RTDE data without the field {err.args[0]}") from None
+    if not all(math.isfinite(v) for v in q + qd):
+        raise CotwinError("RTDE data with a non-finite joint value")
+    return dict(zip(arm, map(float, to_model(q)))), dict(zip(arm, qd))
+
+
+class RTDEEndpoint:
+    """The platform endpoint of a UR robot at `host` (needs `pip install cotwin[rtde]`)."""
+
+    def __init__(self, tree, host: str, speed: float = 1.05, acceleration: float = 1.4):
+        try:
+            import rtde_control
+            import rtde_receive
+        except ImportError:
+            raise CotwinError("the RTDE endpoint needs ur-rtde: pip install 'cotwin[rtde]'") from None
+        from ..pmodel import ik
+
+        self.tree = tree
+        self.arm = ik.arm_joints(tree, ik.find_tool(tree))
+        self.speed, self.acceleration = speed, acceleration
+        host = host.removeprefix("rtde://").split(":")[0]
+        try:
+            self.receive = rtde_receive.RTDEReceiveInterface(host)
+            self.control = rtde_control.RTDEControlInterface(host)
+        except RuntimeError as err:
+            raise CotwinError(f"cannot reach the robot's RTDE interface at {host}: {err}") from None
+        self.time = 0.0
+        self._goal = None
+        self._last = wallclock.monotonic()
+
+    def _fields(self) -> dict[str, float]:
+        q, qd = self.receive.getActualQ(), self.receive.getActualQd()
+        return {**{f"actual_q_{k}": v for k, v in enumerate(q)}, **{f"actual_qd_{k}": v for k, v in enumerate(qd)}}
+
+    def start(self) -> None:
+        self._last = wallclock.monotonic()
+
+    def stop(self) -> None:
+        self.control.stopJ(self.acceleration)
+
+    def joint(self, name: str) -> str:
+        for j in self.tree.actuated:
+            if name == j.name or any(name in (s.name, f"{self.tree.name}::{j.source_link}::{j.source}::{s.name}.dangle")
+                                     for s in j.servos):
+                return j.name
+        raise CotwinError(f"the robot has no actuator '{name}'")
+
+    def command(self, goals: dict[str, float]) -> None:
+        current = self.joint_positions()
+        target = dict(current)
+        for name, value in goals.items():
+            if not math.isfinite(value):
+                raise CotwinError(f"actuator '{name}': goal {value!r} is not a finite number")
+            target[self.joint(name)] = float(value)
+        q_ur = to_ur([target[j] for j in self.arm])
+        self.control.moveJ(list(q_ur), self.speed, self.acceleration, True)
+
+    def advance(self, dt: float) -> None:
+        self._last += dt
+        delay = self._last - wallclock.monotonic()
+        if delay > 0:
+            wallclock.sleep(delay)
+        self.time += dt
+
+    def joint_positions(self) -> dict[str, float]:
+        return fields_to_state(self._fields(), self.arm)[0]
+
+    def joint_velocities(self) -> dict[str, float]:
+        return fields_to_state(self._fields(), self.arm)[1]
+
+    def read_sensors(self) -> dict[str, float]:
+        positions, velocities = fields_to_state(self._fields(), self.arm)
+        out = {}
+        for s in self.tree.sensors:
+            if s.joint is not None:
+                value = {"position": positions, "velocity": velocities}.get(s.quantity, {}).get(s.joint, 0.0)
+                out[f"{self.tree.name}::{s.link}::{s.name}.{s.port}"] = value
+        return out
