@@ -286,6 +286,39 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None)
     click.echo(f"sent {len(publisher.sent)} message(s)")
 
 
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("--opcua", "url", metavar="URL", help="where to serve, e.g. opc.tcp://127.0.0.1:4840 (loopback only; "
+              "default: the project's [pt] url, else port 4840)")
+@click.option("--perturbation", "perturbation_file", type=click.Path(), help="a TOML file of [plant] keys "
+              "(instead of the project's [plant] table)")
+@click.option("--seed", type=click.IntRange(min=0, max=2 ** 63 - 1), help="seed of the sensor noise")
+@click.option("--payload", type=click.FloatRange(min=0), metavar="KG", help="a mass at the tool (kg)")
+@click.option("--latency-ms", type=click.FloatRange(min=0, max=10_000), metavar="MS", help="goals take effect this late")
+@click.option("--noise", type=click.FloatRange(min=0), metavar="STD", help="Gaussian noise on every measurement")
+@click.option("--free-running", is_flag=True, help="advance in real time; Advance waits for the plant's clock")
+def plant(project: str, url: str | None, perturbation_file: str | None, seed: int | None, payload: float | None,
+          latency_ms: float | None, noise: float | None, free_running: bool) -> None:
+    """Serve a stand-in robot cell over OPC UA: the project's models in the simulator, perturbed as its
+    [plant] table and these options say, until SIGINT or SIGTERM."""
+    from .twin.plant import load_plant
+
+    _finite(payload=payload, latency_ms=latency_ms, noise=noise)
+    cell = load_plant(project, url, free_running, perturbation_file, seed=seed, payload=payload,
+                      latency_ms=latency_ms, noise=noise)
+
+    def announce(served) -> None:
+        p = served.endpoint.perturbation
+        click.echo(f"serving {served.endpoint.tree.name} on {served.url} ({served.mode}; perturbation: "
+                   f"{'none' if p.nominal else p.as_dict()})")
+        if served.credentials_file is not None:
+            click.echo(f"operator credentials for local clients: {served.credentials_file}")
+        click.echo("stop with Ctrl-C", err=True)
+
+    cell.serve_until_signalled(announce)
+    click.echo(f"stopped after {cell.calls} call(s), {cell.refused} refused")
+
+
 def _parse_domain(text: str) -> tuple[str, list]:
     name, sep, values = text.partition("=")
     if not sep or not name or not values:

@@ -32,10 +32,12 @@ class SimState:
 
 
 class PlatformSimulator:
-    def __init__(self, tree: KinematicTree, scene=None, timestep: float = TIMESTEP):
+    def __init__(self, tree: KinematicTree, scene=None, timestep: float = TIMESTEP, mjcf: str | None = None):
+        """`mjcf`: an MJCF text derived from `to_mjcf(tree, scene, timestep)` to run instead of it (e.g. with
+        a payload added by cotwin.pmodel.perturbation); names of joints, servos and sensors must be kept."""
         self.tree = tree
         self.scene = scene
-        self.xml = to_mjcf(tree, scene, timestep)
+        self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep)
         try:
             self.model = mujoco.MjModel.from_xml_string(self.xml)
         except ValueError as err:

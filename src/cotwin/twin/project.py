@@ -36,6 +36,13 @@ co-simulation settings and, for a live twin, the physical twin, deviation checki
     debounce_steps = 2              # consecutive deviating steps before an alarm is raised
     [history]
     url = "sqlite:///history.sqlite"  # or postgresql://...; default: DIR/history.sqlite
+    [plant]                         # the stand-in cell of `cotwin plant` (cotwin.pmodel.perturbation)
+    seed = 7
+    payload = 2.0                   # kg at the tool
+    friction = { elbow_joint = 1.5 }  # Coulomb friction, N m (or N); a number: every joint
+    damping = 2.0                   # scale of the joints' damping; or a table by joint
+    latency_ms = 20                 # goals take effect this late
+    noise = { position = 0.001 }    # Gaussian std by sensor quantity; a number: all
 
 Every problem is reported at its key's line and column, all together (cotwin.config).
 """
@@ -47,6 +54,7 @@ from pathlib import Path
 
 from ..config import Key, Schema, TomlFile, raise_problems
 from ..diagnostics import Finding, Severity
+from ..pmodel.perturbation import SCHEMA as PLANT, Perturbation
 
 ENDPOINTS = ("mujoco", "broker")
 PT_ENDPOINTS = ("opcua", "replay", "broker", "rtde")
@@ -103,6 +111,7 @@ SCHEMA = Schema({
         "debounce_steps": Key("int", 2, check=lambda v: None if v >= 1 else "must be >= 1"),
         "exchange": Key("str", "cotwin.twin"), "routing_key": Key("str", "twin.alarm")})),
     "history": Key("table", {}, table=Schema({"url": Key("str")})),
+    "plant": Key("table", table=PLANT),
 })
 
 
@@ -161,6 +170,7 @@ class TwinProject:
     pt: PTSettings | None = None
     deviation: DeviationSettings = field(default_factory=DeviationSettings)
     history_url: str | None = None
+    plant: Perturbation | None = None  # [plant]: how `cotwin plant` perturbs the cell
 
     @property
     def model_files(self) -> list[Path]:
@@ -220,4 +230,5 @@ def load_project(path: str | Path) -> TwinProject:
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.get("module"), models.get("pmodel_name"),
         plan, rabbitmq, platform["endpoint"], platform["queue"], platform["url"], platform["scene"],
         [tuple(b) for b in platform["bricks"]], calibration, float(cosim["step"]), float(cosim["end"]),
-        cosim["algorithm"], cosim["realtime"], cosim["log"], pt, deviation, (data["history"] or {}).get("url"))
+        cosim["algorithm"], cosim["realtime"], cosim["log"], pt, deviation, (data["history"] or {}).get("url"),
+        Perturbation.from_table(data["plant"]) if data["plant"] else None)

@@ -1,0 +1,200 @@
+"""Documented, seedable perturbations of the embedded platform: how a stand-in "physical" robot differs
+from its digital twin. Payload, friction and damping are applied to the generated MuJoCo model
+(here), latency and noise around the endpoint (cotwin.mapping.perturbed); never to the RoboSim models.
+
+- `payload` (kg): a point mass at the tool frame (`cotwin.pmodel.ik.find_tool`), welded to the tool's
+  link as its own MJCF body with no gravity compensation: the servos feel its weight and inertia,
+  as a real arm carrying an unannounced load does. The arm's own compensation is unchanged.
+- `friction` (N m for revolute, N for prismatic joints): Coulomb friction, MuJoCo's `frictionloss` of
+  the joint's degree of freedom. A number applies to every actuated joint; a table names joints.
+- `damping` (factor): scales the joint's viscous damping (the p-model's `Dynamics { damping }`); a
+  number for every actuated joint or a table by joint.
+- `latency_ms` (ms): every servo goal takes effect this long after it was commanded (rounded to whole
+  physics steps), as a cell whose controller lags its commands.
+- `noise` (standard deviation, in the quantity's unit): Gaussian noise on measurements, by sensor
+  quantity (`position`, `velocity`, `effort`); a number applies to all three. Position and velocity
+  noise also applies to the joint positions and velocities the endpoint reports (the encoders). One
+  sample is drawn per quantity and reading after every advance, so repeated reads within a step agree.
+- `seed`: the noise generator's seed (numpy's PCG64); the same seed gives the same noise.
+
+A `Perturbation()` with no field set is nominal: the endpoint then behaves exactly as SimulatedEndpoint.
+In a project file the same keys form the `[plant]` table; a perturbation file holds them at its top level.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from ..config import Key, Schema, TomlFile, raise_problems
+from ..diagnostics import CotwinError, Finding, Severity
+from .ik import find_tool
+from .mjcf import TIMESTEP, to_mjcf
+from .simulator import PlatformSimulator
+from .tree import KinematicTree
+from .xmltext import nums, sub, to_text
+
+QUANTITIES = ("position", "velocity", "effort")
+MAX_LATENCY_MS = 10_000.0
+PAYLOAD_BODY = "cotwin_payload"
+PAYLOAD_RADIUS = 0.03  # m: the payload's inertia is that of a solid sphere of this radius
+
+
+def _is_value(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
+
+
+def _per_name(what: str, names: tuple[str, ...] = ()):
+    """A check for `key = number` or `key = { name = number }` (non-negative, finite)."""
+
+    def check(value) -> str | None:
+        if _is_value(value):
+            return None
+        if not isinstance(value, dict):
+            return f"must be a number >= 0 or a table of {what} -> number >= 0, got {value!r}"
+        for name, v in value.items():
+            if names and name not in names:
+                return f"unknown {what} '{name}' (known: {', '.join(names)})"
+            if not _is_value(v):
+                return f"{what} '{name}' must be a number >= 0, got {v!r}"
+        return None
+
+    return check
+
+
+SCHEMA = Schema({
+    "seed": Key("int", 0, check=lambda v: None if 0 <= v < 2 ** 63 else "must be in [0, 2^63)"),
+    "payload": Key("nonnegative", 0.0),
+    "friction": Key("any", {}, check=_per_name("joint")),
+    "damping": Key("any", {}, check=_per_name("joint")),
+    "latency_ms": Key("nonnegative", 0.0, check=lambda v: None if v <= MAX_LATENCY_MS else
+                      f"must be at most {MAX_LATENCY_MS:g} ms"),
+    "noise": Key("any", {}, check=_per_name("sensor quantity", QUANTITIES)),
+})
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """How the plant differs from the nominal model (see the module doc for units and meaning)."""
+
+    seed: int = 0
+    payload: float = 0.0
+    friction: dict[str, float] | float = field(default_factory=dict)
+    damping: dict[str, float] | float = field(default_factory=dict)
+    latency_ms: float = 0.0
+    noise: dict[str, float] | float = field(default_factory=dict)
+
+    @classmethod
+    def from_table(cls, data: dict) -> "Perturbation":
+        """From a table already checked by SCHEMA (the defaults filled in)."""
+        return cls(**{k: data[k] for k in SCHEMA.keys})
+
+    @property
+    def nominal(self) -> bool:
+        scales = self.damping.values() if isinstance(self.damping, dict) else [self.damping]
+        return not (self.payload or self.latency_ms or _nonzero(self.friction) or _nonzero(self.noise)
+                    or any(v != 1.0 for v in scales))
+
+    def with_options(self, **options) -> "Perturbation":
+        """A copy with the options that are not None replaced (command-line flags over the file)."""
+        return replace(self, **{k: v for k, v in options.items() if v is not None})
+
+    def noise_std(self, quantity: str) -> float:
+        if isinstance(self.noise, dict):
+            return float(self.noise.get(quantity, 0.0))
+        return float(self.noise)
+
+    def per_joint(self, name: str, joints: list[str]) -> dict[str, float]:
+        """`friction` or `damping` by joint: a number applies to every joint in `joints`."""
+        value = getattr(self, name)
+        if isinstance(value, dict):
+            return {j: float(v) for j, v in value.items()}
+        return {j: float(value) for j in joints}
+
+    def problems(self, tree: KinematicTree) -> list[tuple[tuple, str]]:
+        """(key path, message) for every joint named that the p-model does not have."""
+        joints = [j.name for j in tree.actuated]
+        out = []
+        for key in ("friction", "damping"):
+            value = getattr(self, key)
+            for name in value if isinstance(value, dict) else ():
+                if name not in joints:
+                    out.append(((key, name), f"{key}: p-model {tree.name} has no actuated joint '{name}' "
+                                             f"(joints: {', '.join(joints)})"))
+        return out
+
+    def as_dict(self) -> dict:
+        return {"seed": self.seed, "payload": self.payload, "friction": self.friction, "damping": self.damping,
+                "latency_ms": self.latency_ms, "noise": self.noise}
+
+
+def _nonzero(value) -> bool:
+    return any(value.values()) if isinstance(value, dict) else bool(value)
+
+
+def read_table(file: TomlFile, at: tuple = (), problems: list[Finding] | None = None) -> Perturbation | None:
+    """The perturbation written in `file` at table `at` (() for a perturbation file), or None if absent."""
+    data = file.data
+    for key in at:
+        data = data.get(key) if isinstance(data, dict) else None
+    if data is None:
+        return None
+    own = problems is None
+    problems = [] if own else problems
+    if not isinstance(data, dict):
+        problems.append(Finding(file.location(at), Severity.ERROR, f"[{'.'.join(at)}] must be a table"))
+        checked = None
+    else:
+        checked = SCHEMA.read(data, file, at, problems)
+    if own:
+        raise_problems(problems)
+    return Perturbation.from_table(checked) if checked is not None else None
+
+
+def read_perturbation(path: str | Path) -> Perturbation:
+    """A perturbation file: the `[plant]` keys at its top level."""
+    return read_table(TomlFile(path, "perturbation file")) or Perturbation()
+
+
+def check_joints(perturbation: Perturbation, tree: KinematicTree, file: TomlFile | None = None,
+                 at: tuple = ()) -> None:
+    """Unknown joints are errors, located in `file` when the perturbation came from one."""
+    found = perturbation.problems(tree)
+    if not found:
+        return
+    if file is None:
+        raise CotwinError([message for _, message in found])
+    raise CotwinError([Finding(file.location(at + key), Severity.ERROR, message) for key, message in found])
+
+
+# ---- application -------------------------------------------------------------------------------------
+
+def with_payload(xml: str, tree: KinematicTree, kg: float) -> str:
+    """The MJCF with a point mass of `kg` welded at the tool frame (no gravity compensation)."""
+    if kg <= 0:
+        return xml
+    tool = find_tool(tree)
+    root = ET.fromstring(xml)
+    body = next((b for b in root.iter("body") if b.get("name") == tool.link), None)
+    if body is None:
+        raise CotwinError(f"no body '{tool.link}' for the payload in the generated MJCF")
+    holder = sub(body, "body", name=PAYLOAD_BODY, pos=nums(tool.offset[:3, 3]), gravcomp="0")
+    inertia = 0.4 * kg * PAYLOAD_RADIUS ** 2
+    sub(holder, "inertial", pos="0 0 0", mass=nums([kg]), diaginertia=nums([inertia] * 3))
+    return to_text(root)
+
+
+def perturbed_simulator(tree: KinematicTree, scene, perturbation: Perturbation,
+                        timestep: float = TIMESTEP) -> PlatformSimulator:
+    """The MuJoCo platform with the perturbation's payload, friction and damping in its model."""
+    check_joints(perturbation, tree)
+    xml = with_payload(to_mjcf(tree, scene, timestep), tree, perturbation.payload)
+    sim = PlatformSimulator(tree, scene, timestep, mjcf=xml)
+    joints = [j.name for j in tree.actuated]
+    for name, value in perturbation.per_joint("friction", joints).items():
+        sim.model.dof_frictionloss[sim.model.joint(name).dofadr[0]] = value
+    for name, scale in perturbation.per_joint("damping", joints).items():
+        sim.model.dof_damping[sim.model.joint(name).dofadr[0]] *= scale
+    return sim
