@@ -298,3 +298,33 @@ def test_free_running_plant_keeps_its_own_clock(twin, serve):
         assert 0.45 <= wall < 2.0  # it ran in real time: waiting for its clock, never ahead of it
         time.sleep(0.3)
         assert endpoint.refresh()["time"] - t0 >= 0.75  # it goes on without us
+
+
+def test_a_server_that_is_not_a_plant_is_named_as_such(twin):
+    import asyncio
+    import threading
+
+    from asyncua import Server
+
+    port, up, loop = _free_port(), threading.Event(), asyncio.new_event_loop()
+    done = asyncio.Event()
+
+    async def main():  # a bare asyncua server: another OPC UA device, not a cotwin plant
+        server = Server()
+        await server.init()
+        server.set_endpoint(f"opc.tcp://127.0.0.1:{port}/")
+        async with server:
+            up.set()
+            await done.wait()
+
+    thread = threading.Thread(target=loop.run_until_complete, args=(main(),), daemon=True)
+    thread.start()
+    try:
+        assert up.wait(30)
+        env = {"COTWIN_OPCUA_USER": "someone", "COTWIN_OPCUA_PASSWORD": "x"}
+        with pytest.raises(CotwinError, match=f"the OPC UA server at opc.tcp://127.0.0.1:{port} is not a cotwin plant"):
+            OPCUAEndpoint(twin.models.tree, f"opc.tcp://127.0.0.1:{port}", timeout=5, environ=env)
+    finally:
+        loop.call_soon_threadsafe(done.set)
+        thread.join(10)
+        loop.close()

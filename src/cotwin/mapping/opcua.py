@@ -164,7 +164,10 @@ class OPCUAEndpoint:
         client.set_password(self._credentials.password)
         await client.connect()
         self._client = client
-        self._ns = await client.get_namespace_index(NAMESPACE)
+        try:
+            self._ns = await client.get_namespace_index(NAMESPACE)
+        except ValueError:
+            raise CotwinError(f"the OPC UA server at {self.url} is not a cotwin plant (no namespace {NAMESPACE})") from None
         self._robot = ua.NodeId(ROBOT, self._ns)
         self._methods = {name: ua.NodeId(f"{ROBOT}.{name}", self._ns) for name in
                          ("Describe", "State", "Command", "CommandJoints", "Advance", "AdvanceTo", "Reset")}
@@ -180,11 +183,6 @@ class OPCUAEndpoint:
             raise CotwinError(f"the plant at {self.url} did not answer {what} within {limit:g} s") from None
         except CotwinError:
             raise
-        except ValueError as err:
-            if "namespace" in str(err).lower():
-                raise CotwinError(f"the OPC UA server at {self.url} is not a cotwin plant (no namespace "
-                                  f"{NAMESPACE})") from None
-            raise CotwinError(f"the plant at {self.url} failed {what}: {err}") from None
         except Exception as err:
             raise CotwinError(f"the plant at {self.url} failed {what}: {_describe_error(err)}") from None
 
@@ -368,9 +366,8 @@ def _describe_error(err: BaseException) -> str:
     """A library's exception as one line: connection refused, closed channel, bad status."""
     if isinstance(err, ConnectionRefusedError):
         return "connection refused (is the plant running?)"
-    if isinstance(err, (ConnectionError, OSError)):
-        return f"connection lost ({err.strerror or type(err).__name__})" if isinstance(err, OSError) else \
-            f"connection lost ({type(err).__name__})"
+    if isinstance(err, OSError):
+        return f"connection lost ({err.strerror or type(err).__name__})"
     if isinstance(err, asyncio.TimeoutError):
         return "timed out"
     name = type(err).__name__

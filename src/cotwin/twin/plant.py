@@ -120,6 +120,7 @@ class Plant:
         self._stopping: asyncio.Event | None = None
         self._sim = ThreadPoolExecutor(max_workers=1, thread_name_prefix="plant-sim")
         self._credentials: PlantCredentials | None = None
+        self._halted: str | None = None
 
     # ---- life cycle ----
     def start(self, timeout: float = 30.0) -> "Plant":
@@ -426,20 +427,28 @@ class Plant:
         """Advance the simulation with the wall clock, in whole physics steps, and wake the waiters."""
         step = self.endpoint.sim.timestep
         self._anchor = (time.monotonic(), self.endpoint.time)
-        while True:
-            wall0, sim0 = self._anchor
-            behind = sim0 + (time.monotonic() - wall0) - self.endpoint.time
-            if behind >= step:
-                snapshot = await self._on_sim(self._step, math.floor(behind / step + 1e-9) * step)
-                await self._publish(snapshot)
-                async with self._advanced:
-                    self._advanced.notify_all()
-            await asyncio.sleep(FREE_RUNNING_PERIOD)
+        try:
+            while True:
+                wall0, sim0 = self._anchor
+                behind = sim0 + (time.monotonic() - wall0) - self.endpoint.time
+                if behind >= step:
+                    snapshot = await self._on_sim(self._step, math.floor(behind / step + 1e-9) * step)
+                    await self._publish(snapshot)
+                    async with self._advanced:
+                        self._advanced.notify_all()
+                await asyncio.sleep(FREE_RUNNING_PERIOD)
+        except CotwinError as err:  # e.g. unstable physics: the cell has stopped; say so to every waiter
+            self._halted = f"the free-running plant stopped at t = {self.endpoint.time:.3f} s: {err.findings[0].message}"
+            log.error("%s", self._halted)
+            async with self._advanced:
+                self._advanced.notify_all()
 
     async def _wait_until(self, t: float) -> list:
         half = self.endpoint.sim.timestep / 2
         async with self._advanced:
-            await self._advanced.wait_for(lambda: self.endpoint.time >= t - half)
+            await self._advanced.wait_for(lambda: self.endpoint.time >= t - half or self._halted)
+        if self._halted:
+            raise RequestError("BadInvalidState", self._halted)
         return await self._state()
 
     # ---- the command line ----
