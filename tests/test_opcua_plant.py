@@ -277,7 +277,7 @@ def test_a_vanished_plant_is_a_clear_error_not_a_hang(twin, plant_process):
         began = time.monotonic()
         with pytest.raises(CotwinError, match=f"the plant at {url} (failed|did not answer) Advance"):
             endpoint.advance(0.1)
-        assert time.monotonic() - began < 4
+        assert time.monotonic() - began < 10  # bounded by the 2 s timeout (and a loaded machine), not a hang
     finally:
         endpoint.close()
 
@@ -295,7 +295,7 @@ def test_free_running_plant_keeps_its_own_clock(twin, serve):
             endpoint.advance(0.1)
         wall = time.monotonic() - began
         assert endpoint.time - t0 == pytest.approx(0.5, abs=0.03)  # the plant's clock, not ours
-        assert 0.45 <= wall < 2.0  # it ran in real time: waiting for its clock, never ahead of it
+        assert 0.45 <= wall < 3.0  # it ran in real time: waiting for its clock, never ahead of it
         time.sleep(0.3)
         assert endpoint.refresh()["time"] - t0 >= 0.75  # it goes on without us
 
@@ -328,3 +328,19 @@ def test_a_server_that_is_not_a_plant_is_named_as_such(twin):
         loop.call_soon_threadsafe(done.set)
         thread.join(10)
         loop.close()
+
+
+@pytest.mark.parametrize("perturbation, alarmed", [
+    # (no position noise here: the mapping seeds its IK with the measured joints, and from the arm's
+    # stretched-out start 1e-4 rad of noise is enough to pick another IK branch: a real alarm)
+    (Perturbation(payload=0.05, friction=0.05, noise={"velocity": 1e-3}, seed=2), False),
+    (Perturbation(payload=4.0, latency_ms=300, damping=3.0), True),
+])
+def test_live_twin_with_the_plant_as_pt_alarms_beyond_the_threshold_only(twin, serve, tmp_path, perturbation, alarmed):
+    from cotwin.twin.runtime import LiveTwin
+
+    plant = serve(perturbation)
+    with OPCUAEndpoint(twin.models.tree, plant.url, timeout=5, reset=True) as pt:
+        result = LiveTwin(twin, tmp_path, pt=pt, end=8.0).run()
+    assert result.pt.steps == result.dt.steps == 80
+    assert (result.deviation["alarms"] > 0) == alarmed, result.deviation
