@@ -22,7 +22,12 @@ demo: install
 	$(VENV)/bin/cotwin run examples/ur5e/cotwin.toml -o $(OUT)
 	$(VENV)/bin/cotwin run examples/ur5e/cotwin.toml -o $(OUT)/gauss-seidel --algorithm gauss-seidel
 	$(VENV)/bin/cotwin run examples/ur5e/pick_place_project.toml -o $(OUT)/pick-place
+	COTWIN=$(VENV)/bin/cotwin scripts/live-demo.sh $(OUT)/twin
+	@if [ -f ../shared/data/ur5e/rtde_run1.csv ]; then \
+		$(VENV)/bin/cotwin twin examples/ur5e/replay.toml -o $(OUT)/replay 2> $(OUT)/replay.log; \
+	else echo "replay of the real UR5e's log skipped: ../shared/data/ur5e/rtde_run1.csv is not here"; fi
 	@echo "results: $(OUT)/outputs.csv, $(OUT)/figure.png, $(OUT)/gauss-seidel/, $(OUT)/pick-place/ (multimodel: $(OUT)/multimodel.json)"
+	@echo "live twin (PT over OPC UA, DT in MuJoCo, commands from RabbitMQ): $(OUT)/twin/figure.png, $(OUT)/twin/deviation.json"
 
 test: install
 	$(PY) -m pytest -q

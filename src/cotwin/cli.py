@@ -277,7 +277,7 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None)
     if plan is None and system.spec.plan is None:
         raise click.BadParameter("the project has no plan: give one with --plan", param_hint="--plan")
     commands = read_scenario(plan or system.spec.plan, program)
-    ports = system.source_ports if system.spec.rabbitmq else sorted({p for c in commands for p, _ in c.values})
+    ports = system.live_ports()
     publisher = Publisher(settings, commands, idle_values(port_types(program, ports)), period=period,
                           end=system.spec.end)
     click.echo(f"publishing {len(commands)} command(s) on exchange {settings.exchange} ({settings.to_cosim}); "

@@ -177,6 +177,13 @@ class LiveTwin:
             finally:
                 for side in self.sides.values():
                     side.execution.close()
+                for endpoint in (pt_ep, dt_ep):  # sessions and threads of remote platforms
+                    close = getattr(endpoint, "close", None)
+                    if close is not None:
+                        try:
+                            close()
+                        except Exception:  # noqa: BLE001 - closing must not hide the run's outcome
+                            pass
                 if self._publisher is not None:
                     self._publisher.close()
                 if self._bridge is not None:

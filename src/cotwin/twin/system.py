@@ -111,15 +111,7 @@ class TwinSystem:
             self.source_ports = [p for p in command_ports if p in used]
             self.source = CONTROLLER
         elif spec.rabbitmq is not None:
-            names = spec.rabbitmq.commands if spec.rabbitmq.commands is not None else \
-                external_events(program, self.models.mapping_model)
-            unknown = [n for n in names if n not in {ev.name for ev in program.inputs}]
-            if unknown:
-                raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
-                                           f"[scenario] rabbitmq commands: {', '.join(unknown)} are not input events "
-                                           f"of the d-model (it has {', '.join(ev.name for ev in program.inputs)})")])
-            events = [ev for ev in program.inputs if ev.name in names]
-            self.source_ports = [p for ev in events for p in [ev.name, *(port for port, _ in ev.value_ports)]]
+            self.source_ports = self.live_ports()
             self.source = RABBITMQ
         else:  # an autonomous robot: no commands from outside
             self.source_ports = []
@@ -141,6 +133,19 @@ class TwinSystem:
         self.connections = connections
         self.delayed = {MAPPING.name}
         self.log = self._log_variables()
+
+    def live_ports(self) -> list[str]:
+        """The ports a live (RabbitMQ) source carries: the events of `[scenario] rabbitmq commands` (default:
+        the d-model inputs the mapping does not produce) and their value ports."""
+        program, spec = self.models.program, self.spec
+        names = spec.rabbitmq.commands if spec.rabbitmq is not None and spec.rabbitmq.commands is not None else \
+            external_events(program, self.models.mapping_model)
+        unknown = [n for n in names if n not in {ev.name for ev in program.inputs}]
+        if unknown:
+            raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
+                                       f"[scenario] rabbitmq commands: {', '.join(unknown)} are not input events "
+                                       f"of the d-model (it has {', '.join(ev.name for ev in program.inputs)})")])
+        return [p for ev in program.inputs if ev.name in names for p in [ev.name, *(port for port, _ in ev.value_ports)]]
 
     def _log_variables(self) -> dict[str, list[str]]:
         monitored = self.models.monitored
