@@ -344,3 +344,10 @@ def test_live_twin_with_the_plant_as_pt_alarms_beyond_the_threshold_only(twin, s
         result = LiveTwin(twin, tmp_path, pt=pt, end=8.0).run()
     assert result.pt.steps == result.dt.steps == 80
     assert (result.deviation["alarms"] > 0) == alarmed, result.deviation
+    import csv
+
+    def delivered(side):  # the steps in which the source handed the d-model a command
+        rows = csv.DictReader(open(tmp_path / side / "outputs.csv"))
+        return [r["time"] for r in rows if r["{controller}.controller.moveDiscreteCommand"] == "true"]
+
+    assert delivered("pt") == delivered("dt") == ["1.1", "5.6"]  # the plan's commands before 8 s, once each
