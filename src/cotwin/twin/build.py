@@ -23,7 +23,8 @@ from ..diagnostics import CotwinError
 from .system import TwinSystem
 
 RECORD = "build.json"
-_GENERATORS = ("dmodel/ccode.py", "dmodel/fmu.py", "dmodel/ports.py", "dmodel/program.py", "dmodel/interpreter.py")
+_GENERATORS = ("dmodel/ccode.py", "dmodel/fmu.py", "dmodel/fmi2_wrapper.c", "dmodel/ports.py", "dmodel/program.py",
+               "dmodel/interpreter.py")
 
 
 @contextmanager
