@@ -139,6 +139,7 @@ class Execution:
             raise CotwinError("only a running execution (initialised, not closed) has a state to save")
         return pack("Execution", {
             "algorithm": self.algorithm.name, "time": self.time, "steps": self.steps,
+            "step_size": self.step_size, "origin": self._origin,
             "values": self.algorithm.snapshot(),
             "units": {name: unit.get_state() for name, unit in self.system.units.items()}})
 
@@ -168,9 +169,10 @@ class Execution:
             raise
         self.steps = self.total_steps = data["steps"]
         self.time = data["time"]
-        self._origin = (self.time, self.steps)
+        # the same step size counts times as the saved execution did (bit-identical times), another from here
+        self._origin = tuple(data["origin"]) if data["step_size"] == self.step_size else (self.time, self.steps)
         if fresh:
-            self._first = self._origin
+            self._first = (self.time, self.steps)
             for o in self.observers:
                 o.simulation_initialized(self)
 

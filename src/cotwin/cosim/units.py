@@ -436,8 +436,8 @@ class FMUUnit(Unit):
 class PythonUnit(Unit):
     """An in-process unit: subclasses keep their port values in `self.values`.
 
-    Its state is `snapshot()` (plain data: the port values and the time; subclasses add theirs and
-    extend `restore`), saved as bytes by `get_state`."""
+    Its state is `snapshot()` (plain data: the port values and `time`, the time its last step reached,
+    which subclasses keep; they add their own keys and extend `restore`), saved as bytes by `get_state`."""
 
     def __init__(self, name: str, ports: list[Port]):
         self.name = name
@@ -465,8 +465,7 @@ class PythonUnit(Unit):
         if unknown:
             raise CotwinError(f"unit {self.name} has no port(s) {', '.join(unknown)}")
         names = list(names)
-        update = self.values.update
-        return lambda values: update(zip(names, values))
+        return lambda values: self.values.update(zip(names, values))
 
     def getter(self, names: list[str]) -> Callable[[], Sequence]:
         unknown = [n for n in names if n not in self.ports]
@@ -488,7 +487,8 @@ class PythonUnit(Unit):
         return {"values": dict(self.values), "time": self.time}
 
     def restore(self, snapshot: dict) -> None:
-        self.values = dict(snapshot["values"])
+        self.values.clear()  # in place: bound setters and getters keep working
+        self.values.update(snapshot["values"])
         self.time = snapshot["time"]
 
     def get_state(self) -> bytes:

@@ -19,16 +19,20 @@ from .mjcf import TIMESTEP, sensor_name, servo_name, to_mjcf
 from .tree import KinematicTree
 
 
+STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # time, positions, velocities, actuator states and history,
+# solver warm start, controls, applied forces, mocap poses, equality activations, user and plugin data
+
+
 @dataclass(frozen=True)
 class SimState:
-    """A snapshot for what-if forks: everything MuJoCo needs to continue identically."""
+    """A snapshot for what-if forks and rollbacks: MuJoCo's whole integration state (mjSTATE_INTEGRATION),
+    from which a simulator of the same model continues bit for bit."""
 
-    time: float
-    qpos: np.ndarray
-    qvel: np.ndarray
-    act: np.ndarray
-    ctrl: np.ndarray
-    qacc_warmstart: np.ndarray
+    vector: np.ndarray
+
+    @property
+    def time(self) -> float:
+        return float(self.vector[0])
 
 
 class PlatformSimulator:
@@ -116,34 +120,42 @@ class PlatformSimulator:
     def joint_velocities(self) -> dict[str, float]:
         return {n: float(self.data.qvel[a]) for n, a in self._joint_dof.items()}
 
+    def steps_for(self, dt: float) -> int:
+        """The number of physics steps in dt seconds (dt rounded to whole steps)."""
+        if not (math.isfinite(dt) and dt >= 0):
+            raise CotwinError(f"cannot advance by {dt!r} s")
+        return int(round(dt / self.timestep))
+
     def advance(self, dt: float) -> float:
         """Simulate dt seconds in physics steps of `timestep`; returns the simulation time."""
-        if dt < 0 or not math.isfinite(dt):
-            raise CotwinError(f"cannot advance by {dt!r} s")
-        steps = int(round(dt / self.timestep))
-        for _ in range(steps):
-            mujoco.mj_step(self.model, self.data)
-        if not np.all(np.isfinite(self.data.qpos)):
-            raise CotwinError(f"the physics became unstable at t = {self.data.time:.3f} s (non-finite state)")
-        return self.time
+        return self.step(self.steps_for(dt))
+
+    def step(self, steps: int) -> float:
+        """Simulate `steps` physics steps (in one call into MuJoCo); returns the simulation time."""
+        if steps > 0:
+            mujoco.mj_step(self.model, self.data, steps)
+            if not np.isfinite(self.data.qpos).all():
+                raise CotwinError(f"the physics became unstable at t = {self.data.time:.3f} s (non-finite state)")
+        return self.data.time
 
     @property
     def time(self) -> float:
         return float(self.data.time)
 
     def get_state(self) -> SimState:
-        d = self.data
-        return SimState(float(d.time), d.qpos.copy(), d.qvel.copy(), d.act.copy(), d.ctrl.copy(), d.qacc_warmstart.copy())
+        vector = np.empty(mujoco.mj_stateSize(self.model, STATE))
+        mujoco.mj_getState(self.model, self.data, vector, STATE)
+        return SimState(vector)
 
     def set_state(self, state: SimState) -> None:
-        d = self.data
-        d.time = state.time
-        d.qpos[:] = state.qpos
-        d.qvel[:] = state.qvel
-        d.act[:] = state.act
-        d.ctrl[:] = state.ctrl
-        d.qacc_warmstart[:] = state.qacc_warmstart
-        mujoco.mj_forward(self.model, d)
+        """Continue from `state` (derived quantities such as sensors are recomputed at once)."""
+        size = mujoco.mj_stateSize(self.model, STATE)
+        vector = np.asarray(state.vector, dtype=np.float64)
+        if vector.shape != (size,):
+            raise CotwinError(f"the simulator state has {vector.size} numbers, this model's has {size}: "
+                              "it is a state of another model")
+        mujoco.mj_setState(self.model, self.data, vector, STATE)
+        mujoco.mj_forward(self.model, self.data)
 
     def body_pose(self, name: str) -> np.ndarray:
         try:

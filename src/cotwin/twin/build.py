@@ -213,7 +213,8 @@ def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = Non
             shutil.copytree(stage, work / "twin")
             (work / "cotwin_unit.json").write_text(json.dumps({"role": unit.instance, "project": "twin/cotwin.toml"}))
             fmu = FmuBuilder.build_FMU(work / "fmu_slave.py", dest=work,
-                                       project_files=[work / "twin", work / "cotwin_unit.json"])
+                                       project_files=[work / "twin", work / "cotwin_unit.json"],
+                                       canGetAndSetFMUstate=True, canSerializeFMUstate=True)
             part = target.with_name(target.name + ".part")
             shutil.move(str(fmu), part)
             part.replace(target)
