@@ -24,6 +24,7 @@ from ..diagnostics import CotwinError
 from .system import System
 
 UNSET = object()  # a slot no unit has written yet
+_TYPE_ORDER = {"Real": 0, "Integer": 1, "Boolean": 2}  # the order in which FMUUnit groups ports
 
 
 class Values(Mapping):
@@ -78,7 +79,11 @@ class Algorithm:
         watched: dict[str, list[str]] = {n: [] for n in self.order}
         for unit, var in system.observed():
             watched[unit].append(var)
-        self.watched = [watched[n] for n in self.order]
+        # ports bound grouped by type: an FMU moves each group in one call, as one slice
+        self.feeds = [sorted(feeds, key=lambda f, u=u: _TYPE_ORDER.get(u.ports[f[0]].type, 3))
+                      for u, feeds in zip((system.units[n] for n in self.order), self.feeds)]
+        self.watched = [sorted(watched[n], key=lambda v, u=system.units[n]: _TYPE_ORDER.get(u.ports[v].type, 3))
+                        for n in self.order]
         for unit in self.units:
             unit.instantiate(start)
             if system.parameters.get(unit.name):

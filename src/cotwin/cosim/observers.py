@@ -26,13 +26,16 @@ class Observer:
 
 
 def format_value(value) -> str:
-    """Maestro's CSV spelling: Booleans true/false, reals as Python's shortest repr, nothing as ''."""
+    """Maestro's CSV spelling: Booleans true/false, reals as Python's shortest repr, nothing as ''
+    (numpy scalars as the Python numbers they hold)."""
     if value is None or value is UNSET:
         return ""
+    if type(value).__module__ == "numpy" and hasattr(value, "item"):
+        value = value.item()
     if value is True or value is False:
         return "true" if value else "false"
     if isinstance(value, float):
-        return repr(value)
+        return float.__repr__(value)
     return str(value)
 
 
@@ -76,9 +79,12 @@ class CSVWriter(Observer):
             self._flush()
 
     def _row(self, execution) -> None:
-        cells = [f(v) for f, v in zip(self._formats, self._read())]
-        self._lines.append(f"{round(execution.time, 12)!r},{','.join(cells)}\n" if cells
-                           else f"{round(execution.time, 12)!r}\n")
+        values = self._read()
+        if _PLAIN.issuperset(map(type, values)):  # the usual row: in C, Booleans respelt at the end
+            line = ",".join(map(repr, values)).replace("True", "true").replace("False", "false")
+        else:  # None, numpy scalars, ...: cell by cell
+            line = ",".join([f(v) for f, v in zip(self._formats, values)])
+        self._lines.append(f"{round(execution.time, 12)!r},{line}\n" if values else f"{round(execution.time, 12)!r}\n")
         self.rows += 1
 
     def _flush(self) -> None:
@@ -108,6 +114,7 @@ def _integer(value) -> str:
     return str(value) if value.__class__ is int else format_value(value)
 
 
+_PLAIN = frozenset((float, int, bool))  # what FMU ports hold; repr spells them as Maestro does, but Booleans
 _FORMAT = {"Real": _real, "Boolean": _boolean, "Integer": _integer}
 
 

@@ -181,6 +181,34 @@ def _callbacks(unit: "FMUUnit") -> fmi2CallbackFunctions:
     return callbacks
 
 
+class _NotPlain(Exception):
+    """A value that needs the full check (checked_value) before it goes to the FMU."""
+
+
+def _reals(values: Sequence) -> Sequence:
+    for v in values:
+        if v.__class__ is not float or v - v != 0.0:  # not a float, or inf or nan
+            raise _NotPlain
+    return values
+
+
+def _integers(values: Sequence) -> Sequence:
+    for v in values:
+        if v.__class__ is not int or not INT32[0] <= v <= INT32[1]:
+            raise _NotPlain
+    return values
+
+
+def _booleans(values: Sequence) -> Sequence:
+    for v in values:
+        if v.__class__ is not bool:
+            raise _NotPlain
+    return values
+
+
+_FAST_CHECK = {"Real": _reals, "Integer": _integers, "Boolean": _booleans}
+
+
 class _Block:
     """Ports of one FMI type moved in one call: value references and values in preallocated C arrays."""
 
@@ -347,28 +375,42 @@ class FMUUnit(Unit):
         return blocks
 
     def setter(self, names: list[str]) -> Callable[[Sequence], None]:
-        blocks = [(b, [self.ports[n] for n in b.names], self._fn[f"fmi2Set{b.kind}"], f"fmi2Set{b.kind}")
-                  for b in self._plan(tuple(names))]
+        """Values checked against their port's type (cheaply when they already have it) into the
+        block's C array, one fmi2Set call per FMI type. Ports bound grouped by type (as the algorithms
+        bind them) are taken as slices of the sequence."""
+        blocks = []
+        for b in self._plan(tuple(names)):
+            ports = [self.ports[n] for n in b.names]
+            start = b.positions[0]
+            contiguous = b.positions == list(range(start, start + b.n))
+            blocks.append((b, ports, _FAST_CHECK[b.kind], self._fn[f"fmi2Set{b.kind}"], f"fmi2Set{b.kind}",
+                           slice(start, start + b.n) if contiguous else None))
         unit, call = self.name, self._call
 
         def write(values: Sequence) -> None:
-            for block, ports, fn, name in blocks:
-                array = block.values
-                for k, position in enumerate(block.positions):
-                    array[k] = checked_value(unit, ports[k], values[position])
-                call(name, fn, self.component, block.refs, block.n, array)
+            for block, ports, fast, fn, name, part in blocks:
+                chosen = values[part] if part is not None else [values[k] for k in block.positions]
+                try:
+                    block.values[:] = fast(chosen)
+                except _NotPlain:
+                    block.values[:] = [checked_value(unit, p, v) for p, v in zip(ports, chosen)]
+                call(name, fn, self.component, block.refs, block.n, block.values)
         return write
 
     def getter(self, names: list[str]) -> Callable[[], Sequence]:
+        """One fmi2Get call per FMI type into the block's C array; ports bound grouped by type come
+        back as the arrays' values joined, others are placed one by one."""
         blocks = [(b, self._fn[f"fmi2Get{b.kind}"], f"fmi2Get{b.kind}") for b in self._plan(tuple(names))]
         size, call = len(names), self._call
-        if len(blocks) == 1 and blocks[0][0].kind != "Boolean":  # one type: the C array is the answer
-            block, fn, name = blocks[0]
-
-            def read_one() -> list:
-                call(name, fn, self.component, block.refs, block.n, block.values)
-                return block.values[:]
-            return read_one
+        in_order = [k for b, _, _ in blocks for k in b.positions] == list(range(size))
+        if in_order:
+            def read_grouped() -> list:
+                out: list = []
+                for block, fn, name in blocks:
+                    call(name, fn, self.component, block.refs, block.n, block.values)
+                    out += map(bool, block.values) if block.kind == "Boolean" else block.values
+                return out
+            return read_grouped
 
         def read() -> list:
             out = [None] * size

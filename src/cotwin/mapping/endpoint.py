@@ -66,6 +66,7 @@ class SimulatedEndpoint:
         self.tree = simulator.tree
         self._path_to_joint = simulator.actuators()
         self.segment: Segment | None = None
+        self._held = None  # the segment whose final set-point the servos already hold
 
     def start(self) -> None:
         self.segment = None
@@ -119,11 +120,13 @@ class SimulatedEndpoint:
         while steps > 0:
             n = min(period, steps)
             segment = self.segment
-            if segment is not None:
+            if segment is not None and segment is not self._held:
                 ahead = sim.time + n * sim.timestep
                 sim.write_actuators(segment.at(ahead))
                 if ahead >= segment.t0 + segment.duration:  # the set-point stays at the segment's end
-                    n = steps
+                    self._held = segment
+            if segment is None or segment is self._held:
+                n = steps
             sim.step(n)
             steps -= n
 
@@ -139,6 +142,7 @@ class SimulatedEndpoint:
     def restore(self, snapshot: dict) -> None:
         self.sim.set_state(SimState(snapshot["simulator"]))
         self.segment = trajectory_from(snapshot["segment"])
+        self._held = None  # written again at the next step (the same value: MuJoCo's controls are restored)
 
 
 TRAJECTORIES = {"Segment": Segment}  # the trajectory kinds an endpoint state may hold, by class name

@@ -37,11 +37,12 @@ class SimState:
 
 class PlatformSimulator:
     def __init__(self, tree: KinematicTree, scene=None, timestep: float = TIMESTEP, mjcf: str | None = None):
-        """`mjcf`: an MJCF text derived from `to_mjcf(tree, scene, timestep)` to run instead of it (e.g. with
-        a payload added by cotwin.pmodel.perturbation); names of joints, servos and sensors must be kept."""
+        """`mjcf`: an MJCF text derived from `to_mjcf(tree, scene, timestep, visual=False)` to run instead of
+        it (e.g. with a payload added by cotwin.pmodel.perturbation); names of joints, servos and sensors
+        must be kept."""
         self.tree = tree
         self.scene = scene
-        self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep)
+        self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep, visual=False)
         try:
             self.model = mujoco.MjModel.from_xml_string(self.xml)
         except ValueError as err:
@@ -66,6 +67,17 @@ class PlatformSimulator:
                 continue
             self._sensors[name] = (s.adr[0], s.dim[0])
         self._ctrl_range = self.model.actuator_ctrlrange.copy()
+        # per actuator name: its control index and the range its targets are clipped to
+        self._servos: dict[str, tuple[int, float, float]] = {}
+        for name, index in self._actuator.items():
+            low, high = (float(x) for x in self._ctrl_range[index])
+            self._servos[name] = (index, low, high) if high > low else (index, -math.inf, math.inf)
+        # arrays read in one go: joint positions and velocities, sensor values
+        self._joints = list(self._joint_qpos)
+        self._qpos_index = np.array([self._joint_qpos[j] for j in self._joints], dtype=int)
+        self._qvel_index = np.array([self._joint_dof[j] for j in self._joints], dtype=int)
+        self._sensor_paths = list(self._sensors)
+        self._sensor_index = np.array([adr for adr, _ in self._sensors.values()], dtype=int)
         self.reset()
 
     # ---- names ----
@@ -100,25 +112,26 @@ class PlatformSimulator:
     def write_actuators(self, targets: dict[str, float]) -> None:
         """Set servo targets (rad or m). Unknown names and non-finite values are errors; values outside
         a joint's limits are clipped to them."""
+        ctrl, servos = self.data.ctrl, self._servos
         for name, value in targets.items():
-            if name not in self._actuator:
+            servo = servos.get(name)
+            if servo is None:
                 raise CotwinError(f"unknown actuator '{name}' (use a joint or servo name of p-model {self.tree.name})")
             if not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise CotwinError(f"actuator '{name}': target {value!r} is not a finite number")
-            index = self._actuator[name]
-            low, high = self._ctrl_range[index]
-            self.data.ctrl[index] = min(max(float(value), low), high) if high > low else float(value)
+            index, low, high = servo
+            value = float(value)
+            ctrl[index] = low if value < low else high if value > high else value
 
     def read_sensors(self) -> dict[str, float]:
         """Every p-model sensor port, keyed by its mapping path."""
-        data = self.data.sensordata
-        return {name: float(data[adr]) for name, (adr, _) in self._sensors.items()}
+        return dict(zip(self._sensor_paths, self.data.sensordata[self._sensor_index].tolist()))
 
     def joint_positions(self) -> dict[str, float]:
-        return {n: float(self.data.qpos[a]) for n, a in self._joint_qpos.items()}
+        return dict(zip(self._joints, self.data.qpos[self._qpos_index].tolist()))
 
     def joint_velocities(self) -> dict[str, float]:
-        return {n: float(self.data.qvel[a]) for n, a in self._joint_dof.items()}
+        return dict(zip(self._joints, self.data.qvel[self._qvel_index].tolist()))
 
     def steps_for(self, dt: float) -> int:
         """The number of physics steps in dt seconds (dt rounded to whole steps)."""
