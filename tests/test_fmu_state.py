@@ -221,3 +221,35 @@ def test_failed_calls_name_the_call_and_what_the_fmu_said(fmu):
         unit.terminate()
     assert unit.fmu is None and not os.path.exists(str(unit.folder or "/nonexistent"))
     assert zipfile.is_zipfile(fmu)
+
+
+def test_port_memory_and_fmi_calls_move_the_same_values(program, fmu):
+    """A cotwin-built FMU's ports are read and written in its memory (cotwin_ports); the same run
+    through fmi2Set/fmi2Get calls gives the same outputs, and bad values are refused either way."""
+    layout = PortLayout(program)
+    outputs = _outputs(layout)
+    direct, calls = FMUUnit("direct", fmu), FMUUnit("calls", fmu)
+    try:
+        for u in (direct, calls):
+            u.instantiate(0.0)
+            u.initialize()
+        assert direct._memory is not None
+        calls._memory = None  # as for an FMU built elsewhere
+        inputs = list(_inputs(program, {}))
+        setters = [u.setter(inputs) for u in (direct, calls)]
+        getters = [u.getter(outputs) for u in (direct, calls)]
+        for k, present in enumerate(SCRIPT):
+            values = [_inputs(program, present)[n] for n in inputs]
+            for u, write in zip((direct, calls), setters):
+                write(values)
+                u.step(float(k), 1.0)
+            assert getters[0]() == getters[1]()
+            assert [type(v) for v in getters[0]()] == [type(v) for v in getters[1]()]
+        for u in (direct, calls):
+            with pytest.raises(CotwinError, match="does not fit an FMI Integer"):
+                u.set({"MovementArgs_target_X": 2 ** 31})
+            with pytest.raises(CotwinError, match="takes a Real"):
+                u.set({"cycle_period": float("nan")})
+    finally:
+        direct.terminate()
+        calls.terminate()

@@ -13,7 +13,9 @@ import shutil
 import itertools
 import weakref
 from collections import deque
-from ctypes import POINTER, byref, c_char_p, c_double, c_int, c_size_t, c_uint, c_void_p, create_string_buffer
+from ctypes import (POINTER, byref, c_bool, c_char_p, c_double, c_int, c_int64, c_size_t, c_uint, c_void_p,
+                    create_string_buffer)
+from ctypes import string_at as ctypes_string_at
 from dataclasses import dataclass
 from operator import itemgetter
 from pathlib import Path
@@ -254,6 +256,7 @@ class FMUUnit(Unit):
         self._setters: dict[tuple[str, ...], Callable] = {}
         self._getters: dict[tuple[str, ...], Callable] = {}
         self._fn: dict[str, object] = {}
+        self._memory: dict[int, tuple[object, int]] | None = None
 
     # ---- the one path into the FMU ----
     def _call(self, call: str, fn, *args):
@@ -299,6 +302,27 @@ class FMUUnit(Unit):
             fn.restype = c_int
             self._fn[name] = fn
 
+    def _port_memory(self) -> dict[int, tuple[object, int]] | None:
+        """Where a cotwin-built FMU keeps each port's value (value reference -> (C array, index)), from
+        its `cotwin_ports` extension; None for other FMUs."""
+        try:
+            fn = self.fmu.dll["cotwin_ports"]
+        except AttributeError:
+            return None
+        fn.restype = c_size_t
+        kind, slot = c_char_p(), POINTER(c_int)()
+        arrays = {"r": POINTER(c_double)(), "i": POINTER(c_int64)(), "b": POINTER(c_bool)()}
+        n = fn(c_void_p(self.component), byref(kind), byref(slot), byref(arrays["r"]), byref(arrays["i"]),
+               byref(arrays["b"]))
+        kinds = ctypes_string_at(kind, n).decode("ascii") if n else ""
+        if n == 0 or len(kinds) != n or any(k not in arrays for k in kinds):
+            return None
+        memory = {vr: (arrays[kinds[vr]], slot[vr]) for vr in range(n)}
+        expected = {"Real": "r", "Integer": "i", "Boolean": "b"}
+        if any(memory.get(self.vr[p.name], (None,))[0] is not arrays[expected[p.type]] for p in self.ports.values()):
+            return None  # the tables disagree with the model description: use FMI calls only
+        return memory
+
     @property
     def can_save_state(self) -> bool:
         cs = self.md.coSimulation
@@ -324,6 +348,7 @@ class FMUUnit(Unit):
             raise
         self.component = self.fmu.component
         self.status = "instantiated"
+        self._memory = self._port_memory()
         fn = self._fn
         self._call("fmi2SetupExperiment", fn["fmi2SetupExperiment"], self.component, 0, 0.0, start, 0, 0.0)
         self._call("fmi2EnterInitializationMode", fn["fmi2EnterInitializationMode"], self.component)
@@ -377,7 +402,10 @@ class FMUUnit(Unit):
     def setter(self, names: list[str]) -> Callable[[Sequence], None]:
         """Values checked against their port's type (cheaply when they already have it) into the
         block's C array, one fmi2Set call per FMI type. Ports bound grouped by type (as the algorithms
-        bind them) are taken as slices of the sequence."""
+        bind them) are taken as slices of the sequence. A cotwin-built FMU's values are written straight
+        into its port arrays (no call at all)."""
+        if self._memory is not None:
+            return self._memory_setter(names)
         blocks = []
         for b in self._plan(tuple(names)):
             ports = [self.ports[n] for n in b.names]
@@ -399,7 +427,10 @@ class FMUUnit(Unit):
 
     def getter(self, names: list[str]) -> Callable[[], Sequence]:
         """One fmi2Get call per FMI type into the block's C array; ports bound grouped by type come
-        back as the arrays' values joined, others are placed one by one."""
+        back as the arrays' values joined, others are placed one by one. A cotwin-built FMU's values
+        are read straight from its port arrays."""
+        if self._memory is not None:
+            return self._memory_getter(names)
         blocks = [(b, self._fn[f"fmi2Get{b.kind}"], f"fmi2Get{b.kind}") for b in self._plan(tuple(names))]
         size, call = len(names), self._call
         in_order = [k for b, _, _ in blocks for k in b.positions] == list(range(size))
@@ -407,8 +438,9 @@ class FMUUnit(Unit):
             def read_grouped() -> list:
                 out: list = []
                 for block, fn, name in blocks:
-                    call(name, fn, self.component, block.refs, block.n, block.values)
-                    out += map(bool, block.values) if block.kind == "Boolean" else block.values
+                    values = block.values
+                    call(name, fn, self.component, block.refs, block.n, values)
+                    out += list(map(bool, values[:])) if block.kind == "Boolean" else values[:]
                 return out
             return read_grouped
 
@@ -423,6 +455,27 @@ class FMUUnit(Unit):
                     out[position] = value
             return out
         return read
+
+    def _memory_setter(self, names: list[str]) -> Callable[[Sequence], None]:
+        self._plan(tuple(names))  # unknown names are an error here too
+        kinds = {"Real": 0, "Integer": 1, "Boolean": 2}
+        targets = [(*self._memory[self.vr[n]], self.ports[n], kinds[self.ports[n].type]) for n in names]
+        unit, low, high = self.name, INT32[0], INT32[1]
+
+        def write(values: Sequence) -> None:
+            for (array, slot, port, kind), value in zip(targets, values):
+                cls = value.__class__
+                if (cls is float and value - value == 0.0) if kind == 0 else \
+                        (cls is int and low <= value <= high) if kind == 1 else cls is bool:
+                    array[slot] = value
+                else:
+                    array[slot] = checked_value(unit, port, value)
+        return write
+
+    def _memory_getter(self, names: list[str]) -> Callable[[], Sequence]:
+        self._plan(tuple(names))
+        sources = [self._memory[self.vr[n]] for n in names]
+        return lambda: [array[slot] for array, slot in sources]
 
     def set(self, values: dict[str, object]) -> None:
         names = tuple(values)

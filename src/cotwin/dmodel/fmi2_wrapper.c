@@ -9,6 +9,9 @@
  * between them. Its whole state is plain memory (the model holds no pointers), so an FMU state is a
  * copy of it, tagged with the layout it belongs to: fmi2GetFMUstate, fmi2SetFMUstate and
  * (de)serialisation are memory copies, and a state from another module or build is refused.
+ *
+ * Beyond FMI, cotwin_ports tells an in-process master where those arrays are, so that it can move
+ * a step's port values without a call per type (cotwin.cosim.units.FMUUnit uses it when present).
  */
 #include <math.h>
 #include <stdint.h>
@@ -205,6 +208,21 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     INSTANCE(c, "fmi2SetString");
     (void)vr; (void)value;
     return n ? fail(inst, this_function, "the FMU has no String variables") : fmi2OK;
+}
+
+/* ---- cotwin's extension (not FMI): the port arrays of an instance, for an in-process master ----
+ * Writes kind[vr] ('r', 'i', 'b') and slot[vr] tables and the instance's arrays of reals (double),
+ * integers (int64_t) and Booleans (one-byte bool); returns the number of variables. Between calls of
+ * fmi2DoStep the master may read and write these arrays where fmi2Get and fmi2Set would. */
+size_t cotwin_ports(fmi2Component c, const char **kind, const int **slot, double **r, int64_t **i, bool **b) {
+    Instance *inst = (Instance *)c;
+    if (!inst || !kind || !slot || !r || !i || !b) return 0;
+    *kind = port_kind;
+    *slot = port_slot;
+    *r = inst->state.values.r;
+    *i = inst->state.values.i;
+    *b = inst->state.values.b;
+    return N_VARIABLES;
 }
 
 /* ---- stepping ---- */

@@ -78,6 +78,9 @@ class PlatformSimulator:
         self._qvel_index = np.array([self._joint_dof[j] for j in self._joints], dtype=int)
         self._sensor_paths = list(self._sensors)
         self._sensor_index = np.array([adr for adr, _ in self._sensors.values()], dtype=int)
+        # views on MuJoCo's buffers, fetched once (each attribute access makes a new view)
+        self._qpos, self._qvel = self.data.qpos, self.data.qvel
+        self._ctrl, self._sensordata = self.data.ctrl, self.data.sensordata
         self.reset()
 
     # ---- names ----
@@ -112,7 +115,7 @@ class PlatformSimulator:
     def write_actuators(self, targets: dict[str, float]) -> None:
         """Set servo targets (rad or m). Unknown names and non-finite values are errors; values outside
         a joint's limits are clipped to them."""
-        ctrl, servos = self.data.ctrl, self._servos
+        ctrl, servos = self._ctrl, self._servos
         for name, value in targets.items():
             servo = servos.get(name)
             if servo is None:
@@ -125,13 +128,13 @@ class PlatformSimulator:
 
     def read_sensors(self) -> dict[str, float]:
         """Every p-model sensor port, keyed by its mapping path."""
-        return dict(zip(self._sensor_paths, self.data.sensordata[self._sensor_index].tolist()))
+        return dict(zip(self._sensor_paths, self._sensordata[self._sensor_index].tolist()))
 
     def joint_positions(self) -> dict[str, float]:
-        return dict(zip(self._joints, self.data.qpos[self._qpos_index].tolist()))
+        return dict(zip(self._joints, self._qpos[self._qpos_index].tolist()))
 
     def joint_velocities(self) -> dict[str, float]:
-        return dict(zip(self._joints, self.data.qvel[self._qvel_index].tolist()))
+        return dict(zip(self._joints, self._qvel[self._qvel_index].tolist()))
 
     def steps_for(self, dt: float) -> int:
         """The number of physics steps in dt seconds (dt rounded to whole steps)."""
@@ -147,7 +150,8 @@ class PlatformSimulator:
         """Simulate `steps` physics steps (in one call into MuJoCo); returns the simulation time."""
         if steps > 0:
             mujoco.mj_step(self.model, self.data, steps)
-            if not np.isfinite(self.data.qpos).all():
+            q = self._qpos
+            if not math.isfinite(q.dot(q)):  # a non-finite (or huge) position: the physics blew up
                 raise CotwinError(f"the physics became unstable at t = {self.data.time:.3f} s (non-finite state)")
         return self.data.time
 
