@@ -40,7 +40,8 @@ def test_the_simulator_steps_the_scene_without_its_markers(twin):
         (shown.nbody, shown.njnt, shown.nu, shown.nsensor)
 
 
-def test_unstable_physics_stops_with_an_error(twin):
+def test_unstable_physics_stops_with_an_error(twin, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo logs its warning to MUJOCO_LOG.TXT in the working folder
     sim = PlatformSimulator(twin.models.tree, twin.models.scene)
     sim.data.qvel[:] = 1e200
     with pytest.raises(CotwinError, match="physics became unstable"):
