@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Callable
 
+from ..diagnostics import CotwinError
 from ..cosim.units import Port, PythonUnit
 from ..dmodel.ports import PortLayout
 from ..dmodel.program import Program, assemble
@@ -81,6 +82,8 @@ class MappingUnit(PythonUnit):
         return {**super().snapshot(), "mapping": self.mapping.snapshot(), "executed": list(self.executed)}
 
     def restore(self, snapshot: dict) -> None:
+        if self.mapping is None:
+            raise CotwinError(f"unit {self.name}: instantiate it before restoring a state into it")
         super().restore(snapshot)
         self.mapping.restore(snapshot["mapping"])
         self.executed = list(snapshot["executed"])
