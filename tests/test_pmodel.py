@@ -284,7 +284,7 @@ def test_flexcell_grid_matches_the_published_mapping_constants():
     assert (cell.xmax, cell.ymax, cell.hole_dist) == (15, 23, 0.05)
     assert cell.hole(0, 23, 1) == pytest.approx((-0.072, 0.711, 0.07))
     model = mujoco.MjModel.from_xml_string(to_mjcf(_tree(_published("ur5e")), cell))
-    assert sum(model.site(i).name.startswith("hole_") for i in range(model.nsite)) == 16 * 24
+    assert sum(model.geom(i).name.startswith("hole_") for i in range(model.ngeom)) == 16 * 24
 
 
 def test_unreachable_target_is_reported_by_ik(example_tree):

@@ -3,6 +3,10 @@
 `Execution` can be run to an end time (`run`) or stepped one communication step at a time (`step`),
 which is how the live twin keeps a physical and a digital twin on one clock. It always ends the units'
 life as FMI asks, also after a failure, and tells observers how the run ended.
+
+Its state (`get_state`: every unit's state, the values on the connections, the time) can be restored
+into the same execution (a rollback) or into a fresh execution of the same system (a fork): stepped
+with the same inputs, both continue bit for bit as the original did.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ from dataclasses import dataclass, field
 from ..diagnostics import CotwinError
 from .algorithm import Algorithm
 from .observers import Observer
+from .state import pack, unpack
 from .system import System
 
 
@@ -53,10 +58,17 @@ class Execution:
         self.initialized = False
         self.closed = False
         self._wall = 0.0
+        self._origin = (self.start, 0)  # (time, steps) from which step times are counted
+        self._first = (self.start, 0)  # (time, steps) where this execution began (later for a fork)
 
     @property
-    def values(self) -> dict[tuple[str, str], object]:
+    def values(self):
+        """(unit, port) -> the latest value of every observed port (a read-only mapping)."""
         return self.algorithm.values
+
+    def reader(self, keys: list[tuple[str, str]]):
+        """A function returning the latest values of these observed ports as a tuple, in this order."""
+        return self.algorithm.reader(keys)
 
     def add_observer(self, observer: Observer) -> None:
         self.observers.append(observer)
@@ -64,6 +76,11 @@ class Execution:
             observer.simulation_initialized(self)
 
     def initialize(self) -> None:
+        self._setup()
+        for o in self.observers:
+            o.simulation_initialized(self)
+
+    def _setup(self) -> None:
         self._wall = wallclock.perf_counter()
         try:
             self.algorithm.setup(self.system, self.start)
@@ -72,28 +89,31 @@ class Execution:
             self.close(err)
             raise
         self.initialized = True
-        for o in self.observers:
-            o.simulation_initialized(self)
+
+    def _time_at(self, steps: int) -> float:
+        time, done = self._origin
+        return time + (steps - done) * self.step_size
 
     def step(self) -> float:
         """One communication step from the current time; returns the new time."""
-        t = self.start + self.steps * self.step_size
+        t = self._time_at(self.steps)
         try:
             self.algorithm.do_step(t, self.step_size)
         except BaseException as err:
             self.close(err)
             raise
         self.steps += 1
-        self.time = self.start + self.steps * self.step_size
+        self.time = self._time_at(self.steps)
         for o in self.observers:
             o.step_complete(self)
         return self.time
 
     def run(self, end: float) -> RunResult:
         """Initialise (if not yet), step until `end`, close; the result says what ran."""
-        if not end > self.start:
-            raise CotwinError(f"the end time ({end!r} s) must come after the start ({self.start!r} s)")
-        self.total_steps = int(round((end - self.start) / self.step_size))
+        if not end > self.time:
+            raise CotwinError(f"the end time ({end!r} s) must come after the current time ({self.time!r} s)")
+        time, done = self._origin
+        self.total_steps = done + int(round((end - time) / self.step_size))
         if not self.initialized:
             self.initialize()
         try:
@@ -107,8 +127,54 @@ class Execution:
 
     def result(self) -> RunResult:
         outputs = {type(o).__name__: o.path for o in self.observers if getattr(o, "path", None) is not None}
-        return RunResult(self.algorithm.name, self.step_size, self.start, self.time, self.steps,
+        start, done = self._first
+        return RunResult(self.algorithm.name, self.step_size, start, self.time, self.steps - done,
                          wallclock.perf_counter() - self._wall, outputs)
+
+    # ---- state ----
+    def get_state(self) -> bytes:
+        """The co-simulation's whole state at the current time: every unit's, the values on the
+        connections, the time and steps done (cotwin.cosim.state bytes)."""
+        if not self.initialized or self.closed:
+            raise CotwinError("only a running execution (initialised, not closed) has a state to save")
+        return pack("Execution", {
+            "algorithm": self.algorithm.name, "time": self.time, "steps": self.steps,
+            "step_size": self.step_size, "origin": self._origin,
+            "values": self.algorithm.snapshot(),
+            "units": {name: unit.get_state() for name, unit in self.system.units.items()}})
+
+    def set_state(self, state: bytes) -> None:
+        """Continue from `state`: of this execution (a rollback; observers see time jump back) or of
+        another execution of the same system (a fork: this one is initialised first, and its observers
+        start at the restored time). The step size may differ from the saved execution's."""
+        data = unpack(state, "Execution")
+        if self.closed:
+            raise CotwinError("a closed execution cannot restore a state")
+        units = data["units"]
+        if set(units) != set(self.system.units):
+            raise CotwinError(f"the saved state is of units {', '.join(sorted(units))}, this system has "
+                              f"{', '.join(sorted(self.system.units))}")
+        if data["algorithm"] != self.algorithm.name:
+            raise CotwinError(f"the saved state was taken under {data['algorithm']}, this execution runs "
+                              f"{self.algorithm.name}: the values on the connections would mean something else")
+        fresh = not self.initialized
+        if fresh:
+            self._setup()
+        try:
+            for name, unit in self.system.units.items():
+                unit.set_state(units[name])
+            self.algorithm.restore(data["values"])
+        except BaseException as err:
+            self.close(err)
+            raise
+        self.steps = self.total_steps = data["steps"]
+        self.time = data["time"]
+        # the same step size counts times as the saved execution did (bit-identical times), another from here
+        self._origin = tuple(data["origin"]) if data["step_size"] == self.step_size else (self.time, self.steps)
+        if fresh:
+            self._first = (self.time, self.steps)
+            for o in self.observers:
+                o.simulation_initialized(self)
 
     def close(self, error: BaseException | None = None) -> None:
         """Terminate every unit (each unit knows which FMI calls its state still allows) and tell the

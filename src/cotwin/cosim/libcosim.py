@@ -10,12 +10,15 @@ from .multimodel import MultiModel, unit_name
 
 
 def run_libcosim(mm: MultiModel, watch: dict[str, list[str]], step: float | None = None,
-                 end: float | None = None) -> dict[str, list[float]]:
+                 end: float | None = None, log_level: str = "WARNING") -> dict[str, list[float]]:
+    """`log_level` is libcosim's own (TRACE ... FATAL); below WARNING it prints every FMI call."""
     from fmpy import read_model_description
     from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimObserver import CosimObserver
     from libcosimpy.CosimSlave import CosimLocalSlave
 
+    log_output_level(CosimLogLevel[log_level])
     step = step or mm.step
     end = end or mm.end
     ex = CosimExecution.from_step_size(step_size=int(round(step * 1e9)))

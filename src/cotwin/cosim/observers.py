@@ -12,6 +12,8 @@ import time as wallclock
 from pathlib import Path
 from typing import Callable
 
+from .algorithm import UNSET
+
 
 class Observer:
     """Callbacks of an execution; each is optional."""
@@ -24,13 +26,16 @@ class Observer:
 
 
 def format_value(value) -> str:
-    """Maestro's CSV spelling: Booleans true/false, reals as Python's shortest repr, nothing as ''."""
-    if value is None:
+    """Maestro's CSV spelling: Booleans true/false, reals as Python's shortest repr, nothing as ''
+    (numpy scalars as the Python numbers they hold)."""
+    if value is None or value is UNSET:
         return ""
+    if type(value).__module__ == "numpy" and hasattr(value, "item"):
+        value = value.item()
     if value is True or value is False:
         return "true" if value else "false"
     if isinstance(value, float):
-        return repr(value)
+        return float.__repr__(value)
     return str(value)
 
 
@@ -62,7 +67,8 @@ class CSVWriter(Observer):
         self._fd = os.open(self.part, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         header = ["time"] + [self.column_name(u, v) for u, v in self.columns]
         self._lines.append(",".join(_csv_cell(h) for h in header) + "\n")
-        self._keys = list(self.columns)
+        self._read = execution.reader(list(self.columns))
+        self._formats = column_formats(execution.system, list(self.columns))
         self._row(execution)
         self._flush()
 
@@ -73,9 +79,12 @@ class CSVWriter(Observer):
             self._flush()
 
     def _row(self, execution) -> None:
-        values = execution.values
-        self._lines.append(",".join([format_value(round(execution.time, 12))]
-                                    + [format_value(values.get(key)) for key in self._keys]) + "\n")
+        values = self._read()
+        if _PLAIN.issuperset(map(type, values)):  # the usual row: in C, Booleans respelt at the end
+            line = ",".join(map(repr, values)).replace("True", "true").replace("False", "false")
+        else:  # None, numpy scalars, ...: cell by cell
+            line = ",".join([f(v) for f, v in zip(self._formats, values)])
+        self._lines.append(f"{round(execution.time, 12)!r},{line}\n" if values else f"{round(execution.time, 12)!r}\n")
         self.rows += 1
 
     def _flush(self) -> None:
@@ -91,6 +100,31 @@ class CSVWriter(Observer):
         os.close(self._fd)
         self._fd = None
         os.replace(self.part, self.partial_path if error is not None else self.path)
+
+
+def _real(value) -> str:
+    return repr(value) if value.__class__ is float else format_value(value)
+
+
+def _boolean(value) -> str:
+    return ("true" if value else "false") if value is True or value is False else format_value(value)
+
+
+def _integer(value) -> str:
+    return str(value) if value.__class__ is int else format_value(value)
+
+
+_PLAIN = frozenset((float, int, bool))  # what FMU ports hold; repr spells them as Maestro does, but Booleans
+_FORMAT = {"Real": _real, "Boolean": _boolean, "Integer": _integer}
+
+
+def column_formats(system, columns: list[tuple[str, str]]) -> list[Callable[[object], str]]:
+    """A formatter per column, chosen once from the port's type (Maestro's spelling, see format_value)."""
+    formats = []
+    for unit, var in columns:
+        port = system.units[unit].ports.get(var) if unit in system.units else None
+        formats.append(_FORMAT.get(port.type if port else None, format_value))
+    return formats
 
 
 def _csv_cell(text: str) -> str:

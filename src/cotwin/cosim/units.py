@@ -1,20 +1,34 @@
 """Co-simulation units behind one interface: FMI 2.0 FMUs loaded with FMPy, and in-process Python units.
 
-A unit has typed input and output ports, `initialize`, `set`, `step(t, h)`, `get` and `terminate`.
-Every FMI call of an FMU that fails is raised as UnitError naming the unit, the time and the call.
+A unit has typed input and output ports, `initialize`, `set`, `step(t, h)`, `get` and `terminate`,
+and saves and restores its whole state as bytes (`get_state`, `set_state`). Every FMI call of an
+FMU goes through one checked path; a failure is raised as UnitError naming the unit, the time and
+the call.
 """
 
 from __future__ import annotations
 
 import math
 import shutil
+import itertools
+import weakref
+from collections import deque
+from ctypes import (POINTER, byref, c_bool, c_char_p, c_double, c_int, c_int64, c_size_t, c_uint, c_void_p,
+                    create_string_buffer)
+from ctypes import string_at as ctypes_string_at
 from dataclasses import dataclass
+from operator import itemgetter
 from pathlib import Path
+from typing import Callable, Sequence
 
+import fmpy
 from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi1 import printLogMessage
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                       fmi2CallbackLoggerTYPE)
 
 from ..diagnostics import CotwinError
+from .state import pack, unpack
 
 
 INT32 = (-(2 ** 31), 2 ** 31 - 1)
@@ -57,7 +71,13 @@ class Port:
 
 
 class Unit:
-    """The interface the master drives."""
+    """The interface the master drives.
+
+    Besides `set` and `get` (dicts, for occasional use), a unit binds lists of ports once
+    (`setter`, `getter`), which the algorithms call every step with values in that order. A unit's
+    whole state can be saved as bytes (`get_state`) and restored into it or into another instance of
+    the same unit (`set_state`), which is how a running twin is forked or rolled back.
+    """
 
     name: str
     ports: dict[str, Port]
@@ -75,8 +95,139 @@ class Unit:
     def get(self, names: list[str]) -> dict[str, object]: ...
     def terminate(self) -> None: ...
 
+    def setter(self, names: list[str]) -> Callable[[Sequence], None]:
+        """A function that sets these ports from a sequence of values in the same order."""
+        names = list(names)
+        return lambda values: self.set(dict(zip(names, values)))
+
+    def getter(self, names: list[str]) -> Callable[[], Sequence]:
+        """A function that returns the values of these ports, in the same order."""
+        names = list(names)
+
+        def read() -> list:
+            values = self.get(names)
+            return [values[n] for n in names]
+        return read
+
+    def get_state(self) -> bytes:
+        """The unit's whole state (cotwin.cosim.state bytes)."""
+        raise CotwinError(f"unit {self.name} cannot save its state")
+
+    def set_state(self, state: bytes) -> None:
+        """Continue from a state `get_state` returned (of this unit or another instance of it)."""
+        raise CotwinError(f"unit {self.name} cannot restore a state")
+
+
+# FMI 2.0 status codes and the C prototypes of the calls made on every step (fmi2FunctionTypes.h)
+FMI2_OK, FMI2_WARNING, FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL, FMI2_PENDING = range(6)
+STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
+_VR = POINTER(c_uint)
+_PROTOTYPES = {
+    "fmi2SetReal": (c_void_p, _VR, c_size_t, POINTER(c_double)),
+    "fmi2SetInteger": (c_void_p, _VR, c_size_t, POINTER(c_int)),
+    "fmi2SetBoolean": (c_void_p, _VR, c_size_t, POINTER(c_int)),
+    "fmi2GetReal": (c_void_p, _VR, c_size_t, POINTER(c_double)),
+    "fmi2GetInteger": (c_void_p, _VR, c_size_t, POINTER(c_int)),
+    "fmi2GetBoolean": (c_void_p, _VR, c_size_t, POINTER(c_int)),
+    "fmi2DoStep": (c_void_p, c_double, c_double, c_int),
+    "fmi2SetupExperiment": (c_void_p, c_int, c_double, c_double, c_int, c_double),
+    "fmi2EnterInitializationMode": (c_void_p,),
+    "fmi2ExitInitializationMode": (c_void_p,),
+    "fmi2Terminate": (c_void_p,),
+    "fmi2GetFMUstate": (c_void_p, POINTER(c_void_p)),
+    "fmi2SetFMUstate": (c_void_p, c_void_p),
+    "fmi2FreeFMUstate": (c_void_p, POINTER(c_void_p)),
+    "fmi2SerializedFMUstateSize": (c_void_p, c_void_p, POINTER(c_size_t)),
+    "fmi2SerializeFMUstate": (c_void_p, c_void_p, c_char_p, c_size_t),
+    "fmi2DeSerializeFMUstate": (c_void_p, c_char_p, c_size_t, POINTER(c_void_p)),
+}
+_C_TYPE = {"Real": c_double, "Integer": c_int, "Boolean": c_int}
+_STATE_CALLS = ("fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate", "fmi2SerializedFMUstateSize",
+                "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate")
+
+
+_LOGGING: dict[int, "weakref.ref[FMUUnit]"] = {}  # componentEnvironment -> the unit whose FMU logs
+
+
+def _dispatch(env, instance, status, category, message) -> None:
+    """The one logger of every FMU cotwin instantiates: the message goes to the unit named by the
+    componentEnvironment; messages of FMUs FMPy instantiated itself are printed as FMPy does."""
+    unit = _LOGGING.get(env or 0)
+    unit = unit() if unit is not None else None
+    if unit is not None:
+        unit._log(status, category, message)
+    else:
+        printLogMessage(env, instance, status, category, message)
+
+
+# One C callback for the whole process: FMPy's formatting proxy (which expands the FMU's printf-style
+# arguments) keeps a single global logger, so per-unit callbacks would dangle when a unit is freed.
+_LOGGER = fmi2CallbackLoggerTYPE(_dispatch)
+_ENVIRONMENTS = itertools.count(1)
+
+
+def _callbacks(unit: "FMUUnit") -> fmi2CallbackFunctions:
+    env = next(_ENVIRONMENTS)
+    _LOGGING[env] = weakref.ref(unit, lambda _, env=env: _LOGGING.pop(env, None))
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = _LOGGER
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
+    callbacks.componentEnvironment = env
+    try:
+        from fmpy.logging import addLoggerProxy
+
+        addLoggerProxy(byref(callbacks))
+    except Exception:  # noqa: BLE001 - without the proxy, messages arrive unformatted
+        pass
+    return callbacks
+
+
+class _NotPlain(Exception):
+    """A value that needs the full check (checked_value) before it goes to the FMU."""
+
+
+def _reals(values: Sequence) -> Sequence:
+    for v in values:
+        if v.__class__ is not float or v - v != 0.0:  # not a float, or inf or nan
+            raise _NotPlain
+    return values
+
+
+def _integers(values: Sequence) -> Sequence:
+    for v in values:
+        if v.__class__ is not int or not INT32[0] <= v <= INT32[1]:
+            raise _NotPlain
+    return values
+
+
+def _booleans(values: Sequence) -> Sequence:
+    for v in values:
+        if v.__class__ is not bool:
+            raise _NotPlain
+    return values
+
+
+_FAST_CHECK = {"Real": _reals, "Integer": _integers, "Boolean": _booleans}
+
+
+class _Block:
+    """Ports of one FMI type moved in one call: value references and values in preallocated C arrays."""
+
+    def __init__(self, kind: str, names: list[str], positions: list[int], refs: list[int]):
+        self.kind = kind
+        self.names = names
+        self.positions = positions  # where each port is in the bound list
+        self.n = len(names)
+        self.refs = (c_uint * self.n)(*refs)
+        self.values = (_C_TYPE[kind] * self.n)()
+
 
 class FMUUnit(Unit):
+    """An FMI 2.0 co-simulation FMU in this process: FMPy reads, extracts, loads and instantiates it;
+    every call into the FMU then goes through `_call`, which checks the returned status. Values move
+    through C arrays allocated once per bound list of ports, one call per FMI type and step."""
+
     def __init__(self, name: str, path: str | Path):
         self.name = name
         self.path = Path(path)
@@ -95,22 +246,89 @@ class FMUUnit(Unit):
                 self.ports[v.name] = Port(v.name, v.type, v.causality)
                 self.vr[v.name] = v.valueReference
         self.fmu = None
+        self.component = None
         self.folder = None
         self.time = 0.0
         self.status = "new"  # new | instantiated | error | fatal
-        self._plans: dict[tuple[str, ...], list] = {}
+        self.messages: deque[tuple[str, str, str]] = deque(maxlen=50)  # (status, category, message) logged
+        self._fresh = 0  # messages logged since the last failure was reported
+        self._blocks: dict[tuple[str, ...], list[_Block]] = {}
+        self._setters: dict[tuple[str, ...], Callable] = {}
+        self._getters: dict[tuple[str, ...], Callable] = {}
+        self._fn: dict[str, object] = {}
+        self._memory: dict[int, tuple[object, int]] | None = None
 
+    # ---- the one path into the FMU ----
     def _call(self, call: str, fn, *args):
-        """Every FMI call goes through here: a failure becomes a UnitError naming the unit, the time and
-        the call, and the unit remembers an fmi2Error or fmi2Fatal so that `terminate` only makes the
-        calls FMI still allows."""
+        """Every FMI call goes through here: an fmi2Status above fmi2Warning (returned, or raised by
+        FMPy) becomes a UnitError naming the unit, the time, the call and what the FMU logged, and the
+        unit remembers an fmi2Error or fmi2Fatal so that `terminate` only makes the calls FMI allows."""
         try:
-            return fn(*args)
+            result = fn(*args)
         except Exception as err:  # FMPy raises FMICallException, ctypes and OS errors their own kinds
-            status = getattr(err, "status", None)
-            self.status = "fatal" if status == 4 else "error"
-            raise UnitError(self.name, self.time, call, str(err)) from None
+            self._failed(call, getattr(err, "status", None), str(err))
+        if result.__class__ is int and result > FMI2_WARNING:
+            self._failed(call, result, f"returned {STATUS[result] if result < len(STATUS) else result}")
+        return result
 
+    def _failed(self, call: str, status: int | None, detail: str):
+        self.status = "fatal" if status == FMI2_FATAL else "error"
+        logged = [m for _, _, m in list(self.messages)[len(self.messages) - self._fresh:]] if self._fresh else []
+        self._fresh = 0
+        if logged:
+            detail = f"{detail}: {logged[-1]}"
+        raise UnitError(self.name, self.time, call, detail)
+
+    def _log(self, status: int, category: bytes | None, message: bytes | None) -> None:
+        text = message.decode("utf-8", "replace") if message else ""
+        self.messages.append((STATUS[status] if 0 <= status < len(STATUS) else str(status),
+                              category.decode("utf-8", "replace") if category else "", text))
+        self._fresh = min(self._fresh + 1, self.messages.maxlen)
+
+    def _bind_functions(self) -> None:
+        """The FMU's C functions with their prototypes (our own function objects, not FMPy's)."""
+        dll = self.fmu.dll
+        self._setters.clear()  # bound to the previous library's functions
+        self._getters.clear()
+        optional = () if self.can_save_state else _STATE_CALLS
+        for name, argtypes in _PROTOTYPES.items():
+            try:
+                fn = dll[name]
+            except AttributeError:
+                if name in optional:
+                    continue
+                self._failed("load", None, f"the binary has no function {name}")
+            fn.argtypes = argtypes
+            fn.restype = c_int
+            self._fn[name] = fn
+
+    def _port_memory(self) -> dict[int, tuple[object, int]] | None:
+        """Where a cotwin-built FMU keeps each port's value (value reference -> (C array, index)), from
+        its `cotwin_ports` extension; None for other FMUs."""
+        try:
+            fn = self.fmu.dll["cotwin_ports"]
+        except AttributeError:
+            return None
+        fn.restype = c_size_t
+        kind, slot = c_char_p(), POINTER(c_int)()
+        arrays = {"r": POINTER(c_double)(), "i": POINTER(c_int64)(), "b": POINTER(c_bool)()}
+        n = fn(c_void_p(self.component), byref(kind), byref(slot), byref(arrays["r"]), byref(arrays["i"]),
+               byref(arrays["b"]))
+        kinds = ctypes_string_at(kind, n).decode("ascii") if n else ""
+        if n == 0 or len(kinds) != n or any(k not in arrays for k in kinds):
+            return None
+        memory = {vr: (arrays[kinds[vr]], slot[vr]) for vr in range(n)}
+        expected = {"Real": "r", "Integer": "i", "Boolean": "b"}
+        if any(memory.get(self.vr[p.name], (None,))[0] is not arrays[expected[p.type]] for p in self.ports.values()):
+            return None  # the tables disagree with the model description: use FMI calls only
+        return memory
+
+    @property
+    def can_save_state(self) -> bool:
+        cs = self.md.coSimulation
+        return bool(cs.canGetAndSetFMUstate and cs.canSerializeFMUstate)
+
+    # ---- life cycle ----
     def instantiate(self, start: float) -> None:
         self.time = start
         try:
@@ -120,58 +338,27 @@ class FMUUnit(Unit):
         self.fmu = self._call("load", lambda: FMU2Slave(
             guid=self.md.guid, unzipDirectory=self.folder, modelIdentifier=self.md.coSimulation.modelIdentifier,
             instanceName=self.name))
+        self._bind_functions()
+        self.callbacks = _callbacks(self)  # kept alive as long as the instance
         try:
-            self._call("fmi2Instantiate", self.fmu.instantiate)
+            self._call("fmi2Instantiate", lambda: self.fmu.instantiate(callbacks=self.callbacks))
         except UnitError:
+            self.fmu.freeLibrary()
             self.fmu = None  # no instance: nothing to free
             raise
+        self.component = self.fmu.component
         self.status = "instantiated"
-        self._call("fmi2SetupExperiment", lambda: self.fmu.setupExperiment(startTime=start))
-        self._call("fmi2EnterInitializationMode", self.fmu.enterInitializationMode)
-
-    def _plan(self, names: tuple[str, ...]) -> list[tuple[str, list[str], list[int]]]:
-        """Ports grouped by FMI type with their value references, computed once per list of names
-        (the master asks for the same ports every step)."""
-        plan = self._plans.get(names)
-        if plan is None:
-            unknown = [n for n in names if n not in self.ports]
-            if unknown:
-                raise CotwinError(f"unit {self.name} has no port(s) {', '.join(unknown)}")
-            plan = []
-            for kind in ("Real", "Integer", "Boolean"):
-                chosen = [n for n in names if self.ports[n].type == kind]
-                if chosen:
-                    plan.append((kind, chosen, [self.vr[n] for n in chosen]))
-            self._plans[names] = plan
-        return plan
-
-    def set(self, values: dict[str, object]) -> None:
-        for kind, names, refs in self._plan(tuple(values)):
-            checked = [checked_value(self.name, self.ports[n], values[n]) for n in names]
-            if kind == "Real":
-                self._call("fmi2SetReal", self.fmu.setReal, refs, checked)
-            elif kind == "Integer":
-                self._call("fmi2SetInteger", self.fmu.setInteger, refs, checked)
-            else:
-                self._call("fmi2SetBoolean", self.fmu.setBoolean, refs, checked)
+        self._memory = self._port_memory()
+        fn = self._fn
+        self._call("fmi2SetupExperiment", fn["fmi2SetupExperiment"], self.component, 0, 0.0, start, 0, 0.0)
+        self._call("fmi2EnterInitializationMode", fn["fmi2EnterInitializationMode"], self.component)
 
     def initialize(self) -> None:
-        self._call("fmi2ExitInitializationMode", self.fmu.exitInitializationMode)
+        self._call("fmi2ExitInitializationMode", self._fn["fmi2ExitInitializationMode"], self.component)
 
     def step(self, t: float, h: float) -> None:
         self.time = t
-        self._call("fmi2DoStep", lambda: self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h))
-
-    def get(self, names: list[str]) -> dict[str, object]:
-        out = {}
-        for kind, chosen, refs in self._plan(tuple(names)):
-            if kind == "Real":
-                out.update(zip(chosen, self._call("fmi2GetReal", self.fmu.getReal, refs)))
-            elif kind == "Integer":
-                out.update(zip(chosen, self._call("fmi2GetInteger", self.fmu.getInteger, refs)))
-            else:
-                out.update((n, bool(v)) for n, v in zip(chosen, self._call("fmi2GetBoolean", self.fmu.getBoolean, refs)))
-        return out
+        self._call("fmi2DoStep", self._fn["fmi2DoStep"], self.component, t, h, 1)
 
     def terminate(self) -> None:
         """End the instance as FMI 2.0 allows from its state: fmi2Terminate then fmi2FreeInstance when
@@ -180,27 +367,178 @@ class FMUUnit(Unit):
         if self.fmu is not None:
             if self.status == "instantiated":
                 try:
-                    self.fmu.terminate()
-                except Exception:  # noqa: BLE001 - still free the instance
+                    self._call("fmi2Terminate", self._fn["fmi2Terminate"], self.component)
+                except UnitError:
                     pass
             if self.status != "fatal":
                 try:
-                    self.fmu.freeInstance()
-                except Exception:  # noqa: BLE001
+                    self._call("fmi2FreeInstance", self.fmu.freeInstance)
+                except UnitError:
                     pass
             self.fmu = None
+            self.component = None
         if self.folder:
             shutil.rmtree(self.folder, ignore_errors=True)
             self.folder = None
 
+    # ---- port values ----
+    def _plan(self, names: tuple[str, ...]) -> list[_Block]:
+        """The ports grouped by FMI type into preallocated blocks, once per list of names (the master
+        binds the same ports every step)."""
+        blocks = self._blocks.get(names)
+        if blocks is None:
+            unknown = [n for n in names if n not in self.ports]
+            if unknown:
+                raise CotwinError(f"unit {self.name} has no port(s) {', '.join(unknown)}")
+            blocks = []
+            for kind in ("Real", "Integer", "Boolean"):
+                positions = [k for k, n in enumerate(names) if self.ports[n].type == kind]
+                if positions:
+                    chosen = [names[k] for k in positions]
+                    blocks.append(_Block(kind, chosen, positions, [self.vr[n] for n in chosen]))
+            self._blocks[names] = blocks
+        return blocks
+
+    def setter(self, names: list[str]) -> Callable[[Sequence], None]:
+        """Values checked against their port's type (cheaply when they already have it) into the
+        block's C array, one fmi2Set call per FMI type. Ports bound grouped by type (as the algorithms
+        bind them) are taken as slices of the sequence. A cotwin-built FMU's values are written straight
+        into its port arrays (no call at all)."""
+        if self._memory is not None:
+            return self._memory_setter(names)
+        blocks = []
+        for b in self._plan(tuple(names)):
+            ports = [self.ports[n] for n in b.names]
+            start = b.positions[0]
+            contiguous = b.positions == list(range(start, start + b.n))
+            blocks.append((b, ports, _FAST_CHECK[b.kind], self._fn[f"fmi2Set{b.kind}"], f"fmi2Set{b.kind}",
+                           slice(start, start + b.n) if contiguous else None))
+        unit, call = self.name, self._call
+
+        def write(values: Sequence) -> None:
+            for block, ports, fast, fn, name, part in blocks:
+                chosen = values[part] if part is not None else [values[k] for k in block.positions]
+                try:
+                    block.values[:] = fast(chosen)
+                except _NotPlain:
+                    block.values[:] = [checked_value(unit, p, v) for p, v in zip(ports, chosen)]
+                call(name, fn, self.component, block.refs, block.n, block.values)
+        return write
+
+    def getter(self, names: list[str]) -> Callable[[], Sequence]:
+        """One fmi2Get call per FMI type into the block's C array; ports bound grouped by type come
+        back as the arrays' values joined, others are placed one by one. A cotwin-built FMU's values
+        are read straight from its port arrays."""
+        if self._memory is not None:
+            return self._memory_getter(names)
+        blocks = [(b, self._fn[f"fmi2Get{b.kind}"], f"fmi2Get{b.kind}") for b in self._plan(tuple(names))]
+        size, call = len(names), self._call
+        in_order = [k for b, _, _ in blocks for k in b.positions] == list(range(size))
+        if in_order:
+            def read_grouped() -> list:
+                out: list = []
+                for block, fn, name in blocks:
+                    values = block.values
+                    call(name, fn, self.component, block.refs, block.n, values)
+                    out += list(map(bool, values[:])) if block.kind == "Boolean" else values[:]
+                return out
+            return read_grouped
+
+        def read() -> list:
+            out = [None] * size
+            for block, fn, name in blocks:
+                call(name, fn, self.component, block.refs, block.n, block.values)
+                values = block.values[:]
+                if block.kind == "Boolean":
+                    values = [v != 0 for v in values]
+                for position, value in zip(block.positions, values):
+                    out[position] = value
+            return out
+        return read
+
+    def _memory_setter(self, names: list[str]) -> Callable[[Sequence], None]:
+        self._plan(tuple(names))  # unknown names are an error here too
+        kinds = {"Real": 0, "Integer": 1, "Boolean": 2}
+        targets = [(*self._memory[self.vr[n]], self.ports[n], kinds[self.ports[n].type]) for n in names]
+        unit, low, high = self.name, INT32[0], INT32[1]
+
+        def write(values: Sequence) -> None:
+            for (array, slot, port, kind), value in zip(targets, values):
+                cls = value.__class__
+                if (cls is float and value - value == 0.0) if kind == 0 else \
+                        (cls is int and low <= value <= high) if kind == 1 else cls is bool:
+                    array[slot] = value
+                else:
+                    array[slot] = checked_value(unit, port, value)
+        return write
+
+    def _memory_getter(self, names: list[str]) -> Callable[[], Sequence]:
+        self._plan(tuple(names))
+        sources = [self._memory[self.vr[n]] for n in names]
+        return lambda: [array[slot] for array, slot in sources]
+
+    def set(self, values: dict[str, object]) -> None:
+        names = tuple(values)
+        write = self._setters.get(names)
+        if write is None:
+            write = self._setters[names] = self.setter(list(names))
+        write(list(values.values()))
+
+    def get(self, names: list[str]) -> dict[str, object]:
+        names = tuple(names)
+        read = self._getters.get(names)
+        if read is None:
+            read = self._getters[names] = self.getter(list(names))
+        return dict(zip(names, read()))
+
+    # ---- state ----
+    def get_state(self) -> bytes:
+        """fmi2GetFMUstate and fmi2SerializeFMUstate: the FMU's bytes, with its GUID and the unit's time."""
+        if not self.can_save_state:
+            raise UnitError(self.name, self.time, "fmi2GetFMUstate", "the FMU cannot save and serialise its state "
+                            "(canGetAndSetFMUstate and canSerializeFMUstate are not both true)")
+        fn, handle = self._fn, c_void_p()
+        self._call("fmi2GetFMUstate", fn["fmi2GetFMUstate"], self.component, byref(handle))
+        try:
+            size = c_size_t()
+            self._call("fmi2SerializedFMUstateSize", fn["fmi2SerializedFMUstateSize"], self.component, handle,
+                       byref(size))
+            buffer = create_string_buffer(size.value)
+            self._call("fmi2SerializeFMUstate", fn["fmi2SerializeFMUstate"], self.component, handle, buffer, size)
+        finally:
+            self._call("fmi2FreeFMUstate", fn["fmi2FreeFMUstate"], self.component, byref(handle))
+        return pack("FMU", {"guid": self.md.guid, "time": self.time, "fmu": buffer.raw})
+
+    def set_state(self, state: bytes) -> None:
+        """fmi2DeSerializeFMUstate and fmi2SetFMUstate from bytes `get_state` returned for this FMU."""
+        data = unpack(state, "FMU")
+        if not self.can_save_state:
+            raise UnitError(self.name, self.time, "fmi2SetFMUstate", "the FMU cannot restore a state")
+        if data.get("guid") != self.md.guid:
+            raise UnitError(self.name, self.time, "fmi2SetFMUstate",
+                            f"the state is of another FMU (GUID {data.get('guid')}, this one is {self.md.guid})")
+        raw = data["fmu"]
+        fn, handle = self._fn, c_void_p()
+        self._call("fmi2DeSerializeFMUstate", fn["fmi2DeSerializeFMUstate"], self.component, raw, len(raw),
+                   byref(handle))
+        try:
+            self._call("fmi2SetFMUstate", fn["fmi2SetFMUstate"], self.component, handle)
+        finally:
+            self._call("fmi2FreeFMUstate", fn["fmi2FreeFMUstate"], self.component, byref(handle))
+        self.time = data["time"]
+
 
 class PythonUnit(Unit):
-    """An in-process unit: subclasses keep their port values in `self.values`."""
+    """An in-process unit: subclasses keep their port values in `self.values`.
+
+    Its state is `snapshot()` (plain data: the port values and `time`, the time its last step reached,
+    which subclasses keep; they add their own keys and extend `restore`), saved as bytes by `get_state`."""
 
     def __init__(self, name: str, ports: list[Port]):
         self.name = name
         self.ports = {p.name: p for p in ports}
         self.values: dict[str, object] = {p.name: (False if p.type == "Boolean" else 0) for p in ports}
+        self.time = 0.0
 
     def instantiate(self, start: float) -> None:
         self.time = start
@@ -217,5 +555,39 @@ class PythonUnit(Unit):
     def get(self, names: list[str]) -> dict[str, object]:
         return {n: self.values[n] for n in names}
 
+    def setter(self, names: list[str]) -> Callable[[Sequence], None]:
+        unknown = [n for n in names if n not in self.ports]
+        if unknown:
+            raise CotwinError(f"unit {self.name} has no port(s) {', '.join(unknown)}")
+        names = list(names)
+        return lambda values: self.values.update(zip(names, values))
+
+    def getter(self, names: list[str]) -> Callable[[], Sequence]:
+        unknown = [n for n in names if n not in self.ports]
+        if unknown:
+            raise CotwinError(f"unit {self.name} has no port(s) {', '.join(unknown)}")
+        if not names:
+            return lambda: ()
+        pick = itemgetter(*names)
+        if len(names) == 1:
+            return lambda: (pick(self.values),)
+        return lambda: pick(self.values)
+
     def terminate(self) -> None:
         pass
+
+    # ---- state ----
+    def snapshot(self) -> dict:
+        """The unit's state as plain data; subclasses add their own keys."""
+        return {"values": dict(self.values), "time": self.time}
+
+    def restore(self, snapshot: dict) -> None:
+        self.values.clear()  # in place: bound setters and getters keep working
+        self.values.update(snapshot["values"])
+        self.time = snapshot["time"]
+
+    def get_state(self) -> bytes:
+        return pack(type(self).__name__, self.snapshot())
+
+    def set_state(self, state: bytes) -> None:
+        self.restore(unpack(state, type(self).__name__))

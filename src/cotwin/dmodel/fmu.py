@@ -1,5 +1,10 @@
 """Package a module as an FMI 2.0 co-simulation FMU: modelDescription.xml, C sources, linux64 binary.
 
+The sources are the module's cycle (model.c/model.h, cotwin.dmodel.ccode), its ports as tables
+(ports.h, from cotwin.dmodel.ports) and the FMI interface, which is the same for every module
+(fmi2_wrapper.c in this package, shipped as sources/fmi2.c). The FMU can get, set and serialise its
+state (canGetAndSetFMUstate, canSerializeFMUstate).
+
 Ports (docs/interop.md): an input event is a Boolean input true in the step it occurs, plus one
 input per value field; an operation call is a Boolean output plus its arguments; output events
 likewise; `state` is the index of the active leaf state. Constants without a value are parameters.
@@ -11,6 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+import shlex
 import shutil
 import subprocess
 import tempfile
@@ -23,9 +29,10 @@ import fmpy
 
 from ..diagnostics import CotwinError
 from .ccode import generate_c
-from .ports import PortLayout, Variable
+from .ports import SLOT_ARRAY, PortLayout, Variable
 from .program import Program
 
+WRAPPER = Path(__file__).with_name("fmi2_wrapper.c")  # the FMI 2.0 interface, the same for every module
 _FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
@@ -40,38 +47,8 @@ def _start_text(var: Variable) -> str:
     return f' start="{int(var.start)}"'
 
 
-_CAST = {"Real": "{}", "Integer": "(int64_t){}", "Boolean": "(bool){}"}
-
-
 def _field(path: tuple[str, ...]) -> str:
     return "".join(f".{f}" for f in path)
-
-
-def _wrapper_code(layout: PortLayout) -> dict[str, list[str]]:
-    """The wrapper's C statements that move port values in and out of the model, from the layout."""
-    slot = layout.slot
-    code: dict[str, list[str]] = {"params": [], "to_model": [], "flags": [], "clear": [], "from_model": []}
-    for par in layout.parameters:
-        code["params"].append(f"M->m{par.machine}.p_{par.name} = "
-                              f"{_CAST[par.var.fmi_type].format('inst->' + slot(par.var))};")
-    for ev in layout.inputs:
-        code["to_model"].append(f"M->in_{ev.name} = inst->{slot(ev.flag)};")
-        code["flags"].append(f"M->in_{ev.name}")
-        for v in ev.values:
-            code["to_model"].append(f"M->in_{ev.name}_v{_field(v.path)} = "
-                                    f"{_CAST[v.var.fmi_type].format('inst->' + slot(v.var))};")
-    for op in layout.operations:
-        code["clear"].append(f"inst->{slot(op.flag)} = false;")
-        copies = [f"inst->{slot(v.var)} = M->arg_{op.name}_{pname}{_field(v.path)};"
-                  for pname, values in op.args for v in values]
-        code["from_model"].append(f"if (M->op_{op.name}) {{ inst->{slot(op.flag)} = true; {' '.join(copies)} }}")
-    for ev in layout.outputs:
-        code["clear"].append(f"inst->{slot(ev.flag)} = false;")
-        copies = [f"inst->{slot(v.var)} = M->out_{ev.name}_v{_field(v.path)};" for v in ev.values]
-        code["from_model"].append(f"if (M->out_{ev.name}) {{ inst->{slot(ev.flag)} = true; {' '.join(copies)} }}")
-    for st in layout.states:
-        code["from_model"].append(f"inst->{slot(st.var)} = model_state(M, {st.machine});")
-    return code
 
 
 def model_identifier(program: Program) -> str:
@@ -90,7 +67,8 @@ def model_description(program: Program, layout: PortLayout, guid: str) -> str:
         '  variableNamingConvention="flat"',
         '  numberOfEventIndicators="0">',
         f'  <CoSimulation modelIdentifier="{ident}" canHandleVariableCommunicationStepSize="true"'
-        ' canNotUseMemoryManagementFunctions="true"/>',
+        ' canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="true"'
+        ' canSerializeFMUstate="true"/>',
         '  <DefaultExperiment startTime="0.0" stepSize="1.0"/>',
         "  <ModelVariables>",
     ]
@@ -115,167 +93,92 @@ def model_description(program: Program, layout: PortLayout, guid: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def wrapper_source(program: Program, layout: PortLayout) -> str:
+def _c_string(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _port_code(layout: PortLayout) -> dict[str, list[str]]:
+    """The C statements that move port values between the slot arrays r, i, b and the model M."""
+    slot = layout.slot
+    code: dict[str, list[str]] = {"start": [], "parameters": [], "to_model": [], "clear_events": [],
+                                  "clear_outputs": [], "from_model": []}
+    for var in layout.variables:
+        if var.start not in (None, 0, False, 0.0):
+            code["start"].append(f"{slot(var)} = {_c_start(var)};")
+    for par in layout.parameters:
+        code["parameters"].append(f"M->m{par.machine}.p_{par.name} = {_CAST[par.var.fmi_type].format(slot(par.var))};")
+    for ev in layout.inputs:
+        code["to_model"].append(f"M->in_{ev.name} = {slot(ev.flag)};")
+        code["clear_events"].append(f"M->in_{ev.name} = false;")
+        for v in ev.values:
+            code["to_model"].append(f"M->in_{ev.name}_v{_field(v.path)} = {_CAST[v.var.fmi_type].format(slot(v.var))};")
+    for op in layout.operations:
+        code["clear_outputs"].append(f"{slot(op.flag)} = false;")
+        copies = [f"{slot(v.var)} = M->arg_{op.name}_{pname}{_field(v.path)};" for pname, values in op.args for v in values]
+        code["from_model"].append(f"if (M->op_{op.name}) {{ {' '.join([f'{slot(op.flag)} = true;', *copies])} }}")
+    for ev in layout.outputs:
+        code["clear_outputs"].append(f"{slot(ev.flag)} = false;")
+        copies = [f"{slot(v.var)} = M->out_{ev.name}_v{_field(v.path)};" for v in ev.values]
+        code["from_model"].append(f"if (M->out_{ev.name}) {{ {' '.join([f'{slot(ev.flag)} = true;', *copies])} }}")
+    for st in layout.states:
+        code["from_model"].append(f"{slot(st.var)} = model_state(M, {st.machine});")
+    return code
+
+
+_CAST = {"Real": "{}", "Integer": "(int64_t){}", "Boolean": "(bool){}"}
+_UNUSED = {"start": "(void)r; (void)i; (void)b;", "parameters": "(void)M; (void)r; (void)i; (void)b;",
+           "to_model": "(void)M; (void)r; (void)i; (void)b;", "clear_events": "(void)M;",
+           "clear_outputs": "(void)r; (void)i; (void)b;", "from_model": "(void)M; (void)r; (void)i; (void)b;"}
+_SIGNATURES = {
+    "start": "ports_start_values(double *r, int64_t *i, bool *b)",
+    "parameters": "ports_parameters(Model *M, const double *r, const int64_t *i, const bool *b)",
+    "to_model": "ports_to_model(Model *M, const double *r, const int64_t *i, const bool *b)",
+    "clear_events": "ports_clear_input_events(Model *M)",
+    "clear_outputs": "ports_clear_outputs(double *r, int64_t *i, bool *b)",
+    "from_model": "ports_from_model(const Model *M, double *r, int64_t *i, bool *b)",
+}
+_PURPOSE = {
+    "start": "start values of the ports (all others are zero)",
+    "parameters": "parameters into the model, before model_init",
+    "to_model": "input events and their values into the model, before a cycle",
+    "clear_events": "no input events in the second and later cycles of a step",
+    "clear_outputs": "output flags false at the start of a step",
+    "from_model": "operation calls, output events and states out of the model, after a cycle",
+}
+
+
+def ports_header(program: Program, layout: PortLayout, model_header: str) -> str:
+    """sources/ports.h: the module's ports as tables for fmi2_wrapper.c, and the code that moves their
+    values in and out of the model. STATE_TAG (from the model's data layout and the ports) marks the
+    FMU states of this FMU, so that a state of another module or build is refused."""
     n = layout.counts
-    code = _wrapper_code(layout)
-    ind = "\n    "
-    text = f"""/* Generated by cotwin: the FMI 2.0 co-simulation interface of module {program.module.name}. */
-#include <math.h>
-#include <stdarg.h>
-#include <stdlib.h>
-#include <string.h>
-#include "fmi2Functions.h"
-#include "model.h"
-
-typedef struct {{
-    Model model;
-    double r[{max(n['Real'], 1)}];
-    int64_t i[{max(n['Integer'], 1)}];
-    bool b[{max(n['Boolean'], 1)}];
-    fmi2CallbackFunctions functions;
-    char *name;
-    int initialised;
-}} Instance;
-
-static const char kind_of[] = "{''.join({'Real': 'r', 'Integer': 'i', 'Boolean': 'b'}[v.fmi_type] for v in layout.variables)}";
-static const int slot_of[] = {{{', '.join(str(v.slot) for v in layout.variables) or '0'}}};
-#define NVARS {len(layout.variables)}
-
-static void log_error(Instance *inst, const char *message) {{
-    if (inst->functions.logger)
-        inst->functions.logger(inst->functions.componentEnvironment, inst->name, fmi2Error, "error", "%s", message);
-}}
-
-static void defaults(Instance *inst) {{
-    memset(inst->r, 0, sizeof inst->r);
-    memset(inst->i, 0, sizeof inst->i);
-    memset(inst->b, 0, sizeof inst->b);
-    {ind.join(f"inst->{layout.slot(v)} = {_c_start(v)};" for v in layout.variables if v.start not in (None, 0, False, 0.0))}
-    memset(&inst->model, 0, sizeof inst->model);
-}}
-
-static void start_model(Instance *inst) {{
-    Model *M = &inst->model;
-    {ind.join(code['params'])}
-    model_init(M);
-    inst->initialised = 1;
-}}
-
-static int run_cycle(Instance *inst, int first) {{
-    Model *M = &inst->model;
-    {ind.join(code['to_model'])}
-    if (!first) {{  /* input events are present in the first cycle of a step only */
-        {(ind + '    ').join(f"{flag} = false;" for flag in code['flags'])}
-    }}
-    if (model_step(M)) return 1;
-    {ind.join(code['from_model'])}
-    return 0;
-}}
-
-const char *fmi2GetTypesPlatform(void) {{ return fmi2TypesPlatform; }}
-const char *fmi2GetVersion(void) {{ return fmi2Version; }}
-
-fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
-                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
-                              fmi2Boolean visible, fmi2Boolean loggingOn) {{
-    (void)fmuResourceLocation; (void)visible; (void)loggingOn; (void)fmuGUID;
-    if (fmuType != fmi2CoSimulation) return NULL;
-    Instance *inst = calloc(1, sizeof(Instance));
-    if (!inst) return NULL;
-    if (functions) inst->functions = *functions;
-    inst->name = malloc(strlen(instanceName ? instanceName : "") + 1);
-    strcpy(inst->name, instanceName ? instanceName : "");
-    defaults(inst);
-    return inst;
-}}
-
-void fmi2FreeInstance(fmi2Component c) {{
-    Instance *inst = (Instance *)c;
-    if (!inst) return;
-    free(inst->name);
-    free(inst);
-}}
-
-fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cats[]) {{
-    (void)c; (void)on; (void)n; (void)cats; return fmi2OK;
-}}
-fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real start,
-                               fmi2Boolean stopDef, fmi2Real stop) {{
-    (void)c; (void)tolDef; (void)tol; (void)start; (void)stopDef; (void)stop; return fmi2OK;
-}}
-fmi2Status fmi2EnterInitializationMode(fmi2Component c) {{ (void)c; return fmi2OK; }}
-fmi2Status fmi2ExitInitializationMode(fmi2Component c) {{ start_model((Instance *)c); return fmi2OK; }}
-fmi2Status fmi2Terminate(fmi2Component c) {{ (void)c; return fmi2OK; }}
-fmi2Status fmi2Reset(fmi2Component c) {{ Instance *inst = (Instance *)c; defaults(inst); inst->initialised = 0; return fmi2OK; }}
-
-#define CHECK_VR(k) if ((k) >= NVARS) return fmi2Error
-fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {{
-    Instance *inst = (Instance *)c;
-    for (size_t k = 0; k < n; k++) {{ CHECK_VR(vr[k]); if (kind_of[vr[k]] != 'r') return fmi2Error; v[k] = inst->r[slot_of[vr[k]]]; }}
-    return fmi2OK;
-}}
-fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {{
-    Instance *inst = (Instance *)c;
-    for (size_t k = 0; k < n; k++) {{ CHECK_VR(vr[k]); if (kind_of[vr[k]] != 'i') return fmi2Error; v[k] = (fmi2Integer)inst->i[slot_of[vr[k]]]; }}
-    return fmi2OK;
-}}
-fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]) {{
-    Instance *inst = (Instance *)c;
-    for (size_t k = 0; k < n; k++) {{ CHECK_VR(vr[k]); if (kind_of[vr[k]] != 'b') return fmi2Error; v[k] = inst->b[slot_of[vr[k]]] ? fmi2True : fmi2False; }}
-    return fmi2OK;
-}}
-fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]) {{
-    (void)c; (void)vr; (void)v; return n ? fmi2Error : fmi2OK;
-}}
-fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {{
-    Instance *inst = (Instance *)c;
-    for (size_t k = 0; k < n; k++) {{ CHECK_VR(vr[k]); if (kind_of[vr[k]] != 'r') return fmi2Error; inst->r[slot_of[vr[k]]] = v[k]; }}
-    return fmi2OK;
-}}
-fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[]) {{
-    Instance *inst = (Instance *)c;
-    for (size_t k = 0; k < n; k++) {{ CHECK_VR(vr[k]); if (kind_of[vr[k]] != 'i') return fmi2Error; inst->i[slot_of[vr[k]]] = v[k]; }}
-    return fmi2OK;
-}}
-fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[]) {{
-    Instance *inst = (Instance *)c;
-    for (size_t k = 0; k < n; k++) {{ CHECK_VR(vr[k]); if (kind_of[vr[k]] != 'b') return fmi2Error; inst->b[slot_of[vr[k]]] = v[k] != fmi2False; }}
-    return fmi2OK;
-}}
-fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[]) {{
-    (void)c; (void)vr; (void)v; return n ? fmi2Error : fmi2OK;
-}}
-
-fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {{
-    Instance *inst = (Instance *)c;
-    (void)t; (void)noSetPrior;
-    if (!inst->initialised) start_model(inst);
-    double period = inst->{layout.slot(layout.period)};
-    long cycles = period > 0.0 ? lround(h / period) : 1;
-    {ind.join(code['clear'])}
-    for (long k = 0; k < cycles; k++) {{
-        if (run_cycle(inst, k == 0)) {{ log_error(inst, inst->model.message); return fmi2Error; }}
-    }}
-    return fmi2OK;
-}}
-
-fmi2Status fmi2CancelStep(fmi2Component c) {{ (void)c; return fmi2Error; }}
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *v) {{ (void)c; (void)s; (void)v; return fmi2Discard; }}
-fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *v) {{ (void)c; (void)s; (void)v; return fmi2Discard; }}
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *v) {{ (void)c; (void)s; (void)v; return fmi2Discard; }}
-fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *v) {{ (void)c; (void)s; (void)v; return fmi2Discard; }}
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *v) {{ (void)c; (void)s; (void)v; return fmi2Discard; }}
-fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer o[], const fmi2Real v[]) {{ (void)c; (void)vr; (void)n; (void)o; (void)v; return fmi2Error; }}
-fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer o[], fmi2Real v[]) {{ (void)c; (void)vr; (void)n; (void)o; (void)v; return fmi2Error; }}
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) {{ (void)c; (void)s; return fmi2Error; }}
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) {{ (void)c; (void)s; return fmi2Error; }}
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) {{ (void)c; (void)s; return fmi2Error; }}
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *n) {{ (void)c; (void)s; (void)n; return fmi2Error; }}
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t n) {{ (void)c; (void)s; (void)b; (void)n; return fmi2Error; }}
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t n, fmi2FMUstate *s) {{ (void)c; (void)b; (void)n; (void)s; return fmi2Error; }}
-fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu, const fmi2ValueReference z[], size_t nz, const fmi2Real dv[], fmi2Real dz[]) {{ (void)c; (void)u; (void)nu; (void)z; (void)nz; (void)dv; (void)dz; return fmi2Error; }}
-"""
-    return text
+    code = _port_code(layout)
+    lines = [f"/* Generated by cotwin from module {program.module.name}: the FMU's ports and how their values",
+             "   move between the slot arrays (r: reals, i: integers, b: Booleans) and the model. */",
+             "#ifndef COTWIN_PORTS_H", "#define COTWIN_PORTS_H", "#include <stdbool.h>", "#include <stdint.h>",
+             '#include "model.h"', "",
+             f"#define N_REAL {n['Real']}", f"#define N_INTEGER {n['Integer']}", f"#define N_BOOLEAN {n['Boolean']}",
+             f"#define N_VARIABLES {len(layout.variables)}",
+             f"#define PERIOD_SLOT {layout.period.slot}  /* r[] slot of the parameter {layout.period.name} */",
+             "#define STATE_TAG UINT64_C(0x@TAG@)  /* identifies the states of this FMU */", "",
+             "/* per value reference: its type (r, i, b), its slot in that array, its name */",
+             f"static const char port_kind[] = "
+             f"{_c_string(''.join(SLOT_ARRAY[v.fmi_type] for v in layout.variables))};",
+             f"static const int port_slot[] = {{{', '.join(str(v.slot) for v in layout.variables) or '0'}}};",
+             "static const char *const port_name[] = {"]
+    lines.extend(f"    {_c_string(v.name)}," for v in layout.variables)
+    lines.append("};")
+    for key, signature in _SIGNATURES.items():
+        lines.append("")
+        lines.append(f"/* {_PURPOSE[key]} */")
+        lines.append(f"static void {signature} {{")
+        lines.extend(f"    {stmt}" for stmt in code[key] or [_UNUSED[key]])
+        lines.append("}")
+    lines.append("")
+    lines.append("#endif")
+    text = "\n".join(lines) + "\n"
+    tag = hashlib.sha256((model_header + text).encode()).hexdigest()[:16]
+    return text.replace("@TAG@", tag)
 
 
 def _c_start(var: Variable) -> str:
@@ -290,7 +193,8 @@ def fmu_sources(program: Program) -> dict[str, str]:
     """Every text file of the FMU (deterministic): modelDescription.xml and sources/*."""
     layout = PortLayout(program)
     files = {f"sources/{name}": text for name, text in generate_c(program).items()}
-    files["sources/fmi2.c"] = wrapper_source(program, layout)
+    files["sources/ports.h"] = ports_header(program, layout, files["sources/model.h"])
+    files["sources/fmi2.c"] = WRAPPER.read_text()
     headers = Path(fmpy.__file__).parent / "c-code"
     for h in _FMI_HEADERS:
         files[f"sources/{h}"] = (headers / h).read_text()
@@ -301,8 +205,11 @@ def fmu_sources(program: Program) -> dict[str, str]:
 
 
 def compile_binary(sources: dict[str, str], ident: str, folder: Path, cc: str = "cc") -> Path:
-    """Compile the sources into folder/<ident>.so with the system C compiler."""
-    if shutil.which(cc) is None:
+    """Compile the sources into folder/<ident>.so with the C compiler `cc` (a command, possibly with
+    arguments, e.g. "ccache gcc"); paths are kept out of the binary so that it does not depend on
+    where it was built."""
+    command = shlex.split(cc)
+    if not command or shutil.which(command[0]) is None:
         raise CotwinError(f"no C compiler '{cc}' found on PATH (install gcc, or pass --cc)")
     with tempfile.TemporaryDirectory(prefix="cotwin-cc-") as tmp:
         src = Path(tmp)
@@ -311,21 +218,27 @@ def compile_binary(sources: dict[str, str], ident: str, folder: Path, cc: str = 
                 (src / Path(name).name).write_text(text)
         out = folder / f"{ident}.so"
         folder.mkdir(parents=True, exist_ok=True)
-        cmd = [cc, "-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=default", "-Wall", "-Wno-unused-label",
-               "-Wno-unused-variable", "-I", str(src), "-o", str(out), str(src / "model.c"), str(src / "fmi2.c"), "-lm"]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
+        cmd = [*command, "-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=default", "-Wall", "-Wno-unused-label",
+               "-Wno-unused-variable", "-Wno-unused-function", f"-ffile-prefix-map={src}=sources", "-I", str(src),
+               "-o", str(out), str(src / "model.c"), str(src / "fmi2.c"), "-lm"]
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True)
+        except OSError as err:
+            raise CotwinError(f"cannot run the C compiler '{cc}': {err.strerror or err}") from None
         if proc.returncode != 0:
-            raise CotwinError(f"the C compiler failed on the generated code:\n{proc.stderr}")
+            raise CotwinError(f"the C compiler '{cc}' failed on the generated code:\n{proc.stderr}")
+        if not out.is_file():
+            raise CotwinError(f"the C compiler '{cc}' reported success but wrote no {out.name}")
     return out
 
 
 def build_fmu(program: Program, output: str | Path, cc: str = "cc") -> Path:
-    """Write the FMU zip: modelDescription.xml, binaries/linux64/<id>.so and sources/."""
+    """Write the FMU zip: modelDescription.xml, binaries/linux64/<id>.so (compiled with `cc`) and sources/."""
     output = Path(output)
     files = fmu_sources(program)
     ident = model_identifier(program)
     with tempfile.TemporaryDirectory(prefix="cotwin-fmu-") as tmp:
-        binary = compile_binary(files, ident, Path(tmp))
+        binary = compile_binary(files, ident, Path(tmp), cc)
         output.parent.mkdir(parents=True, exist_ok=True)
         partial = output.with_suffix(output.suffix + ".part")
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:

@@ -1,16 +1,14 @@
-"""Drive a built d-model FMU through FMPy with the interpreter's vocabulary (events in, outputs out).
+"""Drive a built d-model FMU with the interpreter's vocabulary (events in, outputs out), through the
+co-simulation's FMU unit (so every FMI call is checked the same way).
 
 Used by differential tests and benchmarks: same inputs as `Interpreter.step`, same `Output` list back.
 """
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
-from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave
-
+from ..cosim.units import FMUUnit
 from .interpreter import Output
 from .ports import PortLayout
 from .program import Program, assemble, get_path
@@ -22,36 +20,21 @@ class FMUDriver:
         self.program = program
         self.layout = PortLayout(program)
         self.vr = {v.name: v for v in self.layout.variables}
-        self.folder = extract(str(fmu_path))
-        md = read_model_description(self.folder)
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self.folder,
-                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance_name)
-        self.fmu.instantiate()
-        self.fmu.setupExperiment(startTime=0.0)
-        self.fmu.enterInitializationMode()
-        for name, value in (parameters or {}).items():
-            self._set(name, value)
-        self.fmu.exitInitializationMode()
+        self.unit = FMUUnit(instance_name, fmu_path)
+        self.unit.instantiate(0.0)
+        if parameters:
+            self.unit.set(dict(parameters))
+        self.unit.initialize()
         self.time = 0.0
         self.h = step_size
         self._events = [ev.name for ev in program.inputs]
 
     def _set(self, name: str, value) -> None:
-        var = self.vr[name]
-        if var.fmi_type == "Real":
-            self.fmu.setReal([var.vr], [float(value)])
-        elif var.fmi_type == "Integer":
-            self.fmu.setInteger([var.vr], [int(value)])
-        else:
-            self.fmu.setBoolean([var.vr], [bool(value)])
+        kind = self.vr[name].fmi_type
+        self.unit.set({name: float(value) if kind == "Real" else int(value) if kind == "Integer" else bool(value)})
 
     def _get(self, name: str):
-        var = self.vr[name]
-        if var.fmi_type == "Real":
-            return self.fmu.getReal([var.vr])[0]
-        if var.fmi_type == "Integer":
-            return self.fmu.getInteger([var.vr])[0]
-        return bool(self.fmu.getBoolean([var.vr])[0])
+        return self.unit.get([name])[name]
 
     def step(self, inputs: dict | None = None) -> list[Output]:
         inputs = inputs or {}
@@ -62,7 +45,7 @@ class FMUDriver:
                 for port, sc in ev.value_ports:
                     value = inputs[ev.name]
                     self._set(port, get_path(value, sc.path) if sc.path else value)
-        self.fmu.doStep(currentCommunicationPoint=self.time, communicationStepSize=self.h)
+        self.unit.step(self.time, self.h)
         self.time += self.h
         return self.outputs()
 
@@ -87,8 +70,4 @@ class FMUDriver:
         return self._get(self.program.state_port(self.program.machines[machine]))
 
     def close(self) -> None:
-        try:
-            self.fmu.terminate()
-            self.fmu.freeInstance()
-        finally:
-            shutil.rmtree(self.folder, ignore_errors=True)
+        self.unit.terminate()

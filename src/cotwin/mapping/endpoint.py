@@ -8,13 +8,13 @@ is the default; any object with this interface plugs in without touching the map
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Protocol
 
 import numpy as np
 
 from ..diagnostics import CotwinError
-from ..pmodel.simulator import PlatformSimulator
+from ..pmodel.simulator import PlatformSimulator, SimState
 from ..pmodel.tree import KinematicTree
 
 CONTROL_PERIOD = 0.002  # s between trajectory set-points sent to the servos
@@ -66,6 +66,7 @@ class SimulatedEndpoint:
         self.tree = simulator.tree
         self._path_to_joint = simulator.actuators()
         self.segment: Segment | None = None
+        self._held = None  # the segment whose final set-point the servos already hold
 
     def start(self) -> None:
         self.segment = None
@@ -110,13 +111,56 @@ class SimulatedEndpoint:
         self.segment = Segment(start, goal, now, segment_duration(self.tree, start, goal))
 
     def advance(self, dt: float) -> None:
-        end = self.sim.time + dt - 1e-12
-        while self.sim.time < end:
-            chunk = min(CONTROL_PERIOD, end - self.sim.time + 1e-12)
-            if self.segment is not None:
-                self.sim.write_actuators(self.segment.at(self.sim.time + chunk))
-            self.sim.advance(chunk)
+        """Run the platform for dt (whole physics steps), the servos' set-points refreshed every
+        CONTROL_PERIOD to where the segment is at the end of that period; once the segment has ended
+        its set-point no longer changes, so the rest runs in one go."""
+        sim = self.sim
+        steps = sim.steps_for(dt)
+        period = max(1, int(round(CONTROL_PERIOD / sim.timestep)))
+        while steps > 0:
+            n = min(period, steps)
+            segment = self.segment
+            if segment is not None and segment is not self._held:
+                ahead = sim.time + n * sim.timestep
+                sim.write_actuators(segment.at(ahead))
+                if ahead >= segment.t0 + segment.duration:  # the set-point stays at the segment's end
+                    self._held = segment
+            if segment is None or segment is self._held:
+                n = steps
+            sim.step(n)
+            steps -= n
 
     @property
     def time(self) -> float:
         return self.sim.time
+
+    # ---- state (what-if forks and rollbacks): the simulator's and the segment in flight ----
+    def snapshot(self) -> dict:
+        """The endpoint's state as plain data: MuJoCo's integration state and the trajectory in flight."""
+        return {"simulator": self.sim.get_state().vector, "segment": trajectory_data(self.segment)}
+
+    def restore(self, snapshot: dict) -> None:
+        self.sim.set_state(SimState(snapshot["simulator"]))
+        self.segment = trajectory_from(snapshot["segment"])
+        self._held = None  # written again at the next step (the same value: MuJoCo's controls are restored)
+
+
+TRAJECTORIES = {"Segment": Segment}  # the trajectory kinds an endpoint state may hold, by class name
+
+
+def trajectory_data(trajectory) -> dict | None:
+    """A trajectory (a dataclass of TRAJECTORIES) as plain data: its kind and fields."""
+    if trajectory is None:
+        return None
+    kind = type(trajectory).__name__
+    if TRAJECTORIES.get(kind) is not type(trajectory):
+        raise CotwinError(f"cannot save a trajectory of kind {kind}: not one of {', '.join(TRAJECTORIES)}")
+    return {"kind": kind, "fields": {f.name: getattr(trajectory, f.name) for f in fields(trajectory)}}
+
+
+def trajectory_from(data: dict | None):
+    if data is None:
+        return None
+    if data.get("kind") not in TRAJECTORIES:
+        raise CotwinError(f"a saved trajectory of unknown kind {data.get('kind')!r}")
+    return TRAJECTORIES[data["kind"]](**data["fields"])

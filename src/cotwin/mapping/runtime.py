@@ -14,6 +14,8 @@ Readings of the mapping (see also docs/robosim-notation.md, section 4):
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 
 from ..diagnostics import CotwinError
@@ -64,6 +66,13 @@ class FunctionRegistry:
 
     def functions(self) -> dict:
         return {"inverse_kinematics": self.inverse_kinematics, "reachable": self.reachable, **MATH}
+
+    # ---- state: a target's solution is reused whenever it comes again, so the cache is state ----
+    def snapshot(self) -> dict:
+        return {key: {f.name: getattr(result, f.name) for f in fields(result)} for key, result in self._cache.items()}
+
+    def restore(self, snapshot: dict) -> None:
+        self._cache = {key: ik.IKResult(**values) for key, values in snapshot.items()}
 
 
 class _Env:
@@ -282,3 +291,21 @@ class Mapping:
     def monitored(self) -> list[str]:
         """Mapping variables worth logging: the q/qd mirrors, in order."""
         return list(self._mirrors)
+
+    # ---- state (what-if forks and rollbacks) ----
+    def snapshot(self) -> dict:
+        """The runtime's state as plain data: its variables, whether it was started, the functions'
+        cached solutions and the endpoint's state (an endpoint that cannot save one is an error)."""
+        save = getattr(self.endpoint, "snapshot", None)
+        if save is None:
+            raise CotwinError(f"mapping {self.model.name}: its platform ({type(self.endpoint).__name__}) cannot save "
+                              "its state, so the mapping cannot either")
+        return {"variables": dict(self.variables), "started": self.started, "functions": self.registry.snapshot(),
+                "endpoint": save()}
+
+    def restore(self, snapshot: dict) -> None:
+        self.endpoint.restore(snapshot["endpoint"])
+        self.registry.restore(snapshot["functions"])
+        self.variables = dict(snapshot["variables"])
+        self.started = snapshot["started"]
+        self._readings = None

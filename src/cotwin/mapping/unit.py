@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Callable
 
+from ..diagnostics import CotwinError
 from ..cosim.units import Port, PythonUnit
 from ..dmodel.ports import PortLayout
 from ..dmodel.program import Program, assemble
@@ -63,6 +64,7 @@ class MappingUnit(PythonUnit):
                 self.mapping.execute_operation(op, args)
                 self.executed.append((t, op, args))
         self.mapping.step(h)
+        self.time = t + h
         self._report()
 
     def _report(self) -> None:
@@ -74,3 +76,14 @@ class MappingUnit(PythonUnit):
     def terminate(self) -> None:
         if self.mapping is not None and self.mapping.started:
             self.mapping.stop_mapping()
+
+    # ---- state: the port values, the mapping runtime's (variables, platform) and the operations run ----
+    def snapshot(self) -> dict:
+        return {**super().snapshot(), "mapping": self.mapping.snapshot(), "executed": list(self.executed)}
+
+    def restore(self, snapshot: dict) -> None:
+        if self.mapping is None:
+            raise CotwinError(f"unit {self.name}: instantiate it before restoring a state into it")
+        super().restore(snapshot)
+        self.mapping.restore(snapshot["mapping"])
+        self.executed = list(snapshot["executed"])

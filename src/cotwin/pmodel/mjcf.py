@@ -11,7 +11,12 @@ Documented defaults, used where the p-model gives no value:
   without steady-state sag; payloads (bricks) are not compensated;
 - the robot does not collide with itself; it collides with the plate and the bricks;
 - joint position limits become the joint range and the servo's control range; effort limits become
-  the servo's force range; velocity limits are the trajectory generator's job (cotwin.mapping).
+  the servo's force range; velocity limits are the trajectory generator's job (cotwin.mapping);
+- an unstable simulation stops (MuJoCo's automatic reset is disabled: it would silently put the
+  robot back at its initial state and carry on).
+
+`visual=False` gives the model the simulator steps: what only shows (geoms that collide with nothing,
+such as the plate's hole markers) is discarded by MuJoCo's compiler, so that it costs no time per step.
 """
 
 from __future__ import annotations
@@ -92,12 +97,14 @@ def servo_gains(tree: KinematicTree, joint: TJoint, timestep: float = TIMESTEP) 
     return float(kp), float(kd)
 
 
-def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP) -> str:
-    """MJCF of the robot, alone or inside a scene (an object with `add_to(worldbody)`)."""
+def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual: bool = True) -> str:
+    """MJCF of the robot, alone or inside a scene (an object with `add_to(worldbody)`); without the
+    purely visual elements when `visual` is false (see the module doc)."""
     root = ET.Element("mujoco", {"model": tree.name})
-    sub(root, "compiler", angle="radian", autolimits="true")
-    sub(root, "option", timestep=num(timestep), gravity="0 0 -9.81", integrator="implicitfast", cone="elliptic",
-        impratio="10")
+    sub(root, "compiler", angle="radian", autolimits="true", **({} if visual else {"discardvisual": "true"}))
+    option = sub(root, "option", timestep=num(timestep), gravity="0 0 -9.81", integrator="implicitfast",
+                 cone="elliptic", impratio="10")
+    sub(option, "flag", autoreset="disable")
     visual = sub(root, "visual")
     sub(visual, "global", offwidth="1280", offheight="960")
     default = sub(root, "default")

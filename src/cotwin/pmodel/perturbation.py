@@ -190,7 +190,7 @@ def perturbed_simulator(tree: KinematicTree, scene, perturbation: Perturbation,
                         timestep: float = TIMESTEP) -> PlatformSimulator:
     """The MuJoCo platform with the perturbation's payload, friction and damping in its model."""
     check_joints(perturbation, tree)
-    xml = with_payload(to_mjcf(tree, scene, timestep), tree, perturbation.payload)
+    xml = with_payload(to_mjcf(tree, scene, timestep, visual=False), tree, perturbation.payload)
     sim = PlatformSimulator(tree, scene, timestep, mjcf=xml)
     joints = [j.name for j in tree.actuated]
     for name, value in perturbation.per_joint("friction", joints).items():

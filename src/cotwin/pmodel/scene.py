@@ -77,8 +77,8 @@ class FlexCell:
         for X in range(self.xmax + 1):
             for Y in range(self.ymax + 1):
                 x, y, _ = self.hole(X, Y)
-                sub(worldbody, "site", name=f"hole_{X}_{Y}", type="cylinder", size="0.006 0.0005",
-                    pos=nums([x, y, 0.0005]), rgba="0.2 0.2 0.2 1")
+                sub(worldbody, "geom", name=f"hole_{X}_{Y}", type="cylinder", size="0.006 0.0005",  # a marker:
+                    pos=nums([x, y, 0.0005]), rgba="0.2 0.2 0.2 1", contype="0", conaffinity="0")  # visual only
         for brick in self.bricks:
             if not self.in_grid(*brick.hole):
                 raise CotwinError(f"brick {brick.name} stands on hole {brick.hole}, outside the grid")

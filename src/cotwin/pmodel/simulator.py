@@ -19,25 +19,30 @@ from .mjcf import TIMESTEP, sensor_name, servo_name, to_mjcf
 from .tree import KinematicTree
 
 
+STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # time, positions, velocities, actuator states and history,
+# solver warm start, controls, applied forces, mocap poses, equality activations, user and plugin data
+
+
 @dataclass(frozen=True)
 class SimState:
-    """A snapshot for what-if forks: everything MuJoCo needs to continue identically."""
+    """A snapshot for what-if forks and rollbacks: MuJoCo's whole integration state (mjSTATE_INTEGRATION),
+    from which a simulator of the same model continues bit for bit."""
 
-    time: float
-    qpos: np.ndarray
-    qvel: np.ndarray
-    act: np.ndarray
-    ctrl: np.ndarray
-    qacc_warmstart: np.ndarray
+    vector: np.ndarray
+
+    @property
+    def time(self) -> float:
+        return float(self.vector[0])
 
 
 class PlatformSimulator:
     def __init__(self, tree: KinematicTree, scene=None, timestep: float = TIMESTEP, mjcf: str | None = None):
-        """`mjcf`: an MJCF text derived from `to_mjcf(tree, scene, timestep)` to run instead of it (e.g. with
-        a payload added by cotwin.pmodel.perturbation); names of joints, servos and sensors must be kept."""
+        """`mjcf`: an MJCF text derived from `to_mjcf(tree, scene, timestep, visual=False)` to run instead of
+        it (e.g. with a payload added by cotwin.pmodel.perturbation); names of joints, servos and sensors
+        must be kept."""
         self.tree = tree
         self.scene = scene
-        self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep)
+        self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep, visual=False)
         try:
             self.model = mujoco.MjModel.from_xml_string(self.xml)
         except ValueError as err:
@@ -62,6 +67,20 @@ class PlatformSimulator:
                 continue
             self._sensors[name] = (s.adr[0], s.dim[0])
         self._ctrl_range = self.model.actuator_ctrlrange.copy()
+        # per actuator name: its control index and the range its targets are clipped to
+        self._servos: dict[str, tuple[int, float, float]] = {}
+        for name, index in self._actuator.items():
+            low, high = (float(x) for x in self._ctrl_range[index])
+            self._servos[name] = (index, low, high) if high > low else (index, -math.inf, math.inf)
+        # arrays read in one go: joint positions and velocities, sensor values
+        self._joints = list(self._joint_qpos)
+        self._qpos_index = np.array([self._joint_qpos[j] for j in self._joints], dtype=int)
+        self._qvel_index = np.array([self._joint_dof[j] for j in self._joints], dtype=int)
+        self._sensor_paths = list(self._sensors)
+        self._sensor_index = np.array([adr for adr, _ in self._sensors.values()], dtype=int)
+        # views on MuJoCo's buffers, fetched once (each attribute access makes a new view)
+        self._qpos, self._qvel = self.data.qpos, self.data.qvel
+        self._ctrl, self._sensordata = self.data.ctrl, self.data.sensordata
         self.reset()
 
     # ---- names ----
@@ -96,54 +115,64 @@ class PlatformSimulator:
     def write_actuators(self, targets: dict[str, float]) -> None:
         """Set servo targets (rad or m). Unknown names and non-finite values are errors; values outside
         a joint's limits are clipped to them."""
+        ctrl, servos = self._ctrl, self._servos
         for name, value in targets.items():
-            if name not in self._actuator:
+            servo = servos.get(name)
+            if servo is None:
                 raise CotwinError(f"unknown actuator '{name}' (use a joint or servo name of p-model {self.tree.name})")
             if not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise CotwinError(f"actuator '{name}': target {value!r} is not a finite number")
-            index = self._actuator[name]
-            low, high = self._ctrl_range[index]
-            self.data.ctrl[index] = min(max(float(value), low), high) if high > low else float(value)
+            index, low, high = servo
+            value = float(value)
+            ctrl[index] = low if value < low else high if value > high else value
 
     def read_sensors(self) -> dict[str, float]:
         """Every p-model sensor port, keyed by its mapping path."""
-        data = self.data.sensordata
-        return {name: float(data[adr]) for name, (adr, _) in self._sensors.items()}
+        return dict(zip(self._sensor_paths, self._sensordata[self._sensor_index].tolist()))
 
     def joint_positions(self) -> dict[str, float]:
-        return {n: float(self.data.qpos[a]) for n, a in self._joint_qpos.items()}
+        return dict(zip(self._joints, self._qpos[self._qpos_index].tolist()))
 
     def joint_velocities(self) -> dict[str, float]:
-        return {n: float(self.data.qvel[a]) for n, a in self._joint_dof.items()}
+        return dict(zip(self._joints, self._qvel[self._qvel_index].tolist()))
+
+    def steps_for(self, dt: float) -> int:
+        """The number of physics steps in dt seconds (dt rounded to whole steps)."""
+        if not (math.isfinite(dt) and dt >= 0):
+            raise CotwinError(f"cannot advance by {dt!r} s")
+        return int(round(dt / self.timestep))
 
     def advance(self, dt: float) -> float:
         """Simulate dt seconds in physics steps of `timestep`; returns the simulation time."""
-        if dt < 0 or not math.isfinite(dt):
-            raise CotwinError(f"cannot advance by {dt!r} s")
-        steps = int(round(dt / self.timestep))
-        for _ in range(steps):
-            mujoco.mj_step(self.model, self.data)
-        if not np.all(np.isfinite(self.data.qpos)):
-            raise CotwinError(f"the physics became unstable at t = {self.data.time:.3f} s (non-finite state)")
-        return self.time
+        return self.step(self.steps_for(dt))
+
+    def step(self, steps: int) -> float:
+        """Simulate `steps` physics steps (in one call into MuJoCo); returns the simulation time."""
+        if steps > 0:
+            mujoco.mj_step(self.model, self.data, steps)
+            q = self._qpos
+            if not math.isfinite(q.dot(q)):  # a non-finite (or huge) position: the physics blew up
+                raise CotwinError(f"the physics became unstable at t = {self.data.time:.3f} s (non-finite state)")
+        return self.data.time
 
     @property
     def time(self) -> float:
         return float(self.data.time)
 
     def get_state(self) -> SimState:
-        d = self.data
-        return SimState(float(d.time), d.qpos.copy(), d.qvel.copy(), d.act.copy(), d.ctrl.copy(), d.qacc_warmstart.copy())
+        vector = np.empty(mujoco.mj_stateSize(self.model, STATE))
+        mujoco.mj_getState(self.model, self.data, vector, STATE)
+        return SimState(vector)
 
     def set_state(self, state: SimState) -> None:
-        d = self.data
-        d.time = state.time
-        d.qpos[:] = state.qpos
-        d.qvel[:] = state.qvel
-        d.act[:] = state.act
-        d.ctrl[:] = state.ctrl
-        d.qacc_warmstart[:] = state.qacc_warmstart
-        mujoco.mj_forward(self.model, d)
+        """Continue from `state` (derived quantities such as sensors are recomputed at once)."""
+        size = mujoco.mj_stateSize(self.model, STATE)
+        vector = np.asarray(state.vector, dtype=np.float64)
+        if vector.shape != (size,):
+            raise CotwinError(f"the simulator state has {vector.size} numbers, this model's has {size}: "
+                              "it is a state of another model")
+        mujoco.mj_setState(self.model, self.data, vector, STATE)
+        mujoco.mj_forward(self.model, self.data)
 
     def body_pose(self, name: str) -> np.ndarray:
         try:

@@ -23,7 +23,8 @@ from ..diagnostics import CotwinError
 from .system import TwinSystem
 
 RECORD = "build.json"
-_GENERATORS = ("dmodel/ccode.py", "dmodel/fmu.py", "dmodel/ports.py", "dmodel/program.py", "dmodel/interpreter.py")
+_GENERATORS = ("dmodel/ccode.py", "dmodel/fmu.py", "dmodel/fmi2_wrapper.c", "dmodel/ports.py", "dmodel/program.py",
+               "dmodel/interpreter.py")
 
 
 @contextmanager
@@ -212,7 +213,8 @@ def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = Non
             shutil.copytree(stage, work / "twin")
             (work / "cotwin_unit.json").write_text(json.dumps({"role": unit.instance, "project": "twin/cotwin.toml"}))
             fmu = FmuBuilder.build_FMU(work / "fmu_slave.py", dest=work,
-                                       project_files=[work / "twin", work / "cotwin_unit.json"])
+                                       project_files=[work / "twin", work / "cotwin_unit.json"],
+                                       canGetAndSetFMUstate=True, canSerializeFMUstate=True)
             part = target.with_name(target.name + ".part")
             shutil.move(str(fmu), part)
             part.replace(target)

@@ -3,8 +3,13 @@
 pythonfmu packages this file; at instantiation the slave reads `cotwin_unit.json` from its resources
 (the unit's role and the twin project copied beside it), rebuilds that cotwin unit and exposes its
 ports. The same class serves every role, so no per-unit template exists.
+
+FMU states (fmi2GetFMUstate, fmi2SerializeFMUstate and their inverses) are the unit's own state
+(`Unit.get_state`: the mapping runtime's variables, the simulator, the trajectory in flight), which
+pythonfmu carries as JSON: the bytes go base64-encoded.
 """
 
+import base64
 import json
 from pathlib import Path
 
@@ -48,3 +53,10 @@ class CotwinUnit(Fmi2Slave):
 
     def terminate(self):
         self.unit.terminate()
+
+    # pythonfmu's hooks behind canGetAndSetFMUstate and canSerializeFMUstate
+    def _get_fmu_state(self):
+        return {"cotwin": base64.b64encode(self.unit.get_state()).decode("ascii")}
+
+    def _set_fmu_state(self, state):
+        self.unit.set_state(base64.b64decode(state["cotwin"]))

@@ -266,6 +266,7 @@ class ScenarioUnit(PythonUnit):
             self._next += 1
 
     def step(self, t: float, h: float) -> None:
+        self.time = t + h
         for ev in self.events:
             self.values[ev] = False
         eps = 1e-9
@@ -280,3 +281,19 @@ class ScenarioUnit(PythonUnit):
                     self.values[port] = self.values[port] or bool(value)
                 else:
                     self.values[port] = value
+
+    # ---- state: the port values, the time reached and the next command to play ----
+    def snapshot(self) -> dict:
+        return {**super().snapshot(), "next": self._next, "plan": self._plan()}
+
+    def restore(self, snapshot: dict) -> None:
+        """Continue where the saved unit was; a unit with another plan (a what-if) continues with the
+        first of its commands not yet due at the saved time."""
+        super().restore(snapshot)
+        if snapshot["plan"] == self._plan():
+            self._next = snapshot["next"]
+        else:
+            self._next = next((k for k, c in enumerate(self.commands) if c.time >= self.time - 1e-9), len(self.commands))
+
+    def _plan(self) -> list[tuple[float, tuple]]:
+        return [(c.time, c.values) for c in self.commands]
