@@ -170,9 +170,10 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
 @click.option("--pt-log", type=click.Path(), help="replay this recorded log as the PT (overrides [pt])")
 @click.option("--rabbitmq", "exchange", help="take commands live from RabbitMQ on this exchange (overrides [scenario])")
 @click.option("--history", "history", help="history database URL (default: [history] url, else DIR/history.sqlite)")
+@click.option("--whatif", "whatif", is_flag=True, help="answer what-if requests sent over the broker (see docs)")
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 def twin(project: str, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
-         pt_log: str | None, exchange: str | None, history: str | None, cc: str) -> None:
+         pt_log: str | None, exchange: str | None, history: str | None, whatif: bool, cc: str) -> None:
     """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
     with deviation checking, alarms and history."""
     import signal
@@ -193,8 +194,9 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         spec.plan = None
         spec.rabbitmq = replace(spec.rabbitmq, exchange=exchange) if spec.rabbitmq else RabbitMQSettings(exchange)
         spec.realtime = True if realtime is None else realtime
+    broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     live = LiveTwin(load(spec), out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
-                    cc=cc)
+                    cc=cc, whatif_url=broker if whatif else None)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: live.stop())
     result = live.run()
@@ -204,6 +206,111 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
                f"(real-time factor {r.real_time_factor:.1f}), {state}")
     click.echo(f"deviation: {result.deviation['alarms']} alarm(s); report {result.out / 'deviation.json'}; "
                f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
+
+
+def _plan_file(path: str, program):
+    """A what-if plan: a plan CSV, a TOML command list or a JSON list of {time, event, args}."""
+    import json
+    from pathlib import Path
+
+    from .twin.scenario import read_scenario
+    from .twin.whatif import plan_from_json
+
+    if path.endswith(".json"):
+        try:
+            data = json.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
+            raise click.BadParameter(f"{path}: {err}", param_hint="--plan") from None
+        return plan_from_json(data, program)
+    return read_scenario(path, program)
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("--plan", "plan", required=True, help="the hypothetical plan (CSV, TOML or JSON; times relative to the fork)")
+@click.option("--from", "state", type=click.Path(), help="a saved DT state to fork (DIR/state of a run or a live twin)")
+@click.option("--horizon", type=click.FloatRange(min=0, min_open=True), default=60.0, show_default=True,
+              help="simulate at most this long (s)")
+@click.option("-o", "--output", "out", help="write the prediction as JSON here")
+def whatif(project: str, plan: str, state: str | None, horizon: float, out: str | None) -> None:
+    """Predict what a plan would do: fork the DT (at a saved state, or at the start) and run the plan
+    ahead of real time; prints each command's outcome and the completion time."""
+    import json
+    from pathlib import Path
+
+    from .twin.run import load
+    from .twin.whatif import predict
+
+    _finite(horizon=horizon)
+    system = load(project)
+    commands = _plan_file(plan, system.models.program)
+    blob = None
+    if state is not None:
+        try:
+            blob = Path(state).read_bytes()
+        except OSError as err:
+            raise click.BadParameter(f"{state}: {err.strerror}", param_hint="--from") from None
+    prediction = predict(system, commands, blob, horizon=horizon)
+    for c in prediction.commands:
+        args = ", ".join(f"{k}={v}" for k, v in c.args.items())
+        verdict = {True: "feasible", False: "NOT feasible", None: "feasibility unknown"}[c.feasible]
+        done = f"done at t = {c.done:g} s" if c.done is not None else "not done within the horizon"
+        click.echo(f"t = {c.time:g} s {c.event}({args}): {verdict}, "
+                   f"{'accepted' if c.accepted else 'ignored by the d-model'}, {done}")
+    for c in prediction.collisions:
+        click.echo(f"collision: {c}")
+    click.echo(f"completion: {'t = %g s' % prediction.completion_time if prediction.completion_time is not None else 'not within the horizon'} "
+               f"(forked at t = {prediction.start:g} s, predicted to t = {prediction.end:g} s in {prediction.wall_seconds:.2f} s)")
+    if out:
+        Path(out).write_text(json.dumps(prediction.as_dict(), indent=1) + "\n")
+
+
+def _range(text: str) -> tuple[str, list]:
+    name, sep, values = text.partition("=")
+    if not sep or not name or not values:
+        raise click.BadParameter(f"'{text}': expected NAME=LOW..HIGH or NAME=v1,v2,...", param_hint="--arg")
+    try:
+        if ".." in values:
+            low, high = values.split("..", 1)
+            return name, list(range(int(low), int(high) + 1))
+        return name, [int(v) if v.lstrip("-").isdigit() else float(v) for v in values.split(",")]
+    except ValueError:
+        raise click.BadParameter(f"'{text}': values must be numbers", param_hint="--arg") from None
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("--event", required=True, help="the command to sweep, e.g. moveDiscreteCommand")
+@click.option("--arg", "args", multiple=True, metavar="NAME=LOW..HIGH", help="an argument's values (repeatable)")
+@click.option("--from", "state", type=click.Path(), help="a saved DT state to fork every what-if from")
+@click.option("--horizon", type=click.FloatRange(min=0, min_open=True), default=30.0, show_default=True)
+@click.option("--workers", type=click.IntRange(min=1), help="local processes (default: one per CPU)")
+@click.option("--ray", "ray", help="run on Ray: 'auto' (the local cluster) or a cluster address")
+@click.option("-o", "--output", "out", required=True, help="the CSV of answers to write")
+def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, horizon: float, workers: int | None,
+          ray: str | None, out: str) -> None:
+    """Run one what-if per combination of argument values, in parallel (e.g. every hole of the plate:
+    --event moveDiscreteCommand --arg target_X=0..15 --arg target_Y=0..23 --arg target_Z=0)."""
+    import csv
+    import time
+    from pathlib import Path
+
+    from .twin.run import load
+    from .twin.sweep import grid, run_sweep
+
+    system = load(project)
+    plans = grid(system.models.program, event, dict(_range(a) for a in args))
+    blob = Path(state).read_bytes() if state else None
+    started = time.perf_counter()
+    rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray)
+    wall = time.perf_counter() - started
+    columns = list(dict.fromkeys(k for r in rows for k in r))
+    with open(out, "w", newline="") as f:
+        writer = csv.DictWriter(f, columns, lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(rows)
+    feasible = sum(1 for r in rows if r.get("feasible"))
+    click.echo(f"{out}: {len(rows)} what-ifs in {wall:.1f} s ({'Ray' if ray else 'local pool'}), {feasible} feasible")
 
 
 @main.group()

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time as wallclock
 from dataclasses import dataclass, field
+from typing import Iterable
 
 from ..diagnostics import CotwinError
 from .algorithm import Algorithm
@@ -143,17 +144,26 @@ class Execution:
             "values": self.algorithm.snapshot(),
             "units": {name: unit.get_state() for name, unit in self.system.units.items()}})
 
-    def set_state(self, state: bytes) -> None:
+    def set_state(self, state: bytes, units: Iterable[str] | None = None) -> None:
         """Continue from `state`: of this execution (a rollback; observers see time jump back) or of
         another execution of the same system (a fork: this one is initialised first, and its observers
-        start at the restored time). The step size may differ from the saved execution's."""
+        start at the restored time). The step size may differ from the saved execution's.
+
+        With `units`, only those units and the values of their ports are restored, and the others start
+        afresh (a fork whose command source is another: a what-if plan in place of the live stream);
+        build such an execution with `start` at the saved time so they are instantiated there."""
         data = unpack(state, "Execution")
         if self.closed:
             raise CotwinError("a closed execution cannot restore a state")
-        units = data["units"]
-        if set(units) != set(self.system.units):
-            raise CotwinError(f"the saved state is of units {', '.join(sorted(units))}, this system has "
+        saved = data["units"]
+        chosen = set(self.system.units) if units is None else set(units)
+        missing = sorted(chosen - set(saved))
+        if units is None and set(saved) != set(self.system.units):
+            raise CotwinError(f"the saved state is of units {', '.join(sorted(saved))}, this system has "
                               f"{', '.join(sorted(self.system.units))}")
+        if missing or not chosen <= set(self.system.units):
+            raise CotwinError(f"cannot restore {', '.join(sorted(chosen))}: the saved state has units "
+                              f"{', '.join(sorted(saved))}, this system {', '.join(sorted(self.system.units))}")
         if data["algorithm"] != self.algorithm.name:
             raise CotwinError(f"the saved state was taken under {data['algorithm']}, this execution runs "
                               f"{self.algorithm.name}: the values on the connections would mean something else")
@@ -161,9 +171,14 @@ class Execution:
         if fresh:
             self._setup()
         try:
-            for name, unit in self.system.units.items():
-                unit.set_state(units[name])
-            self.algorithm.restore(data["values"])
+            for name in chosen:
+                self.system.units[name].set_state(saved[name])
+            values = data["values"]
+            if units is not None:  # the restored units' values this system observes; the rest as they are
+                kept = self.algorithm.snapshot()
+                values = {k: v for k, v in values.items() if k[0] in chosen and k in self.algorithm.slots}
+                values.update({k: v for k, v in kept.items() if k[0] not in chosen})
+            self.algorithm.restore(values)
         except BaseException as err:
             self.close(err)
             raise

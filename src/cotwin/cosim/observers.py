@@ -216,3 +216,29 @@ class LiveFeed(Observer):
                     q.put_nowait(sample)
                 except (queue.Empty, queue.Full):
                     self.dropped += 1
+
+
+class StateFile(Observer):
+    """Saves the execution's state (cotwin.cosim.state bytes) to `path` after its last step, so that a
+    what-if can start where the run ended (`cotwin whatif --from`). A system that cannot save its
+    state (e.g. a remote robot) is noted in `skipped` and nothing is written."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.skipped: str | None = None
+
+    def step_complete(self, execution) -> None:
+        if execution.total_steps and execution.steps >= execution.total_steps:
+            self.save(execution)
+
+    def save(self, execution) -> None:
+        from ..diagnostics import CotwinError
+
+        try:
+            blob = execution.get_state()
+        except CotwinError as err:
+            self.skipped = "; ".join(f.message for f in err.findings)
+            return
+        part = self.path.with_name(self.path.name + ".part")
+        part.write_bytes(blob)
+        part.replace(self.path)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution, RunResult
-from ..cosim.observers import CSVWriter, Observer, Progress, RealTimePacer
+from ..cosim.observers import CSVWriter, Observer, Progress, RealTimePacer, StateFile
 from ..cosim.system import System
 from ..diagnostics import CotwinError
 from .build import dmodel_fmu, folder_lock
@@ -71,7 +71,7 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         cosim = system.instantiate(fmu, endpoint if endpoint is not None else dt_endpoint(system), source=source)
         units = {u.role if u.role != "source" else "source": cosim.units[u.name] for u in system.units}
         writer = CSVWriter(out / "outputs.csv")
-        chain: list[Observer] = [writer, *(observers or [])]
+        chain: list[Observer] = [writer, StateFile(out / "state"), *(observers or [])]
         if progress is not None:
             chain.append(Progress(progress))
         if spec.realtime if realtime is None else realtime:

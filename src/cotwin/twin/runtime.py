@@ -22,7 +22,7 @@ from pathlib import Path
 
 from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution, RunResult
-from ..cosim.observers import CSVWriter, epoch_of
+from ..cosim.observers import CSVWriter, StateFile, epoch_of
 from ..diagnostics import CotwinError
 from .build import dmodel_fmu, folder_lock
 from .deviation import DeviationMonitor
@@ -90,7 +90,8 @@ class LiveTwin:
 
     def __init__(self, system: TwinSystem, out: str | Path, pt=None, dt=None, step: float | None = None,
                  end: float | None = None, algorithm: str | None = None, realtime: bool | None = None,
-                 history_url: str | None = None, alarms_url: str | None = None, observers=(), cc: str = "cc"):
+                 history_url: str | None = None, alarms_url: str | None = None, observers=(), cc: str = "cc",
+                 whatif_url: str | None = None):
         spec = system.spec
         self.system = system
         self.out = Path(out)
@@ -103,6 +104,8 @@ class LiveTwin:
         self.realtime = spec.realtime if realtime is None else realtime
         self.history_url = history_url if history_url is not None else spec.history_url
         self.alarms_url = alarms_url
+        self.whatif_url = whatif_url  # a broker URL: answer what-if requests there (WhatIfService)
+        self.whatif = None
         self.observers = list(observers)
         self.cc = cc
         self.sides: dict[str, Side] = {}
@@ -151,7 +154,8 @@ class LiveTwin:
     def _side(self, name: str, fmu: Path, endpoint, source) -> Side:
         cosim = self.system.instantiate(fmu, endpoint, source=source)
         writer = CSVWriter(self.out / name / "outputs.csv")
-        execution = Execution(cosim, make_algorithm(self.algorithm), self.step_size, 0.0, [writer])
+        observers = [writer] + ([StateFile(self.out / "state")] if name == "dt" else [])  # where a what-if may start
+        execution = Execution(cosim, make_algorithm(self.algorithm), self.step_size, 0.0, observers)
         units = {u.role: cosim.units[u.name] for u in self.system.units}
         return Side(name, execution, writer, units)
 
@@ -173,6 +177,10 @@ class LiveTwin:
                 columns = {n: [f"{u}.{v}" for u, v in s.execution.system.observed()] for n, s in self.sides.items()}
                 self._history = HistoryRecorder(url, str(spec.path), "twin", self.step_size, self.algorithm, columns)
                 self._publisher = self._alarm_publisher()
+                if self.whatif_url is not None:
+                    from .whatif import WhatIfService
+
+                    self.whatif = WhatIfService(self.whatif_url, spec.deviation.exchange, spec.path, self.out)
                 return self._loop(url)
             finally:
                 for side in self.sides.values():
@@ -186,6 +194,8 @@ class LiveTwin:
                             pass
                 if self._publisher is not None:
                     self._publisher.close()
+                if self.whatif is not None:
+                    self.whatif.close()
                 if self._bridge is not None:
                     self._bridge.close()
 
@@ -247,6 +257,8 @@ class LiveTwin:
                 self.monitor.observe(self.time, pt.values(MAPPING.name, self.variables),
                                      dt.values(MAPPING.name, self.variables))
                 self._record(self.steps)
+                if self.whatif is not None:
+                    self.whatif.poll(dt.execution)
                 for o in self.observers:
                     o.twin_step(self, self.steps, self.time)
                 if self.realtime:

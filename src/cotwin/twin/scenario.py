@@ -246,9 +246,15 @@ def read_scenario(path: str | Path, program: Program) -> list[Command]:
 class ScenarioUnit(PythonUnit):
     """The controller: plays a scenario's commands into the d-model's inputs."""
 
-    def __init__(self, name: str, program: Program, commands: list[Command]):
+    def __init__(self, name: str, program: Program, commands: list[Command], ports: list[str] | None = None):
+        """Outputs: the ports the commands use, or `ports` (which must include them)."""
         types = scenario_ports(program)
         used = list(dict.fromkeys(port for c in commands for port, _ in c.values))
+        if ports is not None:
+            extra = [p for p in used if p not in ports]
+            if extra:
+                raise CotwinError(f"the scenario drives {', '.join(extra)}, which the unit {name} does not output")
+            used = list(ports)
         super().__init__(name, [Port(p, types[p], "output") for p in used])
         self.events = {ev.name for ev in program.inputs} & set(used)
         self.commands = sorted(commands, key=lambda c: c.time)

@@ -95,7 +95,9 @@ def external_events(program, mapping_model) -> list[str]:
 class TwinSystem:
     """Units, connections, logged variables and delayed units of a twin project (see module doc)."""
 
-    def __init__(self, spec: TwinProject, models: TwinModels | None = None):
+    def __init__(self, spec: TwinProject, models: TwinModels | None = None, commands=None):
+        """`commands` (a list of scenario Commands) replaces the project's source of commands with that
+        plan over every port a live source carries (what-if forks and sweeps)."""
         from ..dmodel.ports import PortLayout
         from ..mapping.unit import mapping_ports
         from .scenario import read_scenario, scenario_ports
@@ -103,17 +105,24 @@ class TwinSystem:
         self.spec = spec
         self.models = models or load_models(spec)
         program = self.models.program
-        self.commands = read_scenario(spec.plan, program) if spec.plan is not None else []
         mapped = {ev.name for ev in self.models.mapping_model.input_events}
         command_ports = scenario_ports(program)
-        if spec.plan is not None:
+        if commands is not None:
+            self.commands = list(commands)
+            used = {p for c in self.commands for p, _ in c.values}
+            self.source_ports = list(dict.fromkeys([*self.live_ports(), *(p for p in command_ports if p in used)]))
+            self.source = CONTROLLER
+        elif spec.plan is not None:
+            self.commands = read_scenario(spec.plan, program)
             used = {p for c in self.commands for p, _ in c.values}
             self.source_ports = [p for p in command_ports if p in used]
             self.source = CONTROLLER
         elif spec.rabbitmq is not None:
+            self.commands = []
             self.source_ports = self.live_ports()
             self.source = RABBITMQ
         else:  # an autonomous robot: no commands from outside
+            self.commands = []
             self.source_ports = []
             self.source = None
         self.command_events = set(self.source_ports) & {ev.name for ev in program.inputs}
@@ -133,6 +142,10 @@ class TwinSystem:
         self.connections = connections
         self.delayed = {MAPPING.name}
         self.log = self._log_variables()
+
+    def with_plan(self, commands) -> "TwinSystem":
+        """This twin with `commands` as its source (the same models, derived once)."""
+        return TwinSystem(self.spec, self.models, commands)
 
     def live_ports(self) -> list[str]:
         """The ports a live (RabbitMQ) source carries: the events of `[scenario] rabbitmq commands` (default:
@@ -197,7 +210,7 @@ class TwinSystem:
         from .scenario import ScenarioUnit
 
         if self.source is CONTROLLER:
-            return ScenarioUnit(CONTROLLER.name, self.models.program, self.commands)
+            return ScenarioUnit(CONTROLLER.name, self.models.program, self.commands, self.source_ports)
         if self.source is RABBITMQ:
             from .rabbitmq import RabbitMQUnit, port_types
 

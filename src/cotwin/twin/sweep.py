@@ -1,0 +1,129 @@
+"""Sweeps: many what-ifs in parallel, on a local process pool (default) or on Ray.
+
+A sweep is a list of plans (each a what-if from the same state); `grid` builds the common one: one
+command per combination of argument values ("which holes can the arm reach, and how fast?"). Every
+worker loads the project once and shares the d-model FMU built in `artefacts`; answers come back in the
+order of the plans and are the same whichever runs them (what-ifs are deterministic).
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+from pathlib import Path
+
+from ..diagnostics import CotwinError
+from .scenario import Command, typed_value
+
+_SYSTEM = None  # the worker's TwinSystem, loaded once per process
+
+
+def grid(program, event: str, ranges: dict[str, list], at: float = 0.5) -> list[list[Command]]:
+    """One plan per combination of `ranges` (argument -> values): `event` with those arguments at `at` s."""
+    events = {ev.name: ev for ev in program.inputs}
+    if event not in events:
+        raise CotwinError(f"unknown event {event!r} (known: {', '.join(events)})")
+    fields = {sc.path[-1] if sc.path else "value": (port, sc) for port, sc in events[event].value_ports}
+    unknown = [k for k in ranges if k not in fields]
+    if unknown:
+        raise CotwinError(f"event {event} has no argument {', '.join(unknown)} (has {', '.join(fields) or 'none'})")
+    names = list(ranges)
+    plans = []
+    for combo in itertools.product(*(ranges[n] for n in names)):
+        values = [(event, True)]
+        for name, value in zip(names, combo):
+            port, sc = fields[name]
+            try:
+                values.append((port, typed_value(value, sc.fmi_type)))
+            except ValueError as err:
+                raise CotwinError(f"argument {name}: {value!r} {err}") from None
+        plans.append([Command(at, tuple(values), "sweep")])
+    return plans
+
+
+def summary(prediction) -> dict:
+    """One row of a sweep: per command its arguments, feasibility, acceptance and time to be done."""
+    out = {"completion_time": prediction.completion_time, "collisions": len(prediction.collisions)}
+    for k, c in enumerate(prediction.commands):
+        prefix = "" if len(prediction.commands) == 1 else f"c{k}_"
+        out.update({f"{prefix}{name}": value for name, value in c.args.items()})
+        out[f"{prefix}feasible"] = c.feasible
+        out[f"{prefix}accepted"] = c.accepted
+        out[f"{prefix}time_to_done"] = None if c.done is None or c.delivered is None else round(c.done - c.time, 9)
+    return out
+
+
+def _load(project: str, artefacts: str | None) -> None:
+    global _SYSTEM
+    from .run import load
+
+    _SYSTEM = (load(project), artefacts)
+
+
+def _run(plan: list[Command], state: bytes | None, horizon: float, step: float | None) -> dict:
+    from .whatif import predict
+
+    system, artefacts = _SYSTEM
+    return summary(predict(system, plan, state, horizon=horizon, step=step, artefacts=artefacts, decimate=10**9))
+
+
+def _ray_run(project: str, artefacts: str | None, plan, state, horizon, step) -> dict:
+    if _SYSTEM is None or str(_SYSTEM[0].spec.path) != str(Path(project)):
+        _load(project, artefacts)
+    return _run(plan, state, horizon, step)
+
+
+def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | None = None, horizon: float = 30.0,
+              step: float | None = None, workers: int | None = None, ray: str | None = None,
+              artefacts: str | Path | None = None) -> list[dict]:
+    """Run every plan as a what-if; `ray` is a Ray address ("auto" joins the local cluster) or None
+    for a local process pool of `workers` processes (default: one per CPU; 1 runs in this process)."""
+    import shutil
+    import tempfile
+
+    from .build import dmodel_fmu
+    from .run import load
+
+    project = str(Path(project).resolve())
+    scratch = None
+    if artefacts is None:
+        artefacts = scratch = tempfile.mkdtemp(prefix="cotwin-sweep-")
+    try:
+        dmodel_fmu(load(project), artefacts)  # built once, before the workers share it
+        artefacts = str(artefacts)
+        if ray is not None:
+            return _on_ray(project, plans, state, horizon, step, ray, artefacts)
+        workers = workers or os.cpu_count() or 1
+        if workers == 1:
+            _load(project, artefacts)
+            return [_run(p, state, horizon, step) for p in plans]
+        with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
+                                 initargs=(project, artefacts)) as pool:
+            return list(pool.map(_run, plans, [state] * len(plans), [horizon] * len(plans), [step] * len(plans),
+                                 chunksize=max(1, len(plans) // (workers * 8))))
+    finally:
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _on_ray(project, plans, state, horizon, step, address, artefacts) -> list[dict]:
+    try:
+        import ray
+    except ImportError:
+        raise CotwinError("sweeps on Ray need the ray extra: pip install 'cotwin[ray]'") from None
+    started_here = not ray.is_initialized()
+    if started_here:
+        try:
+            ray.init(address=address, logging_level="ERROR", log_to_driver=False)
+        except (ConnectionError, RuntimeError, ValueError) as err:
+            raise CotwinError(f"cannot join the Ray cluster at {address!r}: {err}") from None
+    try:
+        remote = ray.remote(_ray_run)
+        state_ref = ray.put(state)
+        refs = [remote.remote(project, artefacts, plan, state_ref, horizon, step) for plan in plans]
+        return ray.get(refs)
+    finally:
+        if started_here:
+            ray.shutdown()

@@ -1,0 +1,386 @@
+"""What-if: fork the digital twin at a state and run a hypothetical plan ahead of real time.
+
+`predict` builds a fresh DT of the same TwinSystem (same d-model FMU, same mapping, the embedded
+simulator) whose command source plays the plan, restores the saved state of the live DT into its
+d-model and mapping (the simulator, the trajectory in flight, the mapping's variables), and runs it
+as fast as it goes. The live twin is never touched: a state is bytes (cotwin.cosim.state), taken
+between two of its steps. A plan's times are relative to the fork.
+
+The answer (`Prediction`): the predicted trajectory of the monitored variables, the d-model's state
+changes, per command whether it was delivered, accepted (the d-model called an operation in
+response), feasible (an event the platform raised in response, judged by its name: `nonfeasible*`,
+`infeasible*`, `unreachable*` mean no; `feasible*`, `reachable*` mean yes) and when it was done (the
+d-model back in its resting state, the state it rests in after initialisation); collisions (the
+mapping's `collision` event, and contacts of the robot with the scene other than its fingers'); and
+the completion time of the whole plan.
+"""
+
+from __future__ import annotations
+
+import re
+import time as wallclock
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from ..cosim.algorithm import algorithm as make_algorithm
+from ..cosim.execution import Execution
+from ..diagnostics import CotwinError
+from .build import dmodel_fmu
+from .scenario import Command
+from .system import DMODEL, MAPPING, TwinSystem
+
+_WORKER = None  # (TwinSystem, artefacts) of a what-if worker process
+INFEASIBLE = re.compile(r"^(non|in|un)(feasible|reachable)", re.IGNORECASE)
+FEASIBLE = re.compile(r"^(feasible|reachable)", re.IGNORECASE)
+
+
+@dataclass
+class CommandOutcome:
+    time: float  # when the plan sends it (simulation time of the fork's clock)
+    event: str
+    args: dict
+    delivered: float | None = None  # the step end at which the d-model got it
+    accepted: bool = False  # the d-model called an operation in response
+    operations: list[str] = field(default_factory=list)
+    events: list[str] = field(default_factory=list)  # platform events until the next command
+    feasible: bool | None = None
+    done: float | None = None  # back at rest after it
+
+
+@dataclass
+class Prediction:
+    start: float
+    end: float
+    step: float
+    commands: list[CommandOutcome]
+    states: list[tuple[float, str, str]]  # (time, machine, state)
+    trajectory: dict[str, list[float]]
+    collisions: list[dict]
+    completion_time: float | None
+    wall_seconds: float
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def rest_states(program) -> dict[str, int]:
+    """The leaf each machine rests in after its first cycle with no inputs (e.g. Idle)."""
+    from ..dmodel.interpreter import Interpreter
+
+    interp = Interpreter(program)
+    interp.step({})
+    return {program.state_port(m): interp.state_index(k) for k, m in enumerate(program.machines)}
+
+
+class _Contacts:
+    """Contacts of the robot's bodies (its fingers excepted) with the scene, in the embedded simulator."""
+
+    def __init__(self, endpoint, tree):
+        from ..pmodel import ik
+        from ..pmodel.mjcf import ROBOT_CONTYPE
+
+        self.sim = getattr(endpoint, "sim", None)
+        if self.sim is None:
+            return
+        model = self.sim.model
+        tool = ik.find_tool(tree)
+        fingers = {j.child for j in tree.joints if j.name in tool.fingers}
+        self.robot = {g for g in range(model.ngeom) if model.geom_contype[g] == ROBOT_CONTYPE
+                      and model.body(model.geom_bodyid[g]).name not in fingers}
+        self.seen: dict[tuple[str, str], dict] = {}
+
+    def check(self, t: float) -> None:
+        if self.sim is None:
+            return
+        model, data = self.sim.model, self.sim.data
+        for c in data.contact[: data.ncon]:
+            g1, g2 = int(c.geom1), int(c.geom2)
+            if (g1 in self.robot) == (g2 in self.robot) or c.dist > -0.001:
+                continue
+            robot, other = (g1, g2) if g1 in self.robot else (g2, g1)
+            key = (model.body(model.geom_bodyid[robot]).name, model.body(model.geom_bodyid[other]).name)
+            entry = self.seen.setdefault(key, {"kind": "contact", "robot": key[0], "with": key[1], "first": t,
+                                               "depth": 0.0})
+            entry["depth"] = max(entry["depth"], -float(c.dist))
+
+
+def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None, horizon: float = 60.0,
+            step: float | None = None, algorithm: str | None = None, artefacts: str | Path | None = None,
+            settle: float = 0.3, decimate: int = 1, cc: str = "cc") -> Prediction:
+    """Run `plan` on a fork of the DT at `state` (None: from the project's initial state); see module doc."""
+    from ..mapping.endpoint import SimulatedEndpoint
+    from ..pmodel.simulator import PlatformSimulator
+
+    import tempfile
+
+    started = wallclock.perf_counter()
+    models, spec = system.models, system.spec
+    step = spec.step if step is None else step
+    algorithm = algorithm or spec.algorithm
+    start = 0.0
+    if state is not None:
+        from ..cosim.state import unpack
+
+        start = float(unpack(state, "Execution")["time"])
+    shifted = sorted((Command(start + c.time, c.values, c.where) for c in plan), key=lambda c: c.time)
+    fork = system.with_plan(shifted)
+    with tempfile.TemporaryDirectory(prefix="cotwin-whatif-") as tmp:
+        fmu = dmodel_fmu(fork, Path(artefacts) if artefacts is not None else Path(tmp), cc)
+        endpoint = SimulatedEndpoint(PlatformSimulator(models.tree, models.scene))
+        cosim = fork.instantiate(fmu, endpoint)
+        execution = Execution(cosim, make_algorithm(algorithm), step, start)
+        try:
+            if state is not None:
+                execution.set_state(state, units=[DMODEL.name, MAPPING.name])
+            else:
+                execution.initialize()
+            return _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started)
+        finally:
+            execution.close()
+
+
+def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, started) -> Prediction:
+    from ..dmodel.ports import PortLayout
+
+    program = fork.models.program
+    layout = PortLayout(program)
+    source = fork.source.name
+    events = [p for p in fork.source_ports if p in fork.command_events]
+    calls = [op.flag.name for op in layout.operations]
+    platform = [c.output for c in fork.connections if c.source == MAPPING.name and c.target == DMODEL.name
+                and c.output in {ev.name for ev in program.inputs}]
+    monitored = fork.log[MAPPING.name]
+    state_ports = [(program.state_port(m), m) for m in program.machines]
+    rest = rest_states(program)
+    collision_events = [e for e in platform if e.lower() == "collision"]
+    contacts = _Contacts(endpoint, fork.models.tree)
+    outcomes = [CommandOutcome(c.time, next(p for p, v in c.values if p in fork.command_events and v is True),
+                               {p: v for p, v in c.values if p not in fork.command_events}) for c in plan]
+    trajectory: dict[str, list[float]] = {"time": []}
+    for v in monitored:
+        trajectory[v] = []
+    states: list[tuple[float, str, str]] = []
+    collisions: list[dict] = []
+    last_state: dict[str, int] = {}
+    current: CommandOutcome | None = None
+    pending = list(outcomes)
+    at_rest_since: float | None = None
+    last_command = plan[-1].time if plan else start
+    end = start + horizon
+    values = execution.values
+
+    def record(t: float) -> None:
+        if execution.steps % decimate == 0:
+            trajectory["time"].append(t)
+            for v in monitored:
+                trajectory[v].append(values.get((MAPPING.name, v)))
+
+    record(execution.time)
+    while execution.time < end - 1e-9:
+        t = execution.step()
+        record(t)
+        fired = [e for e in events if values.get((source, e)) is True]
+        if fired and pending:
+            current = pending.pop(0)
+            current.delivered = t
+        for c in calls:
+            if values.get((DMODEL.name, c)) is True and current is not None:
+                current.operations.append(c)
+                current.accepted = True
+        for e in platform:
+            if values.get((MAPPING.name, e)) is True:
+                if current is not None:
+                    current.events.append(e)
+                    if current.feasible is None and INFEASIBLE.match(e):
+                        current.feasible = False
+                    elif current.feasible is None and FEASIBLE.match(e):
+                        current.feasible = True
+                if e in collision_events:
+                    collisions.append({"kind": "event", "event": e, "time": t})
+        resting = True
+        for port, m in state_ports:
+            index = values.get((DMODEL.name, port))
+            if index != last_state.get(port):
+                leaves = program.leaf_names(m)
+                states.append((t, m.name, leaves[index] if isinstance(index, int) and 0 <= index < len(leaves) else "none"))
+                last_state[port] = index
+            resting = resting and index == rest[port]
+        if current is not None and current.accepted and current.done is None and resting:
+            current.done = t
+        contacts.check(t)
+        at_rest_since = (at_rest_since if at_rest_since is not None else t) if resting else None
+        if not pending and t >= last_command and at_rest_since is not None and t - at_rest_since >= settle:
+            last = outcomes[-1] if outcomes else None
+            if last is None or last.done is not None:
+                break
+            if not last.accepted and last.delivered is not None and t - last.delivered >= settle + 3 * execution.step_size:
+                break  # delivered, never acted upon: the d-model ignored it
+    for o in outcomes:
+        o.events = list(dict.fromkeys(o.events))
+        o.operations = list(dict.fromkeys(o.operations))
+    collisions.extend(contacts.seen.values() if contacts.sim is not None else [])
+    done = [o.done for o in outcomes]
+    completion = max(done) if done and all(d is not None for d in done) else (None if outcomes else execution.time)
+    return Prediction(start, execution.time, execution.step_size, outcomes, states, trajectory, collisions, completion,
+                      wallclock.perf_counter() - started)
+
+
+def plan_from_json(items: list, program) -> list[Command]:
+    """A what-if plan from JSON (a broker request or a file): [{"time": s, "event": name, "args": {...}}],
+    checked like a TOML scenario; CotwinError naming the item otherwise."""
+    from .scenario import typed_value
+
+    if not isinstance(items, list) or not items:
+        raise CotwinError("a what-if plan is a non-empty list of {time, event, args}")
+    events = {ev.name: ev for ev in program.inputs}
+    out = []
+    for k, item in enumerate(items, start=1):
+        if not isinstance(item, dict) or set(item) - {"time", "event", "args"}:
+            raise CotwinError(f"plan item {k}: expected {{time, event, args}}, got {item!r:.80}")
+        t, name, args = item.get("time"), item.get("event"), item.get("args", {})
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not (0 <= t < 1e6):
+            raise CotwinError(f"plan item {k}: time must be a number of seconds >= 0, got {t!r}")
+        if name not in events:
+            raise CotwinError(f"plan item {k}: unknown event {name!r} (known: {', '.join(events)})")
+        if not isinstance(args, dict):
+            raise CotwinError(f"plan item {k}: args must be an object")
+        fields = {sc.path[-1] if sc.path else "value": (port, sc) for port, sc in events[name].value_ports}
+        values = [(name, True)]
+        for key, value in args.items():
+            if key not in fields:
+                raise CotwinError(f"plan item {k}: event {name} has no argument '{key}' (has {', '.join(fields) or 'none'})")
+            port, sc = fields[key]
+            try:
+                values.append((port, typed_value(value, sc.fmi_type)))
+            except ValueError as err:
+                raise CotwinError(f"plan item {k}: argument {key}: {value!r} {err}") from None
+        out.append(Command(float(t), tuple(values), f"plan item {k}"))
+    return out
+
+
+# ---- what-if requests over the broker ------------------------------------------------------------
+
+def _worker_init(project: str, artefacts: str | None) -> None:
+    global _WORKER
+    from .run import load
+
+    _WORKER = (load(project), artefacts)
+
+
+def _worker_predict(plan_json: list, state: bytes, horizon: float, decimate: int) -> dict:
+    system, artefacts = _WORKER
+    plan = plan_from_json(plan_json, system.models.program)
+    return predict(system, plan, state, horizon=horizon, artefacts=artefacts, decimate=decimate).as_dict()
+
+
+class WhatIfService:
+    """Answers what-if requests of a live twin sent over the broker, without disturbing it.
+
+    A request is a JSON object `{"plan": [{"time": s, "event": name, "args": {...}}], "horizon": s,
+    "decimate": n}` published on the twin's topic exchange (`[deviation] exchange`, default `cotwin.twin`)
+    with routing key `twin.whatif` (or `twin.whatif.<anything>`), with `reply_to` and `correlation_id`
+    set. Between two steps the twin hands its DT's state to a separate process, which runs the plan on a
+    fork; the answer (`Prediction.as_dict()`, or `{"error": why}`) is published to `reply_to` with the
+    request's `correlation_id`. Requests are validated like any broker message; a bad one gets an error
+    answer and never reaches the twin."""
+
+    def __init__(self, url: str, exchange: str, project: str | Path, artefacts: str | Path | None = None,
+                 workers: int = 1, routing_key: str = "twin.whatif"):
+        import queue
+        import threading
+        from concurrent.futures import ProcessPoolExecutor
+        from multiprocessing import get_context
+
+        from ..mapping.amqp import connect
+
+        self.exchange, self.routing_key = exchange, routing_key
+        self.requests: queue.Queue = queue.Queue()
+        self.answered = 0
+        self._pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_init,
+                                         initargs=(str(Path(project).resolve()), str(artefacts) if artefacts else None))
+        self._connection = connect(url, "cotwin what-if")
+        channel = self._connection.channel()
+        channel.exchange_declare(exchange, exchange_type="topic", durable=False, auto_delete=False)
+        self.queue = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
+        for key in (routing_key, routing_key + ".#"):
+            channel.queue_bind(self.queue, exchange, routing_key=key)
+        channel.basic_consume(self.queue, self._on_request, auto_ack=True)
+        self._channel = channel
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="cotwin what-if", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self._connection.process_data_events(time_limit=0.05)
+            except Exception:  # noqa: BLE001 - a lost broker ends the service, not the twin
+                import logging
+
+                logging.getLogger("cotwin.whatif").warning("what-if service: lost the broker; no more requests")
+                return
+
+    def _reply(self, props, answer: dict) -> None:
+        import json
+
+        import pika
+
+        if not props.reply_to:
+            return
+        body = json.dumps(answer, default=float).encode()
+        self._connection.add_callback_threadsafe(lambda: self._channel.basic_publish(
+            "", props.reply_to, body, pika.BasicProperties(correlation_id=props.correlation_id,
+                                                           content_type="application/json")))
+
+    def _on_request(self, channel, method, props, body) -> None:
+        import json
+
+        try:
+            if len(body) > 1 << 20:
+                raise ValueError("request larger than 1 MiB")
+            request = json.loads(body.decode("utf-8"))
+            if not isinstance(request, dict) or set(request) - {"plan", "horizon", "decimate"}:
+                raise ValueError("a request is {plan, horizon, decimate}")
+            horizon = request.get("horizon", 30.0)
+            decimate = request.get("decimate", 1)
+            if isinstance(horizon, bool) or not isinstance(horizon, (int, float)) or not 0 < horizon <= 3600:
+                raise ValueError("horizon must be a number of seconds in (0, 3600]")
+            if isinstance(decimate, bool) or not isinstance(decimate, int) or decimate < 1:
+                raise ValueError("decimate must be a positive integer")
+            if not isinstance(request.get("plan"), list) or not request["plan"]:
+                raise ValueError("plan must be a non-empty list")
+        except (ValueError, UnicodeDecodeError, RecursionError) as err:
+            self._reply(props, {"error": f"bad what-if request: {err}"})
+            return
+        self.requests.put((props, request["plan"], float(horizon), decimate))
+
+    def poll(self, execution) -> None:
+        """Between two steps of the live twin: fork the DT's state for every waiting request."""
+        while not self.requests.empty():
+            props, plan, horizon, decimate = self.requests.get_nowait()
+            try:
+                state = execution.get_state()
+            except CotwinError as err:
+                self._reply(props, {"error": "; ".join(f.message for f in err.findings)})
+                continue
+            future = self._pool.submit(_worker_predict, plan, state, horizon, decimate)
+            future.add_done_callback(lambda f, props=props: self._done(props, f))
+
+    def _done(self, props, future) -> None:
+        try:
+            answer = future.result()
+        except CotwinError as err:
+            answer = {"error": "; ".join(f.message for f in err.findings)}
+        except Exception as err:  # noqa: BLE001 - the worker's failure is the requester's answer
+            answer = {"error": f"{type(err).__name__}: {err}"}
+        self.answered += 1
+        self._reply(props, answer)
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=False)
+        self._stop.set()
+        self._thread.join(5)
+        try:
+            self._connection.close()
+        except Exception:  # noqa: BLE001
+            pass
