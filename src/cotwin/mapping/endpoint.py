@@ -14,6 +14,7 @@ from typing import Protocol
 import numpy as np
 
 from ..diagnostics import CotwinError
+from ..pmodel.cell import CellGeometry
 from ..pmodel.simulator import PlatformSimulator, SimState
 from ..pmodel.tree import KinematicTree
 
@@ -59,11 +60,13 @@ def segment_duration(tree: KinematicTree, start: dict[str, float], goal: dict[st
 
 
 class SimulatedEndpoint:
-    """The embedded MuJoCo platform with a trajectory generator in front of its servos."""
+    """The embedded MuJoCo platform with a trajectory generator in front of its servos. The cell's
+    geometry (for the mapping's kinematics functions) is the scene's unless given."""
 
-    def __init__(self, simulator: PlatformSimulator):
+    def __init__(self, simulator: PlatformSimulator, geometry: CellGeometry | None = None):
         self.sim = simulator
         self.tree = simulator.tree
+        self.geometry = geometry or getattr(simulator.scene, "geometry", None)
         self._path_to_joint = simulator.actuators()
         self.segment: Segment | None = None
         self._held = None  # the segment whose final set-point the servos already hold
