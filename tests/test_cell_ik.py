@@ -135,7 +135,7 @@ def test_scene_places_plate_holes_bricks_and_gravity_with_the_geometry(cell):
     model = mujoco.MjModel.from_xml_string(to_mjcf(build_tree(load_checked([_examples()])), tilted))
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
-    assert np.allclose(data.site("hole_8_10").xpos, TILTED.to_robot(np.array(cell.hole(8, 10)) * [1, 1, 0] + [0, 0, 0.0005]),
+    assert np.allclose(data.geom("hole_8_10").xpos, TILTED.to_robot(np.array(cell.hole(8, 10)) * [1, 1, 0] + [0, 0, 0.0005]),
                        atol=1e-9)
     assert np.allclose(model.opt.gravity, TILTED.plate_pose()[:3, :3] @ [0, 0, -9.81])
     brick = data.body("brick1").xpos
@@ -156,12 +156,13 @@ def test_geometry_round_trips_through_toml(tmp_path):
 
 
 @pytest.mark.parametrize("text, where, message", [
-    ("[plate]\nxyz = [0, 0,\n", "cell.toml:3:", "bad TOML"),
-    ("[plate]\nxyz = [0, 0]\n", "cell.toml:2:1", "list of 3 finite numbers"),
-    ("[plate]\nrpy = [0, 0, 0]\n\n[tool]\npoint = \"elbow\"\n", "cell.toml:5:1", "flange, fingertips"),
-    ("[tool]\nrpy = [0, \"x\", 0]\n", "cell.toml:2:1", "finite numbers"),
-    ("[plate]\nxzy = [0, 0, 0]\n", "cell.toml:2:1", "unknown key 'xzy'"),
-    ("[ik]\njoint_offsets = { elbow_joint = [0, 1] }\n", "cell.toml:2:1", "[dx, dy, dz]"),
+    ("[plate]\nxyz = [0, 0,\n", "cell.toml:3:1:", "bad TOML"),
+    ("[plate]\nxyz = [0, 0]\n", "cell.toml:2:1:", "[plate] xyz: must be a list of 3 finite numbers"),
+    ("[plate]\nrpy = [0, 0, 0]\n\n[tool]\npoint = \"elbow\"\n", "cell.toml:5:1:", "flange, fingertips or [x, y, z]"),
+    ("[tool]\nrpy = [0, \"x\", 0]\n", "cell.toml:2:1:", "[tool] rpy: must be a list of 3 finite numbers"),
+    ("[plate]\nxzy = [0, 0, 0]\n", "cell.toml:2:1:", "unknown key 'xzy' in [plate]"),
+    ("[ik]\njoint_offsets = { elbow_joint = [0, 1] }\n", "cell.toml:2:19:", "elbow_joint: must be a list of 3"),
+    ("[motion]\nprofile = \"movej\"\n", "cell.toml:1:1:", "unknown key 'motion' in the file"),
 ])
 def test_bad_geometry_files_are_reported_at_their_place(tmp_path, text, where, message):
     path = tmp_path / "cell.toml"

@@ -7,11 +7,11 @@ import pytest
 
 from cotwin.diagnostics import CotwinError
 from cotwin.mapping.endpoint import SimulatedEndpoint
-from cotwin.mapping.motion import JointMove, Quintic, profile_from_document
+from cotwin.config import Key, Schema, TomlFile, dumps, raise_problems
+from cotwin.mapping.motion import MOTION, JointMove, Quintic, profile_from_values
 from cotwin.pmodel.simulator import PlatformSimulator
 from cotwin.pmodel.tree import build_tree
 from cotwin.robosim.check import load_checked
-from cotwin.tomlfile import TomlDocument
 
 
 @pytest.fixture(scope="module")
@@ -88,30 +88,35 @@ def test_the_simulated_endpoint_follows_the_profile_it_is_given(tree):
     assert isinstance(SimulatedEndpoint(PlatformSimulator(tree)).profile, Quintic)  # the default
 
 
+def _read_motion(path):
+    file = TomlFile(path)
+    problems = []
+    values = Schema({"motion": Key("table", table=MOTION)}).read(file.data, file, (), problems)
+    profile = profile_from_values(values["motion"], file, problems)
+    raise_problems(problems)
+    return profile
+
+
 @pytest.mark.parametrize("text, message", [
-    ("[motion]\nprofile = \"movel\"\n", "x.toml:2:1: error: [motion] profile must be one of quintic, movej"),
-    ("[motion]\nprofile = \"movej\"\na = -1\n", "x.toml:3:1: error: [motion] a must be positive"),
-    ("[motion]\nprofile = \"movej\"\nv = \"fast\"\n", "x.toml:3:1: error: [motion] v must be a finite number"),
+    ("[motion]\nprofile = \"movel\"\n", "x.toml:2:1: error: [motion] profile must be one of 'quintic', 'movej'"),
+    ("[motion]\nprofile = \"movej\"\na = -1\n", "x.toml:3:1: error: [motion] a must be a positive number"),
+    ("[motion]\nprofile = \"movej\"\nv = \"fast\"\n", "x.toml:3:1: error: [motion] v must be a positive number"),
     ("[motion]\nprofile = \"quintic\"\na = 1.4\n", "x.toml:3:1: error: [motion] a applies to profile 'movej' only"),
     ("[motion]\nspeed = 1\n", "x.toml:2:1: error: unknown key 'speed' in [motion]"),
 ])
 def test_bad_motion_tables_are_reported_at_their_place(tmp_path, text, message):
     path = tmp_path / "x.toml"
     path.write_text(text)
-    doc = TomlDocument(path)
-    profile_from_document(doc)
     with pytest.raises(CotwinError) as err:
-        doc.finish()
+        _read_motion(path)
     assert message in str(err.value)
 
 
 def test_motion_tables_read_what_they_write(tmp_path):
-    from cotwin.tomlfile import dumps
-
     for profile in (JointMove(1.3, 0.9, -0.04), Quintic(0.1)):
         path = tmp_path / "m.toml"
         path.write_text(dumps({"motion": profile.tables()}))
-        assert profile_from_document(TomlDocument(path)) == profile
+        assert _read_motion(path) == profile
 
 
 def test_a_movej_in_flight_is_saved_and_restored_with_the_endpoint(tree):

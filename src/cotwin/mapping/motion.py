@@ -27,7 +27,8 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from ..pmodel.tree import KinematicTree
-from ..tomlfile import TomlDocument
+from ..config import Key, Schema, TomlFile
+from ..diagnostics import Finding, Severity
 
 QUINTIC_PEAK = 1.875  # peak of d/dtau of 10 tau^3 - 15 tau^4 + 6 tau^5
 
@@ -150,23 +151,21 @@ class JointMove:
 
 
 PROFILES = ("quintic", "movej")
+MOTION = Schema({"profile": Key("str", "quintic", choices=PROFILES), "a": Key("positive"), "v": Key("positive"),
+                 "delay": Key("number", 0.0)})
 
 
-def profile_from_document(doc: TomlDocument, default: MotionProfile | None = None) -> MotionProfile | None:
-    """The [motion] table of a TOML document (None when absent); problems go to doc's diagnostics."""
-    if "motion" not in doc.data:
+def profile_from_values(values: dict | None, file: TomlFile, problems: list[Finding],
+                        default: MotionProfile | None = None) -> MotionProfile | None:
+    """The profile of a [motion] table as read by MOTION (None: the table is absent)."""
+    if values is None:
         return default
-    values = doc.table("motion", {"profile", "a", "v", "delay"})
-    kind = values.get("profile", "quintic")
-    delay = doc.number("motion", values, "delay", 0.0)
-    if kind == "quintic":
+    if values["profile"] == "quintic":
         for key in ("a", "v"):
-            if key in values:
-                doc.error("motion", key, f"[motion] {key} applies to profile 'movej' only")
-        return Quintic(delay if delay is not None else 0.0)
-    if kind == "movej":
-        a = doc.number("motion", values, "a", 1.4, positive=True)
-        v = doc.number("motion", values, "v", 1.05, positive=True)
-        return JointMove(a or 1.4, v or 1.05, delay if delay is not None else 0.0)
-    doc.error("motion", "profile", f"[motion] profile must be one of {', '.join(PROFILES)}, got {kind!r}")
-    return default
+            if values.get(key) is not None:
+                problems.append(Finding(file.location(("motion", key)), Severity.ERROR,
+                                        f"[motion] {key} applies to profile 'movej' only"))
+        return Quintic(float(values["delay"]))
+    a = values["a"] if values.get("a") is not None else JointMove.a
+    v = values["v"] if values.get("v") is not None else JointMove.v
+    return JointMove(float(a), float(v), float(values["delay"]))

@@ -55,6 +55,7 @@ class FunctionRegistry:
         reference = dict(zip(self.arm, self.geometry.reference)) if self.geometry.reference is not None else None
         self.solver = ik.Solver(self.tree, self.tool, reference, self.geometry.joint_offsets)
         self._cache: dict[tuple, ik.IKResult] = {}
+        self.requests: list[tuple[float, float, float]] = []  # grid points asked of inverse_kinematics, in order
 
     def _solve(self, x, y, z) -> ik.IKResult:
         key = (round(float(x), 9), round(float(y), 9), round(float(z), 9))
@@ -64,6 +65,7 @@ class FunctionRegistry:
 
     def inverse_kinematics(self, x, y, z):
         """Joint values (arm joints, kinematic order) putting the tool frame at grid point (x, y, z)."""
+        self.requests.append((float(x), float(y), float(z)))
         result = self._solve(x, y, z)
         return tuple(result.q[j] for j in self.arm)
 

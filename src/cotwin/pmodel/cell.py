@@ -12,6 +12,7 @@ IK may run on other link lengths than the arm's). Read and written as TOML:
     [plate]                     # the grid frame in the robot's model frame
     xyz = [0.0, 0.0, 0.0]       # m
     rpy = [0.0, 0.0, 0.0]       # rad, fixed-axis roll-pitch-yaw (as SDF poses)
+    surface = 0.0               # m: height of the plate's top in the grid frame
     [tool]
     point = "fingertips"        # "flange", "fingertips" or [x, y, z] (m, tool link frame)
     rpy = [3.14159265, 0, 0]    # the tool frame at a target, in the plate frame
@@ -29,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..config import Key, Schema, TomlFile, dumps, raise_problems
 from ..diagnostics import CotwinError, Finding, Location, Severity
-from ..tomlfile import TomlDocument, dumps
 from .tree import matrix_rpy, rpy_matrix, transform
 
 TOOL_POINTS = ("flange", "fingertips")
@@ -41,6 +42,7 @@ DOWN = (math.pi, 0.0, 0.0)  # tool approach axis along the plate's -z, tool x al
 class CellGeometry:
     plate_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
     plate_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    surface: float = 0.0  # the plate's top along the grid frame's z (targets are above it)
     tool: str | tuple[float, float, float] = "fingertips"
     tool_rpy: tuple[float, float, float] = DOWN
     reference: tuple[float, ...] | None = None  # None: zero posture with the base facing the target
@@ -94,7 +96,7 @@ class CellGeometry:
             ik["reference"] = [float(v) for v in self.reference]
         if self.joint_offsets:
             ik["joint_offsets"] = {k: [float(x) for x in v] for k, v in self.joint_offsets.items()}
-        tables = {"plate": {"xyz": list(self.plate_xyz), "rpy": list(self.plate_rpy)},
+        tables = {"plate": {"xyz": list(self.plate_xyz), "rpy": list(self.plate_rpy), "surface": self.surface},
                   "tool": {"point": self.tool if isinstance(self.tool, str) else list(self.tool),
                            "rpy": list(self.tool_rpy)}}
         if ik:
@@ -102,58 +104,56 @@ class CellGeometry:
         return tables
 
     @classmethod
-    def from_document(cls, doc: TomlDocument) -> "CellGeometry":
-        """The geometry tables of a TOML document (absent tables keep their defaults); problems are
-        recorded in doc's diagnostics with their places."""
-        geometry = cls()
-        plate = doc.table("plate", {"xyz", "rpy"})
-        geometry.plate_xyz = doc.vector("plate", plate, "xyz", 3, geometry.plate_xyz)
-        geometry.plate_rpy = doc.vector("plate", plate, "rpy", 3, geometry.plate_rpy)
-        tool = doc.table("tool", {"point", "rpy"})
-        point = tool.get("point", geometry.tool)
-        if isinstance(point, str):
-            if point not in TOOL_POINTS:
-                doc.error("tool", "point", f"[tool] point must be one of {', '.join(TOOL_POINTS)} or [x, y, z], "
-                          f"got {point!r}")
-            else:
-                geometry.tool = point
-        else:
-            geometry.tool = doc.vector("tool", tool, "point", 3, geometry.tool)
-        geometry.tool_rpy = doc.vector("tool", tool, "rpy", 3, geometry.tool_rpy)
-        ik = doc.table("ik", {"reference", "reference_name", "joint_offsets"})
-        if "reference" in ik:
-            ref = ik["reference"]
-            if not (isinstance(ref, list) and ref and all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                                          and math.isfinite(v) for v in ref)):
-                doc.error("ik", "reference", f"[ik] reference must be a list of joint angles (rad), got {ref!r}")
-            else:
-                geometry.reference = tuple(float(v) for v in ref)
-        name = ik.get("reference_name", "")
-        if not isinstance(name, str):
-            doc.error("ik", "reference_name", "[ik] reference_name must be a string")
-        else:
-            geometry.reference_name = name
-        offsets = ik.get("joint_offsets", {})
-        if not isinstance(offsets, dict):
-            doc.error("ik", "joint_offsets", "[ik] joint_offsets must be a table of joint = [dx, dy, dz]")
-        else:
-            for joint, value in offsets.items():
-                if not (isinstance(value, list) and len(value) == 3 and all(
-                        isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
-                    doc.error("ik", "joint_offsets", f"[ik] joint_offsets.{joint} must be [dx, dy, dz] in m, got {value!r}")
-                else:
-                    geometry.joint_offsets[joint] = tuple(float(v) for v in value)
-        geometry.where = {"reference": doc.where("ik", "reference"), "joint_offsets": doc.where("ik", "joint_offsets")}
-        return geometry
+    def from_values(cls, values: dict, file: TomlFile) -> "CellGeometry":
+        """The geometry from a file's tables as read by a Schema holding GEOMETRY's keys."""
+        plate, tool, ik = values["plate"], values["tool"], values["ik"]
+        point = tool["point"]
+        return cls(tuple(plate["xyz"]), tuple(plate["rpy"]), float(plate["surface"]),
+                   point if isinstance(point, str) else tuple(float(v) for v in point), tuple(tool["rpy"]),
+                   tuple(float(v) for v in ik["reference"]) if ik["reference"] is not None else None,
+                   ik["reference_name"], {k: tuple(float(x) for x in v) for k, v in (ik["joint_offsets"] or {}).items()},
+                   {"reference": file.location(("ik", "reference")),
+                    "joint_offsets": file.location(("ik", "joint_offsets"))})
 
     @classmethod
     def read(cls, path: str | Path) -> "CellGeometry":
-        doc = TomlDocument(path)
-        geometry = cls.from_document(doc)
-        doc.finish()
-        return geometry
+        """A geometry file: [plate], [tool] and [ik] (all optional)."""
+        file = TomlFile(path, "geometry file")
+        problems: list[Finding] = []
+        values = Schema(GEOMETRY).read(file.data, file, (), problems)
+        raise_problems(problems)
+        return cls.from_values(values, file)
 
     def write(self, path: str | Path, header: str = "cotwin cell geometry") -> Path:
         path = Path(path)
         path.write_text(dumps(self.tables(), header))
         return path
+
+
+def _numbers(length: int | None):
+    def check(value) -> str | None:
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value) \
+                or (length is not None and len(value) != length) or not value:
+            return f"must be a list of {length or 'some'} finite numbers, got {value!r}"
+        return None
+    return check
+
+
+def _tool_point(value) -> str | None:
+    if isinstance(value, str):
+        return None if value in TOOL_POINTS else f"must be one of {', '.join(TOOL_POINTS)} or [x, y, z], got {value!r}"
+    if isinstance(value, list):
+        return _numbers(3)(value)
+    return f"must be one of {', '.join(TOOL_POINTS)} or [x, y, z], got {value!r}"
+
+
+GEOMETRY = {
+    "plate": Key("table", {}, table=Schema({"xyz": Key("list", [0.0, 0.0, 0.0], check=_numbers(3)),
+                                            "rpy": Key("list", [0.0, 0.0, 0.0], check=_numbers(3)),
+                                            "surface": Key("number", 0.0)})),
+    "tool": Key("table", {}, table=Schema({"point": Key("any", "fingertips", check=_tool_point),
+                                           "rpy": Key("list", list(DOWN), check=_numbers(3))})),
+    "ik": Key("table", {}, table=Schema({"reference": Key("list", check=_numbers(None)), "reference_name": Key("str", ""),
+                                         "joint_offsets": Key("table", {}, table=Schema(
+                                             open=True, values=Key("list", check=_numbers(3))))})),
+}

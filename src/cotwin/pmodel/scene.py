@@ -3,7 +3,8 @@
 The grid comes from the mapping's constants (the paper's `mapping.pm` and ours use the same names,
 read case-insensitively): HOLE_DIST, x_max, y_max, XMAX, YMAX and Z_table_level (or Z_TABLE). A hole
 (X, Y) is at x = x_max - (Y + 1) HOLE_DIST, y = y_max - X HOLE_DIST in the plate's (grid) frame, exactly
-as the mapping computes movediscrete targets; the plate's top is that frame's z = 0. The cell's
+as the mapping computes movediscrete targets; the plate's top is that frame's z = 0 (or the geometry's
+`surface`, when the targets were found to lie elsewhere than just above the plate). The cell's
 geometry (cotwin.pmodel.cell) places the grid frame in the robot's frame (the identity by default:
 the plate right under the robot base); the plate is level, so gravity points along its -z.
 """
@@ -94,9 +95,10 @@ class FlexCell:
                 attrs["quat"] = nums(orientation)
             return attrs
 
+        top = self.geometry.surface
         sub(worldbody, "geom", name="floor", type="plane", size="3 3 0.1", rgba="0.3 0.3 0.3 1",
-            contype=str(WORLD_CONTYPE), conaffinity=str(WORLD_CONAFFINITY), **place((0.0, 0.0, -0.8)))
-        cell = sub(worldbody, "body", name="cell", **place((0.0, 0.0, 0.0)))
+            contype=str(WORLD_CONTYPE), conaffinity=str(WORLD_CONAFFINITY), **place((0.0, 0.0, top - 0.8)))
+        cell = sub(worldbody, "body", name="cell", **place((0.0, 0.0, top)))
         plate = sub(cell, "body", name="plate", pos=nums([(x0 + x1) / 2, (y0 + y1) / 2, -self.thickness / 2]))
         sub(plate, "geom", name="plate", type="box", size=nums([(x1 - x0) / 2, (y1 - y0) / 2, self.thickness / 2]),
             rgba="0.75 0.75 0.78 1", contype=str(WORLD_CONTYPE), conaffinity=str(WORLD_CONAFFINITY))
@@ -109,7 +111,7 @@ class FlexCell:
             if not self.in_grid(*brick.hole):
                 raise CotwinError(f"brick {brick.name} stands on hole {brick.hole}, outside the grid")
             x, y, _ = self.hole(*brick.hole)
-            body = sub(worldbody, "body", name=brick.name, **place((x, y, brick.size[2] / 2 + 1e-4)))
+            body = sub(worldbody, "body", name=brick.name, **place((x, y, top + brick.size[2] / 2 + 1e-4)))
             sub(body, "freejoint", name=f"{brick.name}_free")
             sub(body, "geom", name=brick.name, type="box", size=nums([v / 2 for v in brick.size]), mass=num(brick.mass),
                 rgba="0.8 0.3 0.2 1", friction="1.2 0.02 0.001", contype=str(WORLD_CONTYPE),
