@@ -148,3 +148,84 @@ def test_bad_calibration_files_are_reported_at_their_place(tmp_path, text, messa
     with pytest.raises(CotwinError) as err:
         Calibration.read(path)
     assert message in str(err.value)
+
+
+def _calibrated_project(tmp_path, calibration_text=None):
+    from conftest import EXAMPLES
+
+    folder = EXAMPLES / "ur5e"
+    text = (folder / "calibrated.toml").read_text()
+    for name in ("arm.rst", "ur5e.pm", "mapping.pm", "plan.csv"):
+        text = text.replace(f'"{name}"', f'"{(folder / name).as_posix()}"')
+    calibration = folder / "calibration.toml"
+    if calibration_text is not None:
+        calibration = tmp_path / "calibration.toml"
+        calibration.write_text(calibration_text)
+    text = text.replace('"calibration.toml"', f'"{calibration.as_posix()}"')
+    (tmp_path / "cotwin.toml").write_text(text)
+    return tmp_path / "cotwin.toml"
+
+
+def test_the_calibrated_example_project_moves_the_tool_onto_the_calibrated_holes(tmp_path):
+    from cotwin.twin.run import dt_endpoint, run_twin
+
+    system = load(_calibrated_project(tmp_path))
+    calibration = system.models.calibration
+    assert system.models.scene.geometry == calibration.geometry
+    endpoint = dt_endpoint(system)
+    assert endpoint.profile == calibration.profile and isinstance(endpoint.profile, JointMove)
+    ran = run_twin(system, tmp_path / "out", plot=False)
+    import csv
+
+    rows = list(csv.DictReader(open(ran.csv)))
+    tree, geometry = system.models.tree, calibration.geometry
+    tool = ik.find_tool(tree, geometry.tool)
+    arm = ik.arm_joints(tree, tool)
+    solver = ik.Solver(tree, tool, None, geometry.joint_offsets)  # the solver's chain: where the DT aims
+    moves = plan_moves(*project_twin(system))
+    for move, following in zip(moves, moves[1:] + [None]):
+        until = following.command.time if following else 20.0
+        row = [r for r in rows if float(r["time"]) <= until + 1e-9][-1]
+        q = np.array([float(row[f"{{mapping}}.mapping.q{i}"]) for i in range(len(arm))])
+        reached, target = solver.chain.pose(q), geometry.target_pose(move.point)
+        assert np.linalg.norm(reached[:3, 3] - target[:3, 3]) < 0.002
+        assert np.abs(reached[:3, :3] - target[:3, :3]).max() < 0.01
+
+
+def test_a_project_naming_a_bad_calibration_reports_it(tmp_path):
+    project = _calibrated_project(tmp_path, "[ik]\nreference = [0.0, 0.1]\njoint_offsets = { knee = [0, 0, 0] }\n")
+    with pytest.raises(CotwinError) as err:
+        load(project)
+    assert "calibration.toml:2:1: error: the reference posture has 2 values" in str(err.value)
+    assert "calibration.toml:3:1: error: joint_offsets: 'knee' is not an arm joint" in str(err.value)
+
+
+def test_the_command_fits_writes_and_checks(parts, tmp_path):
+    from conftest import EXAMPLES
+
+    log = _pt_log(parts, tmp_path / "pt.csv", [1.23, 6.71, 9.02, 16.35])
+    out = tmp_path / "calibration.toml"
+    project = str(EXAMPLES / "ur5e" / "cotwin.toml")
+    fit = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--pt-log", str(log), "-o", str(out)],
+                         capture_output=True, text=True)
+    assert fit.returncode == 0, fit.stderr
+    assert "a = 1.200 rad/s^2, v = 0.900 rad/s" in fit.stdout
+    after = fit.stdout.split("after (calibrated):")[1]
+    assert sum("_joint" in line and line.count("RMSE") == 2 for line in after.splitlines()) == 6
+    written = Calibration.read(out).profile
+    assert isinstance(written, JointMove) and (written.a, written.v) == pytest.approx((1.2, 0.9), rel=1e-6)
+    checked = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--calibration", str(out),
+                              "--check", str(log)], capture_output=True, text=True)
+    assert checked.returncode == 0, checked.stderr
+    lines = [line for line in checked.stdout.splitlines() if "_joint" in line]
+    assert len(lines) == 6 and all(line.count("RMSE") == 2 for line in lines)
+    assert all(float(line.split("RMSE")[1].split()[0]) <= 0.01 for line in lines)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("timestamp actual_q_0\n0 x\n")
+    refused = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--pt-log", str(bad), "-o",
+                              str(tmp_path / "c.toml")], capture_output=True, text=True)
+    assert refused.returncode == 1 and "bad.csv:1:1: error: the log has no column(s) actual_q_1" in refused.stderr
+    assert "Traceback" not in refused.stderr
+    usage = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--pt-log", str(log)],
+                           capture_output=True, text=True)
+    assert usage.returncode == 2 and "--pt-log needs -o FILE" in usage.stderr

@@ -300,7 +300,7 @@ class Solver:
         best, best_distance, best_error = None, np.inf, None
         fallback = None
         for found in candidates + [None] * len(seeds):
-            q, pos, ang, iterations = found if found is not None else self._newton(target, seeds.pop(0))
+            q, pos, ang, iterations = found if found is not None else self.newton(target, seeds.pop(0))
             if pos < 1e-7 and ang < 1e-7:
                 q = self._wind(q, ref)
                 distance = float(np.sum(self._weights * self._wrap(q - ref) ** 2))
@@ -347,11 +347,13 @@ class Solver:
             waypoint[:3, :3] = axis_angle(turn, float(np.linalg.norm(turn)) * s)[:3, :3] @ start[:3, :3] \
                 if np.linalg.norm(turn) > 1e-12 else start[:3, :3]
             waypoint[:3, 3] = start[:3, 3] + s * (target[:3, 3] - start[:3, 3])
-            q, pos, ang, iterations = self._newton(waypoint, q, max_iterations=None if k == steps else 8)
+            q, pos, ang, iterations = self.newton(waypoint, q, max_iterations=None if k == steps else 8)
             total += iterations
         return q, pos, ang, total
 
-    def _newton(self, target: np.ndarray, seed: np.ndarray, max_iterations: int | None = None):
+    def newton(self, target: np.ndarray, seed: np.ndarray, max_iterations: int | None = None):
+        """Damped Newton iterations from one start (no branch choice): (q, position error, angle error,
+        iterations)."""
         chain = self.chain
         q = np.clip(seed.astype(float), chain.lower, chain.upper)
         damping = 1e-4
