@@ -16,8 +16,6 @@ from __future__ import annotations
 
 from dataclasses import fields
 
-import numpy as np
-
 from ..diagnostics import CotwinError
 from ..pmodel import ik
 from ..pmodel.cell import CellGeometry
