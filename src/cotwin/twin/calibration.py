@@ -208,7 +208,6 @@ def fit_geometry(tree: KinematicTree, points: np.ndarray, postures: np.ndarray, 
                      if np.abs(d).max() > 1e-7}
     geometry = CellGeometry(tool=tool, tool_rpy=tuple(map(float, matrix_rpy(Rt))), reference=tuple(map(float, postures[0])),
                             reference_name=reference_name, joint_offsets=joint_offsets).with_plate(plate)
-    geometry.reference_name = reference_name
     r = residuals(solution.x)[: 6 * len(points)].reshape(len(points), 6)
     solver = ik.Solver(tree, ik.find_tool(tree, geometry.tool), dict(zip(arm, postures[0])), geometry.joint_offsets)
     errors, current = [], postures[0]
@@ -345,7 +344,7 @@ def simulated_servo_lag(twin: DigitalTwin, profile: JointMove, start_q: np.ndarr
     """The shift (s) that best aligns the DT's simulated joints with its set-point over one move."""
     mapping = twin.mapping(geometry, JointMove(profile.a, profile.v))
     endpoint, arm = mapping.endpoint, mapping.registry.arm
-    endpoint.sim.reset(dict(zip(arm, map(float, start_q))))
+    endpoint.place(dict(zip(arm, map(float, start_q))))
     endpoint.start()
     endpoint.command(dict(zip(arm, map(float, end_q))))
     segment = endpoint.segment

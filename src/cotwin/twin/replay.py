@@ -98,7 +98,7 @@ def replay(twin: DigitalTwin, schedule: list[tuple[float, OperationCall]], times
     mapping = twin.mapping(geometry, profile)
     arm = mapping.registry.arm
     endpoint = mapping.endpoint
-    endpoint.sim.reset(dict(zip(arm, map(float, start_q))))
+    endpoint.place(dict(zip(arm, map(float, start_q))))
     mapping.start_mapping()
     pending = sorted(schedule, key=lambda item: item[0])
     out = np.empty((len(times), len(arm)))
