@@ -249,7 +249,7 @@ def test_brick_is_picked_and_placed_by_a_scripted_sequence(example_tree):
 
     def move(point, fingers, seconds=1.5):
         start = sim.joint_positions()
-        solution = ik.solve(example_tree, np.asarray(point), seed=start)
+        solution = ik.solve(example_tree, np.asarray(point), current=start)
         assert solution.ok()
         goal = {**solution.q, **{f: fingers for f in tool.fingers}}
         steps = int(seconds / 0.01)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 from collections import Counter
+from pathlib import Path
 
 import click
 
@@ -311,6 +312,68 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         writer.writerows(rows)
     feasible = sum(1 for r in rows if r.get("feasible"))
     click.echo(f"{out}: {len(rows)} what-ifs in {wall:.1f} s ({'Ray' if ray else 'local pool'}), {feasible} feasible")
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("--pt-log", type=click.Path(), help="the PT's recorded run of the project's plan (a UR RTDE log) to fit")
+@click.option("-o", "--output", "out", type=click.Path(), help="the calibration file to write (with --pt-log)")
+@click.option("--calibration", type=click.Path(), help="the calibration to check (with --check; default: the one "
+              "just fitted, else the project's)")
+@click.option("--check", "check_log", type=click.Path(), help="another recorded run to replay on the calibrated DT")
+@click.option("--tool", default="flange", show_default=True, help="the tool point the PT targets: flange, "
+              "fingertips or X,Y,Z (m, tool link frame); kept unless the log shows several tool orientations")
+@click.option("--log-start", type=float, default=0.0, show_default=True,
+              help="co-simulation time of the log's first row (s), for the commands' latencies")
+def calibrate(project: str, pt_log: str | None, out: str | None, calibration: str | None, check_log: str | None,
+              tool: str, log_start: float) -> None:
+    """Fit the DT to a recorded PT run (plate pose, tool, movej profile, latencies, servo lag) and print the
+    per-joint RMSE before and after; or replay another recorded run on a calibrated DT (--check)."""
+    import math
+
+    from .mapping.rtde import read_arm_log
+    from .pmodel.cell import CellGeometry
+    from .twin import calibration as cal
+    from .twin.run import load
+
+    if pt_log is None and check_log is None:
+        raise click.UsageError("give --pt-log LOG -o FILE to fit, or --calibration FILE --check LOG to check")
+    if pt_log is not None and out is None:
+        raise click.UsageError("--pt-log needs -o FILE: where to write the calibration")
+    for option, path in (("--pt-log", pt_log), ("--check", check_log), ("--calibration", calibration)):
+        if path is not None and not Path(path).is_file():
+            raise click.BadParameter(f"no file {path}", param_hint=option)
+    if not math.isfinite(log_start):
+        raise click.BadParameter(f"{log_start!r} is not a finite number", param_hint="--log-start")
+    point = tool if tool in ("flange", "fingertips") else _point(tool)
+    system = load(project)
+    twin, program, commands = cal.project_twin(system)
+    fitted = None
+    if pt_log is not None:
+        report = cal.calibrate(twin, program, commands, read_arm_log(pt_log), CellGeometry(tool=point), log_start)
+        fitted = report.calibration
+        fitted.write(out, f"cotwin calibration of {Path(project).name}, fitted on {Path(pt_log).name} "
+                          "(cotwin calibrate)")
+        click.echo("\n".join(report.lines()))
+        click.echo(f"wrote {out}")
+    if check_log is not None:
+        chosen = cal.Calibration.read(calibration) if calibration is not None else fitted or system.models.calibration
+        if chosen is None:
+            raise click.UsageError("--check needs a calibration: --calibration FILE, --pt-log to fit one, or a "
+                                   "project with [platform] calibration")
+        click.echo("\n".join(cal.check(twin, program, commands, read_arm_log(check_log), chosen).lines()))
+
+
+def _point(text: str) -> tuple[float, float, float]:
+    import math
+
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise click.BadParameter(f"{text!r}: flange, fingertips or three numbers X,Y,Z (m)", param_hint="--tool")
+    return values
 
 
 @main.group()

@@ -51,6 +51,8 @@ class TomlFile:
             message = str(err)
             at = _DECODE_AT.search(message)
             line, column = (int(at.group(1)), int(at.group(2))) if at else (1, 1)
+            if not at and "end of document" in message:  # where the document ends
+                line, column = self.text.count("\n") + 1, len(self.text.rsplit("\n", 1)[-1]) + 1
             raise self.error(f"bad TOML: {_DECODE_AT.sub('', message).strip()}", line, column) from None
         self.where: dict[tuple, tuple[int, int]] = {}
         self._scan()
@@ -196,3 +198,31 @@ def _value(spec: Key, value, file: TomlFile, where: tuple, problems: list[Findin
 def raise_problems(problems: list[Finding]) -> None:
     if any(p.severity is Severity.ERROR for p in problems):
         raise CotwinError(problems)
+
+
+# ---- writing ------------------------------------------------------------------------------------
+
+def dumps(tables: dict[str, dict], header: str = "") -> str:
+    """TOML text of tables of strings, numbers, Booleans, lists and inline tables, deterministic; floats
+    written as their shortest exact text, so that reading gives back the very same values."""
+    lines = [f"# {line}" if line else "#" for line in header.splitlines()]
+    for table, values in tables.items():
+        if lines:
+            lines.append("")
+        lines.append(f"[{table}]")
+        lines.extend(f"{key} = {_toml_value(value)}" for key, value in values.items() if value is not None)
+    return "\n".join(lines) + "\n"
+
+
+def _toml_value(value) -> str:
+    import json
+
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items() if v is not None) + " }"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, float):
+        return repr(value + 0.0)
+    return json.dumps(value)

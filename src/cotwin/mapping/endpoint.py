@@ -1,24 +1,26 @@
 """Platform endpoints: where a mapping's actuator commands go and its sensor readings come from.
 
 An endpoint takes servo goals by p-model path (`pmodel::link::joint::aref.port`) and moves each joint
-there along a smooth (quintic) trajectory whose peak speed respects the joint's velocity limit, all
-joints arriving together; it reads sensors by path (`pmodel::link::sref.port`). The MuJoCo simulator
-is the default; any object with this interface plugs in without touching the mapping.
+there along a trajectory planned by a motion profile (cotwin.mapping.motion: by default a quintic at
+the joints' velocity limits; a UR-style synchronised `movej`), all joints arriving together; it reads
+sensors by path (`pmodel::link::sref.port`). The MuJoCo simulator is the default; any object with
+this interface plugs in without touching the mapping.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from typing import Protocol
 
 import numpy as np
 
 from ..diagnostics import CotwinError
+from ..pmodel.cell import CellGeometry
 from ..pmodel.simulator import PlatformSimulator, SimState
 from ..pmodel.tree import KinematicTree
+from .motion import MotionProfile, Quintic, Segment
 
 CONTROL_PERIOD = 0.002  # s between trajectory set-points sent to the servos
-QUINTIC_PEAK = 1.875  # peak of d/dtau of 10 tau^3 - 15 tau^4 + 6 tau^5
 
 
 class Endpoint(Protocol):
@@ -34,36 +36,16 @@ class Endpoint(Protocol):
     def joint(self, name: str) -> str: ...
 
 
-@dataclass
-class Segment:
-    start: dict[str, float]
-    goal: dict[str, float]
-    t0: float
-    duration: float
-
-    def at(self, t: float) -> dict[str, float]:
-        tau = 1.0 if self.duration <= 0 else min(max((t - self.t0) / self.duration, 0.0), 1.0)
-        s = tau ** 3 * (10 - 15 * tau + 6 * tau * tau)
-        return {j: self.start[j] + s * (self.goal[j] - self.start[j]) for j in self.goal}
-
-
-def segment_duration(tree: KinematicTree, start: dict[str, float], goal: dict[str, float]) -> float:
-    """Shortest quintic duration in which no joint exceeds its velocity limit (0 if nothing moves)."""
-    duration = 0.0
-    limits = {j.name: j.velocity for j in tree.actuated}
-    for name, target in goal.items():
-        delta = abs(target - start.get(name, 0.0))
-        vmax = limits.get(name) or 1.0
-        duration = max(duration, QUINTIC_PEAK * delta / vmax)
-    return duration
-
-
 class SimulatedEndpoint:
-    """The embedded MuJoCo platform with a trajectory generator in front of its servos."""
+    """The embedded MuJoCo platform with a trajectory generator in front of its servos. The cell's
+    geometry (for the mapping's kinematics functions) is the scene's unless given."""
 
-    def __init__(self, simulator: PlatformSimulator):
+    def __init__(self, simulator: PlatformSimulator, profile: MotionProfile | None = None,
+                 geometry: CellGeometry | None = None):
         self.sim = simulator
         self.tree = simulator.tree
+        self.profile: MotionProfile = profile or Quintic()
+        self.geometry = geometry or getattr(simulator.scene, "geometry", None)
         self._path_to_joint = simulator.actuators()
         self.segment: Segment | None = None
         self._held = None  # the segment whose final set-point the servos already hold
@@ -108,7 +90,7 @@ class SimulatedEndpoint:
                 raise CotwinError(f"actuator '{name}': goal {value!r} is not a finite number")
             goal[self.joint(name)] = float(value)
         start = {j: current.get(j, goal[j]) for j in goal}
-        self.segment = Segment(start, goal, now, segment_duration(self.tree, start, goal))
+        self.segment = self.profile.plan(self.tree, start, goal, now)
 
     def advance(self, dt: float) -> None:
         """Run the platform for dt (whole physics steps), the servos' set-points refreshed every

@@ -1,22 +1,41 @@
 """UR RTDE logs: space-separated, one header row of RTDE output fields (vectors expanded `_0`..`_5`),
-one row per sample. Read strictly: a missing column, a short row or a cell that is not a finite number
-is an error at its line and column."""
+one row per sample. Read strictly: every problem is an error at its line and column (a missing or
+repeated column, a short or long row, a cell that is not a finite number, an oversized field, bytes
+that are not text, time that does not increase), up to MAX_ERRORS of them at once.
+
+Two views of a log:
+- `RTDELog`: the fields as logged (the controller's convention): `column`, `vector`, `times`, `q`, `qd`;
+- `ArmLog`: the arm in the p-model's convention (a `Convention`: joint offsets and the controller's
+  base frame in the model frame; cotwin's UR5e by default, as the RTDE endpoint maps fields,
+  cotwin.mapping.urrtde): time since the first row, measured and set-point joints, TCP poses, and
+  the moves found in the log (`motions()`: a move starts when a joint's speed leaves rest, its onset
+  placed between samples by extrapolating the leading joint's speed back to zero, and settles when
+  every joint is back at rest).
+"""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..diagnostics import CotwinError, Finding, Location, Severity
+from ..diagnostics import CotwinError, Diagnostics, Finding, Location, Severity
+from .urrtde import UR_TO_MODEL
 
-MAX_LINE = 1 << 16
+JOINTS = 6
+MAX_FIELD = 64  # characters: a number needs fewer; anything longer is reported, not parsed
+MAX_ERRORS = 20  # findings reported from one file before giving up
+REST_SPEED = 0.01  # rad/s: below this on every joint, the arm is at rest
+ARM = ("timestamp", *(f"actual_q_{k}" for k in range(JOINTS)))
+LIVE = (*ARM, *(f"actual_qd_{k}" for k in range(JOINTS)))
 
 
 @dataclass
 class RTDELog:
+    """The fields of a log as written (UR convention)."""
+
     path: str
     columns: list[str]
     data: np.ndarray  # (rows, columns)
@@ -24,8 +43,11 @@ class RTDELog:
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.columns.index(name)]
 
-    def vector(self, field: str, n: int = 6) -> np.ndarray:
-        return np.column_stack([self.column(f"{field}_{k}") for k in range(n)])
+    def has(self, field_name: str, n: int = JOINTS) -> bool:
+        return all(f"{field_name}_{k}" in self.columns for k in range(n))
+
+    def vector(self, field_name: str, n: int = JOINTS) -> np.ndarray:
+        return np.column_stack([self.column(f"{field_name}_{k}") for k in range(n)])
 
     @property
     def times(self) -> np.ndarray:
@@ -40,68 +62,299 @@ class RTDELog:
         return self.vector("actual_qd")
 
 
-def read_rtde(path: str | Path, required=("timestamp", *(f"actual_q_{k}" for k in range(6)),
-                                          *(f"actual_qd_{k}" for k in range(6)))) -> RTDELog:
+@dataclass(frozen=True)
+class Convention:
+    """How the controller's joint angles and base frame relate to the p-model's."""
+
+    offsets: tuple[float, ...] = tuple(float(-v) + 0.0 for v in UR_TO_MODEL)  # q_controller = q + offsets
+    base: tuple[tuple[float, ...], ...] = ((-1.0, 0.0, 0.0, 0.0), (0.0, -1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0),
+                                           (0.0, 0.0, 0.0, 1.0))  # controller base frame in the model frame
+
+    def to_model(self, q_controller: np.ndarray) -> np.ndarray:
+        return np.asarray(q_controller, float) - np.asarray(self.offsets)
+
+    def to_controller(self, q: np.ndarray) -> np.ndarray:
+        return np.asarray(q, float) + np.asarray(self.offsets)
+
+    def pose_to_model(self, T_controller: np.ndarray) -> np.ndarray:
+        return np.asarray(self.base) @ T_controller
+
+
+UR_TO_COTWIN = Convention()
+
+
+@dataclass
+class Motion:
+    """One move of the arm in a log (times on the log's clock, seconds since its first row)."""
+
+    onset: float  # when the set-point started to move (between samples)
+    settled: float  # the first sample at rest again
+    first: int  # row of the first moving sample
+    last: int  # row of the last moving sample
+    start_q: np.ndarray  # joints at rest before (p-model convention)
+    end_q: np.ndarray  # joints at rest after
+
+    @property
+    def duration(self) -> float:
+        return self.settled - self.onset
+
+
+@dataclass
+class ArmLog:
+    """The arm's series of an RTDE log in the p-model's convention."""
+
+    raw: RTDELog
+    convention: Convention = field(default_factory=Convention)
+
+    @property
+    def path(self) -> Path:
+        return Path(self.raw.path)
+
+    @property
+    def timestamp(self) -> np.ndarray:
+        """s, the controller's clock."""
+        return self.raw.times
+
+    @property
+    def t(self) -> np.ndarray:
+        """Seconds since the log's first row."""
+        return self.raw.times - self.raw.times[0]
+
+    @property
+    def q(self) -> np.ndarray:
+        """Measured joint angles (n x 6)."""
+        return self.convention.to_model(self.raw.q)
+
+    @property
+    def qd(self) -> np.ndarray:
+        """Measured joint speeds (n x 6); differentiated from q when the log has none."""
+        return self.raw.qd if self.raw.has("actual_qd") else np.gradient(self.q, self.t, axis=0)
+
+    @property
+    def target_q(self) -> np.ndarray | None:
+        """The controller's set-points (n x 6), if logged."""
+        return self.convention.to_model(self.raw.vector("target_q")) if self.raw.has("target_q") else None
+
+    @property
+    def target_qd(self) -> np.ndarray | None:
+        return self.raw.vector("target_qd") if self.raw.has("target_qd") else None
+
+    @property
+    def tcp(self) -> np.ndarray | None:
+        """The measured TCP pose per row (n x 4 x 4) in the model frame, if logged."""
+        if not self.raw.has("actual_TCP_pose"):
+            return None
+        return np.array([self.convention.pose_to_model(pose_matrix(row)) for row in self.raw.vector("actual_TCP_pose")])
+
+    def sample(self, time: float) -> dict[str, np.ndarray]:
+        """q and qd at a time since the first row, linearly interpolated."""
+        t = self.t
+        return {"q": np.array([np.interp(time, t, col) for col in self.q.T]),
+                "qd": np.array([np.interp(time, t, col) for col in self.qd.T])}
+
+    # ---- moves ----
+    def moving(self, rest_speed: float = REST_SPEED) -> np.ndarray:
+        """Rows where some joint moves: the set-point's speed if logged, else the measured one."""
+        speed = self.target_qd if self.target_qd is not None else self.qd
+        return np.abs(speed).max(axis=1) > rest_speed
+
+    def motions(self, rest_speed: float = REST_SPEED) -> list[Motion]:
+        moving = self.moving(rest_speed)
+        speed = np.abs(self.target_qd if self.target_qd is not None else self.qd)
+        reference = self.target_q if self.target_q is not None else self.q
+        t, out, row, n = self.t, [], 0, len(moving)
+        while row < n:
+            if not moving[row]:
+                row += 1
+                continue
+            first = row
+            while row < n and moving[row]:
+                row += 1
+            last = row - 1
+            before, after = reference[max(first - 1, 0)], reference[min(row, n - 1)]
+            lead = int(np.argmax(np.abs(after - before)))
+            onset = t[first]
+            if first > 0:
+                onset = t[first - 1]
+                if first + 1 <= last and speed[first + 1, lead] > speed[first, lead]:
+                    slope = (speed[first + 1, lead] - speed[first, lead]) / (t[first + 1] - t[first])
+                    onset = float(np.clip(t[first] - speed[first, lead] / slope, t[first - 1], t[first]))
+            out.append(Motion(float(onset), float(t[min(row, n - 1)]), first, last, before.copy(), after.copy()))
+        return out
+
+
+def pose_matrix(pose) -> np.ndarray:
+    """4x4 of a UR pose (x, y, z, rx, ry, rz): position and rotation vector."""
+    x, y, z, rx, ry, rz = (float(v) for v in pose)
+    T = np.eye(4)
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if angle > 1e-12:
+        k = np.array([rx, ry, rz]) / angle
+        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        T[:3, :3] = np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def pose_vector(T: np.ndarray) -> np.ndarray:
+    """(x, y, z, rx, ry, rz) of a 4x4: position and rotation vector (inverse of pose_matrix)."""
+    R = T[:3, :3]
+    angle = math.acos(max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0)))
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < 1e-12:
+        rot = v / 2.0
+    elif math.pi - angle < 1e-6:
+        w, V = np.linalg.eigh((R + R.T) / 2.0)
+        rot = V[:, int(np.argmax(w))] * angle
+    else:
+        rot = v * angle / (2.0 * math.sin(angle))
+    return np.concatenate([T[:3, 3], rot])
+
+
+def read_arm_log(path: str | Path, convention: Convention = UR_TO_COTWIN) -> ArmLog:
+    """An RTDE log's arm series in the p-model's convention (needs timestamp and actual_q_0..5)."""
+    return ArmLog(read_rtde(path, ARM), convention)
+
+
+def write_rtde(path: str | Path, timestamp, q, qd=None, target_q=None, target_qd=None, tcp=None,
+               convention: Convention = UR_TO_COTWIN) -> Path:
+    """Write p-model-convention series as an RTDE log (the columns given; TCP poses as 4x4s in the
+    model frame), e.g. to record a DT run in the PT's format."""
     path = Path(path)
-    problems: list[Finding] = []
+    columns: dict[str, np.ndarray] = {"timestamp": np.asarray(timestamp, float)}
 
-    def problem(line: int, column: int, message: str) -> None:
-        problems.append(Finding(Location(str(path), line, column), Severity.ERROR, message))
+    def put(name, matrix):
+        for i in range(JOINTS):
+            columns[f"{name}_{i}"] = np.asarray(matrix, float)[:, i]
 
+    for name, series, angles in (("target_q", target_q, True), ("target_qd", target_qd, False),
+                                 ("actual_q", q, True), ("actual_qd", qd, False)):
+        if series is not None:
+            put(name, convention.to_controller(series) if angles else series)
+    if tcp is not None:
+        to_controller = np.linalg.inv(np.asarray(convention.base))
+        put("actual_TCP_pose", [pose_vector(to_controller @ T) for T in tcp])
+    names = list(columns)
+    rows = zip(*(columns[n] for n in names))
+    path.write_text(" ".join(names) + "\n" + "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in rows))
+    return path
+
+
+def read_rtde(path: str | Path, required=LIVE) -> RTDELog:
+    """Read an RTDE log strictly; `required` columns must be present."""
+    path = Path(path)
+    diag = Diagnostics()
+    where = str(path)
     try:
         raw = path.read_bytes()
     except OSError as err:
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
-                                   f"cannot read the log: {err.strerror or err}")]) from None
+        raise CotwinError([_finding(where, 1, 1, f"cannot read the log: {err.strerror or err}")]) from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:
         line = raw[:err.start].count(b"\n") + 1
-        raise CotwinError([Finding(Location(str(path), line, 1), Severity.ERROR, "the log is not UTF-8 text")]) from None
+        raise CotwinError([_finding(where, line, err.start - raw.rfind(b"\n", 0, err.start),
+                                    "the log is not UTF-8 text (is this an RTDE CSV log?)")]) from None
     lines = text.splitlines()
-    if not lines:
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, "the log is empty")])
-    header = lines[0].split()
-    missing = [c for c in required if c not in header]
+    header_row = next((k for k, line in enumerate(lines) if line.strip()), None)
+    if header_row is None:
+        raise CotwinError([_finding(where, 1, 1, "the log is empty: an RTDE log needs a header row and samples")])
+    header, header_cols = _fields(lines[header_row])
+    seen: dict[str, int] = {}
+    for name, col in zip(header, header_cols):
+        if len(name) > MAX_FIELD:
+            diag.error(Location(where, header_row + 1, col), f"a header name of {len(name)} characters: "
+                       "the first row must name RTDE fields")
+        elif name in seen:
+            diag.error(Location(where, header_row + 1, col), f"column '{name}' appears twice (also column {seen[name]})")
+        seen.setdefault(name, col)
+    missing = [c for c in required if c not in seen]
     if missing:
-        problem(1, 1, f"the log has no column(s) {', '.join(missing)} (an RTDE log with actual_q_0..5 and "
-                      "actual_qd_0..5 is needed)")
-        raise CotwinError(problems)
-    rows = []
-    for number, line in enumerate(lines[1:], start=2):
+        diag.error(Location(where, header_row + 1, 1), f"the log has no column(s) {', '.join(missing)} (an RTDE log "
+                   f"with {_names(required)} is needed; is the file space-separated?)")
+    diag.raise_if_errors()
+    values: list[list[float]] = []
+    errors = 0
+    for k in range(header_row + 1, len(lines)):
+        line = lines[k]
         if not line.strip():
             continue
-        if len(line) > MAX_LINE:
-            problem(number, 1, f"a line longer than {MAX_LINE} characters")
-            continue
-        cells = line.split()
-        if len(cells) != len(header):
-            problem(number, 1, f"{len(cells)} values for {len(header)} columns")
-            continue
-        row, column = [], 1
-        for k, cell in enumerate(cells):
-            column = line.index(cell, column - 1) + 1
-            try:
-                value = float(cell)
-                if not math.isfinite(value):
-                    raise ValueError
-            except ValueError:
-                problem(number, column, f"column '{header[k]}': '{cell[:40]}' is not a finite number")
-                break
-            row.append(value)
-            column += len(cell)
+        fields, cols = _fields(line)
+        if len(fields) != len(header):
+            diag.error(Location(where, k + 1, cols[len(header)] if len(fields) > len(header) else len(line) + 1),
+                       f"{len(fields)} values for {len(header)} columns")
+            errors += 1
         else:
-            rows.append(row)
-        if len(problems) >= 20:
+            row = []
+            for name, cell, col in zip(header, fields, cols):
+                value = _number(cell)
+                if value is None:
+                    problem = (f"{cell!r} is not a finite number" if len(cell) <= 20
+                               else f"a field of {len(cell)} characters is not a number")
+                    diag.error(Location(where, k + 1, col), f"column '{name}': {problem}")
+                    errors += 1
+                row.append(value)
+            if None not in row:
+                values.append(row)
+        if errors >= MAX_ERRORS:
+            diag.error(Location(where, k + 1, 1), f"stopped after {MAX_ERRORS} errors")
             break
-    if problems:
-        raise CotwinError(problems)
-    if len(rows) < 2:
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, "the log has fewer than two samples")])
-    data = np.array(rows)
-    times = data[:, header.index("timestamp")]
-    back = np.nonzero(np.diff(times) <= 0)[0]
-    if len(back):
-        raise CotwinError([Finding(Location(str(path), int(back[0]) + 3, 1), Severity.ERROR,
-                                   "timestamps must increase")])
+    diag.raise_if_errors()
+    if len(values) < 2:
+        raise CotwinError([_finding(where, len(lines) or 1, 1,
+                                    f"the log has {len(values)} sample(s): at least two are needed")])
+    data = np.array(values)
+    stamps = data[:, header.index("timestamp")] if "timestamp" in header else None
+    if stamps is not None:
+        back = np.nonzero(np.diff(stamps) <= 0)[0]
+        if len(back):
+            bad = int(back[0]) + 1
+            raise CotwinError([_finding(where, _data_line(lines, header_row, bad), seen["timestamp"],
+                                        f"timestamps must increase: {float(stamps[bad])!r} after "
+                                        f"{float(stamps[bad - 1])!r}")])
     return RTDELog(str(path), header, data)
+
+
+def _names(required) -> str:
+    fields = list(dict.fromkeys(name.rsplit("_", 1)[0] if name[-1].isdigit() else name for name in required))
+    return ", ".join(f"{f}_0..5" if f != "timestamp" else f for f in fields)
+
+
+def _fields(line: str) -> tuple[list[str], list[int]]:
+    """Whitespace-separated fields and their 1-based columns."""
+    fields, cols, k, n = [], [], 0, len(line)
+    while k < n:
+        while k < n and line[k] in " \t\r":
+            k += 1
+        if k >= n:
+            break
+        start = k
+        while k < n and line[k] not in " \t\r":
+            k += 1
+        fields.append(line[start:k])
+        cols.append(start + 1)
+    return fields, cols
+
+
+def _number(text: str) -> float | None:
+    if len(text) > MAX_FIELD:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
+def _data_line(lines: list[str], header_row: int, index: int) -> int:
+    count = -1
+    for k in range(header_row + 1, len(lines)):
+        if lines[k].strip():
+            count += 1
+            if count == index:
+                return k + 1
+    return len(lines)
+
+
+def _finding(path: str, line: int, column: int, message: str) -> Finding:
+    return Finding(Location(path, line, column), Severity.ERROR, message)

@@ -16,10 +16,9 @@ from __future__ import annotations
 
 from dataclasses import fields
 
-import numpy as np
-
 from ..diagnostics import CotwinError
 from ..pmodel import ik
+from ..pmodel.cell import CellGeometry
 from ..robosim import syntax as s
 from ..robosim.operators import MATH, SHORT_CIRCUIT, binary, short_circuit
 from ..robosim.check_mapping import mapping_targets
@@ -40,24 +39,31 @@ def mirror_variables(variables: list[str], arm: list[str]) -> dict[str, tuple[st
 
 
 class FunctionRegistry:
-    """Implementations of functions the models leave abstract, bound to the platform's kinematics."""
+    """Implementations of functions the models leave abstract, bound to the platform's kinematics and
+    the cell's geometry: `inverse_kinematics(x, y, z)` takes the point the mapping computes in the
+    plate's (grid) frame, places it in the robot's frame and solves for the full tool pose there."""
 
-    def __init__(self, endpoint):
+    def __init__(self, endpoint, geometry: CellGeometry | None = None):
         self.endpoint = endpoint
         self.tree = endpoint.tree
-        self.tool = ik.find_tool(self.tree)
+        self.geometry = geometry or getattr(endpoint, "geometry", None) or CellGeometry()
+        self.tool = ik.find_tool(self.tree, self.geometry.tool)
         self.arm = ik.arm_joints(self.tree, self.tool)
+        self.geometry.check_joints(self.arm)
+        reference = dict(zip(self.arm, self.geometry.reference)) if self.geometry.reference is not None else None
+        self.solver = ik.Solver(self.tree, self.tool, reference, self.geometry.joint_offsets)
         self._cache: dict[tuple, ik.IKResult] = {}
+        self.requests: list[tuple[float, float, float]] = []  # grid points asked of inverse_kinematics, in order
 
     def _solve(self, x, y, z) -> ik.IKResult:
         key = (round(float(x), 9), round(float(y), 9), round(float(z), 9))
         if key not in self._cache:
-            seed = self.endpoint.joint_positions()
-            self._cache[key] = ik.solve(self.tree, np.array(key), approach=(0.0, 0.0, -1.0), seed=seed, tool=self.tool)
-        return self._cache[key]
+            self._cache[key] = self.solver.branch(self.geometry.target_pose(key))
+        return self.solver.near(self._cache[key], self.endpoint.joint_positions())
 
     def inverse_kinematics(self, x, y, z):
-        """Joint values (arm joints, kinematic order) putting the tool at (x, y, z) pointing down."""
+        """Joint values (arm joints, kinematic order) putting the tool frame at grid point (x, y, z)."""
+        self.requests.append((float(x), float(y), float(z)))
         result = self._solve(x, y, z)
         return tuple(result.q[j] for j in self.arm)
 

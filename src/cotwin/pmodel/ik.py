@@ -1,20 +1,32 @@
-"""Inverse kinematics on a p-model's kinematic tree: a tool point reaches a position with the tool's
-approach axis along a given direction (down, for the Flex-cell). Damped least squares, numeric
-Jacobian, joint limits respected, several seeds.
+"""Inverse kinematics on a p-model's kinematic tree: the tool frame reaches a full pose (position and
+orientation, the last wrist joint included), deterministically.
 
-The tool: the link that carries two or more prismatic joints (the gripper body); the approach axis
-points from the gripper body's origin to the centre between the fingers, and the tool point is the
-fingertip: between the fingers, where their geometry ends along the approach axis (their link
-origins when they have no geometry). A grid target's height is where the fingertips go. Without a gripper, the last link's origin and z axis.
+The tool: the link that carries two or more prismatic joints (the gripper body), else the last link.
+Its tool point is the flange (the tool link's origin, where the gripper is mounted), the fingertips
+(between the fingers, where their geometry ends along the approach axis) or an explicit offset in the
+tool link's frame; the tool frame has the tool link's orientation turned so that its z axis is the
+approach axis (from the flange towards the fingers).
+
+Determinism: the same target gives the same joints whatever the arm's current posture. The solver
+starts damped Newton iterations from a fixed set of seeds (the reference posture, the reference
+turned towards the target, and fixed pseudo-random postures), keeps the converged solution nearest
+the reference posture (the branch: shoulder, elbow and wrist configuration; the last joint, a
+6-axis arm's tool roll, only breaks ties), puts every joint on the
+turn (q + 2 pi k, within limits) nearest the reference, and only the base joint on the turn nearest
+its current angle, so that the arm never unwinds a full turn to reach a target.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .tree import KinematicTree, inverse
+from .tree import KinematicTree, axis_angle, inverse
+
+TWO_PI = 2.0 * np.pi
+DOWN = np.diag([1.0, -1.0, -1.0])  # tool z along -z, tool x along x
 
 
 @dataclass(frozen=True)
@@ -24,15 +36,17 @@ class Tool:
     fingers: tuple[str, ...]  # prismatic finger joints
 
 
-def _frame_with_z(z: np.ndarray, origin: np.ndarray) -> np.ndarray:
+def _rotation_onto_z(z: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking the link's z axis onto z (identity when they agree)."""
     z = z / np.linalg.norm(z)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-    T[:3, 3] = origin
-    return T
+    e = np.array([0.0, 0.0, 1.0])
+    c = float(e @ z)
+    if c > 1 - 1e-12:
+        return np.eye(3)
+    if c < -1 + 1e-12:
+        return np.diag([1.0, -1.0, -1.0])
+    axis = np.cross(e, z)
+    return axis_angle(axis, float(np.arccos(np.clip(c, -1.0, 1.0))))[:3, :3]
 
 
 def _corners(g) -> list[np.ndarray]:
@@ -47,7 +61,9 @@ def _corners(g) -> list[np.ndarray]:
     return [half * np.array([sx, sy, sz]) for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
 
 
-def find_tool(tree: KinematicTree) -> Tool:
+def find_tool(tree: KinematicTree, point="fingertips") -> Tool:
+    """The tool of the tree with its tool frame at `point`: "fingertips", "flange" or (x, y, z) in the
+    tool link's frame."""
     for link in reversed(tree.links):
         fingers = [j for j in tree.joints if j.parent == link.name and j.kind == "prismatic"]
         if len(fingers) >= 2:
@@ -63,18 +79,33 @@ def find_tool(tree: KinematicTree) -> Tool:
             approach = mid / np.linalg.norm(mid) if np.linalg.norm(mid) > 1e-9 else np.array([0.0, 0.0, 1.0])
             reach = max((c @ approach for c in corners), default=mid @ approach)
             tip = mid + (reach - mid @ approach) * approach
-            return Tool(link.name, _frame_with_z(approach, tip), tuple(j.name for j in fingers))
+            return Tool(link.name, _tool_frame(approach, tip, point), tuple(j.name for j in fingers))
     last = tree.links[-1]
-    return Tool(last.name, np.eye(4), ())
+    return Tool(last.name, _tool_frame(np.array([0.0, 0.0, 1.0]), np.zeros(3), point), ())
+
+
+def _tool_frame(approach: np.ndarray, tip: np.ndarray, point) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = _rotation_onto_z(approach)
+    if isinstance(point, str):
+        if point not in ("fingertips", "flange"):
+            raise ValueError(f"unknown tool point {point!r}")
+        T[:3, 3] = tip if point == "fingertips" else 0.0
+    else:
+        T[:3, 3] = np.asarray(point, float)
+    return T
 
 
 def arm_joints(tree: KinematicTree, tool: Tool) -> list[str]:
     """The actuated joints on the path from the base to the tool link."""
-    path, link = [], tool.link
+    return [j.name for j in _path(tree, tool.link) if j.kind != "fixed"]
+
+
+def _path(tree: KinematicTree, link: str) -> list:
+    path = []
     while link != tree.root.name:
         joint = next(j for j in tree.joints if j.child == link)
-        if joint.kind != "fixed":
-            path.append(joint.name)
+        path.append(joint)
         link = joint.parent
     return list(reversed(path))
 
@@ -83,71 +114,275 @@ def tool_pose(tree: KinematicTree, tool: Tool, q: dict[str, float]) -> np.ndarra
     return tree.forward(q)[tool.link] @ tool.offset
 
 
+class Chain:
+    """The serial chain from the tree's root to the tool frame, for fast forward kinematics and
+    Jacobians. `offsets` displace joint origins (m, model frame at zero) and everything beyond them:
+    the kinematic corrections of a solver whose link lengths differ from the p-model's."""
+
+    def __init__(self, tree: KinematicTree, tool: Tool, offsets: dict[str, tuple] | None = None):
+        offsets = dict(offsets or {})
+        self.joints: list[str] = []
+        self.kinds: list[str] = []
+        self.axes: list[np.ndarray] = []
+        self.limits: list[tuple[float, float]] = []
+        self.before: list[np.ndarray] = []  # parent link frame -> joint frame (at zero)
+        self.after: list[np.ndarray] = []  # joint frame -> child link frame
+        self.base = tree.root.pose.copy()
+        pending = np.eye(4)  # fixed joints folded into the next moving joint
+        for joint in _path(tree, tool.link):
+            parent, child = tree.link(joint.parent).pose, tree.link(joint.child).pose
+            before = inverse(parent) @ joint.pose
+            before[:3, 3] += parent[:3, :3].T @ np.asarray(offsets.pop(joint.name, (0.0, 0.0, 0.0)), float)
+            after = inverse(joint.pose) @ child
+            if joint.kind == "fixed":
+                pending = pending @ before @ after
+                continue
+            self.joints.append(joint.name)
+            self.kinds.append(joint.kind)
+            self.axes.append(np.asarray(joint.axis, float))
+            lower = joint.lower if joint.lower is not None else -np.pi
+            upper = joint.upper if joint.upper is not None else np.pi
+            self.limits.append((float(lower), float(upper)))
+            self.before.append(pending @ before)
+            self.after.append(after)
+            pending = np.eye(4)
+        self.tail = pending @ tool.offset
+        if offsets:
+            raise ValueError(f"offsets for joints not on the arm: {', '.join(offsets)}")
+        self._before = [(B[:3, :3].copy(), B[:3, 3].copy()) for B in self.before]
+        self._after = [(A[:3, :3].copy(), A[:3, 3].copy()) for A in self.after]
+        self._skew = []
+        for a in self.axes:
+            a = a / np.linalg.norm(a)
+            K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+            self._skew.append((K, K @ K))
+        self._eye = np.eye(3)
+        self._revolute = np.array([k == "revolute" for k in self.kinds], dtype=bool)
+        self.lower = np.array([lo for lo, _ in self.limits])
+        self.upper = np.array([hi for _, hi in self.limits])
+
+    def forward(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Tool pose (4x4) and the 6 x n Jacobian (linear; angular) in the model frame."""
+        R, p = self.base[:3, :3], self.base[:3, 3]
+        n = len(self.kinds)
+        origins, axes = np.empty((n, 3)), np.empty((n, 3))
+        for k in range(n):
+            Rb, pb = self._before[k]
+            p = p + R @ pb
+            R = R @ Rb
+            origins[k] = p
+            axes[k] = R @ self.axes[k]
+            if self.kinds[k] == "revolute":
+                K, K2 = self._skew[k]
+                s, c = math.sin(q[k]), math.cos(q[k])
+                R = R @ (self._eye + s * K + (1.0 - c) * K2)
+            else:
+                p = p + axes[k] * q[k]
+            Ra, pa = self._after[k]
+            p = p + R @ pa
+            R = R @ Ra
+        p = p + R @ self.tail[:3, 3]
+        R = R @ self.tail[:3, :3]
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = p
+        J = np.zeros((6, n))
+        revolute = self._revolute
+        J[:3, revolute] = _cross(axes[revolute], p - origins[revolute]).T
+        J[3:, revolute] = axes[revolute].T
+        J[:3, ~revolute] = axes[~revolute].T
+        return T, J
+
+    def pose(self, q) -> np.ndarray:
+        return self.forward(np.asarray(q, float))[0]
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product (np.cross costs more than the rest of the forward kinematics)."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
+def rotation_error(R_target: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Rotation vector (model frame) turning R onto R_target."""
+    E = R_target @ R.T
+    angle = float(np.arccos(np.clip((np.trace(E) - 1.0) / 2.0, -1.0, 1.0)))
+    v = np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
+    if angle < 1e-9:
+        return v / 2.0
+    if np.pi - angle < 1e-6:  # near a half turn: the axis from the symmetric part
+        w, V = np.linalg.eigh((E + E.T) / 2.0)
+        axis = V[:, np.argmax(w)]
+        if axis @ v < 0:
+            axis = -axis
+        return axis * angle
+    return v * angle / (2.0 * np.sin(angle))
+
+
 @dataclass
 class IKResult:
     q: dict[str, float]
     position_error: float  # m
-    angle_error: float  # rad between the approach axis and the requested direction
+    angle_error: float  # rad between the reached and the requested tool orientation
     iterations: int
 
     def ok(self, position_tol: float = 1e-3, angle_tol: float = 1e-2) -> bool:
         return self.position_error <= position_tol and self.angle_error <= angle_tol
 
 
-def solve(tree: KinematicTree, target: np.ndarray, approach=(0.0, 0.0, -1.0), seed: dict | None = None,
-          tool: Tool | None = None, max_iterations: int = 300) -> IKResult:
-    tool = tool or find_tool(tree)
-    joints = arm_joints(tree, tool)
-    limits = {j.name: (j.lower if j.lower is not None else -np.pi, j.upper if j.upper is not None else np.pi)
-              for j in tree.joints}
-    approach = np.asarray(approach, float) / np.linalg.norm(approach)
-    target = np.asarray(target, float)
-    seeds = [dict(seed or {})]
-    # standard postures: elbow up, tool down, facing the target
-    yaw = float(np.arctan2(target[1], target[0]))
-    for base in (yaw, yaw + np.pi / 2, yaw - np.pi / 2, yaw + np.pi):
-        for elbow in (1.0, -1.0):
-            seeds.append({joints[0]: base, **{n: v * elbow for n, v in zip(joints[1:], (0.5, 1.5, 0.5, 0.0, 0.0))}})
-    best: IKResult | None = None
-    for start in seeds:
-        result = _solve_from(tree, tool, joints, limits, target, approach, start, max_iterations)
-        if best is None or (result.position_error + 0.1 * result.angle_error) < (best.position_error + 0.1 * best.angle_error):
-            best = result
-        if best.ok(1e-4, 1e-3):
-            break
-    return best
+class Solver:
+    """Deterministic full-pose IK on a chain (see the module's docstring)."""
 
+    SEEDS = 8  # fixed pseudo-random starts besides the reference-based ones
+    TOLERANCE = 1e-10
 
-def _residual(tree, tool, q, target, approach):
-    T = tool_pose(tree, tool, q)
-    return np.concatenate([target - T[:3, 3], 0.3 * np.cross(T[:3, 2], approach)]), T
+    def __init__(self, tree: KinematicTree, tool: Tool | None = None, reference: dict[str, float] | None = None,
+                 offsets: dict[str, tuple] | None = None, max_iterations: int = 100):
+        self.tool = tool or find_tool(tree)
+        self.chain = Chain(tree, self.tool, offsets)
+        self.joints = self.chain.joints
+        self.reference = None if reference is None else np.array([float(reference.get(j, 0.0)) for j in self.joints])
+        self.max_iterations = max_iterations
+        rng = np.random.default_rng(20240531)
+        lo, hi = np.maximum(self.chain.lower, -np.pi), np.minimum(self.chain.upper, np.pi)
+        # the last joint (a 6-axis arm's tool roll) defines no branch: it only breaks ties
+        self._weights = np.ones(len(self.joints))
+        if len(self.joints) > 1:
+            self._weights[-1] = 1e-2
+        self._random = [lo + (hi - lo) * rng.random(len(self.joints)) for _ in range(self.SEEDS)]
 
+    def reference_for(self, target: np.ndarray) -> np.ndarray:
+        """The reference posture; without one, the zero posture with the base facing the target."""
+        if self.reference is not None:
+            return self.reference.copy()
+        ref = np.zeros(len(self.joints))
+        if self.chain.kinds and self.chain.kinds[0] == "revolute":
+            ref[0] = self._yaw(target)
+        return ref
 
-def _solve_from(tree, tool, joints, limits, target, approach, start, max_iterations) -> IKResult:
-    q = {n: float(np.clip(start.get(n, 0.0), *limits[n])) for n in joints}
-    damping = 1e-3
-    best_norm, since_best = np.inf, 0
-    for it in range(max_iterations):
-        r, T = _residual(tree, tool, q, target, approach)
-        norm = float(np.linalg.norm(r))
-        if np.linalg.norm(r[:3]) < 1e-7 and np.linalg.norm(r[3:]) < 1e-7:
-            break
-        if norm < best_norm * (1 - 1e-4):
-            best_norm, since_best = norm, 0
+    def _yaw(self, target: np.ndarray) -> float:
+        """Direction of the target seen from the base (about the base frame's z)."""
+        p = inverse(self.chain.base) @ np.append(target[:3, 3], 1.0)
+        return float(np.arctan2(p[1], p[0]))
+
+    def solve(self, target, current: dict[str, float] | None = None) -> IKResult:
+        """Joints putting the tool frame at `target` (4x4 pose, or a point reached pointing down), the
+        base on the turn nearest its `current` angle."""
+        return self.near(self.branch(target), current)
+
+    def near(self, result: IKResult, current: dict[str, float] | None) -> IKResult:
+        """The same solution with the base joint on the turn nearest its current angle."""
+        base = self.joints[0] if self.joints else None
+        if current is None or base is None or self.chain.kinds[0] != "revolute" or base not in current:
+            return result
+        q = dict(result.q)
+        q[base] = self._nearest_turn(q[base], float(current[base]), 0)
+        return IKResult(q, result.position_error, result.angle_error, result.iterations)
+
+    def branch(self, target) -> IKResult:
+        """The solution on the reference's branch, every joint on the turn nearest the reference."""
+        target = np.asarray(target, float)
+        if target.shape == (3,):
+            T = np.eye(4)
+            T[:3, :3] = DOWN
+            T[:3, 3] = target
+            target = T
+        ref = self.reference_for(target)
+        candidates = [self._continuation(target, ref)]
+        seeds = [ref]
+        if self.chain.kinds and self.chain.kinds[0] == "revolute":
+            yaw = self._yaw(target)
+            for base in (yaw, yaw + np.pi):
+                seed = ref.copy()
+                seed[0] = base
+                seeds.append(seed)
+        seeds.extend(self._random)
+        best, best_distance, best_error = None, np.inf, None
+        fallback = None
+        for found in candidates + [None] * len(seeds):
+            q, pos, ang, iterations = found if found is not None else self.newton(target, seeds.pop(0))
+            if pos < 1e-7 and ang < 1e-7:
+                q = self._wind(q, ref)
+                distance = float(np.sum(self._weights * self._wrap(q - ref) ** 2))
+                if distance < best_distance - 1e-9:
+                    best, best_distance, best_error = q, distance, (pos, ang, iterations)
+            elif fallback is None or pos + 0.1 * ang < fallback[1] + 0.1 * fallback[2]:
+                fallback = (q, pos, ang, iterations)
+        if best is None:  # unreachable: the closest approach found
+            q, pos, ang, iterations = fallback
         else:
-            since_best += 1
-            if since_best >= 15:  # stalled: out of reach from this seed
+            q, (pos, ang, iterations) = best, best_error
+        return IKResult(dict(zip(self.joints, map(float, q))), float(pos), float(ang), iterations)
+
+    # ---- internals ----
+    @staticmethod
+    def _wrap(d: np.ndarray) -> np.ndarray:
+        return (d + np.pi) % TWO_PI - np.pi
+
+    def _nearest_turn(self, value: float, near: float, k: int) -> float:
+        if self.chain.kinds[k] != "revolute":
+            return value
+        candidate = near + float(self._wrap(np.array(value - near)))
+        lo, hi = self.chain.limits[k]
+        if lo - 1e-9 <= candidate <= hi + 1e-9:
+            return float(np.clip(candidate, lo, hi))
+        for shift in (TWO_PI, -TWO_PI):
+            if lo - 1e-9 <= candidate + shift <= hi + 1e-9:
+                return float(np.clip(candidate + shift, lo, hi))
+        return value
+
+    def _wind(self, q: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        return np.array([self._nearest_turn(float(v), float(r), k) for k, (v, r) in enumerate(zip(q, ref))])
+
+    def _continuation(self, target: np.ndarray, ref: np.ndarray, steps: int = 16):
+        """Follow the tool from the reference posture's pose to the target along a straight line and a
+        uniform rotation, a few Newton steps at each waypoint: the solution on the reference's branch."""
+        q = np.clip(ref.astype(float), self.chain.lower, self.chain.upper)
+        start = self.chain.forward(q)[0]
+        turn = rotation_error(target[:3, :3], start[:3, :3])
+        total = 0
+        for k in range(1, steps + 1):
+            s = k / steps
+            waypoint = np.eye(4)
+            waypoint[:3, :3] = axis_angle(turn, float(np.linalg.norm(turn)) * s)[:3, :3] @ start[:3, :3] \
+                if np.linalg.norm(turn) > 1e-12 else start[:3, :3]
+            waypoint[:3, 3] = start[:3, 3] + s * (target[:3, 3] - start[:3, 3])
+            q, pos, ang, iterations = self.newton(waypoint, q, max_iterations=None if k == steps else 8)
+            total += iterations
+        return q, pos, ang, total
+
+    def newton(self, target: np.ndarray, seed: np.ndarray, max_iterations: int | None = None):
+        """Damped Newton iterations from one start (no branch choice): (q, position error, angle error,
+        iterations)."""
+        chain = self.chain
+        q = np.clip(seed.astype(float), chain.lower, chain.upper)
+        damping = 1e-4
+        T, J = chain.forward(q)
+        e = np.concatenate([target[:3, 3] - T[:3, 3], rotation_error(target[:3, :3], T[:3, :3])])
+        norm = float(np.linalg.norm(e))
+        iterations = 0
+        for iterations in range(1, (max_iterations or self.max_iterations) + 1):
+            if norm < self.TOLERANCE:
                 break
-        J = np.zeros((6, len(joints)))
-        eps = 1e-6
-        for k, n in enumerate(joints):
-            dq = dict(q)
-            dq[n] += eps
-            J[:, k] = -(_residual(tree, tool, dq, target, approach)[0] - r) / eps
-        step = J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(6), r)
-        step *= min(1.0, 0.5 / max(np.abs(step).max(), 1e-12))
-        for k, n in enumerate(joints):
-            q[n] = float(np.clip(q[n] + step[k], *limits[n]))
-    r, T = _residual(tree, tool, q, target, approach)
-    angle = float(np.arccos(np.clip(T[:3, 2] @ approach, -1.0, 1.0)))
-    return IKResult(q, float(np.linalg.norm(r[:3])), angle, it + 1)
+            step = J.T @ np.linalg.solve(J @ J.T + damping * np.eye(6), e)
+            largest = np.abs(step).max()
+            if largest > 0.5:
+                step *= 0.5 / largest
+            trial = np.clip(q + step, chain.lower, chain.upper)
+            T2, J2 = chain.forward(trial)
+            e2 = np.concatenate([target[:3, 3] - T2[:3, 3], rotation_error(target[:3, :3], T2[:3, :3])])
+            norm2 = float(np.linalg.norm(e2))
+            if norm2 < norm:
+                q, T, J, e, norm = trial, T2, J2, e2, norm2
+                damping = max(damping * 0.3, 1e-12)
+            else:
+                damping *= 10.0
+                if damping > 1e4:
+                    break
+        return q, float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:])), iterations
+
+
+def solve(tree: KinematicTree, target, tool: Tool | None = None, reference: dict[str, float] | None = None,
+          current: dict[str, float] | None = None, offsets: dict[str, tuple] | None = None) -> IKResult:
+    """One-off IK (see Solver): `target` is a 4x4 tool pose, or a point reached with the tool down."""
+    return Solver(tree, tool, reference, offsets).solve(target, current)

@@ -102,7 +102,8 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
     purely visual elements when `visual` is false (see the module doc)."""
     root = ET.Element("mujoco", {"model": tree.name})
     sub(root, "compiler", angle="radian", autolimits="true", **({} if visual else {"discardvisual": "true"}))
-    option = sub(root, "option", timestep=num(timestep), gravity="0 0 -9.81", integrator="implicitfast",
+    gravity = getattr(scene, "gravity", (0.0, 0.0, -9.81))  # a scene may tilt the world (a level plate)
+    option = sub(root, "option", timestep=num(timestep), gravity=nums(gravity), integrator="implicitfast",
                  cone="elliptic", impratio="10")
     sub(option, "flag", autoreset="disable")
     visual = sub(root, "visual")

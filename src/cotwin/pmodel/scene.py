@@ -2,8 +2,11 @@
 
 The grid comes from the mapping's constants (the paper's `mapping.pm` and ours use the same names,
 read case-insensitively): HOLE_DIST, x_max, y_max, XMAX, YMAX and Z_table_level (or Z_TABLE). A hole
-(X, Y) is at x = x_max - (Y + 1) HOLE_DIST, y = y_max - X HOLE_DIST, in the robot base frame, exactly
-as the mapping computes movediscrete targets; the plate's top is at z = 0, under the robot base.
+(X, Y) is at x = x_max - (Y + 1) HOLE_DIST, y = y_max - X HOLE_DIST in the plate's (grid) frame, exactly
+as the mapping computes movediscrete targets; the plate's top is that frame's z = 0 (or the geometry's
+`surface`, when the targets were found to lie elsewhere than just above the plate). The cell's
+geometry (cotwin.pmodel.cell) places the grid frame in the robot's frame (the identity by default:
+the plate right under the robot base); the plate is level, so gravity points along its -z.
 """
 
 from __future__ import annotations
@@ -11,11 +14,14 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ..diagnostics import CotwinError
 from ..robosim.consteval import const_env, evaluate
 from ..robosim.pmodel_elements import Mapping
+from .cell import CellGeometry
 from .mjcf import WORLD_CONAFFINITY, WORLD_CONTYPE
-from .xmltext import num, nums, sub
+from .xmltext import num, nums, quat, sub
 
 _NAMES = {"hole_dist": ("hole_dist",), "x_max": ("x_max",), "y_max": ("y_max",), "xmax": ("xmax",),
           "ymax": ("ymax",), "z_table": ("z_table_level", "z_table")}
@@ -39,9 +45,11 @@ class FlexCell:
     z_table: float = 0.02
     thickness: float = 0.02
     bricks: list[Brick] = field(default_factory=list)
+    geometry: CellGeometry = field(default_factory=CellGeometry)
 
     @classmethod
-    def from_mapping(cls, mapping: Mapping, bricks: list[Brick] | None = None) -> "FlexCell":
+    def from_mapping(cls, mapping: Mapping, bricks: list[Brick] | None = None,
+                     geometry: CellGeometry | None = None) -> "FlexCell":
         consts = {v.name.lower(): v for v in mapping.variables if v.is_const and v.init is not None}
         env = const_env([v for v in mapping.variables if v.is_const])
         values = {}
@@ -52,11 +60,20 @@ class FlexCell:
                                   "for the Flex-cell grid")
             values[key] = evaluate(decl.init, env)
         return cls(values["hole_dist"], values["x_max"], values["y_max"], int(values["xmax"]), int(values["ymax"]),
-                   values["z_table"], bricks=list(bricks or []))
+                   values["z_table"], bricks=list(bricks or []), geometry=geometry or CellGeometry())
 
     def hole(self, X: int, Y: int, Z: int = 0) -> tuple[float, float, float]:
         """The point the mapping's movediscrete aims at for grid target (X, Y, Z)."""
         return (self.x_max - (Y + 1) * self.hole_dist, self.y_max - X * self.hole_dist, self.z_table + Z * self.hole_dist)
+
+    def hole_in_robot(self, X: int, Y: int, Z: int = 0):
+        """The same point in the robot's model frame (where the tool point goes)."""
+        return tuple(float(v) for v in self.geometry.to_robot(self.hole(X, Y, Z)))
+
+    @property
+    def gravity(self) -> tuple[float, float, float]:
+        """Gravity in the robot's frame: along the level plate's -z."""
+        return tuple(float(v) + 0.0 for v in self.geometry.plate_pose()[:3, :3] @ (0.0, 0.0, -9.81))
 
     def in_grid(self, X: int, Y: int) -> bool:
         return 0 <= X <= self.xmax and 0 <= Y <= self.ymax
@@ -69,21 +86,32 @@ class FlexCell:
 
     def add_to(self, worldbody: ET.Element) -> None:
         x0, x1, y0, y1 = self.extent()
-        sub(worldbody, "geom", name="floor", type="plane", size="3 3 0.1", pos=f"0 0 {num(-0.8)}", rgba="0.3 0.3 0.3 1",
-            contype=str(WORLD_CONTYPE), conaffinity=str(WORLD_CONAFFINITY))
-        plate = sub(worldbody, "body", name="plate", pos=nums([(x0 + x1) / 2, (y0 + y1) / 2, -self.thickness / 2]))
+        P = self.geometry.plate_pose()
+        orientation = quat(P[:3, :3])
+
+        def place(point) -> dict:
+            attrs = {"pos": nums(P[:3, :3] @ np.asarray(point, float) + P[:3, 3])}
+            if abs(orientation[0] - 1.0) > 1e-15:
+                attrs["quat"] = nums(orientation)
+            return attrs
+
+        top = self.geometry.surface
+        sub(worldbody, "geom", name="floor", type="plane", size="3 3 0.1", rgba="0.3 0.3 0.3 1",
+            contype=str(WORLD_CONTYPE), conaffinity=str(WORLD_CONAFFINITY), **place((0.0, 0.0, top - 0.8)))
+        cell = sub(worldbody, "body", name="cell", **place((0.0, 0.0, top)))
+        plate = sub(cell, "body", name="plate", pos=nums([(x0 + x1) / 2, (y0 + y1) / 2, -self.thickness / 2]))
         sub(plate, "geom", name="plate", type="box", size=nums([(x1 - x0) / 2, (y1 - y0) / 2, self.thickness / 2]),
             rgba="0.75 0.75 0.78 1", contype=str(WORLD_CONTYPE), conaffinity=str(WORLD_CONAFFINITY))
         for X in range(self.xmax + 1):
             for Y in range(self.ymax + 1):
                 x, y, _ = self.hole(X, Y)
-                sub(worldbody, "geom", name=f"hole_{X}_{Y}", type="cylinder", size="0.006 0.0005",  # a marker:
+                sub(cell, "geom", name=f"hole_{X}_{Y}", type="cylinder", size="0.006 0.0005",  # a marker:
                     pos=nums([x, y, 0.0005]), rgba="0.2 0.2 0.2 1", contype="0", conaffinity="0")  # visual only
         for brick in self.bricks:
             if not self.in_grid(*brick.hole):
                 raise CotwinError(f"brick {brick.name} stands on hole {brick.hole}, outside the grid")
             x, y, _ = self.hole(*brick.hole)
-            body = sub(worldbody, "body", name=brick.name, pos=nums([x, y, brick.size[2] / 2 + 1e-4]))
+            body = sub(worldbody, "body", name=brick.name, **place((x, y, top + brick.size[2] / 2 + 1e-4)))
             sub(body, "freejoint", name=f"{brick.name}_free")
             sub(body, "geom", name=brick.name, type="box", size=nums([v / 2 for v in brick.size]), mass=num(brick.mass),
                 rgba="0.8 0.3 0.2 1", friction="1.2 0.02 0.001", contype=str(WORLD_CONTYPE),

@@ -18,7 +18,8 @@ from .system import MAPPING, TwinSystem
 
 
 def dt_endpoint(system: TwinSystem):
-    """The platform of the project's (digital) twin: the embedded simulator, or a robot behind the broker."""
+    """The platform of the project's (digital) twin: the embedded simulator (calibrated when the project
+    names a calibration), or a robot behind the broker."""
     from ..mapping.endpoint import SimulatedEndpoint
     from ..pmodel.simulator import PlatformSimulator
 
@@ -27,7 +28,9 @@ def dt_endpoint(system: TwinSystem):
         from ..mapping.broker import BrokerEndpoint
 
         return BrokerEndpoint(models.tree, spec.queue, spec.url)
-    return SimulatedEndpoint(PlatformSimulator(models.tree, models.scene))
+    calibration = models.calibration  # the cell's geometry and the motion profile fitted to the PT
+    return SimulatedEndpoint(PlatformSimulator(models.tree, models.scene), calibration and calibration.profile,
+                             calibration and calibration.geometry)
 
 
 def python_unit(project: str | Path, role: str):

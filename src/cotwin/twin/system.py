@@ -52,6 +52,7 @@ class TwinModels:
     mapping_model: object  # cotwin.robosim.pmodel_elements.Mapping
     scene: object | None
     monitored: list[str]
+    calibration: object | None = None  # cotwin.twin.calibration.Calibration: [platform] calibration
 
 
 def load_models(spec: TwinProject) -> TwinModels:
@@ -71,12 +72,20 @@ def load_models(spec: TwinProject) -> TwinModels:
         raise CotwinError([Finding(Location(str(spec.mapping), 1, 1), Severity.ERROR,
                                    f"a twin needs exactly one mapping, found {len(mappings)}")])
     mapping = mappings[0]
+    calibration = None
+    if spec.calibration is not None:
+        from .calibration import Calibration
+
+        calibration = Calibration.read(spec.calibration)
     scene = None
     if spec.scene == "flexcell":
-        scene = FlexCell.from_mapping(mapping, [Brick(f"brick{i + 1}", b) for i, b in enumerate(spec.bricks)])
+        scene = FlexCell.from_mapping(mapping, [Brick(f"brick{i + 1}", b) for i, b in enumerate(spec.bricks)],
+                                      calibration.geometry if calibration else None)
     arm = ik.arm_joints(tree, ik.find_tool(tree))
+    if calibration is not None:
+        calibration.geometry.check_joints(arm)  # its posture and corrections name this arm's joints
     monitored = list(mirror_variables([v.name for v in mapping.variables], arm))
-    return TwinModels(project, program, tree, mapping, scene, monitored)
+    return TwinModels(project, program, tree, mapping, scene, monitored, calibration)
 
 
 def external_events(program, mapping_model) -> list[str]:

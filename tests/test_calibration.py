@@ -1,0 +1,231 @@
+"""Calibration of the DT against a recorded PT run: the fit, the replay at the log's onsets, the file, the
+project key and the command."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from cotwin.diagnostics import CotwinError
+from cotwin.mapping.motion import JointMove
+from cotwin.mapping.rtde import read_arm_log, write_rtde
+from cotwin.pmodel import ik
+from cotwin.pmodel.cell import CellGeometry
+from cotwin.twin.calibration import Calibration, calibrate, check, plan_moves, project_twin
+from cotwin.twin.run import load
+
+MOTION_RMSE = 0.05  # rad: the must-show bound while the PT moves
+SETTLED = 0.01  # rad: the must-show bound at rest
+
+
+@pytest.fixture(scope="module")
+def example():
+    from conftest import EXAMPLES
+
+    return load(EXAMPLES / "ur5e" / "cotwin.toml")
+
+
+@pytest.fixture(scope="module")
+def parts(example):
+    return project_twin(example)
+
+
+def _recorded():
+    from conftest import ROOT
+
+    path = ROOT.parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"
+    if not path.is_file():
+        pytest.skip(f"the real UR5e's recorded run is not at {path} (only in the project workspace)")
+    return path
+
+
+# ---- a synthetic PT: known geometry and timing, recorded at 10 Hz like RTDE ----
+TRUTH = CellGeometry(plate_xyz=(0.03, -0.02, 0.05), plate_rpy=(np.radians(30), 0.0, np.pi), tool="flange",
+                     reference=(-1.6, -0.2, 1.6, -0.7, -1.5, 0.0))
+TRUTH_MOVE = JointMove(a=1.2, v=0.9)
+
+
+def _pt_log(parts, path, onsets, start=(-1.5, -0.3, 1.5, -0.6, -1.5, 0.1), moves=None):
+    """What a PT with cell TRUTH and movej TRUTH_MOVE records for the plan's moves started at `onsets`."""
+    twin, program, commands = parts
+    tree = twin.tree
+    tool = ik.find_tool(tree, TRUTH.tool)
+    arm = ik.arm_joints(tree, tool)
+    solver = ik.Solver(tree, tool, dict(zip(arm, TRUTH.reference)))
+    segments, q = [], np.array(start)
+    for onset, move in zip(onsets, moves or plan_moves(twin, program, commands)):
+        result = solver.solve(TRUTH.target_pose(move.point), dict(zip(arm, q)))
+        goal = np.array([result.q[j] for j in arm])
+        segments.append(TRUTH_MOVE.plan(tree, dict(zip(arm, q)), dict(zip(arm, goal)), onset))
+        q = goal
+
+    def at(x):
+        active = [s for s in segments if s.t0 <= x]
+        return np.array([active[-1].at(x)[j] for j in arm]) if active else np.array(start)
+
+    t = np.arange(0.0, segments[-1].end + 2.5, 0.1)
+    qs = np.array([at(x) for x in t])
+    qd = np.array([(at(x + 1e-5) - at(x - 1e-5)) / 2e-5 for x in t])
+    return write_rtde(path, 500.0 + t, qs, qd, qs, qd)
+
+
+def test_calibration_recovers_a_known_cell_and_timing(parts, tmp_path):
+    twin, program, commands = parts
+    onsets = [1.23, 6.71, 9.02, 16.35]
+    report = calibrate(twin, program, commands, read_arm_log(_pt_log(parts, tmp_path / "pt.csv", onsets)))
+    g = report.calibration.geometry
+    assert np.allclose(g.plate_pose(), TRUTH.plate_pose(), atol=1e-4)
+    assert np.allclose(g.target_pose((0.3, 0.4, 0.05)), TRUTH.target_pose((0.3, 0.4, 0.05)), atol=1e-4)
+    assert g.tool == "flange" and not report.geometry_fit.tool_observable
+    assert np.abs(report.geometry_fit.ik_errors).max() < 1e-4
+    profile = report.calibration.profile
+    assert profile.a == pytest.approx(1.2, rel=1e-3) and profile.v == pytest.approx(0.9, rel=1e-3)
+    assert report.profile_fit.onsets == pytest.approx(onsets, abs=2e-3)
+    assert report.calibration.timing.latencies == pytest.approx(
+        [o - c.time for o, c in zip(onsets, commands)], abs=2e-3)
+    assert report.pt_lag == pytest.approx(0.0, abs=2e-3)  # measured = set-point in this PT
+    assert report.dt_lag > 0.01 and profile.delay == pytest.approx(report.pt_lag - report.dt_lag)
+    assert np.all(report.after.motion <= 0.01) and np.all(report.after.settled <= 0.002)
+    assert np.all(report.before.motion > report.after.motion)
+    # another run of the same plan, other onsets: replayed at its own onsets on the calibrated DT
+    other = read_arm_log(_pt_log(parts, tmp_path / "other.csv", [0.8, 5.9, 8.6, 15.2], start=(-1.4, -0.2, 1.4, -0.5, -1.4, 0.2)))
+    checked = check(twin, program, commands, other, report.calibration)
+    assert checked.onsets == pytest.approx([0.8, 5.9, 8.6, 15.2], abs=2e-3)
+    assert np.all(checked.errors.motion <= 0.01) and np.all(checked.errors.settled <= 0.002)
+
+
+def test_the_recorded_ur5e_run_is_matched_by_the_calibrated_dt(parts, tmp_path):
+    """Must-show: fitted on rtde_run1.csv and replaying its commands at its onsets, the DT is within
+    0.05 rad RMS per joint while moving and 0.01 rad at rest."""
+    twin, program, commands = parts
+    log = read_arm_log(_recorded())
+    report = calibrate(twin, program, commands, log)
+    assert np.all(report.after.motion <= MOTION_RMSE), report.after.motion
+    assert np.all(report.after.settled <= SETTLED), report.after.settled
+    assert report.before.motion.max() > 1.0  # the uncalibrated DT was far off
+    g, profile = report.calibration.geometry, report.calibration.profile
+    # what the fit found: the base tilted by 45 degrees and turned half a turn w.r.t. the plate, the
+    # tool pointing into the plate, URScript's default movej (a = 1.4 rad/s^2, v = 1.05 rad/s)
+    assert np.degrees(g.plate_rpy) == pytest.approx([45.0, 0.0, 180.0], abs=0.1)
+    assert np.degrees(g.tool_rpy[:2]) == pytest.approx([180.0, 0.0], abs=0.1) or \
+        np.degrees(g.tool_rpy[:2]) == pytest.approx([-180.0, 0.0], abs=0.1)
+    assert profile.a == pytest.approx(1.4, abs=0.02) and profile.v == pytest.approx(1.05, abs=0.01)
+    # the written file gives the same DT
+    again = Calibration.read(report.calibration.write(tmp_path / "calibration.toml"))
+    assert again.geometry == g and again.profile == profile
+    checked = check(twin, program, commands, log, again)
+    assert checked.errors.motion == pytest.approx(report.after.motion, abs=1e-9)
+
+
+def test_a_log_of_other_moves_than_the_plan_is_refused(parts, tmp_path):
+    twin, program, commands = parts
+    moves = plan_moves(twin, program, commands)[:3]
+    log = read_arm_log(_pt_log(parts, tmp_path / "three.csv", [1.0, 6.0, 9.0], moves=moves))
+    with pytest.raises(CotwinError, match=r"three.csv:1:1: error: the log has 3 move\(s\) but the plan commands 4"):
+        calibrate(twin, program, commands, log)
+
+
+def test_a_plan_whose_targets_lie_on_a_line_cannot_fix_the_plates_pose(example):
+    from cotwin.twin.calibration import fit_geometry
+
+    with pytest.raises(CotwinError, match="three commanded targets not on one line"):
+        fit_geometry(example.models.tree, np.array([[0.1, 0.2, 0.0], [0.2, 0.2, 0.0], [0.3, 0.2, 0.0]]),
+                     np.zeros((3, 6)), CellGeometry(tool="flange"))
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[plate]\nxyz = [0, 0, 0]\n[cell]\nx = 1\n", "c.toml:3:1: error: unknown key 'cell' in the file"),
+    ("[motion]\nprofile = \"movej\"\na = 0\n", "c.toml:3:1: error: [motion] a must be a positive number"),
+    ("[timing]\nonsets = [1.0, \"late\"]\n", "c.toml:2:1: error: [timing] onsets: must be a list of times"),
+    ("[timing]\nservo_lag = \"small\"\n", "c.toml:2:1: error: [timing] servo_lag must be a finite number"),
+])
+def test_bad_calibration_files_are_reported_at_their_place(tmp_path, text, message):
+    path = tmp_path / "c.toml"
+    path.write_text(text)
+    with pytest.raises(CotwinError) as err:
+        Calibration.read(path)
+    assert message in str(err.value)
+
+
+def _calibrated_project(tmp_path, calibration_text=None):
+    from conftest import EXAMPLES
+
+    folder = EXAMPLES / "ur5e"
+    text = (folder / "calibrated.toml").read_text()
+    for name in ("arm.rst", "ur5e.pm", "mapping.pm", "plan.csv"):
+        text = text.replace(f'"{name}"', f'"{(folder / name).as_posix()}"')
+    calibration = folder / "calibration.toml"
+    if calibration_text is not None:
+        calibration = tmp_path / "calibration.toml"
+        calibration.write_text(calibration_text)
+    text = text.replace('"calibration.toml"', f'"{calibration.as_posix()}"')
+    (tmp_path / "cotwin.toml").write_text(text)
+    return tmp_path / "cotwin.toml"
+
+
+def test_the_calibrated_example_project_moves_the_tool_onto_the_calibrated_holes(tmp_path):
+    from cotwin.twin.run import dt_endpoint, run_twin
+
+    system = load(_calibrated_project(tmp_path))
+    calibration = system.models.calibration
+    assert system.models.scene.geometry == calibration.geometry
+    endpoint = dt_endpoint(system)
+    assert endpoint.profile == calibration.profile and isinstance(endpoint.profile, JointMove)
+    ran = run_twin(system, tmp_path / "out", plot=False)
+    import csv
+
+    rows = list(csv.DictReader(open(ran.csv)))
+    tree, geometry = system.models.tree, calibration.geometry
+    tool = ik.find_tool(tree, geometry.tool)
+    arm = ik.arm_joints(tree, tool)
+    solver = ik.Solver(tree, tool, None, geometry.joint_offsets)  # the solver's chain: where the DT aims
+    moves = plan_moves(*project_twin(system))
+    for move, following in zip(moves, moves[1:] + [None]):
+        until = following.command.time if following else 20.0
+        row = [r for r in rows if float(r["time"]) <= until + 1e-9][-1]
+        q = np.array([float(row[f"{{mapping}}.mapping.q{i}"]) for i in range(len(arm))])
+        reached, target = solver.chain.pose(q), geometry.target_pose(move.point)
+        assert np.linalg.norm(reached[:3, 3] - target[:3, 3]) < 0.002
+        assert np.abs(reached[:3, :3] - target[:3, :3]).max() < 0.01
+
+
+def test_a_project_naming_a_bad_calibration_reports_it(tmp_path):
+    project = _calibrated_project(tmp_path, "[ik]\nreference = [0.0, 0.1]\njoint_offsets = { knee = [0, 0, 0] }\n")
+    with pytest.raises(CotwinError) as err:
+        load(project)
+    assert "calibration.toml:2:1: error: the reference posture has 2 values" in str(err.value)
+    assert "calibration.toml:3:1: error: joint_offsets: 'knee' is not an arm joint" in str(err.value)
+
+
+def test_the_command_fits_writes_and_checks(parts, tmp_path):
+    from conftest import EXAMPLES
+
+    log = _pt_log(parts, tmp_path / "pt.csv", [1.23, 6.71, 9.02, 16.35])
+    out = tmp_path / "calibration.toml"
+    project = str(EXAMPLES / "ur5e" / "cotwin.toml")
+    fit = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--pt-log", str(log), "-o", str(out)],
+                         capture_output=True, text=True)
+    assert fit.returncode == 0, fit.stderr
+    assert "a = 1.200 rad/s^2, v = 0.900 rad/s" in fit.stdout
+    after = fit.stdout.split("after (calibrated):")[1]
+    assert sum("_joint" in line and line.count("RMSE") == 2 for line in after.splitlines()) == 6
+    written = Calibration.read(out).profile
+    assert isinstance(written, JointMove) and (written.a, written.v) == pytest.approx((1.2, 0.9), rel=1e-6)
+    checked = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--calibration", str(out),
+                              "--check", str(log)], capture_output=True, text=True)
+    assert checked.returncode == 0, checked.stderr
+    lines = [line for line in checked.stdout.splitlines() if "_joint" in line]
+    assert len(lines) == 6 and all(line.count("RMSE") == 2 for line in lines)
+    assert all(float(line.split("RMSE")[1].split()[0]) <= 0.01 for line in lines)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("timestamp actual_q_0\n0 x\n")
+    refused = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--pt-log", str(bad), "-o",
+                              str(tmp_path / "c.toml")], capture_output=True, text=True)
+    assert refused.returncode == 1 and "bad.csv:1:1: error: the log has no column(s) actual_q_1" in refused.stderr
+    assert "Traceback" not in refused.stderr
+    usage = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--pt-log", str(log)],
+                           capture_output=True, text=True)
+    assert usage.returncode == 2 and "--pt-log needs -o FILE" in usage.stderr
