@@ -206,7 +206,9 @@ def _actuator_port(eq: s.Expr) -> str | None:
 class Mapping:
     """The platform-mapping interface: one instance per mapping model and endpoint."""
 
-    def __init__(self, project, endpoint, mapping_name: str | None = None):
+    def __init__(self, project, endpoint, mapping_name: str | None = None, geometry=None):
+        """`geometry` (a CellGeometry) places the cell for the IK registry, whatever the endpoint; without
+        it the endpoint's own geometry is used, if it has one."""
         mappings = project.elements(MappingModel)
         if mapping_name is not None:
             model = project.lookup("mapping", mapping_name)
@@ -226,7 +228,7 @@ class Mapping:
         self.members = members
         self.pmodel = pmodel
         self.resolver = TypeResolver(project, self.source, Diagnostics())
-        self.registry = FunctionRegistry(endpoint)
+        self.registry = FunctionRegistry(endpoint, geometry)
         self.functions = self.registry.functions()
         self.env = _Env(self)
         self.events = {ev.name: InputEvent(self, ev) for ev in model.input_events}

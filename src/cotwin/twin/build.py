@@ -19,6 +19,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from .. import __version__
+from ..config import dumps
 from ..diagnostics import CotwinError
 from .system import TwinSystem
 
@@ -161,27 +162,8 @@ def staged_project(system: TwinSystem, stage: Path) -> None:
                 "bricks": [list(b) for b in spec.bricks], "calibration": copy(spec.calibration)}
     cosim = {"step": spec.step, "end": spec.end, "algorithm": spec.algorithm, "realtime": spec.realtime,
              "log": spec.log}
-    (stage / "cotwin.toml").write_text(toml_text({"models": models, "scenario": scenario, "platform": platform,
+    (stage / "cotwin.toml").write_text(dumps({"models": models, "scenario": scenario, "platform": platform,
                                                   "cosim": cosim}))
-
-
-def toml_text(tables: dict[str, dict]) -> str:
-    """TOML for tables of strings, numbers, Booleans, lists and inline tables (None values left out)."""
-
-    def value(v) -> str:
-        if isinstance(v, dict):
-            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items() if x is not None) + " }"
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, (list, tuple)):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        return json.dumps(v)
-
-    lines = []
-    for table, values in tables.items():
-        lines.append(f"[{table}]")
-        lines.extend(f"{key} = {value(v)}" for key, v in values.items() if v is not None)
-    return "\n".join(lines) + "\n"
 
 
 def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = None) -> dict[str, Path]:

@@ -20,15 +20,22 @@ from .system import MAPPING, TwinSystem
 def dt_endpoint(system: TwinSystem):
     """The platform of the project's (digital) twin: the embedded simulator (calibrated when the project
     names a calibration), or a robot behind the broker."""
-    from ..mapping.endpoint import SimulatedEndpoint
-    from ..pmodel.simulator import PlatformSimulator
-
     spec, models = system.spec, system.models
     if spec.endpoint == "broker":
         from ..mapping.broker import BrokerEndpoint
 
         return BrokerEndpoint(models.tree, spec.queue, spec.url)
-    calibration = models.calibration  # the cell's geometry and the motion profile fitted to the PT
+    return simulated_endpoint(system)
+
+
+def simulated_endpoint(system: TwinSystem):
+    """The embedded simulator of the twin's models, calibrated when the project names a calibration (the
+    cell's geometry and the motion profile fitted to the PT): the DT, a what-if fork, a sweep's runs."""
+    from ..mapping.endpoint import SimulatedEndpoint
+    from ..pmodel.simulator import PlatformSimulator
+
+    models = system.models
+    calibration = models.calibration
     return SimulatedEndpoint(PlatformSimulator(models.tree, models.scene), calibration and calibration.profile,
                              calibration and calibration.geometry)
 

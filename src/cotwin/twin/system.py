@@ -206,11 +206,13 @@ class TwinSystem:
         from ..mapping.unit import MappingUnit
 
         models = self.models
+        geometry = models.calibration.geometry if models.calibration is not None else None  # any endpoint's IK
         if callable(endpoint):
-            return MappingUnit(MAPPING.name, models.program, lambda: Mapping(models.project, endpoint()),
+            return MappingUnit(MAPPING.name, models.program, lambda: Mapping(models.project, endpoint(), geometry=geometry),
                                self.command_events, {ev.name for ev in models.mapping_model.input_events},
                                models.monitored)
-        return MappingUnit(MAPPING.name, models.program, Mapping(models.project, endpoint), self.command_events)
+        return MappingUnit(MAPPING.name, models.program, Mapping(models.project, endpoint, geometry=geometry),
+                           self.command_events)
 
     def source_unit(self, bridge=None, stream=None, echo: bool = True) -> Unit | None:
         """The command source: the scenario's controller, or the RabbitMQ unit reading from `bridge`

@@ -108,10 +108,9 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
             step: float | None = None, algorithm: str | None = None, artefacts: str | Path | None = None,
             settle: float = 0.3, decimate: int = 1, cc: str = "cc") -> Prediction:
     """Run `plan` on a fork of the DT at `state` (None: from the project's initial state); see module doc."""
-    from ..mapping.endpoint import SimulatedEndpoint
-    from ..pmodel.simulator import PlatformSimulator
-
     import tempfile
+
+    from .run import simulated_endpoint
 
     started = wallclock.perf_counter()
     models, spec = system.models, system.spec
@@ -126,7 +125,7 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
     fork = system.with_plan(shifted)
     with tempfile.TemporaryDirectory(prefix="cotwin-whatif-") as tmp:
         fmu = dmodel_fmu(fork, Path(artefacts) if artefacts is not None else Path(tmp), cc)
-        endpoint = SimulatedEndpoint(PlatformSimulator(models.tree, models.scene))
+        endpoint = simulated_endpoint(fork)
         cosim = fork.instantiate(fmu, endpoint)
         execution = Execution(cosim, make_algorithm(algorithm), step, start)
         try:
