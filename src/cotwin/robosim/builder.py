@@ -17,8 +17,8 @@ from .declarations import (
     PrimitiveDecl, RecordDecl, SourceFile, VarDecl,
 )
 from .dmodel_elements import (
-    Connection, Controller, Final, OperationDef, Initial, Interface, InterfaceUse, Junction, MachineRef, Module,
-    RoboticPlatform, State, StateMachine, Transition,
+    Communication, Connection, Controller, Final, Initial, Interface, InterfaceUse, Junction, MachineRef, Module,
+    OperationDef, OperationRef, PlatformRef, ProbabilisticJunction, RoboticPlatform, State, StateMachine, Transition,
 )
 from .pmodel_elements import (
     AnnotationEntry, AnnotationRecord, Body, Device, DeviceRef, FixedTo, Inertial, JointRef, Link,
@@ -72,6 +72,7 @@ def _ident(token: Token) -> str:
 
 
 _POSE_KEYS = ("x", "y", "z", "roll", "pitch", "yaw")
+_NODES = (State, Initial, Junction, Final, ProbabilisticJunction)
 
 
 @v_args(meta=True, inline=True)
@@ -124,6 +125,19 @@ class Builder(Transformer):
 
     def function_type(self, meta, argument, result):
         return s.FunctionType(argument, result, self._loc(meta))
+
+    def relation_type(self, meta, domain, range_):
+        """`A <-> B` is read as Set(A * B), as in Z."""
+        loc = self._loc(meta)
+        return s.CollectionType("Set", s.ProductType((domain, range_), loc), loc)
+
+    def any_type(self, meta, name):
+        """`?X`: a type parameter of a generic (toolkit) function."""
+        loc = self._tok_loc(name)
+        return s.NamedType(s.QName(("?" + _ident(name),), loc), loc)
+
+    def diagram(self, meta, name):
+        return _Tagged("diagram", _ident(name), self._loc(meta))
 
     # ---- declarations ----
     def var_kind(self, meta, token):
@@ -180,7 +194,79 @@ class Builder(Transformer):
 
     # ---- expressions ----
     def binary(self, meta, left, op, right):
-        return s.Binary(str(op), left, right, self._loc(meta))
+        text = "cat" if op.type in ("CAT", "CARET") else str(op)
+        return s.Binary(text, left, right, self._loc(meta))
+
+    def compare_op(self, meta, token):
+        return str(token)
+
+    def comparison_chain(self, meta, first, *rest):
+        """`a < b <= c` reads as `a < b /\\ b <= c` (Z's chained relations)."""
+        result = None
+        left = first
+        for op, right in zip(rest[0::2], rest[1::2]):
+            comparison = s.Binary(op, left, right, left.loc)
+            result = comparison if result is None else s.Binary("/\\", result, comparison, result.loc)
+            left = right
+        return result
+
+    def as_expr(self, meta, expr, type_):
+        return s.TypeTest(expr, type_, "as", self._loc(meta))
+
+    def is_expr(self, meta, expr, type_):
+        return s.TypeTest(expr, type_, "is", self._loc(meta))
+
+    def dollar_expr(self, meta, name, suffix=None):
+        if suffix is None:
+            return s.EventTest(name, None, self._loc(meta))
+        kind, value, extra = suffix
+        if kind == "bind":
+            return s.EventTest(name, value.last, self._loc(meta), predicate=extra)
+        return s.EventTest(name, None, self._loc(meta), value=value)
+
+    def dollar_bind(self, meta, name, predicate=None):
+        return ("bind", name, predicate)
+
+    def dollar_value(self, meta, value):
+        return ("value", value, None)
+
+    def such_that(self, meta, expr):
+        return _Tagged("such", expr, self._loc(meta))
+
+    def record_expr(self, meta, name, fields):
+        return s.RecordExpr(name, tuple(fields), self._loc(meta))
+
+    def field_defs(self, meta, *items):
+        return _Args(items)
+
+    def field_def(self, meta, name, value):
+        return (_ident(name), value, self._tok_loc(name))
+
+    def matrix_expr(self, meta, *rows):
+        if len(rows) == 1:
+            return s.VectorExpr(tuple(rows[0]), self._loc(meta))
+        return s.MatrixExpr(tuple(tuple(r) for r in rows), self._loc(meta))
+
+    def set_expr(self, meta, args=()):
+        return s.SetExpr(tuple(args), self._loc(meta))
+
+    def set_range_expr(self, meta, start, end):
+        return s.SetRangeExpr(start, end, self._loc(meta))
+
+    def set_comprehension(self, meta, *items):
+        binders = tuple(i for i in items if isinstance(i, tuple) and not isinstance(i, _Args))
+        such = next((i.value for i in items if isinstance(i, _Tagged)), None)
+        body = next((i for i in items if not isinstance(i, (tuple, _Tagged))), None)
+        return s.SetComprehension(binders, such, body, self._loc(meta))
+
+    def seq_expr(self, meta, *items):
+        return s.SeqExpr(tuple(i for i in items if not isinstance(i, Token)), self._loc(meta))
+
+    def closed_range(self, meta, low, high, close):
+        return s.RangeExpr(low, high, True, str(close) == "]", self._loc(meta))
+
+    def open_range(self, meta, low, high, close):
+        return s.RangeExpr(low, high, False, str(close) == "]", self._loc(meta))
 
     def not_expr(self, meta, operand):
         return s.Unary("not", operand, self._loc(meta))
@@ -191,11 +277,18 @@ class Builder(Transformer):
     def field_expr(self, meta, base, name):
         return s.FieldAccess(base, _ident(name), self._tok_loc(name))
 
-    def index_expr(self, meta, base, index):
-        return s.IndexAccess(base, index, self._loc(meta))
+    def index_expr(self, meta, base, indices):
+        """`m[i, j]` is `m[i][j]`."""
+        for index in indices:
+            base = s.IndexAccess(base, index, self._loc(meta))
+        return base
 
     def call_expr(self, meta, function, args=()):
-        return s.Call(function, tuple(args), self._loc(meta))
+        args = tuple(args)
+        if (isinstance(function, s.Name) and function.name.parts == ("sinceEntry",) and len(args) == 1
+                and isinstance(args[0], s.Name)):
+            return s.SinceEntryExpr(args[0].name, self._loc(meta))
+        return s.Call(function, args, self._loc(meta))
 
     def int_lit(self, meta, token):
         return s.Literal(int(token), self._tok_loc(token))
@@ -224,7 +317,7 @@ class Builder(Transformer):
     def since_expr(self, meta, clock):
         return s.SinceExpr(_ident(clock), self._loc(meta))
 
-    def tuple_expr(self, meta, args):
+    def tuple_expr(self, meta, args=()):
         return s.TupleExpr(tuple(args), self._loc(meta))
 
     def vector_expr(self, meta, args):
@@ -240,7 +333,9 @@ class Builder(Transformer):
         return (_ident(name), type_)
 
     def quantified(self, meta, kind, *rest):
-        return s.Quantified(kind, tuple(rest[:-1]), rest[-1], self._loc(meta))
+        binders = tuple(r for r in rest[:-1] if not isinstance(r, _Tagged))
+        such = next((r.value for r in rest[:-1] if isinstance(r, _Tagged)), None)
+        return s.Quantified(kind, binders, rest[-1], self._loc(meta), such)
 
     def let_binding(self, meta, name, _eq, value):
         return (_ident(name), value)
@@ -253,6 +348,15 @@ class Builder(Transformer):
         if len(basics) == 1:
             return basics[0]
         return s.Sequence(tuple(basics), self._loc(meta))
+
+    def deadline_stmt(self, meta, stmt, deadline):
+        return s.Timed(stmt, deadline, self._loc(meta))
+
+    def wait_stmt(self, meta, duration):
+        return s.Wait(duration, self._loc(meta))
+
+    def receive_stmt(self, meta, event, target):
+        return s.Receive(event, target, self._loc(meta))
 
     def exec_stmt(self, meta):
         return s.Exec(self._loc(meta))
@@ -281,25 +385,34 @@ class Builder(Transformer):
     def field_suffix(self, meta, name):
         return ("field", _ident(name), self._tok_loc(name))
 
-    def index_suffix(self, meta, index):
-        return ("index", index, self._loc(meta))
+    def index_suffix(self, meta, indices):
+        return ("index", tuple(indices), self._loc(meta))
 
-    def lvalue(self, meta, name, *suffixes):
+    def lvalue(self, meta, *items):
+        """A variable with field and index selections; `$v` names the same variable as `v`."""
+        name = items[1] if items[0].type == "DOLLAR" else items[0]
+        suffixes = items[2:] if items[0].type == "DOLLAR" else items[1:]
         loc = self._tok_loc(name)
         target: s.Expr = s.Name(s.QName((_ident(name),), loc), loc)
         for kind, value, where in suffixes:
-            target = s.FieldAccess(target, value, where) if kind == "field" else s.IndexAccess(target, value, where)
+            if kind == "field":
+                target = s.FieldAccess(target, value, where)
+            else:
+                for index in value:
+                    target = s.IndexAccess(target, index, where)
         return target
 
     # ---- d-model ----
     def rst_file(self, meta, *items):
         return self._source(items)
 
+    rct_file = rst_file
+
     def pm_file(self, meta, *items):
         return self._source(items)
 
     def _source(self, items) -> SourceFile:
-        items = _flatten(items)
+        items = _flatten(i for i in items if i is not None)
         package = next((i.value for i in _tagged(items, "package")), None)
         return SourceFile(
             self.path, self.notation, package, list(_of(items, Import)),
@@ -309,11 +422,26 @@ class Builder(Transformer):
     def package(self, meta, name):
         return _Tagged("package", name, self._loc(meta))
 
-    def op_sig(self, meta, name, params=()):
-        return OperationSig(_ident(name), tuple(params), self._tok_loc(name))
+    def op_sig(self, meta, name, *rest):
+        params = next((r for r in rest if isinstance(r, _Params)), ())
+        terminates = any(isinstance(r, _Tagged) and r.tag == "terminates" for r in rest)
+        return OperationSig(_ident(name), tuple(params), self._tok_loc(name), terminates)
 
-    def event(self, meta, name, type_=None):
-        return EventDecl(_ident(name), type_, self._tok_loc(name))
+    def terminates_flag(self, meta):
+        return _Tagged("terminates", True, self._loc(meta))
+
+    terminates = terminates_flag
+
+    def precondition_item(self, meta, expr):
+        return _Tagged("pre", expr, self._loc(meta))
+
+    def postcondition_item(self, meta, expr):
+        return _Tagged("post", expr, self._loc(meta))
+
+    def event(self, meta, *items):
+        broadcast = isinstance(items[0], Token) and items[0].type == "BROADCAST"
+        name, *rest = items[1:] if broadcast else items
+        return EventDecl(_ident(name), rest[0] if rest else None, self._tok_loc(name), broadcast)
 
     def clock(self, meta, name):
         return ClockDecl(_ident(name), self._tok_loc(name))
@@ -338,26 +466,39 @@ class Builder(Transformer):
     def platform(self, meta, name, *items):
         items = _flatten(items)
         return RoboticPlatform(_ident(name), _of(items, InterfaceUse), _of(items, VarDecl),
-                               _of(items, OperationSig), _of(items, EventDecl), self._tok_loc(name))
+                               _of(items, OperationSig), _of(items, EventDecl), self._tok_loc(name),
+                               _of(items, ClockDecl))
+
+    def rref(self, meta, name, target):
+        return PlatformRef(_ident(name), target, self._tok_loc(name))
 
     def cref(self, meta, name, target):
-        return MachineRef(_ident(name), target, self._tok_loc(name))
+        return _Tagged("cref", MachineRef(_ident(name), target, self._tok_loc(name)), self._loc(meta))
+
+    def opref(self, meta, name, target):
+        return OperationRef(_ident(name), target, self._tok_loc(name))
 
     def module(self, meta, name, *items):
         where = f"module {name}"
-        platforms = _of(items, RoboticPlatform)
+        platforms = [*_of(items, RoboticPlatform), *_of(items, PlatformRef)]
         for extra in platforms[1:]:
             self.diag.error(extra.loc, f"more than one robotic platform in {where}")
+        platform = platforms[0] if platforms else None
         return Module(_ident(name), self._single(_tagged(items, "cycleDef"), "cycleDef", where),
-                      platforms[0] if platforms else None, _of(items, Controller), _of(items, MachineRef),
-                      _of(items, Connection), self._tok_loc(name))
+                      platform if isinstance(platform, RoboticPlatform) else None, _of(items, Controller),
+                      tuple(t.value for t in _tagged(items, "cref")), _of(items, Connection), self._tok_loc(name),
+                      platform if isinstance(platform, PlatformRef) else None, _of(items, StateMachine),
+                      _of(items, MachineRef))
 
     def async_flag(self, meta):
         return _Tagged("async", True, self._loc(meta))
 
-    def connection(self, meta, source, source_event, target, target_event, is_async=None):
+    def mult_flag(self, meta):
+        return _Tagged("mult", True, self._loc(meta))
+
+    def connection(self, meta, source, source_event, target, target_event, *flags):
         return Connection(_ident(source), _ident(source_event), _ident(target), _ident(target_event),
-                          is_async is not None, self._loc(meta))
+                          bool(_tagged(flags, "async")), self._loc(meta), bool(_tagged(flags, "mult")))
 
     def controller(self, meta, name, *items):
         items = _flatten(items)
@@ -368,6 +509,7 @@ class Builder(Transformer):
             tuple(m for m in machines if isinstance(m, OperationDef)),
             tuple(m for m in machines if not isinstance(m, OperationDef)),
             _of(items, MachineRef), _of(items, Connection), self._tok_loc(name),
+            _of(items, OperationRef), _of(items, ClockDecl),
         )
 
     def input_context(self, meta, *items):
@@ -376,16 +518,16 @@ class Builder(Transformer):
     def output_context(self, meta, *items):
         return _Tagged("output", tuple(items), self._loc(meta))
 
-    def _machine(self, cls, name, items, params=()):
+    def _machine(self, cls, name, items, params=(), **extra):
         items = _flatten(items)
         where = f"state machine {name}"
         inputs = tuple(x for t in _tagged(items, "input") for x in t.value)
         outputs = tuple(x for t in _tagged(items, "output") for x in t.value)
-        nodes = tuple(i for i in items if isinstance(i, (State, Initial, Junction, Final)))
+        nodes = tuple(i for i in items if isinstance(i, _NODES))
         return cls(
             _ident(name), self._single(_tagged(items, "cycleDef"), "cycleDef", where),
             _of(items, InterfaceUse), inputs, outputs, _of(items, VarDecl), _of(items, ClockDecl),
-            nodes, _of(items, Transition), self._tok_loc(name), tuple(params),
+            nodes, _of(items, Transition), self._tok_loc(name), tuple(params), _of(items, EventDecl), **extra,
         )
 
     def stm(self, meta, name, *items):
@@ -393,12 +535,17 @@ class Builder(Transformer):
 
     def operation_def(self, meta, name, *items):
         params = next((i for i in items if isinstance(i, _Params)), ())
-        return self._machine(OperationDef, name, [i for i in items if not isinstance(i, _Params)], params)
+        rest = [i for i in items if not isinstance(i, _Params)]
+        return self._machine(
+            OperationDef, name, rest, params, terminates=bool(_tagged(rest, "terminates")),
+            preconditions=tuple(t.value for t in _tagged(rest, "pre")),
+            postconditions=tuple(t.value for t in _tagged(rest, "post")),
+        )
 
     def state(self, meta, name, *items):
         where = f"state {name}"
         return State(
-            _ident(name), tuple(i for i in items if isinstance(i, (State, Initial, Junction, Final))),
+            _ident(name), tuple(i for i in items if isinstance(i, _NODES)),
             _of(items, Transition), self._single(_tagged(items, "entry"), "entry action", where),
             self._single(_tagged(items, "during"), "during action", where),
             self._single(_tagged(items, "exit"), "exit action", where), self._tok_loc(name),
@@ -422,6 +569,9 @@ class Builder(Transformer):
     def final(self, meta, name):
         return Final(_ident(name), self._tok_loc(name))
 
+    def probabilistic(self, meta, name):
+        return ProbabilisticJunction(_ident(name), self._tok_loc(name))
+
     def exec_flag(self, meta):
         return _Tagged("exec", True, self._loc(meta))
 
@@ -437,14 +587,45 @@ class Builder(Transformer):
     def action(self, meta, stmt):
         return _Tagged("action", stmt, self._loc(meta))
 
+    def trigger(self, meta, communication):
+        return _Tagged("trigger", communication, self._loc(meta))
+
+    def probability(self, meta, expr):
+        return _Tagged("probability", expr, self._loc(meta))
+
+    def deadline(self, meta, expr):
+        return _Tagged("deadline", expr, self._loc(meta))
+
+    def communication(self, meta, event, *rest):
+        guard = next((r.value for r in rest if isinstance(r, _Tagged) and r.tag == "guard"), None)
+        kind, value = next(((r.tag, r.value) for r in rest if isinstance(r, _Tagged) and r.tag != "guard"),
+                           ("simple", None))
+        return Communication(_ident(event), kind, value, guard, self._tok_loc(event))
+
+    def trigger_guard(self, meta, expr=None):
+        return _Tagged("guard", expr, self._loc(meta))
+
+    def comm_input(self, meta, name):
+        return _Tagged("input", name, self._loc(meta))
+
+    def comm_output(self, meta, value):
+        return _Tagged("output", value, self._loc(meta))
+
+    def comm_sync(self, meta, value):
+        return _Tagged("sync", value, self._loc(meta))
+
     def transition(self, meta, name, source, target, *items):
         condition = _tagged(items, "condition")
         actions = _tagged(items, "action")
+        trigger = _tagged(items, "trigger")
+        probability = _tagged(items, "probability")
+        deadline = _tagged(items, "deadline")
         return Transition(
             _ident(name), _ident(source), _ident(target), bool(_tagged(items, "exec")),
             tuple(t.value for t in _tagged(items, "reset")), condition[0].value if condition else None,
             bool(_tagged(items, "else")), actions[0].value if actions else None, self._tok_loc(name),
-            self._tok_loc(source), self._tok_loc(target),
+            self._tok_loc(source), self._tok_loc(target), trigger[0].value if trigger else None,
+            probability[0].value if probability else None, deadline[0].value if deadline else None,
         )
 
     # ---- p-model ----
@@ -526,7 +707,7 @@ class Builder(Transformer):
                          tuple(t.value for t in _tagged(items, "instantiation")), self._tok_loc(name))
 
     def sref(self, meta, name, target, *items):
-        if self.notation == "rst":
+        if self.notation in ("rst", "rct"):
             return MachineRef(_ident(name), target, self._tok_loc(name))
         return self._device_ref("sref", meta, name, target, items)
 

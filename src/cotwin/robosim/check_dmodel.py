@@ -1,25 +1,41 @@
-"""Checks of d-model elements: names resolve, transitions connect existing nodes, types agree."""
+"""Checks of d-model elements: names resolve, transitions connect existing nodes, types agree, and
+RoboTool's well-formedness rules hold (RoboSimValidator and the RoboChartValidator it extends).
+
+As strict as RoboTool where a rule makes a model meaningless or unrunnable (unresolved names, type
+errors, a machine without an initial junction); RoboTool's rules about the shape of interfaces are
+warnings (cotwin can still read such a model). RoboTool accepts non-boolean cycleDef expressions and
+conditions on transitions out of an initial junction, and so does cotwin. In .rct files (RoboChart,
+which RoboTool loads beside the .rst files) cotwin reads the declarations only.
+"""
 
 from __future__ import annotations
 
-from .checker import Checker
 from . import syntax as s
-from .declarations import EnumDecl, RecordDecl
+from .checker import Checker
+from .declarations import EnumDecl, FunctionDecl, RecordDecl
 from .dmodel_elements import (
-    Connection, Controller, Final, Initial, Interface, Junction, Module, RoboticPlatform, State,
+    Connection, Controller, Final, Initial, Interface, Junction, Module, OperationDef, RoboticPlatform, State,
     StateMachine,
 )
-from .interfaces import interface_of, machine_io, platform_members
+from .interfaces import interface_of, machine_io, module_platform, platform_members, platform_node_name
 from .machines import MachineGraph
 from .typecheck import ExprChecker, Scope, Symbol
-from .types import assignable
+from .types import NAT, REAL, VectorTy, assignable
+
+_DECLARATIONS = ("Interface", "RecordDecl", "EnumDecl", "FunctionDecl", "RoboticPlatform")
+_TIMED = (s.SinceExpr, s.SinceEntryExpr)
+_COMPARISONS = ("<", "<=", ">", ">=", "==")
 
 
 class DModelChecker(Checker):
 
     def check(self) -> None:
+        behaviour = self.source.notation != "rct"
         for element in self.source.elements:
-            method = getattr(self, "_check_" + type(element).__name__, None)
+            kind = type(element).__name__
+            if not behaviour and kind not in _DECLARATIONS:
+                continue
+            method = getattr(self, "_check_" + kind, None)
             if method is not None:
                 method(element)
 
@@ -40,6 +56,9 @@ class DModelChecker(Checker):
         for ev in interface.events:
             if ev.type is not None:
                 self.types.resolve(ev.type)
+        if interface.events and interface.operations:
+            self.diag.warning(interface.loc, f"{where} has both events and operations; RoboTool requires "
+                                             "one or the other (besides variables)")
         self.variables(interface.variables, Scope())
 
     def _params(self, params, where: str) -> None:
@@ -49,6 +68,8 @@ class DModelChecker(Checker):
 
     def _check_RecordDecl(self, record: RecordDecl) -> None:
         self._params(record.fields, f"record {record.name}")
+        if not record.fields:
+            self.diag.error(record.loc, f"datatype {record.name} has no field (a datatype needs at least one)")
 
     def _check_EnumDecl(self, enum: EnumDecl) -> None:
         self._unique(enum.literals, "literal", f"enumeration {enum.name}")
@@ -56,7 +77,7 @@ class DModelChecker(Checker):
             for t in lit.params:
                 self.types.resolve(t)
 
-    def _check_FunctionDecl(self, fn) -> None:
+    def _check_FunctionDecl(self, fn: FunctionDecl) -> None:
         self._params(fn.params, f"function {fn.name}")
         result = self.types.resolve(fn.result)
         scope = Scope({p.name: Symbol(p.name, "param", self.types.resolve(p.type), p.loc) for p in fn.params})
@@ -71,38 +92,48 @@ class DModelChecker(Checker):
             ty, init = self.types.declared(var)
             if init is not None:
                 self.expressions(scope).expect(init, ty, f"initial value of '{var.name}'")
-            scope.symbols[var.name] = Symbol(var.name, "const" if var.is_const else "var", ty, var.loc)
+            scope.symbols[var.name] = Symbol(var.name, "const" if var.is_const else "var", ty, var.loc, var)
         return scope
 
-    def expressions(self, scope: Scope, events=None, clocks=frozenset()) -> ExprChecker:
-        return ExprChecker(self.types, self.diag, scope, self.functions, events, clocks=clocks)
+    def expressions(self, scope: Scope, events=None, clocks=frozenset(), states=None) -> ExprChecker:
+        return ExprChecker(self.types, self.diag, scope, self.functions, events, clocks=clocks, states=states)
 
     def _cycle_def(self, expr: s.Expr | None, where: str) -> None:
-        if expr is None:
-            return
-        self.expressions(Scope()).condition(expr, f"cycleDef of {where}")
+        """RoboTool accepts any expression (`cycleDef cycle == 1`, `cycleDef 1`); it must be typeable."""
+        if expr is not None:
+            self.expressions(Scope()).check(expr)
 
     # ---- platform, module, controller ----
     def _check_RoboticPlatform(self, platform: RoboticPlatform) -> None:
-        members = platform_members(self.project, platform, self.source, self.diag)
         self._unique([*platform.operations, *platform.events, *platform.variables], "member", f"platform {platform.name}")
         for use in platform.interfaces:
+            interface = interface_of(self.project, use, self.source, self.diag)
             if use.kind == "requires":
                 self.diag.warning(use.loc, f"a robotic platform provides or uses interfaces; 'requires {use.name}' is unusual")
-        return members
+            elif interface is not None and use.kind == "provides" and interface.events:
+                self.diag.warning(use.loc, f"{platform.name} provides interface {interface.name}, which has events; "
+                                           "RoboTool expects events in used interfaces")
+        for clock in platform.clocks:
+            self.diag.error(clock.loc, f"robotic platform {platform.name} cannot declare clocks")
 
     def _check_Module(self, module: Module) -> None:
         where = f"module {module.name}"
         self._cycle_def(module.cycle_def, where)
-        if module.platform is None:
-            self.diag.error(module.loc, f"{where} has no robotic platform")
-            platform_events: dict = {}
-        else:
-            members = self._check_RoboticPlatform(module.platform)
-            platform_events = dict(members.events)
-        endpoints: dict[str, dict] = {}
+        platform = module_platform(self.project, module, self.source, self.diag)
+        endpoints: dict[str, dict | None] = {}
+        provided: dict | None = None
         if module.platform is not None:
-            endpoints[module.platform.name] = platform_events
+            self._check_RoboticPlatform(module.platform)
+        if platform is None:
+            if module.platform_ref is None:
+                self.diag.error(module.loc, f"{where} has no robotic platform")
+        else:
+            members = platform_members(self.project, platform, self.project.file_of(platform) or self.source, self.diag)
+            endpoints[platform_node_name(module)] = dict(members.events)
+            provided = members.operations
+        for machine in (*module.machines, *module.machine_refs):
+            self.diag.error(machine.loc, f"{where} must not have a state machine outside a controller")
+        controllers: list[tuple[str, Controller | None, object]] = []
         for ref in module.controller_refs:
             ctrl = self.project.lookup("controller", ref.target, self.source)
             if ctrl is None:
@@ -110,27 +141,50 @@ class DModelChecker(Checker):
                 endpoints[ref.name] = None
             else:
                 endpoints[ref.name] = self._controller_events(ctrl)
+            controllers.append((ref.name, ctrl, ref.loc))
         for ctrl in module.controllers:
             self._check_Controller(ctrl)
             endpoints[ctrl.name] = self._controller_events(ctrl)
-        if not module.controllers and not module.controller_refs:
+            controllers.append((ctrl.name, ctrl, ctrl.loc))
+        if not controllers:
             self.diag.warning(module.loc, f"{where} has no controller")
-        self._connections(module.connections, endpoints, where)
+        if provided is not None:
+            for name, ctrl, loc in controllers:
+                if ctrl is None:
+                    continue
+                missing = [op for op in self._controller_required_ops(ctrl) if op not in provided]
+                if missing:
+                    self.diag.error(loc, f"{where} does not provide operation(s) {', '.join(missing)} that "
+                                         f"controller {ctrl.name} requires")
+        self._connections(module.connections, endpoints, where, platform_node_name(module))
+
+    def _controller_required_ops(self, ctrl: Controller) -> list[str]:
+        source = self.project.file_of(ctrl) or self.source
+        names = []
+        for use in ctrl.interfaces:
+            if use.kind == "requires":
+                interface = self.project.lookup("interface", use.name, source)
+                if interface is not None:
+                    names.extend(op.name for op in interface.operations)
+        return names
 
     def _controller_events(self, ctrl: Controller) -> dict:
+        source = self.project.file_of(ctrl) or self.source
         events = {e.name: e for e in ctrl.events}
         for use in ctrl.interfaces:
-            interface = self.project.lookup("interface", use.name, self.source)
+            interface = self.project.lookup("interface", use.name, source)
             if interface is not None:
                 for ev in interface.events:
                     events.setdefault(ev.name, ev)
         return events
 
-    def _machine_events(self, machine: StateMachine) -> dict:
-        io = machine_io(self.project, machine, self.source)
+    def _machine_events(self, machine: StateMachine, source=None) -> dict:
+        io = machine_io(self.project, machine, source or self.source)
         return {**io.inputs, **io.outputs}
 
-    def _connections(self, connections: tuple[Connection, ...], endpoints: dict[str, dict | None], where: str) -> None:
+    def _connections(self, connections: tuple[Connection, ...], endpoints: dict[str, dict | None], where: str,
+                     platform: str | None = None) -> None:
+        ends: dict[tuple[str, str], Connection] = {}
         for c in connections:
             for node, event in ((c.source, c.source_event), (c.target, c.target_event)):
                 if node not in endpoints:
@@ -146,26 +200,63 @@ class DModelChecker(Checker):
                 b = self.types.resolve(dst.type) if dst.type is not None else None
                 if (a is None) != (b is None) or (a is not None and not assignable(b, a)):
                     self.diag.error(c.loc, f"connection in {where}: event types differ ({a or 'none'} to {b or 'none'})")
+            if platform is not None and platform in (c.source, c.target) and not c.is_async:
+                self.diag.error(c.loc, f"connection in {where}: a connection with the robotic platform must be "
+                                       "asynchronous: add (_async)")
+            for end in ((c.source, c.source_event, "from"), (c.target, c.target_event, "to")):
+                key = end[:2]
+                if key in ends and not c.bidirectional:
+                    self.diag.error(c.loc, f"connection in {where}: {end[1]} on {end[0]} already has a connection "
+                                           f"(line {ends[key].loc.line})")
+                ends.setdefault(key, c)
 
     def _check_Controller(self, ctrl: Controller) -> None:
         where = f"controller {ctrl.name}"
         self._cycle_def(ctrl.cycle_def, where)
+        declared = set()
         for use in ctrl.interfaces:
-            interface_of(self.project, use, self.source, self.diag)
-        self._unique([*ctrl.machine_refs, *ctrl.machines, *ctrl.operations], "machine", where)
+            interface = interface_of(self.project, use, self.source, self.diag)
+            if use.kind == "provides":
+                self.diag.error(use.loc, f"{ctrl.name} is a controller and cannot provide interface {use.name}")
+            if interface is not None and use.kind == "uses":
+                declared.add(id(interface))
+        for clock in ctrl.clocks:
+            self.diag.error(clock.loc, f"{where} cannot declare clocks")
+        self._unique([*ctrl.machine_refs, *ctrl.machines, *ctrl.operations, *ctrl.operation_refs], "machine", where)
+        for ref in ctrl.operation_refs:
+            if self.project.lookup("operation", ref.target, self.source) is None:
+                self.diag.error(ref.target.loc, f"unknown operation '{ref.target}'")
+        if not ctrl.machine_refs and not ctrl.machines:
+            self.diag.error(ctrl.loc, f"{ctrl.name} must have at least one state machine")
         endpoints: dict[str, dict | None] = {ctrl.name: self._controller_events(ctrl)}
+        provided_ops = set(self._controller_required_ops(ctrl)) | {op.name for op in ctrl.operations} | {
+            r.name for r in ctrl.operation_refs} | {r.target.last for r in ctrl.operation_refs}
+        members: list[tuple[str, StateMachine, object, object]] = []
         for ref in ctrl.machine_refs:
             machine = self.project.lookup("stm", ref.target, self.source)
             if machine is None:
                 self.diag.error(ref.target.loc, f"unknown state machine '{ref.target}'")
                 endpoints[ref.name] = None
-            else:
-                endpoints[ref.name] = self._machine_events(machine)
+                continue
+            source = self.project.file_of(machine) or self.source
+            endpoints[ref.name] = self._machine_events(machine, source)
+            members.append((ref.name, machine, source, ref.loc))
         for machine in ctrl.machines:
             self._check_StateMachine(machine)
             endpoints[machine.name] = self._machine_events(machine)
+            members.append((machine.name, machine, self.source, machine.loc))
         for op in ctrl.operations:
             self._check_StateMachine(op)
+        for name, machine, source, loc in members:
+            io = machine_io(self.project, machine, source)
+            missing = [i.name for i in io.used if id(i) not in declared]
+            if missing:
+                self.diag.error(loc, f"the controller {ctrl.name} is missing the declared interfaces: "
+                                     f"{', '.join(sorted(set(missing)))} (used by {machine.name})")
+            unprovided = [op for op in io.operations if op not in provided_ops]
+            if unprovided:
+                self.diag.error(loc, f"{ctrl.name} does not provide operation(s) {', '.join(unprovided)} that "
+                                     f"{machine.name} requires (require them, or define them with operation/opref)")
         self._connections(ctrl.connections, endpoints, where)
 
     # ---- state machines ----
@@ -173,36 +264,102 @@ class DModelChecker(Checker):
         self._check_StateMachine(machine)
 
     def _check_StateMachine(self, machine: StateMachine) -> None:
-        where = f"state machine {machine.name}"
+        kind = "operation" if isinstance(machine, OperationDef) else "state machine"
+        where = f"{kind} {machine.name}"
         self._cycle_def(machine.cycle_def, where)
         io = machine_io(self.project, machine, self.source, self.diag)
         scope = Scope()
         for var in io.variables.values():
-            scope.symbols[var.name] = Symbol(var.name, "const" if var.is_const else "var", self.types.declared(var)[0], var.loc)
+            scope.symbols[var.name] = Symbol(var.name, "const" if var.is_const else "var",
+                                             self.types.declared(var)[0], var.loc, var)
         for p in machine.params:
             scope.symbols[p.name] = Symbol(p.name, "param", self.types.resolve(p.type), p.loc)
         self._unique(machine.variables, "variable", where)
         self.variables(machine.variables, scope)
         events = {name: (self.types.resolve(ev.type) if ev.type is not None else None) for name, ev in io.inputs.items()}
         outputs = {name: (self.types.resolve(ev.type) if ev.type is not None else None) for name, ev in io.outputs.items()}
-        checker = self.expressions(scope, events, io.clocks)
         graph = MachineGraph(machine, self.diag)
-        self._structure(graph, where)
+        states = {n.name for n in graph.nodes if isinstance(n.node, State)} | {
+            ".".join(n.path) for n in graph.nodes if isinstance(n.node, State)}
+        checker = self.expressions(scope, events, io.clocks, states)
+        self._structure(graph, where, isinstance(machine, OperationDef))
         operations = dict(io.operations)
-        local_ops = {}
         for node in graph.nodes:
             if isinstance(node.node, State):
                 for stmt in (node.node.entry, node.node.during, node.node.exit):
-                    checker.statement(stmt, operations, outputs, local_ops)
+                    checker.statement(stmt, operations, outputs)
+                    self._action_expressions(stmt, checker)
         for t in graph.transitions:
             if t.condition is not None:
                 checker.condition(t.condition, f"condition of transition {t.name}")
-            checker.statement(t.action, operations, outputs, local_ops)
+                self._timed(t.condition, checker)
+                self._zero_based(t.condition, checker)
+            checker.statement(t.action, operations, outputs)
+            self._action_expressions(t.action, checker)
             for clock in t.clock_resets:
                 if clock not in io.clocks:
                     self.diag.error(t.loc, f"unknown clock '{clock}'")
+            if t.probability is not None:
+                checker.check(t.probability)
+        if isinstance(machine, OperationDef):
+            for cond in (*machine.preconditions, *machine.postconditions):
+                checker.condition(cond, f"pre/postcondition of operation {machine.name}")
 
-    def _structure(self, graph: MachineGraph, where: str) -> None:
+    def _action_expressions(self, stmt, checker: ExprChecker) -> None:
+        """Timed expressions are not allowed in actions (RoboChart TE1); 0-based vector readings."""
+        for st in s.statements(stmt):
+            for e in s.statement_expressions(st):
+                for node in s.walk(e):
+                    if isinstance(node, _TIMED):
+                        self.diag.error(node.loc, "timed expression (since, sinceEntry) not allowed in an action")
+                self._zero_based(e, checker, statement=st)
+
+    def _timed(self, condition: s.Expr, checker: ExprChecker) -> None:
+        """since(C) and sinceEntry(S) may only be compared with a number (RoboChart TE4)."""
+        parents: dict[int, s.Expr] = {}
+        for node in s.walk(condition):
+            for child in s.sub_expressions(node):
+                parents[id(child)] = node
+        for node in s.walk(condition):
+            if not isinstance(node, _TIMED):
+                continue
+            parent = parents.get(id(node))
+            if not (isinstance(parent, s.Binary) and parent.op in _COMPARISONS):
+                self.diag.error(node.loc, "unsupported use of a timed expression: compare it with a number")
+                continue
+            other = parent.right if parent.left is node else parent.left
+            ty = checker.readings.type_of(other)
+            if ty is not None and not (assignable(NAT, ty) or assignable(REAL, ty)):
+                self.diag.error(node.loc, f"a timed expression is compared with a number, not {ty}")
+
+    def _zero_based(self, expr: s.Expr, checker: ExprChecker, statement=None) -> None:
+        """A constant index 0 into a vector: RoboChart vectors index from 1, so it is out of range.
+        Read as a statement written for 0-based vectors: every constant index into that vector in
+        the same statement (or condition) counts from 0."""
+        root = statement if statement is not None else expr
+        exprs = s.statement_expressions(statement) if statement is not None else (expr,)
+        accesses = [node for e in exprs for node in s.walk(e) if isinstance(node, s.IndexAccess)
+                    and isinstance(node.index, s.Literal) and node.index.value is not True
+                    and isinstance(node.index.value, int)
+                    and isinstance(checker.readings.type_of(node.base), VectorTy)]
+        zero = [a for a in accesses if a.index.value == 0]
+        if not zero:
+            return
+        del root
+        for z in zero:
+            base = _describe(z.base)
+            same = [a for a in accesses if _describe(a.base) == base]
+            if any(id(a) in checker.readings.first_index for a in same):
+                continue
+            size = checker.readings.type_of(z.base).size
+            self.diag.warning(z.index.loc, f"'{base}[0]': vectors index from 1 (1..{size if size else 'n'}), so index 0 "
+                                           f"is out of range; read as written for 0-based vectors: every constant "
+                                           f"index into {base} here counts from 0 "
+                                           f"({', '.join(f'{base}[{a.index.value}]' for a in same)})")
+            for a in same:
+                checker.readings.first_index[id(a)] = 0
+
+    def _structure(self, graph: MachineGraph, where: str, operation: bool = False) -> None:
         containers = [None] + [n for n in graph.nodes if n.is_state and n.children]
         for container in containers:
             children = graph.children_of(container)
@@ -211,18 +368,25 @@ class DModelChecker(Checker):
             place = where if container is None else f"state {container.name}"
             if states and not initials:
                 loc = graph.machine.loc if container is None else container.node.loc
-                self.diag.error(loc, f"{place} has states but no initial junction")
+                if container is None and not operation:
+                    self.diag.error(loc, f"{place} has states but no initial junction")
+                else:
+                    self.diag.warning(loc, f"{place} has states but no initial junction")
+            elif children and not states:
+                loc = graph.machine.loc if container is None else container.node.loc
+                self.diag.error(loc, f"{place} has no state or final state")
             for extra in initials[1:]:
                 self.diag.error(extra.node.loc, f"{place} has more than one initial junction")
+        incoming = {id(e.target) for e in graph.edges}
         for node in graph.nodes:
             if isinstance(node.node, Initial):
                 if len(node.outgoing) != 1:
                     self.diag.error(node.node.loc, f"initial junction '{node.name}' needs exactly one outgoing transition, has {len(node.outgoing)}")
-                for edge in node.outgoing:
-                    if edge.transition.is_exec or edge.transition.condition is not None:
-                        self.diag.error(edge.transition.loc, f"transition {edge.transition.name} from an initial junction has a condition or exec")
-            elif isinstance(node.node, Junction) and not node.outgoing:
-                self.diag.error(node.node.loc, f"junction '{node.name}' has no outgoing transition")
+            elif isinstance(node.node, Junction):
+                if not node.outgoing:
+                    self.diag.error(node.node.loc, f"junction '{node.name}' has no outgoing transition")
+                if id(node) not in incoming:
+                    self.diag.error(node.node.loc, f"junction '{node.name}' has no incoming transition")
             elif isinstance(node.node, Final) and node.outgoing:
                 self.diag.error(node.outgoing[0].transition.loc, f"transition {node.outgoing[0].transition.name} leaves final state '{node.name}'")
         for edge in graph.edges:
@@ -231,3 +395,14 @@ class DModelChecker(Checker):
             if edge.transition.is_else and edge.source.outgoing.count(edge) and sum(
                     e.transition.is_else for e in edge.source.outgoing) > 1:
                 self.diag.error(edge.transition.loc, f"more than one 'else' transition from '{edge.source.name}'")
+
+
+def _describe(e: s.Expr) -> str:
+    if isinstance(e, s.Name):
+        return str(e.name)
+    if isinstance(e, s.FieldAccess):
+        return f"{_describe(e.base)}.{e.field}"
+    return "the vector"
+
+
+

@@ -1,7 +1,9 @@
-"""Evaluate constant expressions: p-model dimensions (`0.15/2`, `PI/2`), limits, mapping constants.
+"""Evaluate constant expressions: p-model dimensions (`0.15/2`, `PI/2`), limits, mapping constants,
+d-model constants.
 
-Values are Python ints, floats, bools, strings and tuples (for `(|0,0,1|)` vectors). Names resolve
-through an environment of constant declarations, each evaluated once, with cycles reported.
+The expression core's Evaluator with names looked up in an environment of constant declarations,
+each evaluated once, with cycles reported. Values are those of cotwin.robosim.values (`(|0,0,1|)`
+is a TupleValue, a tuple).
 """
 
 from __future__ import annotations
@@ -11,10 +13,13 @@ from dataclasses import dataclass, field
 
 from ..diagnostics import Diagnostics
 from . import syntax as s
-from .operators import MATH, binary
+from .evaluator import Evaluator
+from .operators import MATH
+from .values import EvalError
 
 #: unit -> factor to SI
 UNITS = {"kg": 1.0, "g": 1e-3, "m": 1.0, "cm": 1e-2, "mm": 1e-3, "rad": 1.0, "deg": math.pi / 180, "s": 1.0}
+
 
 class ConstError(Exception):
     def __init__(self, loc, message: str):
@@ -31,6 +36,8 @@ class ConstEnv:
     outer: "ConstEnv | None" = None
     _values: dict[str, object] = field(default_factory=dict)
     _active: set[str] = field(default_factory=set)
+    #: enumeration literal (qualified name parts) -> index, for d-model constants
+    enums: object = None
 
     def lookup(self, name: str):
         env = self
@@ -57,57 +64,54 @@ class ConstEnv:
         return result
 
 
-def _num(value, loc) -> float | int:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConstError(loc, f"expected a number, got {value!r}")
-    return value
+class ConstEvaluator(Evaluator):
+    """Names are constants of the environment; calls are the built-in math functions."""
+
+    def __init__(self, env: ConstEnv):
+        super().__init__()
+        self.env = env
+
+    def name(self, e: s.Name):
+        if len(e.name.parts) != 1:
+            enums = self._enums()
+            if enums is not None:
+                value = enums(e.name)
+                if value is not None:
+                    return value
+            raise ConstError(e.loc, f"'{e.name}' is not a constant")
+        return self.env.value(e.name.last, e.loc)
+
+    def _enums(self):
+        env = self.env
+        while env is not None:
+            if env.enums is not None:
+                return env.enums
+            env = env.outer
+        return None
+
+    def function(self, e: s.Call):
+        if isinstance(e.function, s.Name) and e.function.name.last in MATH:
+            return MATH[e.function.name.last]
+        return None
+
+    def unsupported(self, node):
+        raise ConstError(node.loc, "not a constant expression")
 
 
 def evaluate(expr: s.Expr, env: ConstEnv) -> object:
     """The value of a constant expression, or ConstError with the offending location."""
-    if isinstance(expr, s.Literal):
-        return expr.value
-    if isinstance(expr, s.Name):
-        if len(expr.name.parts) != 1:
-            raise ConstError(expr.loc, f"'{expr.name}' is not a constant")
-        return env.value(expr.name.last, expr.loc)
-    if isinstance(expr, s.Unary):
-        value = evaluate(expr.operand, env)
-        if expr.op == "-":
-            return -_num(value, expr.loc)
-        if not isinstance(value, bool):
-            raise ConstError(expr.loc, "'not' needs a boolean")
-        return not value
-    if isinstance(expr, s.Binary):
-        return _binary(expr, evaluate(expr.left, env), evaluate(expr.right, env))
-    if isinstance(expr, (s.TupleExpr, s.VectorExpr)):
-        return tuple(evaluate(i, env) for i in expr.items)
-    if isinstance(expr, s.IfExpr):
-        return evaluate(expr.then if evaluate(expr.condition, env) else expr.otherwise, env)
-    if isinstance(expr, s.Call) and isinstance(expr.function, s.Name) and expr.function.name.last in MATH:
-        args = [_num(evaluate(a, env), a.loc) for a in expr.args]
-        try:
-            return MATH[expr.function.name.last](*args)
-        except (ValueError, TypeError) as err:
-            raise ConstError(expr.loc, f"cannot evaluate {expr.function.name.last}: {err}") from None
-    raise ConstError(expr.loc, "not a constant expression")
-
-
-def _binary(expr: s.Binary, left, right):
-    op, loc = expr.op, expr.loc
-    if op in ("\\/", "/\\", "=>", "iff"):
-        if not isinstance(left, bool) or not isinstance(right, bool):
-            raise ConstError(loc, f"'{op}' needs booleans")
-        return {"\\/": left or right, "/\\": left and right, "=>": (not left) or right, "iff": left == right}[op]
-    if op in ("==", "!="):
-        return binary(op, left, right)
-    a, b = _num(left, expr.left.loc), _num(right, expr.right.loc)
     try:
-        return binary(op, a, b)
-    except ZeroDivisionError:
-        raise ConstError(expr.right.loc, "division by zero") from None
-    except KeyError:
-        raise ConstError(loc, f"operator '{op}' is not allowed in a constant") from None
+        return ConstEvaluator(env).visit(expr)
+    except EvalError as err:
+        raise ConstError(err.loc or expr.loc, _message(err)) from None
+
+
+def _message(err: EvalError) -> str:
+    if err.kind == "unsupported":
+        return "not a constant expression"
+    if err.kind == "type" and err.message.startswith("expected a number"):
+        return err.message
+    return err.message
 
 
 def const_env(declarations, outer: ConstEnv | None = None) -> ConstEnv:

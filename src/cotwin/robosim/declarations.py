@@ -41,6 +41,7 @@ class EventDecl:
     name: str
     type: TypeRef | None
     loc: Location
+    broadcast: bool = False  # RoboChart's `_broadcast event`
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,7 @@ class OperationSig:
     name: str
     params: tuple[Param, ...]
     loc: Location
+    terminates: bool = False  # `op(...) [terminates]`
 
 
 @dataclass(frozen=True)
@@ -109,10 +111,15 @@ class SourceFile:
     """One parsed file: its package, imports and top-level elements in source order."""
 
     path: str
-    notation: str  # "rst" | "pm"
+    notation: str  # "rst" | "rct" | "pm"
     package: QName | None = None
     imports: list[Import] = field(default_factory=list)
     elements: list[object] = field(default_factory=list)
 
     def of_kind(self, cls) -> list:
         return [e for e in self.elements if isinstance(e, cls)]
+
+    @property
+    def namespace(self) -> tuple[str, ...]:
+        """The package this file's elements belong to (() for a file without `package`)."""
+        return self.package.parts if self.package is not None else ()

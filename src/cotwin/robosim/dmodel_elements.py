@@ -35,6 +35,16 @@ class RoboticPlatform:
     operations: tuple[OperationSig, ...]
     events: tuple[EventDecl, ...]
     loc: Location
+    clocks: tuple[ClockDecl, ...] = ()
+
+
+@dataclass(frozen=True)
+class PlatformRef:
+    """`rref name = Platform` in a module: a robotic platform defined elsewhere."""
+
+    name: str
+    target: QName
+    loc: Location
 
 
 @dataclass(frozen=True)
@@ -47,6 +57,7 @@ class Connection:
     target_event: str
     is_async: bool
     loc: Location
+    bidirectional: bool = False  # `[mult]`
 
 
 @dataclass(frozen=True)
@@ -62,6 +73,20 @@ class Transition:
     loc: Location
     source_loc: Location
     target_loc: Location
+    trigger: "Communication | None" = None  # RoboChart (.rct) only
+    probability: Expr | None = None
+    deadline: Expr | None = None
+
+
+@dataclass(frozen=True)
+class Communication:
+    """A RoboChart trigger `e`, `e?x`, `e!v`, `e.v`, optionally guarded `e[|p|]` (in .rct files)."""
+
+    event: str
+    kind: str  # simple | input | output | sync
+    value: Expr | QName | None
+    guard: Expr | None
+    loc: Location
 
 
 @dataclass(frozen=True)
@@ -93,7 +118,13 @@ class Final:
     loc: Location
 
 
-Node = State | Initial | Junction | Final
+@dataclass(frozen=True)
+class ProbabilisticJunction:
+    name: str
+    loc: Location
+
+
+Node = State | Initial | Junction | Final | ProbabilisticJunction
 
 
 @dataclass(frozen=True)
@@ -111,11 +142,25 @@ class StateMachine:
     transitions: tuple[Transition, ...]
     loc: Location
     params: tuple[Param, ...] = ()
+    events: tuple[EventDecl, ...] = ()  # RoboChart declares events in the machine itself
 
 
 @dataclass(frozen=True)
 class OperationDef(StateMachine):
     """An `operation name(params) { ... }` definition: a state machine called from a controller."""
+
+    terminates: bool = False
+    preconditions: tuple[Expr, ...] = ()
+    postconditions: tuple[Expr, ...] = ()
+
+
+@dataclass(frozen=True)
+class OperationRef:
+    """`opref name = Operation` in a controller: an operation definition made available to its machines."""
+
+    name: str
+    target: QName
+    loc: Location
 
 
 @dataclass(frozen=True)
@@ -139,6 +184,8 @@ class Controller:
     machine_refs: tuple[MachineRef, ...]
     connections: tuple[Connection, ...]
     loc: Location
+    operation_refs: tuple[OperationRef, ...] = ()
+    clocks: tuple[ClockDecl, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -150,3 +197,6 @@ class Module:
     controller_refs: tuple[MachineRef, ...]
     connections: tuple[Connection, ...]
     loc: Location
+    platform_ref: PlatformRef | None = None  # `rref`: the platform is defined elsewhere
+    machines: tuple[StateMachine, ...] = ()  # RoboTool rejects machines directly in a module
+    machine_refs: tuple[MachineRef, ...] = ()

@@ -13,9 +13,9 @@ from ..diagnostics import CotwinError, Diagnostics, Finding, Location, Severity
 from .builder import Builder
 from .declarations import SourceFile
 
-NOTATIONS = {".rst": "rst", ".pm": "pm"}
-_START = {"rst": "rst_file", "pm": "pm_file"}
-_GRAMMAR = {"rst": "dmodel.lark", "pm": "pmodel.lark"}
+NOTATIONS = {".rst": "rst", ".rct": "rct", ".pm": "pm"}
+_START = {"rst": "rst_file", "rct": "rst_file", "pm": "pm_file"}
+_GRAMMAR = {"rst": "dmodel.lark", "rct": "dmodel.lark", "pm": "pmodel.lark"}
 
 # Terminal names shown to a user as the text they stand for.
 _TERMINAL_TEXT = {
@@ -30,12 +30,17 @@ def _grammar_text(name: str) -> str:
     return (folder / name).read_text(encoding="utf-8") + "\n" + (folder / "common.lark").read_text(encoding="utf-8")
 
 
-@lru_cache(maxsize=None)
 def lark_parser(notation: str) -> lark.Lark:
-    """The LALR parser of one notation ("rst" or "pm"), built once per process."""
+    """The LALR parser of one notation ("rst", "rct" or "pm"), built once per process."""
+    return _lark_parser(_GRAMMAR[notation])
+
+
+@lru_cache(maxsize=None)
+def _lark_parser(grammar: str) -> lark.Lark:
+    start = "pm_file" if grammar == "pmodel.lark" else "rst_file"
     return lark.Lark(
-        _grammar_text(_GRAMMAR[notation]),
-        start=_START[notation],
+        _grammar_text(grammar),
+        start=start,
         parser="lalr",
         lexer="contextual",
         propagate_positions=True,
@@ -71,7 +76,7 @@ def _describe_expected(expected: set[str], parser: lark.Lark) -> str:
 _OPENERS = frozenset(
     "interface stm state transition controller module robotic datatype record enumeration function "
     "operation connection initial junction final entry during exit pmodel local sensor actuator joint "
-    "map jref sref aref part import".split())
+    "map jref sref aref part import opref cref rref probabilistic".split())
 
 
 def _keyword_before(err: UnexpectedToken, text: str) -> tuple[int, int, str] | None:
@@ -127,7 +132,7 @@ def parse_text(text: str, path: str, notation: str | None = None) -> tuple[Sourc
     notation = notation or notation_of(path)
     if notation not in _START:
         return None, [Finding(Location(path, 1, 1), Severity.ERROR,
-                              "unknown file kind: expected a .rst d-model or a .pm p-model/mapping")]
+                              "unknown file kind: expected a .rst d-model, a .rct RoboChart file or a .pm p-model/mapping")]
     parser = lark_parser(notation)
     try:
         tree = parser.parse(text)

@@ -1,8 +1,12 @@
 """A project: all the model files read together, plus the built-in library, with one symbol table.
 
-Names are looked up per kind (a p-model, a part and an actuator may all be called `Gripper`). Every
-element of the project's own files is visible in every file, as in a RoboTool project; library
-elements only where a file imports them, and a project element shadows a library one.
+Names are scoped per package, as RoboTool scopes them. Every top-level element has a qualified name:
+its file's `package` (none for a file without one) followed by its own name. A simple name used in
+a file resolves, in order, to an element of the file's own package, an element of a file without a
+package (those are visible everywhere), or an element its imports bring in (`import P::*`,
+`import P::N`); a qualified name `P::N` resolves to N of package P (of the project or the built-in
+library) directly. Names are looked up per kind (a p-model, a part and an actuator may all be
+called `Gripper`).
 """
 
 from __future__ import annotations
@@ -13,10 +17,12 @@ from pathlib import Path
 from typing import Iterable
 
 from ..diagnostics import CotwinError, Diagnostics, Finding, Location, Severity
-from .declarations import EnumDecl, FunctionDecl, Import, PrimitiveDecl, RecordDecl, SourceFile
+from .declarations import EnumDecl, FunctionDecl, PrimitiveDecl, RecordDecl, SourceFile
 from .dmodel_elements import Controller, Interface, Module, OperationDef, RoboticPlatform, StateMachine
+from .functions import SUBSTITUTE_PACKAGES
 from .parser import notation_of, parse_file, parse_text
 from .pmodel_elements import Device, Mapping, PModel
+from .readings import Readings
 from .syntax import QName
 
 #: element class -> symbol kind
@@ -41,7 +47,7 @@ def kind_of(element: object) -> str | None:
 
 @dataclass
 class Package:
-    """A library package such as `physmod::joints`."""
+    """A library package such as `physmod::joints` or `set_toolkit`."""
 
     name: tuple[str, ...]
     source: SourceFile
@@ -51,66 +57,85 @@ class Package:
 class Project:
     files: list[SourceFile]
     packages: dict[tuple[str, ...], Package] = field(default_factory=dict)
-    table: dict[str, dict[str, object]] = field(default_factory=dict)
+    #: kind -> qualified name -> element (the project's files and the library packages)
+    symbols: dict[str, dict[tuple[str, ...], object]] = field(default_factory=dict)
+    #: element id -> the file declaring it
+    owners: dict[int, SourceFile] = field(default_factory=dict)
+    #: package names declared by the project's files
+    namespaces: set[tuple[str, ...]] = field(default_factory=set)
+    #: types and readings the checker recorded (filled by check_project)
+    readings: Readings = field(default_factory=Readings)
 
     # ---- queries ----
     def elements(self, cls) -> list:
         return [e for f in self.files for e in f.elements if isinstance(e, cls)]
 
     def file_of(self, element: object) -> SourceFile | None:
-        for f in self.files:
-            if any(e is element for e in f.elements):
-                return f
-        return None
+        return self.owners.get(id(element))
+
+    def qualified_name(self, element: object) -> tuple[str, ...]:
+        owner = self.file_of(element)
+        return (owner.namespace if owner is not None else ()) + (element.name,)
 
     def lookup(self, kind: str, name: QName | str, source: SourceFile | None = None):
-        """The element of `kind` called `name`, as seen from `source` (for its imports)."""
+        """The element of `kind` called `name`, as seen from `source` (its package and imports)."""
         parts = name.parts if isinstance(name, QName) else tuple(name.split("::"))
-        if len(parts) == 1 and parts[0] in self.table.get(kind, {}):
-            return self.table[kind][parts[0]]
+        table = self.symbols.get(kind, {})
         if len(parts) > 1:
-            package = self.packages.get(parts[:-1])
-            if package is not None:
-                return _find(package.source, kind, parts[-1])
-            # a project file may declare `package p`; allow p::Name
-            hit = self.table.get(kind, {}).get(parts[-1])
+            hit = table.get(parts)
             if hit is not None:
-                owner = self.file_of(hit)
-                if owner is not None and owner.package is not None and owner.package.parts == parts[:-1]:
+                return hit
+            for prefix in self._import_prefixes(source):  # `import P::*` then `Q::N` is P::Q::N
+                hit = table.get(prefix + parts)
+                if hit is not None:
                     return hit
             return None
+        own = source.namespace if source is not None else ()
+        hit = table.get(own + parts)
+        if hit is not None:
+            return hit
+        if own:
+            hit = table.get(parts)  # files without a package are visible everywhere
+            if hit is not None:
+                return hit
         for imp in source.imports if source is not None else ():
-            found = self._from_import(imp, kind, parts[0])
-            if found is not None:
-                return found
+            if imp.wildcard:
+                hit = table.get(imp.name.parts + parts)
+            elif imp.name.last == parts[0]:
+                hit = table.get(imp.name.parts)
+            else:
+                hit = None
+            if hit is not None:
+                return hit
         return None
 
-    def _from_import(self, imp: Import, kind: str, name: str):
-        if imp.wildcard:
-            package = self.packages.get(imp.name.parts)
-            return _find(package.source, kind, name) if package else None
-        if imp.name.last != name:
-            return None
-        package = self.packages.get(imp.name.parts[:-1])
-        return _find(package.source, kind, name) if package else None
+    def _import_prefixes(self, source: SourceFile | None) -> list[tuple[str, ...]]:
+        if source is None:
+            return []
+        return [source.namespace] + [imp.name.parts for imp in source.imports if imp.wildcard]
+
+    def elsewhere(self, kind: str, name: QName | str) -> list[str]:
+        """Qualified names of elements of `kind` with this simple name, for 'did you mean' hints."""
+        last = name.last if isinstance(name, QName) else name.split("::")[-1]
+        return sorted("::".join(q) for q in self.symbols.get(kind, {}) if q[-1] == last and len(q) > 1)
 
     def visible_functions(self, source: SourceFile | None) -> dict[str, FunctionDecl]:
-        """Functions callable from `source`: the project's and the imported library ones."""
+        """Functions callable by simple name from `source`: its package's, package-less files',
+        and the imported ones (the first of these shadows the others)."""
         out: dict[str, FunctionDecl] = {}
-        for imp in source.imports if source is not None else ():
-            if imp.wildcard and imp.name.parts in self.packages:
-                for fn in self.packages[imp.name.parts].source.of_kind(FunctionDecl):
-                    out.setdefault(fn.name, fn)
-            elif not imp.wildcard and imp.name.parts[:-1] in self.packages:
-                fn = _find(self.packages[imp.name.parts[:-1]].source, "function", imp.name.last)
-                if fn is not None:
-                    out.setdefault(fn.name, fn)
-        out.update(self.table.get("function", {}))
+        table = self.symbols.get("function", {})
+        own = source.namespace if source is not None else ()
+        for imp in reversed(source.imports if source is not None else []):
+            for q, fn in table.items():
+                if (imp.wildcard and q[:-1] == imp.name.parts) or (not imp.wildcard and q == imp.name.parts):
+                    out[q[-1]] = fn
+        for q, fn in table.items():
+            if len(q) == 1 and q[0] not in out:
+                out[q[0]] = fn
+        for q, fn in table.items():
+            if q[:-1] == own:
+                out[q[-1]] = fn
         return out
-
-
-def _find(source: SourceFile, kind: str, name: str):
-    return next((e for e in source.elements if kind_of(e) == kind and getattr(e, "name", None) == name), None)
 
 
 # ---- library --------------------------------------------------------------------------------
@@ -119,7 +144,8 @@ _LIBRARY_CACHE: dict[tuple[str, ...], Package] | None = None
 
 
 def library_packages() -> dict[tuple[str, ...], Package]:
-    """The built-in packages (`physmod::joints`, `physmod::math`, ...), parsed once."""
+    """The built-in packages (`physmod::joints`, `set_toolkit`, `Mathematics`, ...), parsed once; a
+    package is named after its path under library/ (`physmod/joints.pm` is `physmod::joints`)."""
     global _LIBRARY_CACHE
     if _LIBRARY_CACHE is None:
         root = resources.files("cotwin.robosim") / "library"
@@ -130,20 +156,21 @@ def library_packages() -> dict[tuple[str, ...], Package]:
             source, findings = parse_text(path.read_text(encoding="utf-8"), f"<library>/{rel.as_posix()}")
             if source is None:  # pragma: no cover - the library is ours and tested
                 raise CotwinError(findings)
+            source.package = QName(name)  # named after its path, whatever it declares
             packages[name] = Package(name, source)
         _LIBRARY_CACHE = packages
     return _LIBRARY_CACHE
 
 
 def _library_files(root) -> Iterable[Path]:
-    return [p for p in Path(str(root)).rglob("*.pm")]
+    return [p for p in Path(str(root)).rglob("*") if p.is_file() and notation_of(p)]
 
 
 # ---- loading --------------------------------------------------------------------------------
 
 
 def model_files(paths: Iterable[str | Path]) -> tuple[list[Path], list[Finding]]:
-    """Expand folders into their .rst and .pm files (sorted), reporting paths that do not exist."""
+    """Expand folders into their .rst, .rct and .pm files (sorted), reporting paths that do not exist."""
     files: list[Path] = []
     findings: list[Finding] = []
     for raw in paths:
@@ -151,7 +178,8 @@ def model_files(paths: Iterable[str | Path]) -> tuple[list[Path], list[Finding]]
         if path.is_dir():
             found = sorted(p for p in path.rglob("*") if p.is_file() and notation_of(p))
             if not found:
-                findings.append(Finding(Location(str(path), 1, 1), Severity.ERROR, "no .rst or .pm files in folder"))
+                findings.append(Finding(Location(str(path), 1, 1), Severity.ERROR,
+                                        "no .rst, .rct or .pm files in folder"))
             files.extend(found)
         elif path.is_file():
             files.append(path)
@@ -161,9 +189,22 @@ def model_files(paths: Iterable[str | Path]) -> tuple[list[Path], list[Finding]]
     return unique, findings
 
 
+def _project_root(file: Path, top: Path) -> Path:
+    """The folder holding the RoboTool (Eclipse) project of `file`: its nearest ancestor, up to
+    `top`, with a `.project` file; otherwise the file's own folder."""
+    folder = file.parent
+    while True:
+        if (folder / ".project").is_file():
+            return folder
+        if folder == top or folder.parent == folder:
+            return file.parent
+        folder = folder.parent
+
+
 def project_groups(paths: Iterable[str | Path]) -> tuple[list[list[Path]], list[Finding]]:
-    """Group model files into projects: the files named directly form one project, and every folder
-    holding model files forms its own (so `check ur5e ur3e` checks two independent projects)."""
+    """Group model files into projects: the files named directly form one project; under a folder,
+    every RoboTool project (a folder with a `.project` file, with all its subfolders) and every
+    other folder holding model files forms its own (so `check ur5e ur3e` checks two projects)."""
     loose: list[Path] = []
     groups: dict[Path, list[Path]] = {}
     findings: list[Finding] = []
@@ -173,7 +214,7 @@ def project_groups(paths: Iterable[str | Path]) -> tuple[list[list[Path]], list[
             files, found = model_files([path])
             findings.extend(found)
             for f in files:
-                groups.setdefault(f.parent, []).append(f)
+                groups.setdefault(_project_root(f, path), []).append(f)
         else:
             files, found = model_files([path])
             findings.extend(found)
@@ -183,30 +224,44 @@ def project_groups(paths: Iterable[str | Path]) -> tuple[list[list[Path]], list[
     return out, findings
 
 
+def _index(project: Project, source: SourceFile, namespace: tuple[str, ...], diag: Diagnostics | None) -> None:
+    for element in source.elements:
+        kind = kind_of(element)
+        project.owners[id(element)] = source
+        if kind is None:
+            continue
+        names = project.symbols.setdefault(kind, {})
+        qualified = namespace + (element.name,)
+        first = names.get(qualified)
+        if first is not None:
+            if diag is not None:
+                diag.error(element.loc, f"duplicate {KIND_WORD[kind]} '{'::'.join(qualified)}' "
+                                        f"(first declared at {first.loc})")
+            continue
+        names[qualified] = element
+
+
 def build_project(sources: list[SourceFile], diag: Diagnostics) -> Project:
-    """Index the files' elements per kind, reporting duplicates and unknown imports."""
+    """Index the files' elements per kind and qualified name, reporting duplicates and unknown imports."""
     project = Project(files=sources, packages=dict(library_packages()))
+    for package in project.packages.values():
+        _index(project, package.source, package.name, None)
     for source in sources:
-        for element in source.elements:
-            kind = kind_of(element)
-            if kind is None:
-                continue
-            names = project.table.setdefault(kind, {})
-            first = names.get(element.name)
-            if first is not None:
-                diag.error(element.loc, f"duplicate {KIND_WORD[kind]} '{element.name}' (first declared at {first.loc})")
-                continue
-            names[element.name] = element
+        project.namespaces.add(source.namespace)
+        _index(project, source, source.namespace, diag)
+    known_packages = set(project.packages) | project.namespaces
+    for source in sources:
         for imp in source.imports:
             if imp.wildcard:
-                known = imp.name.parts in project.packages
+                known = imp.name.parts in known_packages
             else:
-                package = project.packages.get(imp.name.parts[:-1])
-                known = package is not None and any(
-                    getattr(e, "name", None) == imp.name.last for e in package.source.elements
-                )
+                known = any(imp.name.parts in table for table in project.symbols.values())
             if not known:
                 diag.error(imp.loc, f"unknown import '{imp.name}{'::*' if imp.wildcard else ''}'")
+            elif imp.name.parts[:1] in SUBSTITUTE_PACKAGES and imp.name.parts[:1] not in project.namespaces:
+                diag.warning(imp.loc, f"package {imp.name.parts[0]} is not part of the project (RoboTool projects "
+                                      f"import it without publishing it): cotwin uses its built-in "
+                                      f"{imp.name.parts[0]} (abs, floor, ceil, sqrt, trigonometry, random)")
     return project
 
 

@@ -96,11 +96,14 @@ class Name:
 
 @dataclass(frozen=True)
 class EventTest:
-    """`$e` (did e arrive in this cycle?) or `$e?x` (and bind its value to x when taken)."""
+    """`$e` (did e arrive in this cycle?), `$e?x` (and bind its value to x when taken), `$e?x:p`
+    (and the bound value satisfies p), `$e.v` (and its value is v). On a variable, `$v` is its value."""
 
     event: QName
     bind: str | None
     loc: Location
+    predicate: "Expr | None" = None
+    value: "Expr | None" = None
 
 
 @dataclass(frozen=True)
@@ -156,10 +159,14 @@ class LetExpr:
 
 @dataclass(frozen=True)
 class Quantified:
-    kind: str  # forall | exists | lambda
+    """`forall`, `exists`, `exists1`, `lambda` or `the` (definite description), with binders, an
+    optional such-that predicate (`| p`) and a body (`@ e`)."""
+
+    kind: str  # forall | exists | exists1 | lambda | the
     binders: tuple[tuple[str, TypeRef], ...]
     body: "Expr"
     loc: Location
+    such_that: "Expr | None" = None
 
 
 @dataclass(frozen=True)
@@ -185,13 +192,97 @@ class CycleExpr:
 
 @dataclass(frozen=True)
 class SinceExpr:
+    """`since(C)`: cycles since clock C was last reset (or since the machine started)."""
+
     clock: str
+    loc: Location
+
+
+@dataclass(frozen=True)
+class SinceEntryExpr:
+    """`sinceEntry(S)`: cycles since state S was last entered."""
+
+    state: QName
+    loc: Location
+
+
+@dataclass(frozen=True)
+class SetExpr:
+    """`{a, b}` (and `{}`)."""
+
+    items: tuple["Expr", ...]
+    loc: Location
+
+
+@dataclass(frozen=True)
+class SetRangeExpr:
+    """`{a to b}`: the integers from a to b."""
+
+    start: "Expr"
+    end: "Expr"
+    loc: Location
+
+
+@dataclass(frozen=True)
+class SeqExpr:
+    """`<a, b>` (and `<>`)."""
+
+    items: tuple["Expr", ...]
+    loc: Location
+
+
+@dataclass(frozen=True)
+class SetComprehension:
+    """`{x: T | p @ e}`: the values of e for the x of type T satisfying p."""
+
+    binders: tuple[tuple[str, TypeRef], ...]
+    predicate: "Expr | None"
+    body: "Expr | None"
+    loc: Location
+
+
+@dataclass(frozen=True)
+class MatrixExpr:
+    """`[|a, b; c, d|]`: rows of equal length."""
+
+    rows: tuple[tuple["Expr", ...], ...]
+    loc: Location
+
+
+@dataclass(frozen=True)
+class RecordExpr:
+    """`R(| f = e, ... |)`: a record value."""
+
+    record: QName
+    fields: tuple[tuple[str, "Expr", Location], ...]
+    loc: Location
+
+
+@dataclass(frozen=True)
+class RangeExpr:
+    """`[a, b]`, `[a, b)`, `(a, b]`, `(a, b)`: an interval."""
+
+    low: "Expr"
+    high: "Expr"
+    low_closed: bool
+    high_closed: bool
+    loc: Location
+
+
+@dataclass(frozen=True)
+class TypeTest:
+    """`e as T` (a cast) or `e is T` (a type test)."""
+
+    expr: "Expr"
+    type: TypeRef
+    kind: str  # as | is
     loc: Location
 
 
 Expr = Union[
     Literal, Name, EventTest, Unary, Binary, FieldAccess, IndexAccess, Call, IfExpr, LetExpr,
-    Quantified, TupleExpr, VectorExpr, CycleExpr, SinceExpr,
+    Quantified, TupleExpr, VectorExpr, CycleExpr, SinceExpr, SinceEntryExpr, SetExpr, SetRangeExpr,
+    SeqExpr, SetComprehension, MatrixExpr, RecordExpr, RangeExpr, TypeTest,
 ]
 
 
@@ -264,7 +355,33 @@ class ClockReset:
     loc: Location
 
 
-Stmt = Union[Sequence, Exec, Skip, Send, PlatformCall, CallStmt, Assign, IfStmt, ClockReset]
+@dataclass(frozen=True)
+class Wait:
+    """RoboChart's `wait(d)` (in .rct files; no RoboSim meaning)."""
+
+    duration: "Expr"
+    loc: Location
+
+
+@dataclass(frozen=True)
+class Receive:
+    """RoboChart's `e?x` input communication as an action (in .rct files)."""
+
+    event: QName
+    target: "Expr"
+    loc: Location
+
+
+@dataclass(frozen=True)
+class Timed:
+    """RoboChart's `s <{ d }`: s with a deadline (in .rct files)."""
+
+    stmt: "Stmt"
+    deadline: "Expr"
+    loc: Location
+
+
+Stmt = Union[Sequence, Exec, Skip, Send, PlatformCall, CallStmt, Assign, IfStmt, ClockReset, Wait, Receive, Timed]
 
 
 def root_name(target: Expr) -> Name | None:
@@ -274,27 +391,33 @@ def root_name(target: Expr) -> Name | None:
     return target if isinstance(target, Name) else None
 
 
+_CHILDREN = {
+    Unary: lambda e: (e.operand,),
+    Binary: lambda e: (e.left, e.right),
+    FieldAccess: lambda e: (e.base,),
+    IndexAccess: lambda e: (e.base, e.index),
+    Call: lambda e: (e.function, *e.args),
+    IfExpr: lambda e: (e.condition, e.then, e.otherwise),
+    LetExpr: lambda e: (*(value for _, value in e.bindings), e.body),
+    Quantified: lambda e: tuple(x for x in (e.such_that, e.body) if x is not None),
+    TupleExpr: lambda e: e.items,
+    VectorExpr: lambda e: e.items,
+    SetExpr: lambda e: e.items,
+    SeqExpr: lambda e: e.items,
+    SetRangeExpr: lambda e: (e.start, e.end),
+    SetComprehension: lambda e: tuple(x for x in (e.predicate, e.body) if x is not None),
+    MatrixExpr: lambda e: tuple(x for row in e.rows for x in row),
+    RecordExpr: lambda e: tuple(value for _, value, _ in e.fields),
+    RangeExpr: lambda e: (e.low, e.high),
+    TypeTest: lambda e: (e.expr,),
+    EventTest: lambda e: tuple(x for x in (e.predicate, e.value) if x is not None),
+}
+
+
 def sub_expressions(expr: Expr):
     """Direct children of an expression, for generic walks."""
-    if isinstance(expr, (Unary,)):
-        return (expr.operand,)
-    if isinstance(expr, Binary):
-        return (expr.left, expr.right)
-    if isinstance(expr, FieldAccess):
-        return (expr.base,)
-    if isinstance(expr, IndexAccess):
-        return (expr.base, expr.index)
-    if isinstance(expr, Call):
-        return (expr.function, *expr.args)
-    if isinstance(expr, IfExpr):
-        return (expr.condition, expr.then, expr.otherwise)
-    if isinstance(expr, LetExpr):
-        return (*(value for _, value in expr.bindings), expr.body)
-    if isinstance(expr, Quantified):
-        return (expr.body,)
-    if isinstance(expr, (TupleExpr, VectorExpr)):
-        return expr.items
-    return ()
+    children = _CHILDREN.get(type(expr))
+    return children(expr) if children is not None else ()
 
 
 def walk(expr: Expr):
@@ -304,3 +427,36 @@ def walk(expr: Expr):
         node = stack.pop()
         yield node
         stack.extend(reversed(sub_expressions(node)))
+
+
+def statements(stmt: "Stmt | None"):
+    """Every statement of an action tree, pre-order (sequences, branches and timed bodies opened)."""
+    stack = [stmt] if stmt is not None else []
+    while stack:
+        node = stack.pop()
+        yield node
+        if isinstance(node, Sequence):
+            stack.extend(reversed(node.statements))
+        elif isinstance(node, IfStmt):
+            stack.extend(x for x in (node.otherwise, node.then) if x is not None)
+        elif isinstance(node, Timed):
+            stack.append(node.stmt)
+
+
+def statement_expressions(stmt: "Stmt"):
+    """The expressions a single statement (not its sub-statements) evaluates."""
+    if isinstance(stmt, Assign):
+        return (stmt.target, stmt.value)
+    if isinstance(stmt, (PlatformCall, CallStmt)):
+        return stmt.args
+    if isinstance(stmt, Send):
+        return (stmt.value,) if stmt.value is not None else ()
+    if isinstance(stmt, IfStmt):
+        return (stmt.condition,)
+    if isinstance(stmt, Wait):
+        return (stmt.duration,)
+    if isinstance(stmt, Receive):
+        return (stmt.target,)
+    if isinstance(stmt, Timed):
+        return (stmt.deadline,)
+    return ()

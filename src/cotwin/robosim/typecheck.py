@@ -1,4 +1,9 @@
-"""Type checking of expressions and statements against a scope, reporting every mismatch with its place."""
+"""Type checking of expressions and statements against a scope, reporting every mismatch with its place.
+
+Every expression's type is recorded in the project's readings (readings.py), so that the evaluators
+and the C generator use the types the checker found. Where RoboTool's notation lets a model be
+defective but cotwin can still read it, the checker warns and records the reading.
+"""
 
 from __future__ import annotations
 
@@ -6,12 +11,15 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from ..diagnostics import Diagnostics, Location
+from . import functions as fns
 from . import syntax as s
-from .declarations import EnumDecl, FunctionDecl, OperationSig
+from .declarations import EnumDecl, FunctionDecl, OperationSig, Param, RecordDecl, VarDecl
+from .readings import Readings
 from .types import (
-    BOOL, INT, NAT, REAL, STRING, UNKNOWN, CollectionTy, DeviceTy, EnumTy, FuncTy, RecordTy, TupleTy,
-    Ty, TypeResolver, VectorTy, assignable, comparable, is_numeric,
+    BOOL, INT, NAT, REAL, STRING, UNKNOWN, CollectionTy, DeviceTy, EnumTy, FuncTy, MatrixTy, RecordTy, TupleTy,
+    Ty, TypeResolver, TypeVar, VectorTy, assignable, comparable, is_numeric, join,
 )
+from .visitor import ExprVisitor
 
 
 @dataclass(frozen=True)
@@ -20,6 +28,7 @@ class Symbol:
     kind: str  # var | const | param | port | binding
     ty: Ty
     loc: Location
+    decl: object = None  # the VarDecl, for constants a model assigns
 
     @property
     def writable(self) -> bool:
@@ -45,11 +54,43 @@ class Scope:
 
 _LOGICAL = ("\\/", "/\\", "=>", "iff")
 _ORDER = ("<", "<=", ">", ">=")
-_ARITH = ("+", "-", "*", "/", "%")
 
 
-class ExprChecker:
-    """Types expressions in one context. Hooks give the context's events and qualified names."""
+def _arithmetic(op: str, left: Ty, right: Ty) -> Ty | None:
+    """The type of a numeric, vector or matrix operation, None if the operands do not fit it."""
+    if is_numeric(left) and is_numeric(right):
+        if UNKNOWN in (left, right):
+            return UNKNOWN
+        if REAL in (left, right):
+            return REAL
+        if op == "-" or INT in (left, right):
+            return INT
+        return NAT
+    shaped = (VectorTy, MatrixTy)
+    if op in ("+", "-") and isinstance(left, shaped) and type(left) is type(right) and comparable(left, right):
+        element = _arithmetic(op, left.element, right.element) or UNKNOWN
+        if isinstance(left, VectorTy):
+            return VectorTy(_widen(element), left.size if left.size is not None else right.size)
+        return MatrixTy(_widen(element), left.rows, left.columns)
+    if op in ("*", "/") and isinstance(left, shaped) and is_numeric(right):
+        element = _widen(_arithmetic(op, left.element, right) or UNKNOWN)
+        return VectorTy(element, left.size) if isinstance(left, VectorTy) else MatrixTy(element, left.rows, left.columns)
+    if op == "*" and is_numeric(left) and isinstance(right, shaped):
+        element = _widen(_arithmetic(op, left, right.element) or UNKNOWN)
+        return VectorTy(element, right.size) if isinstance(right, VectorTy) else MatrixTy(element, right.rows, right.columns)
+    if op == "*" and isinstance(left, MatrixTy) and isinstance(right, VectorTy):
+        return VectorTy(_widen(_arithmetic(op, left.element, right.element) or UNKNOWN), left.rows)
+    if op == "*" and isinstance(left, MatrixTy) and isinstance(right, MatrixTy):
+        return MatrixTy(_widen(_arithmetic(op, left.element, right.element) or UNKNOWN), left.rows, right.columns)
+    return None
+
+
+def _widen(ty: Ty) -> Ty:
+    return INT if ty == NAT else ty
+
+
+class ExprChecker(ExprVisitor):
+    """Types expressions in one context: a scope, the visible functions, the input events, clocks."""
 
     def __init__(
         self,
@@ -60,6 +101,7 @@ class ExprChecker:
         events: dict[str, Ty | None] | None = None,
         qualified: Callable[[s.QName], Ty | None] | None = None,
         clocks: set[str] | frozenset[str] = frozenset(),
+        states: set[str] | frozenset[str] | None = None,
     ):
         self.resolver = resolver
         self.diag = diag
@@ -68,27 +110,45 @@ class ExprChecker:
         self.events = events
         self.qualified = qualified
         self.clocks = clocks
+        self.states = states
+        self.readings: Readings = getattr(resolver.project, "readings", None) or Readings()
 
     def with_scope(self, scope: Scope) -> "ExprChecker":
-        return ExprChecker(self.resolver, self.diag, scope, self.functions, self.events, self.qualified, self.clocks)
+        return ExprChecker(self.resolver, self.diag, scope, self.functions, self.events, self.qualified,
+                           self.clocks, self.states)
 
-    # ---- expressions ----
+    @property
+    def project(self):
+        return self.resolver.project
+
+    @property
+    def source(self):
+        return self.resolver.source
+
+    # ---- entry points ----
     def condition(self, expr: s.Expr, what: str) -> None:
         ty = self.check(expr)
         if not assignable(BOOL, ty):
             self.diag.error(expr.loc, f"{what} must be boolean, not {ty}")
 
     def expect(self, expr: s.Expr, expected: Ty, what: str) -> Ty:
-        ty = self.check(expr)
+        ty = self.check(expr, expected)
         if not assignable(expected, ty):
             self.diag.error(expr.loc, f"{what}: expected {expected}, got {ty}")
         return ty
 
-    def check(self, expr: s.Expr) -> Ty:
-        method = getattr(self, "_" + type(expr).__name__)
-        return method(expr)
+    def check(self, expr: s.Expr, expected: Ty | None = None) -> Ty:
+        self.expected = expected
+        ty = self.visit(expr)
+        self.readings.types[id(expr)] = ty
+        return ty
 
-    def _Literal(self, e: s.Literal) -> Ty:
+    def unsupported(self, node) -> Ty:
+        self.diag.error(node.loc, f"{type(node).__name__} is not allowed here")
+        return UNKNOWN
+
+    # ---- atoms ----
+    def visit_Literal(self, e: s.Literal) -> Ty:
         if isinstance(e.value, bool):
             return BOOL
         if isinstance(e.value, int):
@@ -97,7 +157,7 @@ class ExprChecker:
             return REAL
         return STRING
 
-    def _Name(self, e: s.Name) -> Ty:
+    def visit_Name(self, e: s.Name) -> Ty:
         name = e.name
         if len(name.parts) == 1:
             symbol = self.scope.lookup(name.last)
@@ -111,6 +171,9 @@ class ExprChecker:
         enum = self.enum_literal(name)
         if enum is not None:
             return enum
+        fn = self.project.lookup("function", name, self.source)
+        if fn is not None:
+            return self._function_type(fn)
         if self.qualified is not None:
             ty = self.qualified(name)
             if ty is not None:
@@ -119,7 +182,7 @@ class ExprChecker:
         return UNKNOWN
 
     def enum_literal(self, name: s.QName) -> Ty | None:
-        decl = self.resolver.project.lookup("type", s.QName(name.parts[:-1], name.loc), self.resolver.source)
+        decl = self.project.lookup("type", s.QName(name.parts[:-1], name.loc), self.source)
         if isinstance(decl, EnumDecl):
             if decl.literal(name.last) is None:
                 self.diag.error(name.loc, f"enumeration '{decl.name}' has no literal '{name.last}'")
@@ -129,15 +192,21 @@ class ExprChecker:
     def _function_type(self, fn: FunctionDecl) -> FuncTy:
         return FuncTy(tuple(self.resolver.resolve(p.type) for p in fn.params), self.resolver.resolve(fn.result))
 
-    def _EventTest(self, e: s.EventTest) -> Ty:
+    def visit_EventTest(self, e: s.EventTest) -> Ty:
+        name = e.event.last
+        if self.events is not None and name in self.events and len(e.event.parts) == 1:
+            return self._event_test(e, self.events[name])
+        symbol = self.scope.lookup(name) if len(e.event.parts) == 1 else None
+        if symbol is not None and e.bind is None and e.predicate is None and e.value is None:
+            return symbol.ty  # `$v`: the value of (required) variable v
         if self.events is None:
             self.diag.error(e.loc, f"'${e.event}' tests an input event; not allowed here")
-            return BOOL
-        name = e.event.last
-        if name not in self.events:
+        else:
             self.diag.error(e.event.loc, f"unknown input event '{e.event}'")
-            return BOOL
-        event_ty = self.events[name]
+        return BOOL
+
+    def _event_test(self, e: s.EventTest, event_ty: Ty | None) -> Ty:
+        name = e.event.last
         if e.bind is not None:
             if event_ty is None:
                 self.diag.error(e.loc, f"event '{name}' carries no value, so '?{e.bind}' binds nothing")
@@ -148,22 +217,45 @@ class ExprChecker:
                 elif not symbol.writable:
                     self.diag.error(e.loc, f"'{e.bind}' is a {symbol.kind}; '?{e.bind}' needs a variable")
                 elif not assignable(symbol.ty, event_ty):
-                    self.diag.error(
-                        e.loc, f"event '{name}' carries {event_ty} but '{e.bind}' is {symbol.ty}")
+                    self.diag.error(e.loc, f"event '{name}' carries {event_ty} but '{e.bind}' is {symbol.ty}")
+            if e.predicate is not None:
+                self.condition(e.predicate, f"predicate of '${name}?{e.bind}'")
+        if e.value is not None:
+            if event_ty is None:
+                self.diag.error(e.loc, f"event '{name}' carries no value to compare with")
+                self.check(e.value)
+            else:
+                self.expect(e.value, event_ty, f"value of event '{name}'")
         return BOOL
 
-    def _Unary(self, e: s.Unary) -> Ty:
+    def visit_CycleExpr(self, e: s.CycleExpr) -> Ty:
+        return NAT
+
+    def visit_SinceExpr(self, e: s.SinceExpr) -> Ty:
+        if e.clock not in self.clocks:
+            self.diag.error(e.loc, f"unknown clock '{e.clock}'")
+        return NAT
+
+    def visit_SinceEntryExpr(self, e: s.SinceEntryExpr) -> Ty:
+        if self.states is not None and ".".join(e.state.parts) not in self.states and e.state.last not in self.states:
+            self.diag.error(e.loc, f"sinceEntry: '{e.state}' is not a state of this state machine")
+        return NAT
+
+    # ---- operators ----
+    def visit_Unary(self, e: s.Unary) -> Ty:
         ty = self.check(e.operand)
         if e.op == "not":
             if not assignable(BOOL, ty):
                 self.diag.error(e.loc, f"'not' needs a boolean, not {ty}")
             return BOOL
+        if isinstance(ty, (VectorTy, MatrixTy)):
+            return ty
         if not is_numeric(ty):
             self.diag.error(e.loc, f"'-' needs a number, not {ty}")
             return UNKNOWN
         return INT if ty == NAT else ty
 
-    def _Binary(self, e: s.Binary) -> Ty:
+    def visit_Binary(self, e: s.Binary) -> Ty:
         left, right = self.check(e.left), self.check(e.right)
         if e.op in _LOGICAL:
             for side, ty in ((e.left, left), (e.right, right)):
@@ -175,24 +267,42 @@ class ExprChecker:
                 self.diag.error(e.loc, f"cannot compare {left} with {right}")
             return BOOL
         if e.op == "in":
-            if isinstance(right, CollectionTy) and not comparable(right.element, left):
-                self.diag.error(e.loc, f"{left} cannot be in {right}")
+            if isinstance(right, CollectionTy):
+                if not comparable(right.element, left):
+                    self.diag.error(e.loc, f"{left} cannot be in {right}")
+            elif right != UNKNOWN:
+                self.diag.error(e.right.loc, f"'in' needs a set or a sequence, not {right}")
             return BOOL
-        for side, ty in ((e.left, left), (e.right, right)):
-            if not is_numeric(ty):
-                self.diag.error(side.loc, f"'{e.op}' needs numbers, not {ty}")
-                return BOOL if e.op in _ORDER else UNKNOWN
+        if e.op == "cat":
+            if isinstance(left, CollectionTy) and isinstance(right, CollectionTy) and left.kind == right.kind == "Seq":
+                if not comparable(left.element, right.element):
+                    self.diag.error(e.loc, f"cannot concatenate {left} and {right}")
+                return CollectionTy("Seq", join(left.element, right.element))
+            if UNKNOWN not in (left, right):
+                self.diag.error(e.loc, f"'cat' needs sequences, not {left} and {right}")
+            return CollectionTy("Seq", UNKNOWN)
         if e.op in _ORDER:
+            for side, ty in ((e.left, left), (e.right, right)):
+                if not is_numeric(ty):
+                    self.diag.error(side.loc, f"'{e.op}' needs numbers, not {ty}")
             return BOOL
-        if UNKNOWN in (left, right):
+        result = _arithmetic(e.op, left, right)
+        if result is None:
+            if e.op == "%" or not (isinstance(left, (VectorTy, MatrixTy)) or isinstance(right, (VectorTy, MatrixTy))):
+                for side, ty in ((e.left, left), (e.right, right)):
+                    if not is_numeric(ty):
+                        self.diag.error(side.loc, f"'{e.op}' needs numbers, not {ty}")
+                        break
+            else:
+                self.diag.error(e.loc, f"'{e.op}' cannot combine {left} and {right}")
             return UNKNOWN
-        if REAL in (left, right):
-            return REAL
-        if e.op == "-" or INT in (left, right):
-            return INT
-        return NAT
+        if e.op == "%" and not is_numeric(result):
+            self.diag.error(e.loc, f"'%' needs numbers, not {left} and {right}")
+            return UNKNOWN
+        return result
 
-    def _FieldAccess(self, e: s.FieldAccess) -> Ty:
+    # ---- selections ----
+    def visit_FieldAccess(self, e: s.FieldAccess) -> Ty:
         base = self.check(e.base)
         if base == UNKNOWN:
             return UNKNOWN
@@ -211,63 +321,162 @@ class ExprChecker:
         self.diag.error(e.loc, f"'.{e.field}' on a value of type {base}")
         return UNKNOWN
 
-    def _IndexAccess(self, e: s.IndexAccess) -> Ty:
+    def visit_IndexAccess(self, e: s.IndexAccess) -> Ty:
         base = self.check(e.base)
+        if isinstance(base, TupleTy):
+            self.check(e.index)
+            if not (isinstance(e.index, s.Literal) and isinstance(e.index.value, int)
+                    and not isinstance(e.index.value, bool)):
+                self.diag.error(e.index.loc, "a tuple is indexed by a number literal")
+                return UNKNOWN
+            if not 1 <= e.index.value <= len(base.items):
+                self.diag.error(e.index.loc, f"tuple index out of range ({e.index.value} out of {len(base.items)})")
+                return UNKNOWN
+            return base.items[e.index.value - 1]
         self.expect(e.index, INT, "index")
-        if isinstance(base, (VectorTy, CollectionTy)):
+        if isinstance(base, VectorTy):
+            self._constant_index(e, base.size)
             return base.element
+        if isinstance(base, CollectionTy) and base.kind == "Seq":
+            return base.element
+        if isinstance(base, MatrixTy):
+            self._constant_index(e, base.rows)
+            return VectorTy(base.element, base.columns)
         if base != UNKNOWN:
             self.diag.error(e.loc, f"cannot index a value of type {base}")
         return UNKNOWN
 
-    def _Call(self, e: s.Call) -> Ty:
+    def _constant_index(self, e: s.IndexAccess, size: int | None) -> None:
+        if isinstance(e.index, s.Literal) and isinstance(e.index.value, int) and size is not None:
+            k = e.index.value
+            if k > size:
+                self.diag.warning(e.index.loc, f"index {k} is out of range 1..{size}: evaluating it is an error")
+
+    # ---- calls ----
+    def visit_Call(self, e: s.Call) -> Ty:
+        expected = self.expected
+        args = [self.check(a) for a in e.args]
         if isinstance(e.function, s.Name) and len(e.function.name.parts) > 1:
             enum = self.enum_literal(e.function.name)
             if enum is not None:
-                for a in e.args:
-                    self.check(a)
                 return enum
-        fn = self.check(e.function)
-        if fn == UNKNOWN:
-            for a in e.args:
-                self.check(a)
+        fn = self._callee(e, args, expected)
+        if fn is None:
+            ty = self.check(e.function) if not isinstance(e.function, s.Name) else UNKNOWN
+            if isinstance(ty, FuncTy):
+                self._arguments_against(e, args, list(ty.params), ty.result)
+                return ty.result
             return UNKNOWN
-        if not isinstance(fn, FuncTy):
-            self.diag.error(e.loc, f"cannot call a value of type {fn}")
-            return UNKNOWN
-        if len(e.args) != len(fn.params):
-            self.diag.error(e.loc, f"expected {len(fn.params)} argument(s), got {len(e.args)}")
-        for i, (arg, param) in enumerate(zip(e.args, fn.params)):
-            self.expect(arg, param, f"argument {i + 1}")
-        return fn.result
+        params = [self.resolver.resolve(p.type) for p in fn.params]
+        result = self.resolver.resolve(fn.result)
+        return self._arguments_against(e, args, params, result)
 
-    def _IfExpr(self, e: s.IfExpr) -> Ty:
+    def _callee(self, e: s.Call, args: list[Ty], expected: Ty | None) -> FunctionDecl | None:
+        if not isinstance(e.function, s.Name):
+            return None
+        name = e.function.name
+        symbol = self.scope.lookup(name.last) if len(name.parts) == 1 else None
+        if symbol is not None and isinstance(symbol.ty, FuncTy):
+            return None
+        fn = self.functions.get(name.last) if len(name.parts) == 1 else self.project.lookup("function", name, self.source)
+        if fn is not None:
+            if len(fn.params) != len(args) and not fn.postconditions and not fn.preconditions:
+                builtin = fns.substitute(self.project, fn.name, len(args))
+                if builtin is not None:
+                    where = "::".join(fns.package_of(self.project, builtin) or ())
+                    self.diag.warning(
+                        e.loc, f"function '{fn.name}' is declared with {len(fn.params)} parameter(s) and no "
+                               f"definition but called with {len(args)}: read as {where}::{fn.name}")
+                    self.readings.call_targets[id(e)] = builtin
+                    return builtin
+            return fn
+        implicit = self.readings.implicit_functions.get((getattr(self.source, "path", ""), name.last))
+        if implicit is not None:
+            return implicit
+        missing = [imp for imp in (self.source.imports if self.source is not None else ())
+                   if imp.wildcard and imp.name.parts in fns.SUBSTITUTE_PACKAGES
+                   and imp.name.parts not in getattr(self.project, "namespaces", ())]
+        if missing and len(name.parts) == 1:
+            result = expected if expected is not None and expected != UNKNOWN else REAL
+            decl = FunctionDecl(name.last, tuple(Param(f"x{i + 1}", _type_ref(t, e.loc), e.loc) for i, t in enumerate(args)),
+                                _type_ref(result, e.loc), (), (), e.loc)
+            self.readings.implicit_functions[(self.source.path, name.last)] = decl
+            self.diag.warning(
+                e.loc, f"unknown function '{name}' (the file imports {missing[0].name}::*, which the project "
+                       f"does not contain, and cotwin's {missing[0].name} has no '{name}'): read as an "
+                       f"uninterpreted function of type ({', '.join(map(str, args))}) -> {result}")
+            return decl
+        hint = self.project.elsewhere("function", name)
+        extra = f" (there is {', '.join(hint)}: import its package or qualify the name)" if hint else ""
+        self.diag.error(e.function.loc, f"unknown function '{name}'{extra}")
+        return None
+
+    def _arguments_against(self, e: s.Call, args: list[Ty], params: list[Ty], result: Ty) -> Ty:
+        if len(args) != len(params):
+            self.diag.error(e.loc, f"expected {len(params)} argument(s), got {len(args)}")
+            return _instantiate(result, {})
+        bindings: dict[str, Ty] = {}
+        for i, (arg, param, node) in enumerate(zip(args, params, e.args)):
+            if not _unify(param, arg, bindings):
+                self.diag.error(node.loc, f"argument {i + 1}: expected {_instantiate(param, bindings)}, got {arg}")
+        return _instantiate(result, bindings)
+
+    # ---- compound expressions ----
+    def visit_IfExpr(self, e: s.IfExpr) -> Ty:
         self.condition(e.condition, "'if' condition")
         a, b = self.check(e.then), self.check(e.otherwise)
         if not comparable(a, b):
             self.diag.error(e.loc, f"branches of 'if' have types {a} and {b}")
         return a if assignable(a, b) else b
 
-    def _LetExpr(self, e: s.LetExpr) -> Ty:
+    def visit_LetExpr(self, e: s.LetExpr) -> Ty:
         scope = self.scope.child()
         inner = self.with_scope(scope)
         for name, value in e.bindings:
             scope.symbols[name] = Symbol(name, "binding", inner.check(value), value.loc)
         return inner.check(e.body)
 
-    def _Quantified(self, e: s.Quantified) -> Ty:
-        symbols = {n: Symbol(n, "binding", self.resolver.resolve(t), e.loc) for n, t in e.binders}
-        body = self.with_scope(self.scope.child(symbols)).check(e.body)
+    def _binders(self, binders, loc) -> dict[str, Symbol]:
+        return {n: Symbol(n, "binding", self.resolver.resolve(t), loc) for n, t in binders}
+
+    def visit_Quantified(self, e: s.Quantified) -> Ty:
+        symbols = self._binders(e.binders, e.loc)
+        inner = self.with_scope(self.scope.child(symbols))
+        if e.such_that is not None:
+            inner.condition(e.such_that, f"'|' predicate of '{e.kind}'")
+        body = inner.check(e.body)
         if e.kind == "lambda":
             return FuncTy(tuple(sym.ty for sym in symbols.values()), body)
+        if e.kind == "the":
+            return body
         if not assignable(BOOL, body):
             self.diag.error(e.body.loc, f"'{e.kind}' needs a boolean body, not {body}")
         return BOOL
 
-    def _TupleExpr(self, e: s.TupleExpr) -> Ty:
+    def visit_SetComprehension(self, e: s.SetComprehension) -> Ty:
+        symbols = self._binders(e.binders, e.loc)
+        inner = self.with_scope(self.scope.child(symbols))
+        if e.predicate is not None:
+            inner.condition(e.predicate, "'|' predicate of a set comprehension")
+        if e.body is not None:
+            return CollectionTy("Set", inner.check(e.body))
+        types = [sym.ty for sym in symbols.values()]
+        return CollectionTy("Set", types[0] if len(types) == 1 else TupleTy(tuple(types)))
+
+    def _elements(self, items) -> Ty:
+        element: Ty = UNKNOWN
+        types = [self.check(i) for i in items]
+        for item, ty in zip(items, types):
+            if not comparable(element, ty):
+                self.diag.error(item.loc, f"element of type {ty} among elements of type {element}")
+            else:
+                element = join(element, ty) if element != UNKNOWN else ty
+        return element
+
+    def visit_TupleExpr(self, e: s.TupleExpr) -> Ty:
         return TupleTy(tuple(self.check(i) for i in e.items))
 
-    def _VectorExpr(self, e: s.VectorExpr) -> Ty:
+    def visit_VectorExpr(self, e: s.VectorExpr) -> Ty:
         items = [self.check(i) for i in e.items]
         element = REAL if REAL in items else (items[0] if items else UNKNOWN)
         for item, ty in zip(e.items, items):
@@ -275,13 +484,60 @@ class ExprChecker:
                 self.diag.error(item.loc, f"vector element of type {ty} among {element}")
         return VectorTy(element, len(items))
 
-    def _CycleExpr(self, e: s.CycleExpr) -> Ty:
-        return NAT
+    def visit_MatrixExpr(self, e: s.MatrixExpr) -> Ty:
+        widths = {len(row) for row in e.rows}
+        if len(widths) > 1:
+            self.diag.error(e.loc, f"matrix rows have different lengths ({', '.join(str(len(r)) for r in e.rows)})")
+        element = self._elements([x for row in e.rows for x in row])
+        return MatrixTy(element, len(e.rows), max(widths))
 
-    def _SinceExpr(self, e: s.SinceExpr) -> Ty:
-        if e.clock not in self.clocks:
-            self.diag.error(e.loc, f"unknown clock '{e.clock}'")
-        return NAT
+    def visit_SetExpr(self, e: s.SetExpr) -> Ty:
+        return CollectionTy("Set", self._elements(e.items))
+
+    def visit_SeqExpr(self, e: s.SeqExpr) -> Ty:
+        return CollectionTy("Seq", self._elements(e.items))
+
+    def visit_SetRangeExpr(self, e: s.SetRangeExpr) -> Ty:
+        self.expect(e.start, INT, "start of a set range")
+        self.expect(e.end, INT, "end of a set range")
+        return CollectionTy("Set", INT)
+
+    def visit_RangeExpr(self, e: s.RangeExpr) -> Ty:
+        low, high = self.check(e.low), self.check(e.high)
+        for side, ty in ((e.low, low), (e.high, high)):
+            if not is_numeric(ty):
+                self.diag.error(side.loc, f"interval bounds are numbers, not {ty}")
+        return CollectionTy("Set", join(low, high))
+
+    def visit_RecordExpr(self, e: s.RecordExpr) -> Ty:
+        decl = self.project.lookup("type", e.record, self.source)
+        if not isinstance(decl, RecordDecl):
+            self.diag.error(e.record.loc, f"unknown record type '{e.record}'")
+            for _, value, _ in e.fields:
+                self.check(value)
+            return UNKNOWN
+        given = set()
+        for name, value, loc in e.fields:
+            f = decl.field(name)
+            if f is None:
+                self.diag.error(loc, f"record '{decl.name}' has no field '{name}'")
+                self.check(value)
+                continue
+            given.add(name)
+            self.expect(value, self.resolver.resolve(f.type), f"field '{name}' of {decl.name}")
+        missing = [f.name for f in decl.fields if f.name not in given]
+        if missing:
+            self.diag.error(e.loc, f"record '{decl.name}' literal leaves out {', '.join(missing)}")
+        return RecordTy(decl)
+
+    def visit_TypeTest(self, e: s.TypeTest) -> Ty:
+        value = self.check(e.expr)
+        target = self.resolver.resolve(e.type)
+        if e.kind == "is":
+            return BOOL
+        if not (comparable(target, value) or (is_numeric(target) and is_numeric(value))):
+            self.diag.error(e.loc, f"a value of type {value} cannot be cast as {target}")
+        return target
 
     # ---- statements ----
     def statement(
@@ -291,16 +547,14 @@ class ExprChecker:
         outputs: dict[str, Ty | None],
         local_operations: dict[str, tuple[Ty, ...]] | None = None,
     ) -> None:
-        """Check an action: assignments, platform calls `$op(...)`, output events `$e!v`."""
-        if stmt is None:
-            return
-        if isinstance(stmt, s.Sequence):
-            for item in stmt.statements:
-                self.statement(item, operations, outputs, local_operations)
-        elif isinstance(stmt, s.IfStmt):
+        """Check an action: assignments, platform calls `$op(...)`, software operation calls `op(...)`,
+        output events `$e!v`."""
+        for st in s.statements(stmt):
+            self._statement(st, operations, outputs, local_operations)
+
+    def _statement(self, stmt, operations, outputs, local_operations) -> None:
+        if isinstance(stmt, s.IfStmt):
             self.condition(stmt.condition, "'if' condition")
-            self.statement(stmt.then, operations, outputs, local_operations)
-            self.statement(stmt.otherwise, operations, outputs, local_operations)
         elif isinstance(stmt, s.Assign):
             self.assignment(stmt.target, stmt.value)
         elif isinstance(stmt, s.PlatformCall):
@@ -315,14 +569,21 @@ class ExprChecker:
                 self._arguments(stmt, stmt.args, [self.resolver.resolve(p.type) for p in sig.params], name)
         elif isinstance(stmt, s.CallStmt):
             name = stmt.operation.last
-            if local_operations is None or name not in local_operations:
+            if local_operations is not None and name in local_operations:
+                self._arguments(stmt, stmt.args, list(local_operations[name]), name)
+            elif name in operations and operations[name] is not None:
+                sig = operations[name]
+                self._arguments(stmt, stmt.args, [self.resolver.resolve(p.type) for p in sig.params], name)
+            else:
                 self.diag.error(stmt.operation.loc, f"unknown operation '{stmt.operation}'")
-                return
-            self._arguments(stmt, stmt.args, list(local_operations[name]), name)
+                for a in stmt.args:
+                    self.check(a)
         elif isinstance(stmt, s.Send):
             name = stmt.event.last
             if name not in outputs:
                 self.diag.error(stmt.event.loc, f"unknown output event '{stmt.event}'")
+                if stmt.value is not None:
+                    self.check(stmt.value)
                 return
             ty = outputs[name]
             if ty is None and stmt.value is not None:
@@ -334,6 +595,12 @@ class ExprChecker:
         elif isinstance(stmt, s.ClockReset):
             if stmt.clock not in self.clocks:
                 self.diag.error(stmt.loc, f"unknown clock '{stmt.clock}'")
+        elif isinstance(stmt, s.Wait):
+            self.expect(stmt.duration, INT, "wait duration")
+        elif isinstance(stmt, s.Timed):
+            self.check(stmt.deadline)
+        elif isinstance(stmt, s.Receive):
+            self.check(stmt.target)
 
     def _arguments(self, stmt, args, params: list[Ty], name: str) -> None:
         if len(args) != len(params):
@@ -351,6 +618,70 @@ class ExprChecker:
             return
         symbol = self.scope.lookup(root.name.last) if len(root.name.parts) == 1 else None
         if symbol is not None and not symbol.writable:
-            self.diag.error(root.loc, f"cannot assign to {symbol.kind} '{root.name}'")
+            decl = symbol.decl
+            if symbol.kind == "const" and isinstance(decl, VarDecl) and decl.init is not None:
+                self.diag.warning(root.loc, f"'{root.name}' is a constant but is assigned: read as a variable "
+                                            f"initialised to its constant value")
+                self.readings.assigned_constants.add(id(decl))
+            else:
+                self.diag.error(root.loc, f"cannot assign to {symbol.kind} '{root.name}'")
         target_ty = self.check(target)
         self.expect(value, target_ty, f"assignment to '{root.name}'")
+
+
+# ---- generic functions: ?X type parameters ----
+
+def _unify(param: Ty, arg: Ty, bindings: dict[str, Ty]) -> bool:
+    """Does an argument of type `arg` fit a parameter of type `param`, binding its ?X parameters?"""
+    if isinstance(param, TypeVar):
+        bound = bindings.get(param.name)
+        if bound is None or bound == UNKNOWN:
+            bindings[param.name] = arg
+            return True
+        if assignable(bound, arg):
+            return True
+        if assignable(arg, bound):
+            bindings[param.name] = arg
+            return True
+        return False
+    if isinstance(param, CollectionTy) and isinstance(arg, CollectionTy):
+        if param.kind == "Set" and arg.kind == "Seq" and isinstance(param.element, TypeVar):
+            return _unify(param.element, arg.element, bindings)  # size, dom... of a sequence
+        return param.kind == arg.kind and _unify(param.element, arg.element, bindings)
+    if isinstance(param, TupleTy) and isinstance(arg, TupleTy):
+        return len(param.items) == len(arg.items) and all(_unify(p, a, bindings) for p, a in zip(param.items, arg.items))
+    if isinstance(param, VectorTy) and isinstance(arg, VectorTy):
+        return _unify(param.element, arg.element, bindings)
+    if isinstance(param, MatrixTy) and isinstance(arg, MatrixTy):
+        return _unify(param.element, arg.element, bindings)
+    return assignable(param, arg)
+
+
+def _instantiate(ty: Ty, bindings: dict[str, Ty]) -> Ty:
+    if isinstance(ty, TypeVar):
+        return bindings.get(ty.name, UNKNOWN)
+    if isinstance(ty, CollectionTy):
+        return CollectionTy(ty.kind, _instantiate(ty.element, bindings))
+    if isinstance(ty, TupleTy):
+        return TupleTy(tuple(_instantiate(i, bindings) for i in ty.items))
+    if isinstance(ty, VectorTy):
+        return VectorTy(_instantiate(ty.element, bindings), ty.size)
+    if isinstance(ty, MatrixTy):
+        if ty.rows is None and ty.columns is None and isinstance(ty.element, TypeVar):
+            return MatrixTy(_instantiate(ty.element, bindings), None, None)
+        return MatrixTy(_instantiate(ty.element, bindings), ty.rows, ty.columns)
+    return ty
+
+
+def _type_ref(ty: Ty, loc: Location) -> s.TypeRef:
+    """A written type for a semantic one (for functions the checker synthesises)."""
+    if isinstance(ty, (EnumTy, RecordTy)):
+        return s.NamedType(s.QName((ty.decl.name,), loc), loc)
+    if isinstance(ty, CollectionTy):
+        return s.CollectionType(ty.kind, _type_ref(ty.element, loc), loc)
+    if isinstance(ty, TupleTy):
+        return s.ProductType(tuple(_type_ref(i, loc) for i in ty.items), loc)
+    if isinstance(ty, VectorTy):
+        return s.VectorType(_type_ref(ty.element, loc), s.Literal(ty.size or 0, loc), loc)
+    name = str(ty) if str(ty) in ("int", "nat", "real", "boolean", "string") else "real"
+    return s.NamedType(s.QName((name,), loc), loc)

@@ -58,11 +58,33 @@ class VectorTy:
 
 @dataclass(frozen=True)
 class CollectionTy:
-    kind: str  # Set | Seq | matrix
+    kind: str  # Set | Seq
     element: "Ty"
 
     def __str__(self) -> str:
         return f"{self.kind}({self.element})"
+
+
+@dataclass(frozen=True)
+class MatrixTy:
+    element: "Ty"
+    rows: int | None
+    columns: int | None
+
+    def __str__(self) -> str:
+        def size(n):
+            return n if n is not None else "?"
+        return f"matrix({self.element}, {size(self.rows)}, {size(self.columns)})"
+
+
+@dataclass(frozen=True)
+class TypeVar:
+    """`?X`: a type parameter of a generic function."""
+
+    name: str
+
+    def __str__(self) -> str:
+        return "?" + self.name
 
 
 @dataclass(frozen=True)
@@ -92,7 +114,7 @@ class DeviceTy:
         return f"{self.device.kind} {self.device.name}"
 
 
-Ty = PrimTy | EnumTy | RecordTy | AbstractTy | VectorTy | CollectionTy | TupleTy | FuncTy | DeviceTy
+Ty = PrimTy | EnumTy | RecordTy | AbstractTy | VectorTy | CollectionTy | MatrixTy | TupleTy | FuncTy | DeviceTy | TypeVar
 
 NUMERIC = (INT, NAT, REAL)
 
@@ -105,6 +127,8 @@ def assignable(target: Ty, value: Ty) -> bool:
     """Can a value of type `value` be stored where `target` is expected (int widens to real)?"""
     if target == UNKNOWN or value == UNKNOWN or target == value:
         return True
+    if isinstance(target, TypeVar) or isinstance(value, TypeVar):
+        return True
     if target == REAL and value in (INT, NAT):
         return True
     if target == INT and value == NAT:
@@ -116,12 +140,30 @@ def assignable(target: Ty, value: Ty) -> bool:
             return False
         elements = items if items is not None else (value.element,)
         return all(assignable(target.element, e) for e in elements)
+    if isinstance(target, MatrixTy) and isinstance(value, MatrixTy):
+        return (_same_size(target.rows, value.rows) and _same_size(target.columns, value.columns)
+                and assignable(target.element, value.element))
     if isinstance(target, CollectionTy) and isinstance(value, CollectionTy):
         return target.kind == value.kind and assignable(target.element, value.element)
     if isinstance(target, TupleTy) and isinstance(value, TupleTy):
         return len(target.items) == len(value.items) and all(
             assignable(a, b) for a, b in zip(target.items, value.items))
+    if isinstance(target, FuncTy) and isinstance(value, FuncTy):
+        return len(target.params) == len(value.params) and assignable(target.result, value.result)
     return False
+
+
+def _same_size(a: int | None, b: int | None) -> bool:
+    return a is None or b is None or a == b
+
+
+def join(a: Ty, b: Ty) -> Ty:
+    """The type of a value that is either an a or a b (for branches and collection elements)."""
+    if assignable(a, b):
+        return b if a == UNKNOWN else a
+    if assignable(b, a):
+        return b
+    return UNKNOWN
 
 
 def comparable(a: Ty, b: Ty) -> bool:
@@ -145,7 +187,7 @@ class TypeResolver:
         if isinstance(ref, s.VectorType):
             return VectorTy(self.resolve(ref.element), self._size(ref.size))
         if isinstance(ref, s.MatrixType):
-            return CollectionTy("matrix", self.resolve(ref.element))
+            return MatrixTy(self.resolve(ref.element), self._size(ref.rows), self._size(ref.columns))
         if isinstance(ref, s.CollectionType):
             return CollectionTy(ref.kind, self.resolve(ref.element))
         if isinstance(ref, s.ProductType):
@@ -157,6 +199,10 @@ class TypeResolver:
     def named(self, name: s.QName, report: bool = True) -> Ty:
         if len(name.parts) == 1 and name.last in PRIMITIVES:
             return PRIMITIVES[name.last]
+        if len(name.parts) == 2 and name.parts[0] == "core" and name.last in PRIMITIVES:
+            return PRIMITIVES[name.last]
+        if len(name.parts) == 1 and name.last.startswith("?"):
+            return TypeVar(name.last[1:])
         decl = self.project.lookup("type", name, self.source)
         if isinstance(decl, EnumDecl):
             return EnumTy(decl)
@@ -165,7 +211,9 @@ class TypeResolver:
         if isinstance(decl, PrimitiveDecl):
             return AbstractTy(decl)
         if report:
-            self.diag.error(name.loc, f"unknown type '{name}'")
+            hint = self.project.elsewhere("type", name) if hasattr(self.project, "elsewhere") else []
+            extra = f" (there is {', '.join(hint)}: import its package or qualify the name)" if hint else ""
+            self.diag.error(name.loc, f"unknown type '{name}'{extra}")
         return UNKNOWN
 
     def _size(self, expr: s.Expr) -> int | None:

@@ -1,2 +1,0 @@
-// RoboChart's sequence toolkit. cotwin's models use no sequence function yet; the package exists so
-// that `import sequence_toolkit::*` resolves.
