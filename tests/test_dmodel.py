@@ -253,10 +253,10 @@ def test_build_dmodel_without_module_is_a_clean_error(tmp_path):
 
 
 def test_unsupported_variable_types_are_located(tmp_path):
-    text = TIMELOCK.replace("input context { uses I }", "var v: vector(real, 3)\n\tinput context { uses I }")
+    text = TIMELOCK.replace("input context { uses I }", "var v: string\n\tinput context { uses I }")
     (tmp_path / "v.rst").write_text(text)
     with pytest.raises(CotwinError) as err:
         build_program(load_checked([tmp_path / "v.rst"]))
     [finding] = err.value.findings
     assert (finding.location.line, finding.location.column) == (3, 6)
-    assert "vector(real, 3) cannot be executed yet" in finding.message
+    assert "values of type string cannot be executed yet" in finding.message

@@ -1,35 +1,39 @@
 """Generate readable, deterministic C99 for a module: `model_init()` and `model_step()` (one cycle).
 
-The code follows the reference interpreter step for step: a block `S_n` settles node n (chooses a
-transition, outermost ancestor first, source order), a block `T_e` completes edge e (exit to the
-common container, action, entries down to the target), and every `exec` stores a resume point and
-returns. No threads, no I/O: the FMI wrapper (fmi2.c) calls these functions.
+The code follows the reference interpreter step for step: a block `<B>_S_n` settles node n of body B
+(the machine, or an operation it calls: chooses a transition, outermost ancestor first, source
+order), a block `<B>_T_e` completes edge e (exit to the common container through the body's EXIT
+block, action, entries down to the target), every `exec` stores a resume point and returns, and a
+call of an operation stores where to return and jumps to the operation's start. No threads, no I/O:
+the FMI wrapper (fmu.py) calls these functions.
+
+The generated C never traps: integer arithmetic is checked (division and remainder by zero, results
+outside int64), indices are checked against their bounds, sets and sequences against their
+capacity. A failure makes the step return 1 with `M->message` saying where, e.g.
+`arm.rst:57:9: division by zero in state Requested (cycle 4)`, the same text the interpreter reports.
+Expressions whose evaluation can fail are evaluated into temporaries in the interpreter's order
+(left to right, conditional parts only when reached), so that the first failure is the same one.
 """
 
 from __future__ import annotations
 
 from ..diagnostics import CotwinError
+from ..robosim import functions as fns
 from ..robosim import syntax as s
-from ..robosim.declarations import EnumDecl, RecordDecl
+from ..robosim.declarations import EnumDecl
 from ..robosim.dmodel_elements import Final, Initial, Junction, State
-from ..robosim.types import BOOL, INT, NAT, REAL, EnumTy, RecordTy, Ty
+from ..robosim.operators import BINARY, C_MATH, SHORT_CIRCUIT, UNARY_C
+from ..robosim.types import (
+    BOOL, INT, NAT, REAL, UNKNOWN, CollectionTy, EnumTy, MatrixTy, RecordTy, TupleTy, Ty, TypeResolver, VectorTy,
+    join,
+)
+from ..robosim.values import CAPACITY, FrozenRecord, MatrixValue, SeqValue, SetValue, TupleValue, VectorValue
+from ..robosim.visitor import ExprVisitor, describe
+from . import cnames
+from .cdata import CTypes, is_intlike, is_scalar
+from .cnames import c_comment, c_string, ident
 from .interpreter import MAX_STEPS, lca_index
-from .program import MachineInstance, Program
-
-C_MATH = {"sqrt": "sqrt", "sin": "sin", "cos": "cos", "tan": "tan", "asin": "asin", "acos": "acos", "atan": "atan",
-          "atan2": "atan2", "exp": "exp", "log": "log", "abs": "fabs", "min": "fmin", "max": "fmax", "pow": "pow"}
-
-
-def c_type(ty: Ty) -> str:
-    if ty == BOOL:
-        return "bool"
-    if ty == REAL:
-        return "double"
-    if ty in (INT, NAT) or isinstance(ty, EnumTy):
-        return "int64_t"
-    if isinstance(ty, RecordTy):
-        return f"rec_{ty.decl.name}"
-    raise CotwinError(f"type {ty} is not supported by the C generator")
+from .program import Body, MachineInstance, OperationInstance, Program, node_description, state_index
 
 
 def c_real(value: float) -> str:
@@ -43,6 +47,8 @@ def c_literal(value) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
+        if value == -(2 ** 63):
+            return "INT64_MIN"
         return f"INT64_C({value})"
     if isinstance(value, float):
         return c_real(value)
@@ -50,9 +56,9 @@ def c_literal(value) -> str:
 
 
 class _Lines:
-    def __init__(self) -> None:
+    def __init__(self, depth: int = 0) -> None:
         self.lines: list[str] = []
-        self.depth = 0
+        self.depth = depth
 
     def __call__(self, text: str = "") -> None:
         self.lines.append(("    " * self.depth + text) if text else "")
@@ -64,197 +70,804 @@ class _Lines:
         return "\n".join(self.lines) + "\n"
 
 
+class Context:
+    """Where code runs: a machine instance, the body (machine or operation) whose names are in scope,
+    and names bound by let, quantifiers and inlined function definitions."""
+
+    def __init__(self, gen: "CGenerator", m: MachineInstance, body: Body, frame: int):
+        self.gen = gen
+        self.m = m
+        self.body = body
+        self.frame = frame  # -1: the machine's own frame; k: operation frame k
+        self.bound: dict[str, tuple[str, Ty]] = {}
+        self.in_init = False
+
+    @property
+    def f(self) -> str:
+        """The C prefix of the body's frame: `s->` or `s->o2.`."""
+        return "s->" if self.frame < 0 else f"s->o{self.frame}."
+
+    def name(self, name: str, loc) -> tuple[str, Ty]:
+        if name in self.bound:
+            return self.bound[name]
+        body, m = self.body, self.m
+        if self.frame >= 0:
+            if any(n == name for n, _, _ in body.variables) or any(n == name for n, _ in body.params):
+                return f"s->o{self.frame}.{ident(name)}", body.types[name]
+            if name in body.constants:
+                return self.gen.value(body.constants[name], body.types[name]), body.types[name]
+        if any(n == name for n, _, _ in m.variables):
+            return f"s->{ident(name)}", m.types[name]
+        if name in m.constants:
+            return self.gen.value(m.constants[name], m.types[name]), m.types[name]
+        if name in m.parameters:
+            return f"s->par.{ident(name)}", m.types[name]
+        raise CotwinError(f"{loc}: '{name}' has no value in the generated C")
+
+    def clock(self, clock: str) -> str:
+        if self.frame >= 0 and clock in self.body.clocks:
+            return f"s->o{self.frame}.clk.{ident(clock)}"
+        return f"s->clk.{ident(clock)}"
+
+
+class CExpr(ExprVisitor):
+    """Translates one expression to C text, writing the statements it needs first (temporaries of
+    failable operations, branches of short-circuit and conditional forms) to `out`."""
+
+    def __init__(self, ctx: Context, out: _Lines):
+        self.ctx = ctx
+        self.gen = ctx.gen
+        self.types = ctx.gen.types
+        self.out = out
+
+    # ---- helpers ----
+    def ty(self, e) -> Ty:
+        ty = self.gen.program.type_of(e)
+        if ty is None or ty == UNKNOWN:
+            if isinstance(e, s.Name) and len(e.name.parts) == 1:
+                return self.ctx.name(e.name.last, e.loc)[1]
+            raise CotwinError(f"{e.loc}: the C generator does not know the type of {describe(e)}")
+        return ty
+
+    def temp(self, c_type: str, value: str | None = None, fails: bool = False) -> str:
+        name = self.gen.fresh()
+        self.out(f"{c_type} {name}" + (f" = {value};" if value is not None else ";"))
+        if fails:
+            self.out(self.gen.bail)
+        return name
+
+    def failable(self, c_type: str, value: str) -> str:
+        return self.temp(c_type, value, fails=True)
+
+    def at(self, loc) -> int:
+        return self.gen.location(loc)
+
+    def emit(self, e: s.Expr, want: Ty | None = None) -> str:
+        value = self.visit(e)
+        if want is not None:
+            return self.types.convert(value, self.ty(e), want)
+        return value
+
+    def captured(self, e: s.Expr, want: Ty | None = None) -> tuple[list[str], str]:
+        """Translate e into a separate buffer: (its statements, its value)."""
+        saved = self.out
+        self.out = _Lines(saved.depth + 1)
+        try:
+            value = self.emit(e, want)
+            return self.out.lines, value
+        finally:
+            self.out = saved
+
+    def unsupported(self, node):
+        raise CotwinError(f"{node.loc}: {describe(node)} is not supported by the C generator")
+
+    # ---- atoms ----
+    def visit_Literal(self, e: s.Literal) -> str:
+        return c_literal(e.value)
+
+    def visit_Name(self, e: s.Name) -> str:
+        if len(e.name.parts) > 1:
+            decl = self.gen.program.project.lookup("type", s.QName(e.name.parts[:-1]), self.ctx.body.source)
+            if not isinstance(decl, EnumDecl) or decl.literal(e.name.last) is None:
+                raise CotwinError(f"{e.loc}: unknown name '{e.name}'")
+            index = [lit.name for lit in decl.literals].index(e.name.last)
+            return f"INT64_C({index}) /* {c_comment(str(e.name))} */"
+        return self.ctx.name(e.name.last, e.loc)[0]
+
+    def visit_EventTest(self, e: s.EventTest) -> str:
+        name = e.event.last
+        if name not in self.ctx.m.inputs:
+            return self.ctx.name(name, e.loc)[0]
+        flag = f"in->{ident(name)}.on"
+        value = f"in->{ident(name)}.v"
+        event_ty = self.ctx.m.inputs[name]
+        conditions = []
+        if e.value is not None:
+            lines, v = self.captured(e.value, event_ty)
+            conditions.append((lines, self.types.eq(event_ty, value, v)))
+        if e.bind is not None and e.predicate is not None:
+            saved = dict(self.ctx.bound)
+            self.ctx.bound[e.bind] = (value, event_ty)
+            try:
+                conditions.append(self.captured(e.predicate))
+            finally:
+                self.ctx.bound = saved
+        if not conditions:
+            return flag
+        result = self.temp("bool", flag)
+        for lines, cond in conditions:
+            self.out(f"if ({result}) {{")
+            self.out.lines.extend(lines)
+            self.out(f"    {result} = {cond};")
+            self.out("}")
+        return result
+
+    def visit_CycleExpr(self, e: s.CycleExpr) -> str:
+        return "M->cycle"
+
+    def visit_SinceExpr(self, e: s.SinceExpr) -> str:
+        return self.ctx.clock(e.clock)
+
+    def visit_SinceEntryExpr(self, e: s.SinceEntryExpr) -> str:
+        index = state_index(self.ctx.body.graph, e.state)
+        counter = f"{self.ctx.f}ent{index}"
+        return f"({counter} < 0 ? M->cycle - 1 : {counter})"
+
+    # ---- operators ----
+    def visit_Unary(self, e: s.Unary) -> str:
+        a = self.emit(e.operand)
+        if e.op == "not":
+            return f"(!{a})"
+        ty = self.ty(e.operand)
+        if isinstance(ty, (VectorTy, MatrixTy)):
+            return self.failable(self.types.c(ty), f"{self.types.scale(ty, None, 'neg')}(M, {a}, {self.at(e.loc)})")
+        if is_intlike(ty):
+            return self.failable("int64_t", UNARY_C["-"][1].format(a=a, at=self.at(e.loc)))
+        return UNARY_C["-"][0].format(a=a)
+
+    def visit_Binary(self, e: s.Binary) -> str:
+        op = e.op
+        if op in SHORT_CIRCUIT:
+            return self._short_circuit(e)
+        if op == "in":
+            return self._membership(e)
+        left_ty, right_ty = self.ty(e.left), self.ty(e.right)
+        if op in ("==", "!="):
+            common = join(left_ty, right_ty)
+            if common == UNKNOWN:
+                common = left_ty
+            a, b = self.emit(e.left, common), self.emit(e.right, common)
+            test = self.types.eq(common, a, b)
+            return test if op == "==" else f"(!{test})"
+        a, b = self.emit(e.left), self.emit(e.right)
+        if op == "cat":
+            seq = self.ty(e)
+            a = self.types.convert(a, left_ty, seq)
+            b = self.types.convert(b, right_ty, seq)
+            return self.failable(self.types.c(seq), f"{self.types.seq_op(seq, 'cat')}(M, {a}, {b}, {self.at(e.loc)})")
+        result = self.ty(e)
+        shaped = (VectorTy, MatrixTy)
+        if isinstance(result, shaped) or isinstance(left_ty, shaped) or isinstance(right_ty, shaped):
+            return self._shaped(e, a, b, left_ty, right_ty, result)
+        operator = BINARY[op]
+        if is_intlike(left_ty) and is_intlike(right_ty) and op in ("+", "-", "*", "/", "%"):
+            return self.failable("int64_t", operator.c_int.format(a=a, b=b, at=self.at(e.loc)))
+        if op == "%":
+            return operator.c.format(a=f"(double){a}", b=f"(double){b}")
+        if op == "/":
+            return f"((double){a} / (double){b})"
+        return operator.c.format(a=a, b=b)
+
+    def _shaped(self, e, a, b, left_ty, right_ty, result) -> str:
+        at = self.at(e.loc)
+        c = self.types.c(result)
+        if e.op in ("+", "-"):
+            a = self.types.convert(a, left_ty, result)
+            b = self.types.convert(b, right_ty, result)
+            return self.failable(c, f"{self.types.elementwise(result, e.op)}(M, {a}, {b}, {at})")
+        if e.op == "*" and isinstance(left_ty, MatrixTy) and isinstance(right_ty, (MatrixTy, VectorTy)):
+            return self.failable(c, f"{self.types.product(left_ty, right_ty, result)}(M, {a}, {b}, {at})")
+        if isinstance(left_ty, (VectorTy, MatrixTy)):
+            shaped, scalar, k, shaped_value = left_ty, right_ty, b, a
+        else:
+            shaped, scalar, k, shaped_value = right_ty, left_ty, a, b
+        shaped_value = self.types.convert(shaped_value, shaped, result)
+        return self.failable(c, f"{self.types.scale(result, scalar, e.op)}(M, {shaped_value}, {k}, {at})")
+
+    def _short_circuit(self, e: s.Binary) -> str:
+        a = self.emit(e.left)
+        lines, b = self.captured(e.right)
+        if not lines:
+            return BINARY[e.op].c.format(a=a, b=b)
+        left = self.temp("bool", f"!!({a})")
+        # the value when the right side is not reached; and when it is
+        result = self.temp("bool", f"!{left}" if e.op == "=>" else left)
+        self.out(f"if ({'!' if e.op == chr(92) + '/' else ''}{left}) {{")
+        self.out.lines.extend(lines)
+        self.out(f"    {result} = !!({b});")
+        self.out("}")
+        return result
+
+    def _membership(self, e: s.Binary) -> str:
+        if isinstance(e.right, s.RangeExpr):
+            x = self.emit(e.left)
+            r = e.right
+            low, high = self.emit(r.low), self.emit(r.high)
+            x_ = self.temp(self.types.c(self.ty(e.left)), x)
+            low_test = f"{x_} >= {low}" if r.low_closed else f"{x_} > {low}"
+            high_test = f"{x_} <= {high}" if r.high_closed else f"{x_} < {high}"
+            return f"({low_test} && {high_test})"
+        coll = self.ty(e.right)
+        x = self.emit(e.left, coll.element)
+        c = self.emit(e.right)
+        return f"{self.types.set_has(coll)}({c}, {x})"
+
+    # ---- selections ----
+    def visit_FieldAccess(self, e: s.FieldAccess) -> str:
+        return f"{self._lvalue_base(e.base)}.{ident(e.field)}"
+
+    def _lvalue_base(self, base: s.Expr) -> str:
+        value = self.emit(base)
+        if isinstance(base, (s.Name, s.FieldAccess, s.IndexAccess)) and not value.startswith("("):
+            return value
+        return self.temp(self.types.c(self.ty(base)), value)
+
+    def visit_IndexAccess(self, e: s.IndexAccess) -> str:
+        base_ty = self.ty(e.base)
+        if isinstance(base_ty, TupleTy):
+            return f"{self._lvalue_base(e.base)}.i{e.index.value}"
+        base = self._lvalue_base(e.base)
+        index = self.emit(e.index)
+        return f"{base}.v[{self.checked_index(e, index, base, base_ty)}]"
+
+    def checked_index(self, e: s.IndexAccess, index: str, base: str, base_ty: Ty) -> str:
+        first = self.gen.program.readings.first_index.get(id(e), 1)
+        if isinstance(base_ty, VectorTy):
+            size = str(base_ty.size)
+        elif isinstance(base_ty, MatrixTy):
+            size = str(base_ty.rows)
+        else:
+            size = f"{base}.n"
+        return self.failable("int64_t", f"ck_index(M, {index}, {first}, {size}, {self.at(e.loc)})")
+
+    # ---- calls ----
+    def visit_Call(self, e: s.Call) -> str:
+        project = self.gen.program.project
+        fn = fns.target(project, e, self.ctx.body.source)
+        if fn is None:
+            raise CotwinError(f"{e.loc}: '{e.function}' cannot be called in the generated C")
+        name = fn.name
+        impl = fns.builtin(project, fn)
+        arg_types = [self.ty(a) for a in e.args]
+        if impl is not None:
+            args = [self.emit(a) for a in e.args]
+            return self._builtin(e, name, args, arg_types)
+        definition = fns.definition(fn)
+        resolver = TypeResolver(project, project.file_of(fn) or self.ctx.body.source, self.gen.diag)
+        result = resolver.resolve(fn.result)
+        if definition is None:  # uninterpreted: the next value of the random source
+            for a in e.args:
+                self.emit(a)
+            return self.temp(self.types.c(result), self._random(result))
+        params = [(p.name, resolver.resolve(p.type)) for p in fn.params]
+        values = []
+        for (pname, pty), arg in zip(params, e.args):
+            values.append((pname, self.temp(self.types.c(pty), self.emit(arg, pty)), pty))
+        saved = self.ctx.bound
+        self.ctx.bound = {pname: (tmp, pty) for pname, tmp, pty in values}
+        try:
+            value = self.emit(definition, result)
+        finally:
+            self.ctx.bound = saved
+        return value
+
+    def _random(self, ty: Ty) -> str:
+        if ty == REAL:
+            return "rng_real(M)"
+        if ty == BOOL:
+            return "((rng_next(M) >> 63) != 0)"
+        if ty in (INT, NAT):
+            return "((int64_t)(rng_next(M) >> 63))"
+        if isinstance(ty, EnumTy):
+            return f"((int64_t)(rng_next(M) % {len(ty.decl.literals)}u))"
+        raise CotwinError(f"no random value of type {ty}")
+
+    def _builtin(self, e: s.Call, name: str, args: list[str], types: list[Ty]) -> str:
+        at = self.at(e.loc)
+        result = self.ty(e)
+        if name == "random":
+            return self.temp("double", "rng_real(M)")
+        if name in C_MATH:
+            reals = [f"(double){a}" for a in args]
+            if name in ("floor", "ceil"):
+                return self.failable("int64_t", f"ck_{name}(M, {reals[0]}, {at})")
+            return f"{C_MATH[name]}({', '.join(reals)})"
+        if name == "transpose":
+            return f"{self.types.transpose(types[0])}({args[0]})"
+        coll = types[0] if types and isinstance(types[0], CollectionTy) else None
+        if name == "size":
+            return f"((int64_t){self._tmp(args[0], types[0])}.n)"
+        if name == "isNonEmpty":
+            return f"({self._tmp(args[0], types[0])}.n > 0)"
+        if name in ("union", "inter", "diff", "symetric_diff"):
+            ty = result
+            a = self.types.convert(args[0], types[0], ty)
+            b = self.types.convert(args[1], types[1], ty)
+            return self.failable(self.types.c(ty), f"{self.types.set_op(ty, name)}(M, {a}, {b}, {at})")
+        if name in ("subseteq", "subset"):
+            ty = join(types[0], types[1])
+            a, b = self.types.convert(args[0], types[0], ty), self.types.convert(args[1], types[1], ty)
+            test = f"{self.types.subseteq(ty)}({a}, {b})"
+            if name == "subset":
+                return f"({test} && !{self.types.eq(ty, a, b)})"
+            return test
+        if name == "notin":
+            element = types[1].element
+            return f"(!{self.types.set_has(types[1])}({args[1]}, {self.types.convert(args[0], types[0], element)}))"
+        if name in ("Union", "Inter"):
+            return self.failable(self.types.c(result), f"{self.types.big_op(coll, name)}(M, {args[0]}, {at})")
+        if name == "concat":
+            ty = result
+            a, b = self.types.convert(args[0], types[0], ty), self.types.convert(args[1], types[1], ty)
+            return self.failable(self.types.c(ty), f"{self.types.seq_op(ty, 'cat')}(M, {a}, {b}, {at})")
+        if name in ("head", "last", "tail", "front"):
+            return self.failable(self.types.c(result), f"{self.types.seq_op(coll, name)}(M, {args[0]}, {at})")
+        if name == "reverse":
+            return f"{self.types.seq_op(coll, 'reverse')}({args[0]})"
+        if name in ("prefix", "suffix"):
+            ty = join(types[0], types[1])
+            a, b = self.types.convert(args[0], types[0], ty), self.types.convert(args[1], types[1], ty)
+            return f"{self.types.seq_op(ty, name)}({a}, {b})"
+        raise CotwinError(f"{e.loc}: function '{name}' is not supported by the C generator")
+
+    def _tmp(self, value: str, ty: Ty) -> str:
+        if value.startswith("(") or "(" in value:
+            return self.temp(self.types.c(ty), value)
+        return value
+
+    # ---- compound forms ----
+    def visit_IfExpr(self, e: s.IfExpr) -> str:
+        ty = self.ty(e)
+        condition = self.emit(e.condition)
+        then_lines, then = self.captured(e.then, ty)
+        else_lines, otherwise = self.captured(e.otherwise, ty)
+        if not then_lines and not else_lines:
+            return f"({condition} ? {then} : {otherwise})"
+        result = self.temp(self.types.c(ty))
+        self.out(f"if ({condition}) {{")
+        self.out.lines.extend(then_lines)
+        self.out(f"    {result} = {then};")
+        self.out("} else {")
+        self.out.lines.extend(else_lines)
+        self.out(f"    {result} = {otherwise};")
+        self.out("}")
+        return result
+
+    def visit_LetExpr(self, e: s.LetExpr) -> str:
+        saved = dict(self.ctx.bound)
+        try:
+            for name, value in e.bindings:
+                ty = self.ty(value)
+                self.ctx.bound[name] = (self.temp(self.types.c(ty), self.emit(value)), ty)
+            return self.emit(e.body)
+        finally:
+            self.ctx.bound = saved
+
+    def visit_TypeTest(self, e: s.TypeTest) -> str:
+        return self.emit(e.expr, self.ty(e))
+
+    def visit_TupleExpr(self, e: s.TupleExpr) -> str:
+        ty = self.ty(e)
+        items = [self.emit(i, t) for i, t in zip(e.items, ty.items)]
+        return f"(({self.types.c(ty)}){{{', '.join(items)}}})"
+
+    def visit_VectorExpr(self, e: s.VectorExpr) -> str:
+        ty = self.ty(e)
+        items = [self.emit(i, ty.element) for i in e.items]
+        return f"(({self.types.c(ty)}){{{{{', '.join(items)}}}}})"
+
+    def visit_MatrixExpr(self, e: s.MatrixExpr) -> str:
+        ty = self.ty(e)
+        rows = ["{{" + ", ".join(self.emit(i, ty.element) for i in row) + "}}" for row in e.rows]
+        return f"(({self.types.c(ty)}){{{{{', '.join(rows)}}}}})"
+
+    def visit_RecordExpr(self, e: s.RecordExpr) -> str:
+        ty = self.ty(e)
+        fields = dict(self.types.field_types(ty))
+        values = [(name, self.emit(value, fields[name])) for name, value, _ in e.fields]
+        return f"(({self.types.c(ty)}){{{', '.join(f'.{ident(n)} = {v}' for n, v in values)}}})"
+
+    def visit_SetExpr(self, e: s.SetExpr) -> str:
+        return self._collection(e, e.items)
+
+    def visit_SeqExpr(self, e: s.SeqExpr) -> str:
+        return self._collection(e, e.items)
+
+    def _collection(self, e, items) -> str:
+        ty = self.ty(e)
+        c = self.types.c(ty)
+        result = self.temp(c, f"(({c}){{0}})")
+        add = self.types.add(ty) if items else None
+        for item in items:
+            value = self.emit(item, ty.element)
+            self.out(f"{result} = {add}(M, {result}, {value}, {self.at(e.loc)});")
+            self.out(self.gen.bail)
+        return result
+
+    def visit_SetRangeExpr(self, e: s.SetRangeExpr) -> str:
+        low, high = self.emit(e.start), self.emit(e.end)
+        c = self.types.c(CollectionTy("Set", INT))
+        return self.failable(c, f"{self.types.set_range()}(M, {low}, {high}, {self.at(e.loc)})")
+
+    # quantifiers and comprehensions: loops over the binders' finite ranges
+    def _loops(self, binders, such_that, body_fn, node) -> None:
+        """Open one loop per binder (over `x in S` or a finite type), test `such_that`, run body_fn."""
+        bounded = {}
+        for conjunct in _conjuncts(such_that):
+            if (isinstance(conjunct, s.Binary) and conjunct.op == "in" and isinstance(conjunct.left, s.Name)
+                    and not isinstance(conjunct.right, s.RangeExpr)):
+                bounded.setdefault(conjunct.left.name.last, conjunct.right)
+        saved = dict(self.ctx.bound)
+        opened = 0
+        try:
+            for name, ref in binders:
+                ty = self.ctx.body.resolver.resolve(ref)
+                var = self.gen.fresh()
+                if name in bounded:
+                    coll_ty = self.ty(bounded[name])
+                    coll = self.temp(self.types.c(coll_ty), self.emit(bounded[name]))
+                    k = self.gen.fresh()
+                    self.out(f"for (int {k} = 0; {k} < {coll}.n; {k}++) {{")
+                    self.out.depth += 1
+                    self.out(f"{self.types.c(coll_ty.element)} {var} = {coll}.v[{k}];")
+                    self.ctx.bound[name] = (var, coll_ty.element)
+                elif ty == BOOL:
+                    k = self.gen.fresh()
+                    self.out(f"for (int {k} = 0; {k} < 2; {k}++) {{")
+                    self.out.depth += 1
+                    self.out(f"bool {var} = {k} != 0;")
+                    self.ctx.bound[name] = (var, BOOL)
+                elif isinstance(ty, EnumTy):
+                    self.out(f"for (int64_t {var} = 0; {var} < {len(ty.decl.literals)}; {var}++) {{")
+                    self.out.depth += 1
+                    self.ctx.bound[name] = (var, ty)
+                else:
+                    raise CotwinError(f"{node.loc}: {describe(node)} over all values of {ty} is not supported")
+                opened += 1
+            if such_that is not None:
+                lines, test = self.captured(such_that)
+                self.out.lines.extend(_dedent(lines))
+                self.out(f"if (!({test})) continue;")
+            body_fn()
+        finally:
+            for _ in range(opened):
+                self.out.depth -= 1
+                self.out("}")
+            self.ctx.bound = saved
+
+    def visit_Quantified(self, e: s.Quantified) -> str:
+        if e.kind == "lambda":
+            self.unsupported(e)
+        if e.kind == "the":
+            ty = self.ty(e)
+            count = self.temp("int", "0")
+            found = self.temp(self.types.c(ty), self.types.default(ty))
+        else:
+            count = self.temp("int", "0")
+            found = None
+        result = self.temp("bool", "true" if e.kind == "forall" else "false")
+        done = self.gen.fresh()
+
+        def body():
+            lines, value = self.captured(e.body, self.ty(e) if e.kind == "the" else None)
+            self.out.lines.extend(_dedent(lines))
+            if e.kind == "forall":
+                self.out(f"if (!({value})) {{ {result} = false; goto {done}_end; }}")
+            elif e.kind == "exists":
+                self.out(f"if ({value}) {{ {result} = true; goto {done}_end; }}")
+            elif e.kind == "exists1":
+                self.out(f"if ({value}) {count}++;")
+            else:
+                self.out(f"{count}++; {found} = {value};")
+
+        self._loops(e.binders, e.such_that, body, e)
+        self.out.label(f"{done}_end")
+        if e.kind == "exists1":
+            return f"({count} == 1)"
+        if e.kind == "the":
+            self.out(f"if ({count} != 1) {{ fail_atf(M, {self.at(e.loc)}, \"'the' found %d values, not exactly one\", "
+                     f"{count}); return 1; }}")
+            return found
+        return result
+
+    def visit_SetComprehension(self, e: s.SetComprehension) -> str:
+        ty = self.ty(e)
+        c = self.types.c(ty)
+        result = self.temp(c, f"(({c}){{0}})")
+        add = self.types.add(ty)
+
+        def body():
+            if e.body is not None:
+                lines, value = self.captured(e.body, ty.element)
+                self.out.lines.extend(_dedent(lines))
+            elif len(e.binders) == 1:
+                value = self.ctx.bound[e.binders[0][0]][0]
+            else:
+                value = f"(({self.types.c(ty.element)}){{{', '.join(self.ctx.bound[n][0] for n, _ in e.binders)}}})"
+            self.out(f"{result} = {add}(M, {result}, {value}, {self.at(e.loc)});")
+            self.out(self.gen.bail)
+
+        self._loops(e.binders, e.predicate, body, e)
+        return result
+
+
+def _conjuncts(e):
+    if e is None:
+        return []
+    if isinstance(e, s.Binary) and e.op == "/\\":
+        return _conjuncts(e.left) + _conjuncts(e.right)
+    return [e]
+
+
+def _dedent(lines: list[str]) -> list[str]:
+    return [line[4:] if line.startswith("    ") else line for line in lines]
+
+
 class CGenerator:
     def __init__(self, program: Program):
         self.program = program
-        self.records: dict[str, RecordDecl] = {}
+        self.types = CTypes(program.project)
+        self.locations: list[str] = []
+        self._location_index: dict[str, int] = {}
+        self.counter = 0
         self.resume_count = 0
+        self.bail = "if (M->status) return 1;"
+        from ..diagnostics import Diagnostics
+        self.diag = Diagnostics()
 
-    # ---- types ----
-    def _collect_records(self) -> list[RecordDecl]:
-        order: list[RecordDecl] = []
+    # ---- small services ----
+    def fresh(self) -> str:
+        self.counter += 1
+        return f"t{self.counter}"
 
-        def visit(ty: Ty) -> None:
-            if isinstance(ty, RecordTy) and ty.decl.name not in self.records:
-                for f in ty.decl.fields:
-                    visit(self.program.resolver.resolve(f.type))
-                self.records[ty.decl.name] = ty.decl
-                order.append(ty.decl)
+    def location(self, loc) -> int:
+        text = str(loc)
+        if text not in self._location_index:
+            self._location_index[text] = len(self.locations)
+            self.locations.append(text)
+        return self._location_index[text]
 
-        for m in self.program.machines:
-            for _, ty, _ in m.variables:
-                visit(ty)
-            for ty in (*m.inputs.values(), *m.outputs.values()):
-                if ty is not None:
-                    visit(ty)
-        for p in (*self.program.inputs, *self.program.outputs):
-            if p.ty is not None:
-                visit(p.ty)
-        return order
+    def value(self, value, ty: Ty) -> str:
+        """A constant as a C expression of type ty."""
+        if is_scalar(ty):
+            if ty == REAL:
+                return c_real(float(value))
+            return c_literal(value)
+        c = self.types.c(ty)
+        if isinstance(ty, RecordTy):
+            fields = self.types.field_types(ty)
+            if isinstance(value, FrozenRecord):
+                value = dict(value)
+            return f"(({c}){{{', '.join(f'.{ident(n)} = {self.value(value[n], t)}' for n, t in fields)}}})"
+        if isinstance(ty, VectorTy):
+            return f"(({c}){{{{{', '.join(self.value(v, ty.element) for v in value)}}}}})"
+        if isinstance(ty, MatrixTy):
+            rows = ["{{" + ", ".join(self.value(v, ty.element) for v in row) + "}}" for row in value]
+            return f"(({c}){{{{{', '.join(rows)}}}}})"
+        if isinstance(ty, TupleTy):
+            return f"(({c}){{{', '.join(self.value(v, t) for v, t in zip(value, ty.items))}}})"
+        if isinstance(ty, CollectionTy):
+            items = [self.value(v, ty.element) for v in (sorted(value, key=repr) if isinstance(value, SetValue) else value)]
+            return f"(({c}){{{len(items)}, {{{', '.join(items)}}}}})"
+        raise CotwinError(f"constant {value!r} of type {ty} cannot be written in C")
 
     # ---- the whole file ----
-    def generate(self) -> str:
+    def generate(self) -> tuple[str, str]:
         p = self.program
+        machines = []
+        for m in p.machines:
+            out = _Lines()
+            self.machine_code(m, out)
+            machines.append(out.text())
+        step = _Lines()
+        self.step_code(step)
+        init = _Lines()
+        self.init_code(init)
+        header = self.header()
         out = _Lines()
-        out(f"/* Generated by cotwin from module {p.module.name}. Do not edit: regenerate from the model. */")
-        out("#include <math.h>")
-        out("#include <stdbool.h>")
-        out("#include <stdint.h>")
-        out("#include <stdio.h>")
-        out("#include <string.h>")
+        out(f"/* Generated by cotwin from module {c_comment(p.module.name)}. Do not edit: regenerate from the model. */")
+        for inc in ("math.h", "stdarg.h", "stdbool.h", "stdint.h", "stdio.h", "string.h"):
+            out(f"#include <{inc}>")
         out('#include "model.h"')
         out()
         out(f"#define MAX_STEPS {MAX_STEPS}")
         out()
-        out("static int fail(Model *M, const char *message) {")
-        out("    M->status = 1;")
-        out('    snprintf(M->message, sizeof M->message, "%s (cycle %lld)", message, (long long)M->cycle);')
-        out("    return 1;")
+        out("/* where each checked operation is in the model, for error messages */")
+        out(f"static const char *const LOC[] = {{{', '.join(c_string(loc) for loc in self.locations) or '0'}}};")
+        out()
+        out.lines.extend(_RUNTIME.strip("\n").split("\n"))
+        out()
+        for i, m in enumerate(p.machines):
+            out(f"static const char *m{i}_where(const m{i}_State *s);")
+        out()
+        out("static const char *model_where(const Model *M) {")
+        out("    switch (M->machine) {")
+        for i in range(len(p.machines)):
+            out(f"    case {i}: return m{i}_where(&M->m{i});")
+        out("    default: return \"the module\";")
+        out("    }")
         out("}")
-        for m in p.machines:
-            out()
-            self.machine_code(m, out)
         out()
-        self.step_code(out)
+        out.lines.extend(self.types.functions and "\n\n".join(self.types.functions).split("\n") or [])
         out()
-        self.init_code(out)
-        return out.text()
+        text = out.text() + "\n" + "\n".join(machines) + "\n" + step.text() + "\n" + init.text()
+        return header, text
 
     def header(self) -> str:
         p = self.program
         out = _Lines()
-        out(f"/* Generated by cotwin from module {p.module.name}: the data of one instance and its cycle. */")
+        out(f"/* Generated by cotwin from module {c_comment(p.module.name)}: the data of one instance and its cycle. */")
         out("#ifndef COTWIN_MODEL_H")
         out("#define COTWIN_MODEL_H")
         out("#include <stdbool.h>")
         out("#include <stdint.h>")
         out()
-        for rec in self._collect_records():
-            out(f"typedef struct rec_{rec.name} {{")
-            for f in rec.fields:
-                out(f"    {c_type(p.resolver.resolve(f.type))} {f.name};")
-            out(f"}} rec_{rec.name};")
-            out()
+        struct_lines = _Lines()
         for m in p.machines:
-            out(f"typedef struct {{  /* events arriving at machine {m.name} in one cycle */")
-            for name, ty in m.inputs.items():
-                out(f"    bool e_{name};")
-                if ty is not None:
-                    out(f"    {c_type(ty)} v_{name};")
-            if not m.inputs:
-                out("    bool none;")
-            out(f"}} m{m.index}_In;")
-            out()
-            out(f"typedef struct {{  /* state machine {m.machine.name} */")
-            out("    int active;   /* node index, -1 before the start */")
-            out("    int resume;   /* where the next cycle continues, 0 = start */")
-            for name, ty, _ in m.variables:
-                out(f"    {c_type(ty)} {name};")
-            for const in m.parameters:
-                ty = next(par.ty for par in p.parameters if par.machine == m.index and par.name == const)
-                out(f"    {c_type(ty)} p_{const};  /* parameter */")
-            out(f"    m{m.index}_In in, next;")
-            out(f"}} m{m.index}_State;")
-            out()
-        out("typedef struct {")
-        out("    /* inputs from the platform: an event flag per cycle and its value */")
-        for ev in p.inputs:
-            out(f"    bool in_{ev.name};")
-            if ev.ty is not None:
-                out(f"    {c_type(ev.ty)} in_{ev.name}_v;")
-        out("    /* outputs of the last cycle: operation calls with arguments, output events */")
-        for op in p.operations:
-            out(f"    bool op_{op.name};")
-            for (pname, ty) in op.params:
-                out(f"    {c_type(ty)} arg_{op.name}_{pname};")
-        for ev in p.outputs:
-            out(f"    bool out_{ev.name};")
-            if ev.ty is not None:
-                out(f"    {c_type(ev.ty)} out_{ev.name}_v;")
-        for m in p.machines:
-            out(f"    m{m.index}_State m{m.index};")
-        out("    int64_t cycle;")
-        out("    int64_t nondeterminism;  /* cycles in which several transitions were enabled */")
-        out("    int status;              /* 0 ok, 1 model error (message) */")
-        out("    char message[256];")
-        out("} Model;")
+            self.machine_structs(m, struct_lines)
+        model_lines = _Lines()
+        self.model_struct(model_lines)
+        out.lines.extend(self.types.typedefs)
         out()
-        out("void model_init(Model *M);   /* after parameters p_* are set */")
+        out.lines.extend(struct_lines.lines)
+        out.lines.extend(model_lines.lines)
+        out()
+        out("int model_init(Model *M);    /* after parameters are set; 0 ok */")
         out("int model_step(Model *M);    /* one cycle; 0 ok, 1 error (M->message) */")
         out("int model_state(const Model *M, int machine);  /* index of the active leaf state, -1 if none */")
         out()
         out("#endif")
         return out.text()
 
+    # ---- data ----
+    def _event_struct(self, ty: Ty | None) -> str:
+        return "struct { bool on; }" if ty is None else f"struct {{ bool on; {self.types.c(ty)} v; }}"
+
+    def _frame_members(self, body: Body, out: _Lines) -> None:
+        for name, ty, _ in body.variables:
+            out(f"    {self.types.c(ty)} {ident(name)};")
+        if body.clocks:
+            out(f"    struct {{ {' '.join(f'int64_t {ident(c)};' for c in body.clocks)} }} clk;")
+        for k in sorted(body.entry_timers):
+            out(f"    int64_t ent{k};  /* cycles since {c_comment(node_description(body.graph.nodes[k]))} was entered */")
+
+    def machine_structs(self, m: MachineInstance, out: _Lines) -> None:
+        i = m.index
+        out(f"typedef struct {{  /* events arriving at machine {c_comment(m.name)} in one cycle */")
+        for name, ty in m.inputs.items():
+            out(f"    {self._event_struct(ty)} {ident(name)};")
+        out("    char none;")
+        out(f"}} m{i}_In;")
+        out()
+        for frame in m.frames:
+            out(f"typedef struct {{  /* a call of operation {c_comment(frame.name)} */")
+            out("    int active, xt, xr, ret;")
+            for name, ty in frame.params:
+                out(f"    {self.types.c(ty)} {ident(name)};")
+            self._frame_members(frame, out)
+            out(f"}} m{i}_O{frame.index};")
+            out()
+        out(f"typedef struct {{  /* state machine {c_comment(m.machine.name)} */")
+        out("    int active;   /* node index, -1 before the start */")
+        out("    int resume;   /* where the next cycle continues, 0 = start, -1 = terminated */")
+        out("    int top;      /* the frame running: -1 the machine's own, k operation frame k */")
+        out("    int xt, xr;   /* the exit in progress: up to which container, and where to go back */")
+        self._frame_members(m, out)
+        if m.parameters:
+            out(f"    struct {{ {' '.join(f'{self.types.c(m.types[n])} {ident(n)};' for n in m.parameters)} }} par;")
+        for frame in m.frames:
+            out(f"    m{i}_O{frame.index} o{frame.index};")
+        out(f"    m{i}_In in, next;")
+        out(f"}} m{i}_State;")
+        out()
+
+    def model_struct(self, out: _Lines) -> None:
+        p = self.program
+        out("typedef struct {")
+        out("    struct {  /* inputs from the platform: an event flag per cycle and its value */")
+        for ev in p.inputs:
+            out(f"        {self._event_struct(ev.ty)} {ident(ev.name)};")
+        out("        char none;")
+        out("    } in;")
+        out("    struct {  /* operation calls of the last cycle, with their arguments */")
+        for op in p.operations:
+            members = "".join(f" {self.types.c(ty)} {ident(pname)};" for pname, ty in op.params)
+            out(f"        struct {{ bool on;{members} }} {ident(op.name)};")
+        out("        char none;")
+        out("    } call;")
+        out("    struct {  /* output events of the last cycle */")
+        for ev in p.outputs:
+            out(f"        {self._event_struct(ev.ty)} {ident(ev.name)};")
+        out("        char none;")
+        out("    } out;")
+        for m in p.machines:
+            out(f"    m{m.index}_State m{m.index};")
+        out("    int64_t seed;            /* parameter of the pseudo-random source */")
+        out("    uint64_t rng;")
+        out("    int64_t cycle;")
+        out("    int64_t nondeterminism;  /* cycles in which several transitions were enabled */")
+        out("    int machine;             /* the machine running, for error messages */")
+        out("    int status;              /* 0 ok, 1 model error (message) */")
+        out("    char message[512];")
+        out("} Model;")
+
     # ---- per machine ----
     def machine_code(self, m: MachineInstance, out: _Lines) -> None:
-        graph = m.graph
         i = m.index
-        parents = ", ".join(str(n.parent.index if n.parent else -1) for n in graph.nodes) or "-1"
-        out(f"/* ---- state machine {m.machine.name} ({m.name}) ---- */")
-        out(f"static const int m{i}_parent[] = {{{parents}}};")
-        out(f"static const char *const m{i}_node_name[] = {{{', '.join(chr(34) + '.'.join(n.path) + chr(34) for n in graph.nodes)}}};")
+        bodies: list[tuple[str, Body, int]] = [("B", m, -1)] + [(f"O{f.index}", f, f.index) for f in m.frames]
+        out(f"/* ---- state machine {c_comment(m.machine.name)} ({c_comment(m.name)}) ---- */")
+        for prefix, body, frame in bodies:
+            graph = body.graph
+            parents = ", ".join(str(n.parent.index if n.parent else -1) for n in graph.nodes) or "-1"
+            opname = body.name if frame >= 0 else ""
+            descs = ", ".join(c_string(node_description(n, opname)) for n in graph.nodes) or "0"
+            out(f"static const int m{i}_{prefix}_parent[] = {{{parents}}};")
+            out(f"static const char *const m{i}_{prefix}_desc[] = {{{descs}}};")
         out()
-        out(f"static int m{i}_inside(int node, int container) {{")
+        out(f"static const char *m{i}_where(const m{i}_State *s) {{")
+        start = c_string(f"state machine {m.machine.name}")  # starting, or between states
+        out("    switch (s->top) {")
+        for prefix, body, frame in bodies:
+            active = "s->active" if frame < 0 else f"s->o{frame}.active"
+            out(f"    case {frame}: return {active} < 0 ? {start} : m{i}_{prefix}_desc[{active}];")
+        out(f"    default: return {start};")
+        out("    }")
+        out("}")
+        out()
+        out(f"static int m{i}_inside(const int *parent, int node, int container) {{")
         out("    if (node < 0 || node == container) return 0;")
-        out(f"    for (node = m{i}_parent[node]; node >= 0; node = m{i}_parent[node])")
+        out("    for (node = parent[node]; node >= 0; node = parent[node])")
         out("        if (node == container) return 1;")
         out("    return 0;")
         out("}")
         out()
-        # exit actions
-        out(f"static int m{i}_exit_to(Model *M, int container) {{")
+        out(f"static int m{i}_cycle(Model *M) {{")
+        body_out = _Lines(1)
+        self.resumes: list[tuple[int, str]] = []
+        self.returns: dict[int, list[tuple[int, str]]] = {f.index: [] for f in m.frames}
+        self.exits: dict[str, list[tuple[int, str]]] = {prefix: [] for prefix, _, _ in bodies}
+        ctx = Context(self, m, m, -1)
+        body_out.label("START")
+        body_out("/* the first cycle: initial values, then the initial junction */")
+        body_out("s->top = -1;")
+        for name, ty, init in m.variables:
+            if init is not None:
+                value = CExpr(ctx, body_out).emit(init, ty)
+                body_out(f"s->{ident(name)} = {value};")
+        init = m.graph.initial_of(None)
+        body_out(f"s->active = {init.index};")
+        body_out(f"goto B_S_{init.index};")
+        for prefix, body, frame in bodies:
+            self.body_code(m, prefix, body, frame, body_out)
+        body_out.label("FINAL")
+        body_out("s->resume = -1;")
+        body_out("return 0;")
         out(f"    m{i}_State *s = &M->m{i};")
         out(f"    m{i}_In *in = &s->in;")
-        out("    (void)in;")
-        out("    while (s->active != container && s->active >= 0) {")
-        out("        switch (s->active) {")
-        for n in graph.nodes:
-            if isinstance(n.node, State) and n.node.exit is not None:
-                out(f"        case {n.index}: /* exit {n.name} */")
-                body = _Lines()
-                body.depth = 3
-                self.stmt(m, n.node.exit, body, allow_exec=False)
-                out.lines.extend(body.lines)
-                out("            break;")
-        out("        default: break;")
-        out("        }")
-        out(f"        s->active = m{i}_parent[s->active];")
-        out("    }")
-        out("    return 0;")
-        out("}")
-        out()
-        out(f"static int m{i}_cycle(Model *M) {{")
-        out.depth = 1
-        out(f"m{i}_State *s = &M->m{i};")
-        out(f"m{i}_In *in = &s->in;")
-        out("long steps = 0;")
-        body = _Lines()
-        body.depth = 1
-        self.resumes: list[tuple[int, str]] = []
-        init = graph.initial_of(None)
-        body.label("START")
-        body(f"s->active = {init.index};")
-        body(f"goto S_{init.index};")
-        for n in graph.nodes:
-            self.settle_block(m, n, body)
-        for e in graph.edges:
-            self.edge_block(m, e, body)
-        body.label("FINAL")
-        body("s->resume = -1;")
-        body("return 0;")
-        out("switch (s->resume) {")
-        out("case 0: goto START;")
-        out("case -1: return 0;  /* terminated */")
+        out("    long steps = 0;")
+        out("    (void)in; (void)steps;")
+        out(f"    M->machine = {i};")
+        out("    switch (s->resume) {")
+        out("    case 0: goto START;")
+        out("    case -1: return 0;  /* terminated */")
         for number, label in self.resumes:
-            out(f"case {number}: goto {label};")
-        out('default: return fail(M, "corrupt resume point");')
-        out("}")
-        out.lines.extend(body.lines)
-        out.depth = 0
+            out(f"    case {number}: goto {label};")
+        out('    default: return fail(M, "corrupt resume point");')
+        out("    }")
+        out.lines.extend(body_out.lines)
         out("}")
         out()
-        leaves = graph.leaves
+        leaves = m.graph.leaves
         out(f"static int m{i}_leaf(int active) {{")
         out("    switch (active) {")
         for k, leaf in enumerate(leaves):
@@ -262,6 +875,53 @@ class CGenerator:
         out("    default: return -1;")
         out("    }")
         out("}")
+
+    def body_code(self, m: MachineInstance, prefix: str, body: Body, frame: int, out: _Lines) -> None:
+        ctx = Context(self, m, body, frame)
+        graph = body.graph
+        f = ctx.f
+        if frame >= 0:
+            init = graph.initial_of(None)
+            out.label(f"{prefix}_START")
+            out(f"/* operation {c_comment(body.name)} starts */")
+            out(f"{f}active = {init.index};")
+            out(f"goto {prefix}_S_{init.index};")
+        for n in graph.nodes:
+            self.settle_block(ctx, prefix, n, out)
+        for e in graph.edges:
+            self.edge_block(ctx, prefix, e, out)
+        # the exit block: exit states up to container xt, running exit actions, then go back
+        out.label(f"{prefix}_EXIT")
+        out(f"while ({f}active != {f}xt && {f}active >= 0) {{")
+        out.depth += 1
+        out(f"switch ({f}active) {{")
+        for n in graph.nodes:
+            if isinstance(n.node, State) and n.node.exit is not None:
+                out(f"case {n.index}: /* exit {c_comment('.'.join(n.path))} */")
+                out.depth += 1
+                self.stmt(ctx, n.node.exit, out)
+                out("break;")
+                out.depth -= 1
+        out("default: break;")
+        out("}")
+        out(f"{f}active = m{m.index}_{prefix}_parent[{f}active];")
+        out.depth -= 1
+        out("}")
+        out(f"switch ({f}xr) {{")
+        for number, label in self.exits[prefix]:
+            out(f"case {number}: goto {label};")
+        out("default: break;")
+        out("}")
+        out('return fail(M, "corrupt exit point");')
+        if frame >= 0:
+            out.label(f"{prefix}_RET")
+            out(f"/* operation {c_comment(body.name)} returns */")
+            out(f"switch ({f}ret) {{")
+            for number, label in self.returns[frame]:
+                out(f"case {number}: goto {label};")
+            out("default: break;")
+            out("}")
+            out('return fail(M, "corrupt return point");')
 
     def resume_point(self, out: _Lines, then: str | None = None) -> None:
         self.resume_count += 1
@@ -273,19 +933,20 @@ class CGenerator:
         if then:
             out(then)
 
-    def settle_block(self, m: MachineInstance, n, out: _Lines) -> None:
-        i = m.index
-        out.label(f"S_{n.index}")
-        out(f"/* settle {'.'.join(n.path)} */")
-        out(f'if (++steps > MAX_STEPS) return fail(M, "divergence: no exec reached in state machine {m.machine.name}");')
+    def settle_block(self, ctx: Context, prefix: str, n, out: _Lines) -> None:
+        m, f = ctx.m, ctx.f
+        out.label(f"{prefix}_S_{n.index}")
+        out(f"/* settle {c_comment('.'.join(n.path))} */")
+        out(f'if (++steps > MAX_STEPS) return fail(M, {c_string("divergence: no exec reached in state machine " + m.machine.name)});')
         if isinstance(n.node, Final):
-            out(f"s->active = {n.index};")
-            out("goto FINAL;")
+            out(f"{f}active = {n.index};")
+            out("goto FINAL;" if ctx.frame < 0 else f"goto {prefix}_RET;")
             return
         if isinstance(n.node, State) and any(c.is_state or isinstance(c.node, Initial) for c in n.children):
-            initial = m.graph.initial_of(n)
+            initial = ctx.body.graph.initial_of(n)
             if initial is not None:
-                out(f"if (!m{i}_inside(s->active, {n.index})) {{ s->active = {initial.index}; goto S_{initial.index}; }}")
+                out(f"if (!m{m.index}_inside(m{m.index}_{prefix}_parent, {f}active, {n.index})) "
+                    f"{{ {f}active = {initial.index}; goto {prefix}_S_{initial.index}; }}")
         groups = [a for a in reversed(n.ancestors())] + [n]
         for group in groups:
             if not group.outgoing:
@@ -293,169 +954,206 @@ class CGenerator:
             out("{")
             out.depth += 1
             names = []
+            guards = {}
             for e in group.outgoing:
-                guard = self.guard(m, e)
-                out(f"bool g{e.index} = {guard};  /* {e.transition.name} */")
+                if e.transition.condition is not None:
+                    value = CExpr(ctx, out).emit(e.transition.condition)
+                    guards[e.index] = self._bool(out, value)
+            for e in group.outgoing:
+                out(f"bool g{e.index} = {self.guard(e, guards)};  /* {c_comment(e.transition.name)} */")
                 names.append(f"g{e.index}")
             out(f"int enabled = {' + '.join(f'(int){g}' for g in names)};")
             out("if (enabled > 1) M->nondeterminism++;")
             for e in group.outgoing:
                 out(f"if (g{e.index}) {{")
                 out.depth += 1
-                self.bind(m, e, out)
+                self.bind(ctx, e, out)
                 if e.transition.is_exec:
                     self.resume_count += 1
-                    self.resumes.append((self.resume_count, f"T_{e.index}"))
-                    out(f"s->resume = {self.resume_count};  /* {e.transition.name} completes next cycle */")
+                    self.resumes.append((self.resume_count, f"{prefix}_T_{e.index}"))
+                    out(f"s->resume = {self.resume_count};  /* {c_comment(e.transition.name)} completes next cycle */")
                     out("return 0;")
                 else:
-                    out(f"goto T_{e.index};")
+                    out(f"goto {prefix}_T_{e.index};")
                 out.depth -= 1
                 out("}")
             out.depth -= 1
             out("}")
         if isinstance(n.node, State) and n.node.during is not None:
-            self.stmt(m, n.node.during, out)
-            self.resume_point(out, f"goto S_{n.index};")
+            self.stmt(ctx, n.node.during, out)
+            self.resume_point(out, f"goto {prefix}_S_{n.index};")
             return
         what = "junction" if isinstance(n.node, (Junction, Initial)) else "state"
-        out(f'return fail(M, "timelock: no transition enabled from {what} {n.name} in state machine {m.machine.name}");')
+        out(f'return fail(M, {c_string(f"timelock: no transition enabled from {what} {n.name} in state machine {m.machine.name}")});')
 
-    def guard(self, m: MachineInstance, e) -> str:
+    @staticmethod
+    def _bool(out: _Lines, value: str) -> str:
+        return value
+
+    def guard(self, e, guards: dict[int, str]) -> str:
         t = e.transition
         if t.condition is not None:
-            return self.expr(m, t.condition)
+            return guards[e.index]
         if not t.is_else:
             return "true"
-        others = [self.guard(m, o) for o in e.source.outgoing if o is not e and not o.transition.is_else]
+        others = [self.guard(o, guards) for o in e.source.outgoing if o is not e and not o.transition.is_else]
         return f"!({' || '.join(others)})" if others else "true"
 
-    def bind(self, m: MachineInstance, e, out: _Lines) -> None:
+    def bind(self, ctx: Context, e, out: _Lines) -> None:
         if e.transition.condition is None:
             return
         for node in s.walk(e.transition.condition):
-            if isinstance(node, s.EventTest) and node.bind is not None:
-                out(f"if (in->e_{node.event.last}) s->{node.bind} = in->v_{node.event.last};")
+            if isinstance(node, s.EventTest) and node.bind is not None and node.event.last in ctx.m.inputs:
+                target, ty = ctx.name(node.bind, node.loc)
+                value = ctx.gen.types.convert(f"in->{ident(node.event.last)}.v", ctx.m.inputs[node.event.last], ty)
+                out(f"if (in->{ident(node.event.last)}.on) {target} = {value};")
 
-    def edge_block(self, m: MachineInstance, e, out: _Lines) -> None:
+    def edge_block(self, ctx: Context, prefix: str, e, out: _Lines) -> None:
         t = e.transition
-        out.label(f"T_{e.index}")
-        out(f"/* complete {t.name}: {'.'.join(e.source.path)} -> {'.'.join(e.target.path)} */")
+        f = ctx.f
+        out.label(f"{prefix}_T_{e.index}")
+        out(f"/* complete {c_comment(t.name)}: {c_comment('.'.join(e.source.path))} -> {c_comment('.'.join(e.target.path))} */")
         lca = lca_index(e)
-        out(f"if (m{m.index}_exit_to(M, {lca})) return 1;")
+        self.resume_count += 1
+        back = f"{prefix}_X{self.resume_count}"
+        self.exits[prefix].append((self.resume_count, back))
+        out(f"{f}xt = {lca}; {f}xr = {self.resume_count}; goto {prefix}_EXIT;")
+        out.label(back)
         if t.action is not None:
-            self.stmt(m, t.action, out)
+            self.stmt(ctx, t.action, out)
         path = []
         node = e.target
         while node is not None and node.index != lca:
             path.append(node)
             node = node.parent
         for n in reversed(path):
-            out(f"s->active = {n.index};")
-            if isinstance(n.node, State) and n.node.entry is not None:
-                out(f"/* entry {n.name} */")
-                self.stmt(m, n.node.entry, out)
-        out(f"goto S_{e.target.index};")
+            out(f"{f}active = {n.index};")
+            if isinstance(n.node, State):
+                if n.index in ctx.body.entry_timers:
+                    out(f"{f}ent{n.index} = 0;")
+                if n.node.entry is not None:
+                    out(f"/* entry {c_comment(n.name)} */")
+                    self.stmt(ctx, n.node.entry, out)
+        out(f"goto {prefix}_S_{e.target.index};")
 
     # ---- statements ----
-    def stmt(self, m: MachineInstance, st: s.Stmt, out: _Lines, allow_exec: bool = True) -> None:
+    def stmt(self, ctx: Context, st: s.Stmt, out: _Lines) -> None:
         if isinstance(st, s.Sequence):
             for item in st.statements:
-                self.stmt(m, item, out, allow_exec)
+                self.stmt(ctx, item, out)
         elif isinstance(st, s.Exec):
-            if not allow_exec:
-                raise CotwinError(f"{st.loc}: exec is not allowed in an exit action")
             self.resume_point(out)
         elif isinstance(st, s.Skip):
             out(";")
         elif isinstance(st, s.IfStmt):
-            out(f"if ({self.expr(m, st.condition)}) {{")
+            condition = CExpr(ctx, out).emit(st.condition)
+            out(f"if ({condition}) {{")
             out.depth += 1
-            self.stmt(m, st.then, out, allow_exec)
+            self.stmt(ctx, st.then, out)
             out.depth -= 1
             if st.otherwise is not None:
                 out("} else {")
                 out.depth += 1
-                self.stmt(m, st.otherwise, out, allow_exec)
+                self.stmt(ctx, st.otherwise, out)
                 out.depth -= 1
             out("}")
         elif isinstance(st, s.Assign):
-            out(f"{self.lvalue(m, st.target)} = {self.expr(m, st.value)};")
+            ty = self.program.type_of(st.target) or ctx.name(s.root_name(st.target).name.last, st.loc)[1]
+            value = CExpr(ctx, out).emit(st.value, ty)
+            value = self._hold(out, value, ty)
+            target = self.lvalue(ctx, st.target, out)
+            out(f"{target} = {value};")
         elif isinstance(st, s.PlatformCall):
-            op = st.operation.last
-            out(f'if (M->op_{op}) return fail(M, "operation \'{op}\' called twice in one cycle");')
-            port = next(o for o in self.program.operations if o.name == op)
-            for (pname, _), arg in zip(port.params, st.args):
-                out(f"M->arg_{op}_{pname} = {self.expr(m, arg)};")
-            out(f"M->op_{op} = true;")
+            self.platform_call(ctx, st.operation.last, st.args, out)
+        elif isinstance(st, s.CallStmt):
+            if st.operation.last in ctx.body.calls:
+                self.call(ctx, st, out)
+            else:
+                self.platform_call(ctx, st.operation.last, st.args, out)
         elif isinstance(st, s.Send):
-            self.send(m, st, out)
+            self.send(ctx, st, out)
+        elif isinstance(st, s.ClockReset):
+            out(f"{ctx.clock(st.clock)} = 0;")
         else:
-            raise CotwinError(f"{st.loc}: {type(st).__name__} statements are not supported by the C generator yet")
+            raise CotwinError(f"{st.loc}: {type(st).__name__} statements are not supported by the C generator")
 
-    def send(self, m: MachineInstance, st: s.Send, out: _Lines) -> None:
+    @staticmethod
+    def _hold(out: _Lines, value: str, ty: Ty) -> str:
+        """Values need no temporary before the target's indices: whatever in them can fail or draw a
+        random number is already evaluated, in order, into temporaries."""
+        return value
+
+    def lvalue(self, ctx: Context, e: s.Expr, out: _Lines) -> str:
+        if isinstance(e, s.Name):
+            return ctx.name(e.name.last, e.loc)[0]
+        if isinstance(e, s.FieldAccess):
+            return f"{self.lvalue(ctx, e.base, out)}.{ident(e.field)}"
+        if isinstance(e, s.IndexAccess):
+            base = self.lvalue(ctx, e.base, out)
+            base_ty = self.program.type_of(e.base)
+            if isinstance(base_ty, TupleTy):
+                return f"{base}.i{e.index.value}"
+            cexpr = CExpr(ctx, out)
+            index = cexpr.emit(e.index)
+            return f"{base}.v[{cexpr.checked_index(e, index, base, base_ty)}]"
+        raise CotwinError(f"{e.loc}: only variables, their fields and elements can be assigned")
+
+    def platform_call(self, ctx: Context, op: str, args, out: _Lines) -> None:
+        port = next((o for o in self.program.operations if o.name == op), None)
+        if port is None:
+            raise CotwinError(f"operation '{op}' is not an operation of the platform")
+        values = [CExpr(ctx, out).emit(a, ty) for a, (_, ty) in zip(args, port.params)]
+        held = [self._hold(out, v, ty) for v, (_, ty) in zip(values, port.params)]
+        out(f'if ({cnames.call_flag(op)}) return fail(M, {c_string(f"operation {op!r} called twice in one cycle")});')
+        for (pname, _), value in zip(port.params, held):
+            out(f"{cnames.call_arg(op, pname)} = {value};")
+        out(f"{cnames.call_flag(op)} = true;")
+
+    def call(self, ctx: Context, st: s.CallStmt, out: _Lines) -> None:
+        op: OperationInstance = ctx.body.calls[st.operation.last]
+        k = op.index
+        values = [CExpr(ctx, out).emit(a, ty) for a, (_, ty) in zip(st.args, op.params)]
+        held = [self._hold(out, v, ty) for v, (_, ty) in zip(values, op.params)]
+        out(f"/* call {c_comment(op.name)} */")
+        out(f"s->o{k}.active = -1;")
+        for (pname, _), value in zip(op.params, held):
+            out(f"s->o{k}.{ident(pname)} = {value};")
+        out(f"s->top = {k};")
+        for c in op.clocks:
+            out(f"s->o{k}.clk.{ident(c)} = 0;")
+        for index in sorted(op.entry_timers):
+            out(f"s->o{k}.ent{index} = -1;")
+        inner = Context(self, ctx.m, op, k)
+        for name, ty, init in op.variables:
+            value = CExpr(inner, out).emit(init, ty) if init is not None else self.types.default(ty)
+            out(f"s->o{k}.{ident(name)} = {value};")
+        self.resume_count += 1
+        back = f"C{self.resume_count}"
+        self.returns[k].append((self.resume_count, back))
+        out(f"s->o{k}.ret = {self.resume_count};")
+        out(f"goto O{k}_START;")
+        out.label(back)
+        out(f"s->top = {ctx.frame};")
+
+    def send(self, ctx: Context, st: s.Send, out: _Lines) -> None:
         name = st.event.last
-        key = (m.index, name)
-        value = self.expr(m, st.value) if st.value is not None else None
+        key = (ctx.m.index, name)
+        ty = ctx.m.outputs.get(name)
+        value = CExpr(ctx, out).emit(st.value, ty) if st.value is not None else None
+        if value is not None:
+            value = self._hold(out, value, ty)
         if key in self.program.output_routes:
             port = self.program.output_routes[key]
-            out(f'if (M->out_{port}) return fail(M, "event \'{port}\' sent twice in one cycle");')
+            out(f'if ({cnames.out_flag(port)}) return fail(M, {c_string(f"event {port!r} sent twice in one cycle")});')
             if value is not None:
-                out(f"M->out_{port}_v = {value};")
-            out(f"M->out_{port} = true;")
+                out(f"{cnames.out_value(port)} = {value};")
+            out(f"{cnames.out_flag(port)} = true;")
         for target, ev in self.program.internal_routes.get(key, ()):
-            out(f'if (M->m{target}.next.e_{ev}) return fail(M, "event \'{name}\' sent twice in one cycle");')
+            box = f"M->m{target}.next.{ident(ev)}"
+            out(f'if ({box}.on) return fail(M, {c_string(f"event {name!r} sent twice in one cycle")});')
             if value is not None:
-                out(f"M->m{target}.next.v_{ev} = {value};")
-            out(f"M->m{target}.next.e_{ev} = true;")
-
-    def lvalue(self, m: MachineInstance, e: s.Expr) -> str:
-        if isinstance(e, s.Name):
-            return f"s->{e.name.last}"
-        if isinstance(e, s.FieldAccess):
-            return f"{self.lvalue(m, e.base)}.{e.field}"
-        raise CotwinError(f"{e.loc}: only variables and record fields can be assigned")
-
-    # ---- expressions ----
-    def expr(self, m: MachineInstance, e: s.Expr) -> str:
-        if isinstance(e, s.Literal):
-            return c_literal(e.value)
-        if isinstance(e, s.Name):
-            if len(e.name.parts) > 1:
-                decl = self.program.project.lookup("type", s.QName(e.name.parts[:-1]), m.source)
-                if not isinstance(decl, EnumDecl):
-                    raise CotwinError(f"{e.loc}: unknown name '{e.name}'")
-                return f"INT64_C({[lit.name for lit in decl.literals].index(e.name.last)}) /* {e.name} */"
-            n = e.name.last
-            if any(v == n for v, _, _ in m.variables):
-                return f"s->{n}"
-            if n in m.constants:
-                return c_literal(m.constants[n])
-            if n in m.parameters:
-                return f"s->p_{n}"
-            raise CotwinError(f"{e.loc}: unknown name '{n}'")
-        if isinstance(e, s.EventTest):
-            return f"in->e_{e.event.last}"
-        if isinstance(e, s.Unary):
-            return f"(!{self.expr(m, e.operand)})" if e.op == "not" else f"(-{self.expr(m, e.operand)})"
-        if isinstance(e, s.Binary):
-            a, b = self.expr(m, e.left), self.expr(m, e.right)
-            ops = {"\\/": "||", "/\\": "&&", "+": "+", "-": "-", "*": "*", "/": "/", "%": "%", "==": "==",
-                   "!=": "!=", "<": "<", "<=": "<=", ">": ">", ">=": ">="}
-            if e.op == "=>":
-                return f"(!{a} || {b})"
-            if e.op == "iff":
-                return f"(!{a} == !{b})"
-            if e.op in ops:
-                return f"({a} {ops[e.op]} {b})"
-            raise CotwinError(f"{e.loc}: operator '{e.op}' is not supported by the C generator")
-        if isinstance(e, s.FieldAccess):
-            return f"{self.expr(m, e.base)}.{e.field}"
-        if isinstance(e, s.IfExpr):
-            return f"({self.expr(m, e.condition)} ? {self.expr(m, e.then)} : {self.expr(m, e.otherwise)})"
-        if isinstance(e, s.Call) and isinstance(e.function, s.Name) and e.function.name.last in C_MATH:
-            return f"{C_MATH[e.function.name.last]}({', '.join(self.expr(m, a) for a in e.args)})"
-        raise CotwinError(f"{e.loc}: {type(e).__name__} expressions are not supported by the C generator yet")
+                out(f"{box}.v = {value};")
+            out(f"{box}.on = true;")
 
     # ---- module step and init ----
     def step_code(self, out: _Lines) -> None:
@@ -464,20 +1162,33 @@ class CGenerator:
         out("    if (M->status) return 1;")
         out("    M->cycle++;")
         for op in p.operations:
-            out(f"    M->op_{op.name} = false;")
+            out(f"    {cnames.call_flag(op.name)} = false;")
         for ev in p.outputs:
-            out(f"    M->out_{ev.name} = false;")
+            out(f"    {cnames.out_flag(ev.name)} = false;")
         out("    /* this cycle's inbox: events delayed from other machines, then the platform's */")
         for m in p.machines:
             out(f"    M->m{m.index}.in = M->m{m.index}.next;")
             out(f"    memset(&M->m{m.index}.next, 0, sizeof M->m{m.index}.next);")
         for ev in p.inputs:
             for machine, name in p.input_routes.get(ev.name, ()):
-                out(f"    if (M->in_{ev.name}) {{")
-                out(f"        M->m{machine}.in.e_{name} = true;")
-                if ev.ty is not None:
-                    out(f"        M->m{machine}.in.v_{name} = M->in_{ev.name}_v;")
+                target = self.program.machines[machine]
+                out(f"    if ({cnames.in_flag(ev.name)}) {{")
+                out(f"        M->m{machine}.in.{ident(name)}.on = true;")
+                if ev.ty is not None and target.inputs.get(name) is not None:
+                    value = self.types.convert(cnames.in_value(ev.name), ev.ty, target.inputs[name])
+                    out(f"        M->m{machine}.in.{ident(name)}.v = {value};")
                 out("    }")
+        out("    /* clocks and state-entry counters count the cycles (after a machine's first) */")
+        for m in p.machines:
+            i = m.index
+            counters = [f"M->m{i}.clk.{ident(c)}++;" for c in m.clocks]
+            counters += [f"if (M->m{i}.ent{k} >= 0) M->m{i}.ent{k}++;" for k in sorted(m.entry_timers)]
+            for frame in m.frames:
+                counters += [f"M->m{i}.o{frame.index}.clk.{ident(c)}++;" for c in frame.clocks]
+                counters += [f"if (M->m{i}.o{frame.index}.ent{k} >= 0) M->m{i}.o{frame.index}.ent{k}++;"
+                             for k in sorted(frame.entry_timers)]
+            if counters:
+                out(f"    if (M->m{i}.resume != 0) {{ {' '.join(counters)} }}")
         for m in p.machines:
             out(f"    if (m{m.index}_cycle(M)) return 1;")
         out("    return 0;")
@@ -493,29 +1204,122 @@ class CGenerator:
 
     def init_code(self, out: _Lines) -> None:
         p = self.program
-        out("void model_init(Model *M) {")
+        out("int model_init(Model *M) {")
         out("    M->cycle = 0;")
         out("    M->nondeterminism = 0;")
         out("    M->status = 0;")
+        out("    M->machine = -1;")
         out("    M->message[0] = '\\0';")
+        out("    M->rng = (uint64_t)M->seed;")
         for m in p.machines:
             out("    {")
             out(f"        m{m.index}_State *s = &M->m{m.index};")
             out("        s->active = -1;")
             out("        s->resume = 0;")
+            out("        s->top = -1;")
             out("        memset(&s->in, 0, sizeof s->in);")
             out("        memset(&s->next, 0, sizeof s->next);")
-            for name, ty, init in m.variables:
-                if init is not None:
-                    out(f"        s->{name} = {self.expr(m, init)};")
-                else:
-                    out(f"        memset(&s->{name}, 0, sizeof s->{name});")
+            for c in m.clocks:
+                out(f"        s->clk.{ident(c)} = 0;")
+            for k in sorted(m.entry_timers):
+                out(f"        s->ent{k} = -1;")
+            for name, ty, _ in m.variables:
+                out(f"        s->{ident(name)} = {self.types.default(ty)};")
             out("    }")
+        out("    return 0;")
         out("}")
+
+
+_RUNTIME = r"""
+static int fail(Model *M, const char *message) {
+    if (M->status) return 1;
+    M->status = 1;
+    snprintf(M->message, sizeof M->message, "%s (cycle %lld)", message, (long long)M->cycle);
+    return 1;
+}
+
+static const char *model_where(const Model *M);
+
+/* A located run-time error: "<file>:<line>:<col>: <what> in <state> (cycle N)"; the first one wins. */
+static void fail_atf(Model *M, int at, const char *format, ...) {
+    char what[256];
+    va_list args;
+    if (M->status) return;
+    va_start(args, format);
+    vsnprintf(what, sizeof what, format, args);
+    va_end(args);
+    M->status = 1;
+    snprintf(M->message, sizeof M->message, "%s: %s in %s (cycle %lld)", LOC[at], what, model_where(M),
+             (long long)M->cycle);
+}
+
+static void fail_at(Model *M, int at, const char *what) { fail_atf(M, at, "%s", what); }
+
+/* int64 arithmetic that reports division by zero and overflow instead of trapping */
+static int64_t ck_add(Model *M, int64_t a, int64_t b, int at) {
+    int64_t r;
+    if (__builtin_add_overflow(a, b, &r)) { fail_at(M, at, "integer overflow"); return 0; }
+    return r;
+}
+static int64_t ck_sub(Model *M, int64_t a, int64_t b, int at) {
+    int64_t r;
+    if (__builtin_sub_overflow(a, b, &r)) { fail_at(M, at, "integer overflow"); return 0; }
+    return r;
+}
+static int64_t ck_mul(Model *M, int64_t a, int64_t b, int at) {
+    int64_t r;
+    if (__builtin_mul_overflow(a, b, &r)) { fail_at(M, at, "integer overflow"); return 0; }
+    return r;
+}
+static int64_t ck_div(Model *M, int64_t a, int64_t b, int at) {
+    if (b == 0) { fail_at(M, at, "division by zero"); return 0; }
+    if (a == INT64_MIN && b == -1) { fail_at(M, at, "integer overflow"); return 0; }
+    return a / b;
+}
+static int64_t ck_mod(Model *M, int64_t a, int64_t b, int at) {
+    if (b == 0) { fail_at(M, at, "remainder of a division by zero"); return 0; }
+    if (a == INT64_MIN && b == -1) { fail_at(M, at, "integer overflow"); return 0; }
+    return a % b;
+}
+static int64_t ck_neg(Model *M, int64_t a, int at) {
+    if (a == INT64_MIN) { fail_at(M, at, "integer overflow"); return 0; }
+    return -a;
+}
+static const char *real_text(double x) { return isnan(x) ? "nan" : x > 0 ? "inf" : "-inf"; }
+static int64_t ck_floor(Model *M, double x, int at) {
+    if (!isfinite(x)) { fail_atf(M, at, "floor: floor of %s", real_text(x)); return 0; }
+    x = floor(x);
+    if (x < -9223372036854775808.0 || x >= 9223372036854775808.0) { fail_at(M, at, "floor: integer overflow"); return 0; }
+    return (int64_t)x;
+}
+static int64_t ck_ceil(Model *M, double x, int at) {
+    if (!isfinite(x)) { fail_atf(M, at, "ceil: ceil of %s", real_text(x)); return 0; }
+    x = ceil(x);
+    if (x < -9223372036854775808.0 || x >= 9223372036854775808.0) { fail_at(M, at, "ceil: integer overflow"); return 0; }
+    return (int64_t)x;
+}
+/* the zero-based position of index i (counting from `first`) in n elements */
+static int64_t ck_index(Model *M, int64_t i, int first, int64_t n, int at) {
+    if (i - first < 0 || i - first >= n) { fail_atf(M, at, "index %lld out of range 1..%lld", (long long)i, (long long)n); return 0; }
+    return i - first;
+}
+
+/* splitmix64: the seedable pseudo-random source (uninterpreted functions, Mathematics::random) */
+static uint64_t rng_next(Model *M) {
+    uint64_t z = (M->rng += UINT64_C(0x9E3779B97F4A7C15));
+    z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
+    z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
+    return z ^ (z >> 31);
+}
+static double rng_real(Model *M) { return (double)(rng_next(M) >> 11) * (1.0 / 9007199254740992.0); }
+"""
 
 
 def generate_c(program: Program) -> dict[str, str]:
     """The generated sources: {file name: text}."""
-    gen = CGenerator(program)
-    header = gen.header()
-    return {"model.h": header, "model.c": gen.generate()}
+    header, source = CGenerator(program).generate()
+    return {"model.h": header, "model.c": source}
+
+
+__all__ = ["CGenerator", "c_literal", "c_real", "generate_c", "CAPACITY", "MatrixValue", "SeqValue", "TupleValue",
+           "VectorValue"]

@@ -65,10 +65,11 @@ static void defaults(State *s) {
     ports_start_values(s->values.r, s->values.i, s->values.b);
 }
 
-static void start_model(State *s) {
+/* Parameters into the model and its initial values; nonzero if these fail (s->model.message says where). */
+static int start_model(State *s) {
     ports_parameters(&s->model, s->values.r, s->values.i, s->values.b);
-    model_init(&s->model);
     s->initialised = 1;
+    return model_init(&s->model);
 }
 
 #define INSTANCE(c, function)                          \
@@ -128,7 +129,7 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     INSTANCE(c, "fmi2ExitInitializationMode");
-    start_model(&inst->state);
+    if (start_model(&inst->state)) return fail(inst, this_function, inst->state.model.message);
     return fmi2OK;
 }
 
@@ -241,7 +242,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     INSTANCE(c, "fmi2DoStep");
     (void)currentCommunicationPoint; (void)noSetFMUStatePriorToCurrentPoint;
     State *s = &inst->state;
-    if (!s->initialised) start_model(s);
+    if (!s->initialised && start_model(s)) return fail(inst, this_function, s->model.message);
     double period = s->values.r[PERIOD_SLOT];
     long cycles = period > 0.0 ? lround(communicationStepSize / period) : 1;
     ports_clear_outputs(s->values.r, s->values.i, s->values.b);

@@ -28,6 +28,7 @@ from xml.sax.saxutils import escape
 import fmpy
 
 from ..diagnostics import CotwinError
+from . import cnames
 from .ccode import generate_c
 from .ports import SLOT_ARRAY, PortLayout, Variable
 from .program import Program
@@ -48,7 +49,7 @@ def _start_text(var: Variable) -> str:
 
 
 def _field(path: tuple[str, ...]) -> str:
-    return "".join(f".{f}" for f in path)
+    return cnames.field_path(path)
 
 
 def model_identifier(program: Program) -> str:
@@ -106,20 +107,20 @@ def _port_code(layout: PortLayout) -> dict[str, list[str]]:
         if var.start not in (None, 0, False, 0.0):
             code["start"].append(f"{slot(var)} = {_c_start(var)};")
     for par in layout.parameters:
-        code["parameters"].append(f"M->m{par.machine}.p_{par.name} = {_CAST[par.var.fmi_type].format(slot(par.var))};")
+        code["parameters"].append(f"{cnames.parameter(par.machine, par.name)} = {_CAST[par.var.fmi_type].format(slot(par.var))};")
     for ev in layout.inputs:
-        code["to_model"].append(f"M->in_{ev.name} = {slot(ev.flag)};")
-        code["clear_events"].append(f"M->in_{ev.name} = false;")
+        code["to_model"].append(f"{cnames.in_flag(ev.name)} = {slot(ev.flag)};")
+        code["clear_events"].append(f"{cnames.in_flag(ev.name)} = false;")
         for v in ev.values:
-            code["to_model"].append(f"M->in_{ev.name}_v{_field(v.path)} = {_CAST[v.var.fmi_type].format(slot(v.var))};")
+            code["to_model"].append(f"{cnames.in_value(ev.name)}{_field(v.path)} = {_CAST[v.var.fmi_type].format(slot(v.var))};")
     for op in layout.operations:
         code["clear_outputs"].append(f"{slot(op.flag)} = false;")
-        copies = [f"{slot(v.var)} = M->arg_{op.name}_{pname}{_field(v.path)};" for pname, values in op.args for v in values]
-        code["from_model"].append(f"if (M->op_{op.name}) {{ {' '.join([f'{slot(op.flag)} = true;', *copies])} }}")
+        copies = [f"{slot(v.var)} = {cnames.call_arg(op.name, pname)}{_field(v.path)};" for pname, values in op.args for v in values]
+        code["from_model"].append(f"if ({cnames.call_flag(op.name)}) {{ {' '.join([f'{slot(op.flag)} = true;', *copies])} }}")
     for ev in layout.outputs:
         code["clear_outputs"].append(f"{slot(ev.flag)} = false;")
-        copies = [f"{slot(v.var)} = M->out_{ev.name}_v{_field(v.path)};" for v in ev.values]
-        code["from_model"].append(f"if (M->out_{ev.name}) {{ {' '.join([f'{slot(ev.flag)} = true;', *copies])} }}")
+        copies = [f"{slot(v.var)} = {cnames.out_value(ev.name)}{_field(v.path)};" for v in ev.values]
+        code["from_model"].append(f"if ({cnames.out_flag(ev.name)}) {{ {' '.join([f'{slot(ev.flag)} = true;', *copies])} }}")
     for st in layout.states:
         code["from_model"].append(f"{slot(st.var)} = model_state(M, {st.machine});")
     return code

@@ -1,35 +1,51 @@
-"""The reference interpreter of RoboSim's cycle semantics (docs/robosim-notation.md, section 5).
+"""The reference interpreter of RoboSim's cycle semantics (docs/robosim-notation.md, section 6).
 
-A machine's whole state is explicit and hashable: the active node, the continuation (the work left
-when the last cycle stopped at an `exec`) and the variables. The verifier explores these states; the
-generated C follows the same steps (settle a node, take an edge, resume after an exec).
+A machine's whole state is explicit and hashable: a stack of frames (the machine's own, then one per
+operation call in progress), each with its active node, its continuation (the work left when the
+last cycle stopped at an `exec`), its variables, clocks and state-entry counters. The verifier
+explores these states; the generated C follows the same steps (settle a node, take an edge, resume
+after an exec, call and return from an operation).
 
 Work items of a continuation:
-  ("exit_to", k)   exit states from the active node up to container k (-1 = the machine)
-  ("stmts", ss)    run statements ss (an `exec` among them ends the cycle)
+  ("exit_to", k)   exit states from the active node up to container k (-1 = the machine), running
+                   exit actions (which may `exec`)
+  ("ascend",)      after a state's exit action: its parent becomes the active node
+  ("stmts", ss)    run statements ss (an `exec` among them ends the cycle; a call pushes a frame)
   ("enter", k)     make node k active and run its entry action
   ("settle", k)    choose a transition from node k (and its ancestors, outermost first)
   ("wait", k)      end the cycle; settle k in the next one (after a during action)
   ("final",)       the machine has terminated: nothing happens any more
+
+Clocks and `since`: a clock counts the cycles since it was last reset (`#T`): 0 in the cycle of the
+reset (or of the machine's start), 1 in the next, and so on; `sinceEntry(S)` likewise counts from
+the last entry of S. A run-time error (division by zero, overflow, an index out of range, ...) is an
+ExecutionError located at the expression, naming the state the machine was in.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..diagnostics import CotwinError, Finding, Location, Severity
+from ..diagnostics import CotwinError, Diagnostics, Finding, Location, Severity
+from ..robosim import functions as fns
 from ..robosim import syntax as s
 from ..robosim.declarations import EnumDecl
 from ..robosim.dmodel_elements import Final, Initial, Junction, State
-from ..robosim.operators import MATH, SHORT_CIRCUIT, binary, short_circuit
-from .program import MachineInstance, Program, default_value
+from ..robosim.evaluator import Evaluator, replace_at
+from ..robosim.evaluator import index as index_of
+from ..robosim.types import BOOL, INT, NAT, REAL, EnumTy, Ty, TypeResolver
+from ..robosim.values import EvalError, FrozenRecord, copy, freeze, show, thaw
+from .program import Body, MachineInstance, Program, coerce, default_value, node_description, state_index
 
 MAX_STEPS = 10_000  # instantaneous steps in one cycle before it counts as divergence
 
+__all__ = ["ExecutionError", "FrozenRecord", "Interpreter", "MAX_STEPS", "Nondeterminism", "Output", "Random",
+           "freeze", "lca_index", "thaw"]
+
 
 class ExecutionError(CotwinError):
-    """A run-time model error: timelock, divergence, an output repeated in one cycle. `site` says
-    where, as data (machine, node, and what was repeated), so that it can be compared."""
+    """A run-time model error: timelock, divergence, an output repeated in one cycle, a division by
+    zero... `site` says where, as data (machine, node, and what was repeated), so that it can be compared."""
 
     def __init__(self, kind: str, message: str, loc: Location | None = None, site: tuple = ()):
         self.kind = kind
@@ -65,96 +81,202 @@ class Output:
 
     def __str__(self) -> str:
         if self.kind == "event":
-            return f"{self.name}" + (f"!{_show(self.args[0])}" if self.args else "")
-        return f"{self.name}({', '.join(_show(a) for a in self.args)})"
+            return f"{self.name}" + (f"!{show(self.args[0])}" if self.args else "")
+        return f"{self.name}({', '.join(show(a) for a in self.args)})"
 
 
-def _show(value) -> str:
-    if isinstance(value, dict):
-        return "{" + ", ".join(f"{k}={_show(v)}" for k, v in value.items()) + "}"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return repr(value) if isinstance(value, float) else str(value)
+class Random:
+    """splitmix64: the pseudo-random source of uninterpreted functions and Mathematics::random, the
+    same sequence in the generated C for the same `seed`."""
+
+    MASK = (1 << 64) - 1
+
+    def __init__(self, seed: int = 0):
+        self.state = seed & self.MASK
+
+    def next(self) -> int:
+        self.state = (self.state + 0x9E3779B97F4A7C15) & self.MASK
+        z = self.state
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & self.MASK
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & self.MASK
+        return z ^ (z >> 31)
+
+    def real(self) -> float:
+        return (self.next() >> 11) * (1.0 / 9007199254740992.0)
+
+    def value(self, ty: Ty):
+        """A value of an uninterpreted function's result type."""
+        if ty == REAL:
+            return self.real()
+        x = self.next()
+        if ty == BOOL:
+            return bool(x >> 63)
+        if ty in (INT, NAT):
+            return x >> 63
+        if isinstance(ty, EnumTy):
+            return x % len(ty.decl.literals)
+        raise EvalError("unsupported", f"no random value of type {ty}")
 
 
-class FrozenRecord(tuple):
-    """A record in a snapshot: its (field, value) pairs, hashable, and told apart from other tuples."""
+@dataclass
+class Frame:
+    """The machine's own frame (body -1) or an operation call in progress (body = frame index)."""
 
+    body: int = -1
+    active: int = -1
+    tasks: tuple = ()
+    variables: dict = field(default_factory=dict)
+    clocks: dict = field(default_factory=dict)
+    entered: dict = field(default_factory=dict)  # state index -> cycles since its last entry
 
-def freeze(value):
-    """A hashable form of a value (records are dicts while running)."""
-    if isinstance(value, dict):
-        return FrozenRecord((k, freeze(v)) for k, v in value.items())
-    return value
+    def freeze(self):
+        return (self.body, self.active, self.tasks, tuple((k, freeze(v)) for k, v in self.variables.items()),
+                tuple(sorted(self.clocks.items())), tuple(sorted(self.entered.items())))
 
-
-def thaw(value):
-    if isinstance(value, FrozenRecord):
-        return {k: thaw(v) for k, v in value}
-    return value
+    @staticmethod
+    def thaw(data) -> "Frame":
+        body, active, tasks, variables, clocks, entered = data
+        return Frame(body, active, tasks, {k: thaw(v) for k, v in variables}, dict(clocks), dict(entered))
 
 
 @dataclass
 class MachineState:
-    active: int = -1
-    cont: tuple = ()
-    variables: dict = field(default_factory=dict)
+    frames: list[Frame] = field(default_factory=list)
     started: bool = False
 
+    @property
+    def active(self) -> int:
+        """The machine's own active node (the caller's node while an operation runs)."""
+        return self.frames[0].active if self.frames else -1
 
-class Evaluator:
-    """Evaluates expressions of one machine: variables, constants, parameters, this cycle's inputs."""
+    @property
+    def variables(self) -> dict:
+        return self.frames[0].variables if self.frames else {}
 
-    def __init__(self, program: Program, machine: MachineInstance, parameters: dict):
-        self.program = program
-        self.machine = machine
-        self.values = {**machine.constants, **parameters}
-        self.enums: dict[tuple[str, str], int] = {}
+
+class MachineEvaluator(Evaluator):
+    """Expressions of one machine: names are the top frame's locals, then the machine's variables,
+    constants and parameters; `$e` is this cycle's input event e."""
+
+    def __init__(self, interp: "Interpreter", m: MachineInstance, parameters: dict):
+        super().__init__()
+        self.interp = interp
+        self.program = interp.program
+        self.m = m
+        self.parameters = parameters
+        self.readings = interp.program.readings
+        self.frames: list[Frame] = []
+        self.inputs: dict = {}
+        self.enums: dict[tuple, int] = {}
+        self.function_bodies: dict[int, object] = {}
+
+    # context
+    def at(self, frames: list[Frame], inputs: dict) -> "MachineEvaluator":
+        self.frames = frames
+        self.inputs = inputs
+        self.bound = {}
+        return self
+
+    @property
+    def body(self) -> Body:
+        return self.m.body_of(self.frames[-1].body) if self.frames else self.m
+
+    def lookup(self, name: str, loc):
+        top = self.frames[-1] if self.frames else None
+        if top is not None and top.body >= 0:
+            body = self.m.frames[top.body]
+            if name in top.variables:
+                return top.variables[name]
+            if name in body.constants:
+                return body.constants[name]
+        if self.frames and name in self.frames[0].variables:
+            return self.frames[0].variables[name]
+        if name in self.m.constants:
+            return self.m.constants[name]
+        if name in self.parameters:
+            return self.parameters[name]
+        raise EvalError("name", f"'{name}' has no value", loc)
+
+    def name(self, e: s.Name):
+        if len(e.name.parts) > 1:
+            return self.enum_index(e.name)
+        return self.lookup(e.name.last, e.loc)
 
     def enum_index(self, name: s.QName) -> int:
-        key = (name.parts[-2], name.last)
+        key = name.parts
         if key not in self.enums:
-            decl = self.program.project.lookup("type", s.QName(name.parts[:-1]), self.machine.source)
-            if not isinstance(decl, EnumDecl):
-                raise ExecutionError("name", f"unknown name '{name}'", name.loc)
+            decl = self.program.project.lookup("type", s.QName(name.parts[:-1]), self.body.source)
+            if not isinstance(decl, EnumDecl) or decl.literal(name.last) is None:
+                raise EvalError("name", f"unknown name '{name}'", name.loc)
             self.enums[key] = [lit.name for lit in decl.literals].index(name.last)
         return self.enums[key]
 
-    def eval(self, e: s.Expr, variables: dict, inputs: dict):
-        if isinstance(e, s.Literal):
-            return e.value
-        if isinstance(e, s.Name):
-            if len(e.name.parts) > 1:
-                return self.enum_index(e.name)
-            n = e.name.last
-            if n in variables:
-                return variables[n]
-            if n in self.values:
-                return self.values[n]
-            raise ExecutionError("name", f"unknown name '{n}'", e.loc)
-        if isinstance(e, s.EventTest):
-            return e.event.last in inputs
-        if isinstance(e, s.Unary):
-            v = self.eval(e.operand, variables, inputs)
-            return (not v) if e.op == "not" else -v
-        if isinstance(e, s.Binary):
-            left = self.eval(e.left, variables, inputs)
-            if e.op in SHORT_CIRCUIT:
-                return short_circuit(e.op, left, lambda: self.eval(e.right, variables, inputs))
+    def dollar(self, e: s.EventTest):
+        name = e.event.last
+        if name in self.m.inputs:
+            if name not in self.inputs:
+                return False
+            value = self.inputs[name]
+            if e.value is not None and value != self.visit(e.value):
+                return False
+            if e.bind is not None and e.predicate is not None:
+                saved = dict(self.bound)
+                self.bound[e.bind] = value
+                try:
+                    return bool(self.visit(e.predicate))
+                finally:
+                    self.bound = saved
+            return True
+        return self.lookup(name, e.loc)
+
+    def first_index(self, e: s.IndexAccess) -> int:
+        return self.readings.first_index.get(id(e), 1)
+
+    def function(self, e: s.Call):
+        fn = fns.target(self.program.project, e, self.body.source)
+        if fn is None:
+            return None
+        impl = fns.builtin(self.program.project, fn)
+        if impl == "random":
+            return self.interp.random.real
+        if impl is not None:
+            return impl
+        cached = self.function_bodies.get(id(fn))
+        if cached is None:
+            cached = self.function_bodies[id(fn)] = self._compile_function(fn)
+        return cached
+
+    def _compile_function(self, fn):
+        owner = self.program.project.file_of(fn) or self.body.source
+        resolver = TypeResolver(self.program.project, owner, Diagnostics())
+        result = resolver.resolve(fn.result)
+        definition = fns.definition(fn)
+        if definition is None:
+            return lambda *args: self.interp.random.value(result)
+        params = [(p.name, resolver.resolve(p.type)) for p in fn.params]
+
+        def run(*args):
+            saved = self.bound
+            self.bound = {name: coerce(a, ty, resolver) for (name, ty), a in zip(params, args)}
             try:
-                return binary(e.op, left, self.eval(e.right, variables, inputs))
-            except ZeroDivisionError as err:
-                raise ExecutionError("division", str(err), e.loc) from None
-            except KeyError:
-                raise ExecutionError("unsupported", f"operator '{e.op}' is not executable", e.loc) from None
-        if isinstance(e, s.FieldAccess):
-            return self.eval(e.base, variables, inputs)[e.field]
-        if isinstance(e, s.IfExpr):
-            branch = e.then if self.eval(e.condition, variables, inputs) else e.otherwise
-            return self.eval(branch, variables, inputs)
-        if isinstance(e, s.Call) and isinstance(e.function, s.Name) and e.function.name.last in MATH:
-            return MATH[e.function.name.last](*(self.eval(a, variables, inputs) for a in e.args))
-        raise ExecutionError("unsupported", f"{type(e).__name__} expressions are not executable yet", e.loc)
+                return coerce(self.visit(definition), result, resolver)
+            finally:
+                self.bound = saved
+        return run
+
+    def since(self, e: s.SinceExpr):
+        for frame in reversed(self.frames):
+            if e.clock in frame.clocks:
+                return frame.clocks[e.clock]
+        raise EvalError("name", f"unknown clock '{e.clock}'", e.loc)
+
+    def since_entry(self, e: s.SinceEntryExpr):
+        frame = self.frames[-1]
+        index = state_index(self.m.body_of(frame.body).graph, e.state)
+        return frame.entered.get(index, self.interp.cycle - 1)
+
+    def cycle(self, e: s.CycleExpr):
+        return self.interp.cycle
 
 
 class Interpreter:
@@ -166,35 +288,31 @@ class Interpreter:
         self.evaluators = []
         for m in program.machines:
             mine = {p.name: params.get(p.port, p.default) for p in program.parameters if p.machine == m.index}
-            self.evaluators.append(Evaluator(program, m, mine))
+            self.evaluators.append(MachineEvaluator(self, m, mine))
+        self.seed = int(params.get("seed", 0))
         self.warnings: list[Nondeterminism] = []
         self.taken: set[tuple[int, int]] | None = None  # (machine, edge) taken, when the verifier asks
         self.reset()
 
     def reset(self) -> None:
         self.cycle = 0
-        self.states = [self._initial(m) for m in self.program.machines]
+        self.random = Random(self.seed)
+        self.states = [MachineState() for _ in self.program.machines]
         self.pending: dict[int, dict] = {}  # machine index -> events delivered in the next cycle
-
-    def _initial(self, m: MachineInstance) -> MachineState:
-        ev = self.evaluators[m.index]
-        variables = {}
-        for name, ty, init in m.variables:
-            variables[name] = ev.eval(init, variables, {}) if init is not None else default_value(ty, self.program.resolver)
-        return MachineState(variables=variables)
 
     # ---- snapshots (for the verifier and what-if forks) ----
     def snapshot(self):
         return (
-            tuple((st.active, st.cont, st.started, tuple((k, freeze(v)) for k, v in st.variables.items()))
-                  for st in self.states),
+            tuple((st.started, tuple(f.freeze() for f in st.frames)) for st in self.states),
             tuple(sorted((i, tuple(sorted((k, freeze(v)) for k, v in evs.items()))) for i, evs in self.pending.items())),
+            self.random.state,
         )
 
     def restore(self, snap) -> None:
-        machines, pending = snap
-        self.states = [MachineState(a, c, {k: thaw(v) for k, v in vs}, started) for a, c, started, vs in machines]
+        machines, pending, random_state = snap
+        self.states = [MachineState([Frame.thaw(f) for f in frames], started) for started, frames in machines]
         self.pending = {i: {k: thaw(v) for k, v in evs} for i, evs in pending}
+        self.random.state = random_state
 
     # ---- one cycle ----
     def step(self, inputs: dict | None = None) -> list[Output]:
@@ -228,19 +346,31 @@ class Interpreter:
         node = m.graph.nodes[st.active] if st.active >= 0 else None
         return next((i for i, leaf in enumerate(leaves) if leaf is node), -1)
 
+    def variables(self, machine: int = 0) -> dict:
+        """The machine's variables now (for tests and what-if inspection)."""
+        return self.states[machine].variables
+
     def _run(self, m: MachineInstance, inputs: dict, outputs: list[Output]) -> None:
         st = self.states[m.index]
-        graph = m.graph
         if not st.started:
             st.started = True
-            initial = graph.initial_of(None)
+            frame = Frame(-1, -1, (), {}, {c: 0 for c in m.clocks}, {})
+            st.frames = [frame]
+            cycle = _Cycle(self, m, st, inputs, outputs)
+            for name, ty, init in m.variables:
+                value = cycle.evaluate(init) if init is not None else default_value(ty, m.resolver)
+                frame.variables[name] = coerce(value, ty, m.resolver)
+            initial = m.graph.initial_of(None)
             if initial is None:
                 raise ExecutionError("structure", f"state machine {m.machine.name} has no initial junction", m.machine.loc)
-            tasks = [("enter", initial.index), ("settle", initial.index)]
+            frame.tasks = (("enter", initial.index), ("settle", initial.index))
         else:
-            tasks = list(st.cont)
-        ctx = _Cycle(self, m, st, inputs, outputs)
-        st.cont = ctx.run(tasks)
+            for frame in st.frames:
+                for c in frame.clocks:
+                    frame.clocks[c] += 1
+                for k in frame.entered:
+                    frame.entered[k] += 1
+        _Cycle(self, m, st, inputs, outputs).run()
 
 
 class _Cycle:
@@ -253,101 +383,225 @@ class _Cycle:
         self.inputs = inputs
         self.outputs = outputs
         self.ev = interp.evaluators[m.index]
-        self.graph = m.graph
         self.steps = 0
 
+    # ---- context ----
+    @property
+    def frame(self) -> Frame:
+        return self.st.frames[-1]
+
+    @property
+    def body(self) -> Body:
+        return self.m.body_of(self.frame.body)
+
+    @property
+    def graph(self):
+        return self.body.graph
+
     def node_name(self) -> str:
-        return self.graph.nodes[self.st.active].name if self.st.active >= 0 else "(start)"
+        return self.graph.nodes[self.frame.active].name if self.frame.active >= 0 else "(start)"
 
     def where(self) -> str:
-        return f"state machine {self.m.machine.name}, node {self.node_name()}, cycle {self.interp.cycle}"
+        frame = f", operation {self.body.name}" if self.frame.body >= 0 else ""
+        return f"state machine {self.m.machine.name}{frame}, node {self.node_name()}, cycle {self.interp.cycle}"
+
+    def node_description(self) -> str:
+        if self.frame.active < 0:  # starting, or between states (a transition's action)
+            return f"state machine {self.m.machine.name}"
+        return node_description(self.graph.nodes[self.frame.active], self.body.name if self.frame.body >= 0 else "")
 
     def site(self, *extra) -> tuple:
         return (self.m.machine.name, self.node_name(), *extra)
 
-    def run(self, tasks: list) -> tuple:
-        while tasks:
+    def evaluate(self, e: s.Expr):
+        try:
+            return self.ev.at(self.st.frames, self.inputs).visit(e)
+        except EvalError as err:
+            raise ExecutionError(err.kind, f"{err.message} in {self.node_description()} (cycle {self.interp.cycle})",
+                                 err.loc or e.loc, self.site(err.kind)) from None
+
+    # ---- the task loop ----
+    def run(self) -> None:
+        tasks = list(self.frame.tasks)
+        while True:
             self.steps += 1
             if self.steps > MAX_STEPS:
                 raise ExecutionError("divergence", f"divergence: no exec reached after {MAX_STEPS} steps in {self.where()}",
                                      site=self.site())
+            if not tasks:
+                raise ExecutionError("timelock", f"timelock: the cycle ends without reaching exec in {self.where()}",
+                                     site=self.site())
             task = tasks.pop(0)
             kind = task[0]
             if kind == "final":
-                return (task,)
+                self.frame.tasks = (task,)
+                return
             if kind == "wait":
-                return (("settle", task[1]), *tasks)
+                self.frame.tasks = (("settle", task[1]), *tasks)
+                return
             if kind == "exit_to":
-                self.exit_to(task[1])
+                tasks[0:0] = self.exit_step(task[1])
+            elif kind == "ascend":
+                node = self.graph.nodes[self.frame.active]
+                self.frame.active = node.parent.index if node.parent is not None else -1
             elif kind == "enter":
                 node = self.graph.nodes[task[1]]
-                self.st.active = task[1]
-                if isinstance(node.node, State) and node.node.entry is not None:
-                    tasks.insert(0, ("stmts", (node.node.entry,)))
+                self.frame.active = task[1]
+                if isinstance(node.node, State):
+                    if task[1] in self.body.entry_timers:
+                        self.frame.entered[task[1]] = 0
+                    if node.node.entry is not None:
+                        tasks.insert(0, ("stmts", (node.node.entry,)))
             elif kind == "stmts":
-                rest = self.statements(list(task[1]))
-                if rest is not None:
-                    return (("stmts", tuple(rest)), *tasks) if rest else tuple(tasks)
+                outcome = self.statements(list(task[1]))
+                if outcome is None:
+                    continue
+                what, rest, call = outcome
+                if what == "exec":
+                    self.frame.tasks = (*((("stmts", tuple(rest)),) if rest else ()), *tasks)
+                    return
+                # a call: the caller continues after it once the operation returns
+                self.frame.tasks = (*((("stmts", tuple(rest)),) if rest else ()), *tasks)
+                tasks = self.push(call)
             elif kind == "settle":
                 result = self.settle(task[1])
+                if result[0] == "final":
+                    self.frame.tasks = (("final",),)
+                    return
+                if result[0] == "return":
+                    self.st.frames.pop()
+                    tasks = list(self.frame.tasks)
+                    continue
                 if result[0] == "end":
-                    return result[1]
+                    self.frame.tasks = tuple(result[1])
+                    return
                 tasks[0:0] = result[1]
-        raise ExecutionError("timelock", f"timelock: the cycle ends without reaching exec in {self.where()}",
-                             site=self.site())
 
-    def exit_to(self, container: int) -> None:
-        nodes = self.graph.nodes
-        while self.st.active != container and self.st.active >= 0:
-            node = nodes[self.st.active]
-            if isinstance(node.node, State) and node.node.exit is not None:
-                if self.statements([node.node.exit]) is not None:
-                    raise ExecutionError("structure", f"exec in the exit action of {node.name}", node.node.loc)
-            self.st.active = node.parent.index if node.parent is not None else -1
+    def exit_step(self, container: int) -> list:
+        if self.frame.active == container or self.frame.active < 0:
+            return []
+        node = self.graph.nodes[self.frame.active]
+        steps: list = []
+        if isinstance(node.node, State) and node.node.exit is not None:
+            steps.append(("stmts", (node.node.exit,)))
+        steps.extend((("ascend",), ("exit_to", container)))
+        return steps
 
-    def statements(self, todo: list) -> list | None:
-        """Run statements; at an `exec` return what is left (possibly []), else None."""
-        variables = self.st.variables
+    def push(self, call: s.CallStmt) -> list:
+        op = self.body.calls[call.operation.last]
+        args = [self.evaluate(a) for a in call.args]
+        frame = Frame(op.index, -1, (), {}, {c: 0 for c in op.clocks}, {})
+        for (name, ty), value in zip(op.params, args):
+            frame.variables[name] = coerce(copy(value), ty, op.resolver)
+        self.st.frames.append(frame)
+        for name, ty, init in op.variables:
+            value = self.evaluate(init) if init is not None else default_value(ty, op.resolver)
+            frame.variables[name] = coerce(value, ty, op.resolver)
+        initial = op.graph.initial_of(None)
+        if initial is None:
+            raise ExecutionError("structure", f"operation {op.name} has no initial junction", op.machine.loc)
+        return [("enter", initial.index), ("settle", initial.index)]
+
+    # ---- statements ----
+    def statements(self, todo: list):
+        """Run statements; at an `exec` return ("exec", rest, None), at a call of a software operation
+        ("call", rest, call); None when all ran."""
         while todo:
             stmt = todo.pop(0)
             if isinstance(stmt, s.Sequence):
                 todo[0:0] = list(stmt.statements)
             elif isinstance(stmt, s.Exec):
-                return todo
+                return ("exec", todo, None)
             elif isinstance(stmt, s.Skip):
                 pass
             elif isinstance(stmt, s.IfStmt):
-                branch = stmt.then if self.ev.eval(stmt.condition, variables, self.inputs) else stmt.otherwise
+                branch = stmt.then if self.evaluate(stmt.condition) else stmt.otherwise
                 if branch is not None:
                     todo.insert(0, branch)
             elif isinstance(stmt, s.Assign):
-                self.assign(stmt.target, self.ev.eval(stmt.value, variables, self.inputs))
+                self.assign(stmt.target, self.evaluate(stmt.value))
             elif isinstance(stmt, s.PlatformCall):
-                args = tuple(_copy(self.ev.eval(a, variables, self.inputs)) for a in stmt.args)
-                self.emit(Output("operation", stmt.operation.last, args), stmt.loc)
+                self.platform_call(stmt.operation.last, stmt.args, stmt.loc)
+            elif isinstance(stmt, s.CallStmt):
+                if stmt.operation.last in self.body.calls:
+                    return ("call", todo, stmt)
+                self.platform_call(stmt.operation.last, stmt.args, stmt.loc)
             elif isinstance(stmt, s.Send):
-                value = _copy(self.ev.eval(stmt.value, variables, self.inputs)) if stmt.value is not None else None
+                value = copy(self.evaluate(stmt.value)) if stmt.value is not None else None
+                ty = self.m.outputs.get(stmt.event.last)
+                if value is not None and ty is not None:
+                    value = coerce(value, ty, self.m.resolver)
                 self.send(stmt.event.last, value, stmt.loc)
+            elif isinstance(stmt, s.ClockReset):
+                self.reset_clock(stmt.clock, stmt.loc)
             else:
-                raise ExecutionError("unsupported", f"{type(stmt).__name__} statements are not executable yet", stmt.loc)
+                raise ExecutionError("unsupported", f"{type(stmt).__name__} statements are not executable", stmt.loc)
         return None
 
-    def assign(self, target: s.Expr, value) -> None:
-        if isinstance(target, s.Name):
-            self.st.variables[target.name.last] = _copy(value)
-            return
-        if isinstance(target, s.FieldAccess):
-            container = self._lvalue(target.base)
-            container[target.field] = _copy(value)
-            return
-        raise ExecutionError("unsupported", "only variables and record fields can be assigned", target.loc)
+    def platform_call(self, name: str, arg_exprs, loc) -> None:
+        sig = self.m.operations.get(name)
+        args = [copy(self.evaluate(a)) for a in arg_exprs]
+        if sig is not None:
+            args = [coerce(a, self.m.resolver.resolve(p.type), self.m.resolver) for a, p in zip(args, sig.params)]
+        self.emit(Output("operation", name, tuple(args)), loc)
 
-    def _lvalue(self, e: s.Expr) -> dict:
-        if isinstance(e, s.Name):
-            return self.st.variables[e.name.last]
-        if isinstance(e, s.FieldAccess):
-            return self._lvalue(e.base)[e.field]
-        raise ExecutionError("unsupported", "only variables and record fields can be assigned", e.loc)
+    def reset_clock(self, clock: str, loc) -> None:
+        for frame in reversed(self.st.frames):
+            if clock in frame.clocks:
+                frame.clocks[clock] = 0
+                return
+        raise ExecutionError("name", f"unknown clock '{clock}'", loc)
+
+    def _type_of_target(self, target: s.Expr) -> Ty | None:
+        root = s.root_name(target)
+        name = root.name.last
+        if self.frame.body >= 0 and name in self.body.types:
+            return self.body.types[name]
+        return self.m.types.get(name)
+
+    def _storage(self, name: str) -> dict:
+        if self.frame.body >= 0 and name in self.frame.variables:
+            return self.frame.variables
+        return self.st.frames[0].variables
+
+    def assign(self, target: s.Expr, value) -> None:
+        ty = self.interp.program.type_of(target) or self._type_of_target(target)
+        if ty is not None:
+            value = coerce(value, ty, self.m.resolver)
+        value = copy(value)
+        if isinstance(target, s.Name):
+            self._storage(target.name.last)[target.name.last] = value
+            return
+        root = s.root_name(target)
+        store = self._storage(root.name.last)
+        store[root.name.last] = self._updated(store[root.name.last], target, value)
+
+    def _updated(self, current, target: s.Expr, value):
+        """`current` (the root variable's value) with the part `target` selects replaced by value."""
+        path = []
+        node = target
+        while isinstance(node, (s.FieldAccess, s.IndexAccess)):
+            path.append(node)
+            node = node.base
+        return self._replace(current, list(reversed(path)), value)
+
+    def _replace(self, current, path, value):
+        if not path:
+            return value
+        step = path[0]
+        if isinstance(step, s.FieldAccess):
+            inner = current[step.field]
+            current = dict(current)
+            current[step.field] = self._replace(inner, path[1:], value)
+            return current
+        position = self.evaluate(step.index)
+        first = self.ev.first_index(step)
+        try:
+            inner = index_of(current, position, step.loc, first)
+            return replace_at(current, position, self._replace(inner, path[1:], value), step.loc, first)
+        except EvalError as err:
+            raise ExecutionError(err.kind, f"{err.message} in {self.node_description()} (cycle {self.interp.cycle})",
+                                 err.loc, self.site(err.kind)) from None
 
     def emit(self, out: Output, loc) -> None:
         if any(o.kind == out.kind and o.name == out.name for o in self.outputs):
@@ -367,25 +621,26 @@ class _Cycle:
                                      loc, self.site(event))
             box[target] = value
 
+    # ---- choosing transitions ----
     def settle(self, index: int):
         node = self.graph.nodes[index]
         if isinstance(node.node, Final):
-            self.st.active = index
-            return ("end", (("final",),))
+            self.frame.active = index
+            return ("return",) if self.frame.body >= 0 else ("final",)
         if isinstance(node.node, State) and any(c.is_state or isinstance(c.node, Initial) for c in node.children):
             initial = self.graph.initial_of(node)
-            if initial is not None and not self._inside(self.st.active, index):
+            if initial is not None and not self._inside(self.frame.active, index):
                 return ("go", [("enter", initial.index), ("settle", initial.index)])
         groups = [a for a in reversed(node.ancestors())] + [node]
         for group in groups:
-            enabled = [e for e in group.outgoing if self.guard(e)]
+            enabled = self.enabled(group.outgoing)
             if not enabled:
                 continue
             if len(enabled) > 1:
                 self.interp.warnings.append(Nondeterminism(self.m.machine.name, node.name,
                                                            tuple(e.transition.name for e in enabled), self.interp.cycle))
             edge = enabled[0]
-            if self.interp.taken is not None:
+            if self.interp.taken is not None and self.frame.body < 0:
                 self.interp.taken.add((self.m.index, edge.index))
             self.bind(edge)
             completion = completion_tasks(self.graph, edge)
@@ -404,24 +659,37 @@ class _Cycle:
         node = self.graph.nodes[active]
         return any(a.index == container for a in node.ancestors())
 
-    def guard(self, edge) -> bool:
-        t = edge.transition
-        if t.condition is None:
-            return not t.is_else or not any(
-                e is not edge and (e.transition.condition is None or self.ev.eval(e.transition.condition, self.st.variables, self.inputs))
-                for e in edge.source.outgoing if not e.transition.is_else)
-        return bool(self.ev.eval(t.condition, self.st.variables, self.inputs))
+    def enabled(self, edges) -> list:
+        """The enabled edges, each condition evaluated once, in source order; `else` holds when no
+        other edge's condition does (an edge without a condition counts as holding)."""
+        holds = {}
+        for e in edges:
+            if e.transition.condition is not None:
+                holds[id(e)] = bool(self.evaluate(e.transition.condition))
+        out = []
+        for e in edges:
+            t = e.transition
+            if t.condition is not None:
+                ok = holds[id(e)]
+            elif not t.is_else:
+                ok = True
+            else:
+                ok = not any(holds.get(id(o), True) for o in edges if o is not e and not o.transition.is_else)
+            if ok:
+                out.append(e)
+        return out
 
     def bind(self, edge) -> None:
+        """`$e?x` in the taken transition's guard: x := e's value (when e arrived)."""
         if edge.transition.condition is None:
             return
         for node in s.walk(edge.transition.condition):
             if isinstance(node, s.EventTest) and node.bind is not None and node.event.last in self.inputs:
-                self.st.variables[node.bind] = _copy(self.inputs[node.event.last])
-
-
-def _copy(value):
-    return {k: _copy(v) for k, v in value.items()} if isinstance(value, dict) else value
+                name = node.bind
+                ty = self.body.types.get(name) if self.frame.body >= 0 else None
+                ty = ty or self.m.types.get(name)
+                value = copy(self.inputs[node.event.last])
+                self._storage(name)[name] = coerce(value, ty, self.m.resolver) if ty is not None else value
 
 
 def lca_index(edge) -> int:

@@ -83,9 +83,14 @@ class PortLayout:
         p = self.program
         self.period = self._add("cycle_period", "Real", "parameter", "fixed", 0.0,
                                 "seconds per d-model cycle; 0 = one cycle per FMU step")
+        for port in (*p.inputs, *p.outputs, *p.operations):
+            if port.unportable:
+                raise CotwinError(f"{port.unportable}: it cannot cross the FMU boundary")
         for par in p.parameters:
-            var = self._add(par.port, fmi_type(par.ty), "parameter", "fixed", par.default,
-                            f"constant {par.name} of state machine {p.machines[par.machine].machine.name}")
+            owner = (f"constant {par.name} of state machine {p.machines[par.machine].machine.name}"
+                     if par.machine >= 0 else "seed of the pseudo-random source (uninterpreted functions, "
+                     "Mathematics::random)")
+            var = self._add(par.port, fmi_type(par.ty), "parameter", "fixed", par.default, owner)
             self.parameters.append(ParameterPort(var, par.machine, par.name))
         for ev in p.inputs:
             flag = self._add(ev.name, "Boolean", "input", "discrete", False, f"input event {ev.name}")

@@ -1,10 +1,15 @@
-"""A module flattened for execution: its machines, how events are routed, and its FMU ports.
+"""A module flattened for execution: its machines, the operations they call, how events are routed,
+and its FMU ports.
 
 The interpreter, the C generator, the FMU builder and the verifier all start from this one view, so
-that port names, value encodings and event routes cannot drift apart.
+that port names, value encodings, name resolution and event routes cannot drift apart. Building it
+also checks that everything the module does can run; what cannot (a RoboChart-only statement, a
+quantifier over an infinite type, a string variable, ...) is reported as one located "not supported"
+error per construct, all together, before any code is generated.
 
 Value encoding (shared with the generated C): boolean -> bool, int/nat -> int, real -> float,
-enumeration -> index of the literal (int), record -> dict of field values (a struct in C).
+enumeration -> index of the literal (int), record -> dict of field values (a struct in C); vectors,
+matrices, tuples, sets and sequences as in cotwin.robosim.values.
 """
 
 from __future__ import annotations
@@ -12,16 +17,19 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ..diagnostics import CotwinError, Diagnostics
+from ..robosim import functions as fns
 from ..robosim import syntax as s
 from ..robosim.consteval import ConstEnv, ConstError, evaluate
-from ..robosim.declarations import EventDecl, OperationSig, SourceFile
-from ..robosim.dmodel_elements import Controller, Module, StateMachine
-from ..robosim.interfaces import machine_io, platform_members
-from ..robosim.machines import MachineGraph
+from ..robosim.declarations import EnumDecl, EventDecl, FunctionDecl, OperationSig, SourceFile, VarDecl
+from ..robosim.dmodel_elements import Controller, Module, OperationDef, ProbabilisticJunction, State, StateMachine
+from ..robosim.interfaces import machine_io, module_platform, platform_members, platform_node_name
+from ..robosim.machines import MachineGraph, NodeInfo
 from ..robosim.project import Project
 from ..robosim.types import (
-    BOOL, INT, NAT, REAL, EnumTy, RecordTy, Ty, TypeResolver,
+    BOOL, INT, NAT, REAL, CollectionTy, EnumTy, MatrixTy, RecordTy, TupleTy, Ty, TypeResolver, VectorTy,
 )
+from ..robosim.values import MatrixValue, SeqValue, SetValue, TupleValue, VectorValue
+from ..robosim.visitor import describe
 
 
 @dataclass(frozen=True)
@@ -78,12 +86,41 @@ def assemble(group: list[tuple[str, "Scalar"]], read) -> object:
     return value
 
 
-def executable(ty: Ty, resolver: TypeResolver) -> bool:
-    """Types the interpreter and the C code can hold: boolean, int, nat, real, enumerations, and
-    records of these."""
+def unsupported_type(ty: Ty, resolver: TypeResolver) -> str | None:
+    """Why values of a type cannot be held by the interpreter and the C code, or None if they can:
+    boolean, int, nat, real, enumerations without parameters, records, vectors and matrices of known
+    size, tuples, and sets and sequences of these."""
+    if ty in (BOOL, INT, NAT, REAL):
+        return None
+    if isinstance(ty, EnumTy):
+        return None if not any(lit.params for lit in ty.decl.literals) else "enumerations with parameters"
     if isinstance(ty, RecordTy):
-        return all(executable(resolver.resolve(f.type), resolver) for f in ty.decl.fields)
-    return ty in (BOOL, INT, NAT, REAL) or isinstance(ty, EnumTy)
+        for f in ty.decl.fields:
+            why = unsupported_type(resolver.resolve(f.type), resolver)
+            if why:
+                return why
+        return None
+    if isinstance(ty, VectorTy):
+        if ty.size is None or ty.size < 1:
+            return "vectors whose size is not a positive constant"
+        return unsupported_type(ty.element, resolver)
+    if isinstance(ty, MatrixTy):
+        if not ty.rows or not ty.columns or ty.rows < 1 or ty.columns < 1:
+            return "matrices whose size is not constant"
+        return unsupported_type(ty.element, resolver)
+    if isinstance(ty, TupleTy):
+        for item in ty.items:
+            why = unsupported_type(item, resolver)
+            if why:
+                return why
+        return None
+    if isinstance(ty, CollectionTy):
+        return unsupported_type(ty.element, resolver)
+    return f"values of type {ty}"
+
+
+def executable(ty: Ty, resolver: TypeResolver) -> bool:
+    return unsupported_type(ty, resolver) is None
 
 
 def default_value(ty: Ty, resolver: TypeResolver):
@@ -93,7 +130,42 @@ def default_value(ty: Ty, resolver: TypeResolver):
         return False
     if ty == REAL:
         return 0.0
+    if isinstance(ty, VectorTy):
+        return VectorValue(default_value(ty.element, resolver) for _ in range(ty.size or 0))
+    if isinstance(ty, MatrixTy):
+        return MatrixValue(VectorValue(default_value(ty.element, resolver) for _ in range(ty.columns or 0))
+                           for _ in range(ty.rows or 0))
+    if isinstance(ty, TupleTy):
+        return TupleValue(default_value(i, resolver) for i in ty.items)
+    if isinstance(ty, CollectionTy):
+        return SetValue() if ty.kind == "Set" else SeqValue()
     return 0
+
+
+def coerce(value, ty: Ty, resolver: TypeResolver):
+    """A value as stored in a place of type `ty`: integers become reals where reals are expected."""
+    if ty == REAL and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(ty, VectorTy) and isinstance(value, tuple):
+        return VectorValue(coerce(v, ty.element, resolver) for v in value)
+    if isinstance(ty, MatrixTy) and isinstance(value, tuple):
+        return MatrixValue(VectorValue(coerce(v, ty.element, resolver) for v in row) for row in value)
+    if isinstance(ty, TupleTy) and isinstance(value, tuple):
+        return TupleValue(coerce(v, t, resolver) for v, t in zip(value, ty.items))
+    if isinstance(ty, RecordTy) and isinstance(value, dict):
+        return {f.name: coerce(value[f.name], resolver.resolve(f.type), resolver) if f.name in value else None
+                for f in ty.decl.fields}
+    if isinstance(ty, CollectionTy) and isinstance(value, (SetValue, SeqValue)):
+        items = (coerce(v, ty.element, resolver) for v in value)
+        return SetValue(items) if isinstance(value, SetValue) else SeqValue(items)
+    return value
+
+
+def node_description(node: NodeInfo, frame: str = "") -> str:
+    """How run-time errors name where a machine was: `state Requested`, `junction J (operation op)`."""
+    kind = {"State": "state", "Initial": "initial junction", "Junction": "junction", "Final": "final state",
+            "ProbabilisticJunction": "junction"}[type(node.node).__name__]
+    return f"{kind} {'.'.join(node.path)}" + (f" (operation {frame})" if frame else "")
 
 
 @dataclass
@@ -103,6 +175,7 @@ class EventPort:
     name: str
     ty: Ty | None
     value_ports: list[tuple[str, Scalar]] = field(default_factory=list)  # (port name, scalar)
+    unportable: str | None = None  # why its value cannot be FMU ports (a set, a vector...)
 
 
 @dataclass
@@ -110,11 +183,13 @@ class OperationPort:
     name: str
     params: list[tuple[str, Ty]]
     arg_ports: list[list[tuple[str, Scalar]]] = field(default_factory=list)  # per parameter
+    unportable: str | None = None  # why an argument cannot be FMU ports
 
 
 @dataclass
 class Parameter:
-    """A constant of a machine without a value in the model: an FMU parameter (default 0)."""
+    """A constant without a value in the model (machine >= 0), or the module's random `seed`
+    (machine -1): an FMU parameter."""
 
     machine: int
     name: str
@@ -124,18 +199,42 @@ class Parameter:
 
 
 @dataclass
-class MachineInstance:
-    index: int
-    name: str  # unique within the module, e.g. "sm" or "ctrl_sm"
+class Body:
+    """What a machine or an operation definition runs: its graph and the names local to it."""
+
     machine: StateMachine
     graph: MachineGraph
     source: SourceFile | None
-    variables: list[tuple[str, Ty, s.Expr | None]]  # var declarations (and consts with a value)
+    resolver: TypeResolver
+    variables: list[tuple[str, Ty, s.Expr | None]]  # storage with its initial value (None: default)
     constants: dict[str, object]  # consts with a value, evaluated
-    parameters: list[str]  # consts without a value
-    inputs: dict[str, Ty | None]
-    outputs: dict[str, Ty | None]
-    operations: dict[str, OperationSig]
+    types: dict[str, Ty]  # every name local to it -> its type (variables, constants, parameters)
+    clocks: list[str]
+    calls: dict[str, "OperationInstance"] = field(default_factory=dict)  # software operations it calls
+    entry_timers: set[int] = field(default_factory=set)  # states whose entry `sinceEntry` reads
+
+
+@dataclass
+class OperationInstance(Body):
+    """An operation definition as called by one machine instance (one frame; RoboChart forbids recursion)."""
+
+    index: int = 0
+    name: str = ""
+    params: list[tuple[str, Ty]] = field(default_factory=list)
+
+
+@dataclass
+class MachineInstance(Body):
+    index: int = 0
+    name: str = ""  # unique within the module, e.g. "sm" or "ctrl_sm"
+    parameters: list[str] = field(default_factory=list)  # consts without a value
+    inputs: dict[str, Ty | None] = field(default_factory=dict)
+    outputs: dict[str, Ty | None] = field(default_factory=dict)
+    operations: dict[str, OperationSig] = field(default_factory=dict)  # platform operations ($op)
+    frames: list[OperationInstance] = field(default_factory=list)  # every operation it may call
+
+    def body_of(self, frame: int) -> Body:
+        return self if frame < 0 else self.frames[frame]
 
 
 @dataclass
@@ -154,12 +253,21 @@ class Program:
     output_routes: dict[tuple[int, str], str]
     #: (machine index, machine event) -> [(machine index, event)], delivered one cycle later
     internal_routes: dict[tuple[int, str], list[tuple[int, str]]]
+    #: does anything draw from the pseudo-random source (uninterpreted functions, Mathematics::random)?
+    uses_random: bool = False
+
+    @property
+    def readings(self):
+        return self.project.readings
 
     def state_port(self, machine: MachineInstance) -> str:
         return "state" if len(self.machines) == 1 else f"state_{machine.name}"
 
     def leaf_names(self, machine: MachineInstance) -> list[str]:
         return [".".join(n.path) for n in machine.graph.leaves]
+
+    def type_of(self, expr: s.Expr) -> Ty | None:
+        return self.project.readings.type_of(expr)
 
 
 # ---- building -------------------------------------------------------------------------------
@@ -172,17 +280,21 @@ class _Builder:
         self.source = project.file_of(module)
         self.diag = Diagnostics()
         self.resolver = TypeResolver(project, self.source, self.diag)
+        self.uses_random = False
 
-    def event_type(self, ev: EventDecl | None) -> Ty | None:
+    def event_type(self, ev: EventDecl | None, resolver: TypeResolver | None = None) -> Ty | None:
         if ev is None or ev.type is None:
             return None
-        return self.resolver.resolve(ev.type)
+        return (resolver or self.resolver).resolve(ev.type)
 
     def build(self) -> Program:
         module = self.module
-        if module.platform is None:
+        platform = module_platform(self.project, module, self.source)
+        if platform is None:
             raise CotwinError(f"module {module.name} has no robotic platform")
-        members = platform_members(self.project, module.platform, self.source)
+        platform_source = self.project.file_of(platform) or self.source
+        members = platform_members(self.project, platform, platform_source)
+        platform_resolver = TypeResolver(self.project, platform_source, self.diag)
         machines: list[MachineInstance] = []
         controllers: list[tuple[str, Controller]] = []
         for ref in module.controller_refs:
@@ -192,18 +304,18 @@ class _Builder:
         # (controller node name, machine node name) -> machine index
         node_of: dict[tuple[str, str], int] = {}
         for ctrl_name, ctrl in controllers:
-            refs = [(r.name, self.project.lookup("stm", r.target, self.project.file_of(ctrl) or self.source))
-                    for r in ctrl.machine_refs]
+            ctrl_source = self.project.file_of(ctrl) or self.source
+            refs = [(r.name, self.project.lookup("stm", r.target, ctrl_source)) for r in ctrl.machine_refs]
             refs.extend((m.name, m) for m in ctrl.machines)
             for local, machine in refs:
                 name = local if len(controllers) == 1 else f"{ctrl_name}_{local}"
                 node_of[(ctrl_name, local)] = len(machines)
-                machines.append(self.instance(len(machines), name, machine))
-        inputs = {e.name: self.event_type(e) for e in members.events.values()}
+                machines.append(self.instance(len(machines), name, machine, ctrl, ctrl_source))
+        inputs = {e.name: self.event_type(e, platform_resolver) for e in members.events.values()}
         input_routes: dict[str, list[tuple[int, str]]] = {}
         output_routes: dict[tuple[int, str], str] = {}
         internal: dict[tuple[int, str], list[tuple[int, str]]] = {}
-        platform = module.platform.name
+        platform_name = platform_node_name(module)
         ctrl_by_name = dict(controllers)
 
         def into_controller(ctrl_name: str, event: str) -> list[tuple[int, str]]:
@@ -218,7 +330,7 @@ class _Builder:
 
         used_outputs: set[str] = set()
         for c in module.connections:
-            if c.source == platform:
+            if c.source == platform_name:
                 input_routes.setdefault(c.source_event, []).extend(into_controller(c.target, c.target_event))
         for ctrl_name, ctrl in controllers:
             for c in ctrl.connections:
@@ -230,7 +342,7 @@ class _Builder:
                 elif c.target == ctrl.name:  # leaves the controller
                     for mc in module.connections:
                         if mc.source == ctrl_name and mc.source_event == c.target_event:
-                            if mc.target == platform:
+                            if mc.target == platform_name:
                                 output_routes[src] = mc.target_event
                                 used_outputs.add(mc.target_event)
                             else:
@@ -238,53 +350,237 @@ class _Builder:
         input_ports = [self.event_port(name, inputs[name]) for name in inputs if name in input_routes]
         output_ports = [self.event_port(name, inputs[name]) for name in inputs if name in used_outputs]
         self.disambiguate([*input_ports, *output_ports])
-        operations = [OperationPort(op.name, [(p.name, self.resolver.resolve(p.type)) for p in op.params])
+        operations = [OperationPort(op.name, [(p.name, platform_resolver.resolve(p.type)) for p in op.params])
                       for op in members.operations.values()]
         self.argument_ports(operations)
         parameters = []
         for m in machines:
             for const in m.parameters:
-                ty = next(t for n, t, _ in self.const_decls(m.machine) if n == const)
+                ty = m.types[const]
                 port = const if len(machines) == 1 else f"{m.name}_{const}"
                 parameters.append(Parameter(m.index, const, port, ty, default_value(ty, self.resolver)))
+        if self.uses_random:
+            parameters.append(Parameter(-1, "seed", "seed", INT, 0))
         self.diag.raise_if_errors()
         return Program(self.project, module, self.resolver, input_ports, output_ports, operations, machines,
-                       parameters, input_routes, output_routes, internal)
+                       parameters, input_routes, output_routes, internal, self.uses_random)
 
-    def const_decls(self, machine: StateMachine):
-        return [(v.name, self.resolver.resolve(v.type), v.init) for v in machine.variables if v.is_const]
+    # ---- machines and the operations they call ----
+    def _constants(self, body_vars: list[VarDecl], resolver: TypeResolver, outer: dict | None = None) -> dict:
+        assigned = self.project.readings.assigned_constants
+        definitions = {v.name: v.init for v in body_vars if v.is_const and v.init is not None and id(v) not in assigned}
+        env = ConstEnv(definitions, enums=lambda q: self._enum(q, resolver))
+        if outer:
+            env.outer = ConstEnv({k: s.Literal(v, s.NOWHERE) for k, v in outer.items() if not isinstance(v, dict)})
+        values = {}
+        for v in body_vars:
+            if v.name in definitions:
+                try:
+                    values[v.name] = coerce(evaluate(v.init, env), resolver.resolve(v.type), resolver)
+                except ConstError as err:
+                    self.diag.error(err.loc, f"constant {v.name}: {err.message}")
+        return values
 
-    def instance(self, index: int, name: str, machine: StateMachine) -> MachineInstance:
-        source = self.project.file_of(machine) or self.source
+    def _enum(self, name: s.QName, resolver: TypeResolver):
+        decl = self.project.lookup("type", s.QName(name.parts[:-1]), resolver.source)
+        if isinstance(decl, EnumDecl) and decl.literal(name.last) is not None:
+            return [lit.name for lit in decl.literals].index(name.last)
+        return None
+
+    def _storage(self, decls: list[VarDecl], resolver: TypeResolver, types: dict, where: str):
+        """Variables (and assigned constants) with their initial values, checking their types run."""
+        assigned = self.project.readings.assigned_constants
+        out = []
+        for v in decls:
+            ty, init = resolver.declared(v)
+            types[v.name] = ty
+            why = unsupported_type(ty, resolver)
+            if why:
+                self.diag.error(v.loc, f"{v.name}: {why} cannot be executed yet (in {where})")
+            if not v.is_const or id(v) in assigned:
+                out.append((v.name, ty, init))
+        return out
+
+    def instance(self, index: int, name: str, machine: StateMachine, ctrl: Controller,
+                 ctrl_source: SourceFile | None) -> MachineInstance:
+        source = self.project.file_of(machine) or ctrl_source
         io = machine_io(self.project, machine, source)
         resolver = TypeResolver(self.project, source, self.diag)
-        env = ConstEnv({v.name: v.init for v in machine.variables if v.is_const and v.init is not None})
-        constants = {}
-        for v in machine.variables:
-            if v.is_const and v.init is not None:
-                try:
-                    constants[v.name] = _coerce(evaluate(v.init, env), resolver.resolve(v.type))
-                except ConstError as err:
-                    raise CotwinError(f"{err.loc}: constant {v.name}: {err.message}") from None
-        variables = [(v.name, resolver.resolve(v.type), v.init) for v in machine.variables if not v.is_const]
-        for v in machine.variables:
-            ty = resolver.resolve(v.type)
-            if not executable(ty, resolver):
-                self.diag.error(v.loc, f"{v.name}: values of type {ty} cannot be executed yet "
-                                "(boolean, int, nat, real, enumerations and records of them can)")
-        parameters = [v.name for v in machine.variables if v.is_const and v.init is None]
-        return MachineInstance(
-            index, name, machine, MachineGraph(machine), source, variables, constants, parameters,
-            {n: self.event_type(e) for n, e in io.inputs.items()},
-            {n: self.event_type(e) for n, e in io.outputs.items()},
-            dict(io.operations),
+        types: dict[str, Ty] = {}
+        own = {v.name for v in machine.variables}
+        interface_vars = [v for v in io.variables.values() if v.name not in own]
+        decls = [*interface_vars, *machine.variables]
+        variables = self._storage(decls, resolver, types, f"state machine {machine.name}")
+        constants = self._constants(decls, resolver)
+        assigned = self.project.readings.assigned_constants
+        parameters = [v.name for v in decls if v.is_const and v.init is None and id(v) not in assigned]
+        inst = MachineInstance(
+            machine, MachineGraph(machine), source, resolver, variables, constants, types,
+            sorted(io.clocks), index=index, name=name, parameters=parameters,
+            inputs={n: self.event_type(e, resolver) for n, e in io.inputs.items()},
+            outputs={n: self.event_type(e, resolver) for n, e in io.outputs.items()},
+            operations=dict(io.operations),
         )
+        definitions = self._operation_definitions(ctrl, ctrl_source)
+        self._link(inst, inst, definitions, [])
+        self._runnable(inst, inst, f"state machine {machine.name}")
+        for frame in inst.frames:
+            self._runnable(inst, frame, f"operation {frame.name}")
+        return inst
 
+    def _operation_definitions(self, ctrl: Controller, source) -> dict[str, OperationDef]:
+        defs = {op.name: op for op in ctrl.operations}
+        for ref in ctrl.operation_refs:
+            op = self.project.lookup("operation", ref.target, source)
+            if op is not None:
+                defs.setdefault(op.name, op)
+        return defs
+
+    def _link(self, machine: MachineInstance, body: Body, definitions: dict[str, OperationDef], stack: list[str]) -> None:
+        """Find the operations a body calls, giving each one frame in the machine instance."""
+        for st in _body_statements(body.machine):
+            if not isinstance(st, s.CallStmt):
+                continue
+            name = st.operation.last
+            if name in body.calls:
+                continue
+            op = definitions.get(name)
+            if op is None:
+                if name in machine.operations:
+                    continue  # a platform operation called without `$`: the same output
+                self.diag.error(st.operation.loc, f"operation '{name}' cannot be executed: the controller "
+                                                  "neither defines it (operation, opref) nor requires it from the platform")
+                continue
+            if name in stack:
+                self.diag.error(st.loc, f"operation '{name}' calls itself (RoboTool forbids recursive operations)")
+                continue
+            frame = next((f for f in machine.frames if f.name == name), None)
+            if frame is None:
+                frame = self._operation(machine, op, len(machine.frames))
+                machine.frames.append(frame)
+                self._link(machine, frame, definitions, [*stack, name])
+            body.calls[name] = frame
+
+    def _operation(self, machine: MachineInstance, op: OperationDef, index: int) -> OperationInstance:
+        source = self.project.file_of(op) or machine.source
+        resolver = TypeResolver(self.project, source, self.diag)
+        types: dict[str, Ty] = {}
+        params = [(p.name, resolver.resolve(p.type)) for p in op.params]
+        for pname, ty in params:
+            types[pname] = ty
+            why = unsupported_type(ty, resolver)
+            if why:
+                self.diag.error(op.loc, f"parameter {pname} of operation {op.name}: {why} cannot be executed yet")
+        variables = self._storage(list(op.variables), resolver, types, f"operation {op.name}")
+        constants = self._constants(list(op.variables), resolver)
+        io = machine_io(self.project, op, source)
+        clocks = sorted(c.name for c in op.clocks)
+        for name, var in io.variables.items():
+            if name not in types and name not in machine.types:
+                self.diag.error(op.loc, f"operation {op.name} requires '{name}', which state machine "
+                                        f"{machine.machine.name} does not have")
+        return OperationInstance(op, MachineGraph(op), source, resolver, variables, constants, types, clocks,
+                                 index=index, name=op.name, params=params)
+
+    # ---- what can run ----
+    def _runnable(self, machine: MachineInstance, body: Body, where: str) -> None:
+        for node in body.graph.nodes:
+            if isinstance(node.node, ProbabilisticJunction):
+                self.diag.error(node.node.loc, f"probabilistic junction {node.name} cannot be executed (in {where})")
+        for t in body.graph.transitions:
+            if t.trigger is not None:
+                self.diag.error(t.loc, f"transition {t.name}: RoboChart triggers cannot be executed (in {where})")
+            if t.probability is not None:
+                self.diag.error(t.probability.loc, f"transition {t.name}: probabilities cannot be executed (in {where})")
+            if t.condition is not None:
+                self._expression(t.condition, body, where)
+        for st in _body_statements(body.machine):
+            if isinstance(st, (s.Wait, s.Receive, s.Timed)):
+                kind = {s.Wait: "wait", s.Receive: "an input communication", s.Timed: "a deadline"}[type(st)]
+                self.diag.error(st.loc, f"{kind} is RoboChart's, not RoboSim's: it cannot be executed (in {where})")
+            for e in s.statement_expressions(st):
+                self._expression(e, body, where)
+        for name, ty, init in body.variables:
+            if init is not None:
+                self._expression(init, body, where)
+
+    def _expression(self, expr: s.Expr, body: Body, where: str) -> None:
+        readings = self.project.readings
+        for node in s.walk(expr):
+            why = None
+            if isinstance(node, s.Quantified) and node.kind == "lambda":
+                why = "a lambda expression"
+            elif isinstance(node, s.TypeTest) and node.kind == "is":
+                why = "a type test ('is')"
+            elif isinstance(node, (s.Quantified, s.SetComprehension)):
+                binders = node.binders
+                bound = _bounded_names(node.such_that if isinstance(node, s.Quantified) else node.predicate)
+                for name, ref in binders:
+                    ty = body.resolver.resolve(ref)
+                    if name not in bound and not (ty == BOOL or isinstance(ty, EnumTy)):
+                        why = (f"{describe(node)} over all values of {ty} ('{name}' is not bounded by "
+                               f"'{name} in S')")
+            elif isinstance(node, s.RangeExpr):
+                why = None  # only read by `in`
+            elif isinstance(node, s.Call):
+                why = self._call(node, body)
+            elif isinstance(node, s.SinceEntryExpr):
+                index = _state_index(body.graph, node.state)
+                if index is None:
+                    why = f"sinceEntry of '{node.state}', not a state of this machine"
+                else:
+                    body.entry_timers.add(index)
+            if why:
+                self.diag.error(node.loc, f"{why} cannot be executed (in {where})")
+            ty = readings.type_of(node)
+            if ty is not None and isinstance(node, (s.SetExpr, s.SeqExpr, s.SetComprehension, s.SetRangeExpr)):
+                bad = unsupported_type(ty, body.resolver)
+                if bad:
+                    self.diag.error(node.loc, f"{bad} cannot be executed (in {where})")
+
+    def _call(self, call: s.Call, body: Body) -> str | None:
+        if isinstance(call.function, s.Name) and len(call.function.name.parts) > 1:
+            decl = self.project.lookup("type", s.QName(call.function.name.parts[:-1]), body.source)
+            if isinstance(decl, EnumDecl):
+                return "an enumeration literal with parameters"
+        fn = fns.target(self.project, call, body.source)
+        if fn is None:
+            return "a call of an unknown function"
+        impl = fns.builtin(self.project, fn)
+        if impl == "random":
+            self.uses_random = True
+            return None
+        if impl is not None:
+            return None
+        if fns.definition(fn) is not None:
+            return self._recursive(fn, body, [])
+        result = body.resolver.resolve(fn.result) if not fns.is_builtin(self.project, fn) else None
+        if result is not None and (result in (BOOL, INT, NAT, REAL) or isinstance(result, EnumTy)):
+            self.uses_random = True  # uninterpreted: values from the random source
+            return None
+        return f"function '{fn.name}' (no definition, result of type {result})"
+
+    def _recursive(self, fn: FunctionDecl, body: Body, stack: list) -> str | None:
+        if fn in stack:
+            return f"function '{fn.name}' (defined in terms of itself)"
+        for node in s.walk(fns.definition(fn)):
+            if isinstance(node, s.Call):
+                inner = fns.target(self.project, node, self.project.file_of(fn))
+                if inner is not None and fns.definition(inner) is not None:
+                    why = self._recursive(inner, body, [*stack, fn])
+                    if why:
+                        return why
+        return None
+
+    # ---- ports ----
     def event_port(self, name: str, ty: Ty | None) -> EventPort:
         port = EventPort(name, ty)
         if ty is not None:
             base = ty.decl.name if isinstance(ty, RecordTy) else f"{name}_value"
-            port.value_ports = [(sc.suffix, sc) for sc in scalars(ty, self.resolver, base)]
+            try:
+                port.value_ports = [(sc.suffix, sc) for sc in scalars(ty, self.resolver, base)]
+            except CotwinError as err:
+                port.unportable = f"event {name}: {err.findings[0].message}"
         return port
 
     def disambiguate(self, ports: list[EventPort]) -> None:
@@ -304,22 +600,66 @@ class _Builder:
         types: dict[str, set[str]] = {}
         for op in operations:
             for pname, ty in op.params:
-                for sc in scalars(ty, self.resolver, pname):
-                    types.setdefault(sc.suffix, set()).add(sc.fmi_type)
+                try:
+                    for sc in scalars(ty, self.resolver, pname):
+                        types.setdefault(sc.suffix, set()).add(sc.fmi_type)
+                except CotwinError as err:
+                    op.unportable = f"operation {op.name}: {err.findings[0].message}"
         for op in operations:
             op.arg_ports = []
             for pname, ty in op.params:
                 group = []
-                for sc in scalars(ty, self.resolver, pname):
-                    name = sc.suffix if len(types[sc.suffix]) == 1 else f"{op.name}_{sc.suffix}"
-                    group.append((name, sc))
+                try:
+                    for sc in scalars(ty, self.resolver, pname):
+                        name = sc.suffix if len(types[sc.suffix]) == 1 else f"{op.name}_{sc.suffix}"
+                        group.append((name, sc))
+                except CotwinError:
+                    pass
                 op.arg_ports.append(group)
 
 
-def _coerce(value, ty: Ty):
-    if ty == REAL and isinstance(value, int) and not isinstance(value, bool):
-        return float(value)
-    return value
+def _body_statements(machine: StateMachine):
+    graph_nodes = []
+    stack = list(machine.nodes)
+    while stack:
+        node = stack.pop(0)
+        graph_nodes.append(node)
+        if isinstance(node, State):
+            stack.extend(node.nodes)
+    roots = []
+    for node in graph_nodes:
+        if isinstance(node, State):
+            roots.extend(x for x in (node.entry, node.during, node.exit) if x is not None)
+            roots.extend(t.action for t in node.transitions if t.action is not None)
+    roots.extend(t.action for t in machine.transitions if t.action is not None)
+    for root in roots:
+        yield from s.statements(root)
+
+
+def _bounded_names(predicate) -> set[str]:
+    out = set()
+    stack = [predicate] if predicate is not None else []
+    while stack:
+        e = stack.pop()
+        if isinstance(e, s.Binary) and e.op == "/\\":
+            stack.extend((e.left, e.right))
+        elif isinstance(e, s.Binary) and e.op == "in" and isinstance(e.left, s.Name):
+            out.add(e.left.name.last)
+    return out
+
+
+def _state_index(graph: MachineGraph, state: s.QName) -> int | None:
+    """The node a `sinceEntry(S)` names: by its path (A::B or A.B) or, if unique, its name."""
+    path = tuple(state.parts)
+    hits = [n for n in graph.nodes if isinstance(n.node, State) and (n.path == path or n.path[-len(path):] == path)]
+    return hits[0].index if len(hits) == 1 else None
+
+
+def state_index(graph: MachineGraph, state: s.QName) -> int:
+    index = _state_index(graph, state)
+    if index is None:  # pragma: no cover - build_program reports it
+        raise CotwinError(f"{state.loc}: no state '{state}'")
+    return index
 
 
 def build_program(project: Project, module_name: str | None = None) -> Program:
@@ -327,6 +667,8 @@ def build_program(project: Project, module_name: str | None = None) -> Program:
     modules = project.elements(Module)
     if module_name is not None:
         module = project.lookup("module", module_name)
+        if module is None:
+            module = next((m for m in modules if m.name == module_name.split("::")[-1]), None)
         if module is None:
             raise CotwinError(f"no module '{module_name}' (modules: {', '.join(m.name for m in modules) or 'none'})")
     elif len(modules) == 1:
@@ -336,3 +678,10 @@ def build_program(project: Project, module_name: str | None = None) -> Program:
     else:
         raise CotwinError(f"several modules ({', '.join(m.name for m in modules)}): choose one with --module")
     return _Builder(project, module).build()
+
+
+__all__ = [
+    "Body", "EventPort", "MachineInstance", "OperationInstance", "OperationPort", "Parameter", "Program", "Scalar",
+    "assemble", "build_program", "coerce", "default_value", "executable", "fmi_type", "get_path", "node_description",
+    "scalars", "set_path", "state_index", "unsupported_type", "OperationDef", "StateMachine",
+]
