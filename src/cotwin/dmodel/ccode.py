@@ -219,6 +219,10 @@ class CExpr(ExprVisitor):
         if e.op == "not":
             return f"(!{a})"
         ty = self.ty(e.operand)
+        if e.op == "transpose":
+            return f"{self.types.transpose(ty)}({a})"
+        if e.op == "inverse":
+            raise CotwinError(f"{e.loc}: inverse is not supported by the C generator")
         if isinstance(ty, (VectorTy, MatrixTy)):
             return self.failable(self.types.c(ty), f"{self.types.scale(ty, None, 'neg')}(M, {a}, {self.at(e.loc)})")
         if is_intlike(ty):
@@ -382,8 +386,6 @@ class CExpr(ExprVisitor):
             if name in ("floor", "ceil"):
                 return self.failable("int64_t", f"ck_{name}(M, {reals[0]}, {at})")
             return f"{C_MATH[name]}({', '.join(reals)})"
-        if name == "transpose":
-            return f"{self.types.transpose(types[0])}({args[0]})"
         coll = types[0] if types and isinstance(types[0], CollectionTy) else None
         if name == "size":
             return f"((int64_t){self._tmp(args[0], types[0])}.n)"
@@ -937,7 +939,8 @@ class CGenerator:
         m, f = ctx.m, ctx.f
         out.label(f"{prefix}_S_{n.index}")
         out(f"/* settle {c_comment('.'.join(n.path))} */")
-        out(f'if (++steps > MAX_STEPS) return fail(M, {c_string("divergence: no exec reached in state machine " + m.machine.name)});')
+        out(f'if (++steps > MAX_STEPS) return fail_loc(M, {self.location(m.machine.loc)}, '
+            f'{c_string(f"divergence: no exec reached after {MAX_STEPS} steps in state machine {m.machine.name}")});')
         if isinstance(n.node, Final):
             out(f"{f}active = {n.index};")
             out("goto FINAL;" if ctx.frame < 0 else f"goto {prefix}_RET;")
@@ -984,7 +987,8 @@ class CGenerator:
             self.resume_point(out, f"goto {prefix}_S_{n.index};")
             return
         what = "junction" if isinstance(n.node, (Junction, Initial)) else "state"
-        out(f'return fail(M, {c_string(f"timelock: no transition enabled from {what} {n.name} in state machine {m.machine.name}")});')
+        out(f'return fail_loc(M, {self.location(n.node.loc)}, '
+            f'{c_string(f"timelock: no transition enabled from {what} {n.name} in state machine {m.machine.name}")});')
 
     @staticmethod
     def _bool(out: _Lines, value: str) -> str:
@@ -1064,12 +1068,12 @@ class CGenerator:
             target = self.lvalue(ctx, st.target, out)
             out(f"{target} = {value};")
         elif isinstance(st, s.PlatformCall):
-            self.platform_call(ctx, st.operation.last, st.args, out)
+            self.platform_call(ctx, st.operation.last, st.args, out, st.loc)
         elif isinstance(st, s.CallStmt):
             if st.operation.last in ctx.body.calls:
                 self.call(ctx, st, out)
             else:
-                self.platform_call(ctx, st.operation.last, st.args, out)
+                self.platform_call(ctx, st.operation.last, st.args, out, st.loc)
         elif isinstance(st, s.Send):
             self.send(ctx, st, out)
         elif isinstance(st, s.ClockReset):
@@ -1098,13 +1102,17 @@ class CGenerator:
             return f"{base}.v[{cexpr.checked_index(e, index, base, base_ty)}]"
         raise CotwinError(f"{e.loc}: only variables, their fields and elements can be assigned")
 
-    def platform_call(self, ctx: Context, op: str, args, out: _Lines) -> None:
+    def repeated(self, flag: str, what: str, loc) -> str:
+        return (f'if ({flag}) {{ fail_at(M, {self.location(loc)}, {c_string(what + " emitted twice in one cycle")}); '
+                f'return 1; }}')
+
+    def platform_call(self, ctx: Context, op: str, args, out: _Lines, loc=None) -> None:
         port = next((o for o in self.program.operations if o.name == op), None)
         if port is None:
             raise CotwinError(f"operation '{op}' is not an operation of the platform")
         values = [CExpr(ctx, out).emit(a, ty) for a, (_, ty) in zip(args, port.params)]
         held = [self._hold(out, v, ty) for v, (_, ty) in zip(values, port.params)]
-        out(f'if ({cnames.call_flag(op)}) return fail(M, {c_string(f"operation {op!r} called twice in one cycle")});')
+        out(self.repeated(cnames.call_flag(op), f"operation {op!r}", loc))
         for (pname, _), value in zip(port.params, held):
             out(f"{cnames.call_arg(op, pname)} = {value};")
         out(f"{cnames.call_flag(op)} = true;")
@@ -1144,13 +1152,13 @@ class CGenerator:
             value = self._hold(out, value, ty)
         if key in self.program.output_routes:
             port = self.program.output_routes[key]
-            out(f'if ({cnames.out_flag(port)}) return fail(M, {c_string(f"event {port!r} sent twice in one cycle")});')
+            out(self.repeated(cnames.out_flag(port), f"event {port!r}", st.loc))
             if value is not None:
                 out(f"{cnames.out_value(port)} = {value};")
             out(f"{cnames.out_flag(port)} = true;")
         for target, ev in self.program.internal_routes.get(key, ()):
             box = f"M->m{target}.next.{ident(ev)}"
-            out(f'if ({box}.on) return fail(M, {c_string(f"event {name!r} sent twice in one cycle")});')
+            out(self.repeated(f"{box}.on", f"event {name!r}", st.loc))
             if value is not None:
                 out(f"{box}.v = {value};")
             out(f"{box}.on = true;")
@@ -1239,6 +1247,14 @@ static int fail(Model *M, const char *message) {
 }
 
 static const char *model_where(const Model *M);
+
+/* A located structural error (timelock, divergence): "<file>:<line>:<col>: <what> (cycle N)". */
+static int fail_loc(Model *M, int at, const char *what) {
+    if (M->status) return 1;
+    M->status = 1;
+    snprintf(M->message, sizeof M->message, "%s: %s (cycle %lld)", LOC[at], what, (long long)M->cycle);
+    return 1;
+}
 
 /* A located run-time error: "<file>:<line>:<col>: <what> in <state> (cycle N)"; the first one wins. */
 static void fail_atf(Model *M, int at, const char *format, ...) {

@@ -37,6 +37,7 @@ class CTypes:
         self.functions: list[str] = []
         self._helpers: set[str] = set()
         self._record_names: dict[str, int] = {}
+        self._defined: set[str] = set()
 
     # ---- types ----
     def field_types(self, ty: RecordTy) -> list[tuple[str, Ty]]:
@@ -77,7 +78,9 @@ class CTypes:
         else:
             raise CotwinError(f"values of type {ty} cannot be held by the generated C")
         self.names[ty] = name
-        self.typedefs.append(f"typedef struct {name} {{{body} }} {name};")
+        if name not in self._defined:  # int and nat elements share one representation
+            self._defined.add(name)
+            self.typedefs.append(f"typedef struct {name} {{{body} }} {name};")
         return name
 
     def short(self, ty: Ty) -> str:

@@ -426,8 +426,9 @@ class _Cycle:
         while True:
             self.steps += 1
             if self.steps > MAX_STEPS:
-                raise ExecutionError("divergence", f"divergence: no exec reached after {MAX_STEPS} steps in {self.where()}",
-                                     site=self.site())
+                raise ExecutionError("divergence", f"divergence: no exec reached after {MAX_STEPS} steps in "
+                                     f"state machine {self.m.machine.name} (cycle {self.interp.cycle})",
+                                     self.m.machine.loc, self.site())
             if not tasks:
                 raise ExecutionError("timelock", f"timelock: the cycle ends without reaching exec in {self.where()}",
                                      site=self.site())
@@ -605,8 +606,8 @@ class _Cycle:
 
     def emit(self, out: Output, loc) -> None:
         if any(o.kind == out.kind and o.name == out.name for o in self.outputs):
-            raise ExecutionError("repeated-output", f"{out.kind} '{out.name}' emitted twice in one cycle ({self.where()})",
-                                 loc, self.site(out.name))
+            raise ExecutionError("repeated-output", f"{out.kind} '{out.name}' emitted twice in one cycle in "
+                                 f"{self.node_description()} (cycle {self.interp.cycle})", loc, self.site(out.name))
         self.outputs.append(out)
 
     def send(self, event: str, value, loc) -> None:
@@ -617,8 +618,8 @@ class _Cycle:
         for machine, target in program.internal_routes.get(key, ()):
             box = self.interp.pending.setdefault(machine, {})
             if target in box:
-                raise ExecutionError("repeated-output", f"event '{event}' sent twice in one cycle ({self.where()})",
-                                     loc, self.site(event))
+                raise ExecutionError("repeated-output", f"event '{event}' emitted twice in one cycle in "
+                                     f"{self.node_description()} (cycle {self.interp.cycle})", loc, self.site(event))
             box[target] = value
 
     # ---- choosing transitions ----
@@ -650,7 +651,8 @@ class _Cycle:
         if isinstance(node.node, State) and node.node.during is not None:
             return ("go", [("stmts", (node.node.during,)), ("wait", index)])
         what = "junction" if isinstance(node.node, (Junction, Initial)) else "state"
-        raise ExecutionError("timelock", f"timelock: no transition enabled from {what} {node.name} in {self.where()}",
+        raise ExecutionError("timelock", f"timelock: no transition enabled from {what} {node.name} in state machine "
+                             f"{self.m.machine.name} (cycle {self.interp.cycle})",
                              node.node.loc, self.site())
 
     def _inside(self, active: int, container: int) -> bool:

@@ -512,6 +512,12 @@ class _Builder:
                 why = "a lambda expression"
             elif isinstance(node, s.TypeTest) and node.kind == "is":
                 why = "a type test ('is')"
+            elif isinstance(node, s.TypeTest):
+                source, target = readings.type_of(node.expr), readings.type_of(node)
+                if target in (INT, NAT) and source == REAL:
+                    why = "a cast of a real to an integer ('as')"
+            elif isinstance(node, s.Unary) and node.op == "inverse":
+                why = "the inverse of a matrix"
             elif isinstance(node, (s.Quantified, s.SetComprehension)):
                 binders = node.binders
                 bound = _bounded_names(node.such_that if isinstance(node, s.Quantified) else node.predicate)

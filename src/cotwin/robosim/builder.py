@@ -284,10 +284,14 @@ class Builder(Transformer):
         return base
 
     def call_expr(self, meta, function, args=()):
+        """Calls, and RoboChart's built-in forms written like calls: sinceEntry(S), transpose(m), inverse(m)."""
         args = tuple(args)
-        if (isinstance(function, s.Name) and function.name.parts == ("sinceEntry",) and len(args) == 1
-                and isinstance(args[0], s.Name)):
-            return s.SinceEntryExpr(args[0].name, self._loc(meta))
+        if isinstance(function, s.Name) and len(function.name.parts) == 1 and len(args) == 1:
+            name = function.name.last
+            if name == "sinceEntry" and isinstance(args[0], s.Name):
+                return s.SinceEntryExpr(args[0].name, self._loc(meta))
+            if name in ("transpose", "inverse"):
+                return s.Unary(name, args[0], self._loc(meta))
         return s.Call(function, args, self._loc(meta))
 
     def int_lit(self, meta, token):

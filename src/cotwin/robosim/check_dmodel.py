@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from . import syntax as s
 from .checker import Checker
+from .consteval import ConstError, const_env, evaluate
 from .declarations import EnumDecl, FunctionDecl, RecordDecl
 from .dmodel_elements import (
     Connection, Controller, Final, Initial, Interface, Junction, Module, OperationDef, RoboticPlatform, State,
@@ -24,6 +25,7 @@ from .types import NAT, REAL, VectorTy, assignable
 
 _DECLARATIONS = ("Interface", "RecordDecl", "EnumDecl", "FunctionDecl", "RoboticPlatform")
 _TIMED = (s.SinceExpr, s.SinceEntryExpr)
+_ARITHMETIC_ERRORS = ("division by zero", "integer overflow")
 _COMPARISONS = ("<", "<=", ">", ">=", "==")
 
 
@@ -87,13 +89,29 @@ class DModelChecker(Checker):
             checker.condition(cond, "pre/postcondition")
 
     def variables(self, decls, scope: Scope) -> Scope:
-        """Add declarations to scope, checking types and initial values."""
+        """Add declarations to scope, checking types and initial values; evaluate the constants now,
+        so that a division by zero or an overflow in one is reported here, where it is written."""
         for var in decls:
             ty, init = self.types.declared(var)
             if init is not None:
                 self.expressions(scope).expect(init, ty, f"initial value of '{var.name}'")
             scope.symbols[var.name] = Symbol(var.name, "const" if var.is_const else "var", ty, var.loc, var)
+        env = const_env([d for d in decls if d.is_const])
+        env.enums = self._enum_value
+        for var in decls:
+            if var.is_const and var.init is not None:
+                try:
+                    evaluate(var.init, env)
+                except ConstError as err:
+                    if err.message.endswith(_ARITHMETIC_ERRORS):
+                        self.diag.error(err.loc, f"{err.message} (in constant {var.name})")
         return scope
+
+    def _enum_value(self, name: s.QName):
+        decl = self.project.lookup("type", s.QName(name.parts[:-1]), self.source)
+        if isinstance(decl, EnumDecl) and decl.literal(name.last) is not None:
+            return [lit.name for lit in decl.literals].index(name.last)
+        return None
 
     def expressions(self, scope: Scope, events=None, clocks=frozenset(), states=None) -> ExprChecker:
         return ExprChecker(self.types, self.diag, scope, self.functions, events, clocks=clocks, states=states)

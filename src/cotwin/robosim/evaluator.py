@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Callable
 
 from . import syntax as s
-from .operators import BINARY, SHORT_CIRCUIT, Interval, negate, short_circuit, tuple_item
+from .operators import BINARY, MATRIX_UNARY, SHORT_CIRCUIT, Interval, negate, short_circuit, tuple_item
 from .values import (
     EvalError, MatrixValue, SeqValue, SetValue, TupleValue, VectorValue, bounded, checked, elements, freeze,
     is_int,
@@ -107,6 +107,8 @@ class Evaluator(ExprVisitor):
         value = self.visit(e.operand)
         if e.op == "not":
             return not value
+        if e.op in MATRIX_UNARY:
+            return MATRIX_UNARY[e.op](value, e.loc)
         return negate(value, e.loc)
 
     def visit_Binary(self, e: s.Binary):
@@ -322,7 +324,8 @@ class ClosureCompiler(ExprVisitor):
         if e.op == "not":
             return lambda env: not operand(env)
         loc = e.loc
-        return lambda env: negate(operand(env), loc)
+        run = MATRIX_UNARY.get(e.op, negate)
+        return lambda env: run(operand(env), loc)
 
     def visit_Binary(self, e: s.Binary):
         left, right = self.visit(e.left), self.visit(e.right)

@@ -296,9 +296,33 @@ TOOLKIT = {
     "isNonEmpty": lambda s: len(s) > 0,
     "prefix": lambda s, t: tuple(t[:len(s)]) == tuple(s),
     "suffix": lambda s, t: len(s) <= len(t) and tuple(t[len(t) - len(s):]) == tuple(s),
-    # vectors and matrices
-    "transpose": lambda m: MatrixValue(VectorValue(col) for col in zip(*m)),
 }
+
+
+def transpose(m, loc=None):
+    return MatrixValue(VectorValue(col) for col in zip(*m))
+
+
+def inverse(m, loc=None):
+    """Gauss-Jordan elimination with partial pivoting; a singular matrix is an error."""
+    n = len(m)
+    a = [[float(x) for x in row] + [1.0 if i == j else 0.0 for j in range(n)] for i, row in enumerate(m)]
+    for col in range(n):
+        pivot = max(range(col, n), key=lambda r: abs(a[r][col]))
+        if a[pivot][col] == 0.0:
+            raise EvalError("domain", "inverse of a singular matrix", loc)
+        a[col], a[pivot] = a[pivot], a[col]
+        p = a[col][col]
+        a[col] = [x / p for x in a[col]]
+        for r in range(n):
+            if r != col and a[r][col] != 0.0:
+                f = a[r][col]
+                a[r] = [x - f * y for x, y in zip(a[r], a[col])]
+    return MatrixValue(VectorValue(row[n:]) for row in a)
+
+
+#: RoboChart's matrix forms written like calls (builder.call_expr makes them Unary nodes)
+MATRIX_UNARY = {"transpose": transpose, "inverse": inverse}
 
 #: where each built-in package's functions come from
 BUILTIN_PACKAGES = {

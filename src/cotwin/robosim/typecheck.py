@@ -244,6 +244,16 @@ class ExprChecker(ExprVisitor):
     # ---- operators ----
     def visit_Unary(self, e: s.Unary) -> Ty:
         ty = self.check(e.operand)
+        if e.op in ("transpose", "inverse"):
+            if isinstance(ty, MatrixTy):
+                if e.op == "inverse":
+                    if ty.rows != ty.columns:
+                        self.diag.error(e.loc, f"inverse needs a square matrix, not {ty}")
+                    return MatrixTy(REAL, ty.rows, ty.columns)
+                return MatrixTy(ty.element, ty.columns, ty.rows)
+            if ty != UNKNOWN:
+                self.diag.error(e.loc, f"{e.op} needs a matrix, not {ty}")
+            return UNKNOWN
         if e.op == "not":
             if not assignable(BOOL, ty):
                 self.diag.error(e.loc, f"'not' needs a boolean, not {ty}")

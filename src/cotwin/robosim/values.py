@@ -107,7 +107,7 @@ def bounded(value, loc=None):
     """A Set or Seq within cotwin's capacity."""
     if len(value) > CAPACITY:
         kind = "set" if isinstance(value, SetValue) else "sequence"
-        raise EvalError("capacity", f"{kind} of {len(value)} elements exceeds cotwin's bound of {CAPACITY}", loc)
+        raise EvalError("capacity", f"{kind} exceeds cotwin's bound of {CAPACITY} elements", loc)
     return value
 
 

@@ -1,0 +1,438 @@
+"""The RoboSim language as RoboTool reads it, one test per family of RoboSim.xtext's rules (and the
+RoboChart.xtext rules it builds on): a small model using the family, checked, and where it can run,
+run by the interpreter and by the generated C (an FMU through FMPy) with identical traces.
+
+Families (RoboSim.xtext rule -> test):
+  RCPackage, Import, `diagram`, qualified names, .rct declarations -> test_packages_imports_and_rct_declarations
+  RCModule / SimModule, RoboticPlatformDef, `rref`, `cref`, Connection `(_async)`, `[mult]`  -> test_modules_platform_references_and_connections
+  ControllerDef / SimControllerDef, OperationDef, OperationRef (`opref`), software operation calls -> test_operations_definitions_references_and_calls
+  StateMachineDef / SimMachineDef, InputContext, OutputContext, Event, ConstCycle (`cycleDef`) -> test_machines_contexts_and_cycle_definitions
+  Transition, ExecTrigger, `condition else`, Node kinds, state actions -> test_transitions_exec_else_and_state_actions
+  Clock, ClockReset `#T`, ClockExp `since`, StateClockExp `sinceEntry`, CycleExp -> test_clocks_since_and_since_entry
+  SimRefExp (`$e`, `$e?x`, `$e?x:p`, `$e.v`, `$v`), SendEvent, SimCall `$op()` -> test_dollar_expressions_sends_and_platform_calls
+  BasicStatement (exec, if, skip, `( )`, assignment to fields and elements, `;`) -> test_statements
+  Expression levels (quantifiers, iff, =>, \\/, /\\, not, chained comparisons, the, let, if, as) -> test_logic_comparisons_and_binding_forms
+  PlusMinus, MultDivMod, Neg, Selection, CallExp, RefExp, EnumExp, RecordExp, TupleExp, functions -> test_arithmetic_records_tuples_enumerations_functions
+  VectorOrMatrixExp `[|a, b; c, d|]`, vector and matrix types -> test_vectors_and_matrices
+  SetExp, SetRange, SetComp, SeqExp, CatExp, the set and sequence toolkits -> test_sets_sequences_and_toolkits
+  Types (product, function, relation, Set, Seq, ?X), TypeDecl (type, datatype, record, enumeration) -> test_type_forms
+  RoboChart-only and unrunnable forms (probabilistic, wait, triggers, unbounded quantifiers) -> test_unrunnable_forms_are_located
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from cotwin.diagnostics import CotwinError, Severity
+from cotwin.dmodel.program import build_program
+from cotwin.robosim.check import check_paths
+from language_support import checked, run_both
+
+# A platform with one input event carrying an int, a few outputs, and one operation; most tests plug
+# a machine into it.
+PLATFORM = """interface In { event go: int event stop }
+interface Out { event out: int event flag: boolean event real_out: real }
+interface Ops { move(x: real, y: int) }
+controller C {
+	cycleDef cycle == 1
+	uses In uses Out requires Ops
+	sref m = M
+	connection C on go to m on go
+	connection C on stop to m on stop
+	connection m on out to C on out
+	connection m on flag to C on flag
+	connection m on real_out to C on real_out
+}
+module Mod {
+	cycleDef cycle == 1
+	robotic platform P { uses In uses Out provides Ops }
+	cref c = C
+	connection P on go to c on go (_async)
+	connection P on stop to c on stop (_async)
+	connection c on out to P on out (_async)
+	connection c on flag to P on flag (_async)
+	connection c on real_out to P on real_out (_async)
+}
+"""
+
+
+def machine(body: str, extra: str = "") -> dict[str, str]:
+    """A project: the platform above, the machine M with this body, and extra declarations."""
+    return {"m.rst": PLATFORM + extra + "stm M {\n\tcycleDef cycle == 1\n\tinput context { uses In }\n"
+                                        "\toutput context { uses Out requires Ops }\n" + body + "\n}\n"}
+
+
+def errors(result) -> list[tuple[str, int, int, str]]:
+    return [(f.location.path.rsplit("/", 1)[-1], f.location.line, f.location.column, f.message)
+            for f in result.findings if f.severity is Severity.ERROR]
+
+
+def test_packages_imports_and_rct_declarations(tmp_path):
+    files = {
+        # RoboChart declarations beside the d-models, in their own package
+        "decl.rct": """package Shared
+diagram shared
+interface Ev { event go: Pos event out: int }
+interface Ops { move(x: real, y: int) }
+datatype Pos { x: int y: int }
+enumeration Mode { Slow Fast }
+robotic platform RP { uses Ev provides Ops }
+function twice(n: int): int { postcondition result == 2 * n }
+controller Unused { uses Ev stm S { uses Ev initial i state A { } transition t { from i to A trigger go } } }
+""",
+        # two machines called M in two packages: no clash
+        "other.rst": """package Other
+stm M { initial i state A { } transition t { from i to A } transition u { from A to A exec } }
+""",
+        "main.rst": """package Sim
+import Shared::*
+stm M {
+	var p: Pos
+	var mode: Shared::Mode = Mode::Slow
+	input context { uses Ev } output context { uses Ev requires Ops }
+	initial i
+	state A { }
+	state B { }
+	transition t0 { from i to A }
+	transition t1 { from A to B condition $go?p action $out!twice(p.x + p.y); mode = Mode::Fast }
+	transition t2 { from A to A exec condition not $go }
+	transition t3 { from B to A exec }
+}
+controller C { cycleDef cycle == 1 uses Ev requires Ops sref m = M
+	connection C on go to m on go connection m on out to C on out }
+module Mod { cycleDef cycle == 1 rref P = Shared::RP cref c = C
+	connection P on go to c on go (_async) connection c on out to P on out (_async) }
+""",
+    }
+    trace = run_both(tmp_path, files, [{}, {"go": {"x": 2, "y": 5}}, {}, {"go": {"x": -1, "y": 0}}],
+                     module="Mod")
+    assert [t[0] for t in trace] == [[], ["out!14"], [], ["out!-2"]]
+    # names are per package: without the import, Pos and twice are unknown, with a hint
+    (tmp_path / "main.rst").write_text(files["main.rst"].replace("import Shared::*\n", ""))
+    found = errors(check_paths([tmp_path]))
+    assert any(m.startswith("unknown type 'Pos' (there is Shared::Pos") for _, _, _, m in found)
+
+
+def test_modules_platform_references_and_connections(tmp_path):
+    files = machine("""	initial i
+	state A { }
+	transition t0 { from i to A }
+	state B { }
+	transition t1 { from A to B condition $go?x action $out!x }
+	transition t2 { from A to A exec condition not $go }
+	transition t3 { from B to A exec }
+	var x: int""")
+    assert run_both(tmp_path, files, [{"go": 4}, {}])[0][0] == ["out!4"]
+    # a connection to the platform must be asynchronous; [mult] marks a bidirectional connection
+    text = files["m.rst"].replace("connection P on go to c on go (_async)", "connection P on go to c on go")
+    (tmp_path / "m.rst").write_text(text.replace("connection c on out to P on out (_async)",
+                                                 "connection c on out to P on out (_async) [mult]"))
+    found = errors(check_paths([tmp_path]))
+    assert [m for _, _, _, m in found] == [
+        "connection in module Mod: a connection with the robotic platform must be asynchronous: add (_async)"]
+    # a module holds one platform (or rref) and no state machine
+    (tmp_path / "m.rst").write_text(files["m.rst"].replace("cref c = C", "cref c = C sref s = M"))
+    assert any("must not have a state machine outside a controller" in m for *_, m in errors(check_paths([tmp_path])))
+
+
+def test_operations_definitions_references_and_calls(tmp_path):
+    extra = """interface Shared { var n: int }
+interface Soft { add(k: int) twice(k: int) }
+operation add(k: int) {
+	requires Shared
+	var before: int = n
+	terminates
+	precondition k >= 0
+	initial i
+	junction j
+	final f
+	transition t0 { from i to j }
+	transition t1 { from j to f condition k > 0 action n = before + k }
+	transition t2 { from j to f condition else }
+}
+"""
+    files = machine("""	requires Soft
+	var n: int = 1
+	var x: int
+	initial i
+	state A { }
+	state B { entry twice(x); $out!n }
+	transition t0 { from i to A }
+	transition t1 { from A to B condition $go?x }
+	transition t2 { from A to A exec condition not $go }
+	transition t3 { from B to A exec }""", extra)
+    # `twice` is defined inside the controller, `add` referenced with opref; twice calls add and waits a cycle
+    files["m.rst"] = files["m.rst"].replace("sref m = M", """sref m = M
+	opref a = add
+	operation twice(k: int) {
+		requires Shared requires Soft
+		initial i
+		state W { }
+		final f
+		transition t0 { from i to W action add(k) }
+		transition t1 { from W to f exec action add(k) }
+	}""")
+    trace = run_both(tmp_path, files, [{}, {"go": 3}, {}, {}, {"go": 0}, {}, {}])
+    assert [t[0] for t in trace] == [[], [], ["out!7"], [], [], ["out!7"], []]
+
+
+def test_machines_contexts_and_cycle_definitions(tmp_path):
+    # RoboTool accepts a non-boolean cycleDef and a condition on the transition out of an initial junction
+    files = machine("""	cycleDef 2
+	var started: boolean = true
+	event local_tick
+	initial i
+	state A { }
+	state Z { }
+	transition t0 { from i to A condition started }
+	transition t1 { from A to Z exec condition $stop }
+	transition t2 { from A to A exec condition not $stop action $flag!true }
+	transition t3 { from Z to Z exec }""")
+    files["m.rst"] = files["m.rst"].replace("stm M {\n\tcycleDef cycle == 1", "stm M {")
+    project, warnings = checked(tmp_path, files)
+    assert warnings == []
+    trace = run_both(tmp_path, files, [{}, {"stop": None}, {}])
+    # exec transitions complete in the next cycle: t2's action comes a cycle after its guard held
+    assert trace == [([], [0]), (["flag!true"], [0]), ([], [1])]
+    # input contexts take events; a used interface must be declared by the controller too
+    (tmp_path / "m.rst").write_text(files["m.rst"].replace("uses In uses Out requires Ops\n\tsref", "uses Out requires Ops\n\tsref"))
+    found = errors(check_paths([tmp_path]))
+    assert any("the controller C is missing the declared interfaces: In (used by M)" in m for *_, m in found)
+
+
+def test_transitions_exec_else_and_state_actions(tmp_path):
+    files = machine("""	var k: int = 0
+	initial i
+	state A {
+		entry k = k + 1
+		during $flag!(k > 2)
+		exit $real_out!1.5; exec
+	}
+	junction j
+	state B { }
+	final F
+	transition t0 { from i to A }
+	transition t1 { from A to j condition $go }
+	transition t2 { from j to B condition k > 1 action $out!k }
+	transition t3 { from j to A condition else }
+	transition t4 { from B to F exec condition $stop }
+	transition t5 { from B to B exec condition not $stop }""")
+    trace = run_both(tmp_path, files, [{}, {"go": 0}, {}, {"go": 0}, {}, {}, {"stop": None}, {}, {}])
+    assert trace[0] == (["flag!false"], [0])
+    assert trace[1][0] == ["real_out!1.5"]  # the exit action runs, then waits a cycle (exec in an exit action)
+    assert trace[-1][1] == [2]  # final
+
+
+def test_clocks_since_and_since_entry(tmp_path):
+    files = machine("""	clock T
+	var seen: int
+	initial i
+	state A { }
+	state B { during $flag!true }
+	transition t0 { from i to A action #T }
+	transition t1 { from A to B condition since(T) >= 2 /\\ $go?seen action $out!cycle }
+	transition t2 { from A to A exec condition not (since(T) >= 2 /\\ $go) }
+	transition t3 { from B to A condition sinceEntry(B) > 1 action #T }""")
+    # since(T) counts the cycles since the reset (0 in the cycle of the reset); sinceEntry(B) those
+    # since B was entered; a self-transition would re-enter B, a during action does not
+    trace = run_both(tmp_path, files, [{"go": 1}] * 9)
+    assert [t[0] for t in trace] == [[], [], ["flag!true", "out!3"], ["flag!true"], [], [], ["flag!true", "out!7"],
+                                     ["flag!true"], []]
+    # timed expressions belong in guards, compared with a number
+    bad = files["m.rst"].replace("action $out!cycle", "action $out!since(T)").replace(
+        "condition sinceEntry(B) > 1", "condition sinceEntry(B) == since(T) /\\ (since(T) + 1 > 2)")
+    (tmp_path / "m.rst").write_text(bad)
+    messages = [m for *_, m in errors(check_paths([tmp_path]))]
+    assert "timed expression (since, sinceEntry) not allowed in an action" in messages
+    assert "unsupported use of a timed expression: compare it with a number" in messages
+
+
+def test_dollar_expressions_sends_and_platform_calls(tmp_path):
+    files = machine("""	var x: int
+	var last: int = -1
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	state B { }
+	transition t1 { from A to B condition $go?x:(x > 10) action $out!x; $move(x, x); last = x }
+	transition t2 { from A to B condition $go.7 action $flag!true }
+	transition t3 { from A to B condition not ($go?x:(x > 10) \\/ $go.7) action $real_out!$last }
+	transition t4 { from B to A exec }""")
+    trace = run_both(tmp_path, files, [{"go": 20}, {"go": 7}, {"go": 3}, {}])
+    assert [t[0] for t in trace] == [["move(20.0, 20)", "out!20"], ["flag!true"], ["real_out!20.0"], ["real_out!20.0"]]
+
+
+def test_statements(tmp_path):
+    files = machine("""	var r: Pair
+	var v: vector(int, 3)
+	var n: int
+	initial i
+	state A { }
+	transition t0 { from i to A action r = Pair(|a = 1, b = 2|) }
+	state B { }
+	transition t3 { from B to A exec }
+	transition t1 { from A to B condition $go?n action
+		if n > 0 then (r.a = r.a + n; v[2] = n) else skip end;
+		if r.a == 5 then $flag!true end;
+		$out!(r.a * 10 + v[2]) }
+	transition t2 { from A to A exec condition not $go }""", "datatype Pair { a: int b: int }\n")
+    trace = run_both(tmp_path, files, [{"go": 4}, {"go": -1}, {"go": 0}])
+    assert [t[0] for t in trace] == [["flag!true", "out!54"], ["flag!true", "out!54"], ["flag!true", "out!54"]]
+
+
+def test_logic_comparisons_and_binding_forms(tmp_path):
+    files = machine("""	var n: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	state B { }
+	transition t3 { from B to A exec }
+	transition t1 { from A to B condition $go?n action
+		$flag!((0 < n <= 10 => n != 3) iff (let m == n * 2 @ m > 0 /\\ not (m == 6)));
+		$out!(if 1 <= n < 5 then (the k: int | k in {1, 2, 3} /\\ k == n @ k * 100) else n end);
+		$real_out!(n as real) }
+	transition t2 { from A to A exec condition not $go }""")
+    trace = run_both(tmp_path, files, [{"go": 2}, {"go": 3}, {"go": 7}, {"go": 4}])
+    assert [t[0] for t in trace[:3]] == [["flag!true", "out!200", "real_out!2.0"],
+                                         ["flag!true", "out!300", "real_out!3.0"],
+                                         ["flag!true", "out!7", "real_out!7.0"]]
+    # `the` with no value: the same located error from both
+    assert trace[3][0] == "error" and "'the' found 0 values, not exactly one" in trace[3][1]
+
+
+def test_arithmetic_records_tuples_enumerations_functions(tmp_path):
+    extra = """datatype Pos { x: int y: int }
+enumeration Dir { North East South West }
+function turn(d: Dir): Dir { postcondition result == if d == Dir::West then Dir::North else Dir::East end }
+function norm1(p: Pos): int { postcondition result == (if p.x < 0 then -p.x else p.x end) + (if p.y < 0 then -p.y else p.y end) }
+"""
+    files = machine("""	var p: Pos
+	var d: Dir = Dir::West
+	var t: int * real
+	var n: int
+	const K: int = 7 % 4 - -2
+	initial i
+	state A { }
+	transition t0 { from i to A action t = (|K, 2.5|) }
+	state B { }
+	transition t3 { from B to A exec }
+	transition t1 { from A to B condition $go?n action
+		p = Pos(|x = n / 2, y = -n % 3|); d = turn(d);
+		$out!(norm1(p) * t[1]); $real_out!(t[2] * n / 4); $flag!(p == Pos(|y = -n % 3, x = n / 2|) /\\ d == Dir::North) }
+	transition t2 { from A to A exec condition not $go }""", extra)
+    trace = run_both(tmp_path, files, [{"go": 7}, {"go": -8}, {}])
+    assert [t[0] for t in trace[:2]] == [["flag!true", "out!20", "real_out!4.375"],
+                                         ["flag!false", "out!30", "real_out!-5.0"]]
+
+
+def test_vectors_and_matrices(tmp_path):
+    files = machine("""	var v: vector(int, 3) = [|1, 2, 3|]
+	var w: vector(real, 2)
+	var m: matrix(int, 2, 3) = [|1, 2, 3; 4, 5, 6|]
+	var n: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	state B { }
+	transition t3 { from B to A exec }
+	transition t1 { from A to B condition $go?n action
+		v = v + 2 * v; v[n] = 0; w = [|0.5, 1|] * 2;
+		$out!((m * v)[2] + m[2, 1] + transpose(m)[3, 2]);
+		$real_out!(w[1] + w[2]); $flag!(v == [|3, 6, 0|]) }
+	transition t2 { from A to A exec condition not $go }""")
+    trace = run_both(tmp_path, files, [{"go": 3}, {"go": 4}])
+    assert trace[0][0] == ["flag!true", "out!52", "real_out!3.0"]
+    assert trace[1][0] == "error" and trace[1][1].endswith("index 4 out of range 1..3 in state machine M (cycle 2)")
+
+
+def test_sets_sequences_and_toolkits(tmp_path):
+    files = machine("""	var s: Set(int) = {1, 2}
+	var q: Seq(int) = <5>
+	var n: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	state B { }
+	transition t3 { from B to A exec }
+	transition t1 { from A to B condition $go?n action
+		s = union(s, {n, n + 1}); q = q cat <n> ^ reverse(<1, 2>);
+		$out!(size(s) * 1000 + size(q) * 100 + head(tail(q)) * 10 + last(q));
+		$flag!(n in s /\\ notin(0, s) /\\ subseteq({1}, s) /\\ (forall x: int | x in s @ x > 0)
+		       /\\ (exists1 y: int | y in {1 to 3} @ y * y == 4) /\\ size({x: int | x in s /\\ x > 1 @ x * 2}) == size(s) - 1)
+		}
+	transition t2 { from A to A exec condition not $go }""",
+                    "")
+    files["m.rst"] = "import set_toolkit::*\nimport sequence_toolkit::*\n" + files["m.rst"]
+    trace = run_both(tmp_path, files, [{"go": 7}, {"go": 7}, {"go": 9}] + [{"go": k} for k in range(20, 40)])
+    assert trace[0][0] == ["flag!true", "out!4471"]
+    assert trace[1][0] == ["flag!true", "out!4771"]  # a set keeps each element once; a sequence grows
+    assert trace[-1][0] == "error" and "exceeds cotwin's bound of 32 elements" in trace[-1][1]
+
+
+def test_type_forms(tmp_path):
+    files = machine("""	var f: int -> int
+	var r: int <-> boolean
+	var g: (int * real) * Seq(Set(boolean))
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec }""", """type Opaque
+record R { o: Opaque e: Colour }
+enumeration Colour { Red Green(int) }
+function pick(s: Set(?X)): ?X { }
+""")
+    project, warnings = checked(tmp_path, files)
+    assert warnings == []
+    with pytest.raises(CotwinError) as err:  # function values cannot be executed
+        build_program(project)
+    assert any("f: values of type (int) -> int cannot be executed yet" in f.message for f in err.value.findings)
+
+
+def test_unrunnable_forms_are_located(tmp_path):
+    files = machine("""	var n: int
+	initial i
+	probabilistic p
+	state A { entry wait(1) }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition exists k: int @ k * k == n }""")
+    project, _ = checked(tmp_path, files)
+    with pytest.raises(CotwinError) as err:
+        build_program(project)
+    messages = sorted((f.location.line, f.message) for f in err.value.findings)
+    assert [m for _, m in messages] == [
+        "probabilistic junction p cannot be executed (in state machine M)",
+        "wait is RoboChart's, not RoboSim's: it cannot be executed (in state machine M)",
+        "a quantifier over all values of int ('k' is not bounded by 'k in S') cannot be executed (in state machine M)",
+    ]
+
+
+def test_published_mobile_model_reads_with_documented_warnings_and_runs(published, tmp_path):
+    from cotwin.dmodel.fmu import build_fmu
+    from language_support import fmu_trace, interpreter_trace
+
+    path = published / "mobile" / "ObstacleAvoidance_OneStateMachine.rst"
+    result = check_paths([path])
+    assert errors(result) == []
+    warnings = sorted((f.location.line, f.location.column, f.message.split(":")[0].split(" (")[0])
+                      for f in result.findings if f.severity is Severity.WARNING)
+    assert warnings == [
+        (1, 16, "package Mathematics is not part of the project"),  # imported, never published
+        (66, 35, "'randcoef' is a constant but is assigned"),  # read as a variable
+        (66, 46, "unknown function 'randomcoef'"),  # read as uninterpreted () -> real
+        (72, 35, "'randcoef' is a constant but is assigned"),
+        (110, 88, "function 'abs' is declared with 0 parameter(s) and no definition but called with 1"),
+        (133, 93, "function 'abs' is declared with 0 parameter(s) and no definition but called with 1"),
+        (139, 13, "function 'abs' is declared with 0 parameter(s) and no definition but called with 1"),
+        (172, 14, "function 'abs' is declared with 0 parameter(s) and no definition but called with 1"),
+        (202, 25, "'NOA_Move[0]'"),  # vectors index from 1: that statement is read 0-based
+    ]
+    program = build_program(result.project)
+    assert "seed" in [p.port for p in program.parameters]  # randomcoef() and random_sign() draw from it
+    steps = ([{}] * 3 + [{"closestDistance": 0.5, "closestAngle": 20.0}] + [{}] * 3
+             + [{"closestDistance": 0.3, "closestAngle": -40.0}] * 3 + [{}] * 4)
+    for seed in (0, 7):
+        expected = interpreter_trace(program, steps, {"seed": seed})
+        assert all(t[0] != "error" for t in expected)
+        assert fmu_trace(program, build_fmu(program, tmp_path / f"oa{seed}.fmu"), steps, {"seed": seed}) == expected
+    # the obstacle seen in cycle 4 turns the robot away: av = (20 - 100) * pi / 180, lv = 0.6 / 2
+    assert expected[3][0] == ["move(-1.3962622222222223, 0.3)"]
