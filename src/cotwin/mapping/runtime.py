@@ -20,8 +20,10 @@ from ..diagnostics import CotwinError
 from ..pmodel import ik
 from ..pmodel.cell import CellGeometry
 from ..robosim import syntax as s
-from ..robosim.operators import MATH, SHORT_CIRCUIT, binary, short_circuit
 from ..robosim.check_mapping import mapping_targets
+from ..robosim.evaluator import ClosureCompiler, Evaluator, index
+from ..robosim.operators import MATH
+from ..robosim.values import EvalError
 from ..robosim.declarations import EnumDecl
 from ..robosim.pmodel_elements import Mapping as MappingModel
 from ..robosim.types import EnumTy, TypeResolver
@@ -81,59 +83,113 @@ class FunctionRegistry:
         self._cache = {key: ik.IKResult(**values) for key, values in snapshot.items()}
 
 
-class _Env:
-    """Evaluates mapping expressions over variables, constants, sensors and registry functions."""
+class _MappingNames:
+    """How mapping expressions look names up: the operation's or event's local scope, then the
+    mapping's variables; `E::lit` is an enumeration literal; a path `pmodel::link::sensor.port` is a
+    sensor reading of the platform; functions come from the registry. Vectors index from 0 here, as
+    cotwin's mapping notation has always read them (d-models follow RoboChart and count from 1)."""
+
+    FIRST_INDEX = 0
+
+    @staticmethod
+    def sensor_key(e: s.FieldAccess) -> str | None:
+        if isinstance(e.base, s.Name) and len(e.base.name.parts) >= 3:
+            return f"{e.base.name}.{e.field}"
+        return None
+
+
+class _MappingEvaluator(Evaluator):
+    """The interpreting form (the reference the compiled closures are compared with)."""
+
+    def __init__(self, runtime: "Mapping", scope: dict):
+        super().__init__()
+        self.rt = runtime
+        self.scope = scope
+
+    def name(self, e: s.Name):
+        if len(e.name.parts) > 1:
+            return self.rt.enum_value(e.name)
+        n = e.name.last
+        if n in self.scope:
+            return self.scope[n]
+        if n in self.rt.variables:
+            return self.rt.variables[n]
+        raise CotwinError(f"{e.loc}: '{n}' has no value")
+
+    def field(self, e: s.FieldAccess):
+        key = _MappingNames.sensor_key(e)
+        if key is not None:
+            return self.rt.sensor(key, e.loc)
+        return super().field(e)
+
+    def function(self, e: s.Call):
+        return self.rt.function(e)
+
+    def first_index(self, e: s.IndexAccess) -> int:
+        return _MappingNames.FIRST_INDEX
+
+
+class _MappingCompiler(ClosureCompiler):
+    """The compiled form: each expression becomes a closure over the scope dict, once."""
 
     def __init__(self, runtime: "Mapping"):
         self.rt = runtime
 
-    def eval(self, e: s.Expr, scope: dict):
+    def compile_name(self, e: s.Name):
         rt = self.rt
-        if isinstance(e, s.Literal):
-            return e.value
-        if isinstance(e, s.Name):
-            if len(e.name.parts) == 1:
-                n = e.name.last
-                if n in scope:
-                    return scope[n]
-                if n in rt.variables:
-                    return rt.variables[n]
-                raise CotwinError(f"{e.loc}: '{n}' has no value")
-            return rt.enum_value(e.name)
-        if isinstance(e, s.FieldAccess) and isinstance(e.base, s.Name) and len(e.base.name.parts) >= 3:
-            key = f"{e.base.name}.{e.field}"
-            readings = rt.sensor_readings()
-            if key not in readings:
-                raise CotwinError(f"{e.loc}: the platform does not provide sensor '{key}'")
-            return readings[key]
-        if isinstance(e, s.FieldAccess):
-            return self.eval(e.base, scope)[e.field]
-        if isinstance(e, s.IndexAccess):
-            return self.eval(e.base, scope)[int(self.eval(e.index, scope))]
-        if isinstance(e, s.Unary):
-            v = self.eval(e.operand, scope)
-            return (not v) if e.op == "not" else -v
-        if isinstance(e, s.Binary):
-            left = self.eval(e.left, scope)
-            if e.op in SHORT_CIRCUIT:
-                return short_circuit(e.op, left, lambda: self.eval(e.right, scope))
-            try:
-                return binary(e.op, left, self.eval(e.right, scope))
-            except ZeroDivisionError as err:
-                raise CotwinError(f"{e.loc}: {err}") from None
-            except KeyError:
-                raise CotwinError(f"{e.loc}: operator '{e.op}' is not supported in mappings") from None
-        if isinstance(e, s.IfExpr):
-            return self.eval(e.then if self.eval(e.condition, scope) else e.otherwise, scope)
-        if isinstance(e, (s.VectorExpr, s.TupleExpr)):
-            return tuple(self.eval(i, scope) for i in e.items)
-        if isinstance(e, s.Call) and isinstance(e.function, s.Name):
-            name = e.function.name.last
-            fn = rt.functions.get(name)
-            if fn is None:
-                raise CotwinError(f"{e.loc}: function '{name}' has no implementation in cotwin's registry")
-            return fn(*(self.eval(a, scope) for a in e.args))
-        raise CotwinError(f"{e.loc}: {type(e).__name__} is not supported in mappings")
+        if len(e.name.parts) > 1:
+            value = rt.enum_value(e.name)
+            return lambda scope: value
+        n, loc = e.name.last, e.loc
+
+        def run(scope):
+            if n in scope:
+                return scope[n]
+            variables = rt.variables
+            if n in variables:
+                return variables[n]
+            raise CotwinError(f"{loc}: '{n}' has no value")
+        return run
+
+    def compile_field(self, e: s.FieldAccess):
+        key = _MappingNames.sensor_key(e)
+        if key is None:
+            return None
+        rt, loc = self.rt, e.loc
+        return lambda scope: rt.sensor(key, loc)
+
+    def compile_call(self, e: s.Call):
+        rt = self.rt
+        return lambda scope: rt.function(e)
+
+    def visit_IndexAccess(self, e: s.IndexAccess):
+        base, position, loc = self.visit(e.base), self.visit(e.index), e.loc
+        first = _MappingNames.FIRST_INDEX
+        return lambda scope: index(base(scope), position(scope), loc, first)
+
+    def fallback(self, scope) -> Evaluator:
+        return _MappingEvaluator(self.rt, scope)
+
+
+class _Env:
+    """Evaluates mapping expressions: compiled to closures once (the default), or interpreted."""
+
+    def __init__(self, runtime: "Mapping", compiled: bool = True):
+        self.rt = runtime
+        self.compiled = compiled
+        self._closures: dict[int, object] = {}
+        self._compiler = _MappingCompiler(runtime)
+
+    def eval(self, e: s.Expr, scope: dict):
+        try:
+            if not self.compiled:
+                return _MappingEvaluator(self.rt, scope).visit(e)
+            run = self._closures.get(id(e))
+            if run is None:
+                run = self._closures[id(e)] = self._compiler.compile(e)
+            return run(scope)
+        except EvalError as err:
+            raise CotwinError(f"{err.loc or e.loc}: {err.message}") from None
 
 
 class InputEvent:
@@ -206,9 +262,10 @@ def _actuator_port(eq: s.Expr) -> str | None:
 class Mapping:
     """The platform-mapping interface: one instance per mapping model and endpoint."""
 
-    def __init__(self, project, endpoint, mapping_name: str | None = None, geometry=None):
+    def __init__(self, project, endpoint, mapping_name: str | None = None, geometry=None, compiled: bool = True):
         """`geometry` (a CellGeometry) places the cell for the IK registry, whatever the endpoint; without
-        it the endpoint's own geometry is used, if it has one."""
+        it the endpoint's own geometry is used, if it has one. `compiled=False` evaluates expressions
+        with the interpreting evaluator instead of closures (the reference, for tests and benchmarks)."""
         mappings = project.elements(MappingModel)
         if mapping_name is not None:
             model = project.lookup("mapping", mapping_name)
@@ -230,7 +287,7 @@ class Mapping:
         self.resolver = TypeResolver(project, self.source, Diagnostics())
         self.registry = FunctionRegistry(endpoint, geometry)
         self.functions = self.registry.functions()
-        self.env = _Env(self)
+        self.env = _Env(self, compiled)
         self.events = {ev.name: InputEvent(self, ev) for ev in model.input_events}
         self.operations = {op.name: Operation(self, op, [p.name for p in members.operations[op.name].params])
                            for op in model.operations if op.name in members.operations}
@@ -240,6 +297,19 @@ class Mapping:
         for path, _ in (c for op in self.operations.values() for c in op.commands):
             endpoint.joint(path)  # every commanded actuator exists on the endpoint
         self.started = False
+
+    def sensor(self, key: str, loc):
+        readings = self.sensor_readings()
+        if key not in readings:
+            raise CotwinError(f"{loc}: the platform does not provide sensor '{key}'")
+        return readings[key]
+
+    def function(self, call: s.Call):
+        name = call.function.name.last if isinstance(call.function, s.Name) else "?"
+        fn = self.functions.get(name)
+        if fn is None:
+            raise CotwinError(f"{call.loc}: function '{name}' has no implementation in cotwin's registry")
+        return fn
 
     def enum_value(self, name: s.QName) -> int:
         decl = self.project.lookup("type", s.QName(name.parts[:-1]), self.source)

@@ -24,7 +24,7 @@ def index(base, position, loc, first: int = 1):
     """base[position] for a vector, sequence, tuple or matrix (a row), counting from `first`."""
     if not is_int(position):
         raise EvalError("type", f"index {position!r} is not an integer", loc)
-    if isinstance(base, (VectorValue, SeqValue, TupleValue, MatrixValue)):
+    if isinstance(base, tuple) and not isinstance(base, SetValue):
         k = position - first
         if 0 <= k < len(base):
             return base[k]
