@@ -96,6 +96,9 @@ class Context:
                 return f"s->o{self.frame}.{ident(name)}", body.types[name]
             if name in body.constants:
                 return self.gen.value(body.constants[name], body.types[name]), body.types[name]
+            holder = body.bindings.get(name, -1)
+            if holder >= 0:
+                return Context(self.gen, m, m.frames[holder], holder).name(name, loc)
         if any(n == name for n, _, _ in m.variables):
             return f"s->{ident(name)}", m.types[name]
         if name in m.constants:

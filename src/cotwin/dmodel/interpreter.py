@@ -189,6 +189,12 @@ class MachineEvaluator(Evaluator):
                 return top.variables[name]
             if name in body.constants:
                 return body.constants[name]
+            holder = body.bindings.get(name, -1)
+            if holder >= 0:
+                frame = next(f for f in reversed(self.frames) if f.body == holder)
+                if name in frame.variables:
+                    return frame.variables[name]
+                return self.m.frames[holder].constants[name]
         if self.frames and name in self.frames[0].variables:
             return self.frames[0].variables[name]
         if name in self.m.constants:
@@ -289,7 +295,8 @@ class Interpreter:
         for m in program.machines:
             mine = {p.name: params.get(p.port, p.default) for p in program.parameters if p.machine == m.index}
             self.evaluators.append(MachineEvaluator(self, m, mine))
-        self.seed = int(params.get("seed", 0))
+        seed = next((p for p in program.parameters if p.machine < 0), None)
+        self.seed = int(params.get(seed.port, 0)) if seed is not None else 0
         self.warnings: list[Nondeterminism] = []
         self.taken: set[tuple[int, int]] | None = None  # (machine, edge) taken, when the verifier asks
         self.reset()
@@ -561,8 +568,12 @@ class _Cycle:
         return self.m.types.get(name)
 
     def _storage(self, name: str) -> dict:
-        if self.frame.body >= 0 and name in self.frame.variables:
-            return self.frame.variables
+        if self.frame.body >= 0:
+            if name in self.frame.variables:
+                return self.frame.variables
+            holder = self.body.bindings.get(name, -1)
+            if holder >= 0:
+                return next(f for f in reversed(self.st.frames) if f.body == holder).variables
         return self.st.frames[0].variables
 
     def assign(self, target: s.Expr, value) -> None:

@@ -212,6 +212,8 @@ class Body:
     clocks: list[str]
     calls: dict[str, "OperationInstance"] = field(default_factory=dict)  # software operations it calls
     entry_timers: set[int] = field(default_factory=set)  # states whose entry `sinceEntry` reads
+    #: names it requires but does not declare -> the frame that holds them (-1: the machine's own)
+    bindings: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -221,6 +223,12 @@ class OperationInstance(Body):
     index: int = 0
     name: str = ""
     params: list[tuple[str, Ty]] = field(default_factory=list)
+    callers: list[Body] = field(default_factory=list)
+    required: list[str] = field(default_factory=list)  # variables its interfaces require
+
+    def declares(self, name: str) -> bool:
+        return any(n == name for n, _, _ in self.variables) or any(n == name for n, _ in self.params) \
+            or name in self.constants
 
 
 @dataclass
@@ -353,14 +361,26 @@ class _Builder:
         operations = [OperationPort(op.name, [(p.name, platform_resolver.resolve(p.type)) for p in op.params])
                       for op in members.operations.values()]
         self.argument_ports(operations)
+        taken = {"cycle_period", *(p.name for p in (*input_ports, *output_ports, *operations))}
+        taken |= {name for p in (*input_ports, *output_ports) for name, _ in p.value_ports}
+        taken |= {name for op in operations for group in op.arg_ports for name, _ in group}
+        taken |= {"state" if len(machines) == 1 else f"state_{m.name}" for m in machines}
         parameters = []
         for m in machines:
             for const in m.parameters:
                 ty = m.types[const]
                 port = const if len(machines) == 1 else f"{m.name}_{const}"
+                if port in taken:  # a constant named like an operation's argument or an event
+                    port = f"{m.name}_{const}"
+                while port in taken:
+                    port += "_parameter"
+                taken.add(port)
                 parameters.append(Parameter(m.index, const, port, ty, default_value(ty, self.resolver)))
         if self.uses_random:
-            parameters.append(Parameter(-1, "seed", "seed", INT, 0))
+            port = "seed"
+            while port in taken:
+                port = "random_" + port
+            parameters.append(Parameter(-1, "seed", port, INT, 0))
         self.diag.raise_if_errors()
         return Program(self.project, module, self.resolver, input_ports, output_ports, operations, machines,
                        parameters, input_routes, output_routes, internal, self.uses_random)
@@ -423,6 +443,8 @@ class _Builder:
         )
         definitions = self._operation_definitions(ctrl, ctrl_source)
         self._link(inst, inst, definitions, [])
+        for frame in inst.frames:
+            self._bind(inst, frame)
         self._runnable(inst, inst, f"state machine {machine.name}")
         for frame in inst.frames:
             self._runnable(inst, frame, f"operation {frame.name}")
@@ -460,6 +482,35 @@ class _Builder:
                 machine.frames.append(frame)
                 self._link(machine, frame, definitions, [*stack, name])
             body.calls[name] = frame
+            if body not in frame.callers:
+                frame.callers.append(body)
+
+    def _bind(self, machine: MachineInstance, frame: "OperationInstance") -> None:
+        """Where each variable an operation requires lives: in its caller (a calling operation that
+        declares it, or the machine), the same for every call, as RoboChart requires the caller to
+        provide it."""
+        for name in frame.required:
+            places = {self._place(machine, caller, name, []) for caller in frame.callers}
+            places.discard(None)
+            if len(places) == 1:
+                frame.bindings[name] = places.pop()
+            elif not places:
+                self.diag.error(frame.machine.loc, f"operation {frame.name} requires '{name}', which neither state "
+                                                   f"machine {machine.machine.name} nor any caller declares")
+            else:
+                self.diag.error(frame.machine.loc, f"operation {frame.name} requires '{name}', which its callers hold "
+                                                   "in different places: this cannot be executed")
+
+    def _place(self, machine: MachineInstance, body: Body, name: str, seen: list) -> int | None:
+        if isinstance(body, OperationInstance):
+            if body.declares(name):
+                return body.index
+            if body in seen:
+                return None
+            places = {self._place(machine, c, name, [*seen, body]) for c in body.callers}
+            places.discard(None)
+            return places.pop() if len(places) == 1 else None
+        return -1 if name in machine.types else None
 
     def _operation(self, machine: MachineInstance, op: OperationDef, index: int) -> OperationInstance:
         source = self.project.file_of(op) or machine.source
@@ -475,12 +526,9 @@ class _Builder:
         constants = self._constants(list(op.variables), resolver)
         io = machine_io(self.project, op, source)
         clocks = sorted(c.name for c in op.clocks)
-        for name, var in io.variables.items():
-            if name not in types and name not in machine.types:
-                self.diag.error(op.loc, f"operation {op.name} requires '{name}', which state machine "
-                                        f"{machine.machine.name} does not have")
+        required = [name for name in io.variables if name not in types]
         return OperationInstance(op, MachineGraph(op), source, resolver, variables, constants, types, clocks,
-                                 index=index, name=op.name, params=params)
+                                 index=index, name=op.name, params=params, required=required)
 
     # ---- what can run ----
     def _runnable(self, machine: MachineInstance, body: Body, where: str) -> None:

@@ -190,6 +190,8 @@ class _Env:
             return run(scope)
         except EvalError as err:
             raise CotwinError(f"{err.loc or e.loc}: {err.message}") from None
+        except (TypeError, ValueError, AttributeError, KeyError, IndexError) as err:
+            raise CotwinError(f"{e.loc}: the expression cannot be evaluated: {err}") from None
 
 
 class InputEvent:

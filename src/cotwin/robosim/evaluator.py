@@ -52,6 +52,13 @@ class Evaluator(ExprVisitor):
     def evaluate(self, e: s.Expr):
         return self.visit(e)
 
+    def visit(self, node):
+        try:
+            return super().visit(node)
+        except (TypeError, ValueError, AttributeError, KeyError, IndexError) as err:
+            # values of the wrong kind (a model the checker already rejected): a located error, not a crash
+            raise EvalError("type", f"{describe(node)} cannot be evaluated: {err}", node.loc) from None
+
     def unsupported(self, node):
         raise unsupported(node)
 

@@ -56,9 +56,14 @@ def substitute(project, name: str, arity: int) -> FunctionDecl | None:
     """A built-in function a defective call may be read as: same name, this many parameters."""
     for package in sorted(SUBSTITUTE_PACKAGES) + [("physmod", "math")]:
         fn = project.symbols.get("function", {}).get(package + (name,))
-        if fn is not None and len(fn.params) == arity:
+        if fn is not None and len(fn.params) == arity and builtin(project, fn) is not None:
             return fn
     return None
+
+
+def in_library(project, fn: FunctionDecl) -> bool:
+    owner = project.file_of(fn)
+    return owner is not None and owner.path.startswith("<library>")
 
 
 def target(project, call: s.Call, source) -> FunctionDecl | None:

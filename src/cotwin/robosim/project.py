@@ -235,8 +235,12 @@ def _index(project: Project, source: SourceFile, namespace: tuple[str, ...], dia
         first = names.get(qualified)
         if first is not None:
             if diag is not None:
-                diag.error(element.loc, f"duplicate {KIND_WORD[kind]} '{'::'.join(qualified)}' "
-                                        f"(first declared at {first.loc})")
+                message = f"duplicate {KIND_WORD[kind]} '{'::'.join(qualified)}' (first declared at {first.loc})"
+                if source.notation == "rct" or project.owners[id(first)].notation == "rct":
+                    # RoboTool warns; RoboChart copies beside RoboSim ones (rc2rs) are common
+                    diag.warning(element.loc, message + ": the first one is used")
+                else:
+                    diag.error(element.loc, message)
             continue
         names[qualified] = element
 

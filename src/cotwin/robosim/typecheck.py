@@ -390,13 +390,17 @@ class ExprChecker(ExprVisitor):
             return None
         fn = self.functions.get(name.last) if len(name.parts) == 1 else self.project.lookup("function", name, self.source)
         if fn is not None:
-            if len(fn.params) != len(args) and not fn.postconditions and not fn.preconditions:
+            if not fn.postconditions and not fn.preconditions and not fns.in_library(self.project, fn):
                 builtin = fns.substitute(self.project, fn.name, len(args))
                 if builtin is not None:
                     where = "::".join(fns.package_of(self.project, builtin) or ())
-                    self.diag.warning(
-                        e.loc, f"function '{fn.name}' is declared with {len(fn.params)} parameter(s) and no "
-                               f"definition but called with {len(args)}: read as {where}::{fn.name}")
+                    if len(fn.params) != len(args):
+                        self.diag.warning(
+                            e.loc, f"function '{fn.name}' is declared with {len(fn.params)} parameter(s) and no "
+                                   f"definition but called with {len(args)}: read as {where}::{fn.name}")
+                    else:
+                        self.diag.warning(fn.loc, f"function '{fn.name}' is declared without a definition: read as "
+                                                  f"{where}::{fn.name}")
                     self.readings.call_targets[id(e)] = builtin
                     return builtin
             return fn
