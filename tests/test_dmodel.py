@@ -21,7 +21,7 @@ from cotwin.dmodel.verify import verify
 from cotwin.robosim.check import load_checked
 
 ARGS = {"target_X": 0, "target_Y": 23, "target_Z": 1}
-# docs/robosim-notation.md, section 5: inputs per cycle -> outputs
+# docs/robosim-notation.md, section 6: inputs per cycle -> outputs
 PAPER_TRACE = [
     ({}, []),
     ({"moveDiscreteCommand": ARGS}, ["movediscrete(0, 23, 1)"]),

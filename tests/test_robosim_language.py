@@ -436,3 +436,61 @@ def test_published_mobile_model_reads_with_documented_warnings_and_runs(publishe
         assert fmu_trace(program, build_fmu(program, tmp_path / f"oa{seed}.fmu"), steps, {"seed": seed}) == expected
     # the obstacle seen in cycle 4 turns the robot away: av = (20 - 100) * pi / 180, lv = 0.6 / 2
     assert expected[3][0] == ["move(-1.3962622222222223, 0.3)"]
+
+
+def test_operation_required_variables_come_from_the_caller(tmp_path):
+    # as robochart-tests/robosim-ops-4: opB requires `e`, which its caller opA declares
+    extra = """interface Soft { opA(d: int) }
+interface SoftB { opB(d: int) }
+interface IVars { var e: int }
+operation opA(d: int) { requires SoftB var e: int = 2 initial i final f transition t { from i to f action opB(d) } }
+operation opB(d: int) { requires IVars output context { uses Out } initial i final f transition t { from i to f action $out!(e * 10 + d); e = 0 } }
+"""
+    files = machine("""	requires Soft
+	var n: int
+	initial i
+	state A { }
+	state B { }
+	transition t0 { from i to A }
+	transition t1 { from A to B condition $go?n action opA(n) }
+	transition t2 { from A to A exec condition not $go }
+	transition t3 { from B to A exec }""", extra)
+    files["m.rst"] = files["m.rst"].replace("sref m = M", "sref m = M opref a = opA opref b = opB")
+    trace = run_both(tmp_path, files, [{"go": 3}, {"go": 4}])
+    assert [t[0] for t in trace] == [["out!23"], ["out!24"]]  # each call of opA starts with its own e = 2
+
+
+def test_functions_declared_without_definition_named_like_builtins(tmp_path):
+    # as the Acrobot test model of RoboTool's physmod repository: sin, cos, floor declared, never defined
+    files = machine("""	var x: real
+	initial i
+	state A { }
+	state B { }
+	transition t0 { from i to A }
+	transition t1 { from A to B condition $go?x action $real_out!(sin(x / 2) + floor(x / 3)) }
+	transition t2 { from A to A exec condition not $go }
+	transition t3 { from B to A exec }""", "function sin(x: real): real {}\nfunction floor(x: real): real {}\n")
+    files["m.rst"] = files["m.rst"].replace("event go: int", "event go: real")
+    project, warnings = checked(tmp_path, files)
+    assert sorted(w.message for w in warnings) == [
+        "function 'floor' is declared without a definition: read as Mathematics::floor",
+        "function 'sin' is declared without a definition: read as Mathematics::sin"]
+    trace = run_both(tmp_path, files, [{"go": 7.0}])
+    assert trace[0][0] == [f"real_out!{__import__('math').sin(3.5) + 2}"]
+
+
+def test_robotool_projects_group_their_folders_and_rct_duplicates_warn(tmp_path):
+    project = tmp_path / "Proj"
+    (project / "rc2rs" / "robosim").mkdir(parents=True)
+    (project / "rc2rs" / "robochart").mkdir(parents=True)
+    (project / ".project").write_text("<projectDescription/>")
+    decl = "package Decl\ninterface Ev { event go: int }\n"
+    (project / "decl.rct").write_text(decl)
+    (project / "rc2rs" / "robochart" / "decl.rct").write_text(decl)  # RoboChart copy made by rc2rs
+    (project / "rc2rs" / "robosim" / "m.rst").write_text(
+        "package Sim\nimport Decl::*\nstm M { cycleDef { cycle == 1 } input context { uses Ev } initial i state A { }"
+        " transition t { from i to A } transition u { from A to A exec } }\n")
+    result = check_paths([tmp_path])
+    assert len(result.projects) == 1 and result.ok  # one RoboTool project: the .rst sees the .rct
+    [warning] = [f for f in result.findings if f.severity is Severity.WARNING]
+    assert warning.message.startswith("duplicate interface 'Decl::Ev'") and warning.message.endswith("the first one is used")

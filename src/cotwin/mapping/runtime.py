@@ -1,7 +1,7 @@
 """The platform-mapping interface of the paper (`InputEvent`, `Operation`, `Mapping` with
 `start_mapping`, `get_event`, `execute_operation`, `stop_mapping`), driven by the mapping model.
 
-Readings of the mapping (see also docs/robosim-notation.md, section 4):
+Readings of the mapping (see also docs/robosim-notation.md, section 8):
 - `execute_operation(op, args)`: the d-model's arguments bind the operation's parameters; its local
   `var`s are evaluated in order, then its `action x = e` assign mapping variables, then each
   equation `actuator.port == e` (a path `pmodel::link::joint::aref.port`) sends e to that actuator;
