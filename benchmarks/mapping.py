@@ -13,7 +13,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from cotwin.mapping.endpoint import SimulatedEndpoint  # noqa: E402
 from cotwin.mapping.runtime import Mapping  # noqa: E402
-from cotwin.pipeline import Twin, load_twin_project  # noqa: E402
+from cotwin.twin.run import load  # noqa: E402
 from cotwin.pmodel.simulator import PlatformSimulator  # noqa: E402
 
 
@@ -32,7 +32,7 @@ def per_round(mapping: Mapping, rounds: int) -> float:
 
 
 def main(rounds: int = 2000) -> None:
-    twin = Twin(load_twin_project(ROOT / "examples" / "ur5e" / "cotwin.toml"))
+    twin = load(ROOT / "examples" / "ur5e" / "cotwin.toml").models
     times = {}
     for compiled in (True, False):
         mapping = Mapping(twin.project, SimulatedEndpoint(PlatformSimulator(twin.tree, twin.scene)), compiled=compiled)

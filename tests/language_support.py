@@ -51,8 +51,10 @@ def fmu_trace(program, fmu: Path, steps: list[dict], parameters: dict | None = N
         for inputs in steps:
             try:
                 outputs = driver.step(inputs)
-            except CotwinError as err:
-                trace.append(("error", err.findings[0].message))
+            except CotwinError as err:  # the unit's error ends with what the model logged
+                logged = driver.unit.messages[-1][2]
+                assert err.findings[0].message.endswith(logged)
+                trace.append(("error", logged.removeprefix("fmi2DoStep: ")))
                 break
             trace.append((_canonical(outputs), [driver.state(m.index) for m in program.machines]))
     finally:

@@ -8,7 +8,7 @@ import pytest
 from cotwin.diagnostics import CotwinError
 from cotwin.mapping.endpoint import SimulatedEndpoint
 from cotwin.mapping.runtime import Mapping
-from cotwin.pipeline import Twin, load_twin_project
+from cotwin.twin.run import load
 from cotwin.pmodel.simulator import PlatformSimulator
 
 
@@ -32,7 +32,7 @@ def _run(mapping: Mapping) -> list:
 def test_compiled_mapping_agrees_with_the_interpreting_evaluator():
     from conftest import EXAMPLES
 
-    twin = Twin(load_twin_project(EXAMPLES / "ur5e" / "cotwin.toml"))
+    twin = load(EXAMPLES / "ur5e" / "cotwin.toml").models
     compiled, interpreted = _run(_mapping(twin, True)), _run(_mapping(twin, False))
     assert compiled == interpreted
     assert any(events["feasibleMoveDiscreteCommand"] for events, _ in compiled)
@@ -41,7 +41,7 @@ def test_compiled_mapping_agrees_with_the_interpreting_evaluator():
 def test_mapping_errors_name_the_place_in_both_forms():
     from conftest import EXAMPLES
 
-    twin = Twin(load_twin_project(EXAMPLES / "ur5e" / "cotwin.toml"))
+    twin = load(EXAMPLES / "ur5e" / "cotwin.toml").models
     for compiled in (True, False):
         mapping = _mapping(twin, compiled)
         mapping.start_mapping()
