@@ -247,6 +247,34 @@ def test_clocks_since_and_since_entry(tmp_path):
     assert "unsupported use of a timed expression: compare it with a number" in messages
 
 
+def test_clock_counts_stop_where_no_comparison_tells_them_apart(tmp_path):
+    from cotwin.dmodel.verify import verify
+
+    body = """	clock T
+	const limit: int
+	initial i
+	state A { }
+	state B { during $flag!true }
+	transition t0 { from i to A action #T }
+	transition t1 { from A to B condition since(T) > 3 action $out!1 }
+	transition t2 { from A to A exec condition since(T) <= 3 }
+	transition t3 { from B to A condition sinceEntry(B) >= 2 /\\ $go action #T }"""
+    files = machine(body)
+    steps = [{}] * 8 + [{"go": 1}] + [{}] * 6 + [{"go": 2}]
+    trace = run_both(tmp_path, files, steps, parameters={"limit": 0})  # the same in the interpreter and the C
+    assert [k for k, t in enumerate(trace) if "out!1" in t[0]] == [4, 12]  # T reset in cycle 8, > 3 again in 12
+    program = build_program(checked(tmp_path, files)[0])
+    [m] = program.machines
+    assert m.clock_caps == {"T": 4} and set(m.entry_caps.values()) == {3}  # one above the constants
+    report = verify(program, max_states=1000)
+    assert report.complete and report.states < 30
+    # compared with a parameter, a count cannot stop: the explored states grow with it
+    unbounded = machine(body.replace("> 3", "> limit").replace("<= 3", "<= limit"))
+    program = build_program(checked(tmp_path, unbounded)[0])
+    assert program.machines[0].clock_caps == {"T": None}
+    assert not verify(program, max_states=200, parameters={"limit": 1000}).complete
+
+
 def test_dollar_expressions_sends_and_platform_calls(tmp_path):
     files = machine("""	var x: int
 	var last: int = -1

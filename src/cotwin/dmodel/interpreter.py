@@ -18,7 +18,9 @@ Work items of a continuation:
 
 Clocks and `since`: a clock counts the cycles since it was last reset (`#T`): 0 in the cycle of the
 reset (or of the machine's start), 1 in the next, and so on; `sinceEntry(S)` likewise counts from
-the last entry of S. A run-time error (division by zero, overflow, an index out of range, ...) is an
+the last entry of S. A count only ever compared with constants stops one above the largest of them
+(program.count_caps), where no comparison tells it apart from a larger one: the same behaviour,
+finitely many states for the verifier. A run-time error (division by zero, overflow, an index out of range, ...) is an
 ExecutionError located at the expression, naming the state the machine was in.
 """
 
@@ -279,7 +281,11 @@ class MachineEvaluator(Evaluator):
     def since_entry(self, e: s.SinceEntryExpr):
         frame = self.frames[-1]
         index = state_index(self.m.body_of(frame.body).graph, e.state)
-        return frame.entered.get(index, self.interp.cycle - 1)
+        if index in frame.entered:
+            return frame.entered[index]
+        cap = self.m.body_of(frame.body).entry_caps.get(index)
+        count = self.interp.cycle - 1  # never entered: counted from the start
+        return count if cap is None else min(count, cap)
 
     def cycle(self, e: s.CycleExpr):
         return self.interp.cycle
@@ -372,11 +378,15 @@ class Interpreter:
                 raise ExecutionError("structure", f"state machine {m.machine.name} has no initial junction", m.machine.loc)
             frame.tasks = (("enter", initial.index), ("settle", initial.index))
         else:
+            caps = m.clock_caps  # counts stop where no comparison can tell them apart (program.count_caps)
             for frame in st.frames:
-                for c in frame.clocks:
-                    frame.clocks[c] += 1
-                for k in frame.entered:
-                    frame.entered[k] += 1
+                for c, count in frame.clocks.items():
+                    cap = caps.get(c)
+                    frame.clocks[c] = count + 1 if cap is None or count < cap else cap
+                entry_caps = m.body_of(frame.body).entry_caps
+                for k, count in frame.entered.items():
+                    cap = entry_caps.get(k)
+                    frame.entered[k] = count + 1 if cap is None or count < cap else cap
         _Cycle(self, m, st, inputs, outputs).run()
 
 

@@ -212,6 +212,8 @@ class Body:
     clocks: list[str]
     calls: dict[str, "OperationInstance"] = field(default_factory=dict)  # software operations it calls
     entry_timers: set[int] = field(default_factory=set)  # states whose entry `sinceEntry` reads
+    #: state index -> the count beyond which its `sinceEntry` reads all alike (None: unbounded)
+    entry_caps: dict[int, int | None] = field(default_factory=dict)
     #: names it requires but does not declare -> the frame that holds them (-1: the machine's own)
     bindings: dict[str, int] = field(default_factory=dict)
 
@@ -240,6 +242,8 @@ class MachineInstance(Body):
     outputs: dict[str, Ty | None] = field(default_factory=dict)
     operations: dict[str, OperationSig] = field(default_factory=dict)  # platform operations ($op)
     frames: list[OperationInstance] = field(default_factory=list)  # every operation it may call
+    #: clock -> the count beyond which every `since` of it reads alike (None: unbounded), see `count_caps`
+    clock_caps: dict[str, int | None] = field(default_factory=dict)
 
     def body_of(self, frame: int) -> Body:
         return self if frame < 0 else self.frames[frame]
@@ -541,19 +545,21 @@ class _Builder:
             if t.probability is not None:
                 self.diag.error(t.probability.loc, f"transition {t.name}: probabilities cannot be executed (in {where})")
             if t.condition is not None:
-                self._expression(t.condition, body, where)
+                self._expression(t.condition, body, where, machine)
         for st in _body_statements(body.machine):
             if isinstance(st, (s.Wait, s.Receive, s.Timed)):
                 kind = {s.Wait: "wait", s.Receive: "an input communication", s.Timed: "a deadline"}[type(st)]
                 self.diag.error(st.loc, f"{kind} is RoboChart's, not RoboSim's: it cannot be executed (in {where})")
             for e in s.statement_expressions(st):
-                self._expression(e, body, where)
+                self._expression(e, body, where, machine)
         for name, ty, init in body.variables:
             if init is not None:
-                self._expression(init, body, where)
+                self._expression(init, body, where, machine)
 
-    def _expression(self, expr: s.Expr, body: Body, where: str) -> None:
+    def _expression(self, expr: s.Expr, body: Body, where: str, machine: MachineInstance | None = None) -> None:
         readings = self.project.readings
+        if machine is not None:
+            count_caps(expr, body, machine)
         for node in s.walk(expr):
             why = None
             if isinstance(node, s.Quantified) and node.kind == "lambda":
@@ -739,3 +745,51 @@ __all__ = [
     "assemble", "build_program", "coerce", "default_value", "executable", "fmi_type", "get_path", "node_description",
     "scalars", "set_path", "state_index", "unsupported_type", "OperationDef", "StateMachine",
 ]
+
+
+_COMPARISONS = frozenset({"<", "<=", ">", ">=", "==", "!="})
+
+
+def count_caps(expr: s.Expr, body: Body, machine: MachineInstance) -> None:
+    """Where `since(C)` and `sinceEntry(S)` are only compared with constants, every count above the
+    largest constant k reads alike, so the interpreter may stop counting at floor(k) + 1: the states
+    the verifier explores stay finite. Any other use (arithmetic, output, a parameter) leaves the
+    count unbounded (None)."""
+    compared: dict[int, int] = {}
+    for node in s.walk(expr):
+        if isinstance(node, s.Binary) and node.op in _COMPARISONS:
+            for counter, other in ((node.left, node.right), (node.right, node.left)):
+                if isinstance(counter, (s.SinceExpr, s.SinceEntryExpr)):
+                    bound = _constant_bound(other, body)
+                    if bound is not None:
+                        compared[id(counter)] = max(compared.get(id(counter), 0), bound)
+    for node in s.walk(expr):
+        if isinstance(node, s.SinceExpr):
+            caps, key = machine.clock_caps, node.clock
+        elif isinstance(node, s.SinceEntryExpr):
+            key = _state_index(body.graph, node.state)
+            if key is None:
+                continue
+            caps = body.entry_caps
+        else:
+            continue
+        cap = compared.get(id(node))
+        if key in caps and (caps[key] is None or cap is None):
+            caps[key] = None
+        else:
+            caps[key] = max(caps.get(key, 0), cap) if cap is not None else None
+
+
+def _constant_bound(expr: s.Expr, body: Body) -> int | None:
+    """floor(k) + 1 (at least 0) for a numeric constant k, else None."""
+    env = ConstEnv({k: s.Literal(v, s.NOWHERE) for k, v in body.constants.items()
+                    if isinstance(v, (int, float)) and not isinstance(v, bool)})
+    try:
+        value = evaluate(expr, env)
+    except ConstError:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+        return None
+    if abs(value) > 2 ** 62:
+        return None
+    return max(0, int(value // 1) + 1)
