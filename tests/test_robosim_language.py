@@ -9,6 +9,7 @@ Families (RoboSim.xtext rule -> test):
   StateMachineDef / SimMachineDef, InputContext, OutputContext, Event, ConstCycle (`cycleDef`) -> test_machines_contexts_and_cycle_definitions
   Transition, ExecTrigger, `condition else`, Node kinds, state actions -> test_transitions_exec_else_and_state_actions
   Clock, ClockReset `#T`, ClockExp `since`, StateClockExp `sinceEntry`, CycleExp -> test_clocks_since_and_since_entry
+    (and their bounded counts for the verifier -> test_clock_counts_stop_where_no_comparison_tells_them_apart)
   SimRefExp (`$e`, `$e?x`, `$e?x:p`, `$e.v`, `$v`), SendEvent, SimCall `$op()` -> test_dollar_expressions_sends_and_platform_calls
   BasicStatement (exec, if, skip, `( )`, assignment to fields and elements, `;`) -> test_statements
   Expression levels (quantifiers, iff, =>, \\/, /\\, not, chained comparisons, the, let, if, as) -> test_logic_comparisons_and_binding_forms
