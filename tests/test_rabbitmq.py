@@ -251,7 +251,7 @@ def test_the_bridge_reconnects_and_loses_no_command_published_meanwhile(broker, 
 
     def close_at_five():  # while the second command is due
         time.sleep(5.0)
-        closed.append(_close_connection("cotwin {rabbitmq}.rabbitmq"))
+        closed.append(_close_connection(f"cotwin {{rabbitmq}}.rabbitmq on {system.spec.rabbitmq.exchange}"))
 
     threading.Thread(target=close_at_five, daemon=True).start()
     try:

@@ -294,7 +294,7 @@ class RabbitMQBridge:
     # ---- the link thread ----
     def _open(self) -> None:
         s = self.settings
-        self._connection = connect(s.url, self.name)
+        self._connection = connect(s.url, f"{self.name} on {s.exchange}")  # named per exchange: RabbitMQ shows which twin it is
         channel = self._connection.channel()
         channel.exchange_declare(s.exchange, exchange_type="direct", durable=False, auto_delete=False)
         channel.queue_declare(self.queue_name, durable=False, auto_delete=False,
