@@ -18,6 +18,7 @@ from dataclasses import fields
 
 from ..diagnostics import CotwinError
 from ..pmodel import ik
+from ..pmodel.ikcache import SolutionCache
 from ..pmodel.cell import CellGeometry
 from ..robosim import syntax as s
 from ..robosim.check_mapping import mapping_targets
@@ -55,12 +56,23 @@ class FunctionRegistry:
         reference = dict(zip(self.arm, self.geometry.reference)) if self.geometry.reference is not None else None
         self.solver = ik.Solver(self.tree, self.tool, reference, self.geometry.joint_offsets)
         self._cache: dict[tuple, ik.IKResult] = {}
+        self.stored = SolutionCache(self.solver.fingerprint())  # solutions of earlier runs, exact
         self.requests: list[tuple[float, float, float]] = []  # grid points asked of inverse_kinematics, in order
 
     def _solve(self, x, y, z) -> ik.IKResult:
         key = (round(float(x), 9), round(float(y), 9), round(float(z), 9))
         if key not in self._cache:
-            self._cache[key] = self.solver.branch(self.geometry.target_pose(key))
+            pose = self.geometry.target_pose(key)
+            name = SolutionCache.key(pose.ravel())
+            known = self.stored.get(name)
+            if known is not None:
+                self._cache[key] = ik.IKResult(**known)
+            else:
+                self._cache[key] = self.solver.branch(pose)
+                found = self._cache[key]
+                self.stored.put(name, {"q": {j: float(v) for j, v in found.q.items()},
+                                       "position_error": float(found.position_error),
+                                       "angle_error": float(found.angle_error), "iterations": int(found.iterations)})
         return self.solver.near(self._cache[key], self.endpoint.joint_positions())
 
     def inverse_kinematics(self, x, y, z):
@@ -346,6 +358,7 @@ class Mapping:
 
     def stop_mapping(self) -> None:
         self.endpoint.stop()
+        self.registry.stored.save()
         self.started = False
 
     # ---- time ----

@@ -21,6 +21,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from pathlib import Path
+
 import numpy as np
 
 from .tree import KinematicTree, axis_angle, inverse
@@ -250,6 +252,19 @@ class Solver:
         if len(self.joints) > 1:
             self._weights[-1] = 1e-2
         self._random = [lo + (hi - lo) * rng.random(len(self.joints)) for _ in range(self.SEEDS)]
+
+    def fingerprint(self) -> str:
+        """What the solver's answers depend on (the chain, the tool, the reference, the seeds, this
+        module's code), as a hash: solutions stored under it stay exact (cotwin.pmodel.ikcache)."""
+        import hashlib
+
+        h = hashlib.sha256(Path(__file__).read_bytes())
+        c = self.chain
+        for part in (c.joints, c.kinds, c.limits, self.max_iterations, self.SEEDS, self.TOLERANCE):
+            h.update(repr(part).encode())
+        for array in (c.base, c.tail, *c.axes, *c.before, *c.after, *self._random, *( [self.reference] if self.reference is not None else [])):
+            h.update(np.ascontiguousarray(array, dtype=float).tobytes())
+        return h.hexdigest()
 
     def reference_for(self, target: np.ndarray) -> np.ndarray:
         """The reference posture; without one, the zero posture with the base facing the target."""

@@ -1,0 +1,68 @@
+"""A persistent cache of inverse-kinematics solutions: a cell's targets (its holes) are solved once.
+
+The solver is deterministic, so a solution stored under the solver's fingerprint (its chain, tool,
+reference posture, seeds and code) and the target's pose is exactly what solving again would give;
+a changed model, geometry or solver gives another fingerprint and another file. Files live in
+$COTWIN_CACHE, else $XDG_CACHE_HOME/cotwin, else ~/.cache/cotwin (COTWIN_CACHE=off turns the cache
+off); they are written whole under a temporary name and renamed, and one that cannot be read is
+ignored (and rewritten).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+
+def cache_dir() -> Path | None:
+    chosen = os.environ.get("COTWIN_CACHE")
+    if chosen == "off":
+        return None
+    if chosen:
+        return Path(chosen)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "cotwin"
+
+
+class SolutionCache:
+    """Solutions (plain data) by target key, for one solver fingerprint."""
+
+    def __init__(self, fingerprint: str, folder: Path | None = None):
+        folder = folder if folder is not None else cache_dir()
+        self.path = None if folder is None else folder / "ik" / f"{fingerprint[:32]}.json"
+        self.entries: dict[str, dict] = {}
+        self.loaded = 0
+        self._dirty = False
+        if self.path is not None and self.path.is_file():
+            try:
+                data = json.loads(self.path.read_text())
+                if isinstance(data, dict) and data.get("fingerprint") == fingerprint:
+                    self.entries = dict(data.get("solutions", {}))
+                    self.loaded = len(self.entries)
+            except (OSError, ValueError):
+                pass
+        self.fingerprint = fingerprint
+
+    @staticmethod
+    def key(target) -> str:
+        return ",".join(repr(float(v)) for v in target)
+
+    def get(self, key: str) -> dict | None:
+        return self.entries.get(key)
+
+    def put(self, key: str, solution: dict) -> None:
+        self.entries[key] = solution
+        self._dirty = True
+
+    def save(self) -> None:
+        if self.path is None or not self._dirty:
+            return
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            part = self.path.with_name(f"{self.path.name}.{os.getpid()}.part")
+            part.write_text(json.dumps({"fingerprint": self.fingerprint, "solutions": self.entries}))
+            part.replace(self.path)
+            self._dirty = False
+        except OSError:  # a read-only home: the cache is an optimisation, never a failure
+            pass
