@@ -123,7 +123,11 @@ def _on_ray(project, plans, state, horizon, step, address, artefacts) -> list[di
         remote = ray.remote(_ray_run)
         state_ref = ray.put(state)
         refs = [remote.remote(project, artefacts, plan, state_ref, horizon, step) for plan in plans]
-        return ray.get(refs)
+        try:
+            return ray.get(refs, timeout=max(600.0, 10.0 * len(plans)))
+        except ray.exceptions.GetTimeoutError:
+            raise CotwinError(f"the Ray cluster at {address!r} did not finish {len(plans)} what-ifs in time "
+                              "(are its workers starting?)") from None
     finally:
         if started_here:
             ray.shutdown()

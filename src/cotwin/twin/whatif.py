@@ -18,6 +18,7 @@ the completion time of the whole plan.
 from __future__ import annotations
 
 import re
+import time
 import time as wallclock
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -375,8 +376,15 @@ class WhatIfService:
         self.answered += 1
         self._reply(props, answer)
 
-    def close(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=False)
+    def close(self, wait: float = 60.0) -> None:
+        """Stop taking requests; answer those running (for at most `wait` seconds), drop the others."""
+        running = list((getattr(self._pool, "_processes", None) or {}).values())
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        deadline = time.monotonic() + wait
+        for process in running:
+            process.join(max(0.0, deadline - time.monotonic()))
+            if process.is_alive():
+                process.kill()
         self._stop.set()
         self._thread.join(5)
         try:
