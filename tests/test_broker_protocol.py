@@ -197,3 +197,31 @@ def test_replies_are_checked_like_requests():
     with pytest.raises(CotwinError, match="no actuator"):
         validate_reply("describe", {"ok": True, "actuators": [], "sensors": []}, RobotView())
     assert json.dumps(validate_reply("state", _state(0.1), view))
+
+
+def _json():
+    from hypothesis import strategies as st
+
+    scalars = st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False) | st.text(max_size=8)
+    return st.recursive(scalars, lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=5),
+                        max_leaves=20)
+
+
+def test_any_reply_or_request_is_taken_or_refused_by_name():
+    """Whatever a peer sends, the checks end in a value or a CotwinError, never another exception."""
+    from hypothesis import given, settings, strategies as st
+
+    keys = st.sampled_from(["ok", "time", "sensors", "joints", "velocities", "actuators", "error", "op", "dt", "goals"])
+    shaped = st.dictionaries(keys, _json(), max_size=6)
+
+    @settings(max_examples=400, deadline=None)
+    @given(st.sampled_from(["describe", "state", "advance", "command"]), shaped | st.dictionaries(st.text(max_size=5), _json()))
+    def check(op, message):
+        view = RobotView(actuators={"M1"}, sensors={"s"}, joints={"j1"}, time=0.0)
+        for call in (lambda: validate_reply(op, message, view, 0.1), lambda: validate_request(message, {"M1"})):
+            try:
+                call()
+            except CotwinError:
+                pass
+
+    check()

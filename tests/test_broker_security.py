@@ -531,3 +531,47 @@ def test_a_garbage_reply_from_the_robot_server_is_a_clear_error(broker, clean_en
         stop.set()
         pump.join(5)
         connection.close()
+
+
+class Hasty(SimulatedEndpoint):
+    """A broken robot: after a few advances its clock runs twice as fast as asked."""
+
+    def __init__(self, simulator):
+        super().__init__(simulator)
+        self.advances = 0
+
+    def advance(self, dt: float) -> None:
+        self.advances += 1
+        super().advance(dt * 2 if self.advances > 5 else dt)
+
+
+def test_a_robot_whose_time_runs_off_ends_the_run_clearly_with_the_rows_kept(broker, twin, clean_env, tmp_path):
+    clean_env.setenv("COTWIN_ROBOT_SECRET", uuid.uuid4().hex)
+    server = RobotServer(Hasty(PlatformSimulator(twin.models.tree, twin.models.scene)), f"cotwin.test.{uuid.uuid4().hex[:8]}")
+    thread = serve_in_thread(server)
+    twin.spec.endpoint, twin.spec.queue = "broker", server.queue
+    try:
+        text = _error(lambda: run_twin(twin, tmp_path, end=2.0, plot=False))
+    finally:
+        server.stop()
+        thread.join(5)
+    assert "sent an invalid reply to advance: the robot's time went from 0.5 s to 0.7 s (expected 0.6 s" in text
+    assert len(rows(tmp_path / "outputs.partial.csv")) >= 5
+
+
+def test_the_robot_server_reconnects_when_the_broker_drops_it(broker, twin, clean_env):
+    clean_env.setenv("COTWIN_ROBOT_SECRET", uuid.uuid4().hex)
+    server = RobotServer(simulated(twin), f"cotwin.test.{uuid.uuid4().hex[:8]}")
+    thread = serve_in_thread(server)
+    try:
+        assert close_connection(f"cotwin robot server {server.queue}")
+        deadline = time.monotonic() + 10
+        while server.reconnects == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert server.reconnects == 1 and server.ready.wait(10) and thread.is_alive()  # back on its queue
+        client = BrokerEndpoint(twin.models.tree, server.queue, timeout=5)
+        assert client.call({"op": "state"})["ok"]
+        client.close()
+    finally:
+        server.stop()
+        thread.join(5)

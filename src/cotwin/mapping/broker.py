@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import threading
 import time as wallclock
 import uuid
@@ -50,7 +51,7 @@ class RobotServer:
         self.queue = queue
         self.url = url
         self.environ = environ
-        self.secret = secret if secret is not None else load_secret(*(() if environ is None else (environ,)))
+        self.secret = secret if secret is not None else load_secret(os.environ if environ is None else environ)
         self.reconnect_s = reconnect_s
         self.ready = threading.Event()
         self._stop = threading.Event()
@@ -59,6 +60,7 @@ class RobotServer:
         self.requests = 0  # authenticated requests answered
         self.refused = 0  # answered with "not authenticated"
         self.dropped = 0  # could not be answered (no or foreign reply queue, no correlation id)
+        self.reconnects = 0
         self.internal_errors = 0  # an endpoint failure other than a CotwinError (logged with its traceback)
         self._logged: tuple[float, int] = (0.0, 0)  # start of the log window, warnings logged in it
 
@@ -178,6 +180,7 @@ class RobotServer:
                 try:
                     if connection is None:
                         connection = self._open()
+                        self.reconnects += 1
                         log.warning("robot server %s: reconnected after %.1f s", self.queue, wallclock.monotonic() - lost_at)
                         lost_at = None
                     self.ready.set()
@@ -221,7 +224,7 @@ class BrokerEndpoint:
         self.queue = queue
         self.url = url
         self.timeout = timeout
-        self.secret = secret if secret is not None else load_secret(*(() if environ is None else (environ,)))
+        self.secret = secret if secret is not None else load_secret(os.environ if environ is None else environ)
         self.view = RobotView(joints={j.name for j in tree.joints} if tree is not None else None)
         self._pending: str | None = None
         self._reply: tuple[object, bytes] | None = None
