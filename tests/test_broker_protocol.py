@@ -214,7 +214,7 @@ def test_any_reply_or_request_is_taken_or_refused_by_name():
     keys = st.sampled_from(["ok", "time", "sensors", "joints", "velocities", "actuators", "error", "op", "dt", "goals"])
     shaped = st.dictionaries(keys, _json(), max_size=6)
 
-    @settings(max_examples=400, deadline=None)
+    @settings(max_examples=200, deadline=None)
     @given(st.sampled_from(["describe", "state", "advance", "command"]), shaped | st.dictionaries(st.text(max_size=5), _json()))
     def check(op, message):
         view = RobotView(actuators={"M1"}, sensors={"s"}, joints={"j1"}, time=0.0)
