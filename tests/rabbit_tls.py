@@ -114,7 +114,11 @@ class TLSBroker:
         users = "".join(
             f"ok = rabbit_auth_backend_internal:add_user({_str(r.user)}, {_str(self.passwords[r.name])}, <<\"cotwin-test\">>), "
             f"ok = rabbit_auth_backend_internal:set_permissions({_str(r.user)}, V, {_str(r.configure)}, "
-            f"{_str(r.write)}, {_str(r.read)}, <<\"cotwin-test\">>), " for r in self.roles)
+            f"{_str(r.write)}, {_str(r.read)}, <<\"cotwin-test\">>), "
+            + ("" if r.topic is None else
+               f"ok = rabbit_auth_backend_internal:set_topic_permissions({_str(r.user)}, V, {_str(r.topic[0])}, "
+               f"{_str(r.topic[1])}, {_str(r.topic[2])}, <<\"cotwin-test\">>), ")
+            for r in self.roles)
         rabbitmqctl_eval(f"V = {_str(self.vhost)}, ok = rabbit_vhost:add(V, <<\"cotwin-test\">>), {users}"
                          f"ok = rabbit_networking:start_ssl_listener({{\"127.0.0.1\", {self.port}}}, {options}, 1), ok.")
         return self

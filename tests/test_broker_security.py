@@ -244,11 +244,46 @@ def test_each_role_can_do_its_job_and_nothing_else(tls, clean_env):
                 c.close()
 
 
+def _confirmed(connection):
+    channel = connection.channel()
+    channel.confirm_delivery()  # a refused publish then fails at once
+    return channel
+
+
+def test_what_if_requests_come_only_from_the_whatif_role_and_none_can_forge_alarms(tls, clean_env, tmp_path):
+    from cotwin.twin.whatif import WhatIfService
+
+    for key, value in tls.env("twin").items():
+        clean_env.setenv(key, value)
+    service = WhatIfService(tls.url(), "cotwin.twin", PROJECT, tmp_path)  # in the twin, as the twin's user
+    asker, channel = _open(tls, "whatif")
+    try:
+        replies = channel.queue_declare("", exclusive=True).method.queue
+        channel.confirm_delivery()
+        channel.basic_publish("cotwin.twin", "twin.whatif", b'{"plan": []}',
+                              pika.BasicProperties(reply_to=replies, correlation_id="q1"))
+        deadline, method = time.monotonic() + 10, None
+        while method is None and time.monotonic() < deadline:
+            method, props, body = channel.basic_get(replies, auto_ack=True)
+            asker.process_data_events(0.1)
+        assert method is not None and props.correlation_id == "q1"
+        assert json.loads(body) == {"error": "bad what-if request: plan must be a non-empty list"}
+        # the what-if role may not forge an alarm, the monitor may not ask, the publisher may not touch either
+        assert _refused(lambda: _confirmed(asker).basic_publish("cotwin.twin", "twin.alarm", b"{}")) == 403
+        for role in ("monitor", "publisher"):
+            connection, _ = _open(tls, role)
+            assert _refused(lambda: _confirmed(connection).basic_publish("cotwin.twin", "twin.whatif", b"{}")) == 403
+            connection.close()
+    finally:
+        asker.close()
+        service.close()
+
+
 def test_the_documented_commands_name_the_same_permissions():
     script = rabbitmqctl_script(load_project(PROJECT), "cotwin")
     docs = (ROOT / "docs" / "security.md").read_text()
     for line in script.splitlines():
-        if line.startswith("rabbitmqctl set_permissions") or line.startswith("rabbitmqctl add_vhost"):
+        if line.startswith(("rabbitmqctl set_permissions", "rabbitmqctl set_topic_permissions", "rabbitmqctl add_vhost")):
             assert line in docs, f"docs/security.md lacks: {line}"
 
 
