@@ -145,8 +145,14 @@ class RobotServer:
         answer = self.respond(props, body)
         if answer is not None:
             reply_to, cid, out, headers = answer
-            channel.basic_publish("", reply_to, out, pika.BasicProperties(correlation_id=cid, headers=headers,
-                                                                          content_type="application/json"))
+            try:
+                channel.basic_publish("", reply_to, out, pika.BasicProperties(correlation_id=cid, headers=headers,
+                                                                              content_type="application/json"))
+            except _LINK_ERRORS:
+                raise  # the link is gone: serve() reconnects
+            except Exception:  # noqa: BLE001 - a reply that cannot be encoded must not stop the server
+                self.internal_errors += 1
+                log.exception("robot server %s: cannot send a reply", self.queue)
         channel.basic_ack(method.delivery_tag)
 
     def _open(self):
@@ -192,7 +198,8 @@ class RobotServer:
                     now = wallclock.monotonic()
                     if lost_at is None:
                         lost_at = now
-                        log.warning("robot server %s: lost the broker (%s); reconnecting", self.queue, type(err).__name__)
+                        reason = "; ".join(f.message for f in err.findings) if isinstance(err, CotwinError) else type(err).__name__
+                        log.warning("robot server %s: lost the broker (%s); reconnecting", self.queue, reason)
                     if now - lost_at > self.reconnect_s:
                         raise CotwinError(f"robot server {self.queue}: the broker at {redact(self.url)} stayed away "
                                           f"for {self.reconnect_s:g} s") from None
