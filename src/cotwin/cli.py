@@ -489,6 +489,68 @@ def plant(project: str, url: str | None, perturbation_file: str | None, seed: in
     click.echo(f"stopped after {cell.calls} call(s), {cell.refused} refused")
 
 
+@main.command("serve-robot")
+@click.argument("project", type=click.Path())
+@click.option("--queue", help="the request queue (default: the project's [platform] queue)")
+@click.option("--url", help="the broker (default: the project's [platform] url)")
+def serve_robot(project: str, queue: str | None, url: str | None) -> None:
+    """Serve the project's platform (the MuJoCo simulator) as a robot behind the broker, for twins
+    whose [platform] endpoint is "broker". Needs COTWIN_ROBOT_SECRET (shared with the twin); broker
+    credentials as for every link (docs/security.md). Stops on Ctrl-C or SIGTERM, never on a message."""
+    import signal
+    import threading
+
+    from .mapping.amqp import redact, url_problem
+    from .mapping.broker import RobotServer
+    from .mapping.endpoint import SimulatedEndpoint
+    from .pmodel.simulator import PlatformSimulator
+    from .twin.run import load
+
+    system = load(project)
+    url = url or system.spec.url
+    if url_problem(url):
+        raise click.BadParameter(url_problem(url), param_hint="--url")
+    queue = queue or system.spec.queue
+    server = RobotServer(SimulatedEndpoint(PlatformSimulator(system.models.tree, system.models.scene)), queue, url)
+    failure: list[CotwinError] = []
+
+    def serve() -> None:
+        try:
+            server.serve()
+        except CotwinError as err:
+            failure.append(err)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: server.stop())
+    thread = threading.Thread(target=serve, name="robot server", daemon=True)
+    thread.start()
+    while thread.is_alive() and not server.ready.wait(0.2):
+        pass
+    if server.ready.is_set():
+        click.echo(f"serving the robot on queue {queue} at {redact(url)} (stop: Ctrl-C or SIGTERM)", err=True)
+        click.echo("ready", err=False)
+        sys.stdout.flush()
+    while thread.is_alive():
+        thread.join(0.2)
+    if failure:
+        raise failure[0]
+    click.echo(f"served {server.requests} request(s); refused {server.refused} unauthenticated, dropped "
+               f"{server.dropped} unanswerable", err=True)
+
+
+@main.command("broker-permissions")
+@click.argument("project", type=click.Path())
+@click.option("--vhost", default="cotwin", show_default=True, help="the virtual host of the twin's links")
+@click.option("--prefix", default="cotwin-", show_default=True, help="user names: PREFIX + role")
+def broker_permissions(project: str, vhost: str, prefix: str) -> None:
+    """Print the rabbitmqctl commands creating a vhost and one least-privilege user per role (twin,
+    robot server, publisher, alarms monitor) for this project's exchanges and queues."""
+    from .twin.broker_access import rabbitmqctl_script
+    from .twin.project import load_project
+
+    click.echo(rabbitmqctl_script(load_project(project), vhost, prefix), nl=False)
+
+
 def _parse_domain(text: str) -> tuple[str, list]:
     name, sep, values = text.partition("=")
     if not sep or not name or not values:

@@ -70,12 +70,12 @@ def _pairs(value) -> str | None:
 def _amqp_url(value: str) -> str | None:
     if not value.startswith(("amqp://", "amqps://")):
         return f"'{value}' is not an amqp:// or amqps:// URL"
-    from ..mapping.amqp import url_has_password
+    from ..mapping.amqp import url_has_password, url_problem
 
     if url_has_password(value):
         return ("a password in the project file is refused: give credentials in the environment "
                 "(COTWIN_AMQP_USER, COTWIN_AMQP_PASSWORD) or a file (COTWIN_AMQP_CREDENTIALS)")
-    return None
+    return url_problem(value)
 
 
 RABBITMQ = Schema({
