@@ -1,6 +1,6 @@
 """The kinematic tree of a p-model: the one intermediate form SDF, URDF, MJCF and the simulator share.
 
-Conventions (docs/robosim-notation.md, section 3): a link's pose is in the model frame (the frame of
+Conventions (docs/pmodel-notation.md, section 4): a link's pose is in the model frame (the frame of
 the including p-model for links of a part, composed with the part's pose); a joint's pose is relative
 to its parent link; a joint axis is expressed in the joint frame; roll/pitch/yaw are fixed-axis
 X-Y-Z angles (R = Rz(yaw) Ry(pitch) Rx(roll)), as in SDF and URDF. Everything is at joint values 0.

@@ -1,6 +1,7 @@
 """Checks of platform mappings against the d-model's robotic platform and the p-model's sensors.
 
-Readings chosen where the notation is silent (see docs/robosim-notation.md, section 8):
+Readings chosen where the notation is silent (see docs/pmodel-notation.md, section 5, and
+docs/robosim-notation.md, section 8):
 several `equation`s of an input event are a conjunction; `action x = e` assigns mapping variable x
 when the operation is called.
 """
