@@ -22,7 +22,8 @@ TEXTS = {p.name: p.read_text() for p in sorted(MODELS.glob("*.pm"))}
 TOKENS = ["{", "}", "(", ")", "(|", "|)", "[|", "|]", ";", "<", ">", "^", "m", "cm", "1e-3", "0.5", "-", "index",
           "i", ":", "[0,", "3)", "4]", "lref", "bref", "local", "link", "body", "joint", "sensor", "actuator", "def",
           "relation", "fixed to", "in", "flexibly connected to", "package", "endpackage", "InOut", "Constraint",
-          "mesh", "shape", '"x.stl"', "scaling", "bounce", "friction", "laser retro", "fragment", "solution", "end"]
+          "mesh", "shape", '"x.stl"', "scaling", "bounce", "friction", "laser retro", "fragment", "solution", "end",
+          "primitive unit", "metre", "degree", "derivative("]
 
 
 @st.composite

@@ -3,6 +3,7 @@ geometry (SDF, URDF and MJCF, the last loaded by MuJoCo). Models: tests/models/p
 
 from __future__ import annotations
 
+import math
 import struct
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -74,6 +75,21 @@ def test_units_exponents_and_parameters_evaluate(rover):
     result = check_paths([MODELS / "rover.pm"])
     assert any("SPEED_LIMIT" in m and "no value" in m for _, m in _findings(result, Severity.WARNING))
     assert not _findings(result, Severity.ERROR)
+
+
+def test_named_units_and_unit_declarations(tmp_path):
+    (tmp_path / "units.pm").write_text(
+        "package units\nprimitive unit metre\nprimitive unit second\n"
+        "pmodel U {\n  local d : real\n  equation d == 1.0 metre + derivative(d)\n"
+        "  local link L { def { inertial information { mass 2 kilogram } }\n"
+        "    pose { x=0.5 metre y=(10)cm z=90 degree roll=0 pitch=0 yaw=0 }\n"
+        "    local body B { def { box(length=0.1 metres, width=0.1, height=0.1) } } }\n}\n")
+    result = check_paths([tmp_path])
+    assert not _findings(result, Severity.ERROR)
+    assert not any("derivative" in m for _, m in _findings(result, Severity.WARNING))
+    link = build_tree(load_checked([tmp_path])).link("L")
+    assert link.pose[0, 3] == pytest.approx(0.5) and link.pose[1, 3] == pytest.approx(0.1)
+    assert link.pose[2, 3] == pytest.approx(math.pi / 2) and link.mass == pytest.approx(2.0)
 
 
 def test_joints_from_the_sko_library_and_local_definitions(rover):

@@ -37,6 +37,9 @@ class PModelBuilder(Transformer):
     def pm_package(self, meta, name):
         return _Tagged("package", name, self._loc(meta))
 
+    def unit_decl(self, meta, name):
+        return _Group(())
+
     def pm_endpackage(self, meta):
         return _Tagged("endpackage", None, self._loc(meta))
 

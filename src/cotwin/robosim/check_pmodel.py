@@ -17,6 +17,7 @@ from .checker import Checker
 from . import syntax as s
 from .consteval import UNITS, ConstEnv, const_env, try_evaluate
 from .declarations import VarDecl
+from .operators import MATH
 from .pmodel_elements import (
     AnnotationRecord, Body, BodyDecl, Device, DeviceRef, Fragment, Index, JointRef, Link, LinkDecl, PModel, Pose,
     Shape,
@@ -32,6 +33,9 @@ SHAPE_PARAMS = {
 INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 PARAMETER_DEFAULT = 0.0  # the value of a constant declared without one (RoboTool's default for a number)
 TIME = "t"  # the time variable of equations and initial conditions
+#: the operators RoboTool's equations use without declaring them (calculus and matrix algebra of its solver)
+SOLVER_OPERATORS = frozenset({"derivative", "integral", "adj", "submatrix", "transpose", "inverse", "identity",
+                              "zeroes", "norm", "dot", "cross"}) | frozenset(MATH)
 
 
 @dataclass(frozen=True)
@@ -151,7 +155,7 @@ class PModelChecker(Checker):
             for node in s.walk(expr):
                 if isinstance(node, s.Name) and len(node.name.parts) == 1:
                     name = node.name.last
-                    if name not in known and name not in self.functions:
+                    if name not in known and name not in self.functions and name not in SOLVER_OPERATORS:
                         self.diag.warning(node.loc, f"'{name}' in {where} is declared nowhere "
                                           "(cotwin does not solve p-model equations)")
                         known.add(name)  # once per name and place

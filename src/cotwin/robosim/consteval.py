@@ -20,6 +20,10 @@ from .values import EvalError
 #: unit -> factor to SI
 UNITS = {"kg": 1.0, "g": 1e-3, "mg": 1e-6, "km": 1e3, "m": 1.0, "cm": 1e-2, "mm": 1e-3, "rad": 1.0,
          "deg": math.pi / 180, "s": 1.0, "ms": 1e-3}
+# the unit names of RoboTool's `primitive unit` declarations that cotwin reads (SI: factor 1, degrees as `deg`)
+UNITS.update({name: 1.0 for name in ("metre", "metres", "meter", "meters", "second", "seconds", "kilogram",
+                                     "kilograms", "radian", "radians", "newton", "newtons")})
+UNITS.update({"degree": UNITS["deg"], "degrees": UNITS["deg"]})
 
 
 class ConstError(Exception):
