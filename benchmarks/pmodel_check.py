@@ -47,7 +47,8 @@ def main() -> None:
         parses.append(time.perf_counter() - t0)
     times = [t for t, _ in checks]
     worst, worst_path = max(checks)
-    print(f"cotwin check of {len(checks)} p-model files, one at a time: median {statistics.median(times) * 1000:.1f} ms, "
+    print(f"cotwin check of {len(checks)} p-model files, one at a time: "
+          f"median {statistics.median(times) * 1000:.1f} ms, "
           f"slowest {worst * 1000:.1f} ms ({worst_path.name}); target under 1000 ms per model")
     print(f"Lark's bare parse of the same files: median {statistics.median(parses) * 1000:.2f} ms; "
           f"check/parse ratio {statistics.median(times) / statistics.median(parses):.1f}x (median)")

@@ -3,9 +3,10 @@
 
 The files are RoboTool's (UoY-RoboStar/robotool-meta-physmod), not this repository's: fetch them to a
 folder outside it, keeping their relative paths (lib/physmod/..., metamodelCoverage/...): for instance
-`scripts/fetch-physmod-refs.sh /work/refs/physmod`; then point COTWIN_PHYSMOD_REFS at that folder. Each file is checked with the other model files of its folder (a coverage
-case) and, like a RoboTool workspace, with the files declaring packages it imports from elsewhere in the
-tree. The `.txt` expected files are RoboTool's generator messages, not models: they are counted apart.
+`scripts/fetch-physmod-refs.sh /work/refs/physmod`; then point COTWIN_PHYSMOD_REFS at that folder. Each
+file is checked with the other model files of its folder (a coverage case) and, like a RoboTool workspace,
+with the files declaring packages it imports from elsewhere in the tree. The `.txt` expected files are
+RoboTool's generator messages, not models: they are counted apart.
 """
 
 from __future__ import annotations
