@@ -92,6 +92,16 @@ def test_named_units_and_unit_declarations(tmp_path):
     assert link.pose[2, 3] == pytest.approx(math.pi / 2) and link.mass == pytest.approx(2.0)
 
 
+def test_caret_is_a_power_in_pmodels(tmp_path):
+    (tmp_path / "power.pm").write_text(
+        "pmodel P {\n  const K : real = 2^3 + -2^2\n"
+        "  local link L { def { inertial information { mass K } }\n"
+        "    pose { x=2^-1 y=0 z=0 roll=0 pitch=0 yaw=0 } } }\n")
+    link = build_tree(load_checked([tmp_path])).link("L")
+    assert link.pose[0, 3] == pytest.approx(0.5)
+    assert link.mass == pytest.approx(12.0)  # 2^3 + (-2)^2: `^` sits at RoboChart's `cat` level, above unary minus
+
+
 def test_joints_from_the_sko_library_and_local_definitions(rover):
     tree = build_tree(rover)
     joints = {j.name: j for j in tree.joints}

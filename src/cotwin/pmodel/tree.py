@@ -216,6 +216,12 @@ def build_tree(project, pmodel_name: str | None = None) -> KinematicTree:
     pmodels = project.elements(PModel)
     if pmodel_name is not None:
         pmodel = project.lookup("pmodel", pmodel_name)
+        if pmodel is None:  # a p-model of a package, by its simple name
+            named = [p for p in pmodels if p.name == pmodel_name]
+            if len(named) > 1:
+                raise CotwinError(f"several p-models named '{pmodel_name}': give its package "
+                                  f"({', '.join('::'.join(project.qualified_name(p)) for p in named)})")
+            pmodel = named[0] if named else None
         if pmodel is None:
             raise CotwinError(f"no p-model '{pmodel_name}' (p-models: {', '.join(p.name for p in pmodels)})")
     else:

@@ -92,7 +92,7 @@ def flatten_links(project, pmodel: PModel, _seen: frozenset = frozenset()) -> di
     """All links of a p-model by name, its own first, then those of its parts (recursively)."""
     out: dict[str, PlacedLink] = {link.name: PlacedLink(link, pmodel, None) for link in pmodel.links}
     for part in pmodel.parts:
-        sub = project.lookup("pmodel", part.pmodel)
+        sub = project.lookup("pmodel", part.pmodel, project.file_of(pmodel))
         if sub is None or sub.name in _seen or sub is pmodel:
             continue
         for name, placed in flatten_links(project, sub, _seen | {pmodel.name}).items():

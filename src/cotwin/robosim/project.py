@@ -252,7 +252,10 @@ def _index(project: Project, source: SourceFile, namespace: tuple[str, ...], dia
 def build_project(sources: list[SourceFile], diag: Diagnostics) -> Project:
     """Index the files' elements per kind and qualified name, reporting duplicates and unknown imports."""
     project = Project(files=sources, packages=dict(library_packages()))
+    own_pm = {s.namespace for s in sources if s.notation == "pm"}
     for package in project.packages.values():
+        if package.source.notation == "pm" and package.name in own_pm:
+            continue  # the project's own copy of a p-model library package (RoboTool's files) replaces ours
         _index(project, package.source, package.name, None)
     for source in sources:
         project.namespaces.add(source.namespace)
