@@ -13,10 +13,20 @@ Documented defaults, used where the p-model gives no value:
 - joint position limits become the joint range and the servo's control range; effort limits become
   the servo's force range; velocity limits are the trajectory generator's job (cotwin.mapping);
 - an unstable simulation stops (MuJoCo's automatic reset is disabled: it would silently put the
-  robot back at its initial state and carry on).
+  robot back at its initial state and carry on);
+- an actuator taking a speed (kinds.servo_command) drives its joint by a velocity servo of gain
+  kv = (I + armature) / 20 ms, one taking an effort by a motor; such joints get an armature of 0.001;
+- the base is fixed to the world unless `base="free"` (a mobile robot): then it gets a free joint and
+  no weight compensation;
+- a mesh file cotwin can read becomes a mesh asset; one it cannot is a placeholder sphere that never
+  collides; a body's translational friction coefficient becomes its geom's sliding friction;
+- joints closing a kinematic loop become equality constraints (weld for fixed, connect otherwise);
+- a body quantity of a sensor (yaw rate, forward speed, acceleration) is read by a site-based MuJoCo
+  sensor at the sensor's pose; sensors MuJoCo has no counterpart for (LiDAR scans) are not written.
 
 `visual=False` gives the model the simulator steps: what only shows (geoms that collide with nothing,
-such as the plate's hole markers) is discarded by MuJoCo's compiler, so that it costs no time per step.
+such as the plate's hole markers and mesh placeholders) is discarded by MuJoCo's compiler, so that it
+costs no time per step.
 """
 
 from __future__ import annotations
@@ -30,14 +40,26 @@ from .xmltext import num, nums, quat, sub, to_text
 
 DEFAULT_KP = {"revolute": 5000.0, "prismatic": 2000.0}
 ARMATURE = {"revolute": 0.1, "prismatic": 0.1}
+DRIVEN_ARMATURE = 0.001  # kg m^2 or kg: joints driven by speed or effort (wheels), not by a geared servo
+VELOCITY_TIME = 0.02  # s: time constant of a velocity servo
+BODY_SENSORS = ("gyro", "velocimeter", "accelerometer")
 TIMESTEP = 0.001  # s: the physics step
 ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 1  # robot geoms touch the world and bricks, not each other
 WORLD_CONTYPE, WORLD_CONAFFINITY = 1, 3
 
 
-def sensor_name(pmodel: str, link: str, sref: str, port: str) -> str:
-    """The MJCF name of a p-model sensor port: the mapping's path, `pmodel::link::sref.port`."""
-    return f"{pmodel}::{link}::{sref}.{port}"
+def sensor_name(pmodel: str, link: str, sref: str, port: str, via: str = "") -> str:
+    """The MJCF name of a p-model sensor port: the mapping's path, `pmodel::link::sref.port`
+    (`pmodel::link::joint::sref.port` for a sensor declared inside a joint)."""
+    return f"{pmodel}::{link}::{via + '::' if via else ''}{sref}.{port}"
+
+
+def servo_mode(joint: TJoint) -> str:
+    return joint.servos[0].mode if joint.servos else "position"
+
+
+def armature(joint: TJoint) -> float:
+    return ARMATURE[joint.kind] if servo_mode(joint) == "position" else DRIVEN_ARMATURE
 
 
 def servo_name(joint: TJoint) -> str:
@@ -55,6 +77,9 @@ def _pose_attrs(T: np.ndarray) -> dict:
 
 
 def _geom(parent: ET.Element, g: Geom, **extra) -> None:
+    if g.kind == "mesh":
+        sub(parent, "geom", name=g.name, type="mesh", mesh=_mesh_name(g), **_pose_attrs(g.pose), **extra)
+        return
     if g.kind == "box":
         size = [g.size["length"] / 2, g.size["width"] / 2, g.size["height"] / 2]
     elif g.kind in ("cylinder", "capsule"):
@@ -62,6 +87,17 @@ def _geom(parent: ET.Element, g: Geom, **extra) -> None:
     else:
         size = [g.size["radius"]]
     sub(parent, "geom", name=g.name, type=g.kind, size=nums(size), **_pose_attrs(g.pose), **extra)
+
+
+def _mesh_name(g: Geom) -> str:
+    return f"{g.name}_mesh"
+
+
+def _friction(g: Geom) -> dict:
+    sliding = g.surface.get("friction", {}).get("translational", {}).get("coefficient1")
+    if isinstance(sliding, (int, float)) and not isinstance(sliding, bool):
+        return {"friction": f"{num(sliding)} 0.02 0.001"}
+    return {}
 
 
 def joint_inertia(tree: KinematicTree, joint: TJoint) -> float:
@@ -90,16 +126,27 @@ def joint_inertia(tree: KinematicTree, joint: TJoint) -> float:
 
 def servo_gains(tree: KinematicTree, joint: TJoint, timestep: float = TIMESTEP) -> tuple[float, float]:
     servo = joint.servos[0] if joint.servos else None
-    inertia = joint_inertia(tree, joint) + ARMATURE[joint.kind]
+    inertia = joint_inertia(tree, joint) + armature(joint)
     kp = servo.kp if servo and servo.kp else min(DEFAULT_KP[joint.kind], inertia * (0.15 / timestep) ** 2)
     kp = min(kp, inertia * (0.5 / timestep) ** 2)
     kd = servo.kd if servo and servo.kd else 2.0 * np.sqrt(kp * inertia)
     return float(kp), float(kd)
 
 
-def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual: bool = True) -> str:
+def velocity_gain(tree: KinematicTree, joint: TJoint) -> float:
+    servo = joint.servos[0] if joint.servos else None
+    if servo is not None and servo.kd:
+        return float(servo.kd)
+    return float((joint_inertia(tree, joint) + armature(joint)) / VELOCITY_TIME)
+
+
+def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual: bool = True,
+            base: str = "fixed") -> str:
     """MJCF of the robot, alone or inside a scene (an object with `add_to(worldbody)`); without the
-    purely visual elements when `visual` is false (see the module doc)."""
+    purely visual elements when `visual` is false (see the module doc); `base` is fixed (to the world)
+    or free."""
+    if base not in ("fixed", "free"):
+        raise ValueError(f"base must be fixed or free, not {base!r}")
     root = ET.Element("mujoco", {"model": tree.name})
     sub(root, "compiler", angle="radian", autolimits="true", **({} if visual else {"discardvisual": "true"}))
     gravity = getattr(scene, "gravity", (0.0, 0.0, -9.81))  # a scene may tilt the world (a level plate)
@@ -110,6 +157,11 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
     sub(visual, "global", offwidth="1280", offheight="960")
     default = sub(root, "default")
     sub(default, "geom", condim="4", friction="1 0.02 0.001", solref="0.004 1")
+    meshes = [g for link in tree.links for g in link.geoms if g.kind == "mesh"]
+    if meshes:
+        asset = sub(root, "asset")
+        for g in meshes:
+            sub(asset, "mesh", name=_mesh_name(g), file=g.mesh, scale=nums(g.scale))
     worldbody = sub(root, "worldbody")
     sub(worldbody, "light", name="sun", pos="0.5 0.3 3", dir="0 0 -1", directional="true")
     if scene is not None:
@@ -122,8 +174,11 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
             joint = next(j for j in tree.joints if j.child == link.name)
             parent_el = bodies[joint.parent]
             local = inverse(tree.link(joint.parent).pose) @ link.pose
-        body = sub(parent_el, "body", name=link.name, gravcomp="1", **_pose_attrs(local))
+        weight = {"gravcomp": "1"} if base == "fixed" else {}
+        body = sub(parent_el, "body", name=link.name, **weight, **_pose_attrs(local))
         bodies[link.name] = body
+        if link is tree.root and base == "free":
+            sub(body, "freejoint", name=f"{link.name}_free")
         I = link.inertia
         sub(body, "inertial", mass=num(link.mass), fullinertia=nums([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]]),
             **({"pos": "0 0 0"} | _pose_attrs(link.com)))
@@ -133,25 +188,60 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
                 in_child = inverse(link.pose) @ joint.pose
                 attrs = {"name": joint.name, "type": "hinge" if joint.kind == "revolute" else "slide",
                          "pos": nums(in_child[:3, 3]), "axis": nums(in_child[:3, :3] @ joint.axis),
-                         "damping": num(joint.damping), "armature": num(ARMATURE[joint.kind])}
+                         "damping": num(joint.damping), "armature": num(armature(joint))}
                 if joint.lower is not None and joint.upper is not None:
                     attrs["range"] = f"{num(joint.lower)} {num(joint.upper)}"
                 sub(body, "joint", **attrs)
         for g in link.geoms:
-            _geom(body, g, contype=str(ROBOT_CONTYPE), conaffinity=str(ROBOT_CONAFFINITY), rgba="0.6 0.65 0.7 1")
+            if g.placeholder:
+                _geom(body, g, contype="0", conaffinity="0", rgba="0.6 0.65 0.7 0.4")
+            else:
+                _geom(body, g, contype=str(ROBOT_CONTYPE), conaffinity=str(ROBOT_CONAFFINITY), rgba="0.6 0.65 0.7 1",
+                      **_friction(g))
+        for s_ in _body_sensors(tree, link.name):
+            sub(body, "site", name=_site_name(tree, s_), **_pose_attrs(s_.pose))
+    if tree.loops:
+        equality = sub(root, "equality")
+        for j in tree.loops:
+            if j.kind == "fixed":
+                sub(equality, "weld", name=j.name, body1=j.parent, body2=j.child)
+            else:
+                anchor = inverse(tree.link(j.parent).pose) @ j.pose
+                sub(equality, "connect", name=j.name, body1=j.parent, body2=j.child, anchor=nums(anchor[:3, 3]))
     actuator = sub(root, "actuator")
     for j in tree.actuated:
-        kp, kd = servo_gains(tree, j, timestep)
-        attrs = {"name": servo_name(j), "joint": j.name, "kp": num(kp), "kv": num(kd)}
-        if j.lower is not None and j.upper is not None:
-            attrs["ctrlrange"] = f"{num(j.lower)} {num(j.upper)}"
+        mode = servo_mode(j)
+        attrs = {"name": servo_name(j), "joint": j.name}
+        if mode == "velocity":
+            attrs["kv"] = num(velocity_gain(tree, j))
+        elif mode == "position":
+            kp, kd = servo_gains(tree, j, timestep)
+            attrs.update(kp=num(kp), kv=num(kd))
+            if j.lower is not None and j.upper is not None:
+                attrs["ctrlrange"] = f"{num(j.lower)} {num(j.upper)}"
         if j.effort:
             attrs["forcerange"] = f"{num(-j.effort)} {num(j.effort)}"
-        sub(actuator, "position", **attrs)
+        sub(actuator, {"position": "position", "velocity": "velocity", "effort": "motor"}[mode], **attrs)
     sensor = sub(root, "sensor")
     kinds = {"position": "jointpos", "velocity": "jointvel", "effort": "jointactuatorfrc"}
     for s_ in tree.sensors:
-        if s_.joint is None or s_.quantity not in kinds:
-            continue
-        sub(sensor, kinds[s_.quantity], name=sensor_name(tree.name, s_.link, s_.name, s_.port), joint=s_.joint)
+        name = sensor_name(tree.name, s_.link, s_.name, s_.port, s_.via)
+        if s_.quantity in BODY_SENSORS:
+            sub(sensor, s_.quantity, name=name, site=_site_name(tree, s_))
+        elif s_.joint is not None and s_.quantity in kinds:
+            sub(sensor, kinds[s_.quantity], name=name, joint=s_.joint)
     return to_text(root)
+
+
+def _body_sensors(tree: KinematicTree, link: str) -> list:
+    """The sensors of a link that need a site (one site per placed sensor, first port wins)."""
+    seen, out = set(), []
+    for s_ in tree.sensors:
+        if s_.body == link and s_.quantity in BODY_SENSORS and (s_.via, s_.name) not in seen:
+            seen.add((s_.via, s_.name))
+            out.append(s_)
+    return out
+
+
+def _site_name(tree: KinematicTree, s_) -> str:
+    return f"{tree.name}::{s_.link}::{s_.via + '::' if s_.via else ''}{s_.name}"

@@ -1,12 +1,29 @@
 """p-model -> SDF 1.6 (the paper's format, for Gazebo or CoppeliaSim). SDF puts a joint's pose in its
-child link's frame and its axis in the joint frame."""
+child link's frame and its axis in the joint frame.
+
+Two namings: `style="cotwin"` (the default) names links and joints as the kinematic tree does, the
+names every other cotwin artefact uses; `style="robotool"` writes names as RoboTool's SDF generator
+does: one running number over links, then joints and fixed connections (`1-Tip`, `3-Link1Joint`,
+`4-fixedJoint`), another over bodies (`1--my_body`), part links without their part's name (the
+number keeps them apart), each collision with RoboTool's default surface. Both write collision
+surfaces (bounce, friction, laser retro) where the p-model gives them, and every sensor with an SDF
+counterpart (ray, sonar, imu, camera, contact, ...) as an SDF <sensor>, its annotation's entries as
+SDF elements.
+"""
 
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
-from .tree import Geom, KinematicTree, inverse
+from .tree import Geom, KinematicTree, PlacedDevice, TJoint, inverse
 from .xmltext import num, pose_text, sub, to_text
+
+#: RoboTool's SDF defaults for a collision's surface (its generator writes them for every body)
+ROBOTOOL_SURFACE = {"restitution": 0.0, "threshold": 100000.0, "mu": 1.0, "mu2": 1.0, "fdir1": (0.0, 0.0, 0.0),
+                    "slip1": 0.0, "slip2": 0.0, "torsional": 1.0, "laser_retro": 0.0}
+#: p-model friction entries -> SDF <ode> elements
+FRICTION_KEYS = {"coefficient1": "mu", "coefficient2": "mu2", "direction": "fdir1", "slip1": "slip1",
+                 "slip2": "slip2", "mu": "mu", "mu2": "mu2", "fdir1": "fdir1"}
 
 
 def _geometry(parent: ET.Element, g: Geom) -> None:
@@ -18,16 +35,123 @@ def _geometry(parent: ET.Element, g: Geom) -> None:
         shape = sub(geometry, g.kind)
         sub(shape, "radius", num(g.size["radius"]))
         sub(shape, "length", num(g.size["length"]))
+    elif g.kind == "mesh":
+        mesh = sub(geometry, "mesh")
+        sub(mesh, "uri", f"file://{g.mesh}")
+        sub(mesh, "scale", " ".join(num(v) for v in g.scale))
     else:
         sphere = sub(geometry, "sphere")
         sub(sphere, "radius", num(g.size["radius"]))
 
 
-def to_sdf(tree: KinematicTree) -> str:
+def _surface(parent: ET.Element, g: Geom, defaults: dict | None) -> None:
+    """<surface> of a collision: the p-model's bounce and friction, over `defaults` (RoboTool's) if given."""
+    given = g.surface
+    if not given and defaults is None:
+        return
+    values = dict(defaults or {})
+    values.update({k: given[k] for k in ("restitution", "threshold") if k in given})
+    friction = given.get("friction", {})
+    for key, value in friction.get("translational", {}).items():
+        if key in FRICTION_KEYS and value is not None:
+            values[FRICTION_KEYS[key]] = value
+    torsional = friction.get("torsional", {})
+    surface = sub(parent, "surface")
+    if "restitution" in values or "threshold" in values:
+        bounce = sub(surface, "bounce")
+        for key, tag in (("restitution", "restitution_coefficient"), ("threshold", "threshold")):
+            if key in values:
+                sub(bounce, tag, num(values[key]))
+    ode_keys = [k for k in ("mu", "mu2", "fdir1", "slip1", "slip2") if k in values]
+    if ode_keys or torsional or "torsional" in values:
+        fr = sub(surface, "friction")
+        if ode_keys:
+            ode = sub(fr, "ode")
+            for key in ode_keys:
+                value = values[key]
+                sub(ode, key, " ".join(num(v) for v in value) if isinstance(value, tuple) else num(value))
+        if torsional or "torsional" in values:
+            tors = sub(fr, "torsional")
+            sub(tors, "coefficient", num(torsional.get("coefficient", values.get("torsional", 1.0))))
+            for key, value in torsional.items():
+                if key != "coefficient" and value is not None:
+                    sub(tors, key, _text(value))
+
+
+def _text(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return num(value) if isinstance(value, float) else str(value)
+    if isinstance(value, tuple):
+        return " ".join(_text(v) for v in value)
+    return str(value)
+
+
+def _entries(parent: ET.Element, record: dict) -> None:
+    """An evaluated annotation as SDF elements (`_key` written `key`: RoboTool escapes keywords so)."""
+    for key, value in record["entries"]:
+        tag = key.lstrip("_")
+        if isinstance(value, dict):
+            _entries(sub(parent, tag), value)
+        elif value is not None:
+            sub(parent, tag, _text(value))
+
+
+def _sensor(parent: ET.Element, device: PlacedDevice) -> None:
+    el = sub(parent, "sensor", name=device.name, type=device.sdf_type)
+    sub(el, "pose", pose_text(device.pose))
+    if device.annotation is not None:
+        _entries(el, device.annotation)
+
+
+class _Names:
+    """Link, joint and body names of one SDF style."""
+
+    def __init__(self, tree: KinematicTree, style: str):
+        self.style = style
+        self.links: dict[str, str] = {}
+        self.joints: dict[str, str] = {}
+        self.geoms: dict[str, str] = {}
+        if style == "cotwin":
+            self.links = {l.name: l.name for l in tree.links}
+            self.joints = {j.name: j.name for j in (*tree.joints, *tree.loops)}
+            self.geoms = {g.name: g.name for l in tree.links for g in l.geoms}
+            return
+        parts = sorted((l for l in tree.links), key=lambda l: l.part is None)  # RoboTool: parts' links first
+        for k, link in enumerate(parts, 1):
+            self.links[link.name] = f"{k}-{link.source}"
+        count = len(parts)
+        for j in (*tree.joints, *tree.loops):
+            count += 1
+            fixed = j.kind == "fixed" and not j.source
+            self.joints[j.name] = f"{count}-{'fixedJoint' if fixed else (j.source or j.name)}"
+        k = 0
+        for link in parts:
+            for g in link.geoms:
+                k += 1
+                self.geoms[g.name] = f"{k}--{g.body or g.name}"
+
+    def ordered(self, tree: KinematicTree):
+        return sorted(tree.links, key=lambda l: l.part is None) if self.style == "robotool" else tree.links
+
+
+def to_sdf(tree: KinematicTree, style: str = "cotwin") -> str:
+    """SDF text of the tree; style is "cotwin" (tree names) or "robotool" (RoboTool's generator's names)."""
+    if style not in ("cotwin", "robotool"):
+        raise ValueError(f"unknown SDF style '{style}' (cotwin or robotool)")
+    names = _Names(tree, style)
+    robotool = style == "robotool"
     root = ET.Element("sdf", {"version": "1.6"})
     model = sub(root, "model", name=tree.name)
-    for link in tree.links:
-        el = sub(model, "link", name=link.name)
+    if robotool:
+        sub(model, "self_collide", "true")
+        sub(model, "pose", "0 0 0 0 0 0")
+    devices = {}
+    for d in tree.devices:
+        devices.setdefault(d.link, []).append(d)
+    for link in names.ordered(tree):
+        el = sub(model, "link", name=names.links[link.name])
         sub(el, "pose", pose_text(link.pose))
         inertial = sub(el, "inertial")
         sub(inertial, "pose", pose_text(link.com))
@@ -37,23 +161,60 @@ def to_sdf(tree: KinematicTree) -> str:
         for key, (r, c) in (("ixx", (0, 0)), ("ixy", (0, 1)), ("ixz", (0, 2)), ("iyy", (1, 1)), ("iyz", (1, 2)), ("izz", (2, 2))):
             sub(inertia, key, num(I[r, c]))
         for g in link.geoms:
-            for tag in ("collision", "visual"):
-                part = sub(el, tag, name=f"{g.name}_{tag}")
+            tags = ("visual",) if g.placeholder else ("collision", "visual")
+            for tag in tags:
+                name = names.geoms[g.name] if robotool else f"{g.name}_{tag}"
+                part = sub(el, tag, name=name)
+                if "laser_retro" in g.surface or robotool:
+                    sub(part, "laser_retro", num(g.surface.get("laser_retro", 0.0)))
                 sub(part, "pose", pose_text(g.pose))
                 _geometry(part, g)
-    for j in tree.joints:
-        el = sub(model, "joint", name=j.name, type=j.kind)
-        sub(el, "parent", j.parent)
-        sub(el, "child", j.child)
-        sub(el, "pose", pose_text(inverse(tree.link(j.child).pose) @ j.pose))
-        if j.kind != "fixed":
-            axis = sub(el, "axis")
-            sub(axis, "xyz", " ".join(num(v) for v in j.axis))
-            limit = sub(axis, "limit")
-            for key in ("lower", "upper", "effort", "velocity"):
-                value = getattr(j, key)
-                if value is not None:
-                    sub(limit, key, num(value))
-            dynamics = sub(axis, "dynamics")
-            sub(dynamics, "damping", num(j.damping))
+                if tag == "collision":
+                    _surface(part, g, ROBOTOOL_SURFACE if robotool else None)
+        for device in devices.get(link.name, []):
+            if device.kind == "sensor" and device.sdf_type is not None:
+                _sensor(el, device)
+    for j in (*tree.joints, *tree.loops):
+        _joint(model, tree, j, names, robotool)
     return to_text(root)
+
+
+def _joint(model: ET.Element, tree: KinematicTree, j: TJoint, names: _Names, robotool: bool) -> None:
+    el = sub(model, "joint", name=names.joints[j.name], type=j.kind)
+    if not (robotool and j.kind == "fixed"):
+        sub(el, "parent", names.links[j.parent])
+        sub(el, "child", names.links[j.child])
+        sub(el, "pose", pose_text(inverse(tree.link(j.child).pose) @ j.pose))
+    else:
+        sub(el, "parent", names.links[j.parent])
+        sub(el, "child", names.links[j.child])
+    if j.kind == "fixed":
+        if robotool:
+            axis = sub(el, "axis")
+            sub(axis, "xyz", "0 0 1")
+        return
+    axis = sub(el, "axis")
+    sub(axis, "xyz", " ".join(num(v) for v in j.axis))
+    limit = sub(axis, "limit")
+    for key in ("lower", "upper", "effort", "velocity"):
+        value = getattr(j, key)
+        if value is not None:
+            sub(limit, key, num(value))
+    dynamics = sub(axis, "dynamics")
+    sub(dynamics, "damping", num(j.damping))
+    if robotool:
+        given = dict(_find(j.annotations, "axis", "dynamics"))
+        for key in ("_friction", "spring_reference", "spring_stiffness"):
+            if given.get(key) is not None:
+                sub(dynamics, key.lstrip("_"), _text(given[key]))
+
+
+def _find(record: dict, *path: str) -> list:
+    """The entries of a nested evaluated annotation at `path` ([] if absent)."""
+    entries = record.get("entries", []) if record else []
+    for key in path:
+        value = next((v for k, v in entries if k == key), None)
+        if not isinstance(value, dict):
+            return []
+        entries = value["entries"]
+    return entries

@@ -1,7 +1,9 @@
 """The embedded platform simulator: MuJoCo running the MJCF generated from the p-model.
 
 Names come from the p-model: sensors are read as `pmodel::link::sref.port` (the mapping's paths),
-actuators are written by joint name, servo (aref) name or `pmodel::link::joint::aref.dangle`.
+actuators are written by joint name, servo (aref) name or `pmodel::link::joint::aref.port`, the port
+being the actuator's command input (`dangle` of a ServoMotor, `ControlIn` of a ControlledMotor): an
+angle for position servos, a speed for velocity servos, an effort for motors.
 The physics step (1 ms by default) is sub-stepped inside `advance(dt)`.
 """
 
@@ -15,7 +17,7 @@ import mujoco
 import numpy as np
 
 from ..diagnostics import CotwinError
-from .mjcf import TIMESTEP, sensor_name, servo_name, to_mjcf
+from .mjcf import TIMESTEP, sensor_name, servo_mode, servo_name, to_mjcf
 from .tree import KinematicTree
 
 
@@ -36,13 +38,14 @@ class SimState:
 
 
 class PlatformSimulator:
-    def __init__(self, tree: KinematicTree, scene=None, timestep: float = TIMESTEP, mjcf: str | None = None):
-        """`mjcf`: an MJCF text derived from `to_mjcf(tree, scene, timestep, visual=False)` to run instead of
-        it (e.g. with a payload added by cotwin.pmodel.perturbation); names of joints, servos and sensors
-        must be kept."""
+    def __init__(self, tree: KinematicTree, scene=None, timestep: float = TIMESTEP, mjcf: str | None = None,
+                 base: str = "fixed"):
+        """`mjcf`: an MJCF text derived from `to_mjcf(tree, scene, timestep, visual=False, base=base)` to run
+        instead of it (e.g. with a payload added by cotwin.pmodel.perturbation); names of joints, servos and
+        sensors must be kept. `base`: "fixed" to the world or "free" (a mobile robot), as `to_mjcf`."""
         self.tree = tree
         self.scene = scene
-        self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep, visual=False)
+        self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep, visual=False, base=base)
         try:
             self.model = mujoco.MjModel.from_xml_string(self.xml)
         except ValueError as err:
@@ -57,15 +60,15 @@ class PlatformSimulator:
             self._actuator[j.name] = index
             self._actuator[servo_name(j)] = index
             for servo in j.servos:
-                self._actuator[f"{tree.name}::{j.source_link}::{j.source}::{servo.name}.dangle"] = index
+                self._actuator[f"{tree.name}::{j.source_link}::{j.source}::{servo.name}.{servo.port}"] = index
         self._sensors: dict[str, tuple[int, int]] = {}
         for sensor in tree.sensors:
-            name = sensor_name(tree.name, sensor.link, sensor.name, sensor.port)
+            name = sensor_name(tree.name, sensor.link, sensor.name, sensor.port, sensor.via)
             try:
                 s = self.model.sensor(name)
             except KeyError:
                 continue
-            self._sensors[name] = (s.adr[0], s.dim[0])
+            self._sensors[name] = (s.adr[0] + min(sensor.component, s.dim[0] - 1), 1)
         self._ctrl_range = self.model.actuator_ctrlrange.copy()
         # per actuator name: its control index and the range its targets are clipped to
         self._servos: dict[str, tuple[int, float, float]] = {}
@@ -81,6 +84,7 @@ class PlatformSimulator:
         # views on MuJoCo's buffers, fetched once (each attribute access makes a new view)
         self._qpos, self._qvel = self.data.qpos, self.data.qvel
         self._ctrl, self._sensordata = self.data.ctrl, self.data.sensordata
+        self._holds_position = {j.name for j in tree.actuated if servo_mode(j) == "position"}
         self.reset()
 
     # ---- names ----
@@ -99,12 +103,13 @@ class PlatformSimulator:
 
     # ---- the API ----
     def reset(self, q: dict[str, float] | None = None) -> None:
-        """Back to the model's initial state (joints at q, default 0), servos holding that position."""
+        """Back to the model's initial state (joints at q, default 0), position servos holding that
+        position, speed and effort commands at 0."""
         mujoco.mj_resetData(self.model, self.data)
         for name, value in (q or {}).items():
             self.data.qpos[self._joint_adr(name)] = value
         for name, adr in self._joint_qpos.items():
-            self.data.ctrl[self._actuator[name]] = self.data.qpos[adr]
+            self.data.ctrl[self._actuator[name]] = self.data.qpos[adr] if name in self._holds_position else 0.0
         mujoco.mj_forward(self.model, self.data)
 
     def _joint_adr(self, name: str) -> int:
@@ -113,8 +118,9 @@ class PlatformSimulator:
         return self._joint_qpos[name]
 
     def write_actuators(self, targets: dict[str, float]) -> None:
-        """Set servo targets (rad or m). Unknown names and non-finite values are errors; values outside
-        a joint's limits are clipped to them."""
+        """Set actuator commands (rad or m for position servos, rad/s or m/s for velocity servos, N m or N
+        for motors). Unknown names and non-finite values are errors; position targets outside a joint's
+        limits are clipped to them."""
         ctrl, servos = self._ctrl, self._servos
         for name, value in targets.items():
             servo = servos.get(name)

@@ -1,13 +1,15 @@
 """The kinematic tree of a p-model: the one intermediate form SDF, URDF, MJCF and the simulator share.
 
-Conventions (docs/robosim-notation.md, section 3): a link's pose is in the model frame (the frame of
+Conventions (docs/pmodel-notation.md, section 4): a link's pose is in the model frame (the frame of
 the including p-model for links of a part, composed with the part's pose); a joint's pose is relative
 to its parent link; a joint axis is expressed in the joint frame; roll/pitch/yaw are fixed-axis
 X-Y-Z angles (R = Rz(yaw) Ry(pitch) Rx(roll)), as in SDF and URDF. Everything is at joint values 0.
 
 A sensor declared in a link measures the joint declared just before it in that link (the first
 joint if it comes before any), which is how the UR5e model lists FSJ1..PSJ1 after
-shoulder_pan_joint and the finger sensors after each finger joint.
+shoulder_pan_joint and the finger sensors after each finger joint; a sensor declared in a joint
+measures that joint. Joints that close a kinematic loop are kept apart (`loops`): SDF lists them,
+MJCF turns them into equality constraints, URDF cannot say them.
 """
 
 from __future__ import annotations
@@ -17,13 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import CotwinError, Diagnostics
-from ..robosim import syntax as s
-from ..robosim.check_pmodel import pmodel_constants
-from ..robosim.consteval import UNITS, ConstEnv, try_evaluate
-from ..robosim.pmodel_elements import AnnotationRecord, Link, PModel, Pose, Shape
-from .inertia import default_inertia
-
-DEFAULT_MASS = 1.0  # kg, for a link without inertial information (a warning says so)
+from ..robosim.pmodel_elements import PModel
+from .kinds import SENSOR_QUANTITIES, sensor_quantity  # noqa: F401 (re-exported: part of the tree's API)
 
 
 def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -66,15 +63,22 @@ def axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
     return T
 
 
+
 @dataclass
 class Geom:
     name: str
-    kind: str  # box | cylinder | sphere | capsule
-    size: dict[str, float]
-    pose: np.ndarray  # relative to the link frame
+    kind: str  # box | cylinder | sphere | capsule | mesh
+    size: dict[str, float]  # mesh: the scaled bounding box's length, width, height
+    pose: np.ndarray  # relative to the link frame (a mesh: its file's origin)
+    body: str = ""  # the p-model body it comes from, as written ("" for a link's own shapes)
+    surface: dict = field(default_factory=dict)  # restitution, threshold, laser_retro, friction groups
+    mesh: str | None = None  # the mesh file (absolute path) when kind is mesh
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    center: tuple[float, float, float] = (0.0, 0.0, 0.0)  # a mesh's bounding-box centre in the geom frame
+    placeholder: bool = False  # stands in for a mesh that cannot be read: shown, never collides
 
     def volume(self) -> float:
-        if self.kind == "box":
+        if self.kind in ("box", "mesh"):
             return self.size["length"] * self.size["width"] * self.size["height"]
         if self.kind == "cylinder":
             return np.pi * self.size["radius"] ** 2 * self.size["length"]
@@ -98,12 +102,31 @@ class TLink:
 
 @dataclass
 class Sensor:
+    """One output port of a p-model sensor, as the mapping reads it (`pmodel::link::sref.port`)."""
+
     name: str  # the sref name
     device: str  # the sensor device (e.g. VelocitySensor)
     link: str  # the p-model link it is declared in (as written)
     joint: str | None  # the joint it measures
-    quantity: str  # position | velocity | effort
+    quantity: str  # position | velocity | effort | gyro | velocimeter | accelerometer | none
     port: str  # the device's output port
+    body: str = ""  # the tree link it is mounted on (for body quantities)
+    pose: np.ndarray = field(default_factory=lambda: np.eye(4))  # in that link's frame
+    component: int = 0  # which component of a 3-vector MuJoCo sensor the port reads
+    via: str = ""  # the joint (as written) of a sensor declared inside a joint: its path has it
+
+
+@dataclass
+class PlacedDevice:
+    """A sensor or actuator placed on a link, for SDF <sensor> elements: one per sref/aref."""
+
+    name: str
+    kind: str  # sensor | actuator
+    device: str  # its definition's name
+    link: str  # the tree link it is mounted on
+    pose: np.ndarray  # in that link's frame
+    sdf_type: str | None  # ray | sonar | imu | camera | contact | ... (None: no SDF counterpart)
+    annotation: dict | None  # the annotation giving its SDF data, evaluated: {"name": ..., "entries": [(key, value)]}
 
 
 @dataclass
@@ -113,6 +136,8 @@ class Servo:
     joint: str
     kp: float | None
     kd: float | None
+    mode: str = "position"  # position | velocity | effort: what the command sets
+    port: str = "dangle"  # the actuator's command input port (the mapping writes `...::aref.port`)
 
 
 @dataclass
@@ -131,6 +156,7 @@ class TJoint:
     servos: list[Servo] = field(default_factory=list)
     source_link: str = ""  # the p-model link that declares it (as written)
     source: str = ""  # the joint's name as written (without a part prefix)
+    annotations: dict = field(default_factory=dict)  # SDF annotation entries (dynamics...), evaluated
 
 
 @dataclass
@@ -139,6 +165,8 @@ class KinematicTree:
     links: list[TLink]  # root first, parents before children
     joints: list[TJoint]  # in the order of `links` (joint i leads to a child link)
     sensors: list[Sensor]
+    loops: list[TJoint] = field(default_factory=list)  # joints closing kinematic loops (not in `joints`)
+    devices: list[PlacedDevice] = field(default_factory=list)  # placed sensors and actuators (SDF)
 
     def link(self, name: str) -> TLink:
         return next(l for l in self.links if l.name == name)
@@ -181,195 +209,19 @@ class KinematicTree:
         return {g.name: links[l.name] @ g.pose for l in self.links for g in l.geoms}
 
 
-# ---- building from a p-model --------------------------------------------------------------
-
-
-SENSOR_QUANTITIES = (("position", "position"), ("angle", "position"), ("vel", "velocity"),
-                     ("torque", "effort"), ("force", "effort"))
-
-
-def sensor_quantity(device_name: str, port: str) -> str | None:
-    """What a sensor measures, from its device and output port names (documented rule)."""
-    text = f"{device_name} {port}".lower()
-    for key, quantity in SENSOR_QUANTITIES:
-        if key in text:
-            return quantity
-    return None
-
-
-class _TreeBuilder:
-    def __init__(self, project, diag: Diagnostics):
-        self.project = project
-        self.diag = diag
-        self.links: dict[str, TLink] = {}
-        self.joints: list[TJoint] = []
-        self.sensors: list[Sensor] = []
-
-    def num(self, expr, env: ConstEnv, what: str, default=0.0) -> float:
-        if expr is None:
-            return default
-        value = try_evaluate(expr, env, self.diag, what)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            if value is not None:
-                self.diag.error(expr.loc, f"{what} must be a number")
-            return default
-        return float(value)
-
-    def pose(self, pose: Pose | None, env: ConstEnv, what: str) -> np.ndarray:
-        if pose is None:
-            return np.eye(4)
-        v = {k: self.num(e, env, f"pose of {what}") for k, e, _ in pose.fields}
-        return transform((v.get("x", 0.0), v.get("y", 0.0), v.get("z", 0.0)),
-                         (v.get("roll", 0.0), v.get("pitch", 0.0), v.get("yaw", 0.0)))
-
-    def shape(self, shape: Shape, env: ConstEnv, name: str, pose: np.ndarray) -> Geom | None:
-        if shape.kind == "mesh":
-            self.diag.warning(shape.loc, f"mesh in {name} is not exported (no mesh files): geometry skipped")
-            return None
-        size = {k: self.num(e, env, f"{shape.kind} of {name}") for k, e, _ in shape.params}
-        return Geom(name, shape.kind, size, pose)
-
-    def add_pmodel(self, pmodel: PModel, prefix: str, frame: np.ndarray, part: str | None) -> None:
-        env = pmodel_constants(self.project, pmodel)
-        for link in pmodel.links:
-            self.add_link(link, env, prefix, frame, part)
-        for part_ref in pmodel.parts:
-            sub = self.project.lookup("pmodel", part_ref.pmodel)
-            if sub is None:
-                continue
-            part_frame = frame @ self.pose(part_ref.pose, env, f"part {part_ref.name}")
-            self.add_pmodel(sub, f"{prefix}{part_ref.name}_", part_frame, part_ref.name)
-        for link in pmodel.links:
-            self.add_joints(link, pmodel, env, prefix)
-
-    def add_link(self, link: Link, env: ConstEnv, prefix: str, frame: np.ndarray, part: str | None) -> None:
-        name = prefix + link.name
-        pose = frame @ self.pose(link.pose, env, f"link {link.name}")
-        geoms = []
-        for k, shape in enumerate(link.shapes):
-            g = self.shape(shape, env, f"{name}_shape{k}", np.eye(4))
-            if g:
-                geoms.append(g)
-        for body in link.bodies:
-            for k, shape in enumerate(body.shapes):
-                suffix = "" if len(body.shapes) == 1 else f"_{k}"
-                g = self.shape(shape, env, f"{prefix}{body.name}{suffix}", self.pose(body.pose, env, f"body {body.name}"))
-                if g:
-                    geoms.append(g)
-        inertial = link.inertial
-        if inertial is None or inertial.mass is None:
-            mass = DEFAULT_MASS
-        else:
-            mass = self.num(inertial.mass, env, f"mass of {link.name}", DEFAULT_MASS) * UNITS.get(inertial.unit or "kg", 1.0)
-        com = self.pose(inertial.pose if inertial else None, env, f"inertial of {link.name}")
-        given = {k: self.num(e, env, f"inertia of {link.name}") for k, e, _ in (inertial.inertia if inertial else ())}
-        if given:
-            I = np.array([[given.get("ixx", 0.0), given.get("ixy", 0.0), given.get("ixz", 0.0)],
-                          [given.get("ixy", 0.0), given.get("iyy", 0.0), given.get("iyz", 0.0)],
-                          [given.get("ixz", 0.0), given.get("iyz", 0.0), given.get("izz", 0.0)]])
-        else:
-            I = default_inertia(mass, geoms, com)
-        self.links[name] = TLink(name, pose, mass, com, I, geoms, link.name, part)
-
-    def add_joints(self, link: Link, pmodel: PModel, env: ConstEnv, prefix: str) -> None:
-        parent = prefix + link.name
-        ordered = sorted([*link.joints, *link.sensors], key=lambda r: (r.loc.line, r.loc.column))
-        current = None
-        for ref in ordered:
-            if hasattr(ref, "joint"):  # a JointRef
-                current = ref
-                self.add_joint(ref, parent, pmodel, env, prefix, link.name)
-            else:
-                self.add_sensor(ref, link, current or (link.joints[0] if link.joints else None), prefix, pmodel)
-        for fixed in link.fixed_to:
-            part = next((p for p in pmodel.parts if p.name == fixed.part), None)
-            child = f"{prefix}{fixed.part}_{fixed.link}" if part else None
-            if child not in self.links:
-                continue
-            self.joints.append(TJoint(f"{parent}_to_{child}", "fixed", parent, child, self.links[child].pose.copy(),
-                                      np.array([0.0, 0.0, 1.0]), source_link=link.name))
-
-    def add_joint(self, ref, parent: str, pmodel: PModel, env: ConstEnv, prefix: str, source_link: str) -> None:
-        device = self.project.lookup("joint", ref.joint, self.project.file_of(pmodel))
-        kind = (device.name if device else ref.joint.last).lower()
-        kind = {"continuous": "revolute"}.get(kind, kind)
-        if kind not in ("revolute", "prismatic", "fixed"):
-            self.diag.error(ref.joint.loc, f"joint type '{ref.joint}' is not revolute, prismatic or fixed")
-            return
-        if ref.child is None:
-            return
-        child = prefix + (f"{ref.child_part}_" if ref.child_part else "") + ref.child
-        if child not in self.links:
-            return
-        pose = self.links[parent].pose @ self.pose(ref.pose, env, f"joint {ref.name}")
-        axis = np.array([0.0, 0.0, 1.0])
-        joint = TJoint(prefix + ref.name, kind, parent, child, pose, axis, source_link=source_link, source=ref.name)
-        for ann in ref.annotations:
-            ax = ann.get("axis")
-            if not isinstance(ax, AnnotationRecord):
-                continue
-            xyz = ax.get("xyz")
-            if xyz is not None:
-                value = try_evaluate(xyz, env, self.diag, f"axis of {ref.name}")
-                if isinstance(value, tuple) and len(value) == 3:
-                    vec = np.array([float(v) for v in value])
-                    if np.linalg.norm(vec) > 0:
-                        joint.axis = vec / np.linalg.norm(vec)
-            dyn = ax.get("dynamics")
-            if isinstance(dyn, AnnotationRecord):
-                joint.damping = self.num(dyn.get("damping"), env, f"damping of {ref.name}")
-            lim = ax.get("limit")
-            if isinstance(lim, AnnotationRecord):
-                for key in ("lower", "upper", "velocity", "effort"):
-                    if lim.get(key) is not None:
-                        setattr(joint, key, self.num(lim.get(key), env, f"limit {key} of {ref.name}"))
-        for aref in ref.actuators:
-            gains = {n: self.num(e, env, f"{aref.name}.{n}") for n, e, _ in aref.instantiations}
-            joint.servos.append(Servo(aref.name, aref.device.last, joint.name, gains.get("Kp"), gains.get("Kd")))
-        self.joints.append(joint)
-
-    def add_sensor(self, ref, link: Link, joint, prefix: str, pmodel: PModel) -> None:
-        device = self.project.lookup("sensor", ref.device, self.project.file_of(pmodel))
-        if device is None:
-            return
-        outputs = [p for p in device.ports if p.kind == "output"]
-        for port in outputs:
-            quantity = sensor_quantity(device.name, port.name)
-            if quantity is None:
-                self.diag.warning(ref.loc, f"sensor {ref.name} ({device.name}.{port.name}): cannot tell what it "
-                                  "measures (position, velocity, torque or force); it reads 0")
-                quantity = "none"
-            self.sensors.append(Sensor(ref.name, device.name, link.name, prefix + joint.name if joint else None,
-                                       quantity, port.name))
-
-    def order(self, name: str) -> KinematicTree:
-        children = {j.child for j in self.joints}
-        roots = [l for l in self.links if l not in children]
-        if not roots:
-            raise CotwinError(f"p-model {name} has no root link (a cycle of joints?)")
-        ordered: list[str] = []
-        joints: list[TJoint] = []
-        stack = [roots[0]]
-        while stack:
-            current = stack.pop(0)
-            ordered.append(current)
-            for j in self.joints:
-                if j.parent == current and j.child not in ordered:
-                    joints.append(j)
-                    stack.append(j.child)
-        for other in roots[1:]:  # attach extra roots to the base with a fixed joint
-            self.diag.warning(s.NOWHERE, f"link {other} is not connected to {roots[0]}: fixed to it")
-            joints.append(TJoint(f"{roots[0]}_to_{other}", "fixed", roots[0], other, self.links[other].pose.copy(),
-                                 np.array([0.0, 0.0, 1.0])))
-            ordered.append(other)
-        return KinematicTree(name, [self.links[n] for n in ordered], joints, self.sensors)
-
-
 def build_tree(project, pmodel_name: str | None = None) -> KinematicTree:
     """The kinematic tree of a p-model (the only one not used as a part, or the one named)."""
+    from .tree_build import TreeBuilder
+
     pmodels = project.elements(PModel)
     if pmodel_name is not None:
         pmodel = project.lookup("pmodel", pmodel_name)
+        if pmodel is None:  # a p-model of a package, by its simple name
+            named = [p for p in pmodels if p.name == pmodel_name]
+            if len(named) > 1:
+                raise CotwinError(f"several p-models named '{pmodel_name}': give its package "
+                                  f"({', '.join('::'.join(project.qualified_name(p)) for p in named)})")
+            pmodel = named[0] if named else None
         if pmodel is None:
             raise CotwinError(f"no p-model '{pmodel_name}' (p-models: {', '.join(p.name for p in pmodels)})")
     else:
@@ -381,7 +233,8 @@ def build_tree(project, pmodel_name: str | None = None) -> KinematicTree:
             raise CotwinError("several p-models: choose one with --pmodel: " + ", ".join(p.name for p in top or pmodels))
         pmodel = top[0]
     diag = Diagnostics()
-    builder = _TreeBuilder(project, diag)
+    builder = TreeBuilder(project, diag)
     builder.add_pmodel(pmodel, "", np.eye(4), None)
+    builder.connect_parts()
     diag.raise_if_errors()
     return builder.order(pmodel.name)

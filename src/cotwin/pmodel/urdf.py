@@ -1,5 +1,6 @@
 """p-model -> URDF. URDF has no separate link frames: a child link's frame is its joint's frame, so
-geometry and inertia are re-expressed there; the root link's frame is the model frame."""
+geometry and inertia are re-expressed there; the root link's frame is the model frame. URDF cannot
+close kinematic loops: a loop's closing joints are left out, a comment names them."""
 
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ def _geometry(parent: ET.Element, g: Geom) -> None:
         sub(geometry, "box", size=nums([g.size["length"], g.size["width"], g.size["height"]]))
     elif g.kind in ("cylinder", "capsule"):
         sub(geometry, "cylinder", radius=num(g.size["radius"]), length=num(g.size["length"]))
+    elif g.kind == "mesh":
+        sub(geometry, "mesh", filename=f"file://{g.mesh}", scale=nums(g.scale))
     else:
         sub(geometry, "sphere", radius=num(g.size["radius"]))
 
@@ -47,7 +50,7 @@ def to_urdf(tree: KinematicTree) -> str:
         sub(inertial, "inertia", ixx=num(I[0, 0]), ixy=num(I[0, 1]), ixz=num(I[0, 2]), iyy=num(I[1, 1]),
             iyz=num(I[1, 2]), izz=num(I[2, 2]))
         for g in link.geoms:
-            for tag in ("visual", "collision"):
+            for tag in ("visual",) if g.placeholder else ("visual", "collision"):
                 part = sub(el, tag, name=f"{g.name}_{tag}")
                 _origin(part, local @ g.pose)
                 _geometry(part, g)
@@ -63,4 +66,7 @@ def to_urdf(tree: KinematicTree) -> str:
             limits.setdefault("velocity", "0")
             sub(el, "limit", **limits)
             sub(el, "dynamics", damping=num(j.damping))
+    for j in tree.loops:
+        robot.append(ET.Comment(f" joint {j.name} ({j.kind}, {j.parent} -> {j.child}) closes a kinematic loop: "
+                                "URDF cannot say it "))
     return to_text(robot)

@@ -6,9 +6,7 @@ classes tag items that have no model class of their own (a cycleDef, an exec fla
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-from lark import Token, Transformer, v_args
+from lark import Token, v_args
 
 from ..diagnostics import Diagnostics, Location
 from . import syntax as s
@@ -20,63 +18,15 @@ from .dmodel_elements import (
     Communication, Connection, Controller, Final, Initial, Interface, InterfaceUse, Junction, MachineRef, Module,
     OperationDef, OperationRef, PlatformRef, ProbabilisticJunction, RoboticPlatform, State, StateMachine, Transition,
 )
-from .pmodel_elements import (
-    AnnotationEntry, AnnotationRecord, Body, Device, DeviceRef, FixedTo, Inertial, JointRef, Link,
-    Mapping, MappingInputEvent, MappingOperation, PartRef, PModel, Pose, Shape,
-)
+from .build_items import _Args, _Group, _Params, _Tagged, _flatten, _ident, _of, _tagged
+from .builder_pmodel import PModelBuilder
 
 
-# ---- item tags --------------------------------------------------------------------------------
-
-
-class _Group(tuple):
-    """Several declarations from one `var a: T, b: U` line; flattened into the container."""
-
-
-class _Params(tuple):
-    pass
-
-
-class _Args(tuple):
-    pass
-
-
-@dataclass(frozen=True)
-class _Tagged:
-    tag: str
-    value: object
-    loc: Location
-
-
-def _flatten(items) -> list:
-    out = []
-    for item in items:
-        if isinstance(item, _Group):
-            out.extend(item)
-        else:
-            out.append(item)
-    return out
-
-
-def _of(items, cls) -> tuple:
-    return tuple(i for i in items if isinstance(i, cls))
-
-
-def _tagged(items, tag: str) -> list[_Tagged]:
-    return [i for i in items if isinstance(i, _Tagged) and i.tag == tag]
-
-
-def _ident(token: Token) -> str:
-    text = str(token)
-    return text[1:] if text.startswith("^") else text
-
-
-_POSE_KEYS = ("x", "y", "z", "roll", "pitch", "yaw")
 _NODES = (State, Initial, Junction, Final, ProbabilisticJunction)
 
 
 @v_args(meta=True, inline=True)
-class Builder(Transformer):
+class Builder(PModelBuilder):
     def __init__(self, path: str, notation: str, diagnostics: Diagnostics):
         super().__init__()
         self.path = path
@@ -143,10 +93,6 @@ class Builder(Transformer):
     def var_kind(self, meta, token):
         return str(token)
 
-    port_kind = var_kind
-    device_kind = var_kind
-    shape_kind = var_kind
-    pose_key = var_kind
     quant_kind = var_kind
 
     def var_item(self, meta, name, type_, init=None):
@@ -155,7 +101,6 @@ class Builder(Transformer):
     def var_list(self, meta, kind, *items):
         return _Group(VarDecl(n, t, i, kind, loc) for n, t, i, loc in items)
 
-    port_list = var_list
 
     def param(self, meta, name, type_):
         return Param(_ident(name), type_, self._tok_loc(name))
@@ -194,7 +139,8 @@ class Builder(Transformer):
 
     # ---- expressions ----
     def binary(self, meta, left, op, right):
-        text = "cat" if op.type in ("CAT", "CARET") else str(op)
+        """`^` is RoboChart's concatenation in .rst/.rct files and a power in p-models (RoboTool's physmod)."""
+        text = "cat" if op.type == "CAT" or (op.type == "CARET" and self.notation != "pm") else str(op)
         return s.Binary(text, left, right, self._loc(meta))
 
     def compare_op(self, meta, token):
@@ -411,9 +357,6 @@ class Builder(Transformer):
         return self._source(items)
 
     rct_file = rst_file
-
-    def pm_file(self, meta, *items):
-        return self._source(items)
 
     def _source(self, items) -> SourceFile:
         items = _flatten(i for i in items if i is not None)
@@ -632,146 +575,7 @@ class Builder(Transformer):
             probability[0].value if probability else None, deadline[0].value if deadline else None,
         )
 
-    # ---- p-model ----
-    def equation(self, meta, expr):
-        return _Tagged("equation", expr, self._loc(meta))
-
-    def device(self, meta, kind, name, *items):
-        items = _flatten(items)
-        return Device(kind, _ident(name), _of(items, VarDecl), tuple(t.value for t in _tagged(items, "equation")),
-                      _of(items, AnnotationRecord), self._tok_loc(name))
-
-    def annotation_entry(self, meta, key, value):
-        return AnnotationEntry(_ident(key), value, self._tok_loc(key))
-
-    def annotation(self, meta, name, *entries):
-        return AnnotationRecord(_ident(name), tuple(entries), self._tok_loc(name))
-
-    annotation_record = annotation
-
-    def named_value(self, meta, name, value):
-        return (_ident(name), value, self._tok_loc(name))
-
-    def pose_field(self, meta, key, value):
-        return (key, value, self._loc(meta))
-
-    def pose(self, meta, *fields):
-        seen: dict[str, Location] = {}
-        for key, _, loc in fields:
-            if key in seen:
-                self.diag.error(loc, f"pose field '{key}' given twice (first at line {seen[key].line})")
-            seen[key] = loc
-        return Pose(tuple(fields), self._loc(meta))
-
-    def shape(self, meta, kind, *params):
-        return Shape(kind, tuple(params), self._loc(meta))
-
-    def mass(self, meta, value, unit=None):
-        return _Tagged("mass", (value, str(unit) if unit is not None else None), self._loc(meta))
-
-    def inertia_matrix(self, meta, *values):
-        return _Tagged("inertia", tuple(values), self._loc(meta))
-
-    def inertial(self, meta, *items):
-        where = "inertial information"
-        mass = self._single(_tagged(items, "mass"), "mass", where)
-        poses = _of(items, Pose)
-        return Inertial(mass[0] if mass else None, mass[1] if mass else None,
-                        self._single(_tagged(items, "inertia"), "inertia matrix", where) or (),
-                        poses[0] if poses else None, self._loc(meta))
-
-    def link_def(self, meta, *items):
-        return _Tagged("def", tuple(_flatten(items)), self._loc(meta))
-
-    def local_body(self, meta, name, *items):
-        shapes = tuple(x for d in _tagged(items, "def") for x in d.value if isinstance(x, Shape))
-        return Body(_ident(name), shapes, self._one_pose(items, f"body {name}"), self._tok_loc(name))
-
-    def _one_pose(self, items, where: str) -> Pose | None:
-        poses = _of(items, Pose)
-        for extra in poses[1:]:
-            self.diag.error(extra.loc, f"more than one pose in {where}")
-        return poses[0] if poses else None
-
-    def fixed_to(self, meta, link, _in, part):
-        return FixedTo(_ident(link), _ident(part), self._tok_loc(link))
-
-    def instantiation(self, meta, name, value):
-        return _Tagged("instantiation", (_ident(name), value, self._tok_loc(name)), self._loc(meta))
-
-    def relation(self, meta, expr):
-        return _Tagged("relation", expr, self._loc(meta))
-
-    def flexibly_connected(self, meta, child, *rest):
-        part = _ident(rest[-1]) if rest else None
-        return _Tagged("child", (_ident(child), part, self._tok_loc(child)), self._loc(meta))
-
-    def _device_ref(self, kind, meta, name, device, items):
-        return DeviceRef(kind, _ident(name), device, tuple(t.value for t in _tagged(items, "relation")),
-                         tuple(t.value for t in _tagged(items, "instantiation")), self._tok_loc(name))
-
     def sref(self, meta, name, target, *items):
         if self.notation in ("rst", "rct"):
             return MachineRef(_ident(name), target, self._tok_loc(name))
-        return self._device_ref("sref", meta, name, target, items)
-
-    def aref(self, meta, name, target, *items):
-        return self._device_ref("aref", meta, name, target, items)
-
-    def jref(self, meta, name, joint, *items):
-        where = f"joint {name}"
-        child = self._single(_tagged(items, "child"), "flexibly connected to", where)
-        return JointRef(
-            _ident(name), joint, _of(items, AnnotationRecord),
-            tuple(t.value for t in _tagged(items, "instantiation")),
-            tuple(i for i in items if isinstance(i, DeviceRef)),
-            child[0] if child else None, child[1] if child else None, child[2] if child else None,
-            self._one_pose(items, where), self._tok_loc(name),
-        )
-
-    def local_link(self, meta, name, *items):
-        where = f"link {name}"
-        definition = [x for d in _tagged(items, "def") for x in d.value]
-        inertials = _of(definition, Inertial)
-        for extra in inertials[1:]:
-            self.diag.error(extra.loc, f"more than one inertial information in {where}")
-        refs = _of(items, DeviceRef)
-        return Link(
-            _ident(name), inertials[0] if inertials else None, _of(definition, Shape),
-            _of(definition, AnnotationRecord), _of(definition, VarDecl),
-            tuple(t.value for t in _tagged(definition, "equation")), self._one_pose(items, where),
-            _of(items, Body), _of(items, JointRef), tuple(r for r in refs if r.kind == "sref"),
-            tuple(r for r in refs if r.kind == "aref"), _of(items, FixedTo), self._tok_loc(name),
-        )
-
-    def part(self, meta, name, pmodel, *items):
-        return PartRef(_ident(name), pmodel, self._one_pose(items, f"part {name}"),
-                       tuple(t.value for t in _tagged(items, "instantiation")), self._tok_loc(name))
-
-    def pmodel(self, meta, name, *items):
-        items = _flatten(items)
-        return PModel(_ident(name), _of(items, VarDecl), _of(items, Link), _of(items, PartRef), self._tok_loc(name))
-
-    # ---- mapping ----
-    def map_action(self, meta, target, value):
-        return _Tagged("action", (target, value, self._loc(meta)), self._loc(meta))
-
-    def predicate(self, meta, expr):
-        return _Tagged("predicate", expr, self._loc(meta))
-
-    def map_operation(self, meta, name, *items):
-        items = _flatten(items)
-        return MappingOperation(_ident(name), _of(items, VarDecl), tuple(t.value for t in _tagged(items, "equation")),
-                                tuple(t.value for t in _tagged(items, "action")), self._tok_loc(name))
-
-    def map_input_event(self, meta, name, *items):
-        bind = _ident(items[0]) if items and isinstance(items[0], Token) else None
-        items = _flatten(i for i in items if not isinstance(i, Token))
-        return MappingInputEvent(_ident(name), bind, tuple(t.value for t in _tagged(items, "equation")),
-                                 tuple(t.value for t in _tagged(items, "predicate")), _of(items, VarDecl),
-                                 self._tok_loc(name))
-
-    def mapping(self, meta, name, dmodel, pmodel, *items):
-        items = _flatten(items)
-        return Mapping(_ident(name), dmodel, pmodel, _of(items, VarDecl), _of(items, MappingOperation),
-                       _of(items, MappingInputEvent), self._tok_loc(name))
+        return self._pm_device_ref("sref", name, target, items)

@@ -1,6 +1,7 @@
 """Checks of platform mappings against the d-model's robotic platform and the p-model's sensors.
 
-Readings chosen where the notation is silent (see docs/robosim-notation.md, section 8):
+Readings chosen where the notation is silent (see docs/pmodel-notation.md, section 5, and
+docs/robosim-notation.md, section 8):
 several `equation`s of an input event are a conjunction; `action x = e` assigns mapping variable x
 when the operation is called.
 """
@@ -10,7 +11,7 @@ from __future__ import annotations
 from ..diagnostics import Diagnostics
 from .checker import Checker
 from . import syntax as s
-from .check_pmodel import flatten_links
+from .check_pmodel import device_of, flatten_links
 from .consteval import const_env, try_evaluate
 from .declarations import SourceFile
 from .dmodel_elements import Module
@@ -57,11 +58,11 @@ def device_path(project, pmodel: PModel, name: s.QName):
         joint = next((j for j in link.joints if j.name == parts[2]), None)
         if joint is None:
             return f"link '{link.name}' has no joint '{parts[2]}'"
-        ref = next((a for a in joint.actuators if a.name == parts[3]), None)
+        ref = next((a for a in (*joint.actuators, *joint.sensors) if a.name == parts[3]), None)
         if ref is None:
-            return f"joint '{joint.name}' has no actuator '{parts[3]}'"
+            return f"joint '{joint.name}' has no actuator or sensor '{parts[3]}'"
     kind = "sensor" if ref.kind == "sref" else "actuator"
-    device = project.lookup(kind, ref.device, project.file_of(placed.pmodel))
+    device = device_of(project, ref, project.file_of(placed.pmodel))
     if device is None:
         return f"unknown {kind} '{ref.device}'"
     return link, ref, device

@@ -18,7 +18,12 @@ from .operators import MATH
 from .values import EvalError
 
 #: unit -> factor to SI
-UNITS = {"kg": 1.0, "g": 1e-3, "m": 1.0, "cm": 1e-2, "mm": 1e-3, "rad": 1.0, "deg": math.pi / 180, "s": 1.0}
+UNITS = {"kg": 1.0, "g": 1e-3, "mg": 1e-6, "km": 1e3, "m": 1.0, "cm": 1e-2, "mm": 1e-3, "rad": 1.0,
+         "deg": math.pi / 180, "s": 1.0, "ms": 1e-3}
+# the unit names of RoboTool's `primitive unit` declarations that cotwin reads (SI: factor 1, degrees as `deg`)
+UNITS.update({name: 1.0 for name in ("metre", "metres", "meter", "meters", "second", "seconds", "kilogram",
+                                     "kilograms", "radian", "radians", "newton", "newtons")})
+UNITS.update({"degree": UNITS["deg"], "degrees": UNITS["deg"]})
 
 
 class ConstError(Exception):
@@ -96,6 +101,21 @@ class ConstEvaluator(Evaluator):
 
     def unsupported(self, node):
         raise ConstError(node.loc, "not a constant expression")
+
+    def visit_Binary(self, e: s.Binary):
+        if e.op != "^":
+            return super().visit_Binary(e)
+        # a power: p-models only (the builder reads RoboChart's `^` as `cat` in .rst/.rct files)
+        a, b = self.visit(e.left), self.visit(e.right)
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (a, b)):
+            raise ConstError(e.loc, "'^' needs numbers")
+        try:
+            value = float(a) ** b
+        except (ZeroDivisionError, OverflowError):
+            raise ConstError(e.loc, f"{a} ^ {b} cannot be evaluated") from None
+        if isinstance(value, complex):
+            raise ConstError(e.loc, f"{a} ^ {b} is not a real number")
+        return value
 
 
 def evaluate(expr: s.Expr, env: ConstEnv) -> object:

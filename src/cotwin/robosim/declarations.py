@@ -115,6 +115,7 @@ class SourceFile:
     package: QName | None = None
     imports: list[Import] = field(default_factory=list)
     elements: list[object] = field(default_factory=list)
+    siblings: list["SourceFile"] = field(default_factory=list)  # further `package` blocks of a .pm file
 
     def of_kind(self, cls) -> list:
         return [e for e in self.elements if isinstance(e, cls)]

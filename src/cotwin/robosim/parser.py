@@ -26,8 +26,9 @@ _TERMINAL_TEXT = {
 
 
 def _grammar_text(name: str) -> str:
+    """The shared rules first, then the notation's own (which may `%extend` shared rules)."""
     folder = resources.files("cotwin.robosim") / "grammar"
-    return (folder / name).read_text(encoding="utf-8") + "\n" + (folder / "common.lark").read_text(encoding="utf-8")
+    return (folder / "common.lark").read_text(encoding="utf-8") + "\n" + (folder / name).read_text(encoding="utf-8")
 
 
 def lark_parser(notation: str) -> lark.Lark:

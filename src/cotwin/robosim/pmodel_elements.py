@@ -1,4 +1,8 @@
-"""The p-model (links, bodies, joints, sensors, actuators, parts) and the platform mapping."""
+"""The p-model (links, bodies, joints, sensors, actuators, parts) and the platform mapping.
+
+Local elements (`local joint J { def { ... } }`) carry their own definition (a `Device`); references
+(`jref J = Revolute_y`) name one. New fields have defaults, so the paper's older forms build as before.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +10,8 @@ from dataclasses import dataclass
 
 from .declarations import VarDecl
 from .syntax import Expr, Location, QName
+
+Entry = tuple[str, Expr, Location]  # name = value, where
 
 
 @dataclass(frozen=True)
@@ -28,18 +34,31 @@ class AnnotationRecord:
 
 
 @dataclass(frozen=True)
+class AnnotationTemplate:
+    """`annotation template Name { field : type  nested : template Other }` (declares an annotation)."""
+
+    name: str
+    fields: tuple[tuple[str, object, bool, Location], ...]  # name, type or template name, is nested, where
+    loc: Location
+
+
+@dataclass(frozen=True)
 class Device:
-    """A top-level `sensor`, `actuator` or `joint` definition with its ports and equations."""
+    """A `sensor`, `actuator` or `joint` definition: top-level, or the `def` of a local one."""
 
     kind: str  # sensor | actuator | joint
     name: str
-    ports: tuple[VarDecl, ...]  # kind: input | output | local | const
+    ports: tuple[VarDecl, ...]  # kind: input | output | local | const | var | InOut
     equations: tuple[Expr, ...]
     annotations: tuple[AnnotationRecord, ...]
     loc: Location
+    constraints: tuple[Expr, ...] = ()
 
     def port(self, name: str) -> VarDecl | None:
         return next((p for p in self.ports if p.name == name), None)
+
+    def annotation(self, name: str) -> AnnotationRecord | None:
+        return next((a for a in self.annotations if a.name == name), None)
 
 
 @dataclass(frozen=True)
@@ -51,63 +70,103 @@ class Pose:
 
 
 @dataclass(frozen=True)
+class Index:
+    """`index i : [low, high]` or `[low, high)`: the element is replicated once per integer value."""
+
+    var: str
+    low: Expr
+    high: Expr
+    closed: bool  # ] includes high, ) excludes it
+    loc: Location
+
+
+@dataclass(frozen=True)
 class Shape:
     kind: str  # box | cylinder | sphere | mesh | capsule
-    params: tuple[tuple[str, Expr, Location], ...]
+    params: tuple[Entry, ...]  # mesh: ("shape", file literal), ("scaling", factor)
     loc: Location
+
+
+@dataclass(frozen=True)
+class Surface:
+    """Contact properties of a body: `bounce { }`, `friction { }` and `laser retro`."""
+
+    restitution: Expr | None = None
+    threshold: Expr | None = None
+    friction: tuple[tuple[str, tuple[Entry, ...], Location], ...] = ()  # group (translational...), entries
+    laser_retro: Expr | None = None
 
 
 @dataclass(frozen=True)
 class Inertial:
     mass: Expr | None
     unit: str | None
-    inertia: tuple[tuple[str, Expr, Location], ...]
+    inertia: tuple[Entry, ...]
     pose: Pose | None
     loc: Location
 
 
 @dataclass(frozen=True)
 class Body:
+    """`local body B { def { shape inertial surfaces } pose }` or `bref B = Def { pose }`."""
+
     name: str
     shapes: tuple[Shape, ...]
     pose: Pose | None
     loc: Location
+    inertial: Inertial | None = None
+    surface: Surface | None = None
+    ref: QName | None = None  # bref: the top-level body it instantiates
+    index: Index | None = None
+    relations: tuple[Expr, ...] = ()
+    variables: tuple[VarDecl, ...] = ()
+    equations: tuple[Expr, ...] = ()
 
 
 @dataclass(frozen=True)
 class DeviceRef:
-    """`sref S = Sensor { ... }` or `aref A = Actuator { relation ... }`."""
+    """A sensor or actuator of a link or joint: `sref S = Sensor { ... }`, `aref A = Actuator { relation ... }`,
+    or `local sensor S { def { ... } }` (then `local` holds its definition and `device` is None)."""
 
     kind: str  # sref | aref
     name: str
-    device: QName
+    device: QName | None
     relations: tuple[Expr, ...]
-    instantiations: tuple[tuple[str, Expr, Location], ...]
+    instantiations: tuple[Entry, ...]
     loc: Location
+    local: Device | None = None
+    pose: Pose | None = None
+    index: Index | None = None
+    annotations: tuple[AnnotationRecord, ...] = ()
 
 
 @dataclass(frozen=True)
 class JointRef:
-    """`jref j = Revolute { annotation ... flexibly connected to child ... pose ... }`."""
+    """`jref j = Revolute { annotation ... flexibly connected to child ... pose ... }` or a
+    `local joint j { def { ... } ... }` (then `local` holds its definition and `joint` is None)."""
 
     name: str
-    joint: QName
+    joint: QName | None
     annotations: tuple[AnnotationRecord, ...]
-    instantiations: tuple[tuple[str, Expr, Location], ...]
+    instantiations: tuple[Entry, ...]
     actuators: tuple[DeviceRef, ...]
     child: str | None
     child_part: str | None
     child_loc: Location | None
     pose: Pose | None
     loc: Location
+    local: Device | None = None
+    sensors: tuple[DeviceRef, ...] = ()
+    relations: tuple[Expr, ...] = ()
+    index: Index | None = None
 
 
 @dataclass(frozen=True)
 class FixedTo:
-    """`fixed to link in Part`: a rigid attachment of this link to a link of a part."""
+    """`fixed to link [in Part]`: a rigid attachment of this link to another (the other is the child)."""
 
     link: str
-    part: str
+    part: str | None
     loc: Location
 
 
@@ -126,6 +185,55 @@ class Link:
     actuators: tuple[DeviceRef, ...]
     fixed_to: tuple[FixedTo, ...]
     loc: Location
+    ref: QName | None = None  # lref: the top-level link it instantiates
+    index: Index | None = None
+    relations: tuple[Expr, ...] = ()
+    constraints: tuple[Expr, ...] = ()
+
+
+@dataclass(frozen=True)
+class LinkDecl:
+    """A top-level `link Name { inertial ... const ... }`, instantiated by `lref`."""
+
+    name: str
+    inertial: Inertial | None
+    shapes: tuple[Shape, ...]
+    variables: tuple[VarDecl, ...]
+    equations: tuple[Expr, ...]
+    annotations: tuple[AnnotationRecord, ...]
+    loc: Location
+
+
+@dataclass(frozen=True)
+class BodyDecl:
+    """A top-level `body Name { shape inertial surfaces }`, instantiated by `bref`."""
+
+    name: str
+    shapes: tuple[Shape, ...]
+    inertial: Inertial | None
+    surface: Surface | None
+    variables: tuple[VarDecl, ...]
+    loc: Location
+
+
+@dataclass(frozen=True)
+class PartFixed:
+    """In a part: `link L fixed to M [in P]`: link L of the part is fixed to link M (of part P)."""
+
+    link: str
+    target: str
+    target_part: str | None
+    loc: Location
+
+
+@dataclass(frozen=True)
+class PartJoint:
+    """In a part: `joint J flexibly connected to L [in P]`: the part's joint J gets child L (of part P)."""
+
+    joint: str
+    child: str
+    child_part: str | None
+    loc: Location
 
 
 @dataclass(frozen=True)
@@ -135,7 +243,17 @@ class PartRef:
     name: str
     pmodel: QName
     pose: Pose | None
-    instantiations: tuple[tuple[str, Expr, Location], ...]
+    instantiations: tuple[Entry, ...]
+    loc: Location
+    fixed: tuple[PartFixed, ...] = ()
+    joints: tuple[PartJoint, ...] = ()
+
+
+@dataclass(frozen=True)
+class Solution:
+    """A solver-generated `solution { solutionExpr ... order ... method ... Input ... }` block."""
+
+    items: tuple[tuple[str, object, Location], ...]
     loc: Location
 
 
@@ -145,6 +263,25 @@ class PModel:
     constants: tuple[VarDecl, ...]
     links: tuple[Link, ...]
     parts: tuple[PartRef, ...]
+    loc: Location
+    variables: tuple[VarDecl, ...] = ()  # input, output, local, InOut declarations of the p-model
+    equations: tuple[Expr, ...] = ()
+    constraints: tuple[Expr, ...] = ()
+    solutions: tuple[Solution, ...] = ()
+    annotations: tuple[AnnotationRecord, ...] = ()
+
+
+@dataclass(frozen=True)
+class Fragment:
+    """`fragment Name { links, joints, sensors, actuators }`: a reusable collection of p-model elements."""
+
+    name: str
+    links: tuple[Link, ...]
+    joints: tuple[JointRef, ...]
+    sensors: tuple[DeviceRef, ...]
+    actuators: tuple[DeviceRef, ...]
+    variables: tuple[VarDecl, ...]
+    equations: tuple[Expr, ...]
     loc: Location
 
 

@@ -21,7 +21,7 @@ from .declarations import EnumDecl, FunctionDecl, PrimitiveDecl, RecordDecl, Sou
 from .dmodel_elements import Controller, Interface, Module, OperationDef, RoboticPlatform, StateMachine
 from .functions import SUBSTITUTE_PACKAGES
 from .parser import notation_of, parse_file, parse_text
-from .pmodel_elements import Device, Mapping, PModel
+from .pmodel_elements import AnnotationTemplate, BodyDecl, Device, Fragment, LinkDecl, Mapping, PModel
 from .readings import Readings
 from .syntax import QName
 
@@ -30,12 +30,14 @@ KIND_OF = {
     PrimitiveDecl: "type", RecordDecl: "type", EnumDecl: "type", Interface: "interface",
     FunctionDecl: "function", Module: "module", Controller: "controller", StateMachine: "stm",
     OperationDef: "operation", RoboticPlatform: "platform", PModel: "pmodel", Mapping: "mapping",
+    LinkDecl: "link", BodyDecl: "body", Fragment: "fragment", AnnotationTemplate: "annotation",
 }
 KIND_WORD = {
     "type": "type", "interface": "interface", "function": "function", "module": "module",
     "controller": "controller", "stm": "state machine", "operation": "operation",
     "platform": "robotic platform", "pmodel": "p-model", "mapping": "mapping", "sensor": "sensor",
-    "actuator": "actuator", "joint": "joint",
+    "actuator": "actuator", "joint": "joint", "link": "link", "body": "body", "fragment": "fragment",
+    "annotation": "annotation template",
 }
 
 
@@ -158,6 +160,8 @@ def library_packages() -> dict[tuple[str, ...], Package]:
                 raise CotwinError(findings)
             source.package = QName(name)  # named after its path, whatever it declares
             packages[name] = Package(name, source)
+            for block in source.siblings:  # further `package` blocks of a .pm file, under their own names
+                packages.setdefault(block.package.parts, Package(block.package.parts, block))
         _LIBRARY_CACHE = packages
     return _LIBRARY_CACHE
 
@@ -248,7 +252,10 @@ def _index(project: Project, source: SourceFile, namespace: tuple[str, ...], dia
 def build_project(sources: list[SourceFile], diag: Diagnostics) -> Project:
     """Index the files' elements per kind and qualified name, reporting duplicates and unknown imports."""
     project = Project(files=sources, packages=dict(library_packages()))
+    own_pm = {s.namespace for s in sources if s.notation == "pm"}
     for package in project.packages.values():
+        if package.source.notation == "pm" and package.name in own_pm:
+            continue  # the project's own copy of a p-model library package (RoboTool's files) replaces ours
         _index(project, package.source, package.name, None)
     for source in sources:
         project.namespaces.add(source.namespace)
@@ -261,7 +268,11 @@ def build_project(sources: list[SourceFile], diag: Diagnostics) -> Project:
             else:
                 known = any(imp.name.parts in table for table in project.symbols.values())
             if not known:
-                diag.error(imp.loc, f"unknown import '{imp.name}{'::*' if imp.wildcard else ''}'")
+                message = f"unknown import '{imp.name}{'::*' if imp.wildcard else ''}'"
+                if source.notation == "pm":  # RoboTool resolves imported names lazily: nothing is imported
+                    diag.warning(imp.loc, message + ": nothing is imported")
+                else:
+                    diag.error(imp.loc, message)
             elif imp.name.parts[:1] in SUBSTITUTE_PACKAGES and imp.name.parts[:1] not in project.namespaces:
                 diag.warning(imp.loc, f"package {imp.name.parts[0]} is not part of the project (RoboTool projects "
                                       f"import it without publishing it): cotwin uses its built-in "
@@ -278,5 +289,5 @@ def load_project(paths: Iterable[str | Path], diag: Diagnostics) -> Project:
         source, file_findings = parse_file(path)
         diag.extend(file_findings)
         if source is not None:
-            sources.append(source)
+            sources.extend((source, *source.siblings))
     return build_project(sources, diag)

@@ -1,4 +1,9 @@
-// cotwin's built-in physmod sensor library: ideal sensors of joint quantities.
+// cotwin's built-in physmod sensor library (the legacy `physmod::sensors`): ideal sensors of joint
+// quantities, and the robot sensors of RoboTool's earlier examples.
+package physmod::sensors
+
+import physmod::math::*
+
 sensor PositionSensor {
 	input input_position: real
 	output output_position: real
@@ -21,4 +26,29 @@ sensor ForceSensor {
 	input input_force: real
 	output output_force: real
 	equation input_force == output_force
+}
+
+// infrared proximity: the distance to the nearest surface along the sensor's x axis, within range
+sensor IR {
+	input distance: real
+	output measurement: real
+	const range_max: real
+	equation measurement == min(distance, range_max)
+}
+
+sensor Camera {
+	input scene: real
+	output image: real
+}
+
+sensor Accelerometer {
+	input acceleration: vector(real, 3)
+	output measurement: vector(real, 3)
+	equation measurement == acceleration
+}
+
+sensor Gyroscope {
+	input angular_velocity: vector(real, 3)
+	output measurement: vector(real, 3)
+	equation measurement == angular_velocity
 }

@@ -1,0 +1,165 @@
+"""What a p-model's joints, actuators and sensors are, for exporters and the simulator (documented rules,
+docs/pmodel-notation.md): the motion of a joint, the command an actuator takes, what a sensor measures.
+
+RoboTool's devices say it in equations a solver reads; cotwin reads, in order: SDF annotations, the
+joint's motion subspace (`H` of the SKO library, `S` of Featherstone's) or axis constants (`AXIS`,
+CGA's `axis_rot`/`axis_lin`), and last the device and port names.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..robosim import syntax as s
+from ..robosim.consteval import ConstEnv, try_evaluate
+from ..robosim.pmodel_elements import AnnotationRecord, Device
+
+_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+
+
+def _vector(value, size: int) -> np.ndarray | None:
+    if isinstance(value, tuple) and len(value) == size and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        return np.array([float(v) for v in value])
+    return None
+
+
+def _const(device: Device | None, name: str, env: ConstEnv):
+    """The value of a device's constant (or initialised InOut) `name` in env (instantiations applied)."""
+    port = device.port(name) if device is not None else None
+    if port is None:
+        return None
+    value = try_evaluate(s.Name(s.QName((name,), port.loc), port.loc), env, None)
+    if value is None and port.init is not None:
+        value = try_evaluate(port.init, env, None)
+    return value
+
+
+def joint_motion(device: Device | None, type_name: str, annotations: tuple[AnnotationRecord, ...],
+                 env: ConstEnv) -> tuple[str | None, np.ndarray, str]:
+    """(kind, unit axis in the joint frame, note) of a joint: kind is revolute, prismatic, fixed, or None
+    when nothing tells; the note says what was read (or why a joint was reduced to fixed)."""
+    axis = None
+    kind = None
+    for ann in annotations:  # SDF-style annotation Revolute { axis = Axis { xyz = (|..|) } }
+        if ann.name.lower() in ("revolute", "continuous", "prismatic", "fixed"):
+            kind = {"continuous": "revolute"}.get(ann.name.lower(), ann.name.lower())
+        ax = ann.get("axis")
+        if isinstance(ax, AnnotationRecord) and ax.get("xyz") is not None:
+            axis = _vector(try_evaluate(ax.get("xyz"), env, None), 3)
+    name = (device.name if device is not None else type_name).lower()
+    if axis is None:
+        for const in ("AXIS", "axis_rot", "axis_lin"):
+            value = _vector(_const(device, const, env), 3)
+            if value is not None:
+                axis = value
+                if const == "axis_rot":
+                    kind = kind or "revolute"
+                elif const == "axis_lin":
+                    kind = kind or "prismatic"
+                break
+    if axis is None:
+        for const in ("H", "S"):  # a motion subspace [angular; linear]
+            value = _const(device, const, env)
+            six = _vector(value, 6)
+            if six is not None:
+                angular, linear = six[:3], six[3:]
+                if np.linalg.norm(angular) > 0:
+                    note = "helical: exported as revolute, the pitch is not modelled" if np.linalg.norm(linear) > 0 else ""
+                    return kind or "revolute", angular / np.linalg.norm(angular), note
+                if np.linalg.norm(linear) > 0:
+                    return kind or "prismatic", linear / np.linalg.norm(linear), ""
+            elif isinstance(value, tuple) and value and isinstance(value[0], tuple):
+                return "fixed", np.array(_AXES["z"]), f"{len(value[0])}-degree-of-freedom joint exported as fixed"
+        if device is not None and device.port("H") is not None and device.port("H").init is None:
+            return "fixed", np.array(_AXES["z"]), "joint of several degrees of freedom exported as fixed"
+    if kind is None:
+        if "prismatic" in name or "slider" in name:
+            kind = "prismatic"
+        elif "revolute" in name or "continuous" in name or "hinge" in name:
+            kind = "revolute"
+        elif "fixed" in name:
+            kind = "fixed"
+    if axis is None:
+        suffix = name.rstrip("_neg").rsplit("_", 1)[-1] if "_" in name else ""
+        axis = np.array(_AXES.get(suffix, _AXES["z"]))
+        if name.endswith("_neg"):
+            axis = -axis
+    norm = np.linalg.norm(axis)
+    return kind, (axis / norm if norm > 0 else np.array(_AXES["z"])), ""
+
+
+# ---- actuators ----
+
+#: library actuators whose command is not told by their port names: device -> (command port, mode)
+KNOWN_ACTUATORS = {
+    "ControlledMotor": ("ControlIn", "velocity"),  # RoboTool's mobile robot maps wheel speeds to ControlIn
+    "TrivialMotor": ("TorqueIn", "effort"),
+    "DCMotor": ("V", "effort"),
+}
+_MODE_WORDS = (("position", ("angle", "position", "pos", "theta")),
+               ("velocity", ("speed", "vel", "omega", "rate")),
+               ("effort", ("torque", "force", "effort", "current")))
+
+
+def servo_command(device: Device | None) -> tuple[str | None, str]:
+    """(command input port, mode) of an actuator: mode is position, velocity or effort."""
+    if device is None:
+        return None, "position"
+    if device.name in KNOWN_ACTUATORS:
+        port, mode = KNOWN_ACTUATORS[device.name]
+        if device.port(port) is not None:
+            return port, mode
+    inputs = [p.name for p in device.ports if p.kind == "input"]
+    for port in inputs:
+        low = port.lower()
+        for mode, words in _MODE_WORDS:
+            if any(w in low for w in words):
+                return port, mode
+    low = device.name.lower()
+    for mode, words in _MODE_WORDS:
+        if any(w in low for w in words):
+            return (inputs[0] if inputs else None), mode
+    return (inputs[0] if inputs else None), "position"
+
+
+# ---- sensors ----
+
+SENSOR_QUANTITIES = (("position", "position"), ("angle", "position"), ("vel", "velocity"),
+                     ("torque", "effort"), ("force", "effort"))
+#: SDF sensor types, by annotation name or device name (lower case, first match wins)
+SDF_SENSORS = (("ray", "ray"), ("lidar", "ray"), ("laser", "ray"), ("sonar", "sonar"), ("imu", "imu"),
+               ("camera", "camera"), ("contact", "contact"), ("bumper", "contact"), ("gps", "gps"),
+               ("altimeter", "altimeter"), ("magnetometer", "magnetometer"), ("forcetorque", "force_torque"),
+               ("force_torque", "force_torque"), ("ir", "ray"))
+
+
+def sensor_quantity(device_name: str, port: str) -> str | None:
+    """What a joint sensor measures, from its device and output port names (documented rule)."""
+    text = f"{device_name} {port}".lower()
+    for key, quantity in SENSOR_QUANTITIES:
+        if key in text:
+            return quantity
+    return None
+
+
+def body_quantity(sdf_type: str | None, port: str) -> tuple[str, int] | None:
+    """What an IMU-like sensor's scalar port reads: (MuJoCo sensor, component), e.g. yaw rate = gyro z."""
+    if sdf_type != "imu":
+        return None
+    low = port.lower()
+    if "av" in low or "angular" in low or "gyro" in low:
+        return "gyro", 2
+    if "lv" in low or "linear" in low or "vel" in low:
+        return "velocimeter", 0
+    if "acc" in low:
+        return "accelerometer", 0
+    return None
+
+
+def sdf_sensor_type(device_name: str, annotations: tuple[AnnotationRecord, ...]) -> str | None:
+    for text in [a.name.lower() for a in annotations] + [device_name.lower()]:
+        for key, kind in SDF_SENSORS:
+            if text == key or (len(key) > 2 and key in text):
+                return kind
+    return None
