@@ -280,9 +280,11 @@ class WhatIfService:
     "decimate": n}` published on the twin's topic exchange (`[deviation] exchange`, default `cotwin.twin`)
     with routing key `twin.whatif` (or `twin.whatif.<anything>`), with `reply_to` and `correlation_id`
     set. Between two steps the twin hands its DT's state to a separate process, which runs the plan on a
-    fork; the answer (`Prediction.as_dict()`, or `{"error": why}`) is published to `reply_to` with the
-    request's `correlation_id`. Requests are validated like any broker message; a bad one gets an error
-    answer and never reaches the twin."""
+    fork; the answer (`Prediction.as_dict()`, or `{"error": why}`) is published to `reply_to` (a
+    broker-named `amq.gen-*` queue: named queues get no answer) with the request's `correlation_id`.
+    Requests are validated like any broker message; a bad one gets an error answer and never reaches the
+    twin; at most MAX_PENDING run at a time. Who may send requests is the broker's business: the
+    `whatif` role of docs/security.md may publish `twin.whatif` on the twin's exchange."""
 
     def __init__(self, url: str, exchange: str, project: str | Path, artefacts: str | Path | None = None,
                  workers: int = 1, routing_key: str = "twin.whatif"):
@@ -296,6 +298,7 @@ class WhatIfService:
         self.exchange, self.routing_key = exchange, routing_key
         self.requests: queue.Queue = queue.Queue()
         self.answered = 0
+        self._pending = 0
         self._pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_init,
                                          initargs=(str(Path(project).resolve()), str(artefacts) if artefacts else None))
         self._connection = connect(url, "cotwin what-if")
@@ -325,16 +328,21 @@ class WhatIfService:
 
         import pika
 
-        if not props.reply_to:
-            return
+        if not props.reply_to or not props.reply_to.startswith("amq.gen-"):
+            return  # answers go only to broker-named (exclusive) reply queues, never to a named queue
         body = json.dumps(answer, default=float).encode()
         self._connection.add_callback_threadsafe(lambda: self._channel.basic_publish(
             "", props.reply_to, body, pika.BasicProperties(correlation_id=props.correlation_id,
                                                            content_type="application/json")))
 
+    MAX_PENDING = 4  # requests queued or running; more are answered "busy" (a fork costs a process's time)
+
     def _on_request(self, channel, method, props, body) -> None:
         import json
 
+        if self._pending >= self.MAX_PENDING:
+            self._reply(props, {"error": f"busy: {self._pending} what-ifs pending; try again later"})
+            return
         try:
             if len(body) > 1 << 20:
                 raise ValueError("request larger than 1 MiB")
@@ -352,6 +360,7 @@ class WhatIfService:
         except (ValueError, UnicodeDecodeError, RecursionError) as err:
             self._reply(props, {"error": f"bad what-if request: {err}"})
             return
+        self._pending += 1
         self.requests.put((props, request["plan"], float(horizon), decimate))
 
     def poll(self, execution) -> None:
@@ -361,6 +370,7 @@ class WhatIfService:
             try:
                 state = execution.get_state()
             except CotwinError as err:
+                self._pending -= 1
                 self._reply(props, {"error": "; ".join(f.message for f in err.findings)})
                 continue
             future = self._pool.submit(_worker_predict, plan, state, horizon, decimate)
@@ -374,6 +384,7 @@ class WhatIfService:
         except Exception as err:  # noqa: BLE001 - the worker's failure is the requester's answer
             answer = {"error": f"{type(err).__name__}: {err}"}
         self.answered += 1
+        self._pending -= 1
         self._reply(props, answer)
 
     def close(self, wait: float = 60.0) -> None:
