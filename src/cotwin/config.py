@@ -153,6 +153,7 @@ class Schema:
             if key not in data:
                 if spec.required:
                     problems.append(Finding(file.location(at), Severity.ERROR, f"{name} needs '{key}'"))
+                    out[key] = spec.default
                 elif spec.kind == "table" and spec.table is not None:
                     out[key] = None if spec.default is None else spec.table.read(
                         dict(spec.default), file, at + (key,), problems)
