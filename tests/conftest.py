@@ -35,3 +35,34 @@ def check_texts(tmp_path):
         return check_paths([tmp_path])
 
     return run
+
+
+def listening(port: int, host: str = "127.0.0.1") -> bool:
+    import socket
+
+    try:
+        with socket.create_connection((host, port), timeout=1):
+            return True
+    except OSError:
+        return False
+
+
+def _service(port: int, name: str, start: str) -> None:
+    import os
+
+    if not listening(port):
+        if os.environ.get("CI"):
+            pytest.fail(f"{name} is not listening on 127.0.0.1:{port} (.ci/run should have started it)")
+        pytest.skip(f"no {name} on 127.0.0.1:{port} (start it with: {start})")
+
+
+@pytest.fixture(scope="session")
+def broker():
+    """RabbitMQ on loopback: a test that needs it skips, saying why, where it is not running (and fails
+    under CI, whose .ci/run starts it)."""
+    _service(5672, "RabbitMQ", "rabbitmq-server -detached")
+
+
+@pytest.fixture(scope="session")
+def postgres_server():
+    _service(5432, "PostgreSQL", "pg_ctlcluster --skip-systemctl-redirect $(ls /etc/postgresql) main start")

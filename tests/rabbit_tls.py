@@ -4,7 +4,6 @@ certificates go to it in the call), and a throwaway vhost with one user per role
 
 from __future__ import annotations
 
-import base64
 import os
 import re
 import secrets

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import socket
 import threading
 import uuid
 
@@ -18,20 +16,6 @@ from cotwin.twin.run import load, run_twin
 from cotwin.pmodel.simulator import PlatformSimulator
 
 
-def _broker_up() -> bool:
-    try:
-        with socket.create_connection(("127.0.0.1", 5672), timeout=1):
-            return True
-    except OSError:
-        return False
-
-
-@pytest.fixture(scope="module")
-def broker():
-    if not _broker_up():
-        if os.environ.get("CI"):
-            pytest.fail("RabbitMQ is not listening on 127.0.0.1:5672 (.ci/run should have started it)")
-        pytest.skip("no RabbitMQ on 127.0.0.1:5672 (start it with: rabbitmq-server -detached)")
 
 
 @pytest.fixture()

@@ -32,19 +32,11 @@ from cotwin.pmodel.simulator import PlatformSimulator
 from cotwin.twin.broker_access import rabbitmqctl_script, roles
 from cotwin.twin.project import load_project
 from cotwin.twin.run import load, run_twin
-from rabbit_tls import PKI, TLSBroker, broker_up, close_connection, tools_missing
+from rabbit_tls import PKI, TLSBroker, close_connection, tools_missing
 
 ROOT = Path(__file__).resolve().parents[1]
 PROJECT = ROOT / "examples" / "ur5e" / "cotwin.toml"
 COTWIN_VARS = [v for v in os.environ if v.startswith("COTWIN_")]
-
-
-@pytest.fixture(scope="module")
-def broker():
-    if not broker_up():
-        if os.environ.get("CI"):
-            pytest.fail("RabbitMQ is not listening on 127.0.0.1:5672 (.ci/run should have started it)")
-        pytest.skip("no RabbitMQ on 127.0.0.1:5672 (start it with: rabbitmq-server -detached)")
 
 
 @pytest.fixture(scope="module")

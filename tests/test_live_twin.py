@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import socket
 import subprocess
 import sys
 import uuid
@@ -77,20 +75,9 @@ def test_replayed_pt_beside_the_dt_gives_a_deviation_report(recorded, tmp_path):
     assert runs[-1]["samples"] == 2 * 121 and runs[-1]["status"] == "done"
 
 
-def _postgres_up() -> bool:
-    try:
-        with socket.create_connection(("127.0.0.1", 5432), timeout=1):
-            return True
-    except OSError:
-        return False
-
-
 @pytest.fixture
-def postgres():
-    if not _postgres_up():
-        if os.environ.get("CI"):
-            pytest.fail("PostgreSQL is not listening on 127.0.0.1:5432 (.ci/run should have started it)")
-        pytest.skip("no PostgreSQL on 127.0.0.1:5432")
+def postgres(postgres_server):
+    """A fresh database on the loopback PostgreSQL, dropped afterwards."""
     import psycopg
 
     name = f"cotwin_test_{uuid.uuid4().hex[:8]}"

@@ -21,7 +21,7 @@ from cotwin.mapping.opcua_auth import default_credentials_file
 from cotwin.mapping.perturbed import PerturbedEndpoint
 from cotwin.pmodel.perturbation import Perturbation
 from cotwin.pmodel.simulator import PlatformSimulator
-from cotwin.twin.plant import Plant, load_plant
+from cotwin.twin.plant import Plant
 from cotwin.twin.run import load, run_twin
 
 ua = pytest.importorskip("asyncua").ua

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import socket
 import subprocess
 import threading
 import time
@@ -98,20 +96,6 @@ def test_stream_follows_the_rmq_fmu_time_semantics():
 
 # ---- on the real broker ----------------------------------------------------------------------
 
-def _broker_up() -> bool:
-    try:
-        with socket.create_connection(("127.0.0.1", 5672), timeout=1):
-            return True
-    except OSError:
-        return False
-
-
-@pytest.fixture(scope="module")
-def broker():
-    if not _broker_up():
-        if os.environ.get("CI"):
-            pytest.fail("RabbitMQ is not listening on 127.0.0.1:5672 (.ci/run should have started it)")
-        pytest.skip("no RabbitMQ on 127.0.0.1:5672 (start it with: rabbitmq-server -detached)")
 
 
 def live_system(exchange: str, **cosim):

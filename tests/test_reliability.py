@@ -11,20 +11,18 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
 from cotwin.cosim.algorithm import Jacobi
 from cotwin.cosim.execution import Execution
 from cotwin.cosim.multimodel import execution_for, read_multimodel
-from cotwin.cosim.observers import CSVWriter
 from cotwin.cosim.system import Connection, System
 from cotwin.cosim.units import FMUUnit, Port, PythonUnit
 from cotwin.diagnostics import CotwinError
 from cotwin.twin.build import build, folder_lock
 from cotwin.twin.project import load_project
-from cotwin.twin.run import load, run_twin
+from cotwin.twin.run import load
 from cotwin.twin.scenario import read_plan, read_toml
 
 

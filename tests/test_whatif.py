@@ -107,20 +107,6 @@ def test_whatif_from_a_saved_state_on_the_command_line(system, tmp_path):
             plan_from_json(item, system.models.program)
 
 
-def _broker_up() -> bool:
-    try:
-        with socket.create_connection(("127.0.0.1", 5672), timeout=1):
-            return True
-    except OSError:
-        return False
-
-
-@pytest.fixture
-def broker():
-    if not _broker_up():
-        if os.environ.get("CI"):
-            pytest.fail("RabbitMQ is not listening on 127.0.0.1:5672 (.ci/run should have started it)")
-        pytest.skip("no RabbitMQ on 127.0.0.1:5672")
 
 
 def test_whatif_requests_over_the_broker_are_answered_without_disturbing_the_twin(system, broker, tmp_path):

@@ -266,17 +266,23 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
         Path(out).write_text(json.dumps(prediction.as_dict(), indent=1) + "\n")
 
 
-def _range(text: str) -> tuple[str, list]:
+def _named_values(text: str, hint: str) -> tuple[str, list]:
+    """NAME=LOW..HIGH (integers) or NAME=v1,v2,... (numbers) from an option; finite values only."""
+    import math
+
     name, sep, values = text.partition("=")
     if not sep or not name or not values:
-        raise click.BadParameter(f"'{text}': expected NAME=LOW..HIGH or NAME=v1,v2,...", param_hint="--arg")
+        raise click.BadParameter(f"'{text}': expected NAME=LOW..HIGH or NAME=v1,v2,...", param_hint=hint)
     try:
         if ".." in values:
             low, high = values.split("..", 1)
             return name, list(range(int(low), int(high) + 1))
-        return name, [int(v) if v.lstrip("-").isdigit() else float(v) for v in values.split(",")]
+        out = [int(v) if v.strip().lstrip("-").isdigit() else float(v) for v in values.split(",")]
     except ValueError:
-        raise click.BadParameter(f"'{text}': values must be numbers", param_hint="--arg") from None
+        raise click.BadParameter(f"'{text}': values must be numbers", param_hint=hint) from None
+    if not all(math.isfinite(v) for v in out):
+        raise click.BadParameter(f"'{text}': values must be finite numbers", param_hint=hint)
+    return name, out
 
 
 @main.command()
@@ -300,7 +306,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     from .twin.sweep import grid, run_sweep
 
     system = load(project)
-    plans = grid(system.models.program, event, dict(_range(a) for a in args))
+    plans = grid(system.models.program, event, dict(_named_values(a, "--arg") for a in args))
     blob = Path(state).read_bytes() if state else None
     started = time.perf_counter()
     rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray)
@@ -551,19 +557,6 @@ def broker_permissions(project: str, vhost: str, prefix: str) -> None:
     click.echo(rabbitmqctl_script(load_project(project), vhost, prefix), nl=False)
 
 
-def _parse_domain(text: str) -> tuple[str, list]:
-    name, sep, values = text.partition("=")
-    if not sep or not name or not values:
-        raise click.BadParameter(f"'{text}': expected PORT=LOW..HIGH or PORT=v1,v2,...", param_hint="--domain")
-    try:
-        if ".." in values:
-            low, high = values.split("..", 1)
-            return name, list(range(int(low), int(high) + 1))
-        return name, [float(v) if "." in v else int(v) for v in values.split(",")]
-    except ValueError:
-        raise click.BadParameter(f"'{text}': values must be numbers", param_hint="--domain") from None
-
-
 @main.command()
 @click.argument("model", nargs=-1, required=True)
 @click.option("--module", "module_name", help="the module to verify (default: the only one)")
@@ -579,7 +572,7 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
     from .robosim.check import load_checked
 
     program = build_program(load_checked(model), module_name)
-    parsed = dict(_parse_domain(d) for d in domains)
+    parsed = dict(_named_values(d, "--domain") for d in domains)
     known = [port for ev in program.inputs for port, _ in ev.value_ports]
     unknown = [name for name in parsed if name not in known]
     if unknown:

@@ -114,7 +114,7 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
     from .run import simulated_endpoint
 
     started = wallclock.perf_counter()
-    models, spec = system.models, system.spec
+    spec = system.spec
     step = spec.step if step is None else step
     algorithm = algorithm or spec.algorithm
     start = 0.0
