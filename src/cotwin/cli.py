@@ -84,6 +84,32 @@ def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, out
                f"{kinds['prismatic']} prismatic and {kinds['fixed']} fixed joints, {len(tree.sensors)} sensor ports")
 
 
+def _address(ctx, param, value: str | None) -> tuple[str, int] | None:
+    """A --dashboard HOST:PORT option."""
+    if value is None:
+        return None
+    from .twin.dashboard.app import parse_address
+
+    try:
+        return parse_address(value)
+    except ValueError as err:
+        raise click.BadParameter(str(err)) from None
+
+
+DASHBOARD_HELP = "serve the live dashboard at HOST:PORT (e.g. 127.0.0.1:8050) while the run lasts"
+
+
+def _dashboard(system, address, mode: str, history_url: str | None):
+    """The started dashboard of a run (or None); says where it is."""
+    if address is None:
+        return None
+    from .twin.dashboard import Dashboard
+
+    dash = Dashboard(system, *address, mode=mode, history_url=history_url).start()
+    click.echo(f"dashboard: {dash.url}", err=True)
+    return dash
+
+
 def _show_warnings(findings) -> None:
     for f in findings:
         if f.severity is Severity.WARNING:
@@ -115,20 +141,33 @@ def build(project: str, out: str, cc: str) -> None:
 @click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
 @click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
+@click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=_address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
-        realtime: bool | None, cc: str) -> None:
+        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
+    from pathlib import Path
+
     from rich.progress import Progress
 
+    from .twin.history import database_url
     from .twin.run import load, run_twin
 
     _finite(step=step, end=end)
     system = load(project)
-    with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
-        task = bar.add_task("co-simulating", total=1)
-        ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc,
-                       progress=lambda k, n: bar.update(task, completed=k, total=n))
+    history = None  # one run records no history; the page lists the store's runs when there is one
+    if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
+        history = database_url(system.spec.history_url, Path(out))
+    dash = _dashboard(system, dashboard, "run", history)
+    try:
+        with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
+            task = bar.add_task("co-simulating", total=1)
+            ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc,
+                           observers=[dash.feed] if dash else None,
+                           progress=lambda k, n: bar.update(task, completed=k, total=n))
+    finally:
+        if dash is not None:
+            dash.stop()
     r = ran.result
     click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f})")
@@ -172,9 +211,11 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
 @click.option("--rabbitmq", "exchange", help="take commands live from RabbitMQ on this exchange (overrides [scenario])")
 @click.option("--history", "history", help="history database URL (default: [history] url, else DIR/history.sqlite)")
 @click.option("--whatif", "whatif", is_flag=True, help="answer what-if requests sent over the broker (see docs)")
+@click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=_address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 def twin(project: str, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
-         pt_log: str | None, exchange: str | None, history: str | None, whatif: bool, cc: str) -> None:
+         pt_log: str | None, exchange: str | None, history: str | None, whatif: bool, dashboard: tuple[str, int] | None,
+         cc: str) -> None:
     """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
     with deviation checking, alarms and history."""
     import signal
@@ -195,12 +236,22 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         spec.plan = None
         spec.rabbitmq = replace(spec.rabbitmq, exchange=exchange) if spec.rabbitmq else RabbitMQSettings(exchange)
         spec.realtime = True if realtime is None else realtime
+    from .twin.history import database_url
+
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
-    live = LiveTwin(load(spec), out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
-                    cc=cc, whatif_url=broker if whatif else None)
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: live.stop())
-    result = live.run()
+    system = load(spec)
+    dash = _dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)))
+    try:
+        live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
+                        observers=[dash.feed] if dash else (), cc=cc, whatif_url=broker if whatif else None)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: live.stop())
+        result = live.run()
+        if dash is not None:
+            dash.finish("stopped" if live._stop else "done")
+    finally:
+        if dash is not None:
+            dash.stop()
     r = result.pt
     state = "stopped early" if r.steps < live.steps or live._stop else "done"
     click.echo(f"{result.out}: PT and DT, {r.steps} steps each to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
@@ -426,6 +477,27 @@ def history_export(run_id: int, db: str | None, folder: str | None, side: str, o
 
     path = export_csv(_db(db, folder), run_id, side, out)
     click.echo(str(path))
+
+
+@main.command("dashboard")
+@click.option("--db", help="history database URL (sqlite:///file, postgresql://...)")
+@click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
+@click.option("--at", "address", default="127.0.0.1:8050", show_default=True, metavar="HOST:PORT", callback=_address,
+              help="where to serve the page")
+def dashboard_command(db: str | None, folder: str | None, address: tuple[str, int]) -> None:
+    """Browse the runs of a history store in the dashboard (after the run), until interrupted."""
+    import threading
+
+    from .twin.dashboard import Dashboard
+
+    dash = Dashboard(None, *address, mode="history", history_url=_db(db, folder)).start()
+    click.echo(f"dashboard: {dash.url} (history only; Ctrl-C to stop)", err=True)
+    try:
+        threading.Event().wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        dash.stop()
 
 
 @main.command()

@@ -1,0 +1,346 @@
+"""The dashboard's web server: a Starlette app served by uvicorn on a background thread, started and
+stopped with the run.
+
+Routes: `/` (the page), `/static/...` (its scripts, styles and the vendored three.js), `/api/model`
+(what describe.py derives from the models), `/api/status`, `/api/command` (POST: a command from the
+panel, published on the twin's broker by PagePublisher), `/api/history` and `/api/history/{run}`
+(the history store), and `/ws`: the live stream. A client gets a `hello` (recent samples, every event
+so far, the status) and then, every `period` seconds, a `batch` of what is new: samples (at most
+`max_rate` per second, evenly thinned beyond that), events and the status. Each client reads the
+feed from its own cursor on the server's event loop, so one that is slow to take its messages only
+falls behind (and is told how many samples it skipped), never the twin or the other clients.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+import socket
+import threading
+import time as wallclock
+from pathlib import Path
+
+from ...diagnostics import CotwinError
+from ..system import MAPPING, RABBITMQ, TwinSystem
+from .describe import describe
+from .feed import DashboardFeed
+
+log = logging.getLogger("cotwin.dashboard")
+STATIC = Path(__file__).resolve().parent / "static"
+
+
+def parse_address(text: str) -> tuple[str, int]:
+    """HOST:PORT (e.g. 127.0.0.1:8050; port 0 picks a free one), or ValueError saying what is wrong."""
+    host, sep, port = str(text).rpartition(":")
+    host = host.strip("[]")
+    if not sep or not host:
+        raise ValueError(f"'{text}' is not HOST:PORT (e.g. 127.0.0.1:8050)")
+    try:
+        number = int(port)
+    except ValueError:
+        raise ValueError(f"'{text}': the port '{port}' is not a number") from None
+    if not 0 <= number <= 65535:
+        raise ValueError(f"'{text}': the port {number} is not within 0..65535")
+    return host, number
+
+
+def thin(rows: list, limit: int) -> list:
+    """At most `limit` of `rows`, evenly spaced, always keeping the last."""
+    if len(rows) <= limit:
+        return rows
+    if limit <= 1:
+        return rows[-1:]
+    stride = (len(rows) - 1) / (limit - 1)
+    return [rows[round(i * stride)] for i in range(limit)]
+
+
+def history_run(url: str, run_id: int, max_points: int = 4000) -> dict:
+    """A run of the history store shaped for the page: per side the times and the mapping's variables
+    (thinned to `max_points`), the d-model's states, the commands and the alarms."""
+    from ..history import read_run
+
+    data = read_run(url, run_id)
+    prefix = MAPPING.name + "."
+    sides = {}
+    for side, columns in data["columns"].items():
+        picked = [(i, c[len(prefix):]) for i, c in enumerate(columns) if c.startswith(prefix)]
+        rows = thin(data["samples"].get(side, []), max_points)
+        sides[side] = {"time": [t for t, _ in rows],
+                       "values": {name: [values[i] for _, values in rows] for i, name in picked}}
+    run = dict(data["run"])
+    return {"run": run, "sides": sides, "states": data["states"], "alarms": data["alarms"],
+            "commands": data["commands"]}
+
+
+class Dashboard:
+    """The page of one twin (see module doc). `mode`: twin (a LiveTwin: pass `feed` to it as an
+    observer), run (one twin: pass `feed` to run_twin's observers) or history (no live run)."""
+
+    def __init__(self, system: TwinSystem | None, host: str = "127.0.0.1", port: int = 8050, mode: str = "twin",
+                 history_url: str | None = None, period: float = 0.05, max_rate: float = 200.0,
+                 backlog: int = 4000, heartbeat: bool = True):
+        if mode not in ("twin", "run", "history"):
+            raise ValueError(f"unknown dashboard mode {mode!r}")
+        if system is None and mode != "history":
+            raise ValueError("a live dashboard needs the twin's system")
+        self.system = system
+        self.host, self.port = host, port
+        self.mode = mode
+        self.history_url = history_url
+        self.period = period
+        self.max_rate = max_rate
+        self.backlog = backlog
+        self.feed = DashboardFeed(system) if system is not None and mode != "history" else None
+        sides = ["pt", "dt"] if mode == "twin" else ["twin"]
+        self.model = describe(system, sides, mode) if system is not None else None
+        self.publisher = None
+        if system is not None and system.source is RABBITMQ and mode != "history":
+            from ..rabbitmq import port_types
+            from .commands import PagePublisher
+
+            self.publisher = PagePublisher(system.spec.rabbitmq, port_types(system.models.program, system.source_ports),
+                                           self.model["commands"]["events"], heartbeat=heartbeat)
+        self.clients = 0
+        self.skipped = 0  # samples clients skipped because they fell behind
+        self._server = None
+        self._thread: threading.Thread | None = None
+        self._socket: socket.socket | None = None
+
+    # ---- lifecycle ----
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}/"
+
+    def start(self) -> "Dashboard":
+        """Serve the page (and start the command publisher, bound before this returns, so the twin's ready
+        message reaches it); CotwinError if the address cannot be served."""
+        import uvicorn
+
+        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((self.host, self.port))
+        except OSError as err:
+            sock.close()
+            raise CotwinError(f"dashboard: cannot serve on {self.host}:{self.port}: {err.strerror or err}") from None
+        self._socket = sock
+        self.port = sock.getsockname()[1]
+        config = uvicorn.Config(self.app(), log_level="warning", access_log=False, lifespan="off",
+                                ws="websockets-sansio", timeout_graceful_shutdown=2)
+        self._server = uvicorn.Server(config)
+        self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]}, name="cotwin dashboard",
+                                        daemon=True)
+        self._thread.start()
+        deadline = wallclock.monotonic() + 10
+        while not self._server.started:
+            if not self._thread.is_alive() or wallclock.monotonic() > deadline:
+                self.stop()
+                raise CotwinError(f"dashboard: the server did not start on {self.host}:{self.port}")
+            wallclock.sleep(0.01)
+        if self.publisher is not None:
+            try:
+                self.publisher.start()
+            except CotwinError:
+                self.stop()
+                raise
+        return self
+
+    def finish(self, state: str, message: str | None = None) -> None:
+        if self.feed is not None:
+            self.feed.finish(state, message)
+
+    def stop(self) -> None:
+        """Tell the page the run is over, close the streams and stop serving."""
+        if self.feed is not None:
+            self.feed.finish("stopped")
+        if self.publisher is not None:
+            self.publisher.stop()
+        if self._server is not None:
+            if self._thread is not None and self._thread.is_alive():
+                wallclock.sleep(min(2 * self.period, 0.2))  # let the streams send the final status
+            self._server.should_exit = True
+        if self._thread is not None:
+            self._thread.join(10)
+            self._thread = None
+        if self._socket is not None:
+            self._socket.close()
+            self._socket = None
+
+    def __enter__(self) -> "Dashboard":
+        return self.start()
+
+    def __exit__(self, kind, error, tb) -> None:
+        if error is not None:
+            self.finish("failed" if not isinstance(error, KeyboardInterrupt) else "stopped", str(error))
+        self.stop()
+
+    # ---- the app ----
+    def app(self):
+        from starlette.applications import Starlette
+        from starlette.concurrency import run_in_threadpool
+        from starlette.responses import FileResponse, JSONResponse, Response
+        from starlette.routing import Mount, Route, WebSocketRoute
+        from starlette.staticfiles import StaticFiles
+
+        async def index(request):
+            return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-cache"})
+
+        async def favicon(request):
+            return Response(status_code=204)
+
+        async def model(request):
+            return JSONResponse({"model": self.model, "history": self.history_url is not None, "mode": self.mode})
+
+        async def status(request):
+            return JSONResponse(self._status())
+
+        async def command(request):
+            if self.publisher is None:
+                source = self.model["commands"]["source"] if self.model else "none"
+                why = {"plan": f"this twin's commands come from its plan ({self.model['commands'].get('plan')}), "
+                               "not from the page",
+                       "none": "this twin takes no commands"}.get(source, "no live twin")
+                return JSONResponse({"error": why}, status_code=409)
+            try:
+                body = await request.json()
+            except (ValueError, UnicodeDecodeError):
+                return JSONResponse({"error": "the request is not JSON"}, status_code=400)
+            if not isinstance(body, dict) or not isinstance(body.get("event"), str) \
+                    or not isinstance(body.get("values", {}), dict):
+                return JSONResponse({"error": "expected {\"event\": NAME, \"values\": {PORT: VALUE, ...}}"},
+                                    status_code=400)
+            try:
+                message = self.publisher.command(body["event"], body.get("values", {}))
+            except ValueError as err:
+                return JSONResponse({"error": str(err)}, status_code=422)
+            if self.publisher.error:
+                return JSONResponse({"error": self.publisher.error}, status_code=503)
+            return JSONResponse({"queued": message, "twin_ready": self.publisher.twin_ready.is_set()})
+
+        async def runs(request):
+            if self.history_url is None:
+                return JSONResponse({"runs": [], "error": "no history store"})
+            try:
+                found = await run_in_threadpool(_list_runs, self.history_url)
+            except CotwinError as err:
+                return JSONResponse({"runs": [], "error": "; ".join(f.message for f in err.findings)})
+            return JSONResponse({"runs": found})
+
+        async def run(request):
+            if self.history_url is None:
+                return JSONResponse({"error": "no history store"}, status_code=404)
+            try:
+                data = await run_in_threadpool(history_run, self.history_url, request.path_params["run_id"])
+            except CotwinError as err:
+                return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=404)
+            return JSONResponse(data)
+
+        routes = [
+            Route("/", index),
+            Route("/favicon.ico", favicon),
+            Route("/api/model", model),
+            Route("/api/status", status),
+            Route("/api/command", command, methods=["POST"]),
+            Route("/api/history", runs),
+            Route("/api/history/{run_id:int}", run),
+            WebSocketRoute("/ws", self._stream),
+            Mount("/static", StaticFiles(directory=STATIC), name="static"),
+        ]
+        return Starlette(routes=routes)
+
+    def _status(self) -> dict:
+        out = self.feed.status() if self.feed is not None else {"state": "history"}
+        out["clients"] = self.clients
+        out["skipped"] = self.skipped
+        if self.publisher is not None:
+            out["broker"] = {"twin_ready": self.publisher.twin_ready.is_set(), "sent": len(self.publisher.sent),
+                             "error": self.publisher.error}
+        return out
+
+    async def _stream(self, websocket) -> None:
+        from starlette.websockets import WebSocketDisconnect
+
+        await websocket.accept()
+        self.clients += 1
+        closed = asyncio.Event()
+
+        async def listen():  # the page sends nothing we need; this notices it going away
+            try:
+                while True:
+                    message = await websocket.receive()
+                    if message["type"] == "websocket.disconnect":
+                        break
+            except (WebSocketDisconnect, RuntimeError):
+                pass
+            closed.set()
+
+        listener = asyncio.create_task(listen())
+        feed = self.feed
+        try:
+            if feed is None:
+                await websocket.send_text(_json({"type": "hello", "samples": [], "events": [],
+                                                 "status": self._status()}))
+                await closed.wait()
+                return
+            cursor = max(0, feed.samples.count - self.backlog)
+            rows, cursor, _ = feed.samples.since(cursor)
+            seen = len(feed.events)
+            await websocket.send_text(_json({"type": "hello", "sides": feed.sides, "samples": _rows(rows),
+                                             "events": feed.events[:seen], "status": self._status()}))
+            limit = max(1, int(self.max_rate * self.period))
+            last_state = None
+            while not closed.is_set():
+                try:
+                    await asyncio.wait_for(closed.wait(), self.period)
+                    break
+                except asyncio.TimeoutError:
+                    pass
+                rows, cursor, skipped = feed.samples.since(cursor)
+                self.skipped += skipped
+                events = feed.events[seen:]
+                seen += len(events)
+                status = self._status()
+                if not rows and not events and status["state"] == last_state:
+                    continue
+                last_state = status["state"]
+                await websocket.send_text(_json({"type": "batch", "sides": feed.sides,
+                                                 "samples": _rows(thin(rows, limit)), "skipped": skipped,
+                                                 "events": events, "status": status}))
+        except (WebSocketDisconnect, RuntimeError, OSError):
+            pass
+        finally:
+            self.clients -= 1
+            listener.cancel()
+
+
+def _json(message: dict) -> str:
+    """JSON a browser can parse: NaN and infinities (which JSON lacks) become null."""
+    try:
+        return json.dumps(message, allow_nan=False, default=str)
+    except ValueError:
+        return json.dumps(_finite(message), allow_nan=False, default=str)
+
+
+def _finite(value):
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _rows(rows: list) -> list:
+    """Samples on the wire: [time, [values, states] per side]."""
+    return [[t, row] for t, _, row in rows]
+
+
+def _list_runs(url: str) -> list[dict]:
+    from ..history import list_runs
+
+    return list_runs(url)

@@ -1,0 +1,137 @@
+"""The page's command panel on the broker: a publisher that follows the RMQ FMU protocol as any external
+publisher does (cotwin.twin.publisher): it binds its own queue to `from_cosim` on the twin's direct
+exchange, waits for the twin's ready message, then every `period` of wall time publishes one message
+on `to_cosim`: the idle values (events false, values zero), or in their place the command the page
+asked for. The heartbeat is what lets a twin run from the page alone (the RMQ FMU needs every value
+refreshed within `maxage`); with `heartbeat=False` it sends only the page's commands.
+
+Commands are checked with the twin's own message parser before they leave, so the page is told at
+once why a value is refused (wrong type, out of int32) instead of the twin dropping the message.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+import time as wallclock
+
+import pika
+
+from ...diagnostics import CotwinError
+from ...mapping.amqp import connect
+from ..project import RabbitMQSettings
+from ..publisher import idle_values, now_iso
+from ..rabbitmq import READY, parse_message
+
+log = logging.getLogger("cotwin.dashboard")
+
+
+class PagePublisher:
+    def __init__(self, settings: RabbitMQSettings, types: dict[str, str], events: list[dict], period: float = 0.25,
+                 heartbeat: bool = True, name: str = "cotwin dashboard"):
+        self.settings = settings
+        self.types = types  # every command port with its FMI type
+        self.events = {e["name"]: [v["port"] for v in e["values"]] for e in events}
+        self.idle = idle_values(types)
+        self.period = period
+        self.heartbeat = heartbeat
+        self.name = name
+        self.bound = threading.Event()  # our queue is bound: the twin may announce itself now
+        self.twin_ready = threading.Event()  # the twin's ready message came
+        self.sent: list[tuple[float, dict]] = []  # (wall time, message)
+        self.error: str | None = None
+        self.echoed: float | None = None  # the last simulation time the twin echoed (s)
+        self._pending: queue.Queue[dict] = queue.Queue()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # ---- the page's side ----
+    def command(self, event: str, values: dict) -> dict:
+        """Queue the command `event` with its value ports; returns the message, or ValueError saying why
+        it would be refused."""
+        if event not in self.events:
+            raise ValueError(f"'{event}' is not a command of this twin (commands: {', '.join(self.events) or 'none'})")
+        ports = self.events[event]
+        unknown = [k for k in values if k not in ports]
+        missing = [p for p in ports if p not in values]
+        if unknown or missing:
+            raise ValueError("; ".join([*(f"'{k}' is not a value of {event}" for k in unknown),
+                                        *(f"no value for '{p}'" for p in missing)]))
+        message = {"time": now_iso(), **self.idle, event: True, **values}
+        parsed = parse_message(json.dumps(message).encode(), self.types)  # the twin's own check
+        if parsed.dropped:
+            raise ValueError("; ".join(parsed.dropped))
+        self._pending.put(message)
+        return message
+
+    # ---- the link thread ----
+    def start(self, timeout: float = 10.0) -> "PagePublisher":
+        self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
+        self._thread.start()
+        if not self.bound.wait(timeout) or self.error:
+            self.stop()
+            raise CotwinError(f"dashboard: cannot publish commands on RabbitMQ exchange '{self.settings.exchange}': "
+                              f"{self.error or 'no broker answer within %g s' % timeout}")
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5)
+            self._thread = None
+
+    def _on_echo(self, channel, method, props, body) -> None:
+        try:
+            data = json.loads(body)
+        except ValueError:
+            return
+        if not isinstance(data, dict):
+            return
+        if READY["internal_message"] in str(data.get("internal_message", "")):
+            self.twin_ready.set()
+        try:
+            self.echoed = float(data["simstep"]) / 1000.0
+        except (KeyError, TypeError, ValueError):
+            pass
+
+    def _run(self) -> None:
+        s = self.settings
+        try:
+            connection = connect(s.url, self.name)
+            channel = connection.channel()
+            channel.exchange_declare(s.exchange, exchange_type="direct", durable=False, auto_delete=False)
+            own = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
+            channel.queue_bind(own, s.exchange, routing_key=s.from_cosim)
+            channel.basic_consume(own, self._on_echo, auto_ack=True)
+        except (pika.exceptions.AMQPError, CotwinError, OSError) as err:
+            self.error = str(err) or type(err).__name__
+            self.bound.set()
+            return
+        self.bound.set()
+        try:
+            next_tick = wallclock.monotonic()
+            while not self._stop.is_set():
+                connection.process_data_events(time_limit=0.02)
+                if not self.twin_ready.is_set():
+                    continue
+                message = None
+                try:
+                    message = self._pending.get_nowait()
+                    message["time"] = now_iso()  # stamped when it leaves, as a publisher does
+                except queue.Empty:
+                    if self.heartbeat and wallclock.monotonic() >= next_tick:
+                        message = {"time": now_iso(), **self.idle}
+                if message is not None:
+                    channel.basic_publish(s.exchange, s.to_cosim, json.dumps(message).encode())
+                    self.sent.append((wallclock.time(), message))
+                    next_tick = wallclock.monotonic() + self.period
+        except (pika.exceptions.AMQPError, OSError) as err:
+            self.error = f"the broker link was lost ({type(err).__name__})"
+            log.warning("dashboard publisher: %s", self.error)
+        finally:
+            try:
+                connection.close()
+            except Exception:  # noqa: BLE001 - closing a dead link
+                pass
