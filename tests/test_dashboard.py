@@ -169,6 +169,28 @@ def test_a_run_feeds_the_server_and_the_panel_refuses_to_command_a_plan(system, 
         socket.create_connection(("127.0.0.1", dash.port), timeout=1).close()  # stopped with the run
 
 
+def test_the_commands_serve_the_dashboard_for_the_run_and_refuse_a_bad_address(tmp_path):
+    import subprocess
+    import sys
+
+    project = str(ROOT / "examples" / "ur5e" / "cotwin.toml")
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "run", project, "-o", str(tmp_path), "--end", "0.5",
+                           "--dashboard", "127.0.0.1:0"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "dashboard: http://127.0.0.1:" in proc.stderr and "6 rows" in proc.stdout
+    for bad, why in (("nowhere", "not HOST:PORT"), ("127.0.0.1:99999", "not within 0..65535")):
+        proc = subprocess.run([sys.executable, "-m", "cotwin", "twin", project, "-o", str(tmp_path), "--dashboard", bad],
+                              capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 2 and why in proc.stderr and "Traceback" not in proc.stderr
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        proc = subprocess.run([sys.executable, "-m", "cotwin", "run", project, "-o", str(tmp_path), "--end", "0.5",
+                               "--dashboard", f"127.0.0.1:{port}"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1 and f"cannot serve on 127.0.0.1:{port}" in proc.stderr and "Traceback" not in proc.stderr
+
+
 # ---- the page in a real browser beside a live twin ------------------------------------------------
 
 def _broker_up() -> bool:
@@ -267,12 +289,13 @@ def test_the_page_follows_a_live_twin_commands_it_and_shows_its_alarms(browser, 
         # the 3D view renders the p-model posed as its kinematic tree says, for the joints the page has
         page.wait_for_function("window.cotwin.robot && window.cotwin.robot.frames > 0", timeout=10_000)
         drawn = page.evaluate("""() => { const c = window.cotwin; c.robot.pose(c.live.last);
-            return {row: c.live.last, poses: c.robot.linkPoses('dt')}; }""")
+            return {row: c.live.last, poses: {pt: c.robot.linkPoses('pt'), dt: c.robot.linkPoses('dt')}}; }""")
         joints = {j["variable"]: j["name"] for j in dash.model["robot"]["joints"] if j["variable"]}
-        values = dict(zip(models.monitored, drawn["row"][2]))
-        expected = models.tree.forward({joints[v]: values[v] for v in joints})
-        for link, pose in expected.items():
-            np.testing.assert_allclose(np.array(drawn["poses"][link]).reshape(4, 4), pose, atol=1e-5)
+        for k, side in enumerate(("pt", "dt")):
+            values = dict(zip(models.monitored, drawn["row"][2 * k]))
+            expected = models.tree.forward({joints[v]: values[v] for v in joints})
+            for link, pose in expected.items():
+                np.testing.assert_allclose(np.array(drawn["poses"][side][link]).reshape(4, 4), pose, atol=1e-5)
         shot = _png(page.locator("#view canvas").screenshot())
         background = np.array([0xE9, 0xED, 0xF2])
         drawn_fraction = (np.abs(shot - background).sum(axis=2) > 30).mean()

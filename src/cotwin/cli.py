@@ -222,6 +222,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     from dataclasses import replace
     from pathlib import Path
 
+    from .twin.history import database_url
     from .twin.project import PTSettings, RabbitMQSettings, load_project
     from .twin.run import load
     from .twin.runtime import LiveTwin
@@ -236,8 +237,6 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         spec.plan = None
         spec.rabbitmq = replace(spec.rabbitmq, exchange=exchange) if spec.rabbitmq else RabbitMQSettings(exchange)
         spec.realtime = True if realtime is None else realtime
-    from .twin.history import database_url
-
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
     dash = _dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)))
@@ -249,6 +248,10 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         result = live.run()
         if dash is not None:
             dash.finish("stopped" if live._stop else "done")
+    except BaseException as err:
+        if dash is not None:
+            dash.finish("failed", str(err) or type(err).__name__)
+        raise
     finally:
         if dash is not None:
             dash.stop()

@@ -67,7 +67,7 @@ export class HistoryView {
     });
     const open = {};
     for (const a of data.alarms) {
-      if (a.state === "raised") { open[a.variable] = { start: a.time, end: null, label: a.variable }; this.plot.bands.push(open[a.variable]); }
+      if (a.state === "raised") { open[a.variable] = { start: a.time, end: null, label: a.variable, color: vars.find((v) => v.name === a.variable)?.color }; this.plot.bands.push(open[a.variable]); }
       else if (open[a.variable]) { open[a.variable].end = a.time; delete open[a.variable]; }
     }
     const fired = data.commands.filter((c) => c.value === "true");

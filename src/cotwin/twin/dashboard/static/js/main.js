@@ -62,6 +62,10 @@ class Live {
     }).catch((err) => { $("view").textContent = `3D view unavailable: ${err}`; });
   }
 
+  colorOf(name) {
+    return this.vars.find((v) => v.name === name)?.color;
+  }
+
   samples(rows) {
     const width = this.vars.length;
     const flat = new Array(width * this.sides.length);
@@ -86,7 +90,7 @@ class Live {
     page.events.push(e);
     if (e.kind === "alarm") {
       const raised = e.state === "raised";
-      if (raised) { this.openAlarms[e.variable] = { start: e.time, end: null, label: e.variable }; this.plot.bands.push(this.openAlarms[e.variable]); }
+      if (raised) { this.openAlarms[e.variable] = { start: e.time, end: null, label: e.variable, color: this.colorOf(e.variable) }; this.plot.bands.push(this.openAlarms[e.variable]); }
       else if (this.openAlarms[e.variable]) { this.openAlarms[e.variable].end = e.time; delete this.openAlarms[e.variable]; }
       this.plot.invalidate();
       const detail = e.deviation !== undefined ? ` |Δ| = ${Number(e.deviation).toFixed(3)} (threshold ${Number(e.threshold).toFixed(3)})` : "";

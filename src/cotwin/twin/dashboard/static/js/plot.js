@@ -5,7 +5,7 @@
 const MAX_POINTS = 1 << 20;
 
 export class TimePlot {
-  constructor(canvas, series, { fps = 15, unit = "rad" } = {}) {
+  constructor(canvas, series, { fps = 10, unit = "rad" } = {}) {
     this.canvas = canvas;
     this.series = series.map((s) => ({ visible: true, ...s }));
     this.unit = unit;
@@ -109,8 +109,11 @@ export class TimePlot {
     if (!isFinite(lo)) { lo = -1; hi = 1; }
     if (hi - lo < 1e-6) { lo -= 0.5; hi += 0.5; }
     const pad = (hi - lo) * 0.06; lo -= pad; hi += pad;
+    const lanes = [];
+    for (const b of this.bands) if (!lanes.includes(b.label)) lanes.push(b.label);
+    const room = lanes.length ? lanes.length * 9 + 4 : 0; // alarm lanes above the curves
     const X = (t) => left + ((t - t0) / (t1 - t0)) * pw;
-    const Y = (v) => top + (1 - (v - lo) / (hi - lo)) * ph;
+    const Y = (v) => top + room + (1 - (v - lo) / (hi - lo)) * (ph - room);
     // axes and grid
     g.strokeStyle = "#e3e6eb"; g.fillStyle = "#6b7280"; g.lineWidth = 1; g.font = "10px system-ui, sans-serif";
     for (const v of ticks(lo, hi, 5)) {
@@ -125,14 +128,22 @@ export class TimePlot {
     }
     g.save();
     g.beginPath(); g.rect(left, top, pw, ph); g.clip();
-    // alarms: a band from raised to cleared (or to now)
+    g.font = "10px system-ui, sans-serif";
+    // alarms: a faint band from raised to cleared (or to now), and a lane per variable along the top
     for (const b of this.bands) {
       const x0 = X(b.start), x1 = X(b.end === null ? tEnd : b.end);
       if (x1 < left || x0 > left + pw) continue;
-      g.fillStyle = "rgba(201, 42, 42, 0.13)"; g.fillRect(x0, top, Math.max(2, x1 - x0), ph);
-      g.fillStyle = "#c92a2a"; g.fillRect(x0 - 1, top, 2, ph);
-      g.textAlign = "left"; g.textBaseline = "top"; g.fillText(b.label, x0 + 3, top + 2);
+      const lane = lanes.indexOf(b.label);
+      g.fillStyle = "rgba(201, 42, 42, 0.05)"; g.fillRect(x0, top, Math.max(1, x1 - x0), ph);
+      g.fillStyle = b.color || "#c92a2a"; g.fillRect(x0, top + 3 + lane * 9, Math.max(2, x1 - x0), 5);
+      g.fillStyle = "#c92a2a"; g.fillRect(x0 - 0.5, top, 1, ph);
     }
+    g.font = "9px system-ui, sans-serif"; g.textAlign = "right"; g.textBaseline = "middle";
+    lanes.forEach((name, lane) => {
+      const open = this.bands.some((b) => b.label === name && b.end === null);
+      g.fillStyle = open ? "#c92a2a" : "#6b7280";
+      g.fillText(`${name}${open ? " ⚠" : ""}`, left + pw - 2, top + 5.5 + lane * 9);
+    });
     for (const m of this.markers) {
       const x = Math.round(X(m.time)) + 0.5;
       if (x < left || x > left + pw) continue;

@@ -66,14 +66,19 @@ class RobotModel {
     }
   }
 
-  // values: variable name -> joint position
+  // values: variable name -> joint position; true if anything moved visibly
   pose(values) {
+    let moved = false;
     for (const m of this.motions) {
       const q = values[m.joint.variable];
       if (q === undefined || q === null || Number.isNaN(q)) continue;
+      if (m.q !== undefined && Math.abs(q - m.q) < 1e-6) continue;
+      m.q = q;
+      moved = true;
       if (m.joint.kind === "revolute") m.group.quaternion.setFromAxisAngle(m.axis, q);
       else m.group.position.copy(m.axis).multiplyScalar(q);
     }
+    return moved;
   }
 }
 
@@ -100,14 +105,15 @@ function plate(scene) {
 }
 
 export class RobotView {
-  constructor(container, model, { fps = 30 } = {}) {
+  constructor(container, model, { fps = 12 } = {}) {
     this.container = container;
     this.variables = model.variables.map((v) => v.name);
     this.sides = model.sides;
     this.minInterval = 1000 / fps;
     this.frames = 0;
     try {
-      this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+      // no multisampling: on a machine without a GPU (software GL) it would cost the twin's CPU
+      this.renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
     } catch (err) {
       const note = document.createElement("div");
       note.className = "note";
@@ -191,14 +197,15 @@ export class RobotView {
   // row: the wire sample's per-side [values, states] list
   pose(row) {
     if (!this.renderer) return;
+    let moved = false;
     this.sides.forEach((side, i) => {
       const values = row[2 * i];
       if (!values) return;
       const named = {};
       this.variables.forEach((name, k) => { named[name] = values[k]; });
-      this.robots[side].pose(named);
+      moved = this.robots[side].pose(named) || moved;
     });
-    this.invalidate();
+    if (moved) this.invalidate();
   }
 
   // world pose of every link of a side (row-major 4x4), as drawn: for checking against the p-model
