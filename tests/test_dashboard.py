@@ -169,6 +169,26 @@ def test_a_run_feeds_the_server_and_the_panel_refuses_to_command_a_plan(system, 
         socket.create_connection(("127.0.0.1", dash.port), timeout=1).close()  # stopped with the run
 
 
+def test_the_history_store_is_served_for_the_page_after_the_run(system, tmp_path):
+    pt = SimulatedEndpoint(PlatformSimulator(system.models.tree, system.models.scene))
+    result = LiveTwin(system, tmp_path, pt=pt, end=1.5).run()
+    with Dashboard(None, port=0, mode="history", history_url=result.history_url) as dash:
+        info = json.loads(_get(dash.url + "api/model")[1])
+        assert info == {"model": None, "history": True, "mode": "history"}
+        runs = json.loads(_get(dash.url + "api/history")[1])["runs"]
+        assert [(r["id"], r["kind"], r["status"], r["samples"]) for r in runs] == [(result.run_id, "twin", "done", 32)]
+        run = json.loads(_get(dash.url + f"api/history/{result.run_id}")[1])
+        assert set(run["sides"]) == {"pt", "dt"} and len(run["sides"]["dt"]["time"]) == 16
+        with open(tmp_path / "dt" / "outputs.csv") as f:
+            written = [float(r["{mapping}.mapping.q1"]) for r in csv.DictReader(f)]
+        assert run["sides"]["dt"]["values"]["q1"] == pytest.approx(written)
+        assert [c["port"] for c in run["commands"] if c["value"] == "true"] == ["moveDiscreteCommand"]
+        code, body = _get(dash.url + "api/history/77")
+        assert code == 404 and "no run 77" in json.loads(body)["error"]
+        code, body = _post(dash.url + "api/command", {"event": "moveDiscreteCommand", "values": {}})
+        assert code == 409
+
+
 def test_the_commands_serve_the_dashboard_for_the_run_and_refuse_a_bad_address(tmp_path):
     import subprocess
     import sys

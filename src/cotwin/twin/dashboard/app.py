@@ -65,8 +65,10 @@ def history_run(url: str, run_id: int, max_points: int = 4000) -> dict:
     prefix = MAPPING.name + "."
     sides = {}
     for side, columns in data["columns"].items():
-        picked = [(i, c[len(prefix):]) for i, c in enumerate(columns) if c.startswith(prefix)]
         rows = thin(data["samples"].get(side, []), max_points)
+        picked = [(i, c[len(prefix):]) for i, c in enumerate(columns) if c.startswith(prefix)
+                  and all(isinstance(values[i], (int, float)) and not isinstance(values[i], bool)
+                          for _, values in rows if values[i] is not None)]  # numbers, not the events
         sides[side] = {"time": [t for t, _ in rows],
                        "values": {name: [values[i] for _, values in rows] for i, name in picked}}
     run = dict(data["run"])
@@ -200,10 +202,9 @@ class Dashboard:
 
         async def command(request):
             if self.publisher is None:
-                source = self.model["commands"]["source"] if self.model else "none"
-                why = {"plan": f"this twin's commands come from its plan ({self.model['commands'].get('plan')}), "
-                               "not from the page",
-                       "none": "this twin takes no commands"}.get(source, "no live twin")
+                commands = self.model["commands"] if self.model else {"source": "history"}
+                why = {"plan": f"this twin's commands come from its plan ({commands.get('plan')}), not from the page",
+                       "none": "this twin takes no commands"}.get(commands["source"], "no live twin to command")
                 return JSONResponse({"error": why}, status_code=409)
             try:
                 body = await request.json()

@@ -172,6 +172,7 @@ async function main() {
   } else {
     $("project").textContent = "history";
     document.querySelector('header nav button[data-tab="history"]').click();
+    document.querySelector('header nav button[data-tab="live"]').hidden = true; // no live run to show
   }
   connect(live);
   page.readyAt = performance.now(); // ms since navigation started: the page is built

@@ -130,11 +130,18 @@ export class TimePlot {
     g.beginPath(); g.rect(left, top, pw, ph); g.clip();
     g.font = "10px system-ui, sans-serif";
     // alarms: a faint band from raised to cleared (or to now), and a lane per variable along the top
+    const spans = this.bands.map((b) => [b.start, b.end === null ? tEnd : b.end]).sort((a, b) => a[0] - b[0]);
+    const union = [];
+    for (const [a, b] of spans) {
+      if (union.length && a <= union[union.length - 1][1]) union[union.length - 1][1] = Math.max(union[union.length - 1][1], b);
+      else union.push([a, b]);
+    }
+    g.fillStyle = "rgba(201, 42, 42, 0.08)"; // while any alarm is open
+    for (const [a, b] of union) g.fillRect(X(a), top, Math.max(1, X(b) - X(a)), ph);
     for (const b of this.bands) {
       const x0 = X(b.start), x1 = X(b.end === null ? tEnd : b.end);
       if (x1 < left || x0 > left + pw) continue;
       const lane = lanes.indexOf(b.label);
-      g.fillStyle = "rgba(201, 42, 42, 0.05)"; g.fillRect(x0, top, Math.max(1, x1 - x0), ph);
       g.fillStyle = b.color || "#c92a2a"; g.fillRect(x0, top + 3 + lane * 9, Math.max(2, x1 - x0), 5);
       g.fillStyle = "#c92a2a"; g.fillRect(x0 - 0.5, top, 1, ph);
     }
