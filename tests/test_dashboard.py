@@ -266,12 +266,15 @@ def test_the_page_follows_a_live_twin_commands_it_and_shows_its_alarms(browser, 
     if not _broker_up():
         _required("no RabbitMQ on 127.0.0.1:5672")
     system = load(ROOT / "examples" / "ur5e" / "live.toml")
-    system.spec.rabbitmq = replace(system.spec.rabbitmq, exchange=f"cotwin_dash_{uuid.uuid4().hex[:8]}")
+    name = f"cotwin_dash_{uuid.uuid4().hex[:8]}"
+    system.spec.rabbitmq = replace(system.spec.rabbitmq, exchange=name)
+    system.spec.deviation = replace(system.spec.deviation, exchange=name + ".events")  # alarms and what-if
+    broker = system.spec.rabbitmq.url
     models = system.models
     pt = LaggingEndpoint(PlatformSimulator(models.tree, models.scene), latency=0.5)
-    end = 6.0
-    with Dashboard(system, port=0, mode="twin", history_url=database_url(None, tmp_path)) as dash:
-        twin = LiveTwin(system, tmp_path, pt=pt, end=end, observers=[dash.feed])
+    end = 10.0
+    with Dashboard(system, port=0, mode="twin", history_url=database_url(None, tmp_path), whatif_url=broker) as dash:
+        twin = LiveTwin(system, tmp_path, pt=pt, end=end, observers=[dash.feed], whatif_url=broker)
         outcome = {}
 
         def run():
@@ -322,6 +325,17 @@ def test_the_page_follows_a_live_twin_commands_it_and_shows_its_alarms(browser, 
         assert drawn_fraction > 0.05 and len(np.unique(shot.reshape(-1, 3), axis=0)) > 100
         orange = (shot[..., 0] > shot[..., 2] + 40).mean()  # the PT ghost is drawn too
         assert orange > 0.001
+        # what if, from the DT's live state once it rests: a plan on a fork, overlaid on the plot
+        page.wait_for_selector('#ops li.op:has-text("stop()")', timeout=10_000)
+        page.wait_for_selector('#machines .node.active[data-id="Idle"]', timeout=10_000)
+        page.fill("#whatif-plan", json.dumps([{"time": 0.2, "event": "moveDiscreteCommand",
+                                               "args": {"target_X": 3, "target_Y": 20, "target_Z": 2}}]))
+        page.fill("#whatif-horizon", "10")
+        page.click("#whatif-run")
+        page.wait_for_selector("#whatif-result li.ok", timeout=30_000)
+        assert "done at" in page.inner_text("#whatif-result")
+        predicted = page.evaluate("window.cotwin.prediction.trajectory")
+        assert page.evaluate("window.cotwin.live.plot.overlay.time.length") == len(predicted["time"]) > 2
         runner.join(end + 30)
         assert "error" not in outcome, outcome.get("error")
         page.wait_for_selector('#state[data-state="done"]', timeout=5_000)
@@ -352,3 +366,6 @@ def test_the_page_follows_a_live_twin_commands_it_and_shows_its_alarms(browser, 
     arm = ik.arm_joints(models.tree, tool)
     reached = ik.tool_pose(models.tree, tool, dict(zip(arm, q[-1])))[:3, 3]
     assert np.linalg.norm(reached - np.array(models.scene.hole(0, 23, 1))) < 0.002
+    predicted_tip = ik.tool_pose(models.tree, tool, {j: predicted[f"q{i}"][-1] for i, j in enumerate(arm)})[:3, 3]
+    assert np.linalg.norm(predicted_tip - np.array(models.scene.hole(3, 20, 2))) < 0.002  # the fork went there
+    assert max(abs(a - b) for a, b in zip(q[-1], [predicted[f"q{i}"][0] for i in range(6)])) < 0.05  # from live

@@ -99,13 +99,13 @@ def _address(ctx, param, value: str | None) -> tuple[str, int] | None:
 DASHBOARD_HELP = "serve the live dashboard at HOST:PORT (e.g. 127.0.0.1:8050) while the run lasts"
 
 
-def _dashboard(system, address, mode: str, history_url: str | None):
+def _dashboard(system, address, mode: str, history_url: str | None, whatif_url: str | None = None):
     """The started dashboard of a run (or None); says where it is."""
     if address is None:
         return None
     from .twin.dashboard import Dashboard
 
-    dash = Dashboard(system, *address, mode=mode, history_url=history_url).start()
+    dash = Dashboard(system, *address, mode=mode, history_url=history_url, whatif_url=whatif_url).start()
     click.echo(f"dashboard: {dash.url}", err=True)
     return dash
 
@@ -239,7 +239,8 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         spec.realtime = True if realtime is None else realtime
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
-    dash = _dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)))
+    dash = _dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
+                      broker if whatif else None)
     try:
         live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
                         observers=[dash.feed] if dash else (), cc=cc, whatif_url=broker if whatif else None)

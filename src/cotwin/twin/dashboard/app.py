@@ -3,8 +3,9 @@ stopped with the run.
 
 Routes: `/` (the page), `/static/...` (its scripts, styles and the vendored three.js), `/api/model`
 (what describe.py derives from the models), `/api/status`, `/api/command` (POST: a command from the
-panel, published on the twin's broker by PagePublisher), `/api/history` and `/api/history/{run}`
-(the history store), and `/ws`: the live stream. A client gets a `hello` (recent samples, every event
+panel, published on the twin's broker by PagePublisher), `/api/whatif` (POST: a plan for the twin's
+what-if service, when it runs one), `/api/history` and `/api/history/{run}` (the history store), and
+`/ws`: the live stream. A client gets a `hello` (recent samples, every event
 so far, the status) and then, every `period` seconds, a `batch` of what is new: samples (at most
 `max_rate` per second, evenly thinned beyond that), events and the status. Each client reads the
 feed from its own cursor on the server's event loop, so one that is slow to take its messages only
@@ -82,7 +83,7 @@ class Dashboard:
 
     def __init__(self, system: TwinSystem | None, host: str = "127.0.0.1", port: int = 8050, mode: str = "twin",
                  history_url: str | None = None, period: float = 0.05, max_rate: float = 150.0,
-                 backlog: int = 4000, heartbeat: bool = True):
+                 backlog: int = 4000, heartbeat: bool = True, whatif_url: str | None = None):
         if mode not in ("twin", "run", "history"):
             raise ValueError(f"unknown dashboard mode {mode!r}")
         if system is None and mode != "history":
@@ -96,7 +97,8 @@ class Dashboard:
         self.backlog = backlog
         self.feed = DashboardFeed(system) if system is not None and mode != "history" else None
         sides = ["pt", "dt"] if mode == "twin" else ["twin"]
-        self.model = describe(system, sides, mode) if system is not None else None
+        self.whatif_url = whatif_url if system is not None and mode == "twin" else None  # the twin answers what-if
+        self.model = describe(system, sides, mode, {"whatif": self.whatif_url is not None}) if system is not None else None
         self.publisher = None
         if system is not None and system.source is RABBITMQ and mode != "history":
             from ..rabbitmq import port_types
@@ -222,6 +224,26 @@ class Dashboard:
                 return JSONResponse({"error": self.publisher.error}, status_code=503)
             return JSONResponse({"queued": message, "twin_ready": self.publisher.twin_ready.is_set()})
 
+        async def whatif(request):
+            if self.whatif_url is None:
+                return JSONResponse({"error": "this twin does not answer what-if requests (cotwin twin --whatif)"},
+                                    status_code=409)
+            from .whatif import ask, check_request
+
+            try:
+                body = await request.json()
+            except (ValueError, UnicodeDecodeError):
+                return JSONResponse({"error": "the request is not JSON"}, status_code=400)
+            try:
+                checked = check_request(body, self.system.models.program)
+            except CotwinError as err:
+                return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=422)
+            try:
+                answer = await run_in_threadpool(ask, self.whatif_url, self.system.spec.deviation.exchange, checked)
+            except CotwinError as err:
+                return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=504)
+            return JSONResponse(_finite(answer), status_code=422 if "error" in answer else 200)
+
         async def runs(request):
             if self.history_url is None:
                 return JSONResponse({"runs": [], "error": "no history store"})
@@ -246,6 +268,7 @@ class Dashboard:
             Route("/api/model", model),
             Route("/api/status", status),
             Route("/api/command", command, methods=["POST"]),
+            Route("/api/whatif", whatif, methods=["POST"]),
             Route("/api/history", runs),
             Route("/api/history/{run_id:int}", run),
             WebSocketRoute("/ws", self._stream),

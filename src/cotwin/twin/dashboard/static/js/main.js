@@ -49,7 +49,7 @@ class Live {
     this.machines = model.machines.map((m) => new MachineView($("machines"), m, this.sides));
     $("machine-caption").textContent = model.module;
     buildPanel($("commands"), $("command-caption"), $("sent"), model.commands);
-    if (model.features.whatif) $("whatif").hidden = false; // issue 9: shown once the service exists
+    if (model.features.whatif) this.whatif(); // issue 9: shown when the twin answers what-if requests
     this.robot = null;
     this.openAlarms = {};
     this.opsSeen = new Map();
@@ -60,6 +60,40 @@ class Live {
       $("view-caption").textContent = `${model.robot.name}` + (this.sides.length > 1 ? " (PT orange ghost, DT grey)" : "");
       if (this.last) this.robot.pose(this.last);
     }).catch((err) => { $("view").textContent = `3D view unavailable: ${err}`; });
+  }
+
+  // the what-if panel: a JSON plan (times from now), the prediction overlaid on the plot and summed up
+  whatif() {
+    $("whatif").hidden = false;
+    const ev = this.model.commands.events[0];
+    if (ev) {
+      const args = Object.fromEntries(ev.values.map((v) => [v.label, v.type === "Boolean" ? false : 0]));
+      $("whatif-plan").value = JSON.stringify([{ time: 0.5, event: ev.name, args }]);
+    }
+    $("whatif-run").addEventListener("click", async () => {
+      const out = $("whatif-result");
+      out.replaceChildren(li("predicting…"));
+      let plan;
+      try { plan = JSON.parse($("whatif-plan").value); } catch (err) { out.replaceChildren(li(`the plan is not JSON: ${esc(err.message)}`, "error")); return; }
+      const r = await fetch("/api/whatif", { method: "POST", headers: { "Content-Type": "application/json" },
+        body: JSON.stringify({ plan, horizon: Number($("whatif-horizon").value) }) });
+      const answer = await r.json();
+      if (!r.ok) { out.replaceChildren(li(esc(answer.error), "error")); return; }
+      page.prediction = answer;
+      const names = this.vars.map((v) => v.name);
+      this.plot.overlay = { time: answer.trajectory.time,
+        columns: names.map((n) => answer.trajectory[n] || null) };
+      this.plot.invalidate();
+      const items = answer.commands.map((c) => li(`t = ${c.time.toFixed(2)} s ${esc(c.event)}(${args(c.args)}): ` +
+        (c.delivered === null ? "not delivered" : c.feasible === false ? "infeasible" : c.done !== null
+          ? `done at ${c.done.toFixed(2)} s` : c.accepted ? "not done within the horizon" : "ignored"),
+        c.feasible === false || c.done === null ? "error" : "ok"));
+      items.push(li(answer.completion_time !== null ? `plan complete at t = ${answer.completion_time.toFixed(2)} s`
+        : "plan not complete within the horizon"));
+      if (answer.collisions.length) items.push(li(`${answer.collisions.length} collision(s)`, "error"));
+      items.push(li(`fork from t = ${answer.start.toFixed(2)} s, computed in ${answer.wall_seconds.toFixed(2)} s`));
+      out.replaceChildren(...items);
+    });
   }
 
   colorOf(name) {

@@ -15,6 +15,7 @@ export class TimePlot {
     this.columns = this.series.map(() => new Float32Array(this.capacity));
     this.bands = []; // {start, end|null, label}
     this.markers = []; // {time, label}
+    this.overlay = null; // a prediction: {time: [...], columns: [[...] | null per variable]}, drawn dotted
     this.window = 30;
     this.minInterval = 1000 / fps;
     this.lastDraw = 0;
@@ -97,7 +98,8 @@ export class TimePlot {
     const n = this.n;
     const tEnd = n ? this.time[n - 1] : 0;
     const t0 = this.window > 0 ? Math.max(n ? this.time[0] : 0, tEnd - this.window) : (n ? this.time[0] : 0);
-    const t1 = Math.max(tEnd, t0 + (this.window > 0 ? this.window : 1e-9));
+    const ahead = this.overlay ? this.overlay.time[this.overlay.time.length - 1] : tEnd; // a prediction's end
+    const t1 = Math.max(tEnd, ahead, t0 + (this.window > 0 ? this.window : 1e-9));
     const first = Math.max(0, this._lowerBound(t0) - 1);
     // y range over the visible samples
     let lo = Infinity, hi = -Infinity;
@@ -184,6 +186,20 @@ export class TimePlot {
       if (col >= 0) flush();
       g.stroke();
     });
+    const o = this.overlay;
+    if (o) { // a prediction, per variable whose curves are shown
+      const perSide = o.columns.length;
+      o.columns.forEach((col, i) => {
+        if (!col || !this.series.some((s, k) => k % perSide === i && s.visible)) return;
+        g.strokeStyle = this.series[i].color; g.lineWidth = 2.4; g.setLineDash([1.5, 3]);
+        g.beginPath();
+        col.forEach((v, k) => { if (k === 0) g.moveTo(X(o.time[k]), Y(v)); else g.lineTo(X(o.time[k]), Y(v)); });
+        g.stroke();
+      });
+      const x = X(o.time[0]);
+      g.setLineDash([]); g.fillStyle = "#495057"; g.textAlign = "left"; g.textBaseline = "top";
+      g.fillText("what if ⋯", x + 3, top + ph - 28);
+    }
     g.setLineDash([]);
     g.restore();
     g.strokeStyle = "#9aa3b0"; g.strokeRect(left + 0.5, top + 0.5, pw, ph);

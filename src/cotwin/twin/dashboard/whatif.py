@@ -1,0 +1,67 @@
+"""The page's "what if" button: a what-if request to the live twin's WhatIfService over the broker, as any
+requester sends it (cotwin.twin.whatif: a JSON request on the twin's topic exchange, routing key
+`twin.whatif`, with `reply_to` and `correlation_id`), and the answer it gets back. The plan is checked
+with the service's own parser first, so a mistyped plan is refused at once with the place it is wrong.
+"""
+
+from __future__ import annotations
+
+import json
+import time as wallclock
+import uuid
+
+import pika
+
+from ...diagnostics import CotwinError
+from ...mapping.amqp import connect
+
+
+def check_request(body: dict, program) -> dict:
+    """{plan, horizon} from the page, checked; CotwinError saying what is wrong."""
+    from ..whatif import plan_from_json
+
+    if not isinstance(body, dict) or set(body) - {"plan", "horizon"}:
+        raise CotwinError("a what-if request is {\"plan\": [{time, event, args}, ...], \"horizon\": seconds}")
+    plan_from_json(body.get("plan"), program)  # the service's own checks
+    horizon = body.get("horizon", 30.0)
+    if isinstance(horizon, bool) or not isinstance(horizon, (int, float)) or not 0 < horizon <= 3600:
+        raise CotwinError("horizon must be a number of seconds in (0, 3600]")
+    return {"plan": body["plan"], "horizon": float(horizon)}
+
+
+def ask(url: str, exchange: str, request: dict, timeout: float = 120.0, routing_key: str = "twin.whatif") -> dict:
+    """Publish `request` to the twin's what-if service and wait (at most `timeout`) for its answer."""
+    try:
+        connection = connect(url, "cotwin dashboard what-if")
+    except (pika.exceptions.AMQPError, OSError) as err:
+        raise CotwinError(f"what-if: cannot reach the broker ({type(err).__name__})") from None
+    try:
+        channel = connection.channel()
+        channel.exchange_declare(exchange, exchange_type="topic", durable=False, auto_delete=False)
+        reply = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
+        correlation = uuid.uuid4().hex
+        answer: dict = {}
+
+        def on_reply(ch, method, props, body) -> None:
+            if props.correlation_id == correlation:
+                answer["body"] = body
+
+        channel.basic_consume(reply, on_reply, auto_ack=True)
+        channel.basic_publish(exchange, routing_key, json.dumps(request).encode(),
+                              pika.BasicProperties(reply_to=reply, correlation_id=correlation,
+                                                   content_type="application/json"))
+        deadline = wallclock.monotonic() + timeout
+        while "body" not in answer:
+            left = deadline - wallclock.monotonic()
+            if left <= 0:
+                raise CotwinError(f"what-if: no answer within {timeout:g} s (is the twin still running, with --whatif?)")
+            connection.process_data_events(time_limit=min(left, 0.1))
+        try:
+            return json.loads(answer["body"])
+        except ValueError:
+            raise CotwinError("what-if: the service's answer is not JSON") from None
+    finally:
+        try:
+            connection.close()
+        except Exception:  # noqa: BLE001 - closing a dead link
+            pass
