@@ -82,7 +82,7 @@ class Dashboard:
     observer), run (one twin: pass `feed` to run_twin's observers) or history (no live run)."""
 
     def __init__(self, system: TwinSystem | None, host: str = "127.0.0.1", port: int = 8050, mode: str = "twin",
-                 history_url: str | None = None, period: float = 0.05, max_rate: float = 150.0,
+                 history_url: str | None = None, period: float = 0.1, max_rate: float = 100.0,
                  backlog: int = 4000, heartbeat: bool = True, whatif_url: str | None = None):
         if mode not in ("twin", "run", "history"):
             raise ValueError(f"unknown dashboard mode {mode!r}")

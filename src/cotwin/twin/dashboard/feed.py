@@ -2,9 +2,11 @@
 ring and notes discrete events (commands, operation calls, alarms) in an append-only list.
 
 The twin's thread only writes (a handful of dict look-ups and one list store per step, no lock, no
-I/O, no encoding); the server's thread reads from its own cursors and does everything else. A reader
-that falls behind more than the ring holds skips ahead and counts what it missed, so a slow or
-closed browser can never slow the run.
+I/O, no encoding), and copies values at most `max_rate` times a second of wall time: a paced twin at
+100 Hz is seen step by step, an unpaced one racing at thousands of steps a second is sampled (a page
+draws no more than that), while events are never missed. The server's thread reads from its own
+cursors and does everything else. A reader that falls behind more than the ring holds skips ahead and
+counts what it missed, so a slow or closed browser can never slow the run.
 
 One feed serves both kinds of run: as a cosim Observer of one twin (`cotwin run`, side `twin`) and as
 an observer of a LiveTwin (`twin_started`/`twin_step`, sides `pt` and `dt`).
@@ -55,7 +57,7 @@ class DashboardFeed(Observer):
     """Samples `(time, wall, [values side 1, states side 1, values side 2, ...])` per step, and events
     (dicts with `kind` = command | op | alarm) as they happen (see module doc)."""
 
-    def __init__(self, system: TwinSystem, capacity: int = 1 << 14):
+    def __init__(self, system: TwinSystem, capacity: int = 1 << 14, max_rate: float = 500.0):
         program = system.models.program
         self.system = system
         self.variables = list(system.models.monitored)
@@ -69,6 +71,9 @@ class DashboardFeed(Observer):
                     self._commands.append(((source.name, ev.name), ev.name,
                                            [(port, (source.name, port)) for port, _ in ev.value_ports]))
         self.samples = Ring(capacity)
+        self.min_interval = 1.0 / max_rate  # s of wall time between two copied samples
+        self._last_copy = float("-inf")
+        self._last_time: float | None = None  # the newest step's time, copied or not
         self.events: list[dict] = []
         self.sides: list[str] = []
         self.state = "waiting"  # waiting | running | done | stopped | failed
@@ -120,10 +125,22 @@ class DashboardFeed(Observer):
     def finish(self, state: str, message: str | None = None) -> None:
         """The run ended (the LiveTwin's caller says how; one run's execution says it itself)."""
         if self.state in ("waiting", "running"):
+            if self._last_time is not None:  # the last step, if it was not copied
+                self._copy(self._last_time)
             self.state, self.message = state, message
 
     # ---- the twin's thread ----
     def _capture(self, t: float) -> None:
+        now = wallclock.perf_counter()
+        if now - self._last_copy >= self.min_interval:
+            self._last_copy = now
+            self._copy(t)
+        else:
+            self._last_time = t
+        self._events(t)
+
+    def _copy(self, t: float) -> None:
+        self._last_time = None
         row = []
         keys, state_keys = self._keys, self._state_keys
         for execution in self._executions:
@@ -131,6 +148,8 @@ class DashboardFeed(Observer):
             row.append([values.get(k) for k in keys])
             row.append([values.get(k) for k in state_keys])
         self.samples.append((t, wallclock.time(), row))
+
+    def _events(self, t: float) -> None:
         for i, mapping in enumerate(self._mappings):
             executed = getattr(mapping, "executed", None)
             if executed is not None and len(executed) > self._seen_ops[i]:
