@@ -18,6 +18,7 @@ from pathlib import Path
 
 import sqlalchemy as sa
 
+from ..cosim.algorithm import UNSET
 from ..diagnostics import CotwinError
 
 metadata = sa.MetaData()
@@ -136,6 +137,8 @@ class HistoryRecorder:
                     done = True
                     break
                 table, row = item
+                if table is samples:
+                    row["values"] = json.dumps([None if v is UNSET else v for v in row["values"]])
                 pending.setdefault(table, []).append(row)
             if pending:
                 try:
@@ -146,9 +149,10 @@ class HistoryRecorder:
                     self.error = err
                 pending = {}
 
-    def record_sample(self, side: str, step: int, t: float, values: list) -> None:
+    def record_sample(self, side: str, step: int, t: float, values) -> None:
+        """Queue a sample (a sequence of values; encoded by the writer thread, off the twin's)."""
         self._queue.put((samples, {"run": self.run_id, "side": side, "step": step, "time": t, "wall": wallclock.time(),
-                                   "values": json.dumps(values)}))
+                                   "values": values}))
 
     def record_command(self, step: int, t: float, port: str, value) -> None:
         self._queue.put((commands, {"run": self.run_id, "step": step, "time": t, "wall": wallclock.time(),

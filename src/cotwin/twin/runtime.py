@@ -20,7 +20,7 @@ import time as wallclock
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..cosim.algorithm import algorithm as make_algorithm
+from ..cosim.algorithm import UNSET, algorithm as make_algorithm
 from ..cosim.execution import Execution, RunResult
 from ..cosim.observers import CSVWriter, StateFile, epoch_of
 from ..diagnostics import CotwinError
@@ -207,29 +207,46 @@ class LiveTwin:
 
         return EventPublisher(url, self.system.spec.deviation.exchange, "cotwin alarms")
 
-    def _record(self, k: int) -> None:
-        history = self._history
+    def _prepare_recording(self) -> None:
+        """Readers bound once (after initialisation): what the history and the deviation check read each step."""
         program = self.system.models.program
+        self._readers = {}
         for name, side in self.sides.items():
-            keys = side.execution.system.observed()
-            values = side.execution.values
-            history.record_sample(name, k, side.execution.time, [values.get(key) for key in keys])
-            for m in program.machines:
-                state = values.get((DMODEL.name, program.state_port(m)))
-                if isinstance(state, int):
-                    leaves = program.leaf_names(m)
-                    history.record_state(name, k, side.execution.time, m.name, state,
-                                         leaves[state] if 0 <= state < len(leaves) else "none")
+            execution = side.execution
+            machines = [(m.name, program.leaf_names(m)) for m in program.machines]
+            states = execution.reader([(DMODEL.name, program.state_port(m)) for m in program.machines])
+            self._readers[name] = (execution.reader(execution.system.observed()), states, machines,
+                                   execution.reader([(MAPPING.name, v) for v in self.variables]))
         source = self.system.source
         if source is not None:
-            values = self.sides["pt"].execution.values
-            for port in self.system.source_ports:
-                value = values.get((source.name, port))
-                if port in self.system.command_events and value is True:
+            events = [p for p in self.system.source_ports if p in self.system.command_events]
+            values = [p for p in self.system.source_ports if p not in self.system.command_events]
+            read = self.sides["pt"].execution.reader([(source.name, p) for p in events + values])
+            self._commands = (events, values, read)
+        else:
+            self._commands = None
+
+    def _record(self, k: int) -> None:
+        history = self._history
+        for name, (sample, states, machines, _) in self._readers.items():
+            t = self.sides[name].execution.time
+            history.record_sample(name, k, t, sample())
+            for (machine, leaves), state in zip(machines, states()):
+                if isinstance(state, int) and not isinstance(state, bool):
+                    history.record_state(name, k, t, machine, state, leaves[state] if 0 <= state < len(leaves) else "none")
+        if self._commands is not None:
+            events, values, read = self._commands
+            current = read()
+            fired = [e for e, v in zip(events, current) if v is True]
+            for event in fired:  # a command and the values it carries
+                history.record_command(k, self.time, event, True)
+                for port, value in zip(values, current[len(events):]):
                     history.record_command(k, self.time, port, value)
-                    for other in self.system.source_ports:
-                        if other not in self.system.command_events:
-                            history.record_command(k, self.time, other, values.get((source.name, other)))
+
+    def _deviation_step(self) -> None:
+        pt = {v: None if x is UNSET else x for v, x in zip(self.variables, self._readers["pt"][3]())}
+        dt = {v: None if x is UNSET else x for v, x in zip(self.variables, self._readers["dt"][3]())}
+        self.monitor.observe(self.time, pt, dt)
 
     def _loop(self, url: str) -> LiveResult:
         pt, dt = self.sides["pt"], self.sides["dt"]
@@ -242,6 +259,7 @@ class LiveTwin:
             if place is not None:  # the DT starts where the PT is
                 place(self.sides["pt"].units["mapping"].mapping.endpoint.joint_positions())
             dt.execution.initialize()
+            self._prepare_recording()
             self._record(0)
             for o in self.observers:
                 getattr(o, "twin_started", lambda twin: None)(self)
@@ -254,8 +272,7 @@ class LiveTwin:
                 dt.execution.step()
                 self.steps += 1
                 self.time = pt.execution.time
-                self.monitor.observe(self.time, pt.values(MAPPING.name, self.variables),
-                                     dt.values(MAPPING.name, self.variables))
+                self._deviation_step()
                 self._record(self.steps)
                 if self.whatif is not None:
                     self.whatif.poll(dt.execution)
