@@ -304,5 +304,9 @@ def test_published_turtlebot_is_read_exported_and_driven(published):
     speeds = sim.joint_velocities()
     assert speeds["LeftWheelJoint"] == pytest.approx(speeds["RightWheelJoint"], rel=0.05) and speeds["LeftWheelJoint"] > 3
     assert sim.body_pose("BaseLink")[0, 3] - start[0] > 0.05  # rolled forward along x
+    lidar, base = "Turtlebot3_Burger::BaseLink::TBLidar", "Turtlebot3_Burger::BaseLink"
     assert set(sim.read_sensors()) == {"Turtlebot3_Burger::BaseLink::TBIMU.currentLV",
-                                       "Turtlebot3_Burger::BaseLink::TBIMU.currentAV"}
+                                       "Turtlebot3_Burger::BaseLink::TBIMU.currentAV",
+                                       f"{lidar}.closestDistance", f"{lidar}.closestAngle",
+                                       *(f"{base}.{p}" for p in ("x", "y", "z", "yaw"))}
+    assert sim.read_sensors()[f"{lidar}.closestDistance"] >= 0.12  # the LDS-01's shortest range (inf: nothing)

@@ -31,15 +31,39 @@ def check(paths: tuple[str, ...]) -> None:
     from .robosim.summary import summarise
 
     result = check_paths(paths)
-    _report(result.findings)
+    findings = list(result.findings)
+    if result.ok:
+        findings += [f for project in result.projects for f in _tree_findings(project)]
+    _report(findings)
     if not result.ok:
         errors = sum(f.severity is Severity.ERROR for f in result.findings)
         click.echo(f"{errors} error(s)", file=sys.stderr)
         sys.exit(1)
-    warnings = Counter(f.location.path for f in result.findings if f.severity is Severity.WARNING)
+    warnings = Counter(f.location.path for f in findings if f.severity is Severity.WARNING)
     for source in (f for project in result.projects for f in project.files):
         extra = f", {warnings[source.path]} warning(s)" if warnings[source.path] else ""
         click.echo(f"{source.path}: ok ({summarise(source)}{extra})")
+
+
+def _tree_findings(project) -> list:
+    """The readings a simulator takes of a project's p-models (cotwin.pmodel.tree_build's warnings: a wheel
+    axis moved, an impossible inertia replaced...), for those that build."""
+    from .diagnostics import CotwinError
+    from .pmodel.tree import build_tree
+    from .robosim.pmodel_elements import PModel
+
+    pmodels = project.elements(PModel)
+    used = {p.pmodel.last for pm in pmodels for p in pm.parts}
+    out = []
+    for pmodel in pmodels:
+        if pmodel.name in used:
+            continue
+        try:
+            tree = build_tree(project, "::".join(project.qualified_name(pmodel)))
+        except CotwinError:
+            continue  # a p-model the simulator cannot take says so when it is run
+        out.extend(f for f in tree.findings if f.severity is Severity.WARNING and not f.location.path.startswith("<"))
+    return out
 
 
 @main.command("build-dmodel")

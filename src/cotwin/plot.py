@@ -81,3 +81,48 @@ def twin_figure(pt_csv: str | Path, dt_csv: str | Path, alarms: list[dict], png_
     fig.savefig(png_path, dpi=90)
     plt.close(fig)
     return Path(png_path)
+
+
+def top_view(csv_path: str | Path, png_path: str | Path, world, columns: tuple[str, str], title: str = "",
+             radius: float | None = None) -> Path:
+    """A mobile robot's path seen from above among a world's obstacles (cotwin.pmodel.world): walls and
+    boxes as outlines, cylinders as circles, the path coloured by time from its start (o) to its end (x)."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.patches import Circle, Polygon
+
+    cols = read_csv(csv_path)
+    t, x, y = cols["time"], cols[columns[0]], cols[columns[1]]
+    fig, ax = plt.subplots(figsize=(7, 6.2))
+    for o in world.obstacles:
+        if o.kind == "cylinder":
+            ax.add_patch(Circle((o.x, o.y), o.size[0], color="tab:blue", alpha=0.6))
+        else:
+            ax.add_patch(Polygon(o.outline(), closed=True, color="tab:brown" if "wall" in o.name else "tab:red",
+                                 alpha=0.6))
+    points = list(zip(x, y))
+    if len(points) > 1:
+        segments = [[points[k], points[k + 1]] for k in range(len(points) - 1)]
+        lines = LineCollection(segments, cmap="viridis", linewidths=2)
+        lines.set_array(list(t[1:]))
+        ax.add_collection(lines)
+        fig.colorbar(lines, ax=ax, label="time [s]", shrink=0.8)
+    if points:
+        ax.plot(*points[0], "o", color="black", label="start")
+        ax.plot(*points[-1], "x", color="black", markersize=9, label="end")
+        if radius:
+            ax.add_patch(Circle(points[-1], radius, fill=False, color="black", linestyle=":"))
+    x0, x1, y0, y1 = world.extent()
+    margin = 0.15
+    ax.set_xlim(x0 - margin, x1 + margin)
+    ax.set_ylim(y0 - margin, y1 + margin)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="upper right")
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=90)
+    plt.close(fig)
+    return Path(png_path)

@@ -176,6 +176,7 @@ class EventPort:
     ty: Ty | None
     value_ports: list[tuple[str, Scalar]] = field(default_factory=list)  # (port name, scalar)
     unportable: str | None = None  # why its value cannot be FMU ports (a set, a vector...)
+    bound: set[str] = field(default_factory=set)  # the variables the machines bind its value to ($e?x)
 
 
 @dataclass
@@ -359,12 +360,16 @@ class _Builder:
                                 used_outputs.add(mc.target_event)
                             else:
                                 internal.setdefault(src, []).extend(into_controller(mc.target, mc.target_event))
-        input_ports = [self.event_port(name, inputs[name]) for name in inputs if name in input_routes]
+        input_ports = [self.event_port(name, inputs[name], _bound_names(machines, input_routes[name]))
+                       for name in inputs if name in input_routes]
         output_ports = [self.event_port(name, inputs[name]) for name in inputs if name in used_outputs]
         self.disambiguate([*input_ports, *output_ports])
         operations = [OperationPort(op.name, [(p.name, platform_resolver.resolve(p.type)) for p in op.params])
                       for op in members.operations.values()]
         self.argument_ports(operations)
+        self.name_after_bindings(input_ports, {p.name for p in (*input_ports, *output_ports, *operations)}
+                                 | {name for op in operations for group in op.arg_ports for name, _ in group}
+                                 | {"state" if len(machines) == 1 else f"state_{m.name}" for m in machines})
         taken = {"cycle_period", *(p.name for p in (*input_ports, *output_ports, *operations))}
         taken |= {name for p in (*input_ports, *output_ports) for name, _ in p.value_ports}
         taken |= {name for op in operations for group in op.arg_ports for name, _ in group}
@@ -633,8 +638,9 @@ class _Builder:
         return None
 
     # ---- ports ----
-    def event_port(self, name: str, ty: Ty | None) -> EventPort:
+    def event_port(self, name: str, ty: Ty | None, bound: set[str] | None = None) -> EventPort:
         port = EventPort(name, ty)
+        port.bound = bound or set()
         if ty is not None:
             base = ty.decl.name if isinstance(ty, RecordTy) else f"{name}_value"
             try:
@@ -653,6 +659,22 @@ class _Builder:
         for p in ports:
             if any(counts[n] > 1 for n, _ in p.value_ports):
                 p.value_ports = [(f"{p.name}_{n}", sc) for n, sc in p.value_ports]
+
+    @staticmethod
+    def name_after_bindings(ports: list[EventPort], taken: set[str]) -> None:
+        """The value port of an event of a primitive type is named after the variable the d-model binds
+        it to (`$closestDistance?closest_distance` gives `closest_distance`, as the paper's Listing 6),
+        when every binding uses one name that no other port has; otherwise it stays `<event>_value`."""
+        names = [n for p in ports for n, _ in p.value_ports] + sorted(taken)
+        for p in ports:
+            if len(p.value_ports) != 1 or p.value_ports[0][1].path or len(p.bound) != 1:
+                continue
+            (bound,) = p.bound
+            if bound in names or bound == "cycle_period":
+                continue
+            sc = p.value_ports[0][1]
+            p.value_ports = [(bound, sc)]
+            names.append(bound)
 
     def argument_ports(self, operations: list[OperationPort]) -> None:
         """Arguments are named after the parameter (`target_X`); operations may share a port when
@@ -706,6 +728,19 @@ def _bounded_names(predicate) -> set[str]:
         elif isinstance(e, s.Binary) and e.op == "in" and isinstance(e.left, s.Name):
             out.add(e.left.name.last)
     return out
+
+
+def _bound_names(machines: list[MachineInstance], routes: list[tuple[int, str]]) -> set[str]:
+    """The variables the machines bind a platform event's value to (`$e?x` in their guards)."""
+    names: set[str] = set()
+    for index, event in routes:
+        machine = machines[index]
+        for body in (machine, *machine.frames):
+            for t in body.graph.transitions:
+                for node in s.walk(t.condition) if t.condition is not None else ():
+                    if isinstance(node, s.EventTest) and node.bind and node.event.last == event:
+                        names.add(node.bind)
+    return names
 
 
 def _state_index(graph: MachineGraph, state: s.QName) -> int | None:

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..diagnostics import CotwinError
 from ..pmodel.cell import CellGeometry
+from ..pmodel.mjcf import servo_mode
 from ..pmodel.simulator import PlatformSimulator, SimState
 from ..pmodel.tree import KinematicTree
 from .motion import MotionProfile, Quintic, Segment
@@ -47,8 +48,10 @@ class SimulatedEndpoint:
         self.profile: MotionProfile = profile or Quintic()
         self.geometry = geometry or getattr(simulator.scene, "geometry", None)
         self._path_to_joint = simulator.actuators()
+        self._positioned = {j.name for j in self.tree.actuated if servo_mode(j) == "position"}
         self.segment: Segment | None = None
         self._held = None  # the segment whose final set-point the servos already hold
+        self.direct: dict[str, float] = {}  # joint -> the speed or effort last commanded
 
     def start(self) -> None:
         self.segment = None
@@ -61,6 +64,7 @@ class SimulatedEndpoint:
         known = {n: v for n, v in positions.items() if n in self.sim.joint_names}
         self.sim.reset(known)
         self.segment = None
+        self.direct = {}
 
     def read_sensors(self) -> dict[str, float]:
         return self.sim.read_sensors()
@@ -80,17 +84,39 @@ class SimulatedEndpoint:
         return self._path_to_joint[name]
 
     def command(self, goals: dict[str, float]) -> None:
-        """New servo goals (by actuator path, servo or joint name); joints not named keep their goal."""
-        now = self.sim.time
-        current = self.segment.at(now) if self.segment else self.sim.joint_positions()
-        previous = dict(self.segment.goal) if self.segment else dict(current)
-        goal = dict(previous)
+        """New servo goals (by actuator path, servo or joint name); joints not named keep their goal.
+        Position goals are reached along a planned trajectory; speeds and efforts (wheels, motors) are
+        the actuator's command at once."""
+        planned, direct = {}, {}
         for name, value in goals.items():
             if not np.isfinite(value):
                 raise CotwinError(f"actuator '{name}': goal {value!r} is not a finite number")
-            goal[self.joint(name)] = float(value)
+            joint = self.joint(name)
+            if joint in self._positioned:
+                planned[joint] = float(value)
+            else:
+                direct[name] = float(value)
+                self.direct[joint] = float(value)
+        if direct:
+            self.sim.write_actuators(direct)
+        if not planned:
+            return
+        now = self.sim.time
+        current = self.segment.at(now) if self.segment else \
+            {j: v for j, v in self.sim.joint_positions().items() if j in self._positioned}
+        goal = dict(self.segment.goal) if self.segment else dict(current)
+        goal.update(planned)
         start = {j: current.get(j, goal[j]) for j in goal}
         self.segment = self.profile.plan(self.tree, start, goal, now)
+
+    def goals(self) -> dict[str, float]:
+        """The goals in force by joint: position goals (their segment's end, else where the joint is) and
+        the last speed or effort commanded."""
+        q = self.sim.joint_positions()
+        out = {j: q[j] for j in q if j in self._positioned}
+        if self.segment is not None:
+            out.update(self.segment.goal)
+        return {**{j: 0.0 for j in q if j not in self._positioned}, **out, **self.direct}
 
     def advance(self, dt: float) -> None:
         """Run the platform for dt (whole physics steps), the servos' set-points refreshed every
@@ -119,10 +145,13 @@ class SimulatedEndpoint:
     # ---- state (what-if forks and rollbacks): the simulator's and the segment in flight ----
     def snapshot(self) -> dict:
         """The endpoint's state as plain data: MuJoCo's integration state and the trajectory in flight."""
-        return {"simulator": self.sim.get_state().vector, "segment": trajectory_data(self.segment)}
+        state = self.sim.get_state()
+        return {"simulator": state.vector, "scans": state.scans, "segment": trajectory_data(self.segment),
+                "direct": dict(self.direct)}
 
     def restore(self, snapshot: dict) -> None:
-        self.sim.set_state(SimState(snapshot["simulator"]))
+        self.sim.set_state(SimState(snapshot["simulator"], tuple(snapshot.get("scans", ()))))
+        self.direct = dict(snapshot.get("direct", {}))
         self.segment = trajectory_from(snapshot["segment"])
         self._held = None  # written again at the next step (the same value: MuJoCo's controls are restored)
 

@@ -42,7 +42,7 @@ from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
 
 from ..diagnostics import CotwinError
-from ..pmodel.mjcf import sensor_name
+from ..pmodel.mjcf import pose_paths, sensor_name
 from ..pmodel.tree import KinematicTree
 from .opcua_auth import client_credentials, parse_url
 
@@ -236,7 +236,8 @@ class OPCUAEndpoint:
         if sorted(joints) != sorted(ours):
             raise CotwinError(f"the plant at {self.url} has joints {', '.join(joints)}; p-model {self.tree.name} "
                               f"has {', '.join(ours)}")
-        known = {sensor_name(self.tree.name, s.link, s.name, s.port) for s in self.tree.sensors}
+        known = {sensor_name(self.tree.name, s.link, s.name, s.port, s.via) for s in self.tree.sensors} | \
+            set(pose_paths(self.tree))
         unknown = [s for s in sensors if s not in known]
         if unknown:
             raise CotwinError(f"the plant at {self.url} reports sensors p-model {self.tree.name} does not have: "

@@ -17,6 +17,9 @@ from ..pmodel.tree import KinematicTree
 from .endpoint import SimulatedEndpoint
 
 
+NOISE_OF = {"closest_range": "range", "range": "range"}  # sensor quantity -> the noise it gets, where they differ
+
+
 @dataclass
 class _Pending:
     due: float
@@ -35,14 +38,15 @@ class PerturbedEndpoint:
         self.latency = steps * self.sim.timestep
         self._pending: list[_Pending] = []
         self._rng = np.random.default_rng(perturbation.seed)
-        self._quantity = {sensor_name(self.tree.name, s.link, s.name, s.port): s.quantity for s in self.tree.sensors}
+        self._quantity = {sensor_name(self.tree.name, s.link, s.name, s.port, s.via): NOISE_OF.get(s.quantity, s.quantity)
+                          for s in self.tree.sensors}
         self._std = {q: perturbation.noise_std(q) for q in QUANTITIES}
         self._noisy = any(self._std.values())
         self._sample()
 
     @classmethod
-    def build(cls, tree: KinematicTree, scene, perturbation: Perturbation) -> "PerturbedEndpoint":
-        return cls(SimulatedEndpoint(perturbed_simulator(tree, scene, perturbation)), perturbation)
+    def build(cls, tree: KinematicTree, scene, perturbation: Perturbation, base: str = "fixed") -> "PerturbedEndpoint":
+        return cls(SimulatedEndpoint(perturbed_simulator(tree, scene, perturbation, base=base)), perturbation)
 
     # ---- noise ----
     def _sample(self) -> None:
@@ -115,9 +119,9 @@ class PerturbedEndpoint:
         return dict(self._qd)
 
     def goals(self) -> dict[str, float]:
-        """The servo goals in force (joint -> value), pending ones not included."""
-        segment = self.inner.segment
-        return dict(segment.goal) if segment is not None else self.inner.joint_positions()
+        """The goals in force (joint -> value: a position, or the speed or effort commanded), pending ones
+        not included."""
+        return self.inner.goals()
 
     @property
     def time(self) -> float:

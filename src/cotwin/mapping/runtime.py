@@ -7,13 +7,20 @@ Readings of the mapping (see also docs/robosim-notation.md, section 8):
   equation `actuator.port == e` (a path `pmodel::link::joint::aref.port`) sends e to that actuator;
 - `get_event(e)`: e occurs iff all its equations and predicates hold (a conjunction), evaluated over
   the mapping's variables and the platform's sensors (`pmodel::link::sref.port`);
-- functions the models leave abstract come from a registry (`inverse_kinematics`, `reachable`, math);
-- mapping variables q0..qN and qd0..qdN mirror the arm joints' positions and velocities (kinematic
-  order), so they can be logged as in the paper.
+- an input event `e?x` whose equations include `x == v` carries the value of v: it occurs when v is a
+  finite number (a sensor reporting no measurement gives inf or NaN, as ROS does) and its other
+  equations and predicates hold with x bound to that value;
+- functions the models leave abstract come from a registry: the math functions, and an arm's
+  kinematics (`inverse_kinematics`, `reachable`), set up on the first call only, so that a mapping
+  not calling them needs no arm;
+- mapping variables q0..qN and qd0..qdN mirror the positions and velocities of the mirrored joints
+  (by default the arm's, in kinematic order), so they can be logged as in the paper; further
+  monitored variables may mirror platform readings by path (`monitor`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import fields
 
 from ..diagnostics import CotwinError
@@ -30,15 +37,39 @@ from ..robosim.pmodel_elements import Mapping as MappingModel
 from ..robosim.types import EnumTy, TypeResolver
 from ..diagnostics import Diagnostics
 
-def mirror_variables(variables: list[str], arm: list[str]) -> dict[str, tuple[str, str]]:
-    """Mapping variables q<i> / qd<i> -> (i-th arm joint, position | velocity): q0.. first, then qd0.."""
+MIRROR_PREFIXES = (("q", "position"), ("qd", "velocity"))
+
+
+def mirror_variables(variables: list[str], joints: list[str]) -> dict[str, tuple[str, str]]:
+    """Mapping variables q<i> / qd<i> -> (i-th mirrored joint, position | velocity): q0.. first, then qd0.."""
     names = set(variables)
     out = {}
-    for prefix, kind in (("q", "position"), ("qd", "velocity")):
-        for i, joint in enumerate(arm):
+    for prefix, kind in MIRROR_PREFIXES:
+        for i, joint in enumerate(joints):
             if f"{prefix}{i}" in names:
                 out[f"{prefix}{i}"] = (joint, kind)
     return out
+
+
+def declares_mirrors(variables: list[str]) -> bool:
+    """Does the mapping declare any q<i>/qd<i> variable (so that its mirrored joints matter)?"""
+    return any(v[len(prefix):].isdigit() for v in variables for prefix, _ in MIRROR_PREFIXES
+               if v.startswith(prefix) and len(v) > len(prefix))
+
+
+def mirrored_joints(tree, which="arm", tool: str = "fingertips") -> list[str]:
+    """The joints q<i>/qd<i> mirror: "arm" (the actuated joints from the base to the tool, cotwin.pmodel.ik),
+    "actuated" (every actuated joint, in the tree's order), or a list of joint names."""
+    if which == "arm":
+        return ik.arm_joints(tree, ik.find_tool(tree, tool))
+    if which == "actuated":
+        return [j.name for j in tree.actuated]
+    known = {j.name for j in tree.actuated}
+    unknown = [j for j in which if j not in known]
+    if unknown:
+        raise CotwinError(f"mirrored joints {', '.join(unknown)} are not actuated joints of p-model {tree.name} "
+                          f"(joints: {', '.join(sorted(known))})")
+    return list(which)
 
 
 class FunctionRegistry:
@@ -207,20 +238,52 @@ class _Env:
 
 
 class InputEvent:
-    """An input event of the platform: occurs when all its equations hold."""
+    """An input event of the platform: occurs when all its equations hold; `e?x` with an equation
+    `x == v` (or `v == x`) carries the value of v, and occurs only when that value is a measurement
+    (a finite number, or a non-numeric value)."""
 
     def __init__(self, runtime: "Mapping", model):
         self.runtime = runtime
         self.model = model
         self.name = model.name
+        self.definition: s.Expr | None = None  # v of `x == v`, x being the bound name
+        conditions = []
+        for eq in model.equations:
+            value = _definition(eq, model.bind) if model.bind and self.definition is None else None
+            if value is not None:
+                self.definition = value
+            else:
+                conditions.append(eq)
+        self.conditions = (*conditions, *model.predicates)
+        if model.bind and self.definition is None:
+            raise CotwinError(f"{model.loc}: input event {model.name} binds '{model.bind}' but no equation "
+                              f"'{model.bind} == ...' says what its value is")
+        self.value = None
 
     def occurs(self) -> bool:
+        env = self.runtime.env
         scope = {}
         for var in self.model.variables:
             if var.init is not None:
-                scope[var.name] = self.runtime.env.eval(var.init, scope)
-        conditions = (*self.model.equations, *self.model.predicates)
-        return bool(conditions) and all(bool(self.runtime.env.eval(c, scope)) for c in conditions)
+                scope[var.name] = env.eval(var.init, scope)
+        if self.definition is not None:
+            value = env.eval(self.definition, scope)
+            if isinstance(value, float) and not math.isfinite(value):
+                return False  # no measurement (a range sensor seeing nothing reports inf)
+            scope[self.model.bind] = value
+            self.value = value
+            return all(bool(env.eval(c, scope)) for c in self.conditions)
+        return bool(self.conditions) and all(bool(env.eval(c, scope)) for c in self.conditions)
+
+
+def _definition(eq: s.Expr, bind: str) -> s.Expr | None:
+    """v when eq is `bind == v` or `v == bind`."""
+    if not (isinstance(eq, s.Binary) and eq.op == "=="):
+        return None
+    for this, other in ((eq.left, eq.right), (eq.right, eq.left)):
+        if isinstance(this, s.Name) and len(this.name.parts) == 1 and this.name.last == bind:
+            return other
+    return None
 
 
 class Operation:
@@ -276,10 +339,13 @@ def _actuator_port(eq: s.Expr) -> str | None:
 class Mapping:
     """The platform-mapping interface: one instance per mapping model and endpoint."""
 
-    def __init__(self, project, endpoint, mapping_name: str | None = None, geometry=None, compiled: bool = True):
+    def __init__(self, project, endpoint, mapping_name: str | None = None, geometry=None, compiled: bool = True,
+                 mirrors="arm", monitor: dict[str, str] | None = None):
         """`geometry` (a CellGeometry) places the cell for the IK registry, whatever the endpoint; without
         it the endpoint's own geometry is used, if it has one. `compiled=False` evaluates expressions
-        with the interpreting evaluator instead of closures (the reference, for tests and benchmarks)."""
+        with the interpreting evaluator instead of closures (the reference, for tests and benchmarks).
+        `mirrors`: the joints the mapping's q<i>/qd<i> variables mirror (`mirrored_joints`); `monitor`:
+        further monitored variables, name -> a platform reading's path (read after every step)."""
         mappings = project.elements(MappingModel)
         if mapping_name is not None:
             model = project.lookup("mapping", mapping_name)
@@ -299,18 +365,44 @@ class Mapping:
         self.members = members
         self.pmodel = pmodel
         self.resolver = TypeResolver(project, self.source, Diagnostics())
-        self.registry = FunctionRegistry(endpoint, geometry)
-        self.functions = self.registry.functions()
+        self._geometry = geometry
+        self._registry: FunctionRegistry | None = None
+        self.functions = {**MATH, "inverse_kinematics": self._kinematics("inverse_kinematics"),
+                          "reachable": self._kinematics("reachable")}
         self.env = _Env(self, compiled)
         self.events = {ev.name: InputEvent(self, ev) for ev in model.input_events}
         self.operations = {op.name: Operation(self, op, [p.name for p in members.operations[op.name].params])
                            for op in model.operations if op.name in members.operations}
         self.variables: dict[str, object] = {}
         self._readings: dict[str, float] | None = None
-        self._mirrors = mirror_variables([v.name for v in model.variables], self.registry.arm)
+        names = [v.name for v in model.variables]
+        if not declares_mirrors(names):
+            joints = []
+        elif mirrors == "arm":
+            joints = self.registry.arm  # the arm the kinematics functions solve for (its tool from the geometry)
+        else:
+            joints = mirrored_joints(endpoint.tree, mirrors)
+        self._mirrors = mirror_variables(names, joints)
+        self.monitor = dict(monitor or {})
+        clash = [n for n in self.monitor if n in self._mirrors]
+        if clash:
+            raise CotwinError(f"monitored variable(s) {', '.join(clash)} already mirror joints")
         for path, _ in (c for op in self.operations.values() for c in op.commands):
             endpoint.joint(path)  # every commanded actuator exists on the endpoint
         self.started = False
+
+    @property
+    def registry(self) -> FunctionRegistry:
+        """The arm's kinematics functions, set up on first use (a mapping that never calls them needs no arm)."""
+        if self._registry is None:
+            self._registry = FunctionRegistry(self.endpoint, self._geometry)
+        return self._registry
+
+    def _kinematics(self, name: str):
+        def call(*args):
+            return getattr(self.registry, name)(*args)
+        call.__name__ = name
+        return call
 
     def sensor(self, key: str, loc):
         readings = self.sensor_readings()
@@ -351,6 +443,12 @@ class Mapping:
             raise CotwinError(f"mapping {self.model.name} has no input event '{name}'")
         return self.events[name].occurs()
 
+    def event_value(self, name: str):
+        """The value the event carried when it last occurred (None before, or for an event without one)."""
+        if name not in self.events:
+            raise CotwinError(f"mapping {self.model.name} has no input event '{name}'")
+        return self.events[name].value
+
     def execute_operation(self, name: str, args=None) -> None:
         if name not in self.operations:
             raise CotwinError(f"mapping {self.model.name} has no operation '{name}'")
@@ -358,7 +456,8 @@ class Mapping:
 
     def stop_mapping(self) -> None:
         self.endpoint.stop()
-        self.registry.stored.save()
+        if self._registry is not None:
+            self._registry.stored.save()
         self.started = False
 
     # ---- time ----
@@ -374,6 +473,13 @@ class Mapping:
             velocities = self.endpoint.joint_velocities()
             for var, (joint, kind) in self._mirrors.items():
                 self.variables[var] = q.get(joint, 0.0) if kind == "position" else velocities.get(joint, 0.0)
+        if self.monitor:
+            readings = self.sensor_readings()
+            for var, path in self.monitor.items():
+                if path not in readings:
+                    raise CotwinError(f"monitored variable {var}: the platform has no reading '{path}' "
+                                      f"(it has {', '.join(sorted(readings)) or 'none'})")
+                self.variables[var] = readings[path]
 
     def sensor_readings(self) -> dict[str, float]:
         if self._readings is None:
@@ -382,8 +488,8 @@ class Mapping:
 
     @property
     def monitored(self) -> list[str]:
-        """Mapping variables worth logging: the q/qd mirrors, in order."""
-        return list(self._mirrors)
+        """Mapping variables worth logging: the q/qd mirrors, in order, then the monitored readings."""
+        return [*self._mirrors, *self.monitor]
 
     # ---- state (what-if forks and rollbacks) ----
     def snapshot(self) -> dict:
@@ -393,12 +499,17 @@ class Mapping:
         if save is None:
             raise CotwinError(f"mapping {self.model.name}: its platform ({type(self.endpoint).__name__}) cannot save "
                               "its state, so the mapping cannot either")
-        return {"variables": dict(self.variables), "started": self.started, "functions": self.registry.snapshot(),
-                "endpoint": save()}
+        return {"variables": dict(self.variables), "started": self.started,
+                "functions": self._registry.snapshot() if self._registry is not None else {},
+                "events": {name: ev.value for name, ev in self.events.items()}, "endpoint": save()}
 
     def restore(self, snapshot: dict) -> None:
         self.endpoint.restore(snapshot["endpoint"])
-        self.registry.restore(snapshot["functions"])
+        if snapshot["functions"] or self._registry is not None:
+            self.registry.restore(snapshot["functions"])
+        for name, value in snapshot.get("events", {}).items():
+            if name in self.events:
+                self.events[name].value = value
         self.variables = dict(snapshot["variables"])
         self.started = snapshot["started"]
         self._readings = None

@@ -2,7 +2,8 @@
 
 Its ports are the d-model FMU's with causalities swapped (one naming function: cotwin.dmodel.fmu),
 minus the command events the scenario drives, plus the mapping's monitored variables (q0.., qd0..).
-In a step: run the operations called in it, let the platform move for h, then report which events hold.
+In a step: run the operations called in it, let the platform move for h, then report which events hold
+and the values they carry (a value port keeps its last value while its event does not occur).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from typing import Callable
 from ..diagnostics import CotwinError
 from ..cosim.units import Port, PythonUnit
 from ..dmodel.ports import PortLayout
-from ..dmodel.program import Program, assemble
+from ..dmodel.program import Program, assemble, get_path
 from .runtime import Mapping
 
 
@@ -23,8 +24,10 @@ def mapping_ports(program: Program, mapped_events: set[str], commands: set[str],
     layout = PortLayout(program)
     ports = [Port(v.name, v.fmi_type, "input") for v in layout.variables
              if v.causality == "output" and v.name not in layout.state_ports]
-    ports.extend(Port(ev.name, "Boolean", "output") for ev in program.inputs
-                 if ev.name not in commands and ev.name in mapped_events)
+    for ev in program.inputs:
+        if ev.name not in commands and ev.name in mapped_events:
+            ports.append(Port(ev.name, "Boolean", "output"))
+            ports.extend(Port(name, sc.fmi_type, "output") for name, sc in ev.value_ports)
     ports.extend(Port(name, "Real", "output") for name in monitored)
     return ports
 
@@ -45,6 +48,8 @@ class MappingUnit(PythonUnit):
         self._make = None if made else mapping
         self.monitored = monitored
         self.event_ports = [p for p in self.ports.values() if p.causality == "output" and p.name in events]
+        self.value_ports = {ev.name: [(name, sc) for name, sc in ev.value_ports] for ev in program.inputs
+                            if ev.name in self.ports and ev.name in events and ev.value_ports}
         self.calls: list = []
         self.executed: list[tuple[float, str, dict]] = []  # (step start time, operation, arguments)
 
@@ -69,7 +74,12 @@ class MappingUnit(PythonUnit):
 
     def _report(self) -> None:
         for port in self.event_ports:
-            self.values[port.name] = self.mapping.get_event(port.name)
+            occurs = self.values[port.name] = self.mapping.get_event(port.name)
+            if occurs and port.name in self.value_ports:
+                value = self.mapping.event_value(port.name)
+                for name, sc in self.value_ports[port.name]:
+                    v = get_path(value, sc.path) if sc.path else value
+                    self.values[name] = float(v) if sc.fmi_type == "Real" else v
         for name in self.mapping.monitored:
             self.values[name] = float(self.mapping.variables[name])
 

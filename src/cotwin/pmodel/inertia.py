@@ -1,4 +1,5 @@
-"""Default inertia for links whose p-model gives a mass but no (usable) inertia matrix.
+"""Default inertia for links whose p-model gives a mass but no (usable) inertia matrix, or one no body of
+that geometry can have.
 
 Documented choice: the link's collision geometry is taken as a solid of uniform density carrying the
 link's whole mass (split between shapes by volume), and its inertia is computed about the centre of
@@ -62,3 +63,32 @@ def default_inertia(mass: float, geoms, com: np.ndarray) -> np.ndarray:
     Rc = com[:3, :3]
     I = Rc.T @ I @ Rc
     return (I + I.T) / 2.0
+
+
+def reach(geoms, com: np.ndarray) -> float | None:
+    """The largest distance from the centre of mass `com` (a pose) to the geometry (its shapes' bounding
+    solids), or None when the geometry is not known (none, or a placeholder for an unread mesh)."""
+    if not geoms or any(g.placeholder for g in geoms):
+        return None
+    c = com[:3, 3]
+    far = 0.0
+    for g in geoms:
+        kind, size, pose = _solid(g)
+        if kind == "sphere":
+            far = max(far, float(np.linalg.norm(pose[:3, 3] - c)) + size["radius"])
+            continue
+        if kind == "box":
+            half = np.array([size["length"], size["width"], size["height"]]) / 2
+        else:  # cylinder, capsule (along z)
+            r = size["radius"]
+            half = np.array([r, r, size["length"] / 2 + (r if kind == "capsule" else 0.0)])
+        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half
+        points = corners @ pose[:3, :3].T + pose[:3, 3]
+        far = max(far, float(np.linalg.norm(points - c, axis=1).max()))
+    return far
+
+
+def beyond_reach(I: np.ndarray, mass: float, distance: float) -> bool:
+    """Is a principal moment larger than any body of this mass within `distance` of its centre of mass
+    can have (m d^2: all the mass as far out as the geometry goes)?"""
+    return float(np.linalg.eigvalsh((I + I.T) / 2).max()) > mass * distance * distance * (1 + 1e-6)

@@ -8,6 +8,8 @@ CGA's `axis_rot`/`axis_lin`), and last the device and port names.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..robosim import syntax as s
@@ -163,3 +165,80 @@ def sdf_sensor_type(device_name: str, annotations: tuple[AnnotationRecord, ...])
             if text == key or (len(key) > 2 and key in text):
                 return kind
     return None
+
+
+# ---- ray sensors (LiDARs, sonars) ----
+
+@dataclass(frozen=True)
+class RaySpec:
+    """A ray sensor's beams (cotwin.pmodel.kinds.ray_spec): `samples` beams in the sensor's x-y plane
+    from `min_angle` to `max_angle` (rad, about its z axis, 0 along its x axis), measuring `range_min`
+    to `range_max` (m), a whole scan `update_rate` times a second."""
+
+    samples: int
+    min_angle: float
+    max_angle: float
+    range_min: float
+    range_max: float
+    update_rate: float
+
+    def angles(self) -> np.ndarray:
+        if self.samples == 1:
+            return np.array([self.min_angle])
+        return np.linspace(self.min_angle, self.max_angle, self.samples)
+
+
+
+#: a LiDAR without an annotation saying otherwise is the TurtleBot3's LDS-01 (RoboTool's published mobile
+#: robot carries one): 360 beams a turn, one a degree from straight ahead, 0.12 to 3.5 m, 5 turns a second
+LDS_01 = RaySpec(360, 0.0, float(np.radians(359.0)), 0.12, 3.5, 5.0)
+#: a sonar without an annotation: one beam straight ahead, 2 cm to 4 m, 10 readings a second
+SONAR = RaySpec(1, 0.0, 0.0, 0.02, 4.0, 10.0)
+RAY_QUANTITIES = ("closest_range", "closest_bearing", "range")
+_CLOSEST = ("closest", "nearest", "min")
+
+
+def ray_quantity(port: str) -> str | None:
+    """What a ray sensor's scalar port reads, from its name: the closest return's range (`closestDistance`,
+    `min_range`) or bearing (`closestAngle`), or the range straight ahead (`range`, `distance`); None for
+    other ports (a whole `scan`, a beam model's `measurement` probability)."""
+    low = port.lower()
+    closest = any(w in low for w in _CLOSEST)
+    if closest and any(w in low for w in ("angle", "bearing", "direction")):
+        return "closest_bearing"
+    if closest and any(w in low for w in ("distance", "range", "dist")):
+        return "closest_range"
+    if not closest and any(w in low for w in ("distance", "range")) and "max" not in low:
+        return "range"
+    return None
+
+
+def _entry(record: dict | None, *path: str):
+    """An evaluated annotation's entry at `path` (records nest: ray -> scan -> horizontal -> samples)."""
+    for key in path:
+        if not isinstance(record, dict):
+            return None
+        record = next((v for k, v in record.get("entries", ()) if k.lstrip("_") == key), None)
+    return record
+
+
+def ray_spec(sdf_type: str, annotation: dict | None) -> RaySpec:
+    """The beams of a ray sensor: its SDF annotation's (`Ray { update_rate, ray = RayDetails { scan = Scan {
+    horizontal = Scan_horizontal { samples, min_angle, max_angle } } range = Range { min, max } } }`,
+    `Sonar { sonar = SonarDetails { min, max } }`), each value not given from the default (LDS_01, SONAR)."""
+    base = SONAR if sdf_type == "sonar" else LDS_01
+
+    def number(value, default: float) -> float:
+        return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else default
+
+    if sdf_type == "sonar":
+        return RaySpec(1, 0.0, 0.0, number(_entry(annotation, "sonar", "min"), base.range_min),
+                       number(_entry(annotation, "sonar", "max"), base.range_max),
+                       number(_entry(annotation, "update_rate"), base.update_rate))
+    horizontal = ("ray", "scan", "horizontal")
+    samples = int(number(_entry(annotation, *horizontal, "samples"), base.samples))
+    return RaySpec(max(samples, 1), number(_entry(annotation, *horizontal, "min_angle"), base.min_angle),
+                   number(_entry(annotation, *horizontal, "max_angle"), base.max_angle),
+                   number(_entry(annotation, "ray", "range", "min"), base.range_min),
+                   number(_entry(annotation, "ray", "range", "max"), base.range_max),
+                   number(_entry(annotation, "update_rate"), base.update_rate))

@@ -15,14 +15,22 @@ Documented defaults, used where the p-model gives no value:
 - an unstable simulation stops (MuJoCo's automatic reset is disabled: it would silently put the
   robot back at its initial state and carry on);
 - an actuator taking a speed (kinds.servo_command) drives its joint by a velocity servo of gain
-  kv = (I + armature) / 20 ms, one taking an effort by a motor; such joints get an armature of 0.001;
+  kv = (I + armature) / 5 ms (a motor controller's fast speed loop: a slower one stalls a wheel
+  against the scrub of its tyre when it turns slowly), one taking an effort by a motor; such joints get an
+  armature of 0.001;
 - the base is fixed to the world unless `base="free"` (a mobile robot): then it gets a free joint and
   no weight compensation;
 - a mesh file cotwin can read becomes a mesh asset; one it cannot is a placeholder sphere that never
-  collides; a body's translational friction coefficient becomes its geom's sliding friction;
+  collides (or the project's stand-in shapes);
 - joints closing a kinematic loop become equality constraints (weld for fixed, connect otherwise);
 - a body quantity of a sensor (yaw rate, forward speed, acceleration) is read by a site-based MuJoCo
-  sensor at the sensor's pose; sensors MuJoCo has no counterpart for (LiDAR scans) are not written.
+  sensor at the sensor's pose; a ray sensor (LiDAR, sonar) gets a site at its pose, from which the
+  simulator casts its beams (cotwin.pmodel.simulator), seeing the world (geom group 0) but not the
+  robot (its geoms are in group 1); other sensors MuJoCo has no counterpart for are not written;
+- a geom whose p-model body (or a project's stand-in) gives a sliding friction coefficient governs the
+  friction of its contacts (MuJoCo's `priority` 2, above a world's floor; torsion and rolling scaled
+  alike): a frictionless skid (a caster ball) stays frictionless on any floor;
+- a scene may place the robot (`scene.robot_pose(tree)`, a world's start pose for a free base).
 
 `visual=False` gives the model the simulator steps: what only shows (geoms that collide with nothing,
 such as the plate's hole markers and mesh placeholders) is discarded by MuJoCo's compiler, so that it
@@ -41,10 +49,12 @@ from .xmltext import num, nums, quat, sub, to_text
 DEFAULT_KP = {"revolute": 5000.0, "prismatic": 2000.0}
 ARMATURE = {"revolute": 0.1, "prismatic": 0.1}
 DRIVEN_ARMATURE = 0.001  # kg m^2 or kg: joints driven by speed or effort (wheels), not by a geared servo
-VELOCITY_TIME = 0.02  # s: time constant of a velocity servo
+VELOCITY_TIME = 0.005  # s: time constant of a velocity servo
 BODY_SENSORS = ("gyro", "velocimeter", "accelerometer")
 TIMESTEP = 0.001  # s: the physics step
 ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 1  # robot geoms touch the world and bricks, not each other
+ROBOT_GROUP = "1"  # robot geoms' group: ray sensors see group 0 (the world) only
+OWN_FRICTION = "2"  # priority of a geom whose p-model gives its friction: above a scene's floor (1)
 WORLD_CONTYPE, WORLD_CONAFFINITY = 1, 3
 
 
@@ -52,6 +62,15 @@ def sensor_name(pmodel: str, link: str, sref: str, port: str, via: str = "") -> 
     """The MJCF name of a p-model sensor port: the mapping's path, `pmodel::link::sref.port`
     (`pmodel::link::joint::sref.port` for a sensor declared inside a joint)."""
     return f"{pmodel}::{link}::{via + '::' if via else ''}{sref}.{port}"
+
+
+POSE_PORTS = ("x", "y", "z", "yaw")  # a free base's pose readings (m, m, m, rad)
+
+
+def pose_paths(tree: KinematicTree) -> list[str]:
+    """The names a free base's pose is read by: `pmodel::link.x` .. `.yaw` (two-part paths, which no
+    p-model sensor has), the root link's frame in the world."""
+    return [f"{tree.name}::{tree.root.source}.{p}" for p in POSE_PORTS]
 
 
 def servo_mode(joint: TJoint) -> str:
@@ -95,8 +114,8 @@ def _mesh_name(g: Geom) -> str:
 
 def _friction(g: Geom) -> dict:
     sliding = g.surface.get("friction", {}).get("translational", {}).get("coefficient1")
-    if isinstance(sliding, (int, float)) and not isinstance(sliding, bool):
-        return {"friction": f"{num(sliding)} 0.02 0.001"}
+    if isinstance(sliding, (int, float)) and not isinstance(sliding, bool):  # its own friction governs its
+        return {"friction": nums([sliding, 0.02 * sliding, 0.001 * sliding]), "priority": OWN_FRICTION}  # contacts
     return {}
 
 
@@ -169,7 +188,8 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
     bodies = {}
     for link in tree.links:
         if link is tree.root:
-            parent_el, local = worldbody, link.pose
+            placement = scene.robot_pose(tree) if hasattr(scene, "robot_pose") else None
+            parent_el, local = worldbody, (placement @ link.pose if placement is not None else link.pose)
         else:
             joint = next(j for j in tree.joints if j.child == link.name)
             parent_el = bodies[joint.parent]
@@ -194,10 +214,10 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
                 sub(body, "joint", **attrs)
         for g in link.geoms:
             if g.placeholder:
-                _geom(body, g, contype="0", conaffinity="0", rgba="0.6 0.65 0.7 0.4")
+                _geom(body, g, contype="0", conaffinity="0", group=ROBOT_GROUP, rgba="0.6 0.65 0.7 0.4")
             else:
-                _geom(body, g, contype=str(ROBOT_CONTYPE), conaffinity=str(ROBOT_CONAFFINITY), rgba="0.6 0.65 0.7 1",
-                      **_friction(g))
+                _geom(body, g, contype=str(ROBOT_CONTYPE), conaffinity=str(ROBOT_CONAFFINITY), group=ROBOT_GROUP,
+                      rgba="0.6 0.65 0.7 1", **_friction(g))
         for s_ in _body_sensors(tree, link.name):
             sub(body, "site", name=_site_name(tree, s_), **_pose_attrs(s_.pose))
     if tree.loops:
@@ -237,10 +257,15 @@ def _body_sensors(tree: KinematicTree, link: str) -> list:
     """The sensors of a link that need a site (one site per placed sensor, first port wins)."""
     seen, out = set(), []
     for s_ in tree.sensors:
-        if s_.body == link and s_.quantity in BODY_SENSORS and (s_.via, s_.name) not in seen:
+        if s_.body == link and (s_.quantity in BODY_SENSORS or s_.ray is not None) and (s_.via, s_.name) not in seen:
             seen.add((s_.via, s_.name))
             out.append(s_)
     return out
+
+
+def site_name(tree: KinematicTree, s_) -> str:
+    """The MJCF site a body or ray sensor is mounted at: `pmodel::link::sref` (or `pmodel::link::joint::sref`)."""
+    return _site_name(tree, s_)
 
 
 def _site_name(tree: KinematicTree, s_) -> str:

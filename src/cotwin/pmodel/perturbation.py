@@ -4,7 +4,8 @@ from its digital twin. Payload, friction and damping are applied to the generate
 
 - `payload` (kg): a point mass at the tool frame (`cotwin.pmodel.ik.find_tool`), welded to the tool's
   link as its own MJCF body with no gravity compensation: the servos feel its weight and inertia,
-  as a real arm carrying an unannounced load does. The arm's own compensation is unchanged.
+  as a real arm carrying an unannounced load does. The arm's own compensation is unchanged. On a
+  free base (a mobile robot) the load sits at the base link's centre of mass.
 - `friction` (N m for revolute, N for prismatic joints): Coulomb friction, MuJoCo's `frictionloss` of
   the joint's degree of freedom. A number applies to every actuated joint; a table names joints.
 - `damping` (factor): scales the joint's viscous damping (the p-model's `Dynamics { damping }`); a
@@ -12,7 +13,8 @@ from its digital twin. Payload, friction and damping are applied to the generate
 - `latency_ms` (ms): every servo goal takes effect this long after it was commanded (rounded to whole
   physics steps), as a cell whose controller lags its commands.
 - `noise` (standard deviation, in the quantity's unit): Gaussian noise on measurements, by sensor
-  quantity (`position`, `velocity`, `effort`); a number applies to all three. Position and velocity
+  quantity (`position`, `velocity`, `effort`, `range`: a ray sensor's ranges, m); a number applies to
+  all of them. Position and velocity
   noise also applies to the joint positions and velocities the endpoint reports (the encoders). One
   sample is drawn per quantity and reading after every advance, so repeated reads within a step agree.
 - `seed`: the noise generator's seed (numpy's PCG64); the same seed gives the same noise.
@@ -36,7 +38,7 @@ from .simulator import PlatformSimulator
 from .tree import KinematicTree
 from .xmltext import nums, sub, to_text
 
-QUANTITIES = ("position", "velocity", "effort")
+QUANTITIES = ("position", "velocity", "effort", "range")
 MAX_LATENCY_MS = 10_000.0
 PAYLOAD_BODY = "cotwin_payload"
 PAYLOAD_RADIUS = 0.03  # m: the payload's inertia is that of a solid sphere of this radius
@@ -171,27 +173,32 @@ def check_joints(perturbation: Perturbation, tree: KinematicTree, file: TomlFile
 
 # ---- application -------------------------------------------------------------------------------------
 
-def with_payload(xml: str, tree: KinematicTree, kg: float) -> str:
-    """The MJCF with a point mass of `kg` welded at the tool frame (no gravity compensation)."""
+def with_payload(xml: str, tree: KinematicTree, kg: float, base: str = "fixed") -> str:
+    """The MJCF with a point mass of `kg` welded at the tool frame (no gravity compensation), or at the
+    base link's centre of mass for a free base."""
     if kg <= 0:
         return xml
-    tool = find_tool(tree)
+    if base == "free":
+        link, at = tree.root.name, tree.root.com[:3, 3]
+    else:
+        tool = find_tool(tree)
+        link, at = tool.link, tool.offset[:3, 3]
     root = ET.fromstring(xml)
-    body = next((b for b in root.iter("body") if b.get("name") == tool.link), None)
+    body = next((b for b in root.iter("body") if b.get("name") == link), None)
     if body is None:
-        raise CotwinError(f"no body '{tool.link}' for the payload in the generated MJCF")
-    holder = sub(body, "body", name=PAYLOAD_BODY, pos=nums(tool.offset[:3, 3]), gravcomp="0")
+        raise CotwinError(f"no body '{link}' for the payload in the generated MJCF")
+    holder = sub(body, "body", name=PAYLOAD_BODY, pos=nums(at), gravcomp="0")
     inertia = 0.4 * kg * PAYLOAD_RADIUS ** 2
     sub(holder, "inertial", pos="0 0 0", mass=nums([kg]), diaginertia=nums([inertia] * 3))
     return to_text(root)
 
 
 def perturbed_simulator(tree: KinematicTree, scene, perturbation: Perturbation,
-                        timestep: float = TIMESTEP) -> PlatformSimulator:
+                        timestep: float = TIMESTEP, base: str = "fixed") -> PlatformSimulator:
     """The MuJoCo platform with the perturbation's payload, friction and damping in its model."""
     check_joints(perturbation, tree)
-    xml = with_payload(to_mjcf(tree, scene, timestep, visual=False), tree, perturbation.payload)
-    sim = PlatformSimulator(tree, scene, timestep, mjcf=xml)
+    xml = with_payload(to_mjcf(tree, scene, timestep, visual=False, base=base), tree, perturbation.payload, base)
+    sim = PlatformSimulator(tree, scene, timestep, mjcf=xml, base=base)
     joints = [j.name for j in tree.actuated]
     for name, value in perturbation.per_joint("friction", joints).items():
         sim.model.dof_frictionloss[sim.model.joint(name).dofadr[0]] = value

@@ -27,6 +27,12 @@ _NAMES = {"hole_dist": ("hole_dist",), "x_max": ("x_max",), "y_max": ("y_max",),
           "ymax": ("ymax",), "z_table": ("z_table_level", "z_table")}
 
 
+def has_grid(mapping: Mapping) -> bool:
+    """Does the mapping define the Flex-cell grid's constants (so that the cell can be built from it)?"""
+    names = {v.name.lower() for v in mapping.variables if v.is_const and v.init is not None}
+    return all(any(n in names for n in options) for options in _NAMES.values())
+
+
 @dataclass(frozen=True)
 class Brick:
     name: str

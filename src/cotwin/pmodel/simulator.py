@@ -5,6 +5,20 @@ actuators are written by joint name, servo (aref) name or `pmodel::link::joint::
 being the actuator's command input (`dangle` of a ServoMotor, `ControlIn` of a ControlledMotor): an
 angle for position servos, a speed for velocity servos, an effort for motors.
 The physics step (1 ms by default) is sub-stepped inside `advance(dt)`.
+
+Ray sensors (a LiDAR, a sonar: cotwin.pmodel.kinds.ray_spec) scan at their update rate, at whole
+multiples of its period from the start: every beam is cast from the sensor's site in its x-y plane
+(MuJoCo's mj_multiRay over the world's geoms, not the robot's own), returns outside
+[range_min, range_max] count as none, and the readings hold until the next scan. A port reading the
+closest return gives its range (m) or bearing in degrees, 0 straight ahead, counter-clockwise
+positive, in (-180, 180] (as ROS's LaserScan angles, in degrees: the published TurtleBot's d-model
+compares them with 30 and 90); with no return both read inf and NaN. A port reading the range straight
+ahead gives the first beam's.
+
+A free base also reads its pose in the world: `pmodel::link.x`, `.y`, `.z` (m) and `.yaw` (rad), the
+root link's frame (two-part paths, which no p-model sensor has). When the scene names obstacles
+(a world's walls, boxes, cylinders), every contact of the robot with one is recorded in `touches`
+(checked every CONTACT_PERIOD).
 """
 
 from __future__ import annotations
@@ -17,10 +31,11 @@ import mujoco
 import numpy as np
 
 from ..diagnostics import CotwinError
-from .mjcf import TIMESTEP, sensor_name, servo_mode, servo_name, to_mjcf
+from .mjcf import TIMESTEP, pose_paths, sensor_name, servo_mode, servo_name, site_name, to_mjcf
 from .tree import KinematicTree
 
 
+CONTACT_PERIOD = 0.005  # s between checks for contacts with the scene's obstacles
 STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # time, positions, velocities, actuator states and history,
 # solver warm start, controls, applied forces, mocap poses, equality activations, user and plugin data
 
@@ -31,10 +46,46 @@ class SimState:
     from which a simulator of the same model continues bit for bit."""
 
     vector: np.ndarray
+    scans: tuple = ()  # the ray sensors' last readings (they hold between scans)
 
     @property
     def time(self) -> float:
         return float(self.vector[0])
+
+
+class RayScanner:
+    """One ray sensor (every port of one sref): its beams, cast from its site at its update rate."""
+
+    def __init__(self, sim: "PlatformSimulator", site: str, spec, ports: dict[str, str]):
+        self.sim = sim
+        self.site = sim.model.site(site).id
+        self.spec = spec
+        self.ports = ports  # mapping path -> ray quantity
+        self.angles = spec.angles()
+        self.directions = np.stack([np.cos(self.angles), np.sin(self.angles), np.zeros_like(self.angles)], axis=1)
+        self.bearings = (np.degrees(self.angles) + 180.0) % 360.0 - 180.0
+        self.bearings[self.bearings == -180.0] = 180.0
+        self.period_steps = max(1, int(round(1.0 / (spec.update_rate * sim.timestep))))
+        self._geomid = np.zeros(len(self.angles), dtype=np.int32)
+        self._dist = np.zeros(len(self.angles))
+        self._world = np.array([1, 0, 0, 0, 0, 0], dtype=np.uint8)  # geom group 0: the world, not the robot
+        self.ranges = np.full(len(self.angles), np.inf)
+        self.readings: dict[str, float] = {}
+
+    def scan(self) -> None:
+        model, data = self.sim.model, self.sim.data
+        R = data.site_xmat[self.site].reshape(3, 3)
+        vec = (self.directions @ R.T).ravel()
+        mujoco.mj_multiRay(model, data, data.site_xpos[self.site].copy(), vec, self._world, 1, -1, self._geomid,
+                           self._dist, None, len(self.angles), self.spec.range_max)
+        ranges = self._dist.copy()
+        ranges[(self._geomid < 0) | (ranges < self.spec.range_min) | (ranges > self.spec.range_max)] = np.inf
+        self.ranges = ranges
+        k = int(np.argmin(ranges))
+        seen = bool(np.isfinite(ranges[k]))
+        values = {"closest_range": float(ranges[k]) if seen else math.inf,
+                  "closest_bearing": float(self.bearings[k]) if seen else math.nan, "range": float(ranges[0])}
+        self.readings = {path: values[quantity] for path, quantity in self.ports.items()}
 
 
 class PlatformSimulator:
@@ -45,6 +96,7 @@ class PlatformSimulator:
         sensors must be kept. `base`: "fixed" to the world or "free" (a mobile robot), as `to_mjcf`."""
         self.tree = tree
         self.scene = scene
+        self.base = base
         self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep, visual=False, base=base)
         try:
             self.model = mujoco.MjModel.from_xml_string(self.xml)
@@ -85,6 +137,24 @@ class PlatformSimulator:
         self._qpos, self._qvel = self.data.qpos, self.data.qvel
         self._ctrl, self._sensordata = self.data.ctrl, self.data.sensordata
         self._holds_position = {j.name for j in tree.actuated if servo_mode(j) == "position"}
+        # ray sensors, by placed sensor; the free base's pose
+        groups: dict[str, tuple] = {}
+        for sensor in tree.sensors:
+            if sensor.ray is not None:
+                site = site_name(tree, sensor)
+                path = sensor_name(tree.name, sensor.link, sensor.name, sensor.port, sensor.via)
+                groups.setdefault(site, (sensor.ray, {}))[1][path] = sensor.quantity
+        self.scanners = [RayScanner(self, site, spec, ports) for site, (spec, ports) in groups.items()]
+        self._root = self.model.body(tree.root.name).id
+        self._pose_paths = pose_paths(tree) if base == "free" else []
+        # contacts with the scene's obstacles
+        names = list(getattr(scene, "obstacle_names", ()) or ())
+        self._obstacles = {self.model.geom(n).id for n in names}
+        robot_bodies = {self.model.body(l.name).id for l in tree.links}
+        self._robot_geoms = {g for g in range(self.model.ngeom) if self.model.geom_bodyid[g] in robot_bodies}
+        self._contact_steps = max(1, int(round(CONTACT_PERIOD / timestep)))
+        self.touches: list[tuple[float, str, str]] = []  # (time, robot geom, obstacle) when a contact began
+        self._touching: set[tuple[int, int]] = set()
         self.reset()
 
     # ---- names ----
@@ -111,6 +181,11 @@ class PlatformSimulator:
         for name, adr in self._joint_qpos.items():
             self.data.ctrl[self._actuator[name]] = self.data.qpos[adr] if name in self._holds_position else 0.0
         mujoco.mj_forward(self.model, self.data)
+        self._steps = 0
+        self.touches = []
+        self._touching = set()
+        for scanner in self.scanners:
+            scanner.scan()
 
     def _joint_adr(self, name: str) -> int:
         if name not in self._joint_qpos:
@@ -133,8 +208,23 @@ class PlatformSimulator:
             ctrl[index] = low if value < low else high if value > high else value
 
     def read_sensors(self) -> dict[str, float]:
-        """Every p-model sensor port, keyed by its mapping path."""
-        return dict(zip(self._sensor_paths, self._sensordata[self._sensor_index].tolist()))
+        """Every p-model sensor port, keyed by its mapping path (and a free base's pose, see the module doc)."""
+        out = dict(zip(self._sensor_paths, self._sensordata[self._sensor_index].tolist()))
+        for scanner in self.scanners:
+            out.update(scanner.readings)
+        if self._pose_paths:
+            out.update(zip(self._pose_paths, self.base_pose()))
+        return out
+
+    def base_pose(self) -> tuple[float, float, float, float]:
+        """The root link's x, y, z (m) and yaw (rad) in the world."""
+        x, y, z = self.data.xpos[self._root]
+        R = self.data.xmat[self._root]
+        return float(x), float(y), float(z), float(math.atan2(R[3], R[0]))
+
+    def scan_ranges(self) -> list[np.ndarray]:
+        """Every ray sensor's last scan (m per beam, inf where nothing returned)."""
+        return [s.ranges.copy() for s in self.scanners]
 
     def joint_positions(self) -> dict[str, float]:
         return dict(zip(self._joints, self._qpos[self._qpos_index].tolist()))
@@ -153,13 +243,47 @@ class PlatformSimulator:
         return self.step(self.steps_for(dt))
 
     def step(self, steps: int) -> float:
-        """Simulate `steps` physics steps (in one call into MuJoCo); returns the simulation time."""
-        if steps > 0:
-            mujoco.mj_step(self.model, self.data, steps)
-            q = self._qpos
-            if not math.isfinite(q.dot(q)):  # a non-finite (or huge) position: the physics blew up
-                raise CotwinError(f"the physics became unstable at t = {self.data.time:.3f} s (non-finite state)")
+        """Simulate `steps` physics steps (in one call into MuJoCo, split only where a ray sensor scans or
+        obstacle contacts are checked); returns the simulation time."""
+        if not self.scanners and not self._obstacles:
+            if steps > 0:
+                mujoco.mj_step(self.model, self.data, steps)
+                self._steps += steps
+                self._check()
+            return self.data.time
+        while steps > 0:
+            n = steps
+            for period in [s.period_steps for s in self.scanners] + ([self._contact_steps] if self._obstacles else []):
+                n = min(n, period - self._steps % period)
+            mujoco.mj_step(self.model, self.data, n)
+            self._steps += n
+            steps -= n
+            self._check()
+            if self._obstacles and self._steps % self._contact_steps == 0:
+                self._contacts()
+            for scanner in self.scanners:
+                if self._steps % scanner.period_steps == 0:
+                    scanner.scan()
         return self.data.time
+
+    def _check(self) -> None:
+        q = self._qpos
+        if not math.isfinite(q.dot(q)):  # a non-finite (or huge) position: the physics blew up
+            raise CotwinError(f"the physics became unstable at t = {self.data.time:.3f} s (non-finite state)")
+
+    def _contacts(self) -> None:
+        """Record the contacts of the robot with an obstacle that began since the last check."""
+        now = set()
+        contact = self.data.contact
+        for k in range(self.data.ncon):
+            a, b = int(contact.geom1[k]), int(contact.geom2[k])
+            if a in self._obstacles and b in self._robot_geoms:
+                a, b = b, a
+            if a in self._robot_geoms and b in self._obstacles:
+                now.add((a, b))
+        for a, b in sorted(now - self._touching):
+            self.touches.append((float(self.data.time), self.model.geom(a).name, self.model.geom(b).name))
+        self._touching = now
 
     @property
     def time(self) -> float:
@@ -168,7 +292,7 @@ class PlatformSimulator:
     def get_state(self) -> SimState:
         vector = np.empty(mujoco.mj_stateSize(self.model, STATE))
         mujoco.mj_getState(self.model, self.data, vector, STATE)
-        return SimState(vector)
+        return SimState(vector, tuple((dict(s.readings), s.ranges.copy()) for s in self.scanners))
 
     def set_state(self, state: SimState) -> None:
         """Continue from `state` (derived quantities such as sensors are recomputed at once)."""
@@ -179,6 +303,14 @@ class PlatformSimulator:
                               "it is a state of another model")
         mujoco.mj_setState(self.model, self.data, vector, STATE)
         mujoco.mj_forward(self.model, self.data)
+        self._steps = int(round(self.data.time / self.timestep))
+        self._touching = set()
+        if len(state.scans) == len(self.scanners):
+            for scanner, (readings, ranges) in zip(self.scanners, state.scans):
+                scanner.readings, scanner.ranges = dict(readings), np.array(ranges)
+        else:  # a state without scans (saved before ray sensors were read): scan where the robot is
+            for scanner in self.scanners:
+                scanner.scan()
 
     def body_pose(self, name: str) -> np.ndarray:
         try:

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..diagnostics import CotwinError, Diagnostics
 from ..robosim.pmodel_elements import PModel
-from .kinds import SENSOR_QUANTITIES, sensor_quantity  # noqa: F401 (re-exported: part of the tree's API)
+from .kinds import SENSOR_QUANTITIES, RaySpec, sensor_quantity  # noqa: F401 (re-exported: part of the tree's API)
 
 
 def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -76,6 +76,7 @@ class Geom:
     scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
     center: tuple[float, float, float] = (0.0, 0.0, 0.0)  # a mesh's bounding-box centre in the geom frame
     placeholder: bool = False  # stands in for a mesh that cannot be read: shown, never collides
+    written: str = ""  # a mesh's file as the p-model names it (also for placeholders and stand-ins)
 
     def volume(self) -> float:
         if self.kind in ("box", "mesh"):
@@ -86,6 +87,18 @@ class Geom:
             r = self.size["radius"]
             return np.pi * r * r * self.size["length"] + 4 / 3 * np.pi * r ** 3
         return 4 / 3 * np.pi * self.size["radius"] ** 3
+
+
+@dataclass(frozen=True)
+class StandIn:
+    """A shape standing in for a mesh file the p-model names but cotwin cannot read (e.g. one never
+    published), given by the project: a primitive in the mesh's frame, optionally with its own sliding
+    friction (0: a frictionless skid, as a caster ball)."""
+
+    kind: str  # box | cylinder | sphere | capsule
+    size: dict[str, float]  # box: length, width, height; cylinder, capsule: radius, length; sphere: radius
+    pose: np.ndarray  # in the mesh's frame
+    friction: float | None = None
 
 
 @dataclass
@@ -108,12 +121,14 @@ class Sensor:
     device: str  # the sensor device (e.g. VelocitySensor)
     link: str  # the p-model link it is declared in (as written)
     joint: str | None  # the joint it measures
-    quantity: str  # position | velocity | effort | gyro | velocimeter | accelerometer | none
+    quantity: str  # position | velocity | effort | gyro | velocimeter | accelerometer | closest_range |
+    # closest_bearing | range | none
     port: str  # the device's output port
     body: str = ""  # the tree link it is mounted on (for body quantities)
     pose: np.ndarray = field(default_factory=lambda: np.eye(4))  # in that link's frame
     component: int = 0  # which component of a 3-vector MuJoCo sensor the port reads
     via: str = ""  # the joint (as written) of a sensor declared inside a joint: its path has it
+    ray: RaySpec | None = None  # the beams of a ray sensor (a LiDAR, a sonar), for its ray quantities
 
 
 @dataclass
@@ -167,6 +182,8 @@ class KinematicTree:
     sensors: list[Sensor]
     loops: list[TJoint] = field(default_factory=list)  # joints closing kinematic loops (not in `joints`)
     devices: list[PlacedDevice] = field(default_factory=list)  # placed sensors and actuators (SDF)
+    findings: list = field(default_factory=list)  # warnings of the readings chosen while building it
+    stood_in: set[str] = field(default_factory=set)  # mesh files (as written) replaced by stand-ins
 
     def link(self, name: str) -> TLink:
         return next(l for l in self.links if l.name == name)
@@ -209,8 +226,10 @@ class KinematicTree:
         return {g.name: links[l.name] @ g.pose for l in self.links for g in l.geoms}
 
 
-def build_tree(project, pmodel_name: str | None = None) -> KinematicTree:
-    """The kinematic tree of a p-model (the only one not used as a part, or the one named)."""
+def build_tree(project, pmodel_name: str | None = None, stand_ins: dict[str, list[StandIn]] | None = None
+               ) -> KinematicTree:
+    """The kinematic tree of a p-model (the only one not used as a part, or the one named); `stand_ins`
+    gives shapes for mesh files (as the p-model names them) that cannot be read."""
     from .tree_build import TreeBuilder
 
     pmodels = project.elements(PModel)
@@ -233,8 +252,11 @@ def build_tree(project, pmodel_name: str | None = None) -> KinematicTree:
             raise CotwinError("several p-models: choose one with --pmodel: " + ", ".join(p.name for p in top or pmodels))
         pmodel = top[0]
     diag = Diagnostics()
-    builder = TreeBuilder(project, diag)
+    builder = TreeBuilder(project, diag, stand_ins)
     builder.add_pmodel(pmodel, "", np.eye(4), None)
     builder.connect_parts()
     diag.raise_if_errors()
-    return builder.order(pmodel.name)
+    tree = builder.order(pmodel.name)
+    tree.findings = list(diag.findings)
+    tree.stood_in = set(builder.stood_in)
+    return tree

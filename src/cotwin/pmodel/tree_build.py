@@ -10,6 +10,7 @@ Anything a simulator needs and the model leaves open gets a documented default a
 from __future__ import annotations
 
 from collections import defaultdict
+from dataclasses import replace
 
 import numpy as np
 
@@ -20,23 +21,31 @@ from ..robosim.check_pmodel import (
 )
 from ..robosim.consteval import UNITS, ConstEnv, try_evaluate
 from ..robosim.pmodel_elements import AnnotationRecord, BodyDecl, DeviceRef, Inertial, JointRef, Link, LinkDecl, PModel, Pose, Shape
-from .inertia import FALLBACK_RADIUS, default_inertia, valid_inertia
-from .kinds import body_quantity, joint_motion, sdf_sensor_type, sensor_quantity, servo_command
+from .inertia import FALLBACK_RADIUS, beyond_reach, default_inertia, reach, valid_inertia
+from .kinds import body_quantity, joint_motion, ray_quantity, ray_spec, sdf_sensor_type, sensor_quantity, servo_command
 from .meshes import READABLE, bounding_box
-from .tree import Geom, KinematicTree, PlacedDevice, Sensor, Servo, TJoint, TLink, transform
+from .tree import Geom, KinematicTree, PlacedDevice, Sensor, Servo, StandIn, TJoint, TLink, transform
 
 DEFAULT_MASS = 1.0  # kg, for a link without (usable) inertial information (the checker warns)
 MIN_SIZE = 1e-4  # m: flat shapes (RoboTool accepts a box of height 0) get this thickness
+WHEEL_TOLERANCE = 1e-3  # m: a wheel's axis this far from its geometry's centre is moved through it
 
 
 def _number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+def _scalar(port) -> bool:
+    """A port of a number type (a ray sensor's scan record or sequence is not one)."""
+    return isinstance(port.type, s.NamedType) and port.type.name.last in ("real", "int", "nat")
+
+
 class TreeBuilder:
-    def __init__(self, project, diag: Diagnostics):
+    def __init__(self, project, diag: Diagnostics, stand_ins: dict[str, list[StandIn]] | None = None):
         self.project = project
         self.diag = diag
+        self.stand_ins = dict(stand_ins or {})
+        self.stood_in: set[str] = set()  # stand-ins used
         self.links: dict[str, TLink] = {}
         self.joints: list[TJoint] = []
         self.sensors: list[Sensor] = []
@@ -134,9 +143,7 @@ class TreeBuilder:
         geoms: list[Geom] = []
         shapes = (*link.shapes, *(decl.shapes if isinstance(decl, LinkDecl) else ()))
         for k, shape in enumerate(shapes):
-            g = self.geom(shape, env, f"{name}_shape{k}", f"{name}_shape{k}", np.eye(4), "", source)
-            if g:
-                geoms.append(g)
+            geoms.extend(self.geom(shape, env, f"{name}_shape{k}", f"{name}_shape{k}", np.eye(4), "", source))
         masses = []  # (mass, com pose in the link frame, inertia or None) of bodies with inertial information
         for body in link.bodies:
             bdecl = self.project.lookup("body", body.ref, source) if body.ref is not None else None
@@ -150,10 +157,8 @@ class TreeBuilder:
                 body_geoms = []
                 for k, shape in enumerate(body_shapes):
                     suffix = "" if len(body_shapes) == 1 else f"_{k}"
-                    g = self.geom(shape, benv, f"{prefix}{label}{suffix}", f"{name}_{label}{suffix}", body_pose,
-                                  body.name, source, surface)
-                    if g:
-                        body_geoms.append(g)
+                    body_geoms.extend(self.geom(shape, benv, f"{prefix}{label}{suffix}", f"{name}_{label}{suffix}",
+                                                body_pose, body.name, source, surface))
                 geoms.extend(body_geoms)
                 inertial = body.inertial or (bdecl.inertial if bdecl else None)
                 if inertial is not None:
@@ -187,9 +192,16 @@ class TreeBuilder:
             I = np.array([[given.get("ixx", 0.0), given.get("ixy", 0.0), given.get("ixz", 0.0)],
                           [given.get("ixy", 0.0), given.get("iyy", 0.0), given.get("iyz", 0.0)],
                           [given.get("ixz", 0.0), given.get("iyz", 0.0), given.get("izz", 0.0)]])
+            far = reach(local, com)
             if not valid_inertia(I):
                 self.diag.warning(inertial.loc, f"inertia of {what} is not physical (not positive definite or "
                                   "against the triangle inequality): the geometry's inertia is used")
+                I = default_inertia(mass, local, com)
+            elif far is not None and beyond_reach(I, mass, far):
+                moment = float(np.linalg.eigvalsh(I).max())
+                self.diag.warning(inertial.loc, f"inertia of {what} is beyond what its geometry allows (a moment of "
+                                  f"{moment:.4g} kg m^2, where {mass:.4g} kg within {far:.4g} m of its centre of mass "
+                                  f"give at most {mass * far * far:.4g}): the geometry's inertia is used")
                 I = default_inertia(mass, local, com)
         else:
             I = default_inertia(mass, local, com)
@@ -197,7 +209,7 @@ class TreeBuilder:
 
     @staticmethod
     def _shift(g: Geom, T: np.ndarray) -> Geom:
-        return Geom(g.name, g.kind, g.size, T @ g.pose, g.body, g.surface, g.mesh, g.scale, g.center, g.placeholder)
+        return replace(g, pose=T @ g.pose)
 
     @staticmethod
     def combine(masses, geoms) -> tuple[float, np.ndarray, np.ndarray]:
@@ -226,12 +238,12 @@ class TreeBuilder:
         return out
 
     def geom(self, shape: Shape, env: ConstEnv, name: str, fallback: str, pose: np.ndarray, body: str, source,
-             surface: dict | None = None) -> Geom | None:
+             surface: dict | None = None) -> list[Geom]:
         surface = surface or {}
         if shape.kind == "mesh":
             return self.mesh(shape, env, name, fallback, pose, body, source, surface)
         size = {k: max(self.num(e, env, f"{shape.kind} of {name}"), MIN_SIZE) for k, e, _ in shape.params}
-        return Geom(self._unique(name, fallback), shape.kind, size, pose, body, surface)
+        return [Geom(self._unique(name, fallback), shape.kind, size, pose, body, surface)]
 
     def mesh(self, shape: Shape, env, name, fallback, pose, body, source, surface) -> Geom:
         params = {k: e for k, e, _ in shape.params}
@@ -249,13 +261,23 @@ class TreeBuilder:
                 low, high = low * scale, high * scale
                 extent = np.maximum(np.abs(high - low), MIN_SIZE)
                 size = {"length": float(extent[0]), "width": float(extent[1]), "height": float(extent[2])}
-                return Geom(self._unique(name, fallback), "mesh", size, pose, body, surface, str(path.resolve()),
-                            scale, tuple(float(v) for v in (low + high) / 2))
+                return [Geom(self._unique(name, fallback), "mesh", size, pose, body, surface, str(path.resolve()),
+                             scale, tuple(float(v) for v in (low + high) / 2), written=file)]
         elif path is not None and path.is_file():
             self.diag.warning(shape.loc, f"mesh '{file}' is not a format cotwin measures ({', '.join(READABLE)}): "
                               "a placeholder stands in for it")
-        return Geom(self._unique(name, fallback), "sphere", {"radius": FALLBACK_RADIUS}, pose, body, surface,
-                    placeholder=True)
+        if isinstance(file, str) and file in self.stand_ins:
+            self.stood_in.add(file)
+            out = []
+            for k, stand in enumerate(self.stand_ins[file]):
+                own = dict(surface)
+                if stand.friction is not None:
+                    own["friction"] = {**own.get("friction", {}), "translational": {"coefficient1": stand.friction}}
+                out.append(Geom(self._unique(name if k == 0 else f"{name}_{k}", f"{fallback}_{k}"), stand.kind,
+                                dict(stand.size), pose @ stand.pose, body, own, written=file))
+            return out
+        return [Geom(self._unique(name, fallback), "sphere", {"radius": FALLBACK_RADIUS}, pose, body, surface,
+                     placeholder=True, written=file if isinstance(file, str) else "")]
 
     # ---- joints, sensors, actuators ----
     def add_joints(self, link: Link, pmodel: PModel, env: ConstEnv, prefix: str, parent: str, source) -> None:
@@ -312,9 +334,35 @@ class TreeBuilder:
             port, mode = servo_command(actuator)
             joint.servos.append(Servo(aref.name, actuator.name if actuator else aref.name, name, gains.get("Kp"),
                                       gains.get("Kd"), mode, port or "dangle"))
+        self._centre_wheel(joint, ref)
         self.joints.append(joint)
         for sref in ref.sensors:
             self.add_sensor(sref, None, name, parent, env, source, source_link, ref.name)
+
+    def _centre_wheel(self, joint: TJoint, ref: JointRef) -> None:
+        """A revolute joint driven by a speed (a wheel) whose axis misses the centre of its child's geometry
+        would spin that geometry eccentrically, which no wheel does: its axis is moved, parallel, through
+        that centre, with a warning (the published TurtleBot3 puts its wheel joints 13 mm below the wheels)."""
+        if joint.kind != "revolute" or not joint.servos or joint.servos[0].mode != "velocity":
+            return
+        child = self.links[joint.child]
+        if not child.geoms or any(g.placeholder for g in child.geoms):
+            return
+        centres = []
+        for g in child.geoms:
+            centre = g.pose[:3, 3] + g.pose[:3, :3] @ np.asarray(g.center) if g.kind == "mesh" else g.pose[:3, 3]
+            centres.append(child.pose[:3, :3] @ centre + child.pose[:3, 3])
+        centre = np.mean(centres, axis=0)
+        axis = joint.pose[:3, :3] @ joint.axis
+        offset = centre - joint.pose[:3, 3]
+        off_axis = offset - axis * (offset @ axis)
+        miss = float(np.linalg.norm(off_axis))
+        if miss > WHEEL_TOLERANCE:
+            self.diag.warning(ref.loc, f"joint {ref.name} turns {joint.child} by speed (a wheel) about an axis "
+                              f"{miss * 1000:.3g} mm from the centre of its geometry: read as the parallel axis "
+                              "through that centre")
+            joint.pose = joint.pose.copy()
+            joint.pose[:3, 3] = joint.pose[:3, 3] + off_axis
 
     def place(self, ref: DeviceRef, kind: str, parent: str, env: ConstEnv, source) -> list[tuple[str, ConstEnv, np.ndarray]]:
         """Record a sensor or actuator for SDF (one per index value); returns (name, env, pose) of each."""
@@ -342,13 +390,20 @@ class TreeBuilder:
             return
         sdf_type = self.devices[-1].sdf_type if placed else None
         written = link.name if link is not None else (link_name or "")
-        for name, _, pose in placed:
+        for k, (name, _, pose) in enumerate(placed):
             unknown = []
+            device_record = self.devices[len(self.devices) - len(placed) + k].annotation
+            ray = ray_spec(sdf_type, device_record) if sdf_type in ("ray", "sonar") else None
             for port in (p for p in device.ports if p.kind == "output"):
                 body = body_quantity(sdf_type, port.name)
                 if body is not None:
                     self.sensors.append(Sensor(name, device.name, written, joint, body[0], port.name, parent, pose,
                                                body[1], via))
+                    continue
+                beam = ray_quantity(port.name) if ray is not None and _scalar(port) else None
+                if beam is not None:
+                    self.sensors.append(Sensor(name, device.name, written, None, beam, port.name, parent, pose, 0,
+                                               via, ray))
                     continue
                 # a sensor of the body (ray, camera...) measures no joint, whatever its ports are called
                 joint_sensor = joint is not None and sdf_type is None

@@ -159,11 +159,30 @@ def staged_project(system: TwinSystem, stage: Path) -> None:
     if spec.rabbitmq is not None:
         scenario["rabbitmq"] = dict(vars(spec.rabbitmq))
     platform = {"endpoint": spec.endpoint, "queue": spec.queue, "url": spec.url, "scene": spec.scene,
-                "bricks": [list(b) for b in spec.bricks], "calibration": copy(spec.calibration)}
+                "bricks": [list(b) for b in spec.bricks], "calibration": copy(spec.calibration), "base": spec.base,
+                "stand_in": spec.raw.get("stand_in") or None}
     cosim = {"step": spec.step, "end": spec.end, "algorithm": spec.algorithm, "realtime": spec.realtime,
-             "log": spec.log}
-    (stage / "cotwin.toml").write_text(dumps({"models": models, "scenario": scenario, "platform": platform,
-                                                  "cosim": cosim}))
+             "log": spec.log, "parameters": spec.parameters or None}
+    monitor = {"joints": spec.mirror_joints, "readings": spec.readings or None}
+    tables = {"models": models, "scenario": scenario, "platform": platform, "monitor": monitor, "cosim": cosim}
+    if spec.raw.get("world"):
+        tables["world"] = spec.raw["world"]
+    (stage / "cotwin.toml").write_text(dumps(tables))
+    for mesh in mesh_files(system.models.tree):  # the p-model names them relative to itself
+        written = Path(mesh.written)
+        if not written.is_absolute() and ".." not in written.parts:
+            (stage / written).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy(mesh.mesh, stage / written)
+
+
+def mesh_files(tree) -> list:
+    """The geoms of a kinematic tree that come from mesh files cotwin read (one per file)."""
+    seen: dict[str, object] = {}
+    for link in tree.links:
+        for g in link.geoms:
+            if g.kind == "mesh" and g.mesh and g.written:
+                seen.setdefault(g.mesh, g)
+    return list(seen.values())
 
 
 def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = None) -> dict[str, Path]:

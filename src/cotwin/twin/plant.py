@@ -495,7 +495,7 @@ def load_plant(project, url: str | None = None, free_running: bool = False,
     if url is None:
         url = spec.pt.url if spec.pt is not None and spec.pt.endpoint == "opcua" and spec.pt.url else \
             "opc.tcp://127.0.0.1:4840"
-    endpoint = PerturbedEndpoint.build(system.models.tree, system.models.scene, perturbation)
+    endpoint = PerturbedEndpoint.build(system.models.tree, system.models.scene, perturbation, spec.base)
     return Plant(endpoint, url, free_running)
 
 

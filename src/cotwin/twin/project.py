@@ -16,14 +16,33 @@ co-simulation settings and, for a live twin, the physical twin, deviation checki
     [platform]                      # the DT's robot
     endpoint = "mujoco"             # the embedded simulator, or "broker": a robot behind RabbitMQ
     queue = "cotwin.robot"          #   (its request queue and broker url)
-    scene = "flexcell"              # scene around the robot built from the mapping's constants, or "none"
+    scene = "auto"                  # around the robot: "flexcell" (built from the mapping's constants),
+                                    #   "world" (a world file or [world] table), "none"; "auto": the
+                                    #   world if one is given, else the Flex-cell if the mapping has
+                                    #   its constants, else none
     bricks = [[8, 10]]              # Flex-cell: bricks standing on holes (X, Y)
+    world = "arena.toml"            # a world to walk in (cotwin.pmodel.world), or a [world] table here
+    base = "fixed"                  # the robot's base: fixed to the world, or "free" (a mobile robot)
+    [[platform.stand_in]]           # a shape standing in for a mesh file the p-model names but that
+    mesh = "meshes/base.stl"        #   cannot be read (as the p-model writes its name)
+    shape = "box"                   #   box | cylinder | sphere | capsule
+    size = [0.14, 0.14, 0.17]       #   box: length, width, height; cylinder, capsule: radius, length;
+                                    #   sphere: radius (m)
+    pos = [0.0, 0.0, 0.0]           #   in the mesh's frame (m); rpy = [roll, pitch, yaw] (rad)
+    friction = 0.0                  #   its own sliding friction (0: a frictionless skid), optional
+    [monitor]                       # the mapping's monitored variables (logged; compared PT vs DT)
+    joints = "arm"                  # the joints its q<i>/qd<i> mirror: "arm" (base to tool), "actuated",
+                                    #   or a list of names
+    readings = { x = "robot::base.x" }  # more: name -> a platform reading by path
     [cosim]
     step = 0.1
     end = 20.0
     algorithm = "jacobi"            # or "gauss-seidel"
     realtime = false                # pace to wall-clock time
     log = ["q0", "q1"]              # mapping variables to log (default: every monitored one)
+    parameters = { seed = 7 }       # d-model FMU parameters (its random seed, constants without value)
+    [figure]                        # the figure of `cotwin run` (default: panels chosen from the models)
+    panels = [{ label = "(1) lv", variables = ["dmodel.lv"] }]  # unit role . variable, per panel
     [pt]                            # the physical twin of `cotwin twin`
     endpoint = "opcua"              # opcua | replay | broker | rtde
     url = "opc.tcp://127.0.0.1:4840"
@@ -49,6 +68,7 @@ Every problem is reported at its key's line and column, all together (cotwin.con
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -57,6 +77,7 @@ from ..diagnostics import Finding, Severity
 from ..pmodel.perturbation import SCHEMA as PLANT, Perturbation
 
 ENDPOINTS = ("mujoco", "broker")
+SCENES = ("auto", "flexcell", "world", "none")
 PT_ENDPOINTS = ("opcua", "replay", "broker", "rtde")
 
 
@@ -88,6 +109,45 @@ RABBITMQ = Schema({
     "commands": Key("list[str]"),
 })
 
+SHAPES = {"box": ("length", "width", "height"), "cylinder": ("radius", "length"), "capsule": ("radius", "length"),
+          "sphere": ("radius",)}
+
+
+def _triple(value) -> str | None:
+    if len(value) != 3 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                                  for v in value):
+        return f"must be a list of 3 numbers, got {value!r}"
+    return None
+
+
+STAND_IN = Schema({"mesh": Key("str", required=True), "shape": Key("str", required=True, choices=tuple(SHAPES)),
+                   "size": Key("list", required=True), "pos": Key("list", [0.0, 0.0, 0.0], check=_triple),
+                   "rpy": Key("list", [0.0, 0.0, 0.0], check=_triple), "friction": Key("nonnegative")})
+PANEL = Schema({"label": Key("str", ""), "variables": Key("list[str]", required=True),
+                "style": Key("str", "default", choices=("default", "steps-post"))})
+
+
+def _joints(value) -> str | None:
+    if value in ("arm", "actuated") or (isinstance(value, list) and all(isinstance(v, str) for v in value)):
+        return None
+    return f'must be "arm", "actuated" or a list of joint names, got {value!r}'
+
+
+def _readings(value) -> str | None:
+    bad = [k for k, v in value.items() if not isinstance(v, str)]
+    if bad:
+        return f"each reading is a path (a string): {', '.join(bad)}"
+    return None
+
+
+def _parameters(value) -> str | None:
+    bad = [k for k, v in value.items() if isinstance(v, (dict, list, str)) or
+           (isinstance(v, float) and not math.isfinite(v))]
+    if bad:
+        return f"each parameter is a number or a Boolean: {', '.join(bad)}"
+    return None
+
+
 SCHEMA = Schema({
     "models": Key("table", required=True, table=Schema({
         "dmodel": Key("str", required=True), "pmodel": Key("str", required=True), "mapping": Key("str", required=True),
@@ -97,11 +157,17 @@ SCHEMA = Schema({
     "platform": Key("table", {}, table=Schema({
         "endpoint": Key("str", "mujoco", choices=ENDPOINTS), "queue": Key("str", "cotwin.robot"),
         "url": Key("str", "amqp://127.0.0.1:5672/%2F", check=_amqp_url), "bricks": Key("list", [], check=_pairs),
-        "scene": Key("str", "flexcell", choices=("flexcell", "none")), "calibration": Key("str")})),
+        "scene": Key("str", "auto", choices=SCENES), "calibration": Key("str"), "world": Key("str"),
+        "base": Key("str", "fixed", choices=("fixed", "free")), "stand_in": Key("list", [])})),
+    "world": Key("table"),  # read by cotwin.pmodel.world
+    "monitor": Key("table", {}, table=Schema({"joints": Key("any", "arm", check=_joints),
+                                               "readings": Key("table", {}, check=_readings)})),
     "cosim": Key("table", {}, table=Schema({
         "step": Key("positive", 0.1), "end": Key("positive", 20.0),
         "algorithm": Key("str", "jacobi", choices=("jacobi", "gauss-seidel")),
-        "realtime": Key("bool", False), "log": Key("list[str]")})),
+        "realtime": Key("bool", False), "log": Key("list[str]"),
+        "parameters": Key("table", {}, check=_parameters)})),
+    "figure": Key("table", {}, table=Schema({"panels": Key("list")})),
     "pt": Key("table", table=Schema({
         "endpoint": Key("str", required=True, choices=PT_ENDPOINTS), "url": Key("str"), "log": Key("str"),
         "queue": Key("str", "cotwin.robot"), "offset": Key("number")})),
@@ -159,7 +225,7 @@ class TwinProject:
     endpoint: str = "mujoco"
     queue: str = "cotwin.robot"
     url: str = "amqp://127.0.0.1:5672/%2F"
-    scene: str = "flexcell"
+    scene: str = "auto"
     bricks: list[tuple[int, int]] = field(default_factory=list)
     calibration: Path | None = None
     step: float = 0.1
@@ -171,6 +237,15 @@ class TwinProject:
     deviation: DeviationSettings = field(default_factory=DeviationSettings)
     history_url: str | None = None
     plant: Perturbation | None = None  # [plant]: how `cotwin plant` perturbs the cell
+    world: object | None = None  # cotwin.pmodel.world.World: [platform] world or [world]
+    world_file: Path | None = None  # where it was read from ([platform] world), if a file
+    base: str = "fixed"
+    stand_ins: dict = field(default_factory=dict)  # mesh file as written -> [cotwin.pmodel.tree.StandIn]
+    mirror_joints: object = "arm"  # [monitor] joints
+    readings: dict[str, str] = field(default_factory=dict)  # [monitor] readings
+    parameters: dict[str, object] = field(default_factory=dict)  # [cosim] parameters of the d-model FMU
+    panels: list[tuple[str, list[str], str]] | None = None  # [figure] panels: (label, unit.variable, style)
+    raw: dict = field(default_factory=dict)  # the tables as written that staged copies carry (world, stand_in, figure)
 
     @property
     def model_files(self) -> list[Path]:
@@ -225,10 +300,96 @@ def load_project(path: str | Path) -> TwinProject:
     deviation = DeviationSettings(**{k: (tuple(v) if k == "variables" and v is not None else v)
                                      for k, v in dev.items()}) if dev else DeviationSettings()
     calibration = existing("platform", "calibration", platform.get("calibration"))
+    world, world_file = _world(file, platform, data, existing, problems)
+    stand_ins = _stand_ins(file, platform.get("stand_in") or [], problems)
+    panels = _panels(file, (data["figure"] or {}).get("panels"), problems)
+    monitor = data["monitor"] or {}
     raise_problems(problems)
-    return TwinProject(
+    spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.get("module"), models.get("pmodel_name"),
         plan, rabbitmq, platform["endpoint"], platform["queue"], platform["url"], platform["scene"],
         [tuple(b) for b in platform["bricks"]], calibration, float(cosim["step"]), float(cosim["end"]),
         cosim["algorithm"], cosim["realtime"], cosim["log"], pt, deviation, (data["history"] or {}).get("url"),
         Perturbation.from_table(data["plant"]) if data["plant"] else None)
+    spec.world, spec.world_file, spec.base, spec.stand_ins = world, world_file, platform["base"], stand_ins
+    spec.mirror_joints, spec.readings = monitor.get("joints", "arm"), dict(monitor.get("readings") or {})
+    spec.parameters, spec.panels = dict(cosim.get("parameters") or {}), panels
+    if world_file is not None:
+        spec.world_file = world_file.path
+    spec.raw = {"world": world.table if world is not None else None,
+                "stand_in": list(platform.get("stand_in") or []), "figure": data["figure"] or {}}
+    return spec
+
+
+def _world(file: TomlFile, platform: dict, data: dict, existing, problems: list[Finding]):
+    """The project's world: a file named by [platform] world, or a [world] table (not both)."""
+    from ..diagnostics import CotwinError
+    from ..pmodel.world import read_world
+
+    named, table = platform.get("world"), data.get("world")
+    if named is not None and table is not None:
+        problems.append(Finding(file.location(("world",)), Severity.ERROR,
+                                "give the world as [platform] world = \"<file>\" or as a [world] table, not both"))
+        return None, None
+    if platform.get("scene") == "world" and named is None and table is None:
+        problems.append(Finding(file.location(("platform", "scene")), Severity.ERROR,
+                                "[platform] scene = \"world\" needs a world: [platform] world = \"<file>\" or a [world] table"))
+    try:
+        if named is not None:
+            path = existing("platform", "world", named)
+            if path is None or not path.is_file():
+                return None, None
+            world_file = TomlFile(path, "world file")
+            return read_world(world_file), world_file
+        if table is not None:
+            return read_world(file, ("world",)), None
+    except CotwinError as err:
+        problems.extend(err.findings)
+    return None, None
+
+
+def _stand_ins(file: TomlFile, items: list, problems: list[Finding]) -> dict:
+    from ..pmodel.tree import StandIn, transform
+
+    out: dict = {}
+    for i, item in enumerate(items):
+        at = ("platform", "stand_in", i)
+        if not isinstance(item, dict):
+            problems.append(Finding(file.location(at), Severity.ERROR, "each [[platform.stand_in]] must be a table"))
+            continue
+        before = len(problems)
+        v = STAND_IN.read(item, file, at, problems)
+        if len(problems) > before:
+            continue
+        names = SHAPES[v["shape"]]
+        size = v["size"]
+        if len(size) != len(names) or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                              and math.isfinite(x) and x > 0 for x in size):
+            problems.append(Finding(file.location(at + ("size",)), Severity.ERROR,
+                                    f"[[platform.stand_in]] size of a {v['shape']} is {len(names)} positive number(s) "
+                                    f"({', '.join(names)}), got {size!r}"))
+            continue
+        out.setdefault(v["mesh"], []).append(StandIn(v["shape"], dict(zip(names, map(float, size))),
+                                                     transform(tuple(v["pos"]), tuple(v["rpy"])), v.get("friction")))
+    return out
+
+
+def _panels(file: TomlFile, items: list | None, problems: list[Finding]):
+    if items is None:
+        return None
+    out = []
+    for i, item in enumerate(items):
+        at = ("figure", "panels", i)
+        if not isinstance(item, dict):
+            problems.append(Finding(file.location(at), Severity.ERROR, "each [figure] panel must be a table"))
+            continue
+        before = len(problems)
+        v = PANEL.read(item, file, at, problems)
+        bad = [name for name in v.get("variables") or [] if name.count(".") != 1 or not all(name.split("."))]
+        if bad:
+            problems.append(Finding(file.location(at + ("variables",)), Severity.ERROR,
+                                    f"[figure] panel variables are written unit.variable (dmodel.lv, mapping.x), "
+                                    f"got {', '.join(map(repr, bad))}"))
+        if len(problems) == before:
+            out.append((v["label"], list(v["variables"]), v["style"]))
+    return out

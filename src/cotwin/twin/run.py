@@ -36,8 +36,8 @@ def simulated_endpoint(system: TwinSystem):
 
     models = system.models
     calibration = models.calibration
-    return SimulatedEndpoint(PlatformSimulator(models.tree, models.scene), calibration and calibration.profile,
-                             calibration and calibration.geometry)
+    return SimulatedEndpoint(PlatformSimulator(models.tree, models.scene, base=system.spec.base),
+                             calibration and calibration.profile, calibration and calibration.geometry)
 
 
 def python_unit(project: str | Path, role: str):
@@ -102,14 +102,41 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
 
             figure = draw(out / "outputs.csv", out / "figure.png", figure_panels(system),
                           title=f"{system.models.program.module.name}: step {step:g} s, {result.algorithm}")
+            path = path_columns(system)
+            if path is not None:
+                from ..plot import top_view
+
+                top_view(out / "outputs.csv", out / "path.png", system.models.scene, path,
+                         title=f"{system.models.program.module.name} in {system.models.scene.name or 'its world'}: "
+                               f"{end:g} s")
         return TwinRun(result, out / "outputs.csv", figure, cosim, units)
 
 
+def path_columns(system: TwinSystem) -> tuple[str, str] | None:
+    """The columns of the robot's x and y in a world (monitored readings of its free base's pose), if any."""
+    from ..pmodel.mjcf import pose_paths
+
+    scene = system.models.scene
+    if scene is None or not hasattr(scene, "obstacles"):
+        return None
+    x_path, y_path = pose_paths(system.models.tree)[:2]
+    by_path = {path: name for name, path in system.spec.readings.items()}
+    logged = system.log[MAPPING.name]
+    if by_path.get(x_path) in logged and by_path.get(y_path) in logged:
+        return f"{MAPPING.name}.{by_path[x_path]}", f"{MAPPING.name}.{by_path[y_path]}"
+    return None
+
+
 def figure_panels(system: TwinSystem) -> list[tuple[str, list[str], str]]:
-    """The panels of the paper's Fig. 16, chosen from the models: the commands and their values, the
-    d-model's operation calls and their arguments, and the mapping's monitored variables."""
+    """The project's [figure] panels, or those of the paper's Fig. 16 chosen from the models: the commands
+    and their values, the platform's events and the values they carry, the d-model's operation calls and
+    their arguments, and the mapping's monitored variables."""
     from ..dmodel.ports import PortLayout
 
+    if system.spec.panels is not None:
+        units = {u.role: u.name for u in system.units} | {u.instance: u.name for u in system.units}
+        return [(label, [f"{units.get(v.split('.')[0], v.split('.')[0])}.{v.split('.')[1]}" for v in names], style)
+                for label, names, style in system.spec.panels]
     source = system.source.name if system.source is not None else None
     events = [p for p in system.source_ports if p in system.command_events]
     values = [p for p in system.source_ports if p not in system.command_events]
@@ -117,8 +144,12 @@ def figure_panels(system: TwinSystem) -> list[tuple[str, list[str], str]]:
     calls = [op.flag.name for op in layout.operations]
     args = list(dict.fromkeys(v.var.name for op in layout.operations for _, vs in op.args for v in vs))
     dmodel = "{dmodel}.dmodel"
+    platform = [ev for ev in system.models.program.inputs if ev.name not in system.command_events
+                and ev.name in {e.name for e in system.models.mapping_model.input_events}]
     return [("(1) commands", [f"{source}.{p}" for p in events], "steps-post"),
             ("(2) command values", [f"{source}.{p}" for p in values], "steps-post"),
+            ("(2b) platform event values", [f"{MAPPING.name}.{port}" for ev in platform for port, _ in ev.value_ports],
+             "steps-post"),
             ("(3) d-model operation calls", [f"{dmodel}.{c}" for c in calls], "steps-post"),
             ("(3b) operation arguments", [f"{dmodel}.{a}" for a in args], "steps-post"),
             ("(4) monitored variables", [f"{MAPPING.name}.{v}" for v in system.log[MAPPING.name]], "default")]

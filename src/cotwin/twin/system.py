@@ -13,7 +13,7 @@ monitored variables -> the source, when the source echoes them (the RabbitMQ bri
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..cosim.system import Connection, System
@@ -57,16 +57,20 @@ class TwinModels:
 
 def load_models(spec: TwinProject) -> TwinModels:
     from ..dmodel.program import build_program
-    from ..mapping.runtime import mirror_variables
+    from ..mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints
     from ..pmodel import ik
-    from ..pmodel.scene import Brick, FlexCell
     from ..pmodel.tree import build_tree
     from ..robosim.check import load_checked
     from ..robosim.pmodel_elements import Mapping as MappingModel
 
     project = load_checked(spec.model_files)
     program = build_program(project, spec.module)
-    tree = build_tree(project, spec.pmodel_name)
+    tree = build_tree(project, spec.pmodel_name, spec.stand_ins)
+    unused = sorted(set(spec.stand_ins) - tree.stood_in)
+    if unused:
+        raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
+                                   f"[[platform.stand_in]] for {', '.join(unused)}: p-model {tree.name} names no such "
+                                   "mesh that cannot be read")])
     mappings = project.elements(MappingModel)
     if len(mappings) != 1:
         raise CotwinError([Finding(Location(str(spec.mapping), 1, 1), Severity.ERROR,
@@ -77,15 +81,33 @@ def load_models(spec: TwinProject) -> TwinModels:
         from .calibration import Calibration
 
         calibration = Calibration.read(spec.calibration)
-    scene = None
-    if spec.scene == "flexcell":
-        scene = FlexCell.from_mapping(mapping, [Brick(f"brick{i + 1}", b) for i, b in enumerate(spec.bricks)],
-                                      calibration.geometry if calibration else None)
-    arm = ik.arm_joints(tree, ik.find_tool(tree))
+    scene = build_scene(spec, mapping, calibration)
+    variables = [v.name for v in mapping.variables]
     if calibration is not None:
-        calibration.geometry.check_joints(arm)  # its posture and corrections name this arm's joints
-    monitored = list(mirror_variables([v.name for v in mapping.variables], arm))
+        calibration.geometry.check_joints(ik.arm_joints(tree, ik.find_tool(tree)))  # it names this arm's joints
+    joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) else []
+    clash = [n for n in spec.readings if n in variables or n in mirror_variables(variables, joints)]
+    if clash:
+        raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
+                                   f"[monitor] readings {', '.join(clash)}: the mapping has variables of these names")])
+    monitored = [*mirror_variables(variables, joints), *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration)
+
+
+def build_scene(spec: TwinProject, mapping, calibration=None):
+    """The scene around the robot ([platform] scene): a world, the Flex-cell, or none; "auto" takes the
+    world if the project gives one, else the Flex-cell if the mapping has its grid's constants."""
+    from ..pmodel.scene import Brick, FlexCell, has_grid
+
+    kind = spec.scene
+    if kind == "auto":
+        kind = "world" if spec.world is not None else "flexcell" if has_grid(mapping) else "none"
+    if kind == "world":
+        return spec.world
+    if kind == "flexcell":
+        return FlexCell.from_mapping(mapping, [Brick(f"brick{i + 1}", b) for i, b in enumerate(spec.bricks)],
+                                     calibration.geometry if calibration else None)
+    return None
 
 
 def external_events(program, mapping_model) -> list[str]:
@@ -151,10 +173,22 @@ class TwinSystem:
         self.connections = connections
         self.delayed = {MAPPING.name}
         self.log = self._log_variables()
+        self.parameters = self._parameters(layout)
 
     def with_plan(self, commands) -> "TwinSystem":
         """This twin with `commands` as its source (the same models, derived once)."""
         return TwinSystem(self.spec, self.models, commands)
+
+    def with_parameters(self, **values) -> "TwinSystem":
+        """This twin with d-model parameters set (e.g. `seed=3`: another random walk), the same models."""
+        spec = replace(self.spec, parameters={**self.spec.parameters, **values})
+        return TwinSystem(spec, self.models, self.commands if self.source is CONTROLLER and self.spec.plan is None else None)
+
+    def in_world(self, world) -> "TwinSystem":
+        """This twin's models in another world (cotwin.pmodel.world.World), everything else the same."""
+        spec = replace(self.spec, world=world, world_file=None, scene="world",
+                       raw={**self.spec.raw, "world": world.table})
+        return TwinSystem(spec, replace(self.models, scene=world))
 
     def live_ports(self) -> list[str]:
         """The ports a live (RabbitMQ) source carries: the events of `[scenario] rabbitmq commands` (default:
@@ -180,6 +214,28 @@ class TwinSystem:
         program = self.models.program
         return {MAPPING.name: list(names), DMODEL.name: [program.state_port(m) for m in program.machines]}
 
+    def _parameters(self, layout) -> dict[str, dict[str, object]]:
+        """[cosim] parameters: values of the d-model FMU's parameters (its random seed, constants without a
+        value), checked against its ports."""
+        given = self.spec.parameters
+        if not given:
+            return {}
+        ports = {v.name: v for v in layout.variables if v.causality == "parameter"}
+        problems = []
+        for name, value in given.items():
+            port = ports.get(name)
+            if port is None:
+                problems.append(f"[cosim] parameters: the d-model has no parameter '{name}' "
+                                f"(it has {', '.join(ports) or 'none'})")
+            elif port.fmi_type == "Boolean" and not isinstance(value, bool) or \
+                    port.fmi_type == "Integer" and (isinstance(value, bool) or not isinstance(value, int)) or \
+                    port.fmi_type == "Real" and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                problems.append(f"[cosim] parameters: {name} takes a{'n' if port.fmi_type[0] in 'I' else ''} "
+                                f"{port.fmi_type}, not {value!r}")
+        if problems:
+            raise CotwinError([Finding(Location(str(self.spec.path), 1, 1), Severity.ERROR, p) for p in problems])
+        return {DMODEL.name: {name: (float(v) if ports[name].fmi_type == "Real" else v) for name, v in given.items()}}
+
     # ---- descriptions ----
     def multimodel(self, realtime: bool | None = None) -> dict:
         """Maestro's multimodel.json; the `cotwin` key (which Maestro ignores) holds the delays."""
@@ -189,7 +245,8 @@ class TwinSystem:
         return {
             "fmus": {u.key: u.fmu for u in self.units},
             "connections": connections,
-            "parameters": {},
+            "parameters": {f"{unit}.{name}": value for unit, values in self.parameters.items()
+                           for name, value in values.items()},
             "logVariables": self.log,
             "algorithm": {"type": "fixed-step", "size": self.spec.step},
             "startTime": 0.0,
@@ -207,11 +264,12 @@ class TwinSystem:
 
         models = self.models
         geometry = models.calibration.geometry if models.calibration is not None else None  # any endpoint's IK
+        options = {"geometry": geometry, "mirrors": self.spec.mirror_joints, "monitor": self.spec.readings}
         if callable(endpoint):
-            return MappingUnit(MAPPING.name, models.program, lambda: Mapping(models.project, endpoint(), geometry=geometry),
+            return MappingUnit(MAPPING.name, models.program, lambda: Mapping(models.project, endpoint(), **options),
                                self.command_events, {ev.name for ev in models.mapping_model.input_events},
                                models.monitored)
-        return MappingUnit(MAPPING.name, models.program, Mapping(models.project, endpoint, geometry=geometry),
+        return MappingUnit(MAPPING.name, models.program, Mapping(models.project, endpoint, **options),
                            self.command_events)
 
     def source_unit(self, bridge=None, stream=None, echo: bool = True) -> Unit | None:
@@ -240,7 +298,7 @@ class TwinSystem:
             units.append(source if source is not None else self.source_unit())
         units.append(dmodel if dmodel is not None else FMUUnit(DMODEL.name, dmodel_fmu))
         units.append(self.mapping_unit(endpoint))
-        return System.of(units, self.connections, delayed=self.delayed, log=self.log)
+        return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters)
 
     def units_by_role(self, system: System) -> dict[str, Unit]:
         return {u.role: system.units[u.name] for u in self.units}
