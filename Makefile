@@ -26,8 +26,15 @@ demo: install
 	@if [ -f ../shared/data/ur5e/rtde_run1.csv ]; then \
 		$(VENV)/bin/cotwin twin examples/ur5e/replay.toml -o $(OUT)/replay 2> $(OUT)/replay.log; \
 	else echo "replay of the real UR5e's log skipped: ../shared/data/ur5e/rtde_run1.csv is not here"; fi
+	$(VENV)/bin/cotwin check examples/turtlebot
+	$(VENV)/bin/cotwin run examples/turtlebot/cotwin.toml -o $(OUT)/turtlebot
+	@if [ -f ../shared/robosim/mobile/OA_mapping.pm ]; then \
+		$(VENV)/bin/cotwin run examples/turtlebot/published.toml -o $(OUT)/turtlebot-published; \
+	else echo "the published TurtleBot models are not in ../shared/robosim/mobile: only cotwin's own walk"; fi
+	COTWIN=$(VENV)/bin/cotwin scripts/turtlebot-live.sh $(OUT)/turtlebot-twin
 	@echo "results: $(OUT)/outputs.csv, $(OUT)/figure.png, $(OUT)/gauss-seidel/, $(OUT)/pick-place/ (multimodel: $(OUT)/multimodel.json)"
 	@echo "live twin (PT over OPC UA, DT in MuJoCo, commands from RabbitMQ): $(OUT)/twin/figure.png, $(OUT)/twin/deviation.json"
+	@echo "TurtleBot3 random walk (Fig. 18 and a top view): $(OUT)/turtlebot/figure.png, $(OUT)/turtlebot/path.png; live: $(OUT)/turtlebot-twin/"
 
 test: install
 	$(PY) -m pytest -q

@@ -71,14 +71,20 @@ def _check_walk(system, out: Path, seed: int) -> None:
     rows = _rows(out / "outputs.csv")
     assert len(rows) == 151 and float(rows[-1]["time"]) == pytest.approx(30.0)
     mapping, dmodel = "{mapping}.mapping", "{dmodel}.dmodel"
-    near = 0
-    for seen, acted in zip(rows, rows[1:]):  # Jacobi: what the mapping reports, the d-model acts on next step
+    near, turned_away = 0, []
+    # Jacobi: what the mapping reports after step k, the d-model acts on in step k + 1 and the robot in k + 2
+    for seen, acted, moved, after in zip(rows, rows[1:], rows[2:], rows[3:]):
         d, a = float(seen[f"{mapping}.closest_distance"]), float(seen[f"{mapping}.closest_angle"])
-        if seen[f"{mapping}.closestDistance"] == "true" and 0.2 <= d < 1.0 and abs(a) <= 90 and acted[f"{dmodel}.move"] == "true":
+        seen_near = seen[f"{mapping}.closestDistance"] == "true" and 0.2 <= d < 1.0 and abs(a) <= 90
+        if seen_near and acted[f"{dmodel}.move"] == "true":
             near += 1
             av = float(acted[f"{dmodel}.av"])
             assert av * a < 0 or av == pytest.approx((100 - abs(a)) * math.pi / 180 * -np.sign(a or -1)), (seen, acted)
-    assert near > 5  # obstacles came near, and the robot steered away each time
+            if abs(av) > 0.5:  # a firm turn away: the robot's heading follows in the step it is executed
+                turn = math.remainder(float(after[f"{mapping}.yaw"]) - float(moved[f"{mapping}.yaw"]), math.tau)
+                turned_away.append(turn * av > 0)
+    assert near > 5  # obstacles came near, and the d-model steered away each time
+    assert turned_away and sum(turned_away) >= 0.8 * len(turned_away)  # and the robot turned that way
 
 
 def test_listing6_connections_come_from_the_models_and_no_controller(published):
@@ -91,7 +97,8 @@ def test_listing6_connections_come_from_the_models_and_no_controller(published):
                 ("mappingFMU.closest_distance", "dmodelFMU.closest_distance"),
                 ("mappingFMU.closestAngle", "dmodelFMU.closestAngle"),
                 ("mappingFMU.closest_angle", "dmodelFMU.closest_angle"),
-                ("dmodelFMU.move", "mappingFMU.move"), ("dmodelFMU.lv", "mappingFMU.lv"), ("dmodelFMU.av", "mappingFMU.av")}
+                ("dmodelFMU.move", "mappingFMU.move"), ("dmodelFMU.lv", "mappingFMU.lv"),
+                ("dmodelFMU.av", "mappingFMU.av")}
     assert connections == listing6
     assert published.multimodel()["parameters"] == {f"{DMODEL.name}.seed": 7}
     assert published.models.monitored == ["x", "y", "yaw"]
@@ -170,7 +177,8 @@ def test_lidar_sees_the_closest_obstacle_in_degrees_counter_clockwise(own, tmp_p
     assert simulated_endpoint(turned).read_sensors()[f"{LIDAR}.closestAngle"] == pytest.approx(150.0, abs=1.0)
     mapping = Mapping(system.models.project, endpoint, monitor=system.spec.readings)
     mapping.start_mapping()
-    assert mapping.get_event("closestAngle") and mapping.event_value("closestAngle") == readings[f"{LIDAR}.closestAngle"]
+    assert mapping.get_event("closestAngle")
+    assert mapping.event_value("closestAngle") == readings[f"{LIDAR}.closestAngle"]
     empty = own.in_world(World("nothing", [], (0.0, 0.0, 0.0), (-3, 3, -3, 3)))
     nothing = simulated_endpoint(empty).read_sensors()
     assert nothing[f"{LIDAR}.closestDistance"] == math.inf and math.isnan(nothing[f"{LIDAR}.closestAngle"])
@@ -222,8 +230,8 @@ def _project(tmp_path: Path, extra: str, world: str | None = None) -> Path:
     if world is not None:
         (tmp_path / "world.toml").write_text(world)
     path = tmp_path / "cotwin.toml"
-    path.write_text('[models]\ndmodel = "random_walk.rst"\npmodel = "turtlebot3_burger.pm"\nmapping = "walk_mapping.pm"\n'
-                    + extra)
+    path.write_text('[models]\ndmodel = "random_walk.rst"\npmodel = "turtlebot3_burger.pm"\n'
+                    'mapping = "walk_mapping.pm"\n' + extra)
     return path
 
 
@@ -239,7 +247,8 @@ def test_bad_worlds_are_reported_at_their_keys(tmp_path):
     assert f"{world}:6:1: error: [start] yaw must be a finite number, got 'north'" in text
     assert f"{world}:10:1: error: [[cylinder]] 1 needs 'radius'" in text
     assert f"{world}:15:1: error: unknown key 'colour' in [[wall]] 1" in text
-    (tmp_path / "world.toml").write_text('[arena]\nsize = [2.0, 2.0]\n[[box]]\ncenter = [5.0, 0.0]\nsize = [0.2, 0.2, 0.2]\n')
+    (tmp_path / "world.toml").write_text('[arena]\nsize = [2.0, 2.0]\n[[box]]\ncenter = [5.0, 0.0]\n'
+                                         'size = [0.2, 0.2, 0.2]\n')
     with pytest.raises(CotwinError, match=rf"{world}:3:1: error: box_1 at \(5, 0\) is outside the arena"):
         load_project(path)
     (tmp_path / "world.toml").write_text('[[cylinder]]\ncenter = [0.05, 0.0]\nradius = 0.1\n[start]\nx = 0.0\n')
@@ -328,3 +337,22 @@ def test_live_twin_of_the_walk_sees_the_reality_gap_of_a_perturbed_plant(tmp_pat
     moves = [(p["{dmodel}.dmodel.move"], d["{dmodel}.dmodel.move"]) for p, d in zip(pt, dt)]
     assert moves[:5] == [(d, d) for _, d in moves[:5]]  # the same random walk starts on both sides
     assert (tmp_path / "figure.png").is_file() and (tmp_path / "deviation.json").is_file()
+
+
+@pytest.mark.parametrize("project", ["cotwin.toml", "published.toml"])
+def test_the_multimodel_with_the_mapping_fmu_walks_the_same_walk(project, tmp_path):
+    """`cotwin build`'s multimodel.json (the mapping packaged as an FMU carrying the project, its world and the
+    p-model's mesh files) run by `cotwin simulate` gives `cotwin run`'s very trace."""
+    if project == "published.toml" and not (MOBILE / "OA_mapping.pm").is_file():
+        pytest.skip(f"the paper's published mobile robot models are not at {MOBILE}")
+    from cotwin.cosim.multimodel import execution_for, read_multimodel
+    from cotwin.twin.build import build
+
+    system = load(EXAMPLE / project)
+    written = build(system, tmp_path / "build")
+    mm = read_multimodel(written["multimodel"])
+    execution_for(mm, tmp_path / "simulated.csv", None, None).run(10.0)
+    ran = run_twin(system, tmp_path / "run", end=10.0, plot=False)
+    simulated, direct = _rows(tmp_path / "simulated.csv"), _rows(ran.csv)
+    assert simulated == direct and len(direct) == 51
+    assert float(direct[-1]["{mapping}.mapping.x"]) != float(direct[0]["{mapping}.mapping.x"])

@@ -617,7 +617,8 @@ def serve_robot(project: str, queue: str | None, url: str | None) -> None:
     if url_problem(url):
         raise click.BadParameter(url_problem(url), param_hint="--url")
     queue = queue or system.spec.queue
-    server = RobotServer(SimulatedEndpoint(PlatformSimulator(system.models.tree, system.models.scene)), queue, url)
+    simulator = PlatformSimulator(system.models.tree, system.models.scene, base=system.spec.base)
+    server = RobotServer(SimulatedEndpoint(simulator), queue, url)
     failure: list[CotwinError] = []
 
     def serve() -> None:

@@ -38,8 +38,8 @@ class PerturbedEndpoint:
         self.latency = steps * self.sim.timestep
         self._pending: list[_Pending] = []
         self._rng = np.random.default_rng(perturbation.seed)
-        self._quantity = {sensor_name(self.tree.name, s.link, s.name, s.port, s.via): NOISE_OF.get(s.quantity, s.quantity)
-                          for s in self.tree.sensors}
+        self._quantity = {sensor_name(self.tree.name, s.link, s.name, s.port, s.via):
+                          NOISE_OF.get(s.quantity, s.quantity) for s in self.tree.sensors}
         self._std = {q: perturbation.noise_std(q) for q in QUANTITIES}
         self._noisy = any(self._std.values())
         self._sample()

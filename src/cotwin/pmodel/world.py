@@ -287,7 +287,8 @@ def read_world(file: TomlFile, at: tuple = ()) -> World:
                                 f"the start ({x:g}, {y:g}) is outside the arena"))
     if bounds is not None:
         for o in obstacles:
-            if not o.name.startswith("arena_wall") and not (bounds[0] <= o.x <= bounds[1] and bounds[2] <= o.y <= bounds[3]):
+            inside = bounds[0] <= o.x <= bounds[1] and bounds[2] <= o.y <= bounds[3]
+            if not o.name.startswith("arena_wall") and not inside:
                 problems.append(Finding(file.location(names.get(o.name, at)), Severity.ERROR,
                                         f"{o.name} at ({o.x:g}, {o.y:g}) is outside the arena"))
     raise_problems(problems)

@@ -128,7 +128,7 @@ def build(system: TwinSystem, out: str | Path, cc: str = "cc") -> dict[str, Path
     written = {"dmodel": dmodel_fmu(system, out, cc, record)}
     tree, scene = system.models.tree, system.models.scene
     for name, text in ((f"{tree.name}.sdf", to_sdf(tree)), (f"{tree.name}.urdf", to_urdf(tree)),
-                       (f"{tree.name}_scene.xml", to_mjcf(tree, scene))):
+                       (f"{tree.name}_scene.xml", to_mjcf(tree, scene, base=system.spec.base))):
         written[name] = write_text(out / name, text)
     written.update(python_fmus(system, out, record))
     written["multimodel"] = write_text(out / "multimodel.json", json.dumps(system.multimodel(), indent=2) + "\n")

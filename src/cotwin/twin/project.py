@@ -333,7 +333,8 @@ def _world(file: TomlFile, platform: dict, data: dict, existing, problems: list[
         return None, None
     if platform.get("scene") == "world" and named is None and table is None:
         problems.append(Finding(file.location(("platform", "scene")), Severity.ERROR,
-                                "[platform] scene = \"world\" needs a world: [platform] world = \"<file>\" or a [world] table"))
+                                "[platform] scene = \"world\" needs a world: [platform] world = \"<file>\" "
+                                "or a [world] table"))
     try:
         if named is not None:
             path = existing("platform", "world", named)

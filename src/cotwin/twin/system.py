@@ -182,7 +182,8 @@ class TwinSystem:
     def with_parameters(self, **values) -> "TwinSystem":
         """This twin with d-model parameters set (e.g. `seed=3`: another random walk), the same models."""
         spec = replace(self.spec, parameters={**self.spec.parameters, **values})
-        return TwinSystem(spec, self.models, self.commands if self.source is CONTROLLER and self.spec.plan is None else None)
+        plan = self.commands if self.source is CONTROLLER and self.spec.plan is None else None  # a what-if's
+        return TwinSystem(spec, self.models, plan)
 
     def in_world(self, world) -> "TwinSystem":
         """This twin's models in another world (cotwin.pmodel.world.World), everything else the same."""
