@@ -134,7 +134,8 @@ def test_dmodel_fmu_reproduces_the_interpreter_on_a_runs_recorded_inputs(publish
     operation calls, arguments and states, and those the run recorded."""
     from fmpy.validation import validate_fmu
 
-    ran = run_twin(published.with_parameters(seed=4), tmp_path / "run", plot=False)
+    assert published.seed_port == "seed"
+    ran = run_twin(published.with_seed(4), tmp_path / "run", plot=False)
     rows = _rows(ran.csv)
     program = published.models.program
     fmu = build_fmu(program, tmp_path / "dmodel.fmu")

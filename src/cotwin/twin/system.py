@@ -179,6 +179,17 @@ class TwinSystem:
         """This twin with `commands` as its source (the same models, derived once)."""
         return TwinSystem(self.spec, self.models, commands)
 
+    @property
+    def seed_port(self) -> str | None:
+        """The d-model FMU's parameter seeding its random source (uninterpreted functions, random()), if any."""
+        return next((p.port for p in self.models.program.parameters if p.machine < 0), None)
+
+    def with_seed(self, seed: int) -> "TwinSystem":
+        """This twin with another seed of its d-model's random source (another random walk)."""
+        if self.seed_port is None:
+            raise CotwinError(f"{self.spec.path}: the d-model draws no random values: it has no seed")
+        return self.with_parameters(**{self.seed_port: int(seed)})
+
     def with_parameters(self, **values) -> "TwinSystem":
         """This twin with d-model parameters set (e.g. `seed=3`: another random walk), the same models."""
         spec = replace(self.spec, parameters={**self.spec.parameters, **values})

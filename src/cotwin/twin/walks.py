@@ -17,7 +17,7 @@ import numpy as np
 
 from ..diagnostics import CotwinError
 from .run import path_columns, run_twin, simulated_endpoint
-from .system import TwinSystem
+from .system import DMODEL, TwinSystem
 
 
 @dataclass
@@ -48,7 +48,7 @@ def walk(system: TwinSystem, out: str | Path, seed: int | None = None) -> Walk:
         raise CotwinError(f"{system.spec.path}: a walk needs a world ([platform] world) and the base's x and y "
                           "among the monitored readings ([monitor] readings)")
     if seed is not None:
-        system = system.with_parameters(seed=seed)
+        system = system.with_seed(seed)
     endpoint = simulated_endpoint(system)
     started = time.perf_counter()
     ran = run_twin(system, out, endpoint=endpoint, plot=False)
@@ -58,7 +58,8 @@ def walk(system: TwinSystem, out: str | Path, seed: int | None = None) -> Walk:
     reach = footprint_radius(system.models.tree)
     yaw = [name for name, p in system.spec.readings.items() if p.endswith(".yaw")]
     heading = np.unwrap(data[f"{columns[0].rsplit('.', 1)[0]}.{yaw[0]}"]) if yaw else np.zeros(len(path))
-    return Walk(int(system.spec.parameters.get("seed", 0)), world.name, list(endpoint.sim.touches),
+    return Walk(int(system.parameters.get(DMODEL.name, {}).get(system.seed_port, 0)), world.name,
+                list(endpoint.sim.touches),
                 world.coverage(path, reach), float(world.clearance(path).min() - reach),
                 float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()), float(np.abs(np.diff(heading)).sum()),
                 wall, path)

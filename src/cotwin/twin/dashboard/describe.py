@@ -125,7 +125,7 @@ def robot_drawing(tree, variables: dict[str, str]) -> dict:
 
 def scene_drawing(scene) -> dict | None:
     """The Flex-cell plate and its holes (None for a robot without a scene)."""
-    if scene is None or not hasattr(scene, "extent"):
+    if scene is None or not hasattr(scene, "hole"):  # a world (cotwin.pmodel.world) is not drawn yet
         return None
     x0, x1, y0, y1 = scene.extent()
     holes = [list(scene.hole(X, Y)[:2]) for X in range(scene.xmax + 1) for Y in range(scene.ymax + 1)]
