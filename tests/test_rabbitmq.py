@@ -20,7 +20,7 @@ from cotwin.diagnostics import CotwinError
 from cotwin.mapping.amqp import connect
 from cotwin.pmodel import ik
 from cotwin.twin.publisher import Publisher, idle_values
-from cotwin.twin.rabbitmq import CommandStream, Received, parse_message, parse_time, port_types
+from cotwin.twin.rabbitmq import READY, CommandStream, Received, echo_message, parse_message, parse_time, port_types, read_echo
 from cotwin.twin.run import load, run_twin
 from cotwin.twin.scenario import read_plan
 
@@ -67,6 +67,15 @@ class Feed:
         if not out and timeout:
             time.sleep(min(timeout, 0.01))
         return out
+
+
+def test_publishers_read_the_echo_and_the_ready_message_and_ignore_garbage():
+    """What a publisher (cotwin publish, the dashboard's panel) learns from from_cosim."""
+    assert read_echo(json.dumps(READY).encode()) == (True, None)
+    ready, simstep = read_echo(json.dumps(echo_message({"x": 1.5, "open": True}, 2.0, 0.1)).encode())
+    assert not ready and simstep == pytest.approx(2.1)
+    for garbage in (b"\xff\xfe", b"[1, 2]", b'{"simstep": "NaN"}', b'{"simstep": null}', b'{"simstep": "1e400"}', b""):
+        assert read_echo(garbage) == (False, None), garbage
 
 
 def test_stream_follows_the_rmq_fmu_time_semantics():

@@ -14,7 +14,7 @@ import pytest
 from cotwin.diagnostics import Severity
 from cotwin.pmodel.simulator import PlatformSimulator
 from cotwin.pmodel.tree import StandIn, build_tree, transform
-from cotwin.pmodel.world import Obstacle, World, footprint_radius, load_world, lowest_point
+from cotwin.pmodel.world import Obstacle, World, load_world, lowest_point
 from cotwin.robosim.check import load_checked
 
 MODELS = Path(__file__).parent / "models" / "pmodel"

@@ -508,7 +508,7 @@ class CExpr(ExprVisitor):
     def _loops(self, binders, such_that, body_fn, node) -> None:
         """Open one loop per binder (over `x in S` or a finite type), test `such_that`, run body_fn."""
         bounded = {}
-        for conjunct in _conjuncts(such_that):
+        for conjunct in s.conjuncts(such_that):
             if (isinstance(conjunct, s.Binary) and conjunct.op == "in" and isinstance(conjunct.left, s.Name)
                     and not isinstance(conjunct.right, s.RangeExpr)):
                 bounded.setdefault(conjunct.left.name.last, conjunct.right)
@@ -604,14 +604,6 @@ class CExpr(ExprVisitor):
 
         self._loops(e.binders, e.predicate, body, e)
         return result
-
-
-def _conjuncts(e):
-    if e is None:
-        return []
-    if isinstance(e, s.Binary) and e.op == "/\\":
-        return _conjuncts(e.left) + _conjuncts(e.right)
-    return [e]
 
 
 def _dedent(lines: list[str]) -> list[str]:

@@ -181,7 +181,7 @@ class Evaluator(ExprVisitor):
             self.bound = saved
 
     def _range_of(self, name, type_ref, such_that, node) -> list:
-        for conjunct in _conjuncts(such_that):
+        for conjunct in s.conjuncts(such_that):
             if (isinstance(conjunct, s.Binary) and conjunct.op == "in" and isinstance(conjunct.left, s.Name)
                     and conjunct.left.name.parts == (name,)):
                 collection = self.visit(conjunct.right)
@@ -276,14 +276,6 @@ class Evaluator(ExprVisitor):
 
     def visit_SinceEntryExpr(self, e: s.SinceEntryExpr):
         return self.since_entry(e)
-
-
-def _conjuncts(e):
-    if e is None:
-        return []
-    if isinstance(e, s.Binary) and e.op == "/\\":
-        return _conjuncts(e.left) + _conjuncts(e.right)
-    return [e]
 
 
 def _call_name(e: s.Call) -> str:

@@ -460,3 +460,12 @@ def statement_expressions(stmt: "Stmt"):
     if isinstance(stmt, Timed):
         return (stmt.deadline,)
     return ()
+
+
+def conjuncts(e) -> list:
+    """The conjuncts of a predicate (`a /\\ b /\\ c` gives [a, b, c]; None gives [])."""
+    if e is None:
+        return []
+    if isinstance(e, Binary) and e.op == "/\\":
+        return conjuncts(e.left) + conjuncts(e.right)
+    return [e]

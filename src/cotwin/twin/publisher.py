@@ -19,7 +19,7 @@ from datetime import datetime, timezone
 from ..diagnostics import CotwinError
 from ..mapping.amqp import connect
 from .project import RabbitMQSettings
-from .rabbitmq import READY
+from .rabbitmq import read_echo
 from .scenario import Command
 
 
@@ -54,20 +54,12 @@ class Publisher:
             state = {"ready": False, "sim": None, "last": wallclock.monotonic()}
 
             def on_echo(ch, method, props, body):
-                try:
-                    data = json.loads(body)
-                except ValueError:
-                    return
-                if not isinstance(data, dict):
-                    return
-                if READY["internal_message"] in str(data.get("internal_message", "")):
+                ready, simstep = read_echo(body)
+                if ready:
                     state["ready"] = True
-                if "simstep" in data:
-                    try:
-                        state["sim"] = float(data["simstep"]) / 1000.0
-                        state["last"] = wallclock.monotonic()
-                    except (TypeError, ValueError):
-                        pass
+                if simstep is not None:
+                    state["sim"] = simstep
+                    state["last"] = wallclock.monotonic()
 
             channel.basic_consume(own, on_echo, auto_ack=True)
             self.ready.set()  # bound: the co-simulation may start now

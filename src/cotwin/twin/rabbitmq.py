@@ -397,6 +397,23 @@ def echo_message(inputs: dict[str, object], t: float, h: float) -> dict:
     return out
 
 
+def read_echo(body: bytes) -> tuple[bool, float | None]:
+    """What a publisher learns from a message on `from_cosim`: whether it is the ready message, and
+    the simulated time it announces (`simstep` in s), None where it has none or it is not a number."""
+    try:
+        data = json.loads(body)
+    except ValueError:
+        return False, None
+    if not isinstance(data, dict):
+        return False, None
+    ready = READY["internal_message"] in str(data.get("internal_message", ""))
+    try:
+        simstep = float(data["simstep"]) / 1000.0
+    except (KeyError, TypeError, ValueError):
+        simstep = None
+    return ready, (simstep if simstep is not None and math.isfinite(simstep) else None)
+
+
 class RabbitMQUnit(PythonUnit):
     """The command source of a live twin: outputs the commands as the RMQ FMU does (see module doc),
     inputs are echoed on `from_cosim` every step (the monitored joints, as in the paper)."""

@@ -23,7 +23,7 @@ from ...diagnostics import CotwinError
 from ...mapping.amqp import connect
 from ..project import RabbitMQSettings
 from ..publisher import idle_values, now_iso
-from ..rabbitmq import READY, parse_message
+from ..rabbitmq import parse_message, read_echo
 
 log = logging.getLogger("cotwin.dashboard")
 
@@ -83,18 +83,11 @@ class PagePublisher:
             self._thread = None
 
     def _on_echo(self, channel, method, props, body) -> None:
-        try:
-            data = json.loads(body)
-        except ValueError:
-            return
-        if not isinstance(data, dict):
-            return
-        if READY["internal_message"] in str(data.get("internal_message", "")):
+        ready, simstep = read_echo(body)
+        if ready:
             self.twin_ready.set()
-        try:
-            self.echoed = float(data["simstep"]) / 1000.0
-        except (KeyError, TypeError, ValueError):
-            pass
+        if simstep is not None:
+            self.echoed = simstep
 
     def _run(self) -> None:
         s = self.settings
