@@ -4,6 +4,7 @@ advance on the embedded SimulatedEndpoint in the same run, and the broker endpoi
 
 from __future__ import annotations
 
+import secrets
 import socket
 import statistics
 import sys
@@ -71,11 +72,13 @@ def main() -> None:
                 from cotwin.mapping.broker import BrokerEndpoint, RobotServer
 
                 queue = f"cotwin.bench.{uuid.uuid4().hex[:8]}"
-                server = RobotServer(SimulatedEndpoint(PlatformSimulator(models.tree, models.scene)), queue)
+                secret = secrets.token_bytes(32)  # the robot link is authenticated (docs/security.md)
+                server = RobotServer(SimulatedEndpoint(PlatformSimulator(models.tree, models.scene)), queue,
+                                     secret=secret)
                 thread = threading.Thread(target=server.serve, daemon=True)
                 thread.start()
                 server.ready.wait(10)
-                broker = BrokerEndpoint(models.tree, queue)
+                broker = BrokerEndpoint(models.tree, queue, secret=secret)
                 peer = figures(timed(broker, dt))
                 broker.close()
                 server.stop()

@@ -65,7 +65,7 @@ def setpoints(tree, cell, joints: list[str]) -> np.ndarray:
     tool = ik.find_tool(tree)
     postures, q = [np.zeros(len(joints))], {}
     for hole in ((0, 23, 1), (3, 20, 2), (8, 10, 0), (1, 13, 0)):
-        q = ik.solve(tree, np.array(cell.hole(*hole)), seed=q, tool=tool).q
+        q = ik.solve(tree, np.array(cell.hole(*hole)), tool=tool, current=q or None).q
         postures.append(np.array([q[j] for j in joints]))
     rows = []
     for a, b in zip(postures, postures[1:]):
