@@ -10,7 +10,8 @@ from cotwin.diagnostics import Severity
 from cotwin.dmodel.fmu import fmu_sources
 from cotwin.dmodel.program import build_program
 from cotwin.robosim.check import check_paths
-from language_support import checked, run_both
+from language_support import checked, fmu_trace, interpreter_trace, run_both
+from cotwin.dmodel.fmu import build_fmu
 from test_robosim_language import machine
 
 ARITHMETIC = machine("""	var x: int
@@ -109,3 +110,28 @@ module unsigned {{ robotic platform long {{ uses In uses Out provides Ops }} cre
 def test_generated_sources_are_deterministic_for_a_rich_model(tmp_path):
     project, _ = checked(tmp_path, ARITHMETIC)
     assert fmu_sources(build_program(project)) == fmu_sources(build_program(project))
+
+
+WIDE = machine("""	var x: int
+	initial i
+	state A { }
+	state B { }
+	transition t0 { from i to A }
+	transition t1 { from A to B condition $go?x action $out!(x + 2147483646) }
+	transition t2 { from B to A exec }
+	transition t3 { from A to A exec condition not $go }""")
+
+
+def test_integer_ports_beyond_int32_are_an_error_naming_the_port_not_wrapped(tmp_path):
+    """The model computes in int64 (the interpreter agrees on the values); an FMI Integer port holds
+    32 bits, so a value beyond it ends the step with an error naming the port instead of reaching an
+    importer wrapped (fmpy's fmi2GetInteger) or the in-process master unchecked."""
+    project, _ = checked(tmp_path, WIDE)
+    program = build_program(project, None)
+    assert interpreter_trace(program, [{"go": 1}, {"go": 2}])[1][0] == ["out!2147483648"]
+    fmu = build_fmu(program, tmp_path / "model.fmu")
+    trace = fmu_trace(program, fmu, [{"go": 1}, {"go": 2}, {"go": 0}])
+    assert trace[0][0] == ["out!2147483647"]
+    kind, text = trace[1]
+    assert kind == "error" and "does not fit an FMI Integer (int32)" in text and "= 2147483648" in text, text
+    assert len(trace) == 2

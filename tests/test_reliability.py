@@ -147,14 +147,26 @@ def test_multimodel_phantom_instances_fan_in_and_types_are_errors(system, tmp_pa
 
     def problems(data) -> str:
         path = tmp_path / "bad.json"
-        path.write_text(json.dumps(data))
+        path.write_text(json.dumps(data, indent=2))
         with pytest.raises(CotwinError) as err:
             execution_for(read_multimodel(path))
         return str(err.value)
 
+    def line_of(data, needle: str) -> int:
+        lines = json.dumps(data, indent=2).splitlines()
+        return next(k for k, line in enumerate(lines, 1) if needle in line)
+
     typo = json.loads(json.dumps(mm))
     typo["connections"]["{dmodel}.dmodel.movediscrete"] = ["{mapping}.mappin.movediscrete"]
-    assert "instance {mapping}.mappin receives inputs but nothing reads its outputs" in problems(typo)
+    text = problems(typo)
+    assert "instance {mapping}.mappin receives inputs but nothing reads its outputs" in text
+    assert f"bad.json:{line_of(typo, 'mappin.')}:" in text  # the line of the misspelt name, not 1:1
+    sender = json.loads(json.dumps(mm))  # misspelt where it sends: the d-model would read a copy nobody drives
+    sender["connections"]["{mapping}.maping.feasibleMoveDiscreteCommand"] = \
+        sender["connections"].pop("{mapping}.mapping.feasibleMoveDiscreteCommand")
+    text = problems(sender)
+    assert "instance {mapping}.maping only sends outputs" in text and "{mapping}.mapping" in text
+    assert f"bad.json:{line_of(sender, 'maping.')}:" in text
     fan_in = json.loads(json.dumps(mm))
     fan_in["connections"]["{dmodel}.dmodel.stop"].append("{mapping}.mapping.movediscrete")
     assert "input {mapping}.mapping.movediscrete has two sources" in problems(fan_in)

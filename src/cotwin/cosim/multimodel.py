@@ -55,7 +55,7 @@ class MultiModel:
 
 def read_multimodel(path: str | Path) -> MultiModel:
     path = Path(path)
-    problems: list[str] = []
+    problems: list[tuple[str, str | None]] = []  # (message, the JSON string it is about)
     try:
         raw = path.read_bytes()
         text = raw.decode("utf-8")
@@ -74,22 +74,22 @@ def read_multimodel(path: str | Path) -> MultiModel:
         raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, "a multimodel is a JSON object")])
     for key in data:
         if key not in KNOWN_KEYS:
-            problems.append(f"unknown key '{key}' (Maestro would ignore it silently)")
+            problems.append((f"unknown key '{key}' (Maestro would ignore it silently)", key))
     fmus = {}
     for key, file in (data.get("fmus") or {}).items():
         if not re.fullmatch(r"\{[^}]+\}", key):
-            problems.append(f"fmus: key '{key}' must look like '{{name}}'")
+            problems.append((f"fmus: key '{key}' must look like '{{name}}'", key))
         fmus[key] = (path.parent / file) if not Path(file).is_absolute() else Path(file)
         if not fmus[key].is_file():
-            problems.append(f"fmus: {key}: no file {fmus[key]}")
+            problems.append((f"fmus: {key}: no file {fmus[key]}", file))
 
     def port(text: str, where: str):
         m = PORT.match(text) if isinstance(text, str) else None
         if m is None:
-            problems.append(f"{where}: '{text}' is not a port '{{key}}.instance.variable'")
+            problems.append((f"{where}: '{text}' is not a port '{{key}}.instance.variable'", text))
             return None
         if m.group(1) not in fmus:
-            problems.append(f"{where}: '{text}' names FMU {m.group(1)}, which 'fmus' does not list")
+            problems.append((f"{where}: '{text}' names FMU {m.group(1)}, which 'fmus' does not list", text))
             return None
         return m.group(1), m.group(2), m.group(3)
 
@@ -109,12 +109,12 @@ def read_multimodel(path: str | Path) -> MultiModel:
     for inst, names in (data.get("logVariables") or {}).items():
         m = re.match(r"^(\{[^}]+\})\.([A-Za-z_]\w*)$", inst)
         if m is None or m.group(1) not in fmus:
-            problems.append(f"logVariables: '{inst}' is not a known '{{key}}.instance'")
+            problems.append((f"logVariables: '{inst}' is not a known '{{key}}.instance'", inst))
             continue
         log[(m.group(1), m.group(2))] = list(names)
     algorithm = data.get("algorithm") or {}
     if algorithm.get("type", "fixed-step") != "fixed-step" or not isinstance(algorithm.get("size"), (int, float)):
-        problems.append("algorithm: only {'type': 'fixed-step', 'size': seconds} is supported")
+        problems.append(("algorithm: only {'type': 'fixed-step', 'size': seconds} is supported", "algorithm"))
     extra = data.get("cotwin") or {}
     delayed = set()
     for inst in extra.get("delayed", []):
@@ -122,39 +122,60 @@ def read_multimodel(path: str | Path) -> MultiModel:
         if m:
             delayed.add((m.group(1), m.group(2)))
         else:
-            problems.append(f"cotwin.delayed: '{inst}' is not a '{{key}}.instance'")
+            problems.append((f"cotwin.delayed: '{inst}' is not a '{{key}}.instance'", inst))
     problems.extend(_phantoms(connections, log))
     for key, value in (("startTime", data.get("startTime", 0.0)), ("endTime", data.get("endTime", 10.0)),
                        ("algorithm.size", algorithm.get("size", 0.1))):
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            problems.append(f"{key} must be a finite number, got {value!r}")
+            problems.append((f"{key} must be a finite number, got {value!r}", key.split(".")[-1]))
     if isinstance(algorithm.get("size"), (int, float)) and not algorithm["size"] > 0:
-        problems.append(f"algorithm.size must be positive, got {algorithm['size']!r}")
+        problems.append((f"algorithm.size must be positive, got {algorithm['size']!r}", "size"))
     if not isinstance(data.get("simulationProgramDelay", False), bool):
-        problems.append(f"simulationProgramDelay must be true or false, got {data['simulationProgramDelay']!r}")
+        problems.append((f"simulationProgramDelay must be true or false, got {data['simulationProgramDelay']!r}", "simulationProgramDelay"))
     if problems:
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, p) for p in problems])
+        raise CotwinError([Finding(Location(str(path), *_place(text, needle)), Severity.ERROR, message)
+                           for message, needle in problems])
     return MultiModel(path, fmus, connections, parameters, log, float(algorithm.get("size", 0.1)),
                       float(data.get("startTime", 0.0)), float(data.get("endTime", 10.0)),
                       bool(data.get("simulationProgramDelay", False)), extra.get("algorithm", "jacobi"), delayed)
 
 
-def _phantoms(connections, log) -> list[str]:
-    """Instances that take inputs while nothing reads or logs their outputs, beside another instance of
-    the same FMU: almost always a misspelt instance name, which Maestro would run as a second, silent
-    copy (and the intended instance would miss those inputs)."""
-    feeds, targets = set(), set()
+def _phantoms(connections, log) -> list[tuple[str, str]]:
+    """Instances that are almost always a misspelt instance name, beside another instance of the same
+    FMU, which Maestro would run as a second, silent copy:
+    - one that takes inputs while nothing reads or logs its outputs (the intended instance misses
+      those inputs);
+    - one that only sends, unlogged, beside an instance that takes inputs (the intended instance's
+      output is never read: its readers get the copy's, which nothing drives)."""
+    feeds, targets, first = set(), set(), {}
     for c in connections:
         feeds.add(c[:2])
         targets.add(c[3:5])
+        first.setdefault(c[:2], f"{c[0]}.{c[1]}.{c[2]}")
+        first.setdefault(c[3:5], f"{c[3]}.{c[4]}.{c[5]}")
+    everything = feeds | targets | set(log)
     out = []
-    for inst in sorted(targets - feeds - set(log)):
-        twins = sorted({i for i in feeds | targets | set(log) if i[0] == inst[0] and i != inst})
-        if twins:
-            out.append(f"instance {inst[0]}.{inst[1]} receives inputs but nothing reads its outputs or logs it, beside "
-                       f"{', '.join(f'{k}.{n}' for k, n in twins)} of the same FMU: a misspelt instance name? (log one "
-                       "of its variables if it is meant to be a separate instance)")
+    advice = "a misspelt instance name? (log one of its variables if it is meant to be a separate instance)"
+    for inst in sorted(everything - set(log)):
+        twins = sorted(i for i in everything if i[0] == inst[0] and i != inst)
+        named = ", ".join(f"{k}.{n}" for k, n in twins)
+        if inst in targets and inst not in feeds and twins:
+            out.append((f"instance {inst[0]}.{inst[1]} receives inputs but nothing reads its outputs or logs it, "
+                        f"beside {named} of the same FMU: {advice}", first[inst]))
+        elif inst in feeds and inst not in targets and any(i in targets for i in twins):
+            out.append((f"instance {inst[0]}.{inst[1]} only sends outputs (nothing drives its inputs), beside "
+                        f"{named} of the same FMU, which takes inputs: {advice}", first[inst]))
     return out
+
+
+def _place(text: str, needle: str | None) -> tuple[int, int]:
+    """Line and column of the first JSON string `needle` in the file's text (1:1 when it is not there)."""
+    if needle is None:
+        return 1, 1
+    at = text.find(json.dumps(needle))
+    if at < 0:
+        return 1, 1
+    return text.count("\n", 0, at) + 1, at - text.rfind("\n", 0, at)
 
 
 def unit_name(instance: tuple[str, str]) -> str:

@@ -228,13 +228,29 @@ size_t cotwin_ports(fmi2Component c, const char **kind, const int **slot, double
 
 /* ---- stepping ---- */
 
+/* The model computes in int64; an FMI Integer is 32 bits. A value beyond that is an error naming the
+ * port, never wrapped when an importer reads it (fmi2GetInteger) or the master reads the slot. */
+static int integers_fit(State *s) {
+    for (int v = 0; v < N_VARIABLES; v++) {
+        if (port_kind[v] != 'i') continue;
+        int64_t x = s->values.i[port_slot[v]];
+        if (x < INT32_MIN || x > INT32_MAX) {
+            snprintf(s->model.message, sizeof s->model.message,
+                     "port %s = %lld does not fit an FMI Integer (int32) (cycle %lld)", port_name[v],
+                     (long long)x, (long long)s->model.cycle);
+            return 0;
+        }
+    }
+    return 1;
+}
+
 /* One cycle: inputs in (input events only in the first cycle of a step), the model's cycle, outputs out. */
 static int run_cycle(State *s, int first) {
     ports_to_model(&s->model, s->values.r, s->values.i, s->values.b);
     if (!first) ports_clear_input_events(&s->model);
     if (model_step(&s->model)) return 1;
     ports_from_model(&s->model, s->values.r, s->values.i, s->values.b);
-    return 0;
+    return N_INTEGER > 0 && !integers_fit(s);
 }
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
