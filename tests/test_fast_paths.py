@@ -93,3 +93,23 @@ def test_values_cross_connections_of_every_type_in_bound_groups(algorithm):
         assert seen == [(False, 0, 0, 0), f[0], f[1]]
     else:  # the same step's
         assert seen == f
+
+
+def test_a_result_file_being_written_is_refused_to_a_second_run(tmp_path):
+    """Two runs into one CSV (cotwin simulate -o f.csv twice) interleaved rows of different widths: the
+    second is refused with a clear error while the first writes, and the first's result is whole."""
+    def execution(names):
+        unit = _unit("{u}.u", [Port(n, "Real", "output") for n in names], lambda t, h: None)
+        system = System.of([unit], [], log={"{u}.u": names})
+        return Execution(system, Jacobi(), 0.5, observers=[CSVWriter(tmp_path / "out.csv")])
+
+    first = execution(["a", "b", "c"])
+    first.initialize()  # writing out.csv.part
+    with pytest.raises(CotwinError, match="out.csv is being written by another run"):
+        execution(["a"]).run(1.0)
+    first.run(2.0)
+    rows = list(csv.reader(open(tmp_path / "out.csv")))
+    assert rows[0] == ["time", "{u}.u.a", "{u}.u.b", "{u}.u.c"] and len(rows) == 6  # t = 0 .. 2
+    assert {len(r) for r in rows} == {4}
+    execution(["a"]).run(1.0)  # released once the first has finished
+    assert list(csv.reader(open(tmp_path / "out.csv")))[0] == ["time", "{u}.u.a"]

@@ -78,8 +78,12 @@ class Execution:
 
     def initialize(self) -> None:
         self._setup()
-        for o in self.observers:
-            o.simulation_initialized(self)
+        try:
+            for o in self.observers:
+                o.simulation_initialized(self)
+        except BaseException as err:  # an observer that cannot start (a result file in use ...) ends the run
+            self.close(err)
+            raise
 
     def _setup(self) -> None:
         self._wall = wallclock.perf_counter()

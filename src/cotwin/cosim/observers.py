@@ -5,6 +5,7 @@ and live publishers are all observers, so the step loop knows none of them.
 
 from __future__ import annotations
 
+import fcntl
 import math
 import os
 import queue
@@ -12,6 +13,7 @@ import time as wallclock
 from pathlib import Path
 from typing import Callable
 
+from ..diagnostics import CotwinError
 from .algorithm import UNSET
 
 
@@ -64,7 +66,15 @@ class CSVWriter(Observer):
     def simulation_initialized(self, execution) -> None:
         self.columns = self.columns if self.columns is not None else execution.system.observed()
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fd = os.open(self.part, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        fd = os.open(self.part, os.O_WRONLY | os.O_CREAT, 0o644)
+        try:  # one writer per result file: another run writing it would interleave rows of its own
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise CotwinError(f"{self.path} is being written by another run; choose another output file or "
+                              "wait for it to finish") from None
+        os.ftruncate(fd, 0)
+        self._fd = fd
         header = ["time"] + [self.column_name(u, v) for u, v in self.columns]
         self._lines.append(",".join(_csv_cell(h) for h in header) + "\n")
         self._read = execution.reader(list(self.columns))
@@ -232,8 +242,6 @@ class StateFile(Observer):
             self.save(execution)
 
     def save(self, execution) -> None:
-        from ..diagnostics import CotwinError
-
         try:
             blob = execution.get_state()
         except CotwinError as err:
