@@ -90,6 +90,8 @@ def test_plan_values_out_of_range_or_ill_timed_are_located_errors(system, tmp_pa
         "1000,true,1,1,1\n1000,true,2,2,2": r"plan.csv:3:1: error: a second moveDiscreteCommand at 1 s",
         "1000,yes,1,1,1": "is not true/false",
         "1000,true," + "9" * 100_000 + ",0,0": "longer than",
+        "1000,true,1,1,1\n2000,true," + "9" * 5_000_000 + ",0,0": r"plan.csv:3:1: error: a cell longer than",
+        '1000,true,1,1,1\n2000,true,"' + "9\n" * 200_000: r"plan.csv:\d{4,}:1: error: bad CSV: field larger",
     }
     for row, message in cases.items():
         plan.write_text(header + row + "\n")
@@ -98,6 +100,26 @@ def test_plan_values_out_of_range_or_ill_timed_are_located_errors(system, tmp_pa
     plan.write_bytes(header.encode() + b"1000,true,1,\xff,1\n")
     with pytest.raises(CotwinError, match=r"plan.csv:2:\d+: error: the plan is not UTF-8"):
         read_plan(plan, system.models.program)
+
+
+def test_two_commands_of_one_event_in_one_step_are_an_error_not_a_lost_command(system, tmp_path):
+    """At the plan's own times they are apart, but a step of 0.1 s would deliver both at once and the
+    first would be lost: the run refuses at its first step, naming both lines; a step that separates
+    them runs."""
+    from cotwin.twin.run import run_twin
+
+    plan = tmp_path / "plan.csv"
+    plan.write_text("timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,MovementArgs_target_Z\n"
+                    "1000,true,0,23,1\n1050,true,3,20,2\n")
+    twin = system.with_plan(read_plan(plan, system.models.program))
+    with pytest.raises(CotwinError, match=r"plan.csv:3:1: error: a second moveDiscreteCommand at 1.05 s, in the step "
+                                          r"of 0.1 s that has one at 1 s \(the first is at .*plan.csv:2:1\)"):
+        run_twin(twin, tmp_path / "coarse", step=0.1, end=2.0, plot=False)
+    ran = run_twin(twin, tmp_path / "fine", step=0.05, end=2.0, plot=False)
+    rows = list(csv.DictReader(open(ran.csv)))
+    pulses = [r["{controller}.controller.MovementArgs_target_X"] for r in rows
+              if r["{controller}.controller.moveDiscreteCommand"] == "true"]
+    assert pulses == ["0", "3"]  # both delivered, each in its own step
 
 
 def test_scenario_and_project_tomls_are_strict(system, tmp_path, project):

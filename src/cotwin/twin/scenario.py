@@ -84,16 +84,35 @@ def _decode(path: Path, what: str) -> str:
 
 
 def _same_time(commands: list[Command], events: set[str], problems: list[Finding], path: Path) -> None:
+    problems.extend(same_step(commands, events))
+
+
+def _location(where: str) -> Location:
+    """A command's `where` (file:line:column, or a name such as "plan item 2") as a Location."""
+    parts = where.rsplit(":", 2)
+    if len(parts) == 3 and parts[1].isdigit() and parts[2].isdigit():
+        return Location(parts[0], int(parts[1]), int(parts[2]))
+    return Location(where, 1, 1)
+
+
+def same_step(commands: list[Command], events: set[str], h: float = 0.0, start: float = 0.0) -> list[Finding]:
+    """Commands raising one event in the same step of size `h` from `start` (with h = 0: at the same
+    time): one step delivers an event once, so all but one would be lost."""
+    eps = 1e-9
     seen: dict[tuple[float, str], Command] = {}
+    found = []
     for c in commands:
+        slot = c.time if h <= 0 else math.floor((c.time - start + eps) / h)
         for port, value in c.values:
             if port in events and value is True:
-                first = seen.setdefault((c.time, port), c)
+                first = seen.setdefault((slot, port), c)
                 if first is not c:
-                    line, column = c.where.rsplit(":", 2)[-2:]
-                    problems.append(Finding(Location(str(path), int(line), int(column)), Severity.ERROR,
-                                            f"a second {port} at {c.time:g} s (the first is at {first.where}): "
-                                            "one step delivers an event once, so one of them would be lost"))
+                    when = f"at {c.time:g} s" if h <= 0 else f"at {c.time:g} s, in the step of {h:g} s that has one at {first.time:g} s"
+                    found.append(Finding(_location(c.where), Severity.ERROR,
+                                         f"a second {port} {when} (the first is at {first.where}): one step "
+                                         "delivers an event once, so one of them would be lost"
+                                         + ("" if h <= 0 else ": use a shorter step or space the commands")))
+    return found
 
 
 def read_plan(path: str | Path, program: Program) -> list[Command]:
@@ -106,10 +125,13 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
         problems.append(Finding(Location(str(path), line, column), Severity.ERROR, message))
 
     lines = text.splitlines()
+    clip = min(MAX_FIELD * 4, csv.field_size_limit() - 1)  # a longer cell is reported below, not by csv
+    reader = csv.reader(line if len(line) <= clip else line[:clip] for line in lines)
     try:
-        rows = list(csv.reader(line if len(line) <= MAX_FIELD * 4 else line[:MAX_FIELD * 4] for line in lines))
+        rows = list(reader)
     except csv.Error as err:
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, f"bad CSV: {err}")]) from None
+        raise CotwinError([Finding(Location(str(path), max(reader.line_num, 1), 1), Severity.ERROR,
+                                   f"bad CSV: {err}")]) from None
     if not rows or not rows[0] or rows[0][0].strip() != "timestep":
         raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
                                    "a plan starts with a header whose first column is 'timestep' (ms)")])
@@ -125,11 +147,11 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
         if not row or all(not cell.strip() for cell in row):
             continue
         starts = _column_starts(lines[line - 1])
+        if len(lines[line - 1]) > clip or any(len(cell) > MAX_FIELD for cell in row):
+            problem(line, 1, f"a cell longer than {MAX_FIELD} characters")
+            continue
         if len(row) != len(header):
             problem(line, 1, f"{len(row)} values for {len(header)} columns")
-            continue
-        if any(len(cell) > MAX_FIELD for cell in row):
-            problem(line, 1, f"a cell longer than {MAX_FIELD} characters")
             continue
         values, ok = [], True
         try:
@@ -259,6 +281,7 @@ class ScenarioUnit(PythonUnit):
         self.events = {ev.name for ev in program.inputs} & set(used)
         self.commands = sorted(commands, key=lambda c: c.time)
         self._next = 0
+        self._checked_step = None
 
     @property
     def command_events(self) -> set[str]:
@@ -272,6 +295,11 @@ class ScenarioUnit(PythonUnit):
             self._next += 1
 
     def step(self, t: float, h: float) -> None:
+        if h != self._checked_step:  # once per step size: no two commands of one event may share a step
+            problems = same_step(self.commands[self._next:], self.events, h, t)
+            if problems:
+                raise CotwinError(problems)
+            self._checked_step = h
         self.time = t + h
         for ev in self.events:
             self.values[ev] = False
