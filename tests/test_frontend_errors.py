@@ -158,3 +158,13 @@ def test_unterminated_comment_is_reported_without_blowing_up(tmp_path):
                           text=True, timeout=60)
     assert proc.returncode == 1
     assert f"{tmp_path / 'm.rst'}:16:1: error: unterminated comment" in proc.stderr
+
+
+def test_a_model_that_is_not_utf8_is_located_at_the_byte(tmp_path):
+    lines = DMODEL.split("\n")
+    lines[5] = lines[5] + " // caf\xe9"
+    (tmp_path / "m.rst").write_bytes("\n".join(lines).encode("latin-1"))
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "check", str(tmp_path)], capture_output=True, text=True)
+    column = len(lines[5].encode("latin-1"))
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr
+    assert f"{tmp_path / 'm.rst'}:6:{column}: error: the file is not UTF-8 text (byte 0xe9)" in proc.stderr

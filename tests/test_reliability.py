@@ -133,6 +133,7 @@ def test_scenario_and_project_tomls_are_strict(system, tmp_path, project):
         '[[command]]\ntime = 1\nevent = "moveDiscreteCommand"\nspeed = 2\n': "unknown key 'speed'",
         '[[command]]\ntime = 1\nevent = "moveDiscreteCommand"\n[[command]]\ntime = 1\nevent = "moveDiscreteCommand"\n': "a second moveDiscreteCommand",
         "[[command]\n": r"s.toml:1:\d+: error: bad TOML",
+        '[[command]]\ntime = 1.0\nevent = = "x"\n': r"s.toml:3:\d+: error: bad TOML",  # at its line, not 1:1
     }
     for text, message in cases.items():
         scenario.write_text(text)

@@ -96,7 +96,7 @@ class System:
                     continue
                 kinds.append(p.type)
             if None not in kinds and kinds[0] != kinds[1]:
-                problems.append(f"connection {c}: a {kinds[0]} output cannot feed a {kinds[1]} input")
+                problems.append(f"connection {c}: {_article(kinds[0])} output cannot feed {_article(kinds[1])} input")
             key = (c.target, c.input)
             if key in sources and sources[key] != c:
                 problems.append(f"input {c.target}.{c.input} has two sources: {sources[key].source}.{sources[key].output} "
@@ -137,3 +137,8 @@ class System:
         for u, names in self.log.items():
             out[u].extend(names)
         return [(u, n) for u in self.units for n in dict.fromkeys(out[u])]
+
+
+def _article(kind: str) -> str:
+    """'a Real', 'an Integer'."""
+    return f"{'an' if kind[:1] in 'AEIOU' else 'a'} {kind}"

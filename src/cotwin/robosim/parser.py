@@ -167,9 +167,15 @@ def parse_file(path: str | Path) -> tuple[SourceFile | None, list[Finding]]:
     """Read and parse a file; unreadable files are findings too."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        return None, [Finding(Location(str(path), 1, 1), Severity.ERROR, f"cannot read file: {err}")]
+        raw = path.read_bytes()
+        text = raw.decode("utf-8")
+    except OSError as err:
+        return None, [Finding(Location(str(path), 1, 1), Severity.ERROR, f"cannot read file: {err.strerror or err}")]
+    except UnicodeDecodeError as err:  # located at the offending byte, like every other input
+        line = raw.count(b"\n", 0, err.start) + 1
+        column = err.start - (raw.rfind(b"\n", 0, err.start) + 1) + 1
+        return None, [Finding(Location(str(path), line, column), Severity.ERROR,
+                              f"the file is not UTF-8 text (byte 0x{raw[err.start]:02x})")]
     return parse_text(text, str(path))
 
 
