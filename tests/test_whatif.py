@@ -149,6 +149,7 @@ def test_whatif_requests_over_the_broker_are_answered_without_disturbing_the_twi
     assert (tmp_path / "live" / "dt" / "outputs.csv").read_text() == (tmp_path / "quiet" / "dt" / "outputs.csv").read_text()
     assert set(answers) == {"good", "bad", "worse"}
     good = answers["good"]
+    assert "error" not in good, good
     assert 0.0 < good["start"] < 7.0 and good["commands"][0]["feasible"] is True and good["completion_time"] > good["start"]
     assert "bad what-if request" in answers["bad"]["error"] and "unknown event 'fly'" in answers["worse"]["error"]
 

@@ -299,6 +299,7 @@ class WhatIfService:
         self.requests: queue.Queue = queue.Queue()
         self.answered = 0
         self._pending = 0
+        self._futures: set = set()
         self._pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_init,
                                          initargs=(str(Path(project).resolve()), str(artefacts) if artefacts else None))
         self._connection = connect(url, "cotwin what-if")
@@ -374,11 +375,18 @@ class WhatIfService:
                 self._reply(props, {"error": "; ".join(f.message for f in err.findings)})
                 continue
             future = self._pool.submit(_worker_predict, plan, state, horizon, decimate)
+            self._futures.add(future)
             future.add_done_callback(lambda f, props=props: self._done(props, f))
 
     def _done(self, props, future) -> None:
+        from concurrent.futures import CancelledError
+        from concurrent.futures.process import BrokenProcessPool
+
+        self._futures.discard(future)
         try:
             answer = future.result()
+        except (CancelledError, BrokenProcessPool):
+            answer = {"error": "the twin stopped before this what-if finished"}
         except CotwinError as err:
             answer = {"error": "; ".join(f.message for f in err.findings)}
         except Exception as err:  # noqa: BLE001 - the worker's failure is the requester's answer
@@ -388,12 +396,15 @@ class WhatIfService:
         self._reply(props, answer)
 
     def close(self, wait: float = 60.0) -> None:
-        """Stop taking requests; answer those running (for at most `wait` seconds), drop the others."""
+        """Stop taking requests; answer those already forked (for at most `wait` seconds in all: a loaded
+        machine may not even have started the worker when the twin ends), and tell the others why not."""
+        from concurrent.futures import wait as wait_for
+
+        futures = list(self._futures)
+        wait_for(futures, timeout=wait)
         running = list((getattr(self._pool, "_processes", None) or {}).values())
         self._pool.shutdown(wait=False, cancel_futures=True)
-        deadline = time.monotonic() + wait
         for process in running:
-            process.join(max(0.0, deadline - time.monotonic()))
             if process.is_alive():
                 process.kill()
         self._stop.set()
