@@ -180,3 +180,20 @@ def test_a_sweep_gives_the_same_answers_on_a_local_pool_and_on_ray(system, tmp_p
         subprocess.run([ray, "stop", "--force"], capture_output=True, timeout=120)
         shutil.rmtree(temp, ignore_errors=True)
     assert on_ray == local
+
+
+def test_a_ray_address_nobody_listens_at_is_refused_at_once(system, tmp_path):
+    """Ray retries an unreachable head for minutes (a sweep looked hung): cotwin says so at once."""
+    pytest.importorskip("ray", reason="Ray is an optional extra (pip install 'cotwin[ray]')")
+    from conftest import EXAMPLES
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]  # closed again: nobody listens there
+    plans = grid(system.models.program, "moveDiscreteCommand", {"target_X": [0], "target_Y": [0], "target_Z": [0]})
+    started = time.monotonic()
+    with pytest.raises(CotwinError, match=f"cannot reach the Ray cluster at '127.0.0.1:{port}'"):
+        run_sweep(EXAMPLES / "ur5e" / "cotwin.toml", plans, horizon=2.0, ray=f"127.0.0.1:{port}", artefacts=tmp_path)
+    with pytest.raises(CotwinError, match="a Ray address is 'auto', 'HOST:PORT'"):
+        run_sweep(EXAMPLES / "ur5e" / "cotwin.toml", plans, horizon=2.0, ray="somewhere", artefacts=tmp_path)
+    assert time.monotonic() - started < 60

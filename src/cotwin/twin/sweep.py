@@ -108,6 +108,22 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
             shutil.rmtree(scratch, ignore_errors=True)
 
 
+def _reachable(address: str, timeout: float = 5.0) -> None:
+    """Refuse a Ray address nobody listens at, at once: Ray itself retries an unreachable head for
+    minutes before it gives up ("auto" and "local" are Ray's to resolve)."""
+    import socket
+
+    if address in ("auto", "local"):
+        return
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit() or not 0 < int(port) < 65536:
+        raise CotwinError(f"a Ray address is 'auto', 'HOST:PORT' or 'ray://HOST:PORT', not {address!r}")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as err:
+        raise CotwinError(f"cannot reach the Ray cluster at {address!r}: {err.strerror or err}") from None
+
+
 def _on_ray(project, plans, state, horizon, step, address, artefacts) -> list[dict]:
     try:
         import ray
@@ -115,6 +131,7 @@ def _on_ray(project, plans, state, horizon, step, address, artefacts) -> list[di
         raise CotwinError("sweeps on Ray need the ray extra: pip install 'cotwin[ray]'") from None
     started_here = not ray.is_initialized()
     if started_here:
+        _reachable(address)
         try:
             ray.init(address=address, logging_level="ERROR", log_to_driver=False)
         except (ConnectionError, RuntimeError, ValueError) as err:
