@@ -186,8 +186,16 @@ def test_bad_messages_are_dropped_with_a_reason_and_the_run_goes_on(broker, tmp_
                        "MovementArgs_target_X": 15, "MovementArgs_target_Y": 0, "MovementArgs_target_Z": 0}).encode(),
            json.dumps({"time": stamp.isoformat(), "jump": True}).encode(), b"[" * 50_000]
 
-    def rogue():
-        time.sleep(1.0)
+    echoes = channel.queue_declare("", exclusive=True).method.queue
+    channel.queue_bind(echoes, rabbit.exchange, routing_key=rabbit.from_cosim)
+
+    def rogue():  # once the twin is bound and ready (a fixed sleep raced its FMU build on a busy machine)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            _, _, body = channel.basic_get(echoes, auto_ack=True)
+            if body is not None and read_echo(body)[0]:
+                break
+            time.sleep(0.05)
         for body in bad:
             channel.basic_publish(rabbit.exchange, rabbit.to_cosim, body)
         connection.close()

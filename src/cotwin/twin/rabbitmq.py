@@ -13,8 +13,11 @@ Three parts, each with one job:
 
 `RabbitMQUnit` is the co-simulation unit over them (`rabbitmq.fmu` packages the same unit for Maestro).
 
-Differences from the RMQ FMU, on purpose: every dropped or refused message is logged with its reason
-(logger `cotwin.rabbitmq`, and `CommandStream.refused`); a missing value ends the run with an error
+Differences from the RMQ FMU, on purpose: every dropped or refused message is counted and logged with
+its reason (logger `cotwin.rabbitmq`, at most 20 lines per 10 s, then "N more dropped messages not
+logged"; the newest MAX_REFUSED reasons are kept in `CommandStream.refused`, all are counted in
+`refused_count`); at most MAX_QUEUED values per variable wait for their time (a flood of messages
+stamped in the future is refused, not held without bound); a missing value ends the run with an error
 naming the variable, the time and the age of what it had; and a d-model input *event* (a Boolean
 port the d-model reads as an event) is true in the one step that applies a `true` message, not held
 until a `false` arrives, so each published command is delivered exactly once.
@@ -39,6 +42,7 @@ import pika
 from ..cosim.units import INT32, Port, PythonUnit
 from ..diagnostics import CotwinError
 from ..mapping.amqp import connect, redact
+from .capped_log import CappedLog
 from .project import RabbitMQSettings
 
 log = logging.getLogger("cotwin.rabbitmq")
@@ -46,6 +50,8 @@ log = logging.getLogger("cotwin.rabbitmq")
 READY = {"internal_status": "ready", "internal_message": "waiting for input data for simulation"}
 _ISO = re.compile(r"^(\d{4})-(\d{2})-(\d{2})[T ](\d{2}):(\d{2}):(\d{2})(?:[.,](\d{1,9}))?(Z|z|[+-]\d{2}:?\d{2})$")
 MAX_BYTES = 1 << 16  # a command message is a flat object of a few keys
+MAX_REFUSED = 1000  # reasons of refused messages kept (all are counted)
+MAX_QUEUED = 10_000  # values of one variable waiting for their simulation time
 
 
 def parse_time(text: str) -> datetime:
@@ -163,7 +169,8 @@ class CommandStream:
     maxage: float = 1.0  # s
     timeout: float = 60.0  # s
     t0: datetime | None = None
-    refused: list[tuple[float, str]] = field(default_factory=list)  # (wall time, reason)
+    refused: deque = field(default_factory=lambda: deque(maxlen=MAX_REFUSED))  # (wall time, reason), the newest
+    refused_count: int = 0  # every refusal, kept or not
     applied: list[tuple[float, str, object, float]] = field(default_factory=list)  # (sim, var, value, step end)
 
     def __post_init__(self) -> None:
@@ -172,11 +179,13 @@ class CommandStream:
         self.held: dict[str, _Held] = {}
         self._last: tuple[float, dict[str, object]] | None = None
         self.latest_wall: float | None = None
+        self.log = CappedLog(log, "dropped messages")
 
     def _refuse(self, reason: str, body: bytes = b"") -> None:
         excerpt = body[:80].decode("utf-8", "replace") if body else ""
         self.refused.append((wallclock.time(), reason))
-        log.warning("message dropped: %s%s", reason, f" [{excerpt}]" if excerpt else "")
+        self.refused_count += 1
+        self.log.warning("message dropped: %s%s", reason, f" [{excerpt!r}]" if excerpt else "")
 
     def _take(self, messages: list[Received]) -> None:
         for m in messages:
@@ -196,6 +205,9 @@ class CommandStream:
     def _queue(self, stamp: datetime, values: dict[str, object]) -> None:
         sim = (stamp - self.t0).total_seconds()
         for var, value in values.items():
+            if len(self.queues[var]) >= MAX_QUEUED:
+                self._refuse(f"{var} at t = {sim:.3f} s: {MAX_QUEUED} values of it already wait for their time")
+                continue
             self.queues[var].append((sim, value))
 
     def start(self) -> None:
@@ -458,6 +470,8 @@ class RabbitMQUnit(PythonUnit):
         self.values.update(self.stream.values_for(t, h))
 
     def terminate(self) -> None:
+        if self.stream is not None:
+            self.stream.log.close()
         if self.bridge is not None:
             self.reconnects = self.bridge.reconnects
         if self._own_bridge and self.bridge is not None:

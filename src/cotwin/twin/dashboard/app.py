@@ -5,7 +5,14 @@ Routes: `/` (the page), `/static/...` (its scripts, styles and the vendored thre
 (what describe.py derives from the models), `/api/status`, `/api/command` (POST: a command from the
 panel, published on the twin's broker by PagePublisher), `/api/whatif` (POST: a plan for the twin's
 what-if service, when it runs one), `/api/history` and `/api/history/{run}` (the history store), and
-`/ws`: the live stream. A client gets a `hello` (recent samples, every event
+`/ws`: the live stream.
+
+Requests are read as a hostile client might send them: a body is at most MAX_BODY bytes (a larger
+Content-Length is answered 413 before reading it, a longer body is cut off at the limit and answered
+413, a body slower than BODY_SECONDS 408), must be UTF-8 JSON without NaN or Infinity, an object with
+only the keys it documents (400 naming what is wrong); at most MAX_WHATIFS what-ifs from the page are
+in flight and at most PagePublisher.MAX_WAITING commands wait to leave (429 beyond); commands to a twin
+that has ended are refused (409), while the page keeps its last figure and state. A client gets a `hello` (recent samples, every event
 so far, the status) and then, every `period` seconds, a `batch` of what is new: samples (at most
 `max_rate` per second, evenly thinned beyond that), events and the status. Each client reads the
 feed from its own cursor on the server's event loop, so one that is slow to take its messages only
@@ -18,6 +25,7 @@ import asyncio
 import json
 import logging
 import math
+import queue
 import socket
 import threading
 import time as wallclock
@@ -30,6 +38,68 @@ from .feed import DashboardFeed
 
 log = logging.getLogger("cotwin.dashboard")
 STATIC = Path(__file__).resolve().parent / "static"
+MAX_BODY = 1 << 20  # bytes of a request body (a command or a what-if plan is a few hundred)
+BODY_SECONDS = 10.0  # to send it
+MAX_CLIENTS = 32  # live streams at once (more are closed with 1013, try again later)
+MAX_WHATIFS = 2  # what-ifs from the page in flight (each waits for a fork of the twin)
+ENDED = ("done", "stopped", "failed")
+
+
+class Refused(Exception):
+    """A request the server answers with `status` and `message` (what is wrong with it)."""
+
+    def __init__(self, status: int, message: str):
+        super().__init__(message)
+        self.status, self.message = status, message
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not a JSON number")
+
+
+async def read_json(request, limit: int = MAX_BODY, seconds: float = BODY_SECONDS):
+    """The request's body as JSON (see module doc), or Refused saying why not."""
+    length = request.headers.get("content-length")
+    if length is not None:
+        if not length.strip().isdigit():
+            raise Refused(400, f"Content-Length {length[:40]!r} is not a number of bytes")
+        if int(length) > limit:
+            raise Refused(413, f"the body of {int(length)} bytes is larger than the {limit} bytes accepted")
+
+    async def collect() -> bytes:
+        body = bytearray()
+        async for chunk in request.stream():
+            body += chunk
+            if len(body) > limit:
+                raise Refused(413, f"the body is larger than the {limit} bytes accepted")
+        return bytes(body)
+
+    try:
+        body = await asyncio.wait_for(collect(), seconds)
+    except asyncio.TimeoutError:
+        raise Refused(408, f"the body did not arrive within {seconds:g} s") from None
+    try:
+        return json.loads(body.decode("utf-8"), parse_constant=_no_constant)
+    except UnicodeDecodeError as err:
+        raise Refused(400, f"the request is not UTF-8 (byte {err.start})") from None
+    except json.JSONDecodeError as err:
+        raise Refused(400, f"the request is not JSON: {err.msg} at line {err.lineno} column {err.colno}") from None
+    except ValueError as err:
+        raise Refused(400, f"the request is not JSON: {err}") from None
+    except RecursionError:
+        raise Refused(400, "the request is not JSON: nested too deeply") from None
+
+
+def parse_run_id(text: str) -> int:
+    """A history run id from a URL, or Refused (400 not a run id, 404 out of the ids a store can hold)."""
+    from ..history import MAX_RUN_ID
+
+    if not text.isascii() or not text.isdigit() or len(text) > 30:
+        raise Refused(400, f"'{text[:40]}' is not a run id (a positive whole number)")
+    number = int(text)
+    if not 0 < number <= MAX_RUN_ID:
+        raise Refused(404, f"no run {number} (run ids are 1, 2, ...)")
+    return number
 
 
 def parse_address(text: str) -> tuple[str, int]:
@@ -104,8 +174,11 @@ class Dashboard:
             from ..rabbitmq import port_types
             from .commands import PagePublisher
 
-            self.publisher = PagePublisher(system.spec.rabbitmq, port_types(system.models.program, system.source_ports),
-                                           self.model["commands"]["events"], heartbeat=heartbeat)
+            program = system.models.program
+            scalars = {port: sc for ev in program.inputs for port, sc in ev.value_ports}
+            self.publisher = PagePublisher(system.spec.rabbitmq, port_types(program, system.source_ports),
+                                           self.model["commands"]["events"], heartbeat=heartbeat, scalars=scalars)
+        self.whatifs = 0  # what-ifs from the page in flight
         self.clients = 0
         self.skipped = 0  # samples clients skipped because they fell behind
         self._server = None
@@ -202,6 +275,9 @@ class Dashboard:
         async def status(request):
             return JSONResponse(self._status())
 
+        def refused(err: Refused) -> JSONResponse:
+            return JSONResponse({"error": err.message}, status_code=err.status)
+
         async def command(request):
             if self.publisher is None:
                 commands = self.model["commands"] if self.model else {"source": "history"}
@@ -209,17 +285,27 @@ class Dashboard:
                        "none": "this twin takes no commands"}.get(commands["source"], "no live twin to command")
                 return JSONResponse({"error": why}, status_code=409)
             try:
-                body = await request.json()
-            except (ValueError, UnicodeDecodeError):
-                return JSONResponse({"error": "the request is not JSON"}, status_code=400)
-            if not isinstance(body, dict) or not isinstance(body.get("event"), str) \
-                    or not isinstance(body.get("values", {}), dict):
-                return JSONResponse({"error": "expected {\"event\": NAME, \"values\": {PORT: VALUE, ...}}"},
-                                    status_code=400)
+                body = await read_json(request)
+            except Refused as err:
+                return refused(err)
+            shape = "expected {\"event\": NAME, \"values\": {PORT: VALUE, ...}}"
+            if not isinstance(body, dict):
+                return JSONResponse({"error": shape}, status_code=400)
+            unknown = sorted(set(body) - {"event", "values"})
+            if unknown or not isinstance(body.get("event"), str) or not isinstance(body.get("values", {}), dict):
+                why = f"unknown key {', '.join(repr(k[:40]) for k in unknown)}" if unknown \
+                    else "'event' must be a name" if not isinstance(body.get("event"), str) else "'values' must be an object"
+                return JSONResponse({"error": f"{why}: {shape}"}, status_code=400)
+            if self.feed is not None and self.feed.state in ENDED:
+                return JSONResponse({"error": f"the twin has {'ended' if self.feed.state == 'done' else self.feed.state}"
+                                              f"; it takes no more commands"}, status_code=409)
             try:
                 message = self.publisher.command(body["event"], body.get("values", {}))
             except ValueError as err:
                 return JSONResponse({"error": str(err)}, status_code=422)
+            except queue.Full:
+                return JSONResponse({"error": f"{self.publisher.MAX_WAITING} commands are waiting to be published; "
+                                              "try again later"}, status_code=429, headers={"Retry-After": "1"})
             if self.publisher.error:
                 return JSONResponse({"error": self.publisher.error}, status_code=503)
             return JSONResponse({"queued": message, "twin_ready": self.publisher.twin_ready.is_set()})
@@ -231,17 +317,26 @@ class Dashboard:
             from .whatif import ask, check_request
 
             try:
-                body = await request.json()
-            except (ValueError, UnicodeDecodeError):
-                return JSONResponse({"error": "the request is not JSON"}, status_code=400)
+                body = await read_json(request)
+            except Refused as err:
+                return refused(err)
             try:
                 checked = check_request(body, self.system.models.program)
             except CotwinError as err:
                 return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=422)
+            if self.feed is not None and self.feed.state in ENDED:
+                return JSONResponse({"error": f"the twin has {'ended' if self.feed.state == 'done' else self.feed.state}"
+                                              "; there is no live state to fork"}, status_code=409)
+            if self.whatifs >= MAX_WHATIFS:  # the server's one event loop: no lock needed
+                return JSONResponse({"error": f"{MAX_WHATIFS} what-ifs are already running; try again when one is "
+                                              "answered"}, status_code=429, headers={"Retry-After": "5"})
+            self.whatifs += 1
             try:
                 answer = await run_in_threadpool(ask, self.whatif_url, self.system.spec.deviation.exchange, checked)
             except CotwinError as err:
                 return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=504)
+            finally:
+                self.whatifs -= 1
             return JSONResponse(_finite(answer), status_code=422 if "error" in answer else 200)
 
         async def runs(request):
@@ -257,7 +352,11 @@ class Dashboard:
             if self.history_url is None:
                 return JSONResponse({"error": "no history store"}, status_code=404)
             try:
-                data = await run_in_threadpool(history_run, self.history_url, request.path_params["run_id"])
+                run_id = parse_run_id(request.path_params["run_id"])
+            except Refused as err:
+                return refused(err)
+            try:
+                data = await run_in_threadpool(history_run, self.history_url, run_id)
             except CotwinError as err:
                 return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=404)
             return JSONResponse(data)
@@ -270,7 +369,7 @@ class Dashboard:
             Route("/api/command", command, methods=["POST"]),
             Route("/api/whatif", whatif, methods=["POST"]),
             Route("/api/history", runs),
-            Route("/api/history/{run_id:int}", run),
+            Route("/api/history/{run_id}", run),
             WebSocketRoute("/ws", self._stream),
             Mount("/static", StaticFiles(directory=STATIC), name="static"),
         ]
@@ -288,6 +387,9 @@ class Dashboard:
     async def _stream(self, websocket) -> None:
         from starlette.websockets import WebSocketDisconnect
 
+        if self.clients >= MAX_CLIENTS:  # each stream costs the server's loop a task and a copy per batch
+            await websocket.close(code=1013, reason=f"{MAX_CLIENTS} pages are already following this twin")
+            return
         await websocket.accept()
         self.clients += 1
         closed = asyncio.Event()

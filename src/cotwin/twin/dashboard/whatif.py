@@ -20,8 +20,12 @@ def check_request(body: dict, program) -> dict:
     """{plan, horizon} from the page, checked; CotwinError saying what is wrong."""
     from ..whatif import plan_from_json
 
-    if not isinstance(body, dict) or set(body) - {"plan", "horizon"}:
-        raise CotwinError("a what-if request is {\"plan\": [{time, event, args}, ...], \"horizon\": seconds}")
+    shape = "a what-if request is {\"plan\": [{time, event, args}, ...], \"horizon\": seconds}"
+    if not isinstance(body, dict):
+        raise CotwinError(shape)
+    unknown = sorted(set(body) - {"plan", "horizon"})
+    if unknown:
+        raise CotwinError(f"unknown key {', '.join(map(repr, unknown))}: {shape}")
     plan_from_json(body.get("plan"), program)  # the service's own checks
     horizon = body.get("horizon", 30.0)
     if isinstance(horizon, bool) or not isinstance(horizon, (int, float)) or not 0 < horizon <= 3600:
