@@ -179,6 +179,8 @@ class Dashboard:
             self.publisher = PagePublisher(system.spec.rabbitmq, port_types(program, system.source_ports),
                                            self.model["commands"]["events"], heartbeat=heartbeat, scalars=scalars)
         self.whatifs = 0  # what-ifs from the page in flight
+        self.whatif_timeout = 120.0  # s to wait for the twin's answer
+        self.body_seconds = BODY_SECONDS
         self.clients = 0
         self.skipped = 0  # samples clients skipped because they fell behind
         self._server = None
@@ -285,7 +287,7 @@ class Dashboard:
                        "none": "this twin takes no commands"}.get(commands["source"], "no live twin to command")
                 return JSONResponse({"error": why}, status_code=409)
             try:
-                body = await read_json(request)
+                body = await read_json(request, seconds=self.body_seconds)
             except Refused as err:
                 return refused(err)
             shape = "expected {\"event\": NAME, \"values\": {PORT: VALUE, ...}}"
@@ -317,7 +319,7 @@ class Dashboard:
             from .whatif import ask, check_request
 
             try:
-                body = await read_json(request)
+                body = await read_json(request, seconds=self.body_seconds)
             except Refused as err:
                 return refused(err)
             try:
@@ -332,7 +334,8 @@ class Dashboard:
                                               "answered"}, status_code=429, headers={"Retry-After": "5"})
             self.whatifs += 1
             try:
-                answer = await run_in_threadpool(ask, self.whatif_url, self.system.spec.deviation.exchange, checked)
+                answer = await run_in_threadpool(ask, self.whatif_url, self.system.spec.deviation.exchange, checked,
+                                                 self.whatif_timeout)
             except CotwinError as err:
                 return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=504)
             finally:
