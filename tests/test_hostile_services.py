@@ -331,24 +331,48 @@ module Mod { cycleDef cycle == 1 robotic platform P { uses In uses Out } cref c 
                       ({"fast": "true"}, "argument fast: 'true' is not true or false")):
         with pytest.raises(CotwinError, match=f"plan item 1: {why}".replace("(", r"\(").replace(")", r"\)")):
             plan_from_json([{"time": 1, "event": "go", "args": args}], program)
+    # the page's panel: literals by name (a select), checked before anything is published
+    from cotwin.twin.dashboard.commands import PagePublisher
+    from cotwin.twin.rabbitmq import port_types
+
+    [go] = program.inputs
+    ports = [port for port, _ in go.value_ports]
+    panel = PagePublisher(None, port_types(program, ["go", *ports]), [{"name": "go", "values": [{"port": p} for p in ports]}],
+                          scalars=dict(go.value_ports))
+    message = panel.command("go", {"Goal_dir": "West", "Goal_count": 2, "Goal_fast": False})
+    assert (message["Goal_dir"], message["Goal_count"], message["go"]) == (3, 2, True)
+    with pytest.raises(ValueError, match="Goal_dir: 'Up' is not a literal of Dir.*Goal_count: -2 is negative"):
+        panel.command("go", {"Goal_dir": "Up", "Goal_count": -2, "Goal_fast": False})
 
 
 # ---- a stopped twin ---------------------------------------------------------------------------------------
 
-def test_a_stopped_twin_keeps_its_last_figure_and_state_on_the_page(tmp_path):
+def test_a_stopped_twin_keeps_its_last_figure_and_state_and_the_streams_stay_bounded(tmp_path, monkeypatch):
+    from websockets.exceptions import ConnectionClosed
     from websockets.sync.client import connect as ws_connect
+
+    from cotwin.twin.dashboard import app
+    from cotwin.twin.dashboard.feed import Ring
 
     system = load(ROOT / "examples" / "ur5e" / "cotwin.toml")
     with Dashboard(system, port=0, mode="run") as dash:
-        run_twin(system, tmp_path, end=1.0, observers=[dash.feed], plot=False)
+        dash.feed.events = Ring(2)  # a long run's events, in small
+        run_twin(system, tmp_path, end=3.0, observers=[dash.feed], plot=False)
+        assert dash.feed.events.count > 2 and len(list(dash.feed.events)) == 2
         dash.finish("stopped")  # already done: the state it ended in stays
         for _ in range(2):
             code, status = _request(dash.url + "api/status")
-            assert code == 200 and status["state"] == "done" and status["time"] == pytest.approx(1.0)
-        with ws_connect(dash.url.replace("http", "ws") + "ws", open_timeout=10) as ws:  # a page opened afterwards
+            assert code == 200 and status["state"] == "done" and status["time"] == pytest.approx(3.0)
+        monkeypatch.setattr(app, "MAX_CLIENTS", 1)
+        ws_url = dash.url.replace("http", "ws") + "ws"
+        with ws_connect(ws_url, open_timeout=10) as ws:  # a page opened afterwards
             hello = json.loads(ws.recv(10))
+            with ws_connect(ws_url, open_timeout=10) as extra, pytest.raises(ConnectionClosed) as closed:
+                extra.recv(10)
+            assert closed.value.rcvd.code == 1013
         assert hello["type"] == "hello" and hello["status"]["state"] == "done" and len(hello["samples"]) >= 2
-        assert hello["samples"][-1][0] == pytest.approx(1.0) and hello["sides"] == ["twin"]
+        assert hello["samples"][-1][0] == pytest.approx(3.0) and hello["sides"] == ["twin"]
+        assert len(hello["events"]) == 2 and hello["events_skipped"] == dash.feed.events.count - 2
         assert _request(dash.url + "api/model")[0] == 200
 
 

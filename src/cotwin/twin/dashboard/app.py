@@ -391,6 +391,7 @@ class Dashboard:
         from starlette.websockets import WebSocketDisconnect
 
         if self.clients >= MAX_CLIENTS:  # each stream costs the server's loop a task and a copy per batch
+            await websocket.accept()  # then closed with a reason the page can show
             await websocket.close(code=1013, reason=f"{MAX_CLIENTS} pages are already following this twin")
             return
         await websocket.accept()
@@ -417,9 +418,10 @@ class Dashboard:
                 return
             cursor = max(0, feed.samples.count - self.backlog)
             rows, cursor, _ = feed.samples.since(cursor)
-            seen = len(feed.events)
+            events, seen, events_skipped = feed.events.since(0)
             await websocket.send_text(_json({"type": "hello", "sides": feed.sides, "samples": _rows(rows),
-                                             "events": feed.events[:seen], "status": self._status()}))
+                                             "events": events, "events_skipped": events_skipped,
+                                             "status": self._status()}))
             limit = max(1, int(self.max_rate * self.period))
             last_state = None
             while not closed.is_set():
@@ -430,15 +432,15 @@ class Dashboard:
                     pass
                 rows, cursor, skipped = feed.samples.since(cursor)
                 self.skipped += skipped
-                events = feed.events[seen:]
-                seen += len(events)
+                events, seen, events_skipped = feed.events.since(seen)
                 status = self._status()
                 if not rows and not events and status["state"] == last_state:
                     continue
                 last_state = status["state"]
                 await websocket.send_text(_json({"type": "batch", "sides": feed.sides,
                                                  "samples": _rows(thin(rows, limit)), "skipped": skipped,
-                                                 "events": events, "status": status}))
+                                                 "events": events, "events_skipped": events_skipped,
+                                                 "status": status}))
         except (WebSocketDisconnect, RuntimeError, OSError):
             pass
         finally:
