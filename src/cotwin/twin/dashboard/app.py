@@ -12,7 +12,13 @@ Content-Length is answered 413 before reading it, a longer body is cut off at th
 413, a body slower than BODY_SECONDS 408), must be UTF-8 JSON without NaN or Infinity, an object with
 only the keys it documents (400 naming what is wrong); at most MAX_WHATIFS what-ifs from the page are
 in flight and at most PagePublisher.MAX_WAITING commands wait to leave (429 beyond); commands to a twin
-that has ended are refused (409), while the page keeps its last figure and state. A client gets a `hello` (recent samples, every event
+that has ended are refused (409), while the page keeps its last figure and state.
+
+A command moves a robot, so another site open in the same browser must not send one: a POST must say
+`Content-Type: application/json` (415 otherwise; a browser cannot send that across sites without a
+preflight, which is never answered), its `Origin`, when sent, must be this server (403), and its
+`Host` must be an address, `localhost` or the served host (403: a DNS-rebound name is none of these).
+A stream (`/ws`) from a page of another origin is closed (1008). A client gets a `hello` (recent samples, every event
 so far, the status) and then, every `period` seconds, a `batch` of what is new: samples (at most
 `max_rate` per second, evenly thinned beyond that), events and the status. Each client reads the
 feed from its own cursor on the server's event loop, so one that is slow to take its messages only
@@ -57,8 +63,14 @@ def _no_constant(name: str):
     raise ValueError(f"{name} is not a JSON number")
 
 
-async def read_json(request, limit: int = MAX_BODY, seconds: float = BODY_SECONDS):
+async def read_json(request, served: str, limit: int = MAX_BODY, seconds: float = BODY_SECONDS):
     """The request's body as JSON (see module doc), or Refused saying why not."""
+    foreign = same_site(request.headers, served)
+    if foreign is not None:
+        raise Refused(403, f"refused: {foreign}")
+    kind = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if kind != "application/json":
+        raise Refused(415, f"the body must be sent as application/json, not {kind[:80] or 'without a type'!r}")
     length = request.headers.get("content-length")
     if length is not None:
         if not length.strip().isdigit():
@@ -85,9 +97,28 @@ async def read_json(request, limit: int = MAX_BODY, seconds: float = BODY_SECOND
     except json.JSONDecodeError as err:
         raise Refused(400, f"the request is not JSON: {err.msg} at line {err.lineno} column {err.colno}") from None
     except ValueError as err:
-        raise Refused(400, f"the request is not JSON: {err}") from None
+        why = "a number has too many digits" if "digits" in str(err) else str(err)
+        raise Refused(400, f"the request is not JSON: {why}") from None
     except RecursionError:
         raise Refused(400, "the request is not JSON: nested too deeply") from None
+
+
+def same_site(headers, served: str) -> str | None:
+    """Why a request with these headers may come from another site (see module doc), or None."""
+    import ipaddress
+    from urllib.parse import urlsplit
+
+    host = headers.get("host", "")
+    try:
+        name = urlsplit("//" + host).hostname or ""
+        ipaddress.ip_address(name)
+    except ValueError:
+        if name not in ("localhost", served.strip("[]"), socket.gethostname()):
+            return f"Host {host[:80]!r} is not this server's address"
+    origin = headers.get("origin")
+    if origin is not None and origin not in (f"http://{host}", f"https://{host}"):
+        return f"Origin {origin[:80]!r} is not this server (Host {host[:80]!r})"
+    return None
 
 
 def parse_run_id(text: str) -> int:
@@ -181,6 +212,7 @@ class Dashboard:
         self.whatifs = 0  # what-ifs from the page in flight
         self.whatif_timeout = 120.0  # s to wait for the twin's answer
         self.body_seconds = BODY_SECONDS
+        self._closing = threading.Event()  # ends the what-ifs the page waits for
         self.clients = 0
         self.skipped = 0  # samples clients skipped because they fell behind
         self._server = None
@@ -236,6 +268,7 @@ class Dashboard:
         """Tell the page the run is over, close the streams and stop serving."""
         if self.feed is not None:
             self.feed.finish("stopped")
+        self._closing.set()
         if self.publisher is not None:
             self.publisher.stop()
         if self._server is not None:
@@ -287,7 +320,7 @@ class Dashboard:
                        "none": "this twin takes no commands"}.get(commands["source"], "no live twin to command")
                 return JSONResponse({"error": why}, status_code=409)
             try:
-                body = await read_json(request, seconds=self.body_seconds)
+                body = await read_json(request, self.host, seconds=self.body_seconds)
             except Refused as err:
                 return refused(err)
             shape = "expected {\"event\": NAME, \"values\": {PORT: VALUE, ...}}"
@@ -319,7 +352,7 @@ class Dashboard:
             from .whatif import ask, check_request
 
             try:
-                body = await read_json(request, seconds=self.body_seconds)
+                body = await read_json(request, self.host, seconds=self.body_seconds)
             except Refused as err:
                 return refused(err)
             try:
@@ -335,9 +368,10 @@ class Dashboard:
             self.whatifs += 1
             try:
                 answer = await run_in_threadpool(ask, self.whatif_url, self.system.spec.deviation.exchange, checked,
-                                                 self.whatif_timeout)
+                                                 self.whatif_timeout, cancel=self._closing)
             except CotwinError as err:
-                return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=504)
+                return JSONResponse({"error": "; ".join(f.message for f in err.findings)},
+                                    status_code=503 if self._closing.is_set() else 504)
             finally:
                 self.whatifs -= 1
             return JSONResponse(_finite(answer), status_code=422 if "error" in answer else 200)
@@ -393,6 +427,11 @@ class Dashboard:
         if self.clients >= MAX_CLIENTS:  # each stream costs the server's loop a task and a copy per batch
             await websocket.accept()  # then closed with a reason the page can show
             await websocket.close(code=1013, reason=f"{MAX_CLIENTS} pages are already following this twin")
+            return
+        foreign = same_site(websocket.headers, self.host)
+        if foreign is not None:  # another site's page would read the twin's stream
+            await websocket.accept()
+            await websocket.close(code=1008, reason=foreign[:120])
             return
         await websocket.accept()
         self.clients += 1

@@ -59,12 +59,12 @@ class PagePublisher:
         """Queue the command `event` with its value ports; returns the message, ValueError saying why it
         would be refused (naming the input), or queue.Full if too many wait to leave."""
         if event not in self.events:
-            raise ValueError(f"'{event}' is not a command of this twin (commands: {', '.join(self.events) or 'none'})")
+            raise ValueError(f"{event[:80]!r} is not a command of this twin (commands: {', '.join(self.events) or 'none'})")
         ports = self.events[event]
         unknown = [k for k in values if k not in ports]
         missing = [p for p in ports if p not in values]
         if unknown or missing:
-            raise ValueError("; ".join([*(f"'{k}' is not a value of {event}" for k in unknown),
+            raise ValueError("; ".join([*(f"{k[:80]!r} is not a value of {event}" for k in unknown[:10]),
                                         *(f"no value for '{p}'" for p in missing)]))
         typed, wrong = {}, []
         for port, value in values.items():

@@ -33,8 +33,10 @@ def check_request(body: dict, program) -> dict:
     return {"plan": body["plan"], "horizon": float(horizon)}
 
 
-def ask(url: str, exchange: str, request: dict, timeout: float = 120.0, routing_key: str = "twin.whatif") -> dict:
-    """Publish `request` to the twin's what-if service and wait (at most `timeout`) for its answer."""
+def ask(url: str, exchange: str, request: dict, timeout: float = 120.0, routing_key: str = "twin.whatif",
+        cancel=None) -> dict:
+    """Publish `request` to the twin's what-if service and wait (at most `timeout`, and no longer than
+    the threading.Event `cancel` stays clear) for its answer."""
     try:
         connection = connect(url, "cotwin dashboard what-if")
     except (pika.exceptions.AMQPError, OSError) as err:
@@ -59,6 +61,8 @@ def ask(url: str, exchange: str, request: dict, timeout: float = 120.0, routing_
             left = deadline - wallclock.monotonic()
             if left <= 0:
                 raise CotwinError(f"what-if: no answer within {timeout:g} s (is the twin still running, with --whatif?)")
+            if cancel is not None and cancel.is_set():
+                raise CotwinError("what-if: the dashboard is stopping")
             connection.process_data_events(time_limit=min(left, 0.1))
         try:
             return json.loads(answer["body"])
