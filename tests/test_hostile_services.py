@@ -173,6 +173,20 @@ def test_history_urls_out_of_range_are_refused_and_readers_never_create_a_store(
                                 (str(1 << 63), 404, "no run"), ("7", 404, "no run 7")):
             code_got, answer = _request(dash.url + f"api/history/{path}")
             assert (code_got, why in answer["error"]) == (code, True), (path, answer)
+        import sqlite3
+
+        with sqlite3.connect(tmp_path / "history.sqlite") as db:  # a store damaged by something else
+            db.execute("INSERT INTO runs (project, kind, started, status, step, algorithm, columns) "
+                       "VALUES ('p', 'twin', 0, 'done', 0.1, 'jacobi', '[1, 2]')")
+            for _ in range(2):
+                db.execute("INSERT INTO runs (project, kind, started, status, step, algorithm, columns) "
+                           "VALUES ('p', 'twin', 0, 'done', 0.1, 'jacobi', '{\"dt\": [\"{mapping}.mapping.q0\"]}')")
+            db.execute("INSERT INTO samples VALUES (3, 'dt', 0, 0.0, 0.0, '[]')")  # narrower than its columns
+            db.execute("INSERT INTO samples VALUES (4, 'dt', 1, 0.1, 0.0, '[1.0, ')")  # not JSON
+        for damaged in (2, 3, 4):
+            code, answer = _request(dash.url + f"api/history/{damaged}")
+            assert code == 404 and "damaged" in answer["error"], answer
+        assert _request(dash.url + "api/history")[0] == 200
     missing = tmp_path / "nowhere" / "history.sqlite"
     other = tmp_path / "typo.sqlite"
     with Dashboard(None, port=0, mode="history", history_url=f"sqlite:///{other}") as dash:
@@ -235,8 +249,8 @@ def test_whatif_requests_without_reply_to_are_dropped_and_logged_and_the_count_i
         channel = connection.channel()
         reply = channel.queue_declare("", exclusive=True).method.queue
         answers = {}
-        channel.basic_consume(reply, lambda ch, m, p, body: answers.__setitem__(p.correlation_id, json.loads(body)),
-                              auto_ack=True)
+        channel.basic_consume(reply, lambda ch, m, p, body: answers.__setitem__(p.correlation_id, json.loads(
+            body, parse_constant=lambda c: pytest.fail(f"{c} in an answer"))), auto_ack=True)
         plan = json.dumps({"plan": [{"time": 1, "event": MOVE}], "horizon": 5}).encode()
         channel.basic_publish(exchange, "twin.whatif", plan, pika.BasicProperties(reply_to="victim", correlation_id="v"))
         for k in range(300):
@@ -244,10 +258,14 @@ def test_whatif_requests_without_reply_to_are_dropped_and_logged_and_the_count_i
         for cid, body in (("nan", b'{"plan": [{"time": 1, "event": "x"}], "horizon": NaN}'),
                           ("extra", json.dumps({"plan": [1], "sudo": True}).encode())):
             channel.basic_publish(exchange, "twin.whatif", body, pika.BasicProperties(reply_to=reply, correlation_id=cid))
+        # a fork that diverged: its answer is still JSON (null where it has NaN)
+        service._reply(pika.BasicProperties(reply_to=reply, correlation_id="diverged"),
+                       {"trajectory": {"q0": [0.5, float("nan"), float("inf")]}})
         deadline = time.monotonic() + 20
-        while len(answers) < 2 and time.monotonic() < deadline:
+        while len(answers) < 3 and time.monotonic() < deadline:
             connection.process_data_events(time_limit=0.1)
         connection.close()
+        assert answers["diverged"] == {"trajectory": {"q0": [0.5, None, None]}}
         assert "NaN is not a JSON number" in answers["nan"]["error"] and "unknown key 'sudo'" in answers["extra"]["error"]
         assert service.dropped == 301 and service.pending == 0 and service.requests.empty()  # nothing forked for them
         logged = [r.getMessage() for r in caplog.records if r.name == "cotwin.whatif"]

@@ -18,6 +18,7 @@ the completion time of the whole plan.
 from __future__ import annotations
 
 import logging
+import math
 import re
 import threading
 import time
@@ -264,6 +265,17 @@ def plan_from_json(items: list, program) -> list[Command]:
 
 # ---- what-if requests over the broker ------------------------------------------------------------
 
+def finite(value):
+    """`value` (JSON-ready) with NaN and infinities, which JSON lacks, as null."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite(v) for v in value]
+    return value
+
+
 def _no_constant(name: str):
     """json.loads' hook for NaN, Infinity and -Infinity, which JSON does not have."""
     raise ValueError(f"{name} is not a JSON number")
@@ -343,7 +355,7 @@ class WhatIfService:
 
         if not props.reply_to or not props.reply_to.startswith("amq.gen-"):
             return  # answers go only to broker-named (exclusive) reply queues, never to a named queue
-        body = json.dumps(answer, default=float).encode()
+        body = json.dumps(finite(answer), default=float, allow_nan=False).encode()  # a diverged fork: null, not NaN
         self._connection.add_callback_threadsafe(lambda: self._channel.basic_publish(
             "", props.reply_to, body, pika.BasicProperties(correlation_id=props.correlation_id,
                                                            content_type="application/json")))

@@ -30,7 +30,6 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import math
 import queue
 import socket
 import threading
@@ -39,6 +38,7 @@ from pathlib import Path
 
 from ...diagnostics import CotwinError
 from ..system import MAPPING, RABBITMQ, TwinSystem
+from ..whatif import finite as _finite
 from .describe import describe
 from .feed import DashboardFeed
 
@@ -164,15 +164,20 @@ def history_run(url: str, run_id: int, max_points: int = 4000) -> dict:
     from ..history import read_run
 
     data = read_run(url, run_id)
+    if not isinstance(data["columns"], dict) or not all(isinstance(c, list) for c in data["columns"].values()):
+        raise CotwinError(f"run {run_id}: its columns are not a JSON object of lists (the store is damaged)")
     prefix = MAPPING.name + "."
     sides = {}
-    for side, columns in data["columns"].items():
-        rows = thin(data["samples"].get(side, []), max_points)
-        picked = [(i, c[len(prefix):]) for i, c in enumerate(columns) if c.startswith(prefix)
-                  and all(isinstance(values[i], (int, float)) and not isinstance(values[i], bool)
-                          for _, values in rows if values[i] is not None)]  # numbers, not the events
-        sides[side] = {"time": [t for t, _ in rows],
-                       "values": {name: [values[i] for _, values in rows] for i, name in picked}}
+    try:
+        for side, columns in data["columns"].items():
+            rows = thin(data["samples"].get(side, []), max_points)
+            picked = [(i, c[len(prefix):]) for i, c in enumerate(columns) if c.startswith(prefix)
+                      and all(isinstance(values[i], (int, float)) and not isinstance(values[i], bool)
+                              for _, values in rows if values[i] is not None)]  # numbers, not the events
+            sides[side] = {"time": [t for t, _ in rows],
+                           "values": {name: [values[i] for _, values in rows] for i, name in picked}}
+    except (IndexError, TypeError):  # a sample of another width than the run's columns
+        raise CotwinError(f"run {run_id}: its samples do not match its columns (the store is damaged)") from None
     run = dict(data["run"])
     return {"run": run, "sides": sides, "states": data["states"], "alarms": data["alarms"],
             "commands": data["commands"]}
@@ -493,16 +498,6 @@ def _json(message: dict) -> str:
         return json.dumps(message, allow_nan=False, default=str)
     except ValueError:
         return json.dumps(_finite(message), allow_nan=False, default=str)
-
-
-def _finite(value):
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    return value
 
 
 def _rows(rows: list) -> list:
