@@ -331,7 +331,7 @@ def test_a_flood_of_whatifs_from_the_page_is_answered_429_not_queued(live, capfd
 
 # ---- the command panel ----------------------------------------------------------------------------------
 
-def test_page_commands_are_typed_strictly_bounded_and_refused_once_the_twin_ended(live):
+def test_page_commands_are_typed_strictly_bounded_and_refused_once_the_twin_ended(live, monkeypatch):
     with Dashboard(live, port=0, mode="twin") as dash:
         url = dash.url + "api/command"
         good = {"MovementArgs_target_X": 3, "MovementArgs_target_Y": 4, "MovementArgs_target_Z": 1}
@@ -350,6 +350,17 @@ def test_page_commands_are_typed_strictly_bounded_and_refused_once_the_twin_ende
         dash.finish("stopped")
         code, answer = _post(url, {"event": MOVE, "values": good})
         assert code == 409 and "the twin has stopped" in answer["error"]
+    # what the panel has sent is remembered within a bound, however long it heartbeats
+    from cotwin.twin.dashboard.commands import PagePublisher
+    from cotwin.twin.rabbitmq import port_types
+
+    monkeypatch.setattr(PagePublisher, "MAX_SENT", 10)
+    types = port_types(live.models.program, live.source_ports)
+    panel = PagePublisher(live.spec.rabbitmq, types, [], period=0.0).start()
+    panel.twin_ready.set()
+    time.sleep(1.0)
+    panel.stop()
+    assert panel.sent_count > 20 and len(panel.sent) == 10 and panel.error is None
 
 
 def test_plan_values_take_the_models_literals_and_refuse_others_naming_the_argument(tmp_path):
@@ -471,3 +482,10 @@ def test_a_flood_of_bad_broker_messages_is_counted_but_neither_fills_the_log_nor
     stream.log.close()
     summary = [r.getMessage() for r in caplog.records if r.name == "cotwin.rabbitmq"][-1]
     assert f"{3070 - stream.log.burst} more dropped messages not logged" in summary
+    # what was applied is remembered within a bound too, however long a publisher keeps refreshing
+    monkeypatch.setattr(rabbitmq, "MAX_APPLIED", 5)
+    quiet = CommandStream(types, {MOVE}, lambda timeout: [], timeout=5)
+    quiet.t0 = stream.t0
+    quiet._take([rabbitmq.Received(json.dumps({"time": (quiet.t0 + timedelta(seconds=0.01 * k)).isoformat(),
+                                               MOVE: k % 2 == 0}).encode(), time.time()) for k in range(40)])
+    assert quiet._apply(1.0, 1.0) == {MOVE} and len(quiet.applied) == 5 and quiet.held[MOVE].sim == pytest.approx(0.39)

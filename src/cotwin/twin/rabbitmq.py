@@ -52,6 +52,7 @@ _ISO = re.compile(r"^(\d{4})-(\d{2})-(\d{2})[T ](\d{2}):(\d{2}):(\d{2})(?:[.,](\
 MAX_BYTES = 1 << 16  # a command message is a flat object of a few keys
 MAX_REFUSED = 1000  # reasons of refused messages kept (all are counted)
 MAX_QUEUED = 10_000  # values of one variable waiting for their simulation time
+MAX_APPLIED = 10_000  # values applied, remembered (a publisher refreshing every value for days would grow a list)
 
 
 def parse_time(text: str) -> datetime:
@@ -171,7 +172,7 @@ class CommandStream:
     t0: datetime | None = None
     refused: deque = field(default_factory=lambda: deque(maxlen=MAX_REFUSED))  # (wall time, reason), the newest
     refused_count: int = 0  # every refusal, kept or not
-    applied: list[tuple[float, str, object, float]] = field(default_factory=list)  # (sim, var, value, step end)
+    applied: deque = field(default_factory=lambda: deque(maxlen=MAX_APPLIED))  # (sim, var, value, step end), the newest
 
     def __post_init__(self) -> None:
         self.pending: list[tuple[datetime, dict[str, object], bytes]] = []  # before t0 is known

@@ -422,7 +422,7 @@ class Dashboard:
         out["clients"] = self.clients
         out["skipped"] = self.skipped
         if self.publisher is not None:
-            out["broker"] = {"twin_ready": self.publisher.twin_ready.is_set(), "sent": len(self.publisher.sent),
+            out["broker"] = {"twin_ready": self.publisher.twin_ready.is_set(), "sent": self.publisher.sent_count,
                              "error": self.publisher.error}
         return out
 

@@ -19,6 +19,7 @@ import logging
 import queue
 import threading
 import time as wallclock
+from collections import deque
 
 import pika
 
@@ -34,6 +35,7 @@ log = logging.getLogger("cotwin.dashboard")
 
 class PagePublisher:
     MAX_WAITING = 64  # commands queued and not yet published
+    MAX_SENT = 1000  # messages remembered (a heartbeat every period for days would grow a list without bound)
 
     def __init__(self, settings: RabbitMQSettings, types: dict[str, str], events: list[dict], period: float = 0.25,
                  heartbeat: bool = True, name: str = "cotwin dashboard", scalars: dict | None = None):
@@ -47,7 +49,8 @@ class PagePublisher:
         self.name = name
         self.bound = threading.Event()  # our queue is bound: the twin may announce itself now
         self.twin_ready = threading.Event()  # the twin's ready message came
-        self.sent: list[tuple[float, dict]] = []  # (wall time, message)
+        self.sent: deque[tuple[float, dict]] = deque(maxlen=self.MAX_SENT)  # (wall time, message), the newest
+        self.sent_count = 0
         self.error: str | None = None
         self.echoed: float | None = None  # the last simulation time the twin echoed (s)
         self._pending: queue.Queue[dict] = queue.Queue(self.MAX_WAITING)
@@ -135,6 +138,7 @@ class PagePublisher:
                 if message is not None:
                     channel.basic_publish(s.exchange, s.to_cosim, json.dumps(message).encode())
                     self.sent.append((wallclock.time(), message))
+                    self.sent_count += 1
                     next_tick = wallclock.monotonic() + self.period
         except (pika.exceptions.AMQPError, OSError) as err:
             self.error = f"the broker link was lost ({type(err).__name__})"
