@@ -81,7 +81,7 @@ def _raw(port: int, head: str, body: bytes = b"", wait: float = 10.0) -> tuple[i
 
 # ---- bodies -----------------------------------------------------------------------------------------
 
-def test_request_bodies_are_bounded_plain_json_objects_or_refused_naming_the_problem(live):
+def test_request_bodies_are_bounded_plain_json_objects_or_refused_naming_the_problem(live, capfd):
     with Dashboard(live, port=0, mode="twin", whatif_url=BROKER) as dash:
         url = dash.url + "api/command"
         # a 100 MB body announced: refused before it is read
@@ -114,6 +114,10 @@ def test_request_bodies_are_bounded_plain_json_objects_or_refused_naming_the_pro
         code, answer = _post(dash.url + "api/whatif", b'{"plan": [{"time": NaN, "event": "x"}]}')
         assert code == 400 and "NaN" in answer["error"]
         assert _request(dash.url + "api/status")[0] == 200  # still serving
+        capfd.readouterr()
+        for _ in range(100):  # not HTTP at all: the server's warning about each is capped
+            assert _raw(dash.port, "GARBAGE\n")[0] == 400
+        assert capfd.readouterr().err.count("Invalid HTTP request") <= 20
 
 
 def test_another_site_in_the_browser_cannot_command_the_twin_or_read_its_stream(live):

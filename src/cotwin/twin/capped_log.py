@@ -47,3 +47,34 @@ class CappedLog:
             self.logger.warning("%d more %s not logged (at most %d per %g s)", self.suppressed, self.what,
                                 self.burst, self.window)
             self.suppressed = 0
+
+
+class CappedFilter(logging.Filter):
+    """The same cap for a logger whose calls are not ours (e.g. uvicorn's "Invalid HTTP request
+    received." for every malformed request): attached to it, it lets `burst` records per `window`
+    through and says how many it held back when the next window opens."""
+
+    def __init__(self, what: str, burst: int = 20, window: float = 10.0):
+        super().__init__()
+        self.what, self.burst, self.window = what, burst, window
+        self.suppressed = 0
+        self._opened = float("-inf")
+        self._in_window = 0
+        self._lock = threading.Lock()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.ERROR:
+            return True  # the server's own failures are never held back
+        with self._lock:
+            now = wallclock.monotonic()
+            if now - self._opened >= self.window:
+                if self.suppressed:
+                    record.msg = f"%s (and %d more {self.what} not logged in the last %g s)"
+                    record.args = (record.getMessage(), self.suppressed, self.window)
+                self.suppressed = 0
+                self._opened, self._in_window = now, 0
+            if self._in_window >= self.burst:
+                self.suppressed += 1
+                return False
+            self._in_window += 1
+            return True

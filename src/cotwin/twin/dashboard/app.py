@@ -248,6 +248,7 @@ class Dashboard:
         config = uvicorn.Config(self.app(), log_level="warning", access_log=False, lifespan="off",
                                 ws="websockets-sansio", timeout_graceful_shutdown=2)
         self._server = uvicorn.Server(config)
+        _cap_server_log()
         self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]}, name="cotwin dashboard",
                                         daemon=True)
         self._thread.start()
@@ -490,6 +491,15 @@ class Dashboard:
         finally:
             self.clients -= 1
             listener.cancel()
+
+
+def _cap_server_log() -> None:
+    """uvicorn warns once per malformed request: a client sending thousands must not fill the log."""
+    from ..capped_log import CappedFilter
+
+    server_log = logging.getLogger("uvicorn.error")
+    if not any(isinstance(f, CappedFilter) for f in server_log.filters):
+        server_log.addFilter(CappedFilter("warnings about bad requests"))
 
 
 def _json(message: dict) -> str:
