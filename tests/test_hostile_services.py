@@ -417,6 +417,19 @@ module Mod { cycleDef cycle == 1 robotic platform P { uses In uses Out } cref c 
     assert (message["Goal_dir"], message["Goal_count"], message["go"]) == (3, 2, True)
     with pytest.raises(ValueError, match="Goal_dir: 'Up' is not a literal of Dir.*Goal_count: -2 is negative"):
         panel.command("go", {"Goal_dir": "Up", "Goal_count": -2, "Goal_fast": False})
+    # and the twin's own reader of broker messages: literals by name, refused beyond them, naming the key
+    from cotwin.twin.rabbitmq import parse_message, port_scalars
+
+    types, scalars = port_types(program, ["go", *ports]), port_scalars(program)
+    stamp = datetime.now(timezone.utc).isoformat()
+    parsed = parse_message(json.dumps({"time": stamp, "go": True, "Goal_dir": "East", "Goal_count": 2.0,
+                                       "Goal_fast": True}).encode(), types, scalars)
+    assert parsed.values == {"go": True, "Goal_dir": 1, "Goal_count": 2, "Goal_fast": True} and not parsed.dropped
+    parsed = parse_message(json.dumps({"time": stamp, "go": True, "Goal_dir": 9, "Goal_count": -1,
+                                       "Goal_fast": "yes"}).encode(), types, scalars)
+    assert parsed.values == {"go": True} and parsed.dropped == (
+        "Goal_dir: 9 is not a literal of Dir (North, East, South, West, or 0..3)", "Goal_count: -1 is negative (a nat)",
+        "Goal_fast: 'yes' is not a JSON Boolean")
 
 
 # ---- a stopped twin ---------------------------------------------------------------------------------------

@@ -84,6 +84,12 @@ def port_types(program, ports: list[str]) -> dict[str, str]:
     return {p: types[p] for p in ports}
 
 
+def port_scalars(program) -> dict:
+    """The d-model's input value ports with their Scalar (RoboSim type): what a message may hold
+    beyond the FMI type (an enumeration's literals, a nat's sign)."""
+    return {port: sc for ev in program.inputs for port, sc in ev.value_ports}
+
+
 @dataclass(frozen=True)
 class Parsed:
     time: datetime
@@ -91,11 +97,13 @@ class Parsed:
     dropped: tuple[str, ...]  # reasons for values of this message that were not taken
 
 
-def parse_message(body: bytes, types: dict[str, str]) -> Parsed:
+def parse_message(body: bytes, types: dict[str, str], scalars: dict | None = None) -> Parsed:
     """A message's time and typed values, or ValueError saying why the whole message is refused.
     Booleans take a JSON bool, Integers an int or a double (truncated, within int32), Reals a finite
-    number; a wrongly typed value is dropped (and said so) while the others are kept; unknown keys and
-    keys starting with `internal_` or `simAtTime` are ignored."""
+    number; where `scalars` gives a port's RoboSim type, an enumeration also takes one of its literals
+    by name and refuses an index beyond them, a nat refuses a negative value; a wrongly typed value is
+    dropped (and said so) while the others are kept; unknown keys and keys starting with `internal_` or
+    `simAtTime` are ignored."""
     if len(body) > MAX_BYTES:
         raise ValueError(f"message of {len(body)} bytes (at most {MAX_BYTES})")
     try:
@@ -120,24 +128,38 @@ def parse_message(body: bytes, types: dict[str, str]) -> Parsed:
             continue
         kind = types.get(key)
         if kind is None:
-            dropped.append(f"unknown key '{key}' ignored")
+            dropped.append(f"unknown key {key[:80]!r} ignored")
             continue
         try:
-            values[key] = _typed(value, kind)
+            values[key] = _typed(value, kind, (scalars or {}).get(key))
         except ValueError as err:
-            dropped.append(f"{key}: {err}")
+            dropped.append(f"{key[:80]}: {err}")
     if not values:
         raise ValueError("no known variable (" + ("; ".join(dropped) if dropped else "only 'time'") + ")")
     return Parsed(stamp, values, tuple(dropped))
 
 
-def _typed(value, kind: str):
+def _typed(value, kind: str, sc=None):
+    from ..robosim.types import NAT, EnumTy
+
+    literals = [lit.name for lit in sc.ty.decl.literals] if sc is not None and isinstance(sc.ty, EnumTy) else None
+    if literals is not None and isinstance(value, str) and value in literals:
+        return literals.index(value)
+    typed = _fmi_typed(value, kind)
+    if literals is not None and not 0 <= typed < len(literals):
+        raise ValueError(f"{value!r:.40} is not a literal of {sc.ty.decl.name} ({', '.join(literals)}, or 0..{len(literals) - 1})")
+    if sc is not None and sc.ty == NAT and typed < 0:
+        raise ValueError(f"{typed} is negative (a nat)")
+    return typed
+
+
+def _fmi_typed(value, kind: str):
     if kind == "Boolean":
         if isinstance(value, bool):
             return value
-        raise ValueError(f"{value!r} is not a JSON Boolean")
+        raise ValueError(f"{value!r:.40} is not a JSON Boolean")
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{value!r} is not a number")
+        raise ValueError(f"{value!r:.40} is not a number")
     if not math.isfinite(value):
         raise ValueError(f"{value!r} is not finite")
     if kind == "Integer":
@@ -172,6 +194,7 @@ class CommandStream:
     t0: datetime | None = None
     refused: deque = field(default_factory=lambda: deque(maxlen=MAX_REFUSED))  # (wall time, reason), the newest
     refused_count: int = 0  # every refusal, kept or not
+    scalars: dict | None = None  # port -> Scalar (RoboSim type), see parse_message
     applied: deque = field(default_factory=lambda: deque(maxlen=MAX_APPLIED))  # (sim, var, value, step end), the newest
 
     def __post_init__(self) -> None:
@@ -191,7 +214,7 @@ class CommandStream:
     def _take(self, messages: list[Received]) -> None:
         for m in messages:
             try:
-                parsed = parse_message(m.body, self.types)
+                parsed = parse_message(m.body, self.types, self.scalars)
             except ValueError as err:
                 self._refuse(str(err), m.body)
                 continue
@@ -433,7 +456,7 @@ class RabbitMQUnit(PythonUnit):
 
     def __init__(self, name: str, types: dict[str, str], echoed: list[str], settings: RabbitMQSettings,
                  bridge: RabbitMQBridge | None = None, stream: CommandStream | None = None,
-                 events: set[str] | None = None, echo: bool = True):
+                 events: set[str] | None = None, echo: bool = True, scalars: dict | None = None):
         ports = [Port(p, kind, "output") for p, kind in types.items()]
         ports += [Port(v, "Real", "input") for v in echoed]
         super().__init__(name, ports)
@@ -443,6 +466,7 @@ class RabbitMQUnit(PythonUnit):
         self.events = set(events) if events is not None else {p for p, k in types.items() if k == "Boolean"}
         self.bridge = bridge
         self.stream = stream
+        self.scalars = scalars
         self.echo = echo
         self.reconnects = 0
         self._own_bridge = bridge is None
@@ -460,7 +484,7 @@ class RabbitMQUnit(PythonUnit):
         self.bridge.start()
         if self.stream is None:
             self.stream = CommandStream(self.types, self.events, self.bridge.receive, self.settings.maxage_ms / 1000,
-                                        self.settings.timeout_s)
+                                        self.settings.timeout_s, scalars=self.scalars)
         if self.stream.t0 is None:
             self.stream.start()
         self.values.update({v: held.value if v not in self.events else False for v, held in self.stream.held.items()})

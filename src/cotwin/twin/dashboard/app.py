@@ -207,13 +207,13 @@ class Dashboard:
         self.model = describe(system, sides, mode, {"whatif": self.whatif_url is not None}) if system is not None else None
         self.publisher = None
         if system is not None and system.source is RABBITMQ and mode != "history":
-            from ..rabbitmq import port_types
+            from ..rabbitmq import port_scalars, port_types
             from .commands import PagePublisher
 
             program = system.models.program
-            scalars = {port: sc for ev in program.inputs for port, sc in ev.value_ports}
             self.publisher = PagePublisher(system.spec.rabbitmq, port_types(program, system.source_ports),
-                                           self.model["commands"]["events"], heartbeat=heartbeat, scalars=scalars)
+                                           self.model["commands"]["events"], heartbeat=heartbeat,
+                                           scalars=port_scalars(program))
         self.whatifs = 0  # what-ifs from the page in flight
         self.whatif_timeout = 120.0  # s to wait for the twin's answer
         self.body_seconds = BODY_SECONDS

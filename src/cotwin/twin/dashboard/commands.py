@@ -79,7 +79,7 @@ class PagePublisher:
         if wrong:
             raise ValueError("; ".join(wrong))
         message = {"time": now_iso(), **self.idle, event: True, **typed}
-        parsed = parse_message(json.dumps(message).encode(), self.types)  # the twin's own check
+        parsed = parse_message(json.dumps(message).encode(), self.types, self.scalars)  # the twin's own check
         if parsed.dropped:
             raise ValueError("; ".join(parsed.dropped))
         self._pending.put_nowait(message)
