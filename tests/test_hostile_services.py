@@ -506,3 +506,23 @@ def test_a_flood_of_bad_broker_messages_is_counted_but_neither_fills_the_log_nor
     quiet._take([rabbitmq.Received(json.dumps({"time": (quiet.t0 + timedelta(seconds=0.01 * k)).isoformat(),
                                                MOVE: k % 2 == 0}).encode(), time.time()) for k in range(40)])
     assert quiet._apply(1.0, 1.0) == {MOVE} and len(quiet.applied) == 5 and quiet.held[MOVE].sim == pytest.approx(0.39)
+
+
+# ---- the twin's saved state --------------------------------------------------------------------------------
+
+def test_a_saved_state_reads_robosim_values_back_and_refuses_any_other_class_by_name():
+    import pickle
+
+    from cotwin.cosim.state import MAGIC, StateError, pack, unpack
+    from cotwin.robosim.values import FrozenRecord, MatrixValue, SeqValue, SetValue, TupleValue, VectorValue
+
+    held = {"goal": VectorValue((0.1, 0.2, 0.3)), "pose": MatrixValue((VectorValue((1.0, 0.0)), VectorValue((0.0, 1.0)))),
+            "pair": TupleValue((1, True)), "queue": SeqValue((2, 3)), "seen": SetValue({1, 2}),
+            "records": SetValue({FrozenRecord((("x", 1), ("y", 2)))}), "mode": 2, "busy": False}
+    back = unpack(pack("Mapping", held), "Mapping")
+    assert back == held and all(type(back[k]) is type(v) for k, v in held.items())
+    assert type(back["pose"][0]) is VectorValue
+    for evil, name in ((pickle.dumps(("Mapping", {"x": __import__("os").getcwd})), "posix.getcwd"),
+                       (pickle.dumps(("Mapping", CotwinError("x"))), "cotwin.diagnostics.CotwinError")):
+        with pytest.raises(StateError, match=f"holds only plain data, not {name}"):
+            unpack(MAGIC + evil, "Mapping")

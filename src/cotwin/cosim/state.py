@@ -1,9 +1,12 @@
 """Saved states of units and executions as bytes: plain data (None, Booleans, numbers, strings, bytes,
-tuples, lists, dicts, sets, numpy scalars and arrays of numbers) behind a header naming its kind.
+tuples, lists, dicts, sets, numpy scalars and arrays of numbers, and RoboSim's own values: vectors,
+matrices, tuples, sequences, sets and frozen records, as the d-model and the mapping hold them; an
+enumeration literal is its index, a boolean a bool) behind a header naming its kind.
 
 A state is written with pickle, but read back by an unpickler that refuses every class and function
-but numpy's constructors of numeric scalars and arrays, so that state bytes from elsewhere (a file,
-another process) can never run code; anything else is an error, as is a state of another kind.
+but numpy's constructors of numeric scalars and arrays and those value classes (tuple and frozenset
+subclasses without code of their own), so that state bytes from elsewhere (a file, another process)
+can never run code; anything else is an error naming the class, as is a state of another kind.
 """
 
 from __future__ import annotations
@@ -24,9 +27,13 @@ _NUMPY = {(core, name) for core in ("numpy._core.multiarray", "numpy.core.multia
     {(core, "_frombuffer") for core in ("numpy._core.numeric", "numpy.core.numeric")} | {("numpy", "dtype")}
 
 
+_VALUES = {("cotwin.robosim.values", name) for name in
+           ("VectorValue", "MatrixValue", "TupleValue", "SeqValue", "SetValue", "FrozenRecord")}
+
+
 class _PlainUnpickler(pickle.Unpickler):
     def find_class(self, module: str, name: str):
-        if (module, name) in _NUMPY:
+        if (module, name) in _NUMPY or (module, name) in _VALUES:
             return super().find_class(module, name)
         raise StateError(f"a saved state holds only plain data, not {module}.{name}")
 

@@ -323,6 +323,8 @@ class WhatIfService:
         self.dropped = 0  # requests that could not be answered (no reply_to)
         self._pending = 0
         self._lock = threading.Lock()
+        self._futures: set = set()  # forked and not yet answered
+        self._closing = False
         self.log = CappedLog(logging.getLogger("cotwin.whatif"), "dropped what-if requests")
         self._pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_init,
                                          initargs=(str(Path(project).resolve()), str(artefacts) if artefacts else None))
@@ -371,6 +373,9 @@ class WhatIfService:
                              else f"reply_to {props.reply_to[:80]!r} is not a broker-named queue (amq.gen-*)",
                              (props.correlation_id or "")[:80])
             return
+        if self._closing:
+            self._reply(props, {"error": "the twin is stopping; it takes no more what-if requests"})
+            return
         with self._lock:
             busy = self._pending >= self.MAX_PENDING
             if not busy:
@@ -417,6 +422,8 @@ class WhatIfService:
                 self._release()
                 self._reply(props, {"error": f"the what-if workers are gone ({type(err).__name__})"})
                 continue
+            with self._lock:
+                self._futures.add(future)
             future.add_done_callback(lambda f, props=props: self._done(props, f))
 
     def _done(self, props, future) -> None:
@@ -430,6 +437,7 @@ class WhatIfService:
             answer = {"error": f"{type(err).__name__}: {err}"}
         with self._lock:
             self.answered += 1
+            self._futures.discard(future)
         self._release()
         self._reply(props, answer)
 
@@ -444,7 +452,14 @@ class WhatIfService:
             return self._pending
 
     def close(self, wait: float = 60.0) -> None:
-        """Stop taking requests; answer those running (for at most `wait` seconds), drop the others."""
+        """Stop taking requests; answer those already forked (for at most `wait` seconds in all: a worker
+        still starting when the twin ends gets its queued requests done too), then drop the others."""
+        from concurrent.futures import wait as wait_for
+
+        self._closing = True
+        with self._lock:
+            futures = list(self._futures)
+        wait_for(futures, timeout=wait)
         running = list((getattr(self._pool, "_processes", None) or {}).values())
         self._pool.shutdown(wait=False, cancel_futures=True)
         deadline = time.monotonic() + wait
