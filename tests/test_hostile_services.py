@@ -27,7 +27,7 @@ import pytest
 from cotwin.diagnostics import CotwinError
 from cotwin.twin import rabbitmq
 from cotwin.twin.dashboard import Dashboard
-from cotwin.twin.dashboard.app import MAX_BODY, MAX_WHATIFS
+from cotwin.twin.dashboard.app import MAX_BODY, MAX_CONNECTIONS, MAX_WHATIFS
 from cotwin.twin.history import STALE_AFTER, HistoryRecorder, list_runs, read_run
 from cotwin.twin.run import load, run_twin
 
@@ -52,9 +52,17 @@ def _request(url: str, body: bytes | None = None, method: str = "GET", timeout: 
                                      method=method if body is None else "POST")
     try:
         with urllib.request.urlopen(request, timeout=timeout) as r:
-            return r.status, json.loads(r.read() or b"null")
+            return r.status, _decoded(r.read())
     except urllib.error.HTTPError as err:
-        return err.code, json.loads(err.read() or b"null")
+        return err.code, _decoded(err.read())
+
+
+def _decoded(body: bytes):
+    """JSON, as the app answers; uvicorn's own refusals (503 when too many connections) are text."""
+    try:
+        return json.loads(body or b"null")
+    except ValueError:
+        return body.decode("utf-8", "replace")
 
 
 def _post(url: str, body) -> tuple[int, dict]:
@@ -118,6 +126,19 @@ def test_request_bodies_are_bounded_plain_json_objects_or_refused_naming_the_pro
         for _ in range(100):  # not HTTP at all: the server's warning about each is capped
             assert _raw(dash.port, "GARBAGE\n")[0] == 400
         assert capfd.readouterr().err.count("Invalid HTTP request") <= 20
+        # connections held open without finishing a request: bounded, and served again once they go
+        held = [socket.create_connection(("127.0.0.1", dash.port)) for _ in range(MAX_CONNECTIONS + 10)]
+        for sock in held:
+            sock.sendall(b"GET /api/status HTTP/1.1\r\nHost: 127.0.0.1\r\n")
+        try:
+            assert _request(dash.url + "api/status")[0] == 503
+        finally:
+            for sock in held:
+                sock.close()
+        deadline = time.monotonic() + 10
+        while _request(dash.url + "api/status")[0] != 200 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert _request(dash.url + "api/status")[0] == 200
 
 
 def test_another_site_in_the_browser_cannot_command_the_twin_or_read_its_stream(live):

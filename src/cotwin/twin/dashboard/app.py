@@ -46,6 +46,7 @@ log = logging.getLogger("cotwin.dashboard")
 STATIC = Path(__file__).resolve().parent / "static"
 MAX_BODY = 1 << 20  # bytes of a request body (a command or a what-if plan is a few hundred)
 BODY_SECONDS = 10.0  # to send it
+MAX_CONNECTIONS = 128  # open at once, pages, streams and requests together
 MAX_CLIENTS = 32  # live streams at once (more are closed with 1013, try again later)
 MAX_WHATIFS = 2  # what-ifs from the page in flight (each waits for a fork of the twin)
 ENDED = ("done", "stopped", "failed")
@@ -246,7 +247,8 @@ class Dashboard:
         self._socket = sock
         self.port = sock.getsockname()[1]
         config = uvicorn.Config(self.app(), log_level="warning", access_log=False, lifespan="off",
-                                ws="websockets-sansio", timeout_graceful_shutdown=2)
+                                ws="websockets-sansio", timeout_graceful_shutdown=2,
+                                limit_concurrency=MAX_CONNECTIONS)  # more at once are answered 503
         self._server = uvicorn.Server(config)
         _cap_server_log()
         self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]}, name="cotwin dashboard",
