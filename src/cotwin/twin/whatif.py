@@ -244,21 +244,21 @@ def plan_from_json(items: list, program) -> list[Command]:
             raise CotwinError(f"plan item {k}: expected {{time, event, args}}, got {item!r:.80}")
         t, name, args = item.get("time"), item.get("event"), item.get("args", {})
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not (0 <= t < 1e6):
-            raise CotwinError(f"plan item {k}: time must be a number of seconds >= 0, got {t!r}")
+            raise CotwinError(f"plan item {k}: time must be a number of seconds >= 0, got {t!r:.80}")
         if name not in events:
-            raise CotwinError(f"plan item {k}: unknown event {name!r} (known: {', '.join(events)})")
+            raise CotwinError(f"plan item {k}: unknown event {name!r:.80} (known: {', '.join(events)})")
         if not isinstance(args, dict):
             raise CotwinError(f"plan item {k}: args must be an object")
         fields = {sc.path[-1] if sc.path else "value": (port, sc) for port, sc in events[name].value_ports}
         values = [(name, True)]
         for key, value in args.items():
             if key not in fields:
-                raise CotwinError(f"plan item {k}: event {name} has no argument '{key}' (has {', '.join(fields) or 'none'})")
+                raise CotwinError(f"plan item {k}: event {name} has no argument {key[:80]!r} (has {', '.join(fields) or 'none'})")
             port, sc = fields[key]
             try:
                 values.append((port, scalar_value(value, sc)))
             except ValueError as err:
-                raise CotwinError(f"plan item {k}: argument {key}: {value!r} {err}") from None
+                raise CotwinError(f"plan item {k}: argument {key}: {value!r:.80} {err}") from None
         out.append(Command(float(t), tuple(values), f"plan item {k}"))
     return out
 
