@@ -156,6 +156,7 @@ def test_another_site_in_the_browser_cannot_command_the_twin_or_read_its_stream(
                                    ({"Content-Type": "application/json", "Host": f"rebound.example:{dash.port}",
                                      "Origin": f"http://rebound.example:{dash.port}"}, 403,
                                     "Host 'rebound.example"),
+                                   ({"Content-Type": "application/json", "Host": "[::1"}, 403, "Host '[::1' is not an address"),
                                    ({"Content-Type": "application/json", "Origin": f"http://{here}"}, 200, None)):
             for path in ("api/command", "api/whatif"):
                 request = urllib.request.Request(dash.url + path, body, headers)

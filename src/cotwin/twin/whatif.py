@@ -276,7 +276,7 @@ def finite(value):
     return value
 
 
-def _no_constant(name: str):
+def no_json_constant(name: str):
     """json.loads' hook for NaN, Infinity and -Infinity, which JSON does not have."""
     raise ValueError(f"{name} is not a JSON number")
 
@@ -386,7 +386,7 @@ class WhatIfService:
         try:
             if len(body) > 1 << 20:
                 raise ValueError("request larger than 1 MiB")
-            request = json.loads(body.decode("utf-8"), parse_constant=_no_constant)
+            request = json.loads(body.decode("utf-8"), parse_constant=no_json_constant)
             if not isinstance(request, dict):
                 raise ValueError("a request is a JSON object {plan, horizon, decimate}")
             unknown = sorted(set(request) - {"plan", "horizon", "decimate"})

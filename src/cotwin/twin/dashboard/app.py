@@ -18,8 +18,9 @@ A command moves a robot, so another site open in the same browser must not send 
 `Content-Type: application/json` (415 otherwise; a browser cannot send that across sites without a
 preflight, which is never answered), its `Origin`, when sent, must be this server (403), and its
 `Host` must be an address, `localhost` or the served host (403: a DNS-rebound name is none of these).
-A stream (`/ws`) from a page of another origin is closed (1008). A client gets a `hello` (recent samples, every event
-so far, the status) and then, every `period` seconds, a `batch` of what is new: samples (at most
+A stream (`/ws`) from a page of another origin is closed (1008).
+
+A client gets a `hello` (recent samples, the newest events, the status) and then, every `period` seconds, a `batch` of what is new: samples (at most
 `max_rate` per second, evenly thinned beyond that), events and the status. Each client reads the
 feed from its own cursor on the server's event loop, so one that is slow to take its messages only
 falls behind (and is told how many samples it skipped), never the twin or the other clients.
@@ -39,6 +40,7 @@ from pathlib import Path
 from ...diagnostics import CotwinError
 from ..system import MAPPING, RABBITMQ, TwinSystem
 from ..whatif import finite as _finite
+from ..whatif import no_json_constant
 from .describe import describe
 from .feed import DashboardFeed
 
@@ -58,10 +60,6 @@ class Refused(Exception):
     def __init__(self, status: int, message: str):
         super().__init__(message)
         self.status, self.message = status, message
-
-
-def _no_constant(name: str):
-    raise ValueError(f"{name} is not a JSON number")
 
 
 async def read_json(request, served: str, limit: int = MAX_BODY, seconds: float = BODY_SECONDS):
@@ -92,7 +90,7 @@ async def read_json(request, served: str, limit: int = MAX_BODY, seconds: float 
     except asyncio.TimeoutError:
         raise Refused(408, f"the body did not arrive within {seconds:g} s") from None
     try:
-        return json.loads(body.decode("utf-8"), parse_constant=_no_constant)
+        return json.loads(body.decode("utf-8"), parse_constant=no_json_constant)
     except UnicodeDecodeError as err:
         raise Refused(400, f"the request is not UTF-8 (byte {err.start})") from None
     except json.JSONDecodeError as err:
@@ -112,6 +110,9 @@ def same_site(headers, served: str) -> str | None:
     host = headers.get("host", "")
     try:
         name = urlsplit("//" + host).hostname or ""
+    except ValueError:  # e.g. an unclosed [
+        return f"Host {host[:80]!r} is not an address"
+    try:
         ipaddress.ip_address(name)
     except ValueError:
         if name not in ("localhost", served.strip("[]"), socket.gethostname()):
@@ -339,9 +340,8 @@ class Dashboard:
                 why = f"unknown key {', '.join(repr(k[:40]) for k in unknown)}" if unknown \
                     else "'event' must be a name" if not isinstance(body.get("event"), str) else "'values' must be an object"
                 return JSONResponse({"error": f"{why}: {shape}"}, status_code=400)
-            if self.feed is not None and self.feed.state in ENDED:
-                return JSONResponse({"error": f"the twin has {'ended' if self.feed.state == 'done' else self.feed.state}"
-                                              f"; it takes no more commands"}, status_code=409)
+            if self._ended():
+                return JSONResponse({"error": f"{self._ended()}; it takes no more commands"}, status_code=409)
             try:
                 message = self.publisher.command(body["event"], body.get("values", {}))
             except ValueError as err:
@@ -367,9 +367,8 @@ class Dashboard:
                 checked = check_request(body, self.system.models.program)
             except CotwinError as err:
                 return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=422)
-            if self.feed is not None and self.feed.state in ENDED:
-                return JSONResponse({"error": f"the twin has {'ended' if self.feed.state == 'done' else self.feed.state}"
-                                              "; there is no live state to fork"}, status_code=409)
+            if self._ended():
+                return JSONResponse({"error": f"{self._ended()}; there is no live state to fork"}, status_code=409)
             if self.whatifs >= MAX_WHATIFS:  # the server's one event loop: no lock needed
                 return JSONResponse({"error": f"{MAX_WHATIFS} what-ifs are already running; try again when one is "
                                               "answered"}, status_code=429, headers={"Retry-After": "5"})
@@ -419,6 +418,12 @@ class Dashboard:
             Mount("/static", StaticFiles(directory=STATIC), name="static"),
         ]
         return Starlette(routes=routes)
+
+    def _ended(self) -> str | None:
+        """How the live twin ended ("the twin has stopped"), or None while it runs or waits."""
+        if self.feed is None or self.feed.state not in ENDED:
+            return None
+        return f"the twin has {'ended' if self.feed.state == 'done' else self.feed.state}"
 
     def _status(self) -> dict:
         out = self.feed.status() if self.feed is not None else {"state": "history"}
