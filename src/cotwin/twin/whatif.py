@@ -306,7 +306,8 @@ class WhatIfService:
     Requests are validated like any broker message; a bad one gets an error answer and never reaches the
     twin; one without a broker-named `reply_to` could never be answered and is dropped (and logged, at
     most 20 lines per 10 s: a flood cannot fill the log); at most MAX_PENDING run at a time (the count is
-    shared by the broker's, the twin's and the pool's threads, under a lock). Who may send requests is the broker's business: the
+    shared by the broker's, the twin's and the pool's threads, under a lock); those accepted before the
+    twin ends are answered within `close`'s wait. Who may send requests is the broker's business: the
     `whatif` role of docs/security.md may publish `twin.whatif` on the twin's exchange."""
 
     def __init__(self, url: str, exchange: str, project: str | Path, artefacts: str | Path | None = None,
@@ -391,7 +392,8 @@ class WhatIfService:
                 raise ValueError("a request is a JSON object {plan, horizon, decimate}")
             unknown = sorted(set(request) - {"plan", "horizon", "decimate"})
             if unknown:
-                raise ValueError(f"unknown key {', '.join(map(repr, unknown))} (a request is {{plan, horizon, decimate}})")
+                raise ValueError(f"unknown key {', '.join(repr(k[:40]) for k in unknown[:10])} "
+                                 "(a request is {plan, horizon, decimate})")
             horizon = request.get("horizon", 30.0)
             decimate = request.get("decimate", 1)
             if isinstance(horizon, bool) or not isinstance(horizon, (int, float)) or not 0 < horizon <= 3600:

@@ -25,7 +25,7 @@ def check_request(body: dict, program) -> dict:
         raise CotwinError(shape)
     unknown = sorted(set(body) - {"plan", "horizon"})
     if unknown:
-        raise CotwinError(f"unknown key {', '.join(map(repr, unknown))}: {shape}")
+        raise CotwinError(f"unknown key {', '.join(repr(k[:40]) for k in unknown[:10])}: {shape}")
     plan_from_json(body.get("plan"), program)  # the service's own checks
     horizon = body.get("horizon", 30.0)
     if isinstance(horizon, bool) or not isinstance(horizon, (int, float)) or not 0 < horizon <= 3600:
