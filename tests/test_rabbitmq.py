@@ -218,7 +218,15 @@ def test_bad_messages_are_dropped_with_a_reason_and_the_run_goes_on(broker, tmp_
 def test_a_silent_publisher_ends_the_run_with_a_clear_error_and_keeps_the_rows(broker, tmp_path):
     system = live_system(f"cotwin_test_{uuid.uuid4().hex[:8]}", end=10.0, rabbitmq={"timeout_s": 1.5})
     publisher, stop, thread = start_publisher(system, [], end=None)
-    threading.Timer(2.0, stop.set).start()
+
+    def silence():  # 2 s after the twin is ready and the publisher sends (not after it bound: the twin's start varies)
+        deadline = time.monotonic() + 60
+        while not publisher.sent and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(2.0)
+        stop.set()
+
+    threading.Thread(target=silence, daemon=True).start()
     with pytest.raises(CotwinError) as err:
         run_twin(system, tmp_path, plot=False)
     text = str(err.value)
