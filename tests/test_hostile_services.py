@@ -521,6 +521,21 @@ def test_a_flood_of_bad_broker_messages_is_counted_but_neither_fills_the_log_nor
     stream.log.close()
     summary = [r.getMessage() for r in caplog.records if r.name == "cotwin.rabbitmq"][-1]
     assert f"{3070 - stream.log.burst} more dropped messages not logged" in summary
+    # a flood faster than the twin takes it: what waits for the twin is bounded too
+    monkeypatch.setattr(rabbitmq, "MAX_INBOX", 100)
+    slow = RabbitMQBridge(settings, "cotwin hostile slow bridge").start()
+    try:
+        connection = connect(settings.url, "cotwin hostile flooder")
+        channel = connection.channel()
+        for _ in range(300):
+            channel.basic_publish(settings.exchange, settings.to_cosim, bad[0])
+        connection.close()
+        deadline = time.monotonic() + 20
+        while slow.inbox.qsize() + slow.overflowed < 300 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert (slow.inbox.qsize(), slow.overflowed) == (100, 200)
+    finally:
+        slow.close()
     # what was applied is remembered within a bound too, however long a publisher keeps refreshing
     monkeypatch.setattr(rabbitmq, "MAX_APPLIED", 5)
     quiet = CommandStream(types, {MOVE}, lambda timeout: [], timeout=5)

@@ -52,6 +52,7 @@ _ISO = re.compile(r"^(\d{4})-(\d{2})-(\d{2})[T ](\d{2}):(\d{2}):(\d{2})(?:[.,](\
 MAX_BYTES = 1 << 16  # a command message is a flat object of a few keys
 MAX_REFUSED = 1000  # reasons of refused messages kept (all are counted)
 MAX_QUEUED = 10_000  # values of one variable waiting for their simulation time
+MAX_INBOX = 100_000  # messages received and not yet taken by the twin (it takes them every step)
 MAX_APPLIED = 10_000  # values applied, remembered (a publisher refreshing every value for days would grow a list)
 
 
@@ -317,7 +318,9 @@ class RabbitMQBridge:
         self.name = name
         self.queue_name = f"cotwin.{settings.exchange}.{uuid.uuid4().hex[:12]}"
         self.expires_ms = int(expires_s * 1000)
-        self.inbox: queue.Queue[Received] = queue.Queue()
+        self.inbox: queue.Queue[Received] = queue.Queue(MAX_INBOX)
+        self.overflowed = 0  # messages dropped because the twin had not taken MAX_INBOX others yet
+        self.log = CappedLog(log, "messages dropped on arrival")
         self.outbox: deque[tuple[str, bytes]] = deque()
         self.connected = threading.Event()
         self.reconnects = 0
@@ -340,7 +343,11 @@ class RabbitMQBridge:
         self._channel = channel
 
     def _on_message(self, channel, method, props, body) -> None:
-        self.inbox.put(Received(body, wallclock.time()))
+        try:
+            self.inbox.put_nowait(Received(body, wallclock.time()))
+        except queue.Full:  # a flood faster than the twin steps: memory stays bounded, the drop is counted
+            self.overflowed += 1
+            self.log.warning("message dropped on arrival: %d wait for the twin already", MAX_INBOX)
 
     def _flush(self) -> None:
         while self.outbox:
@@ -422,6 +429,7 @@ class RabbitMQBridge:
                 self._connection.close()
             except Exception:  # noqa: BLE001
                 pass
+        self.log.close()
 
 
 def echo_message(inputs: dict[str, object], t: float, h: float) -> dict:
