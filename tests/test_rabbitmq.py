@@ -186,8 +186,16 @@ def test_bad_messages_are_dropped_with_a_reason_and_the_run_goes_on(broker, tmp_
                        "MovementArgs_target_X": 15, "MovementArgs_target_Y": 0, "MovementArgs_target_Z": 0}).encode(),
            json.dumps({"time": stamp.isoformat(), "jump": True}).encode(), b"[" * 50_000]
 
-    def rogue():
-        time.sleep(1.0)
+    echoes = channel.queue_declare("", exclusive=True).method.queue
+    channel.queue_bind(echoes, rabbit.exchange, routing_key=rabbit.from_cosim)
+
+    def rogue():  # once the twin steps, past its t0 (a fixed sleep raced its FMU build on a busy machine)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            _, _, body = channel.basic_get(echoes, auto_ack=True)
+            if body is not None and read_echo(body)[1] is not None:
+                break
+            time.sleep(0.05)
         for body in bad:
             channel.basic_publish(rabbit.exchange, rabbit.to_cosim, body)
         connection.close()
@@ -210,7 +218,15 @@ def test_bad_messages_are_dropped_with_a_reason_and_the_run_goes_on(broker, tmp_
 def test_a_silent_publisher_ends_the_run_with_a_clear_error_and_keeps_the_rows(broker, tmp_path):
     system = live_system(f"cotwin_test_{uuid.uuid4().hex[:8]}", end=10.0, rabbitmq={"timeout_s": 1.5})
     publisher, stop, thread = start_publisher(system, [], end=None)
-    threading.Timer(2.0, stop.set).start()
+
+    def silence():  # 2 s after the twin is ready and the publisher sends (not after it bound: the twin's start varies)
+        deadline = time.monotonic() + 60
+        while not publisher.sent and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(2.0)
+        stop.set()
+
+    threading.Thread(target=silence, daemon=True).start()
     with pytest.raises(CotwinError) as err:
         run_twin(system, tmp_path, plot=False)
     text = str(err.value)

@@ -131,9 +131,16 @@ def test_whatif_requests_over_the_broker_are_answered_without_disturbing_the_twi
         time.sleep(2.0)
         # late enough that the d-model is at rest whatever the live run was doing when forked
         plan = [{"time": 6.0, "event": "moveDiscreteCommand", "args": {"target_X": 8, "target_Y": 10, "target_Z": 3}}]
+        channel.confirm_delivery()  # an unroutable request (the service not bound yet on a busy machine) is retried
         for cid, body in (("good", json.dumps({"plan": plan, "horizon": 12})), ("bad", b"\xff{"),
                           ("worse", json.dumps({"plan": [{"time": 1, "event": "fly"}]}))):
-            channel.basic_publish(exchange, "twin.whatif", body, pika.BasicProperties(reply_to=reply, correlation_id=cid))
+            for _ in range(100):
+                try:
+                    channel.basic_publish(exchange, "twin.whatif", body, pika.BasicProperties(
+                        reply_to=reply, correlation_id=cid), mandatory=True)
+                    break
+                except pika.exceptions.UnroutableError:
+                    time.sleep(0.2)
         deadline = time.monotonic() + 60
         while len(answers) < 3 and time.monotonic() < deadline:
             connection.process_data_events(time_limit=0.2)

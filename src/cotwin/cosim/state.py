@@ -1,11 +1,12 @@
 """Saved states of units and executions as bytes: plain data (None, Booleans, numbers, strings, bytes,
-tuples, lists, dicts, sets, numpy scalars and arrays of numbers, RoboSim's composite values) behind a
-header naming its kind.
+tuples, lists, dicts, sets, numpy scalars and arrays of numbers, and RoboSim's own values: vectors,
+matrices, tuples, sequences, sets and frozen records, as the d-model and the mapping hold them; an
+enumeration literal is its index, a boolean a bool) behind a header naming its kind.
 
 A state is written with pickle, but read back by an unpickler that refuses every class and function
-but numpy's constructors of numeric scalars and arrays and RoboSim's value classes (tuples and frozensets
-that only name their kind: a mapping or interpreter holds vectors, sequences and sets), so that state bytes from elsewhere (a file,
-another process) can never run code; anything else is an error, as is a state of another kind.
+but numpy's constructors of numeric scalars and arrays and those value classes (tuple and frozenset
+subclasses without code of their own), so that state bytes from elsewhere (a file, another process)
+can never run code; anything else is an error naming the class, as is a state of another kind.
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ class StateError(CotwinError):
 
 _NUMPY = {(core, name) for core in ("numpy._core.multiarray", "numpy.core.multiarray") for name in ("scalar",)} | \
     {(core, "_frombuffer") for core in ("numpy._core.numeric", "numpy.core.numeric")} | {("numpy", "dtype")}
+
+
 _VALUES = {("cotwin.robosim.values", name) for name in
            ("VectorValue", "MatrixValue", "TupleValue", "SeqValue", "SetValue", "FrozenRecord")}
 

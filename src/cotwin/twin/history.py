@@ -5,6 +5,11 @@ Tables: `runs` (one per run), `samples` (run, side, step, time, wall, values as 
 `states` (d-model state changes) and `alarms` (deviation events). Writes are queued and committed in
 batches by a writer thread, so recording never holds the twin up; `close()` waits for the queue.
 `export_csv` writes a run's side back as a Maestro-format CSV (what `cotwin history export` does).
+
+Reading never creates or changes a store: a SQLite file that does not exist is an error, not a new empty
+database. A run still marked `running` whose newest record (its start, a sample, a command or an alarm)
+is older than `STALE_AFTER` seconds is shown as `interrupted` (the process that recorded it ended without
+closing it, e.g. killed with SIGKILL); the stored row is left as it is.
 """
 
 from __future__ import annotations
@@ -86,7 +91,14 @@ def database_url(url: str | None, folder: Path | None = None) -> str:
     return url
 
 
-def engine_for(url: str) -> sa.Engine:
+STALE_AFTER = 120.0  # s without a record after which a `running` run is shown as interrupted
+MAX_RUN_ID = (1 << 63) - 1  # the largest id SQLite and PostgreSQL store
+
+
+def engine_for(url: str, create: bool = True) -> sa.Engine:
+    """An engine on the store at `url`; with `create=False` (readers) a SQLite file must already exist."""
+    if not create:
+        _must_exist(url)
     try:
         engine = sa.create_engine(url, future=True)
         with engine.connect():
@@ -95,6 +107,30 @@ def engine_for(url: str) -> sa.Engine:
         raise CotwinError(f"cannot open the history database {_redact(url)}: {type(err).__name__}: "
                           f"{str(err).splitlines()[0][:200]}") from None
     return engine
+
+
+def _must_exist(url: str) -> None:
+    """CotwinError if `url` is a SQLite file that does not exist (connecting would create it)."""
+    try:
+        parsed = sa.engine.make_url(url)
+    except (sa.exc.ArgumentError, ValueError):
+        return  # engine_for reports it
+    database = parsed.database or ""
+    if parsed.get_backend_name() == "sqlite" and database not in ("", ":memory:") \
+            and not database.startswith("file:") and not Path(database).is_file():
+        raise CotwinError(f"no history database at {database}")
+
+
+def _reading(url: str, what):
+    """`what(engine)` on the store at `url`, opened for reading; a database error becomes a CotwinError."""
+    engine = engine_for(url, create=False)
+    try:
+        return what(engine)
+    except sa.exc.SQLAlchemyError as err:
+        raise CotwinError(f"cannot read the history database {_redact(url)}: {type(err).__name__}: "
+                          f"{str(err).splitlines()[0][:200]}") from None
+    finally:
+        engine.dispose()
 
 
 def _redact(url: str) -> str:
@@ -180,9 +216,9 @@ class HistoryRecorder:
         self.engine.dispose()
 
 
-def list_runs(url: str) -> list[dict]:
-    engine = engine_for(url)
-    try:
+def list_runs(url: str, now: float | None = None) -> list[dict]:
+    """Every run of the store with its sample and raised-alarm counts (see the module doc on `interrupted`)."""
+    def read(engine) -> list[dict]:
         if not sa.inspect(engine).has_table("runs"):
             return []
         with engine.connect() as conn:
@@ -190,32 +226,55 @@ def list_runs(url: str) -> list[dict]:
             counts = dict(conn.execute(sa.select(samples.c.run, sa.func.count()).group_by(samples.c.run)).all())
             alarm_counts = dict(conn.execute(sa.select(alarms.c.run, sa.func.count()).where(alarms.c.state == "raised")
                                              .group_by(alarms.c.run)).all())
-        return [dict(r) | {"samples": counts.get(r["id"], 0), "alarms": alarm_counts.get(r["id"], 0)} for r in rows]
-    finally:
-        engine.dispose()
+            return [_aged(conn, dict(r), now) | {"samples": counts.get(r["id"], 0), "alarms": alarm_counts.get(r["id"], 0)}
+                    for r in rows]
+
+    return _reading(url, read)
 
 
-def read_run(url: str, run_id: int) -> dict:
+def _aged(conn, run: dict, now: float | None) -> dict:
+    """`run`, shown as interrupted if it is still marked running but nothing was recorded for STALE_AFTER s."""
+    if run["status"] != "running":
+        return run
+    newest = [conn.execute(sa.select(sa.func.max(t.c.wall)).where(t.c.run == run["id"])).scalar()
+              for t in (samples, commands, alarms)]
+    last = max([run["started"], *(w for w in newest if w is not None)])
+    now = wallclock.time() if now is None else now
+    if now - last <= STALE_AFTER:
+        return run
+    when = wallclock.strftime("%Y-%m-%d %H:%M:%S", wallclock.localtime(last))
+    return run | {"status": "interrupted", "message": f"still marked running, but nothing recorded since {when}: the "
+                                                      "twin that recorded it ended without closing it (killed?)"}
+
+
+def read_run(url: str, run_id: int, now: float | None = None) -> dict:
     """A run's record, samples per side (list of (time, values)), commands, states and alarms."""
-    engine = engine_for(url)
-    try:
+    if isinstance(run_id, bool) or not isinstance(run_id, int) or not 0 < run_id <= MAX_RUN_ID:
+        raise CotwinError(f"no run {run_id} in the history {_redact(url)} (run ids are 1, 2, ...)")
+
+    def read(engine) -> dict:
+        if not sa.inspect(engine).has_table("runs"):
+            raise CotwinError(f"no run {run_id} in the history {_redact(url)} (it holds no runs)")
         with engine.connect() as conn:
             run = conn.execute(sa.select(runs).where(runs.c.id == run_id)).mappings().first()
             if run is None:
                 raise CotwinError(f"no run {run_id} in the history {_redact(url)}")
-            out = {"run": dict(run), "columns": json.loads(run["columns"]), "samples": {}}
-            for row in conn.execute(sa.select(samples.c.side, samples.c.time, samples.c["values"])
-                                    .where(samples.c.run == run_id).order_by(samples.c.side, samples.c.step)):
-                out["samples"].setdefault(row.side, []).append((row.time, json.loads(row[2])))
+            try:
+                out = {"run": _aged(conn, dict(run), now), "columns": json.loads(run["columns"]), "samples": {}}
+                for row in conn.execute(sa.select(samples.c.side, samples.c.time, samples.c["values"])
+                                        .where(samples.c.run == run_id).order_by(samples.c.side, samples.c.step)):
+                    out["samples"].setdefault(row.side, []).append((row.time, json.loads(row[2])))
+                out["alarms"] = [json.loads(r.event) for r in conn.execute(
+                    sa.select(alarms).where(alarms.c.run == run_id).order_by(alarms.c.time))]
+            except ValueError as err:  # JSON written by something else than the recorder
+                raise CotwinError(f"run {run_id} in the history {_redact(url)} is damaged: {err}") from None
             out["commands"] = [dict(r) for r in conn.execute(sa.select(commands).where(commands.c.run == run_id)
                                                              .order_by(commands.c.step)).mappings()]
             out["states"] = [dict(r) for r in conn.execute(sa.select(states).where(states.c.run == run_id)
                                                            .order_by(states.c.step)).mappings()]
-            out["alarms"] = [json.loads(r.event) for r in conn.execute(sa.select(alarms).where(alarms.c.run == run_id)
-                                                                       .order_by(alarms.c.time))]
         return out
-    finally:
-        engine.dispose()
+
+    return _reading(url, read)
 
 
 def export_csv(url: str, run_id: int, side: str, path: str | Path) -> Path:

@@ -13,8 +13,11 @@ Three parts, each with one job:
 
 `RabbitMQUnit` is the co-simulation unit over them (`rabbitmq.fmu` packages the same unit for Maestro).
 
-Differences from the RMQ FMU, on purpose: every dropped or refused message is logged with its reason
-(logger `cotwin.rabbitmq`, and `CommandStream.refused`); a missing value ends the run with an error
+Differences from the RMQ FMU, on purpose: every dropped or refused message is counted and logged with
+its reason (logger `cotwin.rabbitmq`, at most 20 lines per 10 s, then "N more dropped messages not
+logged"; the newest MAX_REFUSED reasons are kept in `CommandStream.refused`, all are counted in
+`refused_count`); at most MAX_QUEUED values per variable wait for their time (a flood of messages
+stamped in the future is refused, not held without bound); a missing value ends the run with an error
 naming the variable, the time and the age of what it had; and a d-model input *event* (a Boolean
 port the d-model reads as an event) is true in the one step that applies a `true` message, not held
 until a `false` arrives, so each published command is delivered exactly once.
@@ -39,6 +42,7 @@ import pika
 from ..cosim.units import INT32, Port, PythonUnit
 from ..diagnostics import CotwinError
 from ..mapping.amqp import connect, redact
+from .capped_log import CappedLog
 from .project import RabbitMQSettings
 
 log = logging.getLogger("cotwin.rabbitmq")
@@ -46,6 +50,10 @@ log = logging.getLogger("cotwin.rabbitmq")
 READY = {"internal_status": "ready", "internal_message": "waiting for input data for simulation"}
 _ISO = re.compile(r"^(\d{4})-(\d{2})-(\d{2})[T ](\d{2}):(\d{2}):(\d{2})(?:[.,](\d{1,9}))?(Z|z|[+-]\d{2}:?\d{2})$")
 MAX_BYTES = 1 << 16  # a command message is a flat object of a few keys
+MAX_REFUSED = 1000  # reasons of refused messages kept (all are counted)
+MAX_QUEUED = 10_000  # values of one variable waiting for their simulation time
+MAX_INBOX = 100_000  # messages received and not yet taken by the twin (it takes them every step)
+MAX_APPLIED = 10_000  # values applied, remembered (a publisher refreshing every value for days would grow a list)
 
 
 def parse_time(text: str) -> datetime:
@@ -77,6 +85,12 @@ def port_types(program, ports: list[str]) -> dict[str, str]:
     return {p: types[p] for p in ports}
 
 
+def port_scalars(program) -> dict:
+    """The d-model's input value ports with their Scalar (RoboSim type): what a message may hold
+    beyond the FMI type (an enumeration's literals, a nat's sign)."""
+    return {port: sc for ev in program.inputs for port, sc in ev.value_ports}
+
+
 @dataclass(frozen=True)
 class Parsed:
     time: datetime
@@ -84,11 +98,13 @@ class Parsed:
     dropped: tuple[str, ...]  # reasons for values of this message that were not taken
 
 
-def parse_message(body: bytes, types: dict[str, str]) -> Parsed:
+def parse_message(body: bytes, types: dict[str, str], scalars: dict | None = None) -> Parsed:
     """A message's time and typed values, or ValueError saying why the whole message is refused.
     Booleans take a JSON bool, Integers an int or a double (truncated, within int32), Reals a finite
-    number; a wrongly typed value is dropped (and said so) while the others are kept; unknown keys and
-    keys starting with `internal_` or `simAtTime` are ignored."""
+    number; where `scalars` gives a port's RoboSim type, an enumeration also takes one of its literals
+    by name and refuses an index beyond them, a nat refuses a negative value; a wrongly typed value is
+    dropped (and said so) while the others are kept; unknown keys and keys starting with `internal_` or
+    `simAtTime` are ignored."""
     if len(body) > MAX_BYTES:
         raise ValueError(f"message of {len(body)} bytes (at most {MAX_BYTES})")
     try:
@@ -113,24 +129,38 @@ def parse_message(body: bytes, types: dict[str, str]) -> Parsed:
             continue
         kind = types.get(key)
         if kind is None:
-            dropped.append(f"unknown key '{key}' ignored")
+            dropped.append(f"unknown key {key[:80]!r} ignored")
             continue
         try:
-            values[key] = _typed(value, kind)
+            values[key] = _typed(value, kind, (scalars or {}).get(key))
         except ValueError as err:
-            dropped.append(f"{key}: {err}")
+            dropped.append(f"{key[:80]}: {err}")
     if not values:
         raise ValueError("no known variable (" + ("; ".join(dropped) if dropped else "only 'time'") + ")")
     return Parsed(stamp, values, tuple(dropped))
 
 
-def _typed(value, kind: str):
+def _typed(value, kind: str, sc=None):
+    from ..robosim.types import NAT, EnumTy
+
+    literals = [lit.name for lit in sc.ty.decl.literals] if sc is not None and isinstance(sc.ty, EnumTy) else None
+    if literals is not None and isinstance(value, str) and value in literals:
+        return literals.index(value)
+    typed = _fmi_typed(value, kind)
+    if literals is not None and not 0 <= typed < len(literals):
+        raise ValueError(f"{value!r:.40} is not a literal of {sc.ty.decl.name} ({', '.join(literals)}, or 0..{len(literals) - 1})")
+    if sc is not None and sc.ty == NAT and typed < 0:
+        raise ValueError(f"{typed} is negative (a nat)")
+    return typed
+
+
+def _fmi_typed(value, kind: str):
     if kind == "Boolean":
         if isinstance(value, bool):
             return value
-        raise ValueError(f"{value!r} is not a JSON Boolean")
+        raise ValueError(f"{value!r:.40} is not a JSON Boolean")
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{value!r} is not a number")
+        raise ValueError(f"{value!r:.40} is not a number")
     if not math.isfinite(value):
         raise ValueError(f"{value!r} is not finite")
     if kind == "Integer":
@@ -163,8 +193,10 @@ class CommandStream:
     maxage: float = 1.0  # s
     timeout: float = 60.0  # s
     t0: datetime | None = None
-    refused: list[tuple[float, str]] = field(default_factory=list)  # (wall time, reason)
-    applied: list[tuple[float, str, object, float]] = field(default_factory=list)  # (sim, var, value, step end)
+    refused: deque = field(default_factory=lambda: deque(maxlen=MAX_REFUSED))  # (wall time, reason), the newest
+    refused_count: int = 0  # every refusal, kept or not
+    scalars: dict | None = None  # port -> Scalar (RoboSim type), see parse_message
+    applied: deque = field(default_factory=lambda: deque(maxlen=MAX_APPLIED))  # (sim, var, value, step end), the newest
 
     def __post_init__(self) -> None:
         self.pending: list[tuple[datetime, dict[str, object], bytes]] = []  # before t0 is known
@@ -172,16 +204,18 @@ class CommandStream:
         self.held: dict[str, _Held] = {}
         self._last: tuple[float, dict[str, object]] | None = None
         self.latest_wall: float | None = None
+        self.log = CappedLog(log, "dropped messages")
 
     def _refuse(self, reason: str, body: bytes = b"") -> None:
         excerpt = body[:80].decode("utf-8", "replace") if body else ""
         self.refused.append((wallclock.time(), reason))
-        log.warning("message dropped: %s%s", reason, f" [{excerpt}]" if excerpt else "")
+        self.refused_count += 1
+        self.log.warning("message dropped: %s%s", reason, f" [{excerpt!r}]" if excerpt else "")
 
     def _take(self, messages: list[Received]) -> None:
         for m in messages:
             try:
-                parsed = parse_message(m.body, self.types)
+                parsed = parse_message(m.body, self.types, self.scalars)
             except ValueError as err:
                 self._refuse(str(err), m.body)
                 continue
@@ -196,6 +230,9 @@ class CommandStream:
     def _queue(self, stamp: datetime, values: dict[str, object]) -> None:
         sim = (stamp - self.t0).total_seconds()
         for var, value in values.items():
+            if len(self.queues[var]) >= MAX_QUEUED:
+                self._refuse(f"{var} at t = {sim:.3f} s: {MAX_QUEUED} values of it already wait for their time")
+                continue
             self.queues[var].append((sim, value))
 
     def start(self) -> None:
@@ -281,7 +318,9 @@ class RabbitMQBridge:
         self.name = name
         self.queue_name = f"cotwin.{settings.exchange}.{uuid.uuid4().hex[:12]}"
         self.expires_ms = int(expires_s * 1000)
-        self.inbox: queue.Queue[Received] = queue.Queue()
+        self.inbox: queue.Queue[Received] = queue.Queue(MAX_INBOX)
+        self.overflowed = 0  # messages dropped because the twin had not taken MAX_INBOX others yet
+        self.log = CappedLog(log, "messages dropped on arrival")
         self.outbox: deque[tuple[str, bytes]] = deque()
         self.connected = threading.Event()
         self.reconnects = 0
@@ -304,7 +343,11 @@ class RabbitMQBridge:
         self._channel = channel
 
     def _on_message(self, channel, method, props, body) -> None:
-        self.inbox.put(Received(body, wallclock.time()))
+        try:
+            self.inbox.put_nowait(Received(body, wallclock.time()))
+        except queue.Full:  # a flood faster than the twin steps: memory stays bounded, the drop is counted
+            self.overflowed += 1
+            self.log.warning("message dropped on arrival: %d wait for the twin already", MAX_INBOX)
 
     def _flush(self) -> None:
         while self.outbox:
@@ -386,6 +429,7 @@ class RabbitMQBridge:
                 self._connection.close()
             except Exception:  # noqa: BLE001
                 pass
+        self.log.close()
 
 
 def echo_message(inputs: dict[str, object], t: float, h: float) -> dict:
@@ -420,7 +464,7 @@ class RabbitMQUnit(PythonUnit):
 
     def __init__(self, name: str, types: dict[str, str], echoed: list[str], settings: RabbitMQSettings,
                  bridge: RabbitMQBridge | None = None, stream: CommandStream | None = None,
-                 events: set[str] | None = None, echo: bool = True):
+                 events: set[str] | None = None, echo: bool = True, scalars: dict | None = None):
         ports = [Port(p, kind, "output") for p, kind in types.items()]
         ports += [Port(v, "Real", "input") for v in echoed]
         super().__init__(name, ports)
@@ -430,6 +474,7 @@ class RabbitMQUnit(PythonUnit):
         self.events = set(events) if events is not None else {p for p, k in types.items() if k == "Boolean"}
         self.bridge = bridge
         self.stream = stream
+        self.scalars = scalars
         self.echo = echo
         self.reconnects = 0
         self._own_bridge = bridge is None
@@ -447,7 +492,7 @@ class RabbitMQUnit(PythonUnit):
         self.bridge.start()
         if self.stream is None:
             self.stream = CommandStream(self.types, self.events, self.bridge.receive, self.settings.maxage_ms / 1000,
-                                        self.settings.timeout_s)
+                                        self.settings.timeout_s, scalars=self.scalars)
         if self.stream.t0 is None:
             self.stream.start()
         self.values.update({v: held.value if v not in self.events else False for v, held in self.stream.held.items()})
@@ -458,6 +503,8 @@ class RabbitMQUnit(PythonUnit):
         self.values.update(self.stream.values_for(t, h))
 
     def terminate(self) -> None:
+        if self.stream is not None:
+            self.stream.log.close()
         if self.bridge is not None:
             self.reconnects = self.bridge.reconnects
         if self._own_bridge and self.bridge is not None:

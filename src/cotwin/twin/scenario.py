@@ -222,7 +222,7 @@ def read_toml(path: str | Path, program: Program) -> list[Command]:
                 continue
             port, sc = fields[key]
             try:
-                values.append((port, typed_value(value, sc.fmi_type)))
+                values.append((port, scalar_value(value, sc)))
             except ValueError as err:
                 problems.append(Finding(where, Severity.ERROR,
                                         f"[[command]] {i + 1}: argument {key} must be {_article(sc.fmi_type)}: "
@@ -255,6 +255,27 @@ def typed_value(value, fmi: str) -> object:
             raise ValueError("does not fit an FMI Integer (int32)")
         return value
     return float(value)
+
+
+def scalar_value(value, sc) -> object:
+    """A TOML or JSON value for the d-model input scalar `sc` (a dmodel Scalar): typed_value, within its
+    RoboSim type: an enumeration takes one of its literals (by name, or by index), a nat is not negative;
+    ValueError saying why not."""
+    from ..robosim.types import NAT, EnumTy
+
+    if isinstance(sc.ty, EnumTy):
+        names = [lit.name for lit in sc.ty.decl.literals]
+        if isinstance(value, str) and value in names:
+            return names.index(value)
+        index = typed_value(value, "Integer") if not isinstance(value, str) else None
+        if index is None or not 0 <= index < len(names):
+            raise ValueError(f"is not a literal of {sc.ty.decl.name} ({', '.join(names)}, or their index "
+                             f"0..{len(names) - 1})")
+        return index
+    typed = typed_value(value, sc.fmi_type)
+    if sc.ty == NAT and typed < 0:
+        raise ValueError("is negative (the input is a nat)")
+    return typed
 
 
 def _article(fmi: str) -> str:

@@ -15,7 +15,7 @@ from multiprocessing import get_context
 from pathlib import Path
 
 from ..diagnostics import CotwinError
-from .scenario import Command, typed_value
+from .scenario import Command, scalar_value
 
 _SYSTEM = None  # the worker's TwinSystem, loaded once per process
 
@@ -36,7 +36,7 @@ def grid(program, event: str, ranges: dict[str, list], at: float = 0.5) -> list[
         for name, value in zip(names, combo):
             port, sc = fields[name]
             try:
-                values.append((port, typed_value(value, sc.fmi_type)))
+                values.append((port, scalar_value(value, sc)))
             except ValueError as err:
                 raise CotwinError(f"argument {name}: {value!r} {err}") from None
         plans.append([Command(at, tuple(values), "sweep")])

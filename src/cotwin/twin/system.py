@@ -293,11 +293,11 @@ class TwinSystem:
         if self.source is CONTROLLER:
             return ScenarioUnit(CONTROLLER.name, self.models.program, self.commands, self.source_ports)
         if self.source is RABBITMQ:
-            from .rabbitmq import RabbitMQUnit, port_types
+            from .rabbitmq import RabbitMQUnit, port_scalars, port_types
 
             return RabbitMQUnit(RABBITMQ.name, port_types(self.models.program, self.source_ports),
                                 self.models.monitored, self.spec.rabbitmq, bridge=bridge, stream=stream,
-                                events=self.command_events, echo=echo)
+                                events=self.command_events, echo=echo, scalars=port_scalars(self.models.program))
         return None
 
     def instantiate(self, dmodel_fmu: str | Path, endpoint, source: Unit | None = None,

@@ -17,9 +17,13 @@ the completion time of the whole plan.
 
 from __future__ import annotations
 
+import logging
+import math
 import re
+import threading
 import time
 import time as wallclock
+from concurrent.futures import CancelledError
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -27,6 +31,7 @@ from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution
 from ..diagnostics import CotwinError
 from .build import dmodel_fmu
+from .capped_log import CappedLog
 from .scenario import Command
 from .system import DMODEL, MAPPING, TwinSystem
 
@@ -228,7 +233,7 @@ def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, st
 def plan_from_json(items: list, program) -> list[Command]:
     """A what-if plan from JSON (a broker request or a file): [{"time": s, "event": name, "args": {...}}],
     checked like a TOML scenario; CotwinError naming the item otherwise."""
-    from .scenario import typed_value
+    from .scenario import scalar_value
 
     if not isinstance(items, list) or not items:
         raise CotwinError("a what-if plan is a non-empty list of {time, event, args}")
@@ -239,26 +244,42 @@ def plan_from_json(items: list, program) -> list[Command]:
             raise CotwinError(f"plan item {k}: expected {{time, event, args}}, got {item!r:.80}")
         t, name, args = item.get("time"), item.get("event"), item.get("args", {})
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not (0 <= t < 1e6):
-            raise CotwinError(f"plan item {k}: time must be a number of seconds >= 0, got {t!r}")
+            raise CotwinError(f"plan item {k}: time must be a number of seconds >= 0, got {t!r:.80}")
         if name not in events:
-            raise CotwinError(f"plan item {k}: unknown event {name!r} (known: {', '.join(events)})")
+            raise CotwinError(f"plan item {k}: unknown event {name!r:.80} (known: {', '.join(events)})")
         if not isinstance(args, dict):
             raise CotwinError(f"plan item {k}: args must be an object")
         fields = {sc.path[-1] if sc.path else "value": (port, sc) for port, sc in events[name].value_ports}
         values = [(name, True)]
         for key, value in args.items():
             if key not in fields:
-                raise CotwinError(f"plan item {k}: event {name} has no argument '{key}' (has {', '.join(fields) or 'none'})")
+                raise CotwinError(f"plan item {k}: event {name} has no argument {key[:80]!r} (has {', '.join(fields) or 'none'})")
             port, sc = fields[key]
             try:
-                values.append((port, typed_value(value, sc.fmi_type)))
+                values.append((port, scalar_value(value, sc)))
             except ValueError as err:
-                raise CotwinError(f"plan item {k}: argument {key}: {value!r} {err}") from None
+                raise CotwinError(f"plan item {k}: argument {key}: {value!r:.80} {err}") from None
         out.append(Command(float(t), tuple(values), f"plan item {k}"))
     return out
 
 
 # ---- what-if requests over the broker ------------------------------------------------------------
+
+def finite(value):
+    """`value` (JSON-ready) with NaN and infinities, which JSON lacks, as null."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite(v) for v in value]
+    return value
+
+
+def no_json_constant(name: str):
+    """json.loads' hook for NaN, Infinity and -Infinity, which JSON does not have."""
+    raise ValueError(f"{name} is not a JSON number")
+
 
 def _worker_init(project: str, artefacts: str | None) -> None:
     global _WORKER
@@ -283,13 +304,15 @@ class WhatIfService:
     fork; the answer (`Prediction.as_dict()`, or `{"error": why}`) is published to `reply_to` (a
     broker-named `amq.gen-*` queue: named queues get no answer) with the request's `correlation_id`.
     Requests are validated like any broker message; a bad one gets an error answer and never reaches the
-    twin; at most MAX_PENDING run at a time. Who may send requests is the broker's business: the
+    twin; one without a broker-named `reply_to` could never be answered and is dropped (and logged, at
+    most 20 lines per 10 s: a flood cannot fill the log); at most MAX_PENDING run at a time (the count is
+    shared by the broker's, the twin's and the pool's threads, under a lock); those accepted before the
+    twin ends are answered within `close`'s wait. Who may send requests is the broker's business: the
     `whatif` role of docs/security.md may publish `twin.whatif` on the twin's exchange."""
 
     def __init__(self, url: str, exchange: str, project: str | Path, artefacts: str | Path | None = None,
                  workers: int = 1, routing_key: str = "twin.whatif"):
         import queue
-        import threading
         from concurrent.futures import ProcessPoolExecutor
         from multiprocessing import get_context
 
@@ -298,8 +321,12 @@ class WhatIfService:
         self.exchange, self.routing_key = exchange, routing_key
         self.requests: queue.Queue = queue.Queue()
         self.answered = 0
+        self.dropped = 0  # requests that could not be answered (no reply_to)
         self._pending = 0
-        self._futures: set = set()
+        self._lock = threading.Lock()
+        self._futures: set = set()  # forked and not yet answered
+        self._closing = False
+        self.log = CappedLog(logging.getLogger("cotwin.whatif"), "dropped what-if requests")
         self._pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_init,
                                          initargs=(str(Path(project).resolve()), str(artefacts) if artefacts else None))
         self._connection = connect(url, "cotwin what-if")
@@ -331,7 +358,7 @@ class WhatIfService:
 
         if not props.reply_to or not props.reply_to.startswith("amq.gen-"):
             return  # answers go only to broker-named (exclusive) reply queues, never to a named queue
-        body = json.dumps(answer, default=float).encode()
+        body = json.dumps(finite(answer), default=float, allow_nan=False).encode()  # a diverged fork: null, not NaN
         self._connection.add_callback_threadsafe(lambda: self._channel.basic_publish(
             "", props.reply_to, body, pika.BasicProperties(correlation_id=props.correlation_id,
                                                            content_type="application/json")))
@@ -341,15 +368,32 @@ class WhatIfService:
     def _on_request(self, channel, method, props, body) -> None:
         import json
 
-        if self._pending >= self.MAX_PENDING:
-            self._reply(props, {"error": f"busy: {self._pending} what-ifs pending; try again later"})
+        if not props.reply_to or not props.reply_to.startswith("amq.gen-"):
+            self.dropped += 1
+            self.log.warning("what-if request dropped: %s (correlation_id %r)", "no reply_to" if not props.reply_to
+                             else f"reply_to {props.reply_to[:80]!r} is not a broker-named queue (amq.gen-*)",
+                             (props.correlation_id or "")[:80])
+            return
+        if self._closing:
+            self._reply(props, {"error": "the twin is stopping; it takes no more what-if requests"})
+            return
+        with self._lock:
+            busy = self._pending >= self.MAX_PENDING
+            if not busy:
+                self._pending += 1  # taken now, so no two threads both see room for one more
+        if busy:
+            self._reply(props, {"error": f"busy: {self.MAX_PENDING} what-ifs pending; try again later"})
             return
         try:
             if len(body) > 1 << 20:
                 raise ValueError("request larger than 1 MiB")
-            request = json.loads(body.decode("utf-8"))
-            if not isinstance(request, dict) or set(request) - {"plan", "horizon", "decimate"}:
-                raise ValueError("a request is {plan, horizon, decimate}")
+            request = json.loads(body.decode("utf-8"), parse_constant=no_json_constant)
+            if not isinstance(request, dict):
+                raise ValueError("a request is a JSON object {plan, horizon, decimate}")
+            unknown = sorted(set(request) - {"plan", "horizon", "decimate"})
+            if unknown:
+                raise ValueError(f"unknown key {', '.join(repr(k[:40]) for k in unknown[:10])} "
+                                 "(a request is {plan, horizon, decimate})")
             horizon = request.get("horizon", 30.0)
             decimate = request.get("decimate", 1)
             if isinstance(horizon, bool) or not isinstance(horizon, (int, float)) or not 0 < horizon <= 3600:
@@ -359,9 +403,9 @@ class WhatIfService:
             if not isinstance(request.get("plan"), list) or not request["plan"]:
                 raise ValueError("plan must be a non-empty list")
         except (ValueError, UnicodeDecodeError, RecursionError) as err:
+            self._release()
             self._reply(props, {"error": f"bad what-if request: {err}"})
             return
-        self._pending += 1
         self.requests.put((props, request["plan"], float(horizon), decimate))
 
     def poll(self, execution) -> None:
@@ -371,44 +415,63 @@ class WhatIfService:
             try:
                 state = execution.get_state()
             except CotwinError as err:
-                self._pending -= 1
+                self._release()
                 self._reply(props, {"error": "; ".join(f.message for f in err.findings)})
                 continue
-            future = self._pool.submit(_worker_predict, plan, state, horizon, decimate)
-            self._futures.add(future)
+            try:
+                future = self._pool.submit(_worker_predict, plan, state, horizon, decimate)
+            except RuntimeError as err:  # the pool is shut down or broken (a worker died): the twin runs on
+                self._release()
+                self._reply(props, {"error": f"the what-if workers are gone ({type(err).__name__})"})
+                continue
+            with self._lock:
+                self._futures.add(future)
             future.add_done_callback(lambda f, props=props: self._done(props, f))
 
     def _done(self, props, future) -> None:
-        from concurrent.futures import CancelledError
-        from concurrent.futures.process import BrokenProcessPool
-
-        self._futures.discard(future)
         try:
             answer = future.result()
-        except (CancelledError, BrokenProcessPool):
-            answer = {"error": "the twin stopped before this what-if finished"}
         except CotwinError as err:
             answer = {"error": "; ".join(f.message for f in err.findings)}
+        except CancelledError:
+            answer = {"error": "the twin stopped before this what-if ran"}
         except Exception as err:  # noqa: BLE001 - the worker's failure is the requester's answer
             answer = {"error": f"{type(err).__name__}: {err}"}
-        self.answered += 1
-        self._pending -= 1
+        with self._lock:
+            self.answered += 1
+            self._futures.discard(future)
+        self._release()
         self._reply(props, answer)
 
+    def _release(self) -> None:
+        with self._lock:
+            self._pending -= 1
+
+    @property
+    def pending(self) -> int:
+        """Requests queued or running."""
+        with self._lock:
+            return self._pending
+
     def close(self, wait: float = 60.0) -> None:
-        """Stop taking requests; answer those already forked (for at most `wait` seconds in all: a loaded
-        machine may not even have started the worker when the twin ends), and tell the others why not."""
+        """Stop taking requests; answer those already forked (for at most `wait` seconds in all: a worker
+        still starting when the twin ends gets its queued requests done too), then drop the others."""
         from concurrent.futures import wait as wait_for
 
-        futures = list(self._futures)
+        self._closing = True
+        with self._lock:
+            futures = list(self._futures)
         wait_for(futures, timeout=wait)
         running = list((getattr(self._pool, "_processes", None) or {}).values())
         self._pool.shutdown(wait=False, cancel_futures=True)
+        deadline = time.monotonic() + wait
         for process in running:
+            process.join(max(0.0, deadline - time.monotonic()))
             if process.is_alive():
                 process.kill()
         self._stop.set()
         self._thread.join(5)
+        self.log.close()
         try:
             self._connection.close()
         except Exception:  # noqa: BLE001

@@ -5,8 +5,22 @@ Routes: `/` (the page), `/static/...` (its scripts, styles and the vendored thre
 (what describe.py derives from the models), `/api/status`, `/api/command` (POST: a command from the
 panel, published on the twin's broker by PagePublisher), `/api/whatif` (POST: a plan for the twin's
 what-if service, when it runs one), `/api/history` and `/api/history/{run}` (the history store), and
-`/ws`: the live stream. A client gets a `hello` (recent samples, every event
-so far, the status) and then, every `period` seconds, a `batch` of what is new: samples (at most
+`/ws`: the live stream.
+
+Requests are read as a hostile client might send them: a body is at most MAX_BODY bytes (a larger
+Content-Length is answered 413 before reading it, a longer body is cut off at the limit and answered
+413, a body slower than BODY_SECONDS 408), must be UTF-8 JSON without NaN or Infinity, an object with
+only the keys it documents (400 naming what is wrong); at most MAX_WHATIFS what-ifs from the page are
+in flight and at most PagePublisher.MAX_WAITING commands wait to leave (429 beyond); commands to a twin
+that has ended are refused (409), while the page keeps its last figure and state.
+
+A command moves a robot, so another site open in the same browser must not send one: a POST must say
+`Content-Type: application/json` (415 otherwise; a browser cannot send that across sites without a
+preflight, which is never answered), its `Origin`, when sent, must be this server (403), and its
+`Host` must be an address, `localhost` or the served host (403: a DNS-rebound name is none of these).
+A stream (`/ws`) from a page of another origin is closed (1008).
+
+A client gets a `hello` (recent samples, the newest events, the status) and then, every `period` seconds, a `batch` of what is new: samples (at most
 `max_rate` per second, evenly thinned beyond that), events and the status. Each client reads the
 feed from its own cursor on the server's event loop, so one that is slow to take its messages only
 falls behind (and is told how many samples it skipped), never the twin or the other clients.
@@ -17,7 +31,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import math
+import queue
 import socket
 import threading
 import time as wallclock
@@ -25,11 +39,100 @@ from pathlib import Path
 
 from ...diagnostics import CotwinError
 from ..system import MAPPING, RABBITMQ, TwinSystem
+from ..whatif import finite as _finite
+from ..whatif import no_json_constant
 from .describe import describe
 from .feed import DashboardFeed
 
 log = logging.getLogger("cotwin.dashboard")
 STATIC = Path(__file__).resolve().parent / "static"
+MAX_BODY = 1 << 20  # bytes of a request body (a command or a what-if plan is a few hundred)
+BODY_SECONDS = 10.0  # to send it
+MAX_CONNECTIONS = 128  # open at once, pages, streams and requests together
+MAX_CLIENTS = 32  # live streams at once (more are closed with 1013, try again later)
+MAX_WHATIFS = 2  # what-ifs from the page in flight (each waits for a fork of the twin)
+ENDED = ("done", "stopped", "failed")
+
+
+class Refused(Exception):
+    """A request the server answers with `status` and `message` (what is wrong with it)."""
+
+    def __init__(self, status: int, message: str):
+        super().__init__(message)
+        self.status, self.message = status, message
+
+
+async def read_json(request, served: str, limit: int = MAX_BODY, seconds: float = BODY_SECONDS):
+    """The request's body as JSON (see module doc), or Refused saying why not."""
+    foreign = same_site(request.headers, served)
+    if foreign is not None:
+        raise Refused(403, f"refused: {foreign}")
+    kind = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if kind != "application/json":
+        raise Refused(415, f"the body must be sent as application/json, not {kind[:80] or 'without a type'!r}")
+    length = request.headers.get("content-length")
+    if length is not None:
+        if not length.strip().isdigit():
+            raise Refused(400, f"Content-Length {length[:40]!r} is not a number of bytes")
+        if int(length) > limit:
+            raise Refused(413, f"the body of {int(length)} bytes is larger than the {limit} bytes accepted")
+
+    async def collect() -> bytes:
+        body = bytearray()
+        async for chunk in request.stream():
+            body += chunk
+            if len(body) > limit:
+                raise Refused(413, f"the body is larger than the {limit} bytes accepted")
+        return bytes(body)
+
+    try:
+        body = await asyncio.wait_for(collect(), seconds)
+    except asyncio.TimeoutError:
+        raise Refused(408, f"the body did not arrive within {seconds:g} s") from None
+    try:
+        return json.loads(body.decode("utf-8"), parse_constant=no_json_constant)
+    except UnicodeDecodeError as err:
+        raise Refused(400, f"the request is not UTF-8 (byte {err.start})") from None
+    except json.JSONDecodeError as err:
+        raise Refused(400, f"the request is not JSON: {err.msg} at line {err.lineno} column {err.colno}") from None
+    except ValueError as err:
+        why = "a number has too many digits" if "digits" in str(err) else str(err)
+        raise Refused(400, f"the request is not JSON: {why}") from None
+    except RecursionError:
+        raise Refused(400, "the request is not JSON: nested too deeply") from None
+
+
+def same_site(headers, served: str) -> str | None:
+    """Why a request with these headers may come from another site (see module doc), or None."""
+    import ipaddress
+    from urllib.parse import urlsplit
+
+    host = headers.get("host", "")
+    try:
+        name = urlsplit("//" + host).hostname or ""
+    except ValueError:  # e.g. an unclosed [
+        return f"Host {host[:80]!r} is not an address"
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        if name not in ("localhost", served.strip("[]"), socket.gethostname()):
+            return f"Host {host[:80]!r} is not this server's address"
+    origin = headers.get("origin")
+    if origin is not None and origin not in (f"http://{host}", f"https://{host}"):
+        return f"Origin {origin[:80]!r} is not this server (Host {host[:80]!r})"
+    return None
+
+
+def parse_run_id(text: str) -> int:
+    """A history run id from a URL, or Refused (400 not a run id, 404 out of the ids a store can hold)."""
+    from ..history import MAX_RUN_ID
+
+    if not text.isascii() or not text.isdigit() or len(text) > 30:
+        raise Refused(400, f"'{text[:40]}' is not a run id (a positive whole number)")
+    number = int(text)
+    if not 0 < number <= MAX_RUN_ID:
+        raise Refused(404, f"no run {number} (run ids are 1, 2, ...)")
+    return number
 
 
 def parse_address(text: str) -> tuple[str, int]:
@@ -63,15 +166,20 @@ def history_run(url: str, run_id: int, max_points: int = 4000) -> dict:
     from ..history import read_run
 
     data = read_run(url, run_id)
+    if not isinstance(data["columns"], dict) or not all(isinstance(c, list) for c in data["columns"].values()):
+        raise CotwinError(f"run {run_id}: its columns are not a JSON object of lists (the store is damaged)")
     prefix = MAPPING.name + "."
     sides = {}
-    for side, columns in data["columns"].items():
-        rows = thin(data["samples"].get(side, []), max_points)
-        picked = [(i, c[len(prefix):]) for i, c in enumerate(columns) if c.startswith(prefix)
-                  and all(isinstance(values[i], (int, float)) and not isinstance(values[i], bool)
-                          for _, values in rows if values[i] is not None)]  # numbers, not the events
-        sides[side] = {"time": [t for t, _ in rows],
-                       "values": {name: [values[i] for _, values in rows] for i, name in picked}}
+    try:
+        for side, columns in data["columns"].items():
+            rows = thin(data["samples"].get(side, []), max_points)
+            picked = [(i, c[len(prefix):]) for i, c in enumerate(columns) if c.startswith(prefix)
+                      and all(isinstance(values[i], (int, float)) and not isinstance(values[i], bool)
+                              for _, values in rows if values[i] is not None)]  # numbers, not the events
+            sides[side] = {"time": [t for t, _ in rows],
+                           "values": {name: [values[i] for _, values in rows] for i, name in picked}}
+    except (IndexError, TypeError):  # a sample of another width than the run's columns
+        raise CotwinError(f"run {run_id}: its samples do not match its columns (the store is damaged)") from None
     run = dict(data["run"])
     return {"run": run, "sides": sides, "states": data["states"], "alarms": data["alarms"],
             "commands": data["commands"]}
@@ -101,11 +209,17 @@ class Dashboard:
         self.model = describe(system, sides, mode, {"whatif": self.whatif_url is not None}) if system is not None else None
         self.publisher = None
         if system is not None and system.source is RABBITMQ and mode != "history":
-            from ..rabbitmq import port_types
+            from ..rabbitmq import port_scalars, port_types
             from .commands import PagePublisher
 
-            self.publisher = PagePublisher(system.spec.rabbitmq, port_types(system.models.program, system.source_ports),
-                                           self.model["commands"]["events"], heartbeat=heartbeat)
+            program = system.models.program
+            self.publisher = PagePublisher(system.spec.rabbitmq, port_types(program, system.source_ports),
+                                           self.model["commands"]["events"], heartbeat=heartbeat,
+                                           scalars=port_scalars(program))
+        self.whatifs = 0  # what-ifs from the page in flight
+        self.whatif_timeout = 120.0  # s to wait for the twin's answer
+        self.body_seconds = BODY_SECONDS
+        self._closing = threading.Event()  # ends the what-ifs the page waits for
         self.clients = 0
         self.skipped = 0  # samples clients skipped because they fell behind
         self._server = None
@@ -134,8 +248,10 @@ class Dashboard:
         self._socket = sock
         self.port = sock.getsockname()[1]
         config = uvicorn.Config(self.app(), log_level="warning", access_log=False, lifespan="off",
-                                ws="websockets-sansio", timeout_graceful_shutdown=2)
+                                ws="websockets-sansio", timeout_graceful_shutdown=2,
+                                limit_concurrency=MAX_CONNECTIONS)  # more at once are answered 503
         self._server = uvicorn.Server(config)
+        _cap_server_log()
         self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]}, name="cotwin dashboard",
                                         daemon=True)
         self._thread.start()
@@ -161,6 +277,7 @@ class Dashboard:
         """Tell the page the run is over, close the streams and stop serving."""
         if self.feed is not None:
             self.feed.finish("stopped")
+        self._closing.set()
         if self.publisher is not None:
             self.publisher.stop()
         if self._server is not None:
@@ -202,6 +319,9 @@ class Dashboard:
         async def status(request):
             return JSONResponse(self._status())
 
+        def refused(err: Refused) -> JSONResponse:
+            return JSONResponse({"error": err.message}, status_code=err.status)
+
         async def command(request):
             if self.publisher is None:
                 commands = self.model["commands"] if self.model else {"source": "history"}
@@ -209,17 +329,26 @@ class Dashboard:
                        "none": "this twin takes no commands"}.get(commands["source"], "no live twin to command")
                 return JSONResponse({"error": why}, status_code=409)
             try:
-                body = await request.json()
-            except (ValueError, UnicodeDecodeError):
-                return JSONResponse({"error": "the request is not JSON"}, status_code=400)
-            if not isinstance(body, dict) or not isinstance(body.get("event"), str) \
-                    or not isinstance(body.get("values", {}), dict):
-                return JSONResponse({"error": "expected {\"event\": NAME, \"values\": {PORT: VALUE, ...}}"},
-                                    status_code=400)
+                body = await read_json(request, self.host, seconds=self.body_seconds)
+            except Refused as err:
+                return refused(err)
+            shape = "expected {\"event\": NAME, \"values\": {PORT: VALUE, ...}}"
+            if not isinstance(body, dict):
+                return JSONResponse({"error": shape}, status_code=400)
+            unknown = sorted(set(body) - {"event", "values"})
+            if unknown or not isinstance(body.get("event"), str) or not isinstance(body.get("values", {}), dict):
+                why = f"unknown key {', '.join(repr(k[:40]) for k in unknown)}" if unknown \
+                    else "'event' must be a name" if not isinstance(body.get("event"), str) else "'values' must be an object"
+                return JSONResponse({"error": f"{why}: {shape}"}, status_code=400)
+            if self._ended():
+                return JSONResponse({"error": f"{self._ended()}; it takes no more commands"}, status_code=409)
             try:
                 message = self.publisher.command(body["event"], body.get("values", {}))
             except ValueError as err:
                 return JSONResponse({"error": str(err)}, status_code=422)
+            except queue.Full:
+                return JSONResponse({"error": f"{self.publisher.MAX_WAITING} commands are waiting to be published; "
+                                              "try again later"}, status_code=429, headers={"Retry-After": "1"})
             if self.publisher.error:
                 return JSONResponse({"error": self.publisher.error}, status_code=503)
             return JSONResponse({"queued": message, "twin_ready": self.publisher.twin_ready.is_set()})
@@ -231,17 +360,27 @@ class Dashboard:
             from .whatif import ask, check_request
 
             try:
-                body = await request.json()
-            except (ValueError, UnicodeDecodeError):
-                return JSONResponse({"error": "the request is not JSON"}, status_code=400)
+                body = await read_json(request, self.host, seconds=self.body_seconds)
+            except Refused as err:
+                return refused(err)
             try:
                 checked = check_request(body, self.system.models.program)
             except CotwinError as err:
                 return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=422)
+            if self._ended():
+                return JSONResponse({"error": f"{self._ended()}; there is no live state to fork"}, status_code=409)
+            if self.whatifs >= MAX_WHATIFS:  # the server's one event loop: no lock needed
+                return JSONResponse({"error": f"{MAX_WHATIFS} what-ifs are already running; try again when one is "
+                                              "answered"}, status_code=429, headers={"Retry-After": "5"})
+            self.whatifs += 1
             try:
-                answer = await run_in_threadpool(ask, self.whatif_url, self.system.spec.deviation.exchange, checked)
+                answer = await run_in_threadpool(ask, self.whatif_url, self.system.spec.deviation.exchange, checked,
+                                                 self.whatif_timeout, cancel=self._closing)
             except CotwinError as err:
-                return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=504)
+                return JSONResponse({"error": "; ".join(f.message for f in err.findings)},
+                                    status_code=503 if self._closing.is_set() else 504)
+            finally:
+                self.whatifs -= 1
             return JSONResponse(_finite(answer), status_code=422 if "error" in answer else 200)
 
         async def runs(request):
@@ -257,7 +396,11 @@ class Dashboard:
             if self.history_url is None:
                 return JSONResponse({"error": "no history store"}, status_code=404)
             try:
-                data = await run_in_threadpool(history_run, self.history_url, request.path_params["run_id"])
+                run_id = parse_run_id(request.path_params["run_id"])
+            except Refused as err:
+                return refused(err)
+            try:
+                data = await run_in_threadpool(history_run, self.history_url, run_id)
             except CotwinError as err:
                 return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=404)
             return JSONResponse(data)
@@ -270,24 +413,39 @@ class Dashboard:
             Route("/api/command", command, methods=["POST"]),
             Route("/api/whatif", whatif, methods=["POST"]),
             Route("/api/history", runs),
-            Route("/api/history/{run_id:int}", run),
+            Route("/api/history/{run_id}", run),
             WebSocketRoute("/ws", self._stream),
             Mount("/static", StaticFiles(directory=STATIC), name="static"),
         ]
         return Starlette(routes=routes)
+
+    def _ended(self) -> str | None:
+        """How the live twin ended ("the twin has stopped"), or None while it runs or waits."""
+        if self.feed is None or self.feed.state not in ENDED:
+            return None
+        return f"the twin has {'ended' if self.feed.state == 'done' else self.feed.state}"
 
     def _status(self) -> dict:
         out = self.feed.status() if self.feed is not None else {"state": "history"}
         out["clients"] = self.clients
         out["skipped"] = self.skipped
         if self.publisher is not None:
-            out["broker"] = {"twin_ready": self.publisher.twin_ready.is_set(), "sent": len(self.publisher.sent),
+            out["broker"] = {"twin_ready": self.publisher.twin_ready.is_set(), "sent": self.publisher.sent_count,
                              "error": self.publisher.error}
         return out
 
     async def _stream(self, websocket) -> None:
         from starlette.websockets import WebSocketDisconnect
 
+        if self.clients >= MAX_CLIENTS:  # each stream costs the server's loop a task and a copy per batch
+            await websocket.accept()  # then closed with a reason the page can show
+            await websocket.close(code=1013, reason=f"{MAX_CLIENTS} pages are already following this twin")
+            return
+        foreign = same_site(websocket.headers, self.host)
+        if foreign is not None:  # another site's page would read the twin's stream
+            await websocket.accept()
+            await websocket.close(code=1008, reason=foreign[:120])
+            return
         await websocket.accept()
         self.clients += 1
         closed = asyncio.Event()
@@ -312,9 +470,10 @@ class Dashboard:
                 return
             cursor = max(0, feed.samples.count - self.backlog)
             rows, cursor, _ = feed.samples.since(cursor)
-            seen = len(feed.events)
+            events, seen, events_skipped = feed.events.since(0)
             await websocket.send_text(_json({"type": "hello", "sides": feed.sides, "samples": _rows(rows),
-                                             "events": feed.events[:seen], "status": self._status()}))
+                                             "events": events, "events_skipped": events_skipped,
+                                             "status": self._status()}))
             limit = max(1, int(self.max_rate * self.period))
             last_state = None
             while not closed.is_set():
@@ -325,20 +484,29 @@ class Dashboard:
                     pass
                 rows, cursor, skipped = feed.samples.since(cursor)
                 self.skipped += skipped
-                events = feed.events[seen:]
-                seen += len(events)
+                events, seen, events_skipped = feed.events.since(seen)
                 status = self._status()
                 if not rows and not events and status["state"] == last_state:
                     continue
                 last_state = status["state"]
                 await websocket.send_text(_json({"type": "batch", "sides": feed.sides,
                                                  "samples": _rows(thin(rows, limit)), "skipped": skipped,
-                                                 "events": events, "status": status}))
+                                                 "events": events, "events_skipped": events_skipped,
+                                                 "status": status}))
         except (WebSocketDisconnect, RuntimeError, OSError):
             pass
         finally:
             self.clients -= 1
             listener.cancel()
+
+
+def _cap_server_log() -> None:
+    """uvicorn warns once per malformed request: a client sending thousands must not fill the log."""
+    from ..capped_log import CappedFilter
+
+    server_log = logging.getLogger("uvicorn.error")
+    if not any(isinstance(f, CappedFilter) for f in server_log.filters):
+        server_log.addFilter(CappedFilter("warnings about bad requests"))
 
 
 def _json(message: dict) -> str:
@@ -347,16 +515,6 @@ def _json(message: dict) -> str:
         return json.dumps(message, allow_nan=False, default=str)
     except ValueError:
         return json.dumps(_finite(message), allow_nan=False, default=str)
-
-
-def _finite(value):
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    return value
 
 
 def _rows(rows: list) -> list:

@@ -5,8 +5,11 @@ on `to_cosim`: the idle values (events false, values zero), or in their place th
 asked for. The heartbeat is what lets a twin run from the page alone (the RMQ FMU needs every value
 refreshed within `maxage`); with `heartbeat=False` it sends only the page's commands.
 
-Commands are checked with the twin's own message parser before they leave, so the page is told at
-once why a value is refused (wrong type, out of int32) instead of the twin dropping the message.
+Commands are checked before they leave, so the page is told at once why a value is refused instead of
+the twin dropping (or, for a double on an Integer, truncating) it: every value as a plan's would be
+(`scalar_value`: 1.5 is not an integer, an enumeration takes its literals, a nat is not negative, int32)
+and then with the twin's own message parser. At most MAX_WAITING commands wait to leave (one leaves per
+loop of the link thread); more are refused with QueueFull, which the server answers 429.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import logging
 import queue
 import threading
 import time as wallclock
+from collections import deque
 
 import pika
 
@@ -24,15 +28,20 @@ from ...mapping.amqp import connect
 from ..project import RabbitMQSettings
 from ..publisher import idle_values, now_iso
 from ..rabbitmq import parse_message, read_echo
+from ..scenario import scalar_value, typed_value
 
 log = logging.getLogger("cotwin.dashboard")
 
 
 class PagePublisher:
+    MAX_WAITING = 64  # commands queued and not yet published
+    MAX_SENT = 1000  # messages remembered (a heartbeat every period for days would grow a list without bound)
+
     def __init__(self, settings: RabbitMQSettings, types: dict[str, str], events: list[dict], period: float = 0.25,
-                 heartbeat: bool = True, name: str = "cotwin dashboard"):
+                 heartbeat: bool = True, name: str = "cotwin dashboard", scalars: dict | None = None):
         self.settings = settings
         self.types = types  # every command port with its FMI type
+        self.scalars = scalars or {}  # value port -> its d-model Scalar (RoboSim type), where known
         self.events = {e["name"]: [v["port"] for v in e["values"]] for e in events}
         self.idle = idle_values(types)
         self.period = period
@@ -40,30 +49,40 @@ class PagePublisher:
         self.name = name
         self.bound = threading.Event()  # our queue is bound: the twin may announce itself now
         self.twin_ready = threading.Event()  # the twin's ready message came
-        self.sent: list[tuple[float, dict]] = []  # (wall time, message)
+        self.sent: deque[tuple[float, dict]] = deque(maxlen=self.MAX_SENT)  # (wall time, message), the newest
+        self.sent_count = 0
         self.error: str | None = None
         self.echoed: float | None = None  # the last simulation time the twin echoed (s)
-        self._pending: queue.Queue[dict] = queue.Queue()
+        self._pending: queue.Queue[dict] = queue.Queue(self.MAX_WAITING)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
     # ---- the page's side ----
     def command(self, event: str, values: dict) -> dict:
-        """Queue the command `event` with its value ports; returns the message, or ValueError saying why
-        it would be refused."""
+        """Queue the command `event` with its value ports; returns the message, ValueError saying why it
+        would be refused (naming the input), or queue.Full if too many wait to leave."""
         if event not in self.events:
-            raise ValueError(f"'{event}' is not a command of this twin (commands: {', '.join(self.events) or 'none'})")
+            raise ValueError(f"{event[:80]!r} is not a command of this twin (commands: {', '.join(self.events) or 'none'})")
         ports = self.events[event]
         unknown = [k for k in values if k not in ports]
         missing = [p for p in ports if p not in values]
         if unknown or missing:
-            raise ValueError("; ".join([*(f"'{k}' is not a value of {event}" for k in unknown),
+            raise ValueError("; ".join([*(f"{k[:80]!r} is not a value of {event}" for k in unknown[:10]),
                                         *(f"no value for '{p}'" for p in missing)]))
-        message = {"time": now_iso(), **self.idle, event: True, **values}
-        parsed = parse_message(json.dumps(message).encode(), self.types)  # the twin's own check
+        typed, wrong = {}, []
+        for port, value in values.items():
+            try:
+                typed[port] = scalar_value(value, self.scalars[port]) if port in self.scalars \
+                    else typed_value(value, self.types[port])
+            except ValueError as err:
+                wrong.append(f"{port}: {value!r:.40} {err}")
+        if wrong:
+            raise ValueError("; ".join(wrong))
+        message = {"time": now_iso(), **self.idle, event: True, **typed}
+        parsed = parse_message(json.dumps(message).encode(), self.types, self.scalars)  # the twin's own check
         if parsed.dropped:
             raise ValueError("; ".join(parsed.dropped))
-        self._pending.put(message)
+        self._pending.put_nowait(message)
         return message
 
     # ---- the link thread ----
@@ -119,6 +138,7 @@ class PagePublisher:
                 if message is not None:
                     channel.basic_publish(s.exchange, s.to_cosim, json.dumps(message).encode())
                     self.sent.append((wallclock.time(), message))
+                    self.sent_count += 1
                     next_tick = wallclock.monotonic() + self.period
         except (pika.exceptions.AMQPError, OSError) as err:
             self.error = f"the broker link was lost ({type(err).__name__})"

@@ -145,6 +145,16 @@ def observed_joints(system: TwinSystem) -> dict[str, tuple[str, str]]:
     return mirror_variables(system.models.monitored, ik.arm_joints(tree, ik.find_tool(tree)))
 
 
+def _range(sc) -> dict:
+    """What the panel's input for a value port may hold beyond its FMI type: an enumeration's literals
+    (sent by name), a nat's minimum."""
+    from ...robosim.types import NAT, EnumTy
+
+    if isinstance(sc.ty, EnumTy):
+        return {"literals": [lit.name for lit in sc.ty.decl.literals]}
+    return {"min": 0} if sc.ty == NAT else {}
+
+
 def command_panel(system: TwinSystem) -> dict:
     """The commands the page may send: the twin's command events with their value ports, and where the
     twin's commands come from (only a RabbitMQ source takes commands from the page)."""
@@ -154,7 +164,7 @@ def command_panel(system: TwinSystem) -> dict:
         if ev.name not in system.command_events:
             continue
         events.append({"name": ev.name, "values": [{"port": port, "label": "_".join(sc.path) or port,
-                                                     "type": sc.fmi_type} for port, sc in ev.value_ports]})
+                                                     "type": sc.fmi_type, **_range(sc)} for port, sc in ev.value_ports]})
     source = "none" if system.source is None else "rabbitmq" if system.source is RABBITMQ else "plan"
     out = {"source": source, "events": events}
     if source == "plan":

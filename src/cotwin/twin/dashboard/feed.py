@@ -1,5 +1,8 @@
 """The dashboard's view of a running twin: an observer that copies a few values per step into a bounded
-ring and notes discrete events (commands, operation calls, alarms) in an append-only list.
+ring and notes discrete events (commands, operation calls, alarms) in a second, larger ring (a
+publisher commanding at every step of a long run, or a flood of alarms, cannot grow it without bound:
+a page opened late gets the newest `event_capacity` events, and a reader that falls behind is told how
+many it skipped).
 
 The twin's thread only writes (a handful of dict look-ups and one list store per step, no lock, no
 I/O, no encoding), and copies values at most `max_rate` times a second of wall time: a paced twin at
@@ -52,12 +55,20 @@ class Ring:
     def last(self):
         return self.items[(self.count - 1) % self.capacity] if self.count else None
 
+    def __iter__(self):
+        """The items held, oldest first."""
+        return iter(self.since(0)[0])
+
+    def __len__(self) -> int:
+        return min(self.count, self.capacity)
+
 
 class DashboardFeed(Observer):
     """Samples `(time, wall, [values side 1, states side 1, values side 2, ...])` per step, and events
     (dicts with `kind` = command | op | alarm) as they happen (see module doc)."""
 
-    def __init__(self, system: TwinSystem, capacity: int = 1 << 14, max_rate: float = 500.0):
+    def __init__(self, system: TwinSystem, capacity: int = 1 << 14, max_rate: float = 500.0,
+                 event_capacity: int = 1 << 12):
         program = system.models.program
         self.system = system
         self.variables = list(system.models.monitored)
@@ -74,7 +85,7 @@ class DashboardFeed(Observer):
         self.min_interval = 1.0 / max_rate  # s of wall time between two copied samples
         self._last_copy = float("-inf")
         self._last_time: float | None = None  # the newest step's time, copied or not
-        self.events: list[dict] = []
+        self.events = Ring(event_capacity)  # of dicts
         self.sides: list[str] = []
         self.state = "waiting"  # waiting | running | done | stopped | failed
         self.message: str | None = None

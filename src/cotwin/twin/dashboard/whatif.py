@@ -20,8 +20,12 @@ def check_request(body: dict, program) -> dict:
     """{plan, horizon} from the page, checked; CotwinError saying what is wrong."""
     from ..whatif import plan_from_json
 
-    if not isinstance(body, dict) or set(body) - {"plan", "horizon"}:
-        raise CotwinError("a what-if request is {\"plan\": [{time, event, args}, ...], \"horizon\": seconds}")
+    shape = "a what-if request is {\"plan\": [{time, event, args}, ...], \"horizon\": seconds}"
+    if not isinstance(body, dict):
+        raise CotwinError(shape)
+    unknown = sorted(set(body) - {"plan", "horizon"})
+    if unknown:
+        raise CotwinError(f"unknown key {', '.join(repr(k[:40]) for k in unknown[:10])}: {shape}")
     plan_from_json(body.get("plan"), program)  # the service's own checks
     horizon = body.get("horizon", 30.0)
     if isinstance(horizon, bool) or not isinstance(horizon, (int, float)) or not 0 < horizon <= 3600:
@@ -29,8 +33,10 @@ def check_request(body: dict, program) -> dict:
     return {"plan": body["plan"], "horizon": float(horizon)}
 
 
-def ask(url: str, exchange: str, request: dict, timeout: float = 120.0, routing_key: str = "twin.whatif") -> dict:
-    """Publish `request` to the twin's what-if service and wait (at most `timeout`) for its answer."""
+def ask(url: str, exchange: str, request: dict, timeout: float = 120.0, routing_key: str = "twin.whatif",
+        cancel=None) -> dict:
+    """Publish `request` to the twin's what-if service and wait (at most `timeout`, and no longer than
+    the threading.Event `cancel` stays clear) for its answer."""
     try:
         connection = connect(url, "cotwin dashboard what-if")
     except (pika.exceptions.AMQPError, OSError) as err:
@@ -55,6 +61,8 @@ def ask(url: str, exchange: str, request: dict, timeout: float = 120.0, routing_
             left = deadline - wallclock.monotonic()
             if left <= 0:
                 raise CotwinError(f"what-if: no answer within {timeout:g} s (is the twin still running, with --whatif?)")
+            if cancel is not None and cancel.is_set():
+                raise CotwinError("what-if: the dashboard is stopping")
             connection.process_data_events(time_limit=min(left, 0.1))
         try:
             return json.loads(answer["body"])

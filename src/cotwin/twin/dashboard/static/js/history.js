@@ -31,6 +31,7 @@ export class HistoryView {
         td.textContent = cell;
         tr.append(td);
       }
+      if (run.message) tr.title = run.message; // e.g. why a run is shown as interrupted
       tr.addEventListener("click", () => this.open(run.id, tr));
       this.table.append(tr);
     }
@@ -45,7 +46,8 @@ export class HistoryView {
     if (!r.ok) { document.getElementById("run-title").textContent = data.error; return; }
     const run = data.run;
     document.getElementById("run-title").textContent =
-      `Run ${run.id}: ${run.kind}, ${run.status}, step ${run.step} s, ${run.algorithm} — ${run.project}`;
+      `Run ${run.id}: ${run.kind}, ${run.status}, step ${run.step} s, ${run.algorithm} — ${run.project}` +
+      (run.message ? ` (${run.message})` : "");
     const sides = Object.keys(data.sides);
     const names = sides.length ? Object.keys(data.sides[sides[0]].values) : [];
     const vars = names.map((name, i) => ({ name, color: PALETTE[i % PALETTE.length], visible: /^q\d+$/.test(name) }));

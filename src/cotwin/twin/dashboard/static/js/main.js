@@ -173,11 +173,11 @@ function connect(live) {
     }
     if (msg.status) showStatus(msg.status);
   };
-  ws.onclose = () => {
+  ws.onclose = (e) => {
     const state = $("state");
     if (!["done", "stopped", "failed"].includes(state.dataset.state)) {
       state.dataset.state = "disconnected";
-      state.textContent = "disconnected";
+      state.textContent = e.code === 1013 ? `refused: ${e.reason}` : "disconnected";
     } else state.textContent += " (server closed)";
     page.closed = true;
   };

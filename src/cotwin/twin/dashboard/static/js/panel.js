@@ -38,7 +38,9 @@ export function buildPanel(container, caption, sentLog, commands) {
     for (const v of ev.values) {
       const attrs = { name: v.port, "aria-label": v.label, disabled: !live };
       const input = v.type === "Boolean" ? h("input", { type: "checkbox", ...attrs })
-        : h("input", { type: "number", step: v.type === "Integer" ? "1" : "any", value: "0", required: true, ...attrs });
+        : v.literals ? h("select", attrs, ...v.literals.map((name) => h("option", { value: name }, name)))
+        : h("input", { type: "number", step: v.type === "Integer" ? "1" : "any", value: "0", required: true,
+          min: v.min ?? false, ...attrs });
       form.append(h("label", {}, v.label, input));
     }
     const button = h("button", { type: "submit", disabled: !live }, "Send");
@@ -48,7 +50,7 @@ export function buildPanel(container, caption, sentLog, commands) {
       const values = {};
       for (const v of ev.values) {
         const input = form.elements[v.port];
-        values[v.port] = v.type === "Boolean" ? input.checked : Number(input.value);
+        values[v.port] = v.type === "Boolean" ? input.checked : v.literals ? input.value : Number(input.value);
       }
       const text = `${ev.name} ${Object.entries(values).map(([k, x]) => `${k.split("_").pop()}=${x}`).join(" ")}`;
       const item = h("li", { class: "pending" }, `${new Date().toLocaleTimeString()} ${text}: sending`);
