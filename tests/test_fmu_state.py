@@ -254,22 +254,3 @@ def test_port_memory_and_fmi_calls_move_the_same_values(program, fmu):
         direct.terminate()
         calls.terminate()
 
-
-def test_states_keep_robosim_values_and_refuse_other_classes():
-    """A mapping's or interpreter's state holds vectors, sequences and sets: they round-trip with their
-    kind; any other class in the bytes is refused before it is built (a what-if once failed on this)."""
-    import pickle
-    from collections import OrderedDict
-
-    from cotwin.cosim.state import MAGIC, pack, unpack
-    from cotwin.robosim.values import FrozenRecord, MatrixValue, SeqValue, SetValue, TupleValue, VectorValue
-
-    data = {"v": VectorValue((1.0, 2.0)), "m": MatrixValue((VectorValue((1, 2)), VectorValue((3, 4)))),
-            "t": TupleValue((1, True)), "s": SeqValue((3, 4)), "set": SetValue({1, 2}),
-            "r": FrozenRecord((("x", 1),))}
-    back = unpack(pack("Mapping", data), "Mapping")
-    assert back == data and all(type(back[k]) is type(v) for k, v in data.items())
-    assert type(back["m"][0]) is VectorValue
-    for foreign in (OrderedDict(a=1), pickle.Unpickler):
-        with pytest.raises(StateError, match="only plain data"):
-            unpack(MAGIC + pickle.dumps(("Mapping", foreign), protocol=5), "Mapping")
