@@ -89,3 +89,42 @@ def test_broken_rtde_files_are_located_errors(run1, tmp_path):
         f.truncate(rtde.MAX_BYTES + 1)
     started = time.monotonic()
     assert "MiB, over the 512 MiB cotwin reads" in _error(big) and time.monotonic() - started < 1.0
+
+
+@pytest.fixture
+def copied(tmp_path) -> Path:
+    """The UR5e example copied elsewhere: replay.toml's relative [pt] log now points nowhere."""
+    shutil.copytree(EXAMPLES / "ur5e", tmp_path / "ur5e")
+    return tmp_path / "ur5e"
+
+
+def test_a_replay_offset_outside_the_log_is_refused_naming_it_and_the_duration(run1, copied):
+    from cotwin.twin.project import load_project
+    from cotwin.twin.run import load
+    from cotwin.twin.runtime import pt_endpoint
+
+    toml = copied / "replay.toml"
+    text = toml.read_text().replace('log = "../../../shared/data/ur5e/rtde_run1.csv"', f'log = "{RUN1}"')
+    for offset in (9000.0, 0.0):  # past the end; before the start (the controller's clock starts at 5037.7 s)
+        toml.write_text(text.replace("[pt]", f"[pt]\noffset = {offset}"))
+        with pytest.raises(CotwinError) as err:
+            pt_endpoint(load(load_project(toml)))
+        assert (f"[pt] offset: the replay offset {offset} s is outside the log {RUN1}, whose time runs from "
+                "5037.71 to 5061.71 s (24 s long)") in str(err.value)
+    toml.write_text(text.replace("[pt]", "[pt]\noffset = 5040.0"))
+    assert pt_endpoint(load(load_project(toml))).recording_time() == 5040.0
+
+
+def test_pt_log_replaces_the_projects_missing_log_and_calibrate_names_the_key(run1, copied, tmp_path):
+    toml = copied / "replay.toml"
+    header, rows = run1
+    rows[5][header.index("actual_q_1")] = "1e300"
+    bad = _write(tmp_path / "bad.csv", header, rows)
+    proc = cotwin("twin", toml, "-o", tmp_path / "out", "--end", "0.5", "--pt-log", bad)
+    assert proc.returncode == 1 and proc.stderr.startswith(f"{bad}:7:") and "Traceback" not in proc.stderr
+    proc = cotwin("twin", toml, "-o", tmp_path / "out", "--end", "0.5", "--pt-log", RUN1)
+    assert proc.returncode == 0, proc.stderr
+    assert len(list(csv.reader(open(tmp_path / "out" / "pt" / "outputs.csv")))) == 7
+    proc = cotwin("calibrate", toml, "--check", RUN1)  # no --pt-log: the project's [pt] log is needed
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr
+    assert f"{toml}:17:1: error: [pt] log: no file {copied}/../../../shared/data/ur5e/rtde_run1.csv" in proc.stderr

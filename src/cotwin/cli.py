@@ -252,11 +252,11 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     from .twin.runtime import LiveTwin
 
     _finite(step=step, end=end)
-    spec = load_project(project)
-    if pt_log is not None:
-        if not Path(pt_log).is_file():
-            raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
-        spec.pt = replace(spec.pt, endpoint="replay", log=Path(pt_log)) if spec.pt else PTSettings("replay", log=Path(pt_log))
+    if pt_log is not None and not Path(pt_log).is_file():
+        raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
+    spec = load_project(project, pt_log)
+    if pt_log is not None and spec.pt is None:
+        spec.pt = PTSettings("replay", log=Path(pt_log))
     if exchange is not None:
         spec.plan = None
         spec.rabbitmq = replace(spec.rabbitmq, exchange=exchange) if spec.rabbitmq else RabbitMQSettings(exchange)
@@ -419,6 +419,7 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     from .mapping.rtde import read_arm_log
     from .pmodel.cell import CellGeometry
     from .twin import calibration as cal
+    from .twin.project import load_project
     from .twin.run import load
 
     if pt_log is None and check_log is None:
@@ -431,7 +432,7 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     if not math.isfinite(log_start):
         raise click.BadParameter(f"{log_start!r} is not a finite number", param_hint="--log-start")
     point = tool if tool in ("flange", "fingertips") else _point(tool)
-    system = load(project)
+    system = load(load_project(project, pt_log))  # the log to fit replaces [pt] log
     twin, program, commands = cal.project_twin(system)
     fitted = None
     if pt_log is not None:

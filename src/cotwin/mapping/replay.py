@@ -46,6 +46,14 @@ class Recording:
                 still_since = float(t)
         return out
 
+    def offset_problem(self, offset: float) -> str | None:
+        """Why `offset` (the log's time at co-simulation time 0) cannot start a replay, if it cannot."""
+        t0, t1 = float(self.times[0]), float(self.times[-1])
+        if t0 <= offset < t1:
+            return None
+        return (f"the replay offset {offset!r} s is outside the log {self.source}, whose time runs from {t0:g} to "
+                f"{t1:g} s ({t1 - t0:g} s long); the offset is the log's time at co-simulation time 0")
+
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         q = np.array([np.interp(t, self.times, self.q[:, k]) for k in range(len(self.joints))])
         qd = np.array([np.interp(t, self.times, self.qd[:, k]) for k in range(len(self.joints))])
@@ -71,6 +79,9 @@ class ReplayEndpoint:
         if unknown:
             raise CotwinError(f"{self.recording.source}: the recording's joints {', '.join(unknown)} are not joints "
                               f"of p-model {self.tree.name}")
+        problem = self.recording.offset_problem(self.offset) if self.offset is not None else None
+        if problem is not None:
+            raise CotwinError(problem)
         self._held: dict[str, float] = {j.name: 0.0 for j in self.tree.actuated}
         onsets = self.recording.onsets()
         self._first_onset = onsets[0] if onsets else float(self.recording.times[0])

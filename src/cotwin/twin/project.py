@@ -256,8 +256,9 @@ class TwinProject:
         return self.plan
 
 
-def load_project(path: str | Path) -> TwinProject:
-    """Read and check cotwin.toml; every problem is reported at its key, all together."""
+def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProject:
+    """Read and check cotwin.toml; every problem is reported at its key, all together. `pt_log` (a command's
+    --pt-log) replaces [pt] log, which is then not looked for."""
     file = TomlFile(path, "project file")
     problems: list[Finding] = []
     data = SCHEMA.read(file.data, file, (), problems)
@@ -287,15 +288,15 @@ def load_project(path: str | Path) -> TwinProject:
     platform, cosim = data["platform"] or {}, data["cosim"] or {}
     pt = None
     if data["pt"]:
-        raw = data["pt"]
+        raw = data["pt"] | ({"endpoint": "replay", "log": None} if pt_log is not None else {})
         if raw["endpoint"] in ("opcua", "rtde") and not raw.get("url"):
             problems.append(Finding(file.location(("pt", "endpoint")), Severity.ERROR,
                                     f"[pt] endpoint {raw['endpoint']!r} needs a url"))
-        if raw["endpoint"] == "replay" and not raw.get("log"):
+        if raw["endpoint"] == "replay" and not raw.get("log") and pt_log is None:
             problems.append(Finding(file.location(("pt", "endpoint")), Severity.ERROR,
                                     "[pt] endpoint 'replay' needs log = \"<recorded log>\""))
-        pt = PTSettings(raw["endpoint"], raw.get("url"), existing("pt", "log", raw.get("log")), raw["queue"],
-                        raw.get("offset"))
+        log = Path(pt_log) if pt_log is not None else existing("pt", "log", raw.get("log"))
+        pt = PTSettings(raw["endpoint"], raw.get("url"), log, raw["queue"], raw.get("offset"))
     dev = data["deviation"] or {}
     deviation = DeviationSettings(**{k: (tuple(v) if k == "variables" and v is not None else v)
                                      for k, v in dev.items()}) if dev else DeviationSettings()

@@ -50,7 +50,11 @@ def pt_endpoint(system: TwinSystem):
         from ..pmodel import ik
 
         arm = ik.arm_joints(tree, ik.find_tool(tree))
-        return ReplayEndpoint(tree, read_rtde_log(pt.log, arm), pt.offset)
+        recording = read_rtde_log(pt.log, arm)
+        problem = recording.offset_problem(pt.offset) if pt.offset is not None else None
+        if problem is not None:
+            raise CotwinError(f"{system.spec.path}: [pt] offset: {problem}")
+        return ReplayEndpoint(tree, recording, pt.offset)
     if pt.endpoint == "rtde":
         from ..mapping.urrtde import RTDEEndpoint
 
