@@ -98,19 +98,19 @@ def copied(tmp_path) -> Path:
     return tmp_path / "ur5e"
 
 
-def test_a_replay_offset_outside_the_log_is_refused_naming_it_and_the_duration(run1, copied):
+def test_a_replay_offset_past_the_logs_end_is_refused_naming_it_and_the_duration(run1, copied):
     from cotwin.twin.project import load_project
     from cotwin.twin.run import load
     from cotwin.twin.runtime import pt_endpoint
 
     toml = copied / "replay.toml"
     text = toml.read_text().replace('log = "../../../shared/data/ur5e/rtde_run1.csv"', f'log = "{RUN1}"')
-    for offset in (9000.0, 0.0):  # past the end; before the start (the controller's clock starts at 5037.7 s)
+    for offset in (9000.0, 5061.708):  # far past the end; at its last sample
         toml.write_text(text.replace("[pt]", f"[pt]\noffset = {offset}"))
         with pytest.raises(CotwinError) as err:
             pt_endpoint(load(load_project(toml)))
-        assert (f"[pt] offset: the replay offset {offset} s is outside the log {RUN1}, whose time runs from "
-                "5037.71 to 5061.71 s (24 s long)") in str(err.value)
+        assert (f"[pt] offset: the replay offset {offset} s is past the end of the log {RUN1}, whose time runs "
+                "from 5037.71 to 5061.71 s (24 s long)") in str(err.value)
     toml.write_text(text.replace("[pt]", "[pt]\noffset = 5040.0"))
     assert pt_endpoint(load(load_project(toml))).recording_time() == 5040.0
 
@@ -128,3 +128,110 @@ def test_pt_log_replaces_the_projects_missing_log_and_calibrate_names_the_key(ru
     proc = cotwin("calibrate", toml, "--check", RUN1)  # no --pt-log: the project's [pt] log is needed
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
     assert f"{toml}:17:1: error: [pt] log: no file {copied}/../../../shared/data/ur5e/rtde_run1.csv" in proc.stderr
+
+
+# ---- on the real broker ----------------------------------------------------------------------
+
+def _twin(exchange: str, out: Path, *options) -> subprocess.Popen:
+    """`cotwin twin` of the replay example taking its commands live from `exchange`."""
+    return subprocess.Popen([sys.executable, "-m", "cotwin", "twin", EXAMPLES / "ur5e" / "replay.toml", "-o", out,
+                             "--pt-log", RUN1, "--rabbitmq", exchange, *map(str, options)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _await_ready(exchange: str, timeout: float = 60.0) -> None:
+    """Until the twin says on from_cosim that it is bound and waiting for data."""
+    from cotwin.mapping.amqp import connect
+    from cotwin.twin.rabbitmq import read_echo
+
+    connection = connect("amqp://127.0.0.1:5672/%2F", "cotwin test ready")
+    try:
+        channel = connection.channel()
+        channel.exchange_declare(exchange, exchange_type="direct", durable=False, auto_delete=False)
+        own = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
+        channel.queue_bind(own, exchange, routing_key="data.from_cosim")
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            _, _, body = channel.basic_get(own, auto_ack=True)
+            if body is not None and read_echo(body)[0]:
+                return
+            connection.process_data_events(time_limit=0.1)
+        pytest.fail(f"the twin sent no ready message on {exchange} within {timeout:g} s")
+    finally:
+        connection.close()
+
+
+def _publisher(exchange: str, count: int):
+    """Publish idle values until `count` were sent, then fall silent (a publisher that died)."""
+    import threading
+
+    from cotwin.twin.project import RabbitMQSettings
+    from cotwin.twin.publisher import Publisher, idle_values
+    from cotwin.twin.rabbitmq import port_types
+    from cotwin.twin.run import load
+
+    system = load(EXAMPLES / "ur5e" / "live.toml")
+    publisher = Publisher(RabbitMQSettings(exchange), [], idle_values(port_types(system.models.program,
+                                                                                system.source_ports)), period=0.1)
+    stop = threading.Event()
+    threading.Thread(target=publisher.run, args=(stop,), daemon=True).start()
+    deadline = time.monotonic() + 60
+    while len(publisher.sent) < count and time.monotonic() < deadline:
+        time.sleep(0.05)
+    stop.set()
+    return publisher
+
+
+def _interrupt(proc: subprocess.Popen) -> tuple[str, float]:
+    started = time.monotonic()
+    os.kill(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    return err, time.monotonic() - started
+
+
+def _rows(path: Path) -> list[list[str]]:
+    rows = list(csv.reader(open(path)))
+    assert rows[0][0] == "time" and all(len(r) == len(rows[0]) for r in rows), path
+    return rows[1:]
+
+
+def test_ctrl_c_while_waiting_for_the_broker_stops_at_once_keeping_the_rows(broker, run1, tmp_path):
+    exchange, out = f"cotwin_hostile_{os.getpid()}_{time.monotonic_ns()}", tmp_path / "out"
+    proc = _twin(exchange, out, "--end", "30")  # nothing publishes: the twin waits (timeout_s 60) for a first value
+    try:
+        _await_ready(exchange)
+        time.sleep(0.5)
+        err, took = _interrupt(proc)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and took < 5 and "Traceback" not in err
+    assert "interrupted at t = 0 s; no rows were computed" in err
+    proc = _twin(exchange, out, "--end", "30")  # a publisher sends 15 messages, then falls silent mid-run
+    try:
+        _publisher(exchange, 15)
+        time.sleep(2.0)  # the twin now waits for a fresh value (maxage 1 s)
+        err, took = _interrupt(proc)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and took < 5 and "Traceback" not in err
+    for side in ("pt", "dt"):
+        partial = out / side / "outputs.partial.csv"
+        assert str(partial) in err and len(_rows(partial)) > 5 and not (out / side / "outputs.csv").exists()
+
+
+def test_a_twin_failing_midway_names_its_partial_results(broker, run1, copied, tmp_path):
+    exchange, out = f"cotwin_hostile_{os.getpid()}_{time.monotonic_ns()}", tmp_path / "out"
+    toml = copied / "replay.toml"
+    toml.write_text(toml.read_text().replace('plan = "plan.csv"',
+                                             f'rabbitmq = {{ exchange = "{exchange}", timeout_s = 1.0 }}'))
+    proc = subprocess.Popen([sys.executable, "-m", "cotwin", "twin", toml, "-o", out, "--pt-log", RUN1, "--end", "30",
+                             "--realtime"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _publisher(exchange, 15)  # then silent: no fresh value within maxage + timeout_s ends the run
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 1 and "Traceback" not in err and "no fresh value of" in err
+    for side in ("pt", "dt"):
+        partial = out / side / "outputs.partial.csv"
+        assert f"row(s) are in {partial}" in err and len(_rows(partial)) > 5

@@ -187,7 +187,9 @@ def test_bad_messages_are_dropped_with_a_reason_and_the_run_goes_on(broker, tmp_
            json.dumps({"time": stamp.isoformat(), "jump": True}).encode(), b"[" * 50_000]
 
     def rogue():
-        time.sleep(1.0)
+        deadline = time.monotonic() + 60  # once the twin is bound and running (building its FMU takes a while)
+        while len(publisher.sent) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
         for body in bad:
             channel.basic_publish(rabbit.exchange, rabbit.to_cosim, body)
         connection.close()
@@ -199,7 +201,7 @@ def test_bad_messages_are_dropped_with_a_reason_and_the_run_goes_on(broker, tmp_
         stop.set()
         thread.join(5)
     refused = " | ".join(r for _, r in ran.units["source"].stream.refused)
-    for reason in ("not UTF-8", "bad JSON", "no 'time'", "not a JSON Boolean", "not newer", "unknown key 'jump'",
+    for reason in ("not UTF-8", "bad JSON", "no 'time'", "not a JSON Boolean", "from when it arrived", "unknown key 'jump'",
                    "nested too deeply"):
         assert reason in refused
     executed = [a for _, op, a in ran.mapping.executed if op == "movediscrete"]
@@ -210,7 +212,13 @@ def test_bad_messages_are_dropped_with_a_reason_and_the_run_goes_on(broker, tmp_
 def test_a_silent_publisher_ends_the_run_with_a_clear_error_and_keeps_the_rows(broker, tmp_path):
     system = live_system(f"cotwin_test_{uuid.uuid4().hex[:8]}", end=10.0, rabbitmq={"timeout_s": 1.5})
     publisher, stop, thread = start_publisher(system, [], end=None)
-    threading.Timer(2.0, stop.set).start()
+    def silence():  # after 2 s of the run (its FMU build takes a while first): the publisher falls silent
+        deadline = time.monotonic() + 60
+        while len(publisher.sent) < 5 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        stop.set()
+
+    threading.Thread(target=silence, daemon=True).start()
     with pytest.raises(CotwinError) as err:
         run_twin(system, tmp_path, plot=False)
     text = str(err.value)

@@ -20,6 +20,7 @@ import logging
 import os
 import ssl
 import stat
+import time as wallclock
 from dataclasses import dataclass
 from typing import Mapping
 from urllib.parse import unquote, urlsplit
@@ -263,3 +264,30 @@ def scrub(text: str, environ: Mapping[str, str] = os.environ) -> str:
     for secret in sorted(secrets_of(environ), key=len, reverse=True):
         text = text.replace(secret, "***")
     return text
+
+
+class WarningLimit:
+    """Warnings about refused messages, at most `burst` per `window` seconds, then one saying how many
+    were not logged: whoever sends bad messages must not be able to flood the log."""
+
+    def __init__(self, logger: logging.Logger, prefix: str, burst: int = 20, window: float = 60.0):
+        self.logger, self.prefix, self.burst, self.window = logger, prefix, burst, window
+        self._start, self._count = -float("inf"), 0  # start of the window, warnings asked for in it
+
+    def warn(self, message: str) -> None:
+        now = wallclock.monotonic()
+        if now - self._start > self.window:
+            self.flush()
+            self._start, self._count = now, 0
+        self._count += 1
+        if self._count <= self.burst:
+            self.logger.warning("%s%s", self.prefix, message)
+        elif self._count == self.burst + 1:
+            self.logger.warning("%smore refused messages within %g s are counted, not logged", self.prefix,
+                                self.window)
+
+    def flush(self) -> None:
+        """Say how many warnings of the current window were not logged (at its end, or when a run ends)."""
+        if self._count > self.burst:
+            self.logger.warning("%s%d more refused message(s) not logged", self.prefix, self._count - self.burst)
+        self._count = 0

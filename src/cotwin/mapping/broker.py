@@ -27,7 +27,7 @@ from typing import Mapping
 import pika
 
 from ..diagnostics import CotwinError
-from .amqp import connect, redact, scrub
+from .amqp import WarningLimit, connect, redact, scrub
 from .robot_protocol import (MAX_REPLY, MAX_REQUEST, OPS, REPLY_QUEUE, ReplayGuard, RobotView, check_reply,
                              check_request, decode, load_secret, reply_headers, request_headers, validate_reply,
                              validate_request)
@@ -62,20 +62,11 @@ class RobotServer:
         self.dropped = 0  # could not be answered (no or foreign reply queue, no correlation id)
         self.reconnects = 0
         self.internal_errors = 0  # an endpoint failure other than a CotwinError (logged with its traceback)
-        self._logged: tuple[float, int] = (0.0, 0)  # start of the log window, warnings logged in it
+        self._warnings = WarningLimit(log, f"robot server {queue}: ", LOG_BURST, LOG_WINDOW)
 
     def _warn(self, reason: str) -> None:
         """Log a refused message, at most LOG_BURST per LOG_WINDOW (then say how many were not logged)."""
-        now = wallclock.monotonic()
-        start, count = self._logged
-        if now - start > LOG_WINDOW:
-            if count > LOG_BURST:
-                log.warning("robot server %s: %d more refused message(s) not logged", self.queue, count - LOG_BURST)
-            start, count = now, 0
-        count += 1
-        self._logged = (start, count)
-        if count <= LOG_BURST:
-            log.warning("robot server %s: %s", self.queue, reason)
+        self._warnings.warn(reason)
 
     # ---- one message ----
     def state(self) -> dict:

@@ -47,12 +47,14 @@ class Recording:
         return out
 
     def offset_problem(self, offset: float) -> str | None:
-        """Why `offset` (the log's time at co-simulation time 0) cannot start a replay, if it cannot."""
+        """Why `offset` (the log's time at co-simulation time 0) cannot start a replay, if it cannot: at or past
+        the log's end, the replay would hold its last sample for the whole run (before its start is allowed:
+        the first sample holds until the log begins)."""
         t0, t1 = float(self.times[0]), float(self.times[-1])
-        if t0 <= offset < t1:
+        if offset < t1:
             return None
-        return (f"the replay offset {offset!r} s is outside the log {self.source}, whose time runs from {t0:g} to "
-                f"{t1:g} s ({t1 - t0:g} s long); the offset is the log's time at co-simulation time 0")
+        return (f"the replay offset {offset!r} s is past the end of the log {self.source}, whose time runs from "
+                f"{t0:g} to {t1:g} s ({t1 - t0:g} s long); the offset is the log's time at co-simulation time 0")
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         q = np.array([np.interp(t, self.times, self.q[:, k]) for k in range(len(self.joints))])

@@ -10,7 +10,7 @@ co-simulation settings and, for a live twin, the physical twin, deviation checki
     plan = "plan.csv"               #   a TwinManager plan (ms, port values)
     commands = "scenario.toml"      #   a TOML list of [[command]]
     rabbitmq = { exchange = "fmi_digital_twin_dt" }   # live, as the RMQ FMU takes them
-                                    #   (url, to_cosim, from_cosim, maxage_ms, timeout_s: see twin.rabbitmq;
+                                    #   (url, to_cosim, from_cosim, maxage_ms, timeout_s, max_skew_s: see twin.rabbitmq;
                                     #   commands: the d-model events it sends, default those the
                                     #   mapping does not produce)
     [platform]                      # the DT's robot
@@ -106,6 +106,7 @@ RABBITMQ = Schema({
     "from_cosim": Key("str", "data.from_cosim"),
     "maxage_ms": Key("positive", 1000),
     "timeout_s": Key("positive", 60),
+    "max_skew_s": Key("positive", 60),
     "commands": Key("list[str]"),
 })
 
@@ -189,6 +190,7 @@ class RabbitMQSettings:
     from_cosim: str = "data.from_cosim"
     maxage_ms: float = 1000
     timeout_s: float = 60
+    max_skew_s: float = 60  # a message whose time is further than this from its arrival is refused (clock skew)
     commands: tuple[str, ...] | None = None  # d-model input events taken from the broker (default: external ones)
 
 

@@ -14,7 +14,8 @@ Three parts, each with one job:
 `RabbitMQUnit` is the co-simulation unit over them (`rabbitmq.fmu` packages the same unit for Maestro).
 
 Differences from the RMQ FMU, on purpose: every dropped or refused message is logged with its reason
-(logger `cotwin.rabbitmq`, and `CommandStream.refused`); a missing value ends the run with an error
+(logger `cotwin.rabbitmq`, at most 20 a minute, then counted; `CommandStream.refused` keeps the newest);
+a message whose time is more than `max_skew_s` from its arrival is refused (a skewed clock); a missing value ends the run with an error
 naming the variable, the time and the age of what it had; and a d-model input *event* (a Boolean
 port the d-model reads as an event) is true in the one step that applies a `true` message, not held
 until a `false` arrives, so each published command is delivered exactly once.
@@ -38,7 +39,7 @@ import pika
 
 from ..cosim.units import INT32, Port, PythonUnit
 from ..diagnostics import CotwinError
-from ..mapping.amqp import connect, redact
+from ..mapping.amqp import WarningLimit, connect, redact
 from .project import RabbitMQSettings
 
 log = logging.getLogger("cotwin.rabbitmq")
@@ -46,6 +47,7 @@ log = logging.getLogger("cotwin.rabbitmq")
 READY = {"internal_status": "ready", "internal_message": "waiting for input data for simulation"}
 _ISO = re.compile(r"^(\d{4})-(\d{2})-(\d{2})[T ](\d{2}):(\d{2}):(\d{2})(?:[.,](\d{1,9}))?(Z|z|[+-]\d{2}:?\d{2})$")
 MAX_BYTES = 1 << 16  # a command message is a flat object of a few keys
+MAX_REFUSED = 1000  # refusals kept for inspection (the newest); every one is counted in `dropped`
 
 
 def parse_time(text: str) -> datetime:
@@ -162,8 +164,10 @@ class CommandStream:
     receive: object  # callable(timeout_s) -> list[Received]; raises CotwinError when the link is lost
     maxage: float = 1.0  # s
     timeout: float = 60.0  # s
+    cancelled: object = None  # callable() -> bool: a run asked to stop; waiting for messages ends at once
+    max_skew: float | None = None  # s: a message whose time is further than this from its arrival is refused
     t0: datetime | None = None
-    refused: list[tuple[float, str]] = field(default_factory=list)  # (wall time, reason)
+    refused: deque = field(default_factory=lambda: deque(maxlen=MAX_REFUSED))  # (wall time, reason), the newest
     applied: list[tuple[float, str, object, float]] = field(default_factory=list)  # (sim, var, value, step end)
 
     def __post_init__(self) -> None:
@@ -172,11 +176,14 @@ class CommandStream:
         self.held: dict[str, _Held] = {}
         self._last: tuple[float, dict[str, object]] | None = None
         self.latest_wall: float | None = None
+        self.dropped = 0
+        self._warnings = WarningLimit(log, "message dropped: ")
 
     def _refuse(self, reason: str, body: bytes = b"") -> None:
         excerpt = body[:80].decode("utf-8", "replace") if body else ""
         self.refused.append((wallclock.time(), reason))
-        log.warning("message dropped: %s%s", reason, f" [{excerpt}]" if excerpt else "")
+        self.dropped += 1
+        self._warnings.warn(f"{reason} [{excerpt}]" if excerpt else reason)
 
     def _take(self, messages: list[Received]) -> None:
         for m in messages:
@@ -184,6 +191,11 @@ class CommandStream:
                 parsed = parse_message(m.body, self.types)
             except ValueError as err:
                 self._refuse(str(err), m.body)
+                continue
+            skew = parsed.time.timestamp() - m.wall
+            if self.max_skew is not None and abs(skew) > self.max_skew:
+                self._refuse(f"its 'time' {parsed.time.isoformat()} is {skew:+.1f} s from when it arrived (at most "
+                             f"max_skew_s = {self.max_skew:g} s: is the publisher's clock set?)", m.body)
                 continue
             for reason in parsed.dropped:
                 self._refuse(reason, m.body)
@@ -215,7 +227,7 @@ class CommandStream:
             if left <= 0:
                 raise CotwinError(f"no value for {', '.join(missing)} within {self.timeout:g} s of waiting for the "
                                   "first complete set of commands (is a publisher sending on to_cosim?)")
-            self._take(self.receive(min(left, 0.5)))
+            self._wait(min(left, 0.5), f"for the first value of {', '.join(missing)}")
         self.t0 = max(stamp for stamp, _ in latest.values())
         for var, (stamp, value) in latest.items():
             self.held[var] = _Held((stamp - self.t0).total_seconds(), value)
@@ -241,12 +253,22 @@ class CommandStream:
                 raise CotwinError(f"RabbitMQ: no fresh value of '{v}' for the step to t = {until:g} s: the newest "
                                   f"is from t = {held.sim:g} s, {until - held.sim:.3f} s old (maxage "
                                   f"{self.maxage:g} s), and none came within {self.timeout:g} s")
-            self._take(self.receive(min(left, 0.2)))
+            self._wait(min(left, 0.2), f"for a fresh value of '{stale[0][0]}'")
             fired |= self._apply(until, t + h)
         # an event is true in the step that applied a `true`, even if a `false` followed within the step
         out = {v: (v in fired) if v in self.events else held.value for v, held in self.held.items()}
         self._last = (t, out)
         return out
+
+    def finish(self) -> None:
+        """At the end of a run: say how many refusals were counted but not logged."""
+        self._warnings.flush()
+
+    def _wait(self, seconds: float, what: str) -> None:
+        """Take what arrives within `seconds`; a run asked to stop ends here, as Ctrl-C would."""
+        if self.cancelled is not None and self.cancelled():
+            raise KeyboardInterrupt(f"stopped while waiting {what}")
+        self._take(self.receive(seconds))
 
     def _apply(self, until: float, step_end: float) -> set[str]:
         """Apply queued values with simulation time <= until; return the events that fired."""
@@ -447,7 +469,7 @@ class RabbitMQUnit(PythonUnit):
         self.bridge.start()
         if self.stream is None:
             self.stream = CommandStream(self.types, self.events, self.bridge.receive, self.settings.maxage_ms / 1000,
-                                        self.settings.timeout_s)
+                                        self.settings.timeout_s, max_skew=self.settings.max_skew_s)
         if self.stream.t0 is None:
             self.stream.start()
         self.values.update({v: held.value if v not in self.events else False for v, held in self.stream.held.items()})
@@ -458,6 +480,8 @@ class RabbitMQUnit(PythonUnit):
         self.values.update(self.stream.values_for(t, h))
 
     def terminate(self) -> None:
+        if self.stream is not None:
+            self.stream.finish()
         if self.bridge is not None:
             self.reconnects = self.bridge.reconnects
         if self._own_bridge and self.bridge is not None:
