@@ -235,3 +235,50 @@ def test_a_twin_failing_midway_names_its_partial_results(broker, run1, copied, t
     for side in ("pt", "dt"):
         partial = out / side / "outputs.partial.csv"
         assert f"row(s) are in {partial}" in err and len(_rows(partial)) > 5
+
+
+def test_broker_messages_hours_off_are_refused_and_a_flood_of_them_is_not_logged_one_by_one(broker, caplog):
+    import json
+    import logging
+    from datetime import datetime, timedelta, timezone
+
+    from cotwin.mapping.amqp import connect
+    from cotwin.twin.project import RabbitMQSettings
+    from cotwin.twin.rabbitmq import CommandStream, RabbitMQBridge
+
+    settings = RabbitMQSettings(f"cotwin_hostile_{os.getpid()}_{time.monotonic_ns()}", timeout_s=10)
+    assert settings.max_skew_s == 60
+    types = {"moveDiscreteCommand": "Boolean", "MovementArgs_target_X": "Integer"}
+    bridge = RabbitMQBridge(settings, "cotwin test skew").start()
+    stream = CommandStream(types, {"moveDiscreteCommand"}, bridge.receive, 1.0, 10.0, max_skew=settings.max_skew_s)
+    connection = connect(settings.url, "cotwin test flood")
+    try:
+        channel = connection.channel()
+        now = datetime.now(timezone.utc)
+        for k in range(300):  # a publisher whose clock is three hours behind, and one from the future
+            stamp = now - timedelta(hours=3) if k % 2 else now + timedelta(hours=5)
+            body = {"time": stamp.isoformat(), "moveDiscreteCommand": True, "MovementArgs_target_X": 15}
+            channel.basic_publish(settings.exchange, settings.to_cosim, json.dumps(body).encode())
+        good = {"time": datetime.now(timezone.utc).isoformat(), "moveDiscreteCommand": False, "MovementArgs_target_X": 2}
+        channel.basic_publish(settings.exchange, settings.to_cosim, json.dumps(good).encode())
+        with caplog.at_level(logging.WARNING, logger="cotwin.rabbitmq"):
+            stream.start()
+            stream.finish()
+    finally:
+        connection.close()
+        bridge.close()
+    assert stream.held["MovementArgs_target_X"].value == 2 and stream.dropped == 300  # the 15s never applied
+    reasons = [r for _, r in stream.refused]
+    assert any("s from when it arrived (at most max_skew_s = 60 s" in r and "-1080" in r for r in reasons)
+    assert any("+1800" in r for r in reasons)
+    logged = [r.getMessage() for r in caplog.records if r.name == "cotwin.rabbitmq"]
+    assert 20 < len(logged) <= 22 and logged[-1].endswith("280 more refused message(s) not logged")
+
+
+def test_an_end_time_between_steps_is_refused_before_anything_runs(run1, tmp_path):
+    for command, project, end in (("run", "cotwin.toml", "1.05"), ("twin", "replay.toml", "0.05")):
+        proc = cotwin(command, EXAMPLES / "ur5e" / project, "-o", tmp_path / command, "--end", end, "--step", "0.1")
+        assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+        assert f"the end time {end} s is not a whole number of steps of 0.1 s" in proc.stderr
+        assert not (tmp_path / command / "dmodel.fmu").exists()
+        assert ("choose 1 s or 1.1 s" if end == "1.05" else "choose 0.1 s") in proc.stderr
