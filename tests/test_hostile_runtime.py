@@ -282,3 +282,21 @@ def test_an_end_time_between_steps_is_refused_before_anything_runs(run1, tmp_pat
         assert f"the end time {end} s is not a whole number of steps of 0.1 s" in proc.stderr
         assert not (tmp_path / command / "dmodel.fmu").exists()
         assert ("choose 1 s or 1.1 s" if end == "1.05" else "choose 0.1 s") in proc.stderr
+    from cotwin.cosim.execution import step_count
+
+    for end, step in ((1e308, 0.1), (1.0, 1e-300)):  # inf steps (an OverflowError), 1e300 steps (a hang)
+        with pytest.raises(CotwinError, match="steps of .* at most 1e[+]09 in one run"):
+            step_count(end, step)
+
+
+def test_broker_messages_that_say_two_things_or_name_no_real_zone_are_refused_with_the_reason():
+    from cotwin.twin.rabbitmq import parse_message
+
+    types = {"MovementArgs_target_X": "Integer"}
+    for body, reason in ((b'{"time": "2026-01-01T00:00:00Z", "MovementArgs_target_X": 1, "MovementArgs_target_X": 9}',
+                          "key 'MovementArgs_target_X' appears twice"),
+                         (b'{"time": "2026-01-01T00:00:00+99:99", "MovementArgs_target_X": 1}',
+                          "the zone +99:99 is not an offset within +-23:59")):
+        with pytest.raises(ValueError) as err:
+            parse_message(body, types)
+        assert reason in str(err.value)

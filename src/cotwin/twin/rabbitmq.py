@@ -64,7 +64,10 @@ def parse_time(text: str) -> datetime:
     else:
         sign = 1 if zone[0] == "+" else -1
         digits = zone[1:].replace(":", "")
-        tz = timezone(sign * timedelta(hours=int(digits[:2]), minutes=int(digits[2:])))
+        hours, minutes = int(digits[:2]), int(digits[2:])
+        if hours > 23 or minutes > 59:
+            raise ValueError(f"'time' {text!r}: the zone {zone} is not an offset within +-23:59")
+        tz = timezone(sign * timedelta(hours=hours, minutes=minutes))
     try:
         return datetime(year, month, day, hour, minute, second, micro, tzinfo=tz)
     except ValueError as err:
@@ -98,7 +101,7 @@ def parse_message(body: bytes, types: dict[str, str]) -> Parsed:
     except UnicodeDecodeError as err:
         raise ValueError(f"not UTF-8 (byte 0x{body[err.start]:02x} at {err.start})") from None
     try:
-        data = json.loads(text)
+        data = json.loads(text, object_pairs_hook=_unique)
     except json.JSONDecodeError as err:
         raise ValueError(f"bad JSON: {err.msg} at line {err.lineno} column {err.colno}") from None
     except RecursionError:
@@ -124,6 +127,16 @@ def parse_message(body: bytes, types: dict[str, str]) -> Parsed:
     if not values:
         raise ValueError("no known variable (" + ("; ".join(dropped) if dropped else "only 'time'") + ")")
     return Parsed(stamp, values, tuple(dropped))
+
+
+def _unique(pairs: list[tuple[str, object]]) -> dict:
+    """A JSON object whose keys are all different: one naming a variable twice says two things at once."""
+    seen: set[str] = set()
+    for key, _ in pairs:
+        if key in seen:
+            raise ValueError(f"key '{key}' appears twice: which value is meant?")
+        seen.add(key)
+    return dict(pairs)
 
 
 def _typed(value, kind: str):
