@@ -300,3 +300,15 @@ def test_broker_messages_that_say_two_things_or_name_no_real_zone_are_refused_wi
         with pytest.raises(ValueError) as err:
             parse_message(body, types)
         assert reason in str(err.value)
+
+
+def test_commands_a_run_never_sends_are_named_not_dropped_silently():
+    from cotwin.twin.run import load
+    from cotwin.twin.scenario import after_end
+
+    commands = load(EXAMPLES / "ur5e" / "cotwin.toml").commands  # the plan's commands at 1, 5.5, 8 and 15 s
+    late = [str(f) for f in after_end(commands, 8.0)]
+    plan = EXAMPLES / "ur5e" / "plan.csv"
+    assert late == [f"{plan}:4:1: warning: this command at 8 s is after the run's end (8 s): it is never sent",
+                    f"{plan}:5:1: warning: this command at 15 s is after the run's end (8 s): it is never sent"]
+    assert after_end(commands, 15.1) == []

@@ -182,6 +182,9 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
+    from .twin.scenario import after_end
+
+    _show_warnings(after_end(system.commands, system.spec.end if end is None else end))
     dash = _dashboard(system, dashboard, "run", history)
     try:
         with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
@@ -263,6 +266,9 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         spec.realtime = True if realtime is None else realtime
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
+    from .twin.scenario import after_end
+
+    _show_warnings(after_end(system.commands, spec.end if end is None else end))
     dash = _dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
                       broker if whatif else None)
     try:
