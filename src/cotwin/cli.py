@@ -280,6 +280,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
             if not live.looping or live._stop:
                 raise KeyboardInterrupt
             live.stop()
+            click.echo("stopping after this step (interrupt again to stop at once)", err=True)
 
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, interrupt)
