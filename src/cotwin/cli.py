@@ -274,6 +274,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     try:
         live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
                         observers=[dash.feed] if dash else (), cc=cc, whatif_url=broker if whatif else None)
+
         def interrupt(*_) -> None:
             """In the step loop, end after the step (results kept as a finished run's); before it (waiting for
             the broker, building) or at a second signal, at once (rows so far kept as partial results)."""

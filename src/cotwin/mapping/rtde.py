@@ -261,6 +261,9 @@ def read_rtde(path: str | Path, required=LIVE) -> RTDELog:
     header, header_cols = _fields(header_line)
     seen: dict[str, int] = {}
     for name, col in zip(header, header_cols):
+        if len(diag.findings) >= MAX_ERRORS:
+            diag.error(Location(where, header_row, col), f"stopped after {MAX_ERRORS} errors")
+            break
         if len(name) > MAX_FIELD:
             diag.error(Location(where, header_row, col), f"a header name of {len(name)} characters: "
                        "the first row must name RTDE fields")
