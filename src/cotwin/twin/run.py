@@ -91,7 +91,7 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         try:
             result = execution.run(end)
         except (CotwinError, KeyboardInterrupt) as err:
-            kept = f"the {writer.rows} row(s) computed are in {writer.partial_path}" if writer.rows else "no rows computed"
+            kept = writer.kept()
             if isinstance(err, KeyboardInterrupt):
                 stopped = CotwinError(f"interrupted at t = {execution.time:g} s; {kept}")
                 stopped.interrupted = True

@@ -211,9 +211,8 @@ class LiveTwin:
     def _kept(self, err: CotwinError | KeyboardInterrupt) -> CotwinError:
         """The error of a run that failed or was interrupted, saying where the rows it computed are (each
         side's result file holds a header and the rows so far; the previous result is left untouched)."""
-        kept = [f"the {side.name.upper()}'s {side.writer.rows} row(s) are in {side.writer.partial_path}"
-                for side in self.sides.values() if side.writer.rows and side.writer.partial_path.is_file()]
-        said = "; ".join(kept) if kept else "no rows were computed"
+        said = "; ".join(f"{side.name.upper()}: {side.writer.kept()}" for side in self.sides.values()
+                         if side.writer.rows) or "no rows computed"
         if isinstance(err, KeyboardInterrupt):
             stopped = CotwinError(f"interrupted at t = {self.time:g} s; {said}")
             stopped.interrupted = True
