@@ -100,10 +100,12 @@ def copied(tmp_path) -> Path:
     return tmp_path / "ur5e"
 
 
-def test_a_replay_offset_past_the_logs_end_is_refused_naming_it_and_the_duration(run1, copied):
+def test_a_replay_offset_past_the_logs_end_is_refused_naming_it_and_the_duration(run1, copied, caplog):
+    import logging
+
     from cotwin.twin.project import load_project
     from cotwin.twin.run import load
-    from cotwin.twin.runtime import pt_endpoint
+    from cotwin.twin.runtime import LiveTwin, pt_endpoint
 
     toml = copied / "replay.toml"
     text = toml.read_text().replace('log = "../../../shared/data/ur5e/rtde_run1.csv"', f'log = "{RUN1}"')
@@ -113,8 +115,16 @@ def test_a_replay_offset_past_the_logs_end_is_refused_naming_it_and_the_duration
             pt_endpoint(load(load_project(toml)))
         assert (f"[pt] offset: the replay offset {offset} s is past the end of the log {RUN1}, whose time runs "
                 "from 5037.71 to 5061.71 s (24 s long)") in str(err.value)
-    toml.write_text(text.replace("[pt]", "[pt]\noffset = 5040.0"))
-    assert pt_endpoint(load(load_project(toml))).recording_time() == 5040.0
+    toml.write_text(text.replace("[pt]", "[pt]\noffset = 5055.0"))
+    system = load(load_project(toml))
+    replayed = pt_endpoint(system)
+    assert replayed.recording_time() == 5055.0
+    with caplog.at_level(logging.WARNING, logger="cotwin.twin"):  # 6.7 s of log left for an 8 s run: said
+        LiveTwin(system, copied / "out", end=8.0)._warn_if_outlasting(replayed)
+        LiveTwin(system, copied / "out", end=6.5)._warn_if_outlasting(replayed)
+    assert [r.getMessage() for r in caplog.records] == [
+        f"the replayed log {RUN1} ends at t = 6.708 s of the run, which goes on to 8 s: its last sample holds from "
+        "then on"]
 
 
 def test_pt_log_replaces_the_projects_missing_log_and_calibrate_names_the_key(run1, copied, tmp_path):

@@ -176,6 +176,7 @@ class LiveTwin:
         with folder_lock(self.out):
             fmu = dmodel_fmu(self.system, self.out, self.cc)
             pt_ep = self.pt_endpoint if self.pt_endpoint is not None else pt_endpoint(self.system)
+            self._warn_if_outlasting(pt_ep)
             dt_ep = self.dt_endpoint if self.dt_endpoint is not None else dt_endpoint(self.system)
             pt_source, dt_source = self._sources()
             try:
@@ -207,6 +208,17 @@ class LiveTwin:
                     self.whatif.close()
                 if self._bridge is not None:
                     self._bridge.close()
+
+    def _warn_if_outlasting(self, endpoint) -> None:
+        """A replayed PT whose log ends before the run does holds its last sample: say so (a held pose would
+        otherwise look like a robot at rest)."""
+        recording, offset = getattr(endpoint, "recording", None), getattr(endpoint, "offset", None)
+        if recording is None or offset is None:
+            return
+        last = float(recording.times[-1]) - offset
+        if last < self.end:
+            log.warning("the replayed log %s ends at t = %.3f s of the run, which goes on to %g s: its last sample "
+                        "holds from then on", recording.source, last, self.end)
 
     def _kept(self, err: CotwinError | KeyboardInterrupt) -> CotwinError:
         """The error of a run that failed or was interrupted, saying where the rows it computed are (each
