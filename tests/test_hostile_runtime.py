@@ -291,12 +291,15 @@ def test_broker_messages_hours_off_are_refused_and_a_flood_of_them_is_not_logged
 
 
 def test_an_end_time_between_steps_is_refused_before_anything_runs(run1, tmp_path):
-    for command, project, end in (("run", "cotwin.toml", "1.05"), ("twin", "replay.toml", "0.05")):
-        proc = cotwin(command, EXAMPLES / "ur5e" / project, "-o", tmp_path / command, "--end", end, "--step", "0.1")
-        assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
-        assert f"the end time {end} s is not a whole number of steps of 0.1 s" in proc.stderr
-        assert not (tmp_path / command / "dmodel.fmu").exists()
-        assert ("choose 1 s or 1.1 s" if end == "1.05" else "choose 0.1 s") in proc.stderr
+    from cotwin.twin.run import load, run_twin
+    from cotwin.twin.runtime import LiveTwin
+
+    for start, project, end in ((run_twin, "cotwin.toml", 1.05), (LiveTwin, "replay.toml", 0.05)):
+        with pytest.raises(CotwinError) as err:  # 1.05 s ended silently at 1 s; 0.05 s ran no step at all
+            start(load(EXAMPLES / "ur5e" / project), tmp_path / project, end=end, step=0.1)
+        assert (f"the end time {end:g} s is not a whole number of steps of 0.1 s from 0 s "
+                f"({end / 0.1:g} steps): choose {'1 s or 1.1 s' if end == 1.05 else '0.1 s'}") in str(err.value)
+        assert not (tmp_path / project).exists()  # refused before building anything
     from cotwin.cosim.execution import step_count
 
     for end, step in ((1e308, 0.1), (1.0, 1e-300)):  # inf steps (an OverflowError), 1e300 steps (a hang)
