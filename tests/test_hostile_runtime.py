@@ -51,6 +51,7 @@ def _error(path: Path) -> str:
 MUTATIONS = {  # name: (how a row set is spoilt, what the error says, the line it is at)
     "nan": (lambda h, r: r[5].__setitem__(h.index("actual_q_0"), "nan"), "'nan' is not a finite number", 7),
     "inf": (lambda h, r: r[5].__setitem__(h.index("actual_q_2"), "-inf"), "'-inf' is not a finite number", 7),
+    "inf current": (lambda h, r: r[5].__setitem__(h.index("actual_current_0"), "inf"), "'inf' is not a finite", 7),
     "huge angle": (lambda h, r: r[5].__setitem__(h.index("actual_q_0"), "1e300"), "beyond any UR arm's", 7),
     "huge speed": (lambda h, r: r[9].__setitem__(h.index("actual_qd_4"), "-4e4"), "beyond any UR arm's", 11),
     "backwards": (lambda h, r: r[10].__setitem__(0, r[8][0]), "timestamps must increase", 12),

@@ -302,7 +302,7 @@ def read_rtde(path: str | Path, required=LIVE) -> RTDELog:
             break
     limit = np.array([b[0] if b is not None else np.inf for b in bounds])
     data = np.frombuffer(values, dtype=float).reshape(len(numbers), len(header))
-    outside = np.nonzero(~np.all(np.abs(data) <= limit, axis=1))[0]  # NaN compares false: caught too
+    outside = np.nonzero(~np.all(np.isfinite(data) & (np.abs(data) <= limit), axis=1))[0]
     if len(outside) and errors < MAX_ERRORS:
         _cell_problems(path, header, bounds, {numbers[r] for r in outside[:MAX_ERRORS - errors]}, diag)
     diag.raise_if_errors()
