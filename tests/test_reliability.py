@@ -301,7 +301,9 @@ def test_sigterm_ends_a_run_with_its_rows_kept(project, tmp_path):
     (out / "outputs.csv").write_text("a previous result\n")
     proc = subprocess.Popen([sys.executable, "-m", "cotwin", "run", str(toml), "-o", str(out)], stderr=subprocess.PIPE,
                             text=True)
-    time.sleep(4.0)
+    part, deadline = out / "outputs.csv.part", time.monotonic() + 60
+    while time.monotonic() < deadline and (not part.is_file() or part.read_text().count("\n") < 8):
+        time.sleep(0.1)  # rows are flushed every 0.5 s: wait for some, however long starting took
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130 and "interrupted at t = " in err and "Traceback" not in err

@@ -182,6 +182,9 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
+    from .twin.scenario import after_end
+
+    _show_warnings(after_end(system.commands, system.spec.end if end is None else end))
     dash = _dashboard(system, dashboard, "run", history)
     try:
         with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
@@ -220,7 +223,16 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
     _finite(step=step, end=end)
     mm = read_multimodel(multimodel)
     csv_path = Path(out) if out else Path(multimodel).parent / "outputs.csv"
-    result = execution_for(mm, csv_path, step, algorithm).run(mm.end if end is None else end)
+    execution = execution_for(mm, csv_path, step, algorithm)
+    try:
+        result = execution.run(mm.end if end is None else end)
+    except (CotwinError, KeyboardInterrupt) as err:  # say where the rows computed so far are
+        kept = execution.observers[0].kept()
+        if isinstance(err, KeyboardInterrupt):
+            stopped = CotwinError(f"interrupted at t = {execution.time:g} s; {kept}")
+            stopped.interrupted = True
+            raise stopped from None
+        raise CotwinError([*err.findings, *CotwinError(kept).findings]) from None
     click.echo(f"{csv_path}: {result.rows} rows to t = {result.end_time:g} s in {result.wall_seconds:.2f} s")
 
 
@@ -252,24 +264,36 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     from .twin.runtime import LiveTwin
 
     _finite(step=step, end=end)
-    spec = load_project(project)
-    if pt_log is not None:
-        if not Path(pt_log).is_file():
-            raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
-        spec.pt = replace(spec.pt, endpoint="replay", log=Path(pt_log)) if spec.pt else PTSettings("replay", log=Path(pt_log))
+    if pt_log is not None and not Path(pt_log).is_file():
+        raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
+    spec = load_project(project, pt_log)
+    if pt_log is not None and spec.pt is None:
+        spec.pt = PTSettings("replay", log=Path(pt_log))
     if exchange is not None:
         spec.plan = None
         spec.rabbitmq = replace(spec.rabbitmq, exchange=exchange) if spec.rabbitmq else RabbitMQSettings(exchange)
         spec.realtime = True if realtime is None else realtime
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
+    from .twin.scenario import after_end
+
+    _show_warnings(after_end(system.commands, spec.end if end is None else end))
     dash = _dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
                       broker if whatif else None)
     try:
         live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
                         observers=[dash.feed] if dash else (), cc=cc, whatif_url=broker if whatif else None)
+
+        def interrupt(*_) -> None:
+            """In the step loop, end after the step (results kept as a finished run's); before it (waiting for
+            the broker, building) or at a second signal, at once (rows so far kept as partial results)."""
+            if not live.looping or live._stop:
+                raise KeyboardInterrupt
+            live.stop()
+            click.echo("stopping after this step (interrupt again to stop at once)", err=True)
+
         for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda *_: live.stop())
+            signal.signal(sig, interrupt)
         result = live.run()
         if dash is not None:
             dash.finish("stopped" if live._stop else "done")
@@ -419,6 +443,7 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     from .mapping.rtde import read_arm_log
     from .pmodel.cell import CellGeometry
     from .twin import calibration as cal
+    from .twin.project import load_project
     from .twin.run import load
 
     if pt_log is None and check_log is None:
@@ -431,7 +456,7 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     if not math.isfinite(log_start):
         raise click.BadParameter(f"{log_start!r} is not a finite number", param_hint="--log-start")
     point = tool if tool in ("flange", "fingertips") else _point(tool)
-    system = load(project)
+    system = load(load_project(project, pt_log))  # the log to fit replaces [pt] log
     twin, program, commands = cal.project_twin(system)
     fitted = None
     if pt_log is not None:

@@ -43,6 +43,25 @@ class RunResult:
         return (self.end_time - self.start) / max(self.wall_seconds, 1e-12)
 
 
+MAX_STEPS = 10**9  # steps of one run: beyond, days of computing (a step or an end off by powers of ten)
+
+
+def step_count(span: float, step: float, what: str = "the end time", start: float = 0.0) -> int:
+    """How many steps of `step` make `span`; a span that is not a whole number of them (end 1.05 s, step 0.1 s)
+    or shorter than one is an error, not a run that silently ends elsewhere."""
+    steps = span / step
+    if not steps <= MAX_STEPS:  # also inf and NaN
+        raise CotwinError(f"{what} {start + span:g} s is {steps:.3g} steps of {step:g} s from {start:g} s: at most "
+                          f"{MAX_STEPS:.0e} in one run (a larger step or an earlier end)")
+    whole = round(steps)
+    if whole < 1 or abs(steps - whole) > 1e-6 * max(1.0, steps):
+        below, above = max(int(steps), 1), max(int(steps), 1) + (int(steps) >= 1)
+        options = sorted({start + below * step, start + above * step})
+        raise CotwinError(f"{what} {start + span:g} s is not a whole number of steps of {step:g} s from "
+                          f"{start:g} s ({steps:.6g} steps): choose {' or '.join(f'{t:g} s' for t in options)}")
+    return int(whole)
+
+
 class Execution:
     def __init__(self, system: System, algorithm: Algorithm, step_size: float, start: float = 0.0,
                  observers: list[Observer] | tuple[Observer, ...] = ()):
@@ -118,7 +137,7 @@ class Execution:
         if not end > self.time:
             raise CotwinError(f"the end time ({end!r} s) must come after the current time ({self.time!r} s)")
         time, done = self._origin
-        self.total_steps = done + int(round((end - time) / self.step_size))
+        self.total_steps = done + step_count(end - time, self.step_size, "the end time", time)
         if not self.initialized:
             self.initialize()
         try:

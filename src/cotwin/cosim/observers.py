@@ -103,6 +103,12 @@ class CSVWriter(Observer):
             self._lines.clear()
         self._last_flush = wallclock.monotonic()
 
+    def kept(self) -> str:
+        """Where the rows of a run that failed or was interrupted are, for its error message."""
+        if self.rows and self.partial_path.is_file():
+            return f"the {self.rows} row(s) computed are in {self.partial_path}"
+        return "no rows computed"
+
     def simulation_ended(self, execution, error: BaseException | None) -> None:
         if self._fd is None:
             return

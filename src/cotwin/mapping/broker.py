@@ -27,6 +27,7 @@ from typing import Mapping
 import pika
 
 from ..diagnostics import CotwinError
+from ..logcap import CappedLog
 from .amqp import connect, redact, scrub
 from .robot_protocol import (MAX_REPLY, MAX_REQUEST, OPS, REPLY_QUEUE, ReplayGuard, RobotView, check_reply,
                              check_request, decode, load_secret, reply_headers, request_headers, validate_reply,
@@ -62,20 +63,11 @@ class RobotServer:
         self.dropped = 0  # could not be answered (no or foreign reply queue, no correlation id)
         self.reconnects = 0
         self.internal_errors = 0  # an endpoint failure other than a CotwinError (logged with its traceback)
-        self._logged: tuple[float, int] = (0.0, 0)  # start of the log window, warnings logged in it
+        self._warnings = CappedLog(log, f"refused messages of robot server {queue}", LOG_BURST, LOG_WINDOW)
 
     def _warn(self, reason: str) -> None:
         """Log a refused message, at most LOG_BURST per LOG_WINDOW (then say how many were not logged)."""
-        now = wallclock.monotonic()
-        start, count = self._logged
-        if now - start > LOG_WINDOW:
-            if count > LOG_BURST:
-                log.warning("robot server %s: %d more refused message(s) not logged", self.queue, count - LOG_BURST)
-            start, count = now, 0
-        count += 1
-        self._logged = (start, count)
-        if count <= LOG_BURST:
-            log.warning("robot server %s: %s", self.queue, reason)
+        self._warnings.warning("robot server %s: %s", self.queue, reason)
 
     # ---- one message ----
     def state(self) -> dict:
@@ -207,6 +199,7 @@ class RobotServer:
         finally:
             self.ready.clear()
             _close(connection)
+            self._warnings.close()  # how many refusals were counted but not logged
 
     def stop(self) -> None:
         """Stop serving (a local call: safe from another thread or a signal handler)."""

@@ -46,6 +46,16 @@ class Recording:
                 still_since = float(t)
         return out
 
+    def offset_problem(self, offset: float) -> str | None:
+        """Why `offset` (the log's time at co-simulation time 0) cannot start a replay, if it cannot: at or past
+        the log's end, the replay would hold its last sample for the whole run (before its start is allowed:
+        the first sample holds until the log begins)."""
+        t0, t1 = float(self.times[0]), float(self.times[-1])
+        if offset < t1:
+            return None
+        return (f"the replay offset {offset!r} s is past the end of the log {self.source}, whose time runs from "
+                f"{t0:g} to {t1:g} s ({t1 - t0:g} s long); the offset is the log's time at co-simulation time 0")
+
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         q = np.array([np.interp(t, self.times, self.q[:, k]) for k in range(len(self.joints))])
         qd = np.array([np.interp(t, self.times, self.qd[:, k]) for k in range(len(self.joints))])
@@ -71,6 +81,9 @@ class ReplayEndpoint:
         if unknown:
             raise CotwinError(f"{self.recording.source}: the recording's joints {', '.join(unknown)} are not joints "
                               f"of p-model {self.tree.name}")
+        problem = self.recording.offset_problem(self.offset) if self.offset is not None else None
+        if problem is not None:
+            raise CotwinError(problem)
         self._held: dict[str, float] = {j.name: 0.0 for j in self.tree.actuated}
         onsets = self.recording.onsets()
         self._first_onset = onsets[0] if onsets else float(self.recording.times[0])

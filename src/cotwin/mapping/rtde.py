@@ -1,7 +1,8 @@
 """UR RTDE logs: space-separated, one header row of RTDE output fields (vectors expanded `_0`..`_5`),
 one row per sample. Read strictly: every problem is an error at its line and column (a missing or
 repeated column, a short or long row, a cell that is not a finite number, an oversized field, bytes
-that are not text, time that does not increase), up to MAX_ERRORS of them at once.
+that are not text, a joint angle, speed or TCP coordinate beyond any UR arm's (RANGES), time that does
+not increase or jumps by more than MAX_GAP), up to MAX_ERRORS of them at once.
 
 Two views of a log:
 - `RTDELog`: the fields as logged (the controller's convention): `column`, `vector`, `times`, `q`, `qd`;
@@ -16,6 +17,7 @@ Two views of a log:
 from __future__ import annotations
 
 import math
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,8 +28,14 @@ from .urrtde import UR_TO_MODEL
 
 JOINTS = 6
 MAX_FIELD = 64  # characters: a number needs fewer; anything longer is reported, not parsed
+MAX_BYTES = 1 << 29  # a log is read into memory (about 30 s a 512 MiB): cut longer runs to what is needed
 MAX_ERRORS = 20  # findings reported from one file before giving up
 REST_SPEED = 0.01  # rad/s: below this on every joint, the arm is at rest
+MAX_GAP = 10.0  # s between two samples: an RTDE recording is continuous (2-125 ms); a longer jump is corruption
+# The largest magnitude of the fields cotwin reads: UR joints turn +-360 deg at up to 360 deg/s, in a reach of
+# a few metres; two turns, twice that speed and 100 m leave room for every UR and flag what no arm could do.
+RANGES = {"actual_q": (4 * math.pi, "rad"), "target_q": (4 * math.pi, "rad"), "actual_qd": (4 * math.pi, "rad/s"),
+          "target_qd": (4 * math.pi, "rad/s"), "actual_TCP_pose": (100.0, "m or rad")}
 ARM = ("timestamp", *(f"actual_q_{k}" for k in range(JOINTS)))
 LIVE = (*ARM, *(f"actual_qd_{k}" for k in range(JOINTS)))
 
@@ -241,78 +249,132 @@ def write_rtde(path: str | Path, timestamp, q, qd=None, target_q=None, target_qd
 
 
 def read_rtde(path: str | Path, required=LIVE) -> RTDELog:
-    """Read an RTDE log strictly; `required` columns must be present."""
+    """Read an RTDE log strictly; `required` columns must be present. The file is read line by line
+    into one array (8 bytes a value), so a long log costs its size, not several times it."""
     path = Path(path)
     diag = Diagnostics()
     where = str(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as err:
-        raise CotwinError([_finding(where, 1, 1, f"cannot read the log: {err.strerror or err}")]) from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as err:
-        line = raw[:err.start].count(b"\n") + 1
-        raise CotwinError([_finding(where, line, err.start - raw.rfind(b"\n", 0, err.start),
-                                    "the log is not UTF-8 text (is this an RTDE CSV log?)")]) from None
-    lines = text.splitlines()
-    header_row = next((k for k, line in enumerate(lines) if line.strip()), None)
+    lines = _lines(path)
+    header_row, header_line = next(((k, line) for k, line in lines if line.strip()), (None, ""))
     if header_row is None:
         raise CotwinError([_finding(where, 1, 1, "the log is empty: an RTDE log needs a header row and samples")])
-    header, header_cols = _fields(lines[header_row])
+    header, header_cols = _fields(header_line)
     seen: dict[str, int] = {}
     for name, col in zip(header, header_cols):
+        if len(diag.findings) >= MAX_ERRORS:
+            diag.error(Location(where, header_row, col), f"stopped after {MAX_ERRORS} errors")
+            break
         if len(name) > MAX_FIELD:
-            diag.error(Location(where, header_row + 1, col), f"a header name of {len(name)} characters: "
+            diag.error(Location(where, header_row, col), f"a header name of {len(name)} characters: "
                        "the first row must name RTDE fields")
         elif name in seen:
-            diag.error(Location(where, header_row + 1, col), f"column '{name}' appears twice (also column {seen[name]})")
+            diag.error(Location(where, header_row, col), f"column '{name}' appears twice (also column {seen[name]})")
         seen.setdefault(name, col)
     missing = [c for c in required if c not in seen]
     if missing:
-        diag.error(Location(where, header_row + 1, 1), f"the log has no column(s) {', '.join(missing)} (an RTDE log "
+        diag.error(Location(where, header_row, 1), f"the log has no column(s) {', '.join(missing)} (an RTDE log "
                    f"with {_names(required)} is needed; is the file space-separated?)")
     diag.raise_if_errors()
-    values: list[list[float]] = []
-    errors = 0
-    for k in range(header_row + 1, len(lines)):
-        line = lines[k]
-        if not line.strip():
+    bounds = [RANGES.get(name.rsplit("_", 1)[0]) if name[-1:].isdigit() else None for name in header]
+    values, numbers, errors, last = array("d"), array("q"), 0, header_row
+    for k, line in lines:
+        last = k
+        row = _row(line.split(), len(header))
+        if row is not None:
+            values.extend(row)
+            numbers.append(k)
             continue
         fields, cols = _fields(line)
+        if not fields:
+            continue
         if len(fields) != len(header):
-            diag.error(Location(where, k + 1, cols[len(header)] if len(fields) > len(header) else len(line) + 1),
+            diag.error(Location(where, k, cols[len(header)] if len(fields) > len(header) else len(line) + 1),
                        f"{len(fields)} values for {len(header)} columns")
             errors += 1
         else:
-            row = []
-            for name, cell, col in zip(header, fields, cols):
-                value = _number(cell)
-                if value is None:
-                    problem = (f"{cell!r} is not a finite number" if len(cell) <= 20
-                               else f"a field of {len(cell)} characters is not a number")
-                    diag.error(Location(where, k + 1, col), f"column '{name}': {problem}")
+            for name, cell, col, bound in zip(header, fields, cols, bounds):
+                problem = _problem(cell, bound)
+                if problem is not None:
+                    diag.error(Location(where, k, col), f"column '{name}': {problem}")
                     errors += 1
-                row.append(value)
-            if None not in row:
-                values.append(row)
         if errors >= MAX_ERRORS:
-            diag.error(Location(where, k + 1, 1), f"stopped after {MAX_ERRORS} errors")
+            diag.error(Location(where, k, 1), f"stopped after {MAX_ERRORS} errors")
             break
+    limit = np.array([b[0] if b is not None else np.inf for b in bounds])
+    data = np.frombuffer(values, dtype=float).reshape(len(numbers), len(header))
+    outside = np.nonzero(~np.all(np.isfinite(data) & (np.abs(data) <= limit), axis=1))[0]
+    if len(outside) and errors < MAX_ERRORS:
+        _cell_problems(path, header, bounds, {numbers[r] for r in outside[:MAX_ERRORS - errors]}, diag)
     diag.raise_if_errors()
-    if len(values) < 2:
-        raise CotwinError([_finding(where, len(lines) or 1, 1,
-                                    f"the log has {len(values)} sample(s): at least two are needed")])
-    data = np.array(values)
+    if len(numbers) < 2:
+        raise CotwinError([_finding(where, last, 1, f"the log has {len(numbers)} sample(s): at least two are needed")])
     stamps = data[:, header.index("timestamp")] if "timestamp" in header else None
     if stamps is not None:
-        back = np.nonzero(np.diff(stamps) <= 0)[0]
-        if len(back):
-            bad = int(back[0]) + 1
-            raise CotwinError([_finding(where, _data_line(lines, header_row, bad), seen["timestamp"],
-                                        f"timestamps must increase: {float(stamps[bad])!r} after "
-                                        f"{float(stamps[bad - 1])!r}")])
+        steps = np.diff(stamps)
+        bad_steps = np.nonzero((steps <= 0) | (steps > MAX_GAP))[0]
+        if len(bad_steps):
+            bad = int(bad_steps[0]) + 1
+            now, before = float(stamps[bad]), float(stamps[bad - 1])
+            problem = (f"timestamps must increase: {now!r} after {before!r}" if now <= before else
+                       f"a jump of {now - before:g} s after {before!r} (at most {MAX_GAP:g} s between samples: "
+                       "is the timestamp column corrupt?)")
+            raise CotwinError([_finding(where, numbers[bad], seen["timestamp"], problem)])
     return RTDELog(str(path), header, data)
+
+
+def _lines(path: Path):
+    """(line number, text) of a log, read as it goes; a log over MAX_BYTES or bytes that are not UTF-8
+    text end it with an error at the place."""
+    where = str(path)
+    try:
+        size = path.stat().st_size
+        if size > MAX_BYTES:
+            raise CotwinError([_finding(where, 1, 1, f"the log is {size / 2**20:.0f} MiB, over the {MAX_BYTES // 2**20} "
+                                        "MiB cotwin reads: cut it to the run you need")])
+        with path.open("rb") as f:
+            for k, raw in enumerate(f, 1):
+                try:
+                    yield k, raw.decode("utf-8").rstrip("\r\n")
+                except UnicodeDecodeError as err:
+                    raise CotwinError([_finding(where, k, err.start + 1,
+                                                "the log is not UTF-8 text (is this an RTDE CSV log?)")]) from None
+    except OSError as err:
+        raise CotwinError([_finding(where, 1, 1, f"cannot read the log: {err.strerror or err}")]) from None
+
+
+def _row(fields: list[str], width: int) -> list[float] | None:
+    """The numbers of a row, or None when it has the wrong width or a cell is not a number (the caller
+    then says which); their ranges are checked on the whole array at the end."""
+    if len(fields) != width or max(map(len, fields)) > MAX_FIELD:
+        return None
+    try:
+        return list(map(float, fields))
+    except ValueError:
+        return None
+
+
+def _cell_problems(path: Path, header: list[str], bounds, rows: set[int], diag: Diagnostics) -> None:
+    """Locate the cells out of range on the given lines (a second pass: rare, and at most MAX_ERRORS lines)."""
+    for k, line in _lines(path):
+        if k in rows:
+            fields, cols = _fields(line)
+            for name, cell, col, bound in zip(header, fields, cols, bounds):
+                problem = _problem(cell, bound)
+                if problem is not None:
+                    diag.error(Location(str(path), k, col), f"column '{name}': {problem}")
+            if k >= max(rows):
+                break
+
+
+def _problem(cell: str, bound: tuple[float, str] | None) -> str | None:
+    """What is wrong with a cell of a column of range `bound`, if anything."""
+    value = _number(cell)
+    if value is None:
+        return (f"{cell!r} is not a finite number" if len(cell) <= 20
+                else f"a field of {len(cell)} characters is not a number")
+    if bound is not None and abs(value) > bound[0]:
+        return f"{value:g} {bound[1]} is beyond any UR arm's (at most {bound[0]:g} {bound[1]})"
+    return None
 
 
 def _names(required) -> str:
@@ -344,16 +406,6 @@ def _number(text: str) -> float | None:
     except ValueError:
         return None
     return value if math.isfinite(value) else None
-
-
-def _data_line(lines: list[str], header_row: int, index: int) -> int:
-    count = -1
-    for k in range(header_row + 1, len(lines)):
-        if lines[k].strip():
-            count += 1
-            if count == index:
-                return k + 1
-    return len(lines)
 
 
 def _finding(path: str, line: int, column: int, message: str) -> Finding:

@@ -10,7 +10,7 @@ co-simulation settings and, for a live twin, the physical twin, deviation checki
     plan = "plan.csv"               #   a TwinManager plan (ms, port values)
     commands = "scenario.toml"      #   a TOML list of [[command]]
     rabbitmq = { exchange = "fmi_digital_twin_dt" }   # live, as the RMQ FMU takes them
-                                    #   (url, to_cosim, from_cosim, maxage_ms, timeout_s: see twin.rabbitmq;
+                                    #   (url, to_cosim, from_cosim, maxage_ms, timeout_s, max_skew_s: see twin.rabbitmq;
                                     #   commands: the d-model events it sends, default those the
                                     #   mapping does not produce)
     [platform]                      # the DT's robot
@@ -106,6 +106,7 @@ RABBITMQ = Schema({
     "from_cosim": Key("str", "data.from_cosim"),
     "maxage_ms": Key("positive", 1000),
     "timeout_s": Key("positive", 60),
+    "max_skew_s": Key("positive", 60),
     "commands": Key("list[str]"),
 })
 
@@ -189,6 +190,7 @@ class RabbitMQSettings:
     from_cosim: str = "data.from_cosim"
     maxage_ms: float = 1000
     timeout_s: float = 60
+    max_skew_s: float = 60  # a message whose time is further than this from its arrival is refused (clock skew)
     commands: tuple[str, ...] | None = None  # d-model input events taken from the broker (default: external ones)
 
 
@@ -256,8 +258,9 @@ class TwinProject:
         return self.plan
 
 
-def load_project(path: str | Path) -> TwinProject:
-    """Read and check cotwin.toml; every problem is reported at its key, all together."""
+def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProject:
+    """Read and check cotwin.toml; every problem is reported at its key, all together. `pt_log` (a command's
+    --pt-log) replaces [pt] log, which is then not looked for."""
     file = TomlFile(path, "project file")
     problems: list[Finding] = []
     data = SCHEMA.read(file.data, file, (), problems)
@@ -287,15 +290,15 @@ def load_project(path: str | Path) -> TwinProject:
     platform, cosim = data["platform"] or {}, data["cosim"] or {}
     pt = None
     if data["pt"]:
-        raw = data["pt"]
+        raw = data["pt"] | ({"endpoint": "replay", "log": None} if pt_log is not None else {})
         if raw["endpoint"] in ("opcua", "rtde") and not raw.get("url"):
             problems.append(Finding(file.location(("pt", "endpoint")), Severity.ERROR,
                                     f"[pt] endpoint {raw['endpoint']!r} needs a url"))
-        if raw["endpoint"] == "replay" and not raw.get("log"):
+        if raw["endpoint"] == "replay" and not raw.get("log") and pt_log is None:
             problems.append(Finding(file.location(("pt", "endpoint")), Severity.ERROR,
                                     "[pt] endpoint 'replay' needs log = \"<recorded log>\""))
-        pt = PTSettings(raw["endpoint"], raw.get("url"), existing("pt", "log", raw.get("log")), raw["queue"],
-                        raw.get("offset"))
+        log = Path(pt_log) if pt_log is not None else existing("pt", "log", raw.get("log"))
+        pt = PTSettings(raw["endpoint"], raw.get("url"), log, raw["queue"], raw.get("offset"))
     dev = data["deviation"] or {}
     deviation = DeviationSettings(**{k: (tuple(v) if k == "variables" and v is not None else v)
                                      for k, v in dev.items()}) if dev else DeviationSettings()

@@ -17,7 +17,8 @@ Differences from the RMQ FMU, on purpose: every dropped or refused message is co
 its reason (logger `cotwin.rabbitmq`, at most 20 lines per 10 s, then "N more dropped messages not
 logged"; the newest MAX_REFUSED reasons are kept in `CommandStream.refused`, all are counted in
 `refused_count`); at most MAX_QUEUED values per variable wait for their time (a flood of messages
-stamped in the future is refused, not held without bound); a missing value ends the run with an error
+stamped in the future is refused, not held without bound); a message whose time is more than
+`max_skew_s` from its arrival is refused (a skewed clock); a missing value ends the run with an error
 naming the variable, the time and the age of what it had; and a d-model input *event* (a Boolean
 port the d-model reads as an event) is true in the one step that applies a `true` message, not held
 until a `false` arrives, so each published command is delivered exactly once.
@@ -41,8 +42,8 @@ import pika
 
 from ..cosim.units import INT32, Port, PythonUnit
 from ..diagnostics import CotwinError
+from ..logcap import CappedLog
 from ..mapping.amqp import connect, redact
-from .capped_log import CappedLog
 from .project import RabbitMQSettings
 
 log = logging.getLogger("cotwin.rabbitmq")
@@ -70,7 +71,10 @@ def parse_time(text: str) -> datetime:
     else:
         sign = 1 if zone[0] == "+" else -1
         digits = zone[1:].replace(":", "")
-        tz = timezone(sign * timedelta(hours=int(digits[:2]), minutes=int(digits[2:])))
+        hours, minutes = int(digits[:2]), int(digits[2:])
+        if hours > 23 or minutes > 59:
+            raise ValueError(f"'time' {text!r}: the zone {zone} is not an offset within +-23:59")
+        tz = timezone(sign * timedelta(hours=hours, minutes=minutes))
     try:
         return datetime(year, month, day, hour, minute, second, micro, tzinfo=tz)
     except ValueError as err:
@@ -112,7 +116,7 @@ def parse_message(body: bytes, types: dict[str, str], scalars: dict | None = Non
     except UnicodeDecodeError as err:
         raise ValueError(f"not UTF-8 (byte 0x{body[err.start]:02x} at {err.start})") from None
     try:
-        data = json.loads(text)
+        data = json.loads(text, object_pairs_hook=_unique)
     except json.JSONDecodeError as err:
         raise ValueError(f"bad JSON: {err.msg} at line {err.lineno} column {err.colno}") from None
     except RecursionError:
@@ -154,6 +158,16 @@ def _typed(value, kind: str, sc=None):
     return typed
 
 
+def _unique(pairs: list[tuple[str, object]]) -> dict:
+    """A JSON object whose keys are all different: one naming a variable twice says two things at once."""
+    seen: set[str] = set()
+    for key, _ in pairs:
+        if key in seen:
+            raise ValueError(f"key '{key}' appears twice: which value is meant?")
+        seen.add(key)
+    return dict(pairs)
+
+
 def _fmi_typed(value, kind: str):
     if kind == "Boolean":
         if isinstance(value, bool):
@@ -192,6 +206,8 @@ class CommandStream:
     receive: object  # callable(timeout_s) -> list[Received]; raises CotwinError when the link is lost
     maxage: float = 1.0  # s
     timeout: float = 60.0  # s
+    cancelled: object = None  # callable() -> bool: a run asked to stop; waiting for messages ends at once
+    max_skew: float | None = None  # s: a message whose time is further than this from its arrival is refused
     t0: datetime | None = None
     refused: deque = field(default_factory=lambda: deque(maxlen=MAX_REFUSED))  # (wall time, reason), the newest
     refused_count: int = 0  # every refusal, kept or not
@@ -218,6 +234,11 @@ class CommandStream:
                 parsed = parse_message(m.body, self.types, self.scalars)
             except ValueError as err:
                 self._refuse(str(err), m.body)
+                continue
+            skew = parsed.time.timestamp() - m.wall
+            if self.max_skew is not None and abs(skew) > self.max_skew:
+                self._refuse(f"its 'time' {parsed.time.isoformat()} is {skew:+.1f} s from when it arrived (at most "
+                             f"max_skew_s = {self.max_skew:g} s: is the publisher's clock set?)", m.body)
                 continue
             for reason in parsed.dropped:
                 self._refuse(reason, m.body)
@@ -252,7 +273,7 @@ class CommandStream:
             if left <= 0:
                 raise CotwinError(f"no value for {', '.join(missing)} within {self.timeout:g} s of waiting for the "
                                   "first complete set of commands (is a publisher sending on to_cosim?)")
-            self._take(self.receive(min(left, 0.5)))
+            self._wait(min(left, 0.5), f"for the first value of {', '.join(missing)}")
         self.t0 = max(stamp for stamp, _ in latest.values())
         for var, (stamp, value) in latest.items():
             self.held[var] = _Held((stamp - self.t0).total_seconds(), value)
@@ -278,12 +299,22 @@ class CommandStream:
                 raise CotwinError(f"RabbitMQ: no fresh value of '{v}' for the step to t = {until:g} s: the newest "
                                   f"is from t = {held.sim:g} s, {until - held.sim:.3f} s old (maxage "
                                   f"{self.maxage:g} s), and none came within {self.timeout:g} s")
-            self._take(self.receive(min(left, 0.2)))
+            self._wait(min(left, 0.2), f"for a fresh value of '{stale[0][0]}'")
             fired |= self._apply(until, t + h)
         # an event is true in the step that applied a `true`, even if a `false` followed within the step
         out = {v: (v in fired) if v in self.events else held.value for v, held in self.held.items()}
         self._last = (t, out)
         return out
+
+    def finish(self) -> None:
+        """At the end of a run: say how many refusals were counted but not logged."""
+        self.log.close()
+
+    def _wait(self, seconds: float, what: str) -> None:
+        """Take what arrives within `seconds`; a run asked to stop ends here, as Ctrl-C would."""
+        if self.cancelled is not None and self.cancelled():
+            raise KeyboardInterrupt(f"stopped while waiting {what}")
+        self._take(self.receive(seconds))
 
     def _apply(self, until: float, step_end: float) -> set[str]:
         """Apply queued values with simulation time <= until; return the events that fired."""
@@ -492,7 +523,8 @@ class RabbitMQUnit(PythonUnit):
         self.bridge.start()
         if self.stream is None:
             self.stream = CommandStream(self.types, self.events, self.bridge.receive, self.settings.maxage_ms / 1000,
-                                        self.settings.timeout_s, scalars=self.scalars)
+                                        self.settings.timeout_s, scalars=self.scalars,
+                                        max_skew=self.settings.max_skew_s)
         if self.stream.t0 is None:
             self.stream.start()
         self.values.update({v: held.value if v not in self.events else False for v, held in self.stream.held.items()})
@@ -504,7 +536,7 @@ class RabbitMQUnit(PythonUnit):
 
     def terminate(self) -> None:
         if self.stream is not None:
-            self.stream.log.close()
+            self.stream.finish()
         if self.bridge is not None:
             self.reconnects = self.bridge.reconnects
         if self._own_bridge and self.bridge is not None:

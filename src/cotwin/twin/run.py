@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..cosim.algorithm import algorithm as make_algorithm
-from ..cosim.execution import Execution, RunResult
+from ..cosim.execution import Execution, RunResult, step_count
 from ..cosim.observers import CSVWriter, Observer, Progress, RealTimePacer, StateFile
 from ..cosim.system import System
 from ..diagnostics import CotwinError
@@ -76,6 +76,7 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
     step = spec.step if step is None else step
     if not (step > 0 and end > 0):
         raise CotwinError(f"need a positive step and end time (step {step!r}, end {end!r})")
+    step_count(end, step)  # before anything is built: an end between steps is refused
     with folder_lock(out):
         fmu = dmodel_fmu(system, out, cc)
         cosim = system.instantiate(fmu, endpoint if endpoint is not None else dt_endpoint(system), source=source)
@@ -90,7 +91,7 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         try:
             result = execution.run(end)
         except (CotwinError, KeyboardInterrupt) as err:
-            kept = f"the {writer.rows} row(s) computed are in {writer.partial_path}" if writer.rows else "no rows computed"
+            kept = writer.kept()
             if isinstance(err, KeyboardInterrupt):
                 stopped = CotwinError(f"interrupted at t = {execution.time:g} s; {kept}")
                 stopped.interrupted = True

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..cosim.algorithm import UNSET, algorithm as make_algorithm
-from ..cosim.execution import Execution, RunResult
+from ..cosim.execution import Execution, RunResult, step_count
 from ..cosim.observers import CSVWriter, StateFile, epoch_of
 from ..diagnostics import CotwinError
 from .build import dmodel_fmu, folder_lock
@@ -50,7 +50,11 @@ def pt_endpoint(system: TwinSystem):
         from ..pmodel import ik
 
         arm = ik.arm_joints(tree, ik.find_tool(tree))
-        return ReplayEndpoint(tree, read_rtde_log(pt.log, arm), pt.offset)
+        recording = read_rtde_log(pt.log, arm)
+        problem = recording.offset_problem(pt.offset) if pt.offset is not None else None
+        if problem is not None:
+            raise CotwinError(f"{system.spec.path}: [pt] offset: {problem}")
+        return ReplayEndpoint(tree, recording, pt.offset)
     if pt.endpoint == "rtde":
         from ..mapping.urrtde import RTDEEndpoint
 
@@ -100,6 +104,7 @@ class LiveTwin:
         self.end = spec.end if end is None else end
         if not (self.step_size > 0 and self.end > 0):
             raise CotwinError(f"need a positive step and end time (step {self.step_size!r}, end {self.end!r})")
+        step_count(self.end, self.step_size)  # before anything is built: an end between steps is refused
         self.algorithm = algorithm or spec.algorithm
         self.realtime = spec.realtime if realtime is None else realtime
         self.history_url = history_url if history_url is not None else spec.history_url
@@ -123,6 +128,7 @@ class LiveTwin:
         self._history = None
         self._bridge = None
         self._stop = False
+        self.looping = False  # in the step loop: a stop request ends the run after the current step
 
     # ---- services ----
     def _alarm(self, event: dict) -> None:
@@ -147,7 +153,8 @@ class LiveTwin:
             self._bridge = RabbitMQBridge(settings, "cotwin live twin")  # started by the PT's unit when it initialises
             stream = CommandStream(port_types(system.models.program, system.source_ports), system.command_events,
                                    self._bridge.receive, settings.maxage_ms / 1000, settings.timeout_s,
-                                   scalars=port_scalars(system.models.program))
+                                   scalars=port_scalars(system.models.program), cancelled=lambda: self._stop,
+                                   max_skew=settings.max_skew_s)
             return (system.source_unit(self._bridge, stream, echo=True),
                     system.source_unit(self._bridge, stream, echo=False))
         return system.source_unit(), system.source_unit()
@@ -170,6 +177,7 @@ class LiveTwin:
         with folder_lock(self.out):
             fmu = dmodel_fmu(self.system, self.out, self.cc)
             pt_ep = self.pt_endpoint if self.pt_endpoint is not None else pt_endpoint(self.system)
+            self._warn_if_outlasting(pt_ep)
             dt_ep = self.dt_endpoint if self.dt_endpoint is not None else dt_endpoint(self.system)
             pt_source, dt_source = self._sources()
             try:
@@ -183,6 +191,8 @@ class LiveTwin:
 
                     self.whatif = WhatIfService(self.whatif_url, spec.deviation.exchange, spec.path, self.out)
                 return self._loop(url)
+            except (CotwinError, KeyboardInterrupt) as err:
+                raise self._kept(err) from None
             finally:
                 for side in self.sides.values():
                     side.execution.close()
@@ -199,6 +209,28 @@ class LiveTwin:
                     self.whatif.close()
                 if self._bridge is not None:
                     self._bridge.close()
+
+    def _warn_if_outlasting(self, endpoint) -> None:
+        """A replayed PT whose log ends before the run does holds its last sample: say so (a held pose would
+        otherwise look like a robot at rest)."""
+        recording, offset = getattr(endpoint, "recording", None), getattr(endpoint, "offset", None)
+        if recording is None or offset is None:
+            return
+        last = float(recording.times[-1]) - offset
+        if last < self.end:
+            log.warning("the replayed log %s ends at t = %.3f s of the run, which goes on to %g s: its last sample "
+                        "holds from then on", recording.source, last, self.end)
+
+    def _kept(self, err: CotwinError | KeyboardInterrupt) -> CotwinError:
+        """The error of a run that failed or was interrupted, saying where the rows it computed are (each
+        side's result file holds a header and the rows so far; the previous result is left untouched)."""
+        said = "; ".join(f"{side.name.upper()}: {side.writer.kept()}" for side in self.sides.values()
+                         if side.writer.rows) or "no rows computed"
+        if isinstance(err, KeyboardInterrupt):
+            stopped = CotwinError(f"interrupted at t = {self.time:g} s; {said}")
+            stopped.interrupted = True
+            return stopped
+        return CotwinError([*err.findings, *CotwinError(said).findings])
 
     def _alarm_publisher(self):
         url = self.alarms_url or (self.system.spec.rabbitmq.url if self.system.spec.rabbitmq else None)
@@ -251,7 +283,7 @@ class LiveTwin:
 
     def _loop(self, url: str) -> LiveResult:
         pt, dt = self.sides["pt"], self.sides["dt"]
-        total = int(round(self.end / self.step_size))
+        total = step_count(self.end, self.step_size)
         status, message = "failed", None
         try:
             pt.execution.total_steps = dt.execution.total_steps = total
@@ -268,6 +300,7 @@ class LiveTwin:
             epoch = epoch_of(pt.execution.system.units.values(), wallclock.time())
             if epoch is not None:  # keep to the live publisher's clock
                 started -= wallclock.time() - epoch
+            self.looping = True
             while self.steps < total and not self._stop:
                 pt.execution.step()
                 dt.execution.step()
@@ -291,7 +324,8 @@ class LiveTwin:
             status, message = "stopped", "interrupted"
             raise
         finally:
-            error = None if status in ("done", "stopped") else RuntimeError(message or "failed")
+            error = None if status == "done" or (status == "stopped" and message is None) else \
+                RuntimeError(message or "failed")
             for side in (pt, dt):
                 side.execution.close(error)
             report = self.monitor.report()

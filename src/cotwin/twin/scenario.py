@@ -115,6 +115,13 @@ def same_step(commands: list[Command], events: set[str], h: float = 0.0, start: 
     return found
 
 
+def after_end(commands: list[Command], end: float, h: float = 0.0) -> list[Finding]:
+    """Warnings for the commands a run to `end` never sends (the last step covers up to end): a plan
+    longer than its run, or a run cut short by --end, should say what it leaves out."""
+    return [Finding(_location(c.where), Severity.WARNING, f"this command at {c.time:g} s is after the run's end "
+                    f"({end:g} s): it is never sent") for c in commands if c.time >= end - 1e-9]
+
+
 def read_plan(path: str | Path, program: Program) -> list[Command]:
     path = Path(path)
     ports = scenario_ports(program)

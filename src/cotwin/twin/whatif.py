@@ -31,7 +31,7 @@ from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution
 from ..diagnostics import CotwinError
 from .build import dmodel_fmu
-from .capped_log import CappedLog
+from ..logcap import CappedLog
 from .scenario import Command
 from .system import DMODEL, MAPPING, TwinSystem
 

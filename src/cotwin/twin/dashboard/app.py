@@ -502,7 +502,7 @@ class Dashboard:
 
 def _cap_server_log() -> None:
     """uvicorn warns once per malformed request: a client sending thousands must not fill the log."""
-    from ..capped_log import CappedFilter
+    from ...logcap import CappedFilter
 
     server_log = logging.getLogger("uvicorn.error")
     if not any(isinstance(f, CappedFilter) for f in server_log.filters):
