@@ -11,10 +11,27 @@ import click
 from .diagnostics import CotwinError, Severity
 
 
+MAX_HORIZON = 86_400.0  # s: the longest a what-if looks ahead
+MAX_VALUES = 100_000  # values of one --arg or --domain
+MAX_REPORTED = 50  # findings printed at once: a file with thousands of problems says how many more
+
+
 def _report(findings, stream=None) -> None:
     stream = stream or sys.stderr
-    for f in findings:
+    findings = list(findings)
+    for f in findings[:MAX_REPORTED]:
         click.echo(str(f), file=stream)
+    if len(findings) > MAX_REPORTED:
+        rest = findings[MAX_REPORTED:]
+        errors = sum(f.severity is Severity.ERROR for f in rest)
+        click.echo(f"... and {len(rest)} more problem(s) not shown ({errors} error(s))", file=stream)
+
+
+def _output(ctx, param, value: str | None) -> str | None:
+    """An -o option: a path, never the empty string (which would write into the current folder)."""
+    if value is not None and not value.strip():
+        raise click.BadParameter("an empty path: name the file or folder to write", param_hint="-o/--output")
+    return value
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -69,7 +86,7 @@ def _tree_findings(project) -> list:
 @main.command("build-dmodel")
 @click.argument("model", nargs=-1, required=True)
 @click.option("--module", "module_name", help="the module to build (default: the only one)")
-@click.option("-o", "--output", required=True, help="the FMU file to write")
+@click.option("-o", "--output", callback=_output, required=True, help="the FMU file to write")
 @click.option("--cc", default="cc", show_default=True, help="C compiler")
 def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, cc: str) -> None:
     """Generate C from a d-model module and package it as an FMI 2.0 co-simulation FMU."""
@@ -87,7 +104,7 @@ def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, c
 @click.argument("model", nargs=-1, required=True)
 @click.option("--pmodel", "pmodel_name", help="the p-model to export (default: the one not used as a part)")
 @click.option("--format", "fmt", type=click.Choice(["sdf", "urdf", "mjcf"]), required=True)
-@click.option("-o", "--output", required=True, help="the file to write")
+@click.option("-o", "--output", callback=_output, required=True, help="the file to write")
 def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, output: str) -> None:
     """Write a p-model as SDF 1.6, URDF or MJCF (all three from one kinematic tree)."""
     from pathlib import Path
@@ -106,6 +123,30 @@ def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, out
     kinds = {k: sum(j.kind == k for j in tree.joints) for k in ("revolute", "prismatic", "fixed")}
     click.echo(f"{path}: {fmt} of p-model {tree.name}: {len(tree.links)} links, {kinds['revolute']} revolute, "
                f"{kinds['prismatic']} prismatic and {kinds['fixed']} fixed joints, {len(tree.sensors)} sensor ports")
+
+
+def _exchange(ctx, param, value: str | None) -> str | None:
+    """An exchange name option, checked as the project's are (cotwin.twin.project.amqp_name_problem)."""
+    from .twin.project import amqp_name_problem
+
+    problem = None if value is None else amqp_name_problem(value)
+    if problem:
+        raise click.BadParameter(problem)
+    return value
+
+
+def _timing(spec, step: float | None, end: float | None) -> None:
+    """--step and --end checked with the project's other timing (cotwin.twin.project.timing_problems)."""
+    from .twin.project import CYCLE_PERIOD, timing_problems
+
+    if step is None and end is None:
+        return
+    period = spec.parameters.get(CYCLE_PERIOD)
+    for key, message in timing_problems(spec.step if step is None else step, spec.end if end is None else end,
+                                        period if isinstance(period, (int, float)) else None):
+        if key == CYCLE_PERIOD:
+            message += " ([cosim] parameters cycle_period)"
+        raise click.BadParameter(message, param_hint="--end" if key == "end" and end is not None else "--step")
 
 
 def _address(ctx, param, value: str | None) -> tuple[str, int] | None:
@@ -142,7 +183,7 @@ def _show_warnings(findings) -> None:
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
+@click.option("-o", "--output", "out", callback=_output, required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 def build(project: str, out: str, cc: str) -> None:
     """Build every artefact of a twin project (cotwin.toml); unchanged artefacts are kept."""
@@ -160,7 +201,7 @@ def build(project: str, out: str, cc: str) -> None:
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", required=True, help="folder for outputs.csv, figure.png and the artefacts")
+@click.option("-o", "--output", "out", callback=_output, required=True, help="folder for outputs.csv, figure.png and the artefacts")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
 @click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
@@ -179,6 +220,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
 
     _finite(step=step, end=end)
     system = load(project)
+    _timing(system.spec, step, end)
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
@@ -207,7 +249,7 @@ def _finite(**options) -> None:
 
 @main.command()
 @click.argument("multimodel", type=click.Path())
-@click.option("-o", "--output", "out", default=None, help="the CSV to write (default: outputs.csv beside it)")
+@click.option("-o", "--output", "out", callback=_output, default=None, help="the CSV to write (default: outputs.csv beside it)")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True))
 @click.option("--end", type=click.FloatRange(min=0, min_open=True))
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
@@ -226,13 +268,13 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
+@click.option("-o", "--output", "out", callback=_output, required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
 @click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
 @click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
 @click.option("--pt-log", type=click.Path(), help="replay this recorded log as the PT (overrides [pt])")
-@click.option("--rabbitmq", "exchange", help="take commands live from RabbitMQ on this exchange (overrides [scenario])")
+@click.option("--rabbitmq", "exchange", callback=_exchange, help="take commands live from RabbitMQ on this exchange (overrides [scenario])")
 @click.option("--history", "history", help="history database URL (default: [history] url, else DIR/history.sqlite)")
 @click.option("--whatif", "whatif", is_flag=True, help="answer what-if requests sent over the broker (see docs)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=_address, help=DASHBOARD_HELP)
@@ -253,6 +295,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
 
     _finite(step=step, end=end)
     spec = load_project(project)
+    _timing(spec, step, end)
     if pt_log is not None:
         if not Path(pt_log).is_file():
             raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
@@ -309,9 +352,9 @@ def _plan_file(path: str, program):
 @click.argument("project", type=click.Path())
 @click.option("--plan", "plan", required=True, help="the hypothetical plan (CSV, TOML or JSON; times relative to the fork)")
 @click.option("--from", "state", type=click.Path(), help="a saved DT state to fork (DIR/state of a run or a live twin)")
-@click.option("--horizon", type=click.FloatRange(min=0, min_open=True), default=60.0, show_default=True,
+@click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=60.0, show_default=True,
               help="simulate at most this long (s)")
-@click.option("-o", "--output", "out", help="write the prediction as JSON here")
+@click.option("-o", "--output", "out", callback=_output, help="write the prediction as JSON here")
 def whatif(project: str, plan: str, state: str | None, horizon: float, out: str | None) -> None:
     """Predict what a plan would do: fork the DT (at a saved state, or at the start) and run the plan
     ahead of real time; prints each command's outcome and the completion time."""
@@ -355,10 +398,19 @@ def _named_values(text: str, hint: str) -> tuple[str, list]:
     try:
         if ".." in values:
             low, high = values.split("..", 1)
-            return name, list(range(int(low), int(high) + 1))
-        out = [int(v) if v.strip().lstrip("-").isdigit() else float(v) for v in values.split(",")]
+            span = range(int(low), int(high) + 1)
+        else:
+            span = [int(v) if v.strip().lstrip("-").isdigit() else float(v) for v in values.split(",")]
     except ValueError:
         raise click.BadParameter(f"'{text}': values must be numbers", param_hint=hint) from None
+    if not span:
+        raise click.BadParameter(f"'{text}': {name} takes no value (an empty range: LOW..HIGH needs LOW <= HIGH)",
+                                 param_hint=hint)
+    if len(span) > MAX_VALUES:
+        raise click.BadParameter(f"'{text}': {name} takes {len(span)} values, more than {MAX_VALUES}", param_hint=hint)
+    if isinstance(span, range):
+        return name, list(span)
+    out = span
     if not all(math.isfinite(v) for v in out):
         raise click.BadParameter(f"'{text}': values must be finite numbers", param_hint=hint)
     return name, out
@@ -369,10 +421,11 @@ def _named_values(text: str, hint: str) -> tuple[str, list]:
 @click.option("--event", required=True, help="the command to sweep, e.g. moveDiscreteCommand")
 @click.option("--arg", "args", multiple=True, metavar="NAME=LOW..HIGH", help="an argument's values (repeatable)")
 @click.option("--from", "state", type=click.Path(), help="a saved DT state to fork every what-if from")
-@click.option("--horizon", type=click.FloatRange(min=0, min_open=True), default=30.0, show_default=True)
+@click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=30.0, show_default=True,
+              help="simulate each what-if at most this long (s)")
 @click.option("--workers", type=click.IntRange(min=1), help="local processes (default: one per CPU)")
 @click.option("--ray", "ray", help="run on Ray: 'auto' (the local cluster) or a cluster address")
-@click.option("-o", "--output", "out", required=True, help="the CSV of answers to write")
+@click.option("-o", "--output", "out", callback=_output, required=True, help="the CSV of answers to write")
 def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, horizon: float, workers: int | None,
           ray: str | None, out: str) -> None:
     """Run one what-if per combination of argument values, in parallel (e.g. every hole of the plate:
@@ -384,8 +437,14 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     from .twin.run import load
     from .twin.sweep import grid, run_sweep
 
+    _finite(horizon=horizon)
+    ranges: dict[str, list] = {}
+    for name, values in (_named_values(a, "--arg") for a in args):
+        if name in ranges:
+            raise click.BadParameter(f"argument {name!r} is given twice", param_hint="--arg")
+        ranges[name] = values
     system = load(project)
-    plans = grid(system.models.program, event, dict(_named_values(a, "--arg") for a in args))
+    plans = grid(system.models.program, event, ranges)
     blob = Path(state).read_bytes() if state else None
     started = time.perf_counter()
     rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray)
@@ -402,7 +461,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
 @main.command()
 @click.argument("project", type=click.Path())
 @click.option("--pt-log", type=click.Path(), help="the PT's recorded run of the project's plan (a UR RTDE log) to fit")
-@click.option("-o", "--output", "out", type=click.Path(), help="the calibration file to write (with --pt-log)")
+@click.option("-o", "--output", "out", callback=_output, type=click.Path(), help="the calibration file to write (with --pt-log)")
 @click.option("--calibration", type=click.Path(), help="the calibration to check (with --check; default: the one "
               "just fitted, else the project's)")
 @click.option("--check", "check_log", type=click.Path(), help="another recorded run to replay on the calibrated DT")
@@ -498,7 +557,7 @@ def history_list(db: str | None, folder: str | None) -> None:
 @click.option("--db", help="database URL (sqlite:///file, postgresql://...)")
 @click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
 @click.option("--side", default="dt", show_default=True, help="pt or dt")
-@click.option("-o", "--output", "out", required=True, help="the CSV to write")
+@click.option("-o", "--output", "out", callback=_output, required=True, help="the CSV to write")
 def history_export(run_id: int, db: str | None, folder: str | None, side: str, out: str) -> None:
     """Export one side of a run as a Maestro-format CSV."""
     from .twin.history import export_csv
@@ -533,7 +592,7 @@ def dashboard_command(db: str | None, folder: str | None, address: tuple[str, in
 @click.option("--plan", "plan", type=click.Path(), help="the commands to publish (default: the project's plan)")
 @click.option("--period", type=click.FloatRange(min=0.01), default=0.5, show_default=True,
               help="seconds of wall time between messages")
-@click.option("--exchange", help="the twin's exchange (default: the project's [scenario] rabbitmq exchange)")
+@click.option("--exchange", callback=_exchange, help="the twin's exchange (default: the project's [scenario] rabbitmq exchange)")
 def publish(project: str, plan: str | None, period: float, exchange: str | None) -> None:
     """Publish commands to a live twin over RabbitMQ, as the paper's UR5e publisher does: wait for the
     ready message, then every PERIOD send the command due at the echoed simulation time, else idle."""

@@ -40,7 +40,7 @@ class TomlFile:
         except OSError as err:
             raise self.error(f"cannot read {what}: {err.strerror or err}") from None
         try:
-            self.text = raw.decode("utf-8")
+            self.text = raw.decode("utf-8").removeprefix("\ufeff")  # a byte order mark is no content
         except UnicodeDecodeError as err:
             line = raw[:err.start].count(b"\n") + 1
             column = err.start - (raw.rfind(b"\n", 0, err.start) + 1) + 1
@@ -69,12 +69,14 @@ class TomlFile:
                     table = name + (arrays[name],)
                 else:
                     table = name
-                self.where.setdefault(table, (number, header.start(1) + 1))
+                for n in range(1, len(table) + 1):  # [a.b.c] (or [[a]]) also writes a, a.b
+                    self.where.setdefault(table[:n], (number, header.start(1) + 1))
                 continue
             assign = _ASSIGN.match(line)
             if assign:
                 key = table + _keys(assign.group(1))
-                self.where.setdefault(key, (number, assign.start(1) + 1))
+                for n in range(len(table) + 1, len(key) + 1):  # a.b.c = 1 also writes a, a.b
+                    self.where.setdefault(key[:n], (number, assign.start(1) + 1))
                 for inner in _INLINE_KEY.finditer(line, assign.end()):
                     self.where.setdefault(key + _keys(inner.group(1)), (number, inner.start(1) + 1))
 
@@ -194,6 +196,28 @@ def _value(spec: Key, value, file: TomlFile, where: tuple, problems: list[Findin
             problems.append(Finding(file.location(where), Severity.ERROR, f"{name}: {message}"))
             return spec.default
     return value
+
+
+def within(low: float, high: float, unit: str = "") -> Callable[[Any], str | None]:
+    """A check that a number lies in [low, high] (what a setting can sensibly be, not just finite)."""
+    def check(value) -> str | None:
+        if low <= value <= high:
+            return None
+        return f"must be in [{low:g}, {high:g}]{f' {unit}' if unit else ''}, got {value!r}"
+    return check
+
+
+def unique(what: str, empty: bool = False) -> Callable[[Any], str | None]:
+    """A check that a list of names is not empty (unless `empty`), holds no empty name and names nothing
+    twice."""
+    def check(value) -> str | None:
+        if not value and not empty:
+            return f"names no {what} (leave the key out for the default)"
+        if any(not v for v in value):
+            return f"an empty {what} name"
+        twice = sorted({v for v in value if value.count(v) > 1})
+        return f"names {', '.join(map(repr, twice))} more than once" if twice else None
+    return check
 
 
 def raise_problems(problems: list[Finding]) -> None:

@@ -69,16 +69,79 @@ Every problem is reported at its key's line and column, all together (cotwin.con
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..config import Key, Schema, TomlFile, raise_problems
-from ..diagnostics import Finding, Severity
+from ..config import Key, Schema, TomlFile, raise_problems, unique, within
+from ..diagnostics import Finding, Location, Severity
+from ..pmodel.mjcf import TIMESTEP as PHYSICS_STEP
 from ..pmodel.perturbation import SCHEMA as PLANT, Perturbation
 
 ENDPOINTS = ("mujoco", "broker")
 SCENES = ("auto", "flexcell", "world", "none")
 PT_ENDPOINTS = ("opcua", "replay", "broker", "rtde")
+MAX_STEPS = 10 ** 8  # steps of one run: more is a mistake (a step or an end time off by orders of magnitude)
+MAX_CYCLES_PER_STEP = 10 ** 6  # d-model cycles in one step ([cosim] parameters cycle_period)
+MAX_WAIT_S = 86_400.0  # s: the longest a twin waits for, or keeps, a broker message
+MAX_LAG_STEPS = 10 ** 6  # [deviation] lag_steps and debounce_steps
+CYCLE_PERIOD = "cycle_period"  # the d-model FMU's parameter: seconds per cycle (cotwin.dmodel.ports)
+AMQP_MAX = 255  # bytes of an AMQP 0-9-1 short string: exchange, queue and routing-key names
+_AMQP_NAME = re.compile(r"[A-Za-z0-9_.:-]+")
+
+
+def amqp_name_problem(value: str) -> str | None:
+    """Why `value` cannot name an exchange or queue the twin declares (RabbitMQ's rules), or None."""
+    if not value:
+        return "must not be empty"
+    if len(value.encode("utf-8")) > AMQP_MAX:
+        return f"is {len(value.encode('utf-8'))} bytes long; AMQP names hold at most {AMQP_MAX}"
+    if not _AMQP_NAME.fullmatch(value):
+        return f"may hold only letters, digits and '-', '_', '.', ':', got {value[:60]!r}"
+    if value.startswith("amq."):
+        return f"{value!r}: names starting with 'amq.' are reserved by the broker"
+    return None
+
+
+def routing_key_problem(value: str) -> str | None:
+    """Why `value` cannot be a routing key of the twin's messages, or None."""
+    if not value:
+        return "must not be empty"
+    if len(value.encode("utf-8")) > AMQP_MAX:
+        return f"is {len(value.encode('utf-8'))} bytes long; AMQP routing keys hold at most {AMQP_MAX}"
+    if not all(c.isprintable() and not c.isspace() for c in value):
+        return f"may not hold spaces or control characters, got {value[:60]!r}"
+    return None
+
+
+def timing_problems(step: float, end: float, cycle_period: float | None = None) -> list[tuple[str, str]]:
+    """(key, message) for a step and end time a run cannot keep exactly: a step that is not a whole
+    number of the simulator's physics steps, an end time that is not a whole number of steps (it would
+    be rounded), more than MAX_STEPS steps, or a d-model cycle that does not divide the step."""
+    out = []
+    ticks = step / PHYSICS_STEP
+    if round(ticks) < 1 or abs(ticks - round(ticks)) > 1e-6 * ticks:
+        nearest = max(1, round(ticks)) * PHYSICS_STEP
+        out.append(("step", f"{step!r} s is not a whole number of the simulator's {PHYSICS_STEP * 1000:g} ms "
+                            f"physics steps (nearest: {nearest:g} s)"))
+    steps = end / step
+    if steps > MAX_STEPS:
+        out.append(("end", f"{end:g} s is {steps:.3g} steps of {step:g} s, more than {MAX_STEPS:.0e}"))
+    elif steps < 1 - 1e-9:
+        out.append(("end", f"{end:g} s is shorter than one step of {step:g} s"))
+    elif abs(steps - round(steps)) > 1e-9 * steps:
+        low, high = math.floor(steps) * step, math.ceil(steps) * step
+        out.append(("end", f"{end!r} s is not a whole number of steps of {step:g} s (it would be rounded): "
+                           f"give {low:.10g} or {high:.10g}"))
+    if cycle_period is not None and cycle_period > 0:
+        cycles = step / cycle_period
+        if cycles > MAX_CYCLES_PER_STEP:
+            out.append((CYCLE_PERIOD, f"{cycle_period!r} s makes {cycles:.3g} d-model cycles per step of {step:g} s, "
+                                      f"more than {MAX_CYCLES_PER_STEP:.0e}"))
+        elif round(cycles) < 1 or abs(cycles - round(cycles)) > 1e-6 * cycles:
+            out.append((CYCLE_PERIOD, f"{cycle_period!r} s does not divide the step of {step:g} s into whole "
+                                      "d-model cycles"))
+    return out
 
 
 def _pairs(value) -> str | None:
@@ -100,13 +163,13 @@ def _amqp_url(value: str) -> str | None:
 
 
 RABBITMQ = Schema({
-    "exchange": Key("str", required=True),
+    "exchange": Key("str", required=True, check=amqp_name_problem),
     "url": Key("str", "amqp://127.0.0.1:5672/%2F", check=_amqp_url),
-    "to_cosim": Key("str", "data.to_cosim"),
-    "from_cosim": Key("str", "data.from_cosim"),
-    "maxage_ms": Key("positive", 1000),
-    "timeout_s": Key("positive", 60),
-    "commands": Key("list[str]"),
+    "to_cosim": Key("str", "data.to_cosim", check=routing_key_problem),
+    "from_cosim": Key("str", "data.from_cosim", check=routing_key_problem),
+    "maxage_ms": Key("positive", 1000, check=within(0, MAX_WAIT_S * 1000, "ms")),
+    "timeout_s": Key("positive", 60, check=within(0, MAX_WAIT_S, "s")),
+    "commands": Key("list[str]", check=unique("command")),
 })
 
 SHAPES = {"box": ("length", "width", "height"), "cylinder": ("radius", "length"), "capsule": ("radius", "length"),
@@ -123,7 +186,7 @@ def _triple(value) -> str | None:
 STAND_IN = Schema({"mesh": Key("str", required=True), "shape": Key("str", required=True, choices=tuple(SHAPES)),
                    "size": Key("list", required=True), "pos": Key("list", [0.0, 0.0, 0.0], check=_triple),
                    "rpy": Key("list", [0.0, 0.0, 0.0], check=_triple), "friction": Key("nonnegative")})
-PANEL = Schema({"label": Key("str", ""), "variables": Key("list[str]", required=True),
+PANEL = Schema({"label": Key("str", ""), "variables": Key("list[str]", required=True, check=unique("variable")),
                 "style": Key("str", "default", choices=("default", "steps-post"))})
 
 
@@ -155,7 +218,7 @@ SCHEMA = Schema({
     "scenario": Key("table", {}, table=Schema({
         "plan": Key("str"), "commands": Key("str"), "rabbitmq": Key("table", table=RABBITMQ)})),
     "platform": Key("table", {}, table=Schema({
-        "endpoint": Key("str", "mujoco", choices=ENDPOINTS), "queue": Key("str", "cotwin.robot"),
+        "endpoint": Key("str", "mujoco", choices=ENDPOINTS), "queue": Key("str", "cotwin.robot", check=amqp_name_problem),
         "url": Key("str", "amqp://127.0.0.1:5672/%2F", check=_amqp_url), "bricks": Key("list", [], check=_pairs),
         "scene": Key("str", "auto", choices=SCENES), "calibration": Key("str"), "world": Key("str"),
         "base": Key("str", "fixed", choices=("fixed", "free")), "stand_in": Key("list", [])})),
@@ -165,17 +228,19 @@ SCHEMA = Schema({
     "cosim": Key("table", {}, table=Schema({
         "step": Key("positive", 0.1), "end": Key("positive", 20.0),
         "algorithm": Key("str", "jacobi", choices=("jacobi", "gauss-seidel")),
-        "realtime": Key("bool", False), "log": Key("list[str]"),
+        "realtime": Key("bool", False), "log": Key("list[str]", check=unique("variable", empty=True)),
         "parameters": Key("table", {}, check=_parameters)})),
     "figure": Key("table", {}, table=Schema({"panels": Key("list")})),
     "pt": Key("table", table=Schema({
         "endpoint": Key("str", required=True, choices=PT_ENDPOINTS), "url": Key("str"), "log": Key("str"),
-        "queue": Key("str", "cotwin.robot"), "offset": Key("number")})),
+        "queue": Key("str", "cotwin.robot", check=amqp_name_problem), "offset": Key("number")})),
     "deviation": Key("table", {}, table=Schema({
-        "variables": Key("list[str]"), "absolute": Key("nonnegative", 0.05), "relative": Key("nonnegative", 0.0),
-        "lag_steps": Key("int", 3, check=lambda v: None if v >= 0 else "must be >= 0"),
-        "debounce_steps": Key("int", 2, check=lambda v: None if v >= 1 else "must be >= 1"),
-        "exchange": Key("str", "cotwin.twin"), "routing_key": Key("str", "twin.alarm")})),
+        "variables": Key("list[str]", check=unique("variable")), "absolute": Key("nonnegative", 0.05),
+        "relative": Key("nonnegative", 0.0),
+        "lag_steps": Key("int", 3, check=within(0, MAX_LAG_STEPS, "steps")),
+        "debounce_steps": Key("int", 2, check=within(1, MAX_LAG_STEPS, "steps")),
+        "exchange": Key("str", "cotwin.twin", check=amqp_name_problem),
+        "routing_key": Key("str", "twin.alarm", check=routing_key_problem)})),
     "history": Key("table", {}, table=Schema({"url": Key("str")})),
     "plant": Key("table", table=PLANT),
 })
@@ -245,6 +310,7 @@ class TwinProject:
     readings: dict[str, str] = field(default_factory=dict)  # [monitor] readings
     parameters: dict[str, object] = field(default_factory=dict)  # [cosim] parameters of the d-model FMU
     panels: list[tuple[str, list[str], str]] | None = None  # [figure] panels: (label, unit.variable, style)
+    locations: dict = field(default_factory=dict)  # key path -> Location where it was written (later checks)
     raw: dict = field(default_factory=dict)  # the tables as written that staged copies carry (world, stand_in, figure)
 
     @property
@@ -254,6 +320,14 @@ class TwinProject:
     @property
     def scenario(self) -> Path | None:
         return self.plan
+
+    def location(self, *key) -> Location:
+        """Where `key` (or its nearest written parent) is in the project file, for checks made after
+        loading (against the models); the file's start when not known."""
+        for n in range(len(key), 0, -1):
+            if key[:n] in self.locations:
+                return self.locations[key[:n]]
+        return Location(str(self.path), 1, 1)
 
 
 def load_project(path: str | Path) -> TwinProject:
@@ -304,6 +378,9 @@ def load_project(path: str | Path) -> TwinProject:
     stand_ins = _stand_ins(file, platform.get("stand_in") or [], problems)
     panels = _panels(file, (data["figure"] or {}).get("panels"), problems)
     monitor = data["monitor"] or {}
+    _timing(file, cosim, problems)
+    if pt is not None and pt.endpoint == "opcua" and pt.url:
+        problems.extend(_opcua_url(file, pt.url))
     raise_problems(problems)
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.get("module"), models.get("pmodel_name"),
@@ -316,9 +393,44 @@ def load_project(path: str | Path) -> TwinProject:
     spec.parameters, spec.panels = dict(cosim.get("parameters") or {}), panels
     if world_file is not None:
         spec.world_file = world_file.path
+    spec.locations = {key: file.location(key) for key in file.where}
     spec.raw = {"world": world.table if world is not None else None,
                 "stand_in": list(platform.get("stand_in") or []), "figure": data["figure"] or {}}
     return spec
+
+
+def _timing(file: TomlFile, cosim: dict, problems: list[Finding]) -> None:
+    """[cosim] step, end and the d-model's cycle_period checked together (`timing_problems`), when each
+    was read well (a wrong value is already reported, and its default would mislead)."""
+    raw = file.data.get("cosim") if isinstance(file.data.get("cosim"), dict) else {}
+    parameters = raw.get("parameters") if isinstance(raw.get("parameters"), dict) else {}
+    if any(key in raw and raw[key] != cosim[key] for key in ("step", "end")):
+        return
+    period = parameters.get(CYCLE_PERIOD)
+    where = ("cosim", "parameters", CYCLE_PERIOD)
+    if period is not None and (isinstance(period, bool) or not isinstance(period, (int, float)) or
+                               not math.isfinite(period) or period < 0):
+        problems.append(Finding(file.location(where), Severity.ERROR, f"[cosim] parameters {CYCLE_PERIOD} must be "
+                                f"a number >= 0 (s per d-model cycle; 0: one cycle per step), got {period!r}"))
+        period = None
+    for key, message in timing_problems(float(cosim["step"]), float(cosim["end"]), period):
+        at = where if key == CYCLE_PERIOD else ("cosim", key)
+        name = f"parameters {key}" if key == CYCLE_PERIOD else key
+        problems.append(Finding(file.location(at), Severity.ERROR, f"[cosim] {name}: {message}"))
+
+
+def _opcua_url(file: TomlFile, url: str) -> list[Finding]:
+    """A [pt] url for the opcua endpoint: opc.tcp://HOST:PORT with a port in 1..65535."""
+    from ..diagnostics import CotwinError
+    from ..mapping.opcua_auth import parse_url
+
+    try:
+        _, port = parse_url(url)
+    except CotwinError as err:
+        return [Finding(file.location(("pt", "url")), Severity.ERROR, f"[pt] url: {f.message}") for f in err.findings]
+    if not 1 <= port <= 65535:
+        return [Finding(file.location(("pt", "url")), Severity.ERROR, f"[pt] url: port {port} is not in 1..65535")]
+    return []
 
 
 def _world(file: TomlFile, platform: dict, data: dict, existing, problems: list[Finding]):
