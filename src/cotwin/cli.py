@@ -590,7 +590,7 @@ def dashboard_command(db: str | None, folder: str | None, address: tuple[str, in
 @main.command()
 @click.argument("project", type=click.Path())
 @click.option("--plan", "plan", type=click.Path(), help="the commands to publish (default: the project's plan)")
-@click.option("--period", type=click.FloatRange(min=0.01), default=0.5, show_default=True,
+@click.option("--period", type=click.FloatRange(min=0.01, max=3600), default=0.5, show_default=True,
               help="seconds of wall time between messages")
 @click.option("--exchange", callback=_exchange, help="the twin's exchange (default: the project's [scenario] rabbitmq exchange)")
 def publish(project: str, plan: str | None, period: float, exchange: str | None) -> None:
@@ -604,6 +604,7 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None)
     from .twin.run import load
     from .twin.scenario import read_scenario
 
+    _finite(period=period)
     system = load(project)
     settings = system.spec.rabbitmq or RabbitMQSettings(exchange or "fmi_digital_twin_dt")
     if exchange:
@@ -628,9 +629,9 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None)
 @click.option("--perturbation", "perturbation_file", type=click.Path(), help="a TOML file of [plant] keys "
               "(instead of the project's [plant] table)")
 @click.option("--seed", type=click.IntRange(min=0, max=2 ** 63 - 1), help="seed of the sensor noise")
-@click.option("--payload", type=click.FloatRange(min=0), metavar="KG", help="a mass at the tool (kg)")
+@click.option("--payload", type=click.FloatRange(min=0, max=1000), metavar="KG", help="a mass at the tool (kg)")
 @click.option("--latency-ms", type=click.FloatRange(min=0, max=10_000), metavar="MS", help="goals take effect this late")
-@click.option("--noise", type=click.FloatRange(min=0), metavar="STD", help="Gaussian noise on every measurement")
+@click.option("--noise", type=click.FloatRange(min=0, max=1000), metavar="STD", help="Gaussian noise on every measurement")
 @click.option("--free-running", is_flag=True, help="advance in real time; Advance waits for the plant's clock")
 def plant(project: str, url: str | None, perturbation_file: str | None, seed: int | None, payload: float | None,
           latency_ms: float | None, noise: float | None, free_running: bool) -> None:
