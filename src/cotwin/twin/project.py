@@ -404,8 +404,8 @@ def _timing(file: TomlFile, cosim: dict, problems: list[Finding]) -> None:
     was read well (a wrong value is already reported, and its default would mislead)."""
     raw = file.data.get("cosim") if isinstance(file.data.get("cosim"), dict) else {}
     parameters = raw.get("parameters") if isinstance(raw.get("parameters"), dict) else {}
-    if any(key in raw and raw[key] != cosim[key] for key in ("step", "end")):
-        return
+    if any(key not in cosim or key in raw and raw[key] != cosim[key] for key in ("step", "end")):
+        return  # [cosim] itself, or its step or end, is wrong (and reported)
     period = parameters.get(CYCLE_PERIOD)
     where = ("cosim", "parameters", CYCLE_PERIOD)
     if period is not None and (isinstance(period, bool) or not isinstance(period, (int, float)) or
