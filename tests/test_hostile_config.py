@@ -216,7 +216,7 @@ def test_toml_with_a_bom_is_read_and_bad_nesting_names_file_and_key(ur5e):
     assert load_project(bom).end == 20.0
     text = refused(ur5e, MODELS + "[[cosim]]\nstep = 0.1\n[monitor.readings.x]\ny = 1\n")
     assert "hostile.toml:5:1: error: 'cosim' must be a table, got [{'step': 0.1}]" in text, text
-    assert "hostile.toml:7:1: error: [monitor] readings: each reading is a path (a string): x" in text, text
+    assert "hostile.toml:7:1: error: [monitor] readings: each reading is a path (a string): 'x'" in text, text
     text = refused(ur5e, 'models = "arm.rst"\n[cosim]\nstep = { value = 0.1 }\n')
     assert "hostile.toml:1:1: error: 'models' must be a table, got 'arm.rst'" in text
     assert "hostile.toml:3:1: error: [cosim] step must be a positive number" in text
@@ -269,3 +269,31 @@ def test_exchange_options_are_checked_like_the_project(ur5e):
     project = ur5e / "cotwin.toml"
     assert "must not be empty" in option_error("twin", project, "-o", ur5e / "o", "--rabbitmq", "")
     assert "may hold only letters" in option_error("publish", project, "--exchange", "a b")
+
+
+@pytest.mark.parametrize("table, message", [
+    ("[platform]\nbricks = [[8, 10], [2, 3], [8, 10]]", "[platform] bricks: two bricks cannot stand on one hole: [8, 10]"),
+    ("[monitor]\njoints = []", "[monitor] joints: names no joint"),
+    ('[monitor]\njoints = ["elbow_joint", "elbow_joint"]', "[monitor] joints: names 'elbow_joint' more than once"),
+    ('[monitor]\nreadings = { x = "" }', "[monitor] readings: each reading is a path (a string): 'x'"),
+    ('[history]\nurl = ""', "[history] url: '' is not a sqlite:///FILE or postgresql://... URL"),
+    ('[platform]\nstand_in = [{ mesh = "a.stl", shape = "sphere", size = [0.1], pos = [1e300, 0, 0] }]',
+     "[[platform.stand_in]] 1 pos: must be 3 numbers within 10"),
+    ('[platform]\nstand_in = [{ mesh = "a.stl", shape = "sphere", size = [1e300] }]',
+     "size of a sphere is 1 positive number(s) of at most 10 m"),
+])
+def test_empty_duplicated_and_unbounded_platform_and_monitor_settings_are_refused(ur5e, table, message):
+    text = refused(ur5e, MODELS + table + "\n")
+    assert "hostile.toml:6:1: error: " in text and message in text, text
+    text = refused(ur5e, MODELS.replace('mapping.pm"\n', 'mapping.pm"\nmodule = " "\n'))
+    assert "hostile.toml:5:1: error: [models] module: must not be empty" in text, text
+
+
+def test_bricks_off_the_plate_are_refused_at_their_key(ur5e):
+    from cotwin.twin.run import load
+
+    path = ur5e / "bricks.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text().replace("[platform]", "[platform]\nbricks = [[-1, 1000000]]"))
+    with pytest.raises(CotwinError, match=r"bricks.toml:\d+:1: error: \[platform\] bricks: \[-1, 1000000\] is no hole "
+                                          r"of the plate \(X in 0..15, Y in 0..23\)"):
+        load(path)

@@ -148,6 +148,19 @@ def _pairs(value) -> str | None:
     if not all(isinstance(b, list) and len(b) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in b)
                for b in value):
         return "must be a list of [X, Y] hole pairs"
+    twice = sorted({tuple(b) for b in value if value.count(b) > 1})
+    if twice:
+        return f"two bricks cannot stand on one hole: {', '.join(str(list(b)) for b in twice)}"
+    return None
+
+
+def _name(value: str) -> str | None:
+    return "must not be empty" if not value.strip() else None
+
+
+def _history_url(value: str) -> str | None:
+    if not value.startswith(("sqlite:///", "postgresql://", "postgresql+", "postgres://")):
+        return f"{value[:40]!r} is not a sqlite:///FILE or postgresql://... URL"
     return None
 
 
@@ -180,26 +193,34 @@ def _triple(value) -> str | None:
     if len(value) != 3 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
                                   for v in value):
         return f"must be a list of 3 numbers, got {value!r}"
+    if not all(abs(v) <= 10.0 for v in value):
+        return f"must be 3 numbers within 10 (m, rad), got {value!r}"
     return None
 
 
+STAND_IN_EXTENT = 10.0  # m: a stand-in is a part of a robot, its size and offset at most this
 STAND_IN = Schema({"mesh": Key("str", required=True), "shape": Key("str", required=True, choices=tuple(SHAPES)),
                    "size": Key("list", required=True), "pos": Key("list", [0.0, 0.0, 0.0], check=_triple),
-                   "rpy": Key("list", [0.0, 0.0, 0.0], check=_triple), "friction": Key("nonnegative")})
+                   "rpy": Key("list", [0.0, 0.0, 0.0], check=_triple),
+                   "friction": Key("nonnegative", check=within(0, 100))})
 PANEL = Schema({"label": Key("str", ""), "variables": Key("list[str]", required=True, check=unique("variable")),
                 "style": Key("str", "default", choices=("default", "steps-post"))})
 
 
 def _joints(value) -> str | None:
-    if value in ("arm", "actuated") or (isinstance(value, list) and all(isinstance(v, str) for v in value)):
+    if value in ("arm", "actuated"):
         return None
+    if isinstance(value, list) and all(isinstance(v, str) for v in value):
+        return unique("joint")(value)
     return f'must be "arm", "actuated" or a list of joint names, got {value!r}'
 
 
 def _readings(value) -> str | None:
-    bad = [k for k, v in value.items() if not isinstance(v, str)]
+    bad = [k for k, v in value.items() if not isinstance(v, str) or not v.strip()]
     if bad:
-        return f"each reading is a path (a string): {', '.join(bad)}"
+        return f"each reading is a path (a string): {', '.join(map(repr, bad))}"
+    if "" in value:
+        return "a reading needs a name"
     return None
 
 
@@ -214,7 +235,7 @@ def _parameters(value) -> str | None:
 SCHEMA = Schema({
     "models": Key("table", required=True, table=Schema({
         "dmodel": Key("str", required=True), "pmodel": Key("str", required=True), "mapping": Key("str", required=True),
-        "module": Key("str"), "pmodel_name": Key("str")})),
+        "module": Key("str", check=_name), "pmodel_name": Key("str", check=_name)})),
     "scenario": Key("table", {}, table=Schema({
         "plan": Key("str"), "commands": Key("str"), "rabbitmq": Key("table", table=RABBITMQ)})),
     "platform": Key("table", {}, table=Schema({
@@ -241,7 +262,7 @@ SCHEMA = Schema({
         "debounce_steps": Key("int", 2, check=within(1, MAX_LAG_STEPS, "steps")),
         "exchange": Key("str", "cotwin.twin", check=amqp_name_problem),
         "routing_key": Key("str", "twin.alarm", check=routing_key_problem)})),
-    "history": Key("table", {}, table=Schema({"url": Key("str")})),
+    "history": Key("table", {}, table=Schema({"url": Key("str", check=_history_url)})),
     "plant": Key("table", table=PLANT),
 })
 
@@ -477,9 +498,10 @@ def _stand_ins(file: TomlFile, items: list, problems: list[Finding]) -> dict:
         names = SHAPES[v["shape"]]
         size = v["size"]
         if len(size) != len(names) or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                              and math.isfinite(x) and x > 0 for x in size):
+                                              and math.isfinite(x) and 0 < x <= STAND_IN_EXTENT for x in size):
             problems.append(Finding(file.location(at + ("size",)), Severity.ERROR,
                                     f"[[platform.stand_in]] size of a {v['shape']} is {len(names)} positive number(s) "
+                                    f"of at most {STAND_IN_EXTENT:g} m "
                                     f"({', '.join(names)}), got {size!r}"))
             continue
         out.setdefault(v["mesh"], []).append(StandIn(v["shape"], dict(zip(names, map(float, size))),

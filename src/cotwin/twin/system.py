@@ -105,8 +105,14 @@ def build_scene(spec: TwinProject, mapping, calibration=None):
     if kind == "world":
         return spec.world
     if kind == "flexcell":
-        return FlexCell.from_mapping(mapping, [Brick(f"brick{i + 1}", b) for i, b in enumerate(spec.bricks)],
+        cell = FlexCell.from_mapping(mapping, [Brick(f"brick{i + 1}", b) for i, b in enumerate(spec.bricks)],
                                      calibration.geometry if calibration else None)
+        off = [list(b) for b in spec.bricks if not (0 <= b[0] <= cell.xmax and 0 <= b[1] <= cell.ymax)]
+        if off:
+            raise CotwinError([Finding(spec.location("platform", "bricks"), Severity.ERROR,
+                                       f"[platform] bricks: {', '.join(map(str, off))} is no hole of the plate "
+                                       f"(X in 0..{cell.xmax}, Y in 0..{cell.ymax})")])
+        return cell
     return None
 
 
