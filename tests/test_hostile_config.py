@@ -280,7 +280,7 @@ def test_exchange_options_are_checked_like_the_project(ur5e):
     ('[platform]\nstand_in = [{ mesh = "a.stl", shape = "sphere", size = [0.1], pos = [1e300, 0, 0] }]',
      "[[platform.stand_in]] 1 pos: must be 3 numbers within 10"),
     ('[platform]\nstand_in = [{ mesh = "a.stl", shape = "sphere", size = [1e300] }]',
-     "size of a sphere is 1 positive number(s) of at most 10 m"),
+     "size of a sphere is 1 positive number(s) (radius) of at most 10 m"),
 ])
 def test_empty_duplicated_and_unbounded_platform_and_monitor_settings_are_refused(ur5e, table, message):
     text = refused(ur5e, MODELS + table + "\n")

@@ -239,6 +239,17 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
                f"(real-time factor {r.real_time_factor:.1f})")
 
 
+def _step_count(step: float, span: float, hint: str | None, source: str) -> None:
+    """A run of at most MAX_STEPS steps (a step or an end off by orders of magnitude would run for ever)."""
+    from .twin.project import MAX_STEPS
+
+    if span / step > MAX_STEPS:
+        message = f"{span:g} s in steps of {step:g} s is {span / step:.3g} steps, more than {MAX_STEPS:.0e}"
+        if hint is None:
+            raise CotwinError(f"{source}: {message}")
+        raise click.BadParameter(message, param_hint=hint)
+
+
 def _finite(**options) -> None:
     import math
 
@@ -261,6 +272,8 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
 
     _finite(step=step, end=end)
     mm = read_multimodel(multimodel)
+    _step_count(mm.step if step is None else step, (mm.end if end is None else end) - mm.start,
+                "--end" if end is not None else "--step" if step is not None else None, multimodel)
     csv_path = Path(out) if out else Path(multimodel).parent / "outputs.csv"
     result = execution_for(mm, csv_path, step, algorithm).run(mm.end if end is None else end)
     click.echo(f"{csv_path}: {result.rows} rows to t = {result.end_time:g} s in {result.wall_seconds:.2f} s")

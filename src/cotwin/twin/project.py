@@ -35,12 +35,13 @@ co-simulation settings and, for a live twin, the physical twin, deviation checki
                                     #   or a list of names
     readings = { x = "robot::base.x" }  # more: name -> a platform reading by path
     [cosim]
-    step = 0.1
-    end = 20.0
+    step = 0.1                      # a whole number of the simulator's 1 ms physics steps
+    end = 20.0                      # a whole number of steps (never rounded), at most 1e8 of them
     algorithm = "jacobi"            # or "gauss-seidel"
     realtime = false                # pace to wall-clock time
     log = ["q0", "q1"]              # mapping variables to log (default: every monitored one)
-    parameters = { seed = 7 }       # d-model FMU parameters (its random seed, constants without value)
+    parameters = { seed = 7 }       # d-model FMU parameters (its random seed, constants without value;
+                                    #   cycle_period, if given, divides the step into whole cycles)
     [figure]                        # the figure of `cotwin run` (default: panels chosen from the models)
     panels = [{ label = "(1) lv", variables = ["dmodel.lv"] }]  # unit role . variable, per panel
     [pt]                            # the physical twin of `cotwin twin`
@@ -501,8 +502,7 @@ def _stand_ins(file: TomlFile, items: list, problems: list[Finding]) -> dict:
                                               and math.isfinite(x) and 0 < x <= STAND_IN_EXTENT for x in size):
             problems.append(Finding(file.location(at + ("size",)), Severity.ERROR,
                                     f"[[platform.stand_in]] size of a {v['shape']} is {len(names)} positive number(s) "
-                                    f"of at most {STAND_IN_EXTENT:g} m "
-                                    f"({', '.join(names)}), got {size!r}"))
+                                    f"({', '.join(names)}) of at most {STAND_IN_EXTENT:g} m, got {size!r}"))
             continue
         out.setdefault(v["mesh"], []).append(StandIn(v["shape"], dict(zip(names, map(float, size))),
                                                      transform(tuple(v["pos"]), tuple(v["rpy"])), v.get("friction")))
