@@ -297,3 +297,26 @@ def test_bricks_off_the_plate_are_refused_at_their_key(ur5e):
     with pytest.raises(CotwinError, match=r"bricks.toml:\d+:1: error: \[platform\] bricks: \[-1, 1000000\] is no hole "
                                           r"of the plate \(X in 0..15, Y in 0..23\)"):
         load(path)
+
+
+def test_toml_nested_thousands_deep_is_a_located_error(ur5e, tmp_path):
+    path = ur5e / "deep.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text() + "x = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    proc = cotwin("build", path, "-o", tmp_path / "o")
+    assert clean(proc) and "deep.toml:17:1: error: the project file nests arrays or tables too deeply" in proc.stderr, \
+        proc.stderr
+
+
+def test_an_empty_perturbation_file_and_absurd_world_headings_are_refused(ur5e, tmp_path):
+    from cotwin.pmodel.perturbation import read_perturbation
+    from cotwin.pmodel.world import load_world
+
+    path = tmp_path / "plant.toml"
+    path.write_text("# nothing yet\n")
+    with pytest.raises(CotwinError, match=r"plant.toml:1:1: error: the perturbation file sets none of seed, payload"):
+        read_perturbation(path)
+    path.write_text("[start]\nyaw = 1e300\n[[box]]\ncenter = [1, 1]\nsize = [0.1, 0.1, 0.1]\nyaw = -1e9\n")
+    with pytest.raises(CotwinError) as err:
+        load_world(path)
+    assert "plant.toml:2:1: error: [start] yaw: must be within 360 degrees" in str(err.value)
+    assert "plant.toml:6:1: error: [[box]] 1 yaw: must be within 360 degrees" in str(err.value)

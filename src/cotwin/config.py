@@ -54,6 +54,10 @@ class TomlFile:
             if not at and "end of document" in message:  # where the document ends
                 line, column = self.text.count("\n") + 1, len(self.text.rsplit("\n", 1)[-1]) + 1
             raise self.error(f"bad TOML: {_DECODE_AT.sub('', message).strip()}", line, column) from None
+        except RecursionError:  # arrays or inline tables nested thousands deep
+            lines = self.text.splitlines() or [""]
+            line = max(range(len(lines)), key=lambda n: lines[n].count("[") + lines[n].count("{")) + 1
+            raise self.error(f"the {what} nests arrays or tables too deeply to read", line) from None
         self.where: dict[tuple, tuple[int, int]] = {}
         self._scan()
 

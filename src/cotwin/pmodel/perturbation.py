@@ -161,8 +161,12 @@ def read_table(file: TomlFile, at: tuple = (), problems: list[Finding] | None = 
 
 
 def read_perturbation(path: str | Path) -> Perturbation:
-    """A perturbation file: the `[plant]` keys at its top level."""
-    return read_table(TomlFile(path, "perturbation file")) or Perturbation()
+    """A perturbation file: the `[plant]` keys at its top level (at least one: an empty file is a mistake)."""
+    file = TomlFile(path, "perturbation file")
+    if not file.data:
+        raise file.error(f"the perturbation file sets none of {', '.join(SCHEMA.keys)}: it would perturb nothing "
+                         "(leave it out for the nominal plant)")
+    return read_table(file) or Perturbation()
 
 
 def check_joints(perturbation: Perturbation, tree: KinematicTree, file: TomlFile | None = None,

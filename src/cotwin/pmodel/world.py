@@ -72,6 +72,10 @@ def _length(value) -> str | None:
     return None if value <= MAX_EXTENT else f"must be at most {MAX_EXTENT:g} m, got {value!r}"
 
 
+def _degrees(value) -> str | None:
+    return None if abs(value) <= 360 else f"must be within 360 degrees, got {value!r}"
+
+
 def _coordinate(value) -> str | None:
     return None if abs(value) <= MAX_EXTENT else f"must be within {MAX_EXTENT:g} m of the origin, got {value!r}"
 
@@ -80,13 +84,14 @@ ARENA = Schema({"size": Key("list", required=True, check=_numbers(2, positive=Tr
                 "wall_thickness": Key("positive", DEFAULT_THICKNESS, check=_length),
                 "wall_height": Key("positive", DEFAULT_HEIGHT, check=_length)})
 START = Schema({"x": Key("number", 0.0, check=_coordinate), "y": Key("number", 0.0, check=_coordinate),
-                "yaw": Key("number", 0.0)})
+                "yaw": Key("number", 0.0, check=_degrees)})
 WALL = Schema({"name": Key("str"), "from": Key("list", required=True, check=_numbers(2)),
                "to": Key("list", required=True, check=_numbers(2)),
                "thickness": Key("positive", DEFAULT_THICKNESS, check=_length),
                "height": Key("positive", DEFAULT_HEIGHT, check=_length)})
 BOX = Schema({"name": Key("str"), "center": Key("list", required=True, check=_numbers(2)),
-              "size": Key("list", required=True, check=_numbers(3, positive=True)), "yaw": Key("number", 0.0)})
+              "size": Key("list", required=True, check=_numbers(3, positive=True)),
+              "yaw": Key("number", 0.0, check=_degrees)})
 CYLINDER = Schema({"name": Key("str"), "center": Key("list", required=True, check=_numbers(2)),
                    "radius": Key("positive", required=True, check=_length),
                    "height": Key("positive", DEFAULT_HEIGHT, check=_length)})
