@@ -320,3 +320,17 @@ def test_an_empty_perturbation_file_and_absurd_world_headings_are_refused(ur5e, 
         load_world(path)
     assert "plant.toml:2:1: error: [start] yaw: must be within 360 degrees" in str(err.value)
     assert "plant.toml:6:1: error: [[box]] 1 yaw: must be within 360 degrees" in str(err.value)
+
+
+def test_number_options_are_bounded(ur5e, tmp_path):
+    project = ur5e / "cotwin.toml"
+    for args, option in [(["sweep", project, "--event", "moveDiscreteCommand", "--arg", "target_X=1", "--workers",
+                           "1000000", "-o", tmp_path / "s.csv"], "--workers"),
+                         (["verify", ur5e / "arm.rst", "--max-states", str(10 ** 12)], "--max-states"),
+                         (["calibrate", project, "--pt-log", project, "-o", tmp_path / "c.toml", "--log-start",
+                           "1e300"], "--log-start"),
+                         (["whatif", project, "--plan", ur5e / "plan.csv", "--horizon", "1e9"], "--horizon"),
+                         (["plant", project, "--noise", "1e9"], "--noise")]:
+        out = option_error(*args)
+        assert f"Invalid value for '{option}'" in out and "is not in the range" in out, (args, out)
+    assert not (tmp_path / "s.csv").exists() and not (tmp_path / "c.toml").exists()

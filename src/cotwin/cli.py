@@ -436,7 +436,7 @@ def _named_values(text: str, hint: str) -> tuple[str, list]:
 @click.option("--from", "state", type=click.Path(), help="a saved DT state to fork every what-if from")
 @click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=30.0, show_default=True,
               help="simulate each what-if at most this long (s)")
-@click.option("--workers", type=click.IntRange(min=1), help="local processes (default: one per CPU)")
+@click.option("--workers", type=click.IntRange(min=1, max=1024), help="local processes (default: one per CPU)")
 @click.option("--ray", "ray", help="run on Ray: 'auto' (the local cluster) or a cluster address")
 @click.option("-o", "--output", "out", callback=_output, required=True, help="the CSV of answers to write")
 def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, horizon: float, workers: int | None,
@@ -480,7 +480,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
 @click.option("--check", "check_log", type=click.Path(), help="another recorded run to replay on the calibrated DT")
 @click.option("--tool", default="flange", show_default=True, help="the tool point the PT targets: flange, "
               "fingertips or X,Y,Z (m, tool link frame); kept unless the log shows several tool orientations")
-@click.option("--log-start", type=float, default=0.0, show_default=True,
+@click.option("--log-start", type=click.FloatRange(min=-1e9, max=1e9), default=0.0, show_default=True,
               help="co-simulation time of the log's first row (s), for the commands' latencies")
 def calibrate(project: str, pt_log: str | None, out: str | None, calibration: str | None, check_log: str | None,
               tool: str, log_start: float) -> None:
@@ -736,7 +736,7 @@ def broker_permissions(project: str, vhost: str, prefix: str) -> None:
 @click.option("--module", "module_name", help="the module to verify (default: the only one)")
 @click.option("--domain", "domains", multiple=True, metavar="PORT=LOW..HIGH",
               help="values of an event's value port, e.g. MovementArgs_target_X=0..15 (repeatable)")
-@click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1),
+@click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1, max=10 ** 8),
               help="stop exploring after this many states")
 def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, ...], max_states: int) -> None:
     """Explore every state of a d-model module under every input combination; check the core

@@ -104,7 +104,7 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         artefacts = str(artefacts)
         if ray is not None:
             return _on_ray(project, plans, state, horizon, step, ray, artefacts)
-        workers = workers or os.cpu_count() or 1
+        workers = max(1, min(workers or os.cpu_count() or 1, len(plans)))  # no idle processes
         if workers == 1:
             _load(project, artefacts)
             return [_run(p, state, horizon, step) for p in plans]
