@@ -334,3 +334,27 @@ def test_number_options_are_bounded(ur5e, tmp_path):
         out = option_error(*args)
         assert f"Invalid value for '{option}'" in out and "is not in the range" in out, (args, out)
     assert not (tmp_path / "s.csv").exists() and not (tmp_path / "c.toml").exists()
+
+
+def test_a_run_asked_for_by_a_program_keeps_the_same_timing_rules(ur5e, tmp_path):
+    from cotwin.twin.run import load, run_twin
+    from cotwin.twin.runtime import LiveTwin
+
+    system = load(ur5e / "cotwin.toml")
+    with pytest.raises(CotwinError, match=r"end: 1.05 s is not a whole number of steps of 0.1 s"):
+        run_twin(system, tmp_path / "o", end=1.05)
+    with pytest.raises(CotwinError, match=r"step: 0.0015 s is not a whole number of the simulator's 1 ms"):
+        LiveTwin(system, tmp_path / "o", step=0.0015, end=0.3)
+    with pytest.raises(CotwinError, match=r"need a positive step and end time \(step nan"):
+        run_twin(system, tmp_path / "o", step=float("nan"))
+    assert not (tmp_path / "o").exists()
+
+
+def test_deviation_variables_the_mapping_does_not_monitor_are_located(ur5e, tmp_path):
+    from cotwin.twin.run import load
+    from cotwin.twin.runtime import LiveTwin
+
+    path = ur5e / "dev.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text() + '\n[deviation]\nvariables = ["q0", "q7"]\n')
+    with pytest.raises(CotwinError, match=r"dev.toml:19:1: error: \[deviation\] variables q7 are not monitored"):
+        LiveTwin(load(path), tmp_path / "o")
