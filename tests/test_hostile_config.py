@@ -64,6 +64,8 @@ def option_error(*args) -> str:
     ('[deviation]\nexchange = "a b"\n', "6:1", "[deviation] exchange: may hold only"),
     (f'[deviation]\nrouting_key = "{"k" * 256}"\n', "6:1", "[deviation] routing_key: is 256 bytes long"),
     ('[platform]\nqueue = ""\n', "6:1", "[platform] queue: must not be empty"),
+    ('[scenario]\nrabbitmq = { exchange = "x", url = "amqp://127.0.0.1:00/" }\n', "6:30",
+     "[scenario.rabbitmq] url: the broker's port 0 is no port"),
 ])
 def test_amqp_exchange_queue_and_routing_key_names_are_checked(ur5e, table, line, message):
     text = refused(ur5e, MODELS + table)

@@ -73,6 +73,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from ..config import Key, Schema, TomlFile, raise_problems, unique, within
 from ..diagnostics import Finding, Location, Severity
@@ -186,7 +187,10 @@ def _amqp_url(value: str) -> str | None:
     if url_has_password(value):
         return ("a password in the project file is refused: give credentials in the environment "
                 "(COTWIN_AMQP_USER, COTWIN_AMQP_PASSWORD) or a file (COTWIN_AMQP_CREDENTIALS)")
-    return url_problem(value)
+    problem = url_problem(value)
+    if problem is None and urlsplit(value).port == 0:
+        return "the broker's port 0 is no port: give one in 1..65535 (default 5672, amqps 5671)"
+    return problem
 
 
 RABBITMQ = Schema({
