@@ -137,13 +137,12 @@ def _exchange(ctx, param, value: str | None) -> str | None:
 
 def _timing(spec, step: float | None, end: float | None) -> None:
     """--step and --end checked with the project's other timing (cotwin.twin.project.timing_problems)."""
-    from .twin.project import CYCLE_PERIOD, timing_problems
+    from .twin.project import CYCLE_PERIOD, cycle_period, timing_problems
 
     if step is None and end is None:
         return
-    period = spec.parameters.get(CYCLE_PERIOD)
     for key, message in timing_problems(spec.step if step is None else step, spec.end if end is None else end,
-                                        period if isinstance(period, (int, float)) else None):
+                                        cycle_period(spec)):
         if key == CYCLE_PERIOD:
             message += " ([cosim] parameters cycle_period)"
         raise click.BadParameter(message, param_hint="--end" if key == "end" and end is not None else "--step")

@@ -166,14 +166,19 @@ def _history_url(value: str) -> str | None:
     return None
 
 
+def cycle_period(spec: "TwinProject") -> float | None:
+    """The d-model's cycle_period the project sets in [cosim] parameters, if a number."""
+    period = spec.parameters.get(CYCLE_PERIOD)
+    return period if isinstance(period, (int, float)) and not isinstance(period, bool) else None
+
+
 def check_timing(spec: "TwinProject", step: float, end: float) -> None:
     """A run's step and end time (the project's or given by a caller) as `timing_problems` wants them."""
     from ..diagnostics import CotwinError
 
     if not (step > 0 and end > 0):  # also nan
         raise CotwinError(f"need a positive step and end time (step {step!r}, end {end!r})")
-    period = spec.parameters.get(CYCLE_PERIOD)
-    found = timing_problems(step, end, period if isinstance(period, (int, float)) else None)
+    found = timing_problems(step, end, cycle_period(spec))
     if found:  # the caller's values (the project's own were checked where they are written)
         raise CotwinError([f"{spec.path}: {'[cosim] parameters ' if key == CYCLE_PERIOD else ''}{key}: {message}"
                            for key, message in found])
