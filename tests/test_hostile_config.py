@@ -360,3 +360,17 @@ def test_deviation_variables_the_mapping_does_not_monitor_are_located(ur5e, tmp_
     path.write_text((ur5e / "cotwin.toml").read_text() + '\n[deviation]\nvariables = ["q0", "q7"]\n')
     with pytest.raises(CotwinError, match=r"dev.toml:19:1: error: \[deviation\] variables q7 are not monitored"):
         LiveTwin(load(path), tmp_path / "o")
+
+
+def test_bricks_or_a_world_the_scene_would_ignore_are_refused(ur5e):
+    from cotwin.twin.run import load
+
+    path = ur5e / "scene.toml"
+    base = (ur5e / "cotwin.toml").read_text()
+    path.write_text(base.replace("[platform]", '[platform]\nscene = "none"\nbricks = [[8, 10]]'))
+    with pytest.raises(CotwinError, match=r"scene.toml:12:1: error: \[platform\] bricks: the scene is 'none' "
+                                          r"\(\[platform\] scene = \"none\"\), which would ignore it"):
+        load(path)
+    path.write_text(base.replace("[platform]", '[platform]\nscene = "flexcell"') + '[world]\nname = "arena"\n')
+    with pytest.raises(CotwinError, match=r"scene.toml:18:1: error: \[world\]: the scene is 'flexcell'"):
+        load(path)

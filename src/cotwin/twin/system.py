@@ -102,6 +102,15 @@ def build_scene(spec: TwinProject, mapping, calibration=None):
     kind = spec.scene
     if kind == "auto":
         kind = "world" if spec.world is not None else "flexcell" if has_grid(mapping) else "none"
+    ignored = []  # settings this scene would silently ignore
+    if spec.bricks and kind != "flexcell":
+        ignored.append(("[platform] bricks", spec.location("platform", "bricks")))
+    if spec.world is not None and kind != "world":
+        ignored.append(("[platform] world" if spec.world_file else "[world]",
+                        spec.location("platform", "world") if spec.world_file else spec.location("world")))
+    if ignored:
+        raise CotwinError([Finding(at, Severity.ERROR, f"{what}: the scene is '{kind}' ([platform] scene = "
+                                   f"\"{spec.scene}\"), which would ignore it") for what, at in ignored])
     if kind == "world":
         return spec.world
     if kind == "flexcell":
