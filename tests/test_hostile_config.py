@@ -374,3 +374,17 @@ def test_bricks_or_a_world_the_scene_would_ignore_are_refused(ur5e):
     path.write_text(base.replace("[platform]", '[platform]\nscene = "flexcell"') + '[world]\nname = "arena"\n')
     with pytest.raises(CotwinError, match=r"scene.toml:18:1: error: \[world\]: the scene is 'flexcell'"):
         load(path)
+
+
+@pytest.mark.parametrize("pt, line, message", [
+    ('endpoint = "replay"\nlog = "plan.csv"\nurl = "opc.tcp://127.0.0.1:4840"', 8,
+     "[pt] url does not apply to endpoint 'replay' (it takes log, offset)"),
+    ('endpoint = "opcua"\nurl = "opc.tcp://127.0.0.1:4840"\noffset = 3.0', 8,
+     "[pt] offset does not apply to endpoint 'opcua' (it takes url)"),
+    ('endpoint = "broker"\nurl = "amqp://twin:secret@127.0.0.1/"', 7, "[pt] url: a password in the project file is refused"),
+    ('endpoint = "rtde"\nurl = "robot one"', 7, "[pt] url: 'robot one' is not a robot's host"),
+])
+def test_pt_keys_its_endpoint_would_ignore_and_bad_pt_urls_are_refused(ur5e, pt, line, message):
+    text = refused(ur5e, MODELS + "[pt]\n" + pt + "\n")
+    assert f"hostile.toml:{line}:1: error: {message}" in text, text
+    assert "secret" not in text

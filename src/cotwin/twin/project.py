@@ -423,8 +423,8 @@ def load_project(path: str | Path) -> TwinProject:
     panels = _panels(file, (data["figure"] or {}).get("panels"), problems)
     monitor = data["monitor"] or {}
     _timing(file, cosim, problems)
-    if pt is not None and pt.endpoint == "opcua" and pt.url:
-        problems.extend(_opcua_url(file, pt.url))
+    if pt is not None:
+        problems.extend(_pt_keys(file, pt))
     raise_problems(problems)
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.get("module"), models.get("pmodel_name"),
@@ -461,6 +461,28 @@ def _timing(file: TomlFile, cosim: dict, problems: list[Finding]) -> None:
         at = where if key == CYCLE_PERIOD else ("cosim", key)
         name = f"parameters {key}" if key == CYCLE_PERIOD else key
         problems.append(Finding(file.location(at), Severity.ERROR, f"[cosim] {name}: {message}"))
+
+
+PT_KEYS = {"opcua": ("url",), "rtde": ("url",), "replay": ("log", "offset"), "broker": ("queue", "url")}
+
+
+def _pt_keys(file: TomlFile, pt: PTSettings) -> list[Finding]:
+    """[pt] keys its endpoint takes (one it would ignore is an error) and its url, checked as that
+    endpoint reads it."""
+    raw = file.data.get("pt") or {}
+    out = [Finding(file.location(("pt", key)), Severity.ERROR, f"[pt] {key} does not apply to endpoint "
+                   f"'{pt.endpoint}' (it takes {', '.join(PT_KEYS[pt.endpoint])})")
+           for key in raw if key != "endpoint" and key not in PT_KEYS[pt.endpoint]]
+    if pt.url is None:
+        return out
+    if pt.endpoint == "opcua":
+        out.extend(_opcua_url(file, pt.url))
+    elif pt.endpoint == "broker" and _amqp_url(pt.url):
+        out.append(Finding(file.location(("pt", "url")), Severity.ERROR, f"[pt] url: {_amqp_url(pt.url)}"))
+    elif pt.endpoint == "rtde" and not re.fullmatch(r"(rtde://)?[A-Za-z0-9_.\-\[\]:]+", pt.url):
+        out.append(Finding(file.location(("pt", "url")), Severity.ERROR,
+                           f"[pt] url: {pt.url[:60]!r} is not a robot's host (rtde://HOST or HOST)"))
+    return out
 
 
 def _opcua_url(file: TomlFile, url: str) -> list[Finding]:
