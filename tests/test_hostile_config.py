@@ -388,3 +388,23 @@ def test_pt_keys_its_endpoint_would_ignore_and_bad_pt_urls_are_refused(ur5e, pt,
     text = refused(ur5e, MODELS + "[pt]\n" + pt + "\n")
     assert f"hostile.toml:{line}:1: error: {message}" in text, text
     assert "secret" not in text
+
+
+def test_an_integer_too_large_for_any_float_is_a_located_error(ur5e, tmp_path):
+    from cotwin.pmodel.world import load_world
+    from cotwin.twin.calibration import Calibration
+
+    huge = "9" * 400
+    text = refused(ur5e, MODELS + f"[cosim]\nend = {huge}\n[platform]\nstand_in = [{{ mesh = \"a\", shape = "
+                                  f"\"sphere\", size = [{huge}] }}]\n")
+    assert f"hostile.toml:6:1: error: [cosim] end must be a positive number, got {huge[:65]}... (400 characters)" \
+           in text, text
+    assert "hostile.toml:8:1: error: [[platform.stand_in]] size of a sphere" in text, text
+    path = tmp_path / "w.toml"
+    path.write_text(f"[[box]]\ncenter = [{huge}, 0]\nsize = [1, 1, 1]\n")
+    with pytest.raises(CotwinError, match=r"w.toml:2:1: error: \[\[box\]\] 1 center: must be a list of 2 numbers"):
+        load_world(path)
+    path.write_text(f"[ik]\njoint_offsets = {{ elbow_joint = [0, 0, {huge}] }}\n")
+    with pytest.raises(CotwinError, match=r"w.toml:2:19: error: \[ik.joint_offsets\] elbow_joint: must be a list of 3 finite "
+                                          r"numbers, got \[0, 0, 9+\.\.\. \(408 characters\)"):
+        Calibration.read(path)

@@ -98,8 +98,17 @@ class TomlFile:
 
 # ---- schemas ------------------------------------------------------------------------------------
 
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+def is_number(v) -> bool:
+    """A finite TOML number (not a Boolean); an integer too large for any float is none."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        return math.isfinite(v)
+    except OverflowError:
+        return False
+
+
+_is_number = is_number
 
 
 @dataclass(frozen=True)
@@ -183,14 +192,20 @@ def key_name(where: tuple) -> str:
     return f"{table_name(where[:-1])} {where[-1]}" if len(where) > 1 else f"'{where[0]}'"
 
 
+def shown(value, limit: int = 80) -> str:
+    """A value as a message quotes it: its repr, cut short (a hostile file's value may be megabytes)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit - 15]}... ({len(text)} characters)"
+
+
 def _value(spec: Key, value, file: TomlFile, where: tuple, problems: list[Finding], name: str):
     test, words = _KINDS[spec.kind]
     if not test(value):
-        problems.append(Finding(file.location(where), Severity.ERROR, f"{name} must be {words}, got {value!r}"))
+        problems.append(Finding(file.location(where), Severity.ERROR, f"{name} must be {words}, got {shown(value)}"))
         return spec.default
     if spec.choices and value not in spec.choices:
         problems.append(Finding(file.location(where), Severity.ERROR,
-                                f"{name} must be one of {', '.join(map(repr, spec.choices))}, got {value!r}"))
+                                f"{name} must be one of {', '.join(map(repr, spec.choices))}, got {shown(value)}"))
         return spec.default
     if spec.kind == "table" and spec.table is not None:
         return spec.table.read(value, file, where, problems)
@@ -207,7 +222,7 @@ def within(low: float, high: float, unit: str = "") -> Callable[[Any], str | Non
     def check(value) -> str | None:
         if low <= value <= high:
             return None
-        return f"must be in [{low:g}, {high:g}]{f' {unit}' if unit else ''}, got {value!r}"
+        return f"must be in [{low:g}, {high:g}]{f' {unit}' if unit else ''}, got {shown(value)}"
     return check
 
 

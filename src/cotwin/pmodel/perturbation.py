@@ -25,12 +25,11 @@ In a project file the same keys form the `[plant]` table; a perturbation file ho
 
 from __future__ import annotations
 
-import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..config import Key, Schema, TomlFile, raise_problems
+from ..config import Key, Schema, TomlFile, is_number, raise_problems
 from ..diagnostics import CotwinError, Finding, Severity
 from .ik import find_tool
 from .mjcf import TIMESTEP, to_mjcf
@@ -49,7 +48,7 @@ PAYLOAD_RADIUS = 0.03  # m: the payload's inertia is that of a solid sphere of t
 
 
 def _is_value(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
+    return is_number(v) and v >= 0
 
 
 def _per_name(what: str, high: float, names: tuple[str, ...] = ()):

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Key, Schema, TomlFile, raise_problems
+from ..config import Key, Schema, TomlFile, is_number, raise_problems, shown
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from .mjcf import WORLD_CONAFFINITY, WORLD_CONTYPE
 from .tree import KinematicTree, transform
@@ -57,9 +57,8 @@ FLOOR_FRICTION = "1 0.001 0.0001"  # a hard, smooth floor: sliding 1, little tor
 
 def _numbers(count: int, positive: bool = False):
     def check(value) -> str | None:
-        if len(value) != count or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                           and math.isfinite(v) for v in value):
-            return f"must be a list of {count} numbers, got {value!r}"
+        if len(value) != count or not all(is_number(v) for v in value):
+            return f"must be a list of {count} numbers, got {shown(value)}"
         if positive and not all(v > 0 for v in value):
             return f"must be {count} positive numbers, got {value!r}"
         if not all(abs(v) <= MAX_EXTENT for v in value):

@@ -26,7 +26,7 @@ from scipy.optimize import least_squares, minimize_scalar
 from scipy.spatial.transform import Rotation
 
 from .scenario import Command
-from ..config import Key, Schema, TomlFile, dumps, raise_problems
+from ..config import Key, Schema, TomlFile, dumps, is_number, raise_problems
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..dmodel.program import Program
 from ..mapping.motion import MOTION, JointMove, MotionProfile, Quintic, profile_from_values
@@ -92,10 +92,10 @@ class Calibration:
                                        "(write one with cotwin calibrate --pt-log LOG -o FILE)")])
         values = SCHEMA.read(file.data, file, (), problems)
         _check_bounds(values, file, problems)
-        geometry = CellGeometry.from_values(values, file)
         profile = profile_from_values(values["motion"], file, problems, Quintic())
+        raise_problems(problems)  # before reading the geometry: a wrong value is left as None
+        geometry = CellGeometry.from_values(values, file)
         timing = Timing(**values["timing"]) if values["timing"] is not None else None
-        raise_problems(problems)
         return cls(geometry, profile, timing)
 
 
@@ -129,7 +129,7 @@ def _check_bounds(values: dict, file: TomlFile, problems: list[Finding]) -> None
 
 
 def _seconds(value) -> str | None:
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value):
+    if not all(is_number(v) for v in value):
         return f"must be a list of times in seconds, got {value!r}"
     return None
 

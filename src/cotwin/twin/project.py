@@ -75,7 +75,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from ..config import Key, Schema, TomlFile, raise_problems, unique, within
+from ..config import Key, Schema, TomlFile, is_number, raise_problems, shown, unique, within
 from ..diagnostics import Finding, Location, Severity
 from ..pmodel.mjcf import TIMESTEP as PHYSICS_STEP
 from ..pmodel.perturbation import SCHEMA as PLANT, Perturbation
@@ -213,9 +213,8 @@ SHAPES = {"box": ("length", "width", "height"), "cylinder": ("radius", "length")
 
 
 def _triple(value) -> str | None:
-    if len(value) != 3 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                                  for v in value):
-        return f"must be a list of 3 numbers, got {value!r}"
+    if len(value) != 3 or not all(is_number(v) for v in value):
+        return f"must be a list of 3 numbers, got {shown(value)}"
     if not all(abs(v) <= 10.0 for v in value):
         return f"must be 3 numbers within 10 (m, rad), got {value!r}"
     return None
@@ -452,8 +451,7 @@ def _timing(file: TomlFile, cosim: dict, problems: list[Finding]) -> None:
         return  # [cosim] itself, or its step or end, is wrong (and reported)
     period = parameters.get(CYCLE_PERIOD)
     where = ("cosim", "parameters", CYCLE_PERIOD)
-    if period is not None and (isinstance(period, bool) or not isinstance(period, (int, float)) or
-                               not math.isfinite(period) or period < 0):
+    if period is not None and (not is_number(period) or period < 0):
         problems.append(Finding(file.location(where), Severity.ERROR, f"[cosim] parameters {CYCLE_PERIOD} must be "
                                 f"a number >= 0 (s per d-model cycle; 0: one cycle per step), got {period!r}"))
         period = None
@@ -469,7 +467,9 @@ PT_KEYS = {"opcua": ("url",), "rtde": ("url",), "replay": ("log", "offset"), "br
 def _pt_keys(file: TomlFile, pt: PTSettings) -> list[Finding]:
     """[pt] keys its endpoint takes (one it would ignore is an error) and its url, checked as that
     endpoint reads it."""
-    raw = file.data.get("pt") or {}
+    raw = file.data.get("pt")
+    if pt.endpoint not in PT_KEYS or not isinstance(raw, dict):
+        return []  # the endpoint itself is wrong (and reported)
     out = [Finding(file.location(("pt", key)), Severity.ERROR, f"[pt] {key} does not apply to endpoint "
                    f"'{pt.endpoint}' (it takes {', '.join(PT_KEYS[pt.endpoint])})")
            for key in raw if key != "endpoint" and key not in PT_KEYS[pt.endpoint]]
@@ -542,11 +542,10 @@ def _stand_ins(file: TomlFile, items: list, problems: list[Finding]) -> dict:
             continue
         names = SHAPES[v["shape"]]
         size = v["size"]
-        if len(size) != len(names) or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                              and math.isfinite(x) and 0 < x <= STAND_IN_EXTENT for x in size):
+        if len(size) != len(names) or not all(is_number(x) and 0 < x <= STAND_IN_EXTENT for x in size):
             problems.append(Finding(file.location(at + ("size",)), Severity.ERROR,
                                     f"[[platform.stand_in]] size of a {v['shape']} is {len(names)} positive number(s) "
-                                    f"({', '.join(names)}) of at most {STAND_IN_EXTENT:g} m, got {size!r}"))
+                                    f"({', '.join(names)}) of at most {STAND_IN_EXTENT:g} m, got {shown(size)}"))
             continue
         out.setdefault(v["mesh"], []).append(StandIn(v["shape"], dict(zip(names, map(float, size))),
                                                      transform(tuple(v["pos"]), tuple(v["rpy"])), v.get("friction")))
