@@ -156,6 +156,9 @@ def test_sweep_grids_refuse_empty_huge_and_repeated_arguments(ur5e, tmp_path):
     assert "target_X takes no value (an empty range" in option_error(*sweep, "--arg", "target_X=5..1")
     assert "target_X takes 1000000001 values" in option_error(*sweep, "--arg", "target_X=0..1000000000")
     assert "argument 'target_X' is given twice" in option_error(*sweep, "--arg", "target_X=1", "--arg", "target_X=2")
+    huge = "9" * 400
+    assert "values must be finite numbers" in option_error(*sweep, "--arg", f"target_X={huge}")
+    assert "target_X takes countless values" in option_error(*sweep, "--arg", f"target_X=0..{huge}")
     program = load(project).models.program
     with pytest.raises(CotwinError, match=rf"a grid of 1001 target_X x 1001 target_Y is 1002001 what-ifs, more "
                                           rf"than {MAX_PLANS}"):

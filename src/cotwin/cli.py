@@ -401,30 +401,32 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
 
 
 def _named_values(text: str, hint: str) -> tuple[str, list]:
-    """NAME=LOW..HIGH (integers) or NAME=v1,v2,... (numbers) from an option; finite values only."""
-    import math
+    """NAME=LOW..HIGH (integers) or NAME=v1,v2,... (numbers) from an option; finite values only, at least
+    one and at most MAX_VALUES of them."""
+    from .config import is_number
 
     name, sep, values = text.partition("=")
     if not sep or not name or not values:
         raise click.BadParameter(f"'{text}': expected NAME=LOW..HIGH or NAME=v1,v2,...", param_hint=hint)
     try:
         if ".." in values:
-            low, high = values.split("..", 1)
-            span = range(int(low), int(high) + 1)
+            low, high = (int(v) for v in values.split("..", 1))
+            out = None
         else:
-            span = [int(v) if v.strip().lstrip("-").isdigit() else float(v) for v in values.split(",")]
+            out = [int(v) if v.strip().lstrip("-").isdigit() else float(v) for v in values.split(",")]
     except ValueError:
-        raise click.BadParameter(f"'{text}': values must be numbers", param_hint=hint) from None
-    if not span:
-        raise click.BadParameter(f"'{text}': {name} takes no value (an empty range: LOW..HIGH needs LOW <= HIGH)",
+        raise click.BadParameter(f"'{text[:80]}': values must be numbers", param_hint=hint) from None
+    count = high - low + 1 if out is None else len(out)
+    if count < 1:
+        raise click.BadParameter(f"'{text[:80]}': {name} takes no value (an empty range: LOW..HIGH needs LOW <= HIGH)",
                                  param_hint=hint)
-    if len(span) > MAX_VALUES:
-        raise click.BadParameter(f"'{text}': {name} takes {len(span)} values, more than {MAX_VALUES}", param_hint=hint)
-    if isinstance(span, range):
-        return name, list(span)
-    out = span
-    if not all(math.isfinite(v) for v in out):
-        raise click.BadParameter(f"'{text}': values must be finite numbers", param_hint=hint)
+    if count > MAX_VALUES:
+        raise click.BadParameter(f"'{text[:80]}': {name} takes {count if count < 10 ** 12 else 'countless'} values, more than "
+                                 f"{MAX_VALUES}",
+                                 param_hint=hint)
+    out = list(range(low, high + 1)) if out is None else out
+    if not all(is_number(v) for v in out):  # also an integer too large for any float
+        raise click.BadParameter(f"'{text[:80]}': values must be finite numbers", param_hint=hint)
     return name, out
 
 
