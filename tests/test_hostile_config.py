@@ -338,6 +338,8 @@ def test_number_options_are_bounded(ur5e, tmp_path):
                          (["plant", project, "--noise", "1e9"], "--noise")]:
         out = option_error(*args)
         assert f"Invalid value for '{option}'" in out and "is not in the range" in out, (args, out)
+    out = option_error("calibrate", project, "--pt-log", project, "-o", tmp_path / "c.toml", "--tool", "1e300,0,0")
+    assert "Invalid value for --tool" in out and "within 10 m" in out, out
     assert not (tmp_path / "s.csv").exists() and not (tmp_path / "c.toml").exists()
 
 

@@ -529,8 +529,9 @@ def _point(text: str) -> tuple[float, float, float]:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise click.BadParameter(f"{text!r}: flange, fingertips or three numbers X,Y,Z (m)", param_hint="--tool")
+    if len(values) != 3 or not all(math.isfinite(v) and abs(v) <= 10.0 for v in values):
+        raise click.BadParameter(f"{text[:80]!r}: flange, fingertips or three numbers X,Y,Z (m, within 10 m of the "
+                                 "tool link)", param_hint="--tool")
     return values
 
 
