@@ -11,10 +11,27 @@ import click
 from .diagnostics import CotwinError, Severity
 
 
+MAX_HORIZON = 86_400.0  # s: the longest a what-if looks ahead
+MAX_VALUES = 100_000  # values of one --arg or --domain
+MAX_REPORTED = 50  # findings printed at once: a file with thousands of problems says how many more
+
+
 def _report(findings, stream=None) -> None:
     stream = stream or sys.stderr
-    for f in findings:
+    findings = list(findings)
+    for f in findings[:MAX_REPORTED]:
         click.echo(str(f), file=stream)
+    if len(findings) > MAX_REPORTED:
+        rest = findings[MAX_REPORTED:]
+        errors = sum(f.severity is Severity.ERROR for f in rest)
+        click.echo(f"... and {len(rest)} more problem(s) not shown ({errors} error(s))", file=stream)
+
+
+def _output(ctx, param, value: str | None) -> str | None:
+    """An -o option: a path, never the empty string (which would write into the current folder)."""
+    if value is not None and not value.strip():
+        raise click.BadParameter("an empty path: name the file or folder to write", param_hint="-o/--output")
+    return value
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -69,7 +86,7 @@ def _tree_findings(project) -> list:
 @main.command("build-dmodel")
 @click.argument("model", nargs=-1, required=True)
 @click.option("--module", "module_name", help="the module to build (default: the only one)")
-@click.option("-o", "--output", required=True, help="the FMU file to write")
+@click.option("-o", "--output", callback=_output, required=True, help="the FMU file to write")
 @click.option("--cc", default="cc", show_default=True, help="C compiler")
 def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, cc: str) -> None:
     """Generate C from a d-model module and package it as an FMI 2.0 co-simulation FMU."""
@@ -87,7 +104,7 @@ def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, c
 @click.argument("model", nargs=-1, required=True)
 @click.option("--pmodel", "pmodel_name", help="the p-model to export (default: the one not used as a part)")
 @click.option("--format", "fmt", type=click.Choice(["sdf", "urdf", "mjcf"]), required=True)
-@click.option("-o", "--output", required=True, help="the file to write")
+@click.option("-o", "--output", callback=_output, required=True, help="the file to write")
 def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, output: str) -> None:
     """Write a p-model as SDF 1.6, URDF or MJCF (all three from one kinematic tree)."""
     from pathlib import Path
@@ -106,6 +123,29 @@ def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, out
     kinds = {k: sum(j.kind == k for j in tree.joints) for k in ("revolute", "prismatic", "fixed")}
     click.echo(f"{path}: {fmt} of p-model {tree.name}: {len(tree.links)} links, {kinds['revolute']} revolute, "
                f"{kinds['prismatic']} prismatic and {kinds['fixed']} fixed joints, {len(tree.sensors)} sensor ports")
+
+
+def _exchange(ctx, param, value: str | None) -> str | None:
+    """An exchange name option, checked as the project's are (cotwin.twin.project.amqp_name_problem)."""
+    from .twin.project import amqp_name_problem
+
+    problem = None if value is None else amqp_name_problem(value)
+    if problem:
+        raise click.BadParameter(problem)
+    return value
+
+
+def _timing(spec, step: float | None, end: float | None) -> None:
+    """--step and --end checked with the project's other timing (cotwin.twin.project.timing_problems)."""
+    from .twin.project import CYCLE_PERIOD, cycle_period, timing_problems
+
+    if step is None and end is None:
+        return
+    for key, message in timing_problems(spec.step if step is None else step, spec.end if end is None else end,
+                                        cycle_period(spec)):
+        if key == CYCLE_PERIOD:
+            message += " ([cosim] parameters cycle_period)"
+        raise click.BadParameter(message, param_hint="--end" if key == "end" and end is not None else "--step")
 
 
 def _address(ctx, param, value: str | None) -> tuple[str, int] | None:
@@ -142,7 +182,7 @@ def _show_warnings(findings) -> None:
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
+@click.option("-o", "--output", "out", callback=_output, required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 def build(project: str, out: str, cc: str) -> None:
     """Build every artefact of a twin project (cotwin.toml); unchanged artefacts are kept."""
@@ -160,7 +200,7 @@ def build(project: str, out: str, cc: str) -> None:
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", required=True, help="folder for outputs.csv, figure.png and the artefacts")
+@click.option("-o", "--output", "out", callback=_output, required=True, help="folder for outputs.csv, figure.png and the artefacts")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
 @click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
@@ -179,6 +219,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
 
     _finite(step=step, end=end)
     system = load(project)
+    _timing(system.spec, step, end)
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
@@ -200,6 +241,17 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
                f"(real-time factor {r.real_time_factor:.1f})")
 
 
+def _step_count(step: float, span: float, hint: str | None, source: str) -> None:
+    """A run of at most MAX_STEPS steps (a step or an end off by orders of magnitude would run for ever)."""
+    from .cosim.execution import MAX_STEPS
+
+    if span / step > MAX_STEPS:
+        message = f"{span:g} s in steps of {step:g} s is {span / step:.3g} steps, more than {MAX_STEPS:.0e}"
+        if hint is None:
+            raise CotwinError(f"{source}: {message}")
+        raise click.BadParameter(message, param_hint=hint)
+
+
 def _finite(**options) -> None:
     import math
 
@@ -210,7 +262,7 @@ def _finite(**options) -> None:
 
 @main.command()
 @click.argument("multimodel", type=click.Path())
-@click.option("-o", "--output", "out", default=None, help="the CSV to write (default: outputs.csv beside it)")
+@click.option("-o", "--output", "out", callback=_output, default=None, help="the CSV to write (default: outputs.csv beside it)")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True))
 @click.option("--end", type=click.FloatRange(min=0, min_open=True))
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
@@ -222,6 +274,8 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
 
     _finite(step=step, end=end)
     mm = read_multimodel(multimodel)
+    _step_count(mm.step if step is None else step, (mm.end if end is None else end) - mm.start,
+                "--end" if end is not None else "--step" if step is not None else None, multimodel)
     csv_path = Path(out) if out else Path(multimodel).parent / "outputs.csv"
     execution = execution_for(mm, csv_path, step, algorithm)
     try:
@@ -238,13 +292,13 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
+@click.option("-o", "--output", "out", callback=_output, required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
 @click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
 @click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
 @click.option("--pt-log", type=click.Path(), help="replay this recorded log as the PT (overrides [pt])")
-@click.option("--rabbitmq", "exchange", help="take commands live from RabbitMQ on this exchange (overrides [scenario])")
+@click.option("--rabbitmq", "exchange", callback=_exchange, help="take commands live from RabbitMQ on this exchange (overrides [scenario])")
 @click.option("--history", "history", help="history database URL (default: [history] url, else DIR/history.sqlite)")
 @click.option("--whatif", "whatif", is_flag=True, help="answer what-if requests sent over the broker (see docs)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=_address, help=DASHBOARD_HELP)
@@ -267,8 +321,9 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     if pt_log is not None and not Path(pt_log).is_file():
         raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
     spec = load_project(project, pt_log)
-    if pt_log is not None and spec.pt is None:
-        spec.pt = PTSettings("replay", log=Path(pt_log))
+    _timing(spec, step, end)
+    if pt_log is not None:
+        spec.pt = replace(spec.pt, endpoint="replay", log=Path(pt_log)) if spec.pt else PTSettings("replay", log=Path(pt_log))
     if exchange is not None:
         spec.plan = None
         spec.rabbitmq = replace(spec.rabbitmq, exchange=exchange) if spec.rabbitmq else RabbitMQSettings(exchange)
@@ -333,9 +388,9 @@ def _plan_file(path: str, program):
 @click.argument("project", type=click.Path())
 @click.option("--plan", "plan", required=True, help="the hypothetical plan (CSV, TOML or JSON; times relative to the fork)")
 @click.option("--from", "state", type=click.Path(), help="a saved DT state to fork (DIR/state of a run or a live twin)")
-@click.option("--horizon", type=click.FloatRange(min=0, min_open=True), default=60.0, show_default=True,
+@click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=60.0, show_default=True,
               help="simulate at most this long (s)")
-@click.option("-o", "--output", "out", help="write the prediction as JSON here")
+@click.option("-o", "--output", "out", callback=_output, help="write the prediction as JSON here")
 def whatif(project: str, plan: str, state: str | None, horizon: float, out: str | None) -> None:
     """Predict what a plan would do: fork the DT (at a saved state, or at the start) and run the plan
     ahead of real time; prints each command's outcome and the completion time."""
@@ -370,21 +425,32 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
 
 
 def _named_values(text: str, hint: str) -> tuple[str, list]:
-    """NAME=LOW..HIGH (integers) or NAME=v1,v2,... (numbers) from an option; finite values only."""
-    import math
+    """NAME=LOW..HIGH (integers) or NAME=v1,v2,... (numbers) from an option; finite values only, at least
+    one and at most MAX_VALUES of them."""
+    from .config import is_number
 
     name, sep, values = text.partition("=")
     if not sep or not name or not values:
         raise click.BadParameter(f"'{text}': expected NAME=LOW..HIGH or NAME=v1,v2,...", param_hint=hint)
     try:
         if ".." in values:
-            low, high = values.split("..", 1)
-            return name, list(range(int(low), int(high) + 1))
-        out = [int(v) if v.strip().lstrip("-").isdigit() else float(v) for v in values.split(",")]
+            low, high = (int(v) for v in values.split("..", 1))
+            out = None
+        else:
+            out = [int(v) if v.strip().lstrip("-").isdigit() else float(v) for v in values.split(",")]
     except ValueError:
-        raise click.BadParameter(f"'{text}': values must be numbers", param_hint=hint) from None
-    if not all(math.isfinite(v) for v in out):
-        raise click.BadParameter(f"'{text}': values must be finite numbers", param_hint=hint)
+        raise click.BadParameter(f"'{text[:80]}': values must be numbers", param_hint=hint) from None
+    count = high - low + 1 if out is None else len(out)
+    if count < 1:
+        raise click.BadParameter(f"'{text[:80]}': {name} takes no value (an empty range: LOW..HIGH needs LOW <= HIGH)",
+                                 param_hint=hint)
+    if count > MAX_VALUES:
+        raise click.BadParameter(f"'{text[:80]}': {name} takes {count if count < 10 ** 12 else 'countless'} values, more than "
+                                 f"{MAX_VALUES}",
+                                 param_hint=hint)
+    out = list(range(low, high + 1)) if out is None else out
+    if not all(is_number(v) for v in out):  # also an integer too large for any float
+        raise click.BadParameter(f"'{text[:80]}': values must be finite numbers", param_hint=hint)
     return name, out
 
 
@@ -393,10 +459,11 @@ def _named_values(text: str, hint: str) -> tuple[str, list]:
 @click.option("--event", required=True, help="the command to sweep, e.g. moveDiscreteCommand")
 @click.option("--arg", "args", multiple=True, metavar="NAME=LOW..HIGH", help="an argument's values (repeatable)")
 @click.option("--from", "state", type=click.Path(), help="a saved DT state to fork every what-if from")
-@click.option("--horizon", type=click.FloatRange(min=0, min_open=True), default=30.0, show_default=True)
-@click.option("--workers", type=click.IntRange(min=1), help="local processes (default: one per CPU)")
+@click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=30.0, show_default=True,
+              help="simulate each what-if at most this long (s)")
+@click.option("--workers", type=click.IntRange(min=1, max=1024), help="local processes (default: one per CPU)")
 @click.option("--ray", "ray", help="run on Ray: 'auto' (the local cluster) or a cluster address")
-@click.option("-o", "--output", "out", required=True, help="the CSV of answers to write")
+@click.option("-o", "--output", "out", callback=_output, required=True, help="the CSV of answers to write")
 def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, horizon: float, workers: int | None,
           ray: str | None, out: str) -> None:
     """Run one what-if per combination of argument values, in parallel (e.g. every hole of the plate:
@@ -408,8 +475,14 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     from .twin.run import load
     from .twin.sweep import grid, run_sweep
 
+    _finite(horizon=horizon)
+    ranges: dict[str, list] = {}
+    for name, values in (_named_values(a, "--arg") for a in args):
+        if name in ranges:
+            raise click.BadParameter(f"argument {name!r} is given twice", param_hint="--arg")
+        ranges[name] = values
     system = load(project)
-    plans = grid(system.models.program, event, dict(_named_values(a, "--arg") for a in args))
+    plans = grid(system.models.program, event, ranges)
     blob = Path(state).read_bytes() if state else None
     started = time.perf_counter()
     rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray)
@@ -426,13 +499,13 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
 @main.command()
 @click.argument("project", type=click.Path())
 @click.option("--pt-log", type=click.Path(), help="the PT's recorded run of the project's plan (a UR RTDE log) to fit")
-@click.option("-o", "--output", "out", type=click.Path(), help="the calibration file to write (with --pt-log)")
+@click.option("-o", "--output", "out", callback=_output, type=click.Path(), help="the calibration file to write (with --pt-log)")
 @click.option("--calibration", type=click.Path(), help="the calibration to check (with --check; default: the one "
               "just fitted, else the project's)")
 @click.option("--check", "check_log", type=click.Path(), help="another recorded run to replay on the calibrated DT")
 @click.option("--tool", default="flange", show_default=True, help="the tool point the PT targets: flange, "
               "fingertips or X,Y,Z (m, tool link frame); kept unless the log shows several tool orientations")
-@click.option("--log-start", type=float, default=0.0, show_default=True,
+@click.option("--log-start", type=click.FloatRange(min=-1e9, max=1e9), default=0.0, show_default=True,
               help="co-simulation time of the log's first row (s), for the commands' latencies")
 def calibrate(project: str, pt_log: str | None, out: str | None, calibration: str | None, check_log: str | None,
               tool: str, log_start: float) -> None:
@@ -481,8 +554,9 @@ def _point(text: str) -> tuple[float, float, float]:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise click.BadParameter(f"{text!r}: flange, fingertips or three numbers X,Y,Z (m)", param_hint="--tool")
+    if len(values) != 3 or not all(math.isfinite(v) and abs(v) <= 10.0 for v in values):
+        raise click.BadParameter(f"{text[:80]!r}: flange, fingertips or three numbers X,Y,Z (m, within 10 m of the "
+                                 "tool link)", param_hint="--tool")
     return values
 
 
@@ -523,7 +597,7 @@ def history_list(db: str | None, folder: str | None) -> None:
 @click.option("--db", help="database URL (sqlite:///file, postgresql://...)")
 @click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
 @click.option("--side", default="dt", show_default=True, help="pt or dt")
-@click.option("-o", "--output", "out", required=True, help="the CSV to write")
+@click.option("-o", "--output", "out", callback=_output, required=True, help="the CSV to write")
 def history_export(run_id: int, db: str | None, folder: str | None, side: str, out: str) -> None:
     """Export one side of a run as a Maestro-format CSV."""
     from .twin.history import export_csv
@@ -556,9 +630,9 @@ def dashboard_command(db: str | None, folder: str | None, address: tuple[str, in
 @main.command()
 @click.argument("project", type=click.Path())
 @click.option("--plan", "plan", type=click.Path(), help="the commands to publish (default: the project's plan)")
-@click.option("--period", type=click.FloatRange(min=0.01), default=0.5, show_default=True,
+@click.option("--period", type=click.FloatRange(min=0.01, max=3600), default=0.5, show_default=True,
               help="seconds of wall time between messages")
-@click.option("--exchange", help="the twin's exchange (default: the project's [scenario] rabbitmq exchange)")
+@click.option("--exchange", callback=_exchange, help="the twin's exchange (default: the project's [scenario] rabbitmq exchange)")
 def publish(project: str, plan: str | None, period: float, exchange: str | None) -> None:
     """Publish commands to a live twin over RabbitMQ, as the paper's UR5e publisher does: wait for the
     ready message, then every PERIOD send the command due at the echoed simulation time, else idle."""
@@ -570,6 +644,7 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None)
     from .twin.run import load
     from .twin.scenario import read_scenario
 
+    _finite(period=period)
     system = load(project)
     settings = system.spec.rabbitmq or RabbitMQSettings(exchange or "fmi_digital_twin_dt")
     if exchange:
@@ -594,9 +669,9 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None)
 @click.option("--perturbation", "perturbation_file", type=click.Path(), help="a TOML file of [plant] keys "
               "(instead of the project's [plant] table)")
 @click.option("--seed", type=click.IntRange(min=0, max=2 ** 63 - 1), help="seed of the sensor noise")
-@click.option("--payload", type=click.FloatRange(min=0), metavar="KG", help="a mass at the tool (kg)")
+@click.option("--payload", type=click.FloatRange(min=0, max=1000), metavar="KG", help="a mass at the tool (kg)")
 @click.option("--latency-ms", type=click.FloatRange(min=0, max=10_000), metavar="MS", help="goals take effect this late")
-@click.option("--noise", type=click.FloatRange(min=0), metavar="STD", help="Gaussian noise on every measurement")
+@click.option("--noise", type=click.FloatRange(min=0, max=1000), metavar="STD", help="Gaussian noise on every measurement")
 @click.option("--free-running", is_flag=True, help="advance in real time; Advance waits for the plant's clock")
 def plant(project: str, url: str | None, perturbation_file: str | None, seed: int | None, payload: float | None,
           latency_ms: float | None, noise: float | None, free_running: bool) -> None:
@@ -688,7 +763,7 @@ def broker_permissions(project: str, vhost: str, prefix: str) -> None:
 @click.option("--module", "module_name", help="the module to verify (default: the only one)")
 @click.option("--domain", "domains", multiple=True, metavar="PORT=LOW..HIGH",
               help="values of an event's value port, e.g. MovementArgs_target_X=0..15 (repeatable)")
-@click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1),
+@click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1, max=10 ** 8),
               help="stop exploring after this many states")
 def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, ...], max_states: int) -> None:
     """Explore every state of a d-model module under every input combination; check the core

@@ -40,7 +40,7 @@ class TomlFile:
         except OSError as err:
             raise self.error(f"cannot read {what}: {err.strerror or err}") from None
         try:
-            self.text = raw.decode("utf-8")
+            self.text = raw.decode("utf-8").removeprefix("\ufeff")  # a byte order mark is no content
         except UnicodeDecodeError as err:
             line = raw[:err.start].count(b"\n") + 1
             column = err.start - (raw.rfind(b"\n", 0, err.start) + 1) + 1
@@ -54,6 +54,10 @@ class TomlFile:
             if not at and "end of document" in message:  # where the document ends
                 line, column = self.text.count("\n") + 1, len(self.text.rsplit("\n", 1)[-1]) + 1
             raise self.error(f"bad TOML: {_DECODE_AT.sub('', message).strip()}", line, column) from None
+        except RecursionError:  # arrays or inline tables nested thousands deep
+            lines = self.text.splitlines() or [""]
+            line = max(range(len(lines)), key=lambda n: lines[n].count("[") + lines[n].count("{")) + 1
+            raise self.error(f"the {what} nests arrays or tables too deeply to read", line) from None
         self.where: dict[tuple, tuple[int, int]] = {}
         self._scan()
 
@@ -69,12 +73,14 @@ class TomlFile:
                     table = name + (arrays[name],)
                 else:
                     table = name
-                self.where.setdefault(table, (number, header.start(1) + 1))
+                for n in range(1, len(table) + 1):  # [a.b.c] (or [[a]]) also writes a, a.b
+                    self.where.setdefault(table[:n], (number, header.start(1) + 1))
                 continue
             assign = _ASSIGN.match(line)
             if assign:
                 key = table + _keys(assign.group(1))
-                self.where.setdefault(key, (number, assign.start(1) + 1))
+                for n in range(len(table) + 1, len(key) + 1):  # a.b.c = 1 also writes a, a.b
+                    self.where.setdefault(key[:n], (number, assign.start(1) + 1))
                 for inner in _INLINE_KEY.finditer(line, assign.end()):
                     self.where.setdefault(key + _keys(inner.group(1)), (number, inner.start(1) + 1))
 
@@ -92,8 +98,17 @@ class TomlFile:
 
 # ---- schemas ------------------------------------------------------------------------------------
 
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+def is_number(v) -> bool:
+    """A finite TOML number (not a Boolean); an integer too large for any float is none."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        return math.isfinite(v)
+    except OverflowError:
+        return False
+
+
+_is_number = is_number
 
 
 @dataclass(frozen=True)
@@ -177,14 +192,20 @@ def key_name(where: tuple) -> str:
     return f"{table_name(where[:-1])} {where[-1]}" if len(where) > 1 else f"'{where[0]}'"
 
 
+def shown(value, limit: int = 80) -> str:
+    """A value as a message quotes it: its repr, cut short (a hostile file's value may be megabytes)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit - 15]}... ({len(text)} characters)"
+
+
 def _value(spec: Key, value, file: TomlFile, where: tuple, problems: list[Finding], name: str):
     test, words = _KINDS[spec.kind]
     if not test(value):
-        problems.append(Finding(file.location(where), Severity.ERROR, f"{name} must be {words}, got {value!r}"))
+        problems.append(Finding(file.location(where), Severity.ERROR, f"{name} must be {words}, got {shown(value)}"))
         return spec.default
     if spec.choices and value not in spec.choices:
         problems.append(Finding(file.location(where), Severity.ERROR,
-                                f"{name} must be one of {', '.join(map(repr, spec.choices))}, got {value!r}"))
+                                f"{name} must be one of {', '.join(map(repr, spec.choices))}, got {shown(value)}"))
         return spec.default
     if spec.kind == "table" and spec.table is not None:
         return spec.table.read(value, file, where, problems)
@@ -194,6 +215,28 @@ def _value(spec: Key, value, file: TomlFile, where: tuple, problems: list[Findin
             problems.append(Finding(file.location(where), Severity.ERROR, f"{name}: {message}"))
             return spec.default
     return value
+
+
+def within(low: float, high: float, unit: str = "") -> Callable[[Any], str | None]:
+    """A check that a number lies in [low, high] (what a setting can sensibly be, not just finite)."""
+    def check(value) -> str | None:
+        if low <= value <= high:
+            return None
+        return f"must be in [{low:g}, {high:g}]{f' {unit}' if unit else ''}, got {shown(value)}"
+    return check
+
+
+def unique(what: str, empty: bool = False) -> Callable[[Any], str | None]:
+    """A check that a list of names is not empty (unless `empty`), holds no empty name and names nothing
+    twice."""
+    def check(value) -> str | None:
+        if not value and not empty:
+            return f"names no {what} (leave the key out for the default)"
+        if any(not v for v in value):
+            return f"an empty {what} name"
+        twice = sorted({v for v in value if value.count(v) > 1})
+        return f"names {', '.join(map(repr, twice))} more than once" if twice else None
+    return check
 
 
 def raise_problems(problems: list[Finding]) -> None:

@@ -43,7 +43,7 @@ class RunResult:
         return (self.end_time - self.start) / max(self.wall_seconds, 1e-12)
 
 
-MAX_STEPS = 10**9  # steps of one run: beyond, days of computing (a step or an end off by powers of ten)
+MAX_STEPS = 10**8  # steps of one run: beyond, hours of computing (a step or an end off by powers of ten)
 
 
 def step_count(span: float, step: float, what: str = "the end time", start: float = 0.0) -> int:

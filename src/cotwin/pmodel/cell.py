@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Key, Schema, TomlFile, dumps, raise_problems
+from ..config import Key, Schema, TomlFile, dumps, is_number, raise_problems, shown
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from .tree import matrix_rpy, rpy_matrix, transform
 
@@ -132,9 +132,9 @@ class CellGeometry:
 
 def _numbers(length: int | None):
     def check(value) -> str | None:
-        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value) \
+        if not all(is_number(v) for v in value) \
                 or (length is not None and len(value) != length) or not value:
-            return f"must be a list of {length or 'some'} finite numbers, got {value!r}"
+            return f"must be a list of {length or 'some'} finite numbers, got {shown(value)}"
         return None
     return check
 

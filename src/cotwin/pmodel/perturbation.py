@@ -25,12 +25,11 @@ In a project file the same keys form the `[plant]` table; a perturbation file ho
 
 from __future__ import annotations
 
-import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..config import Key, Schema, TomlFile, raise_problems
+from ..config import Key, Schema, TomlFile, is_number, raise_problems
 from ..diagnostics import CotwinError, Finding, Severity
 from .ik import find_tool
 from .mjcf import TIMESTEP, to_mjcf
@@ -40,27 +39,31 @@ from .xmltext import nums, sub, to_text
 
 QUANTITIES = ("position", "velocity", "effort", "range")
 MAX_LATENCY_MS = 10_000.0
+MAX_PAYLOAD = 1000.0  # kg: beyond any robot's load (a typo, not a perturbation)
+MAX_FRICTION = 10_000.0  # N m (or N)
+MAX_DAMPING = 1000.0  # times the p-model's damping
+MAX_NOISE = 1000.0  # standard deviation, in the quantity's unit
 PAYLOAD_BODY = "cotwin_payload"
 PAYLOAD_RADIUS = 0.03  # m: the payload's inertia is that of a solid sphere of this radius
 
 
 def _is_value(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
+    return is_number(v) and v >= 0
 
 
-def _per_name(what: str, names: tuple[str, ...] = ()):
-    """A check for `key = number` or `key = { name = number }` (non-negative, finite)."""
+def _per_name(what: str, high: float, names: tuple[str, ...] = ()):
+    """A check for `key = number` or `key = { name = number }` (non-negative, finite, at most `high`)."""
 
     def check(value) -> str | None:
         if _is_value(value):
-            return None
+            return None if value <= high else f"must be at most {high:g}, got {value!r}"
         if not isinstance(value, dict):
             return f"must be a number >= 0 or a table of {what} -> number >= 0, got {value!r}"
         for name, v in value.items():
             if names and name not in names:
                 return f"unknown {what} '{name}' (known: {', '.join(names)})"
-            if not _is_value(v):
-                return f"{what} '{name}' must be a number >= 0, got {v!r}"
+            if not _is_value(v) or v > high:
+                return f"{what} '{name}' must be a number in [0, {high:g}], got {v!r}"
         return None
 
     return check
@@ -68,12 +71,13 @@ def _per_name(what: str, names: tuple[str, ...] = ()):
 
 SCHEMA = Schema({
     "seed": Key("int", 0, check=lambda v: None if 0 <= v < 2 ** 63 else "must be in [0, 2^63)"),
-    "payload": Key("nonnegative", 0.0),
-    "friction": Key("any", {}, check=_per_name("joint")),
-    "damping": Key("any", {}, check=_per_name("joint")),
+    "payload": Key("nonnegative", 0.0, check=lambda v: None if v <= MAX_PAYLOAD else
+                   f"must be at most {MAX_PAYLOAD:g} kg"),
+    "friction": Key("any", {}, check=_per_name("joint", MAX_FRICTION)),
+    "damping": Key("any", {}, check=_per_name("joint", MAX_DAMPING)),
     "latency_ms": Key("nonnegative", 0.0, check=lambda v: None if v <= MAX_LATENCY_MS else
                       f"must be at most {MAX_LATENCY_MS:g} ms"),
-    "noise": Key("any", {}, check=_per_name("sensor quantity", QUANTITIES)),
+    "noise": Key("any", {}, check=_per_name("sensor quantity", MAX_NOISE, QUANTITIES)),
 })
 
 
@@ -156,8 +160,12 @@ def read_table(file: TomlFile, at: tuple = (), problems: list[Finding] | None = 
 
 
 def read_perturbation(path: str | Path) -> Perturbation:
-    """A perturbation file: the `[plant]` keys at its top level."""
-    return read_table(TomlFile(path, "perturbation file")) or Perturbation()
+    """A perturbation file: the `[plant]` keys at its top level (at least one: an empty file is a mistake)."""
+    file = TomlFile(path, "perturbation file")
+    if not file.data:
+        raise file.error(f"the perturbation file sets none of {', '.join(SCHEMA.keys)}: it would perturb nothing "
+                         "(leave it out for the nominal plant)")
+    return read_table(file) or Perturbation()
 
 
 def check_joints(perturbation: Perturbation, tree: KinematicTree, file: TomlFile | None = None,

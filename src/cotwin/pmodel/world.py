@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Key, Schema, TomlFile, raise_problems
+from ..config import Key, Schema, TomlFile, is_number, raise_problems, shown
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from .mjcf import WORLD_CONAFFINITY, WORLD_CONTYPE
 from .tree import KinematicTree, transform
@@ -50,30 +50,50 @@ DEFAULT_HEIGHT = 0.3  # m: walls and obstacles
 DEFAULT_THICKNESS = 0.05  # m: walls
 FLOOR_CLEARANCE = 0.0005  # m: a free base is put this far above the floor and settles
 FLOOR_GROUP = "2"  # the floor is no obstacle: a planar LiDAR's beams (which see group 0) pass over it
+MAX_EXTENT = 1000.0  # m: no coordinate or size of a world beyond this (a robot's world, not a planet's)
+MAX_OBSTACLES = 10_000  # walls, boxes and cylinders of one world
 FLOOR_FRICTION = "1 0.001 0.0001"  # a hard, smooth floor: sliding 1, little torsion (tyres turn in place) and rolling
 
 
 def _numbers(count: int, positive: bool = False):
     def check(value) -> str | None:
-        if len(value) != count or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                           and math.isfinite(v) for v in value):
-            return f"must be a list of {count} numbers, got {value!r}"
+        if len(value) != count or not all(is_number(v) for v in value):
+            return f"must be a list of {count} numbers, got {shown(value)}"
         if positive and not all(v > 0 for v in value):
             return f"must be {count} positive numbers, got {value!r}"
+        if not all(abs(v) <= MAX_EXTENT for v in value):
+            return f"must be within {MAX_EXTENT:g} m, got {value!r}"
         return None
     return check
 
 
+def _length(value) -> str | None:
+    return None if value <= MAX_EXTENT else f"must be at most {MAX_EXTENT:g} m, got {value!r}"
+
+
+def _degrees(value) -> str | None:
+    return None if abs(value) <= 360 else f"must be within 360 degrees, got {value!r}"
+
+
+def _coordinate(value) -> str | None:
+    return None if abs(value) <= MAX_EXTENT else f"must be within {MAX_EXTENT:g} m of the origin, got {value!r}"
+
+
 ARENA = Schema({"size": Key("list", required=True, check=_numbers(2, positive=True)),
-                "wall_thickness": Key("positive", DEFAULT_THICKNESS), "wall_height": Key("positive", DEFAULT_HEIGHT)})
-START = Schema({"x": Key("number", 0.0), "y": Key("number", 0.0), "yaw": Key("number", 0.0)})
+                "wall_thickness": Key("positive", DEFAULT_THICKNESS, check=_length),
+                "wall_height": Key("positive", DEFAULT_HEIGHT, check=_length)})
+START = Schema({"x": Key("number", 0.0, check=_coordinate), "y": Key("number", 0.0, check=_coordinate),
+                "yaw": Key("number", 0.0, check=_degrees)})
 WALL = Schema({"name": Key("str"), "from": Key("list", required=True, check=_numbers(2)),
-               "to": Key("list", required=True, check=_numbers(2)), "thickness": Key("positive", DEFAULT_THICKNESS),
-               "height": Key("positive", DEFAULT_HEIGHT)})
+               "to": Key("list", required=True, check=_numbers(2)),
+               "thickness": Key("positive", DEFAULT_THICKNESS, check=_length),
+               "height": Key("positive", DEFAULT_HEIGHT, check=_length)})
 BOX = Schema({"name": Key("str"), "center": Key("list", required=True, check=_numbers(2)),
-              "size": Key("list", required=True, check=_numbers(3, positive=True)), "yaw": Key("number", 0.0)})
+              "size": Key("list", required=True, check=_numbers(3, positive=True)),
+              "yaw": Key("number", 0.0, check=_degrees)})
 CYLINDER = Schema({"name": Key("str"), "center": Key("list", required=True, check=_numbers(2)),
-                   "radius": Key("positive", required=True), "height": Key("positive", DEFAULT_HEIGHT)})
+                   "radius": Key("positive", required=True, check=_length),
+                   "height": Key("positive", DEFAULT_HEIGHT, check=_length)})
 SCHEMA = Schema({"name": Key("str", ""), "arena": Key("table", table=ARENA), "start": Key("table", {}, table=START),
                  "wall": Key("list", []), "box": Key("list", []), "cylinder": Key("list", [])})
 _ITEMS = {"wall": WALL, "box": BOX, "cylinder": CYLINDER}
@@ -263,6 +283,10 @@ def read_world(file: TomlFile, at: tuple = ()) -> World:
                                             (length / 2 + t / 2, 0.0, t, width), (-length / 2 - t / 2, 0.0, t, width))):
             obstacles.append(Obstacle(f"arena_wall_{i + 1}", "box", x, y, (lx, ly, h)))
     names: dict[str, tuple] = {}
+    count = sum(len(checked.get(kind) or []) for kind in _ITEMS)
+    if count > MAX_OBSTACLES:
+        raise CotwinError([Finding(file.location(at + (next(k for k in _ITEMS if checked.get(k)),)), Severity.ERROR,
+                                   f"the world has {count} walls, boxes and cylinders, more than {MAX_OBSTACLES}")])
     for kind, schema in _ITEMS.items():
         items = checked.get(kind) or []
         for i, item in enumerate(items):

@@ -26,7 +26,7 @@ from scipy.optimize import least_squares, minimize_scalar
 from scipy.spatial.transform import Rotation
 
 from .scenario import Command
-from ..config import Key, Schema, TomlFile, dumps, raise_problems
+from ..config import Key, Schema, TomlFile, dumps, is_number, raise_problems
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..dmodel.program import Program
 from ..mapping.motion import MOTION, JointMove, MotionProfile, Quintic, profile_from_values
@@ -86,16 +86,50 @@ class Calibration:
         """A calibration file: [plate], [tool], [ik], [motion], [timing] (all optional), [fit] (not read)."""
         file = TomlFile(path, "calibration file")
         problems: list[Finding] = []
+        if not any(table in file.data for table in FITTED):
+            raise CotwinError([Finding(file.location(), Severity.ERROR, "the calibration file sets none of "
+                                       f"{', '.join(f'[{t}]' for t in FITTED)}: it would calibrate nothing "
+                                       "(write one with cotwin calibrate --pt-log LOG -o FILE)")])
         values = SCHEMA.read(file.data, file, (), problems)
-        geometry = CellGeometry.from_values(values, file)
+        _check_bounds(values, file, problems)
         profile = profile_from_values(values["motion"], file, problems, Quintic())
+        raise_problems(problems)  # before reading the geometry: a wrong value is left as None
+        geometry = CellGeometry.from_values(values, file)
         timing = Timing(**values["timing"]) if values["timing"] is not None else None
-        raise_problems(problems)
         return cls(geometry, profile, timing)
 
 
+FITTED = ("plate", "tool", "ik", "motion", "timing")  # the tables a calibration sets ([fit] is only read)
+METRES, RADIANS, SECONDS = 10.0, 4 * np.pi, 3600.0  # what a fitted cell's values can sensibly be, at most
+BOUNDS = {  # key path -> (lowest, highest, unit); lists are checked value by value, "*" is every key of a table
+    ("plate", "xyz"): (-METRES, METRES, "m"), ("plate", "rpy"): (-RADIANS, RADIANS, "rad"),
+    ("plate", "surface"): (-METRES, METRES, "m"), ("tool", "point"): (-METRES, METRES, "m"),
+    ("tool", "rpy"): (-RADIANS, RADIANS, "rad"), ("ik", "reference"): (-RADIANS, RADIANS, "rad"),
+    ("ik", "joint_offsets", "*"): (-METRES, METRES, "m"), ("motion", "a"): (0.0, 1000.0, "rad/s^2"),
+    ("motion", "v"): (0.0, 100.0, "rad/s"), ("motion", "delay"): (-SECONDS, SECONDS, "s"),
+    ("timing", "log_start"): (-1e9, 1e9, "s"), ("timing", "onsets"): (-1e9, 1e9, "s"),
+    ("timing", "latencies"): (-SECONDS, SECONDS, "s"), ("timing", "servo_lag"): (-SECONDS, SECONDS, "s"),
+    ("timing", "simulated_servo_lag"): (-SECONDS, SECONDS, "s"),
+}
+
+
+def _check_bounds(values: dict, file: TomlFile, problems: list[Finding]) -> None:
+    """Every number the calibration gives within BOUNDS (finite is not enough: 1e300 m is no plate pose)."""
+    for path, (low, high, unit) in BOUNDS.items():
+        table = values.get(path[0]) or {}
+        keys = list(table.get(path[1]) or {}) if path[-1] == "*" else [path[1]]
+        for key in keys:
+            value = table.get(key) if path[-1] != "*" else table[path[1]][key]
+            at = path[:1] + ((path[1], key) if path[-1] == "*" else (key,))
+            numbers = value if isinstance(value, list) else [value]
+            bad = [v for v in numbers if isinstance(v, (int, float)) and not isinstance(v, bool) and not low <= v <= high]
+            if bad:
+                problems.append(Finding(file.location(at), Severity.ERROR, f"[{path[0]}] {' '.join(at[1:])} must be "
+                                        f"within [{low:g}, {high:g}] {unit}, got {bad[0]!r}"))
+
+
 def _seconds(value) -> str | None:
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value):
+    if not all(is_number(v) for v in value):
         return f"must be a list of times in seconds, got {value!r}"
     return None
 

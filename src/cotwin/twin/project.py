@@ -35,12 +35,13 @@ co-simulation settings and, for a live twin, the physical twin, deviation checki
                                     #   or a list of names
     readings = { x = "robot::base.x" }  # more: name -> a platform reading by path
     [cosim]
-    step = 0.1
-    end = 20.0
+    step = 0.1                      # a whole number of the simulator's 1 ms physics steps
+    end = 20.0                      # a whole number of steps (never rounded), at most 1e8 of them
     algorithm = "jacobi"            # or "gauss-seidel"
     realtime = false                # pace to wall-clock time
     log = ["q0", "q1"]              # mapping variables to log (default: every monitored one)
-    parameters = { seed = 7 }       # d-model FMU parameters (its random seed, constants without value)
+    parameters = { seed = 7 }       # d-model FMU parameters (its random seed, constants without value;
+                                    #   cycle_period, if given, divides the step into whole cycles)
     [figure]                        # the figure of `cotwin run` (default: panels chosen from the models)
     panels = [{ label = "(1) lv", variables = ["dmodel.lv"] }]  # unit role . variable, per panel
     [pt]                            # the physical twin of `cotwin twin`
@@ -69,23 +70,118 @@ Every problem is reported at its key's line and column, all together (cotwin.con
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import urlsplit
 
-from ..config import Key, Schema, TomlFile, raise_problems
-from ..diagnostics import Finding, Severity
+from ..config import Key, Schema, TomlFile, is_number, raise_problems, shown, unique, within
+from ..diagnostics import Finding, Location, Severity
+from ..cosim.execution import MAX_STEPS
+from ..pmodel.mjcf import TIMESTEP as PHYSICS_STEP
 from ..pmodel.perturbation import SCHEMA as PLANT, Perturbation
 
 ENDPOINTS = ("mujoco", "broker")
 SCENES = ("auto", "flexcell", "world", "none")
 PT_ENDPOINTS = ("opcua", "replay", "broker", "rtde")
+MAX_CYCLES_PER_STEP = 10 ** 6  # d-model cycles in one step ([cosim] parameters cycle_period)
+MAX_WAIT_S = 86_400.0  # s: the longest a twin waits for, or keeps, a broker message
+MAX_LAG_STEPS = 10 ** 6  # [deviation] lag_steps and debounce_steps
+CYCLE_PERIOD = "cycle_period"  # the d-model FMU's parameter: seconds per cycle (cotwin.dmodel.ports)
+AMQP_MAX = 255  # bytes of an AMQP 0-9-1 short string: exchange, queue and routing-key names
+_AMQP_NAME = re.compile(r"[A-Za-z0-9_.:-]+")
+
+
+def amqp_name_problem(value: str) -> str | None:
+    """Why `value` cannot name an exchange or queue the twin declares (RabbitMQ's rules), or None."""
+    if not value:
+        return "must not be empty"
+    if len(value.encode("utf-8")) > AMQP_MAX:
+        return f"is {len(value.encode('utf-8'))} bytes long; AMQP names hold at most {AMQP_MAX}"
+    if not _AMQP_NAME.fullmatch(value):
+        return f"may hold only letters, digits and '-', '_', '.', ':', got {value[:60]!r}"
+    if value.startswith("amq."):
+        return f"{value!r}: names starting with 'amq.' are reserved by the broker"
+    return None
+
+
+def routing_key_problem(value: str) -> str | None:
+    """Why `value` cannot be a routing key of the twin's messages, or None."""
+    if not value:
+        return "must not be empty"
+    if len(value.encode("utf-8")) > AMQP_MAX:
+        return f"is {len(value.encode('utf-8'))} bytes long; AMQP routing keys hold at most {AMQP_MAX}"
+    if not all(c.isprintable() and not c.isspace() for c in value):
+        return f"may not hold spaces or control characters, got {value[:60]!r}"
+    return None
+
+
+def timing_problems(step: float, end: float, cycle_period: float | None = None) -> list[tuple[str, str]]:
+    """(key, message) for a step and end time a run cannot keep exactly: a step that is not a whole
+    number of the simulator's physics steps, an end time that is not a whole number of steps (it would
+    be rounded), more than MAX_STEPS steps, or a d-model cycle that does not divide the step."""
+    out = []
+    ticks = step / PHYSICS_STEP
+    if round(ticks) < 1 or abs(ticks - round(ticks)) > 1e-6 * ticks:
+        nearest = max(1, round(ticks)) * PHYSICS_STEP
+        out.append(("step", f"{step!r} s is not a whole number of the simulator's {PHYSICS_STEP * 1000:g} ms "
+                            f"physics steps (nearest: {nearest:g} s)"))
+    steps = end / step
+    if steps > MAX_STEPS:
+        out.append(("end", f"{end:g} s is {steps:.3g} steps of {step:g} s, more than {MAX_STEPS:.0e}"))
+    elif steps < 1 - 1e-9:
+        out.append(("end", f"{end:g} s is shorter than one step of {step:g} s"))
+    elif abs(steps - round(steps)) > 1e-9 * steps:
+        low, high = math.floor(steps) * step, math.ceil(steps) * step
+        out.append(("end", f"{end!r} s is not a whole number of steps of {step:g} s (it would be rounded): "
+                           f"give {low:.10g} or {high:.10g}"))
+    if cycle_period is not None and cycle_period > 0:
+        cycles = step / cycle_period
+        if cycles > MAX_CYCLES_PER_STEP:
+            out.append((CYCLE_PERIOD, f"{cycle_period!r} s makes {cycles:.3g} d-model cycles per step of {step:g} s, "
+                                      f"more than {MAX_CYCLES_PER_STEP:.0e}"))
+        elif round(cycles) < 1 or abs(cycles - round(cycles)) > 1e-6 * cycles:
+            out.append((CYCLE_PERIOD, f"{cycle_period!r} s does not divide the step of {step:g} s into whole "
+                                      "d-model cycles"))
+    return out
 
 
 def _pairs(value) -> str | None:
     if not all(isinstance(b, list) and len(b) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in b)
                for b in value):
         return "must be a list of [X, Y] hole pairs"
+    twice = sorted({tuple(b) for b in value if value.count(b) > 1})
+    if twice:
+        return f"two bricks cannot stand on one hole: {', '.join(str(list(b)) for b in twice)}"
     return None
+
+
+def _name(value: str) -> str | None:
+    return "must not be empty" if not value.strip() else None
+
+
+def _history_url(value: str) -> str | None:
+    if not value.startswith(("sqlite:///", "postgresql://", "postgresql+", "postgres://")):
+        return f"{value[:40]!r} is not a sqlite:///FILE or postgresql://... URL"
+    return None
+
+
+def cycle_period(spec: "TwinProject") -> float | None:
+    """The d-model's cycle_period the project sets in [cosim] parameters, if a number."""
+    period = spec.parameters.get(CYCLE_PERIOD)
+    return period if isinstance(period, (int, float)) and not isinstance(period, bool) else None
+
+
+def check_timing(spec: "TwinProject", step: float, end: float) -> None:
+    """A run's step and end time (the project's or given by a caller) as `timing_problems` wants them."""
+    from ..diagnostics import CotwinError
+
+    if not (step > 0 and end > 0):  # also nan
+        raise CotwinError(f"need a positive step and end time (step {step!r}, end {end!r})")
+    found = timing_problems(step, end, cycle_period(spec))
+    if found:  # the caller's values (the project's own were checked where they are written)
+        raise CotwinError([f"{spec.path}: {'[cosim] parameters ' if key == CYCLE_PERIOD else ''}{key}: {message}"
+                           for key, message in found])
 
 
 def _amqp_url(value: str) -> str | None:
@@ -96,18 +192,21 @@ def _amqp_url(value: str) -> str | None:
     if url_has_password(value):
         return ("a password in the project file is refused: give credentials in the environment "
                 "(COTWIN_AMQP_USER, COTWIN_AMQP_PASSWORD) or a file (COTWIN_AMQP_CREDENTIALS)")
-    return url_problem(value)
+    problem = url_problem(value)
+    if problem is None and urlsplit(value).port == 0:
+        return "the broker's port 0 is no port: give one in 1..65535 (default 5672, amqps 5671)"
+    return problem
 
 
 RABBITMQ = Schema({
-    "exchange": Key("str", required=True),
+    "exchange": Key("str", required=True, check=amqp_name_problem),
     "url": Key("str", "amqp://127.0.0.1:5672/%2F", check=_amqp_url),
-    "to_cosim": Key("str", "data.to_cosim"),
-    "from_cosim": Key("str", "data.from_cosim"),
-    "maxage_ms": Key("positive", 1000),
-    "timeout_s": Key("positive", 60),
-    "max_skew_s": Key("positive", 60),
-    "commands": Key("list[str]"),
+    "to_cosim": Key("str", "data.to_cosim", check=routing_key_problem),
+    "from_cosim": Key("str", "data.from_cosim", check=routing_key_problem),
+    "maxage_ms": Key("positive", 1000, check=within(0, MAX_WAIT_S * 1000, "ms")),
+    "timeout_s": Key("positive", 60, check=within(0, MAX_WAIT_S, "s")),
+    "max_skew_s": Key("positive", 60, check=within(0, MAX_WAIT_S, "s")),
+    "commands": Key("list[str]", check=unique("command")),
 })
 
 SHAPES = {"box": ("length", "width", "height"), "cylinder": ("radius", "length"), "capsule": ("radius", "length"),
@@ -115,29 +214,36 @@ SHAPES = {"box": ("length", "width", "height"), "cylinder": ("radius", "length")
 
 
 def _triple(value) -> str | None:
-    if len(value) != 3 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                                  for v in value):
-        return f"must be a list of 3 numbers, got {value!r}"
+    if len(value) != 3 or not all(is_number(v) for v in value):
+        return f"must be a list of 3 numbers, got {shown(value)}"
+    if not all(abs(v) <= 10.0 for v in value):
+        return f"must be 3 numbers within 10 (m, rad), got {value!r}"
     return None
 
 
+STAND_IN_EXTENT = 10.0  # m: a stand-in is a part of a robot, its size and offset at most this
 STAND_IN = Schema({"mesh": Key("str", required=True), "shape": Key("str", required=True, choices=tuple(SHAPES)),
                    "size": Key("list", required=True), "pos": Key("list", [0.0, 0.0, 0.0], check=_triple),
-                   "rpy": Key("list", [0.0, 0.0, 0.0], check=_triple), "friction": Key("nonnegative")})
-PANEL = Schema({"label": Key("str", ""), "variables": Key("list[str]", required=True),
+                   "rpy": Key("list", [0.0, 0.0, 0.0], check=_triple),
+                   "friction": Key("nonnegative", check=within(0, 100))})
+PANEL = Schema({"label": Key("str", ""), "variables": Key("list[str]", required=True, check=unique("variable")),
                 "style": Key("str", "default", choices=("default", "steps-post"))})
 
 
 def _joints(value) -> str | None:
-    if value in ("arm", "actuated") or (isinstance(value, list) and all(isinstance(v, str) for v in value)):
+    if value in ("arm", "actuated"):
         return None
+    if isinstance(value, list) and all(isinstance(v, str) for v in value):
+        return unique("joint")(value)
     return f'must be "arm", "actuated" or a list of joint names, got {value!r}'
 
 
 def _readings(value) -> str | None:
-    bad = [k for k, v in value.items() if not isinstance(v, str)]
+    bad = [k for k, v in value.items() if not isinstance(v, str) or not v.strip()]
     if bad:
-        return f"each reading is a path (a string): {', '.join(bad)}"
+        return f"each reading is a path (a string): {', '.join(map(repr, bad))}"
+    if "" in value:
+        return "a reading needs a name"
     return None
 
 
@@ -152,11 +258,11 @@ def _parameters(value) -> str | None:
 SCHEMA = Schema({
     "models": Key("table", required=True, table=Schema({
         "dmodel": Key("str", required=True), "pmodel": Key("str", required=True), "mapping": Key("str", required=True),
-        "module": Key("str"), "pmodel_name": Key("str")})),
+        "module": Key("str", check=_name), "pmodel_name": Key("str", check=_name)})),
     "scenario": Key("table", {}, table=Schema({
         "plan": Key("str"), "commands": Key("str"), "rabbitmq": Key("table", table=RABBITMQ)})),
     "platform": Key("table", {}, table=Schema({
-        "endpoint": Key("str", "mujoco", choices=ENDPOINTS), "queue": Key("str", "cotwin.robot"),
+        "endpoint": Key("str", "mujoco", choices=ENDPOINTS), "queue": Key("str", "cotwin.robot", check=amqp_name_problem),
         "url": Key("str", "amqp://127.0.0.1:5672/%2F", check=_amqp_url), "bricks": Key("list", [], check=_pairs),
         "scene": Key("str", "auto", choices=SCENES), "calibration": Key("str"), "world": Key("str"),
         "base": Key("str", "fixed", choices=("fixed", "free")), "stand_in": Key("list", [])})),
@@ -166,18 +272,20 @@ SCHEMA = Schema({
     "cosim": Key("table", {}, table=Schema({
         "step": Key("positive", 0.1), "end": Key("positive", 20.0),
         "algorithm": Key("str", "jacobi", choices=("jacobi", "gauss-seidel")),
-        "realtime": Key("bool", False), "log": Key("list[str]"),
+        "realtime": Key("bool", False), "log": Key("list[str]", check=unique("variable", empty=True)),
         "parameters": Key("table", {}, check=_parameters)})),
     "figure": Key("table", {}, table=Schema({"panels": Key("list")})),
     "pt": Key("table", table=Schema({
         "endpoint": Key("str", required=True, choices=PT_ENDPOINTS), "url": Key("str"), "log": Key("str"),
-        "queue": Key("str", "cotwin.robot"), "offset": Key("number")})),
+        "queue": Key("str", "cotwin.robot", check=amqp_name_problem), "offset": Key("number")})),
     "deviation": Key("table", {}, table=Schema({
-        "variables": Key("list[str]"), "absolute": Key("nonnegative", 0.05), "relative": Key("nonnegative", 0.0),
-        "lag_steps": Key("int", 3, check=lambda v: None if v >= 0 else "must be >= 0"),
-        "debounce_steps": Key("int", 2, check=lambda v: None if v >= 1 else "must be >= 1"),
-        "exchange": Key("str", "cotwin.twin"), "routing_key": Key("str", "twin.alarm")})),
-    "history": Key("table", {}, table=Schema({"url": Key("str")})),
+        "variables": Key("list[str]", check=unique("variable")), "absolute": Key("nonnegative", 0.05),
+        "relative": Key("nonnegative", 0.0),
+        "lag_steps": Key("int", 3, check=within(0, MAX_LAG_STEPS, "steps")),
+        "debounce_steps": Key("int", 2, check=within(1, MAX_LAG_STEPS, "steps")),
+        "exchange": Key("str", "cotwin.twin", check=amqp_name_problem),
+        "routing_key": Key("str", "twin.alarm", check=routing_key_problem)})),
+    "history": Key("table", {}, table=Schema({"url": Key("str", check=_history_url)})),
     "plant": Key("table", table=PLANT),
 })
 
@@ -247,6 +355,7 @@ class TwinProject:
     readings: dict[str, str] = field(default_factory=dict)  # [monitor] readings
     parameters: dict[str, object] = field(default_factory=dict)  # [cosim] parameters of the d-model FMU
     panels: list[tuple[str, list[str], str]] | None = None  # [figure] panels: (label, unit.variable, style)
+    locations: dict = field(default_factory=dict)  # key path -> Location where it was written (later checks)
     raw: dict = field(default_factory=dict)  # the tables as written that staged copies carry (world, stand_in, figure)
 
     @property
@@ -256,6 +365,14 @@ class TwinProject:
     @property
     def scenario(self) -> Path | None:
         return self.plan
+
+    def location(self, *key) -> Location:
+        """Where `key` (or its nearest written parent) is in the project file, for checks made after
+        loading (against the models); the file's start when not known."""
+        for n in range(len(key), 0, -1):
+            if key[:n] in self.locations:
+                return self.locations[key[:n]]
+        return Location(str(self.path), 1, 1)
 
 
 def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProject:
@@ -307,6 +424,9 @@ def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProj
     stand_ins = _stand_ins(file, platform.get("stand_in") or [], problems)
     panels = _panels(file, (data["figure"] or {}).get("panels"), problems)
     monitor = data["monitor"] or {}
+    _timing(file, cosim, problems)
+    if pt is not None:
+        problems.extend(_pt_keys(file, pt))
     raise_problems(problems)
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.get("module"), models.get("pmodel_name"),
@@ -319,9 +439,67 @@ def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProj
     spec.parameters, spec.panels = dict(cosim.get("parameters") or {}), panels
     if world_file is not None:
         spec.world_file = world_file.path
+    spec.locations = {key: file.location(key) for key in file.where}
     spec.raw = {"world": world.table if world is not None else None,
                 "stand_in": list(platform.get("stand_in") or []), "figure": data["figure"] or {}}
     return spec
+
+
+def _timing(file: TomlFile, cosim: dict, problems: list[Finding]) -> None:
+    """[cosim] step, end and the d-model's cycle_period checked together (`timing_problems`), when each
+    was read well (a wrong value is already reported, and its default would mislead)."""
+    raw = file.data.get("cosim") if isinstance(file.data.get("cosim"), dict) else {}
+    parameters = raw.get("parameters") if isinstance(raw.get("parameters"), dict) else {}
+    if any(key not in cosim or key in raw and raw[key] != cosim[key] for key in ("step", "end")):
+        return  # [cosim] itself, or its step or end, is wrong (and reported)
+    period = parameters.get(CYCLE_PERIOD)
+    where = ("cosim", "parameters", CYCLE_PERIOD)
+    if period is not None and (not is_number(period) or period < 0):
+        problems.append(Finding(file.location(where), Severity.ERROR, f"[cosim] parameters {CYCLE_PERIOD} must be "
+                                f"a number >= 0 (s per d-model cycle; 0: one cycle per step), got {period!r}"))
+        period = None
+    for key, message in timing_problems(float(cosim["step"]), float(cosim["end"]), period):
+        at = where if key == CYCLE_PERIOD else ("cosim", key)
+        name = f"parameters {key}" if key == CYCLE_PERIOD else key
+        problems.append(Finding(file.location(at), Severity.ERROR, f"[cosim] {name}: {message}"))
+
+
+PT_KEYS = {"opcua": ("url",), "rtde": ("url",), "replay": ("log", "offset"), "broker": ("queue", "url")}
+
+
+def _pt_keys(file: TomlFile, pt: PTSettings) -> list[Finding]:
+    """[pt] keys its endpoint takes (one it would ignore is an error) and its url, checked as that
+    endpoint reads it."""
+    raw = file.data.get("pt")
+    if pt.endpoint not in PT_KEYS or not isinstance(raw, dict):
+        return []  # the endpoint itself is wrong (and reported)
+    out = [Finding(file.location(("pt", key)), Severity.ERROR, f"[pt] {key} does not apply to endpoint "
+                   f"'{pt.endpoint}' (it takes {', '.join(PT_KEYS[pt.endpoint])})")
+           for key in raw if key != "endpoint" and key not in PT_KEYS[pt.endpoint]]
+    if pt.url is None:
+        return out
+    if pt.endpoint == "opcua":
+        out.extend(_opcua_url(file, pt.url))
+    elif pt.endpoint == "broker" and _amqp_url(pt.url):
+        out.append(Finding(file.location(("pt", "url")), Severity.ERROR, f"[pt] url: {_amqp_url(pt.url)}"))
+    elif pt.endpoint == "rtde" and not re.fullmatch(r"(rtde://)?[A-Za-z0-9_.\-\[\]:]+", pt.url):
+        out.append(Finding(file.location(("pt", "url")), Severity.ERROR,
+                           f"[pt] url: {pt.url[:60]!r} is not a robot's host (rtde://HOST or HOST)"))
+    return out
+
+
+def _opcua_url(file: TomlFile, url: str) -> list[Finding]:
+    """A [pt] url for the opcua endpoint: opc.tcp://HOST:PORT with a port in 1..65535."""
+    from ..diagnostics import CotwinError
+    from ..mapping.opcua_auth import parse_url
+
+    try:
+        _, port = parse_url(url)
+    except CotwinError as err:
+        return [Finding(file.location(("pt", "url")), Severity.ERROR, f"[pt] url: {f.message}") for f in err.findings]
+    if not 1 <= port <= 65535:
+        return [Finding(file.location(("pt", "url")), Severity.ERROR, f"[pt] url: port {port} is not in 1..65535")]
+    return []
 
 
 def _world(file: TomlFile, platform: dict, data: dict, existing, problems: list[Finding]):
@@ -367,11 +545,10 @@ def _stand_ins(file: TomlFile, items: list, problems: list[Finding]) -> dict:
             continue
         names = SHAPES[v["shape"]]
         size = v["size"]
-        if len(size) != len(names) or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                              and math.isfinite(x) and x > 0 for x in size):
+        if len(size) != len(names) or not all(is_number(x) and 0 < x <= STAND_IN_EXTENT for x in size):
             problems.append(Finding(file.location(at + ("size",)), Severity.ERROR,
                                     f"[[platform.stand_in]] size of a {v['shape']} is {len(names)} positive number(s) "
-                                    f"({', '.join(names)}), got {size!r}"))
+                                    f"({', '.join(names)}) of at most {STAND_IN_EXTENT:g} m, got {shown(size)}"))
             continue
         out.setdefault(v["mesh"], []).append(StandIn(v["shape"], dict(zip(names, map(float, size))),
                                                      transform(tuple(v["pos"]), tuple(v["rpy"])), v.get("friction")))

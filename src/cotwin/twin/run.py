@@ -8,12 +8,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..cosim.algorithm import algorithm as make_algorithm
-from ..cosim.execution import Execution, RunResult, step_count
+from ..cosim.execution import Execution, RunResult
 from ..cosim.observers import CSVWriter, Observer, Progress, RealTimePacer, StateFile
 from ..cosim.system import System
 from ..diagnostics import CotwinError
 from .build import dmodel_fmu, folder_lock
-from .project import TwinProject, load_project
+from .project import TwinProject, check_timing, load_project
 from .system import MAPPING, TwinSystem
 
 
@@ -74,9 +74,7 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
     spec = system.spec
     end = spec.end if end is None else end
     step = spec.step if step is None else step
-    if not (step > 0 and end > 0):
-        raise CotwinError(f"need a positive step and end time (step {step!r}, end {end!r})")
-    step_count(end, step)  # before anything is built: an end between steps is refused
+    check_timing(spec, step, end)
     with folder_lock(out):
         fmu = dmodel_fmu(system, out, cc)
         cosim = system.instantiate(fmu, endpoint if endpoint is not None else dt_endpoint(system), source=source)

@@ -23,7 +23,8 @@ from pathlib import Path
 from ..cosim.algorithm import UNSET, algorithm as make_algorithm
 from ..cosim.execution import Execution, RunResult, step_count
 from ..cosim.observers import CSVWriter, StateFile, epoch_of
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, Finding, Severity
+from .project import check_timing
 from .build import dmodel_fmu, folder_lock
 from .deviation import DeviationMonitor
 from .system import DMODEL, MAPPING, RABBITMQ, TwinSystem
@@ -102,9 +103,7 @@ class LiveTwin:
         self.pt_endpoint, self.dt_endpoint = pt, dt
         self.step_size = spec.step if step is None else step
         self.end = spec.end if end is None else end
-        if not (self.step_size > 0 and self.end > 0):
-            raise CotwinError(f"need a positive step and end time (step {self.step_size!r}, end {self.end!r})")
-        step_count(self.end, self.step_size)  # before anything is built: an end between steps is refused
+        check_timing(spec, self.step_size, self.end)
         self.algorithm = algorithm or spec.algorithm
         self.realtime = spec.realtime if realtime is None else realtime
         self.history_url = history_url if history_url is not None else spec.history_url
@@ -120,8 +119,9 @@ class LiveTwin:
         self.variables = list(dev.variables) if dev.variables is not None else list(system.log[MAPPING.name])
         unknown = [v for v in self.variables if v not in system.models.monitored]
         if unknown:
-            raise CotwinError(f"{spec.path}: [deviation] variables {', '.join(unknown)} are not monitored mapping "
-                              f"variables ({', '.join(system.models.monitored) or 'none'})")
+            raise CotwinError([Finding(spec.location("deviation", "variables"), Severity.ERROR,
+                                       f"[deviation] variables {', '.join(unknown)} are not monitored mapping "
+                                       f"variables ({', '.join(system.models.monitored) or 'none'})")])
         self.monitor = DeviationMonitor(self.variables, dev.absolute, dev.relative, dev.lag_steps, dev.debounce_steps,
                                         publish=self._alarm, twin=spec.path.stem)
         self._publisher = None

@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..config import Key, Schema, TomlFile, raise_problems
+from ..config import Key, Schema, TomlFile, is_number, raise_problems
 from ..cosim.units import INT32, Port, PythonUnit
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..dmodel.program import Program
@@ -253,7 +253,7 @@ def typed_value(value, fmi: str) -> object:
         raise ValueError("is not true or false")
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError("is not a number")
-    if not math.isfinite(value):
+    if not is_number(value):  # also an integer too large for any float
         raise ValueError("is not a finite number")
     if fmi == "Integer":
         if isinstance(value, float):

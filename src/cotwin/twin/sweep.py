@@ -9,6 +9,7 @@ order of the plans and are the same whichever runs them (what-ifs are determinis
 from __future__ import annotations
 
 import itertools
+import math
 import os
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
@@ -18,6 +19,7 @@ from ..diagnostics import CotwinError
 from .scenario import Command, scalar_value
 
 _SYSTEM = None  # the worker's TwinSystem, loaded once per process
+MAX_PLANS = 100_000  # what-ifs of one sweep: a grid larger than this is a mistake, not a sweep
 
 
 def grid(program, event: str, ranges: dict[str, list], at: float = 0.5) -> list[list[Command]]:
@@ -30,6 +32,13 @@ def grid(program, event: str, ranges: dict[str, list], at: float = 0.5) -> list[
     if unknown:
         raise CotwinError(f"event {event} has no argument {', '.join(unknown)} (has {', '.join(fields) or 'none'})")
     names = list(ranges)
+    empty = [n for n in names if not len(ranges[n])]
+    if empty:
+        raise CotwinError(f"argument {', '.join(empty)}: no values to sweep (an empty range)")
+    count = math.prod(len(ranges[n]) for n in names)
+    if count > MAX_PLANS:
+        sizes = " x ".join(f"{len(ranges[n])} {n}" for n in names)
+        raise CotwinError(f"a grid of {sizes} is {count} what-ifs, more than {MAX_PLANS}")
     plans = []
     for combo in itertools.product(*(ranges[n] for n in names)):
         values = [(event, True)]
@@ -95,7 +104,7 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         artefacts = str(artefacts)
         if ray is not None:
             return _on_ray(project, plans, state, horizon, step, ray, artefacts)
-        workers = workers or os.cpu_count() or 1
+        workers = max(1, min(workers or os.cpu_count() or 1, len(plans)))  # no idle processes
         if workers == 1:
             _load(project, artefacts)
             return [_run(p, state, horizon, step) for p in plans]

@@ -102,11 +102,26 @@ def build_scene(spec: TwinProject, mapping, calibration=None):
     kind = spec.scene
     if kind == "auto":
         kind = "world" if spec.world is not None else "flexcell" if has_grid(mapping) else "none"
+    ignored = []  # settings this scene would silently ignore
+    if spec.bricks and kind != "flexcell":
+        ignored.append(("[platform] bricks", spec.location("platform", "bricks")))
+    if spec.world is not None and kind != "world":
+        ignored.append(("[platform] world" if spec.world_file else "[world]",
+                        spec.location("platform", "world") if spec.world_file else spec.location("world")))
+    if ignored:
+        raise CotwinError([Finding(at, Severity.ERROR, f"{what}: the scene is '{kind}' ([platform] scene = "
+                                   f"\"{spec.scene}\"), which would ignore it") for what, at in ignored])
     if kind == "world":
         return spec.world
     if kind == "flexcell":
-        return FlexCell.from_mapping(mapping, [Brick(f"brick{i + 1}", b) for i, b in enumerate(spec.bricks)],
+        cell = FlexCell.from_mapping(mapping, [Brick(f"brick{i + 1}", b) for i, b in enumerate(spec.bricks)],
                                      calibration.geometry if calibration else None)
+        off = [list(b) for b in spec.bricks if not (0 <= b[0] <= cell.xmax and 0 <= b[1] <= cell.ymax)]
+        if off:
+            raise CotwinError([Finding(spec.location("platform", "bricks"), Severity.ERROR,
+                                       f"[platform] bricks: {', '.join(map(str, off))} is no hole of the plate "
+                                       f"(X in 0..{cell.xmax}, Y in 0..{cell.ymax})")])
+        return cell
     return None
 
 
@@ -174,6 +189,7 @@ class TwinSystem:
         self.delayed = {MAPPING.name}
         self.log = self._log_variables()
         self.parameters = self._parameters(layout)
+        self._check_panels()
 
     def with_plan(self, commands) -> "TwinSystem":
         """This twin with `commands` as its source (the same models, derived once)."""
@@ -210,7 +226,7 @@ class TwinSystem:
             external_events(program, self.models.mapping_model)
         unknown = [n for n in names if n not in {ev.name for ev in program.inputs}]
         if unknown:
-            raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
+            raise CotwinError([Finding(spec.location("scenario", "rabbitmq", "commands"), Severity.ERROR,
                                        f"[scenario] rabbitmq commands: {', '.join(unknown)} are not input events "
                                        f"of the d-model (it has {', '.join(ev.name for ev in program.inputs)})")])
         return [p for ev in program.inputs if ev.name in names for p in [ev.name, *(port for port, _ in ev.value_ports)]]
@@ -220,7 +236,7 @@ class TwinSystem:
         names = self.spec.log if self.spec.log is not None else monitored
         unknown = [n for n in names if n not in monitored]
         if unknown:
-            raise CotwinError([Finding(Location(str(self.spec.path), 1, 1), Severity.ERROR,
+            raise CotwinError([Finding(self.spec.location("cosim", "log"), Severity.ERROR,
                                        f"[cosim] log: unknown mapping variable(s) {', '.join(unknown)} "
                                        f"(monitored: {', '.join(monitored) or 'none'})")])
         program = self.models.program
@@ -236,17 +252,53 @@ class TwinSystem:
         problems = []
         for name, value in given.items():
             port = ports.get(name)
+            at = self.spec.location("cosim", "parameters", name)
             if port is None:
-                problems.append(f"[cosim] parameters: the d-model has no parameter '{name}' "
-                                f"(it has {', '.join(ports) or 'none'})")
+                problems.append(Finding(at, Severity.ERROR, f"[cosim] parameters: the d-model has no parameter "
+                                                            f"'{name}' (it has {', '.join(ports) or 'none'})"))
             elif port.fmi_type == "Boolean" and not isinstance(value, bool) or \
                     port.fmi_type == "Integer" and (isinstance(value, bool) or not isinstance(value, int)) or \
                     port.fmi_type == "Real" and (isinstance(value, bool) or not isinstance(value, (int, float))):
-                problems.append(f"[cosim] parameters: {name} takes a{'n' if port.fmi_type[0] in 'I' else ''} "
-                                f"{port.fmi_type}, not {value!r}")
+                problems.append(Finding(at, Severity.ERROR, f"[cosim] parameters: {name} takes "
+                                        f"a{'n' if port.fmi_type[0] in 'I' else ''} {port.fmi_type}, not {value!r}"))
+            elif port.fmi_type == "Integer" and not -2 ** 31 <= value < 2 ** 31:
+                problems.append(Finding(at, Severity.ERROR, f"[cosim] parameters: {name} is an FMI Integer "
+                                        f"(32 bits): {value} is out of its range"))
         if problems:
-            raise CotwinError([Finding(Location(str(self.spec.path), 1, 1), Severity.ERROR, p) for p in problems])
+            raise CotwinError(problems)
         return {DMODEL.name: {name: (float(v) if ports[name].fmi_type == "Real" else v) for name, v in given.items()}}
+
+    def columns(self) -> dict[str, set[str]]:
+        """The variables each unit shows in a result (its connected outputs and logged variables)."""
+        out: dict[str, set[str]] = {u.name: set() for u in self.units}
+        for c in self.connections:
+            out[c.source].add(c.output)
+        for unit, names in self.log.items():
+            out[unit].update(names)
+        return out
+
+    def _check_panels(self) -> None:
+        """[figure] panels name variables a run shows (unit role or instance . variable), else an error
+        at the panel: a misspelt name would draw an empty panel."""
+        if self.spec.panels is None:
+            return
+        units = {u.role: u.name for u in self.units} | {u.instance: u.name for u in self.units}
+        columns = self.columns()
+        problems = []
+        for i, (_, names, _) in enumerate(self.spec.panels):
+            for name in names:
+                unit, variable = name.split(".")
+                if unit not in units:
+                    message = f"unit '{unit}' is not one of this twin's ({', '.join(units)})"
+                elif variable not in columns[units[unit]]:
+                    message = (f"{unit} shows no variable '{variable}' (it shows "
+                               f"{', '.join(sorted(columns[units[unit]])) or 'none'})")
+                else:
+                    continue
+                problems.append(Finding(self.spec.location("figure", "panels", i, "variables"), Severity.ERROR,
+                                        f"[figure] panel {i + 1} variable {name!r}: {message}"))
+        if problems:
+            raise CotwinError(problems)
 
     # ---- descriptions ----
     def multimodel(self, realtime: bool | None = None) -> dict:
