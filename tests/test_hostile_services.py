@@ -449,8 +449,9 @@ module Mod { cycleDef cycle == 1 robotic platform P { uses In uses Out } cref c 
     assert parsed.values == {"go": True, "Goal_dir": 1, "Goal_count": 2, "Goal_fast": True} and not parsed.dropped
     parsed = parse_message(json.dumps({"time": stamp, "go": True, "Goal_dir": 9, "Goal_count": -1,
                                        "Goal_fast": "yes"}).encode(), types, scalars)
-    assert parsed.values == {"go": True} and parsed.dropped == (
-        "Goal_dir: 9 is not a literal of Dir (North, East, South, West, or 0..3)", "Goal_count: -1 is negative (a nat)",
+    assert parsed.values == {"go": True} and parsed.dropped == (  # worded as a plan's values are
+        "Goal_dir: 9 is not a literal of Dir (North, East, South, West, or their index 0..3)",
+        "Goal_count: -1 is negative (the input is a nat)",
         "Goal_fast: 'yes' is not a JSON Boolean")
 
 

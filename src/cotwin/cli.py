@@ -281,12 +281,9 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
     try:
         result = execution.run(mm.end if end is None else end)
     except (CotwinError, KeyboardInterrupt) as err:  # say where the rows computed so far are
-        kept = execution.observers[0].kept()
-        if isinstance(err, KeyboardInterrupt):
-            stopped = CotwinError(f"interrupted at t = {execution.time:g} s; {kept}")
-            stopped.interrupted = True
-            raise stopped from None
-        raise CotwinError([*err.findings, *CotwinError(kept).findings]) from None
+        from .cosim.execution import ended_early
+
+        raise ended_early(err, execution.time, execution.observers[0].kept()) from None
     click.echo(f"{csv_path}: {result.rows} rows to t = {result.end_time:g} s in {result.wall_seconds:.2f} s")
 
 

@@ -108,8 +108,6 @@ def is_number(v) -> bool:
         return False
 
 
-_is_number = is_number
-
 
 @dataclass(frozen=True)
 class Key:
@@ -132,9 +130,9 @@ _KINDS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "str": (lambda v: isinstance(v, str), "a string"),
     "bool": (lambda v: isinstance(v, bool), "true or false (a TOML Boolean, not a string)"),
     "int": (lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer"),
-    "number": (_is_number, "a finite number"),
-    "positive": (lambda v: _is_number(v) and v > 0, "a positive number"),
-    "nonnegative": (lambda v: _is_number(v) and v >= 0, "a number >= 0"),
+    "number": (is_number, "a finite number"),
+    "positive": (lambda v: is_number(v) and v > 0, "a positive number"),
+    "nonnegative": (lambda v: is_number(v) and v >= 0, "a number >= 0"),
     "list[str]": (lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v), "a list of strings"),
     "list": (lambda v: isinstance(v, list), "a list"),
     "table": (lambda v: isinstance(v, dict), "a table"),

@@ -62,6 +62,16 @@ def step_count(span: float, step: float, what: str = "the end time", start: floa
     return int(whole)
 
 
+def ended_early(err: BaseException, time: float, kept: str) -> CotwinError:
+    """The error of a run that failed (`err` a CotwinError) or was interrupted (KeyboardInterrupt) at `time`,
+    saying where the rows it computed are (`kept`, e.g. CSVWriter.kept()); `interrupted` marks the latter."""
+    if isinstance(err, KeyboardInterrupt):
+        stopped = CotwinError(f"interrupted at t = {time:g} s; {kept}")
+        stopped.interrupted = True
+        return stopped
+    return CotwinError([*err.findings, *CotwinError(kept).findings])
+
+
 class Execution:
     def __init__(self, system: System, algorithm: Algorithm, step_size: float, start: float = 0.0,
                  observers: list[Observer] | tuple[Observer, ...] = ()):

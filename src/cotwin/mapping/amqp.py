@@ -263,4 +263,3 @@ def scrub(text: str, environ: Mapping[str, str] = os.environ) -> str:
     for secret in sorted(secrets_of(environ), key=len, reverse=True):
         text = text.replace(secret, "***")
     return text
-

@@ -81,9 +81,6 @@ class ReplayEndpoint:
         if unknown:
             raise CotwinError(f"{self.recording.source}: the recording's joints {', '.join(unknown)} are not joints "
                               f"of p-model {self.tree.name}")
-        problem = self.recording.offset_problem(self.offset) if self.offset is not None else None
-        if problem is not None:
-            raise CotwinError(problem)
         self._held: dict[str, float] = {j.name: 0.0 for j in self.tree.actuated}
         onsets = self.recording.onsets()
         self._first_onset = onsets[0] if onsets else float(self.recording.times[0])

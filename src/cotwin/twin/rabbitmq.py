@@ -41,6 +41,7 @@ from datetime import datetime, timedelta, timezone
 import pika
 
 from ..cosim.units import INT32, Port, PythonUnit
+from ..config import is_number
 from ..diagnostics import CotwinError
 from ..logcap import CappedLog
 from ..mapping.amqp import connect, redact
@@ -145,17 +146,16 @@ def parse_message(body: bytes, types: dict[str, str], scalars: dict | None = Non
 
 
 def _typed(value, kind: str, sc=None):
-    from ..robosim.types import NAT, EnumTy
+    """A message's value as its port's FMI type (as the RMQ FMU types it), within the port's RoboSim type."""
+    if sc is None:
+        return _fmi_typed(value, kind)
+    from .scenario import scalar_value
 
-    literals = [lit.name for lit in sc.ty.decl.literals] if sc is not None and isinstance(sc.ty, EnumTy) else None
-    if literals is not None and isinstance(value, str) and value in literals:
-        return literals.index(value)
-    typed = _fmi_typed(value, kind)
-    if literals is not None and not 0 <= typed < len(literals):
-        raise ValueError(f"{value!r:.40} is not a literal of {sc.ty.decl.name} ({', '.join(literals)}, or 0..{len(literals) - 1})")
-    if sc is not None and sc.ty == NAT and typed < 0:
-        raise ValueError(f"{typed} is negative (a nat)")
-    return typed
+    try:
+        return scalar_value(value, sc, _fmi_typed)
+    except ValueError as err:
+        said = str(err)
+        raise ValueError(said if said.startswith(repr(value)[:40]) else f"{value!r:.40} {said}") from None
 
 
 def _unique(pairs: list[tuple[str, object]]) -> dict:
@@ -175,8 +175,8 @@ def _fmi_typed(value, kind: str):
         raise ValueError(f"{value!r:.40} is not a JSON Boolean")
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"{value!r:.40} is not a number")
-    if not math.isfinite(value):
-        raise ValueError(f"{value!r} is not finite")
+    if not is_number(value):  # also an integer too large for any float
+        raise ValueError(f"{value!r:.40} is not finite")
     if kind == "Integer":
         value = int(value)  # a double is truncated, as the RMQ FMU does
         if not INT32[0] <= value <= INT32[1]:

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..cosim.algorithm import algorithm as make_algorithm
-from ..cosim.execution import Execution, RunResult
+from ..cosim.execution import Execution, RunResult, ended_early
 from ..cosim.observers import CSVWriter, Observer, Progress, RealTimePacer, StateFile
 from ..cosim.system import System
 from ..diagnostics import CotwinError
@@ -89,12 +89,7 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         try:
             result = execution.run(end)
         except (CotwinError, KeyboardInterrupt) as err:
-            kept = writer.kept()
-            if isinstance(err, KeyboardInterrupt):
-                stopped = CotwinError(f"interrupted at t = {execution.time:g} s; {kept}")
-                stopped.interrupted = True
-                raise stopped from None
-            raise CotwinError([*err.findings, *CotwinError(kept).findings]) from None
+            raise ended_early(err, execution.time, writer.kept()) from None
         figure = None
         if plot:
             from ..plot import figure as draw

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..cosim.algorithm import UNSET, algorithm as make_algorithm
-from ..cosim.execution import Execution, RunResult, step_count
+from ..cosim.execution import Execution, RunResult, ended_early, step_count
 from ..cosim.observers import CSVWriter, StateFile, epoch_of
 from ..diagnostics import CotwinError, Finding, Severity
 from .project import check_timing
@@ -226,11 +226,7 @@ class LiveTwin:
         side's result file holds a header and the rows so far; the previous result is left untouched)."""
         said = "; ".join(f"{side.name.upper()}: {side.writer.kept()}" for side in self.sides.values()
                          if side.writer.rows) or "no rows computed"
-        if isinstance(err, KeyboardInterrupt):
-            stopped = CotwinError(f"interrupted at t = {self.time:g} s; {said}")
-            stopped.interrupted = True
-            return stopped
-        return CotwinError([*err.findings, *CotwinError(said).findings])
+        return ended_early(err, self.time, said)
 
     def _alarm_publisher(self):
         url = self.alarms_url or (self.system.spec.rabbitmq.url if self.system.spec.rabbitmq else None)

@@ -264,25 +264,26 @@ def typed_value(value, fmi: str) -> object:
     return float(value)
 
 
-def scalar_value(value, sc) -> object:
-    """A TOML or JSON value for the d-model input scalar `sc` (a dmodel Scalar): typed_value, within its
-    RoboSim type: an enumeration takes one of its literals (by name, or by index), a nat is not negative;
-    ValueError saying why not."""
+def scalar_value(value, sc, typed=None) -> object:
+    """A TOML or JSON value for the d-model input scalar `sc` (a dmodel Scalar): `typed` (typed_value, or a
+    reader's own FMI typing) within its RoboSim type: an enumeration takes one of its literals (by name, or
+    by index), a nat is not negative; ValueError saying why not."""
     from ..robosim.types import NAT, EnumTy
 
+    typed = typed or typed_value
     if isinstance(sc.ty, EnumTy):
         names = [lit.name for lit in sc.ty.decl.literals]
         if isinstance(value, str) and value in names:
             return names.index(value)
-        index = typed_value(value, "Integer") if not isinstance(value, str) else None
+        index = typed(value, "Integer") if not isinstance(value, str) else None
         if index is None or not 0 <= index < len(names):
             raise ValueError(f"is not a literal of {sc.ty.decl.name} ({', '.join(names)}, or their index "
                              f"0..{len(names) - 1})")
         return index
-    typed = typed_value(value, sc.fmi_type)
-    if sc.ty == NAT and typed < 0:
+    out = typed(value, sc.fmi_type)
+    if sc.ty == NAT and out < 0:
         raise ValueError("is negative (the input is a nat)")
-    return typed
+    return out
 
 
 def _article(fmi: str) -> str:
