@@ -242,14 +242,17 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
 
 
 def _step_count(step: float, span: float, hint: str | None, source: str) -> None:
-    """A run of at most MAX_STEPS steps (a step or an end off by orders of magnitude would run for ever)."""
-    from .cosim.execution import MAX_STEPS
+    """A run the master can keep exactly (cosim's step_count), refused before any FMU is loaded, at the
+    option that set it (`hint`) or else at the multimodel (`source`)."""
+    from .cosim.execution import step_count
 
-    if span / step > MAX_STEPS:
-        message = f"{span:g} s in steps of {step:g} s is {span / step:.3g} steps, more than {MAX_STEPS:.0e}"
+    try:
+        step_count(span, step)
+    except CotwinError as err:
+        message = err.findings[0].message
         if hint is None:
-            raise CotwinError(f"{source}: {message}")
-        raise click.BadParameter(message, param_hint=hint)
+            raise CotwinError(f"{source}: {message}") from None
+        raise click.BadParameter(message, param_hint=hint) from None
 
 
 def _finite(**options) -> None:

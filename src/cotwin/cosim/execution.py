@@ -11,6 +11,8 @@ with the same inputs, both continue bit for bit as the original did.
 
 from __future__ import annotations
 
+import math
+
 import time as wallclock
 from dataclasses import dataclass, field
 from typing import Iterable
@@ -46,20 +48,22 @@ class RunResult:
 MAX_STEPS = 10**8  # steps of one run: beyond, hours of computing (a step or an end off by powers of ten)
 
 
-def step_count(span: float, step: float, what: str = "the end time", start: float = 0.0) -> int:
-    """How many steps of `step` make `span`; a span that is not a whole number of them (end 1.05 s, step 0.1 s)
-    or shorter than one is an error, not a run that silently ends elsewhere."""
-    steps = span / step
-    if not steps <= MAX_STEPS:  # also inf and NaN
-        raise CotwinError(f"{what} {start + span:g} s is {steps:.3g} steps of {step:g} s from {start:g} s: at most "
-                          f"{MAX_STEPS:.0e} in one run (a larger step or an earlier end)")
-    whole = round(steps)
-    if whole < 1 or abs(steps - whole) > 1e-6 * max(1.0, steps):
-        below, above = max(int(steps), 1), max(int(steps), 1) + (int(steps) >= 1)
-        options = sorted({start + below * step, start + above * step})
-        raise CotwinError(f"{what} {start + span:g} s is not a whole number of steps of {step:g} s from "
-                          f"{start:g} s ({steps:.6g} steps): choose {' or '.join(f'{t:g} s' for t in options)}")
-    return int(whole)
+def step_count(span: float, step: float, start: float = 0.0, what: str | None = None) -> int:
+    """How many steps of `step` make `span` (from `start`); CotwinError, prefixed with `what`, for a span
+    shorter than one step, more than MAX_STEPS (also inf and NaN), or not a whole number of steps (end
+    1.05 s at 0.1 s): a run that would silently end elsewhere."""
+    steps, end = span / step, start + span
+    whole = round(steps) if steps <= MAX_STEPS else 0
+    if not steps <= MAX_STEPS:
+        problem = f"{end:g} s is {steps:.3g} steps of {step:g} s, more than {MAX_STEPS:.0e}"
+    elif steps < 1 - 1e-9:
+        problem = f"{end:g} s is shorter than one step of {step:g} s"
+    elif abs(steps - whole) > 1e-6 * max(1.0, steps):
+        low, high = start + math.floor(steps) * step, start + math.ceil(steps) * step
+        problem = f"{end!r} s is not a whole number of steps of {step:g} s (it would be rounded): give {low:.10g} or {high:.10g}"
+    else:
+        return int(whole)
+    raise CotwinError(f"{what}: {problem}" if what else problem)
 
 
 def ended_early(err: BaseException, time: float, kept: str) -> CotwinError:
@@ -147,7 +151,7 @@ class Execution:
         if not end > self.time:
             raise CotwinError(f"the end time ({end!r} s) must come after the current time ({self.time!r} s)")
         time, done = self._origin
-        self.total_steps = done + step_count(end - time, self.step_size, "the end time", time)
+        self.total_steps = done + step_count(end - time, self.step_size, time, "the end time")
         if not self.initialized:
             self.initialize()
         try:

@@ -76,8 +76,8 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 from ..config import Key, Schema, TomlFile, is_number, raise_problems, shown, unique, within
-from ..diagnostics import Finding, Location, Severity
-from ..cosim.execution import MAX_STEPS
+from ..diagnostics import CotwinError, Finding, Location, Severity
+from ..cosim.execution import step_count
 from ..pmodel.mjcf import TIMESTEP as PHYSICS_STEP
 from ..pmodel.perturbation import SCHEMA as PLANT, Perturbation
 
@@ -126,15 +126,10 @@ def timing_problems(step: float, end: float, cycle_period: float | None = None) 
         nearest = max(1, round(ticks)) * PHYSICS_STEP
         out.append(("step", f"{step!r} s is not a whole number of the simulator's {PHYSICS_STEP * 1000:g} ms "
                             f"physics steps (nearest: {nearest:g} s)"))
-    steps = end / step
-    if steps > MAX_STEPS:
-        out.append(("end", f"{end:g} s is {steps:.3g} steps of {step:g} s, more than {MAX_STEPS:.0e}"))
-    elif steps < 1 - 1e-9:
-        out.append(("end", f"{end:g} s is shorter than one step of {step:g} s"))
-    elif abs(steps - round(steps)) > 1e-9 * steps:
-        low, high = math.floor(steps) * step, math.ceil(steps) * step
-        out.append(("end", f"{end!r} s is not a whole number of steps of {step:g} s (it would be rounded): "
-                           f"give {low:.10g} or {high:.10g}"))
+    try:
+        step_count(end, step)
+    except CotwinError as err:
+        out.append(("end", err.findings[0].message))
     if cycle_period is not None and cycle_period > 0:
         cycles = step / cycle_period
         if cycles > MAX_CYCLES_PER_STEP:
