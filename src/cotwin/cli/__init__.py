@@ -1,0 +1,51 @@
+"""The `cotwin` command: one group (`common.main`) whose commands live in a module per family."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from ..diagnostics import CotwinError
+from . import analysis, history, live, models, runs  # noqa: F401 - each module registers its commands
+from .common import main, report
+
+__all__ = ["main", "entry"]
+
+
+def _terminate(signum, frame) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def entry() -> None:
+    """Entry point: every error escaping a command is reported as a message, never a traceback.
+    SIGTERM ends a run like Ctrl-C: units are ended properly and the rows so far are kept."""
+    import signal
+
+    signal.signal(signal.SIGTERM, _terminate)
+    try:
+        main(standalone_mode=False)
+    except CotwinError as err:
+        report(err.findings)
+        sys.exit(130 if getattr(err, "interrupted", False) else 1)
+    except OSError as err:  # a file or folder that cannot be read or written
+        click.echo(f"error: {err.strerror or err}{f': {err.filename}' if err.filename else ''}", err=True)
+        sys.exit(1)
+    except (click.exceptions.Abort, KeyboardInterrupt):
+        click.echo("interrupted", err=True)
+        sys.exit(130)
+    except click.ClickException as err:
+        err.show()
+        sys.exit(err.exit_code)
+    except RecursionError:
+        click.echo("error: the input is nested too deeply to process", err=True)
+        sys.exit(1)
+    except Exception as err:  # noqa: BLE001 - a bug of cotwin's: say so in one line, keep the details
+        import tempfile
+        import traceback
+
+        with tempfile.NamedTemporaryFile("w", prefix="cotwin-crash-", suffix=".txt", delete=False) as f:
+            traceback.print_exc(file=f)
+        click.echo(f"internal error: {type(err).__name__}: {str(err)[:300]} (a cotwin bug; details in {f.name})",
+                   err=True)
+        sys.exit(70)

@@ -1,0 +1,159 @@
+"""Commands that look ahead or fit: whatif, sweep, calibrate."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from .common import MAX_HORIZON, check_finite, main, named_values, output_path, tool_point
+
+
+def plan_file(path: str, program):
+    """A what-if plan: a plan CSV, a TOML command list or a JSON list of {time, event, args}."""
+    import json
+    from pathlib import Path
+
+    from ..twin.scenario import read_scenario
+    from ..twin.whatif import plan_from_json
+
+    if path.endswith(".json"):
+        try:
+            data = json.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
+            raise click.BadParameter(f"{path}: {err}", param_hint="--plan") from None
+        return plan_from_json(data, program)
+    return read_scenario(path, program)
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("--plan", "plan", required=True, help="the hypothetical plan (CSV, TOML or JSON; times relative to the fork)")
+@click.option("--from", "state", type=click.Path(), help="a saved DT state to fork (DIR/state of a run or a live twin)")
+@click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=60.0, show_default=True,
+              help="simulate at most this long (s)")
+@click.option("-o", "--output", "out", callback=output_path, help="write the prediction as JSON here")
+def whatif(project: str, plan: str, state: str | None, horizon: float, out: str | None) -> None:
+    """Predict what a plan would do: fork the DT (at a saved state, or at the start) and run the plan
+    ahead of real time; prints each command's outcome and the completion time."""
+    import json
+    from pathlib import Path
+
+    from ..twin.run import load
+    from ..twin.whatif import predict
+
+    check_finite(horizon=horizon)
+    system = load(project)
+    commands = plan_file(plan, system.models.program)
+    blob = None
+    if state is not None:
+        try:
+            blob = Path(state).read_bytes()
+        except OSError as err:
+            raise click.BadParameter(f"{state}: {err.strerror}", param_hint="--from") from None
+    prediction = predict(system, commands, blob, horizon=horizon)
+    for c in prediction.commands:
+        args = ", ".join(f"{k}={v}" for k, v in c.args.items())
+        verdict = {True: "feasible", False: "NOT feasible", None: "feasibility unknown"}[c.feasible]
+        done = f"done at t = {c.done:g} s" if c.done is not None else "not done within the horizon"
+        click.echo(f"t = {c.time:g} s {c.event}({args}): {verdict}, "
+                   f"{'accepted' if c.accepted else 'ignored by the d-model'}, {done}")
+    for c in prediction.collisions:
+        click.echo(f"collision: {c}")
+    click.echo(f"completion: {'t = %g s' % prediction.completion_time if prediction.completion_time is not None else 'not within the horizon'} "
+               f"(forked at t = {prediction.start:g} s, predicted to t = {prediction.end:g} s in {prediction.wall_seconds:.2f} s)")
+    if out:
+        Path(out).write_text(json.dumps(prediction.as_dict(), indent=1) + "\n")
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("--event", required=True, help="the command to sweep, e.g. moveDiscreteCommand")
+@click.option("--arg", "args", multiple=True, metavar="NAME=LOW..HIGH", help="an argument's values (repeatable)")
+@click.option("--from", "state", type=click.Path(), help="a saved DT state to fork every what-if from")
+@click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=30.0, show_default=True,
+              help="simulate each what-if at most this long (s)")
+@click.option("--workers", type=click.IntRange(min=1, max=1024), help="local processes (default: one per CPU)")
+@click.option("--ray", "ray", help="run on Ray: 'auto' (the local cluster) or a cluster address")
+@click.option("-o", "--output", "out", callback=output_path, required=True, help="the CSV of answers to write")
+def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, horizon: float, workers: int | None,
+          ray: str | None, out: str) -> None:
+    """Run one what-if per combination of argument values, in parallel (e.g. every hole of the plate:
+    --event moveDiscreteCommand --arg target_X=0..15 --arg target_Y=0..23 --arg target_Z=0)."""
+    import csv
+    import time
+    from pathlib import Path
+
+    from ..twin.run import load
+    from ..twin.sweep import grid, run_sweep
+
+    check_finite(horizon=horizon)
+    ranges: dict[str, list] = {}
+    for name, values in (named_values(a, "--arg") for a in args):
+        if name in ranges:
+            raise click.BadParameter(f"argument {name!r} is given twice", param_hint="--arg")
+        ranges[name] = values
+    system = load(project)
+    plans = grid(system.models.program, event, ranges)
+    blob = Path(state).read_bytes() if state else None
+    started = time.perf_counter()
+    rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray)
+    wall = time.perf_counter() - started
+    columns = list(dict.fromkeys(k for r in rows for k in r))
+    with open(out, "w", newline="") as f:
+        writer = csv.DictWriter(f, columns, lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(rows)
+    feasible = sum(1 for r in rows if r.get("feasible"))
+    click.echo(f"{out}: {len(rows)} what-ifs in {wall:.1f} s ({'Ray' if ray else 'local pool'}), {feasible} feasible")
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("--pt-log", type=click.Path(), help="the PT's recorded run of the project's plan (a UR RTDE log) to fit")
+@click.option("-o", "--output", "out", callback=output_path, type=click.Path(), help="the calibration file to write (with --pt-log)")
+@click.option("--calibration", type=click.Path(), help="the calibration to check (with --check; default: the one "
+              "just fitted, else the project's)")
+@click.option("--check", "check_log", type=click.Path(), help="another recorded run to replay on the calibrated DT")
+@click.option("--tool", default="flange", show_default=True, help="the tool point the PT targets: flange, "
+              "fingertips or X,Y,Z (m, tool link frame); kept unless the log shows several tool orientations")
+@click.option("--log-start", type=click.FloatRange(min=-1e9, max=1e9), default=0.0, show_default=True,
+              help="co-simulation time of the log's first row (s), for the commands' latencies")
+def calibrate(project: str, pt_log: str | None, out: str | None, calibration: str | None, check_log: str | None,
+              tool: str, log_start: float) -> None:
+    """Fit the DT to a recorded PT run (plate pose, tool, movej profile, latencies, servo lag) and print the
+    per-joint RMSE before and after; or replay another recorded run on a calibrated DT (--check)."""
+    import math
+
+    from ..mapping.rtde import read_arm_log
+    from ..pmodel.cell import CellGeometry
+    from ..twin import calibration as cal
+    from ..twin.project import load_project
+    from ..twin.run import load
+
+    if pt_log is None and check_log is None:
+        raise click.UsageError("give --pt-log LOG -o FILE to fit, or --calibration FILE --check LOG to check")
+    if pt_log is not None and out is None:
+        raise click.UsageError("--pt-log needs -o FILE: where to write the calibration")
+    for option, path in (("--pt-log", pt_log), ("--check", check_log), ("--calibration", calibration)):
+        if path is not None and not Path(path).is_file():
+            raise click.BadParameter(f"no file {path}", param_hint=option)
+    if not math.isfinite(log_start):
+        raise click.BadParameter(f"{log_start!r} is not a finite number", param_hint="--log-start")
+    point = tool if tool in ("flange", "fingertips") else tool_point(tool)
+    system = load(load_project(project, pt_log))  # the log to fit replaces [pt] log
+    twin, program, commands = cal.project_twin(system)
+    fitted = None
+    if pt_log is not None:
+        report = cal.calibrate(twin, program, commands, read_arm_log(pt_log), CellGeometry(tool=point), log_start)
+        fitted = report.calibration
+        fitted.write(out, f"cotwin calibration of {Path(project).name}, fitted on {Path(pt_log).name} "
+                          "(cotwin calibrate)")
+        click.echo("\n".join(report.lines()))
+        click.echo(f"wrote {out}")
+    if check_log is not None:
+        chosen = cal.Calibration.read(calibration) if calibration is not None else fitted or system.models.calibration
+        if chosen is None:
+            raise click.UsageError("--check needs a calibration: --calibration FILE, --pt-log to fit one, or a "
+                                   "project with [platform] calibration")
+        click.echo("\n".join(cal.check(twin, program, commands, read_arm_log(check_log), chosen).lines()))

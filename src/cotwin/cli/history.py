@@ -1,0 +1,75 @@
+"""The history store's commands: history list|export, dashboard."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from .common import address, main, output_path
+
+
+@main.group()
+def history() -> None:
+    """The twin's history store: list runs, export one as CSV."""
+
+
+def history_db(db: str | None, folder: str | None) -> str:
+
+    from ..twin.history import database_url
+
+    if db is None and folder is None:
+        raise click.UsageError("give --db URL or --dir DIR (a twin's output folder, with history.sqlite)")
+    if folder is not None and not (Path(folder) / "history.sqlite").is_file():
+        raise click.BadParameter(f"no history.sqlite in {folder}", param_hint="--dir")
+    return database_url(db, Path(folder) if folder else None)
+
+
+@history.command("list")
+@click.option("--db", help="database URL (sqlite:///file, postgresql://...)")
+@click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
+def history_list(db: str | None, folder: str | None) -> None:
+    """List the runs of a history store."""
+    import datetime
+
+    from ..twin.history import list_runs
+
+    for run in list_runs(history_db(db, folder)):
+        started = datetime.datetime.fromtimestamp(run["started"]).isoformat(timespec="seconds")
+        click.echo(f"{run['id']:>5}  {started}  {run['kind']:<5} {run['status']:<10} step {run['step']:g} s  "
+                   f"{run['samples']} samples  {run['alarms']} alarm(s)  {run['project']}")
+
+
+@history.command("export")
+@click.argument("run_id", type=int)
+@click.option("--db", help="database URL (sqlite:///file, postgresql://...)")
+@click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
+@click.option("--side", default="dt", show_default=True, help="pt or dt")
+@click.option("-o", "--output", "out", callback=output_path, required=True, help="the CSV to write")
+def history_export(run_id: int, db: str | None, folder: str | None, side: str, out: str) -> None:
+    """Export one side of a run as a Maestro-format CSV."""
+    from ..twin.history import export_csv
+
+    path = export_csv(history_db(db, folder), run_id, side, out)
+    click.echo(str(path))
+
+
+@main.command("dashboard")
+@click.option("--db", help="history database URL (sqlite:///file, postgresql://...)")
+@click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
+@click.option("--at", "address", default="127.0.0.1:8050", show_default=True, metavar="HOST:PORT", callback=address,
+              help="where to serve the page")
+def dashboard_command(db: str | None, folder: str | None, address: tuple[str, int]) -> None:
+    """Browse the runs of a history store in the dashboard (after the run), until interrupted."""
+    import threading
+
+    from ..twin.dashboard import Dashboard
+
+    dash = Dashboard(None, *address, mode="history", history_url=history_db(db, folder)).start()
+    click.echo(f"dashboard: {dash.url} (history only; Ctrl-C to stop)", err=True)
+    try:
+        threading.Event().wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        dash.stop()

@@ -1,0 +1,219 @@
+"""Commands of the live twin and its peers: twin, publish, plant, serve-robot, broker-permissions."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from ..diagnostics import CotwinError
+from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchange_name, main, output_path, show_warnings,
+                     start_dashboard)
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
+@click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
+@click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
+@click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
+@click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
+@click.option("--pt-log", type=click.Path(), help="replay this recorded log as the PT (overrides [pt])")
+@click.option("--rabbitmq", "exchange", callback=exchange_name, help="take commands live from RabbitMQ on this exchange (overrides [scenario])")
+@click.option("--history", "history", help="history database URL (default: [history] url, else DIR/history.sqlite)")
+@click.option("--whatif", "whatif", is_flag=True, help="answer what-if requests sent over the broker (see docs)")
+@click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
+@click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+def twin(project: str, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
+         pt_log: str | None, exchange: str | None, history: str | None, whatif: bool, dashboard: tuple[str, int] | None,
+         cc: str) -> None:
+    """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
+    with deviation checking, alarms and history."""
+    import signal
+    from dataclasses import replace
+
+    from ..twin.history import database_url
+    from ..twin.project import PTSettings, RabbitMQSettings, load_project
+    from ..twin.run import load
+    from ..twin.runtime import LiveTwin
+
+    check_finite(step=step, end=end)
+    if pt_log is not None and not Path(pt_log).is_file():
+        raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
+    spec = load_project(project, pt_log)
+    check_timing(spec, step, end)
+    if pt_log is not None:
+        spec.pt = replace(spec.pt, endpoint="replay", log=Path(pt_log)) if spec.pt else PTSettings("replay", log=Path(pt_log))
+    if exchange is not None:
+        spec.plan = None
+        spec.rabbitmq = replace(spec.rabbitmq, exchange=exchange) if spec.rabbitmq else RabbitMQSettings(exchange)
+        spec.realtime = True if realtime is None else realtime
+    broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
+    system = load(spec)
+    from ..twin.scenario import after_end
+
+    show_warnings(after_end(system.commands, spec.end if end is None else end))
+    dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
+                      broker if whatif else None)
+    try:
+        live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
+                        observers=[dash.feed] if dash else (), cc=cc, whatif_url=broker if whatif else None)
+
+        def interrupt(*_) -> None:
+            """In the step loop, end after the step (results kept as a finished run's); before it (waiting for
+            the broker, building) or at a second signal, at once (rows so far kept as partial results)."""
+            if not live.looping or live._stop:
+                raise KeyboardInterrupt
+            live.stop()
+            click.echo("stopping after this step (interrupt again to stop at once)", err=True)
+
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, interrupt)
+        result = live.run()
+        if dash is not None:
+            dash.finish("stopped" if live._stop else "done")
+    except BaseException as err:
+        if dash is not None:
+            dash.finish("failed", str(err) or type(err).__name__)
+        raise
+    finally:
+        if dash is not None:
+            dash.stop()
+    r = result.pt
+    state = "stopped early" if r.steps < live.steps or live._stop else "done"
+    click.echo(f"{result.out}: PT and DT, {r.steps} steps each to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
+               f"(real-time factor {r.real_time_factor:.1f}), {state}")
+    click.echo(f"deviation: {result.deviation['alarms']} alarm(s); report {result.out / 'deviation.json'}; "
+               f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("--plan", "plan", type=click.Path(), help="the commands to publish (default: the project's plan)")
+@click.option("--period", type=click.FloatRange(min=0.01, max=3600), default=0.5, show_default=True,
+              help="seconds of wall time between messages")
+@click.option("--exchange", callback=exchange_name, help="the twin's exchange (default: the project's [scenario] rabbitmq exchange)")
+def publish(project: str, plan: str | None, period: float, exchange: str | None) -> None:
+    """Publish commands to a live twin over RabbitMQ, as the paper's UR5e publisher does: wait for the
+    ready message, then every PERIOD send the command due at the echoed simulation time, else idle."""
+    from dataclasses import replace
+
+    from ..twin.project import RabbitMQSettings
+    from ..twin.publisher import Publisher, idle_values
+    from ..twin.rabbitmq import port_types
+    from ..twin.run import load
+    from ..twin.scenario import read_scenario
+
+    check_finite(period=period)
+    system = load(project)
+    settings = system.spec.rabbitmq or RabbitMQSettings(exchange or "fmi_digital_twin_dt")
+    if exchange:
+        settings = replace(settings, exchange=exchange)
+    program = system.models.program
+    if plan is None and system.spec.plan is None:
+        raise click.BadParameter("the project has no plan: give one with --plan", param_hint="--plan")
+    commands = read_scenario(plan or system.spec.plan, program)
+    ports = system.live_ports()
+    publisher = Publisher(settings, commands, idle_values(port_types(program, ports)), period=period,
+                          end=system.spec.end)
+    click.echo(f"publishing {len(commands)} command(s) on exchange {settings.exchange} ({settings.to_cosim}); "
+               "waiting for the twin's ready message", err=True)
+    publisher.run()
+    click.echo(f"sent {len(publisher.sent)} message(s)")
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("--opcua", "url", metavar="URL", help="where to serve, e.g. opc.tcp://127.0.0.1:4840 (loopback only; "
+              "default: the project's [pt] url, else port 4840)")
+@click.option("--perturbation", "perturbation_file", type=click.Path(), help="a TOML file of [plant] keys "
+              "(instead of the project's [plant] table)")
+@click.option("--seed", type=click.IntRange(min=0, max=2 ** 63 - 1), help="seed of the sensor noise")
+@click.option("--payload", type=click.FloatRange(min=0, max=1000), metavar="KG", help="a mass at the tool (kg)")
+@click.option("--latency-ms", type=click.FloatRange(min=0, max=10_000), metavar="MS", help="goals take effect this late")
+@click.option("--noise", type=click.FloatRange(min=0, max=1000), metavar="STD", help="Gaussian noise on every measurement")
+@click.option("--free-running", is_flag=True, help="advance in real time; Advance waits for the plant's clock")
+def plant(project: str, url: str | None, perturbation_file: str | None, seed: int | None, payload: float | None,
+          latency_ms: float | None, noise: float | None, free_running: bool) -> None:
+    """Serve a stand-in robot cell over OPC UA: the project's models in the simulator, perturbed as its
+    [plant] table and these options say, until SIGINT or SIGTERM."""
+    from ..twin.plant import load_plant
+
+    check_finite(payload=payload, latency_ms=latency_ms, noise=noise)
+    cell = load_plant(project, url, free_running, perturbation_file, seed=seed, payload=payload,
+                      latency_ms=latency_ms, noise=noise)
+
+    def announce(served) -> None:
+        p = served.endpoint.perturbation
+        click.echo(f"serving {served.endpoint.tree.name} on {served.url} ({served.mode}; perturbation: "
+                   f"{'none' if p.nominal else p.as_dict()})")
+        if served.credentials_file is not None:
+            click.echo(f"operator credentials for local clients: {served.credentials_file}")
+        click.echo("stop with Ctrl-C", err=True)
+
+    cell.serve_until_signalled(announce)
+    click.echo(f"stopped after {cell.calls} call(s), {cell.refused} refused")
+
+
+@main.command("serve-robot")
+@click.argument("project", type=click.Path())
+@click.option("--queue", help="the request queue (default: the project's [platform] queue)")
+@click.option("--url", help="the broker (default: the project's [platform] url)")
+def serve_robot(project: str, queue: str | None, url: str | None) -> None:
+    """Serve the project's platform (the MuJoCo simulator) as a robot behind the broker, for twins
+    whose [platform] endpoint is "broker". Needs COTWIN_ROBOT_SECRET (shared with the twin); broker
+    credentials as for every link (docs/security.md). Stops on Ctrl-C or SIGTERM, never on a message."""
+    import signal
+    import threading
+
+    from ..mapping.amqp import redact, url_problem
+    from ..mapping.broker import RobotServer
+    from ..mapping.endpoint import SimulatedEndpoint
+    from ..pmodel.simulator import PlatformSimulator
+    from ..twin.run import load
+
+    system = load(project)
+    url = url or system.spec.url
+    if url_problem(url):
+        raise click.BadParameter(url_problem(url), param_hint="--url")
+    queue = queue or system.spec.queue
+    simulator = PlatformSimulator(system.models.tree, system.models.scene, base=system.spec.base)
+    server = RobotServer(SimulatedEndpoint(simulator), queue, url)
+    failure: list[CotwinError] = []
+
+    def serve() -> None:
+        try:
+            server.serve()
+        except CotwinError as err:
+            failure.append(err)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: server.stop())
+    thread = threading.Thread(target=serve, name="robot server", daemon=True)
+    thread.start()
+    while thread.is_alive() and not server.ready.wait(0.2):
+        pass
+    if server.ready.is_set():
+        click.echo(f"serving the robot on queue {queue} at {redact(url)} (stop: Ctrl-C or SIGTERM)", err=True)
+        click.echo("ready", err=False)
+        sys.stdout.flush()
+    while thread.is_alive():
+        thread.join(0.2)
+    if failure:
+        raise failure[0]
+    click.echo(f"served {server.requests} request(s); refused {server.refused} unauthenticated, dropped "
+               f"{server.dropped} unanswerable", err=True)
+
+
+@main.command("broker-permissions")
+@click.argument("project", type=click.Path())
+@click.option("--vhost", default="cotwin", show_default=True, help="the virtual host of the twin's links")
+@click.option("--prefix", default="cotwin-", show_default=True, help="user names: PREFIX + role")
+def broker_permissions(project: str, vhost: str, prefix: str) -> None:
+    """Print the rabbitmqctl commands creating a vhost and one least-privilege user per role (twin,
+    robot server, publisher, alarms monitor) for this project's exchanges and queues."""
+    from ..twin.broker_access import rabbitmqctl_script
+    from ..twin.project import load_project
+
+    click.echo(rabbitmqctl_script(load_project(project), vhost, prefix), nl=False)

@@ -1,0 +1,121 @@
+"""Commands on models: check, build-dmodel, export-pmodel, verify."""
+
+from __future__ import annotations
+
+import sys
+from collections import Counter
+from pathlib import Path
+
+import click
+
+from ..diagnostics import CotwinError, Severity
+from .common import main, named_values, output_path, report
+
+
+@main.command()
+@click.argument("paths", nargs=-1, required=True)
+def check(paths: tuple[str, ...]) -> None:
+    """Parse, resolve and type-check RoboSim models (files or folders of .rst and .pm)."""
+    from ..robosim.check import check_paths
+    from ..robosim.summary import summarise
+
+    result = check_paths(paths)
+    findings = list(result.findings)
+    if result.ok:
+        findings += [f for project in result.projects for f in tree_findings(project)]
+    report(findings)
+    if not result.ok:
+        errors = sum(f.severity is Severity.ERROR for f in result.findings)
+        click.echo(f"{errors} error(s)", file=sys.stderr)
+        sys.exit(1)
+    warnings = Counter(f.location.path for f in findings if f.severity is Severity.WARNING)
+    for source in (f for project in result.projects for f in project.files):
+        extra = f", {warnings[source.path]} warning(s)" if warnings[source.path] else ""
+        click.echo(f"{source.path}: ok ({summarise(source)}{extra})")
+
+
+def tree_findings(project) -> list:
+    """The readings a simulator takes of a project's p-models (cotwin.pmodel.tree_build's warnings: a wheel
+    axis moved, an impossible inertia replaced...), for those that build."""
+    from ..pmodel.tree import build_tree
+    from ..robosim.pmodel_elements import PModel
+
+    pmodels = project.elements(PModel)
+    used = {p.pmodel.last for pm in pmodels for p in pm.parts}
+    out = []
+    for pmodel in pmodels:
+        if pmodel.name in used:
+            continue
+        try:
+            tree = build_tree(project, "::".join(project.qualified_name(pmodel)))
+        except CotwinError:
+            continue  # a p-model the simulator cannot take says so when it is run
+        out.extend(f for f in tree.findings if f.severity is Severity.WARNING and not f.location.path.startswith("<"))
+    return out
+
+
+@main.command("build-dmodel")
+@click.argument("model", nargs=-1, required=True)
+@click.option("--module", "module_name", help="the module to build (default: the only one)")
+@click.option("-o", "--output", callback=output_path, required=True, help="the FMU file to write")
+@click.option("--cc", default="cc", show_default=True, help="C compiler")
+def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, cc: str) -> None:
+    """Generate C from a d-model module and package it as an FMI 2.0 co-simulation FMU."""
+    from ..dmodel.fmu import build_fmu
+    from ..dmodel.program import build_program
+    from ..robosim.check import load_checked
+
+    program = build_program(load_checked(model), module_name)
+    path = build_fmu(program, output, cc=cc)
+    click.echo(f"{path}: module {program.module.name}, {len(program.machines)} state machine(s), "
+               f"{len(program.inputs)} input event(s), {len(program.operations)} operation(s)")
+
+
+@main.command("export-pmodel")
+@click.argument("model", nargs=-1, required=True)
+@click.option("--pmodel", "pmodel_name", help="the p-model to export (default: the one not used as a part)")
+@click.option("--format", "fmt", type=click.Choice(["sdf", "urdf", "mjcf"]), required=True)
+@click.option("-o", "--output", callback=output_path, required=True, help="the file to write")
+def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, output: str) -> None:
+    """Write a p-model as SDF 1.6, URDF or MJCF (all three from one kinematic tree)."""
+
+    from ..pmodel.mjcf import to_mjcf
+    from ..pmodel.sdf import to_sdf
+    from ..pmodel.tree import build_tree
+    from ..pmodel.urdf import to_urdf
+    from ..robosim.check import load_checked
+
+    tree = build_tree(load_checked(model), pmodel_name)
+    text = {"sdf": to_sdf, "urdf": to_urdf, "mjcf": to_mjcf}[fmt](tree)
+    path = Path(output)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    kinds = {k: sum(j.kind == k for j in tree.joints) for k in ("revolute", "prismatic", "fixed")}
+    click.echo(f"{path}: {fmt} of p-model {tree.name}: {len(tree.links)} links, {kinds['revolute']} revolute, "
+               f"{kinds['prismatic']} prismatic and {kinds['fixed']} fixed joints, {len(tree.sensors)} sensor ports")
+
+
+@main.command()
+@click.argument("model", nargs=-1, required=True)
+@click.option("--module", "module_name", help="the module to verify (default: the only one)")
+@click.option("--domain", "domains", multiple=True, metavar="PORT=LOW..HIGH",
+              help="values of an event's value port, e.g. MovementArgs_target_X=0..15 (repeatable)")
+@click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1, max=10 ** 8),
+              help="stop exploring after this many states")
+def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, ...], max_states: int) -> None:
+    """Explore every state of a d-model module under every input combination; check the core
+    properties (timelock, determinism, divergence, repeated outputs) and reachability."""
+    from ..dmodel.program import build_program
+    from ..dmodel.verify import format_report, verify as explore
+    from ..robosim.check import load_checked
+
+    program = build_program(load_checked(model), module_name)
+    parsed = dict(named_values(d, "--domain") for d in domains)
+    known = [port for ev in program.inputs for port, _ in ev.value_ports]
+    unknown = [name for name in parsed if name not in known]
+    if unknown:
+        raise click.BadParameter(f"{', '.join(unknown)}: not a value port of an input event of module "
+                                 f"{program.module.name} (ports: {', '.join(known) or 'none'})", param_hint="--domain")
+    report = explore(program, parsed, max_states=max_states)
+    click.echo(format_report(program, report))
+    sys.exit(0 if report.ok else 1)

@@ -1,0 +1,97 @@
+"""Commands that build and co-simulate a project: build, run, simulate."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from ..diagnostics import CotwinError
+from .common import (DASHBOARD_HELP, address, check_finite, check_step_count, check_timing, main, output_path,
+                     show_warnings, start_dashboard)
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
+@click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+def build(project: str, out: str, cc: str) -> None:
+    """Build every artefact of a twin project (cotwin.toml); unchanged artefacts are kept."""
+
+    from ..twin.build import build as build_all, folder_lock
+    from ..twin.run import load
+
+    system = load(project)
+    with folder_lock(Path(out)):
+        written = build_all(system, out, cc)
+    for path in written.values():
+        click.echo(f"{path}")
+
+
+@main.command()
+@click.argument("project", type=click.Path())
+@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for outputs.csv, figure.png and the artefacts")
+@click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
+@click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
+@click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
+@click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
+@click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
+@click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
+        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str) -> None:
+    """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
+
+    from rich.progress import Progress
+
+    from ..twin.history import database_url
+    from ..twin.run import load, run_twin
+
+    check_finite(step=step, end=end)
+    system = load(project)
+    check_timing(system.spec, step, end)
+    history = None  # one run records no history; the page lists the store's runs when there is one
+    if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
+        history = database_url(system.spec.history_url, Path(out))
+    from ..twin.scenario import after_end
+
+    show_warnings(after_end(system.commands, system.spec.end if end is None else end))
+    dash = start_dashboard(system, dashboard, "run", history)
+    try:
+        with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
+            task = bar.add_task("co-simulating", total=1)
+            ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc,
+                           observers=[dash.feed] if dash else None,
+                           progress=lambda k, n: bar.update(task, completed=k, total=n))
+    finally:
+        if dash is not None:
+            dash.stop()
+    r = ran.result
+    click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
+               f"(real-time factor {r.real_time_factor:.1f})")
+
+
+@main.command()
+@click.argument("multimodel", type=click.Path())
+@click.option("-o", "--output", "out", callback=output_path, default=None, help="the CSV to write (default: outputs.csv beside it)")
+@click.option("--step", type=click.FloatRange(min=0, min_open=True))
+@click.option("--end", type=click.FloatRange(min=0, min_open=True))
+@click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
+def simulate(multimodel: str, out: str | None, step: float | None, end: float | None, algorithm: str | None) -> None:
+    """Run any Maestro multimodel JSON with cotwin's master (FMUs through FMPy)."""
+
+    from ..cosim.multimodel import execution_for, read_multimodel
+
+    check_finite(step=step, end=end)
+    mm = read_multimodel(multimodel)
+    check_step_count(mm.step if step is None else step, (mm.end if end is None else end) - mm.start,
+                "--end" if end is not None else "--step" if step is not None else None, multimodel)
+    csv_path = Path(out) if out else Path(multimodel).parent / "outputs.csv"
+    execution = execution_for(mm, csv_path, step, algorithm)
+    try:
+        result = execution.run(mm.end if end is None else end)
+    except (CotwinError, KeyboardInterrupt) as err:  # say where the rows computed so far are
+        from ..cosim.execution import ended_early
+
+        raise ended_early(err, execution.time, execution.observers[0].kept()) from None
+    click.echo(f"{csv_path}: {result.rows} rows to t = {result.end_time:g} s in {result.wall_seconds:.2f} s")
