@@ -39,7 +39,27 @@ class Finding:
         return f"{self.location.path}: {self.severity.value}: {self.message}"
 
 
-class CotwinError(Exception):
+def _rebuilt(cls: type, args: tuple, attributes: dict) -> BaseException:
+    """An exception of `cls` with these args and attributes, its __init__ not called (see PicklableError)."""
+    error = cls.__new__(cls, *args)
+    error.args = args
+    error.__dict__.update(attributes)
+    return error
+
+
+class PicklableError(Exception):
+    """An exception that crosses process boundaries (a sweep's or a what-if's worker, a Ray task) intact.
+
+    Pickle rebuilds an exception as `cls(*self.args)`; an __init__ taking other arguments than the
+    message it passes on (e.g. unit, time, call, detail) then fails in the receiving process, and a
+    process pool reports only that it broke. This one is rebuilt from its args and attributes instead.
+    """
+
+    def __reduce__(self):
+        return _rebuilt, (type(self), self.args, self.__dict__)
+
+
+class CotwinError(PicklableError):
     """Bad input: carries every finding, each with its location. Never a bare traceback."""
 
     def __init__(self, findings: Iterable[Finding | str] | str):

@@ -41,7 +41,7 @@ import threading
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, PicklableError
 from ..pmodel.mjcf import pose_paths, sensor_name
 from ..pmodel.tree import KinematicTree
 from .opcua_auth import client_credentials, parse_url
@@ -55,7 +55,7 @@ STATE = ("Time", "Positions", "Velocities", "Sensors", "Goals")
 MODES = ("lockstep", "free-running")
 
 
-class RequestError(Exception):
+class RequestError(PicklableError):
     """A refused call: the OPC UA status name, why, and the index of the argument at fault (if one is)."""
 
     def __init__(self, status: str, message: str, argument: int | None = None):
