@@ -107,7 +107,7 @@ def test_a_sweep_reports_each_failed_whatif_with_its_error_and_grid_point_and_ex
     assert "what-if 1 of 3 (MovementArgs_target_X=0, MovementArgs_target_Y=3, MovementArgs_target_Z=0)" in failed[0]
     assert "arm.rst:" in failed[0] and "division by zero in state Requested" in failed[0]
     assert "3 what-ifs" in proc.stdout and "1 FAILED" in proc.stdout
-    assert "what-ifs: 3/3 (100%)" in proc.stderr  # the progress lines of a log
+    assert "sweeping: 3/3 what-ifs (100%)" in proc.stderr  # the progress lines of a log
     rows = list(csv.DictReader(open(out)))
     assert [r["MovementArgs_target_X"] for r in rows] == ["0", "1", "2"]
     assert "division by zero" in rows[0]["error"] and rows[1]["error"] == rows[2]["error"] == ""

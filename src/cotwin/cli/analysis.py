@@ -99,7 +99,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     plans = grid(system.models.program, event, ranges)
     blob = Path(state).read_bytes() if state else None
     started = time.perf_counter()
-    with ProgressReport("what-ifs") as progress:
+    with ProgressReport("sweeping", "what-ifs") as progress:
         rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress)
     wall = time.perf_counter() - started
     ordered = [r for r in rows if ERROR not in r] + [r for r in rows if ERROR in r]  # answers' columns first

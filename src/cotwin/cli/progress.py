@@ -32,8 +32,9 @@ def interval(environ=os.environ) -> float | None:
 class ProgressReport:
     """`with ProgressReport("verifying") as progress: progress.update(done, total, "detail")`."""
 
-    def __init__(self, label: str, stream=None, terminal: bool | None = None):
+    def __init__(self, label: str, unit: str = "", stream=None, terminal: bool | None = None):
         self.label = label
+        self.unit = unit
         self.stream = stream or sys.stderr
         self.terminal = self.stream.isatty() if terminal is None else terminal
         self.every = interval()
@@ -70,7 +71,9 @@ class ProgressReport:
         if self._last is not None and now - self._last < self.every:
             return
         self._last = now
-        amount = f"{done:g}" if total is None else f"{done:g}/{total:g}" + (f" ({100 * done / total:.0f}%)" if total else "")
+        amount = f"{done:g}" if total is None else f"{done:g}/{total:g}"
+        amount += f" {self.unit}" if self.unit else ""
+        amount += f" ({100 * done / total:.0f}%)" if total else ""
         print(f"{self.label}: {amount}{', ' + detail if detail else ''} [{now - self.started:.0f} s]",
               file=self.stream, flush=True)
 
