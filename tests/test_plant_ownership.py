@@ -136,7 +136,7 @@ def test_the_reset_method_returns_to_the_initial_posture(twin, tmp_path):
 
 def test_twin_pt_url_overrides_the_projects_plant(twin, tmp_path):
     """The project's [pt] url names port 4840; --pt-url sends the twin to this plant instead."""
-    env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
+    env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path), "COTWIN_PROGRESS_SECONDS": "0"}
     project = ROOT / "examples" / "ur5e" / "twin.toml"
     plant = plant_on(twin, "opc.tcp://127.0.0.1:0", env).start()
     try:
@@ -146,6 +146,7 @@ def test_twin_pt_url_overrides_the_projects_plant(twin, tmp_path):
         plant.stop()
     assert proc.returncode == 0, proc.stderr
     assert plant.calls > 10  # the twin stepped this plant
+    assert "twin: 1/1 s (100%), step 10" in proc.stderr  # its progress
     rows = list(csv.DictReader(open(tmp_path / "out" / "pt" / "outputs.csv")))
     assert float(rows[-1]["time"]) == pytest.approx(1.0)
 

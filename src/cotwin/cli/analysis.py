@@ -143,6 +143,7 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     from ..twin import calibration as cal
     from ..twin.project import load_project
     from ..twin.run import load
+    from .progress import ProgressReport
 
     if pt_log is None and check_log is None:
         raise click.UsageError("give --pt-log LOG -o FILE to fit, or --calibration FILE --check LOG to check")
@@ -158,7 +159,9 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     twin, program, commands = cal.project_twin(system)
     fitted = None
     if pt_log is not None:
-        report = cal.calibrate(twin, program, commands, read_arm_log(pt_log), CellGeometry(tool=point), log_start)
+        with ProgressReport("calibrating", "stages") as progress:
+            report = cal.calibrate(twin, program, commands, read_arm_log(pt_log), CellGeometry(tool=point), log_start,
+                                   progress=progress)
         fitted = report.calibration
         fitted.write(out, f"cotwin calibration of {Path(project).name}, fitted on {Path(pt_log).name} "
                           "(cotwin calibrate)")

@@ -39,6 +39,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     from ..twin.project import PTSettings, RabbitMQSettings, load_project
     from ..twin.run import load
     from ..twin.runtime import LiveTwin
+    from .progress import ProgressReport
 
     check_finite(step=step, end=end)
     if pt_log is not None and not Path(pt_log).is_file():
@@ -60,9 +61,11 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     show_warnings(after_end(system.commands, spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
                       broker if whatif else None)
+    progress = ProgressReport("twin", "s").__enter__()
     try:
         live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
-                        observers=[dash.feed] if dash else (), cc=cc, whatif_url=broker if whatif else None)
+                        observers=[*([dash.feed] if dash else ()), TwinProgress(progress)], cc=cc,
+                        whatif_url=broker if whatif else None)
 
         def interrupt(*_) -> None:
             """In the step loop, end after the step (results kept as a finished run's); before it (waiting for
@@ -82,6 +85,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
             dash.finish("failed", str(err) or type(err).__name__)
         raise
     finally:
+        progress.__exit__(None, None, None)
         if dash is not None:
             dash.stop()
     r = result.pt
@@ -90,6 +94,16 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
                f"(real-time factor {r.real_time_factor:.1f}), {state}")
     click.echo(f"deviation: {result.deviation['alarms']} alarm(s); report {result.out / 'deviation.json'}; "
                f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
+
+
+class TwinProgress:
+    """A live twin's observer that reports its simulated time against its end."""
+
+    def __init__(self, report):
+        self.report = report
+
+    def twin_step(self, twin, k: int, t: float) -> None:
+        self.report(round(t, 6), twin.end, f"step {k}")
 
 
 def pt_with_url(pt, url: str, replayed: bool):

@@ -51,7 +51,7 @@ class ProgressReport:
 
             self._bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                                  TimeElapsedColumn(), TextColumn("{task.fields[detail]}"),
-                                 console=Console(file=self.stream), transient=True)
+                                 console=Console(file=self.stream, force_terminal=True), transient=True)
             self._bar.__enter__()
             self._task = self._bar.add_task(self.label, total=None, detail="")
         return self
