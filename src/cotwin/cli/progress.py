@@ -68,8 +68,8 @@ class ProgressReport:
         if self.every is None:
             return
         now = time.monotonic()
-        if self._last is not None and now - self._last < self.every:
-            return
+        if now - (self.started if self._last is None else self._last) < self.every:
+            return  # a command done within the interval prints no line
         self._last = now
         amount = f"{done:g}" if total is None else f"{done:g}/{total:g}"
         amount += f" {self.unit}" if self.unit else ""
