@@ -1,21 +1,30 @@
-# Two commands for a fresh machine: `make demo` and `make test`. Both create .venv and install cotwin.
+# Two commands for a fresh machine: `make demo` and `make test`. Both create .venv and install cotwin:
+# the demo with its runtime extras only (`.[sim]`: MuJoCo, pythonfmu, pika, asyncua, SQLAlchemy...),
+# the tests with the test extras added (`.[test]`: Ray, Playwright, pytest, libcosimpy...).
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
+RUNTIME := $(VENV)/.runtime-stamp
 STAMP := $(VENV)/.installed-stamp
 OUT ?= out/demo
 
-.PHONY: install demo test bench clean
+.PHONY: install install-runtime demo test bench clean
 
-$(STAMP): pyproject.toml
+$(RUNTIME): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[sim]'
+	touch $(RUNTIME)
+
+$(STAMP): $(RUNTIME)
 	$(PY) -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
+install-runtime: $(RUNTIME)
+
 install: $(STAMP)
 
-demo: install
+demo: install-runtime
 	$(VENV)/bin/cotwin check examples/ur5e
 	$(VENV)/bin/cotwin verify examples/ur5e/arm.rst
 	$(VENV)/bin/cotwin build examples/ur5e/cotwin.toml -o $(OUT)

@@ -173,6 +173,17 @@ def test_a_perturbation_beyond_the_threshold_shows_one_within_it_does_not(twin, 
     ("Advance", [], r"Advance takes 1 argument\(s\) \(Dt\), got 0.*BadArgumentsMissing"),
     ("Advance", [ua.Variant(0.1, ua.VariantType.Double)] * 2, r"BadTooManyArguments"),
     ("AdvanceTo", [ua.Variant(-5.0, ua.VariantType.Double)], r"Time must be within"),
+    # hostile goals (issue 22): nested JSON was "internal error", 1e308 rad was accepted
+    ("Command", [ua.Variant("[" * 50_000, ua.VariantType.String)], r"Goals is nested too deeply.*BadTypeMismatch"),
+    ("Command", [ua.Variant('{"M1": {"M1": {"M1": 0.1}}}', ua.VariantType.String)],
+     r"goal 'M1' must be a number, got dict.*BadTypeMismatch"),
+    ("Command", [ua.Variant(" " * 70_000 + "{}", ua.VariantType.String)], r"Goals is 70002 characters long"),
+    ("Command", [ua.Variant('{"M2": 1e308}', ua.VariantType.String)],
+     r"goal 'M2' = 1e\+308 rad is outside joint shoulder_lift_joint's range \[-6.28319, 6.28319\] rad.*BadOutOfRange"),
+    ("CommandJoints", [ua.Variant(["M1"], ua.VariantType.String), ua.Variant([-1e308], ua.VariantType.Double)],
+     r"goal 'M1' = -1e\+308 rad is outside joint shoulder_pan_joint's range"),
+    ("CommandJoints", [ua.Variant(["LFM"], ua.VariantType.String), ua.Variant([0.05], ua.VariantType.Double)],
+     r"goal 'LFM' = 0.05 m is outside joint Gripper_left_finger_joint's range \[0, 0.019\] m"),
 ])
 def test_bad_requests_are_refused_with_a_status_naming_the_problem(client, plant, method, args, message):
     client.start()
@@ -221,12 +232,22 @@ def test_a_plant_only_serves_loopback(twin):
 
 
 def test_nothing_listening_is_a_clear_error(twin, tmp_path):
+    """Connection refused, whether credentials are configured or not (without them it said "no operator
+    credentials", as if the plant were up)."""
     url = f"opc.tcp://127.0.0.1:{_free_port()}"
     env = {"COTWIN_OPCUA_USER": "cotwin", "COTWIN_OPCUA_PASSWORD": "x"}
-    with pytest.raises(CotwinError, match=f"the plant at {url} failed connect: connection refused"):
+    refused = rf"the plant at {url} failed connect: connection refused \(is the plant running\?\)"
+    with pytest.raises(CotwinError, match=refused):
         OPCUAEndpoint(twin.models.tree, url, timeout=2, environ=env)
-    with pytest.raises(CotwinError, match="no operator credentials for the plant at"):
+    with pytest.raises(CotwinError, match=refused):
         OPCUAEndpoint(twin.models.tree, url, timeout=2, environ={"XDG_RUNTIME_DIR": str(tmp_path)})
+
+
+def test_a_plant_without_its_credentials_file_is_named_as_such(twin, serve, tmp_path):
+    """A plant that listens but whose credentials this user cannot find: that is what is said."""
+    plant = serve()
+    with pytest.raises(CotwinError, match="no operator credentials for the plant at"):
+        OPCUAEndpoint(twin.models.tree, plant.url, timeout=2, environ={"XDG_RUNTIME_DIR": str(tmp_path / "elsewhere")})
 
 
 @pytest.fixture()

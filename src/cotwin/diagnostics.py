@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copyreg
 from dataclasses import dataclass
 from enum import Enum
 from typing import Iterable
@@ -39,7 +40,20 @@ class Finding:
         return f"{self.location.path}: {self.severity.value}: {self.message}"
 
 
-class CotwinError(Exception):
+class PicklableError(Exception):
+    """An exception that crosses process boundaries (a sweep's or a what-if's worker, a Ray task) intact.
+
+    Pickle rebuilds an exception as `cls(*self.args)`; an __init__ taking other arguments than the
+    message it passes on (e.g. unit, time, call, detail) then fails in the receiving process, and a
+    process pool reports only that it broke. This one is rebuilt as `cls.__new__(cls, *args)` (its
+    __init__ not called) with its attributes restored: pickle's NEWOBJ, which names the class itself.
+    """
+
+    def __reduce__(self):
+        return copyreg.__newobj__, (type(self), *self.args), self.__dict__
+
+
+class CotwinError(PicklableError):
     """Bad input: carries every finding, each with its location. Never a bare traceback."""
 
     def __init__(self, findings: Iterable[Finding | str] | str):

@@ -1,5 +1,9 @@
 """A figure like the paper's Fig. 16 from a Maestro-format outputs.csv: commands and their arguments,
-the d-model's operation calls, and the joint angles over time."""
+the d-model's operation calls, and the joint angles over time.
+
+Every axis names its unit; variables of different units are on different axes (the twin chooses the
+panels, cotwin.twin.run.figure_panels); within an axis each line has its own colour and, past ten
+lines, its own dash pattern; legends sit beside the axes, never over the data."""
 
 from __future__ import annotations
 
@@ -23,44 +27,72 @@ def read_csv(path: str | Path) -> dict[str, list]:
     return columns
 
 
+COLOURS = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#F0E442",
+           "#8C564B", "#7F7F7F")  # Okabe-Ito (colour-blind safe), then two of tab10's
+DASHES = ("-", "--", "-.", ":")
+
+
+def line_style(k: int) -> dict:
+    """The k-th line of an axis: a colour of its own, and a dash pattern of its own past ten lines."""
+    return {"color": COLOURS[k % len(COLOURS)], "linestyle": DASHES[(k // len(COLOURS)) % len(DASHES)]}
+
+
+def legend_beside(ax, handles: int) -> None:
+    """The axis' legend to its right, outside the plotted area: it never hides a line."""
+    if handles:
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0,
+                  ncol=1 if handles <= 8 else 2, frameon=False)
+
+
+def labelled(label: str) -> str:
+    """A panel's label with a unit: one given in brackets is kept, else the values are the model's own."""
+    return label if "[" in label else f"{label} [model units]"
+
+
 def figure(csv_path: str | Path, png_path: str | Path, panels: list[tuple[str, list[str], str]],
            title: str = "") -> Path:
     """A figure like the paper's Fig. 16 from a Maestro-format outputs.csv: one panel per (label,
-    columns, draw style); the twin chooses the columns from its models (see `twin_panels`)."""
-    cols = read_csv(csv_path)
-    t = cols["time"]
-    panels = [(label, [c for c in names if c in cols], style) for label, names, style in panels]
-    panels = [p for p in panels if p[1]] or [("(no variables)", [], "default")]
-    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 2.3 * len(panels) + 0.6), sharex=True, squeeze=False)
-    for ax, (label, names, style) in zip(axes[:, 0], panels):
-        for name in names:
-            ax.plot(t, cols[name], drawstyle=style, label=name.split(".")[-1])
-        ax.set_ylabel(label, fontsize=8)
-        ax.grid(True, alpha=0.3)
-        if names:
-            ax.legend(fontsize=7, loc="upper right", ncol=3)
-    axes[-1, 0].set_xlabel("time [s]")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
+    columns, draw style); the twin chooses the columns from its models (see `figure_panels`)."""
+    fig = draw(read_csv(csv_path), panels, title)
     fig.savefig(png_path, dpi=90)
     plt.close(fig)
     return Path(png_path)
 
 
+def draw(cols: dict[str, list], panels: list[tuple[str, list[str], str]], title: str = ""):
+    """The matplotlib Figure of `figure`, from columns already read."""
+    t = cols["time"]
+    panels = [(label, [c for c in names if c in cols], style) for label, names, style in panels]
+    panels = [p for p in panels if p[1]] or [("(no variables) [-]", [], "default")]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(11, 2.1 * len(panels) + 0.8), sharex=True, squeeze=False,
+                             layout="constrained")
+    for ax, (label, names, style) in zip(axes[:, 0], panels):
+        for k, name in enumerate(names):
+            ax.plot(t, cols[name], drawstyle=style, label=name.split(".")[-1], linewidth=1.2, **line_style(k))
+        ax.set_ylabel(labelled(label), fontsize=8)
+        ax.grid(True, alpha=0.3)
+        legend_beside(ax, len(names))
+    axes[-1, 0].set_xlabel("time [s]")
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
 def twin_figure(pt_csv: str | Path, dt_csv: str | Path, alarms: list[dict], png_path: str | Path,
-                variables: list[str], title: str = "") -> Path:
+                variables: list[str], title: str = "", units: dict[str, str] | None = None) -> Path:
     """The live twin's figure: each monitored variable of the PT (solid) and the DT (dashed) over time,
-    deviation alarms shaded from raised to cleared."""
+    on its own axis labelled with its unit (`units`: short name -> unit), deviation alarms shaded from
+    raised to cleared."""
     pt, dt = read_csv(pt_csv), read_csv(dt_csv)
+    units = units or {}
     names = [v for v in variables if v in pt and v in dt]
     fig, axes = plt.subplots(max(len(names), 1), 1, figsize=(10, 1.7 * max(len(names), 1) + 1.2), sharex=True,
-                             squeeze=False)
+                             squeeze=False, layout="constrained")
     end = pt["time"][-1] if pt["time"] else 0.0
     for ax, name in zip(axes[:, 0], names):
         short = name.split(".")[-1]
-        ax.plot(pt["time"], pt[name], label="PT", color="tab:blue")
-        ax.plot(dt["time"], dt[name], label="DT", color="tab:orange", linestyle="--")
+        ax.plot(pt["time"], pt[name], label="PT", color=COLOURS[0])
+        ax.plot(dt["time"], dt[name], label="DT", color=COLOURS[1], linestyle="--")
         raised = {}
         for e in alarms:
             if e["variable"] != short:
@@ -71,13 +103,12 @@ def twin_figure(pt_csv: str | Path, dt_csv: str | Path, alarms: list[dict], png_
                 ax.axvspan(raised.pop(short), e["time"], color="tab:red", alpha=0.2)
         if short in raised:
             ax.axvspan(raised.pop(short), end, color="tab:red", alpha=0.2)
-        ax.set_ylabel(short, fontsize=8)
+        ax.set_ylabel(f"{short} [{units.get(short) or 'model units'}]", fontsize=8)
         ax.grid(True, alpha=0.3)
-    axes[0, 0].legend(fontsize=7, loc="upper right", ncol=2)
+    legend_beside(axes[0, 0], 2)
     axes[-1, 0].set_xlabel("time [s] (red: deviation alarm)")
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
     fig.savefig(png_path, dpi=90)
     plt.close(fig)
     return Path(png_path)

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import click
 
-from .common import MAX_HORIZON, check_finite, main, named_values, output_path, tool_point
+from .common import MAX_HORIZON, MAX_REPORTED, check_finite, main, named_values, output_path, tool_point
 
 
 def plan_file(path: str, program):
@@ -85,7 +86,8 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     from pathlib import Path
 
     from ..twin.run import load
-    from ..twin.sweep import grid, run_sweep
+    from ..twin.sweep import ERROR, failures, grid, run_sweep
+    from .progress import ProgressReport
 
     check_finite(horizon=horizon)
     ranges: dict[str, list] = {}
@@ -97,15 +99,26 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     plans = grid(system.models.program, event, ranges)
     blob = Path(state).read_bytes() if state else None
     started = time.perf_counter()
-    rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray)
+    with ProgressReport("sweeping", "what-ifs") as progress:
+        rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress)
     wall = time.perf_counter() - started
-    columns = list(dict.fromkeys(k for r in rows for k in r))
+    ordered = [r for r in rows if ERROR not in r] + [r for r in rows if ERROR in r]  # answers' columns first
+    columns = list(dict.fromkeys(k for r in ordered for k in r))
     with open(out, "w", newline="") as f:
         writer = csv.DictWriter(f, columns, lineterminator="\n")
         writer.writeheader()
         writer.writerows(rows)
+    bad = failures(rows)
+    for k, row in bad[:MAX_REPORTED]:
+        where = ", ".join(f"{name}={value}" for name, value in row.items() if name != ERROR)
+        click.echo(f"what-if {k + 1} of {len(rows)} ({where}) failed: {row[ERROR]}", err=True)
+    if len(bad) > MAX_REPORTED:
+        click.echo(f"... and {len(bad) - MAX_REPORTED} more failed what-if(s) (the {ERROR} column of {out})", err=True)
     feasible = sum(1 for r in rows if r.get("feasible"))
-    click.echo(f"{out}: {len(rows)} what-ifs in {wall:.1f} s ({'Ray' if ray else 'local pool'}), {feasible} feasible")
+    click.echo(f"{out}: {len(rows)} what-ifs in {wall:.1f} s ({'Ray' if ray else 'local pool'}), {feasible} feasible"
+               + (f", {len(bad)} FAILED" if bad else ""))
+    if bad:
+        sys.exit(1)
 
 
 @main.command()
@@ -130,6 +143,7 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     from ..twin import calibration as cal
     from ..twin.project import load_project
     from ..twin.run import load
+    from .progress import ProgressReport
 
     if pt_log is None and check_log is None:
         raise click.UsageError("give --pt-log LOG -o FILE to fit, or --calibration FILE --check LOG to check")
@@ -145,7 +159,9 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     twin, program, commands = cal.project_twin(system)
     fitted = None
     if pt_log is not None:
-        report = cal.calibrate(twin, program, commands, read_arm_log(pt_log), CellGeometry(tool=point), log_start)
+        with ProgressReport("calibrating", "stages") as progress:
+            report = cal.calibrate(twin, program, commands, read_arm_log(pt_log), CellGeometry(tool=point), log_start,
+                                   progress=progress)
         fitted = report.calibration
         fitted.write(out, f"cotwin calibration of {Path(project).name}, fitted on {Path(pt_log).name} "
                           "(cotwin calibrate)")

@@ -20,14 +20,16 @@ from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchan
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
 @click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
 @click.option("--pt-log", type=click.Path(), help="replay this recorded log as the PT (overrides [pt])")
+@click.option("--pt-url", metavar="URL", help="where the PT is (overrides [pt] url; opc.tcp://HOST:PORT is an OPC UA "
+              "plant even without a [pt] table)")
 @click.option("--rabbitmq", "exchange", callback=exchange_name, help="take commands live from RabbitMQ on this exchange (overrides [scenario])")
 @click.option("--history", "history", help="history database URL (default: [history] url, else DIR/history.sqlite)")
 @click.option("--whatif", "whatif", is_flag=True, help="answer what-if requests sent over the broker (see docs)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 def twin(project: str, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
-         pt_log: str | None, exchange: str | None, history: str | None, whatif: bool, dashboard: tuple[str, int] | None,
-         cc: str) -> None:
+         pt_log: str | None, pt_url: str | None, exchange: str | None, history: str | None, whatif: bool,
+         dashboard: tuple[str, int] | None, cc: str) -> None:
     """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
     with deviation checking, alarms and history."""
     import signal
@@ -37,6 +39,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     from ..twin.project import PTSettings, RabbitMQSettings, load_project
     from ..twin.run import load
     from ..twin.runtime import LiveTwin
+    from .progress import ProgressReport
 
     check_finite(step=step, end=end)
     if pt_log is not None and not Path(pt_log).is_file():
@@ -45,6 +48,8 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     check_timing(spec, step, end)
     if pt_log is not None:
         spec.pt = replace(spec.pt, endpoint="replay", log=Path(pt_log)) if spec.pt else PTSettings("replay", log=Path(pt_log))
+    if pt_url is not None:
+        spec.pt = pt_with_url(spec.pt, pt_url, pt_log is not None)
     if exchange is not None:
         spec.plan = None
         spec.rabbitmq = replace(spec.rabbitmq, exchange=exchange) if spec.rabbitmq else RabbitMQSettings(exchange)
@@ -56,9 +61,11 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     show_warnings(after_end(system.commands, spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
                       broker if whatif else None)
+    progress = ProgressReport("twin", "s").__enter__()
     try:
         live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
-                        observers=[dash.feed] if dash else (), cc=cc, whatif_url=broker if whatif else None)
+                        observers=[*([dash.feed] if dash else ()), TwinProgress(progress)], cc=cc,
+                        whatif_url=broker if whatif else None)
 
         def interrupt(*_) -> None:
             """In the step loop, end after the step (results kept as a finished run's); before it (waiting for
@@ -78,6 +85,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
             dash.finish("failed", str(err) or type(err).__name__)
         raise
     finally:
+        progress.__exit__(None, None, None)
         if dash is not None:
             dash.stop()
     r = result.pt
@@ -86,6 +94,38 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
                f"(real-time factor {r.real_time_factor:.1f}), {state}")
     click.echo(f"deviation: {result.deviation['alarms']} alarm(s); report {result.out / 'deviation.json'}; "
                f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
+
+
+class TwinProgress:
+    """A live twin's observer that reports its simulated time against its end."""
+
+    def __init__(self, report):
+        self.report = report
+
+    def twin_step(self, twin, k: int, t: float) -> None:
+        self.report(round(t, 6), twin.end, f"step {k}")
+
+
+def pt_with_url(pt, url: str, replayed: bool):
+    """The [pt] settings with --pt-url's URL, checked as the project's [pt] url is."""
+    from dataclasses import replace
+
+    from ..twin.project import PTSettings, pt_url_problem
+
+    if replayed:
+        raise click.UsageError("--pt-url and --pt-log name two different PTs: give one")
+    if pt is None:
+        if not url.startswith("opc.tcp://"):
+            raise click.BadParameter("the project has no [pt] table, so only an OPC UA plant (opc.tcp://HOST:PORT) "
+                                     "can be named here", param_hint="--pt-url")
+        pt = PTSettings("opcua")
+    if pt.endpoint == "replay":
+        raise click.BadParameter("the project's PT replays a log ([pt] endpoint = \"replay\"), which has no url",
+                                 param_hint="--pt-url")
+    problem = pt_url_problem(pt.endpoint, url)
+    if problem is not None:
+        raise click.BadParameter(f"{problem} (for [pt] endpoint '{pt.endpoint}')", param_hint="--pt-url")
+    return replace(pt, url=url)
 
 
 @main.command()
@@ -134,19 +174,22 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None)
 @click.option("--latency-ms", type=click.FloatRange(min=0, max=10_000), metavar="MS", help="goals take effect this late")
 @click.option("--noise", type=click.FloatRange(min=0, max=1000), metavar="STD", help="Gaussian noise on every measurement")
 @click.option("--free-running", is_flag=True, help="advance in real time; Advance waits for the plant's clock")
+@click.option("--reset-on-connect", is_flag=True, help="back to the initial posture at time 0 whenever an operator "
+              "(a twin) connects, so that every twin run starts from the same posture")
 def plant(project: str, url: str | None, perturbation_file: str | None, seed: int | None, payload: float | None,
-          latency_ms: float | None, noise: float | None, free_running: bool) -> None:
+          latency_ms: float | None, noise: float | None, free_running: bool, reset_on_connect: bool) -> None:
     """Serve a stand-in robot cell over OPC UA: the project's models in the simulator, perturbed as its
     [plant] table and these options say, until SIGINT or SIGTERM."""
     from ..twin.plant import load_plant
 
     check_finite(payload=payload, latency_ms=latency_ms, noise=noise)
-    cell = load_plant(project, url, free_running, perturbation_file, seed=seed, payload=payload,
+    cell = load_plant(project, url, free_running, perturbation_file, reset_on_connect, seed=seed, payload=payload,
                       latency_ms=latency_ms, noise=noise)
 
     def announce(served) -> None:
         p = served.endpoint.perturbation
-        click.echo(f"serving {served.endpoint.tree.name} on {served.url} ({served.mode}; perturbation: "
+        click.echo(f"serving {served.endpoint.tree.name} on {served.url} ({served.mode}"
+                   f"{', reset on connect' if served.reset_on_connect else ''}; perturbation: "
                    f"{'none' if p.nominal else p.as_dict()})")
         if served.credentials_file is not None:
             click.echo(f"operator credentials for local clients: {served.credentials_file}")

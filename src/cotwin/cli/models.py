@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import time
 from collections import Counter
 from pathlib import Path
 
@@ -102,20 +103,41 @@ def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, out
               help="values of an event's value port, e.g. MovementArgs_target_X=0..15 (repeatable)")
 @click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1, max=10 ** 8),
               help="stop exploring after this many states")
-def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, ...], max_states: int) -> None:
+@click.option("--random", "random_values", metavar="V1,V2,...", help="the values Mathematics::random() takes in "
+              "the search, each draw a choice (default: 0,0.5)")
+def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, ...], max_states: int,
+           random_values: str | None) -> None:
     """Explore every state of a d-model module under every input combination; check the core
-    properties (timelock, determinism, divergence, repeated outputs) and reachability."""
+    properties (timelock, determinism, divergence, repeated outputs) and reachability. Exit 0: all
+    hold; 1: a violation (or, in a complete search, something unreachable); 3: the search stopped at
+    --max-states without finding a violation (not verified)."""
     from ..dmodel.program import build_program
-    from ..dmodel.verify import format_report, verify as explore
+    from ..dmodel.verify import RANDOM_VALUES, format_report, verify as explore
     from ..robosim.check import load_checked
+    from .progress import ProgressReport
 
     program = build_program(load_checked(model), module_name)
     parsed = dict(named_values(d, "--domain") for d in domains)
-    known = [port for ev in program.inputs for port, _ in ev.value_ports]
-    unknown = [name for name in parsed if name not in known]
+    draws = RANDOM_VALUES if random_values is None else tuple(named_values(f"random={random_values}", "--random")[1])
+    ports = {port: port for ev in program.inputs for port, _ in ev.value_ports}
+    # a scalar event's one value port may be named by the event (closestDistance for closest_distance)
+    ports.update({ev.name: ev.value_ports[0][0] for ev in program.inputs if len(ev.value_ports) == 1})
+    unknown = [name for name in parsed if name not in ports]
     if unknown:
+        known = [port for ev in program.inputs for port, _ in ev.value_ports]
         raise click.BadParameter(f"{', '.join(unknown)}: not a value port of an input event of module "
                                  f"{program.module.name} (ports: {', '.join(known) or 'none'})", param_hint="--domain")
-    report = explore(program, parsed, max_states=max_states)
+    resolved = {ports[name]: values for name, values in parsed.items()}
+    if len(resolved) < len(parsed):
+        raise click.BadParameter("a port is given twice (by its name and by its event's)", param_hint="--domain")
+    with ProgressReport("verifying", "states") as progress:
+        started = time.monotonic()
+
+        def report_progress(states: int, cycles: int, frontier: int) -> None:
+            rate = cycles / max(time.monotonic() - started, 1e-9)
+            progress(states, None, f"limit {max_states}, {cycles} cycles ({rate:,.0f} cycles/s), "
+                                   f"{frontier} states to expand")
+
+        report = explore(program, resolved, max_states=max_states, random_values=draws, progress=report_progress)
     click.echo(format_report(program, report))
-    sys.exit(0 if report.ok else 1)
+    sys.exit(0 if report.ok else 1 if report.violations or report.complete else 3)

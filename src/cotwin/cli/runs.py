@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import click
@@ -42,10 +41,9 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
         realtime: bool | None, dashboard: tuple[str, int] | None, cc: str) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
-    from rich.progress import Progress
-
     from ..twin.history import database_url
     from ..twin.run import load, run_twin
+    from .progress import ProgressReport
 
     check_finite(step=step, end=end)
     system = load(project)
@@ -58,11 +56,9 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     show_warnings(after_end(system.commands, system.spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "run", history)
     try:
-        with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
-            task = bar.add_task("co-simulating", total=1)
+        with ProgressReport("co-simulating", "steps") as progress:
             ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc,
-                           observers=[dash.feed] if dash else None,
-                           progress=lambda k, n: bar.update(task, completed=k, total=n))
+                           observers=[dash.feed] if dash else None, progress=progress)
     finally:
         if dash is not None:
             dash.stop()

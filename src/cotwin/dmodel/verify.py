@@ -7,7 +7,17 @@ so each violation comes with a shortest input trace.
 Event values: a value that no condition reads (it is only passed on to outputs) cannot change the
 control flow, so one representative value explores all behaviours (data independence); values that
 conditions read range over their domain (--domain, or a small default: 0 and 1, false and true,
-every enumeration literal).
+every enumeration literal). A default domain is a sample: a transition that no sampled value enables
+is reported with the inputs to give values for (`sampled`).
+
+Random draws (Mathematics::random, uninterpreted functions): a run draws them from a seeded
+pseudo-random sequence, whose state would make every cycle's state new and the search endless; the
+verifier makes each draw a choice point instead and explores every choice (Mathematics::random takes
+each of RANDOM_VALUES, or --random; an uninterpreted function's result each value of its type's
+default domain, as an input's), so what it checks holds for any sequence of draws from those values.
+
+A search stops at `max_states`: it is then incomplete, and reports what it did not reach as not
+reached within the limit, never as a failure.
 """
 
 from __future__ import annotations
@@ -16,6 +26,7 @@ import itertools
 import time
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Callable
 
 from ..robosim import syntax as s
 from ..robosim.dmodel_elements import State
@@ -24,16 +35,23 @@ from .interpreter import ExecutionError, Interpreter
 from .program import Program, Scalar, scalars
 
 
+PROGRESS_CYCLES = 2_000  # cycles between two calls of verify's progress
+RANDOM_VALUES = (0.0, 0.5)  # the values a real random draw takes in the search (Mathematics::random is in [0, 1))
+
+
 @dataclass
 class Violation:
     property: str  # timelock | determinism | divergence | repeated-output | ...
     message: str
     trace: list[dict]
+    draws: list[tuple] = field(default_factory=list)  # per cycle of the trace, the random draws chosen
 
     def format(self) -> str:
         lines = [f"{self.property}: {self.message}", "  shortest input trace:"]
         for i, inputs in enumerate(self.trace, 1):
-            lines.append(f"    cycle {i}: {format_inputs(inputs)}")
+            drawn = self.draws[i - 1] if i - 1 < len(self.draws) else ()
+            lines.append(f"    cycle {i}: {format_inputs(inputs)}"
+                         + (f", random draws {', '.join(map(str, drawn))}" if drawn else ""))
         return "\n".join(lines)
 
 
@@ -62,6 +80,9 @@ class Report:
     input_combinations: int = 0
     value_notes: list[str] = field(default_factory=list)
     complete: bool = True
+    max_states: int = 0
+    sampled: list[str] = field(default_factory=list)  # value ports explored with a default domain only
+    random_values: tuple = ()  # what a real random draw took (empty: the model draws none)
 
     @property
     def ok(self) -> bool:
@@ -134,17 +155,27 @@ def _build_value(ty, values: dict[tuple[str, ...], object], resolver):
     return values[()]
 
 
-def event_values(program: Program, domains: dict[str, list]) -> tuple[dict[str, list], list[str]]:
-    """The values each typed input event takes during exploration, and notes saying why."""
+def _whole_domain(sc: Scalar) -> bool:
+    """Does the default domain hold every value of the type (Booleans, enumerations)?"""
+    return sc.ty == BOOL or isinstance(sc.ty, EnumTy)
+
+
+def event_values(program: Program, domains: dict[str, list],
+                 sampled: list[str] | None = None) -> tuple[dict[str, list], list[str]]:
+    """The values each typed input event takes during exploration, and notes saying why; the value
+    ports whose default domain is only a sample of their type are added to `sampled`."""
     relevant = condition_variables(program)
     out: dict[str, list] = {}
     notes = []
+    sampled = [] if sampled is None else sampled
     for ev in program.inputs:
         if ev.ty is None:
             continue
         ports = ev.value_ports
         explicit = {port: domains[port] for port, _ in ports if port in domains}
         bound = _bound_variables(program, ev.name)
+        if bound & relevant:
+            sampled.extend(port for port, sc in ports if port not in explicit and not _whole_domain(sc))
         if not explicit and not (bound & relevant):
             combos = [{sc.path: _default_domain(sc)[0] for _, sc in ports}]
             notes.append(f"{ev.name}: its value is not read by any condition (data independent): "
@@ -166,55 +197,126 @@ def input_combinations(program: Program, values: dict[str, list]):
             yield dict(zip(present, choice))
 
 
+class Draws:
+    """The verifier's random source: every draw is a choice point (see the module doc). `prefix` holds
+    the choices of the draws so far (an index into each draw's values; draws beyond it take the first
+    value) and `sizes` records how many values each draw had, so that the search can try the others.
+    Its `state` never changes, so a snapshot no longer grows with the draws."""
+
+    state = 0
+
+    def __init__(self, reals: tuple[float, ...]):
+        self.reals = tuple(reals)
+        self.prefix: tuple[int, ...] = ()
+        self.sizes: list[int] = []
+        self.drawn: list = []
+
+    def _choose(self, values):
+        k = len(self.sizes)
+        self.sizes.append(len(values))
+        value = values[self.prefix[k]] if k < len(self.prefix) else values[0]
+        self.drawn.append(value)
+        return value
+
+    def real(self) -> float:
+        return self._choose(self.reals)
+
+    def value(self, ty):
+        """An uninterpreted function's result: each value of its type's default domain."""
+        if ty == REAL:
+            return self._choose((0.0, 1.0))
+        if ty == BOOL:
+            return self._choose((False, True))
+        if isinstance(ty, EnumTy):
+            return self._choose(tuple(range(len(ty.decl.literals))))
+        return self._choose((0, 1))
+
+    def start(self, prefix: tuple[int, ...]) -> None:
+        self.prefix, self.sizes, self.drawn = prefix, [], []
+
+    def alternatives(self) -> list[tuple[int, ...]]:
+        """The prefixes of the choices not yet tried below the current one (each full choice once)."""
+        out = []
+        for j in range(len(self.prefix), len(self.sizes)):
+            for k in range(1, self.sizes[j]):
+                out.append(self.prefix + (0,) * (j - len(self.prefix)) + (k,))
+        return out
+
+
 def verify(program: Program, domains: dict[str, list] | None = None, max_states: int = 100_000,
-           parameters: dict | None = None) -> Report:
+           parameters: dict | None = None, random_values: tuple[float, ...] = RANDOM_VALUES,
+           progress: Callable[[int, int, int], None] | None = None) -> Report:
+    """Explore breadth first (see the module doc); `progress(states, cycles, frontier)` is called about
+    every PROGRESS_CYCLES cycles."""
     started = time.perf_counter()
-    report = Report()
-    values, report.value_notes = event_values(program, domains or {})
+    report = Report(max_states=max_states)
+    values, report.value_notes = event_values(program, domains or {}, report.sampled)
     combos = list(input_combinations(program, values))
     report.input_combinations = len(combos)
     interp = Interpreter(program, parameters)
+    draws = Draws(random_values)
+    interp.random = draws
     interp.taken = set()  # every (machine, edge) taken anywhere in the exploration
     root = interp.snapshot()
     parent: dict = {root: None}
     depth = {root: 0}
     queue = deque([root])
     found: dict[tuple[str, str], Violation] = {}
+    drew = False
 
     def trace_to(snap, last):
         path = [last]
         while parent[snap] is not None:
-            snap, inputs = parent[snap]
-            path.append(inputs)
-        return list(reversed(path))
+            snap, step = parent[snap]
+            path.append(step)
+        path.reverse()
+        return Violation("", "", [inputs for inputs, _ in path], [d for _, d in path])
+
+    def violation(kind: str, message: str, snap, inputs) -> Violation:
+        v = trace_to(snap, (inputs, tuple(draws.drawn)))
+        v.property, v.message = kind, message
+        if not drew:
+            v.draws = []
+        return v
 
     while queue:
         snap = queue.popleft()
         for inputs in combos:
-            interp.restore(snap)
-            interp.cycle = depth[snap]
-            interp.warnings = []
-            report.cycles += 1
-            try:
-                interp.step(inputs)
-            except ExecutionError as err:
-                key = (err.kind, err.site or err.findings[0].message)
-                if key not in found:  # breadth first: the first one found has a shortest trace
-                    found[key] = Violation(err.kind, err.findings[0].message, trace_to(snap, inputs))
-                continue
-            for w in interp.warnings:
-                key = ("determinism", w.site)
-                if key not in found:
-                    found[key] = Violation("determinism", str(w), trace_to(snap, inputs))
-            nxt = interp.snapshot()
-            if nxt not in parent:
-                if len(parent) >= max_states:
-                    report.complete = False
+            choices = [()]
+            while choices:
+                prefix = choices.pop()
+                interp.restore(snap)
+                interp.cycle = depth[snap]
+                interp.warnings = []
+                draws.start(prefix)
+                report.cycles += 1
+                if progress is not None and report.cycles % PROGRESS_CYCLES == 0:
+                    progress(len(parent), report.cycles, len(queue))
+                try:
+                    interp.step(inputs)
+                except ExecutionError as err:
+                    choices.extend(draws.alternatives())
+                    drew = drew or bool(draws.sizes)
+                    key = (err.kind, err.site or err.findings[0].message)
+                    if key not in found:  # breadth first: the first one found has a shortest trace
+                        found[key] = violation(err.kind, err.findings[0].message, snap, inputs)
                     continue
-                parent[nxt] = (snap, inputs)
-                depth[nxt] = depth[snap] + 1
-                queue.append(nxt)
+                choices.extend(draws.alternatives())
+                drew = drew or bool(draws.sizes)
+                for w in interp.warnings:
+                    key = ("determinism", w.site)
+                    if key not in found:
+                        found[key] = violation("determinism", str(w), snap, inputs)
+                nxt = interp.snapshot()
+                if nxt not in parent:
+                    if len(parent) >= max_states:
+                        report.complete = False
+                        continue
+                    parent[nxt] = (snap, (inputs, tuple(draws.drawn)))
+                    depth[nxt] = depth[snap] + 1
+                    queue.append(nxt)
     report.states = len(parent)
+    report.random_values = draws.reals if drew else ()
     report.violations = sorted(found.values(), key=lambda v: (len(v.trace), v.property))
     for m in program.machines:
         # a state is reached when a taken transition enters it, even if the cycle moves on from it
@@ -233,20 +335,36 @@ def format_report(program: Program, report: Report) -> str:
     lines = [f"module {program.module.name}: {report.states} states, {report.cycles} cycles explored "
              f"({report.input_combinations} input combinations per state) in {report.seconds:.2f} s"]
     lines.extend(f"  note: {n}" for n in report.value_notes)
+    if report.random_values:
+        lines.append(f"  note: every random draw is a choice: random() takes each of "
+                     f"{', '.join(f'{v:g}' for v in report.random_values)} (--random), an uninterpreted function "
+                     "each value of its type's default domain")
+    sampled = (f"{', '.join(report.sampled)} took only sample values (0 and 1): give the values that matter "
+               f"with --domain {report.sampled[0]}=V1,V2,...") if report.sampled else ""
     if not report.complete:
-        lines.append("  INCOMPLETE: the state limit was reached; raise --max-states")
+        lines.append(f"  INCOMPLETE: the search stopped at its limit of {report.max_states} states: what it "
+                     "found holds, what it did not reach is not judged (raise --max-states"
+                     + (f"; {sampled}" if sampled else "") + ")")
     props = [("timelock", "deadlock/timelock freedom"), ("determinism", "determinism"),
              ("divergence", "divergence freedom"), ("repeated-output", "at most one of each output per cycle")]
     for key, title in props:
         bad = [v for v in report.violations if v.property == key]
-        lines.append(f"{'FAIL' if bad else 'ok  '} {title}" + (f": {len(bad)} violation(s)" if bad else ""))
+        if bad:
+            lines.append(f"FAIL {title}: {len(bad)} violation(s)")
+        else:
+            lines.append(f"ok   {title}" if report.complete else f"?    {title}: no violation within the limit")
     others = [v for v in report.violations if v.property not in dict(props)]
     for v in others:
         lines.append(f"FAIL {v.property}")
-    lines.append(("FAIL" if report.unreached_states else "ok  ") + " every state reachable"
-                 + (": unreachable " + ", ".join(report.unreached_states) if report.unreached_states else ""))
-    lines.append(("FAIL" if report.unreached_transitions else "ok  ") + " every transition can be taken"
-                 + (": never taken " + ", ".join(report.unreached_transitions) if report.unreached_transitions else ""))
+    for what, title, missing in (("state", "every state reachable", report.unreached_states),
+                                 ("transition", "every transition can be taken", report.unreached_transitions)):
+        verb = "reached" if what == "state" else "taken"
+        if not missing:
+            lines.append(f"ok   {title}")
+        elif report.complete:
+            lines.append(f"FAIL {title}: never {verb} " + ", ".join(missing) + (f" ({sampled})" if sampled else ""))
+        else:
+            lines.append(f"?    {title}: not {verb} within the limit: " + ", ".join(missing))
     for v in report.violations:
         lines.append("")
         lines.append(v.format())

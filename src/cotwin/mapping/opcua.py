@@ -41,7 +41,7 @@ import threading
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, PicklableError
 from ..pmodel.mjcf import pose_paths, sensor_name
 from ..pmodel.tree import KinematicTree
 from .opcua_auth import client_credentials, parse_url
@@ -53,9 +53,12 @@ ROBOT = "Robot"
 DT_MAX = 10.0  # s: the longest Advance
 STATE = ("Time", "Positions", "Velocities", "Sensors", "Goals")
 MODES = ("lockstep", "free-running")
+MAX_GOALS_TEXT = 65_536  # characters of Command's JSON argument
+MAX_GOAL = 1e6  # rad, m, rad/s...: the bound of a goal whose joint declares no limit
+RANGE_SLACK = 1e-9  # of a range's width: rounding in a goal computed at a limit
 
 
-class RequestError(Exception):
+class RequestError(PicklableError):
     """A refused call: the OPC UA status name, why, and the index of the argument at fault (if one is)."""
 
     def __init__(self, status: str, message: str, argument: int | None = None):
@@ -70,13 +73,18 @@ def _is_real(value) -> bool:
 
 
 def parse_goals(text) -> dict[str, float]:
-    """Command's JSON argument: an object of actuator -> finite number."""
+    """Command's JSON argument: an object of actuator -> finite number (at most MAX_GOALS_TEXT characters)."""
     if not isinstance(text, str):
         raise RequestError("BadTypeMismatch", f"Goals must be a String holding a JSON object, got {type(text).__name__}", 0)
+    if len(text) > MAX_GOALS_TEXT:
+        raise RequestError("BadOutOfRange", f"Goals is {len(text)} characters long, more than {MAX_GOALS_TEXT}", 0)
     try:
         goals = json.loads(text)
     except json.JSONDecodeError as err:
         raise RequestError("BadTypeMismatch", f"Goals is not JSON: {err.msg} at character {err.pos}", 0) from None
+    except RecursionError:
+        raise RequestError("BadTypeMismatch", "Goals is nested too deeply: a JSON object {actuator: value} "
+                                              "holds numbers only", 0) from None
     if not isinstance(goals, dict):
         raise RequestError("BadTypeMismatch", "Goals must be a JSON object {actuator: value}", 0)
     return check_goals(goals, 0)
@@ -85,10 +93,39 @@ def parse_goals(text) -> dict[str, float]:
 def check_goals(goals: dict, argument: int) -> dict[str, float]:
     for name, value in goals.items():
         if not _is_real(value):
-            raise RequestError("BadTypeMismatch", f"goal '{name}' must be a number, got {value!r}", argument)
+            shown = type(value).__name__ if isinstance(value, (dict, list)) else repr(value)
+            raise RequestError("BadTypeMismatch", f"goal '{name}' must be a number, got {shown:.80}", argument)
         if not math.isfinite(value):
             raise RequestError("BadOutOfRange", f"goal '{name}' must be a finite number, got {value!r}", argument)
     return {name: float(value) for name, value in goals.items()}
+
+
+def goal_range(joint) -> tuple[float, float, str]:
+    """The goals a joint's servo takes (low, high, unit): a position within the joint's limits, a speed
+    or an effort within its velocity or effort limit; MAX_GOAL either way where the p-model gives none."""
+    from ..pmodel.mjcf import servo_mode
+
+    mode = servo_mode(joint)
+    base = "rad" if joint.kind == "revolute" else "m"
+    if mode == "position":
+        low = joint.lower if joint.lower is not None else -MAX_GOAL
+        high = joint.upper if joint.upper is not None else MAX_GOAL
+        return low, high, base
+    bound = joint.velocity if mode == "velocity" else joint.effort
+    unit = f"{base}/s" if mode == "velocity" else ("N m" if joint.kind == "revolute" else "N")
+    return (-bound, bound, unit) if bound else (-MAX_GOAL, MAX_GOAL, unit)
+
+
+def check_goal_ranges(goals: dict[str, float], joints: dict[str, object], argument: int) -> None:
+    """Every goal within its joint's range (goal_range), as a robot controller refuses a target beyond
+    a joint limit rather than clip it; `joints` maps an actuator name to its joint."""
+    for name, value in goals.items():
+        joint = joints[name]
+        low, high, unit = goal_range(joint)
+        slack = RANGE_SLACK * max(1.0, high - low)
+        if not low - slack <= value <= high + slack:
+            raise RequestError("BadOutOfRange", f"goal '{name}' = {value:g} {unit} is outside joint {joint.name}'s "
+                                                f"range [{low:g}, {high:g}] {unit}", argument)
 
 
 def check_dt(dt) -> float:
@@ -133,12 +170,18 @@ class OPCUAEndpoint:
                  environ=os.environ):
         if not (_is_real(timeout) and math.isfinite(timeout) and timeout > 0):
             raise CotwinError(f"OPC UA timeout must be a positive number of seconds, got {timeout!r}")
-        parse_url(url)
+        host, port = parse_url(url)
         self.tree = tree
         self.url = url
         self.timeout = float(timeout)
         self.reset = reset
-        self._credentials = client_credentials(url, environ)
+        try:
+            self._credentials = client_credentials(url, environ)
+        except CotwinError:  # no credentials file: say first that nobody listens, if nobody does
+            problem = _unreachable(host, port, self.timeout)
+            if problem is not None:
+                raise CotwinError(f"the plant at {url} failed connect: {problem}") from None
+            raise
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name=f"opcua client {url}", daemon=True)
         self._thread.start()
@@ -363,14 +406,25 @@ class OPCUAEndpoint:
         self.close()
 
 
+def _unreachable(host: str, port: int, timeout: float) -> str | None:
+    """Why nothing answers at host:port (e.g. connection refused), or None when something listens."""
+    import socket
+
+    try:
+        socket.create_connection((host, port), timeout=min(timeout, 5.0)).close()
+    except OSError as err:
+        return _describe_error(err)
+    return None
+
+
 def _describe_error(err: BaseException) -> str:
     """A library's exception as one line: connection refused, closed channel, bad status."""
     if isinstance(err, ConnectionRefusedError):
         return "connection refused (is the plant running?)"
+    if isinstance(err, (asyncio.TimeoutError, TimeoutError)):
+        return "timed out"
     if isinstance(err, OSError):
         return f"connection lost ({err.strerror or type(err).__name__})"
-    if isinstance(err, asyncio.TimeoutError):
-        return "timed out"
     name = type(err).__name__
     text = str(err).strip()
     if name.startswith("Bad"):

@@ -120,16 +120,23 @@ def client_credentials(url: str, environ=os.environ) -> Credentials:
 
 
 class PlantCredentials:
-    """The plant's operator account: configured, or generated and written for local clients (removed at close)."""
+    """The plant's operator account: configured, or generated. A generated one is written for local
+    clients by `publish(url)`, which the plant calls only once it listens on that URL's port: a plant that
+    fails to start (a busy port) never writes, and so never replaces or removes, another plant's file.
+    `close` removes the file if it still holds this account."""
 
-    def __init__(self, url: str, environ=os.environ):
+    def __init__(self, environ=os.environ):
         configured = configured_credentials(environ)
+        self._environ = environ
         self.file: Path | None = None
-        if configured is not None:
-            self.credentials = configured
+        self.generated = configured is None
+        self.credentials = configured or Credentials(DEFAULT_USER, secrets.token_urlsafe(24))
+
+    def publish(self, url: str) -> None:
+        if not self.generated:
             return
-        self.credentials = Credentials(DEFAULT_USER, secrets.token_urlsafe(24))
-        self.file = default_credentials_file(url, environ)
+        self.close()
+        self.file = default_credentials_file(url, self._environ)
         partial = self.file.with_suffix(f".{os.getpid()}.tmp")
         fd = os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         with os.fdopen(fd, "w", encoding="utf-8") as f:

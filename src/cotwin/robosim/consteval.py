@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from ..diagnostics import Diagnostics
+from ..diagnostics import Diagnostics, PicklableError
 from . import syntax as s
 from .evaluator import Evaluator
 from .operators import MATH
@@ -26,7 +26,7 @@ UNITS.update({name: 1.0 for name in ("metre", "metres", "meter", "meters", "seco
 UNITS.update({"degree": UNITS["deg"], "degrees": UNITS["deg"]})
 
 
-class ConstError(Exception):
+class ConstError(PicklableError):
     def __init__(self, loc, message: str):
         super().__init__(message)
         self.loc = loc

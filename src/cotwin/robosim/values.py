@@ -9,12 +9,14 @@ frozenset). Sets and sequences hold at most CAPACITY elements, the bound the gen
 
 from __future__ import annotations
 
+from ..diagnostics import PicklableError
+
 INT64_MIN = -(2 ** 63)
 INT64_MAX = 2 ** 63 - 1
 CAPACITY = 32  # elements of an executable Set or Seq
 
 
-class EvalError(Exception):
+class EvalError(PicklableError):
     """An expression cannot be evaluated: `kind` says why (division, overflow, index, capacity,
     unsupported, name, domain), `loc` where."""
 

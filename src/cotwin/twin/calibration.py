@@ -462,17 +462,35 @@ class CalibrationReport:
         return out
 
 
+CALIBRATION_STAGES = ("planning the moves", "fitting the geometry", "fitting the plate's surface",
+                      "fitting the motion profile", "measuring the servo lags", "replaying before and after")
+
+
 def calibrate(twin: DigitalTwin, program: Program, commands: list[Command], log: ArmLog,
-              start: CellGeometry | None = None, log_start: float = 0.0, kinematics: bool = True) -> CalibrationReport:
-    """Fit the DT to the PT's recorded run of `commands` (see the module's docstring)."""
+              start: CellGeometry | None = None, log_start: float = 0.0, kinematics: bool = True,
+              progress=None) -> CalibrationReport:
+    """Fit the DT to the PT's recorded run of `commands` (see the module's docstring); `progress(k, n,
+    stage)` is told as each of CALIBRATION_STAGES begins."""
+    stage = iter(enumerate(CALIBRATION_STAGES))
+
+    def next_stage() -> None:
+        if progress is not None:
+            k, what = next(stage)
+            progress(k, len(CALIBRATION_STAGES), what)
+
     start = start or CellGeometry(tool="flange")
+    next_stage()
     moves = plan_moves(twin, program, commands)
     motions = paired(log, moves, "the plan")
     postures = settled_postures(log, motions)
     name = f"settled posture after move 1 of {Path(log.path).name}"
+    next_stage()
     geometry_fit = fit_geometry(twin.tree, np.array([m.point for m in moves]), postures, start, kinematics, name)
+    next_stage()
     geometry_fit.geometry.surface = fit_surface(twin, geometry_fit.geometry, log.q)
+    next_stage()
     profile_fit = fit_joint_move(log, motions)
+    next_stage()
     pt_lag = pt_servo_lag(log, motions, profile_fit)
     first = motions[0]
     dt_lag = simulated_servo_lag(twin, JointMove(profile_fit.a, profile_fit.v), first.start_q, first.end_q,
@@ -482,6 +500,7 @@ def calibrate(twin: DigitalTwin, program: Program, commands: list[Command], log:
     timing = Timing(Path(log.path).name, profile_fit.onsets, latencies, pt_lag, dt_lag, log_start)
     calibration = Calibration(geometry_fit.geometry, profile, timing)
     schedule = [(onset, call) for onset, move in zip(profile_fit.onsets, moves) for call in move.calls]
+    next_stage()
     before_q = replay(twin, schedule, log.t, log.q[0])  # the DT as it is
     after_q = replay(twin, schedule, log.t, log.q[0], calibration.geometry, calibration.profile)
     joints = ik.arm_joints(twin.tree, ik.find_tool(twin.tree))
@@ -492,6 +511,8 @@ def calibrate(twin: DigitalTwin, program: Program, commands: list[Command], log:
                        "settled_error_after": [float(v) for v in after.settled],
                        "plate_rigid_residual_mm": float(1000 * geometry_fit.rigid_residuals.max()),
                        "setpoint_rms": profile_fit.rms}
+    if progress is not None:
+        progress(len(CALIBRATION_STAGES), len(CALIBRATION_STAGES), "done")
     return CalibrationReport(calibration, before, after, geometry_fit, profile_fit, pt_lag, dt_lag, moves)
 
 

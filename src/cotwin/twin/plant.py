@@ -11,6 +11,14 @@ Two clocks:
   Advance(Dt) waits until the plant's time reaches its time at the call plus Dt, AdvanceTo(T) until it
   reaches T (at once if it already has), and both return the state then. Commands apply at once.
 
+Reset: the Reset method puts the cell back in the project's initial posture at time 0 (goals, pending
+commands and the noise generator too); with `--reset-on-connect` the plant does so whenever an operator
+session is activated, so that every twin run starts from the same posture as its DT.
+
+Credentials and the port: a plant writes its generated operator credentials only once it listens
+(cotwin.mapping.opcua_auth), so a second plant on a busy port touches nothing of the first one's; it
+is refused naming the process that holds the port (cotwin.listeners).
+
 Security (what is on by default): the server listens only on a loopback address (a non-loopback host
 is refused); it offers no OPC UA message security (Basic256Sha256 needs certificates on both sides, a
 later option), so it relies on the loopback rule for confidentiality. Anonymous sessions may browse,
@@ -22,6 +30,7 @@ Every call is checked; a bad one is refused with an OPC UA status naming the pro
 from __future__ import annotations
 
 import asyncio
+import errno
 import json
 import logging
 import math
@@ -32,7 +41,9 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from ..diagnostics import CotwinError
-from ..mapping.opcua import (DT_MAX, NAMESPACE, ROBOT, RequestError, check_dt, check_goals, check_time, parse_goals)
+from ..listeners import in_use_message
+from ..mapping.opcua import (DT_MAX, NAMESPACE, ROBOT, RequestError, check_dt, check_goal_ranges, check_goals, check_time,
+                             parse_goals)
 from ..mapping.opcua_auth import PlantCredentials, is_loopback, parse_url
 from ..mapping.perturbed import PerturbedEndpoint
 from ..pmodel.perturbation import Perturbation, check_joints, read_perturbation, read_table
@@ -51,10 +62,12 @@ def _ua():
 
 
 class _Operators:
-    """asyncua user manager: anonymous sessions are observers, the operator login drives the cell."""
+    """asyncua user manager: anonymous sessions are observers, the operator login drives the cell.
+    `on_operator()` is called (on the server's loop) whenever an operator's session is activated."""
 
-    def __init__(self, credentials):
+    def __init__(self, credentials, on_operator=None):
         self.credentials = credentials
+        self.on_operator = on_operator
 
     def get_user(self, iserver, username=None, password=None, certificate=None):
         from asyncua.crypto.permission_rules import User, UserRole
@@ -62,6 +75,8 @@ class _Operators:
         if username is None and password is None:  # (certificate: the channel's peer, if any; not an identity here)
             return User(role=UserRole.Anonymous)
         if self.credentials.matches(username, password):
+            if self.on_operator is not None:
+                self.on_operator()
             return User(role=UserRole.User, name=username)
         return None  # refused: Bad_UserAccessDenied at ActivateSession
 
@@ -95,7 +110,7 @@ class Plant:
     on one worker thread, so calls are applied one at a time in arrival order."""
 
     def __init__(self, endpoint: PerturbedEndpoint, url: str = "opc.tcp://127.0.0.1:4840",
-                 free_running: bool = False, environ=os.environ):
+                 free_running: bool = False, environ=os.environ, reset_on_connect: bool = False):
         host, port = parse_url(url)
         if not is_loopback(host):
             raise CotwinError(f"the plant serves on loopback addresses only (127.0.0.1, ::1), not '{host}': "
@@ -106,6 +121,8 @@ class Plant:
         self.url = url
         self.free_running = free_running
         self.mode = "free-running" if free_running else "lockstep"
+        self.reset_on_connect = reset_on_connect
+        self.resets = 0
         self._environ = environ
         self._tree = endpoint.tree
         self.joints = [j.name for j in self._tree.actuated]
@@ -124,7 +141,7 @@ class Plant:
 
     # ---- life cycle ----
     def start(self, timeout: float = 30.0) -> "Plant":
-        self._credentials = PlantCredentials(self.url, self._environ)
+        self._credentials = PlantCredentials(self._environ)
         self._thread = threading.Thread(target=self._serve, name=f"plant {self.url}", daemon=True)
         self._thread.start()
         if not self._ready.wait(timeout):
@@ -133,6 +150,8 @@ class Plant:
         if self._failure is not None:
             failure, self._failure = self._failure, None
             self.stop()
+            if isinstance(failure, OSError) and failure.errno == errno.EADDRINUSE:
+                raise CotwinError(f"cannot serve the plant on {self.url}: {in_use_message(self.host, self.port)}") from None
             raise CotwinError(f"cannot serve the plant on {self.url}: {_reason(failure)}") from None
         return self
 
@@ -182,7 +201,8 @@ class Plant:
         ua = _ua()
         self._stopping = asyncio.Event()
         self._advanced = asyncio.Condition()
-        server = Server(user_manager=_Operators(self._credentials.credentials))
+        server = Server(user_manager=_Operators(self._credentials.credentials,
+                                                self._operator_connected if self.reset_on_connect else None))
         await server.init()
         server.set_endpoint(f"opc.tcp://{self.host}:{self.port}/" if ":" not in self.host
                             else f"opc.tcp://[{self.host}]:{self.port}/")
@@ -198,10 +218,7 @@ class Plant:
         if self.port == 0:
             self.port = server.bserver.port
             self.url = f"opc.tcp://{self.host}:{self.port}"
-            if self._credentials.file is not None:  # written for port 0: move it to the real port
-                self._credentials.close()
-                self._credentials = PlantCredentials(self.url, self._environ)
-                server.iserver.user_manager = _Operators(self._credentials.credentials)
+        self._credentials.publish(self.url)  # the port is ours now: so is its credentials file
         await self._publish(await self._on_sim(self._snapshot))
         self._ready.set()
         ticker = asyncio.create_task(self._run_free()) if self.free_running else None
@@ -368,6 +385,10 @@ class Plant:
                                    f"{', '.join(a for a in self.actuators if '::' not in a)}, or their mapping paths)",
                                    argument)
 
+    def _check_ranges(self, goals: dict[str, float], argument: int) -> None:
+        joints = {j.name: j for j in self._tree.actuated}
+        check_goal_ranges(goals, {name: joints[self.actuators[name]] for name in goals}, argument)
+
     async def _apply(self, goals: dict[str, float]) -> list:
         def apply():
             self.endpoint.command(goals)
@@ -378,6 +399,7 @@ class Plant:
     async def _command(self, text) -> list:
         goals = parse_goals(text)
         self._check_names(goals, 0)
+        self._check_ranges(goals, 0)
         return await self._apply(goals)
 
     async def _command_joints(self, names, values) -> list:
@@ -390,7 +412,9 @@ class Plant:
         if len(set(names)) != len(names):
             raise RequestError("BadInvalidArgument", "an actuator is named twice", 0)
         self._check_names(dict.fromkeys(names), 0)
-        return await self._apply(check_goals(dict(zip(names, values)), 1))
+        goals = check_goals(dict(zip(names, values)), 1)
+        self._check_ranges(goals, 1)
+        return await self._apply(goals)
 
     async def _advance(self, dt) -> list:
         dt = check_dt(dt)
@@ -413,14 +437,28 @@ class Plant:
         self.endpoint.advance(dt)
         return self._snapshot()
 
-    async def _reset(self) -> list:
-        def reset():
-            self.endpoint.reset()
-            return self._snapshot()
+    def _reset_now(self) -> tuple:
+        """Back to the project's initial posture at time 0 (on the simulator's thread)."""
+        self.endpoint.reset()
+        self.resets += 1
+        return self._snapshot()
 
-        snapshot = await self._on_sim(reset)
+    async def _reset(self) -> list:
+        snapshot = await self._on_sim(self._reset_now)
         self._anchor = (time.monotonic(), 0.0)
         return await self._publish(snapshot)
+
+    def _operator_connected(self) -> None:
+        """--reset-on-connect: a new operator session starts from the initial posture. Queued on the
+        simulator's thread now, before any call of that session can be, and published when done."""
+        future = asyncio.wrap_future(self._sim.submit(self._reset_now))
+        self._anchor = (time.monotonic(), 0.0)
+        log.info("operator connected: the plant is reset to its initial posture")
+
+        async def publish() -> None:
+            await self._publish(await future)
+
+        asyncio.get_running_loop().create_task(publish())
 
     # ---- free running ----
     async def _run_free(self) -> None:
@@ -477,7 +515,7 @@ def _reason(err: BaseException) -> str:
 
 
 def load_plant(project, url: str | None = None, free_running: bool = False,
-               perturbation_file: str | Path | None = None, **options) -> Plant:
+               perturbation_file: str | Path | None = None, reset_on_connect: bool = False, **options) -> Plant:
     """The plant of a twin project (not started): its models in the simulator with the perturbation of
     the project's [plant] table, over which a perturbation file and then `options` (Perturbation fields
     that are not None) take precedence. The URL defaults to the project's [pt] url, else port 4840."""
@@ -496,7 +534,7 @@ def load_plant(project, url: str | None = None, free_running: bool = False,
         url = spec.pt.url if spec.pt is not None and spec.pt.endpoint == "opcua" and spec.pt.url else \
             "opc.tcp://127.0.0.1:4840"
     endpoint = PerturbedEndpoint.build(system.models.tree, system.models.scene, perturbation, spec.base)
-    return Plant(endpoint, url, free_running)
+    return Plant(endpoint, url, free_running, reset_on_connect=reset_on_connect)
 
 
 __all__ = ["Plant", "load_plant", "read_perturbation"]

@@ -471,30 +471,29 @@ def _pt_keys(file: TomlFile, pt: PTSettings) -> list[Finding]:
     out = [Finding(file.location(("pt", key)), Severity.ERROR, f"[pt] {key} does not apply to endpoint "
                    f"'{pt.endpoint}' (it takes {', '.join(PT_KEYS[pt.endpoint])})")
            for key in raw if key != "endpoint" and key not in PT_KEYS[pt.endpoint]]
-    if pt.url is None:
-        return out
-    if pt.endpoint == "opcua":
-        out.extend(_opcua_url(file, pt.url))
-    elif pt.endpoint == "broker" and _amqp_url(pt.url):
-        out.append(Finding(file.location(("pt", "url")), Severity.ERROR, f"[pt] url: {_amqp_url(pt.url)}"))
-    elif pt.endpoint == "rtde" and not re.fullmatch(r"(rtde://)?[A-Za-z0-9_.\-\[\]:]+", pt.url):
-        out.append(Finding(file.location(("pt", "url")), Severity.ERROR,
-                           f"[pt] url: {pt.url[:60]!r} is not a robot's host (rtde://HOST or HOST)"))
+    problem = None if pt.url is None else pt_url_problem(pt.endpoint, pt.url)
+    if problem is not None:
+        out.append(Finding(file.location(("pt", "url")), Severity.ERROR, f"[pt] url: {problem}"))
     return out
 
 
-def _opcua_url(file: TomlFile, url: str) -> list[Finding]:
-    """A [pt] url for the opcua endpoint: opc.tcp://HOST:PORT with a port in 1..65535."""
+def pt_url_problem(endpoint: str, url: str) -> str | None:
+    """What is wrong with a PT url for this endpoint kind ([pt] url, cotwin twin --pt-url), if anything:
+    opcua: opc.tcp://HOST:PORT with a port in 1..65535; broker: an AMQP URL; rtde: a robot's host."""
     from ..diagnostics import CotwinError
     from ..mapping.opcua_auth import parse_url
 
-    try:
-        _, port = parse_url(url)
-    except CotwinError as err:
-        return [Finding(file.location(("pt", "url")), Severity.ERROR, f"[pt] url: {f.message}") for f in err.findings]
-    if not 1 <= port <= 65535:
-        return [Finding(file.location(("pt", "url")), Severity.ERROR, f"[pt] url: port {port} is not in 1..65535")]
-    return []
+    if endpoint == "opcua":
+        try:
+            _, port = parse_url(url)
+        except CotwinError as err:
+            return err.findings[0].message
+        return None if 1 <= port <= 65535 else f"port {port} is not in 1..65535"
+    if endpoint == "broker":
+        return _amqp_url(url)
+    if endpoint == "rtde" and not re.fullmatch(r"(rtde://)?[A-Za-z0-9_.\-\[\]:]+", url):
+        return f"{url[:60]!r} is not a robot's host (rtde://HOST or HOST)"
+    return None
 
 
 def _world(file: TomlFile, platform: dict, data: dict, existing, problems: list[Finding]):

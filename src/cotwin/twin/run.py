@@ -140,13 +140,62 @@ def figure_panels(system: TwinSystem) -> list[tuple[str, list[str], str]]:
     dmodel = "{dmodel}.dmodel"
     platform = [ev for ev in system.models.program.inputs if ev.name not in system.command_events
                 and ev.name in {e.name for e in system.models.mapping_model.input_events}]
-    return [("(1) commands", [f"{source}.{p}" for p in events], "steps-post"),
-            ("(2) command values", [f"{source}.{p}" for p in values], "steps-post"),
-            ("(2b) platform event values", [f"{MAPPING.name}.{port}" for ev in platform for port, _ in ev.value_ports],
-             "steps-post"),
-            ("(3) d-model operation calls", [f"{dmodel}.{c}" for c in calls], "steps-post"),
-            ("(3b) operation arguments", [f"{dmodel}.{a}" for a in args], "steps-post"),
-            ("(4) monitored variables", [f"{MAPPING.name}.{v}" for v in system.log[MAPPING.name]], "default")]
+    return [("(1) commands [1 = sent]", [f"{source}.{p}" for p in events], "steps-post"),
+            ("(2) command values [model units]", [f"{source}.{p}" for p in values], "steps-post"),
+            ("(2b) platform event values [model units]",
+             [f"{MAPPING.name}.{port}" for ev in platform for port, _ in ev.value_ports], "steps-post"),
+            ("(3) d-model operation calls [1 = called]", [f"{dmodel}.{c}" for c in calls], "steps-post"),
+            ("(3b) operation arguments [model units]", [f"{dmodel}.{a}" for a in args], "steps-post"),
+            *monitored_panels(system, "(4)")]
+
+
+#: the unit of a sensor's reading by its quantity (joint quantities take their joint's: rad or m)
+QUANTITY_UNITS = {"gyro": "rad/s", "velocimeter": "m/s", "accelerometer": "m/s²", "closest_range": "m",
+                  "range": "m", "closest_bearing": "deg", "effort": "N m"}
+POSE_UNITS = {"x": "m", "y": "m", "z": "m", "yaw": "rad"}
+
+
+def monitored_units(system: TwinSystem) -> dict[str, tuple[str, str]]:
+    """Each monitored mapping variable's quantity and unit (q0: joint angle, rad; qd0: joint speed,
+    rad/s; a reading: its sensor's), so that a figure draws each unit on its own axis."""
+    from ..mapping.runtime import mirror_variables, mirrored_joints
+    from ..pmodel.mjcf import pose_paths, sensor_name
+
+    tree = system.models.tree
+    kinds = {j.name: j.kind for j in tree.actuated}
+    variables = [v.name for v in system.models.mapping_model.variables]
+    out: dict[str, tuple[str, str]] = {}
+    mirrors = [v for v in system.models.monitored if v not in system.spec.readings]
+    if mirrors:
+        joints = mirrored_joints(tree, system.spec.mirror_joints)
+        for name, (joint, kind) in mirror_variables(variables, joints).items():
+            linear = kinds.get(joint) == "prismatic"
+            out[name] = (("joint position", "m") if linear else ("joint angle", "rad")) if kind == "position" else \
+                (("joint speed", "m/s") if linear else ("joint speed", "rad/s"))
+    sensors = {sensor_name(tree.name, s.link, s.name, s.port, s.via): s for s in tree.sensors}
+    pose = dict(zip(pose_paths(tree), POSE_UNITS))
+    for name, path in system.spec.readings.items():
+        if path in pose:
+            out[name] = (f"base {pose[path]}", POSE_UNITS[pose[path]])
+        elif path in sensors:
+            sensor = sensors[path]
+            unit = QUANTITY_UNITS.get(sensor.quantity, "")
+            if sensor.quantity in ("position", "velocity"):
+                linear = kinds.get(sensor.joint) == "prismatic"
+                unit = ("m" if linear else "rad") + ("/s" if sensor.quantity == "velocity" else "")
+            out[name] = (sensor.quantity.replace("_", " "), unit)
+    return out
+
+
+def monitored_panels(system: TwinSystem, number: str) -> list[tuple[str, list[str], str]]:
+    """The monitored variables, one panel per unit (angles apart from speeds), each labelled with it."""
+    units = monitored_units(system)
+    groups: dict[tuple[str, str], list[str]] = {}
+    for v in system.log[MAPPING.name]:
+        groups.setdefault(units.get(v, ("monitored", "")), []).append(f"{MAPPING.name}.{v}")
+    letters = "abcdefghijklmnopqrstuvwxyz"
+    return [(f"{number}{letters[k] if len(groups) > 1 else ''} {what}" + (f" [{unit}]" if unit else " [unit unknown]"),
+             names, "default") for k, ((what, unit), names) in enumerate(groups.items())]
 
 
 def load(project: str | Path | TwinProject) -> TwinSystem:

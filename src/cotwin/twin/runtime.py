@@ -338,8 +338,11 @@ class LiveTwin:
     def _figure(self) -> None:
         from ..plot import twin_figure
 
+        from .run import monitored_units
+
+        units = {name: unit for name, (_, unit) in monitored_units(self.system).items()}
         twin_figure(self.out / "pt" / "outputs.csv", self.out / "dt" / "outputs.csv", self.monitor.events,
-                    self.out / "figure.png", [f"{MAPPING.name}.{v}" for v in self.variables],
+                    self.out / "figure.png", [f"{MAPPING.name}.{v}" for v in self.variables], units=units,
                     title=f"{self.system.models.program.module.name}: PT ({self.system.spec.pt.endpoint if self.system.spec.pt else 'custom'}) "
                           f"and DT, step {self.step_size:g} s, {self.algorithm}")
 

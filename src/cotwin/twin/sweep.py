@@ -11,7 +11,9 @@ from __future__ import annotations
 import itertools
 import math
 import os
-from concurrent.futures import ProcessPoolExecutor
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -20,6 +22,9 @@ from .scenario import Command, scalar_value
 
 _SYSTEM = None  # the worker's TwinSystem, loaded once per process
 MAX_PLANS = 100_000  # what-ifs of one sweep: a grid larger than this is a mistake, not a sweep
+ERROR = "error"  # the column of a failed what-if's error
+DIED = ("the worker process running this what-if (or another of its batch) died: killed by a signal (e.g. a crash "
+        "inside an FMU) or out of memory")
 
 
 def grid(program, event: str, ranges: dict[str, list], at: float = 0.5) -> list[list[Command]]:
@@ -64,6 +69,32 @@ def summary(prediction) -> dict:
     return out
 
 
+def point(plan: list[Command]) -> dict:
+    """A plan's arguments, named as `summary` names them: the grid point a what-if answers."""
+    out = {}
+    for k, command in enumerate(plan):
+        prefix = "" if len(plan) == 1 else f"c{k}_"
+        out.update({f"{prefix}{port}": value for port, value in command.values[1:]})
+    return out
+
+
+def failed(plan: list[Command], err: BaseException) -> dict:
+    """The row of a what-if that ended with an error: its grid point and the error, as text (a worker's
+    exception never has to cross a process boundary; a bug of cotwin's says so, with its traceback)."""
+    if isinstance(err, CotwinError):
+        return {**point(plan), ERROR: "\n".join(f.message if f.location.path.startswith("<") else str(f)
+                                                for f in err.findings)}
+    import traceback
+
+    where = "".join(traceback.format_exception(err)[-3:]).strip()
+    return {**point(plan), ERROR: f"internal error: {type(err).__name__}: {err} (a cotwin bug)\n{where}"}
+
+
+def failures(rows: list[dict]) -> list[tuple[int, dict]]:
+    """(index, row) of the what-ifs that failed."""
+    return [(k, r) for k, r in enumerate(rows) if r.get(ERROR)]
+
+
 def _load(project: str, artefacts: str | None) -> None:
     global _SYSTEM
     from .run import load
@@ -75,20 +106,34 @@ def _run(plan: list[Command], state: bytes | None, horizon: float, step: float |
     from .whatif import predict
 
     system, artefacts = _SYSTEM
-    return summary(predict(system, plan, state, horizon=horizon, step=step, artefacts=artefacts, decimate=10**9))
+    try:
+        return summary(predict(system, plan, state, horizon=horizon, step=step, artefacts=artefacts, decimate=10**9))
+    except Exception as err:  # noqa: BLE001 - one what-if's failure is its row, the sweep goes on
+        return failed(plan, err)
+
+
+def _run_chunk(plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None) -> list[dict]:
+    return [_run(plan, state, horizon, step) for plan in plans]
 
 
 def _ray_run(project: str, artefacts: str | None, plan, state, horizon, step) -> dict:
     if _SYSTEM is None or str(_SYSTEM[0].spec.path) != str(Path(project)):
-        _load(project, artefacts)
+        try:
+            _load(project, artefacts)
+        except Exception as err:  # noqa: BLE001 - the project does not load on this node: say so per what-if
+            return failed(plan, err)
     return _run(plan, state, horizon, step)
 
 
 def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | None = None, horizon: float = 30.0,
               step: float | None = None, workers: int | None = None, ray: str | None = None,
-              artefacts: str | Path | None = None) -> list[dict]:
+              artefacts: str | Path | None = None, progress=None) -> list[dict]:
     """Run every plan as a what-if; `ray` is a Ray address ("auto" joins the local cluster) or None
-    for a local process pool of `workers` processes (default: one per CPU; 1 runs in this process)."""
+    for a local process pool of `workers` processes (default: one per CPU; 1 runs in this process).
+
+    One row per plan, in the plans' order: `summary` of its prediction, or (a what-if that failed) its
+    grid point and the error in the ERROR column (`failures` lists them). `progress(done, total)` is
+    called as what-ifs finish."""
     import shutil
     import tempfile
 
@@ -96,6 +141,7 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
     from .run import load
 
     project = str(Path(project).resolve())
+    report = progress or (lambda done, total: None)
     scratch = None
     if artefacts is None:
         artefacts = scratch = tempfile.mkdtemp(prefix="cotwin-sweep-")
@@ -103,15 +149,32 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         dmodel_fmu(load(project), artefacts)  # built once, before the workers share it
         artefacts = str(artefacts)
         if ray is not None:
-            return _on_ray(project, plans, state, horizon, step, ray, artefacts)
+            return _on_ray(project, plans, state, horizon, step, ray, artefacts, report)
         workers = max(1, min(workers or os.cpu_count() or 1, len(plans)))  # no idle processes
+        rows: list[dict] = []
+        report(0, len(plans))
         if workers == 1:
             _load(project, artefacts)
-            return [_run(p, state, horizon, step) for p in plans]
+            for plan in plans:
+                rows.append(_run(plan, state, horizon, step))
+                report(len(rows), len(plans))
+            return rows
+        size = max(1, min(len(plans) // (workers * 8), 64))  # small chunks: progress and balance
+        chunks = [plans[k:k + size] for k in range(0, len(plans), size)]
+        answers: dict[int, list[dict]] = {}
         with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
                                  initargs=(project, artefacts)) as pool:
-            return list(pool.map(_run, plans, [state] * len(plans), [horizon] * len(plans), [step] * len(plans),
-                                 chunksize=max(1, len(plans) // (workers * 8))))
+            futures = {pool.submit(_run_chunk, chunk, state, horizon, step): k for k, chunk in enumerate(chunks)}
+            done = 0
+            for future in as_completed(futures):
+                k = futures[future]
+                try:
+                    answers[k] = future.result()
+                except BrokenProcessPool:  # a worker died (a signal, out of memory): its what-ifs say so
+                    answers[k] = [{**point(plan), ERROR: DIED} for plan in chunks[k]]
+                done += len(answers[k])
+                report(done, len(plans))
+        return [row for k in range(len(chunks)) for row in answers[k]]
     finally:
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)
@@ -133,7 +196,7 @@ def _reachable(address: str, timeout: float = 5.0) -> None:
         raise CotwinError(f"cannot reach the Ray cluster at {address!r}: {err.strerror or err}") from None
 
 
-def _on_ray(project, plans, state, horizon, step, address, artefacts) -> list[dict]:
+def _on_ray(project, plans, state, horizon, step, address, artefacts, report) -> list[dict]:
     try:
         import ray
     except ImportError:
@@ -149,11 +212,16 @@ def _on_ray(project, plans, state, horizon, step, address, artefacts) -> list[di
         remote = ray.remote(_ray_run)
         state_ref = ray.put(state)
         refs = [remote.remote(project, artefacts, plan, state_ref, horizon, step) for plan in plans]
-        try:
-            return ray.get(refs, timeout=max(600.0, 10.0 * len(plans)))
-        except ray.exceptions.GetTimeoutError:
-            raise CotwinError(f"the Ray cluster at {address!r} did not finish {len(plans)} what-ifs in time "
-                              "(are its workers starting?)") from None
+        deadline = time.monotonic() + max(600.0, 10.0 * len(plans))
+        pending = list(refs)
+        report(0, len(plans))
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=len(pending), timeout=min(1.0, max(0.0, deadline - time.monotonic())))
+            report(len(plans) - len(pending), len(plans))
+            if pending and time.monotonic() >= deadline:
+                raise CotwinError(f"the Ray cluster at {address!r} did not finish {len(plans)} what-ifs in time "
+                                  f"({len(plans) - len(pending)} done; are its workers starting?)")
+        return ray.get(refs)
     finally:
         if started_here:
             ray.shutdown()

@@ -37,7 +37,7 @@ import threading
 import time as wallclock
 from pathlib import Path
 
-from ...diagnostics import CotwinError
+from ...diagnostics import CotwinError, PicklableError
 from ..system import MAPPING, RABBITMQ, TwinSystem
 from ..whatif import finite as _finite
 from ..whatif import no_json_constant
@@ -54,7 +54,7 @@ MAX_WHATIFS = 2  # what-ifs from the page in flight (each waits for a fork of th
 ENDED = ("done", "stopped", "failed")
 
 
-class Refused(Exception):
+class Refused(PicklableError):
     """A request the server answers with `status` and `message` (what is wrong with it)."""
 
     def __init__(self, status: int, message: str):

@@ -84,14 +84,60 @@ export class MachineView {
         d = `M ${sx} ${sy} Q ${cx} ${cy} ${tx} ${ty}`;
         lx = (sx + 2 * cx + tx) / 4; ly = (sy + 2 * cy + ty) / 4;
       }
-      el("path", { d, "marker-end": `url(#arrow-${machine.name})` }, g);
-      el("text", { x: lx, y: ly - 2 }, g).textContent = e.name;
-      return { ...e, g };
+      const path = el("path", { d, "marker-end": `url(#arrow-${machine.name})` }, g);
+      const label = el("text", { x: lx, y: ly }, g);
+      label.textContent = e.name;
+      return { ...e, g, path, label };
     });
     const caption = document.createElement("div");
     caption.className = "muted";
     caption.textContent = `${machine.machine} (${machine.name})`;
     container.append(caption, svg);
+    this.bounds = { x0: -side, y0: 0, x1: machine.width + side, y1: machine.height + 4 };
+    this.placeLabels();
+  }
+
+  // Transition names placed where no other label and no state is: along the arrow (its middle first),
+  // then beside it; each name placed is an obstacle for the next. Sizes are measured once drawn (an
+  // estimate while the drawing is hidden), in the drawing's own units.
+  placeLabels() {
+    const boxOf = (e, estimate) => {
+      const b = e.getBBox();
+      return b.width > 0 ? { x: b.x, y: b.y, w: b.width, h: b.height } : estimate;
+    };
+    const overlap = (a, b) => Math.max(0, Math.min(a.x + a.w, b.x + b.w) - Math.max(a.x, b.x) + 2) *
+      Math.max(0, Math.min(a.y + a.h, b.y + b.h) - Math.max(a.y, b.y) + 1);
+    const taken = [];
+    for (const n of this.machine.nodes) {
+      const g = this.nodes[n.id];
+      const text = g.querySelector(":scope > text");
+      if (text) taken.push(boxOf(text, { x: n.x - 3.5 * n.name.length, y: n.y - 7, w: 7 * n.name.length, h: 14 }));
+      if (n.kind !== "composite") taken.push({ x: n.x - n.w / 2, y: n.y - n.h / 2, w: n.w, h: n.h });
+    }
+    const { x0, y0, x1, y1 } = this.bounds;
+    for (const e of this.edges) {
+      const size = boxOf(e.label, { w: 5.4 * e.name.length, h: 11 });
+      const w = size.w, h = size.h;
+      const length = e.path.getTotalLength ? e.path.getTotalLength() : 0;
+      let best = null;
+      search: for (const f of [0.5, 0.4, 0.6, 0.3, 0.7, 0.2, 0.8, 0.1, 0.9]) {
+        const p = e.path.getPointAtLength(length * f), q = e.path.getPointAtLength(Math.min(length, length * f + 1));
+        const d = Math.hypot(q.x - p.x, q.y - p.y) || 1;
+        const nx = -(q.y - p.y) / d, ny = (q.x - p.x) / d;
+        for (const off of [0, 8, -8, 14, -14, 22, -22, 32, -32, 44, -44]) {
+          const cx = p.x + nx * off, cy = p.y + ny * off;
+          const box = { x: cx - w / 2, y: cy - h / 2, w, h };
+          let cost = taken.reduce((c, b) => c + overlap(box, b), 0) + Math.abs(off) * 0.01 + Math.abs(f - 0.5) * 0.01;
+          if (box.x < x0 || box.x + w > x1 || box.y < y0 || box.y + h > y1) cost += 1e6;
+          if (!best || cost < best.cost) best = { box, cost };
+          if (cost < 1) break search;
+        }
+      }
+      if (!best) continue;
+      e.label.setAttribute("x", best.box.x + w / 2);
+      e.label.setAttribute("y", best.box.y + h / 2);
+      taken.push(best.box);
+    }
   }
 
   // index: the value of the machine's state port (a leaf's index, -1 = none)

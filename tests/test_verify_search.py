@@ -1,0 +1,122 @@
+"""The verifier on models that draw random numbers and take real inputs: random draws are choice
+points (the walk's search ends), an incomplete search judges nothing it did not reach, the sampled
+inputs are named with --domain, and a long search shows progress."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cotwin.dmodel.interpreter import Interpreter
+from cotwin.dmodel.program import build_program
+from cotwin.dmodel.verify import format_report, verify
+from cotwin.robosim.check import load_checked
+
+ROOT = Path(__file__).resolve().parents[1]
+WALK = ROOT / "examples" / "turtlebot" / "random_walk.rst"
+# the domain docs/verification.md documents for the walk: one value on each side of every guard's bound
+WALK_DOMAIN = {"closest_distance": [0.3, 0.5, 1.5], "closest_angle": [-45, 0, 45, 120]}
+
+COIN = """package Coin
+import Mathematics::*
+interface I { event go }
+interface O { event heads event tails }
+stm M {
+	var x: real
+	var k: int = 1
+	input context { uses I }
+	output context { uses O }
+	initial i
+	state A { }
+	state B { }
+	transition t0 { from i to A }
+	transition idle { from A to A exec condition not $go }
+	transition t1 { from A to B condition $go action x = random() }
+	transition t2 { from B to A exec condition x >= 0.5 action $heads; k = 1 / (k - 1) }
+	transition t3 { from B to A exec condition x < 0.5 action $tails }
+}
+controller C { uses I uses O sref m = M
+	connection C on go to m on go (_async) connection m on heads to C on heads (_async)
+	connection m on tails to C on tails (_async) }
+module Mod { robotic platform P { uses I uses O } cref c = C
+	connection P on go to c on go (_async) connection c on heads to P on heads (_async)
+	connection c on tails to P on tails (_async) }
+"""
+
+
+def cotwin(*args, env=None, cwd=None):
+    return subprocess.run([sys.executable, "-m", "cotwin", *map(str, args)], capture_output=True, text=True,
+                          timeout=600, env=env, cwd=cwd)
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return build_program(load_checked([WALK]))
+
+
+def test_random_draws_are_choice_points_so_the_walks_search_ends(walk):
+    """A seeded pseudo-random sequence made every state new: 100 000 states and INCOMPLETE."""
+    report = verify(walk)
+    assert report.complete and report.states < 1000
+    assert report.random_values == (0.0, 0.5)
+
+
+def test_every_random_choice_is_explored_and_shown_in_the_trace(tmp_path):
+    (tmp_path / "coin.rst").write_text(COIN)
+    program = build_program(load_checked([tmp_path / "coin.rst"]))
+    report = verify(program)
+    assert report.complete and not report.unreached_transitions  # both sides of the coin
+    [division] = [v for v in report.violations if "division by zero" in v.message]
+    assert division.trace == [{"go": None}, {}] and division.draws[0] == (0.5,)
+    assert "cycle 1: {go}, random draws 0.5" in division.format()
+    only_tails = verify(program, random_values=(0.1, 0.2))
+    assert not only_tails.violations
+    assert only_tails.unreached_transitions == ["M: transition t2"]
+    with pytest.raises(Exception, match="division by zero"):  # the trace replays (with the same draw)
+        interp = Interpreter(program)
+        interp.random.real = lambda: 0.5
+        for inputs in division.trace:
+            interp.step(inputs)
+
+
+def test_an_incomplete_search_reports_no_coverage_failure_and_names_the_sampled_inputs(walk, tmp_path):
+    report = verify(walk, max_states=40)
+    assert not report.complete and report.sampled == ["closest_distance", "closest_angle"]
+    text = format_report(walk, report)
+    assert "FAIL" not in text, text
+    assert "INCOMPLETE: the search stopped at its limit of 40 states" in text
+    assert "--domain closest_distance=V1,V2" in text
+    assert "?    every transition can be taken: not taken within the limit: Walker: transition" in text
+    proc = cotwin("verify", WALK, "--max-states", 40)
+    assert proc.returncode == 3 and "FAIL" not in proc.stdout, proc.stdout + proc.stderr
+
+
+def test_a_complete_search_names_the_sampled_inputs_beside_what_it_never_took(walk):
+    text = format_report(walk, verify(walk))
+    line = next(x for x in text.splitlines() if x.startswith("FAIL every transition can be taken"))
+    assert "obstacle" in line and "closest_distance, closest_angle took only sample values (0 and 1)" in line
+
+
+def test_the_walk_with_its_documented_domain_is_verified(walk):
+    """Every state and all but one transition: keep_going is dead in this model (Forward is entered after
+    the clock has counted a cycle, and wander_time = random() < 1), which the verifier rightly says."""
+    report = verify(walk, WALK_DOMAIN)
+    assert report.complete and not report.violations and not report.unreached_states
+    assert report.unreached_transitions == ["Walker: transition keep_going"]
+    assert not report.sampled
+
+
+def test_verify_shows_progress_and_takes_event_names_for_domains(tmp_path):
+    env = dict(os.environ, COTWIN_PROGRESS_SECONDS="0")
+    proc = cotwin("verify", WALK, "--domain", "closestDistance=0.3,0.5,1.5", "--domain", "closest_angle=-45,0,45,120",
+                  env=env, cwd=tmp_path)
+    assert proc.returncode == 1, proc.stderr  # keep_going, and nothing else
+    assert "FAIL every transition can be taken: never taken Walker: transition keep_going\n" in proc.stdout + "\n"
+    progress = [line for line in proc.stderr.splitlines() if line.startswith("verifying: ")]
+    assert progress and "states, limit 100000" in progress[-1] and "cycles/s" in progress[-1], proc.stderr
+    twice = cotwin("verify", WALK, "--domain", "closestDistance=1", "--domain", "closest_distance=2")
+    assert twice.returncode == 2 and "given twice" in twice.stderr
