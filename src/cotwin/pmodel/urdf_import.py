@@ -221,9 +221,16 @@ class MeshCopies:
         self.packages = packages
         self.diag = diag
         self.by_source: dict[Path, Mesh] = {}
+        self.by_uri: dict[str, Mesh | None] = {}
         self.taken: set[str] = set()
 
     def resolve(self, geometry: Geometry) -> Mesh | None:
+        """The mesh a geometry names (once per URI as written), or None with an error at the geometry."""
+        if geometry.filename not in self.by_uri:
+            self.by_uri[geometry.filename] = self._resolve(geometry)
+        return self.by_uri[geometry.filename]
+
+    def _resolve(self, geometry: Geometry) -> Mesh | None:
         uri = geometry.filename
         parsed = urlparse(uri)
         where = geometry.loc
@@ -492,9 +499,13 @@ def import_urdf(urdf: str | Path, out: str | Path, package_path: list[str | Path
         diag.raise_if_errors()
         raise CotwinError(f"{urdf}: nothing to import")
     meshes = MeshCopies(robot, Packages(package_roots(list(package_path), environ), urdf), diag)
+    for link in robot.links:  # every mesh looked for, whatever else is wrong
+        for shape in (*link.collisions, *link.visuals):
+            if shape.geometry.kind == "mesh":
+                meshes.resolve(shape.geometry)
+    diag.raise_if_errors()
     writer = Writer(robot, meshes, urdf.name)
     text = writer.text()
-    diag.raise_if_errors()
     findings = [f for f in diag.findings if f.severity is Severity.WARNING] + _notes(robot)
     if out.exists() and not out.is_dir():
         raise CotwinError(f"{out}: not a folder (-o names the folder to write the p-model and its meshes into)")

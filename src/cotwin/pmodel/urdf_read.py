@@ -219,7 +219,9 @@ class _Reader:
 
 
 def read_urdf(path: str | Path, diag: Diagnostics) -> Robot | None:
-    """The robot a URDF file describes, every problem reported to diag (None if it cannot be read)."""
+    """The robot a URDF file describes, every problem reported to diag; None if it cannot be read at all
+    (a robot is returned beside errors, so that its meshes can be looked for too: only one that comes
+    without errors is a tree)."""
     path = Path(path)
     shown = str(path)
     try:
@@ -298,7 +300,7 @@ def _robot(root: Node, path: Path, diag: Diagnostics) -> Robot | None:
         diag.error(root.loc, f"robot '{name}' has no <link>")
         return None
     _check_structure(robot, seen_links, seen_joints, diag)
-    return None if diag.has_errors else robot
+    return robot
 
 
 def _link(node: Node, read: _Reader, ignored: Counter) -> Link | None:
