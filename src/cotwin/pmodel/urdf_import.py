@@ -532,6 +532,9 @@ def _notes(robot: Robot) -> list[Finding]:
         if j.mimic is not None:
             notes.warning(j.mimic.loc, f"joint '{j.name}' mimics '{j.mimic.joint}': kept as `annotation Mimic`; cotwin's "
                           "simulator drives it by its own servo (a mapping commands both)")
+        if j.type in ("revolute", "prismatic") and j.limit.get("lower") == j.limit.get("upper"):
+            notes.warning(j.loc, f"joint '{j.name}': lower and upper limits are both {j.limit['lower']:g} (URDF's "
+                          "default where <limit> gives neither): the joint cannot move")
         if j.friction:
             notes.warning(j.loc, f"joint '{j.name}': friction {j.friction:g} kept in the p-model's annotation; cotwin's "
                           "simulator applies damping only")
