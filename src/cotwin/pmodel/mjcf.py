@@ -180,7 +180,7 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
     if meshes:
         asset = sub(root, "asset")
         for g in meshes:
-            sub(asset, "mesh", name=_mesh_name(g), file=g.mesh, scale=nums(g.scale))
+            sub(asset, "mesh", name=_mesh_name(g), file=g.mesh, scale=nums(g.scale), inertia="shell")
     worldbody = sub(root, "worldbody")
     sub(worldbody, "light", name="sun", pos="0.5 0.3 3", dir="0 0 -1", directional="true")
     if scene is not None:
