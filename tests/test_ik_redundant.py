@@ -139,3 +139,24 @@ class _Kinematic:
 
     def joint_positions(self):
         return {}
+
+
+def test_the_ik_cache_is_keyed_on_what_determines_the_answer(panda, solver, tmp_path):
+    from cotwin.pmodel.ikcache import SolutionCache
+
+    tool = solver.tool
+    same = ik.Solver(panda, tool, dict(zip(solver.joints, READY)))
+    assert same.fingerprint() == solver.fingerprint()
+    other_reference = ik.Solver(panda, tool, dict(zip(solver.joints, np.zeros(7))))
+    other_tool = ik.Solver(panda, ik.find_tool(panda, "flange", link="panda_hand_tcp"), dict(zip(solver.joints, READY)))
+    assert len({solver.fingerprint(), other_reference.fingerprint(), other_tool.fingerprint()}) == 3
+    # a solution stored and read back is what solving gives
+    target = transform((0.4, 0.0, 0.3), (np.pi, 0.0, 0.0))
+    found = solver.branch(target)
+    cache = SolutionCache(solver.fingerprint(), tmp_path)
+    key = SolutionCache.key(target.ravel())
+    cache.put(key, {"q": found.q, "position_error": found.position_error, "angle_error": found.angle_error,
+                    "iterations": found.iterations})
+    cache.save()
+    assert ik.IKResult(**SolutionCache(same.fingerprint(), tmp_path).get(key)).q == solver.branch(target).q
+    assert SolutionCache(other_tool.fingerprint(), tmp_path).get(key) is None

@@ -475,3 +475,14 @@ def test_the_command_from_another_folder_prints_what_it_did_and_refuses_bad_inpu
                          text=True, timeout=120)
     assert run.returncode == 1 and "bad.urdf:1:" in run.stderr and "malformed XML" in run.stderr
     assert "Traceback" not in run.stderr and not (tmp_path / "x").exists()
+
+
+def test_an_output_that_is_a_file_or_a_urdf_that_is_missing_is_refused(own_arm, tmp_path):
+    taken = tmp_path / "taken"
+    taken.write_text("mine")
+    with pytest.raises(CotwinError, match="not a folder"):
+        import_urdf(own_arm, taken, [tmp_path / "src"])
+    assert taken.read_text() == "mine"
+    with pytest.raises(CotwinError) as err:
+        import_urdf(tmp_path / "none.urdf", tmp_path / "out")
+    assert "none.urdf: error: cannot read the URDF" in str(err.value) and not (tmp_path / "out").exists()

@@ -28,7 +28,8 @@ def import_urdf(urdf: str, output: str, package_path: tuple[str, ...]) -> None:
             click.echo(f"  {r.kind:<5} {r.urdf:<{width}} -> {r.pmodel}  ({r.why})")
     if result.ignored:
         click.echo("left out (no kinematics or inertia in them): "
-                   + ", ".join(f"{n} <{tag}>" for tag, n in result.ignored.items()))
+                   + ", ".join(f"{n} <{tag.rpartition('/')[2]}>" + (f" in <{tag.rpartition('/')[0]}>" if "/" in tag else "")
+                               for tag, n in result.ignored.items()))
     if result.devices:
         click.echo("moving joints: command {actuator.port}, then position, velocity and effort readings:")
         for d in result.devices:
