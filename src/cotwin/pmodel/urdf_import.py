@@ -21,7 +21,6 @@ files, from any working directory.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import posixpath
 import re
@@ -78,7 +77,7 @@ class Names:
         why = "not a RoboSim name" if base != name else ""
         if base in RESERVED.get(kind, {}):
             base, why = RESERVED[kind][base], "MuJoCo reserves the name"
-        used = self.used.setdefault(_scope(kind), set())
+        used = self.used.setdefault("device" if kind in ("aref", "sref") else kind, set())
         chosen, k = base, 2
         while chosen in used:
             chosen = f"{base}_{k}"
@@ -92,10 +91,6 @@ class Names:
 
     def __call__(self, kind: str, name: str) -> str:
         return self.of[(kind, name)]
-
-
-def _scope(kind: str) -> str:
-    return {"aref": "device", "sref": "device"}.get(kind, kind)
 
 
 def ident(name: str) -> str:
@@ -115,22 +110,20 @@ def vector(values) -> str:
     return "(|" + ", ".join(num(v) for v in values) + "|)"
 
 
-def pose_block(T: np.ndarray, indent: str) -> list[str]:
-    if np.array_equal(T, np.eye(4)):
-        return []
-    x, y, z = T[:3, 3]
-    roll, pitch, yaw = matrix_rpy(T[:3, :3])
+def pose_line(xyz, rpy, indent: str) -> list[str]:
+    (x, y, z), (roll, pitch, yaw) = xyz, rpy
     return [f"{indent}pose {{ x = {num(x)} y = {num(y)} z = {num(z)} roll = {num(roll)} pitch = {num(pitch)} "
             f"yaw = {num(yaw)} }}"]
+
+
+def pose_block(T: np.ndarray, indent: str) -> list[str]:
+    """A transform as a pose (none for the identity)."""
+    return [] if np.array_equal(T, np.eye(4)) else pose_line(T[:3, 3], matrix_rpy(T[:3, :3]), indent)
 
 
 def origin_block(origin: Origin, indent: str) -> list[str]:
     """A URDF origin as a pose, with its own numbers (no round trip through a matrix)."""
-    if origin == Origin():
-        return []
-    (x, y, z), (roll, pitch, yaw) = origin.xyz, origin.rpy
-    return [f"{indent}pose {{ x = {num(x)} y = {num(y)} z = {num(z)} roll = {num(roll)} pitch = {num(pitch)} "
-            f"yaw = {num(yaw)} }}"]
+    return [] if origin == Origin() else pose_line(origin.xyz, origin.rpy, indent)
 
 
 def origin_matrix(origin: Origin) -> np.ndarray:
@@ -255,7 +248,7 @@ class MeshCopies:
             if not source.is_absolute():
                 source = self.robot.path.parent / source
             wanted = self._below_urdf(source)
-        elif parsed.scheme in ("", ) or (len(parsed.scheme) == 1 and os.name == "nt"):
+        elif not parsed.scheme or (len(parsed.scheme) == 1 and os.name == "nt"):  # a name (C:\\... on Windows)
             source = Path(uri)
             if not source.is_absolute():
                 source = self.robot.path.parent / source
@@ -309,17 +302,16 @@ class MeshCopies:
 
 
 def _same_bytes(a: Path, b: Path) -> bool:
-    if a.stat().st_size != b.stat().st_size:
-        return False
-    return hashlib.sha256(a.read_bytes()).digest() == hashlib.sha256(b.read_bytes()).digest()
+    return a.stat().st_size == b.stat().st_size and a.read_bytes() == b.read_bytes()
 
 
 # ---- the p-model text ----
 
 JOINT_DEVICES = {"revolute": "Revolute", "continuous": "Continuous", "prismatic": "Prismatic", "fixed": "Fixed"}
-SENSORS = (("position", "PositionSensor"), ("velocity", "VelocitySensor"))
-EFFORT_SENSORS = {"prismatic": ("effort", "ForceSensor")}
-DEFAULT_EFFORT_SENSOR = ("effort", "TorqueSensor")
+#: the sensors of a moving joint: quantity -> (physmod::sensors device, its output port); effort by joint kind
+SENSORS = {"position": ("PositionSensor", "output_position"), "velocity": ("VelocitySensor", "output_vel")}
+EFFORT_SENSORS = {"prismatic": ("ForceSensor", "output_force"), "revolute": ("TorqueSensor", "output_torque"),
+                  "continuous": ("TorqueSensor", "output_torque")}
 
 
 @dataclass
@@ -469,12 +461,9 @@ class Writer:
         out.append(f"\t\t\taref {ident(motor)} = ServoMotor {{ relation {ident(name)}.tau == {ident(motor)}.T }}")
         base = f"{self.name}::{parent}::{name}"
         readings = {}
-        effort = EFFORT_SENSORS.get(joint.type, DEFAULT_EFFORT_SENSOR)
-        for quantity, sensor in (*SENSORS, effort):
+        for quantity, (sensor, port) in {**SENSORS, "effort": EFFORT_SENSORS[joint.type]}.items():
             sref = self.names.add("sref", f"{name}_{quantity}", False)
             out.append(f"\t\t\tsref {ident(sref)} = {sensor}")
-            port = {"PositionSensor": "output_position", "VelocitySensor": "output_vel", "TorqueSensor": "output_torque",
-                    "ForceSensor": "output_force"}[sensor]
             readings[quantity] = f"{base}::{sref}.{port}"
         self.devices.append(Device(name, joint.type, f"{base}::{motor}.dangle", readings))
 

@@ -269,32 +269,22 @@ def _robot(root: Node, path: Path, diag: Diagnostics) -> Robot | None:
     read = _Reader(diag)
     name = read.attr(root, "name", "the robot") or path.stem
     ignored: Counter = Counter()
-    links: list[Link] = []
-    joints: list[Joint] = []
-    seen_links: dict[str, Link] = {}
-    seen_joints: dict[str, Joint] = {}
+    readers = {"link": _link, "joint": _joint}
+    declared: dict[str, dict] = {"link": {}, "joint": {}}  # kind -> name -> element, in the file's order
     for node in root.children:
-        if node.tag == "link":
-            link = _link(node, read, ignored)
-            if link is None:
-                continue
-            if link.name in seen_links:
-                diag.error(node.loc, f"link '{link.name}' is declared twice (first at line {seen_links[link.name].loc.line})")
-                continue
-            seen_links[link.name] = link
-            links.append(link)
-        elif node.tag == "joint":
-            joint = _joint(node, read, ignored)
-            if joint is None:
-                continue
-            if joint.name in seen_joints:
-                diag.error(node.loc, f"joint '{joint.name}' is declared twice (first at line "
-                           f"{seen_joints[joint.name].loc.line})")
-                continue
-            seen_joints[joint.name] = joint
-            joints.append(joint)
-        else:
+        if node.tag not in readers:
             ignored[node.tag] += 1
+            continue
+        element = readers[node.tag](node, read, ignored)
+        if element is None:
+            continue
+        first = declared[node.tag].get(element.name)
+        if first is not None:
+            diag.error(node.loc, f"{node.tag} '{element.name}' is declared twice (first at line {first.loc.line})")
+            continue
+        declared[node.tag][element.name] = element
+    seen_links, seen_joints = declared["link"], declared["joint"]
+    links, joints = list(seen_links.values()), list(seen_joints.values())
     robot = Robot(name, path, links, joints, ignored, root.loc)
     if not links:
         diag.error(root.loc, f"robot '{name}' has no <link>")
