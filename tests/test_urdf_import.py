@@ -486,3 +486,12 @@ def test_an_output_that_is_a_file_or_a_urdf_that_is_missing_is_refused(own_arm, 
     with pytest.raises(CotwinError) as err:
         import_urdf(tmp_path / "none.urdf", tmp_path / "out")
     assert "none.urdf: error: cannot read the URDF" in str(err.value) and not (tmp_path / "out").exists()
+
+
+def test_a_pmodel_the_importer_wrote_wrongly_is_reported_as_its_bug(own_arm, tmp_path, monkeypatch):
+    from cotwin.pmodel import urdf_import
+
+    monkeypatch.setattr(urdf_import.Writer, "text", lambda self: "pmodel broken {\n")
+    with pytest.raises(CotwinError) as err:
+        import_urdf(own_arm, tmp_path / "out", [tmp_path / "src"])
+    assert "a bug of the importer" in str(err.value) and "my_arm.pm:2:" in str(err.value)

@@ -540,6 +540,10 @@ def read_back(file: Path) -> list[Finding]:
     diag = Diagnostics()
     project = load_project([file], diag)
     check_project(project, diag)
-    diag.raise_if_errors()
-    tree = build_tree(project)
+    try:
+        diag.raise_if_errors()
+        tree = build_tree(project)
+    except CotwinError as err:
+        raise CotwinError([*err.findings, f"{file}: cotwin cannot read the p-model import-urdf wrote: a bug of the "
+                           "importer (please report it with the URDF)"]) from None
     return [f for f in (*diag.findings, *tree.findings) if f.severity is Severity.WARNING]
