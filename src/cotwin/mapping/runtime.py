@@ -81,7 +81,7 @@ class FunctionRegistry:
         self.endpoint = endpoint
         self.tree = endpoint.tree
         self.geometry = geometry or getattr(endpoint, "geometry", None) or CellGeometry()
-        self.tool = ik.find_tool(self.tree, self.geometry.tool)
+        self.tool = self.geometry.find_tool(self.tree)
         self.arm = ik.arm_joints(self.tree, self.tool)
         self.geometry.check_joints(self.arm)
         reference = dict(zip(self.arm, self.geometry.reference)) if self.geometry.reference is not None else None

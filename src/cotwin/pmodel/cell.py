@@ -14,6 +14,7 @@ IK may run on other link lengths than the arm's). Read and written as TOML:
     rpy = [0.0, 0.0, 0.0]       # rad, fixed-axis roll-pitch-yaw (as SDF poses)
     surface = 0.0               # m: height of the plate's top in the grid frame
     [tool]
+    link = "tool0"              # the tool link (default: the gripper's, else the end of the arm's chain)
     point = "fingertips"        # "flange", "fingertips" or [x, y, z] (m, tool link frame)
     rpy = [3.14159265, 0, 0]    # the tool frame at a target, in the plate frame
     [ik]
@@ -49,6 +50,7 @@ class CellGeometry:
     reference_name: str = ""
     joint_offsets: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     where: dict[str, Location] = field(default_factory=dict, compare=False, repr=False)  # keys as read
+    tool_link: str = ""  # the tool link; "": cotwin.pmodel.ik.find_tool's default (the gripper's, the chain's end)
 
     # ---- frames ----
     def plate_pose(self) -> np.ndarray:
@@ -73,6 +75,19 @@ class CellGeometry:
         copy.plate_rpy = tuple(float(v) for v in matrix_rpy(T[:3, :3]))
         return copy
 
+    def find_tool(self, tree):
+        """The tool this geometry names on a tree (cotwin.pmodel.ik.find_tool): its link and point; an
+        unknown link is an error at the `[tool] link` that names it."""
+        from . import ik
+
+        try:
+            return ik.find_tool(tree, self.tool, self.tool_link or None)
+        except CotwinError as err:
+            where = self.where.get("tool_link")
+            if where is None:
+                raise
+            raise CotwinError([Finding(where, Severity.ERROR, f.message) for f in err.findings]) from None
+
     # ---- checks against a kinematic chain ----
     def check_joints(self, arm: list[str]) -> None:
         """The reference posture and the offsets name the arm's joints (located in the file read)."""
@@ -96,8 +111,9 @@ class CellGeometry:
             ik["reference"] = [float(v) for v in self.reference]
         if self.joint_offsets:
             ik["joint_offsets"] = {k: [float(x) for x in v] for k, v in self.joint_offsets.items()}
+        tool = {"link": self.tool_link} if self.tool_link else {}
         tables = {"plate": {"xyz": list(self.plate_xyz), "rpy": list(self.plate_rpy), "surface": self.surface},
-                  "tool": {"point": self.tool if isinstance(self.tool, str) else list(self.tool),
+                  "tool": {**tool, "point": self.tool if isinstance(self.tool, str) else list(self.tool),
                            "rpy": list(self.tool_rpy)}}
         if ik:
             tables["ik"] = ik
@@ -113,7 +129,8 @@ class CellGeometry:
                    tuple(float(v) for v in ik["reference"]) if ik["reference"] is not None else None,
                    ik["reference_name"], {k: tuple(float(x) for x in v) for k, v in (ik["joint_offsets"] or {}).items()},
                    {"reference": file.location(("ik", "reference")),
-                    "joint_offsets": file.location(("ik", "joint_offsets"))})
+                    "joint_offsets": file.location(("ik", "joint_offsets")),
+                    "tool_link": file.location(("tool", "link"))}, tool_link=tool["link"])
 
     @classmethod
     def read(cls, path: str | Path) -> "CellGeometry":
@@ -151,7 +168,7 @@ GEOMETRY = {
     "plate": Key("table", {}, table=Schema({"xyz": Key("list", [0.0, 0.0, 0.0], check=_numbers(3)),
                                             "rpy": Key("list", [0.0, 0.0, 0.0], check=_numbers(3)),
                                             "surface": Key("number", 0.0)})),
-    "tool": Key("table", {}, table=Schema({"point": Key("any", "fingertips", check=_tool_point),
+    "tool": Key("table", {}, table=Schema({"link": Key("str", ""), "point": Key("any", "fingertips", check=_tool_point),
                                            "rpy": Key("list", list(DOWN), check=_numbers(3))})),
     "ik": Key("table", {}, table=Schema({"reference": Key("list", check=_numbers(None)), "reference_name": Key("str", ""),
                                          "joint_offsets": Key("table", {}, table=Schema(

@@ -1,11 +1,14 @@
 """Inverse kinematics on a p-model's kinematic tree: the tool frame reaches a full pose (position and
-orientation, the last wrist joint included), deterministically.
+orientation, the last wrist joint included), deterministically, for any serial arm (6 joints, or 7 and
+more: a redundant arm).
 
-The tool: the link that carries two or more prismatic joints (the gripper body), else the last link.
-Its tool point is the flange (the tool link's origin, where the gripper is mounted), the fingertips
-(between the fingers, where their geometry ends along the approach axis) or an explicit offset in the
-tool link's frame; the tool frame has the tool link's orientation turned so that its z axis is the
-approach axis (from the flange towards the fingers).
+The tool: a link named by the caller (`find_tool(tree, point, link=...)`, a cell geometry's `[tool] link`),
+else the link that carries two or more prismatic joints (the gripper body), else the leaf link with the
+most moving joints on its path from the base (the last such in the tree's order). Its tool point is
+the flange (the tool link's origin), the fingertips (a gripper's: between the fingers, where their
+geometry ends along the approach axis; the flange for a link without fingers) or an explicit offset
+(x, y, z) in the tool link's frame; the tool frame has the tool link's orientation turned so that its
+z axis is the approach axis (from the flange towards the fingers; the link's own z without fingers).
 
 Determinism: the same target gives the same joints whatever the arm's current posture. The solver
 starts damped Newton iterations from a fixed set of seeds (the reference posture, the reference
@@ -13,7 +16,12 @@ turned towards the target, and fixed pseudo-random postures), keeps the converge
 the reference posture (the branch: shoulder, elbow and wrist configuration; the last joint, a
 6-axis arm's tool roll, only breaks ties), puts every joint on the
 turn (q + 2 pi k, within limits) nearest the reference, and only the base joint on the turn nearest
-its current angle, so that the arm never unwinds a full turn to reach a target.
+its current angle, so that the arm never unwinds a full turn to reach a target (a base whose limits
+allow one turn only is never moved: the same joints, bit for bit, from any start).
+
+Redundant arms (more joints than the 6 a pose fixes): each converged solution is moved along its
+self-motion (the Jacobian's null space), the pose held and joint limits respected, to the posture
+nearest the reference there (weighted as above); the nearest of those is the answer.
 """
 
 from __future__ import annotations
@@ -25,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..diagnostics import CotwinError
 from .tree import KinematicTree, axis_angle, inverse
 
 TWO_PI = 2.0 * np.pi
@@ -63,10 +72,18 @@ def _corners(g) -> list[np.ndarray]:
     return [half * np.array([sx, sy, sz]) for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
 
 
-def find_tool(tree: KinematicTree, point="fingertips") -> Tool:
+def find_tool(tree: KinematicTree, point="fingertips", link: str | None = None) -> Tool:
     """The tool of the tree with its tool frame at `point`: "fingertips", "flange" or (x, y, z) in the
-    tool link's frame."""
-    for link in reversed(tree.links):
+    tool link's frame; `link` names the tool link (default: the gripper's, else the end of the longest
+    chain, see the module's docstring)."""
+    if link is not None:
+        names = [l.name for l in tree.links]
+        if link not in names:
+            raise CotwinError(f"tool link '{link}' is not a link of p-model {tree.name} (links: {', '.join(names)})")
+        candidates = [tree.link(link)]
+    else:
+        candidates = list(reversed(tree.links))
+    for link in candidates:
         fingers = [j for j in tree.joints if j.parent == link.name and j.kind == "prismatic"]
         if len(fingers) >= 2:
             centres, corners = [], []
@@ -82,8 +99,19 @@ def find_tool(tree: KinematicTree, point="fingertips") -> Tool:
             reach = max((c @ approach for c in corners), default=mid @ approach)
             tip = mid + (reach - mid @ approach) * approach
             return Tool(link.name, _tool_frame(approach, tip, point), tuple(j.name for j in fingers))
-    last = tree.links[-1]
-    return Tool(last.name, _tool_frame(np.array([0.0, 0.0, 1.0]), np.zeros(3), point), ())
+    end = candidates[0].name if len(candidates) == 1 else _chain_end(tree)
+    return Tool(end, _tool_frame(np.array([0.0, 0.0, 1.0]), np.zeros(3), point), ())
+
+
+def _chain_end(tree: KinematicTree) -> str:
+    """The leaf link with the most moving joints on its path from the root (the last such in tree order)."""
+    parents = {j.parent for j in tree.joints}
+    moving = {tree.root.name: 0}
+    for j in tree.joints:  # parents come before children
+        moving[j.child] = moving[j.parent] + (j.kind != "fixed")
+    leaves = [l.name for l in tree.links if l.name not in parents]
+    most = max(moving[l] for l in leaves)
+    return [l for l in leaves if moving[l] == most][-1]
 
 
 def _tool_frame(approach: np.ndarray, tip: np.ndarray, point) -> np.ndarray:
@@ -255,10 +283,14 @@ class Solver:
 
     def fingerprint(self) -> str:
         """What the solver's answers depend on (the chain, the tool, the reference, the seeds, this
-        module's code), as a hash: solutions stored under it stay exact (cotwin.pmodel.ikcache)."""
+        module's code and the tree's transforms it uses), as a hash: solutions stored under it stay exact
+        (cotwin.pmodel.ikcache)."""
         import hashlib
+        import inspect
 
         h = hashlib.sha256(Path(__file__).read_bytes())
+        for helper in (axis_angle, inverse):  # the tree's transforms this solver computes with
+            h.update(inspect.getsource(helper).encode())
         c = self.chain
         for part in (c.joints, c.kinds, c.limits, self.max_iterations, self.SEEDS, self.TOLERANCE):
             h.update(repr(part).encode())
@@ -314,11 +346,17 @@ class Solver:
         seeds.extend(self._random)
         best, best_distance, best_error = None, np.inf, None
         fallback = None
+        moved: list[np.ndarray] = []  # a redundant arm's converged solutions already moved towards the reference
         for found in candidates + [None] * len(seeds):
             q, pos, ang, iterations = found if found is not None else self.newton(target, seeds.pop(0))
             if pos < 1e-7 and ang < 1e-7:
                 q = self._wind(q, ref)
-                distance = float(np.sum(self._weights * self._wrap(q - ref) ** 2))
+                if self.redundant:
+                    if any(np.abs(q - m).max() < 1e-6 for m in moved):
+                        continue
+                    moved.append(q)
+                    q, pos, ang = self._toward(target, q, ref)
+                distance = self._distance(q, ref)
                 if distance < best_distance - 1e-9:
                     best, best_distance, best_error = q, distance, (pos, ang, iterations)
             elif fallback is None or pos + 0.1 * ang < fallback[1] + 0.1 * fallback[2]:
@@ -334,16 +372,49 @@ class Solver:
     def _wrap(d: np.ndarray) -> np.ndarray:
         return (d + np.pi) % TWO_PI - np.pi
 
+    @property
+    def redundant(self) -> bool:
+        """More joints than the six a full pose fixes: a solution can move along its self-motion."""
+        return len(self.joints) > 6
+
+    def _distance(self, q: np.ndarray, ref: np.ndarray) -> float:
+        return float(np.sum(self._weights * self._wrap(q - ref) ** 2))
+
+    def _toward(self, target: np.ndarray, q: np.ndarray, ref: np.ndarray, steps: int = 30):
+        """A redundant arm's solution moved along its self-motion (the Jacobian's null space) towards the
+        reference posture, the pose held (Newton after each step) and the limits kept: (q, position error,
+        angle error) of the posture nearest the reference found, each step halved until it brings it nearer."""
+        chain = self.chain
+        T, J = chain.forward(q)
+        pos = float(np.linalg.norm(target[:3, 3] - T[:3, 3]))
+        ang = float(np.linalg.norm(rotation_error(target[:3, :3], T[:3, :3])))
+        distance = self._distance(q, ref)
+        eye = np.eye(len(q))
+        for _ in range(steps):
+            step = -(eye - np.linalg.pinv(J) @ J) @ (self._weights * self._wrap(q - ref))
+            if np.abs(step).max() < 1e-10:
+                break
+            for scale in (1.0, 0.5, 0.25, 0.125):
+                trial, p, a, _ = self.newton(target, np.clip(q + scale * step, chain.lower, chain.upper), 20)
+                if p < 1e-9 and a < 1e-9 and self._distance(trial, ref) < distance - 1e-12:
+                    q, pos, ang, distance = trial, p, a, self._distance(trial, ref)
+                    J = chain.forward(q)[1]
+                    break
+            else:
+                break
+        return q, pos, ang
+
     def _nearest_turn(self, value: float, near: float, k: int) -> float:
+        """value + 2 pi n (n whole, the value itself when n = 0: no rounding) within the joint's limits,
+        nearest `near`."""
         if self.chain.kinds[k] != "revolute":
             return value
-        candidate = near + float(self._wrap(np.array(value - near)))
+        turns = round((near - value) / TWO_PI)
         lo, hi = self.chain.limits[k]
-        if lo - 1e-9 <= candidate <= hi + 1e-9:
-            return float(np.clip(candidate, lo, hi))
-        for shift in (TWO_PI, -TWO_PI):
-            if lo - 1e-9 <= candidate + shift <= hi + 1e-9:
-                return float(np.clip(candidate + shift, lo, hi))
+        for n in (turns, turns + 1, turns - 1):  # the nearest turn, else the next one up or down
+            candidate = value + n * TWO_PI if n else value
+            if lo - 1e-9 <= candidate <= hi + 1e-9:
+                return float(np.clip(candidate, lo, hi))
         return value
 
     def _wind(self, q: np.ndarray, ref: np.ndarray) -> np.ndarray:

@@ -180,7 +180,7 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
     if meshes:
         asset = sub(root, "asset")
         for g in meshes:
-            sub(asset, "mesh", name=_mesh_name(g), file=g.mesh, scale=nums(g.scale))
+            sub(asset, "mesh", name=_mesh_name(g), file=g.mesh, scale=nums(g.scale), inertia="shell")
     worldbody = sub(root, "worldbody")
     sub(worldbody, "light", name="sun", pos="0.5 0.3 3", dir="0 0 -1", directional="true")
     if scene is not None:
@@ -199,9 +199,10 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
         bodies[link.name] = body
         if link is tree.root and base == "free":
             sub(body, "freejoint", name=f"{link.name}_free")
-        I = link.inertia
+        R = link.com[:3, :3]  # MJCF takes a full inertia in the body's axes only (no quat beside it)
+        I = R @ link.inertia @ R.T
         sub(body, "inertial", mass=num(link.mass), fullinertia=nums([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]]),
-            **({"pos": "0 0 0"} | _pose_attrs(link.com)))
+            pos=nums(link.com[:3, 3]))
         if link is not tree.root:
             joint = next(j for j in tree.joints if j.child == link.name)
             if joint.kind != "fixed":

@@ -55,7 +55,8 @@ def to_urdf(tree: KinematicTree) -> str:
                 _origin(part, local @ g.pose)
                 _geometry(part, g)
     for j in tree.joints:
-        el = sub(robot, "joint", name=j.name, type=j.kind)
+        unlimited = j.kind == "revolute" and j.lower is None and j.upper is None  # URDF's revolute defaults to [0, 0]
+        el = sub(robot, "joint", name=j.name, type="continuous" if unlimited else j.kind)
         _origin(el, inverse(frames[j.parent]) @ j.pose)
         sub(el, "parent", link=j.parent)
         sub(el, "child", link=j.child)

@@ -1,0 +1,41 @@
+"""Commands bringing robots from other formats in: import-urdf."""
+
+from __future__ import annotations
+
+import click
+
+from .common import main, output_path, report
+
+
+@main.command("import-urdf")
+@click.argument("urdf", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", callback=output_path, required=True,
+              help="the folder to write the p-model (ROBOT.pm) and its meshes (meshes/...) into")
+@click.option("--package-path", "package_path", multiple=True, type=click.Path(file_okay=False),
+              help="a folder that is, or holds, the ROS packages package:// names (repeatable; then ROS_PACKAGE_PATH)")
+def import_urdf(urdf: str, output: str, package_path: tuple[str, ...]) -> None:
+    """Write a RoboSim p-model and its meshes from a URDF (docs/urdf-import.md)."""
+    from ..pmodel.urdf_import import import_urdf as run
+
+    result = run(urdf, output, list(package_path))
+    kinds = ", ".join(f"{n} {k}" for k, n in result.joints.items() if n)
+    meshes = f"; {len(result.meshes)} mesh file(s) under {result.file.parent / 'meshes'}" if result.meshes else ""
+    click.echo(f"{result.file}: p-model {result.pmodel}: {result.links} links, {kinds or 'no'} joints{meshes}")
+    if result.renamings:
+        click.echo("renamed:")
+        width = max(len(r.urdf) for r in result.renamings)
+        for r in result.renamings:
+            click.echo(f"  {r.kind:<5} {r.urdf:<{width}} -> {r.pmodel}  ({r.why})")
+    if result.ignored:
+        click.echo("left out (no kinematics or inertia in them): "
+                   + ", ".join(f"{n} <{tag.rpartition('/')[2]}>" + (f" in <{tag.rpartition('/')[0]}>" if "/" in tag else "")
+                               for tag, n in result.ignored.items()))
+    if result.devices:
+        click.echo("moving joints: command {actuator.port}, then position, velocity and effort readings:")
+        for d in result.devices:
+            base, _, command = d.command.rpartition("::")
+            readings = ", ".join(r.rpartition("::")[2] for r in d.readings.values())
+            click.echo(f"  {d.joint} ({d.kind}): {base}::{{{command}; {readings}}}")
+    else:
+        click.echo("no moving joint: nothing for a mapping to command")
+    report(result.findings)
