@@ -120,7 +120,14 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None)
     click.echo(f"publishing {len(commands)} command(s) on exchange {settings.exchange} ({settings.to_cosim}); "
                "waiting for the twin's ready message", err=True)
     publisher.run()
-    click.echo(f"sent {len(publisher.sent)} message(s)")
+    clock = publisher.clock
+    refused = f"; {clock.refused} echo(es) refused (see the log)" if clock is not None and clock.refused else ""
+    click.echo(f"sent {len(publisher.sent)} message(s){refused}")
+    if publisher.ended == "silence":
+        heard = f"t = {clock.sim:g} s" if clock is not None and clock.sim is not None else "no time at all"
+        unsent = f"; {len(publisher.pending)} command(s) of the plan never sent" if publisher.pending else ""
+        raise CotwinError(f"the twin on exchange {settings.exchange} fell silent: no echo for {publisher.silence:g} s "
+                          f"after {heard}{f' (its end is t = {system.spec.end:g} s)' if system.spec.end else ''}{unsent}")
 
 
 @main.command()

@@ -37,10 +37,10 @@ import threading
 import time as wallclock
 from pathlib import Path
 
+from ... import safejson
 from ...diagnostics import CotwinError
 from ..system import MAPPING, RABBITMQ, TwinSystem
 from ..whatif import finite as _finite
-from ..whatif import no_json_constant
 from .describe import describe
 from .feed import DashboardFeed
 
@@ -90,16 +90,9 @@ async def read_json(request, served: str, limit: int = MAX_BODY, seconds: float 
     except asyncio.TimeoutError:
         raise Refused(408, f"the body did not arrive within {seconds:g} s") from None
     try:
-        return json.loads(body.decode("utf-8"), parse_constant=no_json_constant)
-    except UnicodeDecodeError as err:
-        raise Refused(400, f"the request is not UTF-8 (byte {err.start})") from None
-    except json.JSONDecodeError as err:
-        raise Refused(400, f"the request is not JSON: {err.msg} at line {err.lineno} column {err.colno}") from None
-    except ValueError as err:
-        why = "a number has too many digits" if "digits" in str(err) else str(err)
-        raise Refused(400, f"the request is not JSON: {why}") from None
-    except RecursionError:
-        raise Refused(400, "the request is not JSON: nested too deeply") from None
+        return safejson.loads(body, limit)
+    except safejson.Refused as err:
+        raise Refused(400, f"the request is not JSON cotwin reads: {err}") from None
 
 
 def same_site(headers, served: str) -> str | None:
@@ -346,6 +339,8 @@ class Dashboard:
                 message = self.publisher.command(body["event"], body.get("values", {}))
             except ValueError as err:
                 return JSONResponse({"error": str(err)}, status_code=422)
+            except CotwinError as err:  # the link thread stopped: nothing would leave
+                return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=503)
             except queue.Full:
                 return JSONResponse({"error": f"{self.publisher.MAX_WAITING} commands are waiting to be published; "
                                               "try again later"}, status_code=429, headers={"Retry-After": "1"})
@@ -431,7 +426,8 @@ class Dashboard:
         out["skipped"] = self.skipped
         if self.publisher is not None:
             out["broker"] = {"twin_ready": self.publisher.twin_ready.is_set(), "sent": self.publisher.sent_count,
-                             "error": self.publisher.error}
+                             "running": self.publisher.running, "echoes_refused": self.publisher.echoes.refused,
+                             "error": self.publisher.error or (None if self.publisher.running else "stopped")}
         return out
 
     async def _stream(self, websocket) -> None:

@@ -27,7 +27,7 @@ from ...diagnostics import CotwinError
 from ...mapping.amqp import connect
 from ..project import RabbitMQSettings
 from ..publisher import idle_values, now_iso
-from ..rabbitmq import parse_message, read_echo
+from ..rabbitmq import EchoClock, parse_message
 from ..scenario import scalar_value, typed_value
 
 log = logging.getLogger("cotwin.dashboard")
@@ -52,7 +52,7 @@ class PagePublisher:
         self.sent: deque[tuple[float, dict]] = deque(maxlen=self.MAX_SENT)  # (wall time, message), the newest
         self.sent_count = 0
         self.error: str | None = None
-        self.echoed: float | None = None  # the last simulation time the twin echoed (s)
+        self.echoes = EchoClock(settings.maxage_ms / 1000, "dashboard")  # what the twin's echoes say
         self._pending: queue.Queue[dict] = queue.Queue(self.MAX_WAITING)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -60,7 +60,11 @@ class PagePublisher:
     # ---- the page's side ----
     def command(self, event: str, values: dict) -> dict:
         """Queue the command `event` with its value ports; returns the message, ValueError saying why it
-        would be refused (naming the input), or queue.Full if too many wait to leave."""
+        would be refused (naming the input), queue.Full if too many wait to leave, or CotwinError if the
+        link thread has stopped (nothing would leave)."""
+        if not self.running:
+            raise CotwinError(f"the page's command publisher has stopped ({self.error or 'not started'}): "
+                              "commands cannot reach the twin")
         if event not in self.events:
             raise ValueError(f"{event[:80]!r} is not a command of this twin (commands: {', '.join(self.events) or 'none'})")
         ports = self.events[event]
@@ -95,6 +99,11 @@ class PagePublisher:
                               f"{self.error or 'no broker answer within %g s' % timeout}")
         return self
 
+    @property
+    def running(self) -> bool:
+        """The link thread is alive and has no error: a queued command will leave."""
+        return self._thread is not None and self._thread.is_alive() and self.error is None
+
     def stop(self) -> None:
         self._stop.set()
         if self._thread is not None:
@@ -102,11 +111,9 @@ class PagePublisher:
             self._thread = None
 
     def _on_echo(self, channel, method, props, body) -> None:
-        ready, simstep = read_echo(body)
-        if ready:
+        self.echoes.take(body)  # never raises: a bad echo is refused and counted
+        if self.echoes.ready_at is not None:
             self.twin_ready.set()
-        if simstep is not None:
-            self.echoed = simstep
 
     def _run(self) -> None:
         s = self.settings
@@ -143,6 +150,9 @@ class PagePublisher:
         except (pika.exceptions.AMQPError, OSError) as err:
             self.error = f"the broker link was lost ({type(err).__name__})"
             log.warning("dashboard publisher: %s", self.error)
+        except Exception as err:  # noqa: BLE001 - a cotwin bug: the page must say so, not answer "queued"
+            self.error = f"it failed ({type(err).__name__}: {str(err)[:200]})"
+            log.exception("dashboard publisher failed")
         finally:
             try:
                 connection.close()
