@@ -235,7 +235,7 @@ def test_the_pages_publisher_survives_hostile_echoes_and_says_when_it_stopped(br
             dash.publisher.echoes.take = None  # a bug: calling it raises in the link thread
             twin.send(_echo(0.1))
             deadline = time.monotonic() + 10
-            while dash.publisher.running and time.monotonic() < deadline:
+            while not dash.publisher.stopped and time.monotonic() < deadline:
                 time.sleep(0.05)
             code, status = _request(dash.url + "api/status")
             assert not status["broker"]["running"] and "TypeError" in status["broker"]["error"], status

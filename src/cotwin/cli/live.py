@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError
-from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchange_name, main, output_path, show_warnings,
-                     start_dashboard)
+from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchange_name, main, output_path, serving_options,
+                     show_warnings, start_dashboard)
 
 
 @main.command()
@@ -25,9 +25,10 @@ from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchan
 @click.option("--whatif", "whatif", is_flag=True, help="answer what-if requests sent over the broker (see docs)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+@serving_options
 def twin(project: str, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
          pt_log: str | None, exchange: str | None, history: str | None, whatif: bool, dashboard: tuple[str, int] | None,
-         cc: str) -> None:
+         cc: str, serving: dict) -> None:
     """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
     with deviation checking, alarms and history."""
     import signal
@@ -55,7 +56,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
 
     show_warnings(after_end(system.commands, spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
-                      broker if whatif else None)
+                           broker if whatif else None, serving)
     try:
         live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
                         observers=[dash.feed] if dash else (), cc=cc, whatif_url=broker if whatif else None)

@@ -9,7 +9,7 @@ import click
 
 from ..diagnostics import CotwinError
 from .common import (DASHBOARD_HELP, address, check_finite, check_step_count, check_timing, main, output_path,
-                     show_warnings, start_dashboard)
+                     serving_options, show_warnings, start_dashboard)
 
 
 @main.command()
@@ -38,8 +38,9 @@ def build(project: str, out: str, cc: str) -> None:
 @click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+@serving_options
 def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
-        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str) -> None:
+        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str, serving: dict) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
     from rich.progress import Progress
@@ -56,7 +57,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     from ..twin.scenario import after_end
 
     show_warnings(after_end(system.commands, system.spec.end if end is None else end))
-    dash = start_dashboard(system, dashboard, "run", history)
+    dash = start_dashboard(system, dashboard, "run", history, serving=serving)
     try:
         with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
             task = bar.add_task("co-simulating", total=1)

@@ -14,11 +14,16 @@ only the keys it documents (400 naming what is wrong); at most MAX_WHATIFS what-
 in flight and at most PagePublisher.MAX_WAITING commands wait to leave (429 beyond); commands to a twin
 that has ended are refused (409), while the page keeps its last figure and state.
 
+Who may use the page (access.py): on loopback anyone on this machine, unless an access file is given;
+beyond loopback (server.py says what that is) only those in the access file, or the page refuses to
+start: every request without a valid token or session is answered 401, a viewer's command or what-if
+403. Request heads must arrive within HEADER_SECONDS (408 and closed otherwise); TLS is uvicorn's.
+
 A command moves a robot, so another site open in the same browser must not send one: a POST must say
 `Content-Type: application/json` (415 otherwise; a browser cannot send that across sites without a
-preflight, which is never answered), its `Origin`, when sent, must be this server (403), and its
-`Host` must be an address, `localhost` or the served host (403: a DNS-rebound name is none of these).
-A stream (`/ws`) from a page of another origin is closed (1008).
+preflight, which is never answered), its `Origin`, when sent, must be this server (403), and, on a page
+without login, its `Host` must name this machine's loopback (403: a DNS-rebound name, or another
+machine's address, is none of these). A stream (`/ws`) from a page of another origin is closed (1008).
 
 A client gets a `hello` (recent samples, the newest events, the status) and then, every `period` seconds, a `batch` of what is new: samples (at most
 `max_rate` per second, evenly thinned beyond that), events and the status. Each client reads the
@@ -41,8 +46,10 @@ from ... import safejson
 from ...diagnostics import CotwinError
 from ..system import MAPPING, RABBITMQ, TwinSystem
 from ..whatif import finite as _finite
+from .access import Access, Gate
 from .describe import describe
 from .feed import DashboardFeed
+from .server import HEADER_SECONDS, beyond_loopback, check_tls, protocol, ws_protocol
 
 log = logging.getLogger("cotwin.dashboard")
 STATIC = Path(__file__).resolve().parent / "static"
@@ -62,9 +69,9 @@ class Refused(Exception):
         self.status, self.message = status, message
 
 
-async def read_json(request, served: str, limit: int = MAX_BODY, seconds: float = BODY_SECONDS):
-    """The request's body as JSON (see module doc), or Refused saying why not."""
-    foreign = same_site(request.headers, served)
+async def read_json(request, foreign: str | None, limit: int = MAX_BODY, seconds: float = BODY_SECONDS):
+    """The request's body as JSON (see module doc), or Refused saying why not (`foreign`: why the request
+    may come from another site, see same_site)."""
     if foreign is not None:
         raise Refused(403, f"refused: {foreign}")
     kind = request.headers.get("content-type", "").split(";")[0].strip().lower()
@@ -95,21 +102,21 @@ async def read_json(request, served: str, limit: int = MAX_BODY, seconds: float 
         raise Refused(400, f"the request is not JSON cotwin reads: {err}") from None
 
 
-def same_site(headers, served: str) -> str | None:
-    """Why a request with these headers may come from another site (see module doc), or None."""
-    import ipaddress
+def same_site(headers, served: str, checked_host: bool = True) -> str | None:
+    """Why a request with these headers may come from another site (see module doc), or None. With
+    `checked_host` (a page on loopback without authentication) its Host must name this machine's loopback:
+    `localhost`, a loopback address, the served host or this machine's name."""
     from urllib.parse import urlsplit
+
+    from ...mapping.amqp import is_loopback
 
     host = headers.get("host", "")
     try:
         name = urlsplit("//" + host).hostname or ""
     except ValueError:  # e.g. an unclosed [
         return f"Host {host[:80]!r} is not an address"
-    try:
-        ipaddress.ip_address(name)
-    except ValueError:
-        if name not in ("localhost", served.strip("[]"), socket.gethostname()):
-            return f"Host {host[:80]!r} is not this server's address"
+    if checked_host and not (is_loopback(name) or name in (served.strip("[]"), socket.gethostname())):
+        return f"Host {host[:80]!r} is not this server's address"
     origin = headers.get("origin")
     if origin is not None and origin not in (f"http://{host}", f"https://{host}"):
         return f"Origin {origin[:80]!r} is not this server (Host {host[:80]!r})"
@@ -184,13 +191,18 @@ class Dashboard:
 
     def __init__(self, system: TwinSystem | None, host: str = "127.0.0.1", port: int = 8050, mode: str = "twin",
                  history_url: str | None = None, period: float = 0.1, max_rate: float = 100.0,
-                 backlog: int = 4000, heartbeat: bool = True, whatif_url: str | None = None):
+                 backlog: int = 4000, heartbeat: bool = True, whatif_url: str | None = None,
+                 access: str | Path | None = None, tls: tuple[str | Path, str | Path] | None = None):
         if mode not in ("twin", "run", "history"):
             raise ValueError(f"unknown dashboard mode {mode!r}")
         if system is None and mode != "history":
             raise ValueError("a live dashboard needs the twin's system")
         self.system = system
         self.host, self.port = host, port
+        self.access_file, self.tls = access, tls  # see access.py and server.py
+        self.access = None
+        self.gate: Gate | None = None
+        self.header_seconds = HEADER_SECONDS
         self.mode = mode
         self.history_url = history_url
         self.period = period
@@ -223,13 +235,26 @@ class Dashboard:
     @property
     def url(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}/"
+        return f"{'https' if self.tls else 'http'}://{host}:{self.port}/"
 
     def start(self) -> "Dashboard":
         """Serve the page (and start the command publisher, bound before this returns, so the twin's ready
-        message reaches it); CotwinError if the address cannot be served."""
+        message reaches it); CotwinError if the address cannot be served, or is beyond loopback without an
+        access file (server.py), or the access file or the TLS certificate cannot be used."""
         import uvicorn
 
+        if self.access_file is not None:
+            self.access = Access(self.access_file)
+        elif beyond_loopback(self.host):
+            raise CotwinError(f"dashboard: {self.host} can be reached from other machines (it is not a loopback "
+                              "address), and anyone who reaches the page could command the robot: give it an access "
+                              "file (--dashboard-access FILE, made with cotwin dashboard-access; see docs/security.md) "
+                              "or serve it on 127.0.0.1")
+        if self.tls is not None:
+            check_tls(*self.tls)
+        elif beyond_loopback(self.host):
+            log.warning("dashboard: served on %s without TLS: passwords, tokens and the session cookie cross the "
+                        "network in clear text (give --tls-cert and --tls-key)", self.host)
         family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
         sock = socket.socket(family, socket.SOCK_STREAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -240,9 +265,12 @@ class Dashboard:
             raise CotwinError(f"dashboard: cannot serve on {self.host}:{self.port}: {err.strerror or err}") from None
         self._socket = sock
         self.port = sock.getsockname()[1]
-        config = uvicorn.Config(self.app(), log_level="warning", access_log=False, lifespan="off",
-                                ws="websockets-sansio", timeout_graceful_shutdown=2,
-                                limit_concurrency=MAX_CONNECTIONS)  # more at once are answered 503
+        tls = {"ssl_certfile": str(self.tls[0]), "ssl_keyfile": str(self.tls[1])} if self.tls else {}
+        self.gate = Gate(self.app(), self.access, self.tls is not None, str(self.port))
+        config = uvicorn.Config(self.gate, log_level="warning",
+                                access_log=False, lifespan="off", ws=ws_protocol(), timeout_graceful_shutdown=2,
+                                http=protocol(self.header_seconds), proxy_headers=False,  # clients are who connects
+                                limit_concurrency=MAX_CONNECTIONS, **tls)  # more at once are answered 503
         self._server = uvicorn.Server(config)
         _cap_server_log()
         self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]}, name="cotwin dashboard",
@@ -283,6 +311,8 @@ class Dashboard:
         if self._socket is not None:
             self._socket.close()
             self._socket = None
+        if self.gate is not None:
+            self.gate.refusals.close()  # how many refusals were not logged
 
     def __enter__(self) -> "Dashboard":
         return self.start()
@@ -322,7 +352,7 @@ class Dashboard:
                        "none": "this twin takes no commands"}.get(commands["source"], "no live twin to command")
                 return JSONResponse({"error": why}, status_code=409)
             try:
-                body = await read_json(request, self.host, seconds=self.body_seconds)
+                body = await read_json(request, self._foreign(request.headers), seconds=self.body_seconds)
             except Refused as err:
                 return refused(err)
             shape = "expected {\"event\": NAME, \"values\": {PORT: VALUE, ...}}"
@@ -355,7 +385,7 @@ class Dashboard:
             from .whatif import ask, check_request
 
             try:
-                body = await read_json(request, self.host, seconds=self.body_seconds)
+                body = await read_json(request, self._foreign(request.headers), seconds=self.body_seconds)
             except Refused as err:
                 return refused(err)
             try:
@@ -414,6 +444,11 @@ class Dashboard:
         ]
         return Starlette(routes=routes)
 
+    def _foreign(self, headers) -> str | None:
+        """Why a request may come from another site's page (same_site); the Host is checked only where no
+        login protects the page (on loopback without an access file)."""
+        return same_site(headers, self.host, checked_host=self.access is None)
+
     def _ended(self) -> str | None:
         """How the live twin ended ("the twin has stopped"), or None while it runs or waits."""
         if self.feed is None or self.feed.state not in ENDED:
@@ -426,8 +461,8 @@ class Dashboard:
         out["skipped"] = self.skipped
         if self.publisher is not None:
             out["broker"] = {"twin_ready": self.publisher.twin_ready.is_set(), "sent": self.publisher.sent_count,
-                             "running": self.publisher.running, "echoes_refused": self.publisher.echoes.refused,
-                             "error": self.publisher.error or (None if self.publisher.running else "stopped")}
+                             "running": not self.publisher.stopped, "echoes_refused": self.publisher.echoes.refused,
+                             "error": self.publisher.error or ("its link ended" if self.publisher.stopped else None)}
         return out
 
     async def _stream(self, websocket) -> None:
@@ -437,7 +472,7 @@ class Dashboard:
             await websocket.accept()  # then closed with a reason the page can show
             await websocket.close(code=1013, reason=f"{MAX_CLIENTS} pages are already following this twin")
             return
-        foreign = same_site(websocket.headers, self.host)
+        foreign = self._foreign(websocket.headers)
         if foreign is not None:  # another site's page would read the twin's stream
             await websocket.accept()
             await websocket.close(code=1008, reason=foreign[:120])

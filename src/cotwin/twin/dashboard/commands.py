@@ -52,19 +52,17 @@ class PagePublisher:
         self.sent: deque[tuple[float, dict]] = deque(maxlen=self.MAX_SENT)  # (wall time, message), the newest
         self.sent_count = 0
         self.error: str | None = None
-        self.echoes = EchoClock(settings.maxage_ms / 1000, "dashboard")  # what the twin's echoes say
+        self.echoes = EchoClock(settings.maxage_ms / 1000 if settings else 1.0, "dashboard")  # what the echoes say
         self._pending: queue.Queue[dict] = queue.Queue(self.MAX_WAITING)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._started = False
 
     # ---- the page's side ----
     def command(self, event: str, values: dict) -> dict:
         """Queue the command `event` with its value ports; returns the message, ValueError saying why it
         would be refused (naming the input), queue.Full if too many wait to leave, or CotwinError if the
         link thread has stopped (nothing would leave)."""
-        if not self.running:
-            raise CotwinError(f"the page's command publisher has stopped ({self.error or 'not started'}): "
-                              "commands cannot reach the twin")
         if event not in self.events:
             raise ValueError(f"{event[:80]!r} is not a command of this twin (commands: {', '.join(self.events) or 'none'})")
         ports = self.events[event]
@@ -86,11 +84,15 @@ class PagePublisher:
         parsed = parse_message(json.dumps(message).encode(), self.types, self.scalars)  # the twin's own check
         if parsed.dropped:
             raise ValueError("; ".join(parsed.dropped))
+        if self.stopped:
+            raise CotwinError(f"the page's command publisher has stopped ({self.error or 'its link ended'}): "
+                              "commands cannot reach the twin")
         self._pending.put_nowait(message)
         return message
 
     # ---- the link thread ----
     def start(self, timeout: float = 10.0) -> "PagePublisher":
+        self._started = True
         self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
         self._thread.start()
         if not self.bound.wait(timeout) or self.error:
@@ -100,9 +102,9 @@ class PagePublisher:
         return self
 
     @property
-    def running(self) -> bool:
-        """The link thread is alive and has no error: a queued command will leave."""
-        return self._thread is not None and self._thread.is_alive() and self.error is None
+    def stopped(self) -> bool:
+        """The link thread was started and has ended or failed: a queued command would never leave."""
+        return self.error is not None or (self._started and (self._thread is None or not self._thread.is_alive()))
 
     def stop(self) -> None:
         self._stop.set()
