@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 
 from ..diagnostics import CotwinError
-from ..mapping.amqp import connect
+from ..mapping.amqp import connect, declare_exchange
 from .project import RabbitMQSettings
-from .rabbitmq import EchoClock
+from .rabbitmq import COMMANDS, EchoClock
 from .scenario import Command
 
 
@@ -53,7 +53,7 @@ class Publisher:
         connection = connect(s.url, self.name)
         try:
             channel = connection.channel()
-            channel.exchange_declare(s.exchange, exchange_type="direct", durable=False, auto_delete=False)
+            declare_exchange(channel, s.exchange, "direct", s.url, COMMANDS)
             own = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
             channel.queue_bind(own, s.exchange, routing_key=s.from_cosim)
             clock = self.clock = EchoClock(s.maxage_ms / 1000, "publisher")

@@ -44,7 +44,7 @@ from ..cosim.units import INT32, Port, PythonUnit
 from ..config import is_number
 from ..diagnostics import CotwinError
 from ..logcap import CappedLog
-from ..mapping.amqp import connect, redact
+from ..mapping.amqp import connect, declare_exchange, redact
 from .project import RabbitMQSettings
 
 log = logging.getLogger("cotwin.rabbitmq")
@@ -56,6 +56,8 @@ MAX_REFUSED = 1000  # reasons of refused messages kept (all are counted)
 MAX_QUEUED = 10_000  # values of one variable waiting for their simulation time
 MAX_INBOX = 100_000  # messages received and not yet taken by the twin (it takes them every step)
 MAX_APPLIED = 10_000  # values applied, remembered (a publisher refreshing every value for days would grow a list)
+COMMANDS = "the twin's commands ([scenario] rabbitmq exchange, or --rabbitmq)"  # where an exchange's name comes from, for the errors
+EVENTS = "the twin's alarms and what-ifs ([deviation] exchange)"
 ECHO_SLACK = 2.0  # s beyond a twin's furthest time an echo may claim (delivery, the step it announces)
 
 
@@ -344,7 +346,7 @@ class RabbitMQBridge:
         s = self.settings
         self._connection = connect(s.url, f"{self.name} on {s.exchange}")  # named per exchange: RabbitMQ shows which twin it is
         channel = self._connection.channel()
-        channel.exchange_declare(s.exchange, exchange_type="direct", durable=False, auto_delete=False)
+        declare_exchange(channel, s.exchange, "direct", s.url, COMMANDS)
         channel.queue_declare(self.queue_name, durable=False, auto_delete=False,
                               arguments={"x-expires": self.expires_ms})
         channel.queue_bind(self.queue_name, s.exchange, routing_key=s.to_cosim)
@@ -607,13 +609,14 @@ class EventPublisher:
                 if connection is None or not connection.is_open:
                     connection = connect(self.url, self.name)
                     channel = connection.channel()
-                    channel.exchange_declare(self.exchange, exchange_type="topic", durable=False, auto_delete=False)
+                    declare_exchange(channel, self.exchange, "topic", self.url, EVENTS)
                 channel.basic_publish(self.exchange, item[0], item[1])
                 self.sent += 1
             except (pika.exceptions.AMQPError, CotwinError, OSError) as err:
                 self.failed += 1
                 connection = None
-                log.warning("event not published on %s (%s)", self.exchange, type(err).__name__)
+                log.warning("event not published on %s (%s)", self.exchange,
+                            err.findings[0].message if isinstance(err, CotwinError) else type(err).__name__)
         if connection is not None and connection.is_open:
             try:
                 connection.close()

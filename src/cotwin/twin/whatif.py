@@ -313,7 +313,8 @@ class WhatIfService:
         from concurrent.futures import ProcessPoolExecutor
         from multiprocessing import get_context
 
-        from ..mapping.amqp import connect
+        from ..mapping.amqp import connect, declare_exchange
+        from .rabbitmq import EVENTS
 
         self.exchange, self.routing_key = exchange, routing_key
         self.requests: queue.Queue = queue.Queue()
@@ -326,9 +327,16 @@ class WhatIfService:
         self.log = CappedLog(logging.getLogger("cotwin.whatif"), "dropped what-if requests")
         self._pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_init,
                                          initargs=(str(Path(project).resolve()), str(artefacts) if artefacts else None))
-        self._connection = connect(url, "cotwin what-if")
-        channel = self._connection.channel()
-        channel.exchange_declare(exchange, exchange_type="topic", durable=False, auto_delete=False)
+        self._connection = None
+        try:
+            self._connection = connect(url, "cotwin what-if")
+            channel = self._connection.channel()
+            declare_exchange(channel, exchange, "topic", url, EVENTS)
+        except CotwinError:
+            self._pool.shutdown(wait=False)
+            if self._connection is not None:
+                self._connection.close()
+            raise
         self.queue = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
         for key in (routing_key, routing_key + ".#"):
             channel.queue_bind(self.queue, exchange, routing_key=key)

@@ -24,10 +24,10 @@ from collections import deque
 import pika
 
 from ...diagnostics import CotwinError
-from ...mapping.amqp import connect
+from ...mapping.amqp import connect, declare_exchange
 from ..project import RabbitMQSettings
 from ..publisher import idle_values, now_iso
-from ..rabbitmq import EchoClock, parse_message
+from ..rabbitmq import COMMANDS, EchoClock, parse_message
 from ..scenario import scalar_value, typed_value
 
 log = logging.getLogger("cotwin.dashboard")
@@ -122,7 +122,7 @@ class PagePublisher:
         try:
             connection = connect(s.url, self.name)
             channel = connection.channel()
-            channel.exchange_declare(s.exchange, exchange_type="direct", durable=False, auto_delete=False)
+            declare_exchange(channel, s.exchange, "direct", s.url, COMMANDS)
             own = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
             channel.queue_bind(own, s.exchange, routing_key=s.from_cosim)
             channel.basic_consume(own, self._on_echo, auto_ack=True)

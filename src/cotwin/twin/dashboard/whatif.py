@@ -14,7 +14,8 @@ import pika
 
 from ... import safejson
 from ...diagnostics import CotwinError
-from ...mapping.amqp import connect
+from ...mapping.amqp import connect, declare_exchange
+from ..rabbitmq import EVENTS
 
 MAX_ANSWER = 64 << 20  # bytes of a what-if answer (a trajectory of an hour at 1 ms is about 50 MiB)
 
@@ -46,7 +47,7 @@ def ask(url: str, exchange: str, request: dict, timeout: float = 120.0, routing_
         raise CotwinError(f"what-if: cannot reach the broker ({type(err).__name__})") from None
     try:
         channel = connection.channel()
-        channel.exchange_declare(exchange, exchange_type="topic", durable=False, auto_delete=False)
+        declare_exchange(channel, exchange, "topic", url, EVENTS)
         reply = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
         correlation = uuid.uuid4().hex
         answer: dict = {}
