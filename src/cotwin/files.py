@@ -15,6 +15,7 @@ created if missing. A write that fails leaves the previous file as it was.
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 import tempfile
@@ -27,8 +28,10 @@ from .diagnostics import CotwinError, Finding, Location, Severity
 MiB = 1 << 20
 # What cotwin reads whole, by kind, at most (a published model is under 100 KiB, a plan of hours of
 # commands a few MiB; RTDE logs are read as they go, see cotwin.mapping.rtde).
-CAPS = {"model": 16 * MiB, "project": 4 * MiB, "plan": 64 * MiB, "calibration": 4 * MiB, "world": 16 * MiB,
-        "multimodel": 16 * MiB, "state": 256 * MiB, "mesh": 256 * MiB, "access": 1 * MiB}
+CAPS = {"model": 16 * MiB, "project file": 4 * MiB, "plan": 64 * MiB, "scenario": 64 * MiB,
+        "calibration file": 4 * MiB, "world file": 16 * MiB, "multimodel": 16 * MiB, "state": 256 * MiB,
+        "mesh": 256 * MiB, "access file": 1 * MiB}
+DEFAULT_CAP = 16 * MiB  # any other file cotwin reads whole
 
 
 def error(path: str | Path, message: str, line: int = 1, column: int = 1) -> CotwinError:
@@ -36,8 +39,8 @@ def error(path: str | Path, message: str, line: int = 1, column: int = 1) -> Cot
 
 
 def read_bytes(path: str | Path, what: str, limit: int | None = None) -> bytes:
-    """The bytes of the file `what` (a kind of CAPS, or a description with `limit`), or a located CotwinError."""
-    cap = limit if limit is not None else CAPS.get(what.split()[-1], 16 * MiB)
+    """The bytes of the file `what` (capped at CAPS[what], or `limit`), or a located CotwinError."""
+    cap = limit if limit is not None else CAPS.get(what, DEFAULT_CAP)
     try:
         with os.fdopen(os.open(path, os.O_RDONLY | os.O_NONBLOCK), "rb") as f:  # a FIFO opens, and is refused
             info = os.fstat(f.fileno())
@@ -141,3 +144,26 @@ def write_text(path: str | Path, text: str, inputs: Iterable[str | Path | None] 
     with output(path, inputs, mode, text=True, newline="") as f:
         f.write(text)
     return Path(path)
+
+
+def open_exclusive(path: str | Path) -> int:
+    """A descriptor on the regular file `path` (created if missing) that cotwin owns and rewrites in place
+    (a lock file, a result being written): never through a link (one found there is removed, it cannot be
+    ours) and never a file with another name too (a hard link planted there would be truncated with it)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    for _ in range(2):
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o666 & ~_umask())
+        except OSError as err:
+            if err.errno == errno.ELOOP:  # a symbolic link
+                os.unlink(path)
+                continue
+            raise
+        info = os.fstat(fd)
+        if stat.S_ISREG(info.st_mode) and info.st_nlink == 1:
+            return fd
+        os.close(fd)
+        raise error(path, "not a file cotwin made: " + ("it has other names (hard links)" if stat.S_ISREG(info.st_mode)
+                                                      else "not a regular file") + "; remove it")
+    raise error(path, "a link keeps reappearing here; remove it")

@@ -11,6 +11,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from .files import output  # noqa: E402
+
 
 def read_csv(path: str | Path) -> dict[str, list]:
     with open(path, newline="") as f:
@@ -43,7 +45,8 @@ def figure(csv_path: str | Path, png_path: str | Path, panels: list[tuple[str, l
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(png_path, dpi=90)
+    with output(png_path) as f:  # a new file: never through a link left where the figure goes
+        fig.savefig(f, format="png", dpi=90)
     plt.close(fig)
     return Path(png_path)
 
@@ -78,7 +81,8 @@ def twin_figure(pt_csv: str | Path, dt_csv: str | Path, alarms: list[dict], png_
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(png_path, dpi=90)
+    with output(png_path) as f:  # a new file: never through a link left where the figure goes
+        fig.savefig(f, format="png", dpi=90)
     plt.close(fig)
     return Path(png_path)
 
@@ -123,6 +127,7 @@ def top_view(csv_path: str | Path, png_path: str | Path, world, columns: tuple[s
     if title:
         ax.set_title(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(png_path, dpi=90)
+    with output(png_path) as f:  # a new file: never through a link left where the figure goes
+        fig.savefig(f, format="png", dpi=90)
     plt.close(fig)
     return Path(png_path)

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError
+from ..files import check_outputs
 from .common import (DASHBOARD_HELP, address, check_finite, check_step_count, check_timing, main, output_path,
                      serving_options, show_warnings, start_dashboard)
 
@@ -88,6 +89,7 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
     check_step_count(mm.step if step is None else step, (mm.end if end is None else end) - mm.start,
                 "--end" if end is not None else "--step" if step is not None else None, multimodel)
     csv_path = Path(out) if out else Path(multimodel).parent / "outputs.csv"
+    check_outputs([csv_path, csv_path.with_name(csv_path.name + ".part")], [multimodel, *mm.fmus.values()])
     execution = execution_for(mm, csv_path, step, algorithm)
     try:
         result = execution.run(mm.end if end is None else end)

@@ -58,6 +58,8 @@ BODY_SECONDS = 10.0  # to send it
 MAX_CONNECTIONS = 128  # open at once, pages, streams and requests together
 MAX_CLIENTS = 32  # live streams at once (more are closed with 1013, try again later)
 MAX_WHATIFS = 2  # what-ifs from the page in flight (each waits for a fork of the twin)
+MAX_HISTORY_READS = 2  # runs read from the history store at once (more wait their turn)
+MAX_EVENTS = 10_000  # commands, state changes and alarms of a run sent to the page (the first; `counts` has all)
 ENDED = ("done", "stopped", "failed")
 
 
@@ -165,9 +167,7 @@ def history_run(url: str, run_id: int, max_points: int = 4000) -> dict:
     (thinned to `max_points`), the d-model's states, the commands and the alarms."""
     from ..history import read_run
 
-    data = read_run(url, run_id)
-    if not isinstance(data["columns"], dict) or not all(isinstance(c, list) for c in data["columns"].values()):
-        raise CotwinError(f"run {run_id}: its columns are not a JSON object of lists (the store is damaged)")
+    data = read_run(url, run_id, max_points=max_points, max_events=MAX_EVENTS)  # bounded, whatever the run's length
     prefix = MAPPING.name + "."
     sides = {}
     try:
@@ -182,7 +182,7 @@ def history_run(url: str, run_id: int, max_points: int = 4000) -> dict:
         raise CotwinError(f"run {run_id}: its samples do not match its columns (the store is damaged)") from None
     run = dict(data["run"])
     return {"run": run, "sides": sides, "states": data["states"], "alarms": data["alarms"],
-            "commands": data["commands"]}
+            "commands": data["commands"], "counts": data["counts"]}
 
 
 class Dashboard:
@@ -221,6 +221,7 @@ class Dashboard:
             self.publisher = PagePublisher(system.spec.rabbitmq, port_types(program, system.source_ports),
                                            self.model["commands"]["events"], heartbeat=heartbeat,
                                            scalars=port_scalars(program))
+        self._history_reads = asyncio.Semaphore(MAX_HISTORY_READS)
         self.whatifs = 0  # what-ifs from the page in flight
         self.whatif_timeout = 120.0  # s to wait for the twin's answer
         self.body_seconds = BODY_SECONDS
@@ -425,7 +426,8 @@ class Dashboard:
             except Refused as err:
                 return refused(err)
             try:
-                data = await run_in_threadpool(history_run, self.history_url, run_id)
+                async with self._history_reads:  # each read is bounded; so is how many run at once
+                    data = await run_in_threadpool(history_run, self.history_url, run_id)
             except CotwinError as err:
                 return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=404)
             return JSONResponse(data)
