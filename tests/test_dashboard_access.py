@@ -144,20 +144,8 @@ def access(tmp_path_factory):
     return path, tokens
 
 
-def _broker_up() -> bool:
-    try:
-        with socket.create_connection(("127.0.0.1", 5672), timeout=1):
-            return True
-    except OSError:
-        return False
-
-
 @pytest.fixture(scope="module")
-def live():
-    if not _broker_up():
-        if os.environ.get("CI"):
-            pytest.fail("no RabbitMQ on 127.0.0.1:5672 (.ci/run should start it)")
-        pytest.skip("no RabbitMQ on 127.0.0.1:5672")
+def live(broker):
     from cotwin.twin.run import load
 
     system = load(ROOT / "examples" / "ur5e" / "live.toml")

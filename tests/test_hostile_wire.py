@@ -5,7 +5,6 @@ say that it stopped. The broker tests use the real RabbitMQ on 127.0.0.1 on exch
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import sys
 import threading
@@ -81,25 +80,6 @@ def test_echoes_claim_only_a_time_a_twin_could_have_reached():
     assert clock.sim == pytest.approx(5.0)
     assert parse_echo(json.dumps(READY).encode()) == (True, None)
     assert parse_echo(b'{"internal_message": "waiting for input data for simulation"}') == (False, None)
-
-
-def _broker_up() -> bool:
-    try:
-        with socket.create_connection(("127.0.0.1", 5672), timeout=1):
-            return True
-    except OSError:
-        return False
-
-
-@pytest.fixture(scope="module")
-def broker():
-    import os
-
-    if not _broker_up():
-        if os.environ.get("CI"):
-            pytest.fail("no RabbitMQ on 127.0.0.1:5672 (.ci/run should start it)")
-        pytest.skip("no RabbitMQ on 127.0.0.1:5672")
-    return BROKER
 
 
 class FakeTwin:

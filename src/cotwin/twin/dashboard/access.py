@@ -109,7 +109,7 @@ def read_access(path: str | Path) -> list[Person]:
     if mode & 0o077:
         raise files.error(path, f"the access file may be read or changed by others than its owner (mode "
                                 f"{mode:03o}): chmod 600 {path}")
-    text = files.read_text(path, "access file", files.CAPS["access"])
+    text = files.read_text(path, "access file")
     people: dict[str, Person] = {}
     problems = []
     for number, line in enumerate(text.splitlines(), 1):
