@@ -262,7 +262,9 @@ def test_logins_open_sessions_that_end_when_the_access_file_drops_the_person(awa
     mine = tmp_path / "access"
     shutil.copy(path, mine)
     os.chmod(mine, 0o600)
-    dash = Dashboard(None, away.address, 0, mode="history", history_url=_history(tmp_path), access=mine).start()
+    dash = Dashboard(None, away.address, 0, mode="history", history_url=_history(tmp_path), access=mine)
+    dash.body_seconds = 2.0
+    dash.start()
     try:
         jar = http.cookiejar.CookieJar()
         opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(jar))
@@ -276,6 +278,11 @@ def test_logins_open_sessions_that_end_when_the_access_file_drops_the_person(awa
                 return err.code
 
         assert call("/api/status") == 401
+        # a login form that never finishes arriving holds nothing for long
+        with socket.create_connection((away.address, dash.port), timeout=10) as sock:
+            started = time.monotonic()
+            sock.sendall(b"POST /login HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\nname=")
+            assert sock.recv(100).startswith(b"HTTP/1.1 408") and time.monotonic() - started < 8
         assert call("/login", {"name": "alice", "secret": "not the password"}) == 401
         assert call("/login", {"name": "nobody", "secret": PASSWORD}) == 401
         assert call("/login", {"name": "alice", "secret": PASSWORD}) == 200  # 303 to the page, then the page

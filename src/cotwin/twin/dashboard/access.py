@@ -17,6 +17,7 @@ command 403, and every refusal is logged (logger `cotwin.dashboard`, capped agai
 
 from __future__ import annotations
 
+import asyncio
 import base64
 import hashlib
 import hmac
@@ -272,8 +273,8 @@ class Gate:
     """ASGI middleware: authenticates every HTTP request and stream of `app` against `access` (see module
     doc), serves /login and /logout, and logs every refusal of the app's too (any answer of 400 and up)."""
 
-    def __init__(self, app, access: Access | None, tls: bool, port_name: str):
-        self.app, self.access, self.tls = app, access, tls
+    def __init__(self, app, access: Access | None, tls: bool, port_name: str, body_seconds: float = 10.0):
+        self.app, self.access, self.tls, self.body_seconds = app, access, tls, body_seconds
         self.cookie = f"cotwin_session_{port_name}"  # cookies are per host, not per port: one per dashboard
         self.refusals = CappedLog(log, "refused requests", burst=100)  # all counted; a flood logs 10 lines a second
 
@@ -358,14 +359,23 @@ class Gate:
         if self.access.throttled(client):
             return await self._refuse(scope, send, 429, f"more than {MAX_FAILURES} failed logins from {client} within "
                                                         f"{FAILURE_WINDOW:g} s: try again later", where)
-        body = b""
-        while True:
-            message = await receive()
-            body += message.get("body", b"")
-            if len(body) > MAX_LOGIN_BODY:
-                return await self._refuse(scope, send, 413, f"a login form of more than {MAX_LOGIN_BODY} bytes", where)
-            if not message.get("more_body"):
-                break
+        async def collect() -> bytes | None:
+            body = b""
+            while True:
+                message = await receive()
+                body += message.get("body", b"")
+                if len(body) > MAX_LOGIN_BODY:
+                    return None
+                if not message.get("more_body"):
+                    return body
+
+        try:
+            body = await asyncio.wait_for(collect(), self.body_seconds)
+        except asyncio.TimeoutError:
+            return await self._refuse(scope, send, 408, f"the login form did not arrive within {self.body_seconds:g} s",
+                                      where)
+        if body is None:
+            return await self._refuse(scope, send, 413, f"a login form of more than {MAX_LOGIN_BODY} bytes", where)
         try:
             form = parse_qs(body.decode("utf-8"), max_num_fields=4, strict_parsing=False)
         except (UnicodeDecodeError, ValueError):

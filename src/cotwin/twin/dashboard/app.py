@@ -267,7 +267,7 @@ class Dashboard:
         self._socket = sock
         self.port = sock.getsockname()[1]
         tls = {"ssl_certfile": str(self.tls[0]), "ssl_keyfile": str(self.tls[1])} if self.tls else {}
-        self.gate = Gate(self.app(), self.access, self.tls is not None, str(self.port))
+        self.gate = Gate(self.app(), self.access, self.tls is not None, str(self.port), self.body_seconds)
         config = uvicorn.Config(self.gate, log_level="warning",
                                 access_log=False, lifespan="off", ws=ws_protocol(), timeout_graceful_shutdown=2,
                                 http=protocol(self.header_seconds), proxy_headers=False,  # clients are who connects
