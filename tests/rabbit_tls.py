@@ -40,6 +40,7 @@ class PKI:
     """A CA, a server certificate for localhost and 127.0.0.1, a client certificate (PEM files)."""
 
     folder: Path
+    names: tuple[str, ...] = ("DNS:localhost", "IP:127.0.0.1")  # the server certificate's subjectAltNames
     ca: Path = field(init=False)
     server: Path = field(init=False)
     server_key: Path = field(init=False)
@@ -53,7 +54,7 @@ class PKI:
         _openssl("req", "-x509", *ec, "-keyout", "ca.key", "-out", "ca.pem", "-days", "2",
                  "-subj", "/CN=cotwin test CA", cwd=d)
         for name, subject, ext in [
-                ("server", "/CN=localhost", "subjectAltName=DNS:localhost,IP:127.0.0.1\nextendedKeyUsage=serverAuth\n"),
+                ("server", "/CN=localhost", f"subjectAltName={','.join(self.names)}\nextendedKeyUsage=serverAuth\n"),
                 ("client", "/CN=cotwin test client", "extendedKeyUsage=clientAuth\n")]:
             _openssl("req", *ec, "-keyout", f"{name}.key", "-out", f"{name}.csr", "-subj", subject, cwd=d)
             (d / f"{name}.ext").write_text("basicConstraints=CA:FALSE\n" + ext)

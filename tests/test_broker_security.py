@@ -522,7 +522,7 @@ def test_a_robot_server_killed_mid_run_is_a_clear_error_with_the_rows_kept(broke
 
 
 GARBAGE = [
-    (b"not json", "sent an invalid reply to describe: bad JSON"),
+    (b"not json", "sent an invalid reply to describe: not JSON"),
     (b'{"ok": true, "actuators": "M1", "sensors": []}', "'actuators' must be a list of names"),
     (b'{"ok": true, "actuators": ["M1"], "sensors": [], "extra": 1}', "expected exactly ok, actuators, sensors"),
     (b'\xff\xfe', "not UTF-8"),

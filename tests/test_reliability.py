@@ -205,7 +205,7 @@ def test_multimodel_phantom_instances_fan_in_and_types_are_errors(system, tmp_pa
         read_multimodel(path)
     assert "simulationProgramDelay must be true or false" in str(err.value)
     path.write_bytes(b'{"fmus": {"\xff": 1}}')
-    with pytest.raises(CotwinError, match=r"bad.json:1:\d+: error: not UTF-8"):
+    with pytest.raises(CotwinError, match=r"bad.json:1:\d+: error: the multimodel is not UTF-8"):
         read_multimodel(path)
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .diagnostics import CotwinError, Finding, Location, Severity
+from .files import read_text
 
 _HEADER = re.compile(r'^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?')
 _KEY = r'(?:[A-Za-z0-9_-]+|"[^"\n]*"|\'[^\'\n]*\')'
@@ -35,16 +36,7 @@ class TomlFile:
 
     def __init__(self, path: str | Path, what: str = "file"):
         self.path = Path(path)
-        try:
-            raw = self.path.read_bytes()
-        except OSError as err:
-            raise self.error(f"cannot read {what}: {err.strerror or err}") from None
-        try:
-            self.text = raw.decode("utf-8").removeprefix("\ufeff")  # a byte order mark is no content
-        except UnicodeDecodeError as err:
-            line = raw[:err.start].count(b"\n") + 1
-            column = err.start - (raw.rfind(b"\n", 0, err.start) + 1) + 1
-            raise self.error(f"the {what} is not UTF-8 text (byte 0x{raw[err.start]:02x})", line, column) from None
+        self.text = read_text(self.path, what)  # capped, UTF-8, a byte order mark dropped; errors located
         try:
             self.data: dict = tomllib.loads(self.text)
         except tomllib.TOMLDecodeError as err:

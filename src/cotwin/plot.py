@@ -15,6 +15,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from .files import output  # noqa: E402
+
 
 def read_csv(path: str | Path) -> dict[str, list]:
     with open(path, newline="") as f:
@@ -54,7 +56,8 @@ def figure(csv_path: str | Path, png_path: str | Path, panels: list[tuple[str, l
     """A figure like the paper's Fig. 16 from a Maestro-format outputs.csv: one panel per (label,
     columns, draw style); the twin chooses the columns from its models (see `figure_panels`)."""
     fig = draw(read_csv(csv_path), panels, title)
-    fig.savefig(png_path, dpi=90)
+    with output(png_path) as f:  # a new file: never through a link left where the figure goes
+        fig.savefig(f, format="png", dpi=90)
     plt.close(fig)
     return Path(png_path)
 
@@ -109,7 +112,8 @@ def twin_figure(pt_csv: str | Path, dt_csv: str | Path, alarms: list[dict], png_
     axes[-1, 0].set_xlabel("time [s] (red: deviation alarm)")
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.savefig(png_path, dpi=90)
+    with output(png_path) as f:  # a new file: never through a link left where the figure goes
+        fig.savefig(f, format="png", dpi=90)
     plt.close(fig)
     return Path(png_path)
 
@@ -154,6 +158,7 @@ def top_view(csv_path: str | Path, png_path: str | Path, world, columns: tuple[s
     if title:
         ax.set_title(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(png_path, dpi=90)
+    with output(png_path) as f:  # a new file: never through a link left where the figure goes
+        fig.savefig(f, format="png", dpi=90)
     plt.close(fig)
     return Path(png_path)

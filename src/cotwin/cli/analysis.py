@@ -7,21 +7,20 @@ from pathlib import Path
 
 import click
 
+from .. import safejson
+from ..files import CAPS, check_outputs, output, read_bytes, write_text
 from .common import MAX_HORIZON, MAX_REPORTED, check_finite, main, named_values, output_path, tool_point
 
 
 def plan_file(path: str, program):
     """A what-if plan: a plan CSV, a TOML command list or a JSON list of {time, event, args}."""
-    import json
-    from pathlib import Path
-
     from ..twin.scenario import read_scenario
     from ..twin.whatif import plan_from_json
 
     if path.endswith(".json"):
         try:
-            data = json.loads(Path(path).read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
+            data = safejson.loads(read_bytes(path, "plan"), CAPS["plan"])
+        except safejson.Refused as err:
             raise click.BadParameter(f"{path}: {err}", param_hint="--plan") from None
         return plan_from_json(data, program)
     return read_scenario(path, program)
@@ -38,20 +37,16 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
     """Predict what a plan would do: fork the DT (at a saved state, or at the start) and run the plan
     ahead of real time; prints each command's outcome and the completion time."""
     import json
-    from pathlib import Path
 
     from ..twin.run import load
     from ..twin.whatif import predict
 
     check_finite(horizon=horizon)
     system = load(project)
+    if out:
+        check_outputs([out], [*system.spec.inputs, plan, state])
     commands = plan_file(plan, system.models.program)
-    blob = None
-    if state is not None:
-        try:
-            blob = Path(state).read_bytes()
-        except OSError as err:
-            raise click.BadParameter(f"{state}: {err.strerror}", param_hint="--from") from None
+    blob = read_bytes(state, "state") if state is not None else None  # capped: a state is a few MiB
     prediction = predict(system, commands, blob, horizon=horizon)
     for c in prediction.commands:
         args = ", ".join(f"{k}={v}" for k, v in c.args.items())
@@ -64,7 +59,7 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
     click.echo(f"completion: {'t = %g s' % prediction.completion_time if prediction.completion_time is not None else 'not within the horizon'} "
                f"(forked at t = {prediction.start:g} s, predicted to t = {prediction.end:g} s in {prediction.wall_seconds:.2f} s)")
     if out:
-        Path(out).write_text(json.dumps(prediction.as_dict(), indent=1) + "\n")
+        write_text(out, json.dumps(prediction.as_dict(), indent=1) + "\n", [*system.spec.inputs, plan, state])
 
 
 @main.command()
@@ -83,7 +78,6 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     --event moveDiscreteCommand --arg target_X=0..15 --arg target_Y=0..23 --arg target_Z=0)."""
     import csv
     import time
-    from pathlib import Path
 
     from ..twin.run import load
     from ..twin.sweep import ERROR, failures, grid, run_sweep
@@ -96,15 +90,17 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
             raise click.BadParameter(f"argument {name!r} is given twice", param_hint="--arg")
         ranges[name] = values
     system = load(project)
+    inputs = [*system.spec.inputs, state]
+    check_outputs([out], inputs)
     plans = grid(system.models.program, event, ranges)
-    blob = Path(state).read_bytes() if state else None
+    blob = read_bytes(state, "state") if state else None
     started = time.perf_counter()
     with ProgressReport("sweeping", "what-ifs") as progress:
         rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress)
     wall = time.perf_counter() - started
     ordered = [r for r in rows if ERROR not in r] + [r for r in rows if ERROR in r]  # answers' columns first
     columns = list(dict.fromkeys(k for r in ordered for k in r))
-    with open(out, "w", newline="") as f:
+    with output(out, inputs, text=True, newline="") as f:
         writer = csv.DictWriter(f, columns, lineterminator="\n")
         writer.writeheader()
         writer.writerows(rows)
@@ -156,6 +152,8 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
         raise click.BadParameter(f"{log_start!r} is not a finite number", param_hint="--log-start")
     point = tool if tool in ("flange", "fingertips") else tool_point(tool)
     system = load(load_project(project, pt_log))  # the log to fit replaces [pt] log
+    if out is not None:  # the project's own calibration too: a fit never replaces what it started from
+        check_outputs([out], [*system.spec.inputs, pt_log, check_log, calibration])
     twin, program, commands = cal.project_twin(system)
     fitted = None
     if pt_log is not None:

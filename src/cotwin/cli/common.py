@@ -75,14 +75,42 @@ def address(ctx, param, value: str | None) -> tuple[str, int] | None:
 DASHBOARD_HELP = "serve the live dashboard at HOST:PORT (e.g. 127.0.0.1:8050) while the run lasts"
 
 
-def start_dashboard(system, address, mode: str, history_url: str | None, whatif_url: str | None = None):
+def serving_options(command):
+    """The dashboard's --dashboard-access FILE, --tls-cert FILE and --tls-key FILE, handed to the command as
+    `serving` (keyword arguments of Dashboard; docs/security.md)."""
+    import functools
+
+    @functools.wraps(command)
+    def wrapper(*args, dashboard_access=None, tls_cert=None, tls_key=None, **kwargs):
+        if (tls_cert is None) != (tls_key is None):
+            raise click.UsageError("--tls-cert and --tls-key go together")
+        return command(*args, serving={"access": dashboard_access,
+                                       "tls": (tls_cert, tls_key) if tls_cert is not None else None}, **kwargs)
+
+    for option in reversed((
+            click.option("--dashboard-access", type=click.Path(), metavar="FILE",
+                         help="who may use the dashboard (made with cotwin dashboard-access); needed to serve it "
+                              "beyond loopback"),
+            click.option("--tls-cert", type=click.Path(), metavar="FILE", help="serve the dashboard over TLS with "
+                                                                                "this certificate (PEM)"),
+            click.option("--tls-key", type=click.Path(), metavar="FILE", help="the certificate's private key (PEM)"))):
+        wrapper = option(wrapper)
+    return wrapper
+
+
+def start_dashboard(system, address, mode: str, history_url: str | None, whatif_url: str | None = None,
+                    serving: dict | None = None):
     """The started dashboard of a run (or None); says where it is."""
     if address is None:
+        if serving and (serving["access"] or serving["tls"]):
+            raise click.UsageError("--dashboard-access and --tls-cert go with --dashboard HOST:PORT")
         return None
     from ..twin.dashboard import Dashboard
 
-    dash = Dashboard(system, *address, mode=mode, history_url=history_url, whatif_url=whatif_url).start()
-    click.echo(f"dashboard: {dash.url}", err=True)
+    dash = Dashboard(system, *address, mode=mode, history_url=history_url, whatif_url=whatif_url,
+                     **(serving or {})).start()
+    click.echo(f"dashboard: {dash.url}{' (log in: access file ' + str(serving['access']) + ')' if serving and serving['access'] else ''}",
+               err=True)
     return dash
 
 

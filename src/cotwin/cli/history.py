@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .common import address, main, output_path
+from .common import address, main, output_path, serving_options, start_dashboard
 
 
 @main.group()
@@ -59,14 +59,13 @@ def history_export(run_id: int, db: str | None, folder: str | None, side: str, o
 @click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
 @click.option("--at", "address", default="127.0.0.1:8050", show_default=True, metavar="HOST:PORT", callback=address,
               help="where to serve the page")
-def dashboard_command(db: str | None, folder: str | None, address: tuple[str, int]) -> None:
+@serving_options
+def dashboard_command(db: str | None, folder: str | None, address: tuple[str, int], serving: dict) -> None:
     """Browse the runs of a history store in the dashboard (after the run), until interrupted."""
     import threading
 
-    from ..twin.dashboard import Dashboard
-
-    dash = Dashboard(None, *address, mode="history", history_url=history_db(db, folder)).start()
-    click.echo(f"dashboard: {dash.url} (history only; Ctrl-C to stop)", err=True)
+    dash = start_dashboard(None, address, "history", history_db(db, folder), serving=serving)
+    click.echo("(history only; Ctrl-C to stop)", err=True)
     try:
         threading.Event().wait()
     except KeyboardInterrupt:

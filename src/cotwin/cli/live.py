@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError
-from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchange_name, main, output_path, show_warnings,
-                     start_dashboard)
+from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchange_name, main, output_path, serving_options,
+                     show_warnings, start_dashboard)
 
 
 @main.command()
@@ -27,9 +27,10 @@ from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchan
 @click.option("--whatif", "whatif", is_flag=True, help="answer what-if requests sent over the broker (see docs)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+@serving_options
 def twin(project: str, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
          pt_log: str | None, pt_url: str | None, exchange: str | None, history: str | None, whatif: bool,
-         dashboard: tuple[str, int] | None, cc: str) -> None:
+         dashboard: tuple[str, int] | None, cc: str, serving: dict) -> None:
     """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
     with deviation checking, alarms and history."""
     import signal
@@ -60,7 +61,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
 
     show_warnings(after_end(system.commands, spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
-                      broker if whatif else None)
+                           broker if whatif else None, serving)
     progress = ProgressReport("twin", "s").__enter__()
     try:
         live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
@@ -160,7 +161,14 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None)
     click.echo(f"publishing {len(commands)} command(s) on exchange {settings.exchange} ({settings.to_cosim}); "
                "waiting for the twin's ready message", err=True)
     publisher.run()
-    click.echo(f"sent {len(publisher.sent)} message(s)")
+    clock = publisher.clock
+    refused = f"; {clock.refused} echo(es) refused (see the log)" if clock is not None and clock.refused else ""
+    click.echo(f"sent {len(publisher.sent)} message(s){refused}")
+    if publisher.ended == "silence":
+        heard = f"t = {clock.sim:g} s" if clock is not None and clock.sim is not None else "no time at all"
+        unsent = f"; {len(publisher.pending)} command(s) of the plan never sent" if publisher.pending else ""
+        raise CotwinError(f"the twin on exchange {settings.exchange} fell silent: no echo for {publisher.silence:g} s "
+                          f"after {heard}{f' (its end is t = {system.spec.end:g} s)' if system.spec.end else ''}{unsent}")
 
 
 @main.command()

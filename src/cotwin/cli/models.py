@@ -5,11 +5,11 @@ from __future__ import annotations
 import sys
 import time
 from collections import Counter
-from pathlib import Path
 
 import click
 
 from ..diagnostics import CotwinError, Severity
+from ..files import check_outputs, write_text
 from .common import main, named_values, output_path, report
 
 
@@ -66,6 +66,7 @@ def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, c
     from ..dmodel.program import build_program
     from ..robosim.check import load_checked
 
+    check_outputs([output], model)
     program = build_program(load_checked(model), module_name)
     path = build_fmu(program, output, cc=cc)
     click.echo(f"{path}: module {program.module.name}, {len(program.machines)} state machine(s), "
@@ -86,11 +87,10 @@ def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, out
     from ..pmodel.urdf import to_urdf
     from ..robosim.check import load_checked
 
+    check_outputs([output], model)
     tree = build_tree(load_checked(model), pmodel_name)
     text = {"sdf": to_sdf, "urdf": to_urdf, "mjcf": to_mjcf}[fmt](tree)
-    path = Path(output)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
+    path = write_text(output, text, model)
     kinds = {k: sum(j.kind == k for j in tree.joints) for k in ("revolute", "prismatic", "fixed")}
     click.echo(f"{path}: {fmt} of p-model {tree.name}: {len(tree.links)} links, {kinds['revolute']} revolute, "
                f"{kinds['prismatic']} prismatic and {kinds['fixed']} fixed joints, {len(tree.sensors)} sensor ports")

@@ -7,8 +7,9 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError
+from ..files import check_outputs
 from .common import (DASHBOARD_HELP, address, check_finite, check_step_count, check_timing, main, output_path,
-                     show_warnings, start_dashboard)
+                     serving_options, show_warnings, start_dashboard)
 
 
 @main.command()
@@ -37,8 +38,9 @@ def build(project: str, out: str, cc: str) -> None:
 @click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+@serving_options
 def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
-        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str) -> None:
+        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str, serving: dict) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
     from ..twin.history import database_url
@@ -54,7 +56,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     from ..twin.scenario import after_end
 
     show_warnings(after_end(system.commands, system.spec.end if end is None else end))
-    dash = start_dashboard(system, dashboard, "run", history)
+    dash = start_dashboard(system, dashboard, "run", history, serving=serving)
     try:
         with ProgressReport("co-simulating", "steps") as progress:
             ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc,
@@ -83,6 +85,7 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
     check_step_count(mm.step if step is None else step, (mm.end if end is None else end) - mm.start,
                 "--end" if end is not None else "--step" if step is not None else None, multimodel)
     csv_path = Path(out) if out else Path(multimodel).parent / "outputs.csv"
+    check_outputs([csv_path, csv_path.with_name(csv_path.name + ".part")], [multimodel, *mm.fmus.values()])
     execution = execution_for(mm, csv_path, step, algorithm)
     try:
         result = execution.run(mm.end if end is None else end)

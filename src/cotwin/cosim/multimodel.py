@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..diagnostics import CotwinError, Finding, Location, Severity
+from ..files import read_text
 from .algorithm import algorithm as make_algorithm
 from .execution import Execution
 from .observers import CSVWriter, Observer, RealTimePacer
@@ -56,16 +57,9 @@ class MultiModel:
 def read_multimodel(path: str | Path) -> MultiModel:
     path = Path(path)
     problems: list[tuple[str, str | None]] = []  # (message, the JSON string it is about)
+    text = read_text(path, "multimodel")  # capped; located errors
     try:
-        raw = path.read_bytes()
-        text = raw.decode("utf-8")
         data = json.loads(text)
-    except OSError as err:
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, f"cannot read: {err.strerror or err}")]) from None
-    except UnicodeDecodeError as err:
-        line = raw[:err.start].count(b"\n") + 1
-        raise CotwinError([Finding(Location(str(path), line, err.start - raw.rfind(b"\n", 0, err.start)), Severity.ERROR,
-                                   f"not UTF-8 text (byte 0x{raw[err.start]:02x})")]) from None
     except RecursionError:
         raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, "bad JSON: nested too deeply")]) from None
     except json.JSONDecodeError as err:

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..diagnostics import CotwinError
+from ..files import open_exclusive, write_bytes
 from .algorithm import UNSET
 
 
@@ -65,8 +66,7 @@ class CSVWriter(Observer):
 
     def simulation_initialized(self, execution) -> None:
         self.columns = self.columns if self.columns is not None else execution.system.observed()
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.part, os.O_WRONLY | os.O_CREAT, 0o644)
+        fd = open_exclusive(self.part)  # never through a link or a hard link planted at the .part name
         try:  # one writer per result file: another run writing it would interleave rows of its own
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -253,6 +253,4 @@ class StateFile(Observer):
         except CotwinError as err:
             self.skipped = "; ".join(f.message for f in err.findings)
             return
-        part = self.path.with_name(self.path.name + ".part")
-        part.write_bytes(blob)
-        part.replace(self.path)
+        write_bytes(self.path, blob)

@@ -28,6 +28,7 @@ from xml.sax.saxutils import escape
 import fmpy
 
 from ..diagnostics import CotwinError
+from ..files import output as files_output
 from . import cnames
 from .ccode import generate_c
 from .ports import SLOT_ARRAY, PortLayout, Variable
@@ -240,9 +241,7 @@ def build_fmu(program: Program, output: str | Path, cc: str = "cc") -> Path:
     ident = model_identifier(program)
     with tempfile.TemporaryDirectory(prefix="cotwin-fmu-") as tmp:
         binary = compile_binary(files, ident, Path(tmp), cc)
-        output.parent.mkdir(parents=True, exist_ok=True)
-        partial = output.with_suffix(output.suffix + ".part")
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
+        with files_output(output) as f, zipfile.ZipFile(f, "w", zipfile.ZIP_DEFLATED) as zf:
             for name in sorted(files):
                 info = zipfile.ZipInfo(name, date_time=_ZIP_TIME)
                 info.compress_type = zipfile.ZIP_DEFLATED
@@ -251,5 +250,4 @@ def build_fmu(program: Program, output: str | Path, cc: str = "cc") -> Path:
             info.compress_type = zipfile.ZIP_DEFLATED
             info.external_attr = 0o755 << 16
             zf.writestr(info, binary.read_bytes())
-        partial.replace(output)
     return output

@@ -18,6 +18,7 @@ from __future__ import annotations
 import ipaddress
 import logging
 import os
+import re
 import ssl
 import stat
 from dataclasses import dataclass
@@ -199,6 +200,23 @@ def connect(url: str, name: str = "cotwin", environ: Mapping[str, str] | None = 
         return pika.BlockingConnection(params)
     except (pika.exceptions.AMQPError, OSError) as err:
         raise CotwinError(scrub(connect_error(url, err, params), environ)) from None
+
+
+def declare_exchange(channel, name: str, kind: str, url: str, what: str) -> None:
+    """Declare `name` as cotwin declares its exchanges (type `kind`, not durable, not auto-deleted), or
+    CotwinError naming it and `what` set its name if one of that name exists otherwise (another
+    application's exchange, or one declared by hand): the broker refuses the declaration (406)."""
+    try:
+        channel.exchange_declare(name, exchange_type=kind, durable=False, auto_delete=False)
+    except pika.exceptions.ChannelClosedByBroker as err:
+        if err.reply_code != 406:
+            raise
+        found = re.search(r"inequivalent arg '(\w+)'.*received '?([^' ]+)'? but current is '?([^' ]+)'?", err.reply_text)
+        why = (f"it is a {found[3]} exchange" if found and found[1] == "type" else
+               f"its '{found[1]}' is {found[3]}, not {found[2]}" if found else err.reply_text[:160])
+        raise CotwinError(f"RabbitMQ {redact(url)}: the exchange '{name}' exists already and is not the {kind} exchange "
+                          f"cotwin uses ({why}; another application's?): name another exchange for {what}, or delete "
+                          "that one") from None
 
 
 def connect_error(url: str, err: BaseException, params: pika.ConnectionParameters | None = None) -> str:

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import hashlib
 import hmac
-import json
 import math
 import os
 import re
@@ -22,6 +21,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Mapping
 
+from .. import safejson
 from ..diagnostics import CotwinError
 from .amqp import read_secret_file
 
@@ -127,31 +127,14 @@ def check_reply(secret: bytes, queue: str, cid: str, headers, body: bytes) -> bo
 
 # ---- message bodies --------------------------------------------------------------------------------
 
-def _constant(name: str):
-    raise ValueError(f"{name} is not a JSON number")
-
-
 def decode(body: bytes, limit: int, what: str) -> dict:
-    """A JSON object from a message body, or CotwinError saying what is wrong (size, UTF-8, JSON, depth)."""
+    """A JSON object from a message body (cotwin.safejson's policy), or CotwinError saying what is wrong."""
     if not isinstance(body, (bytes, bytearray)):
         raise CotwinError(f"{what}: no body")
-    if len(body) > limit:
-        raise CotwinError(f"{what}: {len(body)} bytes (at most {limit})")
     try:
-        text = bytes(body).decode("utf-8")
-    except UnicodeDecodeError as err:
-        raise CotwinError(f"{what}: not UTF-8 (byte 0x{body[err.start]:02x} at {err.start})") from None
-    try:
-        data = json.loads(text, parse_constant=_constant)
-    except json.JSONDecodeError as err:
-        raise CotwinError(f"{what}: bad JSON ({err.msg} at line {err.lineno} column {err.colno})") from None
-    except RecursionError:
-        raise CotwinError(f"{what}: bad JSON (nested too deeply)") from None
-    except ValueError as err:  # NaN/Infinity literals, integers of too many digits
-        raise CotwinError(f"{what}: bad JSON ({err})") from None
-    if not isinstance(data, dict):
-        raise CotwinError(f"{what}: expected a JSON object, got {type(data).__name__}")
-    return data
+        return safejson.loads_object(body, limit)
+    except safejson.Refused as err:
+        raise CotwinError(f"{what}: {err}") from None
 
 
 def _number(value) -> bool:

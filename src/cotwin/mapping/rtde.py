@@ -17,6 +17,7 @@ Two views of a log:
 from __future__ import annotations
 
 import math
+import stat
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..diagnostics import CotwinError, Diagnostics, Finding, Location, Severity
+from ..files import write_text
 from .urrtde import UR_TO_MODEL
 
 JOINTS = 6
@@ -244,8 +246,7 @@ def write_rtde(path: str | Path, timestamp, q, qd=None, target_q=None, target_qd
         put("actual_TCP_pose", [pose_vector(to_controller @ T) for T in tcp])
     names = list(columns)
     rows = zip(*(columns[n] for n in names))
-    path.write_text(" ".join(names) + "\n" + "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in rows))
-    return path
+    return write_text(path, " ".join(names) + "\n" + "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in rows))
 
 
 def read_rtde(path: str | Path, required=LIVE) -> RTDELog:
@@ -327,7 +328,10 @@ def _lines(path: Path):
     text end it with an error at the place."""
     where = str(path)
     try:
-        size = path.stat().st_size
+        info = path.stat()
+        size = info.st_size
+        if not stat.S_ISREG(info.st_mode):  # a FIFO or a device would be read without end
+            raise CotwinError([_finding(where, 1, 1, "cannot read the log: not a regular file")])
         if size > MAX_BYTES:
             raise CotwinError([_finding(where, 1, 1, f"the log is {size / 2**20:.0f} MiB, over the {MAX_BYTES // 2**20} "
                                         "MiB cotwin reads: cut it to the run you need")])

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..config import Key, Schema, TomlFile, dumps, is_number, raise_problems, shown
 from ..diagnostics import CotwinError, Finding, Location, Severity
+from ..files import write_text
 from .tree import matrix_rpy, rpy_matrix, transform
 
 TOOL_POINTS = ("flange", "fingertips")
@@ -142,9 +143,7 @@ class CellGeometry:
         return cls.from_values(values, file)
 
     def write(self, path: str | Path, header: str = "cotwin cell geometry") -> Path:
-        path = Path(path)
-        path.write_text(dumps(self.tables(), header))
-        return path
+        return write_text(path, dumps(self.tables(), header))
 
 
 def _numbers(length: int | None):

@@ -11,12 +11,18 @@ from pathlib import Path
 
 import numpy as np
 
+from ..diagnostics import CotwinError
+from ..files import read_bytes
+
 READABLE = (".stl", ".obj")  # bounding boxes read here; also the formats MuJoCo loads as mesh assets
 
 
 @lru_cache(maxsize=64)
 def _vertices(path: str, mtime: float) -> np.ndarray:
-    data = Path(path).read_bytes()
+    try:
+        data = read_bytes(path, "mesh")  # capped: a mesh of gigabytes is unreadable, not a MemoryError
+    except CotwinError as err:
+        raise ValueError(err.findings[0].message) from None
     suffix = Path(path).suffix.lower()
     if suffix == ".stl":
         if len(data) >= 84:

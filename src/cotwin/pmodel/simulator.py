@@ -31,6 +31,7 @@ import mujoco
 import numpy as np
 
 from ..diagnostics import CotwinError
+from ..files import write_text
 from .mjcf import TIMESTEP, pose_paths, sensor_name, servo_mode, servo_name, site_name, to_mjcf
 from .tree import KinematicTree
 
@@ -323,6 +324,4 @@ class PlatformSimulator:
         return T
 
     def write_mjcf(self, path: str | Path) -> Path:
-        path = Path(path)
-        path.write_text(self.xml)
-        return path
+        return write_text(path, self.xml)

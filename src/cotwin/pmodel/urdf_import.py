@@ -33,6 +33,7 @@ from urllib.parse import unquote, urlparse
 import numpy as np
 
 from ..diagnostics import CotwinError, Diagnostics, Finding, Severity
+from ..files import check_outputs, write_text
 from .tree import matrix_rpy, transform
 from .urdf_read import Geometry, Joint, Link, Origin, Robot, Shape, read_urdf
 
@@ -500,12 +501,9 @@ def import_urdf(urdf: str | Path, out: str | Path, package_path: list[str | Path
         raise CotwinError(f"{out}: not a folder (-o names the folder to write the p-model and its meshes into)")
     out.mkdir(parents=True, exist_ok=True)
     file = out / f"{writer.name}.pm"
-    if file.resolve() == urdf.resolve():
-        raise CotwinError(f"{file}: would overwrite the URDF being imported")
+    check_outputs([file], [urdf])  # never over the URDF being imported
     copies = meshes.copy_to(out)
-    if file.is_symlink():
-        file.unlink()
-    file.write_text(text, encoding="utf-8")
+    write_text(file, text)  # a new file renamed into place: never through a link left there
     kinds = {k: sum(j.type == k for j in robot.joints) for k in JOINT_DEVICES}
     result = ImportResult(writer.name, file, copies, writer.names.renamed, writer.devices, len(robot.links), kinds,
                           dict(sorted(robot.ignored.items())), findings)

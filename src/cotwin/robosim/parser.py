@@ -10,6 +10,7 @@ import lark
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken, VisitError
 
 from ..diagnostics import CotwinError, Diagnostics, Finding, Location, Severity
+from ..files import CAPS, read_text
 from .builder import Builder
 from .declarations import SourceFile
 
@@ -166,16 +167,10 @@ def _last_position(text: str) -> tuple[int, int]:
 def parse_file(path: str | Path) -> tuple[SourceFile | None, list[Finding]]:
     """Read and parse a file; unreadable files are findings too."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-        text = raw.decode("utf-8")
-    except OSError as err:
-        return None, [Finding(Location(str(path), 1, 1), Severity.ERROR, f"cannot read file: {err.strerror or err}")]
-    except UnicodeDecodeError as err:  # located at the offending byte, like every other input
-        line = raw.count(b"\n", 0, err.start) + 1
-        column = err.start - (raw.rfind(b"\n", 0, err.start) + 1) + 1
-        return None, [Finding(Location(str(path), line, column), Severity.ERROR,
-                              f"the file is not UTF-8 text (byte 0x{raw[err.start]:02x})")]
+    try:  # capped (an 8 GB model is refused before it is read), UTF-8 errors located at the byte
+        text = read_text(path, "file", CAPS["model"])
+    except CotwinError as err:
+        return None, err.findings
     return parse_text(text, str(path))
 
 

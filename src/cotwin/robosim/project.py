@@ -188,7 +188,8 @@ def model_files(paths: Iterable[str | Path]) -> tuple[list[Path], list[Finding]]
         elif path.is_file():
             files.append(path)
         else:
-            findings.append(Finding(Location(str(path), 1, 1), Severity.ERROR, "no such file or folder"))
+            findings.append(Finding(Location(str(path), 1, 1), Severity.ERROR, "not a regular file (a FIFO, a device?)"
+                                    if path.exists() else "no such file or folder"))
     unique = list(dict.fromkeys(files))
     return unique, findings
 

@@ -17,23 +17,27 @@ import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterable
 
 from .. import __version__
 from ..config import dumps
 from ..diagnostics import CotwinError
+from ..files import check_outputs, open_exclusive, output, write_text
 from .system import TwinSystem
 
 RECORD = "build.json"
+ARTEFACTS = ("dmodel.fmu", RECORD)  # and build()'s: the p-model files, the Python FMUs, multimodel.json
 _GENERATORS = ("dmodel/ccode.py", "dmodel/fmu.py", "dmodel/fmi2_wrapper.c", "dmodel/ports.py", "dmodel/program.py",
                "dmodel/interpreter.py")
 
 
 @contextmanager
-def folder_lock(folder: Path):
-    """Hold DIR/.cotwin.lock for the duration; another run into the same folder is refused."""
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / ".cotwin.lock"
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+def folder_lock(folder: Path, writes: Iterable[str | Path] = (), reads: Iterable[Path] = ()):
+    """Hold DIR/.cotwin.lock for the duration; another run into the same folder is refused, and so is one
+    that would write a file of `writes` (names in DIR, or paths) over one it reads (`reads`)."""
+    folder = Path(folder)
+    check_outputs([folder / name for name in writes], reads)
+    fd = open_exclusive(folder / ".cotwin.lock")
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -85,19 +89,10 @@ class Record:
 
     def done(self, target: Path, key: str) -> None:
         self.keys[target.name] = key
-        part = self.path.with_name(self.path.name + ".part")
-        part.write_text(json.dumps(self.keys, indent=1, sort_keys=True) + "\n")
-        part.replace(self.path)
+        write_text(self.path, json.dumps(self.keys, indent=1, sort_keys=True) + "\n")
 
     def forget(self, target: Path) -> None:
         self.keys.pop(target.name, None)
-
-
-def write_text(target: Path, text: str) -> Path:
-    part = target.with_name(target.name + ".part")
-    part.write_text(text)
-    part.replace(target)
-    return target
 
 
 def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: Record | None = None) -> Path:
@@ -123,10 +118,12 @@ def build(system: TwinSystem, out: str | Path, cc: str = "cc") -> dict[str, Path
     from ..pmodel.urdf import to_urdf
 
     out = Path(out)
+    tree, scene = system.models.tree, system.models.scene
+    check_outputs([out / name for name in (*ARTEFACTS, f"{tree.name}.sdf", f"{tree.name}.urdf", f"{tree.name}_scene.xml",
+                                           "multimodel.json", *(u.fmu for u in system.units))], system.spec.inputs)
     out.mkdir(parents=True, exist_ok=True)
     record = Record(out)
     written = {"dmodel": dmodel_fmu(system, out, cc, record)}
-    tree, scene = system.models.tree, system.models.scene
     for name, text in ((f"{tree.name}.sdf", to_sdf(tree)), (f"{tree.name}.urdf", to_urdf(tree)),
                        (f"{tree.name}_scene.xml", to_mjcf(tree, scene, base=system.spec.base))):
         written[name] = write_text(out / name, text)
@@ -216,8 +213,7 @@ def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = Non
             fmu = FmuBuilder.build_FMU(work / "fmu_slave.py", dest=work,
                                        project_files=[work / "twin", work / "cotwin_unit.json"],
                                        canGetAndSetFMUstate=True, canSerializeFMUstate=True)
-            part = target.with_name(target.name + ".part")
-            shutil.move(str(fmu), part)
-            part.replace(target)
+            with open(fmu, "rb") as built, output(target) as f:
+                shutil.copyfileobj(built, f)
             record.done(target, key)
     return written

@@ -28,6 +28,7 @@ from scipy.spatial.transform import Rotation
 from .scenario import Command
 from ..config import Key, Schema, TomlFile, dumps, is_number, raise_problems
 from ..diagnostics import CotwinError, Finding, Location, Severity
+from ..files import write_text
 from ..dmodel.program import Program
 from ..mapping.motion import MOTION, JointMove, MotionProfile, Quintic, profile_from_values
 from ..mapping.rtde import ArmLog, Motion
@@ -78,8 +79,7 @@ class Calibration:
             tables["timing"] = self.timing.table()
         if self.fit:
             tables["fit"] = self.fit
-        path.write_text(dumps(tables, header or "cotwin calibration"))
-        return path
+        return write_text(path, dumps(tables, header or "cotwin calibration"))
 
     @classmethod
     def read(cls, path: str | Path) -> "Calibration":

@@ -25,6 +25,7 @@ import sqlalchemy as sa
 
 from ..cosim.algorithm import UNSET
 from ..diagnostics import CotwinError
+from ..files import check_outputs, output
 
 metadata = sa.MetaData()
 runs = sa.Table(
@@ -80,6 +81,18 @@ alarms = sa.Table(
 )
 
 
+def sqlite_path(url: str) -> Path | None:
+    """The file of a SQLite store's URL (None for another database, or an in-memory one)."""
+    try:
+        parsed = sa.engine.make_url(url)
+    except (sa.exc.ArgumentError, ValueError):
+        return None
+    database = parsed.database or ""
+    if parsed.get_backend_name() != "sqlite" or database in ("", ":memory:") or database.startswith("file:"):
+        return None
+    return Path(database)
+
+
 def database_url(url: str | None, folder: Path | None = None) -> str:
     """A SQLAlchemy URL: `postgresql://` uses psycopg 3; the default is DIR/history.sqlite."""
     if url is None:
@@ -95,30 +108,77 @@ STALE_AFTER = 120.0  # s without a record after which a `running` run is shown a
 MAX_RUN_ID = (1 << 63) - 1  # the largest id SQLite and PostgreSQL store
 
 
+SCHEMA = "cotwin"  # PostgreSQL: cotwin's tables, in a schema of their own beside other applications' tables
+
+
 def engine_for(url: str, create: bool = True) -> sa.Engine:
-    """An engine on the store at `url`; with `create=False` (readers) a SQLite file must already exist."""
+    """An engine on the store at `url` whose tables are cotwin's (see `_ours`): in PostgreSQL those of the
+    schema `cotwin` (made by a recorder; a store made before it had one is read from `public`). With
+    `create=False` (readers) a SQLite file must already exist and nothing is created."""
     if not create:
         _must_exist(url)
     try:
         engine = sa.create_engine(url, future=True)
-        with engine.connect():
-            pass
+        with engine.connect() as conn:
+            schema = _schema(conn, create)
     except (sa.exc.SQLAlchemyError, ImportError, ValueError) as err:
         raise CotwinError(f"cannot open the history database {_redact(url)}: {type(err).__name__}: "
+                          f"{str(err).splitlines()[0][:200]}") from None
+    if schema is not None:
+        engine = engine.execution_options(schema_translate_map={None: schema})
+    try:
+        with engine.connect() as conn:
+            _ours(conn, schema, url)
+    except sa.exc.SQLAlchemyError as err:
+        raise CotwinError(f"cannot read the history database {_redact(url)}: {type(err).__name__}: "
                           f"{str(err).splitlines()[0][:200]}") from None
     return engine
 
 
+def _schema(conn, create: bool) -> str | None:
+    """Where cotwin's tables are in this database: None (SQLite: the file is the store) or a schema."""
+    if conn.dialect.name != "postgresql":
+        return None
+    inspector = sa.inspect(conn)
+    if create:
+        try:
+            conn.execute(sa.schema.CreateSchema(SCHEMA, if_not_exists=True))
+            conn.commit()
+        except sa.exc.SQLAlchemyError as err:
+            raise CotwinError(f"cannot make the schema '{SCHEMA}' for cotwin's history in {conn.engine.url.database}: "
+                              f"{str(err.orig if hasattr(err, 'orig') else err).splitlines()[0][:160]} (create it: "
+                              f"CREATE SCHEMA {SCHEMA} AUTHORIZATION <the user>)") from None
+        return SCHEMA
+    if not inspector.has_table("runs", schema=SCHEMA) and inspector.has_table("runs", schema="public") \
+            and _missing(inspector, "runs", "public") == []:
+        return "public"  # a store written before cotwin had its own schema
+    return SCHEMA
+
+
+def _missing(inspector, table: str, schema: str | None) -> list[str]:
+    have = {c["name"] for c in inspector.get_columns(table, schema=schema)}
+    return [c.name for c in metadata.tables[table].columns if c.name not in have]
+
+
+def _ours(conn, schema: str | None, url: str) -> None:
+    """CotwinError naming the table if a table of cotwin's name here is another application's (it lacks
+    cotwin's columns): writing or reading it would fail half-way, or read someone else's rows."""
+    inspector = sa.inspect(conn)
+    for name in metadata.tables:
+        if inspector.has_table(name, schema=schema):
+            missing = _missing(inspector, name, schema)
+            if missing:
+                where = f"{schema}.{name}" if schema else name
+                raise CotwinError(f"the history database {_redact(url)} has a table '{where}' that is not cotwin's "
+                                  f"(it has no column {', '.join(missing[:5])}): give cotwin a database of its own "
+                                  f"({'another SQLite file' if schema is None else 'or drop that table'})")
+
+
 def _must_exist(url: str) -> None:
     """CotwinError if `url` is a SQLite file that does not exist (connecting would create it)."""
-    try:
-        parsed = sa.engine.make_url(url)
-    except (sa.exc.ArgumentError, ValueError):
-        return  # engine_for reports it
-    database = parsed.database or ""
-    if parsed.get_backend_name() == "sqlite" and database not in ("", ":memory:") \
-            and not database.startswith("file:") and not Path(database).is_file():
-        raise CotwinError(f"no history database at {database}")
+    path = sqlite_path(url)
+    if path is not None and not path.is_file():
+        raise CotwinError(f"no history database at {path}")
 
 
 def _reading(url: str, what):
@@ -216,10 +276,15 @@ class HistoryRecorder:
         self.engine.dispose()
 
 
+def _has_runs(engine) -> bool:
+    schema = engine.get_execution_options().get("schema_translate_map", {}).get(None)
+    return sa.inspect(engine).has_table("runs", schema=schema)
+
+
 def list_runs(url: str, now: float | None = None) -> list[dict]:
     """Every run of the store with its sample and raised-alarm counts (see the module doc on `interrupted`)."""
     def read(engine) -> list[dict]:
-        if not sa.inspect(engine).has_table("runs"):
+        if not _has_runs(engine):
             return []
         with engine.connect() as conn:
             rows = conn.execute(sa.select(runs).order_by(runs.c.id)).mappings().all()
@@ -247,47 +312,127 @@ def _aged(conn, run: dict, now: float | None) -> dict:
                                                       "twin that recorded it ended without closing it (killed?)"}
 
 
-def read_run(url: str, run_id: int, now: float | None = None) -> dict:
-    """A run's record, samples per side (list of (time, values)), commands, states and alarms."""
+PAGE = 5_000  # samples fetched from the store at a time (a reader holds a page, never a whole run)
+MAX_RECORD = 1 << 22  # characters of one stored JSON record (a sample of thousands of variables is ~100 KiB)
+
+
+def _json(text, what: str):
+    """A JSON record as the recorder wrote it (NaN included: a diverged value is one), or ValueError saying
+    why it is not one (the store may be shared with, or damaged by, something else)."""
+    if not isinstance(text, str) or len(text) > MAX_RECORD:
+        raise ValueError(f"{what} is not a JSON text of at most {MAX_RECORD} characters")
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise ValueError(f"{what} is nested too deeply") from None
+    except ValueError as err:
+        raise ValueError(f"{what} is not JSON ({err})") from None
+
+
+def _side_samples(conn, run_id: int, side: str, max_points: int | None = None):
+    """(time, values) of one side of a run in step order, fetched PAGE at a time; with `max_points`, at most
+    that many, evenly spaced with the last kept, chosen by the database."""
+    where = sa.and_(samples.c.run == run_id, samples.c.side == side)
+    query = sa.select(samples.c.time, samples.c["values"]).where(where).order_by(samples.c.step)
+    if max_points is not None:
+        count = conn.execute(sa.select(sa.func.count()).select_from(samples).where(where)).scalar() or 0
+        stride = max(1, -(-count // max(1, max_points - 1)))
+        if stride > 1:  # numbered on the index (run, side, step) alone; only the chosen rows' values are read
+            numbered = sa.select(samples.c.step, sa.func.row_number().over(order_by=samples.c.step).label("k")) \
+                .where(where).subquery()
+            chosen = sa.select(numbered.c.step).where(sa.or_((numbered.c.k - 1) % stride == 0, numbered.c.k == count))
+            query = query.where(samples.c.step.in_(chosen))
+    for row in conn.execution_options(yield_per=PAGE).execute(query):
+        values = _json(row[1], f"a sample of side {side}")
+        if type(values) is not list:
+            raise ValueError(f"a sample of side {side} is not a list of values")
+        yield row[0], values
+
+
+def read_run(url: str, run_id: int, now: float | None = None, max_points: int | None = None,
+             max_events: int | None = None) -> dict:
+    """A run's record, its samples per side (a list of (time, values)), commands, states and alarms. With
+    `max_points`, at most that many samples per side, evenly spaced (chosen in the database: a long run
+    costs a reader what a short one does); with `max_events`, at most that many of each kind of event (the
+    first ones). `counts` says how many the store holds of each."""
     if isinstance(run_id, bool) or not isinstance(run_id, int) or not 0 < run_id <= MAX_RUN_ID:
         raise CotwinError(f"no run {run_id} in the history {_redact(url)} (run ids are 1, 2, ...)")
 
     def read(engine) -> dict:
-        if not sa.inspect(engine).has_table("runs"):
-            raise CotwinError(f"no run {run_id} in the history {_redact(url)} (it holds no runs)")
         with engine.connect() as conn:
-            run = conn.execute(sa.select(runs).where(runs.c.id == run_id)).mappings().first()
-            if run is None:
-                raise CotwinError(f"no run {run_id} in the history {_redact(url)}")
+            run, columns = _record(conn, url, run_id, now)
+            counts = {}
+            out = {"run": run, "columns": columns, "samples": {}, "counts": counts}
             try:
-                out = {"run": _aged(conn, dict(run), now), "columns": json.loads(run["columns"]), "samples": {}}
-                for row in conn.execute(sa.select(samples.c.side, samples.c.time, samples.c["values"])
-                                        .where(samples.c.run == run_id).order_by(samples.c.side, samples.c.step)):
-                    out["samples"].setdefault(row.side, []).append((row.time, json.loads(row[2])))
-                out["alarms"] = [json.loads(r.event) for r in conn.execute(
-                    sa.select(alarms).where(alarms.c.run == run_id).order_by(alarms.c.time))]
+                sides = [r[0] for r in conn.execute(sa.select(samples.c.side).where(samples.c.run == run_id).distinct())]
+                for side in sorted(sides):
+                    out["samples"][side] = list(_side_samples(conn, run_id, side, max_points))
+                    counts[side] = conn.execute(sa.select(sa.func.count()).select_from(samples).where(
+                        samples.c.run == run_id, samples.c.side == side)).scalar()
+                out["alarms"] = [_json(r.event, "an alarm") for r in _events(conn, alarms, run_id, alarms.c.time,
+                                                                             max_events, counts)]
             except ValueError as err:  # JSON written by something else than the recorder
                 raise CotwinError(f"run {run_id} in the history {_redact(url)} is damaged: {err}") from None
-            out["commands"] = [dict(r) for r in conn.execute(sa.select(commands).where(commands.c.run == run_id)
-                                                             .order_by(commands.c.step)).mappings()]
-            out["states"] = [dict(r) for r in conn.execute(sa.select(states).where(states.c.run == run_id)
-                                                           .order_by(states.c.step)).mappings()]
+            out["commands"] = [dict(r) for r in _events(conn, commands, run_id, commands.c.step, max_events, counts)]
+            out["states"] = [dict(r) for r in _events(conn, states, run_id, states.c.step, max_events, counts)]
         return out
 
     return _reading(url, read)
 
 
+def _record(conn, url: str, run_id: int, now: float | None = None) -> tuple[dict, dict]:
+    """A run's row (aged) and its columns per side, or CotwinError: no such run, or a damaged one."""
+    if not _has_runs(conn):
+        raise CotwinError(f"no run {run_id} in the history {_redact(url)} (it holds no runs)")
+    run = conn.execute(sa.select(runs).where(runs.c.id == run_id)).mappings().first()
+    if run is None:
+        raise CotwinError(f"no run {run_id} in the history {_redact(url)}")
+    try:
+        columns = _json(run["columns"], "its columns")
+    except ValueError as err:
+        raise CotwinError(f"run {run_id} in the history {_redact(url)} is damaged: {err}") from None
+    if not isinstance(columns, dict) or not all(isinstance(c, list) for c in columns.values()):
+        raise CotwinError(f"run {run_id} in the history {_redact(url)} is damaged: its columns are not a JSON "
+                          "object of lists")
+    return _aged(conn, dict(run), now), columns
+
+
+def _events(conn, table: sa.Table, run_id: int, order, limit: int | None, counts: dict) -> list:
+    query = sa.select(table).where(table.c.run == run_id).order_by(order)
+    if limit is not None:
+        counts[table.name] = conn.execute(sa.select(sa.func.count()).select_from(table).where(
+            table.c.run == run_id)).scalar()
+        query = query.limit(limit)
+    return list(conn.execute(query).mappings())
+
+
 def export_csv(url: str, run_id: int, side: str, path: str | Path) -> Path:
-    """One side of a run as a Maestro-format CSV (the same columns and spelling as the run wrote)."""
+    """One side of a run as a Maestro-format CSV (the same columns and spelling as the run wrote), read from
+    the store a page at a time; never written over the store itself."""
+    if isinstance(run_id, bool) or not isinstance(run_id, int) or not 0 < run_id <= MAX_RUN_ID:
+        raise CotwinError(f"no run {run_id} in the history {_redact(url)} (run ids are 1, 2, ...)")
+    store = sqlite_path(url)
+    check_outputs([path], [store])
+
+    def write(engine) -> Path:
+        with engine.connect() as conn:
+            _, columns = _record(conn, url, run_id)
+            if side not in columns:
+                raise CotwinError(f"run {run_id} has no side '{side}' (it has {', '.join(columns)})")
+            return _write_side(conn, url, run_id, side, columns[side], path, store)
+
+    return _reading(url, write)
+
+
+def _write_side(conn, url: str, run_id: int, side: str, columns: list, path, store) -> Path:
     from ..cosim.observers import format_value
 
-    data = read_run(url, run_id)
-    if side not in data["columns"]:
-        raise CotwinError(f"run {run_id} has no side '{side}' (it has {', '.join(data['columns'])})")
-    path = Path(path)
-    with open(path, "w", newline="") as f:
+    with output(path, [store], text=True, newline="") as f:
         writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(["time", *data["columns"][side]])
-        for t, values in data["samples"].get(side, []):
-            writer.writerow([format_value(round(t, 12)), *(format_value(v) for v in values)])
-    return path
+        writer.writerow(["time", *columns])
+        try:
+            for t, values in _side_samples(conn, run_id, side):
+                writer.writerow([format_value(round(t, 12)), *(format_value(v) for v in values)])
+        except (ValueError, TypeError) as err:
+            raise CotwinError(f"run {run_id} in the history {_redact(url)} is damaged: {err}") from None
+    return Path(path)

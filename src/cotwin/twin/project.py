@@ -361,6 +361,13 @@ class TwinProject:
     def scenario(self) -> Path | None:
         return self.plan
 
+    @property
+    def inputs(self) -> list[Path]:
+        """Every file the project reads (no output of a run may replace one of them)."""
+        found = [self.path, *self.model_files, self.plan, self.pt.log if self.pt else None, self.calibration,
+                 self.world_file]
+        return [p for p in found if p is not None]
+
     def location(self, *key) -> Location:
         """Where `key` (or its nearest written parent) is in the project file, for checks made after
         loading (against the models); the file's start when not known."""

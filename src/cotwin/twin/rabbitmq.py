@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import queue
 import re
 import threading
@@ -40,11 +39,12 @@ from datetime import datetime, timedelta, timezone
 
 import pika
 
+from .. import safejson
 from ..cosim.units import INT32, Port, PythonUnit
 from ..config import is_number
 from ..diagnostics import CotwinError
 from ..logcap import CappedLog
-from ..mapping.amqp import connect, redact
+from ..mapping.amqp import connect, declare_exchange, redact
 from .project import RabbitMQSettings
 
 log = logging.getLogger("cotwin.rabbitmq")
@@ -56,6 +56,9 @@ MAX_REFUSED = 1000  # reasons of refused messages kept (all are counted)
 MAX_QUEUED = 10_000  # values of one variable waiting for their simulation time
 MAX_INBOX = 100_000  # messages received and not yet taken by the twin (it takes them every step)
 MAX_APPLIED = 10_000  # values applied, remembered (a publisher refreshing every value for days would grow a list)
+COMMANDS = "the twin's commands ([scenario] rabbitmq exchange, or --rabbitmq)"  # where an exchange's name comes from, for the errors
+EVENTS = "the twin's alarms and what-ifs ([deviation] exchange)"
+ECHO_SLACK = 2.0  # s beyond a twin's furthest time an echo may claim (delivery, the step it announces)
 
 
 def parse_time(text: str) -> datetime:
@@ -110,20 +113,7 @@ def parse_message(body: bytes, types: dict[str, str], scalars: dict | None = Non
     by name and refuses an index beyond them, a nat refuses a negative value; a wrongly typed value is
     dropped (and said so) while the others are kept; unknown keys and keys starting with `internal_` or
     `simAtTime` are ignored."""
-    if len(body) > MAX_BYTES:
-        raise ValueError(f"message of {len(body)} bytes (at most {MAX_BYTES})")
-    try:
-        text = body.decode("utf-8")
-    except UnicodeDecodeError as err:
-        raise ValueError(f"not UTF-8 (byte 0x{body[err.start]:02x} at {err.start})") from None
-    try:
-        data = json.loads(text, object_pairs_hook=_unique)
-    except json.JSONDecodeError as err:
-        raise ValueError(f"bad JSON: {err.msg} at line {err.lineno} column {err.colno}") from None
-    except RecursionError:
-        raise ValueError("bad JSON: nested too deeply") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"expected a JSON object, got {type(data).__name__}")
+    data = safejson.loads_object(body, MAX_BYTES)  # the one policy of every message path
     if "time" not in data:
         raise ValueError("no 'time'")
     stamp = parse_time(data["time"])
@@ -156,16 +146,6 @@ def _typed(value, kind: str, sc=None):
     except ValueError as err:
         said = str(err)
         raise ValueError(said if said.startswith(repr(value)[:40]) else f"{value!r:.40} {said}") from None
-
-
-def _unique(pairs: list[tuple[str, object]]) -> dict:
-    """A JSON object whose keys are all different: one naming a variable twice says two things at once."""
-    seen: set[str] = set()
-    for key, _ in pairs:
-        if key in seen:
-            raise ValueError(f"key '{key}' appears twice: which value is meant?")
-        seen.add(key)
-    return dict(pairs)
 
 
 def _fmi_typed(value, kind: str):
@@ -366,7 +346,7 @@ class RabbitMQBridge:
         s = self.settings
         self._connection = connect(s.url, f"{self.name} on {s.exchange}")  # named per exchange: RabbitMQ shows which twin it is
         channel = self._connection.channel()
-        channel.exchange_declare(s.exchange, exchange_type="direct", durable=False, auto_delete=False)
+        declare_exchange(channel, s.exchange, "direct", s.url, COMMANDS)
         channel.queue_declare(self.queue_name, durable=False, auto_delete=False,
                               arguments={"x-expires": self.expires_ms})
         channel.queue_bind(self.queue_name, s.exchange, routing_key=s.to_cosim)
@@ -472,21 +452,77 @@ def echo_message(inputs: dict[str, object], t: float, h: float) -> dict:
     return out
 
 
+_SIMSTEP = re.compile(r"^[0-9]{1,15}(\.[0-9]{1,9})?$")  # ms, as echo_message writes it (up to ~30 000 years)
+
+
+def parse_echo(body: bytes) -> tuple[bool, float | None]:
+    """A message on `from_cosim`: whether it is the ready message, and the simulated time it announces
+    (`simstep`, a decimal number of ms, in s; None where it has none); ValueError saying why it is no echo."""
+    data = safejson.loads_object(body, MAX_BYTES)
+    ready = data.get("internal_status") == READY["internal_status"] and \
+        READY["internal_message"] in str(data.get("internal_message", ""))[:200]
+    if "simstep" not in data:
+        return ready, None
+    simstep = data["simstep"]
+    text = simstep if isinstance(simstep, str) else repr(simstep) if is_number(simstep) else None
+    if text is None or not _SIMSTEP.match(text):
+        raise ValueError(f"'simstep' {str(simstep)[:40]!r} is not a number of milliseconds (e.g. \"1500.000000\")")
+    return ready, float(text) / 1000.0
+
+
 def read_echo(body: bytes) -> tuple[bool, float | None]:
-    """What a publisher learns from a message on `from_cosim`: whether it is the ready message, and
-    the simulated time it announces (`simstep` in s), None where it has none or it is not a number."""
+    """`parse_echo`, with (False, None) for a message that is no echo."""
     try:
-        data = json.loads(body)
+        return parse_echo(body)
     except ValueError:
         return False, None
-    if not isinstance(data, dict):
-        return False, None
-    ready = READY["internal_message"] in str(data.get("internal_message", ""))
-    try:
-        simstep = float(data["simstep"]) / 1000.0
-    except (KeyError, TypeError, ValueError):
-        simstep = None
-    return ready, (simstep if simstep is not None and math.isfinite(simstep) else None)
+
+
+class EchoClock:
+    """What a publisher believes of the twin's simulated time, from the messages on `from_cosim`.
+
+    Anyone who may publish on the twin's exchange can write there, so an echo is taken only where a twin
+    could have sent it: a time is heard only after the ready message, never goes back, and is never
+    further than the twin can be. A twin's clock starts (t0) at a command stamped after it bound its
+    queue, that is before it said it was ready, and it never runs more than `maxage` past the newest
+    command, so its time is at most the wall time since the ready message plus `maxage` (and a step, and
+    ECHO_SLACK for delivery). Refused echoes are counted and logged (capped)."""
+
+    def __init__(self, maxage: float, name: str = "publisher"):
+        self.maxage = maxage
+        self.ready_at: float | None = None  # time.monotonic() of the first ready message
+        self.sim: float | None = None  # the newest simulated time taken (s)
+        self.heard: float | None = None  # time.monotonic() when it was taken
+        self.refused = 0
+        self.log = CappedLog(log, f"echoes refused by the {name}")
+
+    def take(self, body: bytes, now: float | None = None) -> None:
+        now = wallclock.monotonic() if now is None else now
+        try:
+            ready, sim = parse_echo(body)
+        except ValueError as err:
+            return self._refuse(str(err), body)
+        if ready and self.ready_at is None:
+            self.ready_at = now
+        if sim is None:
+            return None
+        if self.ready_at is None:
+            return self._refuse(f"an echo of t = {sim:g} s before the twin said it was ready", body)
+        if self.sim is not None and sim < self.sim:
+            return self._refuse(f"an echo of t = {sim:g} s after one of t = {self.sim:g} s (time goes forward)", body)
+        furthest = now - self.ready_at + self.maxage + ECHO_SLACK
+        if sim > furthest:
+            return self._refuse(f"an echo of t = {sim:g} s only {now - self.ready_at:.1f} s after the twin said it was "
+                                f"ready: no twin can be past t = {furthest:.1f} s yet", body)
+        self.sim, self.heard = sim, now
+        return None
+
+    def _refuse(self, reason: str, body: bytes) -> None:
+        self.refused += 1
+        self.log.warning("echo refused: %s [%r]", reason, bytes(body[:80]).decode("utf-8", "replace"))
+
+    def close(self) -> None:
+        self.log.close()
 
 
 class RabbitMQUnit(PythonUnit):
@@ -573,13 +609,14 @@ class EventPublisher:
                 if connection is None or not connection.is_open:
                     connection = connect(self.url, self.name)
                     channel = connection.channel()
-                    channel.exchange_declare(self.exchange, exchange_type="topic", durable=False, auto_delete=False)
+                    declare_exchange(channel, self.exchange, "topic", self.url, EVENTS)
                 channel.basic_publish(self.exchange, item[0], item[1])
                 self.sent += 1
             except (pika.exceptions.AMQPError, CotwinError, OSError) as err:
                 self.failed += 1
                 connection = None
-                log.warning("event not published on %s (%s)", self.exchange, type(err).__name__)
+                log.warning("event not published on %s (%s)", self.exchange,
+                            err.findings[0].message if isinstance(err, CotwinError) else type(err).__name__)
         if connection is not None and connection.is_open:
             try:
                 connection.close()

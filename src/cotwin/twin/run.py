@@ -12,9 +12,12 @@ from ..cosim.execution import Execution, RunResult, ended_early
 from ..cosim.observers import CSVWriter, Observer, Progress, RealTimePacer, StateFile
 from ..cosim.system import System
 from ..diagnostics import CotwinError
-from .build import dmodel_fmu, folder_lock
+from .build import ARTEFACTS, dmodel_fmu, folder_lock
 from .project import TwinProject, check_timing, load_project
 from .system import MAPPING, TwinSystem
+
+
+RUN_FILES = ("outputs.csv", "outputs.partial.csv", "outputs.csv.part", "state", "figure.png", "path.png", *ARTEFACTS)
 
 
 def dt_endpoint(system: TwinSystem):
@@ -75,7 +78,7 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
     end = spec.end if end is None else end
     step = spec.step if step is None else step
     check_timing(spec, step, end)
-    with folder_lock(out):
+    with folder_lock(out, RUN_FILES, spec.inputs):
         fmu = dmodel_fmu(system, out, cc)
         cosim = system.instantiate(fmu, endpoint if endpoint is not None else dt_endpoint(system), source=source)
         units = {u.role if u.role != "source" else "source": cosim.units[u.name] for u in system.units}

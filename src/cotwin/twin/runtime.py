@@ -24,8 +24,9 @@ from ..cosim.algorithm import UNSET, algorithm as make_algorithm
 from ..cosim.execution import Execution, RunResult, ended_early, step_count
 from ..cosim.observers import CSVWriter, StateFile, epoch_of
 from ..diagnostics import CotwinError, Finding, Severity
+from ..files import write_text
 from .project import check_timing
-from .build import dmodel_fmu, folder_lock
+from .build import ARTEFACTS, dmodel_fmu, folder_lock
 from .deviation import DeviationMonitor
 from .system import DMODEL, MAPPING, RABBITMQ, TwinSystem
 
@@ -169,12 +170,16 @@ class LiveTwin:
 
     # ---- running ----
     def run(self) -> LiveResult:
-        from .history import HistoryRecorder, database_url
+        from .history import HistoryRecorder, database_url, sqlite_path
         from .run import dt_endpoint
 
         spec = self.system.spec
         self.out.mkdir(parents=True, exist_ok=True)
-        with folder_lock(self.out):
+        store = sqlite_path(database_url(self.history_url, self.out))
+        writes = [f"{side}/{name}" for side in ("pt", "dt") for name in ("outputs.csv", "outputs.partial.csv",
+                                                                          "outputs.csv.part")]
+        writes += ["state", "deviation.json", "figure.png", *ARTEFACTS, *([store] if store else [])]
+        with folder_lock(self.out, writes, spec.inputs):
             fmu = dmodel_fmu(self.system, self.out, self.cc)
             pt_ep = self.pt_endpoint if self.pt_endpoint is not None else pt_endpoint(self.system)
             self._warn_if_outlasting(pt_ep)
@@ -326,7 +331,7 @@ class LiveTwin:
                 side.execution.close(error)
             report = self.monitor.report()
             report["pt"] = self.system.spec.pt.endpoint if self.system.spec.pt else "custom"
-            (self.out / "deviation.json").write_text(json.dumps(report, indent=1) + "\n")
+            write_text(self.out / "deviation.json", json.dumps(report, indent=1) + "\n")
             if self._history is not None:
                 self._history.close(status, message)
         result = LiveResult(pt.execution.result(), dt.execution.result(), report, self.out, url,

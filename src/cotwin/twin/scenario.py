@@ -25,6 +25,7 @@ from ..config import Key, Schema, TomlFile, is_number, raise_problems
 from ..cosim.units import INT32, Port, PythonUnit
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..dmodel.program import Program
+from ..files import read_text
 
 MAX_FIELD = 1 << 16  # characters: no cell of a plan is legitimately longer
 
@@ -66,21 +67,6 @@ def parse_value(text: str, fmi: str) -> object:
             raise ValueError("does not fit an FMI Integer (int32)")
         return int(value)
     return value
-
-
-def _decode(path: Path, what: str) -> str:
-    try:
-        raw = path.read_bytes()
-    except OSError as err:
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
-                                   f"cannot read {what}: {err.strerror or err}")]) from None
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as err:
-        line = raw[:err.start].count(b"\n") + 1
-        column = err.start - (raw.rfind(b"\n", 0, err.start) + 1) + 1
-        raise CotwinError([Finding(Location(str(path), line, column), Severity.ERROR,
-                                   f"the {what} is not UTF-8 text (byte 0x{raw[err.start]:02x})")]) from None
 
 
 def _same_time(commands: list[Command], events: set[str], problems: list[Finding], path: Path) -> None:
@@ -125,7 +111,7 @@ def after_end(commands: list[Command], end: float, h: float = 0.0) -> list[Findi
 def read_plan(path: str | Path, program: Program) -> list[Command]:
     path = Path(path)
     ports = scenario_ports(program)
-    text = _decode(path, "plan")
+    text = read_text(path, "plan")  # capped; errors located
     problems: list[Finding] = []
 
     def problem(line: int, column: int, message: str) -> None:

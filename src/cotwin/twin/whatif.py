@@ -27,6 +27,7 @@ from concurrent.futures import CancelledError
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from .. import safejson
 from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution
 from ..diagnostics import CotwinError
@@ -36,6 +37,7 @@ from .scenario import Command
 from .system import DMODEL, MAPPING, TwinSystem
 
 _WORKER = None  # (TwinSystem, artefacts) of a what-if worker process
+MAX_REQUEST = 1 << 20  # bytes of a what-if request (a plan of thousands of commands)
 INFEASIBLE = re.compile(r"^(non|in|un)(feasible|reachable)", re.IGNORECASE)
 FEASIBLE = re.compile(r"^(feasible|reachable)", re.IGNORECASE)
 
@@ -276,11 +278,6 @@ def finite(value):
     return value
 
 
-def no_json_constant(name: str):
-    """json.loads' hook for NaN, Infinity and -Infinity, which JSON does not have."""
-    raise ValueError(f"{name} is not a JSON number")
-
-
 def _worker_init(project: str, artefacts: str | None) -> None:
     global _WORKER
     from .run import load
@@ -316,7 +313,8 @@ class WhatIfService:
         from concurrent.futures import ProcessPoolExecutor
         from multiprocessing import get_context
 
-        from ..mapping.amqp import connect
+        from ..mapping.amqp import connect, declare_exchange
+        from .rabbitmq import EVENTS
 
         self.exchange, self.routing_key = exchange, routing_key
         self.requests: queue.Queue = queue.Queue()
@@ -329,9 +327,16 @@ class WhatIfService:
         self.log = CappedLog(logging.getLogger("cotwin.whatif"), "dropped what-if requests")
         self._pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_init,
                                          initargs=(str(Path(project).resolve()), str(artefacts) if artefacts else None))
-        self._connection = connect(url, "cotwin what-if")
-        channel = self._connection.channel()
-        channel.exchange_declare(exchange, exchange_type="topic", durable=False, auto_delete=False)
+        self._connection = None
+        try:
+            self._connection = connect(url, "cotwin what-if")
+            channel = self._connection.channel()
+            declare_exchange(channel, exchange, "topic", url, EVENTS)
+        except CotwinError:
+            self._pool.shutdown(wait=False)
+            if self._connection is not None:
+                self._connection.close()
+            raise
         self.queue = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
         for key in (routing_key, routing_key + ".#"):
             channel.queue_bind(self.queue, exchange, routing_key=key)
@@ -366,8 +371,6 @@ class WhatIfService:
     MAX_PENDING = 4  # requests queued or running; more are answered "busy" (a fork costs a process's time)
 
     def _on_request(self, channel, method, props, body) -> None:
-        import json
-
         if not props.reply_to or not props.reply_to.startswith("amq.gen-"):
             self.dropped += 1
             self.log.warning("what-if request dropped: %s (correlation_id %r)", "no reply_to" if not props.reply_to
@@ -385,9 +388,7 @@ class WhatIfService:
             self._reply(props, {"error": f"busy: {self.MAX_PENDING} what-ifs pending; try again later"})
             return
         try:
-            if len(body) > 1 << 20:
-                raise ValueError("request larger than 1 MiB")
-            request = json.loads(body.decode("utf-8"), parse_constant=no_json_constant)
+            request = safejson.loads(body, MAX_REQUEST)
             if not isinstance(request, dict):
                 raise ValueError("a request is a JSON object {plan, horizon, decimate}")
             unknown = sorted(set(request) - {"plan", "horizon", "decimate"})
@@ -402,7 +403,7 @@ class WhatIfService:
                 raise ValueError("decimate must be a positive integer")
             if not isinstance(request.get("plan"), list) or not request["plan"]:
                 raise ValueError("plan must be a non-empty list")
-        except (ValueError, UnicodeDecodeError, RecursionError) as err:
+        except ValueError as err:
             self._release()
             self._reply(props, {"error": f"bad what-if request: {err}"})
             return

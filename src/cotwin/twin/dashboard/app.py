@@ -14,11 +14,16 @@ only the keys it documents (400 naming what is wrong); at most MAX_WHATIFS what-
 in flight and at most PagePublisher.MAX_WAITING commands wait to leave (429 beyond); commands to a twin
 that has ended are refused (409), while the page keeps its last figure and state.
 
+Who may use the page (access.py): on loopback anyone on this machine, unless an access file is given;
+beyond loopback (server.py says what that is) only those in the access file, or the page refuses to
+start: every request without a valid token or session is answered 401, a viewer's command or what-if
+403. Request heads must arrive within HEADER_SECONDS (408 and closed otherwise); TLS is uvicorn's.
+
 A command moves a robot, so another site open in the same browser must not send one: a POST must say
 `Content-Type: application/json` (415 otherwise; a browser cannot send that across sites without a
-preflight, which is never answered), its `Origin`, when sent, must be this server (403), and its
-`Host` must be an address, `localhost` or the served host (403: a DNS-rebound name is none of these).
-A stream (`/ws`) from a page of another origin is closed (1008).
+preflight, which is never answered), its `Origin`, when sent, must be this server (403), and, on a page
+without login, its `Host` must name this machine's loopback (403: a DNS-rebound name, or another
+machine's address, is none of these). A stream (`/ws`) from a page of another origin is closed (1008).
 
 A client gets a `hello` (recent samples, the newest events, the status) and then, every `period` seconds, a `batch` of what is new: samples (at most
 `max_rate` per second, evenly thinned beyond that), events and the status. Each client reads the
@@ -37,12 +42,14 @@ import threading
 import time as wallclock
 from pathlib import Path
 
+from ... import safejson
 from ...diagnostics import CotwinError, PicklableError
 from ..system import MAPPING, RABBITMQ, TwinSystem
 from ..whatif import finite as _finite
-from ..whatif import no_json_constant
+from .access import Access, Gate
 from .describe import describe
 from .feed import DashboardFeed
+from .server import HEADER_SECONDS, beyond_loopback, check_tls, protocol, ws_protocol
 
 log = logging.getLogger("cotwin.dashboard")
 STATIC = Path(__file__).resolve().parent / "static"
@@ -51,6 +58,8 @@ BODY_SECONDS = 10.0  # to send it
 MAX_CONNECTIONS = 128  # open at once, pages, streams and requests together
 MAX_CLIENTS = 32  # live streams at once (more are closed with 1013, try again later)
 MAX_WHATIFS = 2  # what-ifs from the page in flight (each waits for a fork of the twin)
+MAX_HISTORY_READS = 2  # runs read from the history store at once (more wait their turn)
+MAX_EVENTS = 10_000  # commands, state changes and alarms of a run sent to the page (the first; `counts` has all)
 ENDED = ("done", "stopped", "failed")
 
 
@@ -62,9 +71,9 @@ class Refused(PicklableError):
         self.status, self.message = status, message
 
 
-async def read_json(request, served: str, limit: int = MAX_BODY, seconds: float = BODY_SECONDS):
-    """The request's body as JSON (see module doc), or Refused saying why not."""
-    foreign = same_site(request.headers, served)
+async def read_json(request, foreign: str | None, limit: int = MAX_BODY, seconds: float = BODY_SECONDS):
+    """The request's body as JSON (see module doc), or Refused saying why not (`foreign`: why the request
+    may come from another site, see same_site)."""
     if foreign is not None:
         raise Refused(403, f"refused: {foreign}")
     kind = request.headers.get("content-type", "").split(";")[0].strip().lower()
@@ -90,33 +99,26 @@ async def read_json(request, served: str, limit: int = MAX_BODY, seconds: float 
     except asyncio.TimeoutError:
         raise Refused(408, f"the body did not arrive within {seconds:g} s") from None
     try:
-        return json.loads(body.decode("utf-8"), parse_constant=no_json_constant)
-    except UnicodeDecodeError as err:
-        raise Refused(400, f"the request is not UTF-8 (byte {err.start})") from None
-    except json.JSONDecodeError as err:
-        raise Refused(400, f"the request is not JSON: {err.msg} at line {err.lineno} column {err.colno}") from None
-    except ValueError as err:
-        why = "a number has too many digits" if "digits" in str(err) else str(err)
-        raise Refused(400, f"the request is not JSON: {why}") from None
-    except RecursionError:
-        raise Refused(400, "the request is not JSON: nested too deeply") from None
+        return safejson.loads(body, limit)
+    except safejson.Refused as err:
+        raise Refused(400, f"the request is not JSON cotwin reads: {err}") from None
 
 
-def same_site(headers, served: str) -> str | None:
-    """Why a request with these headers may come from another site (see module doc), or None."""
-    import ipaddress
+def same_site(headers, served: str, checked_host: bool = True) -> str | None:
+    """Why a request with these headers may come from another site (see module doc), or None. With
+    `checked_host` (a page on loopback without authentication) its Host must name this machine's loopback:
+    `localhost`, a loopback address, the served host or this machine's name."""
     from urllib.parse import urlsplit
+
+    from ...mapping.amqp import is_loopback
 
     host = headers.get("host", "")
     try:
         name = urlsplit("//" + host).hostname or ""
     except ValueError:  # e.g. an unclosed [
         return f"Host {host[:80]!r} is not an address"
-    try:
-        ipaddress.ip_address(name)
-    except ValueError:
-        if name not in ("localhost", served.strip("[]"), socket.gethostname()):
-            return f"Host {host[:80]!r} is not this server's address"
+    if checked_host and not (is_loopback(name) or name in (served.strip("[]"), socket.gethostname())):
+        return f"Host {host[:80]!r} is not this server's address"
     origin = headers.get("origin")
     if origin is not None and origin not in (f"http://{host}", f"https://{host}"):
         return f"Origin {origin[:80]!r} is not this server (Host {host[:80]!r})"
@@ -165,9 +167,7 @@ def history_run(url: str, run_id: int, max_points: int = 4000) -> dict:
     (thinned to `max_points`), the d-model's states, the commands and the alarms."""
     from ..history import read_run
 
-    data = read_run(url, run_id)
-    if not isinstance(data["columns"], dict) or not all(isinstance(c, list) for c in data["columns"].values()):
-        raise CotwinError(f"run {run_id}: its columns are not a JSON object of lists (the store is damaged)")
+    data = read_run(url, run_id, max_points=max_points, max_events=MAX_EVENTS)  # bounded, whatever the run's length
     prefix = MAPPING.name + "."
     sides = {}
     try:
@@ -182,7 +182,7 @@ def history_run(url: str, run_id: int, max_points: int = 4000) -> dict:
         raise CotwinError(f"run {run_id}: its samples do not match its columns (the store is damaged)") from None
     run = dict(data["run"])
     return {"run": run, "sides": sides, "states": data["states"], "alarms": data["alarms"],
-            "commands": data["commands"]}
+            "commands": data["commands"], "counts": data["counts"]}
 
 
 class Dashboard:
@@ -191,13 +191,18 @@ class Dashboard:
 
     def __init__(self, system: TwinSystem | None, host: str = "127.0.0.1", port: int = 8050, mode: str = "twin",
                  history_url: str | None = None, period: float = 0.1, max_rate: float = 100.0,
-                 backlog: int = 4000, heartbeat: bool = True, whatif_url: str | None = None):
+                 backlog: int = 4000, heartbeat: bool = True, whatif_url: str | None = None,
+                 access: str | Path | None = None, tls: tuple[str | Path, str | Path] | None = None):
         if mode not in ("twin", "run", "history"):
             raise ValueError(f"unknown dashboard mode {mode!r}")
         if system is None and mode != "history":
             raise ValueError("a live dashboard needs the twin's system")
         self.system = system
         self.host, self.port = host, port
+        self.access_file, self.tls = access, tls  # see access.py and server.py
+        self.access = None
+        self.gate: Gate | None = None
+        self.header_seconds = HEADER_SECONDS
         self.mode = mode
         self.history_url = history_url
         self.period = period
@@ -216,6 +221,7 @@ class Dashboard:
             self.publisher = PagePublisher(system.spec.rabbitmq, port_types(program, system.source_ports),
                                            self.model["commands"]["events"], heartbeat=heartbeat,
                                            scalars=port_scalars(program))
+        self._history_reads = asyncio.Semaphore(MAX_HISTORY_READS)
         self.whatifs = 0  # what-ifs from the page in flight
         self.whatif_timeout = 120.0  # s to wait for the twin's answer
         self.body_seconds = BODY_SECONDS
@@ -230,13 +236,26 @@ class Dashboard:
     @property
     def url(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}/"
+        return f"{'https' if self.tls else 'http'}://{host}:{self.port}/"
 
     def start(self) -> "Dashboard":
         """Serve the page (and start the command publisher, bound before this returns, so the twin's ready
-        message reaches it); CotwinError if the address cannot be served."""
+        message reaches it); CotwinError if the address cannot be served, or is beyond loopback without an
+        access file (server.py), or the access file or the TLS certificate cannot be used."""
         import uvicorn
 
+        if self.access_file is not None:
+            self.access = Access(self.access_file)
+        elif beyond_loopback(self.host):
+            raise CotwinError(f"dashboard: {self.host} can be reached from other machines (it is not a loopback "
+                              "address), and anyone who reaches the page could command the robot: give it an access "
+                              "file (--dashboard-access FILE, made with cotwin dashboard-access; see docs/security.md) "
+                              "or serve it on 127.0.0.1")
+        if self.tls is not None:
+            check_tls(*self.tls)
+        elif beyond_loopback(self.host):
+            log.warning("dashboard: served on %s without TLS: passwords, tokens and the session cookie cross the "
+                        "network in clear text (give --tls-cert and --tls-key)", self.host)
         family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
         sock = socket.socket(family, socket.SOCK_STREAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -247,9 +266,12 @@ class Dashboard:
             raise CotwinError(f"dashboard: cannot serve on {self.host}:{self.port}: {err.strerror or err}") from None
         self._socket = sock
         self.port = sock.getsockname()[1]
-        config = uvicorn.Config(self.app(), log_level="warning", access_log=False, lifespan="off",
-                                ws="websockets-sansio", timeout_graceful_shutdown=2,
-                                limit_concurrency=MAX_CONNECTIONS)  # more at once are answered 503
+        tls = {"ssl_certfile": str(self.tls[0]), "ssl_keyfile": str(self.tls[1])} if self.tls else {}
+        self.gate = Gate(self.app(), self.access, self.tls is not None, str(self.port), self.body_seconds)
+        config = uvicorn.Config(self.gate, log_level="warning",
+                                access_log=False, lifespan="off", ws=ws_protocol(), timeout_graceful_shutdown=2,
+                                http=protocol(self.header_seconds), proxy_headers=False,  # clients are who connects
+                                limit_concurrency=MAX_CONNECTIONS, **tls)  # more at once are answered 503
         self._server = uvicorn.Server(config)
         _cap_server_log()
         self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]}, name="cotwin dashboard",
@@ -290,6 +312,8 @@ class Dashboard:
         if self._socket is not None:
             self._socket.close()
             self._socket = None
+        if self.gate is not None:
+            self.gate.refusals.close()  # how many refusals were not logged
 
     def __enter__(self) -> "Dashboard":
         return self.start()
@@ -329,7 +353,7 @@ class Dashboard:
                        "none": "this twin takes no commands"}.get(commands["source"], "no live twin to command")
                 return JSONResponse({"error": why}, status_code=409)
             try:
-                body = await read_json(request, self.host, seconds=self.body_seconds)
+                body = await read_json(request, self._foreign(request.headers), seconds=self.body_seconds)
             except Refused as err:
                 return refused(err)
             shape = "expected {\"event\": NAME, \"values\": {PORT: VALUE, ...}}"
@@ -346,6 +370,8 @@ class Dashboard:
                 message = self.publisher.command(body["event"], body.get("values", {}))
             except ValueError as err:
                 return JSONResponse({"error": str(err)}, status_code=422)
+            except CotwinError as err:  # the link thread stopped: nothing would leave
+                return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=503)
             except queue.Full:
                 return JSONResponse({"error": f"{self.publisher.MAX_WAITING} commands are waiting to be published; "
                                               "try again later"}, status_code=429, headers={"Retry-After": "1"})
@@ -360,7 +386,7 @@ class Dashboard:
             from .whatif import ask, check_request
 
             try:
-                body = await read_json(request, self.host, seconds=self.body_seconds)
+                body = await read_json(request, self._foreign(request.headers), seconds=self.body_seconds)
             except Refused as err:
                 return refused(err)
             try:
@@ -400,7 +426,8 @@ class Dashboard:
             except Refused as err:
                 return refused(err)
             try:
-                data = await run_in_threadpool(history_run, self.history_url, run_id)
+                async with self._history_reads:  # each read is bounded; so is how many run at once
+                    data = await run_in_threadpool(history_run, self.history_url, run_id)
             except CotwinError as err:
                 return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=404)
             return JSONResponse(data)
@@ -419,6 +446,11 @@ class Dashboard:
         ]
         return Starlette(routes=routes)
 
+    def _foreign(self, headers) -> str | None:
+        """Why a request may come from another site's page (same_site); the Host is checked only where no
+        login protects the page (on loopback without an access file)."""
+        return same_site(headers, self.host, checked_host=self.access is None)
+
     def _ended(self) -> str | None:
         """How the live twin ended ("the twin has stopped"), or None while it runs or waits."""
         if self.feed is None or self.feed.state not in ENDED:
@@ -431,7 +463,8 @@ class Dashboard:
         out["skipped"] = self.skipped
         if self.publisher is not None:
             out["broker"] = {"twin_ready": self.publisher.twin_ready.is_set(), "sent": self.publisher.sent_count,
-                             "error": self.publisher.error}
+                             "running": not self.publisher.stopped, "echoes_refused": self.publisher.echoes.refused,
+                             "error": self.publisher.error or ("its link ended" if self.publisher.stopped else None)}
         return out
 
     async def _stream(self, websocket) -> None:
@@ -441,7 +474,7 @@ class Dashboard:
             await websocket.accept()  # then closed with a reason the page can show
             await websocket.close(code=1013, reason=f"{MAX_CLIENTS} pages are already following this twin")
             return
-        foreign = same_site(websocket.headers, self.host)
+        foreign = self._foreign(websocket.headers)
         if foreign is not None:  # another site's page would read the twin's stream
             await websocket.accept()
             await websocket.close(code=1008, reason=foreign[:120])

@@ -24,10 +24,10 @@ from collections import deque
 import pika
 
 from ...diagnostics import CotwinError
-from ...mapping.amqp import connect
+from ...mapping.amqp import connect, declare_exchange
 from ..project import RabbitMQSettings
 from ..publisher import idle_values, now_iso
-from ..rabbitmq import parse_message, read_echo
+from ..rabbitmq import COMMANDS, EchoClock, parse_message
 from ..scenario import scalar_value, typed_value
 
 log = logging.getLogger("cotwin.dashboard")
@@ -52,15 +52,17 @@ class PagePublisher:
         self.sent: deque[tuple[float, dict]] = deque(maxlen=self.MAX_SENT)  # (wall time, message), the newest
         self.sent_count = 0
         self.error: str | None = None
-        self.echoed: float | None = None  # the last simulation time the twin echoed (s)
+        self.echoes = EchoClock(settings.maxage_ms / 1000 if settings else 1.0, "dashboard")  # what the echoes say
         self._pending: queue.Queue[dict] = queue.Queue(self.MAX_WAITING)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._started = False
 
     # ---- the page's side ----
     def command(self, event: str, values: dict) -> dict:
         """Queue the command `event` with its value ports; returns the message, ValueError saying why it
-        would be refused (naming the input), or queue.Full if too many wait to leave."""
+        would be refused (naming the input), queue.Full if too many wait to leave, or CotwinError if the
+        link thread has stopped (nothing would leave)."""
         if event not in self.events:
             raise ValueError(f"{event[:80]!r} is not a command of this twin (commands: {', '.join(self.events) or 'none'})")
         ports = self.events[event]
@@ -82,11 +84,15 @@ class PagePublisher:
         parsed = parse_message(json.dumps(message).encode(), self.types, self.scalars)  # the twin's own check
         if parsed.dropped:
             raise ValueError("; ".join(parsed.dropped))
+        if self.stopped:
+            raise CotwinError(f"the page's command publisher has stopped ({self.error or 'its link ended'}): "
+                              "commands cannot reach the twin")
         self._pending.put_nowait(message)
         return message
 
     # ---- the link thread ----
     def start(self, timeout: float = 10.0) -> "PagePublisher":
+        self._started = True
         self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
         self._thread.start()
         if not self.bound.wait(timeout) or self.error:
@@ -95,6 +101,11 @@ class PagePublisher:
                               f"{self.error or 'no broker answer within %g s' % timeout}")
         return self
 
+    @property
+    def stopped(self) -> bool:
+        """The link thread was started and has ended or failed: a queued command would never leave."""
+        return self.error is not None or (self._started and (self._thread is None or not self._thread.is_alive()))
+
     def stop(self) -> None:
         self._stop.set()
         if self._thread is not None:
@@ -102,18 +113,16 @@ class PagePublisher:
             self._thread = None
 
     def _on_echo(self, channel, method, props, body) -> None:
-        ready, simstep = read_echo(body)
-        if ready:
+        self.echoes.take(body)  # never raises: a bad echo is refused and counted
+        if self.echoes.ready_at is not None:
             self.twin_ready.set()
-        if simstep is not None:
-            self.echoed = simstep
 
     def _run(self) -> None:
         s = self.settings
         try:
             connection = connect(s.url, self.name)
             channel = connection.channel()
-            channel.exchange_declare(s.exchange, exchange_type="direct", durable=False, auto_delete=False)
+            declare_exchange(channel, s.exchange, "direct", s.url, COMMANDS)
             own = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
             channel.queue_bind(own, s.exchange, routing_key=s.from_cosim)
             channel.basic_consume(own, self._on_echo, auto_ack=True)
@@ -143,6 +152,9 @@ class PagePublisher:
         except (pika.exceptions.AMQPError, OSError) as err:
             self.error = f"the broker link was lost ({type(err).__name__})"
             log.warning("dashboard publisher: %s", self.error)
+        except Exception as err:  # noqa: BLE001 - a cotwin bug: the page must say so, not answer "queued"
+            self.error = f"it failed ({type(err).__name__}: {str(err)[:200]})"
+            log.exception("dashboard publisher failed")
         finally:
             try:
                 connection.close()

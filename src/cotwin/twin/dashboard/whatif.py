@@ -12,8 +12,12 @@ import uuid
 
 import pika
 
+from ... import safejson
 from ...diagnostics import CotwinError
-from ...mapping.amqp import connect
+from ...mapping.amqp import connect, declare_exchange
+from ..rabbitmq import EVENTS
+
+MAX_ANSWER = 64 << 20  # bytes of a what-if answer (a trajectory of an hour at 1 ms is about 50 MiB)
 
 
 def check_request(body: dict, program) -> dict:
@@ -43,7 +47,7 @@ def ask(url: str, exchange: str, request: dict, timeout: float = 120.0, routing_
         raise CotwinError(f"what-if: cannot reach the broker ({type(err).__name__})") from None
     try:
         channel = connection.channel()
-        channel.exchange_declare(exchange, exchange_type="topic", durable=False, auto_delete=False)
+        declare_exchange(channel, exchange, "topic", url, EVENTS)
         reply = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
         correlation = uuid.uuid4().hex
         answer: dict = {}
@@ -65,9 +69,10 @@ def ask(url: str, exchange: str, request: dict, timeout: float = 120.0, routing_
                 raise CotwinError("what-if: the dashboard is stopping")
             connection.process_data_events(time_limit=min(left, 0.1))
         try:
-            return json.loads(answer["body"])
-        except ValueError:
-            raise CotwinError("what-if: the service's answer is not JSON") from None
+            found = safejson.loads_object(answer["body"], MAX_ANSWER)
+        except safejson.Refused as err:
+            raise CotwinError(f"what-if: the service's answer is refused: {err}") from None
+        return found
     finally:
         try:
             connection.close()

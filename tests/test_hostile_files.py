@@ -1,0 +1,179 @@
+"""Files as a project shipped by someone else may lay them out: links left where outputs go, outputs named
+like inputs, inputs of gigabytes or that are not files at all. Each run through the real `cotwin`."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cotwin.diagnostics import CotwinError
+
+ROOT = Path(__file__).resolve().parents[1]
+UR5E = ROOT / "examples" / "ur5e"
+
+
+def cotwin(*args, cwd=None, timeout=300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cotwin", *map(str, args)], capture_output=True, text=True, cwd=cwd,
+                          timeout=timeout)
+
+
+@pytest.fixture
+def project(tmp_path) -> Path:
+    """The UR5e example copied, so that a test may put files beside it."""
+    folder = tmp_path / "ur5e"
+    shutil.copytree(UR5E, folder)
+    return folder
+
+
+def _victims(folder: Path, names: list[str]) -> dict[Path, Path]:
+    """For each output name, a link from it (in `folder`) to a file elsewhere holding 'precious'."""
+    elsewhere = folder.parent / "elsewhere"
+    elsewhere.mkdir(exist_ok=True)
+    out = {}
+    for name in names:
+        victim = elsewhere / name.replace("/", "_")
+        victim.write_text("precious")
+        link = folder / name
+        link.parent.mkdir(parents=True, exist_ok=True)
+        link.symlink_to(victim)
+        out[link] = victim
+    return out
+
+
+def test_outputs_replace_links_left_where_they_go_and_never_write_through_them(project, tmp_path):
+    out = tmp_path / "out"
+    links = _victims(out, ["figure.png", "outputs.csv", "outputs.csv.part", "state", ".cotwin.lock", "build.json"])
+    proc = cotwin("run", project / "cotwin.toml", "-o", out, "--end", "1")
+    assert proc.returncode == 0, proc.stderr
+    for link, victim in links.items():
+        assert victim.read_text() == "precious", link.name  # untouched
+        if link.name not in ("outputs.csv.part", ".cotwin.lock"):
+            assert link.is_file() and not link.is_symlink(), link.name  # the output itself, in its place
+    assert (out / "outputs.csv").read_text().startswith("time,")
+    # the live twin's report and figure, and a history export
+    from cotwin.mapping.endpoint import SimulatedEndpoint
+    from cotwin.pmodel.simulator import PlatformSimulator
+    from cotwin.twin.history import export_csv
+    from cotwin.twin.run import load
+    from cotwin.twin.runtime import LiveTwin
+
+    live = tmp_path / "live"
+    links = _victims(live, ["deviation.json", "figure.png", "dt/outputs.csv.part", "pt/outputs.csv", "export.csv"])
+    system = load(project / "cotwin.toml")
+    pt = SimulatedEndpoint(PlatformSimulator(system.models.tree, system.models.scene))
+    result = LiveTwin(system, live, pt=pt, end=1.0).run()
+    export_csv(result.history_url, result.run_id, "dt", live / "export.csv")
+    for link, victim in links.items():
+        assert victim.read_text() == "precious", link.name
+    assert (live / "deviation.json").read_text().startswith("{") and not (live / "deviation.json").is_symlink()
+    assert (live / "export.csv").read_text() == (live / "dt" / "outputs.csv").read_text()
+
+
+def test_a_hard_link_planted_where_a_result_is_written_is_refused_not_truncated(project, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    os.link(victim, out / "outputs.csv.part")
+    proc = cotwin("run", project / "cotwin.toml", "-o", out, "--end", "0.5")
+    assert proc.returncode == 1 and "outputs.csv.part" in proc.stderr and "hard links" in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr and victim.read_text() == "precious"
+
+
+def test_no_output_replaces_a_file_the_command_reads(project, tmp_path):
+    plan = project / "plan.csv"
+    before = plan.read_text()
+    # a project whose plan sits where the run writes its results
+    (project / "out").mkdir()
+    shutil.copy(plan, project / "out" / "outputs.csv")
+    toml = project / "cotwin.toml"
+    toml.write_text(toml.read_text().replace('plan = "plan.csv"', 'plan = "out/outputs.csv"'))
+    proc = cotwin("run", toml, "-o", project / "out", "--end", "1")
+    assert proc.returncode == 1 and "would replace" in proc.stderr and "which this command reads" in proc.stderr
+    assert (project / "out" / "outputs.csv").read_text() == before and not (project / "out" / "dmodel.fmu").exists()
+    toml.write_text(toml.read_text().replace('plan = "out/outputs.csv"', 'plan = "plan.csv"'))
+    for args, kept in ((["whatif", toml, "--plan", plan, "--horizon", "1", "-o", plan], plan),
+                       (["whatif", toml, "--plan", plan, "--horizon", "1", "-o", project / "arm.rst"], project / "arm.rst"),
+                       (["export-pmodel", project / "ur5e.pm", "--format", "urdf", "-o", project / "ur5e.pm"],
+                        project / "ur5e.pm"),
+                       (["sweep", toml, "--event", "moveDiscreteCommand", "--arg", "target_X=0", "--arg", "target_Y=0",
+                         "--arg", "target_Z=0", "-o", toml], toml)):
+        text = kept.read_text()
+        proc = cotwin(*args)
+        assert proc.returncode == 1 and "would replace" in proc.stderr and "Traceback" not in proc.stderr, (args, proc.stderr)
+        assert kept.read_text() == text
+    # a fit never replaces the calibration it starts from
+    log = tmp_path / "log.csv"
+    log.write_text("timestamp\n")
+    calibration = (project / "calibration.toml").read_text()
+    proc = cotwin("calibrate", project / "calibrated.toml", "--pt-log", log, "-o", project / "calibration.toml")
+    assert proc.returncode == 1 and "calibration.toml" in proc.stderr and "which this command reads" in proc.stderr
+    assert (project / "calibration.toml").read_text() == calibration
+    # history export onto the store it reads
+    from cotwin.twin.history import HistoryRecorder
+
+    store = tmp_path / "history.sqlite"
+    recorder = HistoryRecorder(f"sqlite:///{store}", "p.toml", "twin", 0.1, "jacobi", {"dt": ["{mapping}.mapping.q0"]})
+    recorder.record_sample("dt", 0, 0.0, [0.5])
+    recorder.close()
+    stored = store.read_bytes()
+    for target in (store, tmp_path / "." / "history.sqlite"):
+        proc = cotwin("history", "export", "1", "--dir", tmp_path, "-o", target)
+        assert proc.returncode == 1 and "which this command reads" in proc.stderr, proc.stderr
+    assert store.read_bytes() == stored
+    proc = cotwin("history", "export", "1", "--dir", tmp_path, "-o", tmp_path / "run1.csv")
+    assert proc.returncode == 0 and (tmp_path / "run1.csv").read_text() == "time,{mapping}.mapping.q0\n0.0,0.5\n"
+
+
+def _sparse(path: Path, size: int = 8 << 30) -> Path:
+    with open(path, "wb") as f:
+        f.truncate(size)  # no disk used: a hole of 8 GiB
+    return path
+
+
+def test_inputs_over_their_cap_are_located_errors_not_memory_errors(project, tmp_path):
+    big = _sparse(tmp_path / "big.rst")
+    proc = cotwin("check", big, timeout=60)
+    assert proc.returncode == 1 and f"{big}:1:1: error: the file is 8192 MiB, over the 16 MiB cotwin reads" in proc.stderr
+    toml = project / "cotwin.toml"
+    original = toml.read_text()
+    for key, name in (('dmodel = "arm.rst"', "dmodel = \"{}\""), ('plan = "plan.csv"', "plan = \"{}\"")):
+        toml.write_text(original.replace(key, name.format(big)))
+        proc = cotwin("run", toml, "-o", tmp_path / "out", timeout=60)
+        assert proc.returncode == 1 and f"{big}:1:1: error:" in proc.stderr and "MiB cotwin reads" in proc.stderr, \
+            proc.stderr
+        assert "internal error" not in proc.stderr and "MemoryError" not in proc.stderr
+    toml.write_text(original.replace('[platform]\nendpoint = "mujoco"',
+                                     f'[platform]\nendpoint = "mujoco"\ncalibration = "{_sparse(tmp_path / "c.toml")}"'))
+    proc = cotwin("run", toml, "-o", tmp_path / "out", timeout=60)
+    assert proc.returncode == 1 and "c.toml:1:1: error: the calibration file is 8192 MiB" in proc.stderr, proc.stderr
+    for args, where in ((["run", _sparse(tmp_path / "p.toml"), "-o", tmp_path / "out"], "p.toml:1:1: error: the project"),
+                        (["simulate", _sparse(tmp_path / "mm.json")], "mm.json:1:1: error: the multimodel is 8192 MiB"),
+                        (["twin", UR5E / "replay.toml", "-o", tmp_path / "out", "--pt-log", _sparse(tmp_path / "log.csv")],
+                         "log.csv:1:1: error: the log is 8192 MiB"),
+                        (["whatif", UR5E / "cotwin.toml", "--plan", _sparse(tmp_path / "plan.json"), "-o",
+                          tmp_path / "p.json"], "the plan is 8192 MiB")):
+        proc = cotwin(*args, timeout=60)
+        assert proc.returncode in (1, 2) and where in proc.stderr and "internal error" not in proc.stderr, (args, proc.stderr)
+
+
+def test_an_input_that_is_not_a_file_is_refused_at_once(project, tmp_path):
+    fifo = tmp_path / "model.rst"
+    os.mkfifo(fifo)  # opening it to read would wait for a writer for ever
+    started = time.monotonic()
+    proc = cotwin("check", fifo, timeout=60)
+    assert proc.returncode == 1 and "not a regular file" in proc.stderr and time.monotonic() - started < 30
+    toml = tmp_path / "project.toml"
+    os.mkfifo(toml)
+    proc = cotwin("run", toml, "-o", tmp_path / "out", timeout=60)
+    assert proc.returncode == 1 and f"{toml}:1:1: error: cannot read project file: not a regular file" in proc.stderr
+    from cotwin import files
+
+    with pytest.raises(CotwinError, match="not a regular file"):
+        files.read_text("/dev/zero", "model")
