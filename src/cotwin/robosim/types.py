@@ -210,7 +210,7 @@ class TypeResolver:
             return RecordTy(decl)
         if isinstance(decl, PrimitiveDecl):
             return AbstractTy(decl)
-        if report:
+        if report and not (hasattr(self.project, "ambiguous") and self.project.ambiguous("type", name)):
             hint = self.project.elsewhere("type", name) if hasattr(self.project, "elsewhere") else []
             extra = f" (there is {', '.join(hint)}: import its package or qualify the name)" if hint else ""
             self.diag.error(name.loc, f"unknown type '{name}'{extra}")
