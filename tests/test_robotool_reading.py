@@ -109,3 +109,20 @@ def test_words_of_robosim_are_names_in_robochart_files(check_texts):
     result = check_texts({"pid.rct": "record PID {\n\terror : real\n\toutput : real\n\tinput : real\n}\n"
                                      "function out(p: PID): real { postcondition result == p.output }\n"})
     assert errors(result) == []
+
+
+def test_a_module_may_declare_constants(check_texts):
+    # RoboSim's ConstCycle: `const` in a module is read, its type resolved and its value checked
+    module = CONTROLLER.replace("module Mod {\n", "module Mod {\n\tconst PERIOD: real = 0.1\n")
+    result = check_texts({"types.rst": "package types\ntype Pos\n", "robot.rst": MACHINE, "app.rst": module})
+    assert errors(result) == []
+    broken = module.replace("0.1", "1 / 0")
+    assert ("app.rst", 8, "division by zero (in constant PERIOD)") in errors(
+        check_texts({"types.rst": "package types\ntype Pos\n", "robot.rst": MACHINE, "app.rst": broken}))
+
+
+def test_link_is_a_physmod_type(check_texts):
+    result = check_texts({"lib.pm": "joint Screwed {\n\tconst parent: LINK, child: LINK\n\tconst AXIS: vector(real, 3)\n}\n"})
+    assert errors(result) == []
+    # in a d-model it is an ordinary (unknown) name
+    assert errors(check_texts({"d.rst": "interface I { event e: LINK }\n"}))[0][2].startswith("unknown type 'LINK'")

@@ -137,6 +137,8 @@ class DModelChecker(Checker):
     def _check_Module(self, module: Module) -> None:
         where = f"module {module.name}"
         self._cycle_def(module.cycle_def, where)
+        self._unique(module.variables, "constant", where)
+        self.variables(module.variables, Scope())
         platform = module_platform(self.project, module, self.source, self.diag)
         endpoints: dict[str, dict | None] = {}
         provided: dict | None = None
