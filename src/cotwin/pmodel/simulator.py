@@ -31,7 +31,7 @@ import mujoco
 import numpy as np
 
 from ..diagnostics import CotwinError
-from .mjcf import TIMESTEP, pose_paths, sensor_name, servo_mode, servo_name, site_name, to_mjcf
+from .mjcf import TIMESTEP, load, pose_paths, sensor_name, servo_mode, servo_name, site_name, to_mjcf
 from .tree import KinematicTree
 
 
@@ -98,10 +98,7 @@ class PlatformSimulator:
         self.scene = scene
         self.base = base
         self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep, visual=False, base=base)
-        try:
-            self.model = mujoco.MjModel.from_xml_string(self.xml)
-        except ValueError as err:
-            raise CotwinError(f"MuJoCo rejected the generated model: {err}") from None
+        self.model = load(self.xml, tree)  # a refusal names the p-model element
         self.data = mujoco.MjData(self.model)
         self.timestep = timestep
         self._joint_qpos = {j.name: self.model.joint(j.name).qposadr[0] for j in tree.actuated}
