@@ -147,7 +147,8 @@ def test_robotool_sdf_naming(arm):
     # parts' links first, numbered, without their part's name; then the p-model's own links
     assert links == ["1-Knuckle", "2-Tip", "3-Palm", "4-Segment", "5-Segment", "6-Segment"]
     joints = [j.get("name") for j in model.findall("joint")]
-    assert joints[0] == "7-fixedJoint" and "8-Bend" in joints
+    # joints after links, a part's first, fixed connections after joints
+    assert joints[:2] == ["7-Bend", "8-fixedJoint"]
     assert model.find("self_collide").text == "true"
     collision = model.find("link[@name='3-Palm']/collision")
     assert collision.get("name").endswith("--Palm_shape0") or "--" in collision.get("name")
@@ -158,7 +159,11 @@ def test_parts_with_part_level_connections(arm):
     tree = build_tree(arm, "Hand")
     joints = {j.name: j for j in tree.joints}
     # a part's links and joints keep their names where nothing else has them (RoboTool's)
-    assert (joints["Palm_to_Knuckle"].kind, joints["Palm_to_Knuckle"].parent) == ("fixed", "Palm")
+    # `link Knuckle fixed to Palm` (RoboTool writes the part's link as the parent), followed from the base
+    fixed = joints["Knuckle_to_Palm"]
+    assert (fixed.kind, fixed.parent, fixed.flipped) == ("fixed", "Palm", True)
+    sdf = ET.fromstring(to_sdf(tree)).find("model/joint[@name='Knuckle_to_Palm']")
+    assert (sdf.findtext("parent"), sdf.findtext("child")) == ("Knuckle", "Palm")
     bend = joints["Bend"]  # `joint Bend flexibly connected to Tip in Thumb`, in the part
     assert (bend.kind, bend.child) == ("revolute", "Tip") and bend.axis == pytest.approx([1, 0, 0])
     assert bend.servos[0].kp == 20 and bend.servos[0].mode == "position"

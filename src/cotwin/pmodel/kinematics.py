@@ -192,6 +192,7 @@ class TJoint:
     annotations: dict = field(default_factory=dict)  # SDF annotation entries (dynamics...), evaluated
     loc: Location = NOWHERE  # the p-model joint (or fixed connection) it comes from
     sdf_kind: str = ""  # its SDF type where that is not `kind`: continuous, gearbox
+    flipped: bool = False  # a fixed connection the tree reaches from its child: written child -> parent
 
 
 @dataclass

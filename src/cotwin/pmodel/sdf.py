@@ -19,6 +19,7 @@ part of the model is written as that element's name); no sensor the model does n
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 
 import numpy as np
 
@@ -140,7 +141,7 @@ class _Names:
         for k, link in enumerate(parts, 1):
             self.links[link.name] = f"{k}-{link.source}"
         count = len(parts)
-        for j in (*tree.joints, *tree.loops):
+        for j in self.ordered_joints(tree):
             count += 1
             fixed = j.kind == "fixed" and not j.source
             self.joints[j.name] = f"{count}-{'fixedJoint' if fixed else (j.source or j.name)}"
@@ -154,6 +155,15 @@ class _Names:
         if self.style != "robotool":
             return tree.links
         return sorted(tree.links, key=lambda l: (l.part is None, l.index is not None))
+
+    def ordered_joints(self, tree: KinematicTree) -> list[TJoint]:
+        """RoboTool's order: parts' joints then their fixed connections, then the p-model's (the tree's else)."""
+        joints = [*tree.joints, *tree.loops]
+        if self.style != "robotool":
+            return joints
+        written = {l.name: l for l in tree.links}
+        return sorted(joints, key=lambda j: (written[j.child if j.flipped else j.parent].part is None,
+                                             j.kind == "fixed"))
 
     def element(self, ref: ElementRef) -> str:
         """The name of a body (its collision), link or part an annotation names."""
@@ -202,7 +212,7 @@ def to_sdf(tree: KinematicTree, style: str = "cotwin") -> str:
         for device in devices.get(link.name, []):
             if device.sdf_type is not None:
                 _device(el, device, names)
-    for j in (*tree.joints, *tree.loops):
+    for j in names.ordered_joints(tree):
         _joint(model, tree, j, names, robotool)
     return to_text(root)
 
@@ -213,6 +223,8 @@ JOINT_ENTRIES = ("gearbox_ratio", "gearbox_reference_body")
 
 def _joint(model: ET.Element, tree: KinematicTree, j: TJoint, names: _Names, robotool: bool) -> None:
     el = sub(model, "joint", name=names.joints[j.name], type=j.sdf_kind or j.kind)
+    if j.flipped:  # a fixed connection written the other way round (RoboTool's direction)
+        j = replace(j, parent=j.child, child=j.parent, pose=tree.link(j.parent).pose)
     if not (robotool and j.kind == "fixed"):
         sub(el, "parent", names.links[j.parent])
         sub(el, "child", names.links[j.child])

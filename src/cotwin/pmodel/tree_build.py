@@ -101,7 +101,7 @@ class TreeBuilder:
         self.sensors: list[Sensor] = []
         self.devices: list[PlacedDevice] = []
         self._named: list[_Named] = []
-        self._refs: list[tuple[dict, int, ElementRef]] = []  # annotation entries naming elements, fixed when named
+        self._links_named: list[tuple[object, str, TLink]] = []  # (element, attribute, link): set once links are named
 
     # ---- values ----
     def num(self, expr, env: ConstEnv, what: str, default=0.0) -> float:
@@ -351,9 +351,9 @@ class TreeBuilder:
                 self.add_joint(joint, base, base.env, None)
         if scope.ref is not None and scope.parent is not None:
             for fixed in scope.ref.fixed:  # `link L fixed to M [in P]` of a part clause
-                for parent in self.targets(scope.parent, fixed.target, fixed.target_part, fixed.loc):
-                    for child in scope.links.get(fixed.link, []):
-                        self._fixed(parent, child, fixed.loc)
+                for target in self.targets(scope.parent, fixed.target, fixed.target_part, fixed.loc):
+                    for link in scope.links.get(fixed.link, []):  # RoboTool: the part's link is the parent
+                        self._fixed(link, target, fixed.loc)
 
     def add_joints(self, instance: _LinkInstance, overrides: dict) -> None:
         link = instance.link
@@ -373,6 +373,7 @@ class TreeBuilder:
     def _fixed(self, parent: _LinkInstance, child: _LinkInstance, loc: Location) -> None:
         joint = TJoint("", "fixed", parent.tlink.name, child.tlink.name, child.tlink.pose.copy(),
                        np.array([0.0, 0.0, 1.0]), source_link=parent.link.name, loc=loc)
+        self._link_name(joint, "parent", parent.tlink), self._link_name(joint, "child", child.tlink)
         self.joints.append(joint)
         label = f"{parent.label}_to_{child.label}"
         self._named.append(_Named(joint, [label, "/".join(parent.scope.path + (label,)),
@@ -405,6 +406,7 @@ class TreeBuilder:
         pose = parent.tlink.pose @ self.pose(ref.pose, env, f"joint {ref.name}")
         joint = TJoint(label, motion.kind, parent.tlink.name, child.tlink.name, pose, motion.axis,
                        source_link=parent.link.name, source=ref.name, loc=ref.loc, sdf_kind=motion.sdf_kind)
+        self._link_name(joint, "parent", parent.tlink), self._link_name(joint, "child", child.tlink)
         main = next((a for a in ref.annotations if a.name.lower() in JOINT_KINDS), None) or next(
             (a for a in ref.annotations if isinstance(a.get("axis"), AnnotationRecord)), None)
         if main is not None:
@@ -484,9 +486,10 @@ class TreeBuilder:
             if record is None and sim_type is not None and kind == "sensor":  # the simulator's reading of it
                 other = next((a for a in annotations if sdf_sensor_type("", (a,)) == sim_type), None)
                 record = self.record(other, renv, holder) if other is not None else None
-            self.devices.append(PlacedDevice(name, kind, device.name if device else ref.name, holder.tlink.name, pose,
-                                             sdf_type, record, ref.name + (f"::{v}" if ref.index is not None else ""),
-                                             ref.loc))
+            placed_device = PlacedDevice(name, kind, device.name if device else ref.name, holder.tlink.name, pose,
+                                         sdf_type, record, ref.name + (f"::{v}" if ref.index is not None else ""), ref.loc)
+            self._link_name(placed_device, "link", holder.tlink)
+            self.devices.append(placed_device)
             placed.append((name, renv, pose, sim_type, record))
         return placed
 
@@ -504,24 +507,28 @@ class TreeBuilder:
             for port in (p for p in device.ports if p.kind == "output"):
                 body = body_quantity(sim_type, port.name)
                 if body is not None:
-                    self.sensors.append(Sensor(name, device.name, holder.link.name, None, body[0], port.name,
-                                               holder.tlink.name, pose, body[1], via))
+                    self._sensor(Sensor(name, device.name, holder.link.name, None, body[0], port.name,
+                                        holder.tlink.name, pose, body[1], via), holder)
                     continue
                 beam = ray_quantity(port.name) if ray is not None and _scalar(port) else None
                 if beam is not None:
-                    self.sensors.append(Sensor(name, device.name, holder.link.name, None, beam, port.name,
-                                               holder.tlink.name, pose, 0, via, ray))
+                    self._sensor(Sensor(name, device.name, holder.link.name, None, beam, port.name,
+                                        holder.tlink.name, pose, 0, via, ray), holder)
                     continue
                 # a sensor of the body (ray, camera...) measures no joint, whatever its ports are called
                 joint_sensor = joint_name is not None and sim_type is None
                 quantity = (sensor_quantity(device.name, port.name) if joint_sensor else None) or "none"
                 if quantity == "none":
                     unknown.append(port.name)
-                self.sensors.append(Sensor(name, device.name, holder.link.name, joint_name if joint_sensor else None,
-                                           quantity, port.name, holder.tlink.name, pose, 0, via))
+                self._sensor(Sensor(name, device.name, holder.link.name, joint_name if joint_sensor else None,
+                                    quantity, port.name, holder.tlink.name, pose, 0, via), holder)
             if unknown:
                 self.diag.warning(ref.loc, f"sensor {name} ({device.name}): cotwin's simulator cannot tell what "
                                   f"{', '.join(unknown)} measure{'s' if len(unknown) == 1 else ''}; they read 0")
+
+    def _sensor(self, sensor: Sensor, holder: _LinkInstance) -> None:
+        self._link_name(sensor, "body", holder.tlink)
+        self.sensors.append(sensor)
 
     # ---- names unique per scope ----
     def name_elements(self) -> None:
@@ -553,9 +560,16 @@ class TreeBuilder:
                                       f"it is named {name} in the exports")
                 n.element.name = name
 
+    def _link_name(self, element, attribute: str, tlink: TLink) -> str:
+        """`tlink`'s name, for `element.attribute`: set again once names are chosen (name_elements)."""
+        self._links_named.append((element, attribute, tlink))
+        return tlink.name
+
     def rename_references(self) -> None:
-        """Servos and sensors name the joints they drive or measure by the names just chosen (a sensor of a
-        link measures the first joint of that name declared in that link)."""
+        """Joints, sensors and devices name links, servos and sensors name joints, by the names just chosen
+        (a sensor of a link measures the first joint of that name declared in that link)."""
+        for element, attribute, tlink in self._links_named:
+            setattr(element, attribute, tlink.name)
         for joint in self.joints:
             for servo in joint.servos:
                 servo.joint = joint.name
@@ -569,26 +583,40 @@ class TreeBuilder:
     # ---- the tree ----
     def order(self, name: str, loc: Location) -> KinematicTree:
         """Links from the base, each joint leading to a new link; joints reaching a link again close loops;
-        links no joint leads to are free bodies (RoboTool's SDF has them so), after the base's tree."""
+        links nothing leads to are free bodies (RoboTool's SDF has them so), after the base's tree. The
+        base is the p-model's first own link no joint leads to; a fixed connection joins two links rigidly
+        whichever way it is written, and is followed backwards where that reaches more of the model."""
         if not self.instances:
             raise CotwinError([f"p-model {name} has no links"])
-        by_id = {id(i.tlink): i.tlink for i in self.instances}
-        tlinks = list(by_id.values())
+        tlinks = list({id(i.tlink): i.tlink for i in self.instances}.values())
         names = {l.name: l for l in tlinks}
-        outgoing = defaultdict(list)
+        edges = defaultdict(list)  # link -> (joint, other end, traversed backwards)
         for j in self.joints:
-            outgoing[j.parent].append(j)
-        children = {j.child for j in self.joints}
-        roots = [l.name for l in tlinks if l.name not in children]
-        own = [r for r in roots if names[r].part is None]
-        ordered_roots = own[:1] + [r for r in roots if r not in own[:1]] if own else roots
-        if not ordered_roots:  # every link is a child: a loop with no root; take the first link
-            ordered_roots = [tlinks[0].name]
-        ordered, tree_joints, loops, reached = [], [], [], set()
-        for root in ordered_roots + [l.name for l in tlinks]:
+            edges[j.parent].append((j, j.child, False))
+            if j.kind == "fixed":
+                edges[j.child].append((j, j.parent, True))
+        moved = {j.child for j in self.joints if j.kind != "fixed"}  # links a moving joint leads to
+        fixed_children = {j.child for j in self.joints if j.kind == "fixed"}
+        candidates = [l.name for l in tlinks if l.name not in moved]
+        own = [n for n in candidates if names[n].part is None]
+
+        def reach(start: str) -> int:
+            seen, queue = {start}, [start]
+            while queue:
+                for _, other, _ in edges[queue.pop()]:
+                    if other not in seen:
+                        seen.add(other)
+                        queue.append(other)
+            return len(seen)
+
+        pool = own or candidates or [tlinks[0].name]
+        base = max(pool, key=lambda n: (reach(n), -pool.index(n)))  # the most reaching, the first declared
+        ordered, tree_joints, loops, reached, used = [], [], [], set(), set()
+        starts = [base] + [l.name for l in tlinks if l.name not in moved and l.name not in fixed_children]
+        for root in starts + [l.name for l in tlinks]:
             if root in reached:
                 continue
-            if root not in ordered_roots:  # a loop no root reaches: its first link stands free
+            if root not in starts:  # a loop no root reaches: its first link stands free
                 self.diag.warning(names[root].loc, f"link {root} is reached only through a kinematic loop: it is a "
                                   "free body")
             reached.add(root)
@@ -596,20 +624,26 @@ class TreeBuilder:
             queue = [root]
             while queue:
                 current = queue.pop(0)
-                for j in outgoing[current]:
-                    if j.child in reached:
+                for j, other, backwards in edges[current]:
+                    if id(j) in used:
+                        continue
+                    used.add(id(j))
+                    if other in reached:
                         loops.append(j)
-                    else:
-                        reached.add(j.child)
-                        tree_joints.append(j)
-                        ordered.append(j.child)
-                        queue.append(j.child)
+                        continue
+                    if backwards:  # a fixed connection followed from its child: written as RoboTool writes it
+                        j.parent, j.child, j.flipped = j.child, j.parent, True
+                        j.pose = names[j.child].pose.copy()
+                    reached.add(other)
+                    tree_joints.append(j)
+                    ordered.append(other)
+                    queue.append(other)
         for j in loops:
             self.diag.warning(j.loc, f"joint {j.name} closes a kinematic loop ({j.parent} -> {j.child})")
-        free = [r for r in ordered_roots[1:]]
+        free = [n for n in ordered if n != ordered[0] and n not in {j.child for j in tree_joints}]
         if free:
             self.diag.warning(loc, f"p-model {name}: no joint or fixed connection leads to {', '.join(free)}: free "
-                              f"bodies beside the base {ordered_roots[0]}, as in RoboTool's SDF")
+                              f"bodies beside the base {ordered[0]}, as in RoboTool's SDF")
         return KinematicTree(name, [names[n] for n in ordered], tree_joints, self.sensors, loops, self.devices)
 
     def build(self, pmodel: PModel) -> KinematicTree:
