@@ -126,6 +126,7 @@ class TLink:
     part: str | None = None  # the part instance it comes through (its scope: `Gripper`, `1-p/q`)
     loc: Location = NOWHERE  # the p-model link (a simulator's error names it)
     index: int | None = None  # the value of its `index`, for a replicated link
+    written_inertia: np.ndarray | None = None  # the model's inertia, where `inertia` (simulated) replaces it
 
 
 @dataclass

@@ -195,7 +195,7 @@ def to_sdf(tree: KinematicTree, style: str = "cotwin") -> str:
         sub(inertial, "pose", pose_text(link.com))
         sub(inertial, "mass", num(link.mass))
         inertia = sub(inertial, "inertia")
-        I = link.inertia
+        I = link.inertia if link.written_inertia is None else link.written_inertia  # the model's, as RoboTool
         for key, (r, c) in (("ixx", (0, 0)), ("ixy", (0, 1)), ("ixz", (0, 2)), ("iyy", (1, 1)), ("iyz", (1, 2)), ("izz", (2, 2))):
             sub(inertia, key, num(I[r, c]))
         for g in link.geoms:

@@ -38,6 +38,7 @@ from .meshes import READABLE, bounding_box
 DEFAULT_MASS = 1.0  # kg: RoboTool's for a link without inertial information
 DEFAULT_INERTIA = np.eye(3)  # kg m^2: RoboTool's (ixx = iyy = izz = 1) for a link without inertial information
 MIN_SIZE = 1e-4  # m: flat shapes (RoboTool accepts a box of height 0) get this thickness
+RESERVED = frozenset({"world"})  # link names a simulator keeps for itself (MuJoCo's world body)
 WHEEL_TOLERANCE = 1e-3  # m: a wheel's axis this far from its geometry's centre is moved through it
 
 
@@ -205,31 +206,36 @@ class TreeBuilder:
                 geoms.extend(body_geoms)
                 inertial = body.inertial or (bdecl.inertial if bdecl else None)
                 if inertial is not None:
-                    m, com, inertia = self.inertial(inertial, benv, f"body {body.name}", body_geoms, body_pose)
+                    m, com, inertia, given = self.inertial(inertial, benv, f"body {body.name}", body_geoms, body_pose)
                     if m is not None:
-                        masses.append((m, body_pose @ com, inertia))
+                        masses.append((m, body_pose @ com, inertia, given))
         inertial = link.inertial or (decl.inertial if decl is not None else None)
+        written = None  # the inertia as the model gives it, where the tree has a physical one instead
         if inertial is not None:
-            mass, com, I = self.inertial(inertial, env, f"link {link.name}", geoms, np.eye(4))
+            mass, com, I, written = self.inertial(inertial, env, f"link {link.name}", geoms, np.eye(4))
             if mass is None:
                 mass, com = DEFAULT_MASS, self.pose(inertial.pose, env, f"inertial of {link.name}")
                 I = default_inertia(mass, geoms, com)
         elif masses:
-            mass, com, I = self.combine(masses, geoms)
+            mass, com, I = self.combine([(m, T, inertia) for m, T, inertia, _ in masses])
+            if any(given is not None for *_, given in masses):
+                written = self.combine([(m, T, inertia if given is None else given) for m, T, inertia, given in masses])[2]
         else:  # RoboTool's SDF generator gives a link without inertial information 1 kg and a unit inertia
             mass, com, I = DEFAULT_MASS, np.eye(4), DEFAULT_INERTIA.copy()
         part = "/".join(path) if path else None
-        return TLink(label, pose, mass, com, I, geoms, link.name, part, link.loc, value)
+        return TLink(label, pose, mass, com, I, geoms, link.name, part, link.loc, value, written)
 
     def inertial(self, inertial: Inertial, env: ConstEnv, what: str, geoms: list[Geom], frame: np.ndarray):
-        """(mass, COM pose in its holder's frame, inertia about the COM); mass None if not usable."""
+        """(mass, COM pose in its holder's frame, inertia about the COM, the model's inertia where that one
+        replaces it); mass None if not usable."""
         if inertial.mass is None:
-            return None, np.eye(4), None
+            return None, np.eye(4), None, None
         mass = self.num(inertial.mass, env, f"mass of {what}", 0.0) * UNITS.get(inertial.unit or "kg", 1.0)
         com = self.pose(inertial.pose, env, f"inertial of {what}")
         if mass <= 0:
-            return None, com, None
+            return None, com, None, None
         given = {k: self.num(e, env, f"inertia of {what}") for k, e, _ in inertial.inertia}
+        written = None
         local = [self._shift(g, np.linalg.inv(frame)) for g in geoms]
         if given:
             I = np.array([[given.get("ixx", 0.0), given.get("ixy", 0.0), given.get("ixz", 0.0)],
@@ -238,24 +244,26 @@ class TreeBuilder:
             far = reach(local, com)
             if not valid_inertia(I):
                 self.diag.warning(inertial.loc, f"inertia of {what} is not physical (not positive definite or "
-                                  "against the triangle inequality): the geometry's inertia is used")
-                I = default_inertia(mass, local, com)
+                                  "against the triangle inequality): the geometry's inertia is simulated (SDF "
+                                  "writes the model's, as RoboTool does)")
+                I, written = default_inertia(mass, local, com), I
             elif far is not None and beyond_reach(I, mass, far):
                 moment = float(np.linalg.eigvalsh(I).max())
                 self.diag.warning(inertial.loc, f"inertia of {what} is beyond what its geometry allows (a moment of "
                                   f"{moment:.4g} kg m^2, where {mass:.4g} kg within {far:.4g} m of its centre of mass "
-                                  f"give at most {mass * far * far:.4g}): the geometry's inertia is used")
-                I = default_inertia(mass, local, com)
+                                  f"give at most {mass * far * far:.4g}): the geometry's inertia is simulated (SDF "
+                                  "writes the model's, as RoboTool does)")
+                I, written = default_inertia(mass, local, com), I
         else:
             I = default_inertia(mass, local, com)
-        return mass, com, I
+        return mass, com, I, written
 
     @staticmethod
     def _shift(g: Geom, T: np.ndarray) -> Geom:
         return replace(g, pose=T @ g.pose)
 
     @staticmethod
-    def combine(masses, geoms) -> tuple[float, np.ndarray, np.ndarray]:
+    def combine(masses) -> tuple[float, np.ndarray, np.ndarray]:
         """Bodies' masses gathered into their link: total mass, common COM, inertia about it (parallel axes)."""
         total = sum(m for m, _, _ in masses)
         c = sum(m * T[:3, 3] for m, T, _ in masses) / total
@@ -551,6 +559,10 @@ class TreeBuilder:
             taken: dict[str, int] = {}
             for n in items:
                 name = n.candidates[min(level[id(n)], len(n.candidates) - 1)]
+                if kind == "link" and name in RESERVED:  # MuJoCo's world body has it
+                    self.diag.warning(n.loc, f"link {name} has the name of MuJoCo's world body: it is named "
+                                      f"{name}_link in the exports")
+                    name = f"{name}_link"
                 if name in taken:  # the same element declared twice (the checker reported it)
                     taken[name] += 1
                     name = f"{name}#{taken[name]}"
