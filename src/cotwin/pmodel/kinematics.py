@@ -127,6 +127,7 @@ class TLink:
     loc: Location = NOWHERE  # the p-model link (a simulator's error names it)
     index: int | None = None  # the value of its `index`, for a replicated link
     written_inertia: np.ndarray | None = None  # the model's inertia, where `inertia` (simulated) replaces it
+    seq: int = 0  # its place in the model (parts first, in declaration order), for exports that keep it
 
 
 @dataclass

@@ -154,7 +154,7 @@ class _Names:
     def ordered(self, tree: KinematicTree):
         if self.style != "robotool":
             return tree.links
-        return sorted(tree.links, key=lambda l: (l.part is None, l.index is not None))
+        return sorted(tree.links, key=lambda l: (l.part is None, l.index is not None, l.seq))
 
     def ordered_joints(self, tree: KinematicTree) -> list[TJoint]:
         """RoboTool's order: parts' joints then their fixed connections, then the p-model's (the tree's else)."""

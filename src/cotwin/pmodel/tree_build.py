@@ -172,6 +172,7 @@ class TreeBuilder:
                 lenv = self.scope.decls_env(link.variables, self.scope.with_index(env, link.index, value))
                 label = _label(link.name, value)
                 tlink = self.add_link(link, lenv, label, path, frame, source, value)
+                tlink.seq = len(self.instances)
                 instance = _LinkInstance(link, inst, lenv, label, tlink)
                 inst.links.setdefault(link.name, []).append(instance)
                 self.instances.append(instance)
