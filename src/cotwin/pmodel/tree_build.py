@@ -438,10 +438,9 @@ class TreeBuilder:
             self.place(aref, "actuator", parent, env)
         self._centre_wheel(joint, ref, child.tlink)
         self.joints.append(joint)
-        scope = parent.scope.path
-        self._named.append(_Named(joint, [label, "/".join(scope + (label,)), "/".join(scope + (parent.label, label)),
-                                          "/".join(scope + (parent.label, label)) + "@" + "/".join(
-                                              child.scope.path + (child.label,))], "joint", ref.loc))
+        scope, target = parent.scope.path, "/".join(child.scope.path + (child.label,))
+        self._named.append(_Named(joint, [label, "/".join(scope + (label,)), "/".join(scope + (label,)) + "@" + target,
+                                          "/".join(scope + (parent.label, label)) + "@" + target], "joint", ref.loc))
         for sref in ref.sensors:
             self.add_sensor(sref, parent, ref, via=ref.name, joint=joint)
 
