@@ -23,12 +23,11 @@ import numpy as np
 
 from ..diagnostics import CotwinError, Diagnostics, Location
 from ..robosim import syntax as s
-from ..robosim.check_pmodel import element_reference
 from ..robosim.consteval import UNITS, ConstEnv, ParameterNumbering, try_evaluate
 from ..robosim.pmodel_elements import (
     AnnotationRecord, DeviceRef, Inertial, JointRef, Link, PartRef, PModel, Pose, Shape,
 )
-from ..robosim.pmodel_scope import PModelScope, mesh_path
+from ..robosim.pmodel_scope import PModelScope, element_reference, mesh_path
 from .inertia import FALLBACK_RADIUS, beyond_reach, default_inertia, reach, valid_inertia
 from .kinematics import ElementRef, Geom, KinematicTree, PlacedDevice, Sensor, Servo, StandIn, TJoint, TLink, transform
 from .kinds import JOINT_KINDS, annotated_sdf_type, body_quantity, joint_motion, ray_quantity, ray_spec, sdf_sensor_type, \

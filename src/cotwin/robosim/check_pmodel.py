@@ -19,7 +19,7 @@ from .pmodel_elements import (
     AnnotationRecord, Body, BodyDecl, Device, DeviceRef, Fragment, Index, JointRef, Link, LinkDecl, PModel, Pose,
     Shape,
 )
-from .pmodel_scope import PModelScope, mesh_path
+from .pmodel_scope import PModelScope, element_reference, mesh_path
 
 SHAPE_PARAMS = {
     "box": ("length", "width", "height"),
@@ -37,35 +37,6 @@ SOLVER_OPERATORS = frozenset({"derivative", "integral", "adj", "submatrix", "tra
 
 def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def element_reference(expr, pmodel: PModel, link: Link | None, scope: PModelScope):
-    """The body, link or part of the model an annotation value names (`gearbox_reference_body = B`,
-    `collision = Rod::my_body`, `collision = my_body`), or None: (kind, element, holder link or part)."""
-    if not isinstance(expr, s.Name):
-        return None
-    parts = expr.name.parts
-    if len(parts) == 1:
-        name = parts[0]
-        if link is not None and (body := next((b for b in link.bodies if b.name == name), None)) is not None:
-            return "body", body, link
-        if (own := scope.own_link(pmodel, name)) is not None:
-            return "link", own, None
-        for other in pmodel.links:
-            if (body := next((b for b in other.bodies if b.name == name), None)) is not None:
-                return "body", body, other
-        if (part := scope.part(pmodel, name)) is not None:
-            return "part", part, None
-        return None
-    if len(parts) == 2:
-        holder = scope.own_link(pmodel, parts[0])
-        if holder is not None and (body := next((b for b in holder.bodies if b.name == parts[1]), None)) is not None:
-            return "body", body, holder
-        part = scope.part(pmodel, parts[0])
-        sub = scope.part_pmodel(part) if part is not None else None
-        if sub is not None and (target := scope.own_link(sub, parts[1])) is not None:
-            return "link", target, part
-    return None
 
 
 class PModelChecker(Checker):

@@ -182,3 +182,32 @@ class PModelScope:
             if sub is not None and (sub is other or self.includes(sub, other, depth + 1)):
                 return True
         return False
+
+
+def element_reference(expr, pmodel: PModel, link: Link | None, scope: "PModelScope"):
+    """The body, link or part of the model an annotation value names (`gearbox_reference_body = B`,
+    `collision = Rod::my_body`, `collision = my_body`), or None: (kind, element, holder link or part)."""
+    if not isinstance(expr, s.Name):
+        return None
+    parts = expr.name.parts
+    if len(parts) == 1:
+        name = parts[0]
+        if link is not None and (body := next((b for b in link.bodies if b.name == name), None)) is not None:
+            return "body", body, link
+        if (own := scope.own_link(pmodel, name)) is not None:
+            return "link", own, None
+        for other in pmodel.links:
+            if (body := next((b for b in other.bodies if b.name == name), None)) is not None:
+                return "body", body, other
+        if (part := scope.part(pmodel, name)) is not None:
+            return "part", part, None
+        return None
+    if len(parts) == 2:
+        holder = scope.own_link(pmodel, parts[0])
+        if holder is not None and (body := next((b for b in holder.bodies if b.name == parts[1]), None)) is not None:
+            return "body", body, holder
+        part = scope.part(pmodel, parts[0])
+        sub = scope.part_pmodel(part) if part is not None else None
+        if sub is not None and (target := scope.own_link(sub, parts[1])) is not None:
+            return "link", target, part
+    return None
