@@ -214,8 +214,8 @@ class TypeResolver:
             return RecordTy(decl)
         if isinstance(decl, PrimitiveDecl):
             return AbstractTy(decl)
-        if report and not (hasattr(self.project, "ambiguous") and self.project.ambiguous("type", name)):
-            hint = self.project.elsewhere("type", name) if hasattr(self.project, "elsewhere") else []
+        if report and not self.project.ambiguous("type", name):  # an ambiguity is reported where found
+            hint = self.project.elsewhere("type", name)
             extra = f" (there is {', '.join(hint)}: import its package or qualify the name)" if hint else ""
             self.diag.error(name.loc, f"unknown type '{name}'{extra}")
         return UNKNOWN
