@@ -1,7 +1,7 @@
 """`cotwin check` of p-models in RoboTool's notation: time per model (target: under a second), with
 Lark's bare LALR parse of the same text as the peer. Models: the TurtleBot3 (issue 14), our per-construct
-models (tests/models/pmodel) and, when COTWIN_PHYSMOD_REFS points at them, RoboTool's physmod library and
-metamodel-coverage models (scripts/fetch-physmod-refs.sh)."""
+models (tests/models/pmodel) and RoboTool's physmod library and T3 test models (../shared/refs/robotool-physmod,
+or COTWIN_PHYSMOD_REFS), where they are."""
 
 from __future__ import annotations
 
@@ -24,9 +24,9 @@ def _models() -> list[Path]:
     turtlebot = ROOT.parent / "shared" / "robosim" / "mobile" / "Turtlebot3_Burger.pm"
     if turtlebot.is_file():
         models.append(turtlebot)
-    refs = os.environ.get("COTWIN_PHYSMOD_REFS")
-    if refs:
-        models += sorted(Path(refs).rglob("*.pm"))
+    refs = Path(os.environ.get("COTWIN_PHYSMOD_REFS") or ROOT.parent / "shared" / "refs" / "robotool-physmod")
+    if refs.is_dir():
+        models += sorted(refs.rglob("*.pm"))
     return models
 
 

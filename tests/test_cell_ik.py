@@ -126,7 +126,7 @@ def test_solver_joint_offsets_displace_the_chain_beyond_a_joint(tree):
     solved = ik.Solver(tree, tool, offsets={"elbow_joint": (0.0, -0.02, 0.01)}).solve(moved.pose(q))
     assert np.allclose(moved.pose(_q(solved, moved.joints)), moved.pose(q), atol=1e-9)
     with pytest.raises(ValueError, match="not on the arm"):
-        ik.Chain(tree, tool, {"Gripper_left_finger_joint": (0.0, 0.0, 0.0)})
+        ik.Chain(tree, tool, {"left_finger_joint": (0.0, 0.0, 0.0)})
 
 
 def test_scene_places_plate_holes_bricks_and_gravity_with_the_geometry(cell):

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from cotwin.robosim.check import check_paths
-from cotwin.robosim.check_pmodel import pmodel_constants
+from cotwin.robosim.pmodel_scope import PModelScope
 from cotwin.robosim.consteval import ConstError
 from cotwin.robosim.parser import parse
 
@@ -22,10 +22,10 @@ def test_pmodel_constants_evaluate(ur5e_example):
     result = check_paths([ur5e_example])
     project = result.project
     pmodel = project.lookup("pmodel", "ur5e")
-    env = pmodel_constants(project, pmodel)
+    env = PModelScope(project).pmodel_env(pmodel)
     assert env.value("D1", None) == pytest.approx(0.1625)
     gripper = project.lookup("pmodel", "Gripper2FG7")
-    genv = pmodel_constants(project, gripper)
+    genv = PModelScope(project).pmodel_env(gripper)
     assert genv.value("STROKE", None) == pytest.approx(0.019)
     assert genv.value("HALF_MIN_WIDTH", None) == pytest.approx(0.0175)
 

@@ -58,7 +58,11 @@ def test_sdf_of_the_published_ur5e_has_the_models_structure():
     # masses, poses, axes and limits as written in the model
     assert float(by_name["upper_arm_link"].find("inertial/mass").text) == pytest.approx(8.058)
     assert [float(v) for v in by_name["upper_arm_link"].find("pose").text.split()][:3] == pytest.approx([0, 0.13585, 0.089159])
-    assert float(by_name["Gripper_link_2fg7_base"].find("inertial/mass").text) == pytest.approx(1.2646523179240972)
+    # the gripper part's links keep RoboTool's names (its SDF of the paper's model: 8-link_2fg7_base,
+    # 9-rightFingerLink, 10-leftFingerLink, without the running number)
+    assert {"link_2fg7_base", "leftFingerLink", "rightFingerLink"} <= set(by_name)
+    assert not any(name.startswith("Gripper") for name in by_name)
+    assert float(by_name["link_2fg7_base"].find("inertial/mass").text) == pytest.approx(1.2646523179240972)
     pan = next(j for j in joints if j.get("name") == "shoulder_pan_joint")
     assert (pan.find("parent").text, pan.find("child").text) == ("base_link", "shoulder_link")
     assert [float(v) for v in pan.find("axis/xyz").text.split()] == pytest.approx([0, 0, 1])
@@ -67,7 +71,7 @@ def test_sdf_of_the_published_ur5e_has_the_models_structure():
     assert float(limit.find("velocity").text) == pytest.approx(3.1415 / 2)
     assert float(pan.find("axis/dynamics/damping").text) == 10
     fixed = next(j for j in joints if j.get("type") == "fixed")
-    assert (fixed.find("parent").text, fixed.find("child").text) == ("wrist_3_link", "Gripper_link_2fg7_base")
+    assert (fixed.find("parent").text, fixed.find("child").text) == ("wrist_3_link", "link_2fg7_base")
     # joint pose in the child frame: at the shoulder link, 0.0988 above the base's origin
     pan_world = tree.link("shoulder_link").pose @ transform(*_pose(pan.find("pose").text))
     assert pan_world[:3, 3] == pytest.approx([0, 0, 0.0988])
@@ -222,9 +226,9 @@ def test_actuator_names_from_the_pmodel_and_errors(sim):
         sim.write_actuators({"elbow": 1.0})
     with pytest.raises(CotwinError, match="not a finite number"):
         sim.write_actuators({"elbow_joint": float("nan")})
-    sim.write_actuators({"Gripper_left_finger_joint": 0.5})  # beyond the 19 mm stroke: clipped
+    sim.write_actuators({"left_finger_joint": 0.5})  # beyond the 19 mm stroke: clipped
     sim.advance(1.0)
-    assert sim.joint_positions()["Gripper_left_finger_joint"] == pytest.approx(0.019, abs=1e-4)
+    assert sim.joint_positions()["left_finger_joint"] == pytest.approx(0.019, abs=1e-4)
 
 
 def test_snapshot_and_restore_give_identical_futures(sim):

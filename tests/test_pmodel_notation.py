@@ -119,17 +119,18 @@ def test_index_replicates_sensors_and_links(rover, arm):
     yaws = [np.arctan2(d.pose[1, 0], d.pose[0, 0]) for d in sonars]
     assert yaws == pytest.approx([0, np.pi / 2, np.pi, -np.pi / 2])
     hand = build_tree(arm, "Hand")
-    segments = [l for l in hand.links if l.name.startswith("Segment_")]
-    assert [l.name for l in segments] == ["Segment_1", "Segment_2", "Segment_3"]  # [1, 3]: 3 is included
+    segments = [l for l in hand.links if l.name.endswith("-Segment")]
+    assert [l.name for l in segments] == ["1-Segment", "2-Segment", "3-Segment"]  # [1, 3]: 3 is included
     assert [l.pose[2, 3] for l in segments] == pytest.approx([0.02, 0.04, 0.06])
 
 
 def test_sdf_sensors_and_surfaces(rover, arm):
     model = ET.fromstring(to_sdf(build_tree(rover))).find("model")
     sensors = {s.get("name"): s for s in model.iter("sensor")}
-    assert sensors["Sonar_1"].get("type") == "sonar" and sensors["Gyro"].get("type") == "imu"
-    assert sensors["Sonar_1"].find("sonar/radius").text == "0.01"  # `_radius` written as <radius>
-    assert sensors["Sonar_1"].find("update_rate").text == "10"
+    # RoboTool's names: `Sonar::1` for a replica of an indexed sensor
+    assert sensors["Sonar::1"].get("type") == "sonar" and sensors["Gyro"].get("type") == "imu"
+    assert sensors["Sonar::1"].find("sonar/radius").text == "0.01"  # `_radius` written as <radius>
+    assert sensors["Sonar::1"].find("update_rate").text == "10"
     bounce = model.find("link[@name='LeftWheel']/collision/surface/bounce")
     assert float(bounce.find("restitution_coefficient").text) == pytest.approx(0.1)
     hand = ET.fromstring(to_sdf(build_tree(arm, "Hand"))).find("model")
@@ -146,7 +147,8 @@ def test_robotool_sdf_naming(arm):
     # parts' links first, numbered, without their part's name; then the p-model's own links
     assert links == ["1-Knuckle", "2-Tip", "3-Palm", "4-Segment", "5-Segment", "6-Segment"]
     joints = [j.get("name") for j in model.findall("joint")]
-    assert joints[0] == "7-fixedJoint" and "8-Bend" in joints
+    # joints after links, a part's first, fixed connections after joints
+    assert joints[:2] == ["7-Bend", "8-fixedJoint"]
     assert model.find("self_collide").text == "true"
     collision = model.find("link[@name='3-Palm']/collision")
     assert collision.get("name").endswith("--Palm_shape0") or "--" in collision.get("name")
@@ -156,11 +158,17 @@ def test_robotool_sdf_naming(arm):
 def test_parts_with_part_level_connections(arm):
     tree = build_tree(arm, "Hand")
     joints = {j.name: j for j in tree.joints}
-    assert (joints["Palm_to_Thumb_Knuckle"].kind, joints["Palm_to_Thumb_Knuckle"].parent) == ("fixed", "Palm")
-    bend = joints["Thumb_Bend"]  # `joint Bend flexibly connected to Tip in Thumb`, in the part
-    assert (bend.kind, bend.child) == ("revolute", "Thumb_Tip") and bend.axis == pytest.approx([1, 0, 0])
+    # a part's links and joints keep their names where nothing else has them (RoboTool's)
+    # `link Knuckle fixed to Palm` (RoboTool writes the part's link as the parent), followed from the base
+    fixed = joints["Knuckle_to_Palm"]
+    assert (fixed.kind, fixed.parent, fixed.flipped) == ("fixed", "Palm", True)
+    sdf = ET.fromstring(to_sdf(tree)).find("model/joint[@name='Knuckle_to_Palm']")
+    assert (sdf.findtext("parent"), sdf.findtext("child")) == ("Knuckle", "Palm")
+    bend = joints["Bend"]  # `joint Bend flexibly connected to Tip in Thumb`, in the part
+    assert (bend.kind, bend.child) == ("revolute", "Tip") and bend.axis == pytest.approx([1, 0, 0])
     assert bend.servos[0].kp == 20 and bend.servos[0].mode == "position"
-    assert tree.link("Thumb_Tip").pose[2, 3] == pytest.approx(0.05 + 0.04)  # LENGTH instantiated as 4cm
+    assert tree.link("Tip").pose[2, 3] == pytest.approx(0.05 + 0.04)  # LENGTH instantiated as 4cm
+    assert tree.link("Tip").part == "Thumb"
     _exports_load(tree)
 
 

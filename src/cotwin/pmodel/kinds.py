@@ -37,19 +37,44 @@ def _const(device: Device | None, name: str, env: ConstEnv):
     return value
 
 
+#: SDF joint types an annotation may name, and the tree kind each moves as (docs/pmodel-notation.md, 7)
+JOINT_KINDS = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic", "fixed": "fixed",
+               "gearbox": "revolute"}
+#: SDF joint types cotwin cannot export (an annotation naming one is an error)
+UNSUPPORTED_JOINTS = ("ball", "screw", "universal", "revolute2")
+
+
+@dataclass(frozen=True)
+class JointMotion:
+    """What a joint does: its tree kind (revolute, prismatic, fixed; None: it cannot be exported), its SDF
+    type where that differs (continuous, gearbox), its unit axis in the joint frame, and a note saying a
+    reading taken (or, with no kind, why it cannot be exported)."""
+
+    kind: str | None
+    axis: np.ndarray
+    note: str = ""
+    sdf_kind: str = ""
+
+
 def joint_motion(device: Device | None, type_name: str, annotations: tuple[AnnotationRecord, ...],
-                 env: ConstEnv) -> tuple[str | None, np.ndarray, str]:
-    """(kind, unit axis in the joint frame, note) of a joint: kind is revolute, prismatic, fixed, or None
-    when nothing tells; the note says what was read (or why a joint was reduced to fixed)."""
+                 env: ConstEnv) -> JointMotion:
+    """What a joint does, read in order from an SDF-style annotation (`annotation Revolute { axis = Axis {
+    xyz = .. } }`), the axis constants (`AXIS`, CGA's `axis_rot`/`axis_lin`), the motion subspace (`H`,
+    `S`), the definition's name; with nothing to tell, RoboTool's default: revolute about z."""
     axis = None
-    kind = None
+    kind = sdf_kind = None
     for ann in annotations:  # SDF-style annotation Revolute { axis = Axis { xyz = (|..|) } }
-        if ann.name.lower() in ("revolute", "continuous", "prismatic", "fixed"):
-            kind = {"continuous": "revolute"}.get(ann.name.lower(), ann.name.lower())
+        named = ann.name.lower()
+        if named in UNSUPPORTED_JOINTS:
+            return JointMotion(None, np.array(_AXES["z"]), f"its annotation {ann.name} names an SDF {named} joint, "
+                               f"which cotwin cannot export (it exports {', '.join(JOINT_KINDS)} joints)")
+        if named in JOINT_KINDS:
+            kind, sdf_kind = JOINT_KINDS[named], (named if named in ("continuous", "gearbox") else "")
         ax = ann.get("axis")
         if isinstance(ax, AnnotationRecord) and ax.get("xyz") is not None:
             axis = _vector(try_evaluate(ax.get("xyz"), env, None), 3)
     name = (device.name if device is not None else type_name).lower()
+    note = ""
     if axis is None:
         for const in ("AXIS", "axis_rot", "axis_lin"):
             value = _vector(_const(device, const, env), 3)
@@ -68,27 +93,38 @@ def joint_motion(device: Device | None, type_name: str, annotations: tuple[Annot
                 angular, linear = six[:3], six[3:]
                 if np.linalg.norm(angular) > 0:
                     note = "helical: exported as revolute, the pitch is not modelled" if np.linalg.norm(linear) > 0 else ""
-                    return kind or "revolute", angular / np.linalg.norm(angular), note
+                    return JointMotion(kind or "revolute", angular / np.linalg.norm(angular), note, sdf_kind or "")
                 if np.linalg.norm(linear) > 0:
-                    return kind or "prismatic", linear / np.linalg.norm(linear), ""
+                    return JointMotion(kind or "prismatic", linear / np.linalg.norm(linear), "", sdf_kind or "")
             elif isinstance(value, tuple) and value and isinstance(value[0], tuple):
-                return "fixed", np.array(_AXES["z"]), f"{len(value[0])}-degree-of-freedom joint exported as fixed"
-        if device is not None and device.port("H") is not None and device.port("H").init is None:
-            return "fixed", np.array(_AXES["z"]), "joint of several degrees of freedom exported as fixed"
+                first = next((_vector(tuple(row[c] for row in value), 6) for c in range(len(value[0]))), None)
+                angular = first[:3] if first is not None else np.zeros(3)
+                axis = angular / np.linalg.norm(angular) if np.linalg.norm(angular) > 0 else np.array(_AXES["z"])
+                return JointMotion(kind or "revolute", axis, f"a joint of {len(value[0])} degrees of freedom: exported "
+                                   "as revolute about its first axis, as RoboTool's SDF generator writes it")
+        if kind is None and device is not None and device.port("H") is not None and device.port("H").init is None:
+            return JointMotion("revolute", np.array(_AXES["z"]), "a joint of several degrees of freedom: exported as "
+                               "revolute about z, as RoboTool's SDF generator writes it")
     if kind is None:
         if "prismatic" in name or "slider" in name:
             kind = "prismatic"
-        elif "revolute" in name or "continuous" in name or "hinge" in name:
+        elif "continuous" in name:
+            kind, sdf_kind = "revolute", "continuous"
+        elif "revolute" in name or "hinge" in name:
             kind = "revolute"
         elif "fixed" in name:
             kind = "fixed"
+    if kind is None:  # RoboTool's SDF generator writes such a joint as revolute (its SDF axis default: z)
+        kind = "revolute"
+        note = ("nothing in its definition says how it moves (no Revolute/Prismatic/... annotation, axis or motion "
+                "subspace): revolute about z, as RoboTool's SDF generator writes it")
     if axis is None:
         suffix = name.rstrip("_neg").rsplit("_", 1)[-1] if "_" in name else ""
         axis = np.array(_AXES.get(suffix, _AXES["z"]))
         if name.endswith("_neg"):
             axis = -axis
     norm = np.linalg.norm(axis)
-    return kind, (axis / norm if norm > 0 else np.array(_AXES["z"])), ""
+    return JointMotion(kind, axis / norm if norm > 0 else np.array(_AXES["z"]), note, sdf_kind or "")
 
 
 # ---- actuators ----
@@ -159,7 +195,28 @@ def body_quantity(sdf_type: str | None, port: str) -> tuple[str, int] | None:
     return None
 
 
+#: SDF sensor types (and RoboTool's `light`) an annotation on a sensor may name: RoboTool writes a <sensor>
+#: of that type, the annotation's name lowercased (`Logical_camera` is `logical_camera`)
+SDF_SENSOR_TYPES = frozenset({"air_pressure", "altimeter", "camera", "contact", "depth_camera", "depth",
+                              "force_torque", "gps", "gpu_ray", "gpu_lidar", "imu", "lidar", "logical_camera",
+                              "magnetometer", "multicamera", "navsat", "ray", "rfid", "rfidtag", "rgbd_camera",
+                              "sonar", "thermal_camera", "wireless_receiver", "wireless_transmitter", "light"})
+
+
+def annotated_sdf_type(annotations: tuple[AnnotationRecord, ...]) -> tuple[str | None, AnnotationRecord | None]:
+    """The SDF type a sensor's annotation names, as RoboTool's SDF generator reads it, and that annotation."""
+    for ann in annotations:
+        if ann.name.lower() in SDF_SENSOR_TYPES:
+            return ann.name.lower(), ann
+    return None, None
+
+
 def sdf_sensor_type(device_name: str, annotations: tuple[AnnotationRecord, ...]) -> str | None:
+    """What a sensor is for the simulator: its annotation's SDF type, else what its device name says
+    (Lidar, IMU, Camera, Sonar, Bumper, GPS: the published models name them so)."""
+    named, _ = annotated_sdf_type(annotations)
+    if named is not None:
+        return {"lidar": "ray", "gpu_ray": "ray", "gpu_lidar": "ray"}.get(named, named)
     for text in [a.name.lower() for a in annotations] + [device_name.lower()]:
         for key, kind in SDF_SENSORS:
             if text == key or (len(key) > 2 and key in text):

@@ -19,7 +19,8 @@ Documented defaults, used where the p-model gives no value:
   against the scrub of its tyre when it turns slowly), one taking an effort by a motor; such joints get an
   armature of 0.001;
 - the base is fixed to the world unless `base="free"` (a mobile robot): then it gets a free joint and
-  no weight compensation;
+  no weight compensation; a root link beside the base (a free body of the p-model, no joint leading to
+  it) gets a free joint and falls;
 - a mesh file cotwin can read becomes a mesh asset; one it cannot is a placeholder sphere that never
   collides (or the project's stand-in shapes);
 - joints closing a kinematic loop become equality constraints (weld for fixed, connect otherwise);
@@ -39,10 +40,13 @@ costs no time per step.
 
 from __future__ import annotations
 
+import re
 import xml.etree.ElementTree as ET
 
+import mujoco
 import numpy as np
 
+from ..diagnostics import CotwinError, Finding, Severity
 from .tree import Geom, KinematicTree, TJoint, inverse
 from .xmltext import num, nums, quat, sub, to_text
 
@@ -186,25 +190,26 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
     if scene is not None:
         scene.add_to(worldbody)
     bodies = {}
+    parents = {j.child: j for j in tree.joints}
+    placement = scene.robot_pose(tree) if hasattr(scene, "robot_pose") else None
     for link in tree.links:
-        if link is tree.root:
-            placement = scene.robot_pose(tree) if hasattr(scene, "robot_pose") else None
+        if link.name not in parents:  # the base, or a free body (a root link beside it)
             parent_el, local = worldbody, (placement @ link.pose if placement is not None else link.pose)
         else:
-            joint = next(j for j in tree.joints if j.child == link.name)
+            joint = parents[link.name]
             parent_el = bodies[joint.parent]
             local = inverse(tree.link(joint.parent).pose) @ link.pose
-        weight = {"gravcomp": "1"} if base == "fixed" else {}
+        weight = {"gravcomp": "1"} if base == "fixed" and link.name in bodies_of_base(tree) else {}
         body = sub(parent_el, "body", name=link.name, **weight, **_pose_attrs(local))
         bodies[link.name] = body
-        if link is tree.root and base == "free":
+        if link.name not in parents and (link is not tree.root or base == "free"):
             sub(body, "freejoint", name=f"{link.name}_free")
         R = link.com[:3, :3]  # MJCF takes a full inertia in the body's axes only (no quat beside it)
         I = R @ link.inertia @ R.T
         sub(body, "inertial", mass=num(link.mass), fullinertia=nums([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]]),
             pos=nums(link.com[:3, 3]))
-        if link is not tree.root:
-            joint = next(j for j in tree.joints if j.child == link.name)
+        if link.name in parents:
+            joint = parents[link.name]
             if joint.kind != "fixed":
                 in_child = inverse(link.pose) @ joint.pose
                 attrs = {"name": joint.name, "type": "hinge" if joint.kind == "revolute" else "slide",
@@ -252,6 +257,33 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
         elif s_.joint is not None and s_.quantity in kinds:
             sub(sensor, kinds[s_.quantity], name=name, joint=s_.joint)
     return to_text(root)
+
+
+def bodies_of_base(tree: KinematicTree) -> set[str]:
+    """The base and the links joints lead to from it (free bodies and theirs are not the robot's arm)."""
+    reached = {tree.root.name}
+    for j in tree.joints:  # parents before children
+        if j.parent in reached:
+            reached.add(j.child)
+    return reached
+
+
+_ELEMENT = re.compile(r"Element name '([^']*)'")
+
+
+def load(xml: str, tree: KinematicTree):
+    """The MuJoCo model of an MJCF text made from `tree`; MuJoCo's refusal is a CotwinError located at the
+    p-model element (link, joint, shape) its message names, not only at the generated MJCF."""
+    try:
+        return mujoco.MjModel.from_xml_string(xml)
+    except ValueError as err:
+        text = " ".join(str(err).replace("Error: ", "").split())
+        named = _ELEMENT.search(str(err))
+        loc = tree.located(named.group(1)) if named else None
+        if loc is not None and loc.line > 0:
+            raise CotwinError([Finding(loc, Severity.ERROR, f"MuJoCo rejected the model made of this element "
+                                                            f"({named.group(1)}): {text}")]) from None
+        raise CotwinError(f"MuJoCo rejected the generated model: {text}") from None
 
 
 def _body_sensors(tree: KinematicTree, link: str) -> list:

@@ -1,22 +1,33 @@
-"""p-model -> SDF 1.6 (the paper's format, for Gazebo or CoppeliaSim). SDF puts a joint's pose in its
-child link's frame and its axis in the joint frame.
+"""p-model -> SDF 1.6 (the paper's format, for Gazebo or CoppeliaSim), as RoboTool's SDF generator writes
+it (docs/pmodel-notation.md, section 7). SDF puts a joint's pose in its child link's frame and its axis in
+the joint frame.
 
 Two namings: `style="cotwin"` (the default) names links and joints as the kinematic tree does, the
-names every other cotwin artefact uses; `style="robotool"` writes names as RoboTool's SDF generator
-does: one running number over links, then joints and fixed connections (`1-Tip`, `3-Link1Joint`,
-`4-fixedJoint`), another over bodies (`1--my_body`), part links without their part's name (the
-number keeps them apart), each collision with RoboTool's default surface. Both write collision
-surfaces (bounce, friction, laser retro) where the p-model gives them, and every sensor with an SDF
-counterpart (ray, sonar, imu, camera, contact, ...) as an SDF <sensor>, its annotation's entries as
-SDF elements.
+names every other cotwin artefact uses: RoboTool's names without its running number (`link_2fg7_base`
+of the UR5e's gripper part, `1-Tip` for value 1 of an indexed link); `style="robotool"` writes them as
+RoboTool's generator does: one running number over links (a p-model's parts first, then its links,
+those of indexed ones last), then joints and fixed connections (`1-Tip`, `3-Link1Joint`,
+`4-fixedJoint`), another over bodies (`1--my_body`), each collision with RoboTool's default surface,
+and each sensor's pose turned by a pitch of pi/2 as RoboTool turns it. Both write joint types from the
+joint's definition (revolute, prismatic, continuous, gearbox, fixed), collision surfaces (bounce,
+friction, laser retro) where the p-model gives them, and a <sensor> for each sensor whose annotation
+names an SDF sensor type (ray, sonar, imu, logical_camera, contact, light, ...), a <light> for an
+actuator annotated Light, their annotations' entries as SDF elements (an entry naming a body, link or
+part of the model is written as that element's name); no sensor the model does not declare.
 """
 
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 
-from .tree import Geom, KinematicTree, PlacedDevice, TJoint, inverse
+import numpy as np
+
+from .kinematics import ElementRef, Geom, KinematicTree, PlacedDevice, TJoint, inverse, transform
 from .xmltext import num, pose_text, sub, to_text
+
+#: RoboTool's SDF generator turns every sensor by this (a pitch of pi/2) after its p-model pose
+ROBOTOOL_SENSOR_TURN = transform(rpy=(0.0, np.pi / 2, 0.0))
 
 #: RoboTool's SDF defaults for a collision's surface (its generator writes them for every body)
 ROBOTOOL_SURFACE = {"restitution": 0.0, "threshold": 100000.0, "mu": 1.0, "mu2": 1.0, "fdir1": (0.0, 0.0, 0.0),
@@ -78,31 +89,39 @@ def _surface(parent: ET.Element, g: Geom, defaults: dict | None) -> None:
                     sub(tors, key, _text(value))
 
 
-def _text(value) -> str:
+def _text(value, names: "_Names | None" = None) -> str:
+    if isinstance(value, ElementRef):
+        return names.element(value) if names is not None else str(value)
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, (int, float)):
         return num(value) if isinstance(value, float) else str(value)
     if isinstance(value, tuple):
-        return " ".join(_text(v) for v in value)
+        return " ".join(_text(v, names) for v in value)
     return str(value)
 
 
-def _entries(parent: ET.Element, record: dict) -> None:
+def _entries(parent: ET.Element, record: dict, names: "_Names") -> None:
     """An evaluated annotation as SDF elements (`_key` written `key`: RoboTool escapes keywords so)."""
     for key, value in record["entries"]:
         tag = key.lstrip("_")
         if isinstance(value, dict):
-            _entries(sub(parent, tag), value)
+            _entries(sub(parent, tag), value, names)
         elif value is not None:
-            sub(parent, tag, _text(value))
+            sub(parent, tag, _text(value, names))
 
 
-def _sensor(parent: ET.Element, device: PlacedDevice) -> None:
-    el = sub(parent, "sensor", name=device.name, type=device.sdf_type)
-    sub(el, "pose", pose_text(device.pose))
+def _device(parent: ET.Element, device: PlacedDevice, names: "_Names") -> None:
+    """A sensor as RoboTool writes it (<sensor> of its annotation's type), or a light actuator (<light>)."""
+    if device.kind == "actuator":
+        el = sub(parent, "light", name=device.sdf_name or device.name)
+    else:
+        el = sub(parent, "sensor", name=device.sdf_name or device.name, type=device.sdf_type)
+        turn = ROBOTOOL_SENSOR_TURN if names.style == "robotool" else np.eye(4)
+        sub(el, "pose", pose_text(device.pose @ turn))
+        sub(el, "visualize", "true")
     if device.annotation is not None:
-        _entries(el, device.annotation)
+        _entries(el, device.annotation, names)
 
 
 class _Names:
@@ -118,11 +137,11 @@ class _Names:
             self.joints = {j.name: j.name for j in (*tree.joints, *tree.loops)}
             self.geoms = {g.name: g.name for l in tree.links for g in l.geoms}
             return
-        parts = sorted((l for l in tree.links), key=lambda l: l.part is None)  # RoboTool: parts' links first
+        parts = self.ordered(tree)  # RoboTool: parts' links first, indexed links last
         for k, link in enumerate(parts, 1):
             self.links[link.name] = f"{k}-{link.source}"
         count = len(parts)
-        for j in (*tree.joints, *tree.loops):
+        for j in self.ordered_joints(tree):
             count += 1
             fixed = j.kind == "fixed" and not j.source
             self.joints[j.name] = f"{count}-{'fixedJoint' if fixed else (j.source or j.name)}"
@@ -133,7 +152,26 @@ class _Names:
                 self.geoms[g.name] = f"{k}--{g.body or g.name}"
 
     def ordered(self, tree: KinematicTree):
-        return sorted(tree.links, key=lambda l: l.part is None) if self.style == "robotool" else tree.links
+        if self.style != "robotool":
+            return tree.links
+        return sorted(tree.links, key=lambda l: (l.part is None, l.index is not None, l.seq))
+
+    def ordered_joints(self, tree: KinematicTree) -> list[TJoint]:
+        """RoboTool's order: parts' joints then their fixed connections, then the p-model's (the tree's else)."""
+        joints = [*tree.joints, *tree.loops]
+        if self.style != "robotool":
+            return joints
+        written = {l.name: l for l in tree.links}
+        return sorted(joints, key=lambda j: (written[j.child if j.flipped else j.parent].part is None,
+                                             j.kind == "fixed"))
+
+    def element(self, ref: ElementRef) -> str:
+        """The name of a body (its collision), link or part an annotation names."""
+        if ref.kind == "body":
+            return self.geoms.get(ref.target.name, ref.target.name)
+        if ref.kind == "link":
+            return self.links.get(ref.target.name, ref.target.name)
+        return str(ref)
 
 
 def to_sdf(tree: KinematicTree, style: str = "cotwin") -> str:
@@ -157,7 +195,7 @@ def to_sdf(tree: KinematicTree, style: str = "cotwin") -> str:
         sub(inertial, "pose", pose_text(link.com))
         sub(inertial, "mass", num(link.mass))
         inertia = sub(inertial, "inertia")
-        I = link.inertia
+        I = link.inertia if link.written_inertia is None else link.written_inertia  # the model's, as RoboTool
         for key, (r, c) in (("ixx", (0, 0)), ("ixy", (0, 1)), ("ixz", (0, 2)), ("iyy", (1, 1)), ("iyz", (1, 2)), ("izz", (2, 2))):
             sub(inertia, key, num(I[r, c]))
         for g in link.geoms:
@@ -172,15 +210,21 @@ def to_sdf(tree: KinematicTree, style: str = "cotwin") -> str:
                 if tag == "collision":
                     _surface(part, g, ROBOTOOL_SURFACE if robotool else None)
         for device in devices.get(link.name, []):
-            if device.kind == "sensor" and device.sdf_type is not None:
-                _sensor(el, device)
-    for j in (*tree.joints, *tree.loops):
+            if device.sdf_type is not None:
+                _device(el, device, names)
+    for j in names.ordered_joints(tree):
         _joint(model, tree, j, names, robotool)
     return to_text(root)
 
 
+#: joint annotation entries RoboTool writes as elements of the <joint> (a gearbox's)
+JOINT_ENTRIES = ("gearbox_ratio", "gearbox_reference_body")
+
+
 def _joint(model: ET.Element, tree: KinematicTree, j: TJoint, names: _Names, robotool: bool) -> None:
-    el = sub(model, "joint", name=names.joints[j.name], type=j.kind)
+    el = sub(model, "joint", name=names.joints[j.name], type=j.sdf_kind or j.kind)
+    if j.flipped:  # a fixed connection written the other way round (RoboTool's direction)
+        j = replace(j, parent=j.child, child=j.parent, pose=tree.link(j.parent).pose)
     if not (robotool and j.kind == "fixed"):
         sub(el, "parent", names.links[j.parent])
         sub(el, "child", names.links[j.child])
@@ -188,6 +232,9 @@ def _joint(model: ET.Element, tree: KinematicTree, j: TJoint, names: _Names, rob
     else:
         sub(el, "parent", names.links[j.parent])
         sub(el, "child", names.links[j.child])
+    for key, value in j.annotations.get("entries", []) if j.annotations else ():
+        if key in JOINT_ENTRIES and value is not None:
+            sub(el, key, _text(value, names))
     if j.kind == "fixed":
         if robotool:
             axis = sub(el, "axis")
@@ -198,7 +245,7 @@ def _joint(model: ET.Element, tree: KinematicTree, j: TJoint, names: _Names, rob
     limit = sub(axis, "limit")
     for key in ("lower", "upper", "effort", "velocity"):
         value = getattr(j, key)
-        if value is not None:
+        if value is not None and not (j.sdf_kind == "continuous" and key in ("lower", "upper")):
             sub(limit, key, num(value))
     dynamics = sub(axis, "dynamics")
     sub(dynamics, "damping", num(j.damping))

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..diagnostics import CotwinError
 from ..files import write_text
-from .mjcf import TIMESTEP, pose_paths, sensor_name, servo_mode, servo_name, site_name, to_mjcf
+from .mjcf import TIMESTEP, load, pose_paths, sensor_name, servo_mode, servo_name, site_name, to_mjcf
 from .tree import KinematicTree
 
 
@@ -99,10 +99,7 @@ class PlatformSimulator:
         self.scene = scene
         self.base = base
         self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep, visual=False, base=base)
-        try:
-            self.model = mujoco.MjModel.from_xml_string(self.xml)
-        except ValueError as err:
-            raise CotwinError(f"MuJoCo rejected the generated model: {err}") from None
+        self.model = load(self.xml, tree)  # a refusal names the p-model element
         self.data = mujoco.MjData(self.model)
         self.timestep = timestep
         self._joint_qpos = {j.name: self.model.joint(j.name).qposadr[0] for j in tree.actuated}

@@ -31,6 +31,8 @@ def _geometry(parent: ET.Element, g: Geom) -> None:
 def urdf_frames(tree: KinematicTree) -> dict[str, np.ndarray]:
     """The model-frame pose of each URDF link frame (the joint frame; the identity for the root)."""
     frames = {tree.root.name: np.eye(4)}
+    for root in tree.roots[1:]:  # free bodies: floating joints from the base, at their poses
+        frames[root.name] = root.pose
     for j in tree.joints:
         frames[j.child] = j.pose
     return frames
@@ -67,6 +69,11 @@ def to_urdf(tree: KinematicTree) -> str:
             limits.setdefault("velocity", "0")
             sub(el, "limit", **limits)
             sub(el, "dynamics", damping=num(j.damping))
+    for root in tree.roots[1:]:  # URDF has one root: a free body of the p-model floats from the base
+        el = sub(robot, "joint", name=f"{root.name}_free", type="floating")
+        _origin(el, root.pose)
+        sub(el, "parent", link=tree.root.name)
+        sub(el, "child", link=root.name)
     for j in tree.loops:
         robot.append(ET.Comment(f" joint {j.name} ({j.kind}, {j.parent} -> {j.child}) closes a kinematic loop: "
                                 "URDF cannot say it "))

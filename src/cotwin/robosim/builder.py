@@ -435,7 +435,7 @@ class Builder(PModelBuilder):
                       platform if isinstance(platform, RoboticPlatform) else None, _of(items, Controller),
                       tuple(t.value for t in _tagged(items, "cref")), _of(items, Connection), self._tok_loc(name),
                       platform if isinstance(platform, PlatformRef) else None, _of(items, StateMachine),
-                      _of(items, MachineRef))
+                      _of(items, MachineRef), _of(_flatten(items), VarDecl))
 
     def async_flag(self, meta):
         return _Tagged("async", True, self._loc(meta))

@@ -37,8 +37,11 @@ class PModelBuilder(Transformer):
     def pm_package(self, meta, name):
         return _Tagged("package", name, self._loc(meta))
 
-    def unit_decl(self, meta, name):
+    def unit_decl(self, meta, name, *items):
         return _Group(())
+
+    def derived_unit_item(self, meta, value):
+        return None
 
     def pm_endpackage(self, meta):
         return _Tagged("endpackage", None, self._loc(meta))
@@ -317,7 +320,7 @@ class PModelBuilder(Transformer):
     def part(self, meta, name, pmodel, *items):
         return PartRef(_ident(name), pmodel, self._one_pose(items, f"part {name}"),
                        self._values(items, "instantiation"), self._tok_loc(name),
-                       _of(items, PartFixed), _of(items, PartJoint))
+                       _of(items, PartFixed), _of(items, PartJoint), self._one(items, Index, "index", f"part {name}"))
 
     def _solution_item(tag):
         def build(self, meta, value):
@@ -349,7 +352,7 @@ class PModelBuilder(Transformer):
         return PModel(_ident(name), tuple(v for v in variables if v.kind == "const"), _of(items, Link),
                       _of(items, PartRef), self._tok_loc(name), tuple(v for v in variables if v.kind != "const"),
                       self._values(items, "equation"), self._values(items, "constraint"), _of(items, Solution),
-                      _of(items, AnnotationRecord))
+                      _of(items, AnnotationRecord), _of(items, JointRef))
 
     def fragment(self, meta, name, *items):
         items = _flatten(items)

@@ -41,6 +41,7 @@ def check_project(project: Project, diag: Diagnostics) -> None:
             DModelChecker(project, source, diag).check()  # enumerations, records, functions in .pm
             PModelChecker(project, source, diag).check()
             MappingChecker(project, source, diag).check()
+    diag.extend(project.scope_findings.values())
 
 
 def check_paths(paths: Iterable[str | Path]) -> CheckResult:

@@ -137,6 +137,8 @@ class DModelChecker(Checker):
     def _check_Module(self, module: Module) -> None:
         where = f"module {module.name}"
         self._cycle_def(module.cycle_def, where)
+        self._unique(module.variables, "constant", where)
+        self.variables(module.variables, Scope())
         platform = module_platform(self.project, module, self.source, self.diag)
         endpoints: dict[str, dict | None] = {}
         provided: dict | None = None
@@ -231,13 +233,10 @@ class DModelChecker(Checker):
     def _check_Controller(self, ctrl: Controller) -> None:
         where = f"controller {ctrl.name}"
         self._cycle_def(ctrl.cycle_def, where)
-        declared = set()
         for use in ctrl.interfaces:
-            interface = interface_of(self.project, use, self.source, self.diag)
+            interface_of(self.project, use, self.source, self.diag)
             if use.kind == "provides":
                 self.diag.error(use.loc, f"{ctrl.name} is a controller and cannot provide interface {use.name}")
-            if interface is not None and use.kind == "uses":
-                declared.add(id(interface))
         for clock in ctrl.clocks:
             self.diag.error(clock.loc, f"{where} cannot declare clocks")
         self._unique([*ctrl.machine_refs, *ctrl.machines, *ctrl.operations, *ctrl.operation_refs], "machine", where)
@@ -266,11 +265,9 @@ class DModelChecker(Checker):
         for op in ctrl.operations:
             self._check_StateMachine(op)
         for name, machine, source, loc in members:
+            # RoboTool does not require a controller to declare the interfaces its machines use (RoboSim's
+            # missingDeclaredInterface check is disabled): only the operations they require (RoboChart's C4)
             io = machine_io(self.project, machine, source)
-            missing = [i.name for i in io.used if id(i) not in declared]
-            if missing:
-                self.diag.error(loc, f"the controller {ctrl.name} is missing the declared interfaces: "
-                                     f"{', '.join(sorted(set(missing)))} (used by {machine.name})")
             unprovided = [op for op in io.operations if op not in provided_ops]
             if unprovided:
                 self.diag.error(loc, f"{ctrl.name} does not provide operation(s) {', '.join(unprovided)} that "

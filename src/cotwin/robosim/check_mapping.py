@@ -11,7 +11,7 @@ from __future__ import annotations
 from ..diagnostics import Diagnostics
 from .checker import Checker
 from . import syntax as s
-from .check_pmodel import device_of, flatten_links
+from .pmodel_scope import PModelScope
 from .consteval import const_env, try_evaluate
 from .declarations import SourceFile
 from .dmodel_elements import Module
@@ -45,11 +45,11 @@ def device_path(project, pmodel: PModel, name: s.QName):
         return f"'{name}' does not start with the mapped p-model '{pmodel.name}'"
     if len(parts) not in (3, 4):
         return f"'{name}' is not a path pmodel::link::sensor"
-    links = flatten_links(project, pmodel)
-    placed = links.get(parts[1])
-    if placed is None:
-        return f"p-model '{pmodel.name}' has no link '{parts[1]}'"
-    link = placed.link
+    scope = PModelScope(project)
+    target, problem, _ = scope.link_target(pmodel, parts[1], None)
+    if target is None:
+        return f"p-model '{pmodel.name}' has no link '{parts[1]}'" if problem.startswith("unknown") else problem
+    link = target.link
     if len(parts) == 3:
         ref = next((r for r in (*link.sensors, *link.actuators) if r.name == parts[2]), None)
         if ref is None:
@@ -62,7 +62,7 @@ def device_path(project, pmodel: PModel, name: s.QName):
         if ref is None:
             return f"joint '{joint.name}' has no actuator or sensor '{parts[3]}'"
     kind = "sensor" if ref.kind == "sref" else "actuator"
-    device = device_of(project, ref, project.file_of(placed.pmodel))
+    device = scope.device_of(ref)
     if device is None:
         return f"unknown {kind} '{ref.device}'"
     return link, ref, device

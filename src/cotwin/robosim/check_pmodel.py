@@ -10,18 +10,16 @@ solver output refers to solver variables it never declares).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from pathlib import Path
-
 from .checker import Checker
 from . import syntax as s
-from .consteval import UNITS, ConstEnv, const_env, try_evaluate
+from .consteval import UNITS, ConstEnv, ParameterNumbering, try_evaluate
 from .declarations import VarDecl
 from .operators import MATH
 from .pmodel_elements import (
     AnnotationRecord, Body, BodyDecl, Device, DeviceRef, Fragment, Index, JointRef, Link, LinkDecl, PModel, Pose,
     Shape,
 )
+from .pmodel_scope import PModelScope, element_reference, mesh_path
 
 SHAPE_PARAMS = {
     "box": ("length", "width", "height"),
@@ -31,98 +29,10 @@ SHAPE_PARAMS = {
     "mesh": (),
 }
 INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
-PARAMETER_DEFAULT = 0.0  # the value of a constant declared without one (RoboTool's default for a number)
 TIME = "t"  # the time variable of equations and initial conditions
 #: the operators RoboTool's equations use without declaring them (calculus and matrix algebra of its solver)
 SOLVER_OPERATORS = frozenset({"derivative", "integral", "adj", "submatrix", "transpose", "inverse", "identity",
                               "zeroes", "norm", "dot", "cross"}) | frozenset(MATH)
-
-
-@dataclass(frozen=True)
-class PlacedLink:
-    """A link of a p-model after parts are flattened: where it comes from and its constants."""
-
-    link: Link
-    pmodel: PModel
-    part: str | None  # the part it came through (None for the p-model's own links)
-
-
-def parameters_env(decls, outer: ConstEnv | None = None) -> ConstEnv:
-    """Constants with a value, plus those without (parameters) at PARAMETER_DEFAULT."""
-    env = const_env(decls, outer)
-    for d in decls:
-        if d.init is None and getattr(d, "kind", "const") == "const":
-            env.definitions.setdefault(d.name, s.Literal(PARAMETER_DEFAULT, d.loc))
-    return env
-
-
-def file_constants(project) -> ConstEnv:
-    """Top-level `const` declarations of all .pm files: the outermost constant scope."""
-    decls = [e for f in project.files if f.notation == "pm" for e in f.elements if isinstance(e, VarDecl)]
-    return parameters_env([d for d in decls if d.kind == "const"])
-
-
-def pmodel_constants(project, pmodel: PModel, instantiations=()) -> ConstEnv:
-    """The constants of a p-model (a part's instantiations override them), inside the file scope."""
-    env = parameters_env(pmodel.constants, file_constants(project))
-    outer = env.outer
-    for name, value, _ in instantiations:  # evaluated where the part is declared, stored as values
-        result = try_evaluate(value, outer, None) if outer is not None else None
-        env.definitions[name] = s.Literal(result, value.loc) if result is not None else value
-    return env
-
-
-def index_values(index: Index | None, env: ConstEnv) -> list[int]:
-    """The integers an `index i : [a, b]` (or `[a, b)`) ranges over; [None] when there is no index."""
-    if index is None:
-        return [None]
-    low, high = try_evaluate(index.low, env, None), try_evaluate(index.high, env, None)
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (low, high)):
-        return []
-    return list(range(int(low), int(high) + (1 if index.closed else 0)))
-
-
-def with_index(env: ConstEnv, index: Index | None, value) -> ConstEnv:
-    if index is None:
-        return env
-    return ConstEnv({index.var: s.Literal(value if value is not None else 0, index.loc)}, env)
-
-
-def flatten_links(project, pmodel: PModel, _seen: frozenset = frozenset()) -> dict[str, PlacedLink]:
-    """All links of a p-model by name, its own first, then those of its parts (recursively)."""
-    out: dict[str, PlacedLink] = {link.name: PlacedLink(link, pmodel, None) for link in pmodel.links}
-    for part in pmodel.parts:
-        sub = project.lookup("pmodel", part.pmodel, project.file_of(pmodel))
-        if sub is None or sub.name in _seen or sub is pmodel:
-            continue
-        for name, placed in flatten_links(project, sub, _seen | {pmodel.name}).items():
-            out.setdefault(name, PlacedLink(placed.link, placed.pmodel, placed.part or part.name))
-    return out
-
-
-def device_of(project, ref: DeviceRef, source) -> Device | None:
-    """The definition of a sensor or actuator reference (its own for a local one)."""
-    if ref.local is not None:
-        return ref.local
-    if ref.device is None:
-        return None
-    return project.lookup("sensor" if ref.kind == "sref" else "actuator", ref.device, source)
-
-
-def joint_device(project, joint: JointRef, source) -> Device | None:
-    if joint.local is not None:
-        return joint.local
-    return project.lookup("joint", joint.joint, source) if joint.joint is not None else None
-
-
-def device_env(device: Device, instantiations, outer: ConstEnv) -> ConstEnv:
-    """A device's constants (parameters at their default) with a reference's instantiations applied."""
-    env = parameters_env([p for p in device.ports if p.kind == "const"], outer)
-    for name, value, _ in instantiations:
-        result = try_evaluate(value, outer, None)
-        env.definitions[name] = s.Literal(result, value.loc) if result is not None else value
-        env._values.pop(name, None)
-    return env
 
 
 def _is_number(value) -> bool:
@@ -132,9 +42,12 @@ def _is_number(value) -> bool:
 class PModelChecker(Checker):
 
     def check(self) -> None:
-        self._warned_parameters: set[str] = set()
-        files = file_constants(self.project)
+        self.scope = PModelScope(self.project, ParameterNumbering())
+        self._pmodel: PModel | None = None  # the p-model (or fragment) being checked: link names resolve in it
+        self._link: Link | None = None  # the link being checked: body names resolve in it first
+        files = self.scope.file_env()
         for element in self.source.elements:
+            self._pmodel, self._link = None, None
             if isinstance(element, Device):
                 self.device(element, files)
             elif isinstance(element, PModel):
@@ -145,8 +58,16 @@ class PModelChecker(Checker):
                 self.body_decl(element, files)
             elif isinstance(element, Fragment):
                 self.fragment(element, files)
-            elif isinstance(element, VarDecl) and element.init is not None:
-                try_evaluate(element.init, files, self.diag, f"constant {element.name}")
+            elif isinstance(element, VarDecl) and element.kind == "const":
+                if element.init is None:
+                    self._parameter(element, "of the file")
+                else:
+                    try_evaluate(element.init, files, self.diag, f"constant {element.name}")
+
+    def _parameter(self, decl: VarDecl, where: str) -> None:
+        self.diag.warning(decl.loc, f"constant '{decl.name}' {where} has no value: unless an instantiation gives it "
+                          "one, it takes the value RoboTool's SDF generator gives such parameters, 1, 2, 3, ... in "
+                          "the order it meets them (export-pmodel says which)")
 
     # ---- names in equations ----
     def _names(self, exprs, known: set[str], where: str) -> None:
@@ -168,7 +89,8 @@ class PModelChecker(Checker):
         return names
 
     def _file_names(self) -> set[str]:
-        return set(file_constants(self.project).definitions)
+        env = self.scope.file_env()
+        return set(env.definitions) | set(env.parameters)
 
     # ---- devices ----
     def device(self, device: Device, env: ConstEnv, outer_names: set[str] | None = None) -> None:
@@ -178,7 +100,7 @@ class PModelChecker(Checker):
                 self.diag.error(port.loc, f"duplicate port '{port.name}' in {device.kind} {device.name}")
             seen[port.name] = port.loc
             self.types.resolve(port.type)
-        denv = parameters_env([p for p in device.ports if p.kind == "const"], env)
+        denv = self.scope.device_env(device, (), env)
         for port in device.ports:
             if port.kind == "const" and port.init is not None and not isinstance(port.init, (s.MatrixExpr,)):
                 try_evaluate(port.init, denv, None)
@@ -190,7 +112,7 @@ class PModelChecker(Checker):
             self.annotation(ann, denv)
 
     def link_decl(self, decl: LinkDecl, env: ConstEnv) -> None:
-        lenv = parameters_env([v for v in decl.variables if v.kind == "const"], env)
+        lenv = self.scope.decls_env(decl.variables, env)
         if decl.inertial is not None:
             self.inertial(decl.inertial, lenv, f"link {decl.name}")
         for shape in decl.shapes:
@@ -199,7 +121,7 @@ class PModelChecker(Checker):
                     f"an equation of link {decl.name}")
 
     def body_decl(self, decl: BodyDecl, env: ConstEnv) -> None:
-        benv = parameters_env([v for v in decl.variables if v.kind == "const"], env)
+        benv = self.scope.decls_env(decl.variables, env)
         if decl.inertial is not None:
             self.inertial(decl.inertial, benv, f"body {decl.name}")
         for shape in decl.shapes:
@@ -210,22 +132,22 @@ class PModelChecker(Checker):
         holder = PModel(fragment.name, (), fragment.links, (), fragment.loc, fragment.variables, fragment.equations)
         known = self._scope_names(fragment.variables) | self._file_names()
         self._names(fragment.equations, known, f"an equation of fragment {fragment.name}")
+        self._pmodel = holder
         children: dict[str, str] = {}
-        all_links = {link.name: PlacedLink(link, holder, None) for link in fragment.links}
         for link in fragment.links:
-            self.link(link, holder, env, all_links, children, known)
+            self.link(link, holder, env, children, known)
         for joint in fragment.joints:
-            self.joint(joint, None, holder, env, all_links, children, known)
+            self.joint(joint, None, holder, env, children, known)
         for ref in (*fragment.sensors, *fragment.actuators):
             self.device_ref(ref, env, known)
 
     # ---- p-models ----
     def pmodel(self, pmodel: PModel) -> None:
-        env = pmodel_constants(self.project, pmodel)
+        self._pmodel = pmodel
+        env = self.scope.pmodel_env(pmodel)
         for const in pmodel.constants:
             if const.init is None:
-                self.diag.warning(const.loc, f"constant '{const.name}' of p-model {pmodel.name} has no value: "
-                                  f"{PARAMETER_DEFAULT:g} is used unless a part instantiates it")
+                self._parameter(const, f"of p-model {pmodel.name}")
             else:
                 try_evaluate(const.init, env, self.diag, f"constant {const.name}")
         for var in pmodel.variables:
@@ -241,17 +163,14 @@ class PModelChecker(Checker):
             names[link.name] = link
         for part in pmodel.parts:
             self.part(part, pmodel, env)
-        all_links = flatten_links(self.project, pmodel)
         children: dict[str, str] = {}
         for link in pmodel.links:
-            self.link(link, pmodel, env, all_links, children, known)
-        for part in pmodel.parts:
-            for fixed in part.fixed:
-                children.setdefault(fixed.target, part.name)
-        roots = [link for link in pmodel.links if link.name not in children]
-        if len(roots) > 1:
-            self.diag.warning(roots[1].loc, f"p-model {pmodel.name} has several root links: "
-                              + ", ".join(r.name for r in roots) + f"; '{roots[0].name}' is taken as the base")
+            self.link(link, pmodel, env, children, known)
+        for joint in pmodel.joints:  # declared in the p-model: the base link is their parent
+            self.diag.warning(joint.loc, f"joint {joint.name} is declared in p-model {pmodel.name}, not in a link: "
+                              "its parent is the base link")
+            self.joint(joint, None, pmodel, env, children, known)
+        # several root links are several free bodies, as in RoboTool's SDF (docs/pmodel-notation.md, 4)
 
     def _solution_names(self, pmodel: PModel) -> set[str]:
         names = set()
@@ -264,55 +183,39 @@ class PModelChecker(Checker):
         return names
 
     def part(self, part, pmodel: PModel, env: ConstEnv) -> None:
-        sub = self.project.lookup("pmodel", part.pmodel, self.source)
+        sub = self.scope.part_pmodel(part)
         if sub is None:
             self.diag.error(part.pmodel.loc, f"unknown p-model '{part.pmodel}' for part {part.name}")
-        elif sub is pmodel or self._includes(sub, pmodel.name):
+        elif sub is pmodel or self.scope.includes(sub, pmodel):
             self.diag.error(part.loc, f"part {part.name} includes p-model {pmodel.name} in itself")
             sub = None
+        env = self.index(part.index, env, f"part {part.name}")
         if part.pose is not None:
             self.pose(part.pose, env, f"part {part.name}")
         for name, value, loc in part.instantiations:
-            if sub is not None and not any(c.name == name for c in sub.constants):
+            if sub is not None and not any(c.name == name for c in (*sub.constants, *sub.variables)):
                 self.diag.error(loc, f"p-model {sub.name} has no constant '{name}' (part {part.name})")
             try_evaluate(value, env, self.diag, f"part {part.name}.{name}")
         if sub is None:
             return
-        own = flatten_links(self.project, sub)
-        here = flatten_links(self.project, pmodel)
         for fixed in part.fixed:
-            if fixed.link not in own:
+            if self.scope.own_link(sub, fixed.link) is None:
                 self.diag.error(fixed.loc, f"part {part.name} (p-model {sub.name}) has no link '{fixed.link}'")
-            self._link_in(fixed.target, fixed.target_part, pmodel, here, fixed.loc, f"part {part.name}")
+            self._target(pmodel, fixed.target, fixed.target_part, fixed.loc, f"part {part.name}")
         for pj in part.joints:
-            if not any(j.name == pj.joint for placed in own.values() for j in placed.link.joints):
+            if not any(j.name == pj.joint for link in sub.links for j in link.joints):
                 self.diag.error(pj.loc, f"part {part.name} (p-model {sub.name}) has no joint '{pj.joint}'")
-            self._link_in(pj.child, pj.child_part, pmodel, here, pj.loc, f"part {part.name}")
+            self._target(pmodel, pj.child, pj.child_part, pj.loc, f"part {part.name}")
 
-    def _link_in(self, link: str, part_name: str | None, pmodel: PModel, here, loc, where: str) -> bool:
-        if part_name is None:
-            if link not in here:
-                self.diag.error(loc, f"{where}: unknown link '{link}'")
-                return False
-            return True
-        part = next((p for p in pmodel.parts if p.name == part_name), None)
-        if part is None:
-            self.diag.error(loc, f"{where}: unknown part '{part_name}'")
-            return False
-        sub = self.project.lookup("pmodel", part.pmodel, self.source)
-        if sub is not None and link not in flatten_links(self.project, sub):
-            self.diag.error(loc, f"part {part_name} (p-model {sub.name}) has no link '{link}'")
-            return False
-        return True
-
-    def _includes(self, pmodel: PModel, name: str, depth: int = 0) -> bool:
-        if depth > 16:
-            return True
-        for part in pmodel.parts:
-            sub = self.project.lookup("pmodel", part.pmodel, self.source)
-            if sub is not None and (sub.name == name or self._includes(sub, name, depth + 1)):
-                return True
-        return False
+    def _target(self, pmodel: PModel, name: str, part_name: str | None, loc, where: str):
+        """The link a joint or a fixed connection names (docs/pmodel-notation.md, 4), reported if none."""
+        target, problem, lenient = self.scope.link_target(pmodel, name, part_name)
+        if target is None:
+            self.diag.error(loc, f"{where}: {problem}")
+        elif lenient:
+            self.diag.warning(loc, f"{where}: '{name}' is a link of part {target.part.name}, not of p-model "
+                              f"{pmodel.name}: RoboTool needs '{name} in {target.part.name}'; cotwin reads it so")
+        return target
 
     # ---- links ----
     def index(self, index: Index | None, env: ConstEnv, where: str) -> ConstEnv:
@@ -322,20 +225,21 @@ class PModelChecker(Checker):
             value = try_evaluate(bound, env, self.diag, f"index of {where}")
             if value is not None and not (_is_number(value) and float(value).is_integer()):
                 self.diag.error(bound.loc, f"index bounds of {where} must be integers, is {value!r}")
-        if not index_values(index, env):
+        values = self.scope.index_values(index, env)
+        if not values:
             self.diag.warning(index.loc, f"index '{index.var}' of {where} ranges over no value")
-        return with_index(env, index, index_values(index, env)[0] if index_values(index, env) else 0)
+        return self.scope.with_index(env, index, values[0] if values else 0)
 
-    def link(self, link: Link, pmodel: PModel, env: ConstEnv, all_links: dict[str, PlacedLink],
-             children: dict[str, str], known: set[str]) -> None:
+    def link(self, link: Link, pmodel: PModel, env: ConstEnv, children: dict[str, str], known: set[str]) -> None:
         where = f"link {link.name}"
+        self._link = link
         env = self.index(link.index, env, where)
         decl = None
         if link.ref is not None:
-            decl = self.project.lookup("link", link.ref, self.source)
+            decl = self.scope.link_decl(link)
             if decl is None:
                 self.diag.error(link.ref.loc, f"unknown link definition '{link.ref}' for lref {link.name}")
-        lenv = parameters_env([v for v in link.variables if v.kind == "const"], env)
+        lenv = self.scope.decls_env(link.variables, env)
         body_inertia = [b for b in link.bodies if self._body_inertial(b) is not None]
         if link.inertial is not None:
             self.inertial(link.inertial, lenv, where)
@@ -344,7 +248,8 @@ class PModelChecker(Checker):
                                 f"{body_inertia[0].name}: give it once (RoboTool's rule L2)")
         elif decl is None or decl.inertial is None:
             if not body_inertia:
-                self.diag.warning(link.loc, f"{where} has no inertial information; a default mass is used")
+                self.diag.warning(link.loc, f"{where} has no inertial information: RoboTool's default is used "
+                                  "(1 kg, inertia 1 kg m^2 about each axis)")
         if link.pose is not None:
             self.pose(link.pose, lenv, where)
         for shape in link.shapes:
@@ -359,40 +264,27 @@ class PModelChecker(Checker):
         for ann in link.annotations:
             self.annotation(ann, lenv)
         for joint in link.joints:
-            self.joint(joint, link, pmodel, lenv, all_links, children, names)
+            self.joint(joint, link, pmodel, lenv, children, names)
         for ref in (*link.sensors, *link.actuators):
             self.device_ref(ref, lenv, names)
         for fixed in link.fixed_to:
-            if fixed.part is None:
-                if fixed.link not in all_links:
-                    self.diag.error(fixed.loc, f"{where} is fixed to unknown link '{fixed.link}'")
-                    continue
-            else:
-                part = next((p for p in pmodel.parts if p.name == fixed.part), None)
-                if part is None:
-                    self.diag.error(fixed.loc, f"{where} is fixed to a link in unknown part '{fixed.part}'")
-                    continue
-                sub = self.project.lookup("pmodel", part.pmodel, self.source)
-                if sub is not None and fixed.link not in flatten_links(self.project, sub):
-                    self.diag.error(fixed.loc, f"part {fixed.part} (p-model {sub.name}) has no link '{fixed.link}'")
             if fixed.link == link.name and fixed.part is None:
                 self.diag.error(fixed.loc, f"{where} is fixed to itself")
-            children.setdefault(fixed.link, link.name)
+            elif self._target(pmodel, fixed.link, fixed.part, fixed.loc, f"{where} is fixed to a link") is not None:
+                children.setdefault(fixed.link, link.name)
 
     def _body_inertial(self, body: Body):
         if body.inertial is not None:
             return body.inertial
-        if body.ref is not None:
-            decl = self.project.lookup("body", body.ref, self.source)
-            return decl.inertial if isinstance(decl, BodyDecl) else None
-        return None
+        decl = self.scope.body_decl(body.ref)
+        return decl.inertial if decl is not None else None
 
     def body(self, body: Body, env: ConstEnv, known: set[str]) -> None:
         where = f"body {body.name}"
         env = self.index(body.index, env, where)
-        if body.ref is not None and self.project.lookup("body", body.ref, self.source) is None:
+        if body.ref is not None and self.scope.body_decl(body.ref) is None:
             self.diag.error(body.ref.loc, f"unknown body definition '{body.ref}' for bref {body.name}")
-        benv = parameters_env([v for v in body.variables if v.kind == "const"], env)
+        benv = self.scope.decls_env(body.variables, env)
         for shape in body.shapes:
             self.shape(shape, benv, where)
         if body.inertial is not None:
@@ -444,10 +336,10 @@ class PModelChecker(Checker):
 
     # ---- joints, sensors, actuators ----
     def joint(self, joint: JointRef, link: Link | None, pmodel: PModel, env: ConstEnv,
-              all_links: dict[str, PlacedLink], children: dict[str, str], known: set[str]) -> None:
+              children: dict[str, str], known: set[str]) -> None:
         where = f"joint {joint.name}"
         env = self.index(joint.index, env, where)
-        device = joint_device(self.project, joint, self.source)
+        device = self.scope.joint_device(joint)
         if joint.local is not None:
             self.device(joint.local, env, known)
         elif device is None:
@@ -455,7 +347,7 @@ class PModelChecker(Checker):
                             "(import physmod::joints::* or physmod::SKO::joints::*, or declare it)")
         self._instantiations(joint.instantiations, device, env, where)
         if device is not None:  # the joint's own constants, as instantiated, are visible in its annotations
-            env = device_env(device, joint.instantiations, env)
+            env = self.scope.device_env(device, joint.instantiations, env)
         for ann in joint.annotations:
             self.annotation(ann, env)
             axis = ann.get("axis")
@@ -472,17 +364,17 @@ class PModelChecker(Checker):
             self.diag.warning(joint.loc, f"joint {joint.name} is not connected to a child link "
                               "('flexibly connected to ...'): it is left out of the kinematic tree")
         else:
-            if joint.child_part is not None:
-                part = next((p for p in pmodel.parts if p.name == joint.child_part), None)
-                sub = self.project.lookup("pmodel", part.pmodel, self.source) if part else None
-                known_child = sub is not None and joint.child in flatten_links(self.project, sub)
-            else:
-                known_child = joint.child in all_links
-            if not known_child:
-                self.diag.error(joint.child_loc, f"joint {joint.name}: unknown child link '{joint.child}'")
+            target, problem, lenient = self.scope.link_target(pmodel, joint.child, joint.child_part)
+            if target is None:
+                message = f"unknown child link '{joint.child}'" if problem.startswith("unknown link") else problem
+                self.diag.error(joint.child_loc, f"joint {joint.name}: {message}")
             elif link is not None and joint.child == link.name and joint.child_part is None:
                 self.diag.error(joint.child_loc, f"joint {joint.name} connects link '{link.name}' to itself")
             else:
+                if lenient:
+                    self.diag.warning(joint.child_loc, f"joint {joint.name}: '{joint.child}' is a link of part "
+                                      f"{target.part.name}, not of p-model {pmodel.name}: RoboTool needs "
+                                      f"'{joint.child} in {target.part.name}'; cotwin reads it so")
                 children.setdefault(joint.child, link.name if link is not None else joint.name)
         for ref in (*joint.actuators, *joint.sensors):
             self.device_ref(ref, env, names, joint=joint, joint_dev=device)
@@ -502,7 +394,7 @@ class PModelChecker(Checker):
             self.pose(ref.pose, env, where)
         for ann in ref.annotations:
             self.annotation(ann, env)
-        device = device_of(self.project, ref, self.source)
+        device = self.scope.device_of(ref)
         if ref.local is not None:
             self.device(ref.local, env, known)
         elif device is None:
@@ -524,10 +416,12 @@ class PModelChecker(Checker):
 
     # ---- values ----
     def annotation(self, record: AnnotationRecord, env: ConstEnv) -> None:
+        """Annotation values are constants, or name a body, link or part of the model (a gearbox's reference
+        body, a contact sensor's collision): RoboTool's SDF generator writes that element's name."""
         for entry in record.entries:
             if isinstance(entry.value, AnnotationRecord):
                 self.annotation(entry.value, env)
-            else:
+            elif self._pmodel is None or element_reference(entry.value, self._pmodel, self._link, self.scope) is None:
                 try_evaluate(entry.value, env, self.diag, f"annotation {record.name}.{entry.key}")
 
     def pose(self, pose: Pose, env: ConstEnv, where: str) -> None:
@@ -571,8 +465,3 @@ class PModelChecker(Checker):
             self.diag.warning(params["shape"][1], f"mesh file '{file}' of {where} not found: a placeholder "
                               "shape stands in for it in exports")
 
-
-def mesh_path(model_path: str, file: str) -> Path:
-    """Where a mesh named in a model is: relative names are relative to the model file's folder."""
-    path = Path(file)
-    return path if path.is_absolute() else Path(model_path).parent / path

@@ -33,9 +33,23 @@ class ConstError(PicklableError):
         self.message = message
 
 
+class ParameterNumbering:
+    """The values of parameters (constants and variables declared without a value), as RoboTool's SDF
+    generator gives them: 1, 2, 3, ... in the order it first meets them (docs/pmodel-notation.md, 3)."""
+
+    def __init__(self) -> None:
+        self.given: dict[int, tuple[object, int]] = {}  # id(declaration) -> (declaration, value)
+
+    def value(self, decl) -> int:
+        if id(decl) not in self.given:
+            self.given[id(decl)] = (decl, len(self.given) + 1)
+        return self.given[id(decl)][1]
+
+
 @dataclass
 class ConstEnv:
-    """Named constant expressions, with an outer environment (p-model inside file scope)."""
+    """Named constant expressions, with an outer environment (p-model inside file scope). `parameters` are
+    declarations without a value: they take the value `numbering` gives them (the nearest one outwards)."""
 
     definitions: dict[str, s.Expr] = field(default_factory=dict)
     outer: "ConstEnv | None" = None
@@ -43,12 +57,22 @@ class ConstEnv:
     _active: set[str] = field(default_factory=set)
     #: enumeration literal (qualified name parts) -> index, for d-model constants
     enums: object = None
+    parameters: dict[str, object] = field(default_factory=dict)
+    numbering: ParameterNumbering | None = None
 
     def lookup(self, name: str):
         env = self
         while env is not None:
-            if name in env.definitions:
+            if name in env.definitions or name in env.parameters:
                 return env
+            env = env.outer
+        return None
+
+    def _numbering(self) -> ParameterNumbering | None:
+        env = self
+        while env is not None:
+            if env.numbering is not None:
+                return env.numbering
             env = env.outer
         return None
 
@@ -56,6 +80,11 @@ class ConstEnv:
         env = self.lookup(name)
         if env is None:
             raise ConstError(loc, f"unknown constant '{name}'")
+        if name not in env.definitions:
+            numbering = env._numbering()
+            if numbering is None:
+                raise ConstError(loc, f"constant '{name}' has no value")
+            return numbering.value(env.parameters[name])
         if name in env._values:
             return env._values[name]
         if name in env._active:

@@ -200,3 +200,4 @@ class Module:
     platform_ref: PlatformRef | None = None  # `rref`: the platform is defined elsewhere
     machines: tuple[StateMachine, ...] = ()  # RoboTool rejects machines directly in a module
     machine_refs: tuple[MachineRef, ...] = ()
+    variables: tuple[VarDecl, ...] = ()  # `const` declarations of the module (RoboSim's ConstCycle)

@@ -32,7 +32,7 @@ class Members:
 
 def interface_of(project, use: InterfaceUse, source: SourceFile | None, diag: Diagnostics | None) -> Interface | None:
     found = project.lookup("interface", use.name, source)
-    if found is None and diag is not None:
+    if found is None and diag is not None and not project.ambiguous("interface", use.name):
         hint = project.elsewhere("interface", use.name)
         extra = f" (there is {', '.join(hint)}: import its package or qualify the name)" if hint else ""
         diag.error(use.name.loc, f"unknown interface '{use.name}'{extra}")

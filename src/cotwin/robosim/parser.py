@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
@@ -49,6 +50,22 @@ def _lark_parser(grammar: str) -> lark.Lark:
         maybe_placeholders=False,
         cache=True,
     )
+
+
+_NAME = re.compile(r"\^?[a-zA-Z_][a-zA-Z0-9_]*")
+
+
+def _keyword_as_name(err: UnexpectedInput) -> bool:
+    """A word of the grammar where only a name fits is that name (`record PID { output : real }` in a
+    RoboChart file, where `output` is no keyword): LALR lookahead merging can lex it as the keyword one
+    token early; the parser takes it again as a name and goes on."""
+    token = getattr(err, "token", None)
+    if not isinstance(err, UnexpectedToken) or token is None or token.type in ("ID", "$END"):
+        return False
+    if "ID" not in err.expected or not _NAME.fullmatch(str(token)):
+        return False
+    err.interactive_parser.feed_token(lark.Token.new_borrow_pos("ID", str(token), token))
+    return True
 
 
 def notation_of(path: str | Path) -> str | None:
@@ -137,7 +154,7 @@ def parse_text(text: str, path: str, notation: str | None = None) -> tuple[Sourc
                               "unknown file kind: expected a .rst d-model, a .rct RoboChart file or a .pm p-model/mapping")]
     parser = lark_parser(notation)
     try:
-        tree = parser.parse(text)
+        tree = parser.parse(text, on_error=_keyword_as_name)
     except UnexpectedInput as err:
         if isinstance(err, UnexpectedToken) and err.token.type == "$END":
             line, column = _last_position(text)

@@ -247,6 +247,7 @@ class PartRef:
     loc: Location
     fixed: tuple[PartFixed, ...] = ()
     joints: tuple[PartJoint, ...] = ()
+    index: Index | None = None  # `index i : [a, b]`: one instance of the p-model per value
 
 
 @dataclass(frozen=True)
@@ -269,6 +270,7 @@ class PModel:
     constraints: tuple[Expr, ...] = ()
     solutions: tuple[Solution, ...] = ()
     annotations: tuple[AnnotationRecord, ...] = ()
+    joints: tuple[JointRef, ...] = ()  # joints declared in the p-model itself: their parent is the base link
 
 
 @dataclass(frozen=True)

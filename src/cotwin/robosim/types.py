@@ -117,6 +117,8 @@ class DeviceTy:
 Ty = PrimTy | EnumTy | RecordTy | AbstractTy | VectorTy | CollectionTy | MatrixTy | TupleTy | FuncTy | DeviceTy | TypeVar
 
 NUMERIC = (INT, NAT, REAL)
+#: physmod's built-in types, known in p-model files: `LINK`, a link of the model (a joint's `const parent: LINK`)
+PHYSMOD_TYPES = {"LINK": AbstractTy(PrimitiveDecl("LINK", s.NOWHERE))}
 
 
 def is_numeric(ty: Ty) -> bool:
@@ -204,17 +206,23 @@ class TypeResolver:
         if len(name.parts) == 1 and name.last.startswith("?"):
             return TypeVar(name.last[1:])
         decl = self.project.lookup("type", name, self.source)
+        if decl is None and len(name.parts) == 1 and name.last in PHYSMOD_TYPES and self._in_pmodel(name):
+            return PHYSMOD_TYPES[name.last]
         if isinstance(decl, EnumDecl):
             return EnumTy(decl)
         if isinstance(decl, RecordDecl):
             return RecordTy(decl)
         if isinstance(decl, PrimitiveDecl):
             return AbstractTy(decl)
-        if report:
-            hint = self.project.elsewhere("type", name) if hasattr(self.project, "elsewhere") else []
+        if report and not self.project.ambiguous("type", name):  # an ambiguity is reported where found
+            hint = self.project.elsewhere("type", name)
             extra = f" (there is {', '.join(hint)}: import its package or qualify the name)" if hint else ""
             self.diag.error(name.loc, f"unknown type '{name}'{extra}")
         return UNKNOWN
+
+    def _in_pmodel(self, name: s.QName) -> bool:
+        """Whether `name` is written in a p-model file (where physmod's types are known)."""
+        return name.loc.path.endswith(".pm") or (self.source is not None and self.source.notation == "pm")
 
     def _size(self, expr: s.Expr) -> int | None:
         if isinstance(expr, s.Literal) and isinstance(expr.value, int):
