@@ -85,6 +85,58 @@ def test_two_feasible_moves_in_a_row_get_one_answer_each_after_their_request(twi
     assert len(calls) == 2 and all(call <= answer for call, answer in zip(calls, feasible))
 
 
+TICKER = """
+interface Ops {
+	beat(n: int)
+}
+
+stm Ticker {
+	var n: int = 0
+	output context { requires Ops }
+	initial i0
+	state Run { }
+	transition init { from i0 to Run }
+	transition tick { from Run to Run exec action n = n + 1; $beat(n) }
+}
+
+controller TickC {
+	requires Ops
+	sref s = Ticker
+}
+
+module Tick {
+	robotic platform P { provides Ops }
+	cref c = TickC
+}
+"""
+
+
+def test_an_output_raised_in_several_cycles_of_one_step_is_said_to_be_lost(tmp_path, caplog):
+    """A Boolean port carries one occurrence per step: with cycle_period a third of the step, an operation
+    called every cycle reaches the platform once per step, and the FMU says the others are lost (once)."""
+    from cotwin.dmodel.fmu import build_fmu
+    from cotwin.dmodel.program import build_program
+    from cotwin.dmodel.runner import FMUDriver
+    from cotwin.robosim.check import load_checked
+
+    (tmp_path / "tick.rst").write_text(TICKER)
+    program = build_program(load_checked([tmp_path / "tick.rst"]))
+    fmu = build_fmu(program, tmp_path / "tick.fmu")
+    for period, warned in ((0.1, True), (0.3, False)):
+        caplog.clear()
+        driver = FMUDriver(program, fmu, parameters={"cycle_period": period}, step_size=0.3)
+        try:
+            driver.step({})
+            second = driver.step({})
+        finally:
+            driver.close()
+        assert [o.name for o in second] == ["beat"]
+        lost = [r.getMessage() for r in caplog.records if "several of the 3 cycles" in r.getMessage()]
+        assert len(lost) == (1 if warned else 0)
+        if warned:
+            assert "beat" in lost[0] and "unit dmodel" in lost[0]
+
+
 @pytest.fixture
 def mapping(twin):
     from cotwin.mapping.endpoint import SimulatedEndpoint
