@@ -195,3 +195,35 @@ def test_answers_that_come_together_are_delivered_one_per_step_and_a_new_request
     mapping.execute_operation("movediscrete", {"target_X": 8, "target_Y": 10, "target_Z": 0})
     assert occurring(mapping) & answers == {"feasibleMoveDiscreteCommand"}
 
+
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
+def test_a_wait_for_an_answer_that_cannot_come_is_said_naming_the_state_and_the_reason(tmp_path, algorithm, caplog):
+    """A mapping that forgets to set `motion` when a move is feasible: the d-model waits in Moving for a
+    moveCompleted whose condition no motion can make true. The run says so, once, where and why."""
+    import shutil
+
+    from conftest import EXAMPLES
+
+    project = tmp_path / "ur5e"
+    shutil.copytree(EXAMPLES / "ur5e", project)
+    mapping = project / "mapping.pm"
+    text = mapping.read_text()
+    assert "\t\taction motion = if ok then Motion::moving else motion end\n" in text
+    mapping.write_text(text.replace("\t\taction motion = if ok then Motion::moving else motion end\n", ""))
+    (project / "plan.csv").write_text("timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,"
+                                      "MovementArgs_target_Z\n1000,true,0,23,1\n")
+    with caplog.at_level("WARNING", logger="cotwin.twin"):
+        ran = run_twin(load(project / "cotwin.toml"), tmp_path / "out", end=5.0, algorithm=algorithm, plot=False)
+    assert len(ran.blocked) == 1
+    blocked = ran.blocked[0]
+    assert (blocked.state, blocked.events, blocked.others) == ("Moving", ["collision", "moveCompleted"], ["collision"])
+    assert "motion == Motion::moving" in blocked.reasons["moveCompleted"]
+    assert "mapping.pm:107:12" in blocked.reasons["moveCompleted"] and "(movejoint, stop)" in blocked.reasons["moveCompleted"]
+    said = [r.getMessage() for r in caplog.records if "waits in state Moving" in r.getMessage()]
+    assert len(said) == 1 and f"since t = {blocked.since:g} s" in said[0]
+
+
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
+def test_no_wait_is_said_blocked_in_a_run_that_completes(twin, built, tmp_path, algorithm):
+    ran, _ = run(twin, built, tmp_path, [move(1.0, 0, 23, 1), move(5.0, 15, 23, 3), move(9.0, 8, 10, 0)], algorithm)
+    assert ran.blocked == []

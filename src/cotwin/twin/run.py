@@ -15,6 +15,7 @@ from ..diagnostics import CotwinError
 from .build import dmodel_fmu, folder_lock
 from .project import TwinProject, check_timing, load_project
 from .system import MAPPING, TwinSystem
+from .waits import WaitWatch
 
 
 def dt_endpoint(system: TwinSystem):
@@ -59,6 +60,7 @@ class TwinRun:
     figure: Path | None
     system: System
     units: dict[str, object] = field(default_factory=dict)
+    blocked: list = field(default_factory=list)  # cotwin.twin.waits.Blocked: waits for answers that cannot come
 
     @property
     def mapping(self):
@@ -80,7 +82,8 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         cosim = system.instantiate(fmu, endpoint if endpoint is not None else dt_endpoint(system), source=source)
         units = {u.role if u.role != "source" else "source": cosim.units[u.name] for u in system.units}
         writer = CSVWriter(out / "outputs.csv")
-        chain: list[Observer] = [writer, StateFile(out / "state"), *(observers or [])]
+        watch = WaitWatch(system)
+        chain: list[Observer] = [writer, StateFile(out / "state"), watch, *(observers or [])]
         if progress is not None:
             chain.append(Progress(progress))
         if spec.realtime if realtime is None else realtime:
@@ -103,7 +106,7 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
                 top_view(out / "outputs.csv", out / "path.png", system.models.scene, path,
                          title=f"{system.models.program.module.name} in {system.models.scene.name or 'its world'}: "
                                f"{end:g} s")
-        return TwinRun(result, out / "outputs.csv", figure, cosim, units)
+        return TwinRun(result, out / "outputs.csv", figure, cosim, units, watch.found)
 
 
 def path_columns(system: TwinSystem) -> tuple[str, str] | None:

@@ -34,6 +34,7 @@ from .build import dmodel_fmu
 from ..logcap import CappedLog
 from .scenario import Command
 from .system import DMODEL, MAPPING, TwinSystem
+from .waits import WaitWatch
 
 _WORKER = None  # (TwinSystem, artefacts) of a what-if worker process
 INFEASIBLE = re.compile(r"^(non|in|un)(feasible|reachable)", re.IGNORECASE)
@@ -64,6 +65,7 @@ class Prediction:
     collisions: list[dict]
     completion_time: float | None
     wall_seconds: float
+    blocked: list[str] = field(default_factory=list)  # waits for answers that cannot come (cotwin.twin.waits)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -133,18 +135,21 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
         fmu = dmodel_fmu(fork, Path(artefacts) if artefacts is not None else Path(tmp), cc)
         endpoint = simulated_endpoint(fork)
         cosim = fork.instantiate(fmu, endpoint)
-        execution = Execution(cosim, make_algorithm(algorithm), step, start)
+        watch = WaitWatch(fork, prefix="what-if: ")
+        execution = Execution(cosim, make_algorithm(algorithm), step, start, [watch])
         try:
             if state is not None:
                 execution.set_state(state, units=[DMODEL.name, MAPPING.name])
             else:
                 execution.initialize()
-            return _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started)
+            prediction = _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started, watch)
+            prediction.blocked = [str(b) for b in watch.found]
+            return prediction
         finally:
             execution.close()
 
 
-def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, started) -> Prediction:
+def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, started, waits=None) -> Prediction:
     from ..dmodel.ports import PortLayout
 
     program = fork.models.program
@@ -214,6 +219,8 @@ def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, st
             current.done = t
         contacts.check(t)
         at_rest_since = (at_rest_since if at_rest_since is not None else t) if resting else None
+        if not pending and t >= last_command and waits is not None and waits.found:
+            break  # blocked for good: the horizon would add nothing
         if not pending and t >= last_command and at_rest_since is not None and t - at_rest_since >= settle:
             last = outcomes[-1] if outcomes else None
             if last is None or last.done is not None:
