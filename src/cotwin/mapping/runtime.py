@@ -418,6 +418,8 @@ class Mapping:
         self.asked: set[str] = set()  # variables operations assigned since the last report
         self.held: dict[str, tuple[bool, object]] = {}  # event -> (held, value) at the last report
         self.pending: dict[str, object] = {}  # answers that came and wait for their step, in order -> value
+        self.reports = 0  # steps reported
+        self.delivered: dict[str, int] = {}  # answer -> the report that last delivered it
         self.events = {ev.name: InputEvent(self, ev) for ev in model.input_events}
         #: mapping variable -> the operations assigning it
         self.assigners: dict[str, list[str]] = {}
@@ -496,6 +498,7 @@ class Mapping:
         self.asked.clear()
         self.held.clear()
         self.pending.clear()
+        self.delivered.clear()
         self.started = True
 
     def get_event(self, name: str, args=None) -> bool:
@@ -527,9 +530,11 @@ class Mapping:
         self.asked.clear()
         for name, value in asked + came:  # caused by an operation at the step's start, then by the platform
             self.pending[name] = value
+        self.reports += 1
         if self.pending:
             name = next(iter(self.pending))
             out[name] = (True, self.pending.pop(name))
+            self.delivered[name] = self.reports
         return out
 
     def never(self, name: str) -> str | None:
@@ -552,7 +557,8 @@ class Mapping:
             by = sorted({op for v in reads for op in self.assigners[v]})
             return (f"its condition `{_source_text(false)}` ({false.loc}) is false and only an operation "
                     f"({', '.join(by)}) changes {', '.join(reads)}")
-        if self.held.get(name, (False, None))[0]:
+        if self.held.get(name, (False, None))[0] and self.reports - self.delivered.get(name, self.reports - 2) >= 2:
+            # delivered two reports ago or more: the d-model has read it (the step after it, also under Jacobi)
             return ("it holds still and occurred already: it occurs again only when it stops holding or an operation "
                     f"assigns {', '.join(sorted(ev.reads & set(self.assigners)))}")
         return None
@@ -616,7 +622,8 @@ class Mapping:
         return {"variables": dict(self.variables), "started": self.started,
                 "functions": self._registry.snapshot() if self._registry is not None else {},
                 "events": {name: ev.value for name, ev in self.events.items()}, "endpoint": save(),
-                "held": dict(self.held), "asked": sorted(self.asked), "pending": list(self.pending.items())}
+                "held": dict(self.held), "asked": sorted(self.asked), "pending": list(self.pending.items()),
+                "reports": self.reports, "delivered": dict(self.delivered)}
 
     def restore(self, snapshot: dict) -> None:
         self.endpoint.restore(snapshot["endpoint"])
@@ -629,5 +636,7 @@ class Mapping:
         self.held = dict(snapshot.get("held", {}))
         self.asked = set(snapshot.get("asked", ()))
         self.pending = dict(snapshot.get("pending", ()))
+        self.reports = snapshot.get("reports", 0)
+        self.delivered = dict(snapshot.get("delivered", {}))
         self.started = snapshot["started"]
         self._readings = None
