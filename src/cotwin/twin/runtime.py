@@ -149,14 +149,14 @@ class LiveTwin:
     def _sources(self):
         system = self.system
         if system.source is RABBITMQ:
-            from .rabbitmq import CommandStream, RabbitMQBridge, port_scalars, port_types
+            from .rabbitmq import CommandStream, RabbitMQBridge, port_arguments, port_scalars, port_types
 
             settings = system.spec.rabbitmq
             self._bridge = RabbitMQBridge(settings, "cotwin live twin")  # started by the PT's unit when it initialises
             stream = CommandStream(port_types(system.models.program, system.source_ports), system.command_events,
                                    self._bridge.receive, settings.maxage_ms / 1000, settings.timeout_s,
                                    scalars=port_scalars(system.models.program), cancelled=lambda: self._stop,
-                                   max_skew=settings.max_skew_s)
+                                   max_skew=settings.max_skew_s, arguments=port_arguments(system.models.program))
             return (system.source_unit(self._bridge, stream, echo=True),
                     system.source_unit(self._bridge, stream, echo=False))
         return system.source_unit(), system.source_unit()

@@ -240,7 +240,7 @@ def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, st
 def plan_from_json(items: list, program) -> list[Command]:
     """A what-if plan from JSON (a broker request or a file): [{"time": s, "event": name, "args": {...}}],
     checked like a TOML scenario; CotwinError naming the item otherwise."""
-    from .scenario import scalar_value
+    from .scenario import command_values
 
     if not isinstance(items, list) or not items:
         raise CotwinError("a what-if plan is a non-empty list of {time, event, args}")
@@ -256,16 +256,9 @@ def plan_from_json(items: list, program) -> list[Command]:
             raise CotwinError(f"plan item {k}: unknown event {name!r:.80} (known: {', '.join(events)})")
         if not isinstance(args, dict):
             raise CotwinError(f"plan item {k}: args must be an object")
-        fields = {sc.path[-1] if sc.path else "value": (port, sc) for port, sc in events[name].value_ports}
-        values = [(name, True)]
-        for key, value in args.items():
-            if key not in fields:
-                raise CotwinError(f"plan item {k}: event {name} has no argument {key[:80]!r} (has {', '.join(fields) or 'none'})")
-            port, sc = fields[key]
-            try:
-                values.append((port, scalar_value(value, sc)))
-            except ValueError as err:
-                raise CotwinError(f"plan item {k}: argument {key}: {value!r:.80} {err}") from None
+        values, wrong = command_values(events[name], args)
+        if wrong:
+            raise CotwinError([f"plan item {k}: {message}" for _, message in wrong])
         out.append(Command(float(t), tuple(values), f"plan item {k}"))
     return out
 
