@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .common import MAX_HORIZON, check_finite, main, named_values, output_path, tool_point
+from .common import MAX_HORIZON, STRICT_HELP, check_finite, main, named_values, outcomes, output_path, tool_point
 
 
 def plan_file(path: str, program):
@@ -33,7 +33,8 @@ def plan_file(path: str, program):
 @click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=60.0, show_default=True,
               help="simulate at most this long (s)")
 @click.option("-o", "--output", "out", callback=output_path, help="write the prediction as JSON here")
-def whatif(project: str, plan: str, state: str | None, horizon: float, out: str | None) -> None:
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
+def whatif(project: str, plan: str, state: str | None, horizon: float, out: str | None, strict: bool) -> None:
     """Predict what a plan would do: fork the DT (at a saved state, or at the start) and run the plan
     ahead of real time; prints each command's outcome and the completion time."""
     import json
@@ -51,6 +52,8 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
             blob = Path(state).read_bytes()
         except OSError as err:
             raise click.BadParameter(f"{state}: {err.strerror}", param_hint="--from") from None
+    from ..twin.outcomes import Summary
+
     prediction = predict(system, commands, blob, horizon=horizon)
     for c in prediction.commands:
         args = ", ".join(f"{k}={v}" for k, v in c.args.items())
@@ -64,6 +67,7 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
                f"(forked at t = {prediction.start:g} s, predicted to t = {prediction.end:g} s in {prediction.wall_seconds:.2f} s)")
     if out:
         Path(out).write_text(json.dumps(prediction.as_dict(), indent=1) + "\n")
+    outcomes({"": Summary(prediction.commands, prediction.blocked)}, strict, per_command=False)  # said above
 
 
 @main.command()

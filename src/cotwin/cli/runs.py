@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError
-from .common import (DASHBOARD_HELP, address, check_finite, check_step_count, check_timing, main, output_path,
-                     show_warnings, start_dashboard)
+from .common import (DASHBOARD_HELP, STRICT_HELP, address, check_finite, check_step_count, check_timing, main,
+                     outcomes, output_path, show_warnings, start_dashboard)
 
 
 @main.command()
@@ -38,8 +38,9 @@ def build(project: str, out: str, cc: str) -> None:
 @click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
 def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
-        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str) -> None:
+        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str, strict: bool) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
     from rich.progress import Progress
@@ -69,6 +70,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     r = ran.result
     click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f})")
+    outcomes({"": ran.outcomes}, strict)
 
 
 @main.command()

@@ -51,6 +51,7 @@ class CommandQueue:
         self.applied: deque[Applied] = deque(maxlen=self.MAX_APPLIED)
         self.accepted = 0
         self.refused = 0
+        self.applied_count = 0  # every command applied (`applied` keeps the newest)
 
     def __len__(self) -> int:
         return len(self.waiting)
@@ -71,17 +72,19 @@ class CommandQueue:
             return None
         command = self.waiting.popleft()
         self.applied.append(Applied(command, step_end))
+        self.applied_count += 1
         return command
 
     # ---- state (plain data: a fork continues with the commands that were waiting) ----
     def snapshot(self) -> dict:
         return {"waiting": [_plain(c) for c in self.waiting], "applied": [(_plain(a.command), a.time) for a in self.applied],
-                "accepted": self.accepted, "refused": self.refused}
+                "accepted": self.accepted, "refused": self.refused, "applied_count": self.applied_count}
 
     def restore(self, snapshot: dict) -> None:
         self.waiting = deque(Occurrence(*c) for c in snapshot["waiting"])
         self.applied = deque((Applied(Occurrence(*c), t) for c, t in snapshot["applied"]), maxlen=self.MAX_APPLIED)
         self.accepted, self.refused = snapshot["accepted"], snapshot["refused"]
+        self.applied_count = snapshot.get("applied_count", len(self.applied))
 
 
 def _plain(c: Occurrence) -> tuple:

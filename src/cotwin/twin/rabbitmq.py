@@ -577,6 +577,11 @@ class RabbitMQUnit(PythonUnit):
         self._own_bridge = bridge is None
 
     @property
+    def command_queue(self):
+        """The commands applied one per step (cotwin.twin.commands.CommandQueue), once the stream exists."""
+        return self.stream.commands if self.stream is not None else None
+
+    @property
     def epoch(self) -> float | None:
         """Wall-clock time of simulation time 0: the publisher's t0 (for real-time pacing)."""
         return self.stream.t0.timestamp() if self.stream is not None and self.stream.t0 is not None else None

@@ -28,6 +28,7 @@ from .project import check_timing
 from .build import dmodel_fmu, folder_lock
 from .deviation import DeviationMonitor
 from .system import DMODEL, MAPPING, RABBITMQ, TwinSystem
+from .outcomes import CommandLedger
 from .waits import WaitWatch
 
 log = logging.getLogger("cotwin.twin")
@@ -73,6 +74,12 @@ class Side:
     writer: CSVWriter
     units: dict[str, object]
     watch: object = None  # cotwin.twin.waits.WaitWatch: blocked waits of this side's d-model
+    ledger: object = None  # cotwin.twin.outcomes.CommandLedger: what became of every command on this side
+
+    def summary(self):
+        from .outcomes import not_applied
+
+        return self.ledger.summary(self.watch.found, not_applied(self.units.get("source")))
 
     def values(self, unit: str, names: list[str]) -> dict[str, float]:
         values = self.execution.values
@@ -164,11 +171,11 @@ class LiveTwin:
     def _side(self, name: str, fmu: Path, endpoint, source) -> Side:
         cosim = self.system.instantiate(fmu, endpoint, source=source)
         writer = CSVWriter(self.out / name / "outputs.csv")
-        watch = WaitWatch(self.system, prefix=f"{name.upper()}: ")
-        observers = [writer, watch] + ([StateFile(self.out / "state")] if name == "dt" else [])  # where a what-if may start
+        watch, ledger = WaitWatch(self.system, prefix=f"{name.upper()}: "), CommandLedger(self.system)
+        observers = [writer, watch, ledger] + ([StateFile(self.out / "state")] if name == "dt" else [])  # where a what-if may start
         execution = Execution(cosim, make_algorithm(self.algorithm), self.step_size, 0.0, observers)
         units = {u.role: cosim.units[u.name] for u in self.system.units}
-        return Side(name, execution, writer, units, watch)
+        return Side(name, execution, writer, units, watch, ledger)
 
     # ---- running ----
     def run(self) -> LiveResult:

@@ -328,6 +328,10 @@ class ScenarioUnit(PythonUnit):
     def command_events(self) -> set[str]:
         return set(self.events)
 
+    @property
+    def command_queue(self) -> CommandQueue:
+        return self.queue
+
     def instantiate(self, start: float) -> None:
         super().instantiate(start)
         self._next = 0
