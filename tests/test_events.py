@@ -8,27 +8,13 @@ import csv
 
 import pytest
 
-from cotwin.twin.build import build
 from cotwin.twin.run import load, run_twin
 from cotwin.twin.scenario import Command
+from test_twin_e2e import built, twin  # noqa: F401 - the example twin and its built FMU, shared fixtures
 
 ALGORITHMS = ["jacobi", "gauss-seidel"]
 MAPPING = "{mapping}.mapping"
 DMODEL = "{dmodel}.dmodel"
-
-
-@pytest.fixture(scope="module")
-def twin():
-    from conftest import EXAMPLES
-
-    return load(EXAMPLES / "ur5e" / "cotwin.toml")
-
-
-@pytest.fixture(scope="module")
-def built(twin, tmp_path_factory):
-    out = tmp_path_factory.mktemp("build")
-    build(twin, out)
-    return out
 
 
 def move(time: float, x: int, y: int, z: int) -> Command:

@@ -15,10 +15,10 @@ from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 from cotwin.cosim.observers import Observer
-from cotwin.twin.build import build
-from cotwin.twin.run import load, run_twin
+from cotwin.twin.run import run_twin
 from cotwin.twin.scenario import Command
 from cotwin.twin.whatif import predict
+from test_twin_e2e import built, twin  # noqa: F401 - the example twin and its built FMU, shared fixtures
 
 STEP = 0.1
 SETTLE = 8.0  # s after the last command: enough for any move across the plate, and a stop
@@ -32,20 +32,6 @@ def own_ik_cache(tmp_path_factory):
     mp.setenv("COTWIN_CACHE", str(tmp_path_factory.mktemp("ik-cache")))
     yield
     mp.undo()
-
-
-@pytest.fixture(scope="module")
-def twin():
-    from conftest import EXAMPLES
-
-    return load(EXAMPLES / "ur5e" / "cotwin.toml")
-
-
-@pytest.fixture(scope="module")
-def built(twin, tmp_path_factory):
-    out = tmp_path_factory.mktemp("build")
-    build(twin, out)
-    return out
 
 
 @st.composite

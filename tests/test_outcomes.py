@@ -5,7 +5,6 @@ exit status 3; arguments are named by their port everywhere, the field name acce
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 import sys
 
@@ -13,6 +12,7 @@ import pytest
 
 from cotwin.diagnostics import CotwinError
 from cotwin.twin.run import load
+from test_reliability import project  # noqa: F401 - a copy of the UR5e example in tmp_path/ur5e
 
 HEADER = "timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,MovementArgs_target_Z\n"
 
@@ -22,27 +22,18 @@ def cotwin(*args, cwd=None):
                           timeout=600)
 
 
-@pytest.fixture
-def project(tmp_path):
-    from conftest import EXAMPLES
-
-    folder = tmp_path / "cell"
-    shutil.copytree(EXAMPLES / "ur5e", folder)
-    return folder
-
-
 def test_a_run_whose_commands_were_all_infeasible_says_so_and_strict_fails(project, tmp_path):
     """Issue 19 item 5: four infeasible commands printed '201 rows to t = 20 s' and exit 0. Run from another
     working directory, with a plan that is not the example's."""
     (project / "plan.csv").write_text(HEADER + "1000,true,15,23,3\n3000,true,15,23,4\n")
     out = tmp_path / "out"
-    proc = cotwin("run", "cell/cotwin.toml", "-o", out, "--end", "6", cwd=tmp_path)
+    proc = cotwin("run", "ur5e/cotwin.toml", "-o", out, "--end", "6", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "commands: 2, 2 infeasible" in proc.stdout
     assert "applied at t = 1.1 s moveDiscreteCommand(MovementArgs_target_X=15, MovementArgs_target_Y=23, " \
            "MovementArgs_target_Z=3): infeasible (nonfeasibleMoveDiscreteCommand)" in proc.stdout
     assert "warning: no command completed (2 applied)" in proc.stderr
-    strict = cotwin("run", "cell/cotwin.toml", "-o", out, "--end", "6", "--strict", cwd=tmp_path)
+    strict = cotwin("run", "ur5e/cotwin.toml", "-o", out, "--end", "6", "--strict", cwd=tmp_path)
     assert strict.returncode == 3 and "--strict: 2 command(s) or wait(s) did not end well" in strict.stderr
 
 
