@@ -19,9 +19,12 @@ logged"; the newest MAX_REFUSED reasons are kept in `CommandStream.refused`, all
 `refused_count`); at most MAX_QUEUED values per variable wait for their time (a flood of messages
 stamped in the future is refused, not held without bound); a message whose time is more than
 `max_skew_s` from its arrival is refused (a skewed clock); a missing value ends the run with an error
-naming the variable, the time and the age of what it had; and a d-model input *event* (a Boolean
-port the d-model reads as an event) is true in the one step that applies a `true` message, not held
-until a `false` arrives, so each published command is delivered exactly once.
+naming the variable, the time and the age of what it had; and a message whose d-model input *event*
+is `true` is a command (cotwin.twin.commands) with the arguments of that same message (one lacking
+an argument is refused), applied one per step in the order of the messages' times, true in that one
+step and not held until a `false` arrives, so each published command is delivered exactly once, with
+its own arguments; the senders are told on `from_cosim` when a command is queued, applied (at which
+step) or refused (docs/interop.md).
 """
 
 from __future__ import annotations
