@@ -305,6 +305,9 @@ def test_the_page_follows_a_live_twin_commands_it_and_shows_its_alarms(browser, 
         form.locator("button").click()
         page.wait_for_selector("#sent li.applied", timeout=10_000)
         assert "MovementArgs_target_Y=23" in page.inner_text("#sent li.applied")
+        # the panel's answer says in which step the twin applied it (issue 19: accepted means applied)
+        page.wait_for_selector("#sent li.confirmed", timeout=10_000)
+        assert "applied in the step to t = " in page.inner_text("#sent li.confirmed")
         # the lagging PT deviates while the arm moves: the alarm appears as it happens
         page.wait_for_selector("#alarms li.raised", timeout=15_000)
         assert page.evaluate("window.cotwin.live.plot.bands.length") >= 1

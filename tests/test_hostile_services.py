@@ -166,7 +166,7 @@ def test_another_site_in_the_browser_cannot_command_the_twin_or_read_its_stream(
                 except urllib.error.HTTPError as err:
                     got, answer = err.code, json.loads(err.read())
                 if why is None:  # the page's own request
-                    assert got == (200 if path == "api/command" else 422), answer
+                    assert got == (202 if path == "api/command" else 422), answer  # accepted: no twin to apply it yet
                 else:
                     assert got == code and why in answer["error"], (path, headers, answer)
         assert len([m for _, m in dash.publisher.sent]) == 0 and dash.publisher._pending.qsize() == 1
@@ -365,14 +365,15 @@ def test_page_commands_are_typed_strictly_bounded_and_refused_once_the_twin_ende
                             ({**good, "MovementArgs_target_Y": 2 ** 40}, "MovementArgs_target_Y: 1099511627776 does not fit"),
                             ({**good, "MovementArgs_target_Z": True}, "MovementArgs_target_Z: True is not a number"),
                             ({**good, "MovementArgs_target_Z": "1"}, "MovementArgs_target_Z: '1' is not a number"),
-                            ({**good, "speed": 2}, "'speed' is not a value of moveDiscreteCommand")):
+                            ({**good, "speed": 2}, "event moveDiscreteCommand has no argument 'speed'")):
             code, answer = _post(url, {"event": MOVE, "values": values})
             assert code == 422 and why in answer["error"], answer
         code, answer = _post(url, {"event": MOVE, "values": good})
-        assert code == 200 and answer["queued"]["MovementArgs_target_X"] == 3 and not answer["twin_ready"]
+        assert code == 202 and answer["queued"]["MovementArgs_target_X"] == 3 and not answer["twin_ready"]
+        assert _request(url + "/" + answer["id"])[1]["status"] == "waiting to be published"
         # no twin takes them: at most MAX_WAITING wait, the rest are told to come back
         codes = [_post(url, {"event": MOVE, "values": good})[0] for _ in range(dash.publisher.MAX_WAITING + 10)]
-        assert codes.count(200) == dash.publisher.MAX_WAITING - 1 and set(codes[dash.publisher.MAX_WAITING - 1:]) == {429}
+        assert codes.count(202) == dash.publisher.MAX_WAITING - 1 and set(codes[dash.publisher.MAX_WAITING - 1:]) == {429}
         dash.finish("stopped")
         code, answer = _post(url, {"event": MOVE, "values": good})
         assert code == 409 and "the twin has stopped" in answer["error"]
@@ -417,8 +418,10 @@ module Mod { cycleDef cycle == 1 robotic platform P { uses In uses Out } cref c 
     program = build_program(result.project, "Mod")
     [command] = plan_from_json([{"time": 1, "event": "go", "args": {"dir": "South", "count": 4, "fast": True}}], program)
     assert dict(command.values) == {"go": True, "Goal_dir": 2, "Goal_count": 4, "Goal_fast": True}
-    [command] = plan_from_json([{"time": 1, "event": "go", "args": {"dir": 3}}], program)
+    [command] = plan_from_json([{"time": 1, "event": "go", "args": {"dir": 3, "count": 0, "fast": False}}], program)
     assert dict(command.values)["Goal_dir"] == 3
+    with pytest.raises(CotwinError, match="plan item 1: event go carries Goal_count, Goal_fast: a command gives every"):
+        plan_from_json([{"time": 1, "event": "go", "args": {"dir": 3}}], program)  # never an earlier command's
     for args, why in (({"dir": "Up"}, "argument dir: 'Up' is not a literal of Dir (North, East, South, West"),
                       ({"dir": 4}, "argument dir: 4 is not a literal of Dir"),
                       ({"dir": 1.0}, "argument dir: 1.0 is not an integer"),

@@ -87,7 +87,6 @@ def test_plan_values_out_of_range_or_ill_timed_are_located_errors(system, tmp_pa
         "1000,true,inf,0,0": "is not a finite number",
         "-5,true,1,1,1": r"plan.csv:2:1: error: timestep '-5' is negative",
         "nan,true,1,1,1": "timestep 'nan' is not a finite number",
-        "1000,true,1,1,1\n1000,true,2,2,2": r"plan.csv:3:1: error: a second moveDiscreteCommand at 1 s",
         "1000,yes,1,1,1": "is not true/false",
         "1000,true," + "9" * 100_000 + ",0,0": "longer than",
         "1000,true,1,1,1\n2000,true," + "9" * 5_000_000 + ",0,0": r"plan.csv:3:1: error: a cell longer than",
@@ -97,29 +96,37 @@ def test_plan_values_out_of_range_or_ill_timed_are_located_errors(system, tmp_pa
         plan.write_text(header + row + "\n")
         with pytest.raises(CotwinError, match=message):
             read_plan(plan, system.models.program)
+    plan.write_text(header + "1000,true,1,1,1\n1000,true,2,2,2\n")  # two at one time: both kept, in order (issue 19)
+    assert [dict(c.values)["MovementArgs_target_X"] for c in read_plan(plan, system.models.program)] == [1, 2]
+    plan.write_text("timestep,moveDiscreteCommand,MovementArgs_target_X\n1000,true,1\n")
+    with pytest.raises(CotwinError, match=r"plan.csv:1:10: error: column 'moveDiscreteCommand' without its argument "
+                                          r"column\(s\) MovementArgs_target_Y, MovementArgs_target_Z"):
+        read_plan(plan, system.models.program)
     plan.write_bytes(header.encode() + b"1000,true,1,\xff,1\n")
     with pytest.raises(CotwinError, match=r"plan.csv:2:\d+: error: the plan is not UTF-8"):
         read_plan(plan, system.models.program)
 
 
-def test_two_commands_of_one_event_in_one_step_are_an_error_not_a_lost_command(system, tmp_path):
-    """At the plan's own times they are apart, but a step of 0.1 s would deliver both at once and the
-    first would be lost: the run refuses at its first step, naming both lines; a step that separates
-    them runs."""
+def test_two_commands_of_one_event_in_one_step_are_both_applied_in_order(system, tmp_path):
+    """At the plan's own times they are apart, but a step of 0.1 s makes both due in one step: one step
+    carries one occurrence, so the second is applied in the next step, with its own arguments (issue 19:
+    every accepted command applied, once, in order; it used to be refused); a step that separates them
+    applies each in its own step."""
     from cotwin.twin.run import run_twin
 
     plan = tmp_path / "plan.csv"
     plan.write_text("timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,MovementArgs_target_Z\n"
                     "1000,true,0,23,1\n1050,true,3,20,2\n")
     twin = system.with_plan(read_plan(plan, system.models.program))
-    with pytest.raises(CotwinError, match=r"plan.csv:3:1: error: a second moveDiscreteCommand at 1.05 s, in the step "
-                                          r"of 0.1 s that has one at 1 s \(the first is at .*plan.csv:2:1\)"):
-        run_twin(twin, tmp_path / "coarse", step=0.1, end=2.0, plot=False)
-    ran = run_twin(twin, tmp_path / "fine", step=0.05, end=2.0, plot=False)
-    rows = list(csv.DictReader(open(ran.csv)))
-    pulses = [r["{controller}.controller.MovementArgs_target_X"] for r in rows
-              if r["{controller}.controller.moveDiscreteCommand"] == "true"]
-    assert pulses == ["0", "3"]  # both delivered, each in its own step
+    for step in (0.1, 0.05):
+        ran = run_twin(twin, tmp_path / f"step{step}", step=step, end=2.0, plot=False)
+        rows = list(csv.DictReader(open(ran.csv)))
+        pulses = [(k, r["{controller}.controller.MovementArgs_target_X"]) for k, r in enumerate(rows)
+                  if r["{controller}.controller.moveDiscreteCommand"] == "true"]
+        assert [x for _, x in pulses] == ["0", "3"]  # both delivered, each in its own step, in order
+        assert pulses[1][0] - pulses[0][0] == 1
+        applied = ran.units["source"].queue.applied
+        assert [round(a.time, 6) for a in applied] == [round(float(rows[k]["time"]), 6) for k, _ in pulses]
 
 
 def test_scenario_and_project_tomls_are_strict(system, tmp_path, project):
@@ -131,7 +138,9 @@ def test_scenario_and_project_tomls_are_strict(system, tmp_path, project):
         '[[command]]\ntime = 1\nevent = "moveDiscreteCommand"\nargs = { target_X = 4294967296 }\n': "does not fit",
         '[[command]]\ntime = 1\nevent = 42\n': "event must be a string",
         '[[command]]\ntime = 1\nevent = "moveDiscreteCommand"\nspeed = 2\n': "unknown key 'speed'",
-        '[[command]]\ntime = 1\nevent = "moveDiscreteCommand"\n[[command]]\ntime = 1\nevent = "moveDiscreteCommand"\n': "a second moveDiscreteCommand",
+        '[[command]]\ntime = 1\nevent = "moveDiscreteCommand"\nargs = { target_X = 1 }\n':
+            r"s.toml:1:1: error: \[\[command\]\] 1: event moveDiscreteCommand carries "
+            r"MovementArgs_target_Y, MovementArgs_target_Z: a command gives every argument",
         "[[command]\n": r"s.toml:1:\d+: error: bad TOML",
         '[[command]]\ntime = 1.0\nevent = = "x"\n': r"s.toml:3:\d+: error: bad TOML",  # at its line, not 1:1
     }

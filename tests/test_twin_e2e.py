@@ -127,7 +127,7 @@ def test_bad_scenarios_are_reported_with_their_place(twin, tmp_path):
         read_plan(plan, twin.models.program)
     scenario = tmp_path / "s.toml"
     scenario.write_text('[[command]]\ntime = 1.0\nevent = "moveDiscreteCommand"\nargs = { target_X = 1.5 }\n')
-    with pytest.raises(CotwinError, match="argument target_X must be an integer"):
+    with pytest.raises(CotwinError, match="argument target_X: 1.5 is not an integer"):
         read_toml(scenario, twin.models.program)
 
 

@@ -87,14 +87,18 @@ def test_whatif_from_a_saved_state_on_the_command_line(system, tmp_path):
                           "--end", "3"], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     plan = tmp_path / "plan.json"
-    plan.write_text(json.dumps([{"time": 0.5, "event": "moveDiscreteCommand",
-                                 "args": {"target_X": 5, "target_Y": 5, "target_Z": 1}}]))
-    proc = subprocess.run([sys.executable, "-m", "cotwin", "whatif", EXAMPLES / "ur5e" / "cotwin.toml", "--plan", plan,
-                           "--from", out / "state", "-o", tmp_path / "p.json"], capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
-    assert "t = 3.5 s moveDiscreteCommand(MovementArgs_target_X=5" in proc.stdout and "feasible, accepted" in proc.stdout
-    answer = json.loads((tmp_path / "p.json").read_text())
-    assert answer["start"] == 3.0 and answer["commands"][0]["feasible"] is True
+    # (5, 5, 1) is out of reach (a straight run says so too); (3, 20, 2) is reachable. The state at 3 s holds
+    # the first move's answer (feasible): it must not be taken as the answer to the what-if's move (issue 19)
+    for (x, y, z), feasible in (((5, 5, 1), False), ((3, 20, 2), True)):
+        plan.write_text(json.dumps([{"time": 0.5, "event": "moveDiscreteCommand",
+                                     "args": {"target_X": x, "target_Y": y, "target_Z": z}}]))
+        proc = subprocess.run([sys.executable, "-m", "cotwin", "whatif", EXAMPLES / "ur5e" / "cotwin.toml", "--plan",
+                               plan, "--from", out / "state", "-o", tmp_path / "p.json"], capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+        said = "NOT feasible, accepted" if not feasible else "feasible, accepted"
+        assert f"t = 3.5 s moveDiscreteCommand(MovementArgs_target_X={x}" in proc.stdout and said in proc.stdout
+        answer = json.loads((tmp_path / "p.json").read_text())
+        assert answer["start"] == 3.0 and answer["commands"][0]["feasible"] is feasible
     plan.write_text(json.dumps([{"time": -1, "event": "moveDiscreteCommand"}]))
     bad = subprocess.run([sys.executable, "-m", "cotwin", "whatif", EXAMPLES / "ur5e" / "cotwin.toml", "--plan", plan],
                          capture_output=True, text=True)

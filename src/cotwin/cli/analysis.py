@@ -9,7 +9,8 @@ import click
 
 from .. import safejson
 from ..files import CAPS, check_outputs, output, read_bytes, write_text
-from .common import MAX_HORIZON, MAX_REPORTED, check_finite, main, named_values, output_path, tool_point
+from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main, named_values, outcomes, output_path,
+                     tool_point)
 
 
 def plan_file(path: str, program):
@@ -33,7 +34,8 @@ def plan_file(path: str, program):
 @click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=60.0, show_default=True,
               help="simulate at most this long (s)")
 @click.option("-o", "--output", "out", callback=output_path, help="write the prediction as JSON here")
-def whatif(project: str, plan: str, state: str | None, horizon: float, out: str | None) -> None:
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
+def whatif(project: str, plan: str, state: str | None, horizon: float, out: str | None, strict: bool) -> None:
     """Predict what a plan would do: fork the DT (at a saved state, or at the start) and run the plan
     ahead of real time; prints each command's outcome and the completion time."""
     import json
@@ -47,6 +49,8 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
         check_outputs([out], [*system.spec.inputs, plan, state])
     commands = plan_file(plan, system.models.program)
     blob = read_bytes(state, "state") if state is not None else None  # capped: a state is a few MiB
+    from ..twin.outcomes import Summary
+
     prediction = predict(system, commands, blob, horizon=horizon)
     for c in prediction.commands:
         args = ", ".join(f"{k}={v}" for k, v in c.args.items())
@@ -60,6 +64,7 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
                f"(forked at t = {prediction.start:g} s, predicted to t = {prediction.end:g} s in {prediction.wall_seconds:.2f} s)")
     if out:
         write_text(out, json.dumps(prediction.as_dict(), indent=1) + "\n", [*system.spec.inputs, plan, state])
+    outcomes({"": Summary(prediction.commands, prediction.blocked)}, strict, per_command=False)  # said above
 
 
 @main.command()

@@ -37,6 +37,29 @@ def main() -> None:
     """cotwin: RoboSim models to FMI-based digital twins."""
 
 
+STRICT_HELP = ("exit with status 3 unless every command the run applied completed and no wait was blocked "
+               "(docs/interop.md, Honest outcomes)")
+
+
+def outcomes(summaries: dict, strict: bool, per_command: bool = True) -> None:
+    """Each summary's counts and per-command lines (cotwin.twin.outcomes.Summary, by label: '' or PT, DT),
+    its warnings (no command completed, blocked waits), and with `strict` exit STRICT_EXIT if anything did
+    not complete."""
+    from ..twin.outcomes import STRICT_EXIT
+
+    failures = 0
+    for label, summary in summaries.items():
+        prefix = f"{label}: " if label else ""
+        for line in summary.lines() if per_command else summary.lines()[:1]:
+            click.echo(prefix + line)
+        for warning in summary.warnings():
+            click.echo(f"{prefix}warning: {warning}", err=True)
+        failures += len(summary.strict_failures())
+    if strict and failures:
+        click.echo(f"--strict: {failures} command(s) or wait(s) did not end well; exit status {STRICT_EXIT}", err=True)
+        sys.exit(STRICT_EXIT)
+
+
 def exchange_name(ctx, param, value: str | None) -> str | None:
     """An exchange name option, checked as the project's are (cotwin.twin.project.amqp_name_problem)."""
     from ..twin.project import amqp_name_problem

@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError
-from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchange_name, main, output_path, serving_options,
-                     show_warnings, start_dashboard)
+from .common import (DASHBOARD_HELP, STRICT_HELP, address, check_finite, check_timing, exchange_name, main, outcomes,
+                     output_path, serving_options, show_warnings, start_dashboard)
 
 
 @main.command()
@@ -28,9 +28,10 @@ from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchan
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 @serving_options
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
 def twin(project: str, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
          pt_log: str | None, pt_url: str | None, exchange: str | None, history: str | None, whatif: bool,
-         dashboard: tuple[str, int] | None, cc: str, serving: dict) -> None:
+         dashboard: tuple[str, int] | None, cc: str, serving: dict, strict: bool) -> None:
     """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
     with deviation checking, alarms and history."""
     import signal
@@ -95,6 +96,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
                f"(real-time factor {r.real_time_factor:.1f}), {state}")
     click.echo(f"deviation: {result.deviation['alarms']} alarm(s); report {result.out / 'deviation.json'}; "
                f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
+    outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
 
 
 class TwinProgress:

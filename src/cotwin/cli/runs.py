@@ -8,8 +8,8 @@ import click
 
 from ..diagnostics import CotwinError
 from ..files import check_outputs
-from .common import (DASHBOARD_HELP, address, check_finite, check_step_count, check_timing, main, output_path,
-                     serving_options, show_warnings, start_dashboard)
+from .common import (DASHBOARD_HELP, STRICT_HELP, address, check_finite, check_step_count, check_timing, main,
+                     outcomes, output_path, serving_options, show_warnings, start_dashboard)
 
 
 @main.command()
@@ -39,8 +39,9 @@ def build(project: str, out: str, cc: str) -> None:
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 @serving_options
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
 def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
-        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str, serving: dict) -> None:
+        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str, serving: dict, strict: bool) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
     from ..twin.history import database_url
@@ -67,6 +68,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     r = ran.result
     click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f})")
+    outcomes({"": ran.outcomes}, strict)
 
 
 @main.command()

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import shutil
 import itertools
+import logging
 import weakref
 from collections import deque
 from ctypes import (POINTER, byref, c_bool, c_char_p, c_double, c_int, c_int64, c_size_t, c_uint, c_void_p,
@@ -32,6 +33,7 @@ from .state import pack, unpack
 
 
 INT32 = (-(2 ** 31), 2 ** 31 - 1)
+log = logging.getLogger("cotwin.fmu")
 
 
 class UnitError(CotwinError):
@@ -284,6 +286,8 @@ class FMUUnit(Unit):
         self.messages.append((STATUS[status] if 0 <= status < len(STATUS) else str(status),
                               category.decode("utf-8", "replace") if category else "", text))
         self._fresh = min(self._fresh + 1, self.messages.maxlen)
+        if status == FMI2_WARNING:  # the FMU goes on but says something is not quite right: the user hears it
+            log.warning("unit %s at t = %g s: %s", self.name, self.time, text)
 
     def _bind_functions(self) -> None:
         """The FMU's C functions with their prototypes (our own function objects, not FMPy's)."""

@@ -44,6 +44,7 @@ typedef struct {
     fmi2CallbackFunctions functions;
     char *name;
     int logging;
+    int merged; /* an output raised in two cycles of one step was reported (once per instance) */
 } Instance;
 
 static void log_message(Instance *inst, fmi2Status status, const char *category, const char *message) {
@@ -244,12 +245,14 @@ static int integers_fit(State *s) {
     return 1;
 }
 
-/* One cycle: inputs in (input events only in the first cycle of a step), the model's cycle, outputs out. */
-static int run_cycle(State *s, int first) {
+/* One cycle: inputs in (input events only in the first cycle of a step: an occurrence is taken once), the
+ * model's cycle, outputs out; *again names an output an earlier cycle of the step raised already. */
+static int run_cycle(State *s, int first, const char **again) {
     ports_to_model(&s->model, s->values.r, s->values.i, s->values.b);
     if (!first) ports_clear_input_events(&s->model);
     if (model_step(&s->model)) return 1;
-    ports_from_model(&s->model, s->values.r, s->values.i, s->values.b);
+    const char *repeated = ports_from_model(&s->model, s->values.r, s->values.i, s->values.b);
+    if (repeated && !*again) *again = repeated;
     return N_INTEGER > 0 && !integers_fit(s);
 }
 
@@ -262,8 +265,17 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     double period = s->values.r[PERIOD_SLOT];
     long cycles = period > 0.0 ? lround(communicationStepSize / period) : 1;
     ports_clear_outputs(s->values.r, s->values.i, s->values.b);
+    const char *again = NULL;
     for (long k = 0; k < cycles; k++) {
-        if (run_cycle(s, k == 0)) return fail(inst, this_function, s->model.message);
+        if (run_cycle(s, k == 0, &again)) return fail(inst, this_function, s->model.message);
+    }
+    if (again && !inst->merged) { /* a Boolean port carries one occurrence per step: say which was lost */
+        char text[400];
+        snprintf(text, sizeof text, "%s occurred in several of the %ld cycles of one step (cycle_period %g s): a "
+                 "step carries one occurrence, with the values of the last, so the others are lost; with "
+                 "cycle_period equal to the step each is kept (further ones not logged)", again, cycles, period);
+        log_message(inst, fmi2Warning, "logStatusWarning", text);
+        inst->merged = 1;
     }
     return fmi2OK;
 }

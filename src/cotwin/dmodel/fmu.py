@@ -9,7 +9,9 @@ Ports (docs/interop.md): an input event is a Boolean input true in the step it o
 input per value field; an operation call is a Boolean output plus its arguments; output events
 likewise; `state` is the index of the active leaf state. Constants without a value are parameters.
 `cycle_period` (s, 0 = one cycle per step) makes a step of size h run round(h / cycle_period)
-cycles, the inputs present in the first; an output flag is then true if it occurred in any of them.
+cycles, the input events present in the first only (one occurrence is taken once); an output flag is
+then true if it occurred in any of them, with the values of the last occurrence; an output raised in
+two cycles of one step (two occurrences one step cannot carry) is logged once as an fmi2Warning.
 """
 
 from __future__ import annotations
@@ -117,14 +119,21 @@ def _port_code(layout: PortLayout) -> dict[str, list[str]]:
     for op in layout.operations:
         code["clear_outputs"].append(f"{slot(op.flag)} = false;")
         copies = [f"{slot(v.var)} = {cnames.call_arg(op.name, pname)}{_field(v.path)};" for pname, values in op.args for v in values]
-        code["from_model"].append(f"if ({cnames.call_flag(op.name)}) {{ {' '.join([f'{slot(op.flag)} = true;', *copies])} }}")
+        code["from_model"].append(f"if ({cnames.call_flag(op.name)}) {{ {' '.join([*_again(slot(op.flag), op.name), *copies])} }}")
     for ev in layout.outputs:
         code["clear_outputs"].append(f"{slot(ev.flag)} = false;")
         copies = [f"{slot(v.var)} = {cnames.out_value(ev.name)}{_field(v.path)};" for v in ev.values]
-        code["from_model"].append(f"if ({cnames.out_flag(ev.name)}) {{ {' '.join([f'{slot(ev.flag)} = true;', *copies])} }}")
+        code["from_model"].append(f"if ({cnames.out_flag(ev.name)}) {{ {' '.join([*_again(slot(ev.flag), ev.name), *copies])} }}")
     for st in layout.states:
         code["from_model"].append(f"{slot(st.var)} = model_state(M, {st.machine});")
+    code["from_model"] = ["const char *again = NULL;", *code["from_model"], "return again;"]
     return code
+
+
+def _again(flag: str, name: str) -> list[str]:
+    """An output flag set by a cycle; `again` names it when an earlier cycle of the step set it already
+    (two occurrences the step carries as one: the FMU says so, see fmi2_wrapper.c)."""
+    return [f"if ({flag}) again = {_c_string(name)};", f"{flag} = true;"]
 
 
 _CAST = {"Real": "{}", "Integer": "(int64_t){}", "Boolean": "(bool){}"}
@@ -145,7 +154,8 @@ _PURPOSE = {
     "to_model": "input events and their values into the model, before a cycle",
     "clear_events": "no input events in the second and later cycles of a step",
     "clear_outputs": "output flags false at the start of a step",
-    "from_model": "operation calls, output events and states out of the model, after a cycle",
+    "from_model": "operation calls, output events and states out of the model, after a cycle; the name of an "
+                  "output an earlier cycle of the step already raised (NULL if none)",
 }
 
 
@@ -173,7 +183,7 @@ def ports_header(program: Program, layout: PortLayout, model_header: str) -> str
     for key, signature in _SIGNATURES.items():
         lines.append("")
         lines.append(f"/* {_PURPOSE[key]} */")
-        lines.append(f"static void {signature} {{")
+        lines.append(f"static {'const char *' if key == 'from_model' else 'void '}{signature} {{")
         lines.extend(f"    {stmt}" for stmt in code[key] or [_UNUSED[key]])
         lines.append("}")
     lines.append("")

@@ -5,8 +5,18 @@ Readings of the mapping (see also docs/robosim-notation.md, section 8):
 - `execute_operation(op, args)`: the d-model's arguments bind the operation's parameters; its local
   `var`s are evaluated in order, then its `action x = e` assign mapping variables, then each
   equation `actuator.port == e` (a path `pmodel::link::joint::aref.port`) sends e to that actuator;
-- `get_event(e)`: e occurs iff all its equations and predicates hold (a conjunction), evaluated over
-  the mapping's variables and the platform's sensors (`pmodel::link::sref.port`);
+- `get_event(e)`: e's definition holds iff all its equations and predicates hold (a conjunction),
+  evaluated over the mapping's variables and the platform's sensors (`pmodel::link::sref.port`);
+- `report()`: which events *occur* in the step just made (docs/interop.md, "Events are events"): an
+  event whose definition reads a variable some operation assigns is an *answer* and occurs in a step
+  when it holds and it did not hold at the end of the previous step, or an operation executed in the
+  step assigned a variable it reads (the question was asked anew), or the value it carries changed;
+  any other event is an *observation* of the platform's sensors and occurs in every step it holds
+  (each step is a new sample). So an answer is never a previous request's, and is true in one step;
+  the d-model takes one event per cycle of a waiting state, so at most one answer is delivered per
+  step: answers that come in the same step (a short move is both feasible and completed within a
+  step of 0.5 s) follow in the next steps, in the order they came, with the values they came with,
+  and a request asking one anew drops the previous request's that still waits;
 - an input event `e?x` whose equations include `x == v` carries the value of v: it occurs when v is a
   finite number (a sensor reporting no measurement gives inf or NaN, as ROS does) and its other
   equations and predicates hold with x bound to that value;
@@ -259,8 +269,30 @@ class InputEvent:
             raise CotwinError(f"{model.loc}: input event {model.name} binds '{model.bind}' but no equation "
                               f"'{model.bind} == ...' says what its value is")
         self.value = None
+        local = {v.name for v in model.variables} | ({model.bind} if model.bind else set())
+        expressions = [*model.equations, *model.predicates, *(v.init for v in model.variables if v.init is not None)]
+        #: the mapping variables its definition reads (an answer when an operation assigns one of them)
+        self.reads = frozenset(n.name.last for e in expressions for n in s.walk(e)
+                               if isinstance(n, s.Name) and len(n.name.parts) == 1 and n.name.last not in local
+                               and n.name.last in runtime.declared)
+
+    def false_request_part(self, assigned: set[str], constants: set[str]) -> s.Expr | None:
+        """A condition of its definition that reads only variables operations assign (and constants), no
+        sensor, function or local name, and is false now: then no motion of the platform makes the event
+        occur, only an operation that assigns one of those variables (None if there is no such condition)."""
+        for condition in (c for e in self.conditions for c in s.conjuncts(e)):
+            names = [n for n in s.walk(condition) if isinstance(n, (s.Name, s.FieldAccess, s.Call, s.IndexAccess))]
+            plain = [n for n in names if isinstance(n, s.Name) and len(n.name.parts) == 1]
+            if any(isinstance(n, (s.FieldAccess, s.Call)) for n in names) or not plain or \
+                    any(n.name.last not in assigned | constants for n in plain):
+                continue
+            if not bool(self.runtime.env.eval(condition, {})):
+                return condition
+        return None
 
     def occurs(self) -> bool:
+        """Whether its definition holds now (the paper's `get_event`); `Mapping.report` says whether it
+        occurs in the step."""
         env = self.runtime.env
         scope = {}
         for var in self.model.variables:
@@ -274,6 +306,17 @@ class InputEvent:
             self.value = value
             return all(bool(env.eval(c, scope)) for c in self.conditions)
         return bool(self.conditions) and all(bool(env.eval(c, scope)) for c in self.conditions)
+
+
+def _source_text(expr: s.Expr, limit: int = 80) -> str:
+    """An expression as written (from its line in the source file, to the line's end), for messages."""
+    try:
+        with open(expr.loc.path, encoding="utf-8") as f:
+            line = f.read().splitlines()[expr.loc.line - 1]
+    except (OSError, IndexError, UnicodeDecodeError):
+        return "..."
+    text = line[expr.loc.column - 1:].strip().rstrip("{").strip()
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def _definition(eq: s.Expr, bind: str) -> s.Expr | None:
@@ -324,6 +367,7 @@ class Operation:
             if root.name.last not in rt.variables:
                 raise CotwinError(f"{target.loc}: '{root.name}' is not a mapping variable")
             rt.variables[root.name.last] = rt.env.eval(value, scope)
+            rt.asked.add(root.name.last)
         goals = {path: float(rt.env.eval(value, scope)) for path, value in self.commands}
         if goals:
             rt.endpoint.command(goals)
@@ -370,7 +414,22 @@ class Mapping:
         self.functions = {**MATH, "inverse_kinematics": self._kinematics("inverse_kinematics"),
                           "reachable": self._kinematics("reachable")}
         self.env = _Env(self, compiled)
+        self.declared = {v.name for v in model.variables}
+        self.asked: set[str] = set()  # variables operations assigned since the last report
+        self.held: dict[str, tuple[bool, object]] = {}  # event -> (held, value) at the last report
+        self.pending: dict[str, object] = {}  # answers that came and wait for their step, in order -> value
+        self.reports = 0  # steps reported
+        self.delivered: dict[str, int] = {}  # answer -> the report that last delivered it
         self.events = {ev.name: InputEvent(self, ev) for ev in model.input_events}
+        #: mapping variable -> the operations assigning it
+        self.assigners: dict[str, list[str]] = {}
+        for op in model.operations:
+            for target, _, _ in op.actions:
+                root = s.root_name(target)
+                if root is not None and op.name not in self.assigners.setdefault(root.name.last, []):
+                    self.assigners[root.name.last].append(op.name)
+        #: answers: events reading a variable an operation assigns (see `report`)
+        self.answers = {name for name, ev in self.events.items() if ev.reads & set(self.assigners)}
         self.operations = {op.name: Operation(self, op, [p.name for p in members.operations[op.name].params])
                            for op in model.operations if op.name in members.operations}
         self.variables: dict[str, object] = {}
@@ -436,12 +495,73 @@ class Mapping:
             else:
                 self.variables[var.name] = {"boolean": False, "real": 0.0}.get(str(ty), 0)
         self._sync()
+        self.asked.clear()
+        self.held.clear()
+        self.pending.clear()
+        self.delivered.clear()
         self.started = True
 
     def get_event(self, name: str, args=None) -> bool:
         if name not in self.events:
             raise CotwinError(f"mapping {self.model.name} has no input event '{name}'")
         return self.events[name].occurs()
+
+    def report(self) -> dict[str, tuple[bool, object]]:
+        """Which events occur in the step just made, with the value each carries (see the module doc):
+        observations whenever their definition holds; an answer when it comes (comes to hold, is asked
+        anew, or carries a new value), at most one answer per step, those that come together delivered
+        in the following steps in the order they came. Called once per step, after `step`."""
+        out: dict[str, tuple[bool, object]] = {}
+        asked, came = [], []
+        for name, ev in self.events.items():
+            holds = ev.occurs()
+            value = ev.value if holds else None
+            if name in self.answers:
+                before, old = self.held.get(name, (False, None))
+                again = bool(ev.reads & self.asked)
+                if again:  # asked anew: an occurrence still waiting is the previous request's answer
+                    self.pending.pop(name, None)
+                if holds and (again or not before or value != old):
+                    (asked if again else came).append((name, value))
+                out[name] = (False, None)
+            else:
+                out[name] = (holds, value)
+            self.held[name] = (holds, value)
+        self.asked.clear()
+        for name, value in asked + came:  # caused by an operation at the step's start, then by the platform
+            self.pending[name] = value
+        self.reports += 1
+        if self.pending:
+            name = next(iter(self.pending))
+            out[name] = (True, self.pending.pop(name))
+            self.delivered[name] = self.reports
+        return out
+
+    def never(self, name: str) -> str | None:
+        """Why the event never occurs (every condition of its definition the literal `false`), or None."""
+        ev = self.events[name]
+        if ev.conditions and all(isinstance(c, s.Literal) and c.value is False for c in ev.conditions):
+            return f"the mapping defines it as never occurring ({ev.model.loc})"
+        return None
+
+    def cannot_come(self, name: str) -> str | None:
+        """Why the answer `name` cannot occur unless an operation runs (None if it may, or is no answer):
+        a condition of it on what operations assign is false, or it holds still and occurred already."""
+        if name not in self.answers or name in self.pending:
+            return None
+        ev = self.events[name]
+        constants = {v.name for v in self.model.variables if v.is_const}
+        false = ev.false_request_part(set(self.assigners), constants)
+        if false is not None:
+            reads = sorted(n.name.last for n in s.walk(false) if isinstance(n, s.Name) and n.name.last in self.assigners)
+            by = sorted({op for v in reads for op in self.assigners[v]})
+            return (f"its condition `{_source_text(false)}` ({false.loc}) is false and only an operation "
+                    f"({', '.join(by)}) changes {', '.join(reads)}")
+        if self.held.get(name, (False, None))[0] and self.reports - self.delivered.get(name, self.reports - 2) >= 2:
+            # delivered two reports ago or more: the d-model has read it (the step after it, also under Jacobi)
+            return ("it holds still and occurred already: it occurs again only when it stops holding or an operation "
+                    f"assigns {', '.join(sorted(ev.reads & set(self.assigners)))}")
+        return None
 
     def event_value(self, name: str):
         """The value the event carried when it last occurred (None before, or for an event without one)."""
@@ -501,7 +621,9 @@ class Mapping:
                               "its state, so the mapping cannot either")
         return {"variables": dict(self.variables), "started": self.started,
                 "functions": self._registry.snapshot() if self._registry is not None else {},
-                "events": {name: ev.value for name, ev in self.events.items()}, "endpoint": save()}
+                "events": {name: ev.value for name, ev in self.events.items()}, "endpoint": save(),
+                "held": dict(self.held), "asked": sorted(self.asked), "pending": list(self.pending.items()),
+                "reports": self.reports, "delivered": dict(self.delivered)}
 
     def restore(self, snapshot: dict) -> None:
         self.endpoint.restore(snapshot["endpoint"])
@@ -511,5 +633,10 @@ class Mapping:
             if name in self.events:
                 self.events[name].value = value
         self.variables = dict(snapshot["variables"])
+        self.held = dict(snapshot.get("held", {}))
+        self.asked = set(snapshot.get("asked", ()))
+        self.pending = dict(snapshot.get("pending", ()))
+        self.reports = snapshot.get("reports", 0)
+        self.delivered = dict(snapshot.get("delivered", {}))
         self.started = snapshot["started"]
         self._readings = None

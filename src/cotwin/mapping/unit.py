@@ -2,7 +2,8 @@
 
 Its ports are the d-model FMU's with causalities swapped (one naming function: cotwin.dmodel.fmu),
 minus the command events the scenario drives, plus the mapping's monitored variables (q0.., qd0..).
-In a step: run the operations called in it, let the platform move for h, then report which events hold
+In a step: run the operations called in it, let the platform move for h, then report which events occur
+in it (`Mapping.report`: an answer is true in the one step it comes, never held from a previous request)
 and the values they carry (a value port keeps its last value while its event does not occur).
 """
 
@@ -73,10 +74,11 @@ class MappingUnit(PythonUnit):
         self._report()
 
     def _report(self) -> None:
+        occurring = self.mapping.report()
         for port in self.event_ports:
-            occurs = self.values[port.name] = self.mapping.get_event(port.name)
+            occurs, value = occurring[port.name]
+            self.values[port.name] = occurs
             if occurs and port.name in self.value_ports:
-                value = self.mapping.event_value(port.name)
                 for name, sc in self.value_ports[port.name]:
                     v = get_path(value, sc.path) if sc.path else value
                     self.values[name] = float(v) if sc.fmi_type == "Real" else v

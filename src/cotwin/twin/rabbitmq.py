@@ -19,13 +19,17 @@ logged"; the newest MAX_REFUSED reasons are kept in `CommandStream.refused`, all
 `refused_count`); at most MAX_QUEUED values per variable wait for their time (a flood of messages
 stamped in the future is refused, not held without bound); a message whose time is more than
 `max_skew_s` from its arrival is refused (a skewed clock); a missing value ends the run with an error
-naming the variable, the time and the age of what it had; and a d-model input *event* (a Boolean
-port the d-model reads as an event) is true in the one step that applies a `true` message, not held
-until a `false` arrives, so each published command is delivered exactly once.
+naming the variable, the time and the age of what it had; and a message whose d-model input *event*
+is `true` is a command (cotwin.twin.commands) with the arguments of that same message (one lacking
+an argument is refused), applied one per step in the order of the messages' times, true in that one
+step and not held until a `false` arrives, so each published command is delivered exactly once, with
+its own arguments; the senders are told on `from_cosim` when a command is queued, applied (at which
+step) or refused (docs/interop.md).
 """
 
 from __future__ import annotations
 
+import heapq
 import json
 import logging
 import queue
@@ -45,6 +49,7 @@ from ..config import is_number
 from ..diagnostics import CotwinError
 from ..logcap import CappedLog
 from ..mapping.amqp import connect, declare_exchange, redact
+from .commands import CommandQueue, Occurrence, QueueFull
 from .project import RabbitMQSettings
 
 log = logging.getLogger("cotwin.rabbitmq")
@@ -59,6 +64,7 @@ MAX_APPLIED = 10_000  # values applied, remembered (a publisher refreshing every
 COMMANDS = "the twin's commands ([scenario] rabbitmq exchange, or --rabbitmq)"  # where an exchange's name comes from, for the errors
 EVENTS = "the twin's alarms and what-ifs ([deviation] exchange)"
 ECHO_SLACK = 2.0  # s beyond a twin's furthest time an echo may claim (delivery, the step it announces)
+MAX_COMMANDS = 1000  # commands due and waiting for their step (one is applied per step); more are refused
 
 
 def parse_time(text: str) -> datetime:
@@ -99,11 +105,17 @@ def port_scalars(program) -> dict:
     return {port: sc for ev in program.inputs for port, sc in ev.value_ports}
 
 
+def port_arguments(program) -> dict[str, list[str]]:
+    """The d-model's input events -> their value ports: the arguments a command message must carry."""
+    return {ev.name: [port for port, _ in ev.value_ports] for ev in program.inputs}
+
+
 @dataclass(frozen=True)
 class Parsed:
     time: datetime
     values: dict[str, object]
     dropped: tuple[str, ...]  # reasons for values of this message that were not taken
+    ident: str | None = None  # `internal_id`: the sender's name for its command, given back in acknowledgements
 
 
 def parse_message(body: bytes, types: dict[str, str], scalars: dict | None = None) -> Parsed:
@@ -119,6 +131,8 @@ def parse_message(body: bytes, types: dict[str, str], scalars: dict | None = Non
     stamp = parse_time(data["time"])
     values: dict[str, object] = {}
     dropped: list[str] = []
+    ident = data.get("internal_id")
+    ident = ident if isinstance(ident, str) and 0 < len(ident) <= 64 else None
     for key, value in data.items():
         if key == "time" or key.startswith(("internal_", "simAtTime")):
             continue
@@ -132,7 +146,7 @@ def parse_message(body: bytes, types: dict[str, str], scalars: dict | None = Non
             dropped.append(f"{key[:80]}: {err}")
     if not values:
         raise ValueError("no known variable (" + ("; ".join(dropped) if dropped else "only 'time'") + ")")
-    return Parsed(stamp, values, tuple(dropped))
+    return Parsed(stamp, values, tuple(dropped), ident)
 
 
 def _typed(value, kind: str, sc=None):
@@ -193,14 +207,22 @@ class CommandStream:
     refused_count: int = 0  # every refusal, kept or not
     scalars: dict | None = None  # port -> Scalar (RoboSim type), see parse_message
     applied: deque = field(default_factory=lambda: deque(maxlen=MAX_APPLIED))  # (sim, var, value, step end), the newest
+    arguments: dict[str, list[str]] | None = None  # event -> its value ports (None: no event carries any)
 
     def __post_init__(self) -> None:
         self.pending: list[tuple[datetime, dict[str, object], bytes]] = []  # before t0 is known
-        self.queues: dict[str, list[tuple[float, object]]] = {v: [] for v in self.types}
+        self.queues: dict[str, list[tuple[float, object, bool]]] = {v: [] for v in self.types}  # (sim, value, quiet)
         self.held: dict[str, _Held] = {}
         self._last: tuple[float, dict[str, object]] | None = None
         self.latest_wall: float | None = None
         self.log = CappedLog(log, "dropped messages")
+        self.arguments = {e: list((self.arguments or {}).get(e, [])) for e in self.events}
+        self.bound = {port for ports in self.arguments.values() for port in ports}  # carried by their event
+        self.due: list[tuple[float, int, Occurrence]] = []  # commands not yet due (a heap)
+        self.commands = CommandQueue(MAX_COMMANDS)  # due, applied one per step
+        self.carried: dict[str, object] = {}  # the value ports of the last command applied
+        self.acks: deque[dict] = deque(maxlen=MAX_REFUSED)  # what to tell the senders (CommandStream.take_acks)
+        self._sequence = 0
 
     def _refuse(self, reason: str, body: bytes = b"") -> None:
         excerpt = body[:80].decode("utf-8", "replace") if body else ""
@@ -226,15 +248,40 @@ class CommandStream:
             if self.t0 is None:
                 self.pending.append((parsed.time, parsed.values, m.body))
             else:
-                self._queue(parsed.time, parsed.values)
+                self._queue(parsed.time, parsed.values, parsed.ident)
 
-    def _queue(self, stamp: datetime, values: dict[str, object]) -> None:
+    def _queue(self, stamp: datetime, values: dict[str, object], ident: str | None = None) -> None:
+        """A message's commands (its events with their own arguments) and its values, each to wait for
+        its simulation time."""
         sim = (stamp - self.t0).total_seconds()
+        quiet = set()  # values taken as a command's: an equal time is no reason to complain
+        for event in (e for e in self.events if values.get(e) is True):
+            ports = self.arguments[event]
+            missing = [p for p in ports if p not in values]
+            if missing:
+                self._refuse_command(f"{event} at t = {sim:.3f} s without {', '.join(missing)}: a command takes its "
+                                     "arguments from its own message", ident, event, stamp)
+                continue
+            self._sequence += 1
+            heapq.heappush(self.due, (sim, self._sequence, Occurrence(
+                event, tuple((p, values[p]) for p in ports), stamp.isoformat(), sim, ident)))
+            quiet.update([event, *ports])
         for var, value in values.items():
             if len(self.queues[var]) >= MAX_QUEUED:
                 self._refuse(f"{var} at t = {sim:.3f} s: {MAX_QUEUED} values of it already wait for their time")
                 continue
-            self.queues[var].append((sim, value))
+            self.queues[var].append((sim, value, var in quiet or var in self.events))
+
+    def _refuse_command(self, reason: str, ident: str | None, event: str, stamp: datetime) -> None:
+        self._refuse(f"command {reason}")
+        self.acks.append({"internal_status": "command refused", "internal_message": reason, "event": event,
+                          "message_time": stamp.isoformat(), **({"internal_id": ident} if ident else {})})
+
+    def take_acks(self) -> list[dict]:
+        """What happened to the commands since the last call (queued, applied, refused), for their senders."""
+        out = list(self.acks)
+        self.acks.clear()
+        return out
 
     def start(self) -> None:
         """Wait (up to the timeout) until every variable has a value; t0 := the newest time then held."""
@@ -257,6 +304,7 @@ class CommandStream:
         self.t0 = max(stamp for stamp, _ in latest.values())
         for var, (stamp, value) in latest.items():
             self.held[var] = _Held((stamp - self.t0).total_seconds(), value)
+        self.carried = {port: self.held[port].value for port in self.bound}
 
     def values_for(self, t: float, h: float) -> dict[str, object]:
         """The variables' values for the step from t to t + h (computed once per step: units sharing
@@ -281,8 +329,14 @@ class CommandStream:
                                   f"{self.maxage:g} s), and none came within {self.timeout:g} s")
             self._wait(min(left, 0.2), f"for a fresh value of '{stale[0][0]}'")
             fired |= self._apply(until, t + h)
-        # an event is true in the step that applied a `true`, even if a `false` followed within the step
-        out = {v: (v in fired) if v in self.events else held.value for v, held in self.held.items()}
+        # one command per step, with its own arguments (even if a `false` and other values followed within the step)
+        command = self.commands.take(t + h)
+        if command is not None:
+            self.carried.update(command.values)
+            self.acks.append({"internal_status": "command applied", "event": command.event, "applied_at": t + h,
+                              "message_time": command.origin, **({"internal_id": command.ident} if command.ident else {})})
+        out = {v: (command is not None and command.event == v) if v in self.events else
+               self.carried[v] if v in self.bound else held.value for v, held in self.held.items()}
         self._last = (t, out)
         return out
 
@@ -297,27 +351,40 @@ class CommandStream:
         self._take(self.receive(seconds))
 
     def _apply(self, until: float, step_end: float) -> set[str]:
-        """Apply queued values with simulation time <= until; return the events that fired."""
-        fired = set()
+        """Apply queued values with simulation time <= until and accept the commands due by then into the
+        queue of those applied one per step (refused when it is full); return the events accepted."""
         for var, items in self.queues.items():
             if not items:
                 continue
             items.sort(key=lambda x: x[0])
             keep = []
-            for sim, value in items:
+            for sim, value, quiet in items:
                 if sim > until + 1e-9:
-                    keep.append((sim, value))
+                    keep.append((sim, value, quiet))
                     continue
                 held = self.held.get(var)
                 if held is not None and sim <= held.sim:
-                    self._refuse(f"{var} at t = {sim:.3f} s is not newer than the value held (t = {held.sim:.3f} s)")
+                    if not quiet:
+                        self._refuse(f"{var} at t = {sim:.3f} s is not newer than the value held (t = {held.sim:.3f} s)")
                     continue
                 self.held[var] = _Held(sim, value)
                 self.applied.append((sim, var, value, step_end))
-                if var in self.events and value is True:
-                    fired.add(var)
             self.queues[var] = keep
-        return fired
+        accepted = set()
+        while self.due and self.due[0][0] <= until + 1e-9:
+            _, _, command = heapq.heappop(self.due)
+            try:
+                place = self.commands.offer(command)
+            except QueueFull as full:
+                self._refuse_command(f"{command.event} at t = {command.due:.3f} s: {full}", command.ident,
+                                     command.event, parse_time(command.origin))
+                continue
+            accepted.add(command.event)
+            if place > 0:
+                self.acks.append({"internal_status": "command queued", "event": command.event, "place": place,
+                                  "message_time": command.origin,
+                                  **({"internal_id": command.ident} if command.ident else {})})
+        return accepted
 
 
 class RabbitMQBridge:
@@ -531,7 +598,8 @@ class RabbitMQUnit(PythonUnit):
 
     def __init__(self, name: str, types: dict[str, str], echoed: list[str], settings: RabbitMQSettings,
                  bridge: RabbitMQBridge | None = None, stream: CommandStream | None = None,
-                 events: set[str] | None = None, echo: bool = True, scalars: dict | None = None):
+                 events: set[str] | None = None, echo: bool = True, scalars: dict | None = None,
+                 arguments: dict[str, list[str]] | None = None):
         ports = [Port(p, kind, "output") for p, kind in types.items()]
         ports += [Port(v, "Real", "input") for v in echoed]
         super().__init__(name, ports)
@@ -542,9 +610,15 @@ class RabbitMQUnit(PythonUnit):
         self.bridge = bridge
         self.stream = stream
         self.scalars = scalars
+        self.arguments = arguments
         self.echo = echo
         self.reconnects = 0
         self._own_bridge = bridge is None
+
+    @property
+    def command_queue(self):
+        """The commands applied one per step (cotwin.twin.commands.CommandQueue), once the stream exists."""
+        return self.stream.commands if self.stream is not None else None
 
     @property
     def epoch(self) -> float | None:
@@ -560,7 +634,7 @@ class RabbitMQUnit(PythonUnit):
         if self.stream is None:
             self.stream = CommandStream(self.types, self.events, self.bridge.receive, self.settings.maxage_ms / 1000,
                                         self.settings.timeout_s, scalars=self.scalars,
-                                        max_skew=self.settings.max_skew_s)
+                                        max_skew=self.settings.max_skew_s, arguments=self.arguments)
         if self.stream.t0 is None:
             self.stream.start()
         self.values.update({v: held.value if v not in self.events else False for v, held in self.stream.held.items()})
@@ -569,6 +643,10 @@ class RabbitMQUnit(PythonUnit):
         if self.echo:
             self.bridge.publish(self.settings.from_cosim, echo_message({v: self.values[v] for v in self.echoed}, t, h))
         self.values.update(self.stream.values_for(t, h))
+        if self.echo:  # the senders hear what became of their commands (the side that echoes tells them)
+            for ack in self.stream.take_acks():
+                self.bridge.publish(self.settings.from_cosim, {**ack, "time": datetime.now(timezone.utc).isoformat(
+                    timespec="milliseconds")})
 
     def terminate(self) -> None:
         if self.stream is not None:

@@ -15,6 +15,8 @@ from ..diagnostics import CotwinError
 from .build import ARTEFACTS, dmodel_fmu, folder_lock
 from .project import TwinProject, check_timing, load_project
 from .system import MAPPING, TwinSystem
+from .outcomes import CommandLedger, not_applied
+from .waits import WaitWatch
 
 
 RUN_FILES = ("outputs.csv", "outputs.partial.csv", "outputs.csv.part", "state", "figure.png", "path.png", *ARTEFACTS)
@@ -62,6 +64,8 @@ class TwinRun:
     figure: Path | None
     system: System
     units: dict[str, object] = field(default_factory=dict)
+    blocked: list = field(default_factory=list)  # cotwin.twin.waits.Blocked: waits for answers that cannot come
+    outcomes: object = None  # cotwin.twin.outcomes.Summary: what became of every command
 
     @property
     def mapping(self):
@@ -83,7 +87,8 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         cosim = system.instantiate(fmu, endpoint if endpoint is not None else dt_endpoint(system), source=source)
         units = {u.role if u.role != "source" else "source": cosim.units[u.name] for u in system.units}
         writer = CSVWriter(out / "outputs.csv")
-        chain: list[Observer] = [writer, StateFile(out / "state"), *(observers or [])]
+        watch, ledger = WaitWatch(system), CommandLedger(system)
+        chain: list[Observer] = [writer, StateFile(out / "state"), watch, ledger, *(observers or [])]
         if progress is not None:
             chain.append(Progress(progress))
         if spec.realtime if realtime is None else realtime:
@@ -106,7 +111,8 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
                 top_view(out / "outputs.csv", out / "path.png", system.models.scene, path,
                          title=f"{system.models.program.module.name} in {system.models.scene.name or 'its world'}: "
                                f"{end:g} s")
-        return TwinRun(result, out / "outputs.csv", figure, cosim, units)
+        return TwinRun(result, out / "outputs.csv", figure, cosim, units, watch.found,
+                       ledger.summary(watch.found, not_applied(units.get("source"))))
 
 
 def path_columns(system: TwinSystem) -> tuple[str, str] | None:

@@ -29,6 +29,8 @@ from .project import check_timing
 from .build import ARTEFACTS, dmodel_fmu, folder_lock
 from .deviation import DeviationMonitor
 from .system import DMODEL, MAPPING, RABBITMQ, TwinSystem
+from .outcomes import CommandLedger
+from .waits import WaitWatch
 
 log = logging.getLogger("cotwin.twin")
 
@@ -72,6 +74,13 @@ class Side:
     execution: Execution
     writer: CSVWriter
     units: dict[str, object]
+    watch: object = None  # cotwin.twin.waits.WaitWatch: blocked waits of this side's d-model
+    ledger: object = None  # cotwin.twin.outcomes.CommandLedger: what became of every command on this side
+
+    def summary(self):
+        from .outcomes import not_applied
+
+        return self.ledger.summary(self.watch.found, not_applied(self.units.get("source")))
 
     def values(self, unit: str, names: list[str]) -> dict[str, float]:
         values = self.execution.values
@@ -148,14 +157,14 @@ class LiveTwin:
     def _sources(self):
         system = self.system
         if system.source is RABBITMQ:
-            from .rabbitmq import CommandStream, RabbitMQBridge, port_scalars, port_types
+            from .rabbitmq import CommandStream, RabbitMQBridge, port_arguments, port_scalars, port_types
 
             settings = system.spec.rabbitmq
             self._bridge = RabbitMQBridge(settings, "cotwin live twin")  # started by the PT's unit when it initialises
             stream = CommandStream(port_types(system.models.program, system.source_ports), system.command_events,
                                    self._bridge.receive, settings.maxage_ms / 1000, settings.timeout_s,
                                    scalars=port_scalars(system.models.program), cancelled=lambda: self._stop,
-                                   max_skew=settings.max_skew_s)
+                                   max_skew=settings.max_skew_s, arguments=port_arguments(system.models.program))
             return (system.source_unit(self._bridge, stream, echo=True),
                     system.source_unit(self._bridge, stream, echo=False))
         return system.source_unit(), system.source_unit()
@@ -163,10 +172,11 @@ class LiveTwin:
     def _side(self, name: str, fmu: Path, endpoint, source) -> Side:
         cosim = self.system.instantiate(fmu, endpoint, source=source)
         writer = CSVWriter(self.out / name / "outputs.csv")
-        observers = [writer] + ([StateFile(self.out / "state")] if name == "dt" else [])  # where a what-if may start
+        watch, ledger = WaitWatch(self.system, prefix=f"{name.upper()}: "), CommandLedger(self.system)
+        observers = [writer, watch, ledger] + ([StateFile(self.out / "state")] if name == "dt" else [])  # where a what-if may start
         execution = Execution(cosim, make_algorithm(self.algorithm), self.step_size, 0.0, observers)
         units = {u.role: cosim.units[u.name] for u in self.system.units}
-        return Side(name, execution, writer, units)
+        return Side(name, execution, writer, units, watch, ledger)
 
     # ---- running ----
     def run(self) -> LiveResult:

@@ -8,10 +8,17 @@ ports; an event column true in a row sends that event) and a TOML list of comman
     event = "moveDiscreteCommand"
     args = { target_X = 0, target_Y = 23, target_Z = 1 }
 
-A command at time T is sent by the step covering it (t <= T < t + h): it is an output of that step, an
-event for exactly one step; value ports keep their last value. Both readers are strict: times must be
-finite and non-negative, two commands of one event at the same time are an error (one would be lost),
-integers must fit the FMU's int32, and every problem is reported at its line and column.
+Arguments are named by their d-model port (`MovementArgs_target_X`, as in plan CSVs, on the RMQ FMU's
+wire and in the page's API: one naming everywhere); TOML scenarios and what-if plans also take the
+field name older files use (`target_X`, or `value` for an event carrying one primitive value). A
+command gives every argument of its event: it takes its arguments from itself, never from an earlier
+one.
+
+A command at time T is due in the step covering it (t <= T < t + h). Each raised event is an occurrence
+(cotwin.twin.commands) queued in time order: the controller applies one per step, as an output of that
+step true for exactly that step with its own arguments; commands due in the same step follow in the
+next steps, none is lost. Both readers are strict: times must be finite and non-negative, integers
+must fit the FMU's int32, and every problem is reported at its line and column.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ from ..cosim.units import INT32, Port, PythonUnit
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..dmodel.program import Program
 from ..files import read_text
+from .commands import CommandQueue, Occurrence
 
 MAX_FIELD = 1 << 16  # characters: no cell of a plan is legitimately longer
 
@@ -69,36 +77,12 @@ def parse_value(text: str, fmi: str) -> object:
     return value
 
 
-def _same_time(commands: list[Command], events: set[str], problems: list[Finding], path: Path) -> None:
-    problems.extend(same_step(commands, events))
-
-
 def _location(where: str) -> Location:
     """A command's `where` (file:line:column, or a name such as "plan item 2") as a Location."""
     parts = where.rsplit(":", 2)
     if len(parts) == 3 and parts[1].isdigit() and parts[2].isdigit():
         return Location(parts[0], int(parts[1]), int(parts[2]))
     return Location(where, 1, 1)
-
-
-def same_step(commands: list[Command], events: set[str], h: float = 0.0, start: float = 0.0) -> list[Finding]:
-    """Commands raising one event in the same step of size `h` from `start` (with h = 0: at the same
-    time): one step delivers an event once, so all but one would be lost."""
-    eps = 1e-9
-    seen: dict[tuple[float, str], Command] = {}
-    found = []
-    for c in commands:
-        slot = c.time if h <= 0 else math.floor((c.time - start + eps) / h)
-        for port, value in c.values:
-            if port in events and value is True:
-                first = seen.setdefault((slot, port), c)
-                if first is not c:
-                    when = f"at {c.time:g} s" if h <= 0 else f"at {c.time:g} s, in the step of {h:g} s that has one at {first.time:g} s"
-                    found.append(Finding(_location(c.where), Severity.ERROR,
-                                         f"a second {port} {when} (the first is at {first.where}): one step "
-                                         "delivers an event once, so one of them would be lost"
-                                         + ("" if h <= 0 else ": use a shorter step or space the commands")))
-    return found
 
 
 def after_end(commands: list[Command], end: float, h: float = 0.0) -> list[Finding]:
@@ -135,6 +119,11 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
             problem(1, columns[k], f"unknown d-model input '{h}' (known: {', '.join(ports)})")
         elif h in header[1:k]:
             problem(1, columns[k], f"column '{h}' appears twice")
+    for ev in program.inputs:
+        missing = [port for port, _ in ev.value_ports if port not in header]
+        if ev.name in header and missing:
+            problem(1, columns[header.index(ev.name)], f"column '{ev.name}' without its argument column(s) "
+                    f"{', '.join(missing)}: a command takes its arguments from its own row")
     commands = []
     for line, row in enumerate(rows[1:], start=2):
         if not row or all(not cell.strip() for cell in row):
@@ -164,7 +153,6 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
                 ok = False
         if ok:
             commands.append(Command(time_ms / 1000.0, tuple(values), f"{path}:{line}:1"))
-    _same_time(commands, {ev.name for ev in program.inputs}, problems, path)
     raise_problems(problems)
     return sorted(commands, key=lambda c: c.time)
 
@@ -204,28 +192,16 @@ def read_toml(path: str | Path, program: Program) -> list[Command]:
             problems.append(Finding(file.location(at + ("event",)), Severity.ERROR,
                                     f"[[command]] {i + 1}: unknown event {name!r} (known: {', '.join(events)})"))
             continue
-        ev = events[name]
-        fields = {sc.path[-1] if sc.path else "value": (port, sc) for port, sc in ev.value_ports}
-        values = [(name, True)]
-        for key, value in (item["args"] or {}).items():
-            where = file.location(at + ("args", key))
-            if key not in fields:
-                problems.append(Finding(where, Severity.ERROR, f"[[command]] {i + 1}: event {name} has no argument "
-                                                               f"'{key}' (has {', '.join(fields) or 'none'})"))
-                continue
-            port, sc = fields[key]
-            try:
-                values.append((port, scalar_value(value, sc)))
-            except ValueError as err:
-                problems.append(Finding(where, Severity.ERROR,
-                                        f"[[command]] {i + 1}: argument {key} must be {_article(sc.fmi_type)}: "
-                                        f"{value!r} {err}"))
-        if item["time"] is not None:
+        args = item["args"] or {}
+        values, wrong = command_values(events[name], args)
+        for key, message in wrong:
+            where = file.location(at + ("args", key)) if key in args else file.location(at)
+            problems.append(Finding(where, Severity.ERROR, f"[[command]] {i + 1}: {message}"))
+        if item["time"] is not None and not wrong:
             line, column = file.location(at).line, file.location(at).column
             commands.append(Command(float(item["time"]), tuple(values), f"{path}:{line}:{column}"))
     if not commands and not problems:
         problems.append(Finding(file.location(), Severity.ERROR, "the scenario has no [[command]]"))
-    _same_time(commands, set(events), problems, path)
     raise_problems(problems)
     return sorted(commands, key=lambda c: c.time)
 
@@ -272,8 +248,42 @@ def scalar_value(value, sc, typed=None) -> object:
     return out
 
 
-def _article(fmi: str) -> str:
-    return {"Integer": "an integer", "Real": "a number", "Boolean": "true or false"}[fmi]
+def argument_keys(ev) -> dict[str, tuple[str, object]]:
+    """The names a command may give an argument of the d-model input event `ev` by -> (port, Scalar): its
+    port name (canonical: `MovementArgs_target_X`) and the field name older files use (`target_X`, or
+    `value` for an event carrying one primitive value)."""
+    keys = {port: (port, sc) for port, sc in ev.value_ports}
+    for port, sc in ev.value_ports:
+        keys.setdefault(sc.path[-1] if sc.path else "value", (port, sc))
+    return keys
+
+
+def command_values(ev, args: dict) -> tuple[list[tuple[str, object]], list[tuple[str | None, str]]]:
+    """A command of event `ev` with `args` (either naming, see `argument_keys`) as port values: the event
+    true, then each argument typed by `scalar_value`; and the problems, each with the key it is about
+    (None for the command as a whole): an unknown or doubly given argument, a wrong value, a missing one."""
+    keys = argument_keys(ev)
+    given: dict[str, object] = {}
+    problems: list[tuple[str | None, str]] = []
+    for key, value in args.items():
+        if key not in keys:
+            problems.append((key, f"event {ev.name} has no argument {str(key)[:80]!r} (it has "
+                                  f"{', '.join(port for port, _ in ev.value_ports) or 'none'})"))
+            continue
+        port, sc = keys[key]
+        if port in given:
+            problems.append((key, f"argument {port} of {ev.name} is given twice"))
+            continue
+        try:
+            given[port] = scalar_value(value, sc)
+        except ValueError as err:
+            problems.append((key, f"argument {key}: {value!r:.80} {err}"))
+            given[port] = None
+    missing = [port for port, _ in ev.value_ports if port not in given]
+    if missing:
+        problems.append((None, f"event {ev.name} carries {', '.join(missing)}: a command gives every argument "
+                               "(it never takes one from an earlier command)"))
+    return [(ev.name, True), *((port, given[port]) for port, _ in ev.value_ports if port in given)], problems
 
 
 def read_scenario(path: str | Path, program: Program) -> list[Command]:
@@ -281,7 +291,8 @@ def read_scenario(path: str | Path, program: Program) -> list[Command]:
 
 
 class ScenarioUnit(PythonUnit):
-    """The controller: plays a scenario's commands into the d-model's inputs."""
+    """The controller: plays a scenario's commands into the d-model's inputs, one event per step (see
+    module doc); `queue.applied` says when each was applied."""
 
     def __init__(self, name: str, program: Program, commands: list[Command], ports: list[str] | None = None):
         """Outputs: the ports the commands use, or `ports` (which must include them)."""
@@ -294,13 +305,18 @@ class ScenarioUnit(PythonUnit):
             used = list(ports)
         super().__init__(name, [Port(p, types[p], "output") for p in used])
         self.events = {ev.name for ev in program.inputs} & set(used)
+        self.arguments = {ev.name: [port for port, _ in ev.value_ports] for ev in program.inputs if ev.name in self.events}
         self.commands = sorted(commands, key=lambda c: c.time)
+        self.queue = CommandQueue()
         self._next = 0
-        self._checked_step = None
 
     @property
     def command_events(self) -> set[str]:
         return set(self.events)
+
+    @property
+    def command_queue(self) -> CommandQueue:
+        return self.queue
 
     def instantiate(self, start: float) -> None:
         super().instantiate(start)
@@ -310,11 +326,6 @@ class ScenarioUnit(PythonUnit):
             self._next += 1
 
     def step(self, t: float, h: float) -> None:
-        if h != self._checked_step:  # once per step size: no two commands of one event may share a step
-            problems = same_step(self.commands[self._next:], self.events, h, t)
-            if problems:
-                raise CotwinError(problems)
-            self._checked_step = h
         self.time = t + h
         for ev in self.events:
             self.values[ev] = False
@@ -325,24 +336,34 @@ class ScenarioUnit(PythonUnit):
             self._next += 1
             if c.time < t - eps:  # before this step: a start in the middle of the plan skips it
                 continue
-            for port, value in c.values:
-                if port in self.events:
-                    self.values[port] = self.values[port] or bool(value)
-                else:
+            values = dict(c.values)
+            raised = [port for port, value in c.values if port in self.events and value is True]
+            for event in raised:
+                self.queue.offer(Occurrence(event, tuple((p, values[p]) for p in self.arguments[event] if p in values),
+                                            c.where, c.time))
+            bound = {p for event in raised for p in self.arguments[event]}
+            for port, value in c.values:  # values without their event: set as they come
+                if port not in self.events and port not in bound:
                     self.values[port] = value
+        occurrence = self.queue.take(t + h)
+        if occurrence is not None:
+            self.values[occurrence.event] = True
+            self.values.update(occurrence.values)
 
-    # ---- state: the port values, the time reached and the next command to play ----
+    # ---- state: the port values, the time reached, the next command to play and those waiting ----
     def snapshot(self) -> dict:
-        return {**super().snapshot(), "next": self._next, "plan": self._plan()}
+        return {**super().snapshot(), "next": self._next, "plan": self._plan(), "queue": self.queue.snapshot()}
 
     def restore(self, snapshot: dict) -> None:
         """Continue where the saved unit was; a unit with another plan (a what-if) continues with the
-        first of its commands not yet due at the saved time."""
+        first of its commands not yet due at the saved time, none waiting."""
         super().restore(snapshot)
         if snapshot["plan"] == self._plan():
             self._next = snapshot["next"]
+            self.queue.restore(snapshot["queue"])
         else:
             self._next = next((k for k, c in enumerate(self.commands) if c.time >= self.time - 1e-9), len(self.commands))
+            self.queue = CommandQueue()
 
     def _plan(self) -> list[tuple[float, tuple]]:
         return [(c.time, c.values) for c in self.commands]

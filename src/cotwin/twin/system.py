@@ -345,11 +345,12 @@ class TwinSystem:
         if self.source is CONTROLLER:
             return ScenarioUnit(CONTROLLER.name, self.models.program, self.commands, self.source_ports)
         if self.source is RABBITMQ:
-            from .rabbitmq import RabbitMQUnit, port_scalars, port_types
+            from .rabbitmq import RabbitMQUnit, port_arguments, port_scalars, port_types
 
-            return RabbitMQUnit(RABBITMQ.name, port_types(self.models.program, self.source_ports),
-                                self.models.monitored, self.spec.rabbitmq, bridge=bridge, stream=stream,
-                                events=self.command_events, echo=echo, scalars=port_scalars(self.models.program))
+            program = self.models.program
+            return RabbitMQUnit(RABBITMQ.name, port_types(program, self.source_ports), self.models.monitored,
+                                self.spec.rabbitmq, bridge=bridge, stream=stream, events=self.command_events, echo=echo,
+                                scalars=port_scalars(program), arguments=port_arguments(program))
         return None
 
     def instantiate(self, dmodel_fmu: str | Path, endpoint, source: Unit | None = None,

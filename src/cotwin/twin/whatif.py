@@ -7,10 +7,9 @@ as fast as it goes. The live twin is never touched: a state is bytes (cotwin.cos
 between two of its steps. A plan's times are relative to the fork.
 
 The answer (`Prediction`): the predicted trajectory of the monitored variables, the d-model's state
-changes, per command whether it was delivered, accepted (the d-model called an operation in
-response), feasible (an event the platform raised in response, judged by its name: `nonfeasible*`,
-`infeasible*`, `unreachable*` mean no; `feasible*`, `reachable*` mean yes) and when it was done (the
-d-model back in its resting state, the state it rests in after initialisation); collisions (the
+changes, per command what became of it (cotwin.twin.outcomes: when it was applied, whether the d-model
+took it, its feasibility as the platform's answer says, when it was done: the d-model back at rest);
+waits for answers that cannot come (cotwin.twin.waits; the what-if ends there); collisions (the
 mapping's `collision` event, and contacts of the robot with the scene other than its fingers'); and
 the completion time of the whole plan.
 """
@@ -19,7 +18,6 @@ from __future__ import annotations
 
 import logging
 import math
-import re
 import threading
 import time
 import time as wallclock
@@ -35,24 +33,11 @@ from .build import dmodel_fmu
 from ..logcap import CappedLog
 from .scenario import Command
 from .system import DMODEL, MAPPING, TwinSystem
+from .outcomes import CommandLedger, CommandOutcome
+from .waits import WaitWatch
 
 _WORKER = None  # (TwinSystem, artefacts) of a what-if worker process
 MAX_REQUEST = 1 << 20  # bytes of a what-if request (a plan of thousands of commands)
-INFEASIBLE = re.compile(r"^(non|in|un)(feasible|reachable)", re.IGNORECASE)
-FEASIBLE = re.compile(r"^(feasible|reachable)", re.IGNORECASE)
-
-
-@dataclass
-class CommandOutcome:
-    time: float  # when the plan sends it (simulation time of the fork's clock)
-    event: str
-    args: dict
-    delivered: float | None = None  # the step end at which the d-model got it
-    accepted: bool = False  # the d-model called an operation in response
-    operations: list[str] = field(default_factory=list)
-    events: list[str] = field(default_factory=list)  # platform events until the next command
-    feasible: bool | None = None
-    done: float | None = None  # back at rest after it
 
 
 @dataclass
@@ -66,18 +51,10 @@ class Prediction:
     collisions: list[dict]
     completion_time: float | None
     wall_seconds: float
+    blocked: list[str] = field(default_factory=list)  # waits for answers that cannot come (cotwin.twin.waits)
 
     def as_dict(self) -> dict:
         return asdict(self)
-
-
-def rest_states(program) -> dict[str, int]:
-    """The leaf each machine rests in after its first cycle with no inputs (e.g. Idle)."""
-    from ..dmodel.interpreter import Interpreter
-
-    interp = Interpreter(program)
-    interp.step({})
-    return {program.state_port(m): interp.state_index(k) for k, m in enumerate(program.machines)}
 
 
 class _Contacts:
@@ -135,42 +112,35 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
         fmu = dmodel_fmu(fork, Path(artefacts) if artefacts is not None else Path(tmp), cc)
         endpoint = simulated_endpoint(fork)
         cosim = fork.instantiate(fmu, endpoint)
-        execution = Execution(cosim, make_algorithm(algorithm), step, start)
+        watch, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
+        execution = Execution(cosim, make_algorithm(algorithm), step, start, [watch, ledger])
         try:
             if state is not None:
                 execution.set_state(state, units=[DMODEL.name, MAPPING.name])
             else:
                 execution.initialize()
-            return _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started)
+            prediction = _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started, watch,
+                                ledger)
+            prediction.blocked = [str(b) for b in watch.found]
+            return prediction
         finally:
             execution.close()
 
 
-def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, started) -> Prediction:
-    from ..dmodel.ports import PortLayout
-
+def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, started, waits, ledger) -> Prediction:
     program = fork.models.program
-    layout = PortLayout(program)
-    source = fork.source.name
-    events = [p for p in fork.source_ports if p in fork.command_events]
-    calls = [op.flag.name for op in layout.operations]
     platform = [c.output for c in fork.connections if c.source == MAPPING.name and c.target == DMODEL.name
                 and c.output in {ev.name for ev in program.inputs}]
     monitored = fork.log[MAPPING.name]
     state_ports = [(program.state_port(m), m) for m in program.machines]
-    rest = rest_states(program)
     collision_events = [e for e in platform if e.lower() == "collision"]
     contacts = _Contacts(endpoint, fork.models.tree)
-    outcomes = [CommandOutcome(c.time, next(p for p, v in c.values if p in fork.command_events and v is True),
-                               {p: v for p, v in c.values if p not in fork.command_events}) for c in plan]
     trajectory: dict[str, list[float]] = {"time": []}
     for v in monitored:
         trajectory[v] = []
     states: list[tuple[float, str, str]] = []
     collisions: list[dict] = []
     last_state: dict[str, int] = {}
-    current: CommandOutcome | None = None
-    pending = list(outcomes)
     at_rest_since: float | None = None
     last_command = plan[-1].time if plan else start
     end = start + horizon
@@ -186,45 +156,34 @@ def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, st
     while execution.time < end - 1e-9:
         t = execution.step()
         record(t)
-        fired = [e for e in events if values.get((source, e)) is True]
-        if fired and pending:
-            current = pending.pop(0)
-            current.delivered = t
-        for c in calls:
-            if values.get((DMODEL.name, c)) is True and current is not None:
-                current.operations.append(c)
-                current.accepted = True
-        for e in platform:
-            if values.get((MAPPING.name, e)) is True:
-                if current is not None:
-                    current.events.append(e)
-                    if current.feasible is None and INFEASIBLE.match(e):
-                        current.feasible = False
-                    elif current.feasible is None and FEASIBLE.match(e):
-                        current.feasible = True
-                if e in collision_events:
-                    collisions.append({"kind": "event", "event": e, "time": t})
-        resting = True
+        collisions.extend({"kind": "event", "event": e, "time": t} for e in collision_events
+                          if values.get((MAPPING.name, e)) is True)
+        current = []
         for port, m in state_ports:
             index = values.get((DMODEL.name, port))
+            current.append(index)
             if index != last_state.get(port):
                 leaves = program.leaf_names(m)
                 states.append((t, m.name, leaves[index] if isinstance(index, int) and 0 <= index < len(leaves) else "none"))
                 last_state[port] = index
-            resting = resting and index == rest[port]
-        if current is not None and current.accepted and current.done is None and resting:
-            current.done = t
+        resting = ledger.resting(current)
         contacts.check(t)
         at_rest_since = (at_rest_since if at_rest_since is not None else t) if resting else None
-        if not pending and t >= last_command and at_rest_since is not None and t - at_rest_since >= settle:
+        outcomes = ledger.outcomes
+        applied = len(outcomes) >= len(plan)
+        if applied and t >= last_command and waits.found:
+            break  # blocked for good: the horizon would add nothing
+        if applied and t >= last_command and at_rest_since is not None and t - at_rest_since >= settle:
             last = outcomes[-1] if outcomes else None
             if last is None or last.done is not None:
                 break
-            if not last.accepted and last.delivered is not None and t - last.delivered >= settle + 3 * execution.step_size:
+            if not last.accepted and t - last.delivered >= settle + 3 * execution.step_size:
                 break  # delivered, never acted upon: the d-model ignored it
-    for o in outcomes:
-        o.events = list(dict.fromkeys(o.events))
-        o.operations = list(dict.fromkeys(o.operations))
+    outcomes = list(ledger.outcomes)
+    for c in plan[len(outcomes):]:  # not applied within the horizon
+        event = next(p for p, v in c.values if p in fork.command_events and v is True)
+        outcomes.append(CommandOutcome(c.time, event, {p: v for p, v in c.values if p not in fork.command_events},
+                                       origin=c.where))
     collisions.extend(contacts.seen.values() if contacts.sim is not None else [])
     done = [o.done for o in outcomes]
     completion = max(done) if done and all(d is not None for d in done) else (None if outcomes else execution.time)
@@ -235,7 +194,7 @@ def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, st
 def plan_from_json(items: list, program) -> list[Command]:
     """A what-if plan from JSON (a broker request or a file): [{"time": s, "event": name, "args": {...}}],
     checked like a TOML scenario; CotwinError naming the item otherwise."""
-    from .scenario import scalar_value
+    from .scenario import command_values
 
     if not isinstance(items, list) or not items:
         raise CotwinError("a what-if plan is a non-empty list of {time, event, args}")
@@ -251,16 +210,9 @@ def plan_from_json(items: list, program) -> list[Command]:
             raise CotwinError(f"plan item {k}: unknown event {name!r:.80} (known: {', '.join(events)})")
         if not isinstance(args, dict):
             raise CotwinError(f"plan item {k}: args must be an object")
-        fields = {sc.path[-1] if sc.path else "value": (port, sc) for port, sc in events[name].value_ports}
-        values = [(name, True)]
-        for key, value in args.items():
-            if key not in fields:
-                raise CotwinError(f"plan item {k}: event {name} has no argument {key[:80]!r} (has {', '.join(fields) or 'none'})")
-            port, sc = fields[key]
-            try:
-                values.append((port, scalar_value(value, sc)))
-            except ValueError as err:
-                raise CotwinError(f"plan item {k}: argument {key}: {value!r:.80} {err}") from None
+        values, wrong = command_values(events[name], args)
+        if wrong:
+            raise CotwinError([f"plan item {k}: {message}" for _, message in wrong])
         out.append(Command(float(t), tuple(values), f"plan item {k}"))
     return out
 

@@ -3,7 +3,8 @@ stopped with the run.
 
 Routes: `/` (the page), `/static/...` (its scripts, styles and the vendored three.js), `/api/model`
 (what describe.py derives from the models), `/api/status`, `/api/command` (POST: a command from the
-panel, published on the twin's broker by PagePublisher), `/api/whatif` (POST: a plan for the twin's
+panel, published on the twin's broker by PagePublisher; answered 200 with the step that applied it, 409
+when the twin refused it, or 202 when it is accepted and waits, `/api/command/{id}` saying what became of it), `/api/whatif` (POST: a plan for the twin's
 what-if service, when it runs one), `/api/history` and `/api/history/{run}` (the history store), and
 `/ws`: the live stream.
 
@@ -60,6 +61,7 @@ MAX_CLIENTS = 32  # live streams at once (more are closed with 1013, try again l
 MAX_WHATIFS = 2  # what-ifs from the page in flight (each waits for a fork of the twin)
 MAX_HISTORY_READS = 2  # runs read from the history store at once (more wait their turn)
 MAX_EVENTS = 10_000  # commands, state changes and alarms of a run sent to the page (the first; `counts` has all)
+COMMAND_SECONDS = 5.0  # a command's answer waits this long for the twin to apply it (else 202: it will be)
 ENDED = ("done", "stopped", "failed")
 
 
@@ -225,6 +227,7 @@ class Dashboard:
         self.whatifs = 0  # what-ifs from the page in flight
         self.whatif_timeout = 120.0  # s to wait for the twin's answer
         self.body_seconds = BODY_SECONDS
+        self.command_seconds = COMMAND_SECONDS
         self._closing = threading.Event()  # ends the what-ifs the page waits for
         self.clients = 0
         self.skipped = 0  # samples clients skipped because they fell behind
@@ -377,7 +380,34 @@ class Dashboard:
                                               "try again later"}, status_code=429, headers={"Retry-After": "1"})
             if self.publisher.error:
                 return JSONResponse({"error": self.publisher.error}, status_code=503)
-            return JSONResponse({"queued": message, "twin_ready": self.publisher.twin_ready.is_set()})
+            return await command_answer(message)
+
+        async def command_answer(message: dict) -> JSONResponse:
+            """Wait (up to command_seconds, while the twin is there) for the twin to apply or refuse the
+            command: 200 with the step that applied it, 409 with the twin's refusal, else 202 (accepted:
+            it will be applied; GET /api/command/{id} says when)."""
+            ident, ready = message["internal_id"], self.publisher.twin_ready.is_set()
+            deadline = wallclock.monotonic() + (self.command_seconds if ready else 0.0)
+            ticket = self.publisher.ticket(ident)
+            while ticket["status"] not in ("applied", "refused") and wallclock.monotonic() < deadline \
+                    and not self._closing.is_set():
+                await asyncio.sleep(0.02)
+                ticket = self.publisher.ticket(ident)
+            if ticket["status"] == "refused":
+                return JSONResponse({"error": f"the twin refused the command: {ticket.get('internal_message')}",
+                                     "id": ident}, status_code=409)
+            if ticket["status"] == "applied":
+                return JSONResponse({"applied": {"time": ticket["applied_at"]}, "id": ident, "message": message,
+                                     "twin_ready": True})
+            return JSONResponse({"queued": message, "id": ident, "status": ticket["status"],
+                                 **({"place": ticket["place"]} if "place" in ticket else {}),
+                                 "twin_ready": self.publisher.twin_ready.is_set()}, status_code=202)
+
+        async def command_status(request):
+            ticket = self.publisher.ticket(request.path_params["ident"]) if self.publisher is not None else None
+            if ticket is None:
+                return JSONResponse({"error": "no such command (or it is too old to be remembered)"}, status_code=404)
+            return JSONResponse(ticket)
 
         async def whatif(request):
             if self.whatif_url is None:
@@ -438,6 +468,7 @@ class Dashboard:
             Route("/api/model", model),
             Route("/api/status", status),
             Route("/api/command", command, methods=["POST"]),
+            Route("/api/command/{ident}", command_status),
             Route("/api/whatif", whatif, methods=["POST"]),
             Route("/api/history", runs),
             Route("/api/history/{run_id}", run),

@@ -7,9 +7,12 @@ refreshed within `maxage`); with `heartbeat=False` it sends only the page's comm
 
 Commands are checked before they leave, so the page is told at once why a value is refused instead of
 the twin dropping (or, for a double on an Integer, truncating) it: every value as a plan's would be
-(`scalar_value`: 1.5 is not an integer, an enumeration takes its literals, a nat is not negative, int32)
+(`command_values`: every argument given, by its port name or its field name, 1.5 is not an integer, an
+enumeration takes its literals, a nat is not negative, int32)
 and then with the twin's own message parser. At most MAX_WAITING commands wait to leave (one leaves per
-loop of the link thread); more are refused with QueueFull, which the server answers 429.
+loop of the link thread); more are refused with QueueFull, which the server answers 429. Each command
+carries an `internal_id` (ignored by RMQ-FMU readers); the twin says on `from_cosim` when it queued,
+applied (at which step) or refused it, and `ticket(id)` tells what became of it.
 """
 
 from __future__ import annotations
@@ -19,30 +22,45 @@ import logging
 import queue
 import threading
 import time as wallclock
+import uuid
 from collections import deque
+from dataclasses import dataclass
 
 import pika
 
+from ... import safejson
 from ...diagnostics import CotwinError
+from ...dmodel.program import Scalar
 from ...mapping.amqp import connect, declare_exchange
 from ..project import RabbitMQSettings
 from ..publisher import idle_values, now_iso
-from ..rabbitmq import COMMANDS, EchoClock, parse_message
-from ..scenario import scalar_value, typed_value
+from ..rabbitmq import COMMANDS, MAX_BYTES, EchoClock, parse_message
+from ..scenario import command_values
 
 log = logging.getLogger("cotwin.dashboard")
+
+
+@dataclass(frozen=True)
+class _CommandEvent:
+    """A command event as the panel knows it: its name and value ports (as cotwin.dmodel.program.EventPort)."""
+
+    name: str
+    value_ports: list
 
 
 class PagePublisher:
     MAX_WAITING = 64  # commands queued and not yet published
     MAX_SENT = 1000  # messages remembered (a heartbeat every period for days would grow a list without bound)
+    MAX_TICKETS = 1000  # commands whose fate is remembered
 
     def __init__(self, settings: RabbitMQSettings, types: dict[str, str], events: list[dict], period: float = 0.25,
                  heartbeat: bool = True, name: str = "cotwin dashboard", scalars: dict | None = None):
         self.settings = settings
         self.types = types  # every command port with its FMI type
         self.scalars = scalars or {}  # value port -> its d-model Scalar (RoboSim type), where known
-        self.events = {e["name"]: [v["port"] for v in e["values"]] for e in events}
+        self.events = {e["name"]: _CommandEvent(e["name"], [(v["port"], self.scalars.get(v["port"]) or
+                                                              Scalar(v["port"], types[v["port"]], (), None))
+                                                             for v in e["values"]]) for e in events}
         self.idle = idle_values(types)
         self.period = period
         self.heartbeat = heartbeat
@@ -54,6 +72,8 @@ class PagePublisher:
         self.error: str | None = None
         self.echoes = EchoClock(settings.maxage_ms / 1000 if settings else 1.0, "dashboard")  # what the echoes say
         self._pending: queue.Queue[dict] = queue.Queue(self.MAX_WAITING)
+        self._lock = threading.Lock()
+        self.tickets: dict[str, dict] = {}  # command id -> what became of it (`ticket`), the newest MAX_TICKETS
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._started = False
@@ -65,30 +85,41 @@ class PagePublisher:
         link thread has stopped (nothing would leave)."""
         if event not in self.events:
             raise ValueError(f"{event[:80]!r} is not a command of this twin (commands: {', '.join(self.events) or 'none'})")
-        ports = self.events[event]
-        unknown = [k for k in values if k not in ports]
-        missing = [p for p in ports if p not in values]
-        if unknown or missing:
-            raise ValueError("; ".join([*(f"{k[:80]!r} is not a value of {event}" for k in unknown[:10]),
-                                        *(f"no value for '{p}'" for p in missing)]))
-        typed, wrong = {}, []
-        for port, value in values.items():
-            try:
-                typed[port] = scalar_value(value, self.scalars[port]) if port in self.scalars \
-                    else typed_value(value, self.types[port])
-            except ValueError as err:
-                wrong.append(f"{port}: {value!r:.40} {err}")
+        typed, wrong = command_values(self.events[event], values)
         if wrong:
-            raise ValueError("; ".join(wrong))
-        message = {"time": now_iso(), **self.idle, event: True, **typed}
+            raise ValueError("; ".join(message for _, message in wrong[:10]))
+        ident = uuid.uuid4().hex[:16]
+        message = {"time": now_iso(), **self.idle, **dict(typed), "internal_id": ident}
         parsed = parse_message(json.dumps(message).encode(), self.types, self.scalars)  # the twin's own check
         if parsed.dropped:
             raise ValueError("; ".join(parsed.dropped))
         if self.stopped:
             raise CotwinError(f"the page's command publisher has stopped ({self.error or 'its link ended'}): "
                               "commands cannot reach the twin")
-        self._pending.put_nowait(message)
+        with self._lock:
+            self._pending.put_nowait(message)
+            self.tickets[ident] = {"id": ident, "status": "waiting to be published", "message": message}
+            while len(self.tickets) > self.MAX_TICKETS:
+                self.tickets.pop(next(iter(self.tickets)))
         return message
+
+    def ticket(self, ident: str) -> dict | None:
+        """What became of the command `ident` (`command` put it in its message's `internal_id`): its status
+        (waiting to be published, published, queued by the twin, applied, refused) and the twin's word."""
+        with self._lock:
+            found = self.tickets.get(ident)
+            return dict(found) if found is not None else None
+
+    def _acknowledged(self, data: dict) -> None:
+        """The twin's word on a command of ours (cotwin.twin.rabbitmq: queued, applied, refused)."""
+        status = str(data.get("internal_status", ""))
+        if not status.startswith("command "):
+            return
+        with self._lock:
+            found = self.tickets.get(data.get("internal_id"))
+            if found is not None and found["status"] not in ("applied", "refused"):
+                found["status"] = status[len("command "):]
+                found.update({k: data[k] for k in ("applied_at", "place", "internal_message") if k in data})
 
     # ---- the link thread ----
     def start(self, timeout: float = 10.0) -> "PagePublisher":
@@ -116,6 +147,12 @@ class PagePublisher:
         self.echoes.take(body)  # never raises: a bad echo is refused and counted
         if self.echoes.ready_at is not None:
             self.twin_ready.set()
+        if b'"command ' in body[:4096]:  # the twin's word on a command (queued, applied, refused)
+            try:
+                data = safejson.loads_object(body, MAX_BYTES)
+            except ValueError:
+                return
+            self._acknowledged(data)
 
     def _run(self) -> None:
         s = self.settings
@@ -146,6 +183,10 @@ class PagePublisher:
                         message = {"time": now_iso(), **self.idle}
                 if message is not None:
                     channel.basic_publish(s.exchange, s.to_cosim, json.dumps(message).encode())
+                    with self._lock:
+                        found = self.tickets.get(message.get("internal_id"))
+                        if found is not None and found["status"] == "waiting to be published":
+                            found["status"] = "published"
                     self.sent.append((wallclock.time(), message))
                     self.sent_count += 1
                     next_tick = wallclock.monotonic() + self.period

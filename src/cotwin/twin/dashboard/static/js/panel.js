@@ -59,9 +59,11 @@ export function buildPanel(container, caption, sentLog, commands) {
         const r = await fetch("/api/command", { method: "POST", headers: { "Content-Type": "application/json" },
           body: JSON.stringify({ event: ev.name, values }) });
         const answer = await r.json();
-        item.className = r.ok ? "queued" : "error";
-        item.textContent = `${new Date().toLocaleTimeString()} ${text}: ` +
-          (r.ok ? (answer.twin_ready ? "published" : "queued until the twin is ready") : answer.error);
+        item.className = !r.ok ? "error" : answer.applied ? "confirmed" : "queued";
+        item.textContent = `${new Date().toLocaleTimeString()} ${text}: ` + (!r.ok ? answer.error
+          : answer.applied ? `applied in the step to t = ${Number(answer.applied.time).toFixed(2)} s`
+          : answer.place !== undefined ? `queued by the twin, ${answer.place} before it`
+          : answer.twin_ready ? "accepted, not applied yet" : "queued until the twin is ready");
       } catch (err) {
         item.className = "error";
         item.textContent = `${text}: ${err}`;

@@ -1,0 +1,123 @@
+"""Honest outcomes (issue 19 item 5) and one naming of command arguments (item 8): `cotwin run`, `twin`
+and `whatif` end with what became of every command, warn when none completed, and `--strict` makes that
+exit status 3; arguments are named by their port everywhere, the field name accepted where old files use it."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from cotwin.diagnostics import CotwinError
+from cotwin.twin.run import load
+from test_reliability import project  # noqa: F401 - a copy of the UR5e example in tmp_path/ur5e
+
+HEADER = "timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,MovementArgs_target_Z\n"
+
+
+def cotwin(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "cotwin", *map(str, args)], capture_output=True, text=True, cwd=cwd,
+                          timeout=600)
+
+
+def test_a_run_whose_commands_were_all_infeasible_says_so_and_strict_fails(project, tmp_path):
+    """Issue 19 item 5: four infeasible commands printed '201 rows to t = 20 s' and exit 0. Run from another
+    working directory, with a plan that is not the example's."""
+    (project / "plan.csv").write_text(HEADER + "1000,true,15,23,3\n3000,true,15,23,4\n")
+    out = tmp_path / "out"
+    proc = cotwin("run", "ur5e/cotwin.toml", "-o", out, "--end", "6", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "commands: 2, 2 infeasible" in proc.stdout
+    assert "applied at t = 1.1 s moveDiscreteCommand(MovementArgs_target_X=15, MovementArgs_target_Y=23, " \
+           "MovementArgs_target_Z=3): infeasible (nonfeasibleMoveDiscreteCommand)" in proc.stdout
+    assert "warning: no command completed (2 applied)" in proc.stderr
+    strict = cotwin("run", "ur5e/cotwin.toml", "-o", out, "--end", "6", "--strict", cwd=tmp_path)
+    assert strict.returncode == 3 and "--strict: 2 command(s) or wait(s) did not end well" in strict.stderr
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+def test_a_run_lists_each_command_completed_infeasible_or_not_taken(project, tmp_path, algorithm):
+    (project / "plan.csv").write_text(HEADER + "1000,true,0,23,1\n1300,true,3,20,2\n5000,true,15,23,3\n"
+                                               "9000,true,8,10,0\n")
+    proc = cotwin("run", project / "cotwin.toml", "-o", tmp_path / "out", "--end", "14", "--algorithm", algorithm)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    head = next(k for k, line in enumerate(lines) if line.startswith("commands:"))
+    assert lines[head] == "commands: 4, 2 completed, 1 infeasible, 1 not taken"
+    verdicts = [line.split("): ", 1)[1] for line in lines[head + 1:head + 5]]
+    assert verdicts[0].startswith("completed at t = ") and verdicts[3].startswith("completed at t = ")
+    assert verdicts[1].startswith("not taken (the d-model was in state ")  # busy with the first move
+    assert verdicts[2] == "infeasible (nonfeasibleMoveDiscreteCommand)"
+    assert "warning" not in proc.stderr
+    assert cotwin("run", project / "cotwin.toml", "-o", tmp_path / "out", "--end", "14", "--algorithm", algorithm,
+                  "--strict").returncode == 3
+
+
+def test_a_live_twin_sums_up_each_side(tmp_path):
+    from conftest import EXAMPLES
+
+    from cotwin.mapping.endpoint import SimulatedEndpoint
+    from cotwin.pmodel.simulator import PlatformSimulator
+    from cotwin.twin.runtime import LiveTwin
+
+    system = load(EXAMPLES / "ur5e" / "cotwin.toml")
+    pt = SimulatedEndpoint(PlatformSimulator(system.models.tree, system.models.scene))
+    result = LiveTwin(system, tmp_path, pt=pt, end=4.0).run()
+    for side in ("pt", "dt"):
+        summary = result.sides[side].summary()
+        assert summary.lines()[0] == "commands: 1, 1 completed" and not summary.warnings()
+        assert summary.outcomes[0].args == {"MovementArgs_target_X": 0, "MovementArgs_target_Y": 23,
+                                            "MovementArgs_target_Z": 1}
+
+
+def test_whatif_sums_up_and_strict_fails_on_an_infeasible_command(tmp_path):
+    from conftest import EXAMPLES
+
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps([{"time": 0.5, "event": "moveDiscreteCommand",
+                                 "args": {"MovementArgs_target_X": 15, "MovementArgs_target_Y": 23,
+                                          "MovementArgs_target_Z": 3}}]))
+    proc = cotwin("whatif", EXAMPLES / "ur5e" / "cotwin.toml", "--plan", plan, "--strict")
+    assert proc.returncode == 3, proc.stderr
+    assert "NOT feasible" in proc.stdout and "commands: 1, 1 infeasible" in proc.stdout
+    assert "warning: no command completed (1 applied)" in proc.stderr
+
+
+def test_command_arguments_have_one_naming_and_old_files_keep_working(tmp_path):
+    """The port name (MovementArgs_target_X: the RMQ FMU's wire, plan CSVs, the page) everywhere; TOML
+    scenarios, what-if plans and the page also take the field name (target_X) older files use."""
+    from conftest import EXAMPLES
+
+    from cotwin.twin.scenario import read_toml
+    from cotwin.twin.whatif import plan_from_json
+
+    program = load(EXAMPLES / "ur5e" / "cotwin.toml").models.program
+    canonical = {"MovementArgs_target_X": 3, "MovementArgs_target_Y": 20, "MovementArgs_target_Z": 2}
+    old = {"target_X": 3, "target_Y": 20, "target_Z": 2}
+    expected = (("moveDiscreteCommand", True), *canonical.items())
+    scenario = tmp_path / "s.toml"
+    for args in (canonical, old, {"target_X": 3, "MovementArgs_target_Y": 20, "target_Z": 2}):
+        body = ", ".join(f"{k} = {v}" for k, v in args.items())
+        scenario.write_text(f'[[command]]\ntime = 1.0\nevent = "moveDiscreteCommand"\nargs = {{ {body} }}\n')
+        assert [c.values for c in read_toml(scenario, program)] == [expected]
+        assert [c.values for c in plan_from_json([{"time": 1, "event": "moveDiscreteCommand", "args": args}],
+                                                 program)] == [expected]
+    scenario.write_text('[[command]]\ntime = 1.0\nevent = "moveDiscreteCommand"\n'
+                        'args = { target_X = 3, MovementArgs_target_X = 4, target_Y = 1, target_Z = 0 }\n')
+    with pytest.raises(CotwinError, match=r"s.toml:4:\d+: error: \[\[command\]\] 1: argument MovementArgs_target_X "
+                                          r"of moveDiscreteCommand is given twice"):
+        read_toml(scenario, program)
+    # the page's panel: the same reader
+    from cotwin.twin.dashboard.commands import PagePublisher
+    from cotwin.twin.rabbitmq import port_scalars, port_types
+
+    live = load(EXAMPLES / "ur5e" / "live.toml")
+    [move] = [ev for ev in live.models.program.inputs if ev.name == "moveDiscreteCommand"]
+    panel = PagePublisher(None, port_types(live.models.program, live.source_ports),
+                          [{"name": move.name, "values": [{"port": p} for p, _ in move.value_ports]}],
+                          scalars=port_scalars(live.models.program))
+    for args in (canonical, old):
+        message = panel.command("moveDiscreteCommand", args)
+        assert {k: message[k] for k in canonical} == canonical and message["moveDiscreteCommand"] is True
