@@ -10,12 +10,16 @@ the FMI wrapper (fmu.py) calls these functions.
 The generated C never traps: integer arithmetic is checked (division and remainder by zero, results
 outside int64), indices are checked against their bounds, sets and sequences against their
 capacity. A failure makes the step return 1 with `M->message` saying where, e.g.
-`arm.rst:57:9: division by zero in state Requested (cycle 4)`, the same text the interpreter reports.
+`arm.rst:57:9: division by zero in state Requested (cycle 4)`, the same text the interpreter reports but
+for the file, which is named relative to the project (so that the code does not depend on where it is).
 Expressions whose evaluation can fail are evaluated into temporaries in the interpreter's order
 (left to right, conditional parts only when reached), so that the first failure is the same one.
 """
 
 from __future__ import annotations
+
+import os
+from pathlib import Path
 
 from ..diagnostics import CotwinError
 from ..robosim import functions as fns
@@ -610,9 +614,26 @@ def _dedent(lines: list[str]) -> list[str]:
     return [line[4:] if line.startswith("    ") else line for line in lines]
 
 
+def model_root(program: Program) -> Path:
+    """The folder the model files' locations are written relative to in generated files when the caller
+    names none: the deepest folder holding every model file of the project (the library's are not files)."""
+    folders = [str(Path(f.path).resolve().parent) for f in program.project.files if not str(f.path).startswith("<")]
+    return Path(os.path.commonpath(folders)) if folders else Path("/")
+
+
+def portable_location(loc, root: Path) -> str:
+    """`file:line:column` with the file relative to `root` (posix separators): the same text whatever the
+    working directory and wherever the project lies, so that generated files never depend on either."""
+    path = str(loc.path)
+    if not path.startswith("<"):
+        path = Path(os.path.relpath(Path(path).resolve(), root)).as_posix()
+    return f"{path}:{loc.line}:{loc.column}"
+
+
 class CGenerator:
-    def __init__(self, program: Program):
+    def __init__(self, program: Program, root: str | Path | None = None):
         self.program = program
+        self.root = Path(root).resolve() if root is not None else model_root(program)
         self.types = CTypes(program.project)
         self.locations: list[str] = []
         self._location_index: dict[str, int] = {}
@@ -628,7 +649,7 @@ class CGenerator:
         return f"t{self.counter}"
 
     def location(self, loc) -> int:
-        text = str(loc)
+        text = portable_location(loc, self.root)
         if text not in self._location_index:
             self._location_index[text] = len(self.locations)
             self.locations.append(text)
@@ -1326,9 +1347,9 @@ static double rng_real(Model *M) { return (double)(rng_next(M) >> 11) * (1.0 / 9
 """
 
 
-def generate_c(program: Program) -> dict[str, str]:
-    """The generated sources: {file name: text}."""
-    header, source = CGenerator(program).generate()
+def generate_c(program: Program, root: str | Path | None = None) -> dict[str, str]:
+    """The generated sources: {file name: text}; model locations relative to `root` (default: model_root)."""
+    header, source = CGenerator(program, root).generate()
     return {"model.h": header, "model.c": source}
 
 

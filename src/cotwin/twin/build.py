@@ -13,8 +13,11 @@ import fcntl
 import hashlib
 import json
 import os
+import re
 import shutil
 import tempfile
+import uuid
+import zipfile
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -62,12 +65,6 @@ def _cotwin_sources(names=_GENERATORS) -> list[bytes]:
     return [(root / n).read_bytes() for n in names if (root / n).is_file()]
 
 
-def model_texts(system: TwinSystem) -> list[bytes]:
-    """Every model file the twin was checked from, in a stable order."""
-    return [Path(f.path).read_bytes() for f in sorted(system.models.project.files, key=lambda f: str(f.path))
-            if not str(f.path).startswith("<")]
-
-
 class Record:
     """DIR/build.json: artefact name -> the key it was built with."""
 
@@ -101,17 +98,21 @@ def write_text(target: Path, text: str) -> Path:
 
 
 def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: Record | None = None) -> Path:
-    """DIR/dmodel.fmu, rebuilt only when the models, the module, the compiler or cotwin changed."""
-    from ..dmodel.fmu import build_fmu
+    """DIR/dmodel.fmu, rebuilt only when its sources (the models, the module, where the model files lie in
+    the project), the compiler or cotwin changed."""
+    from ..dmodel.fmu import build_fmu, fmu_sources
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     record = record or Record(folder)
     target = folder / "dmodel.fmu"
-    key = _digest(__version__, *model_texts(system), str(system.spec.module), cc, *_cotwin_sources())
+    root = system.spec.path.parent
+    sources = fmu_sources(system.models.program, root)
+    key = _digest(__version__, *(part for name in sorted(sources) for part in (name, sources[name])), cc,
+                  *_cotwin_sources())
     if not record.fresh(target, key):
         record.forget(target)
-        build_fmu(system.models.program, target, cc=cc)
+        build_fmu(system.models.program, target, cc=cc, root=root)
         record.done(target, key)
     return target
 
@@ -217,7 +218,31 @@ def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = Non
                                        project_files=[work / "twin", work / "cotwin_unit.json"],
                                        canGetAndSetFMUstate=True, canSerializeFMUstate=True)
             part = target.with_name(target.name + ".part")
-            shutil.move(str(fmu), part)
+            reproducible_fmu(Path(fmu), part)
             part.replace(target)
             record.done(target, key)
     return written
+
+
+_ZIP_TIME = (1980, 1, 1, 0, 0, 0)
+
+
+def reproducible_fmu(fmu: Path, output: Path) -> Path:
+    """`fmu` (a pythonfmu build) rewritten to `output` so that the same sources give the same bytes wherever
+    and whenever it is built: entries in name order with a fixed date and modes, no generation date, and
+    a GUID that is a digest of the content (pythonfmu draws a time-based one)."""
+    with zipfile.ZipFile(fmu) as zf:
+        files = {info.filename: zf.read(info) for info in zf.infolist() if not info.is_dir()}
+    description = files["modelDescription.xml"].decode("utf-8")
+    description = re.sub(r'\s+generationDateAndTime="[^"]*"', "", description, count=1)
+    description = re.sub(r'\bguid="[^"]*"', 'guid="@GUID@"', description, count=1)
+    files["modelDescription.xml"] = description.encode("utf-8")
+    guid = str(uuid.UUID(_digest(*(part for name in sorted(files) for part in (name, files[name])))[:32]))
+    files["modelDescription.xml"] = description.replace("@GUID@", guid).encode("utf-8")
+    with zipfile.ZipFile(output, "w", zipfile.ZIP_DEFLATED) as zf:
+        for name in sorted(files):
+            info = zipfile.ZipInfo(name, date_time=_ZIP_TIME)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = (0o755 if name.startswith("binaries/") else 0o644) << 16
+            zf.writestr(info, files[name])
+    return output
