@@ -103,3 +103,14 @@ def test_a_state_restores_in_another_copy_from_another_folder_through_whatif_and
     assert swept.exit_code == 0, swept.output
     rows = Path("sweep.csv").read_text().splitlines()
     assert len(rows) == 3 and all(",True,True," in row for row in rows[1:])
+
+
+def test_a_state_of_other_models_is_refused_naming_the_file_that_changed(saved_state, tmp_path, monkeypatch):
+    changed = _copy(tmp_path / "changed")
+    (changed / "arm.rst").write_text((changed / "arm.rst").read_text() + "\n// one more line\n")
+    monkeypatch.chdir(changed)
+    run = CliRunner().invoke(main, ["whatif", "cotwin.toml", "--plan", "plan.csv", "--from", str(saved_state)])
+    assert run.exit_code == 1
+    said = str(run.exception)
+    assert "saved from other models than these: arm.rst changed (sha256" in said
+    assert "mapping.pm" not in said and "ur5e.pm" not in said  # only what differs

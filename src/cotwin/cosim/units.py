@@ -28,7 +28,7 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
                        fmi2CallbackLoggerTYPE)
 
 from ..diagnostics import CotwinError
-from .state import pack, unpack
+from .state import fields, finite, of_type, pack, port_value, unpack
 
 
 INT32 = (-(2 ** 31), 2 ** 31 - 1)
@@ -507,16 +507,22 @@ class FMUUnit(Unit):
             self._call("fmi2SerializeFMUstate", fn["fmi2SerializeFMUstate"], self.component, handle, buffer, size)
         finally:
             self._call("fmi2FreeFMUstate", fn["fmi2FreeFMUstate"], self.component, byref(handle))
-        return pack("FMU", {"guid": self.md.guid, "time": self.time, "fmu": buffer.raw})
+        return pack("FMU", {"guid": self.md.guid, "model": self.md.modelName, "time": self.time, "fmu": buffer.raw})
 
     def set_state(self, state: bytes) -> None:
-        """fmi2DeSerializeFMUstate and fmi2SetFMUstate from bytes `get_state` returned for this FMU."""
-        data = unpack(state, "FMU")
+        """fmi2DeSerializeFMUstate and fmi2SetFMUstate from bytes `get_state` returned for this FMU (its
+        GUID; the FMU checks its own bytes)."""
+        data = fields(unpack(state, "FMU"), f"unit {self.name}", ("guid", "time", "fmu"), ("model",))
         if not self.can_save_state:
             raise UnitError(self.name, self.time, "fmi2SetFMUstate", "the FMU cannot restore a state")
-        if data.get("guid") != self.md.guid:
-            raise UnitError(self.name, self.time, "fmi2SetFMUstate",
-                            f"the state is of another FMU (GUID {data.get('guid')}, this one is {self.md.guid})")
+        saved = f"{str(data.get('model', '?'))[:60]} (GUID {str(data['guid'])[:60]})"
+        if data["guid"] != self.md.guid:
+            raise UnitError(self.name, self.time, "fmi2SetFMUstate", f"the state is of another FMU: {saved}, this "
+                            f"unit runs {self.md.modelName} (GUID {self.md.guid})"
+                            + (": another build of the same model (other sources or another cotwin)"
+                               if data.get("model") == self.md.modelName else ""))
+        time = finite(data["time"], f"unit {self.name}'s time")
+        of_type(data["fmu"], bytes, f"unit {self.name}'s FMU state")
         raw = data["fmu"]
         fn, handle = self._fn, c_void_p()
         self._call("fmi2DeSerializeFMUstate", fn["fmi2DeSerializeFMUstate"], self.component, raw, len(raw),
@@ -525,7 +531,7 @@ class FMUUnit(Unit):
             self._call("fmi2SetFMUstate", fn["fmi2SetFMUstate"], self.component, handle)
         finally:
             self._call("fmi2FreeFMUstate", fn["fmi2FreeFMUstate"], self.component, byref(handle))
-        self.time = data["time"]
+        self.time = time
 
 
 class PythonUnit(Unit):
@@ -577,14 +583,24 @@ class PythonUnit(Unit):
         pass
 
     # ---- state ----
+    STATE_KEYS: tuple[str, ...] = ("values", "time")  # of a snapshot; subclasses add theirs
+
     def snapshot(self) -> dict:
-        """The unit's state as plain data; subclasses add their own keys."""
+        """The unit's state as plain data; subclasses add their own keys (STATE_KEYS)."""
         return {"values": dict(self.values), "time": self.time}
 
     def restore(self, snapshot: dict) -> None:
+        """Continue from a snapshot, checked first: exactly STATE_KEYS, a value of its type for every port,
+        a finite time (subclasses check their own keys, then call this). Values of ports this unit does not
+        have are left out: a fork's unit may have fewer (its command source drives some of its events)."""
+        what = f"unit {self.name}"
+        fields(snapshot, what, self.STATE_KEYS)
+        saved = fields(snapshot["values"], f"{what}'s values", list(self.ports), snapshot["values"])
+        values = {name: port_value(saved[name], port.type, f"{what}'s {name}") for name, port in self.ports.items()}
+        time = finite(snapshot["time"], f"{what}'s time")
         self.values.clear()  # in place: bound setters and getters keep working
-        self.values.update(snapshot["values"])
-        self.time = snapshot["time"]
+        self.values.update(values)
+        self.time = time
 
     def get_state(self) -> bytes:
         return pack(type(self).__name__, self.snapshot())

@@ -301,16 +301,35 @@ class PlatformSimulator:
         if vector.shape != (size,):
             raise CotwinError(f"the simulator state has {vector.size} numbers, this model's has {size}: "
                               "it is a state of another model")
+        if not np.all(np.isfinite(vector)) or not abs(vector[0]) < 1e12:
+            raise CotwinError("the simulator state holds numbers that are not finite (or a time beyond 1e12 s)")
+        scans = self._checked_scans(state.scans)
         mujoco.mj_setState(self.model, self.data, vector, STATE)
         mujoco.mj_forward(self.model, self.data)
         self._steps = int(round(self.data.time / self.timestep))
         self._touching = set()
-        if len(state.scans) == len(self.scanners):
-            for scanner, (readings, ranges) in zip(self.scanners, state.scans):
-                scanner.readings, scanner.ranges = dict(readings), np.array(ranges)
+        if scans is not None:
+            for scanner, (readings, ranges) in zip(self.scanners, scans):
+                scanner.readings, scanner.ranges = readings, ranges
         else:  # a state without scans (saved before ray sensors were read): scan where the robot is
             for scanner in self.scanners:
                 scanner.scan()
+
+    def _checked_scans(self, scans) -> list | None:
+        """The ray sensors' saved readings, each (readings by path, ranges of every beam) as the scanner
+        holds them, or None for a state without them; CotwinError for any other shape."""
+        if not scans or len(scans) != len(self.scanners):
+            return None
+        out = []
+        for k, (scanner, scan) in enumerate(zip(self.scanners, scans)):
+            readings, ranges = scan if isinstance(scan, (tuple, list)) and len(scan) == 2 else (None, None)
+            if not isinstance(readings, dict) or set(readings) != set(scanner.ports) or \
+                    not all(isinstance(v, float) for v in readings.values()):
+                raise CotwinError(f"the simulator state's scan {k + 1} does not hold the readings {', '.join(scanner.ports)}")
+            if not isinstance(ranges, np.ndarray) or ranges.shape != scanner.ranges.shape or ranges.dtype != np.float64:
+                raise CotwinError(f"the simulator state's scan {k + 1} does not hold {len(scanner.angles)} ranges")
+            out.append((dict(readings), ranges.copy()))
+        return out
 
     def body_pose(self, name: str) -> np.ndarray:
         try:

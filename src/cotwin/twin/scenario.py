@@ -25,6 +25,7 @@ from ..config import Key, Schema, TomlFile, is_number, raise_problems
 from ..cosim.units import INT32, Port, PythonUnit
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..dmodel.program import Program
+from ..plaindata import count
 
 MAX_FIELD = 1 << 16  # characters: no cell of a plan is legitimately longer
 
@@ -346,6 +347,8 @@ class ScenarioUnit(PythonUnit):
                     self.values[port] = value
 
     # ---- state: the port values, the time reached and the next command to play ----
+    STATE_KEYS = (*PythonUnit.STATE_KEYS, "next", "plan")
+
     def snapshot(self) -> dict:
         return {**super().snapshot(), "next": self._next, "plan": self._plan()}
 
@@ -354,7 +357,7 @@ class ScenarioUnit(PythonUnit):
         first of its commands not yet due at the saved time."""
         super().restore(snapshot)
         if snapshot["plan"] == self._plan():
-            self._next = snapshot["next"]
+            self._next = count(snapshot["next"], f"unit {self.name}'s next command", len(self.commands))
         else:
             self._next = next((k for k, c in enumerate(self.commands) if c.time >= self.time - 1e-9), len(self.commands))
 

@@ -13,7 +13,7 @@ monitored variables -> the source, when the source echoes them (the RabbitMQ bri
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..cosim.system import Connection, System
@@ -53,6 +53,23 @@ class TwinModels:
     scene: object | None
     monitored: list[str]
     calibration: object | None = None  # cotwin.twin.calibration.Calibration: [platform] calibration
+    digests: dict[str, str] = field(default_factory=dict)  # model_digests: what a saved state names
+
+
+def model_digests(spec: TwinProject, project) -> dict[str, str]:
+    """What the DT is made from, by path relative to the project's folder (as in generated files): every
+    model file, the calibration and the world file, each with the sha256 of its bytes; a saved state
+    carries them, so that one restored into a DT of other models names the file that changed."""
+    import hashlib
+    import os
+
+    root = spec.path.parent.resolve()
+    files = [Path(f.path) for f in project.files if not str(f.path).startswith("<")]
+    files += [p for p in (spec.calibration, spec.world_file) if p is not None]
+    out = {}
+    for path in dict.fromkeys(p.resolve() for p in files):
+        out[Path(os.path.relpath(path, root)).as_posix()] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return dict(sorted(out.items()))
 
 
 def load_models(spec: TwinProject) -> TwinModels:
@@ -91,7 +108,7 @@ def load_models(spec: TwinProject) -> TwinModels:
         raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
                                    f"[monitor] readings {', '.join(clash)}: the mapping has variables of these names")])
     monitored = [*mirror_variables(variables, joints), *spec.readings]
-    return TwinModels(project, program, tree, mapping, scene, monitored, calibration)
+    return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project))
 
 
 def build_scene(spec: TwinProject, mapping, calibration=None):
@@ -362,7 +379,9 @@ class TwinSystem:
             units.append(source if source is not None else self.source_unit())
         units.append(dmodel if dmodel is not None else FMUUnit(DMODEL.name, dmodel_fmu))
         units.append(self.mapping_unit(endpoint))
-        return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters)
+        return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters,
+                         models=self.models.digests)
+
 
     def units_by_role(self, system: System) -> dict[str, Unit]:
         return {u.role: system.units[u.name] for u in self.units}
