@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError
-from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchange_name, main, output_path, show_warnings,
-                     start_dashboard)
+from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, address, check_finite, check_timing, exchange_name, main,
+                     output_path, said_restarts, show_warnings, start_dashboard)
 
 
 @main.command()
@@ -25,9 +25,10 @@ from .common import (DASHBOARD_HELP, address, check_finite, check_timing, exchan
 @click.option("--whatif", "whatif", is_flag=True, help="answer what-if requests sent over the broker (see docs)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+@ON_UNIT_FAILURE
 def twin(project: str, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
          pt_log: str | None, exchange: str | None, history: str | None, whatif: bool, dashboard: tuple[str, int] | None,
-         cc: str) -> None:
+         cc: str, on_unit_failure: str) -> None:
     """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
     with deviation checking, alarms and history."""
     import signal
@@ -58,7 +59,8 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
                       broker if whatif else None)
     try:
         live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
-                        observers=[dash.feed] if dash else (), cc=cc, whatif_url=broker if whatif else None)
+                        observers=[dash.feed] if dash else (), cc=cc, whatif_url=broker if whatif else None,
+                        restart=on_unit_failure == "restart-from-state")
 
         def interrupt(*_) -> None:
             """In the step loop, end after the step (results kept as a finished run's); before it (waiting for
@@ -81,6 +83,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         if dash is not None:
             dash.stop()
     r = result.pt
+    said_restarts(unit for side in live.sides.values() for unit in side.execution.system.units.values())
     state = "stopped early" if r.steps < live.steps or live._stop else "done"
     click.echo(f"{result.out}: PT and DT, {r.steps} steps each to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f}), {state}")

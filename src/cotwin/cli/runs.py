@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError
-from .common import (DASHBOARD_HELP, address, check_finite, check_step_count, check_timing, main, output_path,
-                     show_warnings, start_dashboard)
+from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, address, check_finite, check_step_count, check_timing, main,
+                     output_path, said_restarts, show_warnings, start_dashboard)
 
 
 @main.command()
@@ -38,8 +38,9 @@ def build(project: str, out: str, cc: str) -> None:
 @click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+@ON_UNIT_FAILURE
 def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
-        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str) -> None:
+        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str, on_unit_failure: str) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
     from rich.progress import Progress
@@ -62,11 +63,13 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
             task = bar.add_task("co-simulating", total=1)
             ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc,
                            observers=[dash.feed] if dash else None,
-                           progress=lambda k, n: bar.update(task, completed=k, total=n))
+                           progress=lambda k, n: bar.update(task, completed=k, total=n),
+                           restart=on_unit_failure == "restart-from-state")
     finally:
         if dash is not None:
             dash.stop()
     r = ran.result
+    said_restarts(ran.system.units.values())
     click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f})")
 
@@ -77,7 +80,9 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
 @click.option("--step", type=click.FloatRange(min=0, min_open=True))
 @click.option("--end", type=click.FloatRange(min=0, min_open=True))
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
-def simulate(multimodel: str, out: str | None, step: float | None, end: float | None, algorithm: str | None) -> None:
+@ON_UNIT_FAILURE
+def simulate(multimodel: str, out: str | None, step: float | None, end: float | None, algorithm: str | None,
+             on_unit_failure: str) -> None:
     """Run any Maestro multimodel JSON with cotwin's master (FMUs through FMPy)."""
 
     from ..cosim.multimodel import execution_for, read_multimodel
@@ -87,11 +92,12 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
     check_step_count(mm.step if step is None else step, (mm.end if end is None else end) - mm.start,
                 "--end" if end is not None else "--step" if step is not None else None, multimodel)
     csv_path = Path(out) if out else Path(multimodel).parent / "outputs.csv"
-    execution = execution_for(mm, csv_path, step, algorithm)
+    execution = execution_for(mm, csv_path, step, algorithm, restart=on_unit_failure == "restart-from-state")
     try:
         result = execution.run(mm.end if end is None else end)
     except (CotwinError, KeyboardInterrupt) as err:  # say where the rows computed so far are
         from ..cosim.execution import ended_early
 
         raise ended_early(err, execution.time, execution.observers[0].kept()) from None
+    said_restarts(execution.system.units.values())
     click.echo(f"{csv_path}: {result.rows} rows to t = {result.end_time:g} s in {result.wall_seconds:.2f} s")

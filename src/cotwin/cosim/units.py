@@ -37,7 +37,7 @@ INT32 = (-(2 ** 31), 2 ** 31 - 1)
 class UnitError(CotwinError):
     def __init__(self, unit: str, time: float, call: str, detail: str):
         super().__init__(f"unit {unit}: {call} failed at t = {time:g} s: {detail}")
-        self.unit, self.time, self.call = unit, time, call
+        self.unit, self.time, self.call, self.detail = unit, time, call, detail
 
 
 def checked_value(unit: str, port: "Port", value) -> object:
@@ -223,28 +223,42 @@ class _Block:
         self.values = (_C_TYPE[kind] * self.n)()
 
 
+def read_fmu(name: str, path: Path):
+    """An FMU's model description, its ports (Real, Integer and Boolean inputs, outputs and parameters) by
+    name and their value references; CotwinError naming unit `name` for a file that is no co-simulation FMU."""
+    if not path.is_file():
+        raise CotwinError(f"unit {name}: no FMU at {path}")
+    try:
+        md = read_model_description(str(path))
+    except Exception as err:  # FMPy raises many kinds for a bad zip or XML
+        raise CotwinError(f"unit {name}: cannot read {path}: {err}") from None
+    if md.coSimulation is None:
+        raise CotwinError(f"unit {name}: {path} is not a co-simulation FMU")
+    ports, vr = {}, {}
+    for v in md.modelVariables:
+        if v.type in ("Real", "Integer", "Boolean") and v.causality in ("input", "output", "parameter"):
+            ports[v.name] = Port(v.name, v.type, v.causality)
+            vr[v.name] = v.valueReference
+    return md, ports, vr
+
+
+def can_save_state(md) -> bool:
+    """Whether an FMU can get, set and serialise its state (both capability flags)."""
+    cs = md.coSimulation
+    return bool(cs.canGetAndSetFMUstate and cs.canSerializeFMUstate)
+
+
 class FMUUnit(Unit):
     """An FMI 2.0 co-simulation FMU in this process: FMPy reads, extracts, loads and instantiates it;
     every call into the FMU then goes through `_call`, which checks the returned status. Values move
     through C arrays allocated once per bound list of ports, one call per FMI type and step."""
 
+    unzip_dir: str | None = None  # where to extract the FMU (None: a temporary folder of FMPy's)
+
     def __init__(self, name: str, path: str | Path):
         self.name = name
         self.path = Path(path)
-        if not self.path.is_file():
-            raise CotwinError(f"unit {name}: no FMU at {self.path}")
-        try:
-            self.md = read_model_description(str(self.path))
-        except Exception as err:  # FMPy raises many kinds for a bad zip or XML
-            raise CotwinError(f"unit {name}: cannot read {self.path}: {err}") from None
-        if self.md.coSimulation is None:
-            raise CotwinError(f"unit {name}: {self.path} is not a co-simulation FMU")
-        self.ports = {}
-        self.vr = {}
-        for v in self.md.modelVariables:
-            if v.type in ("Real", "Integer", "Boolean") and v.causality in ("input", "output", "parameter"):
-                self.ports[v.name] = Port(v.name, v.type, v.causality)
-                self.vr[v.name] = v.valueReference
+        self.md, self.ports, self.vr = read_fmu(name, self.path)
         self.fmu = None
         self.component = None
         self.folder = None
@@ -325,14 +339,13 @@ class FMUUnit(Unit):
 
     @property
     def can_save_state(self) -> bool:
-        cs = self.md.coSimulation
-        return bool(cs.canGetAndSetFMUstate and cs.canSerializeFMUstate)
+        return can_save_state(self.md)
 
     # ---- life cycle ----
     def instantiate(self, start: float) -> None:
         self.time = start
         try:
-            self.folder = extract(str(self.path))
+            self.folder = extract(str(self.path), self.unzip_dir)
         except Exception as err:  # a bad zip
             raise UnitError(self.name, start, "extract", str(err)) from None
         self.fmu = self._call("load", lambda: FMU2Slave(

@@ -99,13 +99,23 @@ def write_text(target: Path, text: str) -> Path:
 
 def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: Record | None = None) -> Path:
     """DIR/dmodel.fmu, rebuilt only when its sources (the models, the module, where the model files lie in
-    the project), the compiler or cotwin changed."""
+    the project), the compiler or cotwin changed; a copy of [models] fmu when the project names one."""
     from ..dmodel.fmu import build_fmu, fmu_sources
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     record = record or Record(folder)
     target = folder / "dmodel.fmu"
+    if system.spec.fmu is not None:  # built elsewhere ([models] fmu): copied, as the multimodel names it
+        given = system.spec.fmu.read_bytes()
+        key = _digest("given", given)
+        if not record.fresh(target, key):
+            record.forget(target)
+            part = target.with_name(target.name + ".part")
+            part.write_bytes(given)
+            part.replace(target)
+            record.done(target, key)
+        return target
     root = system.spec.path.parent
     sources = fmu_sources(system.models.program, root)
     key = _digest(__version__, *(part for name in sorted(sources) for part in (name, sources[name])), cc,
@@ -230,11 +240,13 @@ _ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 def reproducible_fmu(fmu: Path, output: Path) -> Path:
     """`fmu` (a pythonfmu build) rewritten to `output` so that the same sources give the same bytes wherever
     and whenever it is built: entries in name order with a fixed date and modes, no generation date, and
-    a GUID that is a digest of the content (pythonfmu draws a time-based one)."""
+    a GUID that is a digest of the content (pythonfmu draws a time-based one); its generationTool says
+    cotwin built it (with pythonfmu), so that it runs in the master's process by default."""
     with zipfile.ZipFile(fmu) as zf:
         files = {info.filename: zf.read(info) for info in zf.infolist() if not info.is_dir()}
     description = files["modelDescription.xml"].decode("utf-8")
     description = re.sub(r'\s+generationDateAndTime="[^"]*"', "", description, count=1)
+    description = re.sub(r'\bgenerationTool="([^"]*)"', r'generationTool="cotwin (\1)"', description, count=1)
     description = re.sub(r'\bguid="[^"]*"', 'guid="@GUID@"', description, count=1)
     files["modelDescription.xml"] = description.encode("utf-8")
     guid = str(uuid.UUID(_digest(*(part for name in sorted(files) for part in (name, files[name])))[:32]))

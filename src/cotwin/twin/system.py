@@ -370,14 +370,19 @@ class TwinSystem:
         return None
 
     def instantiate(self, dmodel_fmu: str | Path, endpoint, source: Unit | None = None,
-                    dmodel: Unit | None = None) -> System:
-        """A fresh, checked co-simulation of this twin against `endpoint` (the platform)."""
-        from ..cosim.units import FMUUnit
+                    dmodel: Unit | None = None, restart: bool = False) -> System:
+        """A fresh, checked co-simulation of this twin against `endpoint` (the platform). The d-model FMU
+        runs in a process of its own when [cosim] isolate says so (by default when cotwin did not build
+        it: [models] fmu) or when `restart` (a failed step is retried in a new process from its last good
+        state)."""
+        from ..cosim.isolated import fmu_unit
 
         units = []
         if self.source is not None:
             units.append(source if source is not None else self.source_unit())
-        units.append(dmodel if dmodel is not None else FMUUnit(DMODEL.name, dmodel_fmu))
+        isolate = self.spec.isolate if self.spec.isolate is not None else self.spec.fmu is not None
+        units.append(dmodel if dmodel is not None else fmu_unit(DMODEL.name, dmodel_fmu, isolate,
+                                                                 self.spec.unit_timeout, restart))
         units.append(self.mapping_unit(endpoint))
         return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters,
                          models=self.models.digests)
