@@ -218,3 +218,34 @@ def test_the_live_twin_survives_a_crashing_dmodel_fmu_with_restart_from_state(cr
     assert [r["{mapping}.mapping.q0"] for r in dt] == [r["{mapping}.mapping.q0"] for r in expected]
     with pytest.raises(Exception, match="fmi2DoStep failed at t = 3.9 s: the FMU dmodel.fmu crashed its process"):
         LiveTwin(load(folder / "crashing.toml"), tmp_path / "again", pt=simulated_endpoint(system), end=6.0).run()
+
+
+@pytest.mark.parametrize("answer, said", [
+    (b"\x00" + (1 << 31).to_bytes(4, "little"), "answer with a frame of 2147483648 bytes"),
+    (b"\x07\x00\x00\x00\x00", "answer with an answer of kind 7"),
+    (b"\x00\x03\x00\x00\x00abc", "answered 3 bytes for 12 bytes of outputs"),
+    (b"\x00\x00\x00", "closed its connection|ended its process|crashed"),
+])
+def test_a_worker_that_answers_nonsense_is_stopped_with_a_located_error(fmus, answer, said):
+    """Whatever a damaged worker writes, the master reads only frames of its own layout: a length beyond
+    bounds, an unknown kind of answer or outputs of the wrong size end the unit with a located error."""
+    import os
+
+    unit = IsolatedUnit("{f}.a", fmus["saves"], timeout=5)
+    unit.instantiate(0.0)
+    read = unit.getter(["y", "n"])
+    unit.initialize()
+    unit.step(0.0, 0.1)
+    assert read() == (0.0, 1)
+    worker = unit._worker
+    fake_r, fake_w = os.pipe()
+    os.write(fake_w, answer)
+    os.close(fake_w)
+    real, worker.from_worker = worker.from_worker, fake_r
+    try:
+        with pytest.raises(UnitError, match=f"unit \\{{f\\}}.a: fmi2DoStep failed at t = 0.1 s: .*({said})"):
+            unit.step(0.1, 0.1)
+        assert worker.process.poll() is not None  # the worker was stopped
+    finally:
+        os.close(real)
+        unit.terminate()

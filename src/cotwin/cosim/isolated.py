@@ -39,9 +39,10 @@ from typing import Callable, Sequence
 
 from ..diagnostics import CotwinError
 from .state import unpack
-from .units import FMUUnit, Port, Unit, UnitError, can_save_state, checked_value, read_fmu
+from .units import FMUUnit, Port, Unit, UnitError, can_save_state, checked_value, fmu_state, read_fmu
 
 DEFAULT_TIMEOUT = 30.0  # s an FMU call may take before its worker is stopped as hanging
+MAX_FRAME = 1 << 30  # bytes of one request or answer (an FMU state): a larger length is a damaged worker
 START_TIMEOUT = 120.0  # s for a worker to start (a Python process) and load its FMU
 log = logging.getLogger("cotwin.isolated")
 
@@ -59,10 +60,11 @@ _SIGNALS = {signal.SIGSEGV: "a memory fault (SIGSEGV)", signal.SIGBUS: "a bus er
 
 
 class _Gone(Exception):
-    """The worker's pipe closed or its answer did not come in time."""
+    """The worker's pipe closed, its answer did not come in time, or it was not a frame."""
 
-    def __init__(self, hung: bool):
+    def __init__(self, hung: bool, malformed: str = ""):
         self.hung = hung
+        self.malformed = malformed
 
 
 def _write(fd: int, data: bytes, deadline: float) -> None:
@@ -106,6 +108,8 @@ def send(fd: int, op: int, payload: bytes = b"", deadline: float = float("inf"))
 
 def receive(fd: int, deadline: float | None = None) -> tuple[int, bytes]:
     op, size = _FRAME.unpack(_read(fd, _FRAME.size, deadline))
+    if size > MAX_FRAME:
+        raise _Gone(False, f"a frame of {size} bytes")
     return op, _read(fd, size, deadline) if size else b""
 
 
@@ -138,6 +142,7 @@ class IsolatedUnit(Unit):
         self._worker: _Worker | None = None
         self._bound: list[_Bound] = []
         self._step_getters: list[_Bound] = []
+        self._outputs_size = 0  # bytes of the step getters' values in a step's answer
         self._pending: dict[int, bytes] = {}  # inputs set since the last call that sent them
         self._outputs: dict[int, tuple] = {}  # bound getter -> its values after the last step
         self._fresh = False  # _outputs are the FMU's current outputs
@@ -160,9 +165,15 @@ class IsolatedUnit(Unit):
         try:
             send(worker.to_worker, op, payload, deadline)
             answer, body = receive(worker.from_worker, deadline)
+            if answer not in (OK, ERROR):
+                raise _Gone(False, f"an answer of kind {answer}")
         except _Gone as gone:
             self._worker = None
-            raise worker.lost(self, call, gone.hung) from None
+            raise worker.lost(self, call, gone.hung, gone.malformed) from None
+        except BaseException:  # an interrupt while the worker works: it is stopped, not waited for
+            self._worker = None
+            worker.stop()
+            raise
         if answer == OK:
             return body
         try:
@@ -199,6 +210,7 @@ class IsolatedUnit(Unit):
         self._bound.append(bound)
         if step:
             self._step_getters.append(bound)
+            self._outputs_size += bound.layout.size
         return bound
 
     def setter(self, names: list[str]) -> Callable[[Sequence], None]:
@@ -226,7 +238,11 @@ class IsolatedUnit(Unit):
         def read() -> Sequence:
             if self._fresh:
                 return self._outputs[bound.id]
-            return bound.layout.unpack(self._call(GET, struct.pack("<H", bound.id) + self._inputs(), "fmi2Get"))
+            body = self._call(GET, struct.pack("<H", bound.id) + self._inputs(), "fmi2Get")
+            if len(body) != bound.layout.size:
+                raise UnitError(self.name, self.time, "fmi2Get", f"the FMU {self.path.name}'s worker answered "
+                                f"{len(body)} bytes for {bound.layout.size} (a damaged process)")
+            return bound.layout.unpack(body)
         return read
 
     def _inputs(self) -> bytes:
@@ -253,7 +269,7 @@ class IsolatedUnit(Unit):
         self._call(INITIALIZE, self._inputs(), "fmi2ExitInitializationMode")
         self._fresh = False
         if self.restart and self.can_save_state:
-            self._good = (self.time, self.get_state())
+            self._good = (self.time, unpack(self.get_state(), "FMU")["fmu"])
 
     def step(self, t: float, h: float) -> None:
         self.time = t
@@ -277,6 +293,11 @@ class IsolatedUnit(Unit):
         checkpoint = self.restart and self._good is not None
         blocks = self._inputs()
         body = self._call(STEP, _STEP.pack(t, h, checkpoint) + blocks, "fmi2DoStep")
+        if len(body) < self._outputs_size or (not checkpoint and len(body) != self._outputs_size):
+            self._worker.stop()
+            self._worker = None
+            raise UnitError(self.name, t, "fmi2DoStep", f"the FMU {self.path.name}'s worker answered {len(body)} bytes "
+                            f"for {self._outputs_size} bytes of outputs (a damaged process); it was stopped")
         at = 0
         for bound in self._step_getters:
             size = bound.layout.size
@@ -284,7 +305,7 @@ class IsolatedUnit(Unit):
             at += size
         self._fresh = True
         if checkpoint:
-            self._good = (t + h, body[at:])
+            self._good = (t + h, body[at:])  # the FMU's serialised bytes: a state when it is needed
 
     def _restart(self, err: UnitError, inputs: dict[int, bytes]) -> None:
         """A new worker continuing from the last good state, this step's inputs set again."""
@@ -298,7 +319,7 @@ class IsolatedUnit(Unit):
         self.restarts.append((err.time, message))
         self.instantiate(self.start)
         self._call(INITIALIZE, self._inputs(), "fmi2ExitInitializationMode")
-        self._call(SET_STATE, state, "fmi2SetFMUstate")
+        self._call(SET_STATE, fmu_state(self.md, state, good_time), "fmi2SetFMUstate")
         self.time = err.time
         self._pending.update(inputs)
         self._fresh = False
@@ -363,7 +384,7 @@ class _Worker:
         return cls(process, down_w, up_r, page, output, folder)
 
     def call(self) -> str | None:
-        """The FMI call the worker was last in, from the shared page."""
+        """The FMI call the worker is in (None between requests), from the shared page."""
         size = self.page[0]
         return bytes(self.page[1:1 + size]).decode("ascii", "replace") if 0 < size < _CALL_PAGE else None
 
@@ -375,11 +396,14 @@ class _Worker:
         lines = [line.strip() for line in self.output.read().decode("utf-8", "replace").splitlines() if line.strip()]
         return " / ".join(lines[-3:])[-500:]
 
-    def lost(self, unit: IsolatedUnit, call: str, hung: bool) -> UnitError:
+    def lost(self, unit: IsolatedUnit, call: str, hung: bool, malformed: str = "") -> UnitError:
         """The error of a worker that did not answer: stopped if it hangs, and what ended its process."""
         call = self.call() or call
         words = self.said()
-        if hung:
+        if malformed:
+            self.stop()
+            what = f"made its process answer with {malformed}, not a frame of cotwin's (a damaged process); it was stopped"
+        elif hung:
             self.stop()
             what = f"did not return within {unit.timeout:g} s (a hang?); its process was stopped"
         else:
@@ -489,7 +513,7 @@ def serve(requests: int, answers: int, page_fd: int) -> None:
                 unit.step(t, h)
                 out = [bound[k][0].pack(*bound[k][2]()) for k in step_getters]
                 if checkpoint:
-                    out.append(unit.get_state())
+                    out.append(unit.serialized())
                 answer = b"".join(out)
             elif op == GET:
                 (ident,) = struct.unpack_from("<H", body)
@@ -507,12 +531,16 @@ def serve(requests: int, answers: int, page_fd: int) -> None:
                 break
             else:
                 raise CotwinError(f"unknown request {op}")
+            page[0] = 0  # no FMI call in progress
             send(answers, OK, answer)
         except UnitError as err:
+            page[0] = 0
             send(answers, ERROR, json.dumps({"call": err.call, "detail": err.detail}).encode())
         except CotwinError as err:
+            page[0] = 0
             send(answers, ERROR, json.dumps({"detail": "; ".join(f.message for f in err.findings)}).encode())
         except Exception as err:  # noqa: BLE001 - the master reports it; the worker serves on
+            page[0] = 0
             send(answers, ERROR, json.dumps({"detail": f"{type(err).__name__}: {err}"}).encode())
 
 

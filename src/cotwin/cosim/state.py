@@ -207,8 +207,10 @@ def unpack(blob: bytes | bytearray | memoryview, kind: str) -> object:
     if bytes(view[:len(MAGIC)]) != MAGIC:
         raise StateError(f"not a cotwin state (expected a state of a {kind})")
     at = len(MAGIC) + 8
+    if len(view) < at:
+        raise StateError("a damaged cotwin state (it ends within its header)")
     size = int.from_bytes(view[len(MAGIC):at], "little")
-    if len(view) < at or size > min(MAX_JSON, len(view) - at):
+    if size > min(MAX_JSON, len(view) - at):
         raise StateError(f"a damaged cotwin state (its structure claims {size} bytes, {max(0, len(view) - at)} follow)")
     try:
         head = json.loads(bytes(view[at:at + size]).decode("utf-8"), parse_constant=_refuse_constant,

@@ -248,6 +248,11 @@ def can_save_state(md) -> bool:
     return bool(cs.canGetAndSetFMUstate and cs.canSerializeFMUstate)
 
 
+def fmu_state(md, serialized: bytes, time: float) -> bytes:
+    """An FMU unit's state (cotwin.cosim.state bytes): the FMU's serialised bytes at `time`, with its GUID."""
+    return pack("FMU", {"guid": md.guid, "model": md.modelName, "time": time, "fmu": serialized})
+
+
 class FMUUnit(Unit):
     """An FMI 2.0 co-simulation FMU in this process: FMPy reads, extracts, loads and instantiates it;
     every call into the FMU then goes through `_call`, which checks the returned status. Values move
@@ -507,6 +512,10 @@ class FMUUnit(Unit):
     # ---- state ----
     def get_state(self) -> bytes:
         """fmi2GetFMUstate and fmi2SerializeFMUstate: the FMU's bytes, with its GUID and the unit's time."""
+        return fmu_state(self.md, self.serialized(), self.time)
+
+    def serialized(self) -> bytes:
+        """The FMU's own serialised state (fmi2GetFMUstate, fmi2SerializeFMUstate)."""
         if not self.can_save_state:
             raise UnitError(self.name, self.time, "fmi2GetFMUstate", "the FMU cannot save and serialise its state "
                             "(canGetAndSetFMUstate and canSerializeFMUstate are not both true)")
@@ -520,7 +529,7 @@ class FMUUnit(Unit):
             self._call("fmi2SerializeFMUstate", fn["fmi2SerializeFMUstate"], self.component, handle, buffer, size)
         finally:
             self._call("fmi2FreeFMUstate", fn["fmi2FreeFMUstate"], self.component, byref(handle))
-        return pack("FMU", {"guid": self.md.guid, "model": self.md.modelName, "time": self.time, "fmu": buffer.raw})
+        return buffer.raw
 
     def set_state(self, state: bytes) -> None:
         """fmi2DeSerializeFMUstate and fmi2SetFMUstate from bytes `get_state` returned for this FMU (its
