@@ -20,7 +20,7 @@ from .algorithm import algorithm as make_algorithm
 from .execution import Execution
 from .observers import CSVWriter, Observer, RealTimePacer
 from .system import Connection, System
-from .isolated import fmu_unit
+from .isolated import DEFAULT_TIMEOUT, fmu_unit
 
 KNOWN_KEYS = {"fmus", "connections", "parameters", "logVariables", "algorithm", "startTime", "endTime",
               "simulationProgramDelay", "cotwin", "livestream", "overrideLogLevel", "loggingOn", "visible",
@@ -42,7 +42,7 @@ class MultiModel:
     algorithm: str = "jacobi"
     delayed: set[tuple[str, str]] = field(default_factory=set)
     isolate: dict[tuple[str, str], bool] = field(default_factory=dict)  # instance -> in a process of its own
-    unit_timeout: float = 30.0  # s an isolated FMU's call may take
+    unit_timeout: float = DEFAULT_TIMEOUT  # s an isolated FMU's call may take
 
     @property
     def instances(self) -> list[tuple[str, str]]:
@@ -136,7 +136,7 @@ def read_multimodel(path: str | Path) -> MultiModel:
             isolate[(m.group(1), m.group(2))] = value
     if not isinstance(extra.get("isolate") or {}, dict):
         problems.append(("cotwin.isolate: a table {\"{key}.instance\": true or false}", "isolate"))
-    timeout = extra.get("unit_timeout", 30.0)
+    timeout = extra.get("unit_timeout", DEFAULT_TIMEOUT)
     if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not 0 < timeout < math.inf:
         problems.append((f"cotwin.unit_timeout must be a positive number of seconds, got {timeout!r}", "unit_timeout"))
     problems.extend(_phantoms(connections, log))

@@ -84,6 +84,7 @@ from urllib.parse import urlsplit
 from ..config import Key, Schema, TomlFile, is_number, raise_problems, shown, unique, within
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..cosim.execution import step_count
+from ..cosim.isolated import DEFAULT_TIMEOUT
 from ..pmodel.mjcf import TIMESTEP as PHYSICS_STEP
 from ..pmodel.perturbation import SCHEMA as PLANT, Perturbation
 
@@ -275,7 +276,7 @@ SCHEMA = Schema({
         "algorithm": Key("str", "jacobi", choices=("jacobi", "gauss-seidel")),
         "realtime": Key("bool", False), "log": Key("list[str]", check=unique("variable", empty=True)),
         "parameters": Key("table", {}, check=_parameters), "isolate": Key("bool"),
-        "unit_timeout": Key("positive", 30.0)})),
+        "unit_timeout": Key("positive", DEFAULT_TIMEOUT)})),
     "figure": Key("table", {}, table=Schema({"panels": Key("list")})),
     "pt": Key("table", table=Schema({
         "endpoint": Key("str", required=True, choices=PT_ENDPOINTS), "url": Key("str"), "log": Key("str"),
@@ -359,7 +360,7 @@ class TwinProject:
     panels: list[tuple[str, list[str], str]] | None = None  # [figure] panels: (label, unit.variable, style)
     fmu: Path | None = None  # [models] fmu: a d-model FMU built elsewhere, run in place of the one built from dmodel
     isolate: bool | None = None  # [cosim] isolate: the d-model FMU in a process of its own (None: if cotwin did not build it)
-    unit_timeout: float = 30.0  # [cosim] unit_timeout: s an isolated FMU's call may take
+    unit_timeout: float = DEFAULT_TIMEOUT  # [cosim] unit_timeout: s an isolated FMU's call may take
     locations: dict = field(default_factory=dict)  # key path -> Location where it was written (later checks)
     raw: dict = field(default_factory=dict)  # the tables as written that staged copies carry (world, stand_in, figure)
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from ..cosim.isolated import DEFAULT_TIMEOUT
 from ..cosim.system import Connection, System
 from ..cosim.units import Unit
 from ..diagnostics import CotwinError, Finding, Location, Severity
@@ -333,8 +334,16 @@ class TwinSystem:
             "startTime": 0.0,
             "endTime": self.spec.end,
             "simulationProgramDelay": self.spec.realtime if realtime is None else realtime,
-            "cotwin": {"delayed": sorted(self.delayed), "algorithm": self.spec.algorithm},
+            "cotwin": {"delayed": sorted(self.delayed), "algorithm": self.spec.algorithm,
+                       **({"isolate": {DMODEL.name: self.isolated}} if self.isolated else {}),
+                       **({"unit_timeout": self.spec.unit_timeout} if self.spec.unit_timeout != DEFAULT_TIMEOUT else {})},
         }
+
+    @property
+    def isolated(self) -> bool:
+        """Whether the d-model FMU runs in a process of its own: [cosim] isolate, else when cotwin did not
+        build it ([models] fmu)."""
+        return self.spec.isolate if self.spec.isolate is not None else self.spec.fmu is not None
 
     # ---- instances ----
     def mapping_unit(self, endpoint) -> Unit:
@@ -380,8 +389,7 @@ class TwinSystem:
         units = []
         if self.source is not None:
             units.append(source if source is not None else self.source_unit())
-        isolate = self.spec.isolate if self.spec.isolate is not None else self.spec.fmu is not None
-        units.append(dmodel if dmodel is not None else fmu_unit(DMODEL.name, dmodel_fmu, isolate,
+        units.append(dmodel if dmodel is not None else fmu_unit(DMODEL.name, dmodel_fmu, self.isolated,
                                                                  self.spec.unit_timeout, restart))
         units.append(self.mapping_unit(endpoint))
         return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters,
