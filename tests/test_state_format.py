@@ -20,6 +20,7 @@ from cotwin.cosim.execution import Execution
 from cotwin.cosim.state import MAGIC, OLD_MAGIC, StateError, pack, unpack
 from cotwin.diagnostics import CotwinError
 from cotwin.robosim.values import FrozenRecord, MatrixValue, SeqValue, SetValue, TupleValue, VectorValue
+from test_twin_state import fmu, twin  # noqa: F401 - the UR5e example twin and its d-model FMU, per module
 
 FORK = 1.5  # s: the first command is being executed, a trajectory in flight
 
@@ -142,21 +143,6 @@ def test_the_numpy_dtype_state_is_refused_by_whatif_and_sweep_without_a_crash(tm
                         "-o", "sweep.csv", cwd=tmp_path)
         assert sweep.returncode == 1, sweep.stderr[-2000:]
         assert refusal in sweep.stderr and "cotwin bug" not in sweep.stderr
-
-
-@pytest.fixture(scope="module")
-def twin():
-    from conftest import EXAMPLES
-    from cotwin.twin.run import load
-
-    return load(EXAMPLES / "ur5e" / "cotwin.toml")
-
-
-@pytest.fixture(scope="module")
-def fmu(twin, tmp_path_factory):
-    from cotwin.twin.build import dmodel_fmu
-
-    return dmodel_fmu(twin, tmp_path_factory.mktemp("dmodel"))
 
 
 def _execution(twin, fmu) -> Execution:
@@ -307,54 +293,26 @@ def test_random_damage_to_a_whole_twin_state_is_refused_or_restored(twin, fmu, s
 
 # ---- the d-model FMU's own check of serialised bytes --------------------------------------------------------
 
-FUZZ_MODEL = """interface In { event go: int event stop }
-interface Out { event out: int event flag: boolean }
-interface Ops { move(x: real, y: int) }
-interface Shared { var n: int }
+def _fuzz_model() -> str:
+    """A module whose state has everything model_check looks at: a machine calling an operation that calls
+    another (frames, return points), a set, a sequence of records, a Boolean vector (test_robosim_language's
+    platform and its operations test's interfaces)."""
+    from test_robosim_language import machine
+
+    extra = """interface Shared { var n: int }
 interface Soft { add(k: int) twice(k: int) }
 datatype Pos { x: int y: int }
 operation add(k: int) {
 	requires Shared
-	var before: int = n
 	initial i
-	junction j
+	state Adding { entry n = n + k }
 	final f
-	transition t0 { from i to j }
-	transition t1 { from j to f condition k > 0 action n = before + k }
-	transition t2 { from j to f condition else }
+	transition t0 { from i to Adding }
+	transition t1 { from Adding to f exec condition n > k \\/ k <= 0 }
+	transition t2 { from Adding to Adding exec condition n <= k /\\ k > 0 }
 }
-controller C {
-	cycleDef cycle == 1
-	uses In uses Out requires Ops
-	sref m = M
-	opref a = add
-	operation twice(k: int) {
-		requires Shared requires Soft
-		initial i
-		state W { }
-		final f
-		transition t0 { from i to W action add(k) }
-		transition t1 { from W to f exec action add(k) }
-	}
-	connection C on go to m on go
-	connection C on stop to m on stop
-	connection m on out to C on out
-	connection m on flag to C on flag
-}
-module Mod {
-	cycleDef cycle == 1
-	robotic platform P { uses In uses Out provides Ops }
-	cref c = C
-	connection P on go to c on go (_async)
-	connection P on stop to c on stop (_async)
-	connection c on out to P on out (_async)
-	connection c on flag to P on flag (_async)
-}
-stm M {
-	cycleDef cycle == 1
-	input context { uses In }
-	output context { uses Out requires Ops }
-	requires Soft
+"""
+    text = machine("""	requires Soft
 	var n: int = 1
 	var x: int
 	var s: Set(int) = {1, 2}
@@ -367,9 +325,20 @@ stm M {
 	transition t0 { from i to A }
 	transition t1 { from A to B condition $go?x }
 	transition t2 { from A to A exec condition not $go }
-	transition t3 { from B to A exec }
-}
-"""
+	transition t3 { from B to A exec }""", extra)["m.rst"]
+    return "import set_toolkit::*\nimport sequence_toolkit::*\n" + text.replace("sref m = M", """sref m = M
+	opref a = add
+	operation twice(k: int) {
+		requires Shared requires Soft
+		var c: int = 0
+		initial i
+		state Calling { entry add(k); c = c + 1 }
+		final f
+		transition t0 { from i to Calling }
+		transition t1 { from Calling to Calling exec condition c < 2 }
+		transition t2 { from Calling to f exec condition c >= 2 }
+	}""")
+
 
 FUZZ = """
 import sys
@@ -424,7 +393,7 @@ def test_the_fmu_refuses_malformed_serialised_bytes_without_undefined_behaviour(
 
     if shutil.which("cc") is None:
         pytest.skip("no C compiler")
-    (tmp_path / "m.rst").write_text("import set_toolkit::*\nimport sequence_toolkit::*\n" + FUZZ_MODEL)
+    (tmp_path / "m.rst").write_text(_fuzz_model())
     fmu = build_fmu(build_program(load_checked([tmp_path / "m.rst"])), tmp_path / "m.fmu",
                     cc="cc -fsanitize=undefined,bounds -fno-sanitize-recover=all")
     (tmp_path / "fuzz.py").write_text(FUZZ)

@@ -42,7 +42,8 @@ from typing import Callable, Sequence
 
 from ..diagnostics import CotwinError
 from .state import unpack
-from .units import FMUUnit, Port, Unit, UnitError, can_save_state, checked_value, fmu_state, read_fmu
+from .units import (BoundByNames, FMUUnit, Port, Unit, UnitError, can_save_state, checked_value, fmu_state,
+                    read_fmu)
 
 DEFAULT_TIMEOUT = 30.0  # s an FMU call may take before its worker is stopped as hanging
 MAX_FRAME = 1 << 30  # bytes of one request or answer (an FMU state): a larger length is a damaged worker
@@ -128,7 +129,7 @@ class _Bound:
 
 # ---- the parent's side ----
 
-class IsolatedUnit(Unit):
+class IsolatedUnit(BoundByNames, Unit):
     """An FMI 2.0 co-simulation FMU run by a worker process (see the module doc)."""
 
     def __init__(self, name: str, path: str | Path, timeout: float = DEFAULT_TIMEOUT, restart: bool = False):
@@ -253,20 +254,6 @@ class IsolatedUnit(Unit):
         blocks = [_BLOCK.pack(k, len(v)) + v for k, v in self._pending.items()]
         self._pending.clear()
         return struct.pack("<H", len(blocks)) + b"".join(blocks)
-
-    def set(self, values: dict[str, object]) -> None:
-        names = tuple(values)
-        write = self._setters.get(names)
-        if write is None:
-            write = self._setters[names] = self.setter(list(names))
-        write(list(values.values()))
-
-    def get(self, names: list[str]) -> dict[str, object]:
-        names = tuple(names)
-        read = self._getters.get(names)
-        if read is None:
-            read = self._getters[names] = self.getter(list(names))
-        return dict(zip(names, read()))
 
     def initialize(self) -> None:
         self._call(INITIALIZE, self._inputs(), "fmi2ExitInitializationMode")

@@ -223,6 +223,28 @@ class _Block:
         self.values = (_C_TYPE[kind] * self.n)()
 
 
+class BoundByNames:
+    """`set` and `get` of a unit that moves values through bound lists (`setter`, `getter`): one list bound
+    per tuple of names, kept in `_setters` and `_getters`."""
+
+    _setters: dict[tuple[str, ...], Callable]
+    _getters: dict[tuple[str, ...], Callable]
+
+    def set(self, values: dict[str, object]) -> None:
+        names = tuple(values)
+        write = self._setters.get(names)
+        if write is None:
+            write = self._setters[names] = self.setter(list(names))
+        write(list(values.values()))
+
+    def get(self, names: list[str]) -> dict[str, object]:
+        names = tuple(names)
+        read = self._getters.get(names)
+        if read is None:
+            read = self._getters[names] = self.getter(list(names))
+        return dict(zip(names, read()))
+
+
 def read_fmu(name: str, path: Path):
     """An FMU's model description, its ports (Real, Integer and Boolean inputs, outputs and parameters) by
     name and their value references; CotwinError naming unit `name` for a file that is no co-simulation FMU."""
@@ -253,7 +275,7 @@ def fmu_state(md, serialized: bytes, time: float) -> bytes:
     return pack("FMU", {"guid": md.guid, "model": md.modelName, "time": time, "fmu": serialized})
 
 
-class FMUUnit(Unit):
+class FMUUnit(BoundByNames, Unit):
     """An FMI 2.0 co-simulation FMU in this process: FMPy reads, extracts, loads and instantiates it;
     every call into the FMU then goes through `_call`, which checks the returned status. Values move
     through C arrays allocated once per bound list of ports, one call per FMI type and step."""
@@ -494,20 +516,6 @@ class FMUUnit(Unit):
         self._plan(tuple(names))
         sources = [self._memory[self.vr[n]] for n in names]
         return lambda: [array[slot] for array, slot in sources]
-
-    def set(self, values: dict[str, object]) -> None:
-        names = tuple(values)
-        write = self._setters.get(names)
-        if write is None:
-            write = self._setters[names] = self.setter(list(names))
-        write(list(values.values()))
-
-    def get(self, names: list[str]) -> dict[str, object]:
-        names = tuple(names)
-        read = self._getters.get(names)
-        if read is None:
-            read = self._getters[names] = self.getter(list(names))
-        return dict(zip(names, read()))
 
     # ---- state ----
     def get_state(self) -> bytes:
