@@ -243,7 +243,8 @@ def test_a_worker_that_answers_nonsense_is_stopped_with_a_located_error(fmus, an
     os.close(fake_w)
     real, worker.from_worker = worker.from_worker, fake_r
     try:
-        with pytest.raises(UnitError, match=f"unit \\{{f\\}}.a: fmi2DoStep failed at t = 0.1 s: .*({said})"):
+        # the call named is the one the worker is in when the master gives up on it (a live worker here)
+        with pytest.raises(UnitError, match=f"unit \\{{f\\}}.a: fmi2\\w+ failed at t = 0.1 s: .*({said})"):
             unit.step(0.1, 0.1)
         assert worker.process.poll() is not None  # the worker was stopped
     finally:
