@@ -247,6 +247,7 @@ def _drop(path: tuple):
     (MAPPING, "MappingUnit", _mapping(_set(("events", "feasibleMoveDiscreteCommand2"), True)), "does not define"),
     (MAPPING, "MappingUnit", _mapping(_set(("endpoint", "simulator"), np.zeros(5))), "has 5 numbers, this model's has"),
     (MAPPING, "MappingUnit", _mapping(lambda m: m["endpoint"]["simulator"].__setitem__(3, np.nan)), "not finite"),
+    (MAPPING, "MappingUnit", _mapping(lambda m: m["endpoint"]["simulator"].__setitem__(3, 1e11)), "beyond MuJoCo's"),
     (MAPPING, "MappingUnit", _mapping(_set(("endpoint", "segment", "fields", "goal", "elbow"), 1.0)), "moves 'elbow'"),
     (MAPPING, "MappingUnit", _mapping(_set(("endpoint", "segment", "fields", "duration"), math.nan)), "duration is nan"),
     (MAPPING, "MappingUnit", _mapping(_set(("endpoint", "segment", "kind"), "os.system")), "unknown kind 'os.system'"),

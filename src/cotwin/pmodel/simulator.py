@@ -307,8 +307,9 @@ class PlatformSimulator:
         if vector.shape != (size,):
             raise CotwinError(f"the simulator state has {vector.size} numbers, this model's has {size}: "
                               "it is a state of another model")
-        if not np.all(np.isfinite(vector)) or not abs(vector[0]) < 1e12:
-            raise CotwinError("the simulator state holds numbers that are not finite (or a time beyond 1e12 s)")
+        if not np.all(np.isfinite(vector)) or not abs(vector[0]) < 1e12 or not np.all(np.abs(vector[1:]) <= mujoco.mjMAXVAL):
+            raise CotwinError(f"the simulator state holds numbers that are not finite, beyond MuJoCo's {mujoco.mjMAXVAL:g} "
+                              "(where it would reset the simulation) or a time beyond 1e12 s")
         scans = self._checked_scans(state.scans)
         derived = self._checked_derived(state.derived)
         mujoco.mj_setState(self.model, self.data, vector, STATE)
