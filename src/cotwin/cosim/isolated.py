@@ -18,8 +18,8 @@ the restart is logged and recorded in `restarts`.
 
 Why pipes (benchmarks/isolation.py, the three taking turns on the shared 2-core machine): a round trip
 of 12 numbers each way costs 15-60 us, multiprocessing's Connection (pickle) 1.6-1.7x that, shared
-memory with a one-byte pipe handshake 6-20 us less; all are two wake-ups of a process, and an isolated
-step's 65 us are mostly Python on both sides, so a shared buffer would save little, while frames carry
+memory with a one-byte pipe handshake 0-20 us less; all are two wake-ups of a process, and an isolated
+step's 65-140 us are mostly Python on both sides, so a shared buffer would save little, while frames carry
 answers of any size (states, errors) with no memory shared with the FMU's process but the call's name.
 """
 
