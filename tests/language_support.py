@@ -31,6 +31,9 @@ def _canonical(outputs) -> list[str]:
 
 
 def interpreter_trace(program, steps: list[dict], parameters: dict | None = None) -> list:
+    """Errors located as the FMU locates them: the file relative to the folder of the model files."""
+    from cotwin.dmodel.ccode import model_root, portable_location
+
     interp = Interpreter(program, parameters)
     trace = []
     for inputs in steps:
@@ -38,7 +41,7 @@ def interpreter_trace(program, steps: list[dict], parameters: dict | None = None
             outputs = interp.step(inputs)
         except ExecutionError as err:
             finding = err.findings[0]
-            trace.append(("error", f"{finding.location}: {finding.message}"))
+            trace.append(("error", f"{portable_location(finding.location, model_root(program))}: {finding.message}"))
             break
         trace.append((_canonical(outputs), [interp.state_index(m.index) for m in program.machines]))
     return trace

@@ -551,7 +551,7 @@ def test_a_flood_of_bad_broker_messages_is_counted_but_neither_fills_the_log_nor
 
 # ---- the twin's saved state --------------------------------------------------------------------------------
 
-def test_a_saved_state_reads_robosim_values_back_and_refuses_any_other_class_by_name():
+def test_a_saved_state_reads_robosim_values_back_and_holds_no_other_class():
     import pickle
 
     from cotwin.cosim.state import MAGIC, StateError, pack, unpack
@@ -563,7 +563,8 @@ def test_a_saved_state_reads_robosim_values_back_and_refuses_any_other_class_by_
     back = unpack(pack("Mapping", held), "Mapping")
     assert back == held and all(type(back[k]) is type(v) for k, v in held.items())
     assert type(back["pose"][0]) is VectorValue
-    for evil, name in ((pickle.dumps(("Mapping", {"x": __import__("os").getcwd})), "posix.getcwd"),
-                       (pickle.dumps(("Mapping", CotwinError("x"))), "cotwin.diagnostics.CotwinError")):
-        with pytest.raises(StateError, match=f"holds only plain data, not {name}"):
+    for evil in (pickle.dumps(("Mapping", {"x": __import__("os").getcwd})), pickle.dumps(("Mapping", CotwinError("x")))):
+        with pytest.raises(StateError, match="damaged cotwin state"):  # no pickle is read (tests/test_state_format.py)
             unpack(MAGIC + evil, "Mapping")
+    with pytest.raises(StateError, match="holds only plain data, not a cotwin.diagnostics.CotwinError"):
+        pack("Mapping", CotwinError("x"))

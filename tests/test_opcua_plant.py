@@ -183,7 +183,7 @@ def test_a_perturbation_beyond_the_threshold_shows_one_within_it_does_not(twin, 
     ("CommandJoints", [ua.Variant(["M1"], ua.VariantType.String), ua.Variant([-1e308], ua.VariantType.Double)],
      r"goal 'M1' = -1e\+308 rad is outside joint shoulder_pan_joint's range"),
     ("CommandJoints", [ua.Variant(["LFM"], ua.VariantType.String), ua.Variant([0.05], ua.VariantType.Double)],
-     r"goal 'LFM' = 0.05 m is outside joint Gripper_left_finger_joint's range \[0, 0.019\] m"),
+     r"goal 'LFM' = 0.05 m is outside joint left_finger_joint's range \[0, 0.019\] m"),
 ])
 def test_bad_requests_are_refused_with_a_status_naming_the_problem(client, plant, method, args, message):
     client.start()

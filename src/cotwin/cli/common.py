@@ -24,6 +24,23 @@ def report(findings, stream=None) -> None:
         click.echo(f"... and {len(rest)} more problem(s) not shown ({errors} error(s))", file=stream)
 
 
+ON_UNIT_FAILURE = click.option(
+    "--on-unit-failure", type=click.Choice(["stop", "restart-from-state"]), default="stop", show_default=True,
+    help="when an FMU crashes, hangs or fails a step: end the run (the rows so far kept), or retry the step once "
+         "in a new process from the FMU's state after its last good step (FMUs that can save their state; every "
+         "FMU then runs in a process of its own)")
+
+
+def said_restarts(units) -> None:
+    """Say which units were restarted from a state during the run (each restart was logged as it happened)."""
+    for unit in units:
+        restarts = getattr(unit, "restarts", None)
+        if restarts:
+            times = ", ".join(f"{t:g}" for t, _ in restarts[:20]) + (", ..." if len(restarts) > 20 else "")
+            click.echo(f"unit {unit.name}: restarted {len(restarts)} time(s) from its last good state, at t = {times} s",
+                       err=True)
+
+
 def output_path(ctx, param, value: str | None) -> str | None:
     """An -o option: a path, never the empty string (which would write into the current folder)."""
     if value is not None and not value.strip():

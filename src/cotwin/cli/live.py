@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError
-from .common import (DASHBOARD_HELP, STRICT_HELP, address, check_finite, check_timing, exchange_name, main, outcomes,
-                     output_path, serving_options, show_warnings, start_dashboard)
+from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
+                     main, outcomes, output_path, said_restarts, serving_options, show_warnings, start_dashboard)
 
 
 @main.command()
@@ -28,10 +28,11 @@ from .common import (DASHBOARD_HELP, STRICT_HELP, address, check_finite, check_t
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 @serving_options
+@ON_UNIT_FAILURE
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 def twin(project: str, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
          pt_log: str | None, pt_url: str | None, exchange: str | None, history: str | None, whatif: bool,
-         dashboard: tuple[str, int] | None, cc: str, serving: dict, strict: bool) -> None:
+         dashboard: tuple[str, int] | None, cc: str, serving: dict, strict: bool, on_unit_failure: str) -> None:
     """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
     with deviation checking, alarms and history."""
     import signal
@@ -67,7 +68,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     try:
         live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
                         observers=[*([dash.feed] if dash else ()), TwinProgress(progress)], cc=cc,
-                        whatif_url=broker if whatif else None)
+                        whatif_url=broker if whatif else None, restart=on_unit_failure == "restart-from-state")
 
         def interrupt(*_) -> None:
             """In the step loop, end after the step (results kept as a finished run's); before it (waiting for
@@ -91,6 +92,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         if dash is not None:
             dash.stop()
     r = result.pt
+    said_restarts(unit for side in live.sides.values() for unit in side.execution.system.units.values())
     state = "stopped early" if r.steps < live.steps or live._stop else "done"
     click.echo(f"{result.out}: PT and DT, {r.steps} steps each to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f}), {state}")

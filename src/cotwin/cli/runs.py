@@ -8,8 +8,9 @@ import click
 
 from ..diagnostics import CotwinError
 from ..files import check_outputs
-from .common import (DASHBOARD_HELP, STRICT_HELP, address, check_finite, check_step_count, check_timing, main,
-                     outcomes, output_path, serving_options, show_warnings, start_dashboard)
+from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_step_count,
+                     check_timing, main, outcomes, output_path, said_restarts, serving_options, show_warnings,
+                     start_dashboard)
 
 
 @main.command()
@@ -39,9 +40,11 @@ def build(project: str, out: str, cc: str) -> None:
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 @serving_options
+@ON_UNIT_FAILURE
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
-        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str, serving: dict, strict: bool) -> None:
+        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str, serving: dict, strict: bool,
+        on_unit_failure: str) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
     from ..twin.history import database_url
@@ -61,11 +64,13 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     try:
         with ProgressReport("co-simulating", "steps") as progress:
             ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc,
-                           observers=[dash.feed] if dash else None, progress=progress)
+                           observers=[dash.feed] if dash else None, progress=progress,
+                           restart=on_unit_failure == "restart-from-state")
     finally:
         if dash is not None:
             dash.stop()
     r = ran.result
+    said_restarts(ran.system.units.values())
     click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f})")
     outcomes({"": ran.outcomes}, strict)
@@ -77,7 +82,9 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
 @click.option("--step", type=click.FloatRange(min=0, min_open=True))
 @click.option("--end", type=click.FloatRange(min=0, min_open=True))
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
-def simulate(multimodel: str, out: str | None, step: float | None, end: float | None, algorithm: str | None) -> None:
+@ON_UNIT_FAILURE
+def simulate(multimodel: str, out: str | None, step: float | None, end: float | None, algorithm: str | None,
+             on_unit_failure: str) -> None:
     """Run any Maestro multimodel JSON with cotwin's master (FMUs through FMPy)."""
 
     from ..cosim.multimodel import execution_for, read_multimodel
@@ -88,11 +95,12 @@ def simulate(multimodel: str, out: str | None, step: float | None, end: float | 
                 "--end" if end is not None else "--step" if step is not None else None, multimodel)
     csv_path = Path(out) if out else Path(multimodel).parent / "outputs.csv"
     check_outputs([csv_path, csv_path.with_name(csv_path.name + ".part")], [multimodel, *mm.fmus.values()])
-    execution = execution_for(mm, csv_path, step, algorithm)
+    execution = execution_for(mm, csv_path, step, algorithm, restart=on_unit_failure == "restart-from-state")
     try:
         result = execution.run(mm.end if end is None else end)
     except (CotwinError, KeyboardInterrupt) as err:  # say where the rows computed so far are
         from ..cosim.execution import ended_early
 
         raise ended_early(err, execution.time, execution.observers[0].kept()) from None
+    said_restarts(execution.system.units.values())
     click.echo(f"{csv_path}: {result.rows} rows to t = {result.end_time:g} s in {result.wall_seconds:.2f} s")

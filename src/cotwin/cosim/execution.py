@@ -20,7 +20,7 @@ from typing import Iterable
 from ..diagnostics import CotwinError
 from .algorithm import Algorithm
 from .observers import Observer
-from .state import pack, unpack
+from .state import StateError, count, fields, finite, of_type, pack, port_value, unpack
 from .system import System
 
 
@@ -74,6 +74,53 @@ def ended_early(err: BaseException, time: float, kept: str) -> CotwinError:
         stopped.interrupted = True
         return stopped
     return CotwinError([*err.findings, *CotwinError(kept).findings])
+
+
+def saved_execution(state: bytes) -> dict:
+    """The data of an execution's saved state with its structure and times checked (before anything is
+    built from it): the time a finite number that is `steps` steps of `step_size` from the origin, steps
+    a whole number, the units' states bytes by name, the values by (unit, port); StateError otherwise."""
+    data = fields(unpack(state, "Execution"), "execution", ("algorithm", "time", "steps", "step_size", "origin",
+                                                             "values", "units"), ("models",))
+    of_type(data["algorithm"], str, "algorithm")
+    time = finite(data["time"], "time")
+    steps = count(data["steps"], "number of steps", MAX_STEPS)
+    step = finite(data["step_size"], "step size")
+    if not step > 0:
+        raise StateError(f"the saved state's step size is {step!r}, not a positive number of seconds")
+    origin = data["origin"]
+    if origin.__class__ not in (tuple, list) or len(origin) != 2:
+        raise StateError(f"the saved state's origin is {origin!r:.60}, not a (time, steps) pair")
+    origin = (finite(origin[0], "origin's time"), count(origin[1], "origin's steps", steps))
+    expected = origin[0] + (steps - origin[1]) * step
+    if abs(expected - time) > 1e-6 * max(1.0, abs(time), step):
+        raise StateError(f"the saved state's time {time!r} s is not {steps - origin[1]} steps of {step!r} s from "
+                         f"{origin[0]!r} s (that is {expected!r} s)")
+    values = of_type(data["values"], dict, "values")
+    for key in values:
+        if key.__class__ is not tuple or len(key) != 2 or not all(k.__class__ is str for k in key):
+            raise StateError(f"the saved state's values are keyed by (unit, port), not by {key!r:.60}")
+    units = of_type(data["units"], dict, "units")
+    for name, blob in units.items():
+        of_type(name, str, "unit name")
+        of_type(blob, bytes, f"state of unit {name}")
+    models = of_type(data.get("models", {}), dict, "models")
+    for name, digest in models.items():
+        of_type(name, str, "model name")
+        of_type(digest, str, f"digest of model {name}")
+    return {**data, "time": time, "steps": steps, "step_size": step, "origin": origin, "models": models}
+
+
+def model_differences(saved: dict[str, str], here: dict[str, str]) -> list[str]:
+    """What differs between the models (name -> digest) a state was saved from and these; nothing when
+    either does not name its models."""
+    if not saved or not here:
+        return []
+    out = [f"{name} changed (sha256 {saved[name][:12]} when saved, {here[name][:12]} here)"
+           for name in sorted(set(saved) & set(here)) if saved[name] != here[name]]
+    out += [f"{name} is not among these models" for name in sorted(set(saved) - set(here))]
+    out += [f"{name} was not among the saved models" for name in sorted(set(here) - set(saved))]
+    return out
 
 
 class Execution:
@@ -172,13 +219,14 @@ class Execution:
     # ---- state ----
     def get_state(self) -> bytes:
         """The co-simulation's whole state at the current time: every unit's, the values on the
-        connections, the time and steps done (cotwin.cosim.state bytes)."""
+        connections, the time and steps done, and the models the system was made from when it names
+        them (cotwin.cosim.state bytes)."""
         if not self.initialized or self.closed:
             raise CotwinError("only a running execution (initialised, not closed) has a state to save")
         return pack("Execution", {
             "algorithm": self.algorithm.name, "time": self.time, "steps": self.steps,
             "step_size": self.step_size, "origin": self._origin,
-            "values": self.algorithm.snapshot(),
+            "values": self.algorithm.snapshot(), "models": dict(self.system.models),
             "units": {name: unit.get_state() for name, unit in self.system.units.items()}})
 
     def set_state(self, state: bytes, units: Iterable[str] | None = None) -> None:
@@ -188,33 +236,44 @@ class Execution:
 
         With `units`, only those units and the values of their ports are restored, and the others start
         afresh (a fork whose command source is another: a what-if plan in place of the live stream);
-        build such an execution with `start` at the saved time so they are instantiated there."""
-        data = unpack(state, "Execution")
+        build such an execution with `start` at the saved time so they are instantiated there.
+
+        Everything in the state is checked against this system before anything is restored: its models,
+        units, observed ports and their types, and its times; each unit checks its own part."""
+        data = saved_execution(state)
         if self.closed:
             raise CotwinError("a closed execution cannot restore a state")
         saved = data["units"]
         chosen = set(self.system.units) if units is None else set(units)
         missing = sorted(chosen - set(saved))
+        differences = model_differences(data["models"], self.system.models)
+        if differences:
+            raise StateError(f"the state was saved from other models than these: {'; '.join(differences)}")
         if units is None and set(saved) != set(self.system.units):
-            raise CotwinError(f"the saved state is of units {', '.join(sorted(saved))}, this system has "
-                              f"{', '.join(sorted(self.system.units))}")
+            raise StateError(f"the saved state is of units {', '.join(sorted(saved))}, this system has "
+                             f"{', '.join(sorted(self.system.units))}")
         if missing or not chosen <= set(self.system.units):
-            raise CotwinError(f"cannot restore {', '.join(sorted(chosen))}: the saved state has units "
-                              f"{', '.join(sorted(saved))}, this system {', '.join(sorted(self.system.units))}")
+            raise StateError(f"cannot restore {', '.join(sorted(chosen))}: the saved state has units "
+                             f"{', '.join(sorted(saved))}, this system {', '.join(sorted(self.system.units))}")
         if data["algorithm"] != self.algorithm.name:
-            raise CotwinError(f"the saved state was taken under {data['algorithm']}, this execution runs "
-                              f"{self.algorithm.name}: the values on the connections would mean something else")
+            raise StateError(f"the saved state was taken under {data['algorithm']:.40}, this execution runs "
+                             f"{self.algorithm.name}: the values on the connections would mean something else")
+        values = data["values"]
+        observed = set(self.system.observed())
+        if units is not None:  # a fork takes the values of the restored units' ports it observes
+            values = {k: v for k, v in values.items() if k[0] in chosen and k in observed}
+        for (unit, port), value in values.items():
+            if (unit, port) not in observed:
+                raise StateError(f"the saved state has a value of {unit:.60}.{port:.60}, which this system does not observe")
+            port_value(value, self.system.units[unit].ports[port].type, f"value of {unit}.{port}")
         fresh = not self.initialized
         if fresh:
             self._setup()
         try:
             for name in chosen:
                 self.system.units[name].set_state(saved[name])
-            values = data["values"]
             if units is not None:  # the restored units' values this system observes; the rest as they are
-                kept = self.algorithm.snapshot()
-                values = {k: v for k, v in values.items() if k[0] in chosen and k in self.algorithm.slots}
-                values.update({k: v for k, v in kept.items() if k[0] not in chosen})
+                values.update({k: v for k, v in self.algorithm.snapshot().items() if k[0] not in chosen})
             self.algorithm.restore(values)
         except BaseException as err:
             self.close(err)

@@ -2,7 +2,9 @@
 
 Maestro ignores unknown keys, so a typo passes silently there; here unknown keys, malformed ports
 (`{key}.instance.variable`) and ports the FMUs do not have are reported together, with the file.
-The key `cotwin` (ignored by Maestro) may hold {"delayed": [units], "algorithm": "gauss-seidel"}.
+The key `cotwin` (ignored by Maestro) may hold {"delayed": [units], "algorithm": "gauss-seidel",
+"isolate": {"{key}.instance": true}, "unit_timeout": seconds}: which FMU instances run in a process of
+their own (cotwin.cosim.isolated; by default those cotwin did not build) and how long their calls may take.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from .algorithm import algorithm as make_algorithm
 from .execution import Execution
 from .observers import CSVWriter, Observer, RealTimePacer
 from .system import Connection, System
-from .units import FMUUnit
+from .isolated import DEFAULT_TIMEOUT, fmu_unit
 
 KNOWN_KEYS = {"fmus", "connections", "parameters", "logVariables", "algorithm", "startTime", "endTime",
               "simulationProgramDelay", "cotwin", "livestream", "overrideLogLevel", "loggingOn", "visible",
@@ -40,6 +42,8 @@ class MultiModel:
     realtime: bool
     algorithm: str = "jacobi"
     delayed: set[tuple[str, str]] = field(default_factory=set)
+    isolate: dict[tuple[str, str], bool] = field(default_factory=dict)  # instance -> in a process of its own
+    unit_timeout: float = DEFAULT_TIMEOUT  # s an isolated FMU's call may take
 
     @property
     def instances(self) -> list[tuple[str, str]]:
@@ -117,6 +121,18 @@ def read_multimodel(path: str | Path) -> MultiModel:
             delayed.add((m.group(1), m.group(2)))
         else:
             problems.append((f"cotwin.delayed: '{inst}' is not a '{{key}}.instance'", inst))
+    isolate: dict[tuple[str, str], bool] = {}
+    for inst, value in (extra.get("isolate") or {}).items() if isinstance(extra.get("isolate") or {}, dict) else ():
+        m = re.match(r"^(\{[^}]+\})\.([A-Za-z_]\w*)$", inst)
+        if m is None or m.group(1) not in fmus or not isinstance(value, bool):
+            problems.append((f"cotwin.isolate: '{inst}' is not a '{{key}}.instance' of a listed FMU with true or false", inst))
+        else:
+            isolate[(m.group(1), m.group(2))] = value
+    if not isinstance(extra.get("isolate") or {}, dict):
+        problems.append(("cotwin.isolate: a table {\"{key}.instance\": true or false}", "isolate"))
+    timeout = extra.get("unit_timeout", DEFAULT_TIMEOUT)
+    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not 0 < timeout < math.inf:
+        problems.append((f"cotwin.unit_timeout must be a positive number of seconds, got {timeout!r}", "unit_timeout"))
     problems.extend(_phantoms(connections, log))
     for key, value in (("startTime", data.get("startTime", 0.0)), ("endTime", data.get("endTime", 10.0)),
                        ("algorithm.size", algorithm.get("size", 0.1))):
@@ -131,7 +147,8 @@ def read_multimodel(path: str | Path) -> MultiModel:
                            for message, needle in problems])
     return MultiModel(path, fmus, connections, parameters, log, float(algorithm.get("size", 0.1)),
                       float(data.get("startTime", 0.0)), float(data.get("endTime", 10.0)),
-                      bool(data.get("simulationProgramDelay", False)), extra.get("algorithm", "jacobi"), delayed)
+                      bool(data.get("simulationProgramDelay", False)), extra.get("algorithm", "jacobi"), delayed,
+                      isolate, float(timeout))
 
 
 def _phantoms(connections, log) -> list[tuple[str, str]]:
@@ -176,10 +193,12 @@ def unit_name(instance: tuple[str, str]) -> str:
     return f"{instance[0]}.{instance[1]}"
 
 
-def system_of(mm: MultiModel) -> System:
-    """The multimodel's units (one FMU instance each) and connections, checked."""
+def system_of(mm: MultiModel, restart: bool = False) -> System:
+    """The multimodel's units (one FMU instance each, isolated as `cotwin.isolate` says, all of them with
+    `restart`) and connections, checked."""
     try:
-        units = [FMUUnit(unit_name(inst), mm.fmus[inst[0]]) for inst in mm.instances]
+        units = [fmu_unit(unit_name(inst), mm.fmus[inst[0]], mm.isolate.get(inst), mm.unit_timeout, restart)
+                 for inst in mm.instances]
         connections = [Connection(unit_name(c[:2]), c[2], unit_name(c[3:5]), c[5]) for c in mm.connections]
         return System.of(units, connections, delayed={unit_name(d) for d in mm.delayed},
                          log={unit_name(k): v for k, v in mm.log.items()},
@@ -189,12 +208,15 @@ def system_of(mm: MultiModel) -> System:
 
 
 def execution_for(mm: MultiModel, csv_path: str | Path | None = None, step: float | None = None,
-                  algorithm: str | None = None, observers: list[Observer] | None = None) -> Execution:
+                  algorithm: str | None = None, observers: list[Observer] | None = None,
+                  restart: bool = False) -> Execution:
     """An execution of the multimodel (FMUs through FMPy), writing Maestro's CSV when given a path and
-    pacing to wall-clock time when the multimodel asks for it (`simulationProgramDelay`)."""
+    pacing to wall-clock time when the multimodel asks for it (`simulationProgramDelay`); with `restart`,
+    every FMU is isolated and a failed step is retried in a new process from its last good state."""
     observers = list(observers or [])
     if csv_path is not None:
         observers.insert(0, CSVWriter(csv_path))
     if mm.realtime:
         observers.append(RealTimePacer())
-    return Execution(system_of(mm), make_algorithm(algorithm or mm.algorithm), step or mm.step, mm.start, observers)
+    return Execution(system_of(mm, restart), make_algorithm(algorithm or mm.algorithm), step or mm.step, mm.start,
+                     observers)

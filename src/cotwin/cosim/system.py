@@ -1,5 +1,6 @@
 """The system structure of a co-simulation: units, the connections between their ports, the units whose
-outputs are read one step late (`delayed`), logged variables and parameters. Description only: the
+outputs are read one step late (`delayed`), logged variables and parameters, and the model files it was
+made from (`models`, so that a saved state names which one changed). Description only: the
 algorithms (cotwin.cosim.algorithm) execute it and the observers (cotwin.cosim.observers) watch it.
 
 `System.check()` returns every problem at once: unknown units or ports, an output feeding an output,
@@ -61,16 +62,19 @@ class System:
     delayed: set[str] = field(default_factory=set)
     log: dict[str, list[str]] = field(default_factory=dict)
     parameters: dict[str, dict[str, object]] = field(default_factory=dict)
+    models: dict[str, str] = field(default_factory=dict)  # the model files it was made from: name -> sha256
 
     @classmethod
-    def of(cls, units: list[Unit], connections: list[Connection], delayed=(), log=None, parameters=None) -> "System":
+    def of(cls, units: list[Unit], connections: list[Connection], delayed=(), log=None, parameters=None,
+           models=None) -> "System":
         by_name: dict[str, Unit] = {}
         for u in units:
             if u.name in by_name:
                 raise CotwinError(f"two units are called '{u.name}'")
             by_name[u.name] = u
         system = cls(by_name, list(connections), set(delayed),
-                     {u: list(dict.fromkeys(names)) for u, names in (log or {}).items()}, dict(parameters or {}))
+                     {u: list(dict.fromkeys(names)) for u, names in (log or {}).items()}, dict(parameters or {}),
+                     dict(models or {}))
         problems = system.check()
         if problems:
             raise CotwinError(problems)

@@ -29,7 +29,7 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
                        fmi2CallbackLoggerTYPE)
 
 from ..diagnostics import CotwinError
-from .state import pack, unpack
+from .state import fields, finite, of_type, pack, port_value, unpack
 
 
 INT32 = (-(2 ** 31), 2 ** 31 - 1)
@@ -39,7 +39,7 @@ log = logging.getLogger("cotwin.fmu")
 class UnitError(CotwinError):
     def __init__(self, unit: str, time: float, call: str, detail: str):
         super().__init__(f"unit {unit}: {call} failed at t = {time:g} s: {detail}")
-        self.unit, self.time, self.call = unit, time, call
+        self.unit, self.time, self.call, self.detail = unit, time, call, detail
 
 
 def checked_value(unit: str, port: "Port", value) -> object:
@@ -225,28 +225,69 @@ class _Block:
         self.values = (_C_TYPE[kind] * self.n)()
 
 
-class FMUUnit(Unit):
+class BoundByNames:
+    """`set` and `get` of a unit that moves values through bound lists (`setter`, `getter`): one list bound
+    per tuple of names, kept in `_setters` and `_getters`."""
+
+    _setters: dict[tuple[str, ...], Callable]
+    _getters: dict[tuple[str, ...], Callable]
+
+    def set(self, values: dict[str, object]) -> None:
+        names = tuple(values)
+        write = self._setters.get(names)
+        if write is None:
+            write = self._setters[names] = self.setter(list(names))
+        write(list(values.values()))
+
+    def get(self, names: list[str]) -> dict[str, object]:
+        names = tuple(names)
+        read = self._getters.get(names)
+        if read is None:
+            read = self._getters[names] = self.getter(list(names))
+        return dict(zip(names, read()))
+
+
+def read_fmu(name: str, path: Path):
+    """An FMU's model description, its ports (Real, Integer and Boolean inputs, outputs and parameters) by
+    name and their value references; CotwinError naming unit `name` for a file that is no co-simulation FMU."""
+    if not path.is_file():
+        raise CotwinError(f"unit {name}: no FMU at {path}")
+    try:
+        md = read_model_description(str(path))
+    except Exception as err:  # FMPy raises many kinds for a bad zip or XML
+        raise CotwinError(f"unit {name}: cannot read {path}: {err}") from None
+    if md.coSimulation is None:
+        raise CotwinError(f"unit {name}: {path} is not a co-simulation FMU")
+    ports, vr = {}, {}
+    for v in md.modelVariables:
+        if v.type in ("Real", "Integer", "Boolean") and v.causality in ("input", "output", "parameter"):
+            ports[v.name] = Port(v.name, v.type, v.causality)
+            vr[v.name] = v.valueReference
+    return md, ports, vr
+
+
+def can_save_state(md) -> bool:
+    """Whether an FMU can get, set and serialise its state (both capability flags)."""
+    cs = md.coSimulation
+    return bool(cs.canGetAndSetFMUstate and cs.canSerializeFMUstate)
+
+
+def fmu_state(md, serialized: bytes, time: float) -> bytes:
+    """An FMU unit's state (cotwin.cosim.state bytes): the FMU's serialised bytes at `time`, with its GUID."""
+    return pack("FMU", {"guid": md.guid, "model": md.modelName, "time": time, "fmu": serialized})
+
+
+class FMUUnit(BoundByNames, Unit):
     """An FMI 2.0 co-simulation FMU in this process: FMPy reads, extracts, loads and instantiates it;
     every call into the FMU then goes through `_call`, which checks the returned status. Values move
     through C arrays allocated once per bound list of ports, one call per FMI type and step."""
 
+    unzip_dir: str | None = None  # where to extract the FMU (None: a temporary folder of FMPy's)
+
     def __init__(self, name: str, path: str | Path):
         self.name = name
         self.path = Path(path)
-        if not self.path.is_file():
-            raise CotwinError(f"unit {name}: no FMU at {self.path}")
-        try:
-            self.md = read_model_description(str(self.path))
-        except Exception as err:  # FMPy raises many kinds for a bad zip or XML
-            raise CotwinError(f"unit {name}: cannot read {self.path}: {err}") from None
-        if self.md.coSimulation is None:
-            raise CotwinError(f"unit {name}: {self.path} is not a co-simulation FMU")
-        self.ports = {}
-        self.vr = {}
-        for v in self.md.modelVariables:
-            if v.type in ("Real", "Integer", "Boolean") and v.causality in ("input", "output", "parameter"):
-                self.ports[v.name] = Port(v.name, v.type, v.causality)
-                self.vr[v.name] = v.valueReference
+        self.md, self.ports, self.vr = read_fmu(name, self.path)
         self.fmu = None
         self.component = None
         self.folder = None
@@ -329,14 +370,13 @@ class FMUUnit(Unit):
 
     @property
     def can_save_state(self) -> bool:
-        cs = self.md.coSimulation
-        return bool(cs.canGetAndSetFMUstate and cs.canSerializeFMUstate)
+        return can_save_state(self.md)
 
     # ---- life cycle ----
     def instantiate(self, start: float) -> None:
         self.time = start
         try:
-            self.folder = extract(str(self.path))
+            self.folder = extract(str(self.path), self.unzip_dir)
         except Exception as err:  # a bad zip
             raise UnitError(self.name, start, "extract", str(err)) from None
         self.fmu = self._call("load", lambda: FMU2Slave(
@@ -481,23 +521,13 @@ class FMUUnit(Unit):
         sources = [self._memory[self.vr[n]] for n in names]
         return lambda: [array[slot] for array, slot in sources]
 
-    def set(self, values: dict[str, object]) -> None:
-        names = tuple(values)
-        write = self._setters.get(names)
-        if write is None:
-            write = self._setters[names] = self.setter(list(names))
-        write(list(values.values()))
-
-    def get(self, names: list[str]) -> dict[str, object]:
-        names = tuple(names)
-        read = self._getters.get(names)
-        if read is None:
-            read = self._getters[names] = self.getter(list(names))
-        return dict(zip(names, read()))
-
     # ---- state ----
     def get_state(self) -> bytes:
         """fmi2GetFMUstate and fmi2SerializeFMUstate: the FMU's bytes, with its GUID and the unit's time."""
+        return fmu_state(self.md, self.serialized(), self.time)
+
+    def serialized(self) -> bytes:
+        """The FMU's own serialised state (fmi2GetFMUstate, fmi2SerializeFMUstate)."""
         if not self.can_save_state:
             raise UnitError(self.name, self.time, "fmi2GetFMUstate", "the FMU cannot save and serialise its state "
                             "(canGetAndSetFMUstate and canSerializeFMUstate are not both true)")
@@ -511,16 +541,22 @@ class FMUUnit(Unit):
             self._call("fmi2SerializeFMUstate", fn["fmi2SerializeFMUstate"], self.component, handle, buffer, size)
         finally:
             self._call("fmi2FreeFMUstate", fn["fmi2FreeFMUstate"], self.component, byref(handle))
-        return pack("FMU", {"guid": self.md.guid, "time": self.time, "fmu": buffer.raw})
+        return buffer.raw
 
     def set_state(self, state: bytes) -> None:
-        """fmi2DeSerializeFMUstate and fmi2SetFMUstate from bytes `get_state` returned for this FMU."""
-        data = unpack(state, "FMU")
+        """fmi2DeSerializeFMUstate and fmi2SetFMUstate from bytes `get_state` returned for this FMU (its
+        GUID; the FMU checks its own bytes)."""
+        data = fields(unpack(state, "FMU"), f"unit {self.name}", ("guid", "time", "fmu"), ("model",))
         if not self.can_save_state:
             raise UnitError(self.name, self.time, "fmi2SetFMUstate", "the FMU cannot restore a state")
-        if data.get("guid") != self.md.guid:
-            raise UnitError(self.name, self.time, "fmi2SetFMUstate",
-                            f"the state is of another FMU (GUID {data.get('guid')}, this one is {self.md.guid})")
+        saved = f"{str(data.get('model', '?'))[:60]} (GUID {str(data['guid'])[:60]})"
+        if data["guid"] != self.md.guid:
+            raise UnitError(self.name, self.time, "fmi2SetFMUstate", f"the state is of another FMU: {saved}, this "
+                            f"unit runs {self.md.modelName} (GUID {self.md.guid})"
+                            + (": another build of the same model (other sources or another cotwin)"
+                               if data.get("model") == self.md.modelName else ""))
+        time = finite(data["time"], f"unit {self.name}'s time")
+        of_type(data["fmu"], bytes, f"unit {self.name}'s FMU state")
         raw = data["fmu"]
         fn, handle = self._fn, c_void_p()
         self._call("fmi2DeSerializeFMUstate", fn["fmi2DeSerializeFMUstate"], self.component, raw, len(raw),
@@ -529,7 +565,7 @@ class FMUUnit(Unit):
             self._call("fmi2SetFMUstate", fn["fmi2SetFMUstate"], self.component, handle)
         finally:
             self._call("fmi2FreeFMUstate", fn["fmi2FreeFMUstate"], self.component, byref(handle))
-        self.time = data["time"]
+        self.time = time
 
 
 class PythonUnit(Unit):
@@ -581,14 +617,24 @@ class PythonUnit(Unit):
         pass
 
     # ---- state ----
+    STATE_KEYS: tuple[str, ...] = ("values", "time")  # of a snapshot; subclasses add theirs
+
     def snapshot(self) -> dict:
-        """The unit's state as plain data; subclasses add their own keys."""
+        """The unit's state as plain data; subclasses add their own keys (STATE_KEYS)."""
         return {"values": dict(self.values), "time": self.time}
 
     def restore(self, snapshot: dict) -> None:
+        """Continue from a snapshot, checked first: exactly STATE_KEYS, a value of its type for every port,
+        a finite time (subclasses check their own keys, then call this). Values of ports this unit does not
+        have are left out: a fork's unit may have fewer (its command source drives some of its events)."""
+        what = f"unit {self.name}"
+        fields(snapshot, what, self.STATE_KEYS)
+        saved = fields(snapshot["values"], f"{what}'s values", list(self.ports), snapshot["values"])
+        values = {name: port_value(saved[name], port.type, f"{what}'s {name}") for name, port in self.ports.items()}
+        time = finite(snapshot["time"], f"{what}'s time")
         self.values.clear()  # in place: bound setters and getters keep working
-        self.values.update(snapshot["values"])
-        self.time = snapshot["time"]
+        self.values.update(values)
+        self.time = time
 
     def get_state(self) -> bytes:
         return pack(type(self).__name__, self.snapshot())

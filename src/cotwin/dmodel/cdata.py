@@ -36,6 +36,7 @@ class CTypes:
         self.typedefs: list[str] = []
         self.functions: list[str] = []
         self._helpers: set[str] = set()
+        self._checks: dict[str, str | None] = {}  # ok_<type> -> its name, None when any bytes are a value
         self._record_names: dict[str, int] = {}
         self._defined: set[str] = set()
 
@@ -101,6 +102,46 @@ class CTypes:
         if is_intlike(ty):
             return "INT64_C(0)"
         return f"(({self.c(ty)}){{0}})"
+
+    # ---- checks of untrusted bytes (a deserialised state) ----
+    def check(self, ty: Ty, ref: str) -> str | None:
+        """A C condition, true when the value at `ref` (an lvalue of type `ty` read from bytes of unknown
+        origin) is one the generated code can run: every Boolean 0 or 1 and every set and sequence within
+        its capacity, at any depth; None when any bytes are (numbers)."""
+        if ty == BOOL:
+            return f"bool_ok(&{ref})"
+        if is_scalar(ty) or ty == UNKNOWN:
+            return None
+        name = self.check_function(ty)
+        return f"{name}(&{ref})" if name else None
+
+    def check_function(self, ty: Ty) -> str | None:
+        t = self.c(ty)
+        name = f"ok_{t}"
+        if name in self._checks:
+            return self._checks[name]
+        self._checks[name] = None  # filled below; a type does not contain itself
+        if isinstance(ty, RecordTy):
+            parts = [self.check(ft, f"v->{ident(n)}") for n, ft in self.field_types(ty)]
+            lines = [f"    if (!({c})) return false;" for c in parts if c]
+        elif isinstance(ty, (VectorTy, MatrixTy)):
+            element = ty.element if isinstance(ty, VectorTy) else VectorTy(ty.element, ty.columns)
+            size = ty.size if isinstance(ty, VectorTy) else ty.rows
+            inner = self.check(element, "v->v[k]")
+            lines = [f"    for (int k = 0; k < {size}; k++) if (!({inner})) return false;"] if inner else []
+        elif isinstance(ty, TupleTy):
+            parts = [self.check(it, f"v->i{k + 1}") for k, it in enumerate(ty.items)]
+            lines = [f"    if (!({c})) return false;" for c in parts if c]
+        else:  # a set or sequence
+            inner = self.check(ty.element, "v->v[k]")
+            lines = [f"    if (v->n < 0 || v->n > {CAPACITY}) return false;"]
+            if inner:
+                lines.append(f"    for (int k = 0; k < v->n; k++) if (!({inner})) return false;")
+        if not lines:
+            return None
+        self._checks[name] = name
+        self.functions.append(f"static bool {name}(const {t} *v) {{\n" + "\n".join(lines) + "\n    return true;\n}")
+        return name
 
     # ---- equality ----
     def eq(self, ty: Ty, a: str, b: str) -> str:

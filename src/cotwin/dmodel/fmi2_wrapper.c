@@ -9,6 +9,10 @@
  * between them. Its whole state is plain memory (the model holds no pointers), so an FMU state is a
  * copy of it, tagged with the layout it belongs to: fmi2GetFMUstate, fmi2SetFMUstate and
  * (de)serialisation are memory copies, and a state from another module or build is refused.
+ * Serialised bytes may come from anywhere (a file): they carry a header (magic, format version, size,
+ * layout tag), and fmi2DeSerializeFMUstate checks every field the code indexes or loops by
+ * (model_check, generated with the model) before it hands out a state, so that no bytes can make the
+ * FMU read or write outside its memory.
  *
  * Beyond FMI, cotwin_ports tells an in-process master where those arrays are, so that it can move
  * a step's port values without a call per type (cotwin.cosim.units.FMUUnit uses it when present).
@@ -38,6 +42,16 @@ typedef struct {
     Values values;
     int initialised; /* the model has run model_init */
 } State;
+
+/* The serialised form of a State: this header, then the State's bytes. */
+#define STATE_MAGIC "cotwinFS"
+#define STATE_VERSION 2u
+typedef struct {
+    char magic[8];    /* STATE_MAGIC */
+    uint32_t version; /* STATE_VERSION: the layout of these bytes */
+    uint32_t size;    /* sizeof(State) */
+    uint64_t tag;     /* STATE_TAG */
+} StateHeader;
 
 typedef struct {
     State state;
@@ -362,30 +376,68 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
     INSTANCE(c, "fmi2SerializedFMUstateSize");
     if (!FMUstate || !size) return fail(inst, this_function, "no state or no place for its size (NULL)");
-    *size = sizeof(State);
+    *size = sizeof(StateHeader) + sizeof(State);
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
     INSTANCE(c, "fmi2SerializeFMUstate");
     if (!FMUstate || !serializedState) return fail(inst, this_function, "no state or no buffer (NULL)");
-    if (size < sizeof(State)) return fail(inst, this_function, "the buffer is smaller than fmi2SerializedFMUstateSize");
-    memcpy(serializedState, FMUstate, sizeof(State));
+    if (size < sizeof(StateHeader) + sizeof(State))
+        return fail(inst, this_function, "the buffer is smaller than fmi2SerializedFMUstateSize");
+    StateHeader header;
+    memset(&header, 0, sizeof header);
+    memcpy(header.magic, STATE_MAGIC, sizeof header.magic);
+    header.version = STATE_VERSION;
+    header.size = (uint32_t)sizeof(State);
+    header.tag = STATE_TAG;
+    memcpy(serializedState, &header, sizeof header);
+    memcpy(serializedState + sizeof header, FMUstate, sizeof(State));
     return fmi2OK;
+}
+
+/* 1 if `s` (bytes of unknown origin) is a state this FMU can run; else 0 and why. */
+static int state_check(const State *s, char *why, size_t size) {
+    if (s->tag != STATE_TAG) return snprintf(why, size, "a state of another FMU (layout tag)"), 0;
+    if (s->initialised != 0 && s->initialised != 1) return snprintf(why, size, "a malformed initialisation flag"), 0;
+    for (int k = 0; k < N_BOOLEAN; k++) {
+        unsigned char byte;
+        memcpy(&byte, &s->values.b[k], 1);
+        if (byte > 1) return snprintf(why, size, "Boolean port slot %d is neither true nor false", k), 0;
+    }
+    double period = s->values.r[PERIOD_SLOT];
+    if (!(period >= 0.0) || isinf(period)) return snprintf(why, size, "the cycle period is not a finite number >= 0"), 0;
+    return model_check(&s->model, why, size);
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate *FMUstate) {
     INSTANCE(c, "fmi2DeSerializeFMUstate");
     if (!serializedState || !FMUstate) return fail(inst, this_function, "no bytes or no place for the state (NULL)");
-    uint64_t tag;
-    if (size != sizeof(State)) return fail(inst, this_function, "the bytes are not a state of this FMU (wrong size)");
-    memcpy(&tag, serializedState, sizeof tag);
-    if (tag != STATE_TAG) return fail(inst, this_function, "the bytes are a state of another FMU");
-    State *copy = (State *)*FMUstate;
-    if (!copy) copy = malloc(sizeof(State));
-    if (!copy) return fail(inst, this_function, "out of memory");
-    memcpy(copy, serializedState, sizeof(State));
-    *FMUstate = copy;
+    StateHeader header;
+    if (size != sizeof header + sizeof(State))
+        return fail(inst, this_function, "the bytes are not a state of this FMU (wrong size)");
+    memcpy(&header, serializedState, sizeof header);
+    if (memcmp(header.magic, STATE_MAGIC, sizeof header.magic) != 0)
+        return fail(inst, this_function, "the bytes are not a state of this FMU (no cotwin FMU state header)");
+    if (header.version != STATE_VERSION || header.size != sizeof(State))
+        return fail(inst, this_function, "the bytes are a state of another version of the FMU's state format");
+    if (header.tag != STATE_TAG) return fail(inst, this_function, "the bytes are a state of another FMU");
+    State *checked = malloc(sizeof(State));
+    if (!checked) return fail(inst, this_function, "out of memory");
+    memcpy(checked, serializedState + sizeof header, sizeof(State));
+    char why[200];
+    if (!state_check(checked, why, sizeof why)) {
+        free(checked);
+        char text[300];
+        snprintf(text, sizeof text, "the bytes are not a state this FMU can run: %s", why);
+        return fail(inst, this_function, text);
+    }
+    if (*FMUstate) { /* FMI: a state given back is overwritten */
+        memcpy(*FMUstate, checked, sizeof(State));
+        free(checked);
+    } else {
+        *FMUstate = checked;
+    }
     return fmi2OK;
 }

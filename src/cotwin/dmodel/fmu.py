@@ -201,10 +201,13 @@ def _c_start(var: Variable) -> str:
     return str(int(var.start))
 
 
-def fmu_sources(program: Program) -> dict[str, str]:
-    """Every text file of the FMU (deterministic): modelDescription.xml and sources/*."""
+def fmu_sources(program: Program, root: str | Path | None = None) -> dict[str, str]:
+    """Every text file of the FMU (deterministic): modelDescription.xml and sources/*. Model locations in
+    them (error messages) are relative to `root`, the project's folder (default: the folder holding the
+    model files), so that the same models give the same bytes and GUID from any working directory and
+    wherever the project lies; the GUID is a digest of the other files."""
     layout = PortLayout(program)
-    files = {f"sources/{name}": text for name, text in generate_c(program).items()}
+    files = {f"sources/{name}": text for name, text in generate_c(program, root).items()}
     files["sources/ports.h"] = ports_header(program, layout, files["sources/model.h"])
     files["sources/fmi2.c"] = WRAPPER.read_text()
     headers = Path(fmpy.__file__).parent / "c-code"
@@ -244,10 +247,11 @@ def compile_binary(sources: dict[str, str], ident: str, folder: Path, cc: str = 
     return out
 
 
-def build_fmu(program: Program, output: str | Path, cc: str = "cc") -> Path:
-    """Write the FMU zip: modelDescription.xml, binaries/linux64/<id>.so (compiled with `cc`) and sources/."""
+def build_fmu(program: Program, output: str | Path, cc: str = "cc", root: str | Path | None = None) -> Path:
+    """Write the FMU zip: modelDescription.xml, binaries/linux64/<id>.so (compiled with `cc`) and sources/
+    (locations relative to `root`, see fmu_sources)."""
     output = Path(output)
-    files = fmu_sources(program)
+    files = fmu_sources(program, root)
     ident = model_identifier(program)
     with tempfile.TemporaryDirectory(prefix="cotwin-fmu-") as tmp:
         binary = compile_binary(files, ident, Path(tmp), cc)

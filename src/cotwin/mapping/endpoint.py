@@ -9,12 +9,13 @@ this interface plugs in without touching the mapping.
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import fields as dataclass_fields
 from typing import Protocol
 
 import numpy as np
 
 from ..diagnostics import CotwinError
+from ..plaindata import fields, finite, of_type
 from ..pmodel.cell import CellGeometry
 from ..pmodel.mjcf import servo_mode
 from ..pmodel.simulator import PlatformSimulator, SimState
@@ -146,13 +147,27 @@ class SimulatedEndpoint:
     def snapshot(self) -> dict:
         """The endpoint's state as plain data: MuJoCo's integration state and the trajectory in flight."""
         state = self.sim.get_state()
-        return {"simulator": state.vector, "scans": state.scans, "segment": trajectory_data(self.segment),
-                "direct": dict(self.direct)}
+        return {"simulator": state.vector, "scans": state.scans, "derived": state.derived,
+                "segment": trajectory_data(self.segment), "direct": dict(self.direct)}
 
     def restore(self, snapshot: dict) -> None:
-        self.sim.set_state(SimState(snapshot["simulator"], tuple(snapshot.get("scans", ()))))
-        self.direct = dict(snapshot.get("direct", {}))
-        self.segment = trajectory_from(snapshot["segment"])
+        """Continue from a snapshot, checked against this platform first: the simulator's state (its size,
+        finite numbers, the ray sensors' readings), the trajectory's joints and numbers, the speeds and
+        efforts by joint."""
+        fields(snapshot, "platform", ("simulator", "segment"), ("scans", "direct", "derived"))
+        of_type(snapshot["simulator"], np.ndarray, "platform's simulator state")
+        direct = of_type(snapshot.get("direct", {}), dict, "platform's commanded speeds and efforts")
+        commanded = {j.name for j in self.tree.actuated} - self._positioned
+        for joint, value in direct.items():
+            if joint not in commanded:
+                raise CotwinError(f"the saved state commands a speed or effort of {joint!r:.60}, which is not a "
+                                  f"speed- or effort-driven joint of this platform")
+            finite(value, f"commanded speed or effort of {joint}")
+        segment = trajectory_from(snapshot["segment"], self._positioned)
+        self.sim.set_state(SimState(snapshot["simulator"], tuple(snapshot.get("scans", ())),
+                                    tuple(of_type(snapshot.get("derived", ()), tuple, "platform's derived quantities"))))
+        self.direct = {j: float(v) for j, v in direct.items()}
+        self.segment = segment
         self._held = None  # written again at the next step (the same value: MuJoCo's controls are restored)
 
 
@@ -166,12 +181,29 @@ def trajectory_data(trajectory) -> dict | None:
     kind = type(trajectory).__name__
     if TRAJECTORIES.get(kind) is not type(trajectory):
         raise CotwinError(f"cannot save a trajectory of kind {kind}: not one of {', '.join(TRAJECTORIES)}")
-    return {"kind": kind, "fields": {f.name: getattr(trajectory, f.name) for f in fields(trajectory)}}
+    return {"kind": kind, "fields": {f.name: getattr(trajectory, f.name) for f in dataclass_fields(trajectory)}}
 
 
-def trajectory_from(data: dict | None):
+def trajectory_from(data: dict | None, joints: set[str] | None = None):
+    """The trajectory `trajectory_data` saved, checked: a known kind, its fields and no others, finite numbers,
+    goals only for `joints` (when given) and a start for every goal; CotwinError naming what is wrong."""
     if data is None:
         return None
-    if data.get("kind") not in TRAJECTORIES:
-        raise CotwinError(f"a saved trajectory of unknown kind {data.get('kind')!r}")
-    return TRAJECTORIES[data["kind"]](**data["fields"])
+    fields(data, "trajectory", ("kind", "fields"))
+    if data["kind"] not in TRAJECTORIES:
+        raise CotwinError(f"a saved trajectory of unknown kind {str(data['kind'])[:60]!r}")
+    kind = TRAJECTORIES[data["kind"]]
+    values = fields(data["fields"], "trajectory", [f.name for f in dataclass_fields(kind)])
+    return kind(**{name: _checked_field(name, value, joints) for name, value in values.items()}).checked()
+
+
+def _checked_field(name: str, value, joints: set[str] | None):
+    if isinstance(value, dict):
+        for joint, position in value.items():
+            if joints is not None and joint not in joints:
+                raise CotwinError(f"the saved trajectory moves {joint!r:.60}, not a position-driven joint of this platform")
+            finite(position, f"trajectory's {name} of {joint}")
+        return {j: float(v) for j, v in value.items()}
+    if isinstance(value, str):
+        return value
+    return finite(value, f"trajectory's {name}")

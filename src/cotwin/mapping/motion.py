@@ -28,7 +28,7 @@ from typing import Protocol
 
 from ..pmodel.tree import KinematicTree
 from ..config import Key, Schema, TomlFile
-from ..diagnostics import Finding, Severity
+from ..diagnostics import CotwinError, Finding, Severity
 
 QUINTIC_PEAK = 1.875  # peak of d/dtau of 10 tau^3 - 15 tau^4 + 6 tau^5
 
@@ -65,6 +65,19 @@ class Segment:
     @property
     def end(self) -> float:
         return self.t0 + max(self.duration, 0.0)
+
+    def checked(self) -> "Segment":
+        """This segment if its fields make a move (a saved state's, before it runs): goals with a start
+        each, a known shape, a duration at least 0 and, for a trapezoid that takes time, positive a, v and
+        distance; CotwinError otherwise."""
+        if not set(self.goal) <= set(self.start):
+            raise CotwinError(f"the saved trajectory has goals without a start: {', '.join(sorted(set(self.goal) - set(self.start)))}")
+        if self.shape not in ("quintic", "trapezoid"):
+            raise CotwinError(f"the saved trajectory's shape is {self.shape[:40]!r}, not quintic or trapezoid")
+        if not self.duration >= 0 or (self.shape == "trapezoid" and self.duration > 0 and
+                                      not (self.a > 0 and self.v > 0 and self.distance > 0)):
+            raise CotwinError("the saved trajectory's duration, acceleration, speed or distance cannot make a move")
+        return self
 
 
 def trapezoid_duration(a: float, v: float, distance: float) -> float:

@@ -34,6 +34,7 @@ import math
 from dataclasses import fields
 
 from ..diagnostics import CotwinError
+from ..plaindata import count, fields as state_fields, finite, like, of_type
 from ..pmodel import ik
 from ..pmodel.ikcache import SolutionCache
 from ..pmodel.cell import CellGeometry
@@ -133,7 +134,27 @@ class FunctionRegistry:
         return {key: {f.name: getattr(result, f.name) for f in fields(result)} for key, result in self._cache.items()}
 
     def restore(self, snapshot: dict) -> None:
-        self._cache = {key: ik.IKResult(**values) for key, values in snapshot.items()}
+        """The solutions a saved state holds, checked first: grid points of three finite numbers, each with
+        a finite value for every arm joint (and only joints of this tree), errors and an iteration count."""
+        of_type(snapshot, dict, "inverse kinematics solutions")
+        names = [f.name for f in fields(ik.IKResult)]
+        joints = {j.name for j in self.tree.joints}
+        cache = {}
+        for key, values in snapshot.items():
+            if key.__class__ is not tuple or len(key) != 3:
+                raise CotwinError(f"the saved state's inverse kinematics are keyed by a grid point, not {key!r:.60}")
+            key = tuple(finite(v, "inverse kinematics grid point") for v in key)
+            what = f"inverse kinematics solution at {key}"
+            values = state_fields(values, what, names)
+            q = of_type(values["q"], dict, f"{what}'s joints")
+            if not set(self.arm) <= set(q) or not set(q) <= joints:
+                raise CotwinError(f"the saved state's {what} is for joints {', '.join(map(str, q))[:200]}, not this "
+                                  f"arm's {', '.join(self.arm)}")
+            cache[key] = ik.IKResult(q={j: finite(v, f"{what}'s {j}") for j, v in q.items()},
+                                     position_error=finite(values["position_error"], f"{what}'s position error", 0.0),
+                                     angle_error=finite(values["angle_error"], f"{what}'s angle error", 0.0),
+                                     iterations=count(values["iterations"], f"{what}'s iterations"))
+        self._cache = cache
 
 
 class _MappingNames:
@@ -626,17 +647,71 @@ class Mapping:
                 "reports": self.reports, "delivered": dict(self.delivered)}
 
     def restore(self, snapshot: dict) -> None:
+        """Continue from a snapshot, checked against this mapping first: its variables (each shaped as its
+        declared type), its events, the functions' solutions and the platform's state. An event's value is
+        checked by the unit that reads it (it knows the d-model's event types)."""
+        what = f"mapping {self.model.name}"
+        state_fields(snapshot, what, ("variables", "started", "functions", "endpoint"),
+                     ("events", "held", "asked", "pending", "reports", "delivered"))
+        variables = like(snapshot["variables"], self._shapes(), f"{what}'s variables")
+        started = of_type(snapshot["started"], bool, f"{what}'s started")
+        events = of_type(snapshot.get("events", {}), dict, f"{what}'s events")
+        unknown = [name for name in events if name not in self.events]
+        if unknown:
+            raise CotwinError(f"the saved state's {what} has events {', '.join(map(str, unknown))[:200]}, which it "
+                              f"does not define")
+        of_type(snapshot["functions"], dict, f"{what}'s function solutions")
         self.endpoint.restore(snapshot["endpoint"])
         if snapshot["functions"] or self._registry is not None:
             self.registry.restore(snapshot["functions"])
-        for name, value in snapshot.get("events", {}).items():
-            if name in self.events:
-                self.events[name].value = value
-        self.variables = dict(snapshot["variables"])
-        self.held = dict(snapshot.get("held", {}))
-        self.asked = set(snapshot.get("asked", ()))
-        self.pending = dict(snapshot.get("pending", ()))
-        self.reports = snapshot.get("reports", 0)
-        self.delivered = dict(snapshot.get("delivered", {}))
-        self.started = snapshot["started"]
+        held, asked, pending, reports, delivered = self._answers_state(snapshot, what)
+        for name, value in events.items():
+            self.events[name].value = value
+        self.variables = dict(variables)
+        self.held, self.asked, self.pending, self.reports, self.delivered = held, asked, pending, reports, delivered
+        self.started = started
         self._readings = None
+
+    def _answers_state(self, snapshot: dict, what: str) -> tuple:
+        """The answers' bookkeeping of `report` in a snapshot, checked: events this mapping defines, answers
+        among them where only answers may be, report counts that do not run ahead of `reports`."""
+        reports = count(snapshot.get("reports", 0), f"{what}'s reports")
+        held = {}
+        for name, entry in of_type(snapshot.get("held", {}), dict, f"{what}'s held events").items():
+            if name not in self.events or not isinstance(entry, (tuple, list)) or len(entry) != 2:
+                raise CotwinError(f"the saved state's {what} holds {name!r:.60} as an event, which it does not "
+                                  "define (or not as a pair of held and value)")
+            held[name] = (of_type(entry[0], bool, f"{what}'s {name} held"), entry[1])
+        asked = set(of_type(snapshot.get("asked", []), (list, tuple), f"{what}'s asked variables"))
+        unknown = [v for v in asked if v not in self.variables and v not in self.assigners]
+        if unknown:
+            raise CotwinError(f"the saved state's {what} was asked about {', '.join(map(repr, unknown))[:200]}, "
+                              "which no operation of it assigns")
+        pending = {}
+        for entry in of_type(snapshot.get("pending", []), (list, tuple), f"{what}'s pending answers"):
+            if not isinstance(entry, (tuple, list)) or len(entry) != 2 or entry[0] not in self.answers:
+                raise CotwinError(f"the saved state's {what} has a pending answer {entry!r:.60}, not one of its "
+                                  f"answers ({', '.join(sorted(self.answers)) or 'none'})")
+            pending[entry[0]] = entry[1]
+        delivered = {}
+        for name, at in of_type(snapshot.get("delivered", {}), dict, f"{what}'s delivered answers").items():
+            if name not in self.answers:
+                raise CotwinError(f"the saved state's {what} delivered {name!r:.60}, which is not one of its answers")
+            delivered[name] = count(at, f"{what}'s report delivering {name}", reports)
+        return held, asked, pending, reports, delivered
+
+    def _shapes(self) -> dict:
+        """Every variable's value shape (cotwin.plaindata.like): its declared type's default value, a number
+        for the mirrors and the monitored readings; None (anything) where the type gives no shape."""
+        from ..dmodel.program import default_value
+        from ..robosim.types import INT, NAT
+
+        shapes: dict = {}
+        for var in self.model.variables:
+            ty, _ = self.resolver.declared(var)
+            value = default_value(ty, self.resolver)
+            shapes[var.name] = None if value == 0 and value.__class__ is int and ty not in (INT, NAT) \
+                and not isinstance(ty, EnumTy) else value
+        for name in (*self._mirrors, *self.monitor):
+            shapes[name] = 0.0
+        return shapes

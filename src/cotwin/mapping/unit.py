@@ -13,6 +13,7 @@ from typing import Callable
 
 from ..diagnostics import CotwinError
 from ..cosim.units import Port, PythonUnit
+from ..plaindata import fields, finite, of_type, port_value
 from ..dmodel.ports import PortLayout
 from ..dmodel.program import Program, assemble, get_path
 from .runtime import Mapping
@@ -90,12 +91,37 @@ class MappingUnit(PythonUnit):
             self.mapping.stop_mapping()
 
     # ---- state: the port values, the mapping runtime's (variables, platform) and the operations run ----
+    STATE_KEYS = (*PythonUnit.STATE_KEYS, "mapping", "executed")
+
     def snapshot(self) -> dict:
         return {**super().snapshot(), "mapping": self.mapping.snapshot(), "executed": list(self.executed)}
 
     def restore(self, snapshot: dict) -> None:
+        """Continue from a snapshot, checked first (cotwin.plaindata): the operations run (known operations at
+        finite times), the events' values (each value port's scalar where the unit reads it), then the
+        mapping's own state and the port values."""
         if self.mapping is None:
             raise CotwinError(f"unit {self.name}: instantiate it before restoring a state into it")
+        what = f"unit {self.name}"
+        fields(snapshot, what, self.STATE_KEYS)
+        executed = of_type(snapshot["executed"], list, f"{what}'s operations run")
+        operations = {op.name for op in self.program.operations}
+        for entry in executed:
+            if entry.__class__ is not tuple or len(entry) != 3 or entry[1] not in operations or \
+                    entry[2].__class__ is not dict:
+                raise CotwinError(f"the saved state's {what} ran {entry!r:.80}, not (time, operation, arguments)")
+            finite(entry[0], f"{what}'s operation time")
+        events = fields(snapshot["mapping"], f"{what}'s mapping", ("variables", "started", "functions", "endpoint"),
+                        ("events",)).get("events", {})
+        for name, scalars in self.value_ports.items():
+            value = events.get(name) if events.__class__ is dict else None
+            for port, sc in scalars if value is not None else ():
+                try:
+                    scalar = get_path(value, sc.path) if sc.path else value
+                except (KeyError, IndexError, TypeError):
+                    raise CotwinError(f"the saved state's {what}: event {name}'s value {value!r:.80} has no "
+                                      f"{'.'.join(map(str, sc.path))}") from None
+                port_value(scalar, sc.fmi_type, f"{what}'s event {name} ({port})")
         super().restore(snapshot)
         self.mapping.restore(snapshot["mapping"])
-        self.executed = list(snapshot["executed"])
+        self.executed = list(executed)

@@ -39,6 +39,7 @@ from .tree import KinematicTree
 CONTACT_PERIOD = 0.005  # s between checks for contacts with the scene's obstacles
 STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # time, positions, velocities, actuator states and history,
 # solver warm start, controls, applied forces, mocap poses, equality activations, user and plugin data
+DERIVED = ("sensordata", "xpos", "xmat")  # what cotwin reads between steps besides STATE, as mj_step left it
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,7 @@ class SimState:
 
     vector: np.ndarray
     scans: tuple = ()  # the ray sensors' last readings (they hold between scans)
+    derived: tuple = ()  # (sensordata, xpos, xmat) as the last step left them (see PlatformSimulator.set_state)
 
     @property
     def time(self) -> float:
@@ -290,25 +292,66 @@ class PlatformSimulator:
     def get_state(self) -> SimState:
         vector = np.empty(mujoco.mj_stateSize(self.model, STATE))
         mujoco.mj_getState(self.model, self.data, vector, STATE)
-        return SimState(vector, tuple((dict(s.readings), s.ranges.copy()) for s in self.scanners))
+        return SimState(vector, tuple((dict(s.readings), s.ranges.copy()) for s in self.scanners),
+                        tuple(getattr(self.data, name).copy() for name in DERIVED))
 
     def set_state(self, state: SimState) -> None:
-        """Continue from `state` (derived quantities such as sensors are recomputed at once)."""
+        """Continue from `state`. What cotwin reads between steps (sensors, body poses) is as the saved
+        simulator's last step left it, computed before that step's integration (mj_step), not as mj_forward
+        would recompute it at the restored positions: a fork then reads what the original read, bit for bit;
+        a state without them gets mj_forward's."""
         size = mujoco.mj_stateSize(self.model, STATE)
         vector = np.asarray(state.vector, dtype=np.float64)
         if vector.shape != (size,):
             raise CotwinError(f"the simulator state has {vector.size} numbers, this model's has {size}: "
                               "it is a state of another model")
+        if not np.all(np.isfinite(vector)) or not abs(vector[0]) < 1e12 or not np.all(np.abs(vector[1:]) <= mujoco.mjMAXVAL):
+            raise CotwinError(f"the simulator state holds numbers that are not finite, beyond MuJoCo's {mujoco.mjMAXVAL:g} "
+                              "(where it would reset the simulation) or a time beyond 1e12 s")
+        scans = self._checked_scans(state.scans)
+        derived = self._checked_derived(state.derived)
         mujoco.mj_setState(self.model, self.data, vector, STATE)
         mujoco.mj_forward(self.model, self.data)
+        for name, values in zip(DERIVED, derived):
+            getattr(self.data, name)[:] = values
         self._steps = int(round(self.data.time / self.timestep))
         self._touching = set()
-        if len(state.scans) == len(self.scanners):
-            for scanner, (readings, ranges) in zip(self.scanners, state.scans):
-                scanner.readings, scanner.ranges = dict(readings), np.array(ranges)
+        if scans is not None:
+            for scanner, (readings, ranges) in zip(self.scanners, scans):
+                scanner.readings, scanner.ranges = readings, ranges
         else:  # a state without scans (saved before ray sensors were read): scan where the robot is
             for scanner in self.scanners:
                 scanner.scan()
+
+    def _checked_derived(self, derived) -> tuple:
+        """The saved sensors and body poses if they fit this model (arrays of its sizes, finite), else ()
+        for a state without them; CotwinError for any other shape."""
+        if not derived:
+            return ()
+        if len(derived) != len(DERIVED):
+            raise CotwinError(f"the simulator state's derived quantities are not {', '.join(DERIVED)}")
+        for name, values in zip(DERIVED, derived):
+            live = getattr(self.data, name)
+            if not isinstance(values, np.ndarray) or values.shape != live.shape or values.dtype != np.float64 or \
+                    not np.all(np.isfinite(values)):
+                raise CotwinError(f"the simulator state's {name} is not {live.size} finite numbers of this model")
+        return tuple(derived)
+
+    def _checked_scans(self, scans) -> list | None:
+        """The ray sensors' saved readings, each (readings by path, ranges of every beam) as the scanner
+        holds them, or None for a state without them; CotwinError for any other shape."""
+        if not scans or len(scans) != len(self.scanners):
+            return None
+        out = []
+        for k, (scanner, scan) in enumerate(zip(self.scanners, scans)):
+            readings, ranges = scan if isinstance(scan, (tuple, list)) and len(scan) == 2 else (None, None)
+            if not isinstance(readings, dict) or set(readings) != set(scanner.ports) or \
+                    not all(isinstance(v, float) for v in readings.values()):
+                raise CotwinError(f"the simulator state's scan {k + 1} does not hold the readings {', '.join(scanner.ports)}")
+            if not isinstance(ranges, np.ndarray) or ranges.shape != scanner.ranges.shape or ranges.dtype != np.float64:
+                raise CotwinError(f"the simulator state's scan {k + 1} does not hold {len(scanner.angles)} ranges")
+            out.append((dict(readings), ranges.copy()))
+        return out
 
     def body_pose(self, name: str) -> np.ndarray:
         try:

@@ -13,8 +13,11 @@ import fcntl
 import hashlib
 import json
 import os
+import re
 import shutil
 import tempfile
+import uuid
+import zipfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterable
@@ -22,7 +25,7 @@ from typing import Iterable
 from .. import __version__
 from ..config import dumps
 from ..diagnostics import CotwinError
-from ..files import check_outputs, open_exclusive, output, write_text
+from ..files import check_outputs, open_exclusive, output, write_bytes, write_text
 from .system import TwinSystem
 
 RECORD = "build.json"
@@ -66,12 +69,6 @@ def _cotwin_sources(names=_GENERATORS) -> list[bytes]:
     return [(root / n).read_bytes() for n in names if (root / n).is_file()]
 
 
-def model_texts(system: TwinSystem) -> list[bytes]:
-    """Every model file the twin was checked from, in a stable order."""
-    return [Path(f.path).read_bytes() for f in sorted(system.models.project.files, key=lambda f: str(f.path))
-            if not str(f.path).startswith("<")]
-
-
 class Record:
     """DIR/build.json: artefact name -> the key it was built with."""
 
@@ -96,17 +93,29 @@ class Record:
 
 
 def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: Record | None = None) -> Path:
-    """DIR/dmodel.fmu, rebuilt only when the models, the module, the compiler or cotwin changed."""
-    from ..dmodel.fmu import build_fmu
+    """DIR/dmodel.fmu, rebuilt only when its sources (the models, the module, where the model files lie in
+    the project), the compiler or cotwin changed; a copy of [models] fmu when the project names one."""
+    from ..dmodel.fmu import build_fmu, fmu_sources
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     record = record or Record(folder)
     target = folder / "dmodel.fmu"
-    key = _digest(__version__, *model_texts(system), str(system.spec.module), cc, *_cotwin_sources())
+    if system.spec.fmu is not None:  # built elsewhere ([models] fmu): copied, as the multimodel names it
+        given = system.spec.fmu.read_bytes()
+        key = _digest("given", given)
+        if not record.fresh(target, key):
+            record.forget(target)
+            write_bytes(target, given)  # a new file renamed into place: never through a link left there
+            record.done(target, key)
+        return target
+    root = system.spec.path.parent
+    sources = fmu_sources(system.models.program, root)
+    key = _digest(__version__, *(part for name in sorted(sources) for part in (name, sources[name])), cc,
+                  *_cotwin_sources())
     if not record.fresh(target, key):
         record.forget(target)
-        build_fmu(system.models.program, target, cc=cc)
+        build_fmu(system.models.program, target, cc=cc, root=root)
         record.done(target, key)
     return target
 
@@ -213,7 +222,32 @@ def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = Non
             fmu = FmuBuilder.build_FMU(work / "fmu_slave.py", dest=work,
                                        project_files=[work / "twin", work / "cotwin_unit.json"],
                                        canGetAndSetFMUstate=True, canSerializeFMUstate=True)
-            with open(fmu, "rb") as built, output(target) as f:
-                shutil.copyfileobj(built, f)
+            with output(target) as f:  # a new file renamed into place: never through a link left there
+                reproducible_fmu(Path(fmu), f)
             record.done(target, key)
     return written
+
+
+_ZIP_TIME = (1980, 1, 1, 0, 0, 0)
+
+
+def reproducible_fmu(fmu: Path, into) -> None:
+    """`fmu` (a pythonfmu build) rewritten into `into` (a path or a binary file) so that the same sources give the same bytes wherever
+    and whenever it is built: entries in name order with a fixed date and modes, no generation date, and
+    a GUID that is a digest of the content (pythonfmu draws a time-based one); its generationTool says
+    cotwin built it (with pythonfmu), so that it runs in the master's process by default."""
+    with zipfile.ZipFile(fmu) as zf:
+        files = {info.filename: zf.read(info) for info in zf.infolist() if not info.is_dir()}
+    description = files["modelDescription.xml"].decode("utf-8")
+    description = re.sub(r'\s+generationDateAndTime="[^"]*"', "", description, count=1)
+    description = re.sub(r'\bgenerationTool="([^"]*)"', r'generationTool="cotwin (\1)"', description, count=1)
+    description = re.sub(r'\bguid="[^"]*"', 'guid="@GUID@"', description, count=1)
+    files["modelDescription.xml"] = description.encode("utf-8")
+    guid = str(uuid.UUID(_digest(*(part for name in sorted(files) for part in (name, files[name])))[:32]))
+    files["modelDescription.xml"] = description.replace("@GUID@", guid).encode("utf-8")
+    with zipfile.ZipFile(into, "w", zipfile.ZIP_DEFLATED) as zf:
+        for name in sorted(files):
+            info = zipfile.ZipInfo(name, date_time=_ZIP_TIME)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = (0o755 if name.startswith("binaries/") else 0o644) << 16
+            zf.writestr(info, files[name])

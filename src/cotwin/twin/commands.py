@@ -14,6 +14,8 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 
+from ..plaindata import StateError, count, fields, finite, of_type, port_value
+
 
 @dataclass(frozen=True)
 class Occurrence:
@@ -80,11 +82,42 @@ class CommandQueue:
         return {"waiting": [_plain(c) for c in self.waiting], "applied": [(_plain(a.command), a.time) for a in self.applied],
                 "accepted": self.accepted, "refused": self.refused, "applied_count": self.applied_count}
 
-    def restore(self, snapshot: dict) -> None:
-        self.waiting = deque(Occurrence(*c) for c in snapshot["waiting"])
-        self.applied = deque((Applied(Occurrence(*c), t) for c, t in snapshot["applied"]), maxlen=self.MAX_APPLIED)
-        self.accepted, self.refused = snapshot["accepted"], snapshot["refused"]
-        self.applied_count = snapshot.get("applied_count", len(self.applied))
+    def restore(self, snapshot: dict, ports: dict | None = None, what: str = "command queue") -> None:
+        """Continue with a saved queue, checked first: its counts, and every command an event of `ports`
+        (name -> cotwin.cosim.units.Port, where known) with values of its value ports' types."""
+        fields(snapshot, what, ("waiting", "applied", "accepted", "refused"), ("applied_count",))
+        waiting = [self._occurrence(c, ports, f"{what}'s waiting command")
+                   for c in of_type(snapshot["waiting"], (list, tuple), f"{what}'s waiting commands")]
+        applied = []
+        for entry in of_type(snapshot["applied"], (list, tuple), f"{what}'s applied commands")[-self.MAX_APPLIED:]:
+            if not isinstance(entry, (list, tuple)) or len(entry) != 2:
+                raise StateError(f"the saved state's {what} has an applied command {entry!r:.60}, not a (command, time)")
+            applied.append(Applied(self._occurrence(entry[0], ports, f"{what}'s applied command"),
+                                   finite(entry[1], f"{what}'s applied command's time")))
+        self.waiting = deque(waiting)
+        self.applied = deque(applied, maxlen=self.MAX_APPLIED)
+        self.accepted = count(snapshot["accepted"], f"{what}'s accepted count")
+        self.refused = count(snapshot["refused"], f"{what}'s refused count")
+        self.applied_count = count(snapshot.get("applied_count", len(applied)), f"{what}'s applied count")
+
+    @staticmethod
+    def _occurrence(data, ports: dict | None, what: str) -> Occurrence:
+        if not isinstance(data, (list, tuple)) or len(data) != 5:
+            raise StateError(f"the saved state's {what} is {data!r:.60}, not (event, values, origin, due, id)")
+        event, values, origin, due, ident = data
+        if not isinstance(event, str) or (ports is not None and event not in ports):
+            raise StateError(f"the saved state's {what} is an event {event!r:.60} this unit does not send")
+        pairs = []
+        for pair in of_type(values, (list, tuple), f"{what}'s values"):
+            if not isinstance(pair, (list, tuple)) or len(pair) != 2 or not isinstance(pair[0], str) or \
+                    (ports is not None and pair[0] not in ports):
+                raise StateError(f"the saved state's {what} sets {pair!r:.60}, not a value port of this unit")
+            value = pair[1] if ports is None else port_value(pair[1], ports[pair[0]].type, f"{what}'s {pair[0]}")
+            pairs.append((pair[0], value))
+        if ident is not None:
+            of_type(ident, str, f"{what}'s id")
+        return Occurrence(event, tuple(pairs), of_type(origin, str, f"{what}'s origin"), finite(due, f"{what}'s time"),
+                          ident)
 
 
 def _plain(c: Occurrence) -> tuple:

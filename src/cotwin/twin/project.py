@@ -6,6 +6,8 @@ co-simulation settings and, for a live twin, the physical twin, deviation checki
     pmodel = "ur5e.pm"
     mapping = "mapping.pm"
     module = "FlexCellArm"          # optional: the d-model module; pmodel_name likewise
+    fmu = "dmodel.fmu"              # optional: a d-model FMU built elsewhere, run in place of the one
+                                    #   cotwin builds from dmodel (its ports must be the module's)
     [scenario]                      # where commands come from: one of
     plan = "plan.csv"               #   a TwinManager plan (ms, port values)
     commands = "scenario.toml"      #   a TOML list of [[command]]
@@ -42,6 +44,10 @@ co-simulation settings and, for a live twin, the physical twin, deviation checki
     log = ["q0", "q1"]              # mapping variables to log (default: every monitored one)
     parameters = { seed = 7 }       # d-model FMU parameters (its random seed, constants without value;
                                     #   cycle_period, if given, divides the step into whole cycles)
+    isolate = true                  # the d-model FMU in a process of its own (cotwin.cosim.isolated): a
+                                    #   crash or hang in it is a located error (default: only an FMU
+                                    #   cotwin did not build, [models] fmu)
+    unit_timeout = 30.0             # s an isolated FMU's call may take before it counts as hanging
     [figure]                        # the figure of `cotwin run` (default: panels chosen from the models)
     panels = [{ label = "(1) lv", variables = ["dmodel.lv"] }]  # unit role . variable, per panel
     [pt]                            # the physical twin of `cotwin twin`
@@ -78,6 +84,7 @@ from urllib.parse import urlsplit
 from ..config import Key, Schema, TomlFile, is_number, raise_problems, shown, unique, within
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..cosim.execution import step_count
+from ..cosim.isolated import DEFAULT_TIMEOUT
 from ..pmodel.mjcf import TIMESTEP as PHYSICS_STEP
 from ..pmodel.perturbation import SCHEMA as PLANT, Perturbation
 
@@ -253,7 +260,7 @@ def _parameters(value) -> str | None:
 SCHEMA = Schema({
     "models": Key("table", required=True, table=Schema({
         "dmodel": Key("str", required=True), "pmodel": Key("str", required=True), "mapping": Key("str", required=True),
-        "module": Key("str", check=_name), "pmodel_name": Key("str", check=_name)})),
+        "module": Key("str", check=_name), "pmodel_name": Key("str", check=_name), "fmu": Key("str")})),
     "scenario": Key("table", {}, table=Schema({
         "plan": Key("str"), "commands": Key("str"), "rabbitmq": Key("table", table=RABBITMQ)})),
     "platform": Key("table", {}, table=Schema({
@@ -268,7 +275,8 @@ SCHEMA = Schema({
         "step": Key("positive", 0.1), "end": Key("positive", 20.0),
         "algorithm": Key("str", "jacobi", choices=("jacobi", "gauss-seidel")),
         "realtime": Key("bool", False), "log": Key("list[str]", check=unique("variable", empty=True)),
-        "parameters": Key("table", {}, check=_parameters)})),
+        "parameters": Key("table", {}, check=_parameters), "isolate": Key("bool"),
+        "unit_timeout": Key("positive", DEFAULT_TIMEOUT)})),
     "figure": Key("table", {}, table=Schema({"panels": Key("list")})),
     "pt": Key("table", table=Schema({
         "endpoint": Key("str", required=True, choices=PT_ENDPOINTS), "url": Key("str"), "log": Key("str"),
@@ -350,6 +358,9 @@ class TwinProject:
     readings: dict[str, str] = field(default_factory=dict)  # [monitor] readings
     parameters: dict[str, object] = field(default_factory=dict)  # [cosim] parameters of the d-model FMU
     panels: list[tuple[str, list[str], str]] | None = None  # [figure] panels: (label, unit.variable, style)
+    fmu: Path | None = None  # [models] fmu: a d-model FMU built elsewhere, run in place of the one built from dmodel
+    isolate: bool | None = None  # [cosim] isolate: the d-model FMU in a process of its own (None: if cotwin did not build it)
+    unit_timeout: float = DEFAULT_TIMEOUT  # [cosim] unit_timeout: s an isolated FMU's call may take
     locations: dict = field(default_factory=dict)  # key path -> Location where it was written (later checks)
     raw: dict = field(default_factory=dict)  # the tables as written that staged copies carry (world, stand_in, figure)
 
@@ -395,6 +406,7 @@ def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProj
 
     models = data["models"] or {}
     files = {k: existing("models", k, models.get(k)) for k in ("dmodel", "pmodel", "mapping")}
+    fmu = existing("models", "fmu", models.get("fmu"))
     scenario = data["scenario"] or {}
     sources = [k for k in ("plan", "commands", "rabbitmq") if scenario.get(k) is not None]
     if len(sources) > 1:
@@ -439,6 +451,8 @@ def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProj
     spec.world, spec.world_file, spec.base, spec.stand_ins = world, world_file, platform["base"], stand_ins
     spec.mirror_joints, spec.readings = monitor.get("joints", "arm"), dict(monitor.get("readings") or {})
     spec.parameters, spec.panels = dict(cosim.get("parameters") or {}), panels
+    spec.fmu = fmu
+    spec.isolate, spec.unit_timeout = cosim.get("isolate"), float(cosim["unit_timeout"])
     if world_file is not None:
         spec.world_file = world_file.path
     spec.locations = {key: file.location(key) for key in file.where}

@@ -74,9 +74,11 @@ class TwinRun:
 
 def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end: float | None = None,
              algorithm: str | None = None, realtime: bool | None = None, observers: list[Observer] | None = None,
-             progress=None, plot: bool = True, endpoint=None, source=None, cc: str = "cc") -> TwinRun:
+             progress=None, plot: bool = True, endpoint=None, source=None, cc: str = "cc",
+             restart: bool = False) -> TwinRun:
     """Co-simulate the twin into `out` (outputs.csv, figure.png), building the d-model FMU if it is
-    missing or stale. The folder is locked for the run; a failed run keeps the previous result."""
+    missing or stale. The folder is locked for the run; a failed run keeps the previous result. With
+    `restart`, a failed step of the d-model FMU is retried in a new process from its last good state."""
     out = Path(out)
     spec = system.spec
     end = spec.end if end is None else end
@@ -84,7 +86,8 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
     check_timing(spec, step, end)
     with folder_lock(out, RUN_FILES, spec.inputs):
         fmu = dmodel_fmu(system, out, cc)
-        cosim = system.instantiate(fmu, endpoint if endpoint is not None else dt_endpoint(system), source=source)
+        cosim = system.instantiate(fmu, endpoint if endpoint is not None else dt_endpoint(system), source=source,
+                                   restart=restart)
         units = {u.role if u.role != "source" else "source": cosim.units[u.name] for u in system.units}
         writer = CSVWriter(out / "outputs.csv")
         watch, ledger = WaitWatch(system), CommandLedger(system)

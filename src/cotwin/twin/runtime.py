@@ -106,8 +106,9 @@ class LiveTwin:
     def __init__(self, system: TwinSystem, out: str | Path, pt=None, dt=None, step: float | None = None,
                  end: float | None = None, algorithm: str | None = None, realtime: bool | None = None,
                  history_url: str | None = None, alarms_url: str | None = None, observers=(), cc: str = "cc",
-                 whatif_url: str | None = None):
+                 whatif_url: str | None = None, restart: bool = False):
         spec = system.spec
+        self.restart = restart  # a failed step of a d-model FMU is retried in a new process from its last good state
         self.system = system
         self.out = Path(out)
         self.pt_endpoint, self.dt_endpoint = pt, dt
@@ -170,7 +171,7 @@ class LiveTwin:
         return system.source_unit(), system.source_unit()
 
     def _side(self, name: str, fmu: Path, endpoint, source) -> Side:
-        cosim = self.system.instantiate(fmu, endpoint, source=source)
+        cosim = self.system.instantiate(fmu, endpoint, source=source, restart=self.restart)
         writer = CSVWriter(self.out / name / "outputs.csv")
         watch, ledger = WaitWatch(self.system, prefix=f"{name.upper()}: "), CommandLedger(self.system)
         observers = [writer, watch, ledger] + ([StateFile(self.out / "state")] if name == "dt" else [])  # where a what-if may start

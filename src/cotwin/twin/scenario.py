@@ -33,6 +33,7 @@ from ..cosim.units import INT32, Port, PythonUnit
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..dmodel.program import Program
 from ..files import read_text
+from ..plaindata import count
 from .commands import CommandQueue, Occurrence
 
 MAX_FIELD = 1 << 16  # characters: no cell of a plan is legitimately longer
@@ -351,6 +352,8 @@ class ScenarioUnit(PythonUnit):
             self.values.update(occurrence.values)
 
     # ---- state: the port values, the time reached, the next command to play and those waiting ----
+    STATE_KEYS = (*PythonUnit.STATE_KEYS, "next", "plan", "queue")
+
     def snapshot(self) -> dict:
         return {**super().snapshot(), "next": self._next, "plan": self._plan(), "queue": self.queue.snapshot()}
 
@@ -359,8 +362,8 @@ class ScenarioUnit(PythonUnit):
         first of its commands not yet due at the saved time, none waiting."""
         super().restore(snapshot)
         if snapshot["plan"] == self._plan():
-            self._next = snapshot["next"]
-            self.queue.restore(snapshot["queue"])
+            self._next = count(snapshot["next"], f"unit {self.name}'s next command", len(self.commands))
+            self.queue.restore(snapshot["queue"], self.ports, f"unit {self.name}'s command queue")
         else:
             self._next = next((k for k, c in enumerate(self.commands) if c.time >= self.time - 1e-9), len(self.commands))
             self.queue = CommandQueue()

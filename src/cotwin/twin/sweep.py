@@ -140,6 +140,10 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
     from .build import dmodel_fmu
     from .run import load
 
+    if state is not None:  # its format and times checked once here, before any worker reads it
+        from ..cosim.execution import saved_execution
+
+        saved_execution(state)
     project = str(Path(project).resolve())
     report = progress or (lambda done, total: None)
     scratch = None

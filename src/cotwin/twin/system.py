@@ -13,9 +13,10 @@ monitored variables -> the source, when the source echoes them (the RabbitMQ bri
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from ..cosim.isolated import DEFAULT_TIMEOUT
 from ..cosim.system import Connection, System
 from ..cosim.units import Unit
 from ..diagnostics import CotwinError, Finding, Location, Severity
@@ -53,6 +54,23 @@ class TwinModels:
     scene: object | None
     monitored: list[str]
     calibration: object | None = None  # cotwin.twin.calibration.Calibration: [platform] calibration
+    digests: dict[str, str] = field(default_factory=dict)  # model_digests: what a saved state names
+
+
+def model_digests(spec: TwinProject, project) -> dict[str, str]:
+    """What the DT is made from, by path relative to the project's folder (as in generated files): every
+    model file, the calibration and the world file, each with the sha256 of its bytes; a saved state
+    carries them, so that one restored into a DT of other models names the file that changed."""
+    import hashlib
+    import os
+
+    root = spec.path.parent.resolve()
+    files = [Path(f.path) for f in project.files if not str(f.path).startswith("<")]
+    files += [p for p in (spec.calibration, spec.world_file) if p is not None]
+    out = {}
+    for path in dict.fromkeys(p.resolve() for p in files):
+        out[Path(os.path.relpath(path, root)).as_posix()] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return dict(sorted(out.items()))
 
 
 def load_models(spec: TwinProject) -> TwinModels:
@@ -91,7 +109,7 @@ def load_models(spec: TwinProject) -> TwinModels:
         raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
                                    f"[monitor] readings {', '.join(clash)}: the mapping has variables of these names")])
     monitored = [*mirror_variables(variables, joints), *spec.readings]
-    return TwinModels(project, program, tree, mapping, scene, monitored, calibration)
+    return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project))
 
 
 def build_scene(spec: TwinProject, mapping, calibration=None):
@@ -316,8 +334,16 @@ class TwinSystem:
             "startTime": 0.0,
             "endTime": self.spec.end,
             "simulationProgramDelay": self.spec.realtime if realtime is None else realtime,
-            "cotwin": {"delayed": sorted(self.delayed), "algorithm": self.spec.algorithm},
+            "cotwin": {"delayed": sorted(self.delayed), "algorithm": self.spec.algorithm,
+                       **({"isolate": {DMODEL.name: self.isolated}} if self.isolated else {}),
+                       **({"unit_timeout": self.spec.unit_timeout} if self.spec.unit_timeout != DEFAULT_TIMEOUT else {})},
         }
+
+    @property
+    def isolated(self) -> bool:
+        """Whether the d-model FMU runs in a process of its own: [cosim] isolate, else when cotwin did not
+        build it ([models] fmu)."""
+        return self.spec.isolate if self.spec.isolate is not None else self.spec.fmu is not None
 
     # ---- instances ----
     def mapping_unit(self, endpoint) -> Unit:
@@ -354,16 +380,22 @@ class TwinSystem:
         return None
 
     def instantiate(self, dmodel_fmu: str | Path, endpoint, source: Unit | None = None,
-                    dmodel: Unit | None = None) -> System:
-        """A fresh, checked co-simulation of this twin against `endpoint` (the platform)."""
-        from ..cosim.units import FMUUnit
+                    dmodel: Unit | None = None, restart: bool = False) -> System:
+        """A fresh, checked co-simulation of this twin against `endpoint` (the platform). The d-model FMU
+        runs in a process of its own when [cosim] isolate says so (by default when cotwin did not build
+        it: [models] fmu) or when `restart` (a failed step is retried in a new process from its last good
+        state)."""
+        from ..cosim.isolated import fmu_unit
 
         units = []
         if self.source is not None:
             units.append(source if source is not None else self.source_unit())
-        units.append(dmodel if dmodel is not None else FMUUnit(DMODEL.name, dmodel_fmu))
+        units.append(dmodel if dmodel is not None else fmu_unit(DMODEL.name, dmodel_fmu, self.isolated,
+                                                                 self.spec.unit_timeout, restart))
         units.append(self.mapping_unit(endpoint))
-        return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters)
+        return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters,
+                         models=self.models.digests)
+
 
     def units_by_role(self, system: System) -> dict[str, Unit]:
         return {u.role: system.units[u.name] for u in self.units}

@@ -103,9 +103,9 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
     algorithm = algorithm or spec.algorithm
     start = 0.0
     if state is not None:
-        from ..cosim.state import unpack
+        from ..cosim.execution import saved_execution
 
-        start = float(unpack(state, "Execution")["time"])
+        start = saved_execution(state)["time"]
     shifted = sorted((Command(start + c.time, c.values, c.where) for c in plan), key=lambda c: c.time)
     fork = system.with_plan(shifted)
     with tempfile.TemporaryDirectory(prefix="cotwin-whatif-") as tmp:
