@@ -253,6 +253,16 @@ def _drop(path: tuple):
     (MAPPING, "MappingUnit", _mapping(_set(("endpoint", "segment", "kind"), "os.system")), "unknown kind 'os.system'"),
     (MAPPING, "MappingUnit", _mapping(_set(("endpoint", "direct", "elbow_joint"), 1.0)), "not a speed- or effort-driven"),
     (MAPPING, "MappingUnit", _mapping(_set(("functions", (1.0, 2.0)), {})), "keyed by a grid point"),
+    (MAPPING, "MappingUnit", _mapping(_set(("pending",), [("q0", 1.0)])), "pending answer .*not one of its answers"),
+    (MAPPING, "MappingUnit", _mapping(_set(("held", "noSuchEvent"), (True, None))), "holds 'noSuchEvent' as an event"),
+    (MAPPING, "MappingUnit", _mapping(_set(("asked",), ["os"])), "asked about 'os'"),
+    (MAPPING, "MappingUnit", _mapping(_set(("reports",), -3)), "reports is -3"),
+    (MAPPING, "MappingUnit", _mapping(lambda m: m.update(reports=2, delivered={"moveCompleted": 9})),
+     "report delivering moveCompleted is 9, not a whole number from 0 to 2"),
+    (CONTROLLER, "ScenarioUnit", _set(("queue", "waiting"), [("rm", (), "x", 0.0, None)]), "event 'rm' this unit does not send"),
+    (CONTROLLER, "ScenarioUnit", _set(("queue", "waiting"), [("moveDiscreteCommand", (("MovementArgs_target_X", "8"),),
+                                                               "x", 0.0, None)]), "MovementArgs_target_X is '8', not an Integer"),
+    (CONTROLLER, "ScenarioUnit", _set(("queue", "accepted"), -1), "accepted count is -1"),
 ])
 def test_every_field_is_checked_against_the_system_it_restores_into(twin, fmu, saved, unit, kind, edit, message):
     with pytest.raises(CotwinError, match=message):

@@ -633,6 +633,9 @@ class Mapping:
         return [*self._mirrors, *self.monitor]
 
     # ---- state (what-if forks and rollbacks) ----
+    STATE_KEYS = ("variables", "started", "functions", "endpoint")  # of a snapshot
+    OPTIONAL_STATE_KEYS = ("events", "held", "asked", "pending", "reports", "delivered")  # the answers' bookkeeping
+
     def snapshot(self) -> dict:
         """The runtime's state as plain data: its variables, whether it was started, the functions'
         cached solutions and the endpoint's state (an endpoint that cannot save one is an error)."""
@@ -651,8 +654,7 @@ class Mapping:
         declared type), its events, the functions' solutions and the platform's state. An event's value is
         checked by the unit that reads it (it knows the d-model's event types)."""
         what = f"mapping {self.model.name}"
-        state_fields(snapshot, what, ("variables", "started", "functions", "endpoint"),
-                     ("events", "held", "asked", "pending", "reports", "delivered"))
+        state_fields(snapshot, what, self.STATE_KEYS, self.OPTIONAL_STATE_KEYS)
         variables = like(snapshot["variables"], self._shapes(), f"{what}'s variables")
         started = of_type(snapshot["started"], bool, f"{what}'s started")
         events = of_type(snapshot.get("events", {}), dict, f"{what}'s events")

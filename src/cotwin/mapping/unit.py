@@ -111,8 +111,8 @@ class MappingUnit(PythonUnit):
                     entry[2].__class__ is not dict:
                 raise CotwinError(f"the saved state's {what} ran {entry!r:.80}, not (time, operation, arguments)")
             finite(entry[0], f"{what}'s operation time")
-        events = fields(snapshot["mapping"], f"{what}'s mapping", ("variables", "started", "functions", "endpoint"),
-                        ("events",)).get("events", {})
+        events = fields(snapshot["mapping"], f"{what}'s mapping", Mapping.STATE_KEYS,
+                        Mapping.OPTIONAL_STATE_KEYS).get("events", {})
         for name, scalars in self.value_ports.items():
             value = events.get(name) if events.__class__ is dict else None
             for port, sc in scalars if value is not None else ():
