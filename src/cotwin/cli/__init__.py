@@ -7,7 +7,7 @@ import sys
 import click
 
 from ..diagnostics import CotwinError
-from . import analysis, history, live, models, runs  # noqa: F401 - each module registers its commands
+from . import analysis, history, live, models, runs, testing  # noqa: F401 - each module registers its commands
 from .common import main, report
 
 __all__ = ["main", "entry"]

@@ -59,16 +59,30 @@ def tree_findings(project) -> list:
 @click.option("--module", "module_name", help="the module to build (default: the only one)")
 @click.option("-o", "--output", callback=output_path, required=True, help="the FMU file to write")
 @click.option("--cc", default="cc", show_default=True, help="C compiler")
-def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, cc: str) -> None:
-    """Generate C from a d-model module and package it as an FMI 2.0 co-simulation FMU."""
+@click.option("--fmi", "version", type=click.Choice(["2", "3"]), default="2", show_default=True,
+              help="FMI version: 3 makes the d-model's cycle a clock (Co-Simulation with Event Mode)")
+@click.option("--cycle-period", type=click.FloatRange(min=0, min_open=True, max=86_400),
+              help="FMI 3.0: the clock's default interval in seconds (the parameter cycle_period) [default: 0.1]")
+def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, cc: str, version: str,
+                 cycle_period: float | None) -> None:
+    """Generate C from a d-model module and package it as an FMI 2.0 (default) or 3.0 co-simulation FMU."""
     from ..dmodel.fmu import build_fmu
     from ..dmodel.program import build_program
     from ..robosim.check import load_checked
 
+    if cycle_period is not None and version != "3":
+        raise click.BadParameter("the FMI 2.0 FMU takes cycle_period as a parameter when run (0: one cycle per "
+                                 "step); --cycle-period sets the FMI 3.0 clock's default", param_hint="--cycle-period")
     program = build_program(load_checked(model), module_name)
-    path = build_fmu(program, output, cc=cc)
-    click.echo(f"{path}: module {program.module.name}, {len(program.machines)} state machine(s), "
-               f"{len(program.inputs)} input event(s), {len(program.operations)} operation(s)")
+    if version == "3":
+        from ..dmodel.fmi3 import DEFAULT_PERIOD, build_fmu3
+
+        path = build_fmu3(program, output, cc=cc, period=cycle_period or DEFAULT_PERIOD)
+    else:
+        path = build_fmu(program, output, cc=cc)
+    click.echo(f"{path}: FMI {version}.0, module {program.module.name}, {len(program.machines)} state machine(s), "
+               f"{len(program.inputs)} input event(s), {len(program.operations)} operation(s)"
+               + (f", clock cycle every {cycle_period or DEFAULT_PERIOD:g} s" if version == "3" else ""))
 
 
 @main.command("export-pmodel")

@@ -1,0 +1,108 @@
+"""Commands on generated tests: testgen (a suite from a d-model), test (run it), mutants (its worth)."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from .common import main, named_values, output_path
+
+
+def _domains(program, domains: tuple[str, ...]) -> dict[str, list]:
+    parsed = dict(named_values(d, "--domain") for d in domains)
+    known = [port for ev in program.inputs for port, _ in ev.value_ports]
+    unknown = [name for name in parsed if name not in known]
+    if unknown:
+        raise click.BadParameter(f"{', '.join(unknown)}: not a value port of an input event of module "
+                                 f"{program.module.name} (ports: {', '.join(known) or 'none'})", param_hint="--domain")
+    return parsed
+
+
+def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str], str]:
+    """The input events that are commands, and how that was decided: named by --command, else those the
+    project's mapping does not produce (as a twin takes them from its source), else all of them."""
+    from ..robosim.pmodel_elements import Mapping
+
+    events = [ev.name for ev in program.inputs]
+    if named:
+        unknown = [n for n in named if n not in events]
+        if unknown:
+            raise click.BadParameter(f"{', '.join(unknown)}: not an input event of module {program.module.name} "
+                                     f"(events: {', '.join(events)})", param_hint="--command")
+        return [e for e in events if e in named], "named by --command"
+    mappings = [m for m in project.elements(Mapping)]
+    if len(mappings) == 1:
+        from ..twin.system import external_events
+
+        return external_events(program, mappings[0]), f"those mapping {mappings[0].name} does not produce"
+    return events, "all input events (no mapping given: name commands with --command to stub the platform's answers)"
+
+
+@main.command()
+@click.argument("model", nargs=-1, required=True)
+@click.option("--module", "module_name", help="the module (default: the only one)")
+@click.option("--coverage", "criterion", type=click.Choice(["states", "transitions", "transition-pairs"]),
+              default="transitions", show_default=True, help="what the suite covers")
+@click.option("--domain", "domains", multiple=True, metavar="PORT=LOW..HIGH",
+              help="values of an event's value port, e.g. MovementArgs_target_X=0..15 (repeatable)")
+@click.option("--command", "commands", multiple=True, metavar="EVENT",
+              help="an input event that is a command (repeatable; default: those the mapping among MODEL does "
+                   "not produce, else every input event); the others are the platform's answers")
+@click.option("--answers", type=click.Choice(["stub", "platform"]), default="stub", show_default=True,
+              help="stub: each case carries the platform's answers; platform: each case leaves them to the platform")
+@click.option("--max-cycles", default=30, show_default=True, type=click.IntRange(min=1, max=10 ** 6),
+              help="cycles of one case (a case's first item may lie further)")
+@click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1, max=10 ** 8),
+              help="stop exploring after this many states")
+@click.option("--period", default=0.1, show_default=True, type=click.FloatRange(min=0, min_open=True, max=3600),
+              help="seconds per d-model cycle in the plans")
+@click.option("--settle", default=10.0, show_default=True, type=click.FloatRange(min=0, max=86_400),
+              help="seconds a plan leaves the platform to answer (cases with --answers platform)")
+@click.option("-o", "--output", "out", callback=output_path, required=True, help="the folder for the suite")
+def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, domains: tuple[str, ...],
+            commands: tuple[str, ...], answers: str, max_cycles: int, max_states: int, period: float, settle: float,
+            out: str) -> None:
+    """Generate a test suite covering every reachable state, transition or pair of a d-model module."""
+    from ..dmodel.program import build_program
+    from ..dmodel.testgen import generate
+    from ..dmodel.testgen_files import write_suite
+    from ..dmodel.testgen_graph import explore
+    from ..robosim.check import load_checked
+
+    project = load_checked(model)
+    program = build_program(project, module_name)
+    parsed = _domains(program, domains)
+    chosen, why = command_events(project, program, commands)
+    graph = explore(program, parsed, max_states=max_states)
+    suite = generate(graph, criterion, max_cycles, chosen, answers)
+    write_suite(suite, out, period, settle)
+    click.echo(format_suite(suite, period, why, out))
+    if not suite.cases:
+        click.echo("no case: nothing is reachable to cover", err=True)
+        sys.exit(1)
+
+
+def format_suite(suite, period: float, why: str, out: str) -> str:
+    graph = suite.graph
+    reached, covered = len(suite.reached), len(suite.covered)
+    lines = [f"module {suite.program.module.name}: {len(graph.snapshots)} states, {graph.edges} distinct cycles explored "
+             f"in {graph.seconds:.2f} s" + ("" if graph.complete else " (INCOMPLETE: the state limit was reached)")]
+    lines += [f"  note: {n}" for n in graph.value_notes]
+    lines.append(f"  commands: {', '.join(suite.commands) or 'none'} ({why}); platform answers: "
+                 f"{', '.join(ev.name for ev in suite.program.inputs if ev.name not in suite.commands) or 'none'}")
+    share = 100.0 * covered / reached if reached else 100.0
+    lines.append(f"{suite.criterion}: {covered} of {reached} reachable covered ({share:.0f}%), {len(suite.total)} in the model")
+    lines.append(f"  {len(suite.cases)} case(s), {suite.cycles} cycles, {suite.cycles * period:g} s of simulated time at "
+                 f"{period:g} s per cycle; greedy minimisation kept {len(suite.cases)} of {suite.walks} walk(s)")
+    for case in suite.cases:
+        lines.append(f"  {case.name}: {case.cycles} cycles, answers {case.answers}, {len(case.covers)} item(s) first covered")
+    for item, why_not in suite.unreachable:
+        lines.append(f"  unreachable: {item}: {why_not}")
+    for item, why_not in suite.uncovered:
+        lines.append(f"  uncovered: {item}: {why_not}")
+    lines.append(f"written to {out}/ (suite.json, per case a plan .csv and an .oracle.json)")
+    return "\n".join(lines)
+
+
+__all__ = ["testgen"]
