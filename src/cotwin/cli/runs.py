@@ -38,8 +38,14 @@ def build(project: str, out: str, cc: str) -> None:
 @click.option("--realtime/--no-realtime", default=None, help="pace to wall-clock time (default: the project's)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+@click.option("--fmi", "version", type=click.Choice(["2", "3"]), default="2", show_default=True,
+              help="3: the d-model as an FMI 3.0 FMU whose cycle is a clock (commands reach the robot in the step "
+                   "they are issued, under either algorithm)")
+@click.option("--cycle-period", type=click.FloatRange(min=0, min_open=True),
+              help="with --fmi 3: seconds between d-model cycles, a whole number of steps [default: the step]")
 def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
-        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str) -> None:
+        realtime: bool | None, dashboard: tuple[str, int] | None, cc: str, version: str,
+        cycle_period: float | None) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
     from rich.progress import Progress
@@ -47,7 +53,10 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     from ..twin.history import database_url
     from ..twin.run import load, run_twin
 
-    check_finite(step=step, end=end)
+    check_finite(step=step, end=end, **{"cycle-period": cycle_period})
+    if cycle_period is not None and version != "3":
+        raise click.BadParameter("only with --fmi 3 (an FMI 2.0 d-model takes [cosim] parameters cycle_period)",
+                                 param_hint="--cycle-period")
     system = load(project)
     check_timing(system.spec, step, end)
     history = None  # one run records no history; the page lists the store's runs when there is one
@@ -60,7 +69,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     try:
         with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
             task = bar.add_task("co-simulating", total=1)
-            ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc,
+            ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc, fmi=int(version), cycle_period=cycle_period,
                            observers=[dash.feed] if dash else None,
                            progress=lambda k, n: bar.update(task, completed=k, total=n))
     finally:

@@ -21,6 +21,7 @@ from operator import itemgetter
 from typing import Callable, Iterator
 
 from ..diagnostics import CotwinError
+from .clocks import EventPhase
 from .system import System
 
 UNSET = object()  # a slot no unit has written yet
@@ -57,6 +58,7 @@ def _picker(slots: list[int]) -> Callable[[list], tuple]:
 
 class Algorithm:
     name = "algorithm"
+    UNSET = UNSET
 
     def __init__(self) -> None:
         self.system: System | None = None
@@ -89,6 +91,7 @@ class Algorithm:
             if system.parameters.get(unit.name):
                 unit.set(system.parameters[unit.name])
         self._bind()
+        self.events = EventPhase(self)  # units with clocks (FMI 3.0): Event Mode before each step
 
     def _source_slot(self, key: tuple[str, str]) -> int:
         return self.slots[key]
@@ -161,6 +164,8 @@ class Jacobi(Algorithm):
     name = "jacobi"
 
     def do_step(self, t: float, h: float) -> None:
+        if self.events:
+            self.events.run(t)
         data = self.data  # all inputs are set before any unit steps: no copy needed
         for write in self.writes:
             if write is not None:
@@ -192,6 +197,8 @@ class GaussSeidel(Algorithm):
         return self.slots[key]
 
     def do_step(self, t: float, h: float) -> None:
+        if self.events:
+            self.events.run(t)
         data = self.data
         for source, shadow in self.copies:
             data[shadow] = data[source]

@@ -18,7 +18,7 @@ from .algorithm import algorithm as make_algorithm
 from .execution import Execution
 from .observers import CSVWriter, Observer, RealTimePacer
 from .system import Connection, System
-from .units import FMUUnit
+from .fmi3 import fmu_unit
 
 KNOWN_KEYS = {"fmus", "connections", "parameters", "logVariables", "algorithm", "startTime", "endTime",
               "simulationProgramDelay", "cotwin", "livestream", "overrideLogLevel", "loggingOn", "visible",
@@ -183,9 +183,10 @@ def unit_name(instance: tuple[str, str]) -> str:
 
 
 def system_of(mm: MultiModel) -> System:
-    """The multimodel's units (one FMU instance each) and connections, checked."""
+    """The multimodel's units (one FMU instance each, FMI 2.0 or 3.0 by its model description) and
+    connections, checked."""
     try:
-        units = [FMUUnit(unit_name(inst), mm.fmus[inst[0]]) for inst in mm.instances]
+        units = [fmu_unit(unit_name(inst), mm.fmus[inst[0]]) for inst in mm.instances]
         connections = [Connection(unit_name(c[:2]), c[2], unit_name(c[3:5]), c[5]) for c in mm.connections]
         return System.of(units, connections, delayed={unit_name(d) for d in mm.delayed},
                          log={unit_name(k): v for k, v in mm.log.items()},

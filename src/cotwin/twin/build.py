@@ -100,18 +100,26 @@ def write_text(target: Path, text: str) -> Path:
     return target
 
 
-def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: Record | None = None) -> Path:
-    """DIR/dmodel.fmu, rebuilt only when the models, the module, the compiler or cotwin changed."""
+def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: Record | None = None,
+               fmi: int = 2) -> Path:
+    """DIR/dmodel.fmu (FMI 2.0) or DIR/dmodel3.fmu (FMI 3.0, the cycle a clock), rebuilt only when the models,
+    the module, the compiler or cotwin changed."""
     from ..dmodel.fmu import build_fmu
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     record = record or Record(folder)
-    target = folder / "dmodel.fmu"
-    key = _digest(__version__, *model_texts(system), str(system.spec.module), cc, *_cotwin_sources())
+    target = folder / ("dmodel.fmu" if fmi == 2 else "dmodel3.fmu")
+    sources = _cotwin_sources() if fmi == 2 else _cotwin_sources((*_GENERATORS, "dmodel/fmi3.py", "dmodel/fmi3_wrapper.c"))
+    key = _digest(__version__, *model_texts(system), str(system.spec.module), cc, *sources)
     if not record.fresh(target, key):
         record.forget(target)
-        build_fmu(system.models.program, target, cc=cc)
+        if fmi == 2:
+            build_fmu(system.models.program, target, cc=cc)
+        else:
+            from ..dmodel.fmi3 import build_fmu3
+
+            build_fmu3(system.models.program, target, cc=cc)
         record.done(target, key)
     return target
 
