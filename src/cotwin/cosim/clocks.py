@@ -1,8 +1,9 @@
 """Event Mode in the master: units with clocks run their clocked partitions at communication points.
 
 A *clocked* unit (an FMI 3.0 FMU with Event Mode, cotwin.cosim.fmi3; a source whose commands are events)
-has, besides the Unit interface, `event_setter(names)` and `event(t)`. At every communication point t,
-before any unit steps, the event phase visits the clocked units in dependency order: each is offered
+has, besides the Unit interface, `event_setter(names)` and `event(t)`. At every communication point t
+(after initialisation, and after every step, before the results at t are observed), the event phase
+visits the clocked units in dependency order: each is offered
 its inputs as they are at t (the outputs of units before it in this very phase included) and runs
 `event(t)`, which runs its partition if one of its clocks ticks at t (else it keeps what it was
 offered for its next tick and shows its events as not occurring); its outputs are read at once. So
