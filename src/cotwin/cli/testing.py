@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import click
 
@@ -49,8 +50,13 @@ def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str],
 @click.option("--command", "commands", multiple=True, metavar="EVENT",
               help="an input event that is a command (repeatable; default: those the mapping among MODEL does "
                    "not produce, else every input event); the others are the platform's answers")
-@click.option("--answers", type=click.Choice(["stub", "platform"]), default="stub", show_default=True,
-              help="stub: each case carries the platform's answers; platform: each case leaves them to the platform")
+@click.option("--answers", type=click.Choice(["stub", "platform", "auto"]), default="stub", show_default=True,
+              help="stub: each case carries the platform's answers; platform: each case leaves them to the platform; "
+                   "auto (with --project): left to the platform where its simulated platform follows the case, "
+                   "else stubbed")
+@click.option("--project", type=click.Path(), help="a twin project (cotwin.toml) to try the cases on (--answers auto)")
+@click.option("--split", type=click.Choice(["rest", "length"]), default="rest", show_default=True,
+              help="rest: a case ends back at rest having covered something; length: only at --max-cycles")
 @click.option("--max-cycles", default=30, show_default=True, type=click.IntRange(min=1, max=10 ** 6),
               help="cycles of one case (a case's first item may lie further)")
 @click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1, max=10 ** 8),
@@ -61,8 +67,8 @@ def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str],
               help="seconds a plan leaves the platform to answer (cases with --answers platform)")
 @click.option("-o", "--output", "out", callback=output_path, required=True, help="the folder for the suite")
 def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, domains: tuple[str, ...],
-            commands: tuple[str, ...], answers: str, max_cycles: int, max_states: int, period: float, settle: float,
-            out: str) -> None:
+            commands: tuple[str, ...], answers: str, project: str | None, split: str, max_cycles: int, max_states: int,
+            period: float, settle: float, out: str) -> None:
     """Generate a test suite covering every reachable state, transition or pair of a d-model module."""
     from ..dmodel.program import build_program
     from ..dmodel.testgen import generate
@@ -70,17 +76,46 @@ def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, dom
     from ..dmodel.testgen_graph import explore
     from ..robosim.check import load_checked
 
-    project = load_checked(model)
-    program = build_program(project, module_name)
+    if (answers == "auto") != (project is not None):
+        raise click.BadParameter("--answers auto tries the cases on a project's simulated platform: give both",
+                                 param_hint="--answers" if project is None else "--project")
+    models = load_checked(model)
+    program = build_program(models, module_name)
     parsed = _domains(program, domains)
-    chosen, why = command_events(project, program, commands)
+    chosen, why = command_events(models, program, commands)
     graph = explore(program, parsed, max_states=max_states)
-    suite = generate(graph, criterion, max_cycles, chosen, answers)
+    suite = generate(graph, criterion, max_cycles, chosen, "platform" if answers == "auto" else answers, split)
     write_suite(suite, out, period, settle)
+    if answers == "auto":
+        try_on_platform(suite, project, out, period, settle)
     click.echo(format_suite(suite, period, why, out))
     if not suite.cases:
         click.echo("no case: nothing is reachable to cover", err=True)
         sys.exit(1)
+
+
+def try_on_platform(suite, project: str, out: str, period: float, settle: float) -> dict[str, str]:
+    """--answers auto: every case (written with its answers left to the platform) run on the project's
+    simulated platform; those it does not follow are rewritten with their answers stubbed. Returns
+    {case: why it was stubbed}."""
+    import tempfile
+
+    from ..dmodel.testgen_files import read_suite, write_suite
+    from ..twin.run import load
+    from ..twin.testing import run_suite
+
+    system = load(project)
+    with tempfile.TemporaryDirectory(prefix="cotwin-testgen-") as tmp:
+        result = run_suite(system, read_suite(out), tmp)
+    stubbed = {}
+    for case, ran in zip(suite.cases, result.cases):
+        if ran.passed:
+            case.note = "left to the platform: the project's simulated platform follows it"
+        else:
+            case.answers = "stub"
+            case.note = stubbed[case.name] = f"stubbed: on the project's simulated platform, {ran.divergence}"
+    write_suite(suite, out, period, settle)
+    return stubbed
 
 
 def format_suite(suite, period: float, why: str, out: str) -> str:
@@ -96,7 +131,8 @@ def format_suite(suite, period: float, why: str, out: str) -> str:
     lines.append(f"  {len(suite.cases)} case(s), {suite.cycles} cycles, {suite.cycles * period:g} s of simulated time at "
                  f"{period:g} s per cycle; greedy minimisation kept {len(suite.cases)} of {suite.walks} walk(s)")
     for case in suite.cases:
-        lines.append(f"  {case.name}: {case.cycles} cycles, answers {case.answers}, {len(case.covers)} item(s) first covered")
+        lines.append(f"  {case.name}: {case.cycles} cycles, answers {case.answers}, {len(case.covers)} item(s) first covered"
+                     + (f"; {case.note}" if case.note else ""))
     for item, why_not in suite.unreachable:
         lines.append(f"  unreachable: {item}: {why_not}")
     for item, why_not in suite.uncovered:
@@ -106,3 +142,76 @@ def format_suite(suite, period: float, why: str, out: str) -> str:
 
 
 __all__ = ["testgen"]
+
+
+def pt_option(ctx, param, value: str | None) -> str | None:
+    """--pt: the project's [pt] ("project"), or an OPC UA URL for it."""
+    if value is None or value == "project":
+        return value
+    if not value.startswith("opc.tcp://"):
+        raise click.BadParameter(f"{value!r}: give an OPC UA URL (opc.tcp://HOST:PORT), or --pt alone for the "
+                                 "project's [pt]")
+    return value
+
+
+@main.command("test")
+@click.argument("project", type=click.Path())
+@click.argument("tests", type=click.Path())
+@click.option("--pt", "pt", is_flag=False, flag_value="project", default=None, callback=pt_option, metavar="[URL]",
+              help="run against the PT through the twin (hardware in the loop): the project's [pt], or the OPC UA "
+                   "plant at URL")
+@click.option("--junit", type=click.Path(), help="write the results as JUnit XML")
+@click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]), help="(default: the project's)")
+@click.option("--fmi", "version", type=click.Choice(["2", "3"]), default="2", show_default=True,
+              help="the d-model FMU's FMI version (3: its cycle a clock)")
+@click.option("--case", "cases", multiple=True, metavar="NAME", help="run only this case (repeatable)")
+@click.option("-o", "--output", "out", callback=output_path, default=None,
+              help="folder for the built FMU (default: a temporary one)")
+@click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
+def test_command(project: str, tests: str, pt: str | None, junit: str | None, algorithm: str | None, version: str,
+                 cases: tuple[str, ...], out: str | None, cc: str) -> None:
+    """Run a generated suite on a twin project's co-simulation (or its PT) and judge each case by its oracle."""
+    import tempfile
+
+    from ..dmodel.testgen_files import read_suite
+    from ..twin.run import load
+    from ..twin.testing import format_result, junit_xml, run_suite
+
+    system = load(project)
+    suite = read_suite(tests)
+    endpoint, target = None, "the co-simulation (the project's simulated platform)"
+    if pt is not None:
+        endpoint, target = _pt_endpoint(system, pt)
+
+    def progress(k, n, result):
+        click.echo(f"  [{k}/{n}] {result.name}: {'pass' if result.passed else 'FAIL'}", err=True)
+
+    with tempfile.TemporaryDirectory(prefix="cotwin-test-") as tmp:
+        result = run_suite(system, suite, out or tmp, endpoint, target, algorithm, int(version), cc,
+                           list(cases) or None, progress)
+    if junit:
+        path = Path(junit)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(junit_xml(result))
+    click.echo(format_result(result))
+    if junit:
+        click.echo(f"JUnit XML: {junit}")
+    if not result.cases:
+        click.echo("no case ran", err=True)
+        sys.exit(1)
+    sys.exit(0 if result.passed else 1)
+
+
+def _pt_endpoint(system, pt: str):
+    """A function making the PT's endpoint for each case, and how to name it."""
+    if pt == "project":
+        from ..twin.runtime import pt_endpoint
+
+        spec = system.spec.pt
+        if spec is None:
+            raise click.BadParameter(f"{system.spec.path} has no [pt] table: name the plant's URL (--pt opc.tcp://...)",
+                                     param_hint="--pt")
+        return (lambda: pt_endpoint(system)), f"the PT ({spec.endpoint}{' at ' + spec.url if getattr(spec, 'url', None) else ''})"
+    from ..mapping.opcua import OPCUAEndpoint
+
+    return (lambda: OPCUAEndpoint(system.models.tree, pt)), f"the PT (OPC UA plant at {pt})"

@@ -116,6 +116,7 @@ class FMU3Unit(Unit):
         self.shown: dict[str, object] = {n: (False if p.type == "Boolean" else 0) for n, p in self.ports.items()
                                          if p.causality == "output"}
         self.ticks = 0  # ticks run (all clocks together), for reports
+        self.delivered: dict[str, object] = {}  # the clocked inputs set at the last tick
         self._pending = False  # the FMU asked for event handling (eventHandlingNeeded)
 
     # ---- the one path into the FMU ----
@@ -258,6 +259,7 @@ class FMU3Unit(Unit):
             clock.next += 1
         if due:
             self.ticks += 1
+            self.delivered = dict(self.offered)
             for name in list(self.offered):
                 if self.ports[name].type == "Boolean":
                     self.offered[name] = False

@@ -2,7 +2,8 @@
 transition or pair of consecutive transitions (RoboStar's criteria, here timed and for co-simulation).
 
 From the state graph (cotwin.dmodel.testgen_graph, the verifier's exploration) the generator walks
-from the initial state to the nearest uncovered item, then on to the next nearest, until a case has
+from the initial state to the nearest uncovered item, then on to the next nearest, until the case is
+back at rest (where the initial state goes without inputs) having covered something, or has
 `max_cycles` cycles; a new case starts afresh from the initial state. A greedy minimisation then
 keeps the walks that add the most uncovered items (ties: the shorter), trims each kept walk after the
 last cycle that adds something, and drops any walk the others make redundant; both counts are reported.
@@ -259,26 +260,39 @@ def _nearest(cov: Coverage, start, wanted: set, limit: int | None):
     return None
 
 
-def build_walks(cov: Coverage, targets: set, max_cycles: int) -> tuple[list[Walk], set]:
+def home(cov: Coverage) -> tuple | None:
+    """The rest states: the active leaf states the initial state settles in without inputs (None if it does
+    not). Data (a variable bound from the last command) may differ at rest: only the control state counts."""
+    return next((cycle.states for cycle, _ in cov.successors(cov.start) if not cycle.inputs), None)
+
+
+def build_walks(cov: Coverage, targets: set, max_cycles: int, split: str = "rest") -> tuple[list[Walk], set]:
     """Walks from the initial state, each going to the nearest uncovered item while it has room (a case's
-    first item may lie further than `max_cycles`: it is reached all the same); the items left uncovered."""
+    first item may lie further than `max_cycles`: it is reached all the same); with `split` "rest" a walk
+    also ends when it is back at rest (`home`) having covered something new, so that each case is one
+    excursion from rest and back. Returns the walks and the items left uncovered."""
     uncovered = set(targets)
     walks: list[Walk] = []
+    rest = home(cov) if split == "rest" else None
     while uncovered:
-        walk, node = Walk(), cov.start
-        while True:
+        walk, node, fresh, back = Walk(), cov.start, False, False
+        while not back:
             room = None if not walk.steps else max_cycles - len(walk.steps)
             if room is not None and room <= 0:
                 break
             path = _nearest(cov, node, uncovered, room)
             if path is None:
                 break
-            for before, cycle, after in path:
+            for k, (before, cycle, after) in enumerate(path):
                 its = cov.items(before, cycle)
                 walk.steps.append((before, cycle))
                 walk.items.append(its)
+                fresh |= bool(its & uncovered) and len(walk.steps) > 1
                 uncovered -= its
                 node = after
+                if rest is not None and cycle.states == rest and fresh:
+                    back = True
+                    break
         if not walk.steps:
             break
         walks.append(walk)
@@ -327,6 +341,7 @@ class Case:
     covers: list[str]  # items this case was kept for
     items: list[str]  # every item it covers
     answers: str = "stub"  # stub | platform (see module doc)
+    note: str = ""  # why its answers are what they are, when chosen by trying them (cotwin testgen --answers auto)
 
     @property
     def cycles(self) -> int:
@@ -358,9 +373,10 @@ class Suite:
 
 
 def generate(graph: StateGraph, criterion: str = "transitions", max_cycles: int = 30,
-             commands: Iterable[str] | None = None, answers: str = "stub") -> Suite:
+             commands: Iterable[str] | None = None, answers: str = "stub", split: str = "rest") -> Suite:
     """The suite covering every reachable item of `criterion` (see module doc). `commands` names the input
-    events that are commands (default: all of them, so that no input is the platform's)."""
+    events that are commands (default: all of them, so that no input is the platform's); `split` "rest"
+    ends a case when it is back at rest, "length" only at `max_cycles`."""
     program = graph.program
     if criterion not in COVERAGE:
         raise ValueError(f"unknown coverage criterion {criterion!r} (known: {', '.join(CRITERIA)})")
@@ -368,7 +384,7 @@ def generate(graph: StateGraph, criterion: str = "transitions", max_cycles: int 
     universe = cov.universe
     reached = _reachable(cov)
     targets = {i for i in universe if i in reached}
-    walks, left = build_walks(cov, targets, max_cycles)
+    walks, left = build_walks(cov, targets, max_cycles, split)
     kept = minimise(walks, targets)
     cases = []
     for k, walk in enumerate(kept, start=1):
@@ -421,6 +437,26 @@ def _steps(program: Program, walk: Walk) -> list[CaseStep]:
                        for m, e in cycle.taken]
         out.append(CaseStep(k, cycle.input_dict, list(cycle.outputs), states, transitions))
     return out
+
+
+def replay_items(program: Program, criterion: str, taken: list[list[tuple[int, int]]]) -> list[str]:
+    """The items of `criterion` a run covers, in the order it first covers them, from the transitions
+    (machine, edge) it took in each cycle (an interpreter's record, e.g. a replay of a co-simulation)."""
+    from .testgen_graph import StateGraph
+
+    cov = COVERAGE[criterion](StateGraph(program))
+    node = cov.start
+    seen: dict = {}
+    for cycle_taken in taken:
+        cycle = Cycle(0, 0, (), (), tuple(cycle_taken), ())
+        for item in sorted(cov.items(node, cycle), key=repr):
+            seen.setdefault(item, None)
+        if criterion == "transition-pairs":
+            last = list(node[1])
+            for m, e in cycle_taken:
+                last[m] = e
+            node = (0, tuple(last))
+    return [cov.name(i) for i in seen]
 
 
 def model_digest(program: Program) -> str:

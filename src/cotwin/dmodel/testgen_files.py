@@ -118,8 +118,9 @@ def suite_record(suite: Suite, period: float, settle: float) -> dict:
         "minimisation": {"walks": suite.walks, "cases": len(suite.cases), "cycles": suite.cycles},
         "unreachable": [{"item": i, "why": why} for i, why in suite.unreachable],
         "uncovered": [{"item": i, "why": why} for i, why in suite.uncovered],
-        "cases": [{"name": c.name, "cycles": c.cycles, "answers": c.answers, "plan": f"{c.name}.csv",
-                   "oracle": f"{c.name}.oracle.json", "covers": c.covers, "items": c.items} for c in suite.cases],
+        "cases": [{"name": c.name, "cycles": c.cycles, "answers": c.answers, **({"why": c.note} if c.note else {}),
+                   "plan": f"{c.name}.csv", "oracle": f"{c.name}.oracle.json", "covers": c.covers, "items": c.items}
+                  for c in suite.cases],
     }
 
 
