@@ -215,3 +215,60 @@ def _pt_endpoint(system, pt: str):
     from ..mapping.opcua import OPCUAEndpoint
 
     return (lambda: OPCUAEndpoint(system.models.tree, pt)), f"the PT (OPC UA plant at {pt})"
+
+
+@main.command()
+@click.argument("tests", type=click.Path())
+@click.argument("model", nargs=-1, required=True)
+@click.option("--module", "module_name", help="the module (default: the only one)")
+@click.option("--fmu", "through_fmu", is_flag=True, help="run each mutant's cases through its FMU (built with --cc)")
+@click.option("--cc", default="cc", show_default=True, help="C compiler (with --fmu)")
+@click.option("--min-kill", type=click.FloatRange(0, 100), metavar="PERCENT",
+              help="exit 1 when fewer of the non-equivalent mutants are killed")
+@click.option("-o", "--output", "out", callback=output_path, default=None, help="write the outcomes as JSON")
+def mutants(tests: str, model: tuple[str, ...], module_name: str | None, through_fmu: bool, cc: str,
+            min_kill: float | None, out: str | None) -> None:
+    """Mutate a d-model automatically and run a generated suite on every mutant: the kill rate, and why each
+    survivor survived (equivalent, or told apart by an input sequence the suite lacks)."""
+    import json
+
+    from ..dmodel.program import build_program
+    from ..dmodel.testgen import model_digest
+    from ..dmodel.testgen_files import read_suite
+    from ..dmodel.testgen_mutants import analyse, format_report, make_mutants
+    from ..robosim.check import load_checked
+
+    files = [Path(m) for m in model]
+    folders = [f for f in files if f.is_dir()]
+    if folders:
+        raise click.BadParameter(f"{folders[0]}: name the model files (the .rst files are mutated)", param_hint="MODEL")
+    program = build_program(load_checked(files), module_name)
+    suite = read_suite(tests)
+    if suite.data.get("model_digest") != model_digest(program):
+        raise click.BadParameter(f"{tests}/suite.json was generated from another d-model (module "
+                                 f"{suite.data.get('module')}): mutate the model the suite was made from",
+                                 param_hint="MODEL")
+    events = [ev.name for ev in program.inputs]
+    made = [m for f in files if f.suffix == ".rst" for m in make_mutants(f, events)]
+    builder = None
+    if through_fmu:
+        from ..dmodel.fmu import build_fmu
+
+        builder = (lambda prog, path: build_fmu(prog, path, cc=cc))
+    domains = suite.data.get("exploration", {}).get("domains") or {}
+    report = analyse(program, suite, made, files, module_name, domains, builder)
+    click.echo(format_report(report, suite.criterion))
+    if out:
+        rows = [{"mutant": o.mutant.name, "operator": o.mutant.operator, "where": o.mutant.where,
+                 "change": o.mutant.change, "status": o.status, "by": o.by, "equivalent": o.equivalent,
+                 "explanation": o.explanation} for o in report.outcomes]
+        Path(out).write_text(json.dumps({"criterion": suite.criterion, "mutants": len(report.outcomes),
+                                         "valid": report.valid, "killed": len(report.of("killed")),
+                                         "equivalent": report.equivalent, "kill_rate": report.kill_rate,
+                                         "kill_rate_non_equivalent": report.kill_rate_non_equivalent,
+                                         "outcomes": rows}, indent=1) + "\n")
+    if not made:
+        click.echo("no mutant: the model has nothing the operators change", err=True)
+        sys.exit(1)
+    if min_kill is not None and 100 * report.kill_rate_non_equivalent < min_kill:
+        sys.exit(1)

@@ -63,6 +63,7 @@ class StateGraph:
     complete: bool = True
     input_combinations: int = 0
     value_notes: list[str] = field(default_factory=list)
+    domains: dict[str, list] = field(default_factory=dict)  # the value domains given (--domain)
     seconds: float = 0.0
 
     @property
@@ -78,7 +79,7 @@ def explore(program: Program, domains: dict[str, list] | None = None, max_states
             parameters: dict | None = None) -> StateGraph:
     """Every state reachable from the initial one under every input combination (see module doc)."""
     started = time.perf_counter()
-    graph = StateGraph(program)
+    graph = StateGraph(program, domains=dict(domains or {}))
     values, graph.value_notes = event_values(program, domains or {})
     combos = sorted(input_combinations(program, values), key=len)  # stable: fewest events first
     graph.input_combinations = len(combos)
