@@ -267,3 +267,50 @@ def test_mutants_of_the_ur5e_dmodel_are_killed_and_survivors_explained(auto_suit
     killed = [o for o in data["outcomes"] if o["status"] == "killed"]
     assert any(o["change"].startswith("entry action $stop()") and "case_01 cycle 6" in o["by"] for o in killed)
     assert f"kill rate {round(100 * data['kill_rate'])}%" in proc.stdout
+
+
+# ---- against the PT: the perturbed OPC UA plant ----
+
+@pytest.fixture()
+def plant(tmp_path):
+    """`cotwin plant` with examples/ur5e/twin.toml's perturbation (0.5 kg payload, 40 ms actuator latency) on a
+    free loopback port, in its own process, stopped by its PID whatever happens."""
+    pytest.importorskip("asyncua")
+    import os
+    import signal
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    url = f"opc.tcp://127.0.0.1:{port}"
+    env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
+    process = subprocess.Popen([str(Path(sys.executable).parent / "cotwin"), "plant", str(UR5E / "twin.toml"),
+                                "--opcua", url], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        line = process.stdout.readline()
+        assert line.startswith(f"serving ur5e on {url} (lockstep; perturbation:"), line + process.stderr.read()
+        yield url, env
+    finally:
+        if process.poll() is None:
+            process.send_signal(signal.SIGTERM)
+            try:
+                process.wait(10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait(10)
+        process.stdout.close()
+        process.stderr.close()
+
+
+def test_cotwin_test_passes_every_case_on_the_perturbed_plant_over_opcua(auto_suite, plant, tmp_path):
+    url, env = plant
+    report = tmp_path / "pt.xml"
+    proc = subprocess.run([str(Path(sys.executable).parent / "cotwin"), "test", str(UR5E / "cotwin.toml"),
+                           str(auto_suite[0]), "--pt", url, "--junit", str(report)], capture_output=True, text=True,
+                          env=env)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f"4 of 4 case(s) passed on the PT (OPC UA plant at {url})" in proc.stdout
+    assert "transitions covered: 25 of 25 reachable (100%)" in proc.stdout
+    suite = ET.parse(report).getroot().find("testsuite")
+    assert suite.get("failures") == "0" and suite.get("name") == f"FlexCellArm on the PT (OPC UA plant at {url})"
