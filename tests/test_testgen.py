@@ -46,7 +46,8 @@ def graph(arm):
 def auto_suite(tmp_path_factory):
     """The UR5e suite with each case's answers chosen by trying it on the project's simulated platform."""
     out = tmp_path_factory.mktemp("auto") / "tests"
-    proc = cotwin("testgen", *MODELS, *FEASIBLE, "--answers", "auto", "--project", UR5E / "cotwin.toml", "-o", out)
+    proc = cotwin("testgen", *MODELS, *FEASIBLE, "--answers", "auto", "--project", UR5E / "cotwin.toml", "--no-drivers",
+                  "-o", out)
     assert proc.returncode == 0, proc.stderr
     return out, proc.stdout
 
@@ -120,10 +121,10 @@ def test_unreachable_items_are_listed_with_their_reason(tmp_path):
 
 def test_the_suite_is_byte_identical_from_any_directory_and_its_plans_are_project_plans(tmp_path, arm):
     a, b = tmp_path / "a", tmp_path / "b"
-    assert cotwin("testgen", *MODELS, "-o", a).returncode == 0
+    assert cotwin("testgen", *MODELS, "--no-drivers", "-o", a).returncode == 0
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
-    proc = cotwin("testgen", *[m.resolve() for m in MODELS], "-o", b.resolve(), cwd=elsewhere)
+    proc = cotwin("testgen", *[m.resolve() for m in MODELS], "--no-drivers", "-o", b.resolve(), cwd=elsewhere)
     assert proc.returncode == 0, proc.stderr
     names = sorted(p.name for p in a.iterdir())
     assert names == sorted(p.name for p in b.iterdir())
@@ -314,3 +315,43 @@ def test_cotwin_test_passes_every_case_on_the_perturbed_plant_over_opcua(auto_su
     assert "transitions covered: 25 of 25 reachable (100%)" in proc.stdout
     suite = ET.parse(report).getroot().find("testsuite")
     assert suite.get("failures") == "0" and suite.get("name") == f"FlexCellArm on the PT (OPC UA plant at {url})"
+
+
+# ---- the cases as test driver FMUs ----
+
+def test_a_stub_case_is_a_test_driver_fmu_that_reports_its_verdict(tmp_path, arm):
+    """The driver FMU beside the d-model FMU in a multimodel, run by cotwin's master and by libcosim: verdict 1;
+    beside a faulty d-model (no stop() on arrival): verdict -1 at the cycle of the difference."""
+    from fmpy.validation import validate_fmu
+
+    from cotwin.cosim.libcosim import run_libcosim
+    from cotwin.cosim.multimodel import read_multimodel
+    from cotwin.dmodel.fmu import build_fmu
+
+    tests = tmp_path / "tests"
+    proc = cotwin("testgen", UR5E / "arm.rst", "-o", tests)
+    assert proc.returncode == 0, proc.stderr
+    assert "test driver FMUs of the 4 stub case(s)" in proc.stdout
+    assert validate_fmu(str(tests / "case_01.fmu")) == []
+    faulty = tmp_path / "faulty.rst"
+    faulty.write_text((UR5E / "arm.rst").read_text().replace("state Stopping { entry $stop() }", "state Stopping { }"))
+    build_fmu(arm, tmp_path / "dmodel.fmu")
+    build_fmu(build_program(load_checked([faulty])), tmp_path / "faulty.fmu")
+    inputs = [ev.name for ev in arm.inputs] + [p for ev in arm.inputs for p, _ in ev.value_ports]
+    outputs = [op.name for op in arm.operations] + [p for op in arm.operations for g in op.arg_ports for p, _ in g]
+    outputs = list(dict.fromkeys(outputs)) + ["state"]
+    for dmodel, verdict in (("dmodel.fmu", ("1", "0")), ("faulty.fmu", ("-1", "6"))):
+        connections = {f"{{driver}}.case.{p}": [f"{{dmodel}}.dmodel.{p}"] for p in inputs}
+        connections.update({f"{{dmodel}}.dmodel.{p}": [f"{{driver}}.case.{p}"] for p in outputs})
+        mm = {"fmus": {"{driver}": str(tests / "case_01.fmu"), "{dmodel}": str(tmp_path / dmodel)},
+              "connections": connections, "logVariables": {"{driver}.case": ["verdict", "divergence_cycle"]},
+              "algorithm": {"type": "fixed-step", "size": 0.1}, "endTime": 1.0, "cotwin": {"delayed": ["{driver}.case"]}}
+        path = tmp_path / f"{dmodel}.json"
+        path.write_text(json.dumps(mm))
+        out = tmp_path / f"{dmodel}.csv"
+        proc = cotwin("simulate", path, "-o", out)
+        assert proc.returncode == 0, proc.stderr
+        last = list(__import__("csv").DictReader(open(out)))[-1]
+        assert (last["{driver}.case.verdict"], last["{driver}.case.divergence_cycle"]) == verdict, dmodel
+    theirs = run_libcosim(read_multimodel(tmp_path / "dmodel.fmu.json"), {"{driver}.case": ["verdict"]}, end=1.0)
+    assert theirs["{driver}.case.verdict"][-1] == 1

@@ -65,10 +65,13 @@ def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str],
               help="seconds per d-model cycle in the plans")
 @click.option("--settle", default=10.0, show_default=True, type=click.FloatRange(min=0, max=86_400),
               help="seconds a plan leaves the platform to answer (cases with --answers platform)")
+@click.option("--drivers/--no-drivers", default=True, show_default=True,
+              help="build each stub case as a test driver FMU (case_NN.fmu) reporting a verdict")
+@click.option("--cc", default="cc", show_default=True, help="C compiler for the driver FMUs")
 @click.option("-o", "--output", "out", callback=output_path, required=True, help="the folder for the suite")
 def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, domains: tuple[str, ...],
             commands: tuple[str, ...], answers: str, project: str | None, split: str, max_cycles: int, max_states: int,
-            period: float, settle: float, out: str) -> None:
+            period: float, settle: float, drivers: bool, cc: str, out: str) -> None:
     """Generate a test suite covering every reachable state, transition or pair of a d-model module."""
     from ..dmodel.program import build_program
     from ..dmodel.testgen import generate
@@ -88,7 +91,15 @@ def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, dom
     write_suite(suite, out, period, settle)
     if answers == "auto":
         try_on_platform(suite, project, out, period, settle)
-    click.echo(format_suite(suite, period, why, out))
+    if drivers:
+        from ..dmodel.testgen_driver import build_driver
+        from ..dmodel.testgen_files import oracle
+
+        write_suite(suite, out, period, settle, drivers=True)
+        for case in suite.cases:
+            if case.answers == "stub":
+                build_driver(program, case.name, oracle(case)["cycles"], Path(out) / f"{case.name}.fmu", cc)
+    click.echo(format_suite(suite, period, why, out, drivers))
     if not suite.cases:
         click.echo("no case: nothing is reachable to cover", err=True)
         sys.exit(1)
@@ -118,7 +129,7 @@ def try_on_platform(suite, project: str, out: str, period: float, settle: float)
     return stubbed
 
 
-def format_suite(suite, period: float, why: str, out: str) -> str:
+def format_suite(suite, period: float, why: str, out: str, drivers: bool = False) -> str:
     graph = suite.graph
     reached, covered = len(suite.reached), len(suite.covered)
     lines = [f"module {suite.program.module.name}: {len(graph.snapshots)} states, {graph.edges} distinct cycles explored "
@@ -137,7 +148,9 @@ def format_suite(suite, period: float, why: str, out: str) -> str:
         lines.append(f"  unreachable: {item}: {why_not}")
     for item, why_not in suite.uncovered:
         lines.append(f"  uncovered: {item}: {why_not}")
-    lines.append(f"written to {out}/ (suite.json, per case a plan .csv and an .oracle.json)")
+    drivers = sum(1 for c in suite.cases if c.answers == "stub") if drivers else 0
+    lines.append(f"written to {out}/ (suite.json, per case a plan .csv and an .oracle.json"
+                 + (f", test driver FMUs of the {drivers} stub case(s), reporting `verdict`" if drivers else "") + ")")
     return "\n".join(lines)
 
 

@@ -9,6 +9,8 @@
   previous one when the platform had to answer in between.
 - `case_NN.oracle.json`: per cycle the inputs, the operation calls and output events with their
   arguments, the active leaf states after it and the transitions it took.
+- `case_NN.fmu` (cotwin testgen, unless --no-drivers): a stub case as a test driver FMU reporting a
+  `verdict` (cotwin.dmodel.testgen_driver).
 
 Everything is written in a stable order, so the same model and options give byte-identical files.
 """
@@ -99,7 +101,7 @@ def oracle(case: Case) -> dict:
         for st in case.steps]}
 
 
-def suite_record(suite: Suite, period: float, settle: float) -> dict:
+def suite_record(suite: Suite, period: float, settle: float, drivers: bool = False) -> dict:
     program = suite.program
     graph = suite.graph
     return {
@@ -120,7 +122,9 @@ def suite_record(suite: Suite, period: float, settle: float) -> dict:
         "unreachable": [{"item": i, "why": why} for i, why in suite.unreachable],
         "uncovered": [{"item": i, "why": why} for i, why in suite.uncovered],
         "cases": [{"name": c.name, "cycles": c.cycles, "answers": c.answers, **({"why": c.note} if c.note else {}),
-                   "plan": f"{c.name}.csv", "oracle": f"{c.name}.oracle.json", "covers": c.covers, "items": c.items}
+                   "plan": f"{c.name}.csv", "oracle": f"{c.name}.oracle.json",
+                   **({"driver": f"{c.name}.fmu"} if drivers and c.answers == "stub" else {}),
+                   "covers": c.covers, "items": c.items}
                   for c in suite.cases],
     }
 
@@ -129,19 +133,22 @@ def _dump(data) -> str:
     return json.dumps(data, indent=1, sort_keys=False, allow_nan=False) + "\n"
 
 
-def write_suite(suite: Suite, folder: str | Path, period: float = 0.1, settle: float = 10.0) -> list[Path]:
+def write_suite(suite: Suite, folder: str | Path, period: float = 0.1, settle: float = 10.0,
+                drivers: bool = False) -> list[Path]:
     """Write the suite into `folder` (see module doc); returns the files written. Files of an earlier suite
-    that this one does not have (more cases then) are removed, so the folder holds one suite."""
+    that this one does not have (more cases then) are removed, so the folder holds one suite. With `drivers`
+    the index names each stub case's test driver FMU (cotwin.dmodel.testgen_driver builds them)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     commands = set(suite.commands)
-    files: dict[str, str] = {"suite.json": _dump(suite_record(suite, period, settle))}
+    files: dict[str, str] = {"suite.json": _dump(suite_record(suite, period, settle, drivers))}
+    keep = {f"{c.name}.fmu" for c in suite.cases if drivers and c.answers == "stub"}
     for case in suite.cases:
         header, rows = plan_rows(suite.program, case, commands, period, settle)
         files[f"{case.name}.csv"] = "\n".join(",".join(r) for r in [header, *rows]) + "\n"
         files[f"{case.name}.oracle.json"] = _dump(oracle(case))
     for stale in folder.glob("case_*"):
-        if stale.name not in files and stale.suffix in (".csv", ".json", ".fmu"):
+        if stale.name not in files and stale.name not in keep and stale.suffix in (".csv", ".json", ".fmu"):
             stale.unlink()
     written = []
     for name, text in files.items():
