@@ -223,39 +223,72 @@ def run_case_fmu(program: Program, cycles: list[dict], fmu: Path) -> str | None:
     return None
 
 
-def tell_apart(original: Program, mutant: Program, domains: dict | None = None, max_pairs: int = 100_000):
+def _recording(interp: Interpreter) -> set:
+    """The platform input events `interp` tests (`$e`) from now on, gathered in the set returned (cleared by the
+    caller): a cycle's outcome depends on the inputs only through these."""
+    reads: set = set()
+    platform = {}
+    for name, routes in interp.program.input_routes.items():
+        for machine, event in routes:
+            platform.setdefault((machine, event), []).append(name)
+    for ev in interp.evaluators:
+        def dollar(e, ev=ev, test=ev.dollar):
+            reads.update(platform.get((ev.m.index, e.event.last), ()))
+            return test(e)
+        ev.dollar = dollar
+    return reads
+
+
+def tell_apart(original: Program, mutant: Program, domains: dict | None = None, max_pairs: int = 100_000,
+               memo: dict | None = None):
     """The shortest input trace after which the mutant does something else than the original (outputs or
     states), as (trace, what); (None, pairs explored) when none exists (equivalent); (None, None) when the
-    exploration stopped at max_pairs before deciding."""
+    exploration stopped at max_pairs before deciding. `memo` keeps the original's cycles between calls.
+
+    An input combination agreeing, on every event both programs tested in an earlier combination's cycle,
+    with that combination gives the same cycle (the programs are deterministic): it is skipped, which
+    leaves a handful of combinations per state where 2^events would be tried."""
     values, _ = event_values(original, domains or {})
     combos = sorted(input_combinations(original, values), key=len)
     a, b = Interpreter(original), Interpreter(mutant)
+    reads_a, reads_b = _recording(a), _recording(b)
+    memo = {} if memo is None else memo
     root = (a.snapshot(), b.snapshot())
     parent = {root: None}
     queue = deque([(root, 0)])
     while queue:
         (sa, sb), depth = queue.popleft()
-        for inputs in combos:
-            a.restore(sa)
+        tried: list[tuple[tuple, tuple]] = []  # (events tested, their presence and values)
+        for k, inputs in enumerate(combos):
+            if any(tuple((n, n in inputs, inputs.get(n)) for n in names) == seen for names, seen in tried):
+                continue
+            reads_a.clear()
+            reads_b.clear()
+            key = (sa, depth, k)
+            if key not in memo:
+                a.restore(sa)
+                a.cycle = depth
+                try:
+                    out = a.step(dict(inputs))
+                    memo[key] = (out, a.snapshot(), [s.active for s in a.states], _leaves(original, a), set(reads_a))
+                except ExecutionError:
+                    memo[key] = None  # the original fails there too: not a behaviour a test can ask for
+            if memo[key] is None:
+                continue
+            oa, next_a, active_a, leaves_a, tested = memo[key]
             b.restore(sb)
-            a.cycle = b.cycle = depth
+            b.cycle = depth
             what = None
-            try:
-                oa = a.step(dict(inputs))
-            except ExecutionError:
-                continue  # the original fails there too: not a behaviour a test can ask for
             try:
                 ob = b.step(dict(inputs))
             except ExecutionError as err:
                 what = f"the mutant fails: {err.findings[0].message}"
                 ob = None
             if what is None:
-                ra = sorted((output_record(o) for o in oa), key=lambda r: (r["kind"], r["name"]))
-                rb = sorted((output_record(o) for o in ob), key=lambda r: (r["kind"], r["name"]))
-                if ra != rb:
+                if oa != ob and sorted(map(str, oa)) != sorted(map(str, ob)):
                     what = "other outputs"
-                elif _leaves(original, a) != _leaves(mutant, b):
-                    what = f"state {', '.join(_leaves(mutant, b))} instead of {', '.join(_leaves(original, a))}"
+                elif active_a != [s.active for s in b.states] and leaves_a != _leaves(mutant, b):
+                    what = f"state {', '.join(_leaves(mutant, b))} instead of {', '.join(leaves_a)}"
             if what is not None:
                 trace = [inputs]
                 node = (sa, sb)
@@ -263,7 +296,9 @@ def tell_apart(original: Program, mutant: Program, domains: dict | None = None, 
                     node, step = parent[node]
                     trace.append(step)
                 return list(reversed(trace)), what
-            nxt = (a.snapshot(), b.snapshot())
+            names = tuple(sorted(tested | reads_b))
+            tried.append((names, tuple((n, n in inputs, inputs.get(n)) for n in names)))
+            nxt = (next_a, b.snapshot())
             if nxt not in parent:
                 if len(parent) >= max_pairs:
                     return None, None
@@ -302,6 +337,7 @@ def analyse(original: Program, suite: SuiteFile, mutants: list[Mutant], model_fi
     """Run the suite on every mutant and explain the survivors (see module doc). `fmu_builder(program,
     path)`, when given, runs each case through the mutant's FMU instead of the interpreter."""
     report = MutationReport()
+    memo: dict = {}  # the original's cycles, shared by every survivor's side-by-side exploration
     for mutant in mutants:
         try:
             program = mutant_program(mutant, model_files, module)
@@ -323,7 +359,7 @@ def analyse(original: Program, suite: SuiteFile, mutants: list[Mutant], model_fi
             if fmu_dir is not None:
                 fmu_dir.cleanup()
         if outcome.status == "survived":
-            trace, what = tell_apart(original, program, domains)
+            trace, what = tell_apart(original, program, domains, memo=memo)
             if trace is None and what is None:
                 outcome.explanation = "undecided: the side-by-side exploration reached its limit"
             elif trace is None:
