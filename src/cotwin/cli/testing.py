@@ -60,7 +60,8 @@ def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str],
 @click.option("--max-cycles", default=30, show_default=True, type=click.IntRange(min=1, max=10 ** 6),
               help="cycles of one case (a case's first item may lie further)")
 @click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1, max=10 ** 8),
-              help="stop exploring after this many states")
+              help="stop exploring after this many states (states and transitions: also once every transition "
+                   "was taken)")
 @click.option("--period", default=0.1, show_default=True, type=click.FloatRange(min=0, min_open=True, max=3600),
               help="seconds per d-model cycle in the plans")
 @click.option("--settle", default=10.0, show_default=True, type=click.FloatRange(min=0, max=86_400),
@@ -86,7 +87,12 @@ def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, dom
     program = build_program(models, module_name)
     parsed = _domains(program, domains)
     chosen, why = command_events(models, program, commands)
-    graph = explore(program, parsed, max_states=max_states)
+    from rich.progress import Progress
+
+    with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
+        task = bar.add_task("exploring the d-model's states", total=max_states)
+        graph = explore(program, parsed, max_states=max_states, until_all_taken=criterion != "transition-pairs",
+                        progress=lambda done, found: bar.update(task, completed=found))
     suite = generate(graph, criterion, max_cycles, chosen, "platform" if answers == "auto" else answers, split)
     write_suite(suite, out, period, settle)
     if answers == "auto":
@@ -133,7 +139,8 @@ def format_suite(suite, period: float, why: str, out: str, drivers: bool = False
     graph = suite.graph
     reached, covered = len(suite.reached), len(suite.covered)
     lines = [f"module {suite.program.module.name}: {len(graph.snapshots)} states, {graph.edges} distinct cycles explored "
-             f"in {graph.seconds:.2f} s" + ("" if graph.complete else " (INCOMPLETE: the state limit was reached)")]
+             f"in {graph.seconds:.2f} s" + ("" if graph.complete else " (INCOMPLETE: the state limit was reached)")
+             + (f" (stopped: {graph.stopped})" if graph.stopped else "")]
     lines += [f"  note: {n}" for n in graph.value_notes]
     lines.append(f"  commands: {', '.join(suite.commands) or 'none'} ({why}); platform answers: "
                  f"{', '.join(ev.name for ev in suite.program.inputs if ev.name not in suite.commands) or 'none'}")
@@ -144,8 +151,9 @@ def format_suite(suite, period: float, why: str, out: str, drivers: bool = False
     for case in suite.cases:
         lines.append(f"  {case.name}: {case.cycles} cycles, answers {case.answers}, {len(case.covers)} item(s) first covered"
                      + (f"; {case.note}" if case.note else ""))
+    label = "unreachable" if graph.complete else "not reached"
     for item, why_not in suite.unreachable:
-        lines.append(f"  unreachable: {item}: {why_not}")
+        lines.append(f"  {label}: {item}: {why_not}")
     for item, why_not in suite.uncovered:
         lines.append(f"  uncovered: {item}: {why_not}")
     drivers = sum(1 for c in suite.cases if c.answers == "stub") if drivers else 0

@@ -392,8 +392,12 @@ def generate(graph: StateGraph, criterion: str = "transitions", max_cycles: int 
         cases.append(Case(f"case_{k:02d}", _steps(program, walk), [cov.name(i) for i in _ordered(walk, targets - seen_before)],
                           [cov.name(i) for i in _ordered(walk, targets)], answers))
     reached_transitions = {(m, e) for cycles in graph.cycles for c in cycles for m, e in c.taken}
-    limit = "" if graph.complete else " (the exploration stopped at its state limit: raise --max-states)"
-    unreachable = [(cov.name(i), (cov.why_unreached(i, reached_transitions) + limit)) for i in universe if i not in reached]
+    if graph.complete:
+        unreachable = [(cov.name(i), cov.why_unreached(i, reached_transitions)) for i in universe if i not in reached]
+    else:  # nothing is known of what lies beyond the limit
+        limit = (f"not reached within the state limit ({len(graph.snapshots)} states): raise --max-states, or give "
+                 "--domain values of the inputs its conditions compare against")
+        unreachable = [(cov.name(i), limit) for i in universe if i not in reached]
     covered = set().union(*(w.covered for w in kept)) if kept else set()
     uncovered = [(cov.name(i), "no walk from the initial state reaches it") for i in universe
                   if i in targets and i not in covered]

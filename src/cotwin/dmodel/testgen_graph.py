@@ -64,6 +64,7 @@ class StateGraph:
     input_combinations: int = 0
     value_notes: list[str] = field(default_factory=list)
     domains: dict[str, list] = field(default_factory=dict)  # the value domains given (--domain)
+    stopped: str = ""  # why the exploration ended before the last state (every transition taken)
     seconds: float = 0.0
 
     @property
@@ -76,8 +77,12 @@ def _frozen(inputs: dict) -> tuple:
 
 
 def explore(program: Program, domains: dict[str, list] | None = None, max_states: int = 100_000,
-            parameters: dict | None = None) -> StateGraph:
-    """Every state reachable from the initial one under every input combination (see module doc)."""
+            parameters: dict | None = None, until_all_taken: bool = False, progress=None) -> StateGraph:
+    """Every state reachable from the initial one under every input combination (see module doc). With
+    `until_all_taken` the exploration ends once every transition of the model has been taken (every state
+    has then been entered, and the graph holds a path to each): a model with endless data (a counter, a
+    random source) then needs only the states up to there. `progress(states done, states found)` is
+    called every 100 states."""
     started = time.perf_counter()
     graph = StateGraph(program, domains=dict(domains or {}))
     values, graph.value_notes = event_values(program, domains or {})
@@ -90,8 +95,15 @@ def explore(program: Program, domains: dict[str, list] | None = None, max_states
     graph.snapshots.append(root)
     graph.cycles.append([])
     queue = deque([0])
+    edges = {(m.index, e.index) for m in program.machines for e in m.graph.edges}
+    taken_all: set = set()
     while queue:
+        if until_all_taken and taken_all >= edges:
+            graph.stopped = f"every transition taken after {len(graph.snapshots)} states"
+            break
         node = queue.popleft()
+        if progress is not None and node % 100 == 0:
+            progress(node, len(graph.snapshots))
         snap = graph.snapshots[node]
         seen: dict[tuple, Cycle] = {}
         for inputs in combos:
@@ -116,6 +128,7 @@ def explore(program: Program, domains: dict[str, list] | None = None, max_states
                 depth.append(depth[node] + 1)
                 queue.append(target)
             taken = tuple(interp.taken)
+            taken_all.update(taken)
             states = tuple(interp.state_index(m.index) for m in program.machines)
             key = (target, tuple((o.kind, o.name, freeze(o.args)) for o in outputs), taken)
             if key not in seen:
