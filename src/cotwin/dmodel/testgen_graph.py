@@ -79,9 +79,10 @@ def _frozen(inputs: dict) -> tuple:
 def explore(program: Program, domains: dict[str, list] | None = None, max_states: int = 100_000,
             parameters: dict | None = None, until_all_taken: bool = False, progress=None) -> StateGraph:
     """Every state reachable from the initial one under every input combination (see module doc). With
-    `until_all_taken` the exploration ends once every transition of the model has been taken (every state
-    has then been entered, and the graph holds a path to each): a model with endless data (a counter, a
-    random source) then needs only the states up to there. `progress(states done, states found)` is
+    `until_all_taken` the exploration adds no state once every transition of the model has been taken (every
+    state has then been entered, and the graph holds a path to each); the states found are still expanded,
+    so that walks can go on from each: a model with endless data (a counter, a random source) then needs
+    only the states up to there. `progress(states done, states found)` is
     called every 100 states."""
     started = time.perf_counter()
     graph = StateGraph(program, domains=dict(domains or {}))
@@ -97,10 +98,11 @@ def explore(program: Program, domains: dict[str, list] | None = None, max_states
     queue = deque([0])
     edges = {(m.index, e.index) for m in program.machines for e in m.graph.edges}
     taken_all: set = set()
+    closing = False  # every transition taken: the states found are expanded, no new one is added
     while queue:
-        if until_all_taken and taken_all >= edges:
+        if until_all_taken and not closing and taken_all >= edges:
+            closing = True
             graph.stopped = f"every transition taken after {len(graph.snapshots)} states"
-            break
         node = queue.popleft()
         if progress is not None and node % 100 == 0:
             progress(node, len(graph.snapshots))
@@ -119,6 +121,8 @@ def explore(program: Program, domains: dict[str, list] | None = None, max_states
             nxt = interp.snapshot()
             target = ids.get(nxt)
             if target is None:
+                if closing:
+                    continue
                 if len(ids) >= max_states:
                     graph.complete = False
                     continue
