@@ -155,3 +155,14 @@ def tool_point(text: str) -> tuple[float, float, float]:
         raise click.BadParameter(f"{text[:80]!r}: flange, fingertips or three numbers X,Y,Z (m, within 10 m of the "
                                  "tool link)", param_hint="--tool")
     return values
+
+
+def value_domains(program, domains: tuple[str, ...]) -> dict[str, list]:
+    """--domain PORT=LOW..HIGH options of a d-model command, each naming a value port of an input event."""
+    parsed = dict(named_values(d, "--domain") for d in domains)
+    known = [port for ev in program.inputs for port, _ in ev.value_ports]
+    unknown = [name for name in parsed if name not in known]
+    if unknown:
+        raise click.BadParameter(f"{', '.join(unknown)}: not a value port of an input event of module "
+                                 f"{program.module.name} (ports: {', '.join(known) or 'none'})", param_hint="--domain")
+    return parsed

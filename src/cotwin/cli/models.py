@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError, Severity
-from .common import main, named_values, output_path, report
+from .common import main, output_path, report, value_domains
 
 
 @main.command()
@@ -124,12 +124,6 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
     from ..robosim.check import load_checked
 
     program = build_program(load_checked(model), module_name)
-    parsed = dict(named_values(d, "--domain") for d in domains)
-    known = [port for ev in program.inputs for port, _ in ev.value_ports]
-    unknown = [name for name in parsed if name not in known]
-    if unknown:
-        raise click.BadParameter(f"{', '.join(unknown)}: not a value port of an input event of module "
-                                 f"{program.module.name} (ports: {', '.join(known) or 'none'})", param_hint="--domain")
-    report = explore(program, parsed, max_states=max_states)
+    report = explore(program, value_domains(program, domains), max_states=max_states)
     click.echo(format_report(program, report))
     sys.exit(0 if report.ok else 1)

@@ -7,17 +7,7 @@ from pathlib import Path
 
 import click
 
-from .common import main, named_values, output_path
-
-
-def _domains(program, domains: tuple[str, ...]) -> dict[str, list]:
-    parsed = dict(named_values(d, "--domain") for d in domains)
-    known = [port for ev in program.inputs for port, _ in ev.value_ports]
-    unknown = [name for name in parsed if name not in known]
-    if unknown:
-        raise click.BadParameter(f"{', '.join(unknown)}: not a value port of an input event of module "
-                                 f"{program.module.name} (ports: {', '.join(known) or 'none'})", param_hint="--domain")
-    return parsed
+from .common import main, output_path, value_domains
 
 
 def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str], str]:
@@ -85,7 +75,7 @@ def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, dom
                                  param_hint="--answers" if project is None else "--project")
     models = load_checked(model)
     program = build_program(models, module_name)
-    parsed = _domains(program, domains)
+    parsed = value_domains(program, domains)
     chosen, why = command_events(models, program, commands)
     from rich.progress import Progress
 

@@ -27,8 +27,8 @@ import fmpy
 
 from ..diagnostics import CotwinError
 from .ccode import generate_c
-from .fmu import model_identifier, package_fmu, ports_header
-from .ports import PortLayout, Variable
+from .fmu import _start_text, model_identifier, package_fmu, ports_header
+from .ports import PortLayout
 from .program import Program
 
 WRAPPER = Path(__file__).with_name("fmi3_wrapper.c")
@@ -41,16 +41,6 @@ DEFAULT_PERIOD = 0.1  # s: the cycle_period an importer gets unless it sets the 
 
 def clock_reference(layout: PortLayout) -> int:
     return len(layout.variables)
-
-
-def _start(var: Variable) -> str:
-    if var.start is None:
-        return ""
-    if var.fmi_type == "Boolean":
-        return f' start="{"true" if var.start else "false"}"'
-    if var.fmi_type == "Real":
-        return f' start="{float(var.start)!r}"'
-    return f' start="{int(var.start)}"'
 
 
 def model_description(program: Program, layout: PortLayout, token: str, period: float) -> str:
@@ -78,7 +68,7 @@ def model_description(program: Program, layout: PortLayout, token: str, period: 
             extra = ' initial="exact"'
         else:
             extra = f' clocks="{clock}"'
-        start = f' start="{period!r}"' if var is layout.period else _start(var) if var.causality != "output" else ""
+        start = f' start="{period!r}"' if var is layout.period else _start_text(var) if var.causality != "output" else ""
         lines.append(f'    <{kind} name="{escape(var.name)}" valueReference="{var.vr}" causality="{var.causality}" '
                      f'variability="{var.variability}"{extra}{start}{desc}/>')
     lines.append(f'    <Clock name="{CLOCK}" valueReference="{clock}" causality="input" variability="discrete" '

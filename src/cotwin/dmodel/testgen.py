@@ -28,7 +28,7 @@ import hashlib
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Hashable, Iterable
+from typing import Hashable, Iterable
 
 from ..robosim.dmodel_elements import Initial
 from .interpreter import Output
