@@ -31,6 +31,7 @@ demo: install-runtime
 	$(VENV)/bin/cotwin run examples/ur5e/cotwin.toml -o $(OUT)
 	$(VENV)/bin/cotwin run examples/ur5e/cotwin.toml -o $(OUT)/gauss-seidel --algorithm gauss-seidel
 	$(VENV)/bin/cotwin run examples/ur5e/pick_place_project.toml -o $(OUT)/pick-place
+	$(VENV)/bin/cotwin testgen examples/ur5e/arm.rst examples/ur5e/mapping.pm examples/ur5e/ur5e.pm -o $(OUT)/tests && $(VENV)/bin/cotwin test examples/ur5e/cotwin.toml $(OUT)/tests --junit $(OUT)/tests/report.xml
 	COTWIN=$(VENV)/bin/cotwin scripts/live-demo.sh $(OUT)/twin
 	@if [ -f ../shared/data/ur5e/rtde_run1.csv ]; then \
 		$(VENV)/bin/cotwin twin examples/ur5e/replay.toml -o $(OUT)/replay 2> $(OUT)/replay.log; \

@@ -223,3 +223,20 @@ def tool_point(text: str) -> tuple[float, float, float]:
         raise click.BadParameter(f"{text[:80]!r}: flange, fingertips or three numbers X,Y,Z (m, within 10 m of the "
                                  "tool link)", param_hint="--tool")
     return values
+
+
+def value_domains(program, domains: tuple[str, ...]) -> dict[str, list]:
+    """--domain PORT=LOW..HIGH options of a d-model command, each naming a value port of an input event, or
+    the event itself where it carries one value (closestDistance for its port closest_distance)."""
+    parsed = dict(named_values(d, "--domain") for d in domains)
+    ports = {port: port for ev in program.inputs for port, _ in ev.value_ports}
+    ports.update({ev.name: ev.value_ports[0][0] for ev in program.inputs if len(ev.value_ports) == 1})
+    unknown = [name for name in parsed if name not in ports]
+    if unknown:
+        known = [port for ev in program.inputs for port, _ in ev.value_ports]
+        raise click.BadParameter(f"{', '.join(unknown)}: not a value port of an input event of module "
+                                 f"{program.module.name} (ports: {', '.join(known) or 'none'})", param_hint="--domain")
+    resolved = {ports[name]: values for name, values in parsed.items()}
+    if len(resolved) < len(parsed):
+        raise click.BadParameter("a port is given twice (by its name and by its event's)", param_hint="--domain")
+    return resolved

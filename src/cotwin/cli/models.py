@@ -10,7 +10,7 @@ import click
 
 from ..diagnostics import CotwinError, Severity
 from ..files import check_outputs, write_text
-from .common import main, named_values, output_path, report
+from .common import main, named_values, output_path, report, value_domains
 
 
 @main.command()
@@ -60,17 +60,31 @@ def tree_findings(project) -> list:
 @click.option("--module", "module_name", help="the module to build (default: the only one)")
 @click.option("-o", "--output", callback=output_path, required=True, help="the FMU file to write")
 @click.option("--cc", default="cc", show_default=True, help="C compiler")
-def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, cc: str) -> None:
-    """Generate C from a d-model module and package it as an FMI 2.0 co-simulation FMU."""
+@click.option("--fmi", "version", type=click.Choice(["2", "3"]), default="2", show_default=True,
+              help="FMI version: 3 makes the d-model's cycle a clock (Co-Simulation with Event Mode)")
+@click.option("--cycle-period", type=click.FloatRange(min=0, min_open=True, max=86_400),
+              help="FMI 3.0: the clock's default interval in seconds (the parameter cycle_period) [default: 0.1]")
+def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, cc: str, version: str,
+                 cycle_period: float | None) -> None:
+    """Generate C from a d-model module and package it as an FMI 2.0 (default) or 3.0 co-simulation FMU."""
     from ..dmodel.fmu import build_fmu
     from ..dmodel.program import build_program
     from ..robosim.check import load_checked
 
     check_outputs([output], model)
+    if cycle_period is not None and version != "3":
+        raise click.BadParameter("the FMI 2.0 FMU takes cycle_period as a parameter when run (0: one cycle per "
+                                 "step); --cycle-period sets the FMI 3.0 clock's default", param_hint="--cycle-period")
     program = build_program(load_checked(model), module_name)
-    path = build_fmu(program, output, cc=cc)
-    click.echo(f"{path}: module {program.module.name}, {len(program.machines)} state machine(s), "
-               f"{len(program.inputs)} input event(s), {len(program.operations)} operation(s)")
+    if version == "3":
+        from ..dmodel.fmi3 import DEFAULT_PERIOD, build_fmu3
+
+        path = build_fmu3(program, output, cc=cc, period=cycle_period or DEFAULT_PERIOD)
+    else:
+        path = build_fmu(program, output, cc=cc)
+    click.echo(f"{path}: FMI {version}.0, module {program.module.name}, {len(program.machines)} state machine(s), "
+               f"{len(program.inputs)} input event(s), {len(program.operations)} operation(s)"
+               + (f", clock cycle every {cycle_period or DEFAULT_PERIOD:g} s" if version == "3" else ""))
 
 
 @main.command("export-pmodel")
@@ -117,19 +131,8 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
     from .progress import ProgressReport
 
     program = build_program(load_checked(model), module_name)
-    parsed = dict(named_values(d, "--domain") for d in domains)
+    resolved = value_domains(program, domains)
     draws = RANDOM_VALUES if random_values is None else tuple(named_values(f"random={random_values}", "--random")[1])
-    ports = {port: port for ev in program.inputs for port, _ in ev.value_ports}
-    # a scalar event's one value port may be named by the event (closestDistance for closest_distance)
-    ports.update({ev.name: ev.value_ports[0][0] for ev in program.inputs if len(ev.value_ports) == 1})
-    unknown = [name for name in parsed if name not in ports]
-    if unknown:
-        known = [port for ev in program.inputs for port, _ in ev.value_ports]
-        raise click.BadParameter(f"{', '.join(unknown)}: not a value port of an input event of module "
-                                 f"{program.module.name} (ports: {', '.join(known) or 'none'})", param_hint="--domain")
-    resolved = {ports[name]: values for name, values in parsed.items()}
-    if len(resolved) < len(parsed):
-        raise click.BadParameter("a port is given twice (by its name and by its event's)", param_hint="--domain")
     with ProgressReport("verifying", "states") as progress:
         started = time.monotonic()
 

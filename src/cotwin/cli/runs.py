@@ -42,16 +42,24 @@ def build(project: str, out: str, cc: str) -> None:
 @serving_options
 @ON_UNIT_FAILURE
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
+@click.option("--fmi", "version", type=click.Choice(["2", "3"]), default="2", show_default=True,
+              help="3: the d-model as an FMI 3.0 FMU whose cycle is a clock (commands reach the robot in the step "
+                   "they are issued, under either algorithm)")
+@click.option("--cycle-period", type=click.FloatRange(min=0, min_open=True),
+              help="with --fmi 3: seconds between d-model cycles, a whole number of steps [default: the step]")
 def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
         realtime: bool | None, dashboard: tuple[str, int] | None, cc: str, serving: dict, strict: bool,
-        on_unit_failure: str) -> None:
+        on_unit_failure: str, version: str, cycle_period: float | None) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
     from ..twin.history import database_url
     from ..twin.run import load, run_twin
     from .progress import ProgressReport
 
-    check_finite(step=step, end=end)
+    check_finite(step=step, end=end, **{"cycle-period": cycle_period})
+    if cycle_period is not None and version != "3":
+        raise click.BadParameter("only with --fmi 3 (an FMI 2.0 d-model takes [cosim] parameters cycle_period)",
+                                 param_hint="--cycle-period")
     system = load(project)
     check_timing(system.spec, step, end)
     history = None  # one run records no history; the page lists the store's runs when there is one
@@ -65,7 +73,8 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
         with ProgressReport("co-simulating", "steps") as progress:
             ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc,
                            observers=[dash.feed] if dash else None, progress=progress,
-                           restart=on_unit_failure == "restart-from-state")
+                           restart=on_unit_failure == "restart-from-state", fmi=int(version),
+                           cycle_period=cycle_period)
     finally:
         if dash is not None:
             dash.stop()

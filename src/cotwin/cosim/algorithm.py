@@ -9,6 +9,9 @@
 
 Initialisation propagates start values in dependency order, as Maestro does.
 
+Units with clocks (FMI 3.0 FMUs in Event Mode) also run an event phase at every communication point,
+after the units stepped to it (and after initialisation): cotwin.cosim.clocks.
+
 The latest value of every observed port lives in one flat list of slots; each unit's inputs and
 outputs are bound once (`Unit.setter`, `Unit.getter`) to slot positions, so a step moves values by
 position without building dicts. `values` is a read-only view of the slots by (unit, port).
@@ -21,6 +24,7 @@ from operator import itemgetter
 from typing import Callable, Iterator
 
 from ..diagnostics import CotwinError
+from .clocks import EventPhase
 from .system import System
 
 UNSET = object()  # a slot no unit has written yet
@@ -57,6 +61,7 @@ def _picker(slots: list[int]) -> Callable[[list], tuple]:
 
 class Algorithm:
     name = "algorithm"
+    UNSET = UNSET
 
     def __init__(self) -> None:
         self.system: System | None = None
@@ -67,6 +72,7 @@ class Algorithm:
     def setup(self, system: System, start: float) -> None:
         """Instantiate every unit (dependency order), set its parameters and bind its ports to slots."""
         self.system = system
+        self.start = start
         self.order = system.order
         self.units = [system.units[n] for n in self.order]
         self.slots = {key: i for i, key in enumerate(system.observed())}
@@ -89,6 +95,7 @@ class Algorithm:
             if system.parameters.get(unit.name):
                 unit.set(system.parameters[unit.name])
         self._bind()
+        self.events = EventPhase(self)  # units with clocks (FMI 3.0): Event Mode at each communication point
 
     def _source_slot(self, key: tuple[str, str]) -> int:
         return self.slots[key]
@@ -138,6 +145,8 @@ class Algorithm:
         for k, unit in enumerate(self.units):
             unit.initialize()
             self._read(k)
+        if self.events:
+            self.events.run(self.start)
 
     def do_step(self, t: float, h: float) -> None:
         raise NotImplementedError
@@ -173,6 +182,8 @@ class Jacobi(Algorithm):
                 getter, slots = read
                 for i, value in zip(slots, getter()):
                     data[i] = value
+        if self.events:
+            self.events.run(t + h)
 
 
 class GaussSeidel(Algorithm):
@@ -204,6 +215,8 @@ class GaussSeidel(Algorithm):
                 getter, slots = read
                 for i, value in zip(slots, getter()):
                     data[i] = value
+        if self.events:
+            self.events.run(t + h)
 
 
 ALGORITHMS = {"jacobi": Jacobi, "gauss-seidel": GaussSeidel}

@@ -21,7 +21,7 @@ from .algorithm import algorithm as make_algorithm
 from .execution import Execution
 from .observers import CSVWriter, Observer, RealTimePacer
 from .system import Connection, System
-from .isolated import DEFAULT_TIMEOUT, fmu_unit
+from .fmi3 import DEFAULT_TIMEOUT, fmu_unit
 
 KNOWN_KEYS = {"fmus", "connections", "parameters", "logVariables", "algorithm", "startTime", "endTime",
               "simulationProgramDelay", "cotwin", "livestream", "overrideLogLevel", "loggingOn", "visible",
@@ -194,8 +194,8 @@ def unit_name(instance: tuple[str, str]) -> str:
 
 
 def system_of(mm: MultiModel, restart: bool = False) -> System:
-    """The multimodel's units (one FMU instance each, isolated as `cotwin.isolate` says, all of them with
-    `restart`) and connections, checked."""
+    """The multimodel's units (one FMU instance each, FMI 2.0 or 3.0 by its model description, isolated as
+    `cotwin.isolate` says, all of them with `restart`) and connections, checked."""
     try:
         units = [fmu_unit(unit_name(inst), mm.fmus[inst[0]], mm.isolate.get(inst), mm.unit_timeout, restart)
                  for inst in mm.instances]

@@ -220,7 +220,7 @@ def fmu_sources(program: Program, root: str | Path | None = None) -> dict[str, s
 
 
 def compile_binary(sources: dict[str, str], ident: str, folder: Path, cc: str = "cc") -> Path:
-    """Compile the sources into folder/<ident>.so with the C compiler `cc` (a command, possibly with
+    """Compile the sources' .c files into folder/<ident>.so with the C compiler `cc` (a command, possibly with
     arguments, e.g. "ccache gcc"); paths are kept out of the binary so that it does not depend on
     where it was built."""
     command = shlex.split(cc)
@@ -235,7 +235,8 @@ def compile_binary(sources: dict[str, str], ident: str, folder: Path, cc: str = 
         folder.mkdir(parents=True, exist_ok=True)
         cmd = [*command, "-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=default", "-Wall", "-Wno-unused-label",
                "-Wno-unused-variable", "-Wno-unused-function", f"-ffile-prefix-map={src}=sources", "-I", str(src),
-               "-o", str(out), str(src / "model.c"), str(src / "fmi2.c"), "-lm"]
+               "-o", str(out), *sorted(str(src / Path(n).name) for n in sources if n.startswith("sources/")
+                                       and n.endswith(".c")), "-lm"]
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True)
         except OSError as err:
@@ -250,9 +251,13 @@ def compile_binary(sources: dict[str, str], ident: str, folder: Path, cc: str = 
 def build_fmu(program: Program, output: str | Path, cc: str = "cc", root: str | Path | None = None) -> Path:
     """Write the FMU zip: modelDescription.xml, binaries/linux64/<id>.so (compiled with `cc`) and sources/
     (locations relative to `root`, see fmu_sources)."""
+    return package_fmu(fmu_sources(program, root), model_identifier(program), output, cc)
+
+
+def package_fmu(files: dict[str, str], ident: str, output: str | Path, cc: str = "cc", platform: str = "linux64") -> Path:
+    """Compile the sources and zip them with the text files: binaries/<platform>/<ident>.so (FMI 2.0 names the
+    platform linux64, FMI 3.0 x86_64-linux), deterministically (fixed dates, sorted names)."""
     output = Path(output)
-    files = fmu_sources(program, root)
-    ident = model_identifier(program)
     with tempfile.TemporaryDirectory(prefix="cotwin-fmu-") as tmp:
         binary = compile_binary(files, ident, Path(tmp), cc)
         with files_output(output) as f, zipfile.ZipFile(f, "w", zipfile.ZIP_DEFLATED) as zf:
@@ -260,7 +265,7 @@ def build_fmu(program: Program, output: str | Path, cc: str = "cc", root: str | 
                 info = zipfile.ZipInfo(name, date_time=_ZIP_TIME)
                 info.compress_type = zipfile.ZIP_DEFLATED
                 zf.writestr(info, files[name])
-            info = zipfile.ZipInfo(f"binaries/linux64/{ident}.so", date_time=_ZIP_TIME)
+            info = zipfile.ZipInfo(f"binaries/{platform}/{ident}.so", date_time=_ZIP_TIME)
             info.compress_type = zipfile.ZIP_DEFLATED
             info.external_attr = 0o755 << 16
             zf.writestr(info, binary.read_bytes())

@@ -51,16 +51,7 @@ class FMUDriver:
 
     def outputs(self) -> list[Output]:
         """The operation calls and output events of the last step, in the program's port order."""
-        out = []
-        for op in self.program.operations:
-            if self._get(op.name):
-                args = tuple(assemble(group, self._read) for group in op.arg_ports)
-                out.append(Output("operation", op.name, args))
-        for ev in self.program.outputs:
-            if self._get(ev.name):
-                args = (assemble(ev.value_ports, self._read),) if ev.value_ports else ()
-                out.append(Output("event", ev.name, args))
-        return out
+        return outputs_of(self.program, self._read)
 
     def _read(self, port: str):
         value = self._get(port)
@@ -71,3 +62,22 @@ class FMUDriver:
 
     def close(self) -> None:
         self.unit.terminate()
+
+
+def outputs_of(program: Program, read) -> list[Output]:
+    """The operation calls and output events an FMU's output ports show (`read(port)` -> value), in the
+    program's port order."""
+    out = []
+    for op in program.operations:
+        if read(op.name):
+            out.append(Output("operation", op.name, tuple(assemble(group, read) for group in op.arg_ports)))
+    for ev in program.outputs:
+        if read(ev.name):
+            out.append(Output("event", ev.name, (assemble(ev.value_ports, read),) if ev.value_ports else ()))
+    return out
+
+
+def inputs_of(program: Program, read) -> dict:
+    """The input events an FMU's input ports hold (`read(port)` -> value): {event: value or None}."""
+    return {ev.name: (assemble(ev.value_ports, read) if ev.value_ports else None)
+            for ev in program.inputs if read(ev.name)}

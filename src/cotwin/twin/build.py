@@ -92,16 +92,21 @@ class Record:
         self.keys.pop(target.name, None)
 
 
-def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: Record | None = None) -> Path:
-    """DIR/dmodel.fmu, rebuilt only when its sources (the models, the module, where the model files lie in
-    the project), the compiler or cotwin changed; a copy of [models] fmu when the project names one."""
+def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: Record | None = None,
+               fmi: int = 2) -> Path:
+    """DIR/dmodel.fmu (FMI 2.0) or DIR/dmodel3.fmu (FMI 3.0, the cycle a clock), rebuilt only when its sources
+    (the models, the module, where the model files lie in the project), the compiler or cotwin changed; a
+    copy of [models] fmu when the project names one."""
     from ..dmodel.fmu import build_fmu, fmu_sources
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     record = record or Record(folder)
-    target = folder / "dmodel.fmu"
+    target = folder / ("dmodel.fmu" if fmi == 2 else "dmodel3.fmu")
     if system.spec.fmu is not None:  # built elsewhere ([models] fmu): copied, as the multimodel names it
+        if fmi != 2:
+            raise CotwinError(f"{system.spec.path}: [models] fmu names a d-model FMU built elsewhere; --fmi 3 builds "
+                              "cotwin's own from the models")
         given = system.spec.fmu.read_bytes()
         key = _digest("given", given)
         if not record.fresh(target, key):
@@ -110,12 +115,21 @@ def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: R
             record.done(target, key)
         return target
     root = system.spec.path.parent
-    sources = fmu_sources(system.models.program, root)
-    key = _digest(__version__, *(part for name in sorted(sources) for part in (name, sources[name])), cc,
-                  *_cotwin_sources())
+    program = system.models.program
+    if fmi == 2:
+        sources, generators = fmu_sources(program, root), _cotwin_sources()
+    else:
+        from ..dmodel.fmi3 import build_fmu3, fmu3_sources
+
+        sources = fmu3_sources(program, root=root)
+        generators = _cotwin_sources((*_GENERATORS, "dmodel/fmi3.py", "dmodel/fmi3_wrapper.c"))
+    key = _digest(__version__, *(part for name in sorted(sources) for part in (name, sources[name])), cc, *generators)
     if not record.fresh(target, key):
         record.forget(target)
-        build_fmu(system.models.program, target, cc=cc, root=root)
+        if fmi == 2:
+            build_fmu(program, target, cc=cc, root=root)
+        else:
+            build_fmu3(program, target, cc=cc, root=root)
         record.done(target, key)
     return target
 

@@ -75,19 +75,32 @@ class TwinRun:
 def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end: float | None = None,
              algorithm: str | None = None, realtime: bool | None = None, observers: list[Observer] | None = None,
              progress=None, plot: bool = True, endpoint=None, source=None, cc: str = "cc",
-             restart: bool = False) -> TwinRun:
+             restart: bool = False, fmi: int = 2, cycle_period: float | None = None) -> TwinRun:
     """Co-simulate the twin into `out` (outputs.csv, figure.png), building the d-model FMU if it is
     missing or stale. The folder is locked for the run; a failed run keeps the previous result. With
-    `restart`, a failed step of the d-model FMU is retried in a new process from its last good state."""
+    `restart`, a failed step of the d-model FMU is retried in a new process from its last good state. With
+    `fmi` 3 the d-model is the FMI 3.0 FMU, its cycle a clock ticking every `cycle_period` (default: the
+    project's, else every step), a whole number of steps (cotwin.twin.clocked)."""
     out = Path(out)
     spec = system.spec
     end = spec.end if end is None else end
     step = spec.step if step is None else step
     check_timing(spec, step, end)
+    if fmi == 3:
+        from .clocked import clock_period
+
+        if restart:
+            raise CotwinError("restart-from-state is for FMI 2.0 FMUs: the FMI 3.0 d-model runs in cotwin's process")
+        cycle_period = clock_period(spec, step, cycle_period)
     with folder_lock(out, RUN_FILES, spec.inputs):
-        fmu = dmodel_fmu(system, out, cc)
-        cosim = system.instantiate(fmu, endpoint if endpoint is not None else dt_endpoint(system), source=source,
-                                   restart=restart)
+        fmu = dmodel_fmu(system, out, cc, fmi=fmi)
+        endpoint = endpoint if endpoint is not None else dt_endpoint(system)
+        if fmi == 3:
+            from .clocked import clocked_system
+
+            cosim = clocked_system(system, fmu, endpoint, cycle_period, source)
+        else:
+            cosim = system.instantiate(fmu, endpoint, source=source, restart=restart)
         units = {u.role if u.role != "source" else "source": cosim.units[u.name] for u in system.units}
         writer = CSVWriter(out / "outputs.csv")
         watch, ledger = WaitWatch(system), CommandLedger(system)

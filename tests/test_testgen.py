@@ -1,0 +1,362 @@
+"""Generated co-simulation tests: cotwin testgen (coverage, minimisation, reasons), cotwin test (verdicts against
+the oracle on the co-simulation, JUnit, divergences) and cotwin mutants (the suite's worth)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from conftest import EXAMPLES
+from cotwin.dmodel.program import build_program
+from cotwin.dmodel.testgen import generate
+from cotwin.dmodel.testgen_files import read_suite, write_suite
+from cotwin.dmodel.testgen_graph import explore
+from cotwin.robosim.check import load_checked
+from cotwin.twin.run import load
+from cotwin.twin.scenario import read_plan
+from cotwin.twin.testing import run_suite
+
+UR5E = EXAMPLES / "ur5e"
+MODELS = [UR5E / "arm.rst", UR5E / "mapping.pm", UR5E / "ur5e.pm"]
+FEASIBLE = ["--domain", "MovementArgs_target_X=8", "--domain", "MovementArgs_target_Y=10",
+            "--domain", "MovementArgs_target_Z=1"]
+
+
+def cotwin(*args, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run([str(Path(sys.executable).parent / "cotwin"), *map(str, args)], capture_output=True,
+                          text=True, cwd=cwd)
+
+
+@pytest.fixture(scope="module")
+def arm():
+    return build_program(load_checked([UR5E / "arm.rst"]))
+
+
+@pytest.fixture(scope="module")
+def graph(arm):
+    return explore(arm)
+
+
+@pytest.fixture(scope="module")
+def auto_suite(tmp_path_factory):
+    """The UR5e suite with each case's answers chosen by trying it on the project's simulated platform."""
+    out = tmp_path_factory.mktemp("auto") / "tests"
+    proc = cotwin("testgen", *MODELS, *FEASIBLE, "--answers", "auto", "--project", UR5E / "cotwin.toml", "--no-drivers",
+                  "-o", out)
+    assert proc.returncode == 0, proc.stderr
+    return out, proc.stdout
+
+
+# ---- generation ----
+
+def test_every_reachable_transition_of_the_ur5e_is_covered_by_four_excursions(graph):
+    suite = generate(graph, "transitions")
+    assert len(suite.total) == len(suite.reached) == len(suite.covered) == 25 and not suite.unreachable
+    assert [c.cycles for c in suite.cases] == [8, 3, 3, 2]
+    last = suite.cases[-1]
+    assert last.covers == ["transition PickPlace.infeasible"]
+    assert [s.states for s in last.steps] == [["Requested"], ["Idle"]]  # each case ends back at rest
+    assert str(last.steps[0].outputs[0]) == "movediscrete(0, 0, 0)"
+    # the same items by one long walk when cases are cut by length only
+    assert [c.cycles for c in generate(graph, "transitions", split="length").cases] == [16]
+
+
+def test_states_and_transition_pairs_are_covered_too(graph):
+    states = generate(graph, "states")
+    assert len(states.covered) == len(states.reached) == 10
+    pairs = generate(graph, "transition-pairs")
+    assert len(pairs.covered) == len(pairs.reached) == 54 and len(pairs.cases) > 4
+    # the minimisation never keeps a case that adds nothing
+    seen = set()
+    for case in pairs.cases:
+        assert set(case.covers) - seen
+        seen |= set(case.items)
+
+
+OWN = """
+interface Io { event go event stop }
+interface Ops { beep() }
+stm Lamp {
+  cycleDef cycle == 1
+  input context { uses Io }
+  output context { requires Ops }
+  initial i
+  state Off { }
+  state On { entry $beep() }
+  state Never { }
+  state Broken { }
+  transition t0 { from i to Off }
+  transition wait { from Off to Off exec condition not $go }
+  transition on { from Off to On condition $go }
+  transition back { from On to Off exec }
+  transition odd { from Off to Broken condition $go /\\ not $go }
+  transition fix { from Broken to Off exec }
+  transition lost { from Never to Off exec }
+}
+controller C { cycleDef cycle == 1 uses Io requires Ops sref s = Lamp
+  connection C on go to s on go (_async) connection C on stop to s on stop (_async) }
+module M { cycleDef cycle == 1 robotic platform P { provides Ops uses Io } cref c = C
+  connection P on go to c on go (_async) connection P on stop to c on stop (_async) }
+"""
+
+
+def test_unreachable_items_are_listed_with_their_reason(tmp_path):
+    (tmp_path / "lamp.rst").write_text(OWN)
+    graph = explore(build_program(load_checked([tmp_path / "lamp.rst"])))
+    suite = generate(graph, "transitions")
+    reasons = dict(suite.unreachable)
+    assert reasons["transition Lamp.odd"].startswith("its condition never holds while Off is active")
+    assert reasons["transition Lamp.fix"] == "its source state Broken is never active"
+    assert reasons["transition Lamp.lost"] == "its source state Never is never active"
+    assert len(suite.covered) == len(suite.reached) == 4
+    states = dict(generate(graph, "states").unreachable)
+    assert "no input sequence takes a transition into it (odd)" in states["state Lamp.Broken"]
+    assert states["state Lamp.Never"] == "no transition leads into it"
+
+
+def test_the_suite_is_byte_identical_from_any_directory_and_its_plans_are_project_plans(tmp_path, arm):
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert cotwin("testgen", *MODELS, "--no-drivers", "-o", a).returncode == 0
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    proc = cotwin("testgen", *[m.resolve() for m in MODELS], "--no-drivers", "-o", b.resolve(), cwd=elsewhere)
+    assert proc.returncode == 0, proc.stderr
+    names = sorted(p.name for p in a.iterdir())
+    assert names == sorted(p.name for p in b.iterdir())
+    assert all((a / n).read_bytes() == (b / n).read_bytes() for n in names)
+    assert "transitions: 25 of 25 reachable covered (100%)" in proc.stdout
+    commands = read_plan(a / "case_01.csv", arm)  # the project's plan reader takes the case as it is
+    assert [c.time for c in commands] == [0.1, 0.3, 0.5, 0.7]
+    assert dict(commands[0].values)["moveDiscreteCommand"] is True
+    data = json.loads((a / "suite.json").read_text())
+    assert data["commands"] == ["moveDiscreteCommand", "openGripperCommand", "closeGripperCommand"]
+    assert data["minimisation"] == {"walks": 4, "cases": 4, "cycles": 16}
+
+
+def test_testgen_refuses_bad_options_by_name(tmp_path):
+    proc = cotwin("testgen", *MODELS, "--command", "fly", "-o", tmp_path / "t")
+    assert proc.returncode != 0 and "fly: not an input event of module FlexCellArm" in proc.stderr
+    proc = cotwin("testgen", *MODELS, "--answers", "auto", "-o", tmp_path / "t")
+    assert proc.returncode != 0 and "--answers auto tries the cases on a project's simulated platform" in proc.stderr
+    proc = cotwin("testgen", *MODELS, "--domain", "target=1..2", "-o", tmp_path / "t")
+    assert proc.returncode != 0 and "not a value port" in proc.stderr
+
+
+# ---- running a suite ----
+
+def test_answers_are_chosen_per_case_by_the_simulated_platform(auto_suite):
+    out, text = auto_suite
+    data = json.loads((out / "suite.json").read_text())
+    answers = {c["name"]: c["answers"] for c in data["cases"]}
+    # the gripper cases are left to the platform; the move case needs a robot still moving after stop(), the
+    # last a rejected target: the simulated platform gives neither, so both carry their answers
+    assert answers == {"case_01": "stub", "case_02": "platform", "case_03": "platform", "case_04": "stub"}
+    why = {c["name"]: c["why"] for c in data["cases"]}
+    assert "expected AwaitStop" in why["case_01"] and "expected Idle" in why["case_04"]
+    platform_plan = (out / "case_02.csv").read_text().splitlines()
+    assert platform_plan[0] == "timestep,openGripperCommand"  # commands only
+
+
+def test_cotwin_test_passes_every_case_on_the_cosimulation_and_writes_junit(auto_suite, tmp_path):
+    out, _ = auto_suite
+    report = tmp_path / "report.xml"
+    proc = cotwin("test", UR5E / "cotwin.toml", out, "--junit", report)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "4 of 4 case(s) passed" in proc.stdout and "transitions covered: 25 of 25 reachable (100%)" in proc.stdout
+    assert "operations carried out place x1" in proc.stdout
+    root = ET.parse(report).getroot()
+    suite = root.find("testsuite")
+    assert (suite.get("tests"), suite.get("failures")) == ("4", "0")
+    assert [c.get("name") for c in suite.findall("testcase")] == ["case_01", "case_02", "case_03", "case_04"]
+
+
+@pytest.fixture(scope="module")
+def stub_suite(tmp_path_factory, graph):
+    out = tmp_path_factory.mktemp("stub") / "tests"
+    write_suite(generate(graph, "transitions"), out)
+    return out
+
+
+@pytest.mark.parametrize("algorithm,fmi", [("gauss-seidel", 2), ("jacobi", 3)])
+def test_stub_cases_pass_under_gauss_seidel_and_fmi3_clocks(stub_suite, tmp_path, algorithm, fmi):
+    """The master's delay shifts a stub case's plan (one cycle under Jacobi, none here): its oracle holds."""
+    result = run_suite(load(UR5E / "cotwin.toml"), read_suite(stub_suite), tmp_path, algorithm=algorithm, fmi=fmi)
+    assert [c.passed for c in result.cases] == [True] * 4, [str(c.divergence) for c in result.cases]
+    assert len(result.covered) == 25
+
+
+def test_a_platform_case_says_where_another_master_left_its_path(auto_suite, tmp_path):
+    """With FMI 3.0 clocks the d-model's pick() reaches the gripper in the step it is called (under the project's
+    Jacobi with FMI 2.0 a step later): the gripper reports closed a cycle earlier and the platform no longer
+    leads the d-model through AwaitClosed. Stub cases do not depend on the platform's timing."""
+    result = run_suite(load(UR5E / "cotwin.toml"), read_suite(auto_suite[0]), tmp_path, fmi=3)
+    verdicts = {c.name: c for c in result.cases}
+    assert all(verdicts[n].passed for n in ("case_01", "case_02", "case_04"))
+    assert not verdicts["case_03"].passed
+    assert str(verdicts["case_03"].divergence) == ("cycle 3: states (the case's path): expected AwaitClosed (the case's "
+                                                   "cycle 2, after no input), got Idle after robotStopped, gripperClosed")
+    assert verdicts["case_03"].missing == ["transition PickPlace.awaitClosed", "transition PickPlace.notClosed"]
+
+
+def test_a_wrong_oracle_fails_at_its_first_divergence(auto_suite, tmp_path):
+    out = tmp_path / "tests"
+    out.mkdir()
+    for f in auto_suite[0].iterdir():
+        (out / f.name).write_bytes(f.read_bytes())
+    oracle = json.loads((out / "case_01.oracle.json").read_text())
+    oracle["cycles"][4]["states"] = ["Stopping"]  # cycle 5: the d-model is still Moving
+    (out / "case_01.oracle.json").write_text(json.dumps(oracle))
+    report = tmp_path / "report.xml"
+    proc = cotwin("test", UR5E / "cotwin.toml", out, "--junit", report)
+    assert proc.returncode == 1
+    assert "FAIL case_01" in proc.stdout and "first divergence: cycle 5: states: expected Stopping, got Moving" in proc.stdout
+    assert "3 of 4 case(s) passed" in proc.stdout
+    failure = ET.parse(report).getroot().find("testsuite/testcase/failure")
+    assert failure is not None and "expected Stopping, got Moving" in failure.get("message")
+
+
+def test_a_changed_dmodel_fails_the_suite_it_no_longer_meets(auto_suite, tmp_path):
+    """A regression: the project's d-model no longer stops the arm on arrival (its entry action dropped)."""
+    models = tmp_path / "models"
+    models.mkdir()
+    for name in ("mapping.pm", "ur5e.pm", "plan.csv"):
+        (models / name).write_bytes((UR5E / name).read_bytes())
+    (models / "arm.rst").write_text((UR5E / "arm.rst").read_text().replace("state Stopping { entry $stop() }",
+                                                                           "state Stopping { }"))
+    (models / "cotwin.toml").write_text((UR5E / "cotwin.toml").read_text())
+    proc = cotwin("test", models / "cotwin.toml", auto_suite[0])
+    assert proc.returncode == 1
+    assert "warning:" in proc.stdout and "another version of module FlexCellArm" in proc.stdout
+    assert "first divergence: cycle 7: outputs (conformance" not in proc.stdout  # the FMU does what its model says
+    assert "first divergence: cycle 6: outputs: expected stop(), got no call" in proc.stdout
+
+
+def test_cotwin_test_refuses_what_it_cannot_run_by_name(tmp_path, auto_suite):
+    proc = cotwin("test", UR5E / "cotwin.toml", tmp_path / "nothing")
+    assert proc.returncode == 1 and "cannot read a test suite" in proc.stderr
+    proc = cotwin("test", UR5E / "cotwin.toml", auto_suite[0], "--pt", "http://x")
+    assert proc.returncode != 0 and "give an OPC UA URL" in proc.stderr
+    proc = cotwin("test", UR5E / "cotwin.toml", auto_suite[0], "--pt")
+    assert proc.returncode != 0 and "has no [pt] table" in proc.stderr
+    proc = cotwin("test", UR5E / "cotwin.toml", auto_suite[0], "--case", "case_09")
+    assert proc.returncode == 1 and "no case(s) case_09" in proc.stderr
+
+
+# ---- mutation ----
+
+def test_mutants_of_the_ur5e_dmodel_are_killed_and_survivors_explained(auto_suite, tmp_path):
+    report = tmp_path / "mutants.json"
+    proc = cotwin("mutants", auto_suite[0], UR5E / "arm.rst", "-o", report)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(report.read_text())
+    assert data["valid"] >= 30
+    operators = {o["operator"] for o in data["outcomes"]}
+    assert {"guard-negated", "action-dropped", "target-swapped", "exec-dropped", "constant-changed"} <= operators
+    assert data["kill_rate_non_equivalent"] >= 0.8
+    survivors = [o for o in data["outcomes"] if o["status"] == "survived"]
+    assert survivors and all(o["explanation"] for o in survivors)
+    equivalent = {o["change"] for o in survivors if o["equivalent"]}
+    # `close` needs `not $moveDiscreteCommand` only when `move` (tried first) would not take the cycle anyway
+    assert "transition close: operand not $moveDiscreteCommand dropped" in equivalent
+    apart = {o["change"]: o["explanation"] for o in survivors if o["equivalent"] is False}
+    assert apart and all("told apart after" in why for why in apart.values())
+    # `close` testing $openGripperCommand instead: with open and close in one cycle neither open (not close) nor
+    # close (not open) is enabled in the mutant: a timelock the suite never provokes (it sends one command a cycle)
+    why = apart["transition close: $moveDiscreteCommand becomes $openGripperCommand"]
+    assert why.startswith("told apart after 1 cycle(s) (the mutant fails: timelock") and \
+        "[1] {openGripperCommand, closeGripperCommand}" in why
+    killed = [o for o in data["outcomes"] if o["status"] == "killed"]
+    assert any(o["change"].startswith("entry action $stop()") and "case_01 cycle 6" in o["by"] for o in killed)
+    assert f"kill rate {round(100 * data['kill_rate'])}%" in proc.stdout
+
+
+# ---- against the PT: the perturbed OPC UA plant ----
+
+@pytest.fixture()
+def plant(tmp_path):
+    """`cotwin plant` with examples/ur5e/twin.toml's perturbation (0.5 kg payload, 40 ms actuator latency) on a
+    free loopback port, in its own process, stopped by its PID whatever happens."""
+    pytest.importorskip("asyncua")
+    import os
+    import signal
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    url = f"opc.tcp://127.0.0.1:{port}"
+    env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
+    process = subprocess.Popen([str(Path(sys.executable).parent / "cotwin"), "plant", str(UR5E / "twin.toml"),
+                                "--opcua", url], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        line = process.stdout.readline()
+        assert line.startswith(f"serving ur5e on {url} (lockstep; perturbation:"), line + process.stderr.read()
+        yield url, env
+    finally:
+        if process.poll() is None:
+            process.send_signal(signal.SIGTERM)
+            try:
+                process.wait(10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait(10)
+        process.stdout.close()
+        process.stderr.close()
+
+
+def test_cotwin_test_passes_every_case_on_the_perturbed_plant_over_opcua(auto_suite, plant, tmp_path):
+    url, env = plant
+    report = tmp_path / "pt.xml"
+    proc = subprocess.run([str(Path(sys.executable).parent / "cotwin"), "test", str(UR5E / "cotwin.toml"),
+                           str(auto_suite[0]), "--pt", url, "--junit", str(report)], capture_output=True, text=True,
+                          env=env)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f"4 of 4 case(s) passed on the PT (OPC UA plant at {url})" in proc.stdout
+    assert "transitions covered: 25 of 25 reachable (100%)" in proc.stdout
+    suite = ET.parse(report).getroot().find("testsuite")
+    assert suite.get("failures") == "0" and suite.get("name") == f"FlexCellArm on the PT (OPC UA plant at {url})"
+
+
+# ---- the cases as test driver FMUs ----
+
+def test_a_stub_case_is_a_test_driver_fmu_that_reports_its_verdict(tmp_path, arm):
+    """The driver FMU beside the d-model FMU in a multimodel, run by cotwin's master and by libcosim: verdict 1;
+    beside a faulty d-model (no stop() on arrival): verdict -1 at the cycle of the difference."""
+    from fmpy.validation import validate_fmu
+
+    from cotwin.cosim.libcosim import run_libcosim
+    from cotwin.cosim.multimodel import read_multimodel
+    from cotwin.dmodel.fmu import build_fmu
+
+    tests = tmp_path / "tests"
+    proc = cotwin("testgen", UR5E / "arm.rst", "-o", tests)
+    assert proc.returncode == 0, proc.stderr
+    assert "test driver FMUs of the 4 stub case(s)" in proc.stdout
+    assert validate_fmu(str(tests / "case_01.fmu")) == []
+    faulty = tmp_path / "faulty.rst"
+    faulty.write_text((UR5E / "arm.rst").read_text().replace("state Stopping { entry $stop() }", "state Stopping { }"))
+    build_fmu(arm, tmp_path / "dmodel.fmu")
+    build_fmu(build_program(load_checked([faulty])), tmp_path / "faulty.fmu")
+    inputs = [ev.name for ev in arm.inputs] + [p for ev in arm.inputs for p, _ in ev.value_ports]
+    outputs = [op.name for op in arm.operations] + [p for op in arm.operations for g in op.arg_ports for p, _ in g]
+    outputs = list(dict.fromkeys(outputs)) + ["state"]
+    for dmodel, verdict in (("dmodel.fmu", ("1", "0")), ("faulty.fmu", ("-1", "6"))):
+        connections = {f"{{driver}}.case.{p}": [f"{{dmodel}}.dmodel.{p}"] for p in inputs}
+        connections.update({f"{{dmodel}}.dmodel.{p}": [f"{{driver}}.case.{p}"] for p in outputs})
+        mm = {"fmus": {"{driver}": str(tests / "case_01.fmu"), "{dmodel}": str(tmp_path / dmodel)},
+              "connections": connections, "logVariables": {"{driver}.case": ["verdict", "divergence_cycle"]},
+              "algorithm": {"type": "fixed-step", "size": 0.1}, "endTime": 1.0, "cotwin": {"delayed": ["{driver}.case"]}}
+        path = tmp_path / f"{dmodel}.json"
+        path.write_text(json.dumps(mm))
+        out = tmp_path / f"{dmodel}.csv"
+        proc = cotwin("simulate", path, "-o", out)
+        assert proc.returncode == 0, proc.stderr
+        last = list(__import__("csv").DictReader(open(out)))[-1]
+        assert (last["{driver}.case.verdict"], last["{driver}.case.divergence_cycle"]) == verdict, dmodel
+    theirs = run_libcosim(read_multimodel(tmp_path / "dmodel.fmu.json"), {"{driver}.case": ["verdict"]}, end=1.0)
+    assert theirs["{driver}.case.verdict"][-1] == 1
