@@ -4,7 +4,8 @@ With the d-model's cycle a clock (cotwin.dmodel.fmi3), the master's event phase 
 lets a command cross the d-model and reach the platform in the step it is issued in. The scenario
 takes part: at communication point t it raises every command due by t (time <= t) that it has not
 raised yet, and a step from t raises those due before its end, shown at t + h; each command is raised
-once, at the first communication point at or after its time. A plan whose times lie on the grid of
+once, at the first communication point at or after its time, one per point (those due together queued in
+order, cotwin.twin.commands). A plan whose times lie on the grid of
 steps is thus delivered at its times exactly.
 """
 
@@ -14,41 +15,29 @@ import math
 from typing import Callable, Sequence
 
 from ..diagnostics import CotwinError
-from .scenario import ScenarioUnit, same_step
+from .scenario import ScenarioUnit
 
 EPS = 1e-9
 
 
 class ClockedScenario(ScenarioUnit):
-    """A scenario unit with an event phase (see module doc)."""
+    """A scenario unit with an event phase (see module doc); its commands queued as the plan controller's,
+    one applied per communication point (cotwin.twin.commands)."""
 
     def event_setter(self, names: list[str]) -> Callable[[Sequence], None]:
         return lambda values: None  # a source takes no inputs
 
     def event(self, t: float) -> None:
-        self._raise(t + EPS)
+        self._offer_due(t, t + EPS)
+        if not any(self.values[ev] is True for ev in self.events):  # none shown at t yet: the next one is
+            self._apply(t)
 
     def step(self, t: float, h: float) -> None:
-        if h != self._checked_step:  # once per step size: two commands of one event in one step would be one
-            problems = same_step(self.commands[self._next:], self.events, h, t)
-            if problems:
-                raise CotwinError(problems)
-            self._checked_step = h
         for ev in self.events:
             self.values[ev] = False
-        self._raise(t + h - EPS)
+        self._offer_due(t, t + h - EPS)
+        self._apply(t + h)
         self.time = t + h
-
-    def _raise(self, before: float) -> None:
-        commands = self.commands
-        while self._next < len(commands) and commands[self._next].time < before:
-            c = commands[self._next]
-            self._next += 1
-            for port, value in c.values:
-                if port in self.events:
-                    self.values[port] = self.values[port] or bool(value)
-                else:
-                    self.values[port] = value
 
 
 def clock_period(spec, step: float, period: float | None = None) -> float:

@@ -330,12 +330,18 @@ class ScenarioUnit(PythonUnit):
         self.time = t + h
         for ev in self.events:
             self.values[ev] = False
+        self._offer_due(t, t + h - 1e-9)
+        self._apply(t + h)
+
+    def _offer_due(self, start: float, before: float) -> None:
+        """Offer the queue every command due before `before` not offered yet, each event with the values of
+        its own arguments (those due before `start` are skipped: a start in the middle of the plan)."""
         eps = 1e-9
         commands = self.commands
-        while self._next < len(commands) and commands[self._next].time < t + h - eps:
+        while self._next < len(commands) and commands[self._next].time < before:
             c = commands[self._next]
             self._next += 1
-            if c.time < t - eps:  # before this step: a start in the middle of the plan skips it
+            if c.time < start - eps:
                 continue
             values = dict(c.values)
             raised = [port for port, value in c.values if port in self.events and value is True]
@@ -346,7 +352,10 @@ class ScenarioUnit(PythonUnit):
             for port, value in c.values:  # values without their event: set as they come
                 if port not in self.events and port not in bound:
                     self.values[port] = value
-        occurrence = self.queue.take(t + h)
+
+    def _apply(self, at: float) -> None:
+        """Show the next waiting command (its event true, its arguments set), applied at time `at`."""
+        occurrence = self.queue.take(at)
         if occurrence is not None:
             self.values[occurrence.event] = True
             self.values.update(occurrence.values)
