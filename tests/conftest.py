@@ -4,6 +4,7 @@ a fresh cotwin cache for the session; and, at the end of a run, the tests skippe
 from __future__ import annotations
 
 import os
+import random
 import re
 import shutil
 import tempfile
@@ -78,8 +79,17 @@ def postgres_server():
 # cotwin caches IK solutions in $COTWIN_CACHE (else ~/.cache/cotwin): tests that shared the user's cache
 # depended on what earlier runs had solved. Every test session gets its own, empty, inherited by the
 # commands the tests run; tests of the cache itself point it elsewhere.
-_SESSION_CACHE = tempfile.mkdtemp(prefix="cotwin-test-cache-")
-os.environ["COTWIN_CACHE"] = _SESSION_CACHE
+_SESSION_CACHE = os.environ.get("COTWIN_TEST_SESSION_CACHE") or tempfile.mkdtemp(prefix="cotwin-test-cache-")
+os.environ["COTWIN_TEST_SESSION_CACHE"] = os.environ["COTWIN_CACHE"] = _SESSION_CACHE  # once, however imported
+
+# ---- one seed for every random test case of the session, printed in the header ----------------------
+FUZZ_SEED = int(os.environ.get("COTWIN_FUZZ_SEED") or random.SystemRandom().randrange(2 ** 32))
+os.environ["COTWIN_FUZZ_SEED"] = str(FUZZ_SEED)
+
+
+def pytest_report_header(config) -> str:
+    return (f"fuzz seed: {FUZZ_SEED} (COTWIN_FUZZ_SEED={FUZZ_SEED} repeats this run's random cases); "
+            f"IK cache: {_SESSION_CACHE}")
 
 
 def pytest_unconfigure(config) -> None:
