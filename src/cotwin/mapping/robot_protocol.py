@@ -155,7 +155,13 @@ def decode(body: bytes, limit: int, what: str) -> dict:
 
 
 def _number(value) -> bool:
-    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+    """A finite number (JSON integers beyond any float, e.g. 1e400 written out, are not)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def _show(value, limit: int = 60) -> str:
