@@ -217,6 +217,7 @@ OBSERVED = [("i", "int", "i"), ("j", "int", "j"), ("n", "nat", "n"), ("r", "real
             *[(f"m{a}{b}", "real", f"m[{a}, {b}]") for a in (1, 2) for b in (1, 2)],
             ("ssize", "int", "size(s)"), *[(f"s{k}", "boolean", f"({k} in s)") for k in MEMBERS],
             ("qsize", "int", "size(q)"), ("bumps", "int", "bumps"),
+            ("imod", "int", "(i % -5)"), ("jdiv", "int", "(j / -3)"), ("imodj", "int", "(if j != 0 then i % j else 0 end)"),
             *[(f"q{k}", "int", f"(if size(q) >= {k} then q[{k}] else 0 end)") for k in range(1, SEQ_SHOWN + 1)]]
 
 
