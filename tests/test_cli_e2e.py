@@ -51,6 +51,20 @@ def get(url: str, timeout: float = 10) -> tuple[int, str]:
         return err.code, err.read().decode("utf-8", "replace")
 
 
+def stop(process: subprocess.Popen, sig: int) -> str:
+    """Stop a server we started (its PID): the signal, then a kill if it does not end; its stderr."""
+    process.send_signal(sig)
+    try:
+        process.wait(20)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait(10)
+    errors = process.stderr.read()
+    process.stdout.close()
+    process.stderr.close()
+    return errors
+
+
 @pytest.fixture
 def project(tmp_path) -> Path:
     """The UR5e example copied into a folder of its own (runs elsewhere: the user's working directory)."""
@@ -81,14 +95,7 @@ def plant(project, tmp_path):
         assert line.startswith(f"serving ur5e on {url}"), line + process.stderr.read()
         yield url, env
     finally:
-        process.send_signal(signal.SIGTERM)
-        try:
-            process.wait(15)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait(10)
-        process.stdout.close()
-        process.stderr.close()
+        stop(process, signal.SIGTERM)
 
 
 # ---- models ------------------------------------------------------------------------------------------
@@ -229,15 +236,7 @@ def test_twin_with_an_opcua_pt_and_its_served_page_then_its_history(project, wor
                 time.sleep(0.3)
         assert answer is not None and answer[0] < 500 and "<html" in answer[1].lower(), (answer, dash.poll())
     finally:
-        dash.send_signal(signal.SIGINT)
-        try:
-            dash.wait(20)
-        except subprocess.TimeoutExpired:
-            dash.kill()
-            dash.wait(10)
-        errors = dash.stderr.read()
-        dash.stdout.close()
-        dash.stderr.close()
+        errors = stop(dash, signal.SIGINT)
     assert f"127.0.0.1:{port}" in errors and "Traceback" not in errors, errors[-2000:]
 
 

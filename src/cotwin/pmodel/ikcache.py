@@ -11,9 +11,10 @@ ignored (and rewritten), as is an entry that is not a solution as this module wr
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
+
+from ..config import is_number
 
 
 def cache_dir() -> Path | None:
@@ -26,15 +27,11 @@ def cache_dir() -> Path | None:
     return Path(base) / "cotwin"
 
 
-def _number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
 def _solution(entry) -> bool:
     """A stored solution as `put` writes it (a damaged or hand-edited entry is dropped, then solved again)."""
     return (isinstance(entry, dict) and set(entry) == {"q", "position_error", "angle_error", "iterations"}
-            and isinstance(entry["q"], dict) and all(isinstance(k, str) and _number(v) for k, v in entry["q"].items())
-            and _number(entry["position_error"]) and _number(entry["angle_error"])
+            and isinstance(entry["q"], dict) and all(isinstance(k, str) and is_number(v) for k, v in entry["q"].items())
+            and is_number(entry["position_error"]) and is_number(entry["angle_error"])
             and isinstance(entry["iterations"], int) and not isinstance(entry["iterations"], bool))
 
 
