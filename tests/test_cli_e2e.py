@@ -51,6 +51,17 @@ def get(url: str, timeout: float = 10) -> tuple[int, str]:
         return err.code, err.read().decode("utf-8", "replace")
 
 
+def page_of(port: int, server: subprocess.Popen, patience: float) -> tuple[int, str] | None:
+    """The page served at the port once it answers (None if the server ends or `patience` s pass first)."""
+    deadline = time.monotonic() + patience
+    while time.monotonic() < deadline and server.poll() is None:
+        try:
+            return get(f"http://127.0.0.1:{port}/", timeout=2)
+        except OSError:
+            time.sleep(0.3)
+    return None
+
+
 def stop(process: subprocess.Popen, sig: int) -> str:
     """Stop a server we started (its PID): the signal, then a kill if it does not end; its stderr."""
     process.send_signal(sig)
@@ -191,14 +202,8 @@ def test_twin_with_an_opcua_pt_and_its_served_page_then_its_history(project, wor
     twin = subprocess.Popen([sys.executable, "-m", "cotwin", "twin", str(project / "twin.toml"), "-o", str(out), "--end", "6",
                              "--realtime", "--dashboard", f"127.0.0.1:{port}"], cwd=workdir, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env)
-    page = None
     try:
-        deadline = time.monotonic() + 120
-        while page is None and time.monotonic() < deadline and twin.poll() is None:
-            try:
-                page = get(f"http://127.0.0.1:{port}/", timeout=2)
-            except OSError:
-                time.sleep(0.3)
+        page = page_of(port, twin, 120)
         stdout, stderr = twin.communicate(timeout=300)
     finally:
         if twin.poll() is None:
@@ -227,13 +232,7 @@ def test_twin_with_an_opcua_pt_and_its_served_page_then_its_history(project, wor
     dash = subprocess.Popen([sys.executable, "-m", "cotwin", "dashboard", "--dir", str(out), "--at", f"127.0.0.1:{port}"],
                             cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        answer = None
-        deadline = time.monotonic() + 60
-        while answer is None and time.monotonic() < deadline and dash.poll() is None:
-            try:
-                answer = get(f"http://127.0.0.1:{port}/", timeout=2)
-            except OSError:
-                time.sleep(0.3)
+        answer = page_of(port, dash, 60)
         assert answer is not None and answer[0] < 500 and "<html" in answer[1].lower(), (answer, dash.poll())
     finally:
         errors = stop(dash, signal.SIGINT)
