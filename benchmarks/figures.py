@@ -13,6 +13,8 @@ import math
 import os
 import statistics
 
+import numpy as np
+
 _RECORDS: dict[str, list[dict]] = {"figures": [], "goals": []}
 
 
@@ -32,8 +34,8 @@ def figure(name: str, value: float | None, unit: str, peer: str | None = None, p
 def goal(name: str, value: float | None, target: float, at_most: bool = False, unit: str = "") -> str:
     """Judge value against target (at least, or at most); record it; return 'met' or 'MISSED ...' for the
     text. A value that could not be measured (None) misses its goal."""
-    met = value is not None and math.isfinite(value) and (value <= target if at_most else value >= target)
-    _RECORDS["goals"].append({"name": name, "value": _plain(value), "target": target,
+    met = bool(value is not None and math.isfinite(value) and (value <= target if at_most else value >= target))
+    _RECORDS["goals"].append({"name": name, "value": _plain(value), "target": _plain(target),
                               "comparison": "<=" if at_most else ">=", "unit": unit, "met": met})
     return "met" if met else f"MISSED: goal {'<=' if at_most else '>='} {target:g}{unit}"
 
@@ -59,8 +61,13 @@ def shown(value: float | None, fmt: str = ".1f") -> str:
 
 
 def _plain(value):
-    if value is None or isinstance(value, (str, bool, int)):
+    """A JSON value: numpy's numbers and booleans as Python's, non-finite numbers as text."""
+    if value is None or isinstance(value, str):
         return value
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
     try:
         value = float(value)
     except (TypeError, ValueError):
@@ -72,5 +79,7 @@ def _plain(value):
 def _write() -> None:
     path = os.environ.get("COTWIN_BENCH_JSON")
     if path:
-        with open(path, "w") as f:
-            json.dump(_RECORDS, f, indent=1)
+        text = json.dumps(_RECORDS, indent=1, default=str)
+        with open(path + ".part", "w") as f:
+            f.write(text)
+        os.replace(path + ".part", path)

@@ -77,9 +77,15 @@ def main() -> int:
         for line in proc.stdout:
             say(line.rstrip("\n"))
         proc.wait()
-        data = json.loads(record.read_text()) if record.is_file() else {"figures": [], "goals": []}
+        data, returncode = {"figures": [], "goals": []}, proc.returncode
+        try:
+            if record.is_file():
+                data = json.loads(record.read_text())
+        except ValueError as err:
+            say(f"{name}: its figures could not be read ({err}): counted as failed", sys.stderr)
+            returncode = returncode or 1
         record.unlink(missing_ok=True)
-        results["modules"][name] = {"returncode": proc.returncode, "seconds": time.perf_counter() - started, **data}
+        results["modules"][name] = {"returncode": returncode, "seconds": time.perf_counter() - started, **data}
     results["machine"]["load_average_after"] = machine()["load_average"]
     failed = [n for n, r in results["modules"].items() if r["returncode"] != 0]
     missed = [f"{n}: {g['name']} = {g['value']} (goal {g['comparison']} {g['target']}{g['unit']})"
