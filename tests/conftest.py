@@ -113,9 +113,13 @@ def skip_cause(reason: str) -> str:
     return reason
 
 
-def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
     """How many tests skipped and why, grouped by cause (a user's machine without the services or
-    ../shared skips their tests: said here, at the end, not only in -ra's per-test lines)."""
+    ../shared skips their tests: said here, at the very end, not only in -ra's per-test lines)."""
+    yield
+    if exitstatus not in (0, 5):  # -q shows no header: a failing run names its random cases here
+        terminalreporter.line(f"fuzz seed: {FUZZ_SEED} (COTWIN_FUZZ_SEED={FUZZ_SEED} repeats this run's random cases)")
     skipped = terminalreporter.stats.get("skipped", [])
     if not skipped:
         return
