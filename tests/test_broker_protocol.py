@@ -251,7 +251,8 @@ def _acceptable(message) -> bool:
     exactly its fields; advance's dt a finite number of seconds in [0, 10]; command's goals a non-empty
     object of finite numbers for actuators the robot has."""
     fields = {"describe": set(), "state": set(), "advance": {"dt"}, "command": {"goals"}}
-    if not isinstance(message, dict) or message.get("op") not in fields or set(message) != fields[message["op"]] | {"op"}:
+    op = message.get("op") if isinstance(message, dict) else None
+    if not isinstance(op, str) or op not in fields or set(message) != fields[op] | {"op"}:
         return False
     if message["op"] == "advance":
         return _finite(message["dt"]) and 0 <= message["dt"] <= 10
