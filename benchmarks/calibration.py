@@ -19,6 +19,7 @@ from cotwin.pmodel import ik  # noqa: E402
 from cotwin.twin.calibration import calibrate, plan_moves, project_twin  # noqa: E402
 from cotwin.twin.replay import replay  # noqa: E402
 from cotwin.twin.run import load  # noqa: E402
+from figures import figure, goal  # noqa: E402
 
 LOG = ROOT.parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"
 
@@ -41,9 +42,14 @@ def main() -> None:
     print(f"calibration (fit, two replays, surface search): {t_fit:.2f} s; one replay of the {log.t[-1]:.0f} s run: "
           f"{t_replay:.2f} s (calibration/replay = {t_fit / t_replay:.1f}; replay real-time factor "
           f"{log.t[-1] / t_replay:.1f})")
+    figure("calibration fit", t_fit, "s", peer="one replay of the run", peer_value=t_replay)
+    figure("worst joint RMSE in motion after calibration", report.after.motion.max(), "rad",
+           peer="before calibration", peer_value=report.before.motion.max())
+    figure("worst joint settled error after calibration", report.after.settled.max(), "rad",
+           peer="before calibration", peer_value=report.before.settled.max())
     print(f"worst joint: RMSE in motion {report.before.motion.max():.4f} -> {report.after.motion.max():.4f} rad "
-          f"(bound 0.05), settled error {report.before.settled.max():.4f} -> {report.after.settled.max():.4f} rad "
-          f"(bound 0.01)")
+          f"({goal('worst joint RMSE in motion', report.after.motion.max(), 0.002, at_most=True, unit=' rad')}: the 0.002 rad the twin is known for), settled error {report.before.settled.max():.4f} -> {report.after.settled.max():.4f} rad "
+          f"({goal('worst joint settled error', report.after.settled.max(), 0.002, at_most=True, unit=' rad')})")
     determinism(twin.tree, report.calibration.geometry, moves[2].point)
 
 

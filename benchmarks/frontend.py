@@ -14,6 +14,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from figures import figure  # noqa: E402
+
 
 def _best(fn, repeat: int = 20) -> float:
     times = []
@@ -45,9 +47,11 @@ def main() -> None:
         total_ours += ours
         total_lark += bare
         print(f"  {path.name:22s} {len(text):6d} chars  parse+build {ours * 1000:6.2f} ms   lark parse {bare * 1000:6.2f} ms")
+    figure("parse+build of all files", total_ours * 1000, "ms", peer="Lark's bare parse", peer_value=total_lark * 1000)
     print(f"all files: parse+build {total_ours * 1000:.1f} ms, lark bare parse {total_lark * 1000:.1f} ms, "
           f"ratio {total_ours / total_lark:.2f}x")
     full, median = _best(lambda: check_paths(folders), repeat=5)
+    figure("cotwin check of the models, best", full * 1000, "ms", median_ms=median * 1000)
     print(f"cotwin check of {', '.join(f.name for f in folders)} (parse, resolve, type-check): "
           f"best {full * 1000:.1f} ms, median {median * 1000:.1f} ms")
 

@@ -23,6 +23,7 @@ from cotwin.pmodel.perturbation import Perturbation  # noqa: E402
 from cotwin.pmodel.simulator import PlatformSimulator  # noqa: E402
 from cotwin.twin.plant import Plant  # noqa: E402
 from cotwin.twin.run import load  # noqa: E402
+from figures import figure  # noqa: E402
 
 STEPS = 400
 
@@ -66,6 +67,8 @@ def main() -> None:
         for dt in (0.01, 0.1):
             direct = figures(timed(SimulatedEndpoint(PlatformSimulator(models.tree, models.scene)), dt))
             remote = figures(timed(client, dt))
+            figure(f"OPC UA Advance, step {dt:g} s, median", remote[0], "ms", peer="embedded endpoint",
+                   peer_value=direct[0], p99_ms=remote[1], peer_p99_ms=direct[1], samples=STEPS)
             line = (f"step {dt:g} s: OPC UA Advance median {remote[0]:.2f} ms, p99 {remote[1]:.2f} ms; "
                     f"embedded {direct[0]:.2f} / {direct[1]:.2f} ms; overhead median {remote[0] - direct[0]:.2f} ms")
             if broker_up():
@@ -83,6 +86,7 @@ def main() -> None:
                 broker.close()
                 server.stop()
                 thread.join(5)
+                figure(f"broker endpoint advance, step {dt:g} s, median", peer[0], "ms", p99_ms=peer[1], samples=STEPS)
                 line += f"; broker (RabbitMQ) {peer[0]:.2f} / {peer[1]:.2f} ms, OPC UA/broker {remote[0] / peer[0]:.2f}"
             print(line)
         client.close()

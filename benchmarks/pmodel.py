@@ -27,6 +27,7 @@ from cotwin.pmodel.simulator import PlatformSimulator  # noqa: E402
 from cotwin.pmodel.tree import build_tree  # noqa: E402
 from cotwin.robosim.check import load_checked  # noqa: E402
 from cotwin.robosim.pmodel_elements import Mapping  # noqa: E402
+from figures import figure, goal  # noqa: E402
 
 SECONDS = 8.0  # simulated per repetition: the four moves, 2 s each
 REPEATS = 5
@@ -133,8 +134,10 @@ def main() -> None:
     print(f"peer: bare mj_step, a 6-joint capsule arm alone: {arm_us:.2f} us/step")
     for name in sims:
         physics, us = best["bare " + name] * 1e6, best[name] * 1e6
+        figure(f"scene of the {name}: physics", physics, "us/step", peer="the robot alone", peer_value=robot_us,
+               arm_us=arm_us, stepped_as_the_twin_does_us=us)
         print(f"scene of the {name}: physics {physics:.2f} us/step; scene/robot = {physics / robot_us:.2f} "
-              f"(goal <= 1.5), scene/arm = {physics / arm_us:.2f}; stepped as the twin does {us:.2f} us/step "
+              f"({goal(f'scene/robot, {name}', physics / robot_us, 1.5, at_most=True)}), scene/arm = {physics / arm_us:.2f}; stepped as the twin does {us:.2f} us/step "
               f"(real-time factor {1e3 / us:.0f}x, simulator/bare = {us / physics:.2f})")
 
 

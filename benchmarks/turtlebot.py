@@ -19,6 +19,7 @@ sys.path.insert(0, str(ROOT / "src"))
 from cotwin.pmodel.world import load_world  # noqa: E402
 from cotwin.twin.run import load  # noqa: E402
 from cotwin.twin.walks import walks  # noqa: E402
+from figures import figure  # noqa: E402
 
 EXAMPLE = ROOT / "examples" / "turtlebot"
 SEEDS = range(20)
@@ -43,6 +44,8 @@ def main() -> None:
                 collisions = sum(w.collisions for w in done)
                 total += collisions
                 visited = np.array([w.visited for w in done])
+                figure(f"{label}, {name}: collisions over {len(done)} walks", collisions, "",
+                       wall_s_median=float(np.median([w.wall_seconds for w in done])), simulated_s=twin.spec.end)
                 wall = np.array([w.wall_seconds for w in done])
                 print(f"{label}, {name}: {len(done)} walks of {twin.spec.end:g} s at {twin.spec.step:g} s; "
                       f"{collisions} collision(s) ({sum(bool(w.collisions) for w in done)} walk(s) with any)")

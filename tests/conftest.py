@@ -1,7 +1,14 @@
-"""Shared fixtures: where the paper's published models are, and our own examples."""
+"""Shared fixtures: where the paper's published models are, our own examples, the loopback services;
+a fresh cotwin cache for the session; and, at the end of a run, the tests skipped grouped by cause."""
 
 from __future__ import annotations
 
+import os
+import random
+import re
+import shutil
+import tempfile
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -66,3 +73,61 @@ def broker():
 @pytest.fixture(scope="session")
 def postgres_server():
     _service(5432, "PostgreSQL", "pg_ctlcluster --skip-systemctl-redirect $(ls /etc/postgresql) main start")
+
+
+# ---- one fresh cache per test session -------------------------------------------------------------
+# cotwin caches IK solutions in $COTWIN_CACHE (else ~/.cache/cotwin): tests that shared the user's cache
+# depended on what earlier runs had solved. Every test session gets its own, empty, inherited by the
+# commands the tests run; tests of the cache itself point it elsewhere.
+_SESSION_CACHE = os.environ.get("COTWIN_TEST_SESSION_CACHE") or tempfile.mkdtemp(prefix="cotwin-test-cache-")
+os.environ["COTWIN_TEST_SESSION_CACHE"] = os.environ["COTWIN_CACHE"] = _SESSION_CACHE  # once, however imported
+
+# ---- one seed for every random test case of the session, printed in the header ----------------------
+FUZZ_SEED = int(os.environ.get("COTWIN_FUZZ_SEED") or random.SystemRandom().randrange(2 ** 32))
+os.environ["COTWIN_FUZZ_SEED"] = str(FUZZ_SEED)
+
+
+def pytest_report_header(config) -> str:
+    return (f"fuzz seed: {FUZZ_SEED} (COTWIN_FUZZ_SEED={FUZZ_SEED} repeats this run's random cases); "
+            f"IK cache: {_SESSION_CACHE}")
+
+
+def pytest_unconfigure(config) -> None:
+    shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
+
+
+# ---- why tests skipped, grouped by cause -------------------------------------------------------------
+_CAUSES = [  # (pattern in a skip reason, the cause it is counted under)
+    (r"RabbitMQ", "RabbitMQ is not running on 127.0.0.1:5672"),
+    (r"PostgreSQL", "PostgreSQL is not running on 127.0.0.1:5432"),
+    (r"chromium", "Debian's chromium is not at /usr/bin/chromium"),
+    (r"shared|published|recorded|only in the project workspace", "../shared (the paper's models and the UR5e's log) is not beside the clone"),
+]
+
+
+def skip_cause(reason: str) -> str:
+    reason = reason.removeprefix("Skipped: ")
+    for pattern, cause in _CAUSES:
+        if re.search(pattern, reason, re.IGNORECASE):
+            return cause
+    return reason
+
+
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    """How many tests skipped and why, grouped by cause (a user's machine without the services or
+    ../shared skips their tests: said here, at the very end, not only in -ra's per-test lines)."""
+    yield
+    if exitstatus not in (0, 5):  # -q shows no header: a failing run names its random cases here
+        terminalreporter.line(f"fuzz seed: {FUZZ_SEED} (COTWIN_FUZZ_SEED={FUZZ_SEED} repeats this run's random cases)")
+    skipped = terminalreporter.stats.get("skipped", [])
+    if not skipped:
+        return
+    causes = Counter()
+    for report in skipped:
+        longrepr = report.longrepr
+        reason = longrepr[2] if isinstance(longrepr, tuple) and len(longrepr) == 3 else str(longrepr)
+        causes[skip_cause(reason)] += 1
+    terminalreporter.section(f"{len(skipped)} test(s) skipped, by cause")
+    for cause, n in causes.most_common():
+        terminalreporter.line(f"{n:5d}  {cause}")

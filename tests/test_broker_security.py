@@ -36,7 +36,7 @@ from rabbit_tls import PKI, TLSBroker, close_connection, tools_missing
 
 ROOT = Path(__file__).resolve().parents[1]
 PROJECT = ROOT / "examples" / "ur5e" / "cotwin.toml"
-COTWIN_VARS = [v for v in os.environ if v.startswith("COTWIN_")]
+COTWIN_VARS = [v for v in os.environ if v.startswith("COTWIN_") and v != "COTWIN_CACHE"]  # the session's own cache stays
 
 
 @pytest.fixture(scope="module")

@@ -306,7 +306,8 @@ def test_sigterm_ends_a_run_with_its_rows_kept(project, tmp_path):
     toml = project / "cotwin.toml"
     toml.write_text(toml.read_text().replace("[cosim]", "[cosim]\nrealtime = true", 1))
     out = tmp_path / "out"
-    cotwin("build", toml, "-o", out)
+    built = cotwin("build", toml, "-o", out)
+    assert built.returncode == 0 and (out / "dmodel.fmu").is_file(), built.stderr[-2000:]
     (out / "outputs.csv").write_text("a previous result\n")
     proc = subprocess.Popen([sys.executable, "-m", "cotwin", "run", str(toml), "-o", str(out)], stderr=subprocess.PIPE,
                             text=True)

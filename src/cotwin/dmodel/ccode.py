@@ -36,8 +36,10 @@ from ..robosim.visitor import ExprVisitor, describe
 from . import cnames
 from .cdata import CTypes, is_intlike, is_scalar
 from .cnames import c_comment, c_string, ident
-from .interpreter import MAX_STEPS, lca_index
-from .program import Body, MachineInstance, OperationInstance, Program, node_description, state_index
+from .interpreter import MAX_STEPS, lca_index, shared_port_message
+from .program import (
+    Body, MachineInstance, OperationInstance, Program, beyond_int32_message, node_description, state_index,
+)
 
 
 def c_real(value: float) -> str:
@@ -1129,15 +1131,29 @@ class CGenerator:
                 f'return 1; }}')
 
     def platform_call(self, ctx: Context, op: str, args, out: _Lines, loc=None) -> None:
-        port = next((o for o in self.program.operations if o.name == op), None)
+        port = self.program.operation_port(op)
         if port is None:
             raise CotwinError(f"operation '{op}' is not an operation of the platform")
         values = [CExpr(ctx, out).emit(a, ty) for a, (_, ty) in zip(args, port.params)]
         held = [self._hold(out, v, ty) for v, (_, ty) in zip(values, port.params)]
         out(self.repeated(cnames.call_flag(op), f"operation {op!r}", loc))
+        for other, shared in sorted(port.shares.items()):
+            what = c_string(shared_port_message(other, op, shared))
+            out(f"if ({cnames.call_flag(other)}) {{ fail_at(M, {self.location(loc)}, {what}); return 1; }}")
+        for group, value in zip(port.arg_ports, held):
+            self.fits_ports(group, value, loc, out)
         for (pname, _), value in zip(port.params, held):
             out(f"{cnames.call_arg(op, pname)} = {value};")
         out(f"{cnames.call_flag(op)} = true;")
+
+    def fits_ports(self, group, value: str, loc, out: _Lines) -> None:
+        """Fail where an integer sent through an FMI Integer port does not fit 32 bits (as the interpreter)."""
+        for port, sc in group:
+            if sc.ty in (INT, NAT):
+                x = f"({value}){cnames.field_path(sc.path)}"
+                text = c_string(beyond_int32_message(port, 0).replace(" = 0 ", " = %lld "))
+                out(f"if ({x} < INT32_MIN || {x} > INT32_MAX) {{ fail_atf(M, {self.location(loc)}, {text}, "
+                    f"(long long){x}); return 1; }}")
 
     def call(self, ctx: Context, st: s.CallStmt, out: _Lines) -> None:
         op: OperationInstance = ctx.body.calls[st.operation.last]
@@ -1175,6 +1191,9 @@ class CGenerator:
         if key in self.program.output_routes:
             port = self.program.output_routes[key]
             out(self.repeated(cnames.out_flag(port), f"event {port!r}", st.loc))
+            event = self.program.output_port(port)
+            if value is not None and event is not None:
+                self.fits_ports(event.value_ports, value, st.loc, out)
             if value is not None:
                 out(f"{cnames.out_value(port)} = {value};")
             out(f"{cnames.out_flag(port)} = true;")

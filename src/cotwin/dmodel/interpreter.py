@@ -37,7 +37,10 @@ from ..robosim.evaluator import Evaluator, replace_at
 from ..robosim.evaluator import index as index_of
 from ..robosim.types import BOOL, INT, NAT, REAL, EnumTy, Ty, TypeResolver
 from ..robosim.values import EvalError, FrozenRecord, copy, freeze, show, thaw
-from .program import Body, MachineInstance, Program, coerce, default_value, node_description, state_index
+from .program import (
+    Body, MachineInstance, Program, beyond_int32, beyond_int32_message, coerce, default_value, node_description,
+    state_index,
+)
 
 MAX_STEPS = 10_000  # instantaneous steps in one cycle before it counts as divergence
 
@@ -85,6 +88,11 @@ class Output:
         if self.kind == "event":
             return f"{self.name}" + (f"!{show(self.args[0])}" if self.args else "")
         return f"{self.name}({', '.join(show(a) for a in self.args)})"
+
+
+def shared_port_message(first: str, second: str, port: str) -> str:
+    return (f"operations '{first}' and '{second}' called in one cycle: both pass argument port '{port}', which holds "
+            f"one value (rename a parameter to give each its own port)")
 
 
 class Random:
@@ -629,6 +637,23 @@ class _Cycle:
         if any(o.kind == out.kind and o.name == out.name for o in self.outputs):
             raise ExecutionError("repeated-output", f"{out.kind} '{out.name}' emitted twice in one cycle in "
                                  f"{self.node_description()} (cycle {self.interp.cycle})", loc, self.site(out.name))
+        program = self.interp.program
+        where = f" in {self.node_description()} (cycle {self.interp.cycle})"
+        port = program.operation_port(out.name) if out.kind == "operation" else None
+        for o in self.outputs if port is not None else ():
+            if o.kind == "operation" and o.name in port.shares:
+                raise ExecutionError("shared-port", shared_port_message(o.name, out.name, port.shares[o.name]) + where,
+                                     loc, self.site(out.name))
+        # what the FMU's ports cannot hold is an error here as in the C, not a value only the interpreter shows
+        if port is not None:
+            groups = list(zip(port.arg_ports, out.args))
+        else:
+            event = program.output_port(out.name) if out.kind == "event" else None
+            groups = [(event.value_ports, out.args[0])] if event is not None and out.args else []
+        for group, value in groups:
+            wide = beyond_int32(group, value)
+            if wide is not None:
+                raise ExecutionError("overflow", beyond_int32_message(*wide) + where, loc, self.site(out.name))
         self.outputs.append(out)
 
     def send(self, event: str, value, loc) -> None:

@@ -86,6 +86,24 @@ def assemble(group: list[tuple[str, "Scalar"]], read) -> object:
     return value
 
 
+INT32 = (-(2 ** 31), 2 ** 31 - 1)  # an FMI 2 Integer port
+
+
+def beyond_int32(group: list[tuple[str, Scalar]], value) -> tuple[str, int] | None:
+    """The first integer scalar of `value` (sent through the ports `group`) that an FMI Integer cannot
+    hold, as (port, value); the model computes in int64."""
+    for port, sc in group:
+        if sc.ty in (INT, NAT):
+            x = get_path(value, sc.path) if sc.path else value
+            if not INT32[0] <= x <= INT32[1]:
+                return port, x
+    return None
+
+
+def beyond_int32_message(port: str, value: int) -> str:
+    return f"port {port} = {value} does not fit an FMI Integer (int32)"
+
+
 def unsupported_type(ty: Ty, resolver: TypeResolver) -> str | None:
     """Why values of a type cannot be held by the interpreter and the C code, or None if they can:
     boolean, int, nat, real, enumerations without parameters, records, vectors and matrices of known
@@ -185,6 +203,7 @@ class OperationPort:
     params: list[tuple[str, Ty]]
     arg_ports: list[list[tuple[str, Scalar]]] = field(default_factory=list)  # per parameter
     unportable: str | None = None  # why an argument cannot be FMU ports
+    shares: dict[str, str] = field(default_factory=dict)  # other operation -> an argument port both write
 
 
 @dataclass
@@ -272,6 +291,12 @@ class Program:
     @property
     def readings(self):
         return self.project.readings
+
+    def operation_port(self, name: str) -> OperationPort | None:
+        return next((op for op in self.operations if op.name == name), None)
+
+    def output_port(self, name: str) -> EventPort | None:
+        return next((ev for ev in self.outputs if ev.name == name), None)
 
     def state_port(self, machine: MachineInstance) -> str:
         return "state" if len(self.machines) == 1 else f"state_{machine.name}"
@@ -698,6 +723,15 @@ class _Builder:
                 except CotwinError:
                     pass
                 op.arg_ports.append(group)
+        # operations sharing a port cannot both be called in one cycle: the port holds one value (the
+        # interpreter and the C refuse it at run time, as they refuse an output emitted twice)
+        writers: dict[str, list[str]] = {}
+        for op in operations:
+            for group in op.arg_ports:
+                for name, _ in group:
+                    writers.setdefault(name, []).append(op.name)
+        for op in operations:
+            op.shares = {other: name for name, ops in sorted(writers.items()) if op.name in ops for other in ops if other != op.name}
 
 
 def _body_statements(machine: StateMachine):

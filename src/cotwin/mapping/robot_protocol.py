@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Mapping
 
 from .. import safejson
+from ..config import is_number
 from ..diagnostics import CotwinError
 from .amqp import read_secret_file
 
@@ -137,10 +138,6 @@ def decode(body: bytes, limit: int, what: str) -> dict:
         raise CotwinError(f"{what}: {err}") from None
 
 
-def _number(value) -> bool:
-    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
-
-
 def _show(value, limit: int = 60) -> str:
     text = repr(value)
     return text if len(text) <= limit else text[:limit] + "..."
@@ -161,14 +158,14 @@ def validate_request(message: object, actuators: set[str] | None = None) -> dict
         raise CotwinError(f"request {op}: missing field(s) {', '.join(sorted(missing))}")
     if op == "advance":
         dt = message["dt"]
-        if not _number(dt) or not 0 <= dt <= MAX_DT:
+        if not is_number(dt) or not 0 <= dt <= MAX_DT:
             raise CotwinError(f"request advance: dt must be a number of seconds in [0, {MAX_DT:g}], got {_show(dt)}")
     if op == "command":
         goals = message["goals"]
         if not isinstance(goals, dict) or not goals:
             raise CotwinError("request command: goals must be a non-empty object {actuator: value}")
         for name, value in goals.items():
-            if not _number(value):
+            if not is_number(value):
                 raise CotwinError(f"request command: goal {_show(name)} must be a finite number, got {_show(value)}")
             if actuators is not None and name not in actuators:
                 raise CotwinError(f"request command: unknown actuator {_show(name)}")
@@ -203,7 +200,7 @@ def _values(reply: dict, key: str, what: str) -> dict[str, float]:
     if not isinstance(values, dict) or len(values) > MAX_NAMES:
         raise CotwinError(f"{what}: '{key}' must be an object {{name: number}}")
     for name, v in values.items():
-        if not _number(v):
+        if not is_number(v):
             raise CotwinError(f"{what}: {key} {_show(name)} is {_show(v)}, not a finite number")
     return {n: float(v) for n, v in values.items()}
 
@@ -233,7 +230,7 @@ def validate_reply(op: str, reply: dict, view: RobotView, dt: float = 0.0) -> di
         raise CotwinError(f"{what}: expected exactly ok, time, sensors, joints, velocities; "
                           f"got {', '.join(sorted(map(str, reply))[:8])}")
     t = reply["time"]
-    if not _number(t):
+    if not is_number(t):
         raise CotwinError(f"{what}: time {_show(t)} is not a finite number")
     sensors, joints, velocities = (_values(reply, k, what) for k in ("sensors", "joints", "velocities"))
     if set(sensors) != view.sensors:

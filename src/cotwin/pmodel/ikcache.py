@@ -5,7 +5,7 @@ reference posture, seeds and code) and the target's pose is exactly what solving
 a changed model, geometry or solver gives another fingerprint and another file. Files live in
 $COTWIN_CACHE, else $XDG_CACHE_HOME/cotwin, else ~/.cache/cotwin (COTWIN_CACHE=off turns the cache
 off); they are written whole under a temporary name and renamed, and one that cannot be read is
-ignored (and rewritten).
+ignored (and rewritten), as is an entry that is not a solution as this module writes it.
 """
 
 from __future__ import annotations
@@ -13,6 +13,8 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+
+from ..config import is_number
 
 
 def cache_dir() -> Path | None:
@@ -23,6 +25,14 @@ def cache_dir() -> Path | None:
         return Path(chosen)
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "cotwin"
+
+
+def _solution(entry) -> bool:
+    """A stored solution as `put` writes it (a damaged or hand-edited entry is dropped, then solved again)."""
+    return (isinstance(entry, dict) and set(entry) == {"q", "position_error", "angle_error", "iterations"}
+            and isinstance(entry["q"], dict) and all(isinstance(k, str) and is_number(v) for k, v in entry["q"].items())
+            and is_number(entry["position_error"]) and is_number(entry["angle_error"])
+            and isinstance(entry["iterations"], int) and not isinstance(entry["iterations"], bool))
 
 
 class SolutionCache:
@@ -38,8 +48,11 @@ class SolutionCache:
             try:
                 data = json.loads(self.path.read_text())
                 if isinstance(data, dict) and data.get("fingerprint") == fingerprint:
-                    self.entries = dict(data.get("solutions", {}))
+                    solutions = data.get("solutions")
+                    stored = solutions.items() if isinstance(solutions, dict) else ()
+                    self.entries = {key: value for key, value in stored if _solution(value)}
                     self.loaded = len(self.entries)
+                    self._dirty = self.loaded != len(stored) or not isinstance(solutions, dict)  # rewrite it clean
             except (OSError, ValueError):
                 pass
         self.fingerprint = fingerprint
