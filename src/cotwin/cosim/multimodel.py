@@ -78,8 +78,13 @@ def read_multimodel(path: str | Path) -> MultiModel:
         if not re.fullmatch(r"\{[^}]+\}", key):
             problems.append((f"fmus: key '{key}' must look like '{{name}}'", key))
         fmus[key] = (path.parent / file) if not Path(file).is_absolute() else Path(file)
-        if not fmus[key].is_file():
-            problems.append((f"fmus: {key}: no file {fmus[key]}", file))
+        try:
+            found = fmus[key].is_file()
+        except OSError as err:  # e.g. a name longer than the file system takes
+            problems.append((f"fmus: {key}: cannot look for {str(fmus[key])[:120]}: {err.strerror}", file))
+            continue
+        if not found:
+            problems.append((f"fmus: {key}: no file {str(fmus[key])[:200]}", file))
 
     def port(text: str, where: str):
         m = PORT.match(text) if isinstance(text, str) else None
