@@ -208,7 +208,7 @@ def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = Non
         staged = [p.read_bytes() for p in sorted(stage.rglob("*")) if p.is_file()]
         script = Path(__file__).parent / "fmu_slave.py"
         base_key = _digest(__version__, script.read_bytes(), *staged,
-                           *_cotwin_sources(("mapping/runtime.py", "mapping/unit.py", "twin/rabbitmq.py")))
+                           *_cotwin_sources(("mapping/runtime.py", "twin/mapping_unit.py", "twin/rabbitmq.py")))
         for unit in roles:
             target = out / unit.fmu
             key = _digest(base_key, unit.instance)
