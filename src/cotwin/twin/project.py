@@ -110,7 +110,10 @@ class TwinProject:
         """This project with some keys set (None: left out), checked as if written in the file. A change is
         named SECTION_KEY (pt_url, scenario_rabbitmq_exchange) or by a key only one section has (step,
         end, realtime); a Path is taken as it is, not relative to the project file."""
-        data = copy.deepcopy(self.file.data if self.file is not None else {})
+        if self.file is None:
+            raise CotwinError(f"{self.path}: a project made in code, not read by load_project, has no settings "
+                              "to override")
+        data = copy.deepcopy(self.file.data)
         for name, value in changes.items():
             path = override_path(name)
             table = data
@@ -129,6 +132,9 @@ class TwinProject:
         """The project's settings as TOML (only keys set away from their defaults); `sections` limits the
         tables written, `rebase` maps each file the project names (resolved) to the name written."""
         settings = self.settings
+        if settings is None:
+            raise CotwinError(f"{self.path}: a project made in code, not read by load_project, has no settings "
+                              "to write")
         if rebase is not None:
             for path, spec in leaves(ProjectSettings).items():
                 value = _get(settings, path)

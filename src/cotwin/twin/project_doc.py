@@ -21,7 +21,8 @@ This page is generated from the schema (`cotwin.twin.sections`) by `python -m co
 `tests/test_project_doc.py` fails when the two differ. Read a project with
 `cotwin.twin.project.load_project`; `TwinProject.with_overrides(step=..., pt_url=...)` gives a changed
 copy (a change is named SECTION_KEY, or by a key only one section has) and `TwinProject.to_toml()` writes
-one back.
+one back. A new table is a frozen dataclass whose fields are `cotwin.settings.setting(meaning, Key(...))`
+and one entry in `cotwin.twin.sections.SECTIONS` (then regenerate this page).
 
 A minimal project:
 
