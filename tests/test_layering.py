@@ -118,7 +118,7 @@ def test_every_part_of_cotwin_has_a_layer():
 def test_a_twin_part_importing_a_later_one_is_found(tmp_path):
     fake = tmp_path / "cotwin"
     (fake / "twin").mkdir(parents=True)
-    (fake / "twin" / "project.py").write_text("from .runtime import LiveTwin\nfrom .sections import SECTIONS\n")
+    (fake / "twin" / "project.py").write_text("from .runtime import LiveTwin\nfrom .project.sections import SECTIONS\n")
     (fake / "twin" / "system.py").write_text("def f():\n    from cotwin.twin.history import History\n")
     assert upward_imports(fake) == [
         "cotwin/twin/project.py:1: cotwin.twin's project part imports cotwin.twin.runtime, of its live part above it",

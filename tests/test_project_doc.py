@@ -6,8 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from cotwin.settings import default_text, kind_text, leaves
-from cotwin.twin.project_doc import DOC, main, project_reference
-from cotwin.twin.sections import ProjectSettings
+from cotwin.twin.project.doc import DOC, main, project_reference
+from cotwin.twin.project.sections import ProjectSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_the_page_is_what_the_schema_generates():
     assert DOC == ROOT / "docs" / "project.md"
     assert DOC.read_text(encoding="utf-8") == project_reference(), \
-        "docs/project.md differs from the schema: run python -m cotwin.twin.project_doc"
+        "docs/project.md differs from the schema: run python -m cotwin.twin.project.doc"
 
 
 def test_every_key_is_on_the_page_with_its_type_and_default():

@@ -15,7 +15,7 @@ from cotwin.config import Key, TomlFile
 from cotwin.diagnostics import CotwinError
 from cotwin.settings import read, reference, setting
 from cotwin.twin.project import load_project
-from cotwin.twin.sections import SECTIONS, Cosim, ProjectSettings, project_settings
+from cotwin.twin.project.sections import SECTIONS, Cosim, ProjectSettings, project_settings
 
 PROJECTS = sorted(p for p in EXAMPLES.glob("*/*.toml") if "[models]" in p.read_text())
 MODELS = '[models]\ndmodel = "arm.rst"\npmodel = "ur5e.pm"\nmapping = "mapping.pm"\n'

@@ -3,8 +3,9 @@ physical twin, with the services and analyses around it. It may import every cot
 (robosim, dmodel, pmodel, mapping, cosim); inside it, each part imports only its own and those before
 it in PARTS (tests/test_layering.py checks both, import by import):
 
-- project: the project file's schema (`sections`), reading, overrides and writing (`project`), its
-  reference (`project_doc`). Imports nothing else of the twin.
+- project (a subpackage): the project file's schema (`project.sections`), reading, overrides and
+  writing (`project.load`, all exported by `cotwin.twin.project`), its reference (`project.doc`).
+  Imports nothing else of the twin.
 - assembly: scenarios and command sources (`scenario`, `commands`, `replay`, `rabbitmq`), the models
   and units of a twin (`system`, `mapping_unit`, `calibration`), artefacts (`build`, `fmu_slave`),
   one co-simulated run (`run`, `clocked`, `waits`, `outcomes`), broker accounts (`broker_access`).
@@ -15,7 +16,7 @@ it in PARTS (tests/test_layering.py checks both, import by import):
 """
 
 PARTS: dict[str, tuple[str, ...]] = {
-    "project": ("sections", "project", "project_doc"),
+    "project": ("project",),
     "assembly": ("commands", "scenario", "replay", "calibration", "rabbitmq", "mapping_unit", "system", "build",
                  "fmu_slave", "outcomes", "waits", "clocked", "run", "broker_access"),
     "services": ("deviation", "history", "whatif", "publisher", "plant", "dashboard"),

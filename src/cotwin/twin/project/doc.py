@@ -1,5 +1,5 @@
-"""docs/project.md generated from the project schema (`cotwin.twin.sections`): every table and key with
-its type, default and meaning, in the file's order. `python -m cotwin.twin.project_doc [OUT]` rewrites it
+"""docs/project.md generated from the project schema (`cotwin.twin.project.sections`): every table and key with
+its type, default and meaning, in the file's order. `python -m cotwin.twin.project.doc [OUT]` rewrites it
 (default docs/project.md beside the package's repository); `--check` exits 1 when it differs."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..settings import reference
+from ...settings import reference
 from .sections import ProjectSettings
 
 INTRO = """# The project file (`cotwin.toml`)
@@ -17,12 +17,12 @@ co-simulation and, for a live twin, the physical twin, deviation checking and hi
 it is reported at its key's line and column, all together; an unknown key is refused with the nearest
 known one. Paths are relative to the project file. Tables left out take their keys' defaults.
 
-This page is generated from the schema (`cotwin.twin.sections`) by `python -m cotwin.twin.project_doc`;
+This page is generated from the schema (`cotwin.twin.project.sections`) by `python -m cotwin.twin.project.doc`;
 `tests/test_project_doc.py` fails when the two differ. Read a project with
 `cotwin.twin.project.load_project`; `TwinProject.with_overrides(step=..., pt_url=...)` gives a changed
 copy (a change is named SECTION_KEY, or by a key only one section has) and `TwinProject.to_toml()` writes
 one back. A new table is a frozen dataclass whose fields are `cotwin.settings.setting(meaning, Key(...))`
-and one entry in `cotwin.twin.sections.SECTIONS` (then regenerate this page).
+and one entry in `cotwin.twin.project.sections.SECTIONS` (then regenerate this page).
 
 A minimal project:
 
@@ -47,7 +47,7 @@ def project_reference() -> str:
     return INTRO + "\n".join(reference(ProjectSettings)) + "\n"
 
 
-DOC = Path(__file__).resolve().parents[3] / "docs" / "project.md"
+DOC = Path(__file__).resolve().parents[4] / "docs" / "project.md"
 
 
 def main(argv: list[str]) -> int:
@@ -58,7 +58,7 @@ def main(argv: list[str]) -> int:
     if check:
         same = out.is_file() and out.read_text(encoding="utf-8") == text
         if not same:
-            print(f"{out} differs from the schema: run python -m cotwin.twin.project_doc", file=sys.stderr)
+            print(f"{out} differs from the schema: run python -m cotwin.twin.project.doc", file=sys.stderr)
         return 0 if same else 1
     out.write_text(text, encoding="utf-8")
     print(f"wrote {out}")

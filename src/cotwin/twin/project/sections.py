@@ -1,6 +1,6 @@
 """The sections of a twin project (`cotwin.toml`) as typed settings: one frozen dataclass per table, each
 key declared once with its kind, default and meaning (`cotwin.settings`); `docs/project.md` is generated
-from them (`python -m cotwin.twin.project_doc`). A new section is a dataclass and one entry in SECTIONS.
+from them (`python -m cotwin.twin.project.doc`). A new section is a dataclass and one entry in SECTIONS.
 """
 
 from __future__ import annotations
@@ -11,13 +11,13 @@ import re
 from typing import Any
 from urllib.parse import urlsplit
 
-from ..config import Key, is_number, shown, unique, within
-from ..cosim.execution import step_count
-from ..cosim.isolated import DEFAULT_TIMEOUT
-from ..diagnostics import CotwinError
-from ..pmodel.mjcf import TIMESTEP as PHYSICS_STEP
-from ..pmodel.perturbation import SCHEMA as PLANT
-from ..settings import setting
+from ...config import Key, is_number, shown, unique, within
+from ...cosim.execution import step_count
+from ...cosim.isolated import DEFAULT_TIMEOUT
+from ...diagnostics import CotwinError
+from ...pmodel.mjcf import TIMESTEP as PHYSICS_STEP
+from ...pmodel.perturbation import SCHEMA as PLANT
+from ...settings import setting
 
 ENDPOINTS = ("mujoco", "broker")
 SCENES = ("auto", "flexcell", "world", "none")
@@ -119,7 +119,7 @@ def check_timing(spec: "TwinProject", step: float, end: float) -> None:
 def _amqp_url(value: str) -> str | None:
     if not value.startswith(("amqp://", "amqps://")):
         return f"'{value}' is not an amqp:// or amqps:// URL"
-    from ..mapping.amqp import url_has_password, url_problem
+    from ...mapping.amqp import url_has_password, url_problem
 
     if url_has_password(value):
         return ("a password in the project file is refused: give credentials in the environment "

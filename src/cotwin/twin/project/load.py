@@ -2,7 +2,7 @@
 co-simulation settings and, for a live twin, the physical twin, deviation checking and history.
 
 Every key, with its type, default and meaning, is in docs/project.md, generated from the section
-dataclasses of `cotwin.twin.sections` (`python -m cotwin.twin.project_doc`). `load_project` reads a file
+dataclasses of `cotwin.twin.project.sections` (`python -m cotwin.twin.project.doc`). `load_project` reads a file
 into those settings, every problem reported at its key's line and column, all together
 (cotwin.config), and resolves them against the models' files into a `TwinProject`; `with_overrides`
 gives a project with some keys changed (a command's options), `to_toml` writes one back.
@@ -17,15 +17,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from ..config import TomlFile, dumps, is_number, raise_problems, shown
-from ..cosim.isolated import DEFAULT_TIMEOUT
-from ..diagnostics import CotwinError, Finding, Location, Severity
-from ..pmodel.perturbation import Perturbation
-from ..settings import leaves, read, replace_path, tables
-from .sections import (  # noqa: F401  (the names other modules import from here)
-    AMQP_MAX, CYCLE_PERIOD, ENDPOINTS, MAX_CYCLES_PER_STEP, MAX_LAG_STEPS, MAX_WAIT_S, PT_ENDPOINTS, SCENES,
-    SECTIONS, SHAPES, STAND_IN_EXTENT, DeviationSettings, ProjectSettings, RabbitMQSettings, amqp_name_problem,
-    check_timing, cycle_period, routing_key_problem, timing_problems, _amqp_url)
+from ...config import TomlFile, dumps, is_number, raise_problems, shown
+from ...cosim.isolated import DEFAULT_TIMEOUT
+from ...diagnostics import CotwinError, Finding, Location, Severity
+from ...pmodel.perturbation import Perturbation
+from ...settings import leaves, read, replace_path, tables
+from .sections import (CYCLE_PERIOD, SHAPES, STAND_IN_EXTENT, DeviationSettings, ProjectSettings, RabbitMQSettings,
+                       _amqp_url, timing_problems)
 
 
 @dataclass(frozen=True)
@@ -240,7 +238,7 @@ def _table(data: dict, key: str) -> dict:
 
 
 def _thawed(item) -> dict:
-    from ..settings import tables as written
+    from ...settings import tables as written
 
     return written(item)
 
@@ -303,8 +301,8 @@ def _pt_keys(file: TomlFile, pt: PTSettings) -> list[Finding]:
 def pt_url_problem(endpoint: str, url: str) -> str | None:
     """What is wrong with a PT url for this endpoint kind ([pt] url, cotwin twin --pt-url), if anything:
     opcua: opc.tcp://HOST:PORT with a port in 1..65535; broker: an AMQP URL; rtde: a robot's host."""
-    from ..diagnostics import CotwinError
-    from ..mapping.opcua_auth import parse_url
+    from ...diagnostics import CotwinError
+    from ...mapping.opcua_auth import parse_url
 
     if endpoint == "opcua":
         try:
@@ -321,7 +319,7 @@ def pt_url_problem(endpoint: str, url: str) -> str | None:
 
 def _world(file: TomlFile, s, existing, problems: list[Finding]):
     """The project's world: a file named by [platform] world, or a [world] table (not both)."""
-    from ..pmodel.world import read_world
+    from ...pmodel.world import read_world
 
     named, table = s.platform.world, s.world
     if named is not None and table is not None:
@@ -348,7 +346,7 @@ def _world(file: TomlFile, s, existing, problems: list[Finding]):
 
 def _stand_ins(file: TomlFile, items: tuple, problems: list[Finding]) -> dict:
     """[[platform.stand_in]] as the kinematic tree takes them: mesh file as written -> its stand-ins."""
-    from ..pmodel.tree import StandIn, transform
+    from ...pmodel.tree import StandIn, transform
 
     out: dict = {}
     for i, item in enumerate(items):
