@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
 from ...config import Key, is_number, shown, unique, within
@@ -18,6 +18,9 @@ from ...diagnostics import CotwinError
 from ...pmodel.mjcf import TIMESTEP as PHYSICS_STEP
 from ...pmodel.perturbation import SCHEMA as PLANT
 from ...settings import setting
+
+if TYPE_CHECKING:
+    from .load import TwinProject
 
 ENDPOINTS = ("mujoco", "broker")
 SCENES = ("auto", "flexcell", "world", "none")
