@@ -9,7 +9,7 @@ this interface plugs in without touching the mapping.
 
 from __future__ import annotations
 
-from dataclasses import fields as dataclass_fields
+from dataclasses import fields as dataclass_fields, replace
 from typing import Protocol
 
 import numpy as np
@@ -66,6 +66,18 @@ class SimulatedEndpoint:
         self.sim.reset(known)
         self.segment = None
         self.direct = {}
+
+    def resync(self, positions: dict[str, float], velocities: dict[str, float] | None = None) -> None:
+        """Take a measured joint state (a live twin's DT corrected to its PT). A move in progress continues
+        from it: its set-points are re-timed to where along the move the measured joints are (else the
+        servos would pull the robot straight back to the old set-point, undoing the correction)."""
+        known = {n: v for n, v in positions.items() if n in self.sim.joint_names}
+        speeds = {n: v for n, v in (velocities or {}).items() if n in self.sim.joint_names}
+        self.sim.set_joint_state(known, speeds)
+        segment = self.segment
+        if segment is not None:
+            self.segment = retimed(segment, known, self.sim.time)
+            self._held = None  # its set-point is written again at the next step
 
     def read_sensors(self) -> dict[str, float]:
         return self.sim.read_sensors()
@@ -169,6 +181,28 @@ class SimulatedEndpoint:
         self.direct = {j: float(v) for j, v in direct.items()}
         self.segment = segment
         self._held = None  # written again at the next step (the same value: MuJoCo's controls are restored)
+
+
+def retimed(segment: Segment, positions: dict[str, float], now: float) -> Segment:
+    """`segment` shifted in time so that its set-point at `now` is the point of the move nearest to
+    `positions` (the fraction along start -> goal, by least squares over the moving joints); unchanged when
+    nothing moves or the joints are not yet on their way and the move has not begun."""
+    moving = [j for j in segment.goal if j in positions and abs(segment.goal[j] - segment.start[j]) > 1e-12]
+    if not moving or segment.duration <= 0:
+        return segment
+    span = np.array([segment.goal[j] - segment.start[j] for j in moving])
+    offset = np.array([positions[j] - segment.start[j] for j in moving])
+    s = float(np.clip(offset @ span / (span @ span), 0.0, 1.0))
+    if s <= 0.0 and segment.fraction(now) <= 0.0:
+        return segment  # not begun on either side: the move starts when it was planned to
+    low, high = 0.0, segment.duration  # the elapsed time at which the move's fraction is s (it never decreases)
+    for _ in range(60):
+        mid = 0.5 * (low + high)
+        if segment.fraction(segment.t0 + mid) < s:
+            low = mid
+        else:
+            high = mid
+    return replace(segment, t0=now - high)
 
 
 TRAJECTORIES = {"Segment": Segment}  # the trajectory kinds an endpoint state may hold, by class name

@@ -232,6 +232,17 @@ class PlatformSimulator:
     def joint_velocities(self) -> dict[str, float]:
         return dict(zip(self._joints, self._qvel[self._qvel_index].tolist()))
 
+    def set_joint_state(self, positions: dict[str, float], velocities: dict[str, float] | None = None) -> None:
+        """Put these joints at these positions and velocities (a live twin's resync to its PT's measured
+        state), the rest of the state kept, and recompute what is read between steps (mj_forward)."""
+        for name, value in positions.items():
+            self._qpos[self._joint_adr(name)] = float(value)
+        for name, value in (velocities or {}).items():
+            self._joint_adr(name)
+            self._qvel[self._joint_dof[name]] = float(value)
+        self._check()
+        mujoco.mj_forward(self.model, self.data)
+
     def steps_for(self, dt: float) -> int:
         """The number of physics steps in dt seconds (dt rounded to whole steps)."""
         if not (math.isfinite(dt) and dt >= 0):

@@ -62,6 +62,10 @@ co-simulation settings and, for a live twin, the physical twin, deviation checki
     debounce_steps = 2              # consecutive deviating steps before an alarm is raised
     [history]
     url = "sqlite:///history.sqlite"  # or postgresql://...; default: DIR/history.sqlite
+    [convergence]                   # a live twin's DT pulled towards its PT (cotwin.twin.convergence)
+    resync = "on-alarm"             # "never" | "on-alarm" | "every N steps": PT joint state into the DT
+    estimate = "payload"            # "none" | "payload": the tool's load from the PT's joint torques
+    payload_std = 0.05              # kg: applied to the DT once the estimate's std is below this
     [plant]                         # the stand-in cell of `cotwin plant` (cotwin.pmodel.perturbation)
     seed = 7
     payload = 2.0                   # kg at the tool
@@ -290,6 +294,7 @@ SCHEMA = Schema({
         "routing_key": Key("str", "twin.alarm", check=routing_key_problem)})),
     "history": Key("table", {}, table=Schema({"url": Key("str", check=_history_url)})),
     "plant": Key("table", table=PLANT),
+    "convergence": Key("table"),  # read by cotwin.twin.convergence
 })
 
 
@@ -361,6 +366,7 @@ class TwinProject:
     fmu: Path | None = None  # [models] fmu: a d-model FMU built elsewhere, run in place of the one built from dmodel
     isolate: bool | None = None  # [cosim] isolate: the d-model FMU in a process of its own (None: if cotwin did not build it)
     unit_timeout: float = DEFAULT_TIMEOUT  # [cosim] unit_timeout: s an isolated FMU's call may take
+    convergence: object | None = None  # cotwin.twin.convergence.ConvergenceSettings: [convergence]
     locations: dict = field(default_factory=dict)  # key path -> Location where it was written (later checks)
     raw: dict = field(default_factory=dict)  # the tables as written that staged copies carry (world, stand_in, figure)
 
@@ -441,6 +447,9 @@ def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProj
     _timing(file, cosim, problems)
     if pt is not None:
         problems.extend(_pt_keys(file, pt))
+    from .convergence import read_convergence
+
+    convergence = read_convergence(file, problems)
     raise_problems(problems)
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.get("module"), models.get("pmodel_name"),
@@ -452,6 +461,7 @@ def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProj
     spec.mirror_joints, spec.readings = monitor.get("joints", "arm"), dict(monitor.get("readings") or {})
     spec.parameters, spec.panels = dict(cosim.get("parameters") or {}), panels
     spec.fmu = fmu
+    spec.convergence = convergence
     spec.isolate, spec.unit_timeout = cosim.get("isolate"), float(cosim["unit_timeout"])
     if world_file is not None:
         spec.world_file = world_file.path

@@ -1,0 +1,339 @@
+"""Convergence: a live twin's DT pulled towards its PT, as the `[convergence]` table of a project says.
+
+    [convergence]
+    resync = "on-alarm"       # "never" (default) | "on-alarm" | "every N steps"
+    estimate = "payload"      # "none" (default) | "payload": the mass at the tool, from the PT's joint torques
+    payload_std = 0.05        # kg: the estimate is applied to the DT once its standard deviation is below this
+    rest_speed = 0.05         # rad/s (m/s): torques are taken only while every joint is slower than this
+
+Resync puts the PT's measured joint positions and velocities into the DT between two steps (on-alarm: at
+every step in which a deviation alarm is raised or still open; every N steps: at steps N, 2N, ...); a
+move in progress continues from the new state (cotwin.mapping.endpoint.retimed) and the mapping reads the
+new state at once. Each resync is a correction in the history (time, reason, size: the largest joint
+difference it removed) and a marker on the dashboard's plot.
+
+Payload estimation: at rest, the torque a joint's servo exerts beyond what the DT's model needs is the
+payload's weight through the tool's Jacobian, tau - tau0(q) = m * phi(q) with phi = -J(q)^T g (per kg).
+Least squares over every rest sample (each a vector of joint torques) gives m and, from the residuals, its
+standard deviation; once that is below `payload_std` the DT's payload body (a point mass at the tool
+frame, as `cotwin plant` adds one) takes the mass, recorded as a correction too.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import Key, Schema, TomlFile, shown, within
+from ..diagnostics import CotwinError, Finding, Severity
+
+log = logging.getLogger("cotwin.twin")
+
+RESYNC = re.compile(r"every\s+(\d+)\s+steps?")
+MAX_EVERY = 10 ** 6
+PLACEHOLDER_KG = 1e-6  # the DT's payload body is built with this mass, set to 0 before the run starts
+PRIOR_KG = 1000.0  # the estimate's prior standard deviation: nothing known (cotwin.pmodel.perturbation.MAX_PAYLOAD)
+
+
+def _resync(value: str) -> str | None:
+    if value in ("never", "on-alarm"):
+        return None
+    match = RESYNC.fullmatch(value.strip())
+    if match is None:
+        return f'must be "never", "on-alarm" or "every N steps", got {shown(value)}'
+    if not 1 <= int(match.group(1)) <= MAX_EVERY:
+        return f"every N steps takes N in 1..{MAX_EVERY}, got {match.group(1)}"
+    return None
+
+
+SCHEMA = Schema({
+    "resync": Key("str", "never", check=_resync),
+    "estimate": Key("str", "none", choices=("none", "payload")),
+    "payload_std": Key("positive", 0.05, check=within(0, 1000, "kg")),
+    "rest_speed": Key("positive", 0.05, check=within(0, 100, "rad/s")),
+})
+
+
+@dataclass(frozen=True)
+class ConvergenceSettings:
+    """[convergence]: when the DT is resynced to the PT and which unknown parameter is estimated."""
+
+    resync: str = "never"  # never | on-alarm | every
+    every: int = 0  # resync = "every N steps": N
+    estimate: str = "none"  # none | payload
+    payload_std: float = 0.05  # kg
+    rest_speed: float = 0.05  # rad/s or m/s
+
+    @property
+    def active(self) -> bool:
+        return self.resync != "never" or self.estimate != "none"
+
+    def as_dict(self) -> dict:
+        return {"resync": self.resync if self.resync != "every" else f"every {self.every} steps",
+                "estimate": self.estimate, "payload_std": self.payload_std, "rest_speed": self.rest_speed}
+
+
+def read_convergence(file: TomlFile, problems: list[Finding]) -> ConvergenceSettings | None:
+    """The project's [convergence] table (None when absent); every problem at its key, appended."""
+    data = file.data.get("convergence")
+    if data is None:
+        return None
+    if not isinstance(data, dict):
+        problems.append(Finding(file.location(("convergence",)), Severity.ERROR,
+                                f"[convergence] must be a table, got {shown(data)}"))
+        return None
+    before = len(problems)
+    values = SCHEMA.read(data, file, ("convergence",), problems)
+    if len(problems) > before:
+        return None
+    mode, every = values["resync"], 0
+    match = RESYNC.fullmatch(mode.strip())
+    if match is not None:
+        mode, every = "every", int(match.group(1))
+    return ConvergenceSettings(mode, every, values["estimate"], float(values["payload_std"]),
+                               float(values["rest_speed"]))
+
+
+# ---- the DT ---------------------------------------------------------------------------------------------
+
+def digital_twin(system):
+    """The DT's platform: the project's (cotwin.twin.run.dt_endpoint), with a payload body at the tool (of
+    no mass until an estimate is applied) when [convergence] estimates the payload."""
+    from .run import dt_endpoint
+
+    settings = getattr(system.spec, "convergence", None)
+    if settings is None or settings.estimate != "payload" or system.spec.endpoint != "mujoco":
+        return dt_endpoint(system)
+    from ..mapping.endpoint import SimulatedEndpoint
+    from ..pmodel.mjcf import TIMESTEP, to_mjcf
+    from ..pmodel.perturbation import PAYLOAD_BODY, with_payload
+    from ..pmodel.simulator import PlatformSimulator
+
+    models, base = system.models, system.spec.base
+    xml = with_payload(to_mjcf(models.tree, models.scene, TIMESTEP, visual=False, base=base), models.tree, PLACEHOLDER_KG, base)
+    sim = PlatformSimulator(models.tree, models.scene, mjcf=xml, base=base)
+    body = sim.model.body(PAYLOAD_BODY).id
+    sim.model.body_mass[body] = 0.0
+    sim.model.body_inertia[body] = 0.0
+    sim.reset()
+    calibration = models.calibration
+    return SimulatedEndpoint(sim, calibration and calibration.profile, calibration and calibration.geometry)
+
+
+# ---- payload estimation -----------------------------------------------------------------------------------
+
+class PayloadEstimator:
+    """Least squares of the payload mass from joint torques at rest (see the module doc), on a scratch copy
+    of the DT's MuJoCo data (the DT's own state is never touched)."""
+
+    def __init__(self, sim, effort_sensors: dict[str, str]):
+        import mujoco
+
+        from ..pmodel.perturbation import PAYLOAD_BODY
+
+        self.sim = sim
+        self.model = sim.model
+        self.data = mujoco.MjData(sim.model)
+        self.body = sim.model.body(PAYLOAD_BODY).id
+        self.sensors = effort_sensors  # joint -> the PT's reading of its torque (by mapping path)
+        self.joints = list(effort_sensors)
+        self.qpos = {j: sim.model.joint(j).qposadr[0] for j in sim.joint_names}
+        self.dofs = np.array([sim.model.joint(j).dofadr[0] for j in self.joints], dtype=int)
+        self.sum_pp = 0.0  # sum of phi . phi
+        self.sum_pr = 0.0  # sum of phi . r
+        self.sum_rr = 0.0
+        self.count = 0  # scalar measurements (joint torques) taken
+        self.samples = 0  # rest samples taken
+
+    def regressor(self, positions: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
+        """(tau0, phi) at these joint positions: the torques the DT's model needs at rest without the
+        payload, and those one kilogram at the payload body adds."""
+        import mujoco
+
+        model, data = self.model, self.data
+        mass = float(model.body_mass[self.body])
+        data.qpos[:] = model.qpos0
+        for name, value in positions.items():
+            if name in self.qpos:
+                data.qpos[self.qpos[name]] = value
+        data.qvel[:] = 0.0
+        data.qacc[:] = 0.0
+        mujoco.mj_inverse(model, data)
+        jacp = np.zeros((3, model.nv))
+        mujoco.mj_jacBody(model, data, jacp, None, self.body)
+        phi = -(jacp.T @ model.opt.gravity)[self.dofs]
+        tau = data.qfrc_inverse[self.dofs] - mass * phi
+        return tau, phi
+
+    def observe(self, positions: dict[str, float], readings: dict[str, float]) -> bool:
+        """Take one rest sample (PT joint positions, PT sensor readings); False when a torque is missing."""
+        measured = [readings.get(self.sensors[j]) for j in self.joints]
+        if any(v is None or not math.isfinite(v) for v in measured):
+            return False
+        tau0, phi = self.regressor(positions)
+        r = np.asarray(measured) - tau0
+        self.sum_pp += float(phi @ phi)
+        self.sum_pr += float(phi @ r)
+        self.sum_rr += float(r @ r)
+        self.count += len(r)
+        self.samples += 1
+        return True
+
+    @property
+    def mass(self) -> float | None:
+        return self.sum_pr / self.sum_pp if self.sum_pp > 0 else None
+
+    @property
+    def std(self) -> float:
+        """The estimate's standard deviation (kg): residual variance over the information taken."""
+        if self.sum_pp <= 0 or self.count < 2:
+            return PRIOR_KG
+        m = self.sum_pr / self.sum_pp
+        residual = max(0.0, self.sum_rr - 2 * m * self.sum_pr + m * m * self.sum_pp)
+        return math.sqrt(residual / (self.count - 1) / self.sum_pp)
+
+    def apply(self, mass: float) -> None:
+        """The DT's payload body takes `mass` (kg), a solid sphere as `cotwin plant` makes it."""
+        from ..pmodel.perturbation import PAYLOAD_RADIUS
+
+        self.model.body_mass[self.body] = mass
+        self.model.body_inertia[self.body] = 0.4 * mass * PAYLOAD_RADIUS ** 2
+
+
+def effort_sensors(tree) -> dict[str, str]:
+    """Joint -> the mapping path of the p-model sensor reading its torque (or force), for actuated joints."""
+    from ..pmodel.mjcf import sensor_name
+
+    actuated = {j.name for j in tree.actuated}
+    out = {}
+    for s in tree.sensors:
+        if s.quantity == "effort" and s.joint in actuated:
+            out.setdefault(s.joint, sensor_name(tree.name, s.link, s.name, s.port, s.via))
+    return out
+
+
+# ---- the service ----------------------------------------------------------------------------------------
+
+class Convergence:
+    """A live twin's observer that resyncs the DT and estimates the payload (see the module doc). It runs
+    first among the observers, after the step's deviation check and history record."""
+
+    def __init__(self, settings: ConvergenceSettings, spec, history=None):
+        self.settings = settings
+        self.spec = spec
+        self.history = history
+        self.events: list[dict] = []  # every correction, as recorded
+        self.estimator: PayloadEstimator | None = None
+        self.applied: float | None = None
+        self.trace: list[tuple[float, float, float]] = []  # (time, estimate, std) whenever a sample was taken
+        self._seen_alarms = 0
+
+    # ---- start ----
+    def twin_started(self, twin) -> None:
+        self.pt = twin.sides["pt"].units["mapping"].mapping.endpoint
+        self.dt_mapping = twin.sides["dt"].units["mapping"].mapping
+        self.dt = self.dt_mapping.endpoint
+        self.monitor = twin.monitor
+        self._seen_alarms = len(self.monitor.events)
+        from ..mapping.endpoint import SimulatedEndpoint
+
+        if not isinstance(self.dt, SimulatedEndpoint):
+            raise CotwinError([Finding(self.spec.location("convergence"), Severity.ERROR,
+                                       "[convergence] corrects a DT in the embedded simulator ([platform] endpoint = "
+                                       f"\"mujoco\"), not a {type(self.dt).__name__}")])
+        if self.settings.estimate == "payload":
+            self.estimator = self._estimator(twin)
+
+    def _estimator(self, twin) -> PayloadEstimator:
+        from ..pmodel.perturbation import PAYLOAD_BODY
+
+        at = self.spec.location("convergence", "estimate")
+        tree = twin.system.models.tree
+        sensors = effort_sensors(tree)
+        if not sensors:
+            raise CotwinError([Finding(at, Severity.ERROR, f"[convergence] estimate = \"payload\": p-model {tree.name} "
+                                                           "has no sensor of a joint's torque (effort) to estimate it from")])
+        pt_kind = self.spec.pt.endpoint if self.spec.pt is not None else None
+        if pt_kind == "replay":
+            raise CotwinError([Finding(at, Severity.ERROR, "[convergence] estimate = \"payload\" needs a PT reporting "
+                                                           "joint torques; a replayed log reports positions and "
+                                                           "velocities only")])
+        try:
+            self.dt.sim.model.body(PAYLOAD_BODY)
+        except KeyError:
+            raise CotwinError([Finding(at, Severity.ERROR, "[convergence] estimate = \"payload\": the DT has no payload "
+                                                           "body at its tool (build it with "
+                                                           "cotwin.twin.convergence.digital_twin)")]) from None
+        return PayloadEstimator(self.dt.sim, sensors)
+
+    # ---- each step ----
+    def twin_step(self, twin, k: int, t: float) -> None:
+        if self.estimator is not None:
+            self._estimate(k, t)
+        reason = self._resync_reason(k)
+        if reason is not None:
+            self.resync(k, t, reason)
+
+    def _resync_reason(self, k: int) -> str | None:
+        mode = self.settings.resync
+        raised = [e["variable"] for e in self.monitor.events[self._seen_alarms:] if e["state"] == "raised"]
+        self._seen_alarms = len(self.monitor.events)
+        if mode == "every":
+            return f"every {self.settings.every} steps" if k % self.settings.every == 0 else None
+        if mode == "on-alarm":
+            names = list(dict.fromkeys([*raised, *self.monitor.active]))
+            return f"alarm: {', '.join(names)}" if names else None
+        return None
+
+    def resync(self, k: int, t: float, reason: str) -> dict:
+        """Put the PT's measured joint state into the DT now; the correction, recorded."""
+        q, qd = self.pt.joint_positions(), self.pt.joint_velocities()
+        before, speeds = self.dt.joint_positions(), self.dt.joint_velocities()
+        size = max((abs(q[j] - before[j]) for j in q if j in before), default=0.0)
+        speed = max((abs(qd[j] - speeds[j]) for j in qd if j in speeds), default=0.0)
+        self.dt.resync(q, qd)
+        self.dt_mapping.step(0.0)  # the mapping reads the new state (no time passes)
+        return self._record({"kind": "resync", "step": k, "time": t, "reason": reason, "size": size,
+                             "detail": {"velocity": speed, "joints": len(q)}})
+
+    def _estimate(self, k: int, t: float) -> None:
+        estimator, settings = self.estimator, self.settings
+        speeds = self.pt.joint_velocities()
+        if not speeds or any(abs(v) > settings.rest_speed for v in speeds.values()):
+            return
+        if not estimator.observe(self.pt.joint_positions(), self.pt.read_sensors()):
+            return
+        mass, std = estimator.mass, estimator.std
+        self.trace.append((t, mass, std))
+        if std > settings.payload_std or mass is None:
+            return
+        mass = max(0.0, mass)
+        if self.applied is not None and abs(mass - self.applied) <= std:
+            return  # what the DT has is within the estimate's uncertainty
+        previous = self.applied or 0.0
+        estimator.apply(mass)
+        self.applied = mass
+        self._record({"kind": "payload", "step": k, "time": t, "reason": f"estimate {mass:.4g} kg +- {std:.2g} kg",
+                      "size": mass - previous, "detail": {"mass": mass, "std": std, "samples": estimator.samples}})
+
+    def _record(self, event: dict) -> dict:
+        event = {"type": "correction", "twin": self.spec.path.stem, **event}
+        self.events.append(event)
+        log.info("DT corrected (%s) at t = %.3f s: %s, size %.4g", event["kind"], event["time"], event["reason"],
+                 event["size"])
+        if self.history is not None:
+            self.history.record_correction(event)
+        return event
+
+    def report(self) -> dict:
+        resyncs = [e for e in self.events if e["kind"] == "resync"]
+        out = {"settings": self.settings.as_dict(), "resyncs": len(resyncs),
+               "largest_resync": max((e["size"] for e in resyncs), default=None), "corrections": list(self.events)}
+        if self.estimator is not None:
+            out["payload"] = {"estimate": self.estimator.mass, "std": self.estimator.std,
+                              "samples": self.estimator.samples, "applied": self.applied}
+        return out
