@@ -231,6 +231,7 @@ class Convergence:
         self.applied: float | None = None
         self.trace: list[tuple[float, float, float]] = []  # (time, estimate, std) whenever a sample was taken
         self._seen_alarms = 0
+        self._rested = False  # the PT was at rest at the previous step
 
     # ---- start ----
     def twin_started(self, twin) -> None:
@@ -303,7 +304,8 @@ class Convergence:
     def _estimate(self, k: int, t: float) -> None:
         estimator, settings = self.estimator, self.settings
         speeds = self.pt.joint_velocities()
-        if not speeds or any(abs(v) > settings.rest_speed for v in speeds.values()):
+        rest, self._rested = self._rested, bool(speeds) and all(abs(v) <= settings.rest_speed for v in speeds.values())
+        if not (rest and self._rested):  # at rest at this step and the one before: settled, no inertial torque
             return
         if not estimator.observe(self.pt.joint_positions(), self.pt.read_sensors()):
             return

@@ -1,0 +1,131 @@
+"""Convergence ([convergence]): the DT resynced to its PT's measured state, and the payload the DT does not
+know estimated from the PT's joint torques, against the perturbed OPC UA plant."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cotwin.diagnostics import CotwinError
+from cotwin.mapping.endpoint import retimed
+from cotwin.mapping.motion import Segment
+from cotwin.mapping.perturbed import PerturbedEndpoint
+from cotwin.pmodel.perturbation import Perturbation
+from cotwin.twin.project import load_project
+from cotwin.twin.run import load
+
+pytest.importorskip("asyncua")
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "ur5e"
+PAYLOAD = 0.5  # kg at the plant's tool, unknown to the DT
+# the cell's controller also lags its commands (300 ms): a state the DT drifts from, which a resync removes
+PLANT = Perturbation(payload=PAYLOAD, latency_ms=300, noise={"effort": 0.05, "position": 1e-4}, seed=3)
+
+
+def project(folder: Path, convergence: str, end: float = 8.0) -> Path:
+    """The UR5e experiment's models and plan, a deviation check that expects the DT in step (lag 1), and
+    `convergence` as the [convergence] table's body."""
+    path = folder / "cotwin.toml"
+    path.write_text(f'[models]\ndmodel = "{EXAMPLE / "arm.rst"}"\npmodel = "{EXAMPLE / "ur5e.pm"}"\n'
+                    f'mapping = "{EXAMPLE / "mapping.pm"}"\n[scenario]\nplan = "{EXAMPLE / "plan.csv"}"\n'
+                    f"[cosim]\nstep = 0.1\nend = {end}\n[deviation]\nlag_steps = 1\n[convergence]\n{convergence}\n")
+    return path
+
+
+def test_bad_convergence_keys_are_each_reported_at_their_line(tmp_path):
+    path = project(tmp_path, 'resync = "sometimes"\nestimate = "mass"\npayload_std = -1\nrest = 0.1\n')
+    with pytest.raises(CotwinError) as err:
+        load_project(path)
+    found = {f.location.line: f.message for f in err.value.findings}
+    lines = path.read_text().splitlines()
+    for key, words in (("resync", '"never", "on-alarm" or "every N steps"'), ("estimate", "must be one of"),
+                       ("payload_std", "positive"), ("rest", "unknown key 'rest'")):
+        line = next(n for n, text in enumerate(lines, 1) if text.startswith(f"{key} ="))
+        assert words in found.get(line, ""), (key, found)
+    with pytest.raises(CotwinError, match="every N steps takes N in 1"):
+        load_project(project(tmp_path, 'resync = "every 0 steps"'))
+    assert load_project(project(tmp_path, 'resync = "every 5 steps"')).convergence.every == 5
+
+
+def test_a_resynced_move_continues_from_the_measured_state():
+    move = Segment({"a": 0.0, "b": 1.0}, {"a": 1.0, "b": -1.0}, t0=0.0, duration=2.0)
+    behind = move.at(0.6)  # the PT is where the DT's set-point was 0.4 s ago
+    later = retimed(move, behind, now=1.0)
+    assert later.goal == move.goal and later.duration == move.duration
+    assert later.at(1.0) == pytest.approx(behind, abs=1e-9)
+    assert later.t0 == pytest.approx(0.4, abs=1e-9)
+    waiting = Segment({"a": 0.0}, {"a": 1.0}, t0=5.0, duration=1.0)  # not begun on either side: kept
+    assert retimed(waiting, {"a": 0.0}, now=1.0) is waiting
+
+
+@pytest.fixture(scope="module")
+def against_plant(tmp_path_factory):
+    """One 8 s live twin per resync setting, each against its own perturbed plant over OPC UA (payload
+    estimated in both): resync -> (result, history rows of corrections)."""
+    from cotwin.mapping.opcua import OPCUAEndpoint
+    from cotwin.twin.history import read_run
+    from cotwin.twin.plant import Plant
+    from cotwin.twin.runtime import LiveTwin
+
+    out = {}
+    for resync in ("never", "on-alarm"):
+        folder = tmp_path_factory.mktemp(resync)
+        system = load(project(folder, f'resync = "{resync}"\nestimate = "payload"\nrest_speed = 0.01'))
+        plant = Plant(PerturbedEndpoint.build(system.models.tree, system.models.scene, PLANT), "opc.tcp://127.0.0.1:0")
+        plant.start()
+        try:
+            with OPCUAEndpoint(system.models.tree, plant.url, timeout=5, reset=True) as pt:
+                twin = LiveTwin(system, folder / "out", pt=pt)
+                result = twin.run()
+        finally:
+            plant.stop()
+        assert not plant.running
+        rows = read_run(result.history_url, result.run_id)["corrections"]
+        out[resync] = (result, rows, twin)
+    return out
+
+
+def _rmse(result) -> float:
+    """The mean over the joints of the raw PT - DT position RMSE (rad)."""
+    values = [v["rmse"] for name, v in result.deviation["variables"].items() if name.startswith("q") and
+              not name.startswith("qd")]
+    return sum(values) / len(values)
+
+
+def test_resync_on_alarm_keeps_the_dt_closer_to_the_perturbed_plant(against_plant):
+    never, _, _ = against_plant["never"]
+    on_alarm, rows, _ = against_plant["on-alarm"]
+    assert never.deviation["convergence"]["resyncs"] == 0 and never.deviation["alarms"] > 0
+    resyncs = [e for e in on_alarm.convergence["corrections"] if e["kind"] == "resync"]
+    assert resyncs and all(e["reason"].startswith("alarm: ") for e in resyncs)
+    assert max(e["size"] for e in resyncs) > 0.05  # rad: the DT had drifted beyond the alarm threshold
+    assert _rmse(on_alarm) < 0.5 * _rmse(never), (_rmse(on_alarm), _rmse(never))
+    stored = [r for r in rows if r["kind"] == "resync"]  # each resync is in the history, with its reason and size
+    assert [(r["time"], r["reason"]) for r in stored] == [(e["time"], e["reason"]) for e in resyncs]
+    assert [r["size"] for r in stored] == pytest.approx([e["size"] for e in resyncs])
+
+
+def test_the_payload_is_estimated_from_the_plants_torques_and_applied_to_the_dt(against_plant):
+    result, rows, twin = against_plant["never"]
+    payload = result.deviation["convergence"]["payload"]
+    assert abs(payload["estimate"] - PAYLOAD) < 0.02, payload  # kg: 4 % of the truth
+    assert payload["std"] < 0.01 and payload["samples"] > 20
+    assert abs(payload["applied"] - payload["estimate"]) <= 2 * payload["std"] + 1e-9
+    estimator = twin.convergence.estimator  # the DT's payload body carries what was applied
+    assert estimator.model.body_mass[estimator.body] == pytest.approx(payload["applied"])
+    applied = [r for r in rows if r["kind"] == "payload"]
+    assert applied and applied[-1]["size"] == pytest.approx(payload["applied"] - sum(r["size"] for r in applied[:-1]))
+
+
+def test_every_n_steps_resyncs_on_schedule_and_marks_the_page(tmp_path):
+    from cotwin.twin.dashboard.feed import DashboardFeed
+    from cotwin.twin.runtime import LiveTwin
+
+    system = load(project(tmp_path, 'resync = "every 10 steps"', end=3.0))
+    pt = PerturbedEndpoint.build(system.models.tree, system.models.scene, PLANT)
+    feed = DashboardFeed(system)
+    result = LiveTwin(system, tmp_path / "out", pt=pt, observers=[feed]).run()
+    times = [e["time"] for e in result.convergence["corrections"]]
+    assert times == pytest.approx([1.0, 2.0, 3.0])
+    marks = [e for e in feed.events if e["kind"] == "correction"]
+    assert [e["correction"] for e in marks] == ["resync"] * 3 and [e["time"] for e in marks] == pytest.approx(times)
