@@ -83,9 +83,7 @@ def read_convergence(file: TomlFile, problems: list[Finding]) -> ConvergenceSett
     if data is None:
         return None
     if not isinstance(data, dict):
-        problems.append(Finding(file.location(("convergence",)), Severity.ERROR,
-                                f"[convergence] must be a table, got {shown(data)}"))
-        return None
+        return None  # reported by the project's schema
     before = len(problems)
     values = SCHEMA.read(data, file, ("convergence",), problems)
     if len(problems) > before:
@@ -100,28 +98,27 @@ def read_convergence(file: TomlFile, problems: list[Finding]) -> ConvergenceSett
 
 # ---- the DT ---------------------------------------------------------------------------------------------
 
-def digital_twin(system):
-    """The DT's platform: the project's (cotwin.twin.run.dt_endpoint), with a payload body at the tool (of
-    no mass until an estimate is applied) when [convergence] estimates the payload."""
-    from .run import dt_endpoint
+def estimates_payload(spec) -> bool:
+    """Whether the project's DT needs a payload body ([convergence] estimate = "payload")."""
+    settings = getattr(spec, "convergence", None)
+    return settings is not None and settings.estimate == "payload"
 
-    settings = getattr(system.spec, "convergence", None)
-    if settings is None or settings.estimate != "payload" or system.spec.endpoint != "mujoco":
-        return dt_endpoint(system)
-    from ..mapping.endpoint import SimulatedEndpoint
+
+def payload_simulator(tree, scene, base: str = "fixed"):
+    """The embedded simulator with a payload body at the tool (cotwin.pmodel.perturbation.with_payload) of no
+    mass until an estimate is applied: the DT of a twin estimating its payload, and its what-if forks (a
+    saved state holds every body's pose, so the fork's model must have the same bodies)."""
     from ..pmodel.mjcf import TIMESTEP, to_mjcf
     from ..pmodel.perturbation import PAYLOAD_BODY, with_payload
     from ..pmodel.simulator import PlatformSimulator
 
-    models, base = system.models, system.spec.base
-    xml = with_payload(to_mjcf(models.tree, models.scene, TIMESTEP, visual=False, base=base), models.tree, PLACEHOLDER_KG, base)
-    sim = PlatformSimulator(models.tree, models.scene, mjcf=xml, base=base)
+    xml = with_payload(to_mjcf(tree, scene, TIMESTEP, visual=False, base=base), tree, PLACEHOLDER_KG, base)
+    sim = PlatformSimulator(tree, scene, mjcf=xml, base=base)
     body = sim.model.body(PAYLOAD_BODY).id
     sim.model.body_mass[body] = 0.0
     sim.model.body_inertia[body] = 0.0
     sim.reset()
-    calibration = models.calibration
-    return SimulatedEndpoint(sim, calibration and calibration.profile, calibration and calibration.geometry)
+    return sim
 
 
 # ---- payload estimation -----------------------------------------------------------------------------------
@@ -267,8 +264,8 @@ class Convergence:
             self.dt.sim.model.body(PAYLOAD_BODY)
         except KeyError:
             raise CotwinError([Finding(at, Severity.ERROR, "[convergence] estimate = \"payload\": the DT has no payload "
-                                                           "body at its tool (build it with "
-                                                           "cotwin.twin.convergence.digital_twin)")]) from None
+                                                           "body at its tool (cotwin.twin.convergence."
+                                                           "payload_simulator builds one)")]) from None
         return PayloadEstimator(self.dt.sim, sensors)
 
     # ---- each step ----

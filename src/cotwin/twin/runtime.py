@@ -184,7 +184,7 @@ class LiveTwin:
     # ---- running ----
     def run(self) -> LiveResult:
         from .history import HistoryRecorder, database_url, sqlite_path
-        from .convergence import digital_twin
+        from .run import dt_endpoint
 
         spec = self.system.spec
         self.out.mkdir(parents=True, exist_ok=True)
@@ -196,7 +196,7 @@ class LiveTwin:
             fmu = dmodel_fmu(self.system, self.out, self.cc)
             pt_ep = self.pt_endpoint if self.pt_endpoint is not None else pt_endpoint(self.system)
             self._warn_if_outlasting(pt_ep)
-            dt_ep = self.dt_endpoint if self.dt_endpoint is not None else digital_twin(self.system)
+            dt_ep = self.dt_endpoint if self.dt_endpoint is not None else dt_endpoint(self.system)
             pt_source, dt_source = self._sources()
             try:
                 self.sides = {"pt": self._side("pt", fmu, pt_ep, pt_source), "dt": self._side("dt", fmu, dt_ep, dt_source)}
