@@ -129,3 +129,34 @@ def test_every_n_steps_resyncs_on_schedule_and_marks_the_page(tmp_path):
     assert times == pytest.approx([1.0, 2.0, 3.0])
     marks = [e for e in feed.events if e["kind"] == "correction"]
     assert [e["correction"] for e in marks] == ["resync"] * 3 and [e["time"] for e in marks] == pytest.approx(times)
+
+
+def test_the_page_marks_each_resync_on_its_plot(tmp_path):
+    """The dashboard of a resyncing twin draws a marker per correction (a page opened after the run gets them
+    from the feed's event ring)."""
+    chromium = Path("/usr/bin/chromium")
+    if not chromium.is_file():
+        pytest.skip(f"no Debian chromium at {chromium}")
+    from playwright.sync_api import sync_playwright
+
+    from cotwin.twin.dashboard import Dashboard
+    from cotwin.twin.history import database_url
+    from cotwin.twin.runtime import LiveTwin
+
+    system = load(project(tmp_path, 'resync = "every 10 steps"', end=2.0))
+    pt = PerturbedEndpoint.build(system.models.tree, system.models.scene, PLANT)
+    with Dashboard(system, port=0, mode="twin", history_url=database_url(None, tmp_path / "out")) as dash:
+        LiveTwin(system, tmp_path / "out", pt=pt, observers=[dash.feed]).run()
+        dash.finish("done")
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(chromium),
+                                        args=["--headless", "--no-sandbox", "--disable-gpu"])
+            try:
+                page = browser.new_page()
+                page.goto(dash.url)
+                page.wait_for_selector("#alarms li.correction", timeout=15_000)
+                markers = page.evaluate("window.cotwin.live.plot.markers.filter((m) => m.color)")
+                assert [(m["time"], m["label"]) for m in markers] == [(1.0, "resync"), (2.0, "resync")]
+                assert page.locator("#alarms li.correction").count() == 2
+            finally:
+                browser.close()
