@@ -38,7 +38,7 @@ def project(folder: Path, resync: str, end: float) -> Path:
     path.write_text(f'[models]\ndmodel = "{EXAMPLE / "arm.rst"}"\npmodel = "{EXAMPLE / "ur5e.pm"}"\n'
                     f'mapping = "{EXAMPLE / "mapping.pm"}"\n[scenario]\nplan = "{EXAMPLE / "plan.csv"}"\n'
                     f"[cosim]\nstep = 0.1\nend = {end}\n[deviation]\nlag_steps = 1\n"
-                    f'[convergence]\nresync = "{resync}"\nestimate = "payload"\nrest_speed = 0.01\n')
+                    f'[convergence]\nresync = "{resync}"\nestimate = "payload"\n')
     return path
 
 

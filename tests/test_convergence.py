@@ -70,7 +70,7 @@ def against_plant(tmp_path_factory):
     out = {}
     for resync in ("never", "on-alarm"):
         folder = tmp_path_factory.mktemp(resync)
-        system = load(project(folder, f'resync = "{resync}"\nestimate = "payload"\nrest_speed = 0.01'))
+        system = load(project(folder, f'resync = "{resync}"\nestimate = "payload"'))
         plant = Plant(PerturbedEndpoint.build(system.models.tree, system.models.scene, PLANT), "opc.tcp://127.0.0.1:0")
         plant.start()
         try:
@@ -108,7 +108,8 @@ def test_resync_on_alarm_keeps_the_dt_closer_to_the_perturbed_plant(against_plan
 def test_the_payload_is_estimated_from_the_plants_torques_and_applied_to_the_dt(against_plant):
     result, rows, twin = against_plant["never"]
     payload = result.deviation["convergence"]["payload"]
-    assert abs(payload["estimate"] - PAYLOAD) < 0.02, payload  # kg: 4 % of the truth
+    error = abs(payload["estimate"] - PAYLOAD)
+    assert error < 0.01 and error < 3 * payload["std"], payload  # kg: 2 % of the truth, within its uncertainty
     assert payload["std"] < 0.01 and payload["samples"] > 20
     assert abs(payload["applied"] - payload["estimate"]) <= 2 * payload["std"] + 1e-9
     estimator = twin.convergence.estimator  # the DT's payload body carries what was applied

@@ -4,7 +4,7 @@
     resync = "on-alarm"       # "never" (default) | "on-alarm" | "every N steps"
     estimate = "payload"      # "none" (default) | "payload": the mass at the tool, from the PT's joint torques
     payload_std = 0.05        # kg: the estimate is applied to the DT once its standard deviation is below this
-    rest_speed = 0.05         # rad/s (m/s): torques are taken only while every joint is slower than this
+    rest_speed = 0.002        # rad/s (m/s): torques are taken only while every joint is slower than this
 
 Resync puts the PT's measured joint positions and velocities into the DT between two steps (on-alarm: at
 every step in which a deviation alarm is raised or still open; every N steps: at steps N, 2N, ...); a
@@ -54,7 +54,7 @@ SCHEMA = Schema({
     "resync": Key("str", "never", check=_resync),
     "estimate": Key("str", "none", choices=("none", "payload")),
     "payload_std": Key("positive", 0.05, check=within(0, 1000, "kg")),
-    "rest_speed": Key("positive", 0.05, check=within(0, 100, "rad/s")),
+    "rest_speed": Key("positive", 0.002, check=within(0, 100, "rad/s")),
 })
 
 
@@ -66,7 +66,7 @@ class ConvergenceSettings:
     every: int = 0  # resync = "every N steps": N
     estimate: str = "none"  # none | payload
     payload_std: float = 0.05  # kg
-    rest_speed: float = 0.05  # rad/s or m/s
+    rest_speed: float = 0.002  # rad/s or m/s
 
     @property
     def active(self) -> bool:
