@@ -114,6 +114,9 @@ def test_the_payload_is_estimated_from_the_plants_torques_and_applied_to_the_dt(
     assert abs(payload["applied"] - payload["estimate"]) <= 2 * payload["std"] + 1e-9
     estimator = twin.convergence.estimator  # the DT's payload body carries what was applied
     assert estimator.model.body_mass[estimator.body] == pytest.approx(payload["applied"])
+    from cotwin.twin.convergence import summary
+
+    assert f"payload {payload['estimate']:.4g} +- " in summary(result.convergence)  # what `cotwin twin` prints
     applied = [r for r in rows if r["kind"] == "payload"]
     assert applied and applied[-1]["size"] == pytest.approx(payload["applied"] - sum(r["size"] for r in applied[:-1]))
 

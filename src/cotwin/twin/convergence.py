@@ -336,3 +336,19 @@ class Convergence:
             out["payload"] = {"estimate": self.estimator.mass, "std": self.estimator.std,
                               "samples": self.estimator.samples, "applied": self.applied}
         return out
+
+
+def summary(report: dict) -> str:
+    """One line for the command line: the resyncs and the payload estimate of a run's convergence report."""
+    text = f"convergence: {report['resyncs']} resync(s)"
+    if report["largest_resync"] is not None:
+        text += f" (largest {report['largest_resync']:.4g})"
+    payload = report.get("payload")
+    if payload is not None:
+        if payload["estimate"] is None:
+            text += "; payload: no rest sample of the PT to estimate it from"
+        else:
+            applied = f"applied {payload['applied']:.4g} kg" if payload["applied"] is not None else "not confident enough to apply"
+            text += (f"; payload {payload['estimate']:.4g} +- {payload['std']:.2g} kg from {payload['samples']} rest "
+                     f"sample(s), {applied}")
+    return text
