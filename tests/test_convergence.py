@@ -137,7 +137,7 @@ def test_every_n_steps_resyncs_on_schedule_and_marks_the_page(tmp_path):
 
 def test_the_page_marks_each_resync_on_its_plot(tmp_path):
     """The dashboard of a resyncing twin draws a marker per correction (a page opened after the run gets them
-    from the feed's event ring)."""
+    from the feed's event ring), and lists them in the run's history."""
     chromium = Path("/usr/bin/chromium")
     if not chromium.is_file():
         pytest.skip(f"no Debian chromium at {chromium}")
@@ -162,5 +162,11 @@ def test_the_page_marks_each_resync_on_its_plot(tmp_path):
                 markers = page.evaluate("window.cotwin.live.plot.markers.filter((m) => m.color)")
                 assert [(m["time"], m["label"]) for m in markers] == [(1.0, "resync"), (2.0, "resync")]
                 assert page.locator("#alarms li.correction").count() == 2
+                page.click('header nav button[data-tab="history"]')  # and the run's history shows them too
+                page.wait_for_selector("#runs tbody tr", timeout=5_000)
+                page.click("#runs tbody tr")
+                page.wait_for_selector("#run-alarms li.correction", timeout=5_000)
+                assert page.locator("#run-alarms li.correction").count() == 2
+                assert "every 10 steps" in page.inner_text("#run-alarms")
             finally:
                 browser.close()
