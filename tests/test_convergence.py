@@ -170,3 +170,26 @@ def test_the_page_marks_each_resync_on_its_plot(tmp_path):
                 assert "every 10 steps" in page.inner_text("#run-alarms")
             finally:
                 browser.close()
+
+
+
+def test_a_saved_state_carries_the_payload_applied_to_the_dt(tmp_path):
+    """A what-if fork of a DT that was given an estimated payload restores that payload with its state."""
+    from cotwin.cosim.state import pack, unpack
+    from cotwin.mapping.endpoint import SimulatedEndpoint
+    from cotwin.twin.convergence import PayloadEstimator, effort_sensors, payload_simulator
+
+    system = load(project(tmp_path, 'estimate = "payload"'))
+    tree, scene = system.models.tree, system.models.scene
+    dt = SimulatedEndpoint(payload_simulator(tree, scene))
+    estimator = PayloadEstimator(dt.sim, effort_sensors(tree))
+    estimator.apply(0.42)
+    saved = unpack(pack("platform", dt.snapshot()), "platform")
+    fork = SimulatedEndpoint(payload_simulator(tree, scene))
+    fork.restore(saved)
+    body = fork.sim.model.body(estimator.body)
+    assert float(fork.sim.model.body_mass[body.id]) == 0.42
+    assert fork.sim.changed_bodies() == dt.sim.changed_bodies()
+    saved["bodies"] = {"no_such_body": [1.0, 0.0, 0.0, 0.0]}
+    with pytest.raises(CotwinError, match="changes a body 'no_such_body' that this model does not have"):
+        fork.restore(saved)

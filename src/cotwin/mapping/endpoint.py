@@ -160,13 +160,14 @@ class SimulatedEndpoint:
         """The endpoint's state as plain data: MuJoCo's integration state and the trajectory in flight."""
         state = self.sim.get_state()
         return {"simulator": state.vector, "scans": state.scans, "derived": state.derived,
-                "segment": trajectory_data(self.segment), "direct": dict(self.direct)}
+                "segment": trajectory_data(self.segment), "direct": dict(self.direct),
+                "bodies": self.sim.changed_bodies()}
 
     def restore(self, snapshot: dict) -> None:
         """Continue from a snapshot, checked against this platform first: the simulator's state (its size,
         finite numbers, the ray sensors' readings), the trajectory's joints and numbers, the speeds and
-        efforts by joint."""
-        fields(snapshot, "platform", ("simulator", "segment"), ("scans", "direct", "derived"))
+        efforts by joint, the masses of bodies changed while running (an estimated payload)."""
+        fields(snapshot, "platform", ("simulator", "segment"), ("scans", "direct", "derived", "bodies"))
         of_type(snapshot["simulator"], np.ndarray, "platform's simulator state")
         direct = of_type(snapshot.get("direct", {}), dict, "platform's commanded speeds and efforts")
         commanded = {j.name for j in self.tree.actuated} - self._positioned
@@ -176,6 +177,7 @@ class SimulatedEndpoint:
                                   f"speed- or effort-driven joint of this platform")
             finite(value, f"commanded speed or effort of {joint}")
         segment = trajectory_from(snapshot["segment"], self._positioned)
+        self.sim.set_bodies(of_type(snapshot.get("bodies", {}), dict, "platform's changed bodies"))  # e.g. a payload
         self.sim.set_state(SimState(snapshot["simulator"], tuple(snapshot.get("scans", ())),
                                     tuple(of_type(snapshot.get("derived", ()), tuple, "platform's derived quantities"))))
         self.direct = {j: float(v) for j, v in direct.items()}
