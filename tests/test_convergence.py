@@ -193,3 +193,19 @@ def test_a_saved_state_carries_the_payload_applied_to_the_dt(tmp_path):
     saved["bodies"] = {"no_such_body": [1.0, 0.0, 0.0, 0.0]}
     with pytest.raises(CotwinError, match="changes a body 'no_such_body' that this model does not have"):
         fork.restore(saved)
+
+
+def test_estimating_the_payload_from_a_replayed_log_is_refused_at_its_key(tmp_path):
+    from cotwin.twin.runtime import LiveTwin
+
+    log = EXAMPLE.parents[1].parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"
+    if not log.is_file():
+        pytest.skip(f"../shared is absent ({log})")
+    path = project(tmp_path, 'resync = "on-alarm"\nestimate = "payload"')
+    path.write_text(path.read_text() + f'[pt]\nendpoint = "replay"\nlog = "{log}"\n')
+    system = load(path)
+    with pytest.raises(CotwinError, match="needs a PT reporting joint torques") as err:
+        LiveTwin(system, tmp_path / "out").run()
+    line = next(n for n, text in enumerate(path.read_text().splitlines(), 1) if text.startswith("estimate ="))
+    assert err.value.findings[0].location.line == line
+    assert not (tmp_path / "out" / "history.sqlite").exists()  # refused before anything was built or recorded

@@ -219,9 +219,19 @@ class Convergence:
     """A live twin's observer that resyncs the DT and estimates the payload (see the module doc). It runs
     first among the observers, after the step's deviation check and history record."""
 
-    def __init__(self, settings: ConvergenceSettings, spec, history=None):
+    def __init__(self, settings: ConvergenceSettings, system, history=None):
         self.settings = settings
-        self.spec = spec
+        self.spec = spec = system.spec
+        self.tree = system.models.tree
+        at = spec.location("convergence", "estimate")
+        if settings.estimate == "payload" and not effort_sensors(self.tree):
+            raise CotwinError([Finding(at, Severity.ERROR, f"[convergence] estimate = \"payload\": p-model "
+                                                           f"{self.tree.name} has no sensor of a joint's torque (effort) "
+                                                           "to estimate it from")])
+        if settings.estimate == "payload" and spec.pt is not None and spec.pt.endpoint == "replay":
+            raise CotwinError([Finding(at, Severity.ERROR, "[convergence] estimate = \"payload\" needs a PT reporting "
+                                                           "joint torques; a replayed log reports positions and "
+                                                           "velocities only")])
         self.history = history
         self.events: list[dict] = []  # every correction, as recorded
         self.estimator: PayloadEstimator | None = None
@@ -244,29 +254,19 @@ class Convergence:
                                        "[convergence] corrects a DT in the embedded simulator ([platform] endpoint = "
                                        f"\"mujoco\"), not a {type(self.dt).__name__}")])
         if self.settings.estimate == "payload":
-            self.estimator = self._estimator(twin)
+            self.estimator = self._estimator()
 
-    def _estimator(self, twin) -> PayloadEstimator:
+    def _estimator(self) -> PayloadEstimator:
         from ..pmodel.perturbation import PAYLOAD_BODY
 
         at = self.spec.location("convergence", "estimate")
-        tree = twin.system.models.tree
-        sensors = effort_sensors(tree)
-        if not sensors:
-            raise CotwinError([Finding(at, Severity.ERROR, f"[convergence] estimate = \"payload\": p-model {tree.name} "
-                                                           "has no sensor of a joint's torque (effort) to estimate it from")])
-        pt_kind = self.spec.pt.endpoint if self.spec.pt is not None else None
-        if pt_kind == "replay":
-            raise CotwinError([Finding(at, Severity.ERROR, "[convergence] estimate = \"payload\" needs a PT reporting "
-                                                           "joint torques; a replayed log reports positions and "
-                                                           "velocities only")])
         try:
             self.dt.sim.model.body(PAYLOAD_BODY)
         except KeyError:
             raise CotwinError([Finding(at, Severity.ERROR, "[convergence] estimate = \"payload\": the DT has no payload "
                                                            "body at its tool (cotwin.twin.convergence."
                                                            "payload_simulator builds one)")]) from None
-        return PayloadEstimator(self.dt.sim, sensors)
+        return PayloadEstimator(self.dt.sim, effort_sensors(self.tree))
 
     # ---- each step ----
     def twin_step(self, twin, k: int, t: float) -> None:

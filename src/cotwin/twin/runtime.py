@@ -193,6 +193,12 @@ class LiveTwin:
                                                                           "outputs.csv.part")]
         writes += ["state", "deviation.json", "figure.png", *ARTEFACTS, *([store] if store else [])]
         with folder_lock(self.out, writes, spec.inputs):
+            settings = spec.convergence
+            if settings is not None and settings.active:  # checked against the models before anything is built
+                from .convergence import Convergence
+
+                self.convergence = Convergence(settings, self.system)
+                self.observers.insert(0, self.convergence)  # the DT corrected before anyone looks at it
             fmu = dmodel_fmu(self.system, self.out, self.cc)
             pt_ep = self.pt_endpoint if self.pt_endpoint is not None else pt_endpoint(self.system)
             self._warn_if_outlasting(pt_ep)
@@ -204,12 +210,8 @@ class LiveTwin:
                 columns = {n: [f"{u}.{v}" for u, v in s.execution.system.observed()] for n, s in self.sides.items()}
                 self._history = HistoryRecorder(url, str(spec.path), "twin", self.step_size, self.algorithm, columns)
                 self._publisher = self._alarm_publisher()
-                settings = spec.convergence
-                if settings is not None and settings.active:
-                    from .convergence import Convergence
-
-                    self.convergence = Convergence(settings, spec, self._history)
-                    self.observers.insert(0, self.convergence)  # the DT corrected before anyone looks at it
+                if self.convergence is not None:
+                    self.convergence.history = self._history
                 if self.whatif_url is not None:
                     from .whatif import WhatIfService
 
