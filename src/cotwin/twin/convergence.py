@@ -13,7 +13,9 @@ new state at once. Each resync is a correction in the history (time, reason, siz
 difference it removed) and a marker on the dashboard's plot.
 
 Payload estimation: at rest, the torque a joint's servo exerts beyond what the DT's model needs is the
-payload's weight through the tool's Jacobian, tau - tau0(q) = m * phi(q) with phi = -J(q)^T g (per kg).
+payload's weight through the tool's Jacobian, tau - tau0(q) = m * phi(q) with phi = -J(q)^T g (per kg);
+tau0 is the DT's own torque at the same time (both at rest) less that of the payload it was given, so
+whatever else both carry (a grasped brick) cancels.
 Least squares over every rest sample (each a vector of joint torques) gives m and, from the residuals, its
 standard deviation; once that is below `payload_std` the DT's payload body (a point mass at the tool
 frame, as `cotwin plant` adds one) takes the mass, recorded as a correction too.
@@ -166,13 +168,27 @@ class PayloadEstimator:
         tau = data.qfrc_inverse[self.dofs] - mass * phi
         return tau, phi
 
-    def observe(self, positions: dict[str, float], readings: dict[str, float]) -> bool:
-        """Take one rest sample (PT joint positions, PT sensor readings); False when a torque is missing."""
+    def torques(self, readings: dict[str, float]) -> np.ndarray | None:
         measured = [readings.get(self.sensors[j]) for j in self.joints]
         if any(v is None or not math.isfinite(v) for v in measured):
+            return None
+        return np.asarray(measured, dtype=float)
+
+    def observe(self, positions: dict[str, float], readings: dict[str, float], reference=None) -> bool:
+        """Take one rest sample (PT joint positions, PT sensor readings); False when a torque is missing.
+        `reference`: the DT's (joint positions, sensor readings) at the same time: its torques less its own
+        payload's are then what the model needs there, so that whatever else both carry (a grasped brick, an
+        arm's weight its servos hold) cancels; without it, MuJoCo's inverse dynamics at rest."""
+        measured = self.torques(readings)
+        if measured is None:
             return False
         tau0, phi = self.regressor(positions)
-        r = np.asarray(measured) - tau0
+        if reference is not None:
+            modelled = self.torques(reference[1])
+            if modelled is None:
+                return False
+            tau0 = modelled - float(self.model.body_mass[self.body]) * self.regressor(reference[0])[1]
+        r = measured - tau0
         self.sum_pp += float(phi @ phi)
         self.sum_pr += float(phi @ r)
         self.sum_rr += float(r @ r)
@@ -300,11 +316,12 @@ class Convergence:
 
     def _estimate(self, k: int, t: float) -> None:
         estimator, settings = self.estimator, self.settings
-        speeds = self.pt.joint_velocities()
-        rest, self._rested = self._rested, bool(speeds) and all(abs(v) <= settings.rest_speed for v in speeds.values())
-        if not (rest and self._rested):  # at rest at this step and the one before: settled, no inertial torque
+        speeds = [*self.pt.joint_velocities().values(), *self.dt.joint_velocities().values()]
+        rest, self._rested = self._rested, bool(speeds) and all(abs(v) <= settings.rest_speed for v in speeds)
+        if not (rest and self._rested):  # both at rest at this step and the one before: settled, no inertial torque
             return
-        if not estimator.observe(self.pt.joint_positions(), self.pt.read_sensors()):
+        reference = (self.dt.joint_positions(), self.dt.read_sensors())
+        if not estimator.observe(self.pt.joint_positions(), self.pt.read_sensors(), reference):
             return
         mass, std = estimator.mass, estimator.std
         self.trace.append((t, mass, std))
