@@ -228,3 +228,14 @@ def test_a_brick_both_twins_carry_is_not_taken_for_the_payload(tmp_path):
     grasped = [m for t, m, _ in twin.convergence.trace if t > 12.0]  # the brick lifted at 11 s
     assert grasped and all(abs(m - PAYLOAD) < 0.01 for m in grasped), grasped[-5:]
     assert abs(result.convergence["payload"]["applied"] - PAYLOAD) < 0.01
+
+
+def test_a_dt_behind_the_broker_cannot_be_corrected(tmp_path):
+    from cotwin.twin.runtime import LiveTwin
+
+    path = project(tmp_path, 'resync = "on-alarm"')
+    path.write_text(path.read_text().replace("[cosim]", '[platform]\nendpoint = "broker"\n[cosim]'))
+    with pytest.raises(CotwinError, match=r"not a robot behind the broker") as err:
+        LiveTwin(load(path), tmp_path / "out").run()
+    line = next(n for n, text in enumerate(path.read_text().splitlines(), 1) if text == "[convergence]")
+    assert err.value.findings[0].location.line == line

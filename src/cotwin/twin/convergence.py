@@ -239,6 +239,10 @@ class Convergence:
         self.settings = settings
         self.spec = spec = system.spec
         self.tree = system.models.tree
+        if spec.endpoint != "mujoco":
+            raise CotwinError([Finding(spec.location("convergence"), Severity.ERROR, "[convergence] corrects a DT in the "
+                                       f"embedded simulator, not a robot behind the broker ([platform] endpoint = "
+                                       f"\"{spec.endpoint}\")")])
         at = spec.location("convergence", "estimate")
         if settings.estimate == "payload" and not effort_sensors(self.tree):
             raise CotwinError([Finding(at, Severity.ERROR, f"[convergence] estimate = \"payload\": p-model "
