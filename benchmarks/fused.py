@@ -3,7 +3,8 @@ speed as a share of the same scene's physics alone, measured in this run.
 
 - A profile of the paper's 20 s experiment at steps 0.01 and 0.001 s (physics at 1 ms), from inside the
   very run it describes: per step, each unit's step (the d-model FMU, the command source, the mapping
-  less the physics it runs), the physics (mj_step), the master's moves of values (the bound setters and getters), the CSV row, the other
+  less the physics and the event report it runs), the physics (mj_step), the mapping's event report
+  (every input event's definition evaluated each step: Mapping.report), the master's moves of values (the bound setters and getters), the CSV row, the other
   observers, and the rest (the execution's loop).
 - The 20 s experiment at steps 0.1, 0.01 and 0.001 s against physics alone (the scene's 20 000 mj_steps
   in one MuJoCo call): goals >= 0.95, >= 0.9 and >= 0.5 of its speed.
@@ -71,6 +72,11 @@ class Profiler(Observer):
                 timed = Timed(read[0])
                 algorithm.reads[k] = (timed, read[1])
                 self.moves.append(timed)
+        mapping = execution.system.units.get(MAPPING.name)
+        runtime = getattr(mapping, "mapping", None)  # the mapping runtime of an in-process mapping unit
+        self.report = None
+        if runtime is not None:
+            self.report = runtime.report = Timed(runtime.report)
         self.observers = {}
         for o in execution.observers:
             if o is not self:
@@ -91,12 +97,14 @@ def profile(twin, build_dir: Path, folder: Path, step: float) -> dict[str, float
     with PhysicsClock() as physics:
         run_twin(twin, folder, step=step, plot=False, observers=[prof])
     per = lambda s: s / prof.steps * 1e6  # noqa: E731
-    units = {f"unit {name}: step" + (" less physics" if name == MAPPING.name else ""):
-             t.seconds - (physics.seconds if name == MAPPING.name else 0.0) for name, t in prof.units.items()}
+    report = prof.report.seconds if prof.report is not None else 0.0
+    units = {f"unit {name}: step" + (" less physics and event report" if name == MAPPING.name else ""):
+             t.seconds - (physics.seconds + report if name == MAPPING.name else 0.0) for name, t in prof.units.items()}
     csv = sum(t.seconds for name, t in prof.observers.items() if name == CSVWriter.__name__)
     others = sum(t.seconds for name, t in prof.observers.items() if name != CSVWriter.__name__)
     moves = sum(t.seconds for t in prof.moves)
     parts = {**units, "physics (mj_step, inside the mapping unit's step)": physics.seconds,
+             "mapping's event report (input events' conditions evaluated, inside its step)": report,
              "master: values moved (setters, getters)": moves, "CSV row": csv, "other observers": others}
     parts["master: the loop itself (rest)"] = prof.seconds - sum(parts.values())
     return {name: per(s) for name, s in parts.items()} | {"total": per(prof.seconds)}
