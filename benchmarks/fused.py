@@ -75,8 +75,11 @@ class Profiler(Observer):
         mapping = execution.system.units.get(MAPPING.name)
         runtime = getattr(mapping, "mapping", None)  # the mapping runtime of an in-process mapping unit
         self.report = None
+        self.events = {}
         if runtime is not None:
             self.report = runtime.report = Timed(runtime.report)
+            for name, event in runtime.events.items():
+                self.events[name] = event.occurs = Timed(event.occurs)
         self.observers = {}
         for o in execution.observers:
             if o is not self:
@@ -88,8 +91,9 @@ class Profiler(Observer):
         self.steps = execution.steps
 
 
-def profile(twin, build_dir: Path, folder: Path, step: float) -> dict[str, float]:
-    """Microseconds per communication step of each part of one 20 s run at this step."""
+def profile(twin, build_dir: Path, folder: Path, step: float) -> tuple[dict[str, float], dict[str, float]]:
+    """Microseconds per communication step of each part of one 20 s run at this step, and of each of the
+    mapping's input events' definitions (inside its event report)."""
     folder.mkdir(exist_ok=True)
     for name in ("dmodel.fmu", "build.json"):
         shutil.copy(build_dir / name, folder / name)
@@ -107,7 +111,8 @@ def profile(twin, build_dir: Path, folder: Path, step: float) -> dict[str, float
              "mapping's event report (input events' conditions evaluated, inside its step)": report,
              "master: values moved (setters, getters)": moves, "CSV row": csv, "other observers": others}
     parts["master: the loop itself (rest)"] = prof.seconds - sum(parts.values())
-    return {name: per(s) for name, s in parts.items()} | {"total": per(prof.seconds)}
+    events = {name: per(t.seconds) for name, t in prof.events.items()}
+    return {name: per(s) for name, s in parts.items()} | {"total": per(prof.seconds)}, events
 
 
 def experiment(twin, build_dir: Path, folder: Path, step: float) -> float:
@@ -130,13 +135,18 @@ def main() -> None:
         build(twin, out / "build")
         experiment(twin, out / "build", out / "warmup", 0.1)  # IK solutions cached, imports warm
         for step in (0.01, 0.001):
-            prof = profile(twin, out / "build", out / f"profile{step}", step)
+            prof, events = profile(twin, out / "build", out / f"profile{step}", step)
             total = prof.pop("total")
             for name, us in prof.items():
                 figure(f"profile, step {step:g} s: {name}", us, "us/step", share=us / total)
             print(f"profile of the 20 s experiment at step {step:g} s (physics 1 ms), {total:.1f} us per step "
                   "(timers included): " + "; ".join(f"{name} {us:.1f} us ({100 * us / total:.0f}%)"
                                                     for name, us in prof.items()))
+            costly = sorted(events.items(), key=lambda item: -item[1])
+            for name, us in costly:
+                figure(f"profile, step {step:g} s: input event {name}'s definition", us, "us/step")
+            print(f"  of the event report, per input event (us/step): "
+                  + ", ".join(f"{name} {us:.1f}" for name, us in costly))
         limit = min(physics_alone(twin) for _ in range(3))
         for step, target in GOALS.items():
             stepping = min(experiment(twin, out / "build", out / f"run{step}", step)
