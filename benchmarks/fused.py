@@ -7,7 +7,9 @@ speed as a share of the same scene's physics alone, measured in this run.
   (every input event's definition evaluated each step: Mapping.report), the master's moves of values (the bound setters and getters), the CSV row, the other
   observers, and the rest (the execution's loop).
 - The 20 s experiment at steps 0.1, 0.01 and 0.001 s against physics alone (the scene's 20 000 mj_steps
-  in one MuJoCo call): goals >= 0.95, >= 0.9 and >= 0.5 of its speed.
+  in one MuJoCo call): goals >= 0.95, >= 0.9 and >= 0.5 of its speed; a what-if of the paper's plan
+  (goal >= 0.5 of it). The 384-hole sweep is timed by whatif.py (one process, a pool, Ray); its goal
+  here (>= 5x over the FMU path) needs the fused path to compare with, so it is not judged yet.
 The fused native step the issue asks for is not built yet (docs/benchmarks.md): these figures are the
 FMU path's, the baseline it is to be judged against; the goals are the issue's and fail until it is.
 Figures are the best of a few repetitions (the machine is shared); ratios are taken within one run.
@@ -32,10 +34,12 @@ from cotwin.cosim.observers import CSVWriter, Observer  # noqa: E402
 from cotwin.twin.build import build  # noqa: E402
 from cotwin.twin.run import load, run_twin  # noqa: E402
 from cotwin.twin.system import MAPPING  # noqa: E402
+from cotwin.twin.whatif import predict  # noqa: E402
 from figures import figure, goal  # noqa: E402
 from twin import END, PhysicsClock, Stopwatch, physics_alone  # noqa: E402
 
 GOALS = {0.1: 0.95, 0.01: 0.9, 0.001: 0.5}  # share of physics-only speed, the issue's
+WHATIF_GOAL = 0.5  # a what-if of the paper's plan, share of physics-only speed (the issue's)
 
 
 class Timed:
@@ -157,6 +161,29 @@ def main() -> None:
             print(f"20 s experiment, step {step:g} s, FMU path: real-time factor {END / stepping:.1f}x, peer physics "
                   f"alone {END / limit:.1f}x; share of physics-only speed {ratio:.2f} "
                   f"({goal(f'share of physics-only speed at step {step:g} s', ratio, target)})")
+
+        whatif(twin, out, limit)
+
+
+def whatif(twin, out: Path, limit: float) -> None:
+    """A what-if of the paper's plan from the DT's state at the end of the 20 s run (warm: FMU built, IK
+    cached; best of two after an untimed one), as a share of physics-only speed."""
+    folder = out / "whatif"
+    run_twin(twin, folder, plot=False)  # builds the FMU in the folder, leaves the state at t = 20 s
+    state = (folder / "state").read_bytes()
+    best, span = 1e9, 0.0
+    for k in range(3):
+        t0 = time.perf_counter()
+        prediction = predict(twin, twin.commands, state, horizon=25.0, artefacts=folder)
+        if k:
+            best = min(best, time.perf_counter() - t0)
+        span = prediction.end - prediction.start
+    ratio = (span / best) / (END / limit)
+    figure("what-if of the paper's plan, FMU path: real-time factor", span / best, "x",
+           peer="physics alone (one mj_step call)", peer_value=END / limit, simulated_s=span)
+    print(f"what-if of the paper's plan from t = 20 s, FMU path: {span:.1f} s simulated in {best:.2f} s "
+          f"({span / best:.1f}x real time), peer physics alone {END / limit:.1f}x; share of physics-only speed "
+          f"{ratio:.2f} ({goal('what-if: share of physics-only speed', ratio, WHATIF_GOAL)})")
 
 
 if __name__ == "__main__":
