@@ -21,7 +21,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from cotwin.twin.fleet.spec import read_fleet  # noqa: E402
 from cotwin.twin.fleet.supervisor import Fleet  # noqa: E402
-from figures import figure, goal  # noqa: E402
+from figures import figure, goal, shown  # noqa: E402
 
 PROJECT = ROOT / "examples" / "ur5e" / "replay.toml"
 SHARED_LOG = ROOT.parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"
@@ -91,16 +91,24 @@ def capacity(folder: Path, log: Path, ray: str | None, workers: int, label: str)
     return kept
 
 
-def throughput(folder: Path, log: Path, ray: str | None, workers: int) -> tuple[float, float]:
-    """(simulated twin-seconds per wall second over the whole run, the same while stepping: the sum of the
-    twins' real-time factors) of FULL_TWINS unpaced twins."""
+def throughput(folder: Path, log: Path, ray: str | None, workers: int) -> tuple[float | None, float | None]:
+    """(simulated twin-seconds per wall second over the whole run, start-up included; the same while stepping,
+    the sum of the twins' real-time factors) of FULL_TWINS unpaced twins; None when a twin did not finish."""
     summary, wall = run(folder, log, FULL_TWINS, FULL_END, False, ray, workers)
     done = [t for t in summary["twins"] if t["state"] == "done"]
-    return len(done) * FULL_END / wall, sum(t["real_time_factor"] or 0.0 for t in done)
+    if len(done) < FULL_TWINS:
+        print(f"  {FULL_TWINS - len(done)} twin(s) did not finish: " +
+              "; ".join(f"{t['name']}: {t.get('message')}" for t in summary["twins"] if t["state"] != "done")[:600])
+        return None, None
+    return FULL_TWINS * FULL_END / wall, sum(t["real_time_factor"] or 0.0 for t in done)
 
 
 def main() -> None:
+    import logging
+
     import ray
+
+    logging.getLogger("cotwin.twin").setLevel(logging.ERROR)  # each twin's deviation alarms: not this figure's
 
     with tempfile.TemporaryDirectory(prefix="cotwin-bench-fleet-") as tmp:
         folder = Path(tmp)
@@ -121,10 +129,11 @@ def main() -> None:
            peer="one process", peer_value=one_full, stepping_two=two_stepping, stepping_one=one_stepping)
     print(f"UR5e twins (step 0.1 s, replayed PT, MuJoCo DT) kept at real time (lag <= {LAG_LIMIT} s): one process "
           f"{one}, Ray with 2 workers {two} ({goal('twins at real time, Ray 2 workers against one process', two - one, 0, unit=' twins')})")
-    print(f"fleet of {FULL_TWINS} at full speed, {FULL_END:g} s each: one process {one_full:.1f} twin-s/s "
-          f"(stepping {one_stepping:.1f}), Ray with 2 workers {two_full:.1f} twin-s/s (stepping {two_stepping:.1f}), "
-          f"ratio {two_full / one_full:.2f}")
-
+    ratio = two_full / one_full if two_full and one_full else None
+    print(f"fleet of {FULL_TWINS} at full speed, {FULL_END:g} s each (start-up included): one process "
+          f"{shown(one_full)} twin-s/s (stepping {shown(one_stepping)}), Ray with 2 workers {shown(two_full)} twin-s/s "
+          f"(stepping {shown(two_stepping)}), ratio {shown(ratio, '.2f')} "
+          f"({goal('fleet throughput, Ray 2 workers over one process', ratio, 1.2, unit='x')})")
 
 if __name__ == "__main__":
     main()

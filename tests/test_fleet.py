@@ -172,3 +172,54 @@ def test_a_twin_named_twice_and_a_projects_own_problems_are_located(tmp_path):
     assert any(s.startswith(f"{path}:12:1:") and "already the name of twin 1" in s for s in said), said
     assert any(s.startswith(f"{path}:18:1:") and "twin 'c': its project" in s for s in said), said
     assert any(s.startswith(f"{broken}:") and "step" in s for s in said), said
+
+
+def test_each_twins_alarms_go_to_the_broker_under_its_own_name(tmp_path, broker):
+    """Alarms of a fleet's twins reach the broker with a routing key naming the twin, and say its name."""
+    import json
+    import uuid
+
+    from cotwin.mapping.amqp import connect, declare_exchange
+    from cotwin.twin.fleet.spec import read_fleet
+    from cotwin.twin.fleet.supervisor import Fleet
+
+    url = "amqp://127.0.0.1:5672/%2F"
+    tag = uuid.uuid4().hex[:8]
+    log = write_log(tmp_path / "run.csv", span=6.0)
+    names = [f"left-{tag}", f"right-{tag}"]
+    spec = read_fleet(fleet_file(tmp_path, [{"name": n, "project": str(PROJECT), "pt_log": str(log), "end": 5.0}
+                                            for n in names], fleet=f'alarms = "{url}"\n'))
+    connection = connect(url, "fleet test")
+    try:
+        channel = connection.channel()
+        declare_exchange(channel, "cotwin.twin", "topic", url, "the test")
+        queue = channel.queue_declare("", exclusive=True).method.queue
+        channel.queue_bind(queue, "cotwin.twin", routing_key="twin.alarm.*")
+        summary = Fleet(spec, tmp_path / "out", ray=None).run()
+        assert all(t["state"] == "done" for t in summary["twins"])
+        raised = {t["name"]: t["alarms"] for t in summary["twins"]}
+        assert all(raised[n] > 0 for n in names), raised  # the generated PT strays from the plan's DT
+        got: dict[str, list] = {}
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and sum(len(v) for v in got.values()) < sum(raised.values()):
+            method, _, body = channel.basic_get(queue, auto_ack=True)
+            if method is None:
+                time.sleep(0.1)
+                continue
+            event = json.loads(body)
+            got.setdefault(method.routing_key, []).append(event["twin"])
+        for name in names:
+            assert got.get(f"twin.alarm.{name}") == [name] * raised[name], got
+    finally:
+        connection.close()
+
+
+def test_the_command_reports_a_bad_fleet_file_at_its_place_without_a_traceback(tmp_path):
+    import subprocess
+    import sys
+
+    path = fleet_file(tmp_path, [{"name": "a", "project": "nowhere.toml"}])
+    done = subprocess.run([sys.executable, "-m", "cotwin", "fleet", str(path), "-o", str(tmp_path / "out"), "--ray", "off"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    assert f"{path}:8:1: error: twin 'a': no project file" in done.stderr and "Traceback" not in done.stderr
