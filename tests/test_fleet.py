@@ -223,3 +223,73 @@ def test_the_command_reports_a_bad_fleet_file_at_its_place_without_a_traceback(t
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 1
     assert f"{path}:8:1: error: twin 'a': no project file" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_a_twin_whose_plant_is_killed_is_restarted_once_the_plant_is_back(tmp_path, monkeypatch):
+    """The PT of one twin is an OPC UA plant, killed by PID mid-run and served again: the supervisor restarts
+    that twin (afresh, saying why: a remote PT cannot save its state) and it finishes, as does the other."""
+    import socket
+    import subprocess
+    import sys
+
+    from cotwin.twin.fleet.spec import read_fleet
+    from cotwin.twin.fleet.supervisor import Fleet
+
+    pytest.importorskip("asyncua")
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))  # the plants' operator credentials, read by the twin
+    cell = ROOT / "examples" / "ur5e" / "twin.toml"
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        url = f"opc.tcp://127.0.0.1:{s.getsockname()[1]}"
+    cotwin = str(Path(sys.executable).parent / "cotwin")
+
+    def serve() -> subprocess.Popen:
+        plant = subprocess.Popen([cotwin, "plant", str(cell), "--opcua", url, "--reset-on-connect"],
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        line = plant.stdout.readline()
+        assert line.startswith("serving"), line + plant.stderr.read()
+        return plant
+
+    log = write_log(tmp_path / "run.csv")
+    spec = read_fleet(fleet_file(tmp_path, [
+        {"name": "cell", "project": str(cell), "pt_url": url, "end": 4.0, "realtime": True},
+        {"name": "arm", "project": str(PROJECT), "pt_log": str(log), "end": 2.0}],
+        fleet="checkpoint_every = 5\nmax_restarts = 3\nrestart_delay = 2.0\n"))
+    said: list[str] = []
+    plants = [serve()]
+    try:
+        fleet = Fleet(spec, tmp_path / "out", ray=None, say=said.append)
+        result: dict = {}
+        runner = threading.Thread(target=lambda: result.update(fleet.run()))
+        runner.start()
+        deadline = time.monotonic() + 120
+        while runner.is_alive() and time.monotonic() < deadline:
+            twin = next(t for t in fleet.overview()["twins"] if t["name"] == "cell")
+            if twin["state"] == "running" and (twin.get("time") or 0) >= 1.0:
+                break
+            time.sleep(0.05)
+        plants[0].kill()
+        plants[0].wait(10)
+        plants.append(serve())
+        runner.join(180)
+        twins = {t["name"]: t for t in result["twins"]}
+        assert twins["arm"]["state"] == "done" and twins["arm"]["restarts"] == 0
+        assert twins["cell"]["state"] == "done" and twins["cell"]["restarts"] >= 1, twins["cell"]
+        assert any("twin cell failed" in s and "restarting it afresh (its states cannot be saved" in s for s in said), said
+        assert (tmp_path / "out" / "cell" / f"restart-{twins['cell']['restarts']}" / "dt" / "outputs.csv").is_file()
+    finally:
+        for plant in plants:
+            plant.kill()
+            plant.wait(10)
+            plant.stdout.close()
+            plant.stderr.close()
+
+
+def test_without_ray_the_fleet_names_the_extra_and_the_way_without_it(monkeypatch):
+    import sys
+
+    from cotwin.twin.fleet.supervisor import RayHosts
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # as where the ray extra is not installed
+    with pytest.raises(CotwinError, match=r"pip install 'cotwin\[ray\]'.*--ray off"):
+        RayHosts("auto")

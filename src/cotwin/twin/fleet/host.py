@@ -19,6 +19,9 @@ from pathlib import Path
 from ...diagnostics import CotwinError
 
 log = logging.getLogger("cotwin.fleet")
+# One twin of a host starts at a time: loading an FMU, FMPy changes the process's working directory to the
+# FMU's binaries and back, so two loading at once leave the process in a folder deleted with an FMU.
+_STARTING = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -40,8 +43,9 @@ class TwinWatch:
     simulated time over the wall time it took since it started or resumed) and its lag behind the wall
     clock when it is paced to it (a twin that cannot keep real time is reported, never slowed further)."""
 
-    def __init__(self, every: int):
+    def __init__(self, every: int, started=lambda: None):
         self.every = every
+        self.started = started  # called once both sides are initialised
         self.checkpoint: dict[str, bytes] | None = None
         self.checkpoint_time: float | None = None
         self.checkpoint_step = 0
@@ -57,6 +61,7 @@ class TwinWatch:
     def twin_started(self, twin) -> None:
         self.begun, self.time, self.wall0 = twin.time, twin.time, wallclock.perf_counter()
         self.realtime = bool(twin.realtime)
+        self.started()
         self._save(twin)
 
     def twin_step(self, twin, k: int, t: float) -> None:
@@ -87,7 +92,8 @@ class RunningTwin:
     def __init__(self, job: TwinJob, resume: dict[str, bytes] | None):
         self.job = job
         self.resume = resume
-        self.watch = TwinWatch(job.checkpoint_every)
+        self.watch = TwinWatch(job.checkpoint_every, self._started)
+        self._starting = False
         self.state = "starting"
         self.message: str | None = None
         self.live = None
@@ -103,6 +109,8 @@ class RunningTwin:
         from .spec import twin_project
 
         job, dash = self.job, None
+        _STARTING.acquire()
+        self._starting = True
         try:
             spec = twin_project(job.entry)
             if job.routing_key is not None:
@@ -143,10 +151,17 @@ class RunningTwin:
             if dash is not None:
                 dash.finish("failed", self.message)
         finally:
+            self._started()
             if self.live is not None and self.live._history is not None:
                 self.run_id = self.live._history.run_id
             if dash is not None:
                 dash.stop()
+
+    def _started(self) -> None:
+        """The twin runs (or ended before it could): the next twin of this host may start."""
+        if self._starting:
+            self._starting = False
+            _STARTING.release()
 
     def status(self) -> dict:
         """What the supervisor and the overview show of this twin, with a saved state newer than the last

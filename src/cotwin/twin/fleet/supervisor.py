@@ -288,8 +288,9 @@ class Fleet:
             self.recorder.event(name, record.attempt, record.status.get("run_id"), "given up", t, message)
             return
         record.restart_at = wallclock.monotonic() + self.spec.restart_delay
+        saving = record.status.get("saving")
         where = (f"from its state saved at t = {record.checkpoint_time:g} s" if record.checkpoint is not None
-                 else "afresh (no saved state yet)")
+                 else f"afresh (its states cannot be saved: {saving})" if saving else "afresh (no saved state yet)")
         said = (f"twin {name} failed at t = {t if t is not None else 0:g} s: {message}; restarting it {where} "
                 f"(restart {record.restarts + 1} of at most {self.spec.max_restarts})")
         log.warning(said)
