@@ -110,7 +110,7 @@ def test_overview_page_answers_with_each_twins_state(tmp_path):
 
     log = write_log(tmp_path / "run.csv")
     spec = read_fleet(fleet_file(tmp_path, [
-        {"name": "a", "project": str(PROJECT), "pt_log": str(log), "end": 1.0},
+        {"name": "a", "project": str(PROJECT), "pt_log": str(log), "end": 1.0, "dashboard": "127.0.0.1:0"},
         {"name": "b", "project": str(PROJECT), "pt_log": str(log), "end": 1.0}]))
     fleet = Fleet(spec, tmp_path / "out", ray=None)
     page = FleetPage(fleet.overview, "127.0.0.1", 0).start()
@@ -123,7 +123,10 @@ def test_overview_page_answers_with_each_twins_state(tmp_path):
         after = json.load(urllib.request.urlopen(page.url + "api/fleet", timeout=10))
         assert {t["name"]: t["state"] for t in after["twins"]} == {"a": "done", "b": "done"}
         assert all(t["time"] == pytest.approx(1.0) and t["real_time_factor"] > 0 for t in after["twins"])
+        links = {t["name"]: t["page"] for t in after["twins"]}
+        assert links["a"].startswith("http://127.0.0.1:") and links["b"] is None  # a's own page, served while it ran
         text = urllib.request.urlopen(page.url, timeout=10).read().decode()
+        assert f'<a href="{links["a"]}">open</a>' in text
         assert 'data-twin="a"' in text and 'data-twin="b"' in text and ">done<" in text
         foreign = urllib.request.Request(page.url + "api/fleet", headers={"Host": "198.51.100.7:80"})
         with pytest.raises(urllib.error.HTTPError) as refused:
