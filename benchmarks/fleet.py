@@ -27,7 +27,7 @@ PROJECT = ROOT / "examples" / "ur5e" / "replay.toml"
 SHARED_LOG = ROOT.parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"
 LAG_LIMIT = 0.2  # s: two steps behind the wall clock
 PACED_END = 6.0  # s simulated in a paced trial
-FULL_END = 20.0  # s simulated per twin at full speed
+FULL_END = 60.0  # s simulated per twin at full speed (long enough that start-up, an actor process each, is not the figure)
 FULL_TWINS = 8
 MAX_TWINS = 64
 
