@@ -15,7 +15,7 @@ sys.path.insert(0, str(ROOT / "src"))
 from cotwin.dmodel.fmu import build_fmu  # noqa: E402
 from cotwin.dmodel.interpreter import Interpreter  # noqa: E402
 from cotwin.dmodel.program import build_program  # noqa: E402
-from cotwin.dmodel.runner import FMUDriver  # noqa: E402
+from cotwin.cosim.driver import FMUDriver  # noqa: E402
 from cotwin.dmodel.verify import verify  # noqa: E402
 from cotwin.robosim.check import load_checked  # noqa: E402
 from figures import figure  # noqa: E402

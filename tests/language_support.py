@@ -12,7 +12,7 @@ from cotwin.diagnostics import CotwinError, Severity
 from cotwin.dmodel.fmu import build_fmu
 from cotwin.dmodel.interpreter import ExecutionError, Interpreter
 from cotwin.dmodel.program import build_program
-from cotwin.dmodel.runner import FMUDriver
+from cotwin.cosim.driver import FMUDriver
 from cotwin.robosim.check import check_paths
 
 

@@ -16,7 +16,7 @@ from cotwin.dmodel.fmu import build_fmu, fmu_sources
 from cotwin.dmodel.ports import PortLayout
 from cotwin.dmodel.interpreter import ExecutionError, Interpreter
 from cotwin.dmodel.program import build_program
-from cotwin.dmodel.runner import FMUDriver
+from cotwin.cosim.driver import FMUDriver
 from cotwin.dmodel.verify import verify
 from cotwin.robosim.check import load_checked
 

@@ -102,7 +102,7 @@ def test_an_output_raised_in_several_cycles_of_one_step_is_said_to_be_lost(tmp_p
     called every cycle reaches the platform once per step, and the FMU says the others are lost (once)."""
     from cotwin.dmodel.fmu import build_fmu
     from cotwin.dmodel.program import build_program
-    from cotwin.dmodel.runner import FMUDriver
+    from cotwin.cosim.driver import FMUDriver
     from cotwin.robosim.check import load_checked
 
     (tmp_path / "tick.rst").write_text(TICKER)

@@ -24,7 +24,7 @@ from cotwin.dmodel.fmi3 import build_fmu3
 from cotwin.dmodel.fmu import build_fmu
 from cotwin.dmodel.interpreter import Interpreter
 from cotwin.dmodel.program import build_program
-from cotwin.dmodel.runner import FMUDriver
+from cotwin.cosim.driver import FMUDriver
 from cotwin.robosim.check import load_checked
 from cotwin.twin.clocked import servo_delays
 from cotwin.twin.run import dt_endpoint, load, run_twin

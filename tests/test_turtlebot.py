@@ -18,7 +18,7 @@ import pytest
 from cotwin.diagnostics import CotwinError
 from cotwin.dmodel.fmu import build_fmu
 from cotwin.dmodel.interpreter import Interpreter
-from cotwin.dmodel.runner import FMUDriver
+from cotwin.cosim.driver import FMUDriver
 from cotwin.pmodel.world import load_world
 from cotwin.robosim.check import load_checked
 from cotwin.dmodel.program import build_program

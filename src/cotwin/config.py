@@ -9,6 +9,7 @@ true), numbers must be finite, unknown keys are reported with the known ones.
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 import tomllib
@@ -149,9 +150,7 @@ class Schema:
             spec = self.keys.get(key) or (self.values if self.open else None)
             where = at + (key,)
             if spec is None:
-                known = ", ".join(self.keys) or "none"
-                problems.append(Finding(file.location(where), Severity.ERROR,
-                                        f"unknown key '{key}' in {name} (known: {known})"))
+                problems.append(Finding(file.location(where), Severity.ERROR, unknown_key(key, self.keys, name)))
                 continue
             out[key] = _value(spec, value, file, where, problems, key_name(where))
         for key, spec in self.keys.items():
@@ -165,6 +164,13 @@ class Schema:
                 else:
                     out[key] = spec.default
         return out
+
+
+def unknown_key(key: str, known, name: str) -> str:
+    """The message for a key a table does not take, naming the nearest known key when one is close."""
+    near = difflib.get_close_matches(key, list(known), n=1, cutoff=0.6)
+    hint = f"; did you mean '{near[0]}'?" if near else ""
+    return f"unknown key '{key}' in {name}{hint} (known: {', '.join(known) or 'none'})"
 
 
 def table_name(at: tuple) -> str:

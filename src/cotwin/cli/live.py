@@ -36,10 +36,8 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
     with deviation checking, alarms and history."""
     import signal
-    from dataclasses import replace
-
     from ..twin.history import database_url
-    from ..twin.project import PTSettings, RabbitMQSettings, load_project
+    from ..twin.project import load_project
     from ..twin.run import load
     from ..twin.runtime import LiveTwin
     from .progress import ProgressReport
@@ -49,14 +47,11 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
     spec = load_project(project, pt_log)
     check_timing(spec, step, end)
-    if pt_log is not None:
-        spec.pt = replace(spec.pt, endpoint="replay", log=Path(pt_log)) if spec.pt else PTSettings("replay", log=Path(pt_log))
     if pt_url is not None:
-        spec.pt = pt_with_url(spec.pt, pt_url, pt_log is not None)
+        spec = pt_with_url(spec, pt_url, pt_log is not None)
     if exchange is not None:
-        spec.plan = None
-        spec.rabbitmq = replace(spec.rabbitmq, exchange=exchange) if spec.rabbitmq else RabbitMQSettings(exchange)
-        spec.realtime = True if realtime is None else realtime
+        spec = spec.with_overrides(scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange,
+                                   realtime=True if realtime is None else realtime)
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
     from ..twin.scenario import after_end
@@ -111,26 +106,24 @@ class TwinProgress:
         self.report(round(t, 6), twin.end, f"step {k}")
 
 
-def pt_with_url(pt, url: str, replayed: bool):
-    """The [pt] settings with --pt-url's URL, checked as the project's [pt] url is."""
-    from dataclasses import replace
-
-    from ..twin.project import PTSettings, pt_url_problem
+def pt_with_url(spec, url: str, replayed: bool):
+    """The project with --pt-url's URL as its [pt] url, checked as the project's own is."""
+    from ..twin.project import pt_url_problem
 
     if replayed:
         raise click.UsageError("--pt-url and --pt-log name two different PTs: give one")
-    if pt is None:
-        if not url.startswith("opc.tcp://"):
-            raise click.BadParameter("the project has no [pt] table, so only an OPC UA plant (opc.tcp://HOST:PORT) "
-                                     "can be named here", param_hint="--pt-url")
-        pt = PTSettings("opcua")
-    if pt.endpoint == "replay":
+    pt = spec.pt
+    if pt is None and not url.startswith("opc.tcp://"):
+        raise click.BadParameter("the project has no [pt] table, so only an OPC UA plant (opc.tcp://HOST:PORT) "
+                                 "can be named here", param_hint="--pt-url")
+    endpoint = "opcua" if pt is None else pt.endpoint
+    if endpoint == "replay":
         raise click.BadParameter("the project's PT replays a log ([pt] endpoint = \"replay\"), which has no url",
                                  param_hint="--pt-url")
-    problem = pt_url_problem(pt.endpoint, url)
+    problem = pt_url_problem(endpoint, url)
     if problem is not None:
-        raise click.BadParameter(f"{problem} (for [pt] endpoint '{pt.endpoint}')", param_hint="--pt-url")
-    return replace(pt, url=url)
+        raise click.BadParameter(f"{problem} (for [pt] endpoint '{endpoint}')", param_hint="--pt-url")
+    return spec.with_overrides(pt_endpoint=endpoint, pt_url=url)
 
 
 @main.command()

@@ -246,6 +246,7 @@ def mutants(tests: str, model: tuple[str, ...], module_name: str | None, through
     from ..dmodel.program import build_program
     from ..dmodel.testgen import model_digest
     from ..dmodel.testgen_files import read_suite
+    from ..cosim.driver import FMUDriver
     from ..dmodel.testgen_mutants import analyse, format_report, make_mutants
     from ..robosim.check import load_checked
 
@@ -267,7 +268,7 @@ def mutants(tests: str, model: tuple[str, ...], module_name: str | None, through
 
         builder = (lambda prog, path: build_fmu(prog, path, cc=cc))
     domains = suite.data.get("exploration", {}).get("domains") or {}
-    report = analyse(program, suite, made, files, module_name, domains, builder)
+    report = analyse(program, suite, made, files, module_name, domains, builder, FMUDriver)
     click.echo(format_report(report, suite.criterion))
     if out:
         rows = [{"mutant": o.mutant.name, "operator": o.mutant.operator, "where": o.mutant.where,

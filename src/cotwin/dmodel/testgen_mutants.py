@@ -200,11 +200,10 @@ def run_case(program: Program, cycles: list[dict], parameters: dict | None = Non
     return None
 
 
-def run_case_fmu(program: Program, cycles: list[dict], fmu: Path) -> str | None:
-    """As run_case, through the mutant's FMU (built by the caller) with a stub platform."""
-    from .runner import FMUDriver
-
-    driver = FMUDriver(program, fmu)
+def run_case_fmu(program: Program, cycles: list[dict], fmu: Path, fmu_driver) -> str | None:
+    """As run_case, through the mutant's FMU (built by the caller) with a stub platform; `fmu_driver(program,
+    fmu)` drives it (cotwin.cosim.driver.FMUDriver: the co-simulation layer, above this one)."""
+    driver = fmu_driver(program, fmu)
     try:
         for c in cycles:
             outputs = driver.step(dict(c["inputs"]))
@@ -333,9 +332,13 @@ class MutationReport:
 
 
 def analyse(original: Program, suite: SuiteFile, mutants: list[Mutant], model_files: list[Path],
-            module: str | None = None, domains: dict | None = None, fmu_builder=None) -> MutationReport:
+            module: str | None = None, domains: dict | None = None, fmu_builder=None,
+            fmu_driver=None) -> MutationReport:
     """Run the suite on every mutant and explain the survivors (see module doc). `fmu_builder(program,
-    path)`, when given, runs each case through the mutant's FMU instead of the interpreter."""
+    path)`, when given, runs each case through the mutant's FMU, driven by `fmu_driver(program, fmu)`,
+    instead of the interpreter."""
+    if fmu_builder is not None and fmu_driver is None:
+        raise ValueError("analyse: an fmu_builder needs an fmu_driver (cotwin.cosim.driver.FMUDriver)")
     report = MutationReport()
     memo: dict = {}  # the original's cycles, shared by every survivor's side-by-side exploration
     for mutant in mutants:
@@ -349,7 +352,7 @@ def analyse(original: Program, suite: SuiteFile, mutants: list[Mutant], model_fi
         try:
             fmu = fmu_builder(program, Path(fmu_dir.name) / "mutant.fmu") if fmu_builder else None
             for case in suite.cases:
-                why = run_case_fmu(program, case.cycles, fmu) if fmu else run_case(program, case.cycles)
+                why = run_case_fmu(program, case.cycles, fmu, fmu_driver) if fmu else run_case(program, case.cycles)
                 if why is not None:
                     outcome = Outcome(mutant, "killed", f"{case.name} {why}")
                     break

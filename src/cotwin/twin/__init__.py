@@ -1,1 +1,25 @@
-"""The live twin: projects, the TwinSystem, the RabbitMQ bridge, the PT/DT runtime and the twin's services."""
+"""The twin layer: a project's models assembled into a co-simulation, run as a digital twin beside its
+physical twin, with the services and analyses around it. It may import every cotwin package below it
+(robosim, dmodel, pmodel, mapping, cosim); inside it, each part imports only its own and those before
+it in PARTS (tests/test_layering.py checks both, import by import):
+
+- project (a subpackage): the project file's schema (`project.sections`), reading, overrides and
+  writing (`project.load`, all exported by `cotwin.twin.project`), its reference (`project.doc`).
+  Imports nothing else of the twin.
+- assembly: scenarios and command sources (`scenario`, `commands`, `replay`, `rabbitmq`), the models
+  and units of a twin (`system`, `mapping_unit`, `calibration`), artefacts (`build`, `fmu_slave`),
+  one co-simulated run (`run`, `clocked`, `waits`, `outcomes`), broker accounts (`broker_access`).
+- services: what runs beside a twin: deviation, history, what-if, the publisher, the OPC UA plant,
+  the page (`dashboard`).
+- live: the live twin, PT and DT in lockstep (`runtime`), wiring the services.
+- analysis: many runs or runs judged: sweeps, generated tests run on a twin, walks.
+"""
+
+PARTS: dict[str, tuple[str, ...]] = {
+    "project": ("project",),
+    "assembly": ("commands", "scenario", "replay", "calibration", "rabbitmq", "mapping_unit", "system", "build",
+                 "fmu_slave", "outcomes", "waits", "clocked", "run", "broker_access"),
+    "services": ("deviation", "history", "whatif", "publisher", "plant", "dashboard"),
+    "live": ("runtime",),
+    "analysis": ("sweep", "testing", "walks"),
+}

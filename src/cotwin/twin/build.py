@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Iterable
 
 from .. import __version__
-from ..config import dumps
 from ..diagnostics import CotwinError
 from ..files import check_outputs, open_exclusive, output, write_bytes, write_text
 from .system import TwinSystem
@@ -155,6 +154,9 @@ def build(system: TwinSystem, out: str | Path, cc: str = "cc") -> dict[str, Path
     return written
 
 
+STAGED_SECTIONS = ("models", "scenario", "platform", "monitor", "cosim", "world")  # what the FMUs read
+
+
 def staged_project(system: TwinSystem, stage: Path) -> None:
     """A copy of the project's models and settings in `stage`, as the Python FMUs carry it: the
     platform endpoint and the command source included, so the FMUs drive the same robot."""
@@ -171,23 +173,9 @@ def staged_project(system: TwinSystem, stage: Path) -> None:
             names[path] = name
         return names[path]
 
-    models = {"dmodel": copy(spec.dmodel), "pmodel": copy(spec.pmodel), "mapping": copy(spec.mapping),
-              "module": spec.module, "pmodel_name": spec.pmodel_name}
-    scenario: dict = {}
-    if spec.plan is not None:
-        scenario["commands" if spec.plan.suffix == ".toml" else "plan"] = copy(spec.plan)
-    if spec.rabbitmq is not None:
-        scenario["rabbitmq"] = dict(vars(spec.rabbitmq))
-    platform = {"endpoint": spec.endpoint, "queue": spec.queue, "url": spec.url, "scene": spec.scene,
-                "bricks": [list(b) for b in spec.bricks], "calibration": copy(spec.calibration), "base": spec.base,
-                "stand_in": spec.raw.get("stand_in") or None}
-    cosim = {"step": spec.step, "end": spec.end, "algorithm": spec.algorithm, "realtime": spec.realtime,
-             "log": spec.log, "parameters": spec.parameters or None}
-    monitor = {"joints": spec.mirror_joints, "readings": spec.readings or None}
-    tables = {"models": models, "scenario": scenario, "platform": platform, "monitor": monitor, "cosim": cosim}
-    if spec.raw.get("world"):
-        tables["world"] = spec.raw["world"]
-    (stage / "cotwin.toml").write_text(dumps(tables))
+    staged = spec.with_overrides(models_fmu=None, platform_world=None, world=spec.world.table if spec.world else None)
+    text = staged.to_toml(STAGED_SECTIONS, rebase=lambda path: copy(path) if path.is_file() else None)
+    (stage / "cotwin.toml").write_text(text)
     for mesh in mesh_files(system.models.tree):  # the p-model names them relative to itself
         written = Path(mesh.written)
         if not written.is_absolute() and ".." not in written.parts:
@@ -220,7 +208,7 @@ def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = Non
         staged = [p.read_bytes() for p in sorted(stage.rglob("*")) if p.is_file()]
         script = Path(__file__).parent / "fmu_slave.py"
         base_key = _digest(__version__, script.read_bytes(), *staged,
-                           *_cotwin_sources(("mapping/runtime.py", "mapping/unit.py", "twin/rabbitmq.py")))
+                           *_cotwin_sources(("mapping/runtime.py", "twin/mapping_unit.py", "twin/rabbitmq.py")))
         for unit in roles:
             target = out / unit.fmu
             key = _digest(base_key, unit.instance)

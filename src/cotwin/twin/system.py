@@ -163,7 +163,7 @@ class TwinSystem:
         """`commands` (a list of scenario Commands) replaces the project's source of commands with that
         plan over every port a live source carries (what-if forks and sweeps)."""
         from ..dmodel.ports import PortLayout
-        from ..mapping.unit import mapping_ports
+        from .mapping_unit import mapping_ports
         from .scenario import read_scenario, scenario_ports
 
         self.spec = spec
@@ -350,7 +350,7 @@ class TwinSystem:
         """The platform mapping against `endpoint`, or against what `endpoint()` returns when the unit is
         instantiated (a function: describing the unit then never connects to the robot)."""
         from ..mapping.runtime import Mapping
-        from ..mapping.unit import MappingUnit
+        from .mapping_unit import MappingUnit
 
         models = self.models
         geometry = models.calibration.geometry if models.calibration is not None else None  # any endpoint's IK

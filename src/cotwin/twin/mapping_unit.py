@@ -16,7 +16,7 @@ from ..cosim.units import Port, PythonUnit
 from ..plaindata import fields, finite, of_type, port_value
 from ..dmodel.ports import PortLayout
 from ..dmodel.program import Program, assemble, get_path
-from .runtime import Mapping
+from ..mapping.runtime import Mapping
 
 
 def mapping_ports(program: Program, mapped_events: set[str], commands: set[str], monitored: list[str]) -> list[Port]:
