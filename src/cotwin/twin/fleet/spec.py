@@ -62,7 +62,7 @@ def _history(value: str) -> str | None:
 
 
 def _broker(value: str) -> str | None:
-    from ..project import _amqp_url
+    from ..project.sections import _amqp_url
 
     return _amqp_url(value)
 
