@@ -296,3 +296,34 @@ def test_without_ray_the_fleet_names_the_extra_and_the_way_without_it(monkeypatc
     monkeypatch.setitem(sys.modules, "ray", None)  # as where the ray extra is not installed
     with pytest.raises(CotwinError, match=r"pip install 'cotwin\[ray\]'.*--ray off"):
         RayHosts("auto")
+
+
+def test_a_fleet_records_into_one_postgresql_store(tmp_path, postgres_server):
+    """Every twin's run and the fleet's own events go to the one PostgreSQL store the fleet names."""
+    import uuid
+
+    import psycopg
+
+    from cotwin.twin.fleet.record import fleet_events
+    from cotwin.twin.fleet.spec import read_fleet
+    from cotwin.twin.fleet.supervisor import Fleet
+    from cotwin.twin.history import database_url, list_runs
+
+    name = f"cotwin_test_{uuid.uuid4().hex[:8]}"
+    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    url = f"postgresql://postgres@127.0.0.1:5432/{name}"
+    try:
+        log = write_log(tmp_path / "run.csv", span=3.0)
+        spec = read_fleet(fleet_file(tmp_path, [{"name": n, "project": str(PROJECT), "pt_log": str(log), "end": 1.0}
+                                                for n in ("a", "b")], fleet=f'history = "{url}"\n'))
+        summary = Fleet(spec, tmp_path / "out", ray=None).run()
+        assert all(t["state"] == "done" for t in summary["twins"])
+        assert not (tmp_path / "out" / "history.sqlite").exists()
+        runs = list_runs(database_url(url))
+        events = fleet_events(database_url(url))
+        assert {e["twin"] for e in events if e["event"] == "done"} == {"a", "b"}
+        assert {e["run"] for e in events if e["event"] == "done"} == {r["id"] for r in runs}
+    finally:
+        with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
+            conn.execute(f'DROP DATABASE "{name}" WITH (FORCE)')

@@ -60,7 +60,8 @@ def fleet_events(url: str, fleet: str | None = None) -> list[dict]:
     from ..history import _reading
 
     def read(engine) -> list[dict]:
-        if not sa.inspect(engine).has_table("fleet_twins"):
+        schema = engine.get_execution_options().get("schema_translate_map", {}).get(None)  # PostgreSQL: cotwin's
+        if not sa.inspect(engine).has_table("fleet_twins", schema=schema):
             return []
         query = sa.select(fleet_twins).order_by(fleet_twins.c.wall)
         if fleet is not None:
