@@ -257,7 +257,7 @@ def test_a_twin_whose_plant_is_killed_is_restarted_once_the_plant_is_back(tmp_pa
     spec = read_fleet(fleet_file(tmp_path, [
         {"name": "cell", "project": str(cell), "pt_url": url, "end": 4.0, "realtime": True},
         {"name": "arm", "project": str(PROJECT), "pt_log": str(log), "end": 2.0}],
-        fleet="checkpoint_every = 5\nmax_restarts = 3\nrestart_delay = 2.0\n"))
+        fleet="checkpoint_every = 5\nmax_restarts = 15\nrestart_delay = 2.0\n"))  # a plant starts in seconds
     said: list[str] = []
     plants = [serve()]
     try:
