@@ -38,6 +38,7 @@ MODULES = [
     "turtlebot",     # the TurtleBot3's random walks
     "dashboard",     # the dashboard's cost against the same twin without it; page load
     "convergence",   # a DT resynced on alarm against never, the payload estimate against the truth (OPC UA plant)
+    "fleet",         # UR5e twins kept at real time, one process against Ray with 2 workers; full-speed throughput
 ]
 HELPERS = {"run", "figures", "fmicalls"}  # imported by the modules, not run
 

@@ -124,6 +124,28 @@ class ReplayEndpoint:
         _, qd = self.recording.at(self.recording_time())
         return {j: 0.0 for j in self._held} | dict(zip(self.recording.joints, map(float, qd)))
 
+    # ---- state (a twin restarted from its last saved state goes on where the replay was) ----
+    def snapshot(self) -> dict:
+        """Where the replay is: its time, its alignment and the joints it holds at commanded goals (the goals
+        it took before are a report of the run so far, not state)."""
+        return {"time": self.time, "offset": self.offset, "held": dict(self._held)}
+
+    def restore(self, snapshot: dict) -> None:
+        """Continue from a snapshot, checked against this recording's robot first."""
+        from ..plaindata import fields, finite, of_type
+
+        fields(snapshot, "replay", ("time", "offset", "held"))
+        time = finite(snapshot["time"], "replay's time")
+        offset = None if snapshot["offset"] is None else finite(snapshot["offset"], "replay's offset")
+        held = of_type(snapshot["held"], dict, "replay's held joints")
+        unknown = [j for j in held if j not in self._held]
+        if unknown:
+            raise CotwinError(f"the saved replay holds joints {', '.join(map(str, unknown))[:200]}, which are not "
+                              f"joints of p-model {self.tree.name}")
+        self.time, self.offset = time, offset
+        self._held = {j: finite(v, f"replay's held {j}") for j, v in held.items()} | \
+            {j: v for j, v in self._held.items() if j not in held}
+
     def read_sensors(self) -> dict[str, float]:
         positions, velocities = self.joint_positions(), self.joint_velocities()
         out = {}

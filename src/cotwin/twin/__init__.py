@@ -12,7 +12,8 @@ it in PARTS (tests/test_layering.py checks both, import by import):
 - services: what runs beside a twin: deviation, history, what-if, the publisher, the OPC UA plant,
   the page (`dashboard`).
 - live: the live twin, PT and DT in lockstep (`runtime`), wiring the services.
-- analysis: many runs or runs judged: sweeps, generated tests run on a twin, walks.
+- analysis: many runs or runs judged: sweeps, generated tests run on a twin, walks, fleets of live
+  twins (`fleet`: on Ray, supervised, with an overview page).
 """
 
 PARTS: dict[str, tuple[str, ...]] = {
@@ -21,5 +22,5 @@ PARTS: dict[str, tuple[str, ...]] = {
                  "fmu_slave", "outcomes", "waits", "clocked", "convergence", "run", "broker_access"),
     "services": ("deviation", "history", "whatif", "publisher", "plant", "dashboard"),
     "live": ("runtime",),
-    "analysis": ("sweep", "testing", "walks"),
+    "analysis": ("sweep", "testing", "walks", "fleet"),
 }

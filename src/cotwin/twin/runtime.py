@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..cosim.algorithm import UNSET, algorithm as make_algorithm
-from ..cosim.execution import Execution, RunResult, ended_early, step_count
+from ..cosim.execution import Execution, RunResult, ended_early, saved_execution, step_count
 from ..cosim.observers import CSVWriter, StateFile, epoch_of
 from ..diagnostics import CotwinError, Finding, Severity
 from ..files import write_text
@@ -107,8 +107,9 @@ class LiveTwin:
     def __init__(self, system: TwinSystem, out: str | Path, pt=None, dt=None, step: float | None = None,
                  end: float | None = None, algorithm: str | None = None, realtime: bool | None = None,
                  history_url: str | None = None, alarms_url: str | None = None, observers=(), cc: str = "cc",
-                 whatif_url: str | None = None, restart: bool = False):
+                 whatif_url: str | None = None, restart: bool = False, resume: dict[str, bytes] | None = None):
         spec = system.spec
+        self.resume = resume  # side -> its saved execution state: go on from there (a fleet's restarted twin)
         self.restart = restart  # a failed step of a d-model FMU is retried in a new process from its last good state
         self.system = system
         self.out = Path(out)
@@ -177,7 +178,8 @@ class LiveTwin:
         writer = CSVWriter(self.out / name / "outputs.csv")
         watch, ledger = WaitWatch(self.system, prefix=f"{name.upper()}: "), CommandLedger(self.system)
         observers = [writer, watch, ledger] + ([StateFile(self.out / "state")] if name == "dt" else [])  # where a what-if may start
-        execution = Execution(cosim, make_algorithm(self.algorithm), self.step_size, 0.0, observers)
+        start = 0.0 if self.resume is None else saved_execution(self.resume[name])["time"]
+        execution = Execution(cosim, make_algorithm(self.algorithm), self.step_size, start, observers)
         units = {u.role: cosim.units[u.name] for u in self.system.units}
         return Side(name, execution, writer, units, watch, ledger)
 
@@ -308,14 +310,20 @@ class LiveTwin:
         total = step_count(self.end, self.step_size)
         status, message = "failed", None
         try:
+            if self.resume is not None:  # both sides from their saved states
+                for side in (pt, dt):
+                    side.execution.set_state(self.resume[side.name])
+                self.steps, self.time = pt.execution.steps, pt.execution.time
+            else:
+                pt.execution.initialize()
+                place = getattr(self.sides["dt"].units["mapping"].mapping.endpoint, "place", None)
+                if place is not None:  # the DT starts where the PT is
+                    place(self.sides["pt"].units["mapping"].mapping.endpoint.joint_positions())
+                dt.execution.initialize()
             pt.execution.total_steps = dt.execution.total_steps = total
-            pt.execution.initialize()
-            place = getattr(self.sides["dt"].units["mapping"].mapping.endpoint, "place", None)
-            if place is not None:  # the DT starts where the PT is
-                place(self.sides["pt"].units["mapping"].mapping.endpoint.joint_positions())
-            dt.execution.initialize()
             self._prepare_recording()
-            self._record(0)
+            self._record(self.steps)
+            begun = self.time
             for o in self.observers:
                 getattr(o, "twin_started", lambda twin: None)(self)
             started = wallclock.perf_counter()
@@ -335,7 +343,7 @@ class LiveTwin:
                 for o in self.observers:
                     o.twin_step(self, self.steps, self.time)
                 if self.realtime:
-                    ahead = self.time - (wallclock.perf_counter() - started)
+                    ahead = self.time - begun - (wallclock.perf_counter() - started)
                     if ahead > 0:
                         wallclock.sleep(ahead)
             status = "done" if not self._stop else "stopped"
