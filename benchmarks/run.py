@@ -30,12 +30,14 @@ MODULES = [
     "mapping",       # compiled mapping expressions, against the interpreting evaluator
     "pmodel",        # the scene's physics, against the robot alone
     "twin",          # the 20 s experiment's real-time factors; the master against libcosim, like for like
+    "fused",         # where a step's time goes; the twin's speed as a share of physics alone (issue 23)
     "whatif",        # one what-if against the same span run straight; sweeps on one process, a pool, Ray
     "live",          # command latency through RabbitMQ; PT+DT lockstep against one twin
     "opcua",         # OPC UA Advance against the embedded endpoint and the broker
     "calibration",   # the fit against one replay
     "turtlebot",     # the TurtleBot3's random walks
     "dashboard",     # the dashboard's cost against the same twin without it; page load
+    "convergence",   # a DT resynced on alarm against never, the payload estimate against the truth (OPC UA plant)
 ]
 HELPERS = {"run", "figures", "fmicalls"}  # imported by the modules, not run
 

@@ -62,7 +62,8 @@ def test_a_long_run_is_read_in_bounded_pages(tmp_path):
         gaps = {round(b - a, 6) for a, b in zip(times, times[1:-1])}
         assert len(gaps) == 1  # evenly spaced
         assert all(values == [pytest.approx(t * 100), pytest.approx(-t * 100)] for t, values in data["samples"][side])
-    assert data["counts"] == {"pt": 20_000, "dt": 20_000, "commands": 20_000, "states": 0, "alarms": 0}
+    assert data["counts"] == {"pt": 20_000, "dt": 20_000, "commands": 20_000, "states": 0, "alarms": 0,
+                              "corrections": 0}
     assert len(data["commands"]) == 100 and data["commands"][0]["step"] == 0
     with Dashboard(None, port=0, mode="history", history_url=url) as dash:
         code, page = _get(dash.url + f"api/history/{run}")

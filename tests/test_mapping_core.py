@@ -71,3 +71,21 @@ def test_compiled_and_interpreted_mappings_run_the_same_twin(project, tmp_path, 
     assert compiled.mapping.executed == interpreted.mapping.executed
     assert len(compiled.mapping.executed) >= 4
     assert compiled.csv.read_bytes() == interpreted.csv.read_bytes()
+
+
+def test_a_sensor_the_platform_stops_providing_is_a_located_error_in_both_forms():
+    """A reading missing from the platform's sensors (compiled form: looked up in the step's readings
+    directly) fails naming the sensor and the place, as the interpreting form does, never a KeyError."""
+    from conftest import EXAMPLES
+
+    twin = load(EXAMPLES / "ur5e" / "cotwin.toml").models
+    missing = "ur5e::base_link::VS1.output_vel"
+    for compiled in (True, False):
+        mapping = _mapping(twin, compiled)
+        mapping.start_mapping()
+        assert mapping.get_event("robotStopped") in (True, False)
+        read = mapping.endpoint.read_sensors
+        mapping.endpoint.read_sensors = lambda: {k: v for k, v in read().items() if k != missing}
+        mapping.step(0.01)
+        with pytest.raises(CotwinError, match=rf"mapping\.pm:\d+:\d+.*does not provide sensor '{missing}'"):
+            mapping.get_event("robotStopped")

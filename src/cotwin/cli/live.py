@@ -93,6 +93,10 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
                f"(real-time factor {r.real_time_factor:.1f}), {state}")
     click.echo(f"deviation: {result.deviation['alarms']} alarm(s); report {result.out / 'deviation.json'}; "
                f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
+    if result.convergence:
+        from ..twin.convergence import summary
+
+        click.echo(summary(result.convergence))
     outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
 
 

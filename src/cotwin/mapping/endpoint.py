@@ -9,7 +9,7 @@ this interface plugs in without touching the mapping.
 
 from __future__ import annotations
 
-from dataclasses import fields as dataclass_fields
+from dataclasses import fields as dataclass_fields, replace
 from typing import Protocol
 
 import numpy as np
@@ -66,6 +66,18 @@ class SimulatedEndpoint:
         self.sim.reset(known)
         self.segment = None
         self.direct = {}
+
+    def resync(self, positions: dict[str, float], velocities: dict[str, float] | None = None) -> None:
+        """Take a measured joint state (a live twin's DT corrected to its PT). A move in progress continues
+        from it: its set-points are re-timed to where along the move the measured joints are (else the
+        servos would pull the robot straight back to the old set-point, undoing the correction)."""
+        known = {n: v for n, v in positions.items() if n in self.sim.joint_names}
+        speeds = {n: v for n, v in (velocities or {}).items() if n in self.sim.joint_names}
+        self.sim.set_joint_state(known, speeds)
+        segment = self.segment
+        if segment is not None:
+            self.segment = retimed(segment, known, self.sim.time)
+            self._held = None  # its set-point is written again at the next step
 
     def read_sensors(self) -> dict[str, float]:
         return self.sim.read_sensors()
@@ -148,13 +160,14 @@ class SimulatedEndpoint:
         """The endpoint's state as plain data: MuJoCo's integration state and the trajectory in flight."""
         state = self.sim.get_state()
         return {"simulator": state.vector, "scans": state.scans, "derived": state.derived,
-                "segment": trajectory_data(self.segment), "direct": dict(self.direct)}
+                "segment": trajectory_data(self.segment), "direct": dict(self.direct),
+                "bodies": self.sim.changed_bodies()}
 
     def restore(self, snapshot: dict) -> None:
         """Continue from a snapshot, checked against this platform first: the simulator's state (its size,
         finite numbers, the ray sensors' readings), the trajectory's joints and numbers, the speeds and
-        efforts by joint."""
-        fields(snapshot, "platform", ("simulator", "segment"), ("scans", "direct", "derived"))
+        efforts by joint, the masses of bodies changed while running (an estimated payload)."""
+        fields(snapshot, "platform", ("simulator", "segment"), ("scans", "direct", "derived", "bodies"))
         of_type(snapshot["simulator"], np.ndarray, "platform's simulator state")
         direct = of_type(snapshot.get("direct", {}), dict, "platform's commanded speeds and efforts")
         commanded = {j.name for j in self.tree.actuated} - self._positioned
@@ -164,11 +177,34 @@ class SimulatedEndpoint:
                                   f"speed- or effort-driven joint of this platform")
             finite(value, f"commanded speed or effort of {joint}")
         segment = trajectory_from(snapshot["segment"], self._positioned)
+        self.sim.set_bodies(of_type(snapshot.get("bodies", {}), dict, "platform's changed bodies"))  # e.g. a payload
         self.sim.set_state(SimState(snapshot["simulator"], tuple(snapshot.get("scans", ())),
                                     tuple(of_type(snapshot.get("derived", ()), tuple, "platform's derived quantities"))))
         self.direct = {j: float(v) for j, v in direct.items()}
         self.segment = segment
         self._held = None  # written again at the next step (the same value: MuJoCo's controls are restored)
+
+
+def retimed(segment: Segment, positions: dict[str, float], now: float) -> Segment:
+    """`segment` shifted in time so that its set-point at `now` is the point of the move nearest to
+    `positions` (the fraction along start -> goal, by least squares over the moving joints); unchanged when
+    nothing moves or the joints are not yet on their way and the move has not begun."""
+    moving = [j for j in segment.goal if j in positions and abs(segment.goal[j] - segment.start[j]) > 1e-12]
+    if not moving or segment.duration <= 0:
+        return segment
+    span = np.array([segment.goal[j] - segment.start[j] for j in moving])
+    offset = np.array([positions[j] - segment.start[j] for j in moving])
+    s = float(np.clip(offset @ span / (span @ span), 0.0, 1.0))
+    if s <= 0.0 and segment.fraction(now) <= 0.0:
+        return segment  # not begun on either side: the move starts when it was planned to
+    low, high = 0.0, segment.duration  # the elapsed time at which the move's fraction is s (it never decreases)
+    for _ in range(60):
+        mid = 0.5 * (low + high)
+        if segment.fraction(segment.t0 + mid) < s:
+            low = mid
+        else:
+            high = mid
+    return replace(segment, t0=now - high)
 
 
 TRAJECTORIES = {"Segment": Segment}  # the trajectory kinds an endpoint state may hold, by class name

@@ -230,11 +230,26 @@ class _MappingCompiler(ClosureCompiler):
         if key is None:
             return None
         rt, loc = self.rt, e.loc
-        return lambda scope: rt.sensor(key, loc)
+
+        def run(scope):  # the step's readings read once per step (Mapping.sensor_readings), then a look-up
+            readings = rt._readings
+            if readings is None:
+                readings = rt.sensor_readings()
+            if key in readings:
+                return readings[key]
+            return rt.sensor(key, loc)  # a located error naming the missing sensor
+        return run
 
     def compile_call(self, e: s.Call):
-        rt = self.rt
-        return lambda scope: rt.function(e)
+        rt, found = self.rt, []
+
+        def run(scope):  # the registry's function looked up at its first call (an unknown one fails there)
+            if found:
+                return found[0]
+            function = rt.function(e)
+            found.append(function)
+            return function
+        return run
 
     def visit_IndexAccess(self, e: s.IndexAccess):
         base, position, loc = self.visit(e.base), self.visit(e.index), e.loc

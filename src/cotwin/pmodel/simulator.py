@@ -104,6 +104,7 @@ class PlatformSimulator:
         self.model = load(self.xml, tree)  # a refusal names the p-model element
         self.data = mujoco.MjData(self.model)
         self.timestep = timestep
+        self._inertial0 = (self.model.body_mass.copy(), self.model.body_inertia.copy())  # as compiled
         self._joint_qpos = {j.name: self.model.joint(j.name).qposadr[0] for j in tree.actuated}
         self._joint_dof = {j.name: self.model.joint(j.name).dofadr[0] for j in tree.actuated}
         self._actuator: dict[str, int] = {}
@@ -231,6 +232,44 @@ class PlatformSimulator:
 
     def joint_velocities(self) -> dict[str, float]:
         return dict(zip(self._joints, self._qvel[self._qvel_index].tolist()))
+
+    def set_joint_state(self, positions: dict[str, float], velocities: dict[str, float] | None = None) -> None:
+        """Put these joints at these positions and velocities (a live twin's resync to its PT's measured
+        state), the rest of the state kept, and recompute what is read between steps (mj_forward)."""
+        for name, value in positions.items():
+            self._qpos[self._joint_adr(name)] = float(value)
+        for name, value in (velocities or {}).items():
+            self._joint_adr(name)
+            self._qvel[self._joint_dof[name]] = float(value)
+        self._check()
+        mujoco.mj_forward(self.model, self.data)
+
+    def changed_bodies(self) -> dict[str, list[float]]:
+        """Bodies whose mass or inertia was changed since the model was compiled (an estimated payload given to
+        a DT), by name: [mass, ixx, iyy, izz]; a saved state carries them, as the model does not."""
+        mass0, inertia0 = self._inertial0
+        model = self.model
+        changed = np.flatnonzero((model.body_mass != mass0) | np.any(model.body_inertia != inertia0, axis=1))
+        return {model.body(int(b)).name: [float(model.body_mass[b]), *map(float, model.body_inertia[b])] for b in changed}
+
+    def set_bodies(self, bodies: dict) -> None:
+        """Give bodies a mass and principal inertia ([mass, ixx, iyy, izz] by name, as `changed_bodies` says),
+        each checked: a body of this model, four finite numbers >= 0."""
+        checked = {}
+        for name, values in bodies.items():
+            try:
+                body = self.model.body(name).id if isinstance(name, str) else None
+            except KeyError:
+                body = None
+            if body is None:
+                raise CotwinError(f"the saved state changes a body {str(name)[:60]!r} that this model does not have")
+            if not (isinstance(values, (list, tuple)) and len(values) == 4 and all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0 for v in values)):
+                raise CotwinError(f"the saved state's mass and inertia of body {name!r} are not 4 finite numbers >= 0")
+            checked[body] = values
+        for body, (mass, *inertia) in checked.items():
+            self.model.body_mass[body] = mass
+            self.model.body_inertia[body] = inertia
 
     def steps_for(self, dt: float) -> int:
         """The number of physics steps in dt seconds (dt rounded to whole steps)."""

@@ -18,7 +18,7 @@ it in PARTS (tests/test_layering.py checks both, import by import):
 PARTS: dict[str, tuple[str, ...]] = {
     "project": ("project",),
     "assembly": ("commands", "scenario", "replay", "calibration", "rabbitmq", "mapping_unit", "system", "build",
-                 "fmu_slave", "outcomes", "waits", "clocked", "run", "broker_access"),
+                 "fmu_slave", "outcomes", "waits", "clocked", "convergence", "run", "broker_access"),
     "services": ("deviation", "history", "whatif", "publisher", "plant", "dashboard"),
     "live": ("runtime",),
     "analysis": ("sweep", "testing", "walks"),

@@ -2,7 +2,8 @@
 and alarm of a run, in SQLite (embedded, the default) or PostgreSQL, through SQLAlchemy Core.
 
 Tables: `runs` (one per run), `samples` (run, side, step, time, wall, values as JSON), `commands`,
-`states` (d-model state changes) and `alarms` (deviation events). Writes are queued and committed in
+`states` (d-model state changes), `alarms` (deviation events) and `corrections` (the DT corrected towards
+the PT: cotwin.twin.convergence). Writes are queued and committed in
 batches by a writer thread, so recording never holds the twin up; `close()` waits for the queue.
 `export_csv` writes a run's side back as a Maestro-format CSV (what `cotwin history export` does).
 
@@ -78,6 +79,18 @@ alarms = sa.Table(
     sa.Column("variable", sa.String(256), nullable=False),
     sa.Column("state", sa.String(16), nullable=False),
     sa.Column("event", sa.Text, nullable=False),
+)
+
+corrections = sa.Table(  # the DT corrected towards the PT (cotwin.twin.convergence): resyncs, estimates applied
+    "corrections", metadata,
+    sa.Column("run", sa.Integer, sa.ForeignKey("runs.id"), nullable=False),
+    sa.Column("step", sa.Integer, nullable=False),
+    sa.Column("time", sa.Float, nullable=False),
+    sa.Column("wall", sa.Float, nullable=False),
+    sa.Column("kind", sa.String(32), nullable=False),  # resync | payload
+    sa.Column("reason", sa.Text, nullable=False),
+    sa.Column("size", sa.Float, nullable=False),  # resync: largest joint difference removed; payload: kg added
+    sa.Column("event", sa.Text, nullable=False),  # the whole correction as JSON
 )
 
 
@@ -266,6 +279,11 @@ class HistoryRecorder:
         self._queue.put((alarms, {"run": self.run_id, "time": event["time"], "wall": wallclock.time(),
                                   "variable": event["variable"], "state": event["state"], "event": json.dumps(event)}))
 
+    def record_correction(self, event: dict) -> None:
+        self._queue.put((corrections, {"run": self.run_id, "step": event["step"], "time": event["time"],
+                                       "wall": wallclock.time(), "kind": event["kind"], "reason": event["reason"],
+                                       "size": event["size"], "event": json.dumps(event)}))
+
     def close(self, status: str = "done", message: str | None = None) -> None:
         self._queue.put(None)
         self._thread.join()
@@ -375,6 +393,10 @@ def read_run(url: str, run_id: int, now: float | None = None, max_points: int | 
                 raise CotwinError(f"run {run_id} in the history {_redact(url)} is damaged: {err}") from None
             out["commands"] = [dict(r) for r in _events(conn, commands, run_id, commands.c.step, max_events, counts)]
             out["states"] = [dict(r) for r in _events(conn, states, run_id, states.c.step, max_events, counts)]
+            schema = engine.get_execution_options().get("schema_translate_map", {}).get(None)
+            out["corrections"] = [dict(r) for r in _events(conn, corrections, run_id, corrections.c.step, max_events,
+                                                           counts)] \
+                if sa.inspect(conn).has_table("corrections", schema=schema) else []  # a store made before them
         return out
 
     return _reading(url, read)

@@ -39,10 +39,13 @@ def simulated_endpoint(system: TwinSystem):
     from ..mapping.endpoint import SimulatedEndpoint
     from ..pmodel.simulator import PlatformSimulator
 
+    from .convergence import estimates_payload, payload_simulator
+
     models = system.models
     calibration = models.calibration
-    return SimulatedEndpoint(PlatformSimulator(models.tree, models.scene, base=system.spec.base),
-                             calibration and calibration.profile, calibration and calibration.geometry)
+    sim = payload_simulator(models.tree, models.scene, system.spec.base) if estimates_payload(system.spec) else \
+        PlatformSimulator(models.tree, models.scene, base=system.spec.base)  # [convergence] may give it a payload
+    return SimulatedEndpoint(sim, calibration and calibration.profile, calibration and calibration.geometry)
 
 
 def python_unit(project: str | Path, role: str):

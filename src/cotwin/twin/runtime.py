@@ -97,6 +97,7 @@ class LiveResult:
     run_id: int | None
     sides: dict[str, Side] = field(default_factory=dict)
     alarms: list[dict] = field(default_factory=list)
+    convergence: dict = field(default_factory=dict)  # [convergence]: its corrections and estimate
 
 
 class LiveTwin:
@@ -137,6 +138,7 @@ class LiveTwin:
                                         publish=self._alarm, twin=spec.path.stem)
         self._publisher = None
         self._history = None
+        self.convergence = None  # cotwin.twin.convergence.Convergence, when the project has [convergence]
         self._bridge = None
         self._stop = False
         self.looping = False  # in the step loop: a stop request ends the run after the current step
@@ -191,6 +193,12 @@ class LiveTwin:
                                                                           "outputs.csv.part")]
         writes += ["state", "deviation.json", "figure.png", *ARTEFACTS, *([store] if store else [])]
         with folder_lock(self.out, writes, spec.inputs):
+            settings = spec.convergence
+            if settings is not None and settings.active:  # checked against the models before anything is built
+                from .convergence import Convergence
+
+                self.convergence = Convergence(settings, self.system)
+                self.observers.insert(0, self.convergence)  # the DT corrected before anyone looks at it
             fmu = dmodel_fmu(self.system, self.out, self.cc)
             pt_ep = self.pt_endpoint if self.pt_endpoint is not None else pt_endpoint(self.system)
             self._warn_if_outlasting(pt_ep)
@@ -202,6 +210,8 @@ class LiveTwin:
                 columns = {n: [f"{u}.{v}" for u, v in s.execution.system.observed()] for n, s in self.sides.items()}
                 self._history = HistoryRecorder(url, str(spec.path), "twin", self.step_size, self.algorithm, columns)
                 self._publisher = self._alarm_publisher()
+                if self.convergence is not None:
+                    self.convergence.history = self._history
                 if self.whatif_url is not None:
                     from .whatif import WhatIfService
 
@@ -342,11 +352,14 @@ class LiveTwin:
                 side.execution.close(error)
             report = self.monitor.report()
             report["pt"] = self.system.spec.pt.endpoint if self.system.spec.pt else "custom"
+            if self.convergence is not None:
+                report["convergence"] = self.convergence.report()
             write_text(self.out / "deviation.json", json.dumps(report, indent=1) + "\n")
             if self._history is not None:
                 self._history.close(status, message)
         result = LiveResult(pt.execution.result(), dt.execution.result(), report, self.out, url,
-                            self._history.run_id if self._history else None, dict(self.sides), list(self.monitor.events))
+                            self._history.run_id if self._history else None, dict(self.sides), list(self.monitor.events),
+                            report.get("convergence", {}))
         if status == "done":
             self._figure()
         return result

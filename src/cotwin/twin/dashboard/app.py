@@ -184,7 +184,8 @@ def history_run(url: str, run_id: int, max_points: int = 4000) -> dict:
         raise CotwinError(f"run {run_id}: its samples do not match its columns (the store is damaged)") from None
     run = dict(data["run"])
     return {"run": run, "sides": sides, "states": data["states"], "alarms": data["alarms"],
-            "commands": data["commands"], "counts": data["counts"]}
+            "commands": data["commands"], "counts": data["counts"],
+            "corrections": [{k: c[k] for k in ("time", "kind", "reason", "size")} for c in data.get("corrections", [])]}
 
 
 class Dashboard:

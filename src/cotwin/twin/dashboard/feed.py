@@ -65,7 +65,7 @@ class Ring:
 
 class DashboardFeed(Observer):
     """Samples `(time, wall, [values side 1, states side 1, values side 2, ...])` per step, and events
-    (dicts with `kind` = command | op | alarm) as they happen (see module doc)."""
+    (dicts with `kind` = command | op | alarm | correction) as they happen (see module doc)."""
 
     def __init__(self, system: TwinSystem, capacity: int = 1 << 14, max_rate: float = 500.0,
                  event_capacity: int = 1 << 12):
@@ -98,6 +98,8 @@ class DashboardFeed(Observer):
         self._seen_ops: list[int] = []
         self._monitor = None
         self._seen_alarms = 0
+        self._corrections: list = []  # a LiveTwin's [convergence] corrections (cotwin.twin.convergence)
+        self._seen_corrections = 0
 
     # ---- attaching ----
     def _attach(self, executions: dict, monitor=None, step: float | None = None, end: float | None = None) -> None:
@@ -119,6 +121,9 @@ class DashboardFeed(Observer):
     # a LiveTwin's observer
     def twin_started(self, twin) -> None:
         self._attach({name: side.execution for name, side in twin.sides.items()}, twin.monitor, twin.step_size, twin.end)
+        if twin.convergence is not None:
+            self._corrections = twin.convergence.events
+            self._seen_corrections = len(self._corrections)
 
     def twin_step(self, twin, k: int, t: float) -> None:
         self._capture(t)
@@ -179,6 +184,10 @@ class DashboardFeed(Observer):
             for event in monitor.events[self._seen_alarms:]:
                 self.events.append({"kind": "alarm", **event})
             self._seen_alarms = len(monitor.events)
+        if len(self._corrections) > self._seen_corrections:  # the DT resynced or given an estimate: a marker
+            for event in self._corrections[self._seen_corrections:]:
+                self.events.append({**event, "kind": "correction", "correction": event["kind"]})
+            self._seen_corrections = len(self._corrections)
 
     # ---- the server's side ----
     def status(self) -> dict:

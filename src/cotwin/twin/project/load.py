@@ -72,6 +72,7 @@ class TwinProject:
     readings: dict[str, str] = field(default_factory=dict)  # [monitor] readings
     parameters: dict[str, object] = field(default_factory=dict)  # [cosim] parameters of the d-model FMU
     panels: list[tuple[str, list[str], str]] | None = None  # [figure] panels: (label, unit.variable, style)
+    convergence: object | None = None  # [convergence] (project.sections.Convergence): the DT pulled towards its PT
     fmu: Path | None = None  # [models] fmu: a d-model FMU built elsewhere, run in place of the one built from dmodel
     isolate: bool | None = None  # [cosim] isolate: the d-model FMU in a process of its own (None: if cotwin did not build it)
     unit_timeout: float = DEFAULT_TIMEOUT  # [cosim] unit_timeout: s an isolated FMU's call may take
@@ -223,6 +224,7 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     spec.parameters, spec.panels = dict(cosim.parameters), panels
     spec.fmu = fmu
     spec.isolate, spec.unit_timeout = cosim.isolate, float(cosim.unit_timeout)
+    spec.convergence = s.convergence
     if world_file is not None:
         spec.world_file = world_file.path
     spec.locations = {key: file.location(key) for key in file.where}

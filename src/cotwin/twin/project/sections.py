@@ -353,6 +353,54 @@ class Plant:
     noise: Any = setting(PLANT_MEANINGS["noise"], PLANT.keys["noise"])
 
 
+RESYNC = re.compile(r"every\s+(\d+)\s+steps?")
+MAX_EVERY = 10 ** 6
+
+
+def _resync(value: str) -> str | None:
+    if value in ("never", "on-alarm"):
+        return None
+    match = RESYNC.fullmatch(value.strip())
+    if match is None:
+        return f'must be "never", "on-alarm" or "every N steps", got {shown(value)}'
+    if not 1 <= int(match.group(1)) <= MAX_EVERY:
+        return f"every N steps takes N in 1..{MAX_EVERY}, got {match.group(1)}"
+    return None
+
+
+@_section
+class Convergence:
+    """A live twin's DT pulled towards its PT (cotwin.twin.convergence)."""
+
+    resync: str = setting('when the PT\'s joint state is put into the DT: "never", "on-alarm" (every step with an '
+                          'alarm raised or open) or "every N steps"', Key("str", "never", check=_resync))
+    estimate: str = setting('"payload": the mass at the tool estimated from the PT\'s joint torques at rest',
+                            Key("str", "none", choices=("none", "payload")))
+    payload_std: float = setting("kg: the estimate is applied to the DT once its standard deviation is below this",
+                                 Key("positive", 0.05, check=within(0, 1000, "kg")))
+    rest_speed: float = setting("rad/s (m/s): torques are taken only while every joint is slower than this",
+                                Key("positive", 0.002, check=within(0, 100, "rad/s")))
+
+    @property
+    def mode(self) -> str:
+        """never | on-alarm | every"""
+        return "every" if RESYNC.fullmatch(self.resync.strip()) else self.resync
+
+    @property
+    def every(self) -> int:
+        """resync = "every N steps": N (else 0)."""
+        match = RESYNC.fullmatch(self.resync.strip())
+        return int(match.group(1)) if match else 0
+
+    @property
+    def active(self) -> bool:
+        return self.resync != "never" or self.estimate != "none"
+
+    def as_dict(self) -> dict:
+        return {"resync": self.resync, "estimate": self.estimate, "payload_std": self.payload_std,
+                "rest_speed": self.rest_speed}
+
+
 # The project file's tables in order: adding a section is a dataclass above (or in its own module) and one
 # entry here.
 SECTIONS: dict[str, Any] = {
@@ -370,6 +418,7 @@ SECTIONS: dict[str, Any] = {
     "deviation": setting("Deviation checking.", section=DeviationSettings),
     "history": setting("History.", section=History),
     "plant": setting("A perturbed plant.", section=Plant, optional=True),
+    "convergence": setting("The DT pulled towards its PT (a live twin).", section=Convergence, optional=True),
 }
 
 

@@ -74,11 +74,13 @@ export class HistoryView {
     }
     const fired = data.commands.filter((c) => c.value === "true");
     for (const c of fired) this.plot.markers.push({ time: c.time, label: c.port });
+    for (const c of data.corrections || []) this.plot.markers.push({ time: c.time, label: c.kind, color: "#2b8a3e" }); // the DT corrected
     this.plot.invalidate();
     const list = (id, items) => document.getElementById(id).replaceChildren(...items);
     list("run-commands", data.commands.map((c) => li(`t = ${c.time.toFixed(2)} s  ${c.port} = ${c.value}`)));
     list("run-states", data.states.map((s) => li(`t = ${s.time.toFixed(2)} s  ${s.side}  ${s.machine}: ${s.name}`)));
-    list("run-alarms", data.alarms.map((a) => li(`t = ${a.time.toFixed(2)} s  ${a.variable} ${a.state}` +
-      (a.deviation !== undefined ? `  |Δ| = ${Number(a.deviation).toFixed(3)}` : ""), a.state)));
+    list("run-alarms", [...data.alarms.map((a) => li(`t = ${a.time.toFixed(2)} s  ${a.variable} ${a.state}` +
+      (a.deviation !== undefined ? `  |Δ| = ${Number(a.deviation).toFixed(3)}` : ""), a.state)),
+      ...(data.corrections || []).map((c) => li(`t = ${c.time.toFixed(2)} s  DT ${c.kind}: ${c.reason} (size ${Number(c.size).toFixed(4)})`, "correction"))]);
   }
 }

@@ -138,6 +138,12 @@ class Live {
       this.opsSeen.set(key, item);
       if (this.opsSeen.size > 2 * MAX_LOG) this.opsSeen.delete(this.opsSeen.keys().next().value);
       prepend($("ops"), item);
+    } else if (e.kind === "correction") { // the DT resynced to the PT, or given an estimate: a green marker
+      const label = e.correction === "resync" ? "resync" : `${e.correction} ${Number(e.detail?.mass ?? e.size).toFixed(3)}`;
+      this.plot.markers.push({ time: e.time, label, color: "#2b8a3e" });
+      this.plot.invalidate();
+      page.corrections = (page.corrections || 0) + 1;
+      prepend($("alarms"), li(`t = ${e.time.toFixed(2)} s DT <b>${esc(e.correction)}</b> ${esc(e.reason)} (size ${Number(e.size).toFixed(4)})`, "correction"));
     } else if (e.kind === "command") {
       this.plot.markers.push({ time: e.time, label: e.name });
       this.plot.invalidate();

@@ -14,7 +14,7 @@ export class TimePlot {
     this.time = new Float64Array(this.capacity);
     this.columns = this.series.map(() => new Float32Array(this.capacity));
     this.bands = []; // {start, end|null, label}
-    this.markers = []; // {time, label}
+    this.markers = []; // {time, label, color?}
     this.overlay = null; // a prediction: {time: [...], columns: [[...] | null per variable]}, drawn dotted
     this.window = 30;
     this.minInterval = 1000 / fps;
@@ -156,9 +156,9 @@ export class TimePlot {
     for (const m of this.markers) {
       const x = Math.round(X(m.time)) + 0.5;
       if (x < left || x > left + pw) continue;
-      g.strokeStyle = "#1f6feb"; g.setLineDash([2, 3]);
+      g.strokeStyle = m.color || "#1f6feb"; g.setLineDash([2, 3]);
       g.beginPath(); g.moveTo(x, top); g.lineTo(x, top + ph); g.stroke(); g.setLineDash([]);
-      g.fillStyle = "#1f6feb"; g.textAlign = "left"; g.textBaseline = "bottom"; g.fillText(m.label, x + 3, top + ph - 2);
+      g.fillStyle = m.color || "#1f6feb"; g.textAlign = "left"; g.textBaseline = "bottom"; g.fillText(m.label, x + 3, top + ph - 2);
     }
     // series, decimated to min/max per pixel column
     const px = (t1 - t0) / pw;
