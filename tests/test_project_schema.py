@@ -29,7 +29,7 @@ def ur5e(tmp_path) -> Path:
 
 
 def test_every_example_project_is_found():
-    assert len(PROJECTS) >= 6 and {p.parent.name for p in PROJECTS} == {"ur5e", "turtlebot"}
+    assert len(PROJECTS) >= 6 and {p.parent.name for p in PROJECTS} == {"ur5e", "ur3e", "turtlebot"}
 
 
 def _resolved(value):
