@@ -36,6 +36,7 @@ demo: install-runtime
 	@if [ -f ../shared/data/ur5e/rtde_run1.csv ]; then \
 		$(VENV)/bin/cotwin twin examples/ur5e/replay.toml -o $(OUT)/replay 2> $(OUT)/replay.log; \
 	else echo "replay of the real UR5e's log skipped: ../shared/data/ur5e/rtde_run1.csv is not here"; fi
+	$(VENV)/bin/cotwin run examples/ur3e/cotwin.toml -o $(OUT)/ur3e
 	$(VENV)/bin/cotwin check examples/turtlebot
 	$(VENV)/bin/cotwin run examples/turtlebot/cotwin.toml -o $(OUT)/turtlebot
 	@if [ -f ../shared/robosim/mobile/OA_mapping.pm ]; then \

@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from cotwin.pmodel import ik  # noqa: E402
 from cotwin.pmodel.mjcf import to_mjcf  # noqa: E402
-from cotwin.pmodel.scene import FlexCell  # noqa: E402
+from cotwin_cells.flexcell import FlexCell  # noqa: E402
 from cotwin.pmodel.tree import build_tree, transform  # noqa: E402
 from cotwin.pmodel.xmltext import quat  # noqa: E402
 from cotwin.robosim.check import load_checked  # noqa: E402

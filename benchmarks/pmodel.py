@@ -22,7 +22,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from cotwin.pmodel import ik  # noqa: E402
 from cotwin.pmodel.mjcf import to_mjcf  # noqa: E402
-from cotwin.pmodel.scene import Brick, FlexCell  # noqa: E402
+from cotwin_cells.flexcell import Brick, FlexCell  # noqa: E402
 from cotwin.pmodel.simulator import PlatformSimulator  # noqa: E402
 from cotwin.pmodel.tree import build_tree  # noqa: E402
 from cotwin.robosim.check import load_checked  # noqa: E402

@@ -12,7 +12,7 @@ from cotwin.mapping.runtime import FunctionRegistry
 from cotwin.pmodel import ik
 from cotwin.pmodel.cell import CellGeometry
 from cotwin.pmodel.mjcf import to_mjcf
-from cotwin.pmodel.scene import Brick, FlexCell
+from cotwin_cells.flexcell import Brick, FlexCell
 from cotwin.pmodel.simulator import PlatformSimulator
 from cotwin.pmodel.tree import build_tree, rpy_matrix, transform
 from cotwin.robosim.check import load_checked

@@ -219,7 +219,7 @@ def test_a_brick_both_twins_carry_is_not_taken_for_the_payload(tmp_path):
     path = tmp_path / "cotwin.toml"
     path.write_text(f'[models]\ndmodel = "{EXAMPLE / "arm.rst"}"\npmodel = "{EXAMPLE / "ur5e.pm"}"\n'
                     f'mapping = "{EXAMPLE / "mapping.pm"}"\n[scenario]\ncommands = "{EXAMPLE / "pick_place.toml"}"\n'
-                    '[platform]\nbricks = [[8, 10]]\n[cosim]\nstep = 0.05\nend = 14.0\nalgorithm = "gauss-seidel"\n'
+                    '[scene]\nbricks = [[8, 10]]\n[cosim]\nstep = 0.05\nend = 14.0\nalgorithm = "gauss-seidel"\n'
                     '[convergence]\nestimate = "payload"\n')
     system = load(path)
     pt = PerturbedEndpoint.build(system.models.tree, system.models.scene, Perturbation(payload=PAYLOAD))

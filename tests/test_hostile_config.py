@@ -277,7 +277,6 @@ def test_exchange_options_are_checked_like_the_project(ur5e):
 
 
 @pytest.mark.parametrize("table, message", [
-    ("[platform]\nbricks = [[8, 10], [2, 3], [8, 10]]", "[platform] bricks: two bricks cannot stand on one hole: [8, 10]"),
     ("[monitor]\njoints = []", "[monitor] joints: names no joint"),
     ('[monitor]\njoints = ["elbow_joint", "elbow_joint"]', "[monitor] joints: names 'elbow_joint' more than once"),
     ('[monitor]\nreadings = { x = "" }', "[monitor] readings: each reading is a path (a string): 'x'"),
@@ -298,9 +297,23 @@ def test_bricks_off_the_plate_are_refused_at_their_key(ur5e):
     from cotwin.twin.run import load
 
     path = ur5e / "bricks.toml"
-    path.write_text((ur5e / "cotwin.toml").read_text().replace("[platform]", "[platform]\nbricks = [[-1, 1000000]]"))
-    with pytest.raises(CotwinError, match=r"bricks.toml:\d+:1: error: \[platform\] bricks: \[-1, 1000000\] is no hole "
+    path.write_text((ur5e / "cotwin.toml").read_text() + "\n[scene]\nbricks = [[-1, 1000000]]\n")
+    with pytest.raises(CotwinError, match=r"bricks.toml:\d+:1: error: \[scene\] bricks: \[-1, 1000000\] is no hole "
                                           r"of the plate \(X in 0..15, Y in 0..23\)"):
+        load(path)
+    path.write_text((ur5e / "cotwin.toml").read_text() + "\n[scene]\nbricks = [[8, 10], [2, 3], [8, 10]]\n")
+    with pytest.raises(CotwinError, match=r"bricks.toml:\d+:1: error: \[scene\] bricks: two bricks cannot stand on "
+                                          r"one hole: \[8, 10\]"):
+        load(path)
+
+
+def test_an_unknown_scene_kind_is_refused_at_its_key_naming_the_known_ones(ur5e):
+    from cotwin.twin.run import load
+
+    path = ur5e / "kind.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text().replace("[platform]", '[platform]\nscene = "flexcel"'))
+    with pytest.raises(CotwinError, match=r"kind.toml:\d+:1: error: \[platform\] scene: no scene kind 'flexcel' "
+                                          r"\(known: auto, .*flexcell.*\)"):
         load(path)
 
 
@@ -372,8 +385,8 @@ def test_bricks_or_a_world_the_scene_would_ignore_are_refused(ur5e):
 
     path = ur5e / "scene.toml"
     base = (ur5e / "cotwin.toml").read_text()
-    path.write_text(base.replace("[platform]", '[platform]\nscene = "none"\nbricks = [[8, 10]]'))
-    with pytest.raises(CotwinError, match=r"scene.toml:12:1: error: \[platform\] bricks: the scene is 'none' "
+    path.write_text(base.replace("[platform]", '[platform]\nscene = "none"') + "\n[scene]\nbricks = [[8, 10]]\n")
+    with pytest.raises(CotwinError, match=r"scene.toml:\d+:1: error: \[scene\] bricks: the scene is 'none' "
                                           r"\(\[platform\] scene = \"none\"\), which would ignore it"):
         load(path)
     path.write_text(base.replace("[platform]", '[platform]\nscene = "flexcell"') + '[world]\nname = "arena"\n')

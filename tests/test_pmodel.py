@@ -13,7 +13,7 @@ import pytest
 from cotwin.diagnostics import CotwinError
 from cotwin.pmodel import ik
 from cotwin.pmodel.mjcf import to_mjcf
-from cotwin.pmodel.scene import Brick, FlexCell
+from cotwin_cells.flexcell import Brick, FlexCell
 from cotwin.pmodel.sdf import to_sdf
 from cotwin.pmodel.simulator import PlatformSimulator
 from cotwin.pmodel.tree import build_tree, inverse, rpy_matrix, transform

@@ -29,7 +29,7 @@ def ur5e(tmp_path) -> Path:
 
 
 def test_every_example_project_is_found():
-    assert len(PROJECTS) >= 6 and {p.parent.name for p in PROJECTS} == {"ur5e", "turtlebot"}
+    assert len(PROJECTS) >= 6 and {p.parent.name for p in PROJECTS} == {"ur5e", "ur3e", "turtlebot"}
 
 
 def _resolved(value):
@@ -118,12 +118,12 @@ def test_the_staged_copy_of_a_build_reads_back_as_the_project(ur5e, tmp_path):
     from cotwin.twin.build import staged_project
     from cotwin.twin.run import load
 
-    system = load(load_project(ur5e / "pick_place_project.toml").with_overrides(step=0.05, platform_bricks=[[3, 4]]))
+    system = load(load_project(ur5e / "pick_place_project.toml").with_overrides(step=0.05))
     staged_project(system, tmp_path / "stage")
     copy = load_project(tmp_path / "stage" / "cotwin.toml")
     for section in ("platform", "monitor", "cosim"):
         assert getattr(copy.settings, section) == getattr(system.spec.settings, section)
-    assert copy.bricks == [(3, 4)] and copy.plan.name == "pick_place.toml" and copy.plan.parent == tmp_path / "stage"
+    assert copy.scene_options == {"bricks": [[8, 10]]} and copy.plan.name == "pick_place.toml" and copy.plan.parent == tmp_path / "stage"
     assert copy.dmodel.read_text() == system.spec.dmodel.read_text()
 
 

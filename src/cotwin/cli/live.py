@@ -137,7 +137,7 @@ def pt_with_url(spec, url: str, replayed: bool):
               help="seconds of wall time between messages")
 @click.option("--exchange", callback=exchange_name, help="the twin's exchange (default: the project's [scenario] rabbitmq exchange)")
 def publish(project: str, plan: str | None, period: float, exchange: str | None) -> None:
-    """Publish commands to a live twin over RabbitMQ, as the paper's UR5e publisher does: wait for the
+    """Publish commands to a live twin over RabbitMQ, as the paper's arm publisher does: wait for the
     ready message, then every PERIOD send the command due at the echoed simulation time, else idle."""
     from dataclasses import replace
 

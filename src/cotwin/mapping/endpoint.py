@@ -47,7 +47,7 @@ class SimulatedEndpoint:
         self.sim = simulator
         self.tree = simulator.tree
         self.profile: MotionProfile = profile or Quintic()
-        self.geometry = geometry or getattr(simulator.scene, "geometry", None)
+        self.geometry = geometry or (simulator.scene.geometry if simulator.scene is not None else None)
         self._path_to_joint = simulator.actuators()
         self._positioned = {j.name for j in self.tree.actuated if servo_mode(j) == "position"}
         self.segment: Segment | None = None

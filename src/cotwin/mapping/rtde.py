@@ -7,7 +7,7 @@ not increase or jumps by more than MAX_GAP), up to MAX_ERRORS of them at once.
 Two views of a log:
 - `RTDELog`: the fields as logged (the controller's convention): `column`, `vector`, `times`, `q`, `qd`;
 - `ArmLog`: the arm in the p-model's convention (a `Convention`: joint offsets and the controller's
-  base frame in the model frame; cotwin's UR5e by default, as the RTDE endpoint maps fields,
+  base frame in the model frame; by default the UR convention, as the RTDE endpoint maps fields,
   cotwin.mapping.urrtde): time since the first row, measured and set-point joints, TCP poses, and
   the moves found in the log (`motions()`: a move starts when a joint's speed leaves rest, its onset
   placed between samples by extrapolating the leading joint's speed back to zero, and settles when

@@ -1,1 +1,1 @@
-"""p-model: kinematic tree, SDF/URDF/MJCF export, the MuJoCo platform simulator and the Flex-cell scene."""
+"""p-model: kinematic tree, SDF/URDF/MJCF export, the MuJoCo platform simulator and the Scene seam."""

@@ -246,9 +246,9 @@ class RaySpec:
 
 
 
-#: a LiDAR without an annotation saying otherwise is the TurtleBot3's LDS-01 (RoboTool's published mobile
-#: robot carries one): 360 beams a turn, one a degree from straight ahead, 0.12 to 3.5 m, 5 turns a second
-LDS_01 = RaySpec(360, 0.0, float(np.radians(359.0)), 0.12, 3.5, 5.0)
+#: a LiDAR without an annotation saying otherwise: a common 2D laser scanner (the one RoboTool's published
+#: mobile robot carries): 360 beams a turn, one a degree from straight ahead, 0.12 to 3.5 m, 5 turns a second
+PLANAR_LIDAR = RaySpec(360, 0.0, float(np.radians(359.0)), 0.12, 3.5, 5.0)
 #: a sonar without an annotation: one beam straight ahead, 2 cm to 4 m, 10 readings a second
 SONAR = RaySpec(1, 0.0, 0.0, 0.02, 4.0, 10.0)
 RAY_QUANTITIES = ("closest_range", "closest_bearing", "range")
@@ -282,8 +282,8 @@ def _entry(record: dict | None, *path: str):
 def ray_spec(sdf_type: str, annotation: dict | None) -> RaySpec:
     """The beams of a ray sensor: its SDF annotation's (`Ray { update_rate, ray = RayDetails { scan = Scan {
     horizontal = Scan_horizontal { samples, min_angle, max_angle } } range = Range { min, max } } }`,
-    `Sonar { sonar = SonarDetails { min, max } }`), each value not given from the default (LDS_01, SONAR)."""
-    base = SONAR if sdf_type == "sonar" else LDS_01
+    `Sonar { sonar = SonarDetails { min, max } }`), each value not given from the default (PLANAR_LIDAR, SONAR)."""
+    base = SONAR if sdf_type == "sonar" else PLANAR_LIDAR
 
     def number(value, default: float) -> float:
         return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else default

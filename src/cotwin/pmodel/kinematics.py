@@ -7,7 +7,7 @@ to its parent link; a joint axis is expressed in the joint frame; roll/pitch/yaw
 X-Y-Z angles (R = Rz(yaw) Ry(pitch) Rx(roll)), as in SDF and URDF. Everything is at joint values 0.
 
 A sensor declared in a link measures the joint declared just before it in that link (the first
-joint if it comes before any), which is how the UR5e model lists FSJ1..PSJ1 after
+joint if it comes before any), which is how an arm's p-model lists FSJ1..PSJ1 after
 shoulder_pan_joint and the finger sensors after each finger joint; a sensor declared in a joint
 measures that joint. Joints that close a kinematic loop are kept apart (`loops`): SDF lists them,
 MJCF turns them into equality constraints, URDF cannot say them.

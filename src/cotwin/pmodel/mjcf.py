@@ -1,5 +1,5 @@
 """p-model -> MJCF (MuJoCo XML): nested bodies in p-model link frames, a position servo per actuated
-joint, a MuJoCo sensor per p-model sensor, and optionally the Flex-cell scene around the robot.
+joint, a MuJoCo sensor per p-model sensor, and optionally a scene around the robot (cotwin.pmodel.scenes).
 
 Documented defaults, used where the p-model gives no value:
 - every joint gets an armature (reflected rotor inertia of its gearbox) of 0.1 kg m^2 or 0.1 kg;
@@ -8,8 +8,8 @@ Documented defaults, used where the p-model gives no value:
   the joint at zero plus its armature; any kp is capped at I (0.5 / dt)^2, beyond which the explicit
   stiffness of a 1 ms step would make the simulation unstable;
 - the arm's own weight is compensated (`gravcomp`), as a UR controller does, so servos hold targets
-  without steady-state sag; payloads (bricks) are not compensated;
-- the robot does not collide with itself; it collides with the plate and the bricks;
+  without steady-state sag; payloads (a scene's loose objects) are not compensated;
+- the robot does not collide with itself; it collides with the scene (its fixtures and loose objects);
 - joint position limits become the joint range and the servo's control range; effort limits become
   the servo's force range; velocity limits are the trajectory generator's job (cotwin.mapping);
 - an unstable simulation stops (MuJoCo's automatic reset is disabled: it would silently put the
@@ -47,6 +47,7 @@ import mujoco
 import numpy as np
 
 from ..diagnostics import CotwinError, Finding, Severity
+from .scenes import EARTH
 from .tree import Geom, KinematicTree, TJoint, inverse
 from .xmltext import num, nums, quat, sub, to_text
 
@@ -56,7 +57,7 @@ DRIVEN_ARMATURE = 0.001  # kg m^2 or kg: joints driven by speed or effort (wheel
 VELOCITY_TIME = 0.005  # s: time constant of a velocity servo
 BODY_SENSORS = ("gyro", "velocimeter", "accelerometer")
 TIMESTEP = 0.001  # s: the physics step
-ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 1  # robot geoms touch the world and bricks, not each other
+ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 1  # robot geoms touch the world and its loose objects, not each other
 ROBOT_GROUP = "1"  # robot geoms' group: ray sensors see group 0 (the world) only
 OWN_FRICTION = "2"  # priority of a geom whose p-model gives its friction: above a scene's floor (1)
 WORLD_CONTYPE, WORLD_CONAFFINITY = 1, 3
@@ -165,14 +166,14 @@ def velocity_gain(tree: KinematicTree, joint: TJoint) -> float:
 
 def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual: bool = True,
             base: str = "fixed") -> str:
-    """MJCF of the robot, alone or inside a scene (an object with `add_to(worldbody)`); without the
+    """MJCF of the robot, alone or inside a scene (cotwin.pmodel.scenes.Scene); without the
     purely visual elements when `visual` is false (see the module doc); `base` is fixed (to the world)
     or free."""
     if base not in ("fixed", "free"):
         raise ValueError(f"base must be fixed or free, not {base!r}")
     root = ET.Element("mujoco", {"model": tree.name})
     sub(root, "compiler", angle="radian", autolimits="true", **({} if visual else {"discardvisual": "true"}))
-    gravity = getattr(scene, "gravity", (0.0, 0.0, -9.81))  # a scene may tilt the world (a level plate)
+    gravity = scene.gravity if scene is not None else EARTH  # a scene may tilt the world (a level plate)
     option = sub(root, "option", timestep=num(timestep), gravity=nums(gravity), integrator="implicitfast",
                  cone="elliptic", impratio="10")
     sub(option, "flag", autoreset="disable")
@@ -191,7 +192,7 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
         scene.add_to(worldbody)
     bodies = {}
     parents = {j.child: j for j in tree.joints}
-    placement = scene.robot_pose(tree) if hasattr(scene, "robot_pose") else None
+    placement = scene.robot_pose(tree) if scene is not None else None
     for link in tree.links:
         if link.name not in parents:  # the base, or a free body (a root link beside it)
             parent_el, local = worldbody, (placement @ link.pose if placement is not None else link.pose)

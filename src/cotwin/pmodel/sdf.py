@@ -4,7 +4,7 @@ the joint frame.
 
 Two namings: `style="cotwin"` (the default) names links and joints as the kinematic tree does, the
 names every other cotwin artefact uses: RoboTool's names without its running number (`link_2fg7_base`
-of the UR5e's gripper part, `1-Tip` for value 1 of an indexed link); `style="robotool"` writes them as
+of a gripper part, `1-Tip` for value 1 of an indexed link); `style="robotool"` writes them as
 RoboTool's generator does: one running number over links (a p-model's parts first, then its links,
 those of indexed ones last), then joints and fixed connections (`1-Tip`, `3-Link1Joint`,
 `4-fixedJoint`), another over bodies (`1--my_body`), each collision with RoboTool's default surface,

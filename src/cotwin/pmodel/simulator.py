@@ -11,8 +11,8 @@ multiples of its period from the start: every beam is cast from the sensor's sit
 (MuJoCo's mj_multiRay over the world's geoms, not the robot's own), returns outside
 [range_min, range_max] count as none, and the readings hold until the next scan. A port reading the
 closest return gives its range (m) or bearing in degrees, 0 straight ahead, counter-clockwise
-positive, in (-180, 180] (as ROS's LaserScan angles, in degrees: the published TurtleBot's d-model
-compares them with 30 and 90); with no return both read inf and NaN. A port reading the range straight
+positive, in (-180, 180] (as ROS's LaserScan angles, in degrees: a d-model compares them with
+angles such as 30 and 90); with no return both read inf and NaN. A port reading the range straight
 ahead gives the first beam's.
 
 A free base also reads its pose in the world: `pmodel::link.x`, `.y`, `.z` (m) and `.yaw` (rad), the
@@ -149,7 +149,7 @@ class PlatformSimulator:
         self._root = self.model.body(tree.root.name).id
         self._pose_paths = pose_paths(tree) if base == "free" else []
         # contacts with the scene's obstacles
-        names = list(getattr(scene, "obstacle_names", ()) or ())
+        names = list(scene.obstacle_names) if scene is not None else []
         self._obstacles = {self.model.geom(n).id for n in names}
         robot_bodies = {self.model.body(l.name).id for l in tree.links}
         self._robot_geoms = {g for g in range(self.model.ngeom) if self.model.geom_bodyid[g] in robot_bodies}

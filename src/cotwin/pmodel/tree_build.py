@@ -446,7 +446,7 @@ class TreeBuilder:
     def _centre_wheel(self, joint: TJoint, ref: JointRef, child: TLink) -> None:
         """A revolute joint driven by a speed (a wheel) whose axis misses the centre of its child's geometry
         would spin that geometry eccentrically, which no wheel does: its axis is moved, parallel, through
-        that centre, with a warning (the published TurtleBot3 puts its wheel joints 13 mm below the wheels)."""
+        that centre, with a warning (a published mobile robot's p-model puts its wheel joints 13 mm below the wheels)."""
         if joint.kind != "revolute" or not joint.servos or joint.servos[0].mode != "velocity":
             return
         if not child.geoms or any(g.placeholder for g in child.geoms):

@@ -1,5 +1,5 @@
 """A world for a mobile robot to walk in: a floor, an arena's walls and obstacles (walls, boxes, cylinders),
-and where the robot starts. A scene like the Flex-cell (`add_to(worldbody)`), read from a world file or a
+and where the robot starts. A scene (cotwin.pmodel.scenes), read from a world file or a
 project's `[world]` table, so the same models run in different worlds:
 
     name = "two rooms"
@@ -43,6 +43,7 @@ import numpy as np
 from ..config import Key, Schema, TomlFile, is_number, raise_problems, shown
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from .mjcf import WORLD_CONAFFINITY, WORLD_CONTYPE
+from .scenes import SceneBase
 from .tree import KinematicTree, transform
 from .xmltext import nums, sub
 
@@ -132,7 +133,7 @@ class Obstacle:
 
 
 @dataclass
-class World:
+class World(SceneBase):
     """A floor, obstacles and a start pose (see the module doc)."""
 
     name: str = ""
@@ -141,6 +142,8 @@ class World:
     bounds: tuple[float, float, float, float] | None = None  # the arena's inside: x0, x1, y0, y1
     source: Location | None = None  # where the start was written (for errors about it)
     table: dict | None = None  # the table it was read from (a copy of a project carries it)
+
+    walkable = True  # a floor a mobile robot walks on
 
     # ---- the scene interface ----
     @property

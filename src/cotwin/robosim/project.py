@@ -278,7 +278,7 @@ def _project_root(file: Path, top: Path) -> Path:
 def project_groups(paths: Iterable[str | Path]) -> tuple[list[list[Path]], list[Finding]]:
     """Group model files into projects: the files named directly form one project; under a folder,
     every RoboTool project (a folder with a `.project` file, with all its subfolders) and every
-    other folder holding model files forms its own (so `check ur5e ur3e` checks two projects)."""
+    other folder holding model files forms its own (so `check arm1 arm2` checks two projects)."""
     loose: list[Path] = []
     groups: dict[Path, list[Path]] = {}
     findings: list[Finding] = []

@@ -235,7 +235,7 @@ class TypeResolver:
 
     def declared(self, var) -> tuple[Ty, s.Expr | None]:
         """A variable's type and initial value, accepting `var x : E::lit` (an enumeration literal in
-        type position, as the UR5e mapping writes) as type E with initial value E::lit, with a warning."""
+        type position, as a published mapping writes) as type E with initial value E::lit, with a warning."""
         ref = var.type
         if isinstance(ref, s.NamedType) and len(ref.name.parts) >= 2:
             enum_name = s.QName(ref.name.parts[:-1], ref.name.loc)

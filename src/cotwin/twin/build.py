@@ -154,7 +154,7 @@ def build(system: TwinSystem, out: str | Path, cc: str = "cc") -> dict[str, Path
     return written
 
 
-STAGED_SECTIONS = ("models", "scenario", "platform", "monitor", "cosim", "world")  # what the FMUs read
+STAGED_SECTIONS = ("models", "scenario", "platform", "scene", "monitor", "cosim", "world")  # what the FMUs read
 
 
 def staged_project(system: TwinSystem, stage: Path) -> None:

@@ -18,7 +18,7 @@ The result is a `Calibration` (TOML, read by a project's `[platform] calibration
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -257,7 +257,7 @@ def robot_touches_plate(twin: DigitalTwin, geometry: CellGeometry, postures: np.
     """Whether any moving part of the robot comes within CLEARANCE of the plate at any posture."""
     if twin.scene is None:
         return False
-    scene = replace(twin.scene, geometry=geometry, **({"bricks": []} if hasattr(twin.scene, "bricks") else {}))
+    scene = twin.scene.with_geometry(geometry, payloads=False)
     sim = PlatformSimulator(twin.tree, scene)
     try:
         plate = sim.model.geom("plate").id

@@ -15,7 +15,7 @@ difference it removed) and a marker on the dashboard's plot.
 Payload estimation: at rest, the torque a joint's servo exerts beyond what the DT's model needs is the
 payload's weight through the tool's Jacobian, tau - tau0(q) = m * phi(q) with phi = -J(q)^T g (per kg);
 tau0 is the DT's own torque at the same time (both at rest) less that of the payload it was given, so
-whatever else both carry (a grasped brick) cancels.
+whatever else both carry (a grasped object) cancels.
 Least squares over every rest sample (each a vector of joint torques) gives m and, from the residuals, its
 standard deviation; once that is below `payload_std` the DT's payload body (a point mass at the tool
 frame, as `cotwin plant` adds one) takes the mass, recorded as a correction too.
@@ -118,7 +118,7 @@ class PayloadEstimator:
     def observe(self, positions: dict[str, float], readings: dict[str, float], reference=None) -> bool:
         """Take one rest sample (PT joint positions, PT sensor readings); False when a torque is missing.
         `reference`: the DT's (joint positions, sensor readings) at the same time: its torques less its own
-        payload's are then what the model needs there, so that whatever else both carry (a grasped brick, an
+        payload's are then what the model needs there, so that whatever else both carry (a grasped object, an
         arm's weight its servos hold) cancels; without it, MuJoCo's inverse dynamics at rest."""
         measured = self.torques(readings)
         if measured is None:

@@ -1,4 +1,4 @@
-"""A command publisher that follows the RMQ FMU protocol as the paper's UR5e publisher does.
+"""A command publisher that follows the RMQ FMU protocol as the paper's arm publisher does.
 
 It binds its own queue to `from_cosim` on the twin's direct exchange, waits for the ready message
 ("waiting for input data for simulation"), then every `period` seconds of wall time publishes one

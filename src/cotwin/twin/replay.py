@@ -9,7 +9,7 @@ onsets), from the recorded initial posture, and samples the DT's joints at the l
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -22,6 +22,7 @@ from ..mapping.motion import MotionProfile
 from ..mapping.rtde import ArmLog, Motion
 from ..mapping.runtime import Mapping
 from ..pmodel.cell import CellGeometry
+from ..pmodel.scenes import Scene
 from ..pmodel.simulator import PlatformSimulator
 from ..pmodel.tree import KinematicTree
 
@@ -61,7 +62,7 @@ class DigitalTwin:
 
     project: object  # the checked RoboSim project
     tree: KinematicTree
-    scene: object | None  # a FlexCell (a dataclass with a `geometry` field), or None: no scene
+    scene: Scene | None  # the cell (cotwin.pmodel.scenes), or None: no scene
     profile: MotionProfile | None = None  # the DT's motion profile (None: the endpoint's default)
     geometry: CellGeometry | None = None  # the DT's cell geometry (None: the scene's)
     mapping_name: str | None = None
@@ -72,7 +73,7 @@ class DigitalTwin:
         geometry = geometry or self.geometry
         scene = self.scene
         if scene is not None and geometry is not None:
-            scene = replace(scene, geometry=geometry)
+            scene = scene.with_geometry(geometry)
         endpoint = SimulatedEndpoint(PlatformSimulator(self.tree, scene), profile or self.profile, geometry)
         return Mapping(self.project, endpoint, self.mapping_name)
 

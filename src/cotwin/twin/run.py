@@ -139,7 +139,7 @@ def path_columns(system: TwinSystem) -> tuple[str, str] | None:
     from ..pmodel.mjcf import pose_paths
 
     scene = system.models.scene
-    if scene is None or not hasattr(scene, "obstacles"):
+    if scene is None or not scene.walkable:
         return None
     x_path, y_path = pose_paths(system.models.tree)[:2]
     by_path = {path: name for name, path in system.spec.readings.items()}

@@ -113,34 +113,20 @@ def load_models(spec: TwinProject) -> TwinModels:
 
 
 def build_scene(spec: TwinProject, mapping, calibration=None):
-    """The scene around the robot ([platform] scene): a world, the Flex-cell, or none; "auto" takes the
-    world if the project gives one, else the Flex-cell if the mapping has its grid's constants."""
-    from ..pmodel.scene import Brick, FlexCell, has_grid
+    """The scene around the robot: the kind `[platform] scene` names (cotwin.pmodel.scenes, "auto": the
+    world if the project gives one, else a registered kind that fits the mapping, else none), built from
+    the mapping, the `[scene]` table and the calibrated cell geometry."""
+    from ..pmodel import scenes
 
-    kind = spec.scene
-    if kind == "auto":
-        kind = "world" if spec.world is not None else "flexcell" if has_grid(mapping) else "none"
-    ignored = []  # settings this scene would silently ignore
-    if spec.bricks and kind != "flexcell":
-        ignored.append(("[platform] bricks", spec.location("platform", "bricks")))
-    if spec.world is not None and kind != "world":
-        ignored.append(("[platform] world" if spec.world_file else "[world]",
-                        spec.location("platform", "world") if spec.world_file else spec.location("world")))
-    if ignored:
-        raise CotwinError([Finding(at, Severity.ERROR, f"{what}: the scene is '{kind}' ([platform] scene = "
-                                   f"\"{spec.scene}\"), which would ignore it") for what, at in ignored])
-    if kind == "world":
-        return spec.world
-    if kind == "flexcell":
-        cell = FlexCell.from_mapping(mapping, [Brick(f"brick{i + 1}", b) for i, b in enumerate(spec.bricks)],
-                                     calibration.geometry if calibration else None)
-        off = [list(b) for b in spec.bricks if not (0 <= b[0] <= cell.xmax and 0 <= b[1] <= cell.ymax)]
-        if off:
-            raise CotwinError([Finding(spec.location("platform", "bricks"), Severity.ERROR,
-                                       f"[platform] bricks: {', '.join(map(str, off))} is no hole of the plate "
-                                       f"(X in 0..{cell.xmax}, Y in 0..{cell.ymax})")])
-        return cell
-    return None
+    request = scenes.SceneRequest(mapping, dict(spec.scene_options), calibration.geometry if calibration else None,
+                                  spec.world, spec.path.parent, spec.location)
+    kind = scenes.choose_kind(spec.scene, request, spec.location("platform", "scene"))
+    if spec.world is not None and kind.name != "world":
+        what, at = ("[platform] world", spec.location("platform", "world")) if spec.world_file else \
+            ("[world]", spec.location("world"))
+        raise CotwinError([Finding(at, Severity.ERROR, f"{what}: the scene is '{kind.name}' ([platform] scene = "
+                                   f"\"{spec.scene}\"), which would ignore it")])
+    return scenes.build_scene(kind.name, request)
 
 
 def external_events(program, mapping_model) -> list[str]:

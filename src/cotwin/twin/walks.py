@@ -44,7 +44,7 @@ def walk(system: TwinSystem, out: str | Path, seed: int | None = None) -> Walk:
 
     world = system.models.scene
     columns = path_columns(system)
-    if world is None or not hasattr(world, "obstacles") or columns is None:
+    if world is None or not world.walkable or columns is None:
         raise CotwinError(f"{system.spec.path}: a walk needs a world ([platform] world) and the base's x and y "
                           "among the monitored readings ([monitor] readings)")
     if seed is not None:

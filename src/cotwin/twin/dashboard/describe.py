@@ -1,6 +1,6 @@
 """What the page draws that does not change during a run, derived from the twin's models: the d-model's
 state machines (nodes, transitions, a layout), the robot's links and joints with their geometry from
-the kinematic tree (the same one SDF, URDF and MJCF are written from), the scene's plate, the
+the kinematic tree (the same one SDF, URDF and MJCF are written from), the scene's drawing, the
 observed variables and the commands the panel can send. Plain JSON-ready data.
 """
 
@@ -124,13 +124,8 @@ def robot_drawing(tree, variables: dict[str, str]) -> dict:
 
 
 def scene_drawing(scene) -> dict | None:
-    """The Flex-cell plate and its holes (None for a robot without a scene)."""
-    if scene is None or not hasattr(scene, "hole"):  # a world (cotwin.pmodel.world) is not drawn yet
-        return None
-    x0, x1, y0, y1 = scene.extent()
-    holes = [list(scene.hole(X, Y)[:2]) for X in range(scene.xmax + 1) for Y in range(scene.ymax + 1)]
-    return {"plate": {"x0": x0, "x1": x1, "y0": y0, "y1": y1, "thickness": scene.thickness},
-            "hole_radius": 0.006, "holes": [[round(x, 6), round(y, 6)] for x, y in holes]}
+    """What the scene draws on the page (its `drawing()`; None without a scene or drawing)."""
+    return scene.drawing() if scene is not None else None
 
 
 # ---- the whole page ---------------------------------------------------------------------------

@@ -7,12 +7,12 @@ cotwin.twin.
 from .load import (PT_KEYS, PTSettings, TwinProject, load_project, override_path,  # noqa: F401
                    pt_url_problem)
 from .sections import (AMQP_MAX, CYCLE_PERIOD, ENDPOINTS, MAX_CYCLES_PER_STEP, MAX_LAG_STEPS,  # noqa: F401
-                       MAX_WAIT_S, PT_ENDPOINTS, SCENES, SECTIONS, SHAPES, STAND_IN_EXTENT, URL, DeviationSettings,
+                       MAX_WAIT_S, PT_ENDPOINTS, SECTIONS, SHAPES, STAND_IN_EXTENT, URL, DeviationSettings,
                        ProjectSettings, RabbitMQSettings, amqp_name_problem, check_timing, cycle_period,
                        project_settings, routing_key_problem, timing_problems)
 
 __all__ = ["PT_KEYS", "PTSettings", "TwinProject", "load_project", "override_path", "pt_url_problem", "AMQP_MAX",
            "CYCLE_PERIOD", "ENDPOINTS", "MAX_CYCLES_PER_STEP", "MAX_LAG_STEPS", "MAX_WAIT_S", "PT_ENDPOINTS",
-           "SCENES", "SECTIONS", "SHAPES", "STAND_IN_EXTENT", "URL", "DeviationSettings", "ProjectSettings",
+           "SECTIONS", "SHAPES", "STAND_IN_EXTENT", "URL", "DeviationSettings", "ProjectSettings",
            "RabbitMQSettings", "amqp_name_problem", "check_timing", "cycle_period", "project_settings",
            "routing_key_problem", "timing_problems"]

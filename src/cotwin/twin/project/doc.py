@@ -29,7 +29,7 @@ A minimal project:
 ```toml
 [models]
 dmodel = "arm.rst"
-pmodel = "ur5e.pm"
+pmodel = "robot.pm"
 mapping = "mapping.pm"
 
 [scenario]

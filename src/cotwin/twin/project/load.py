@@ -53,7 +53,7 @@ class TwinProject:
     queue: str = "cotwin.robot"
     url: str = "amqp://127.0.0.1:5672/%2F"
     scene: str = "auto"
-    bricks: list[tuple[int, int]] = field(default_factory=list)
+    scene_options: dict = field(default_factory=dict)  # [scene]: the scene kind's own keys
     calibration: Path | None = None
     step: float = 0.1
     end: float = 20.0
@@ -215,7 +215,7 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.module, models.pmodel_name,
         plan, scenario.rabbitmq, platform.endpoint, platform.queue, platform.url, platform.scene,
-        [tuple(b) for b in platform.bricks], calibration, float(cosim.step), float(cosim.end),
+        copy.deepcopy(_table(file.data, "scene")), calibration, float(cosim.step), float(cosim.end),
         cosim.algorithm, cosim.realtime, None if cosim.log is None else list(cosim.log), pt, s.deviation,
         s.history.url, Perturbation.from_table(dataclasses.asdict(s.plant)) if s.plant is not None else None)
     spec.world, spec.world_file, spec.base, spec.stand_ins = world, world_file, platform.base, stand_ins

@@ -23,7 +23,6 @@ if TYPE_CHECKING:
     from .load import TwinProject
 
 ENDPOINTS = ("mujoco", "broker")
-SCENES = ("auto", "flexcell", "world", "none")
 PT_ENDPOINTS = ("opcua", "replay", "broker", "rtde")
 MAX_CYCLES_PER_STEP = 10 ** 6  # d-model cycles in one step ([cosim] parameters cycle_period)
 MAX_WAIT_S = 86_400.0  # s: the longest a twin waits for, or keeps, a broker message
@@ -80,16 +79,6 @@ def timing_problems(step: float, end: float, cycle_period: float | None = None) 
             out.append((CYCLE_PERIOD, f"{cycle_period!r} s does not divide the step of {step:g} s into whole "
                                       "d-model cycles"))
     return out
-
-
-def _pairs(value) -> str | None:
-    if not all(isinstance(b, list) and len(b) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in b)
-               for b in value):
-        return "must be a list of [X, Y] hole pairs"
-    twice = sorted({tuple(b) for b in value if value.count(b) > 1})
-    if twice:
-        return f"two bricks cannot stand on one hole: {', '.join(str(list(b)) for b in twice)}"
-    return None
 
 
 def _name(value: str) -> str | None:
@@ -248,10 +237,10 @@ class Platform:
                             Key("str", "mujoco", choices=ENDPOINTS))
     queue: str = setting("broker: the robot's request queue", Key("str", "cotwin.robot", check=amqp_name_problem))
     url: str = setting("broker: the broker's URL", Key("str", URL, check=_amqp_url))
-    bricks: tuple = setting("Flex-cell: bricks standing on holes, [[X, Y], ...]", Key("list", [], check=_pairs))
-    scene: str = setting('around the robot: "flexcell" (from the mapping\'s constants), "world" (a world file or '
-                         '[world] table), "none"; "auto": the world if one is given, else the Flex-cell if the '
-                         "mapping has its constants, else none", Key("str", "auto", choices=SCENES))
+    scene: str = setting('around the robot: a scene kind by name (cotwin.pmodel.scenes: "none", "floor", "world" '
+                         '(a world file or [world] table), or one an installed package registers); "auto": the '
+                         "world if one is given, else a registered kind that fits the mapping, else none",
+                         Key("str", "auto", check=_name))
     calibration: str | None = setting("a calibration file (docs/calibration.md)", Key("str"), path=True)
     world: str | None = setting("a world file (cotwin.pmodel.world); or a [world] table here", Key("str"), path=True)
     base: str = setting('the robot\'s base: fixed to the world, or "free" (a mobile robot)',
@@ -420,6 +409,8 @@ SECTIONS: dict[str, Any] = {
     "platform": setting("The DT's robot.", section=Platform),
     "world": setting("A world to walk in, written here instead of a file named by [platform] world; its keys are "
                      "those of a world file (cotwin.pmodel.world).", Key("table")),
+    "scene": setting("The scene's own keys, read by the kind [platform] scene names (docs/scenes.md); a key "
+                     "that kind does not read is an error.", Key("table")),
     "monitor": setting("What the mapping monitors.", section=Monitor),
     "cosim": setting("The co-simulation.", section=Cosim),
     "figure": setting("The run's figure.", section=Figure),

@@ -38,7 +38,7 @@ function ind(z: real, lower: real, upper: real): real {
 }
 
 // a range finder with the beam model of Thrun et al. (hit, short, max and random readings);
-// cotwin's simulator casts its beams (docs/turtlebot.md); the `scan` record is not filled
+// cotwin's simulator casts its beams (cotwin.pmodel.simulator); the `scan` record is not filled
 sensor Lidar {
 	const PI: real = 3.141592653589793
 	input trueDistance: real, measuredDistance: real, range_max: real

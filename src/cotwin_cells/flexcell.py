@@ -12,16 +12,17 @@ the plate right under the robot base); the plate is level, so gravity points alo
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..diagnostics import CotwinError
-from ..robosim.consteval import const_env, evaluate
-from ..robosim.pmodel_elements import Mapping
-from .cell import CellGeometry
-from .mjcf import WORLD_CONAFFINITY, WORLD_CONTYPE
-from .xmltext import num, nums, quat, sub
+from cotwin.diagnostics import CotwinError
+from cotwin.pmodel.cell import CellGeometry
+from cotwin.pmodel.mjcf import WORLD_CONAFFINITY, WORLD_CONTYPE
+from cotwin.pmodel.scenes import SceneBase, SceneKind, SceneRequest
+from cotwin.pmodel.xmltext import num, nums, quat, sub
+from cotwin.robosim.consteval import const_env, evaluate
+from cotwin.robosim.pmodel_elements import Mapping
 
 _NAMES = {"hole_dist": ("hole_dist",), "x_max": ("x_max",), "y_max": ("y_max",), "xmax": ("xmax",),
           "ymax": ("ymax",), "z_table": ("z_table_level", "z_table")}
@@ -42,7 +43,7 @@ class Brick:
 
 
 @dataclass
-class FlexCell:
+class FlexCell(SceneBase):
     hole_dist: float = 0.05
     x_max: float = 1.128
     y_max: float = 0.711
@@ -80,6 +81,21 @@ class FlexCell:
     def gravity(self) -> tuple[float, float, float]:
         """Gravity in the robot's frame: along the level plate's -z."""
         return tuple(float(v) + 0.0 for v in self.geometry.plate_pose()[:3, :3] @ (0.0, 0.0, -9.81))
+
+    @property
+    def name(self) -> str:
+        return "Flex-cell"
+
+    def with_geometry(self, geometry: CellGeometry | None, payloads: bool = True) -> "FlexCell":
+        """The cell placed at `geometry` (None: where it is), its bricks kept only with `payloads`."""
+        return replace(self, geometry=geometry or self.geometry, bricks=list(self.bricks) if payloads else [])
+
+    def drawing(self) -> dict:
+        """The plate and its holes, in the grid frame, as the page draws them."""
+        x0, x1, y0, y1 = self.extent()
+        holes = [self.hole(X, Y)[:2] for X in range(self.xmax + 1) for Y in range(self.ymax + 1)]
+        return {"plate": {"x0": x0, "x1": x1, "y0": y0, "y1": y1, "thickness": self.thickness},
+                "hole_radius": 0.006, "holes": [[round(x, 6), round(y, 6)] for x, y in holes]}
 
     def in_grid(self, X: int, Y: int) -> bool:
         return 0 <= X <= self.xmax and 0 <= Y <= self.ymax
@@ -122,3 +138,34 @@ class FlexCell:
             sub(body, "geom", name=brick.name, type="box", size=nums([v / 2 for v in brick.size]), mass=num(brick.mass),
                 rgba="0.8 0.3 0.2 1", friction="1.2 0.02 0.001", contype=str(WORLD_CONTYPE),
                 conaffinity=str(WORLD_CONAFFINITY))
+
+
+def _pairs(value) -> str | None:
+    if not isinstance(value, list) or not all(
+            isinstance(b, list) and len(b) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in b)
+            for b in value):
+        return "must be a list of [X, Y] hole pairs"
+    twice = sorted({tuple(b) for b in value if value.count(b) > 1})
+    if twice:
+        return f"two bricks cannot stand on one hole: {', '.join(str(list(b)) for b in twice)}"
+    return None
+
+
+def build(request: SceneRequest) -> FlexCell:
+    """The cell from the mapping's grid constants, bricks on the `[scene] bricks` holes, at the calibrated
+    geometry (if any)."""
+    holes = request.options.get("bricks", [])
+    problem = _pairs(holes)
+    if problem:
+        raise request.error("bricks", problem)
+    cell = FlexCell.from_mapping(request.mapping, [Brick(f"brick{i + 1}", tuple(b)) for i, b in enumerate(holes)],
+                                 request.geometry)
+    off = [list(b) for b in holes if not cell.in_grid(*b)]
+    if off:
+        raise request.error("bricks", f"{', '.join(map(str, off))} is no hole of the plate "
+                                      f"(X in 0..{cell.xmax}, Y in 0..{cell.ymax})")
+    return cell
+
+
+KIND = SceneKind("flexcell", "the Flex-cell: a plate with a grid of holes (the mapping's constants), bricks on it",
+                 build, options=("bricks",), fits=has_grid)

@@ -1,0 +1,131 @@
+"""The Scene seam: scene kinds by name (core's generic ones, installed ones, a test's own), `[scene]` keys
+read only by the kind that takes them, and the generic core free of the examples' names."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from cotwin.diagnostics import CotwinError
+from cotwin.pmodel.scenes import SceneBase, SceneKind, register_scene, scene_kinds
+from cotwin.pmodel.xmltext import nums, sub
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE_WORDS = re.compile(r"ur5e|flexcell|flex-cell|turtlebot|brick", re.IGNORECASE)
+GENERIC = {"firebrick"}  # a CSS colour name (the vendored three.js)
+
+
+@dataclass
+class Pillar(SceneBase):
+    """A scene of this test's own: one pillar (an obstacle) beside the robot, the robot raised on a stand."""
+
+    name: str = "pillar"
+    x: float = 0.6
+    lift: float = 0.25
+
+    @property
+    def obstacle_names(self) -> list[str]:
+        return ["pillar"]
+
+    def add_to(self, worldbody: ET.Element) -> None:
+        sub(worldbody, "geom", name="pillar", type="box", size="0.05 0.05 0.4", pos=nums([self.x, 0.0, 0.4]))
+
+    def robot_pose(self, tree):
+        import numpy as np
+
+        pose = np.eye(4)
+        pose[2, 3] = self.lift
+        return pose
+
+    def drawing(self) -> dict:
+        return {"pillar": [self.x, 0.0]}
+
+
+def _pillar(request):
+    lift = request.options.get("lift", 0.25)
+    if not isinstance(lift, (int, float)) or lift < 0:
+        raise request.error("lift", f"must be a height >= 0 (m), got {lift!r}")
+    return Pillar(lift=float(lift))
+
+
+register_scene(SceneKind("test-pillar", "a pillar beside a raised robot", _pillar, options=("lift",)))
+
+
+@pytest.fixture
+def ur5e(tmp_path):
+    shutil.copytree(ROOT / "examples" / "ur5e", tmp_path / "ur5e")
+    return tmp_path / "ur5e"
+
+
+def test_core_and_installed_kinds_are_known_by_name():
+    kinds = scene_kinds()
+    assert {"none", "floor", "world", "flexcell", "test-pillar"} <= set(kinds)
+    assert kinds["flexcell"].options == ("bricks",) and kinds["flexcell"].fits is not None
+
+
+def test_a_kind_of_ones_own_places_the_robot_its_obstacles_and_the_page(ur5e):
+    """A project naming a kind registered outside cotwin gets that scene in its MJCF, simulator and page."""
+    from cotwin.pmodel.mjcf import to_mjcf
+    from cotwin.pmodel.simulator import PlatformSimulator
+    from cotwin.twin.dashboard.describe import scene_drawing
+    from cotwin.twin.run import load
+
+    path = ur5e / "pillar.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text().replace("[platform]", '[platform]\nscene = "test-pillar"')
+                    + "\n[scene]\nlift = 0.4\n")
+    system = load(path)
+    scene = system.models.scene
+    assert isinstance(scene, Pillar) and scene.lift == 0.4
+    root = ET.fromstring(to_mjcf(system.models.tree, scene))
+    assert root.find(".//geom[@name='pillar']") is not None
+    base = root.find("worldbody/body")
+    assert [float(v) for v in base.get("pos").split()][2] == pytest.approx(0.4 + system.models.tree.root.pose[2, 3])
+    sim = PlatformSimulator(system.models.tree, scene)
+    assert sim.model.geom("pillar").id in sim._obstacles
+    assert scene_drawing(scene) == {"pillar": [0.6, 0.0]}
+
+
+def test_a_scene_key_its_kind_does_not_read_is_refused_at_the_key(ur5e):
+    from cotwin.twin.run import load
+
+    path = ur5e / "pillar.toml"
+    text = (ur5e / "cotwin.toml").read_text().replace("[platform]", '[platform]\nscene = "test-pillar"')
+    path.write_text(text + "\n[scene]\nlift = -1\n")
+    with pytest.raises(CotwinError, match=r"pillar.toml:\d+:1: error: \[scene\] lift: must be a height >= 0"):
+        load(path)
+    path.write_text(text + "\n[scene]\nbricks = [[1, 2]]\n")
+    with pytest.raises(CotwinError, match=r"pillar.toml:\d+:1: error: \[scene\] bricks: the scene is 'test-pillar' "
+                                          r".*which would ignore it \(it reads lift\)"):
+        load(path)
+
+
+def test_auto_chooses_the_kind_that_fits_the_mapping_and_floor_is_an_empty_floor(ur5e):
+    from cotwin.twin.run import load
+
+    assert type(load(ur5e / "cotwin.toml").models.scene).__name__ == "FlexCell"  # the mapping has the grid
+    path = ur5e / "floor.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text().replace("[platform]", '[platform]\nscene = "floor"'))
+    floor = load(path).models.scene
+    assert floor.obstacle_names == [] and floor.geometry is None and floor.drawing() is None
+
+
+def test_the_generic_core_names_no_example():
+    """No file under src/cotwin names an example's robot, cell or world (they live in examples/ and in
+    packages registering scene kinds, such as cotwin_cells); the one generic word allowed is the CSS
+    colour `firebrick` in the vendored three.js."""
+    found = []
+    for path in sorted((ROOT / "src" / "cotwin").rglob("*")):
+        if not path.is_file() or "__pycache__" in path.parts:
+            continue
+        text = path.read_bytes().decode("utf-8", "replace")
+        for match in EXAMPLE_WORDS.finditer(text):
+            word = text[max(0, match.start() - 4):match.end()].lower()
+            if word not in GENERIC:
+                line = text.count("\n", 0, match.start()) + 1
+                found.append(f"{path.relative_to(ROOT)}:{line}: {text[max(0, match.start() - 40):match.end() + 40]!r}")
+    assert not found, "\n".join(found)
