@@ -13,7 +13,7 @@ differs between its twin and the project it names (where its PT is, how long it 
 
     [[twin]]
     name = "arm-1"                  # unique in the fleet: its folder DIR/NAME, its alarms' routing key
-    project = "ur5e/replay.toml"    # a project as `cotwin twin` takes it (relative to this file)
+    project = "arm/replay.toml"     # a project as `cotwin twin` takes it (relative to this file)
     pt_log = "logs/run1.csv"        # optional overrides, as cotwin twin's options: the replayed log,
     pt_url = "opc.tcp://127.0.0.1:4841"   # or where the PT is
     step = 0.1                      #   the communication step, end time, algorithm and pacing
