@@ -139,7 +139,10 @@ def test_the_recorded_ur5e_run_is_matched_by_the_calibrated_dt(parts, tmp_path):
     """Must-show: fitted on rtde_run1.csv and replaying its commands at its onsets, the DT is within
     0.05 rad RMS per joint while moving and 0.01 rad at rest."""
     twin, program, commands = parts
-    log = read_arm_log(_recorded())
+    from conftest import EXAMPLES
+    from cotwin.mapping.profile import read_profile
+
+    log = read_arm_log(_recorded(), read_profile(EXAMPLES / "ur5e" / "ur.profile.toml", 6))
     report = calibrate(twin, program, commands, log)
     assert np.all(report.after.motion <= MOTION_RMSE), report.after.motion
     assert np.all(report.after.settled <= SETTLED), report.after.settled
