@@ -79,3 +79,57 @@ def test_no_profile_means_the_identity_and_a_warning(tmp_path, caplog):
     assert [r.message for r in caplog.records if "no robot profile" in r.message], caplog.text
     log = read_arm_log(_log(tmp_path, controller), convention)
     assert np.array_equal(log.q, controller)
+
+
+@pytest.fixture
+def replay_project(tmp_path):
+    """The UR5e replay example copied elsewhere, replaying a log of our own (written as a made-up
+    controller reports), with the [robot] table as the test writes it."""
+    import shutil
+
+    from conftest import EXAMPLES
+
+    folder = tmp_path / "ur5e"
+    shutil.copytree(EXAMPLES / "ur5e", folder)
+    controller = np.array([[0.1, -1.2, 1.3, -1.6, -1.5, 0.2], [0.1, -1.2, 1.3, -1.6, -1.5, 0.25]])
+    write_rtde(folder / "made-up.csv", [0.0, 0.1], controller, qd=np.zeros_like(controller))
+    (folder / "arm.profile.toml").write_text(PROFILE)
+    text = (folder / "replay.toml").read_text()
+    text = text.replace('log = "../../../shared/data/ur5e/rtde_run1.csv"', 'log = "made-up.csv"')
+    start = text.index("[robot]")
+    text = text[:start] + text[text.index("[cosim]"):]
+
+    def project(robot: str):
+        (folder / "replay.toml").write_text(text.replace("[cosim]", robot + "[cosim]"))
+        return folder / "replay.toml"
+
+    return project, controller
+
+
+def test_the_replay_pt_reads_the_log_through_the_projects_profile(replay_project, caplog):
+    from cotwin.twin.run import load
+    from cotwin.twin.runtime import pt_endpoint
+
+    project, controller = replay_project
+    with caplog.at_level(logging.WARNING, logger="cotwin.twin"):
+        replayed = pt_endpoint(load(project('[robot]\nprofile = "arm.profile.toml"\n\n')))
+    assert np.allclose(replayed.recording.q, controller - OFFSETS, atol=1e-12)
+    assert not [r for r in caplog.records if "no robot profile" in r.message]
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="cotwin.twin"):
+        replayed = pt_endpoint(load(project("")))
+    assert np.array_equal(replayed.recording.q, controller)  # no profile: the identity
+    assert len([r for r in caplog.records if "no robot profile" in r.message]) == 1  # said once
+
+
+def test_a_project_naming_a_missing_or_mismatched_profile_is_refused_at_its_key(replay_project, tmp_path):
+    from cotwin.twin.run import load
+    from cotwin.twin.runtime import pt_endpoint
+
+    project, _ = replay_project
+    with pytest.raises(CotwinError, match=r"replay.toml:\d+:1: error: \[robot\] profile: no file .*nowhere.toml"):
+        load(project('[robot]\nprofile = "nowhere.toml"\n\n'))
+    short = tmp_path / "ur5e" / "short.profile.toml"
+    short.write_text("joint_offsets = [0.0, 0.1, 0.2]\n")
+    with pytest.raises(CotwinError, match=r"short.profile.toml:1:1: error: joint_offsets: 3 offsets for an arm of 6"):
+        pt_endpoint(load(project('[robot]\nprofile = "short.profile.toml"\n\n')))
