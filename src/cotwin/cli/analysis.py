@@ -167,8 +167,8 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     fitted = None
     if pt_log is not None:
         with ProgressReport("calibrating", "stages") as progress:
-            report = cal.calibrate(twin, program, commands, read_arm_log(pt_log, convention), CellGeometry(tool=point), log_start,
-                                   progress=progress)
+            report = cal.calibrate(twin, program, commands, read_arm_log(pt_log, convention), CellGeometry(tool=point),
+                                   log_start, progress=progress)
         fitted = report.calibration
         fitted.write(out, f"cotwin calibration of {Path(project).name}, fitted on {Path(pt_log).name} "
                           "(cotwin calibrate)")
