@@ -14,6 +14,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from cotwin.mapping.profile import read_profile  # noqa: E402
 from cotwin.mapping.rtde import read_arm_log  # noqa: E402
 from cotwin.pmodel import ik  # noqa: E402
 from cotwin.twin.calibration import calibrate, plan_moves, project_twin  # noqa: E402
@@ -28,8 +29,9 @@ def main() -> None:
     if not LOG.is_file():
         print(f"skipped: the recorded UR5e run is not at {LOG} (only in the project workspace)")
         return
-    twin, program, commands = project_twin(load(ROOT / "examples" / "ur5e" / "cotwin.toml"))
-    log = read_arm_log(LOG)
+    system = load(ROOT / "examples" / "ur5e" / "cotwin.toml")
+    twin, program, commands = project_twin(system)
+    log = read_arm_log(LOG, read_profile(system.spec.profile, 6))  # the example's UR profile
     t0 = time.perf_counter()
     report = calibrate(twin, program, commands, log)
     t_fit = time.perf_counter() - t0

@@ -11,6 +11,7 @@ import pytest
 
 from cotwin.diagnostics import CotwinError
 from cotwin.mapping.motion import JointMove
+from cotwin.mapping.profile import IDENTITY, read_profile
 from cotwin.mapping.rtde import read_arm_log, write_rtde
 from cotwin.pmodel import ik
 from cotwin.pmodel.cell import CellGeometry, matrix_rpy
@@ -87,8 +88,9 @@ def _reach(tree, tool, arm, target: np.ndarray, near: np.ndarray) -> np.ndarray:
     return fit.x
 
 
-def _pt_log(parts, path, onsets, start=(-1.5, -0.3, 1.5, -0.6, -1.5, 0.1), moves=None):
-    """What a PT with cell TRUTH and movej TRUTH_MOVE records for the plan's moves started at `onsets`."""
+def _pt_log(parts, path, onsets, start=(-1.5, -0.3, 1.5, -0.6, -1.5, 0.1), moves=None, convention=IDENTITY):
+    """What a PT with cell TRUTH and movej TRUTH_MOVE records for the plan's moves started at `onsets`
+    (angles written in the controller's `convention`)."""
     twin, program, commands = parts
     tree = twin.tree
     tool = ik.find_tool(tree, TRUTH.tool)
@@ -107,7 +109,7 @@ def _pt_log(parts, path, onsets, start=(-1.5, -0.3, 1.5, -0.6, -1.5, 0.1), moves
     t = np.arange(0.0, end + 2.5, 0.1)
     qs = np.array([at(x) for x in t])
     qd = np.array([(at(x + 1e-5) - at(x - 1e-5)) / 2e-5 for x in t])
-    return write_rtde(path, 500.0 + t, qs, qd, qs, qd)
+    return write_rtde(path, 500.0 + t, qs, qd, qs, qd, convention=convention)
 
 
 def test_calibration_recovers_a_known_cell_and_timing(parts, tmp_path):
@@ -139,7 +141,9 @@ def test_the_recorded_ur5e_run_is_matched_by_the_calibrated_dt(parts, tmp_path):
     """Must-show: fitted on rtde_run1.csv and replaying its commands at its onsets, the DT is within
     0.05 rad RMS per joint while moving and 0.01 rad at rest."""
     twin, program, commands = parts
-    log = read_arm_log(_recorded())
+    from conftest import EXAMPLES
+
+    log = read_arm_log(_recorded(), read_profile(EXAMPLES / "ur5e" / "ur.profile.toml", 6))
     report = calibrate(twin, program, commands, log)
     assert np.all(report.after.motion <= MOTION_RMSE), report.after.motion
     assert np.all(report.after.settled <= SETTLED), report.after.settled
@@ -219,7 +223,7 @@ def _calibrated_project(tmp_path, calibration_text=None):
 
     folder = EXAMPLES / "ur5e"
     text = (folder / "calibrated.toml").read_text()
-    for name in ("arm.rst", "ur5e.pm", "mapping.pm", "plan.csv"):
+    for name in ("arm.rst", "ur5e.pm", "mapping.pm", "plan.csv", "ur.profile.toml"):
         text = text.replace(f'"{name}"', f'"{(folder / name).as_posix()}"')
     calibration = folder / "calibration.toml"
     if calibration_text is not None:
@@ -267,7 +271,9 @@ def test_a_project_naming_a_bad_calibration_reports_it(tmp_path):
 def test_the_command_fits_writes_and_checks(parts, tmp_path):
     from conftest import EXAMPLES
 
-    log = _pt_log(parts, tmp_path / "pt.csv", [1.23, 6.71, 9.02, 16.35])
+    # the example project names the UR profile: the log is written as a UR controller would
+    log = _pt_log(parts, tmp_path / "pt.csv", [1.23, 6.71, 9.02, 16.35],
+                  convention=read_profile(EXAMPLES / "ur5e" / "ur.profile.toml", 6))
     out = tmp_path / "calibration.toml"
     project = str(EXAMPLES / "ur5e" / "cotwin.toml")
     fit = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--pt-log", str(log), "-o", str(out)],

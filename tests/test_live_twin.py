@@ -78,9 +78,11 @@ def test_replayed_pt_beside_the_dt_gives_a_deviation_report(recorded, tmp_path):
         assert figures["max_deviation_time"] == pytest.approx(float(pt[1 + aligned.index(max(aligned))]["time"]))
     assert report["variables"]["q0"]["rmse"] > 1e-3  # the twins do differ: the check above is not 0 == 0
     # the PT is the recording: its joints at rest equal the log's first sample in the p-model convention
+    from conftest import EXAMPLES
+    from cotwin.mapping.profile import read_profile
     from cotwin.mapping.replay import read_rtde_log
 
-    log = read_rtde_log(recorded, [f"j{i}" for i in range(6)])
+    log = read_rtde_log(recorded, [f"j{i}" for i in range(6)], read_profile(EXAMPLES / "ur5e" / "ur.profile.toml"))
     assert float(pt[0]["{mapping}.mapping.q1"]) == pytest.approx(log.q[0, 1], abs=1e-9)
     assert float(dt[0]["{mapping}.mapping.q1"]) == pytest.approx(log.q[0, 1], abs=1e-3)  # the DT starts there too
     assert (tmp_path / "figure.png").stat().st_size > 10_000
@@ -140,6 +142,7 @@ def test_rtde_field_mapping_agrees_with_the_logs_own_tcp_poses(recorded):
     import numpy as np
 
     from conftest import EXAMPLES
+    from cotwin.mapping.profile import read_profile
     from cotwin.mapping.replay import ReplayEndpoint, read_rtde_log
     from cotwin.mapping.rtde import read_rtde
     from cotwin.mapping.urrtde import fields_to_state
@@ -149,11 +152,12 @@ def test_rtde_field_mapping_agrees_with_the_logs_own_tcp_poses(recorded):
     arm = ik.arm_joints(tree, ik.find_tool(tree))
     flange = next(j.child for j in tree.joints if j.name == arm[-1])
     log = read_rtde(recorded)
-    replay = ReplayEndpoint(tree, read_rtde_log(recorded, arm), offset=0.0)
+    ur = read_profile(EXAMPLES / "ur5e" / "ur.profile.toml", len(arm))
+    replay = ReplayEndpoint(tree, read_rtde_log(recorded, arm, ur), offset=0.0)
     in_flange = []
     for i in range(0, len(log.data), 7):
         row = dict(zip(log.columns, log.data[i]))
-        q, qd = fields_to_state(row, arm)
+        q, qd = fields_to_state(row, arm, ur)
         tcp_ur = np.array([row[f"actual_TCP_pose_{k}"] for k in range(3)])
         tcp = np.array([-tcp_ur[0], -tcp_ur[1], tcp_ur[2], 1.0])  # the UR base frame turned by pi about z
         in_flange.append((np.linalg.inv(tree.forward(q)[flange]) @ tcp)[:3])

@@ -7,7 +7,8 @@ import pytest
 
 from cotwin.diagnostics import CotwinError
 from cotwin.mapping.motion import JointMove
-from cotwin.mapping.rtde import UR_TO_COTWIN, read_arm_log, read_rtde, write_rtde
+from cotwin.mapping.profile import read_profile
+from cotwin.mapping.rtde import read_arm_log, read_rtde, write_rtde
 from cotwin.pmodel import ik
 from cotwin.pmodel.tree import build_tree
 from cotwin.robosim.check import load_checked
@@ -66,21 +67,27 @@ def test_motion_onsets_and_settling_are_found_between_samples(tree, tmp_path):
 
 
 def test_angles_and_poses_are_converted_to_the_p_models_convention(tree, tmp_path):
+    from conftest import EXAMPLES
+
+    ur = read_profile(EXAMPLES / "ur5e" / "ur.profile.toml", 6)  # the UR controller's conventions
     q = np.array([[0.1, 0.2, 0.3, 0.4, 0.5, 0.6], [0.1, 0.2, 0.3, 0.4, 0.5, 0.7]])
     tool = ik.find_tool(tree, "flange")
     poses = [ik.tool_pose(tree, tool, dict(zip(ik.arm_joints(tree, tool), row))) for row in q]
-    path = write_rtde(tmp_path / "c.csv", [0.0, 0.1], q, tcp=poses)
+    path = write_rtde(tmp_path / "c.csv", [0.0, 0.1], q, tcp=poses, convention=ur)
     header = path.read_text().split("\n")[0].split()
     first = dict(zip(header, map(float, path.read_text().split("\n")[1].split())))
     assert first["actual_q_1"] == pytest.approx(0.2 - np.pi / 2) and first["actual_q_3"] == pytest.approx(0.4 - np.pi / 2)
     assert first["actual_TCP_pose_0"] == pytest.approx(-poses[0][0, 3])  # the UR base is turned by pi
-    log = read_arm_log(path)
+    log = read_arm_log(path, ur)
     assert np.allclose(log.q, q) and np.allclose(log.tcp, poses)
     assert np.allclose(log.qd[0], [0, 0, 0, 0, 0, 1.0])  # differentiated when the log has no speeds
 
 
 def test_the_recorded_ur5e_run_reads_with_four_moves_and_a_consistent_convention(tree):
-    log = read_arm_log(_run1())
+    from conftest import EXAMPLES
+
+    ur = read_profile(EXAMPLES / "ur5e" / "ur.profile.toml", 6)  # the UR controller's conventions
+    log = read_arm_log(_run1(), ur)
     assert len(log.t) == 241 and log.t[-1] == pytest.approx(24.0)
     motions = log.motions()
     assert len(motions) == 4
@@ -97,7 +104,7 @@ def test_the_recorded_ur5e_run_reads_with_four_moves_and_a_consistent_convention
         seen = (np.linalg.inv(flange) @ tcp)[:3, 3]
         assert np.linalg.norm(seen - [0.0, 0.0, 0.032]) < 0.005, (row, seen)
         assert np.degrees(np.arccos(np.clip((np.trace(flange[:3, :3].T @ tcp[:3, :3]) - 1) / 2, -1, 1))) < 1.0
-    assert UR_TO_COTWIN.to_controller(log.q)[0] == pytest.approx(
+    assert ur.to_controller(log.q)[0] == pytest.approx(
         [log.raw.column(f"actual_q_{i}")[0] for i in range(6)])
 
 

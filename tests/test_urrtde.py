@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from cotwin.diagnostics import CotwinError
-from cotwin.mapping.rtde import UR_TO_COTWIN
+from cotwin.mapping.profile import read_profile
 from cotwin.mapping.urrtde import RTDEEndpoint
 from cotwin.pmodel import ik
 
@@ -66,6 +66,14 @@ def robot(monkeypatch):
 
 
 @pytest.fixture(scope="module")
+def ur():
+    """The UR controller's profile the UR5e example carries."""
+    from conftest import EXAMPLES
+
+    return read_profile(EXAMPLES / "ur5e" / "ur.profile.toml", 6)
+
+
+@pytest.fixture(scope="module")
 def tree():
     from conftest import EXAMPLES
     from cotwin.pmodel.tree import build_tree
@@ -74,22 +82,22 @@ def tree():
     return build_tree(load_checked([EXAMPLES / "ur5e"]))
 
 
-def test_joints_read_in_the_p_models_convention(robot, tree):
-    endpoint = RTDEEndpoint(tree, "rtde://10.0.0.7:30004")
+def test_joints_read_in_the_p_models_convention(robot, tree, ur):
+    endpoint = RTDEEndpoint(tree, "rtde://10.0.0.7:30004", convention=ur)
     assert robot.hosts == ["10.0.0.7", "10.0.0.7"]  # the scheme and port are not the host
     arm = ik.arm_joints(tree, ik.find_tool(tree))
     q = endpoint.joint_positions()
     assert list(q) == arm
     # the documented convention (interop.md): q_model = q_ur + (0, pi/2, 0, pi/2, 0, 0)
     assert np.allclose([q[j] for j in arm], np.array(CONTROLLER_Q) + [0, np.pi / 2, 0, np.pi / 2, 0, 0], atol=0)
-    assert np.allclose([q[j] for j in arm], UR_TO_COTWIN.to_model(np.array(CONTROLLER_Q)))  # logs read alike
+    assert np.allclose([q[j] for j in arm], ur.to_model(np.array(CONTROLLER_Q)))  # logs read alike
     assert [endpoint.joint_velocities()[j] for j in arm] == CONTROLLER_QD
     sensors = endpoint.read_sensors()
     assert sensors and all(np.isfinite(v) for v in sensors.values())
 
 
-def test_a_command_is_one_asynchronous_movej_in_the_controllers_convention(robot, tree):
-    endpoint = RTDEEndpoint(tree, "10.0.0.7", speed=0.5, acceleration=0.8)
+def test_a_command_is_one_asynchronous_movej_in_the_controllers_convention(robot, tree, ur):
+    endpoint = RTDEEndpoint(tree, "10.0.0.7", speed=0.5, acceleration=0.8, convention=ur)
     arm = ik.arm_joints(tree, ik.find_tool(tree))
     current = endpoint.joint_positions()
     goal = {arm[1]: current[arm[1]] + 0.3}

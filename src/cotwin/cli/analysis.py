@@ -139,7 +139,9 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     per-joint RMSE before and after; or replay another recorded run on a calibrated DT (--check)."""
     import math
 
+    from ..mapping.profile import robot_convention
     from ..mapping.rtde import read_arm_log
+    from ..pmodel import ik
     from ..pmodel.cell import CellGeometry
     from ..twin import calibration as cal
     from ..twin.project import load_project
@@ -160,11 +162,13 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     if out is not None:  # the project's own calibration too: a fit never replaces what it started from
         check_outputs([out], [*system.spec.inputs, pt_log, check_log, calibration])
     twin, program, commands = cal.project_twin(system)
+    arm = ik.arm_joints(system.models.tree, ik.find_tool(system.models.tree))
+    convention = robot_convention(system.spec.profile, len(arm))
     fitted = None
     if pt_log is not None:
         with ProgressReport("calibrating", "stages") as progress:
-            report = cal.calibrate(twin, program, commands, read_arm_log(pt_log), CellGeometry(tool=point), log_start,
-                                   progress=progress)
+            report = cal.calibrate(twin, program, commands, read_arm_log(pt_log, convention), CellGeometry(tool=point),
+                                   log_start, progress=progress)
         fitted = report.calibration
         fitted.write(out, f"cotwin calibration of {Path(project).name}, fitted on {Path(pt_log).name} "
                           "(cotwin calibrate)")
@@ -175,4 +179,4 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
         if chosen is None:
             raise click.UsageError("--check needs a calibration: --calibration FILE, --pt-log to fit one, or a "
                                    "project with [platform] calibration")
-        click.echo("\n".join(cal.check(twin, program, commands, read_arm_log(check_log), chosen).lines()))
+        click.echo("\n".join(cal.check(twin, program, commands, read_arm_log(check_log, convention), chosen).lines()))

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..diagnostics import CotwinError
 from ..pmodel.tree import KinematicTree
+from .profile import IDENTITY, Convention
 
 
 @dataclass
@@ -157,11 +158,11 @@ class ReplayEndpoint:
         return out
 
 
-def read_rtde_log(path, joints: list[str]) -> Recording:
+def read_rtde_log(path, joints: list[str], convention: Convention = IDENTITY) -> Recording:
     """The arm joints of a UR RTDE log (space-separated, header row; actual_q_*, actual_qd_*) as a Recording
-    in the p-model's convention (the field mapping of the RTDE endpoint)."""
+    in the p-model's convention (the robot profile's, as the RTDE endpoint maps fields; identity by default)."""
     from .rtde import read_rtde
-    from .urrtde import to_model
 
     log = read_rtde(path)
-    return Recording(log.times, np.array([to_model(q) for q in log.q]), log.qd, joints[: log.q.shape[1]], str(path))
+    return Recording(log.times, np.array([convention.to_model(q) for q in log.q]), log.qd, joints[: log.q.shape[1]],
+                     str(path))

@@ -6,9 +6,9 @@ not increase or jumps by more than MAX_GAP), up to MAX_ERRORS of them at once.
 
 Two views of a log:
 - `RTDELog`: the fields as logged (the controller's convention): `column`, `vector`, `times`, `q`, `qd`;
-- `ArmLog`: the arm in the p-model's convention (a `Convention`: joint offsets and the controller's
-  base frame in the model frame; by default the UR convention, as the RTDE endpoint maps fields,
-  cotwin.mapping.urrtde): time since the first row, measured and set-point joints, TCP poses, and
+- `ArmLog`: the arm in the p-model's convention (a `Convention` read from the project's robot profile,
+  cotwin.mapping.profile: joint offsets and the controller's base frame in the model frame; by default
+  the identity): time since the first row, measured and set-point joints, TCP poses, and
   the moves found in the log (`motions()`: a move starts when a joint's speed leaves rest, its onset
   placed between samples by extrapolating the leading joint's speed back to zero, and settles when
   every joint is back at rest).
@@ -19,14 +19,14 @@ from __future__ import annotations
 import math
 import stat
 from array import array
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..diagnostics import CotwinError, Diagnostics, Finding, Location, Severity
 from ..files import write_text
-from .urrtde import UR_TO_MODEL
+from .profile import IDENTITY, Convention
 
 JOINTS = 6
 MAX_FIELD = 64  # characters: a number needs fewer; anything longer is reported, not parsed
@@ -72,27 +72,6 @@ class RTDELog:
         return self.vector("actual_qd")
 
 
-@dataclass(frozen=True)
-class Convention:
-    """How the controller's joint angles and base frame relate to the p-model's."""
-
-    offsets: tuple[float, ...] = tuple(float(-v) + 0.0 for v in UR_TO_MODEL)  # q_controller = q + offsets
-    base: tuple[tuple[float, ...], ...] = ((-1.0, 0.0, 0.0, 0.0), (0.0, -1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0),
-                                           (0.0, 0.0, 0.0, 1.0))  # controller base frame in the model frame
-
-    def to_model(self, q_controller: np.ndarray) -> np.ndarray:
-        return np.asarray(q_controller, float) - np.asarray(self.offsets)
-
-    def to_controller(self, q: np.ndarray) -> np.ndarray:
-        return np.asarray(q, float) + np.asarray(self.offsets)
-
-    def pose_to_model(self, T_controller: np.ndarray) -> np.ndarray:
-        return np.asarray(self.base) @ T_controller
-
-
-UR_TO_COTWIN = Convention()
-
-
 @dataclass
 class Motion:
     """One move of the arm in a log (times on the log's clock, seconds since its first row)."""
@@ -114,7 +93,7 @@ class ArmLog:
     """The arm's series of an RTDE log in the p-model's convention."""
 
     raw: RTDELog
-    convention: Convention = field(default_factory=Convention)
+    convention: Convention = IDENTITY
 
     @property
     def path(self) -> Path:
@@ -221,13 +200,13 @@ def pose_vector(T: np.ndarray) -> np.ndarray:
     return np.concatenate([T[:3, 3], rot])
 
 
-def read_arm_log(path: str | Path, convention: Convention = UR_TO_COTWIN) -> ArmLog:
+def read_arm_log(path: str | Path, convention: Convention = IDENTITY) -> ArmLog:
     """An RTDE log's arm series in the p-model's convention (needs timestamp and actual_q_0..5)."""
     return ArmLog(read_rtde(path, ARM), convention)
 
 
 def write_rtde(path: str | Path, timestamp, q, qd=None, target_q=None, target_qd=None, tcp=None,
-               convention: Convention = UR_TO_COTWIN) -> Path:
+               convention: Convention = IDENTITY) -> Path:
     """Write p-model-convention series as an RTDE log (the columns given; TCP poses as 4x4s in the
     model frame), e.g. to record a DT run in the PT's format."""
     path = Path(path)

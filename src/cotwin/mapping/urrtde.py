@@ -1,9 +1,9 @@
 """A real Universal Robots arm over RTDE as the physical twin's endpoint (the `rtde` extra: ur-rtde).
 
 One field mapping serves the live robot and its recorded logs (cotwin.mapping.rtde, the replay
-endpoint): RTDE's `actual_q_k` / `actual_qd_k` (k = 0..5, UR convention) become the p-model's arm
-joints with `to_model` (q_model = q_ur + (0, pi/2, 0, pi/2, 0, 0), interop.md); goals go the other way
-with `to_ur`. A command is a synchronised joint move (URScript's movej through ur-rtde's moveJ, with the
+endpoint): RTDE's `actual_q_k` / `actual_qd_k` (k = 0..5, the controller's convention) become the
+p-model's arm joints with the project's robot profile (cotwin.mapping.profile; identity without one);
+goals go the other way. A command is a synchronised joint move (URScript's movej through ur-rtde's moveJ, with the
 project's speed and acceleration), asynchronous so the twin keeps stepping; `advance(dt)` waits until
 dt of wall time has passed since the last step, since a real robot runs on its own clock.
 """
@@ -14,22 +14,11 @@ import math
 import time as wallclock
 from typing import Mapping
 
-import numpy as np
-
 from ..diagnostics import CotwinError
+from .profile import IDENTITY, Convention
 
-UR_TO_MODEL = np.array([0.0, math.pi / 2, 0.0, math.pi / 2, 0.0, 0.0])
-
-
-def to_model(q_ur) -> np.ndarray:
-    return np.asarray(q_ur, float) + UR_TO_MODEL[: len(q_ur)]
-
-
-def to_ur(q_model) -> np.ndarray:
-    return np.asarray(q_model, float) - UR_TO_MODEL[: len(q_model)]
-
-
-def fields_to_state(fields: Mapping[str, float], arm: list[str]) -> tuple[dict[str, float], dict[str, float]]:
+def fields_to_state(fields: Mapping[str, float], arm: list[str],
+                    convention: Convention = IDENTITY) -> tuple[dict[str, float], dict[str, float]]:
     """Arm joint positions and velocities (p-model names and convention) from RTDE output fields named as
     in a log's header (`actual_q_0`.., `actual_qd_0`..)."""
     try:
@@ -39,13 +28,14 @@ def fields_to_state(fields: Mapping[str, float], arm: list[str]) -> tuple[dict[s
         raise CotwinError(f"RTDE data without the field {err.args[0]}") from None
     if not all(math.isfinite(v) for v in q + qd):
         raise CotwinError("RTDE data with a non-finite joint value")
-    return dict(zip(arm, map(float, to_model(q)))), dict(zip(arm, qd))
+    return dict(zip(arm, map(float, convention.to_model(q)))), dict(zip(arm, qd))
 
 
 class RTDEEndpoint:
     """The platform endpoint of a UR robot at `host` (needs `pip install cotwin[rtde]`)."""
 
-    def __init__(self, tree, host: str, speed: float = 1.05, acceleration: float = 1.4):
+    def __init__(self, tree, host: str, speed: float = 1.05, acceleration: float = 1.4,
+                 convention: Convention = IDENTITY):
         try:
             import rtde_control
             import rtde_receive
@@ -55,7 +45,7 @@ class RTDEEndpoint:
 
         self.tree = tree
         self.arm = ik.arm_joints(tree, ik.find_tool(tree))
-        self.speed, self.acceleration = speed, acceleration
+        self.speed, self.acceleration, self.convention = speed, acceleration, convention
         host = host.removeprefix("rtde://").split(":")[0]
         try:
             self.receive = rtde_receive.RTDEReceiveInterface(host)
@@ -90,8 +80,8 @@ class RTDEEndpoint:
             if not math.isfinite(value):
                 raise CotwinError(f"actuator '{name}': goal {value!r} is not a finite number")
             target[self.joint(name)] = float(value)
-        q_ur = to_ur([target[j] for j in self.arm])
-        self.control.moveJ(list(q_ur), self.speed, self.acceleration, True)
+        q_controller = self.convention.to_controller([target[j] for j in self.arm])
+        self.control.moveJ(list(q_controller), self.speed, self.acceleration, True)
 
     def advance(self, dt: float) -> None:
         self._last += dt
@@ -101,13 +91,13 @@ class RTDEEndpoint:
         self.time += dt
 
     def joint_positions(self) -> dict[str, float]:
-        return fields_to_state(self._fields(), self.arm)[0]
+        return fields_to_state(self._fields(), self.arm, self.convention)[0]
 
     def joint_velocities(self) -> dict[str, float]:
-        return fields_to_state(self._fields(), self.arm)[1]
+        return fields_to_state(self._fields(), self.arm, self.convention)[1]
 
     def read_sensors(self) -> dict[str, float]:
-        positions, velocities = fields_to_state(self._fields(), self.arm)
+        positions, velocities = fields_to_state(self._fields(), self.arm, self.convention)
         out = {}
         for s in self.tree.sensors:
             if s.joint is not None:

@@ -25,6 +25,7 @@ from ..cosim.execution import Execution, RunResult, ended_early, saved_execution
 from ..cosim.observers import CSVWriter, StateFile, epoch_of
 from ..diagnostics import CotwinError, Finding, Severity
 from ..files import write_text
+from ..mapping.profile import robot_convention
 from .project import check_timing
 from .build import ARTEFACTS, dmodel_fmu, folder_lock
 from .deviation import DeviationMonitor
@@ -54,15 +55,17 @@ def pt_endpoint(system: TwinSystem):
         from ..pmodel import ik
 
         arm = ik.arm_joints(tree, ik.find_tool(tree))
-        recording = read_rtde_log(pt.log, arm)
+        recording = read_rtde_log(pt.log, arm, robot_convention(system.spec.profile, len(arm)))
         problem = recording.offset_problem(pt.offset) if pt.offset is not None else None
         if problem is not None:
             raise CotwinError(f"{system.spec.path}: [pt] offset: {problem}")
         return ReplayEndpoint(tree, recording, pt.offset)
     if pt.endpoint == "rtde":
         from ..mapping.urrtde import RTDEEndpoint
+        from ..pmodel import ik
 
-        return RTDEEndpoint(tree, pt.url)
+        arm = ik.arm_joints(tree, ik.find_tool(tree))
+        return RTDEEndpoint(tree, pt.url, convention=robot_convention(system.spec.profile, len(arm)))
     raise CotwinError(f"unknown PT endpoint {pt.endpoint!r}")
 
 

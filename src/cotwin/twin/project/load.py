@@ -81,6 +81,7 @@ class TwinProject:
     settings: Any = None  # ProjectSettings: the sections as written
     file: TomlFile | None = field(default=None, repr=False)  # the file read (its data and where each key is)
     pt_log: Path | None = None  # a command's --pt-log, in place of [pt] log
+    profile: Path | None = None  # [robot] profile: the controller's conventions (cotwin.mapping.profile)
 
     @property
     def model_files(self) -> list[Path]:
@@ -94,7 +95,7 @@ class TwinProject:
     def inputs(self) -> list[Path]:
         """Every file the project reads (no output of a run may replace one of them)."""
         found = [self.path, *self.model_files, self.plan, self.pt.log if self.pt else None, self.calibration,
-                 self.world_file]
+                 self.world_file, self.profile]
         return [p for p in found if p is not None]
 
     def location(self, *key) -> Location:
@@ -205,6 +206,7 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
         if sources and sources[0] != "rabbitmq" else None
     pt = _pt(file, s.pt, pt_log, existing, problems)
     calibration = existing("platform", "calibration", platform.calibration)
+    profile = existing("robot", "profile", s.robot.profile)
     world, world_file = _world(file, s, existing, problems)
     stand_ins = _stand_ins(file, platform.stand_in, problems)
     panels = _panels(file, s.figure.panels, problems) if "panels" in _table(file.data, "figure") else None
@@ -225,6 +227,7 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     spec.fmu = fmu
     spec.isolate, spec.unit_timeout = cosim.isolate, float(cosim.unit_timeout)
     spec.convergence = s.convergence
+    spec.profile = profile
     if world_file is not None:
         spec.world_file = world_file.path
     spec.locations = {key: file.location(key) for key in file.where}

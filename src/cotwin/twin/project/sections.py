@@ -297,6 +297,15 @@ class Figure:
 
 
 @_section
+class Robot:
+    """The real robot's controller: how its joints and base frame relate to the p-model's."""
+
+    profile: str | None = setting("a robot profile file: joint offsets and base frame (docs/live-twin.md); "
+                                  "absent: the identity, with a warning when a log or robot is read",
+                                  Key("str"), path=True)
+
+
+@_section
 class PT:
     """The physical twin of `cotwin twin`."""
 
@@ -414,6 +423,7 @@ SECTIONS: dict[str, Any] = {
     "monitor": setting("What the mapping monitors.", section=Monitor),
     "cosim": setting("The co-simulation.", section=Cosim),
     "figure": setting("The run's figure.", section=Figure),
+    "robot": setting("The real robot's conventions.", section=Robot),
     "pt": setting("The physical twin; absent: `cotwin twin` needs --pt-log or --pt-url.", section=PT, optional=True),
     "deviation": setting("Deviation checking.", section=DeviationSettings),
     "history": setting("History.", section=History),
