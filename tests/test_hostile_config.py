@@ -188,6 +188,11 @@ def test_worlds_are_bounded_in_size_and_obstacles(tmp_path):
         load_world(path)
 
 
+def lines(path) -> int:
+    """How many lines a file has: problems in text appended to an example are located after them."""
+    return len(path.read_text().splitlines())
+
+
 def test_figure_panels_naming_unknown_units_or_variables_are_refused(ur5e):
     from cotwin.twin.run import load
 
@@ -197,7 +202,8 @@ def test_figure_panels_naming_unknown_units_or_variables_are_refused(ur5e):
     with pytest.raises(CotwinError) as err:
         load(path)
     text = str(err.value)
-    assert "figure.toml:18:1: error: [figure] panel 2 variable 'mapping.q9': mapping shows no variable 'q9'" in text
+    at = lines(ur5e / "cotwin.toml") + 2  # the line of panels
+    assert f"figure.toml:{at}:1: error: [figure] panel 2 variable 'mapping.q9': mapping shows no variable 'q9'" in text
     assert "[figure] panel 2 variable 'robot.q0': unit 'robot' is not one of this twin's" in text
     assert "panel 1" not in text
     text = refused(ur5e, MODELS + "[figure]\npanels = [{ variables = [] }]\n")
@@ -321,7 +327,8 @@ def test_toml_nested_thousands_deep_is_a_located_error(ur5e, tmp_path):
     path = ur5e / "deep.toml"
     path.write_text((ur5e / "cotwin.toml").read_text() + "x = " + "[" * 100_000 + "]" * 100_000 + "\n")
     proc = cotwin("build", path, "-o", tmp_path / "o")
-    assert clean(proc) and "deep.toml:17:1: error: the project file nests arrays or tables too deeply" in proc.stderr, \
+    at = lines(ur5e / "cotwin.toml") + 1  # the line of x
+    assert clean(proc) and f"deep.toml:{at}:1: error: the project file nests arrays or tables too deeply" in proc.stderr, \
         proc.stderr
 
 
@@ -376,7 +383,8 @@ def test_deviation_variables_the_mapping_does_not_monitor_are_located(ur5e, tmp_
 
     path = ur5e / "dev.toml"
     path.write_text((ur5e / "cotwin.toml").read_text() + '\n[deviation]\nvariables = ["q0", "q7"]\n')
-    with pytest.raises(CotwinError, match=r"dev.toml:19:1: error: \[deviation\] variables q7 are not monitored"):
+    at = lines(ur5e / "cotwin.toml") + 3  # the line of variables
+    with pytest.raises(CotwinError, match=rf"dev.toml:{at}:1: error: \[deviation\] variables q7 are not monitored"):
         LiveTwin(load(path), tmp_path / "o")
 
 
@@ -390,7 +398,8 @@ def test_bricks_or_a_world_the_scene_would_ignore_are_refused(ur5e):
                                           r"\(\[platform\] scene = \"none\"\), which would ignore it"):
         load(path)
     path.write_text(base.replace("[platform]", '[platform]\nscene = "flexcell"') + '[world]\nname = "arena"\n')
-    with pytest.raises(CotwinError, match=r"scene.toml:18:1: error: \[world\]: the scene is 'flexcell'"):
+    at = lines(ur5e / "cotwin.toml") + 2  # the line of [world], after the added scene line
+    with pytest.raises(CotwinError, match=rf"scene.toml:{at}:1: error: \[world\]: the scene is 'flexcell'"):
         load(path)
 
 

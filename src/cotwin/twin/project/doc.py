@@ -17,7 +17,8 @@ co-simulation and, for a live twin, the physical twin, deviation checking and hi
 it is reported at its key's line and column, all together; an unknown key is refused with the nearest
 known one. Paths are relative to the project file. Tables left out take their keys' defaults.
 
-This page is generated from the schema (`cotwin.twin.project.sections`) by `python -m cotwin.twin.project.doc`;
+This page is generated from the schema (`cotwin.twin.project.sections`) by `python -m cotwin.twin.project.doc`
+(which rewrites docs/project.md; `--check` only compares);
 `tests/test_project_doc.py` fails when the two differ. Read a project with
 `cotwin.twin.project.load_project`; `TwinProject.with_overrides(step=..., pt_url=...)` gives a changed
 copy (a change is named SECTION_KEY, or by a key only one section has) and `TwinProject.to_toml()` writes
