@@ -300,7 +300,9 @@ def test_published_turtlebot_is_read_exported_and_driven(published):
     assert [list(j.axis) for j in wheels] == [[0, 1, 0], [0, 1, 0]]
     assert {j.servos[0].mode for j in wheels} == {"velocity"}
 
-    class Floor:
+    from cotwin.pmodel.scenes import SceneBase
+
+    class Floor(SceneBase):  # a scene of the test's own (the Scene protocol's defaults, a plane to drive on)
         def add_to(self, worldbody):
             ET.SubElement(worldbody, "geom", name="floor", type="plane", size="5 5 0.1", contype="1", conaffinity="3")
 

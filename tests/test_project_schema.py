@@ -149,3 +149,20 @@ def test_a_new_section_is_a_dataclass_and_one_entry(tmp_path):
     assert [p.message for p in problems] == ["unknown key 'tolerence' in [extra]; did you mean 'tolerance'? "
                                              "(known: tolerance, names)"]
     assert "extra" not in {f.name for f in dataclasses.fields(ProjectSettings)}
+
+
+def test_fields_set_after_loading_are_what_overrides_and_the_writer_keep():
+    """A caller that sets a loaded project's fields (a test's exchange, a fleet's end) builds what it set:
+    the build's staged copy (with_overrides, then to_toml) wrote the file's values instead, so the broker
+    FMU listened on the file's exchange and the run waited for commands that went elsewhere."""
+    from dataclasses import replace
+
+    from cotwin.twin.project import load_project
+
+    spec = load_project(EXAMPLES / "ur5e" / "live.toml")
+    spec.rabbitmq = replace(spec.rabbitmq, exchange="cotwin_elsewhere")
+    spec.end, spec.algorithm = 3.0, "gauss-seidel"
+    staged = spec.with_overrides(models_fmu=None)
+    assert (staged.rabbitmq.exchange, staged.end, staged.algorithm) == ("cotwin_elsewhere", 3.0, "gauss-seidel")
+    text = staged.to_toml()
+    assert 'exchange = "cotwin_elsewhere"' in text and "end = 3.0" in text and 'algorithm = "gauss-seidel"' in text

@@ -11,6 +11,7 @@ kind whose `fits(mapping)` holds, else none.
 
 from __future__ import annotations
 
+import threading
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
@@ -98,6 +99,7 @@ class SceneKind:
 
 _KINDS: dict[str, SceneKind] = {}
 _loaded = False
+_LOADING = threading.RLock()
 
 
 def register_scene(kind: SceneKind) -> SceneKind:
@@ -107,15 +109,17 @@ def register_scene(kind: SceneKind) -> SceneKind:
 
 
 def scene_kinds() -> dict[str, SceneKind]:
-    """Every known kind: core's generic ones and those installed packages publish (entry points)."""
+    """Every known kind: core's generic ones and those installed packages publish (entry points), loaded
+    once under a lock (twins loaded in threads at once saw a registry half loaded: "auto" chose none)."""
     global _loaded
-    if not _loaded:
-        _loaded = True
-        for ep in sorted(entry_points(group=ENTRY_POINTS), key=lambda e: e.name):
-            if ep.name not in _KINDS:
-                kind = ep.load()
-                _KINDS[kind.name] = kind
-    return dict(_KINDS)
+    with _LOADING:
+        if not _loaded:
+            for ep in sorted(entry_points(group=ENTRY_POINTS), key=lambda e: e.name):
+                if ep.name not in _KINDS:
+                    kind = ep.load()
+                    _KINDS[kind.name] = kind
+            _loaded = True
+        return dict(_KINDS)
 
 
 def scene_kind(name: str, at: Location | None = None) -> SceneKind:

@@ -114,6 +114,12 @@ class TwinProject:
             raise CotwinError(f"{self.path}: a project made in code, not read by load_project, has no settings "
                               "to override")
         data = copy.deepcopy(self.file.data)
+        current = tables(self.current_settings())  # what a caller set since loading is kept
+        for section in ("scenario", "platform", "cosim", "deviation", "history", "convergence"):
+            if section in current:
+                data[section] = copy.deepcopy(current[section])
+            else:
+                data.pop(section, None)
         for name, value in changes.items():
             path = override_path(name)
             table = data
@@ -127,14 +133,30 @@ class TwinProject:
         file.data = data
         return _load(file, self.pt_log)
 
+    def current_settings(self):
+        """The settings as this project now holds them: the file's, with the fields a caller may have set
+        since loading (the scenario's broker, the platform, timing, deviation, history, convergence) laid
+        over them, so that what is written (a build's staged copy) is what runs."""
+        s = self.settings
+        if s is None:
+            raise CotwinError(f"{self.path}: a project made in code, not read by load_project, has no settings "
+                              "to write")
+        return dataclasses.replace(
+            s, scenario=dataclasses.replace(s.scenario, rabbitmq=self.rabbitmq),
+            platform=dataclasses.replace(s.platform, endpoint=self.endpoint, queue=self.queue, url=self.url,
+                                         scene=self.scene),
+            cosim=dataclasses.replace(s.cosim, step=self.step, end=self.end, algorithm=self.algorithm,
+                                      realtime=self.realtime, log=None if self.log is None else tuple(self.log),
+                                      parameters=dict(self.parameters), isolate=self.isolate,
+                                      unit_timeout=self.unit_timeout),
+            deviation=self.deviation, history=dataclasses.replace(s.history, url=self.history_url),
+            convergence=self.convergence)
+
     def to_toml(self, sections: tuple[str, ...] | None = None, rebase: Callable[[Path], str | None] | None = None,
                 header: str = "") -> str:
         """The project's settings as TOML (only keys set away from their defaults); `sections` limits the
         tables written, `rebase` maps each file the project names (resolved) to the name written."""
-        settings = self.settings
-        if settings is None:
-            raise CotwinError(f"{self.path}: a project made in code, not read by load_project, has no settings "
-                              "to write")
+        settings = self.current_settings()
         if rebase is not None:
             for path, spec in leaves(ProjectSettings).items():
                 value = _get(settings, path)
