@@ -224,7 +224,7 @@ def test_a_changed_dmodel_fails_the_suite_it_no_longer_meets(auto_suite, tmp_pat
     """A regression: the project's d-model no longer stops the arm on arrival (its entry action dropped)."""
     models = tmp_path / "models"
     models.mkdir()
-    for name in ("mapping.pm", "ur5e.pm", "plan.csv"):
+    for name in ("mapping.pm", "ur5e.pm", "plan.csv", "ur.profile.toml"):
         (models / name).write_bytes((UR5E / name).read_bytes())
     (models / "arm.rst").write_text((UR5E / "arm.rst").read_text().replace("state Stopping { entry $stop() }",
                                                                            "state Stopping { }"))
