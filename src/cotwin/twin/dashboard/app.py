@@ -50,7 +50,8 @@ from ..whatif import finite as _finite
 from .access import Access, Gate
 from .describe import describe
 from .feed import DashboardFeed
-from .server import HEADER_SECONDS, beyond_loopback, check_tls, protocol, ws_protocol
+from .server import (HEADER_SECONDS, beyond_loopback, bound_socket, check_tls, protocol, serve_in_thread,
+                     ws_protocol)
 
 log = logging.getLogger("cotwin.dashboard")
 STATIC = Path(__file__).resolve().parent / "static"
@@ -260,14 +261,7 @@ class Dashboard:
         elif beyond_loopback(self.host):
             log.warning("dashboard: served on %s without TLS: passwords, tokens and the session cookie cross the "
                         "network in clear text (give --tls-cert and --tls-key)", self.host)
-        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
-        sock = socket.socket(family, socket.SOCK_STREAM)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            sock.bind((self.host, self.port))
-        except OSError as err:
-            sock.close()
-            raise CotwinError(f"dashboard: cannot serve on {self.host}:{self.port}: {err.strerror or err}") from None
+        sock = bound_socket(self.host, self.port, "dashboard")
         self._socket = sock
         self.port = sock.getsockname()[1]
         tls = {"ssl_certfile": str(self.tls[0]), "ssl_keyfile": str(self.tls[1])} if self.tls else {}
@@ -276,17 +270,12 @@ class Dashboard:
                                 access_log=False, lifespan="off", ws=ws_protocol(), timeout_graceful_shutdown=2,
                                 http=protocol(self.header_seconds), proxy_headers=False,  # clients are who connects
                                 limit_concurrency=MAX_CONNECTIONS, **tls)  # more at once are answered 503
-        self._server = uvicorn.Server(config)
         _cap_server_log()
-        self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]}, name="cotwin dashboard",
-                                        daemon=True)
-        self._thread.start()
-        deadline = wallclock.monotonic() + 10
-        while not self._server.started:
-            if not self._thread.is_alive() or wallclock.monotonic() > deadline:
-                self.stop()
-                raise CotwinError(f"dashboard: the server did not start on {self.host}:{self.port}")
-            wallclock.sleep(0.01)
+        try:
+            self._server, self._thread = serve_in_thread(config, sock, "dashboard")
+        except CotwinError:
+            self.stop()
+            raise
         if self.publisher is not None:
             try:
                 self.publisher.start()

@@ -14,6 +14,8 @@ import ipaddress
 import logging
 import socket
 import ssl
+import threading
+import time as wallclock
 from pathlib import Path
 
 from ...diagnostics import CotwinError
@@ -119,3 +121,34 @@ def ws_protocol():
                 self.handshake_complete = True
 
     return DenyingProtocol
+
+
+def bound_socket(host: str, port: int, what: str) -> socket.socket:
+    """A TCP socket bound to HOST:PORT for a page of ours (PORT 0: a free one); a port that cannot be had is a
+    readable error naming the page."""
+    sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as err:
+        sock.close()
+        raise CotwinError(f"{what}: cannot serve on {host}:{port}: {err.strerror or err}") from None
+    return sock
+
+
+def serve_in_thread(config, sock: socket.socket, what: str):
+    """A uvicorn server for `config` on `sock` in a daemon thread, returned (server, thread) once it is
+    serving; one that does not start within 10 s is stopped and a readable error."""
+    import uvicorn
+
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, name=f"cotwin {what}", daemon=True)
+    thread.start()
+    deadline = wallclock.monotonic() + 10
+    while not server.started:
+        if not thread.is_alive() or wallclock.monotonic() > deadline:
+            server.should_exit = True
+            thread.join(5)
+            raise CotwinError(f"{what}: the server did not start on {sock.getsockname()[0]}:{sock.getsockname()[1]}")
+        wallclock.sleep(0.01)
+    return server, thread

@@ -10,9 +10,6 @@ refreshes itself from `GET /api/fleet`, the overview as JSON).
 from __future__ import annotations
 
 import html
-import socket
-import threading
-import time as wallclock
 from typing import Callable
 
 from ...diagnostics import CotwinError
@@ -118,28 +115,13 @@ class FleetPage:
     def start(self) -> "FleetPage":
         import uvicorn
 
-        from ..dashboard.server import protocol
+        from ..dashboard.server import bound_socket, protocol, serve_in_thread
 
-        sock = socket.socket(socket.AF_INET6 if ":" in self.host else socket.AF_INET, socket.SOCK_STREAM)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            sock.bind((self.host, self.port))
-        except OSError as err:
-            sock.close()
-            raise CotwinError(f"fleet page: cannot serve on {self.host}:{self.port}: {err.strerror or err}") from None
+        sock = bound_socket(self.host, self.port, "fleet page")
         self.port = sock.getsockname()[1]
         config = uvicorn.Config(app(self.overview, self.host), log_level="warning", access_log=False, lifespan="off",
                                 http=protocol(), proxy_headers=False, limit_concurrency=64, timeout_graceful_shutdown=2)
-        self._server = uvicorn.Server(config)
-        self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]}, name="cotwin fleet page",
-                                        daemon=True)
-        self._thread.start()
-        deadline = wallclock.monotonic() + 10
-        while not self._server.started:
-            if not self._thread.is_alive() or wallclock.monotonic() > deadline:
-                self.stop()
-                raise CotwinError(f"fleet page: the server did not start on {self.host}:{self.port}")
-            wallclock.sleep(0.01)
+        self._server, self._thread = serve_in_thread(config, sock, "fleet page")
         return self
 
     def stop(self) -> None:
