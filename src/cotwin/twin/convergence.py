@@ -43,7 +43,7 @@ PRIOR_KG = 1000.0  # the estimate's prior standard deviation: nothing known (cot
 
 def estimates_payload(spec) -> bool:
     """Whether the project's DT needs a payload body ([convergence] estimate = "payload")."""
-    settings = getattr(spec, "convergence", None)
+    settings = spec.convergence
     return settings is not None and settings.estimate == "payload"
 
 
