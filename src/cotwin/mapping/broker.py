@@ -29,6 +29,7 @@ import pika
 from ..diagnostics import CotwinError
 from ..logcap import CappedLog
 from .amqp import connect, redact, scrub
+from .platform import Endpoint
 from .robot_protocol import (MAX_REPLY, MAX_REQUEST, OPS, REPLY_QUEUE, ReplayGuard, RobotView, check_reply,
                              check_request, decode, load_secret, reply_headers, request_headers, validate_reply,
                              validate_request)
@@ -76,8 +77,8 @@ class RobotServer:
 
     def _actuators(self) -> set[str] | None:
         if self._known is None:
-            names = getattr(self.endpoint, "actuator_names", None)
-            self._known = set(names()) if names is not None else set()
+            names = self.endpoint.actuator_names()
+            self._known = set(names) if names is not None else set()
         return self._known or None
 
     def handle(self, body: bytes) -> bytes:
@@ -214,7 +215,7 @@ def _close(connection) -> None:
             pass
 
 
-class BrokerEndpoint:
+class BrokerEndpoint(Endpoint):
     """The mapping's view of a robot behind the broker (the same interface as SimulatedEndpoint).
     Only authenticated replies are taken, each checked against what the robot described."""
 

@@ -45,6 +45,7 @@ from ..diagnostics import CotwinError, PicklableError
 from ..pmodel.mjcf import pose_paths, sensor_name
 from ..pmodel.tree import KinematicTree
 from .opcua_auth import client_credentials, parse_url
+from .platform import Endpoint
 
 logging.getLogger("asyncua").addHandler(logging.NullHandler())  # a library logs; the application decides
 
@@ -159,7 +160,7 @@ class Layout:
 
 # ---- the client ----------------------------------------------------------------------------------
 
-class OPCUAEndpoint:
+class OPCUAEndpoint(Endpoint):
     """The mapping's view of a robot cell served over OPC UA (the same interface as SimulatedEndpoint).
 
     Every call has a timeout (`timeout` seconds, plus the wait of a free-running Advance); every reply is

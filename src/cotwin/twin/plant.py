@@ -292,7 +292,7 @@ class Plant:
                                    inputs, outputs)
 
     def _perturbation(self) -> dict:
-        p = getattr(self.endpoint, "perturbation", None)
+        p = self.endpoint.perturbation
         return p.as_dict() if isinstance(p, Perturbation) else {}
 
     # ---- calls ----

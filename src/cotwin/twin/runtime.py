@@ -25,10 +25,10 @@ from ..cosim.execution import Execution, RunResult, ended_early, saved_execution
 from ..cosim.observers import CSVWriter, StateFile, epoch_of
 from ..diagnostics import CotwinError, Finding, Severity
 from ..files import write_text
-from ..mapping.profile import robot_convention
 from .project import check_timing
 from .build import ARTEFACTS, dmodel_fmu, folder_lock
 from .deviation import DeviationMonitor
+from .endpoints import check_endpoints, make_endpoint
 from .system import DMODEL, MAPPING, RABBITMQ, TwinSystem
 from .outcomes import CommandLedger
 from .waits import WaitWatch
@@ -37,36 +37,8 @@ log = logging.getLogger("cotwin.twin")
 
 
 def pt_endpoint(system: TwinSystem):
-    """The physical twin's platform, from the project's [pt] table."""
-    pt = system.spec.pt
-    if pt is None:
-        raise CotwinError(f"{system.spec.path}: a live twin needs a [pt] table (endpoint = opcua | replay | broker | rtde)")
-    tree = system.models.tree
-    if pt.endpoint == "opcua":
-        from ..mapping.opcua import OPCUAEndpoint
-
-        return OPCUAEndpoint(tree, pt.url)
-    if pt.endpoint == "broker":
-        from ..mapping.broker import BrokerEndpoint
-
-        return BrokerEndpoint(tree, pt.queue, pt.url or system.spec.url)
-    if pt.endpoint == "replay":
-        from ..mapping.replay import ReplayEndpoint, read_rtde_log
-        from ..pmodel import ik
-
-        arm = ik.arm_joints(tree, ik.find_tool(tree))
-        recording = read_rtde_log(pt.log, arm, robot_convention(system.spec.profile, len(arm)))
-        problem = recording.offset_problem(pt.offset) if pt.offset is not None else None
-        if problem is not None:
-            raise CotwinError(f"{system.spec.path}: [pt] offset: {problem}")
-        return ReplayEndpoint(tree, recording, pt.offset)
-    if pt.endpoint == "rtde":
-        from ..mapping.urrtde import RTDEEndpoint
-        from ..pmodel import ik
-
-        arm = ik.arm_joints(tree, ik.find_tool(tree))
-        return RTDEEndpoint(tree, pt.url, convention=robot_convention(system.spec.profile, len(arm)))
-    raise CotwinError(f"unknown PT endpoint {pt.endpoint!r}")
+    """The physical twin's platform, from the project's [pt] table (its kind from cotwin.twin.endpoints)."""
+    return make_endpoint(system, "pt")
 
 
 @dataclass
@@ -204,6 +176,8 @@ class LiveTwin:
 
                 self.convergence = Convergence(settings, self.system)
                 self.observers.insert(0, self.convergence)  # the DT corrected before anyone looks at it
+            check_endpoints(self.system, *(side for side, given in (("pt", self.pt_endpoint), ("dt", self.dt_endpoint))
+                                           if given is None))  # before the d-model is built
             fmu = dmodel_fmu(self.system, self.out, self.cc)
             pt_ep = self.pt_endpoint if self.pt_endpoint is not None else pt_endpoint(self.system)
             self._warn_if_outlasting(pt_ep)
@@ -228,12 +202,10 @@ class LiveTwin:
                 for side in self.sides.values():
                     side.execution.close()
                 for endpoint in (pt_ep, dt_ep):  # sessions and threads of remote platforms
-                    close = getattr(endpoint, "close", None)
-                    if close is not None:
-                        try:
-                            close()
-                        except Exception:  # noqa: BLE001 - closing must not hide the run's outcome
-                            pass
+                    try:
+                        endpoint.close()
+                    except Exception:  # noqa: BLE001 - closing must not hide the run's outcome
+                        pass
                 if self._publisher is not None:
                     self._publisher.close()
                 if self.whatif is not None:
@@ -244,13 +216,10 @@ class LiveTwin:
     def _warn_if_outlasting(self, endpoint) -> None:
         """A replayed PT whose log ends before the run does holds its last sample: say so (a held pose would
         otherwise look like a robot at rest)."""
-        recording, offset = getattr(endpoint, "recording", None), getattr(endpoint, "offset", None)
-        if recording is None or offset is None:
-            return
-        last = float(recording.times[-1]) - offset
-        if last < self.end:
-            log.warning("the replayed log %s ends at t = %.3f s of the run, which goes on to %g s: its last sample "
-                        "holds from then on", recording.source, last, self.end)
+        ending = endpoint.ends()
+        if ending is not None and ending[0] < self.end:
+            log.warning("%s ends at t = %.3f s of the run, which goes on to %g s: its last sample holds from then on",
+                        ending[1], ending[0], self.end)
 
     def _kept(self, err: CotwinError | KeyboardInterrupt) -> CotwinError:
         """The error of a run that failed or was interrupted, saying where the rows it computed are (each
@@ -319,9 +288,9 @@ class LiveTwin:
                 self.steps, self.time = pt.execution.steps, pt.execution.time
             else:
                 pt.execution.initialize()
-                place = getattr(self.sides["dt"].units["mapping"].mapping.endpoint, "place", None)
-                if place is not None:  # the DT starts where the PT is
-                    place(self.sides["pt"].units["mapping"].mapping.endpoint.joint_positions())
+                dt_platform = dt.units["mapping"].mapping.endpoint
+                if dt_platform.placeable:  # the DT starts where the PT is
+                    dt_platform.place(pt.units["mapping"].mapping.endpoint.joint_positions())
                 dt.execution.initialize()
             pt.execution.total_steps = dt.execution.total_steps = total
             self._prepare_recording()

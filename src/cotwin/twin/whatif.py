@@ -64,7 +64,7 @@ class _Contacts:
         from ..pmodel import ik
         from ..pmodel.mjcf import ROBOT_CONTYPE
 
-        self.sim = getattr(endpoint, "sim", None)
+        self.sim = endpoint.sim
         if self.sim is None:
             return
         model = self.sim.model
