@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError
+from ..twin.observing import TwinObserver
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
                      main, outcomes, output_path, said_restarts, serving_options, show_warnings, start_dashboard)
 
@@ -100,7 +101,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
 
 
-class TwinProgress:
+class TwinProgress(TwinObserver):
     """A live twin's observer that reports its simulated time against its end."""
 
     def __init__(self, report):

@@ -17,7 +17,6 @@ from ..plaindata import fields, finite, of_type
 from ..pmodel.cell import CellGeometry
 from ..pmodel.mjcf import servo_mode
 from ..pmodel.simulator import PlatformSimulator, SimState
-from ..pmodel.tree import KinematicTree
 from .motion import MotionProfile, Quintic, Segment
 from .platform import Endpoint
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import time as wallclock
 
 from ...cosim.observers import Observer
+from ..observing import TwinObserver
 from ..system import DMODEL, MAPPING, TwinSystem
 
 
@@ -63,7 +64,7 @@ class Ring:
         return min(self.count, self.capacity)
 
 
-class DashboardFeed(Observer):
+class DashboardFeed(Observer, TwinObserver):
     """Samples `(time, wall, [values side 1, states side 1, values side 2, ...])` per step, and events
     (dicts with `kind` = command | op | alarm | correction) as they happen (see module doc)."""
 

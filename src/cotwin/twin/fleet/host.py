@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ...diagnostics import CotwinError
+from ..observing import TwinObserver
 
 log = logging.getLogger("cotwin.fleet")
 # One twin of a host starts at a time: loading an FMU, FMPy changes the process's working directory to the
@@ -38,7 +39,7 @@ class TwinJob:
     routing_key: str | None = None  # the twin's alarms' routing key (the project's, naming the twin)
 
 
-class TwinWatch:
+class TwinWatch(TwinObserver):
     """A live twin's observer: its saved state every `every` steps (both sides), its real-time factor (the
     simulated time over the wall time it took since it started or resumed) and its lag behind the wall
     clock when it is paced to it (a twin that cannot keep real time is reported, never slowed further)."""
