@@ -1,0 +1,174 @@
+"""The twin runtime's seams (issue 20): an endpoint kind registered from outside the core and named by a
+project, the live twin's observers (started, each step, alarms, ended), and the background-service base
+every threaded service uses (a failure on its thread reaches the caller; one never ready is a clear
+timeout)."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from cotwin.diagnostics import CotwinError
+from cotwin.mapping.endpoint import SimulatedEndpoint
+from cotwin.pmodel.simulator import PlatformSimulator
+from cotwin.service import BackgroundService
+from cotwin.twin.endpoints import EndpointKind, endpoint_kinds, register_endpoint
+from cotwin.twin.observing import TwinObserver
+from cotwin.twin.run import load
+from cotwin.twin.runtime import LiveTwin
+
+ROOT = Path(__file__).resolve().parents[1]
+UR5E = ROOT / "examples" / "ur5e"
+
+
+def project_with_pt(folder: Path, pt: str) -> Path:
+    """The UR5e example's project (its files by absolute path) with this [pt] table."""
+    text = (UR5E / "cotwin.toml").read_text()
+    for name in ("arm.rst", "ur5e.pm", "mapping.pm", "plan.csv", "ur.profile.toml"):
+        text = text.replace(f'"{name}"', json.dumps(str(UR5E / name)))
+    path = folder / "custom.toml"
+    path.write_text(text + f"\n{pt}\n")
+    return path
+
+
+class CountingEndpoint(SimulatedEndpoint):
+    """A PT kind no core module knows: the embedded simulator, counting its steps and closing."""
+
+    made: list["CountingEndpoint"] = []
+
+    def __init__(self, system, settings):
+        super().__init__(PlatformSimulator(system.models.tree, system.models.scene))
+        self.queue = settings.queue
+        self.advanced = 0
+        self.closed = False
+        CountingEndpoint.made.append(self)
+
+    def advance(self, dt: float) -> None:
+        self.advanced += 1
+        super().advance(dt)
+
+    def close(self) -> None:
+        self.closed = True
+
+
+class Recorder(TwinObserver):
+    """Every callback a live twin makes, in order."""
+
+    def __init__(self):
+        self.calls: list[tuple] = []
+
+    def twin_started(self, twin) -> None:
+        self.calls.append(("started", twin.steps, twin.time))
+
+    def twin_step(self, twin, k: int, t: float) -> None:
+        self.calls.append(("step", k, round(t, 9)))
+
+    def twin_alarm(self, twin, event: dict) -> None:
+        self.calls.append(("alarm", event["state"], event["variable"]))
+
+    def twin_ended(self, twin, status: str) -> None:
+        self.calls.append(("ended", status, twin.message))
+
+
+def test_an_endpoint_kind_registered_outside_the_core_is_used_by_a_project_and_observers_see_the_run(tmp_path):
+    register_endpoint(EndpointKind("counting-sim", CountingEndpoint, ("pt",), "a test's PT"))
+    try:
+        project = project_with_pt(tmp_path, '[pt]\nendpoint = "counting-sim"\nqueue = "robot.7"')
+        system = load(project)
+        recorder = Recorder()
+        CountingEndpoint.made.clear()
+        result = LiveTwin(system, tmp_path / "out", end=1.0, observers=[recorder]).run()
+    finally:
+        from cotwin.twin import endpoints
+
+        endpoints._KINDS.pop("counting-sim", None)
+    assert "counting-sim" not in endpoint_kinds()
+    made = CountingEndpoint.made
+    assert len(made) == 1 and made[0].queue == "robot.7"  # built from the project's [pt] table
+    assert made[0].advanced == 10 and made[0].closed  # stepped as the PT, closed when the run ended
+    assert result.pt.steps == result.dt.steps == 10
+    assert json.loads((tmp_path / "out" / "deviation.json").read_text())["pt"] == "counting-sim"
+    calls = recorder.calls
+    assert calls[0] == ("started", 0, 0.0)
+    assert [c for c in calls if c[0] == "step"] == [("step", k, round(0.1 * k, 9)) for k in range(1, 11)]
+    assert calls[-1] == ("ended", "done", None)
+
+
+def test_an_unknown_endpoint_kind_is_a_located_error_listing_the_known_ones(tmp_path):
+    system = load(project_with_pt(tmp_path, '[pt]\nendpoint = "carrier-pigeon"'))
+    with pytest.raises(CotwinError) as err:
+        LiveTwin(system, tmp_path / "out", end=1.0).run()
+    finding = err.value.findings[0]
+    assert finding.location.path.endswith("custom.toml") and finding.location.line > 1
+    assert "'carrier-pigeon'" in finding.message
+    for known in ("broker", "opcua", "replay", "rtde"):
+        assert known in finding.message
+    assert not (tmp_path / "out" / "dmodel.fmu").exists()  # said before the d-model was built
+
+
+def test_an_observer_hears_of_alarms_and_of_a_run_that_fails(tmp_path):
+    from cotwin.mapping.perturbed import PerturbedEndpoint
+    from cotwin.pmodel.perturbation import Perturbation
+
+    system = load(UR5E / "cotwin.toml")
+    pt = PerturbedEndpoint.build(system.models.tree, system.models.scene,
+                                 Perturbation(payload=2.0, latency_ms=200, seed=3))
+    recorder = Recorder()
+
+    class Failing(TwinObserver):
+        def twin_step(self, twin, k, t):
+            if k == 70:
+                raise CotwinError("observer gave up")
+
+    with pytest.raises(CotwinError, match="observer gave up"):
+        LiveTwin(system, tmp_path, pt=pt, end=8.0, observers=[recorder, Failing()]).run()
+    alarms = [c for c in recorder.calls if c[0] == "alarm"]
+    assert alarms and alarms[0][1] == "raised"  # the perturbed PT deviates before step 70
+    assert recorder.calls[-1] == ("ended", "failed", "observer gave up")
+    report = json.loads((tmp_path / "deviation.json").read_text())  # the deviation service ended too
+    assert report["steps"] == 70 and sum(len(v["alarms"]) for v in report["variables"].values()) >= 1
+
+
+class Failing(BackgroundService):
+    def __init__(self, when: str):
+        super().__init__("test service")
+        self.when = when
+
+    def serve(self) -> None:
+        if self.when == "before":
+            raise OSError("port taken")
+        self.ready()
+        self.stopping.wait(0.05)
+        raise ValueError("the link broke")
+
+
+class Sleepy(BackgroundService):
+    def serve(self) -> None:
+        self.stopping.wait()  # never says it is ready
+
+
+def test_a_background_service_failing_on_its_thread_reports_it_to_the_caller():
+    with pytest.raises(CotwinError, match="test service: OSError: port taken"):
+        Failing("before").start(timeout=5)
+    service = Failing("after").start(timeout=5)
+    assert service.is_ready
+    deadline = time.monotonic() + 5
+    while service.running and time.monotonic() < deadline:
+        time.sleep(0.01)
+    with pytest.raises(CotwinError, match="test service: ValueError: the link broke"):
+        service.check()
+    assert service.stop()
+
+
+def test_a_background_service_never_ready_is_a_clear_timeout_and_is_stopped():
+    service = Sleepy("sleepy service")
+    before = threading.active_count()
+    started = time.monotonic()
+    with pytest.raises(CotwinError, match=r"sleepy service did not become ready within 0.3 s"):
+        service.start(timeout=0.3)
+    assert 0.3 <= time.monotonic() - started < 3
+    assert not service.started and threading.active_count() == before  # its thread was stopped and joined
