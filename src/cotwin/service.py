@@ -63,7 +63,7 @@ class BackgroundService:
         self._ready.set()
         self._settled.set()
 
-    def _main(self) -> None:
+    def _service_thread(self) -> None:
         try:
             self.serve()
         except BaseException as err:  # noqa: BLE001 - reported to the caller, never lost with the thread
@@ -96,7 +96,7 @@ class BackgroundService:
         self.failure = None
         self._ready.clear()
         self._settled.clear()
-        self._thread = threading.Thread(target=self._main, name=self.name, daemon=True)
+        self._thread = threading.Thread(target=self._service_thread, name=self.name, daemon=True)
         self._thread.start()
         self._settled.wait(timeout)
         if self.failure is not None and not self._ready.is_set():
