@@ -161,7 +161,7 @@ def epoch_of(units, now: float, slack: float = 1.0) -> float | None:
     """The wall-clock time (time.time()) of simulation time 0 announced by a unit (`epoch`, e.g. the
     RabbitMQ source's t0), kept within [now - slack, now] so that a far-off publisher clock cannot
     stall or rush the run; None when no unit announces one."""
-    epochs = [e for e in (getattr(u, "epoch", None) for u in units) if e is not None]
+    epochs = [u.epoch for u in units if u.epoch is not None]
     return min(max(min(epochs), now - slack), now) if epochs else None
 
 

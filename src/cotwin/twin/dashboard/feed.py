@@ -107,7 +107,7 @@ class DashboardFeed(Observer, TwinObserver):
         self.sides = list(executions)
         self._executions = list(executions.values())
         self._mappings = [e.system.units.get(MAPPING.name) for e in self._executions]
-        self._seen_ops = [len(getattr(m, "executed", ())) for m in self._mappings]
+        self._seen_ops = [len(m.executed) if m is not None else 0 for m in self._mappings]
         self._monitor = monitor
         self._seen_alarms = len(monitor.events) if monitor is not None else 0
         first = self._executions[0]
@@ -168,8 +168,8 @@ class DashboardFeed(Observer, TwinObserver):
 
     def _events(self, t: float) -> None:
         for i, mapping in enumerate(self._mappings):
-            executed = getattr(mapping, "executed", None)
-            if executed is not None and len(executed) > self._seen_ops[i]:
+            executed = mapping.executed if mapping is not None else ()
+            if len(executed) > self._seen_ops[i]:
                 for start, name, args in executed[self._seen_ops[i]:]:
                     self.events.append({"kind": "op", "side": self.sides[i], "time": start, "name": name,
                                         "args": args})
