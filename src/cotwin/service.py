@@ -114,6 +114,13 @@ class BackgroundService:
         if self.failure is not None:
             raise self.error_of(self.failure)
 
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait for the service's thread to end by itself (at most `timeout` s); True when it has."""
+        thread = self._thread
+        if thread is not None:
+            thread.join(timeout)
+        return thread is None or not thread.is_alive()
+
     def stop(self, timeout: float | None = 10.0) -> bool:
         """Ask the service to end and wait for its thread (at most `timeout` s; None: as long as it takes);
         True when it ended."""
