@@ -172,3 +172,38 @@ def test_a_background_service_never_ready_is_a_clear_timeout_and_is_stopped():
         service.start(timeout=0.3)
     assert 0.3 <= time.monotonic() - started < 3
     assert not service.started and threading.active_count() == before  # its thread was stopped and joined
+
+
+PUBLISHED_TURTLEBOT = ROOT / "examples" / "turtlebot" / "published.toml"
+
+
+def test_a_robot_profile_gives_the_scanner_a_p_model_leaves_out(tmp_path):
+    from cotwin.mapping.profile import profile_rays
+    from cotwin.pmodel.kinds import RAY_DEFAULTS
+
+    if not (ROOT.parent / "shared" / "robosim" / "mobile" / "Turtlebot3_Burger.pm").is_file():
+        pytest.skip("RoboTool's published TurtleBot is not in ../shared/robosim/mobile (only in the workspace)")
+    system = load(PUBLISHED_TURTLEBOT)  # names turtlebot.profile.toml: the LDS-01
+    (lidar,) = [s.ray for s in system.models.tree.sensors if s.ray is not None][:1]
+    assert (lidar.samples, lidar.range_min, lidar.range_max, lidar.update_rate) == (360, 0.12, 3.5, 5.0)
+    bare = tmp_path / "bare.profile.toml"
+    bare.write_text('joint_offsets = []\n[lidar]\nrange_max = 8.0\n')
+    rays = profile_rays(bare)  # what it leaves out comes from the generic default, not a robot's
+    assert rays["lidar"].range_max == 8.0 and rays["lidar"].range_min == RAY_DEFAULTS["lidar"].range_min
+    assert RAY_DEFAULTS["lidar"] != rays["lidar"] and "sonar" not in rays
+
+
+def test_a_profile_scanner_table_is_checked_at_its_keys(tmp_path):
+    from cotwin.mapping.profile import profile_rays, read_profile
+
+    path = tmp_path / "bad.profile.toml"
+    path.write_text('joint_offsets = []\n[lidar]\nsamples = 0\nrange_max = 3.5\nbeams = 4\n[sonar]\nrange_min = 5.0\n'
+                    'range_max = 4.0\n')
+    with pytest.raises(CotwinError) as err:
+        profile_rays(path)
+    said = [(f.location.line, f.message) for f in err.value.findings]
+    assert (3, "[lidar] samples: must be a finite number (a whole number >= 1), got 0") in said
+    assert (5, "[lidar] beams: unknown key (it takes samples, min_angle, max_angle, range_min, range_max, "
+               "update_rate)") in said
+    assert any(line == 6 and "range_min 5 m is not below range_max 4 m" in m for line, m in said)
+    assert read_profile(path).name == "bad.profile.toml"  # the joints' convention reads past the scanner tables
