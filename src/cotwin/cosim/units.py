@@ -90,6 +90,7 @@ class Unit:
     mapping = None  # an in-process mapping unit's runtime (cotwin.mapping.runtime): it can be asked
     executed: Sequence[tuple[float, str, dict]] = ()  # an in-process mapping unit's operations run
     command_queue = None  # a command source's commands not yet applied (cotwin.twin.commands.CommandQueue)
+    ticks: int | None = None  # a clocked unit's clock ticks run so far (None: the unit has no clocks)
 
     def inputs(self) -> list[str]:
         return [p.name for p in self.ports.values() if p.causality == "input"]

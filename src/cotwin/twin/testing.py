@@ -93,7 +93,7 @@ class DModelTrace(Observer):
         self.unit = unit
         self.cycles: list[Observed] = []
         self.leaves = [program.leaf_names(m) for m in program.machines]
-        self.clocked = hasattr(unit, "ticks")
+        self.clocked = unit.ticks is not None  # an FMI 3.0 d-model: one cycle per clock tick
         self._ticks = 0
 
     def _states(self, values) -> list[str]:
