@@ -207,3 +207,18 @@ def test_a_profile_scanner_table_is_checked_at_its_keys(tmp_path):
                "update_rate)") in said
     assert any(line == 6 and "range_min 5 m is not below range_max 4 m" in m for line, m in said)
     assert read_profile(path).name == "bad.profile.toml"  # the joints' convention reads past the scanner tables
+
+
+def test_a_loop_thread_runs_coroutines_until_stopped_then_closes_its_loop():
+    import asyncio
+
+    from cotwin.service import LoopThread
+
+    thread = LoopThread("test loop").start(timeout=5)
+
+    async def double(x):
+        await asyncio.sleep(0.01)
+        return 2 * x
+
+    assert asyncio.run_coroutine_threadsafe(double(21), thread.loop).result(5) == 42
+    assert thread.stop(5) and thread.loop.is_closed() and not thread.started

@@ -13,6 +13,7 @@ it was ready is kept (`failure`) and raised by `check()`, so the thread that use
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import threading
 
@@ -142,3 +143,27 @@ class BackgroundService:
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+
+class LoopThread(BackgroundService):
+    """An asyncio event loop on its own thread, for synchronous code that runs coroutines there
+    (`asyncio.run_coroutine_threadsafe(coroutine, thread.loop)`): ready once the loop runs; stopped, the
+    loop is closed."""
+
+    def __init__(self, name: str):
+        super().__init__(name)
+        self.loop = asyncio.new_event_loop()
+
+    def serve(self) -> None:
+        self.loop.call_soon(self.ready)
+        self.loop.run_forever()
+
+    def interrupt(self) -> None:
+        if not self.loop.is_closed():
+            self.loop.call_soon_threadsafe(self.loop.stop)
+
+    def stop(self, timeout: float | None = 10.0) -> bool:
+        ended = super().stop(timeout)
+        if ended and not self.loop.is_closed():
+            self.loop.close()
+        return ended
