@@ -3,13 +3,15 @@
 An endpoint takes servo goals by p-model path (`pmodel::link::joint::aref.port`) and moves each joint
 there along a trajectory planned by a motion profile (cotwin.mapping.motion: by default a quintic at
 the joints' velocity limits; a UR-style synchronised `movej`), all joints arriving together; it reads
-sensors by path (`pmodel::link::sref.port`). The MuJoCo simulator is the default; any object with
-this interface plugs in without touching the mapping.
+sensors by path (`pmodel::link::sref.port`). The MuJoCo simulator is the default; any subclass of
+cotwin.mapping.platform.Endpoint (the interface and its optional abilities) plugs in without touching the
+mapping.
 """
 
 from __future__ import annotations
 
 from dataclasses import fields as dataclass_fields, replace
+
 import numpy as np
 
 from ..diagnostics import CotwinError
