@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError
+from ..twin.observing import TwinObserver
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
                      main, outcomes, output_path, said_restarts, serving_options, show_warnings, start_dashboard)
 
@@ -100,7 +101,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
 
 
-class TwinProgress:
+class TwinProgress(TwinObserver):
     """A live twin's observer that reports its simulated time against its end."""
 
     def __init__(self, report):
@@ -217,7 +218,6 @@ def serve_robot(project: str, queue: str | None, url: str | None) -> None:
     whose [platform] endpoint is "broker". Needs COTWIN_ROBOT_SECRET (shared with the twin); broker
     credentials as for every link (docs/security.md). Stops on Ctrl-C or SIGTERM, never on a message."""
     import signal
-    import threading
 
     from ..mapping.amqp import redact, url_problem
     from ..mapping.broker import RobotServer
@@ -232,28 +232,20 @@ def serve_robot(project: str, queue: str | None, url: str | None) -> None:
     queue = queue or system.spec.queue
     simulator = PlatformSimulator(system.models.tree, system.models.scene, base=system.spec.base)
     server = RobotServer(SimulatedEndpoint(simulator), queue, url)
-    failure: list[CotwinError] = []
-
-    def serve() -> None:
-        try:
-            server.serve()
-        except CotwinError as err:
-            failure.append(err)
-
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: server.stop())
-    thread = threading.Thread(target=serve, name="robot server", daemon=True)
-    thread.start()
-    while thread.is_alive() and not server.ready.wait(0.2):
-        pass
-    if server.ready.is_set():
+        signal.signal(sig, lambda *_: server.stopping.set())  # the server's thread ends after its current message
+    try:
+        server.start(timeout=None)  # on its own thread (cotwin.service): until it is on its queue, or fails
+    except CotwinError:
+        if server.failure is not None:
+            raise
+    else:
         click.echo(f"serving the robot on queue {queue} at {redact(url)} (stop: Ctrl-C or SIGTERM)", err=True)
         click.echo("ready", err=False)
         sys.stdout.flush()
-    while thread.is_alive():
-        thread.join(0.2)
-    if failure:
-        raise failure[0]
+    while not server.wait(0.2):
+        pass
+    server.check()  # the broker stayed away
     click.echo(f"served {server.requests} request(s); refused {server.refused} unauthenticated, dropped "
                f"{server.dropped} unanswerable", err=True)
 

@@ -3,14 +3,14 @@
 An endpoint takes servo goals by p-model path (`pmodel::link::joint::aref.port`) and moves each joint
 there along a trajectory planned by a motion profile (cotwin.mapping.motion: by default a quintic at
 the joints' velocity limits; a UR-style synchronised `movej`), all joints arriving together; it reads
-sensors by path (`pmodel::link::sref.port`). The MuJoCo simulator is the default; any object with
-this interface plugs in without touching the mapping.
+sensors by path (`pmodel::link::sref.port`). The MuJoCo simulator is the default; any subclass of
+cotwin.mapping.platform.Endpoint (the interface and its optional abilities) plugs in without touching the
+mapping.
 """
 
 from __future__ import annotations
 
 from dataclasses import fields as dataclass_fields, replace
-from typing import Protocol
 
 import numpy as np
 
@@ -19,26 +19,13 @@ from ..plaindata import fields, finite, of_type
 from ..pmodel.cell import CellGeometry
 from ..pmodel.mjcf import servo_mode
 from ..pmodel.simulator import PlatformSimulator, SimState
-from ..pmodel.tree import KinematicTree
 from .motion import MotionProfile, Quintic, Segment
+from .platform import Endpoint
 
 CONTROL_PERIOD = 0.002  # s between trajectory set-points sent to the servos
 
 
-class Endpoint(Protocol):
-    tree: KinematicTree
-
-    def start(self) -> None: ...
-    def stop(self) -> None: ...
-    def read_sensors(self) -> dict[str, float]: ...
-    def command(self, goals: dict[str, float]) -> None: ...
-    def advance(self, dt: float) -> None: ...
-    def joint_positions(self) -> dict[str, float]: ...
-    def joint_velocities(self) -> dict[str, float]: ...
-    def joint(self, name: str) -> str: ...
-
-
-class SimulatedEndpoint:
+class SimulatedEndpoint(Endpoint):
     """The embedded MuJoCo platform with a trajectory generator in front of its servos. The cell's
     geometry (for the mapping's kinematics functions) is the scene's unless given."""
 
@@ -59,6 +46,8 @@ class SimulatedEndpoint:
 
     def stop(self) -> None:
         self.segment = None
+
+    placeable = saves_state = True
 
     def place(self, positions: dict[str, float]) -> None:
         """Put the robot at rest at these joint positions (a live twin starts its DT where the PT is)."""

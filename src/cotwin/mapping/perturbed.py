@@ -15,6 +15,7 @@ from ..pmodel.mjcf import sensor_name
 from ..pmodel.perturbation import QUANTITIES, Perturbation, perturbed_simulator
 from ..pmodel.tree import KinematicTree
 from .endpoint import SimulatedEndpoint
+from .platform import Endpoint
 
 
 NOISE_OF = {"closest_range": "range", "range": "range"}  # sensor quantity -> the noise it gets, where they differ
@@ -26,7 +27,7 @@ class _Pending:
     goals: dict[str, float]
 
 
-class PerturbedEndpoint:
+class PerturbedEndpoint(Endpoint):
     """A SimulatedEndpoint seen through the perturbation's actuator latency and measurement noise."""
 
     def __init__(self, inner: SimulatedEndpoint, perturbation: Perturbation):

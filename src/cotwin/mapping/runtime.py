@@ -91,7 +91,7 @@ class FunctionRegistry:
     def __init__(self, endpoint, geometry: CellGeometry | None = None):
         self.endpoint = endpoint
         self.tree = endpoint.tree
-        self.geometry = geometry or getattr(endpoint, "geometry", None) or CellGeometry()
+        self.geometry = geometry or endpoint.geometry or CellGeometry()
         self.tool = self.geometry.find_tool(self.tree)
         self.arm = ik.arm_joints(self.tree, self.tool)
         self.geometry.check_joints(self.arm)
@@ -654,13 +654,12 @@ class Mapping:
     def snapshot(self) -> dict:
         """The runtime's state as plain data: its variables, whether it was started, the functions'
         cached solutions and the endpoint's state (an endpoint that cannot save one is an error)."""
-        save = getattr(self.endpoint, "snapshot", None)
-        if save is None:
+        if not self.endpoint.saves_state:
             raise CotwinError(f"mapping {self.model.name}: its platform ({type(self.endpoint).__name__}) cannot save "
                               "its state, so the mapping cannot either")
         return {"variables": dict(self.variables), "started": self.started,
                 "functions": self._registry.snapshot() if self._registry is not None else {},
-                "events": {name: ev.value for name, ev in self.events.items()}, "endpoint": save(),
+                "events": {name: ev.value for name, ev in self.events.items()}, "endpoint": self.endpoint.snapshot(),
                 "held": dict(self.held), "asked": sorted(self.asked), "pending": list(self.pending.items()),
                 "reports": self.reports, "delivered": dict(self.delivered)}
 

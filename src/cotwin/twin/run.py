@@ -23,14 +23,12 @@ RUN_FILES = ("outputs.csv", "outputs.partial.csv", "outputs.csv.part", "state", 
 
 
 def dt_endpoint(system: TwinSystem):
-    """The platform of the project's (digital) twin: the embedded simulator (calibrated when the project
-    names a calibration), or a robot behind the broker."""
-    spec, models = system.spec, system.models
-    if spec.endpoint == "broker":
-        from ..mapping.broker import BrokerEndpoint
+    """The platform of the project's (digital) twin, as its [platform] endpoint names it
+    (cotwin.twin.endpoints): the embedded simulator (calibrated when the project names a calibration), a
+    robot behind the broker, or a kind registered from outside the core."""
+    from .endpoints import make_endpoint
 
-        return BrokerEndpoint(models.tree, spec.queue, spec.url)
-    return simulated_endpoint(system)
+    return make_endpoint(system, "dt")
 
 
 def simulated_endpoint(system: TwinSystem):
@@ -95,6 +93,10 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         if restart:
             raise CotwinError("restart-from-state is for FMI 2.0 FMUs: the FMI 3.0 d-model runs in cotwin's process")
         cycle_period = clock_period(spec, step, cycle_period)
+    if endpoint is None:
+        from .endpoints import check_endpoints
+
+        check_endpoints(system, "dt")  # a kind no one registered: said before the d-model is built
     with folder_lock(out, RUN_FILES, spec.inputs):
         fmu = dmodel_fmu(system, out, cc, fmi=fmi)
         endpoint = endpoint if endpoint is not None else dt_endpoint(system)

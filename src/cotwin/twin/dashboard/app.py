@@ -233,8 +233,7 @@ class Dashboard:
         self._closing = threading.Event()  # ends the what-ifs the page waits for
         self.clients = 0
         self.skipped = 0  # samples clients skipped because they fell behind
-        self._server = None
-        self._thread: threading.Thread | None = None
+        self._served = None  # cotwin.twin.dashboard.server.ServedPage
         self._socket: socket.socket | None = None
 
     # ---- lifecycle ----
@@ -272,7 +271,7 @@ class Dashboard:
                                 limit_concurrency=MAX_CONNECTIONS, **tls)  # more at once are answered 503
         _cap_server_log()
         try:
-            self._server, self._thread = serve_in_thread(config, sock, "dashboard")
+            self._served = serve_in_thread(config, sock, "dashboard")
         except CotwinError:
             self.stop()
             raise
@@ -295,13 +294,11 @@ class Dashboard:
         self._closing.set()
         if self.publisher is not None:
             self.publisher.stop()
-        if self._server is not None:
-            if self._thread is not None and self._thread.is_alive():
+        if self._served is not None:
+            if self._served.running:
                 wallclock.sleep(min(2 * self.period, 0.2))  # let the streams send the final status
-            self._server.should_exit = True
-        if self._thread is not None:
-            self._thread.join(10)
-            self._thread = None
+            self._served.stop(10)
+            self._served = None
         if self._socket is not None:
             self._socket.close()
             self._socket = None

@@ -20,6 +20,7 @@ from __future__ import annotations
 import time as wallclock
 
 from ...cosim.observers import Observer
+from ..observing import TwinObserver
 from ..system import DMODEL, MAPPING, TwinSystem
 
 
@@ -63,7 +64,7 @@ class Ring:
         return min(self.count, self.capacity)
 
 
-class DashboardFeed(Observer):
+class DashboardFeed(Observer, TwinObserver):
     """Samples `(time, wall, [values side 1, states side 1, values side 2, ...])` per step, and events
     (dicts with `kind` = command | op | alarm | correction) as they happen (see module doc)."""
 
@@ -106,7 +107,7 @@ class DashboardFeed(Observer):
         self.sides = list(executions)
         self._executions = list(executions.values())
         self._mappings = [e.system.units.get(MAPPING.name) for e in self._executions]
-        self._seen_ops = [len(getattr(m, "executed", ())) for m in self._mappings]
+        self._seen_ops = [len(m.executed) if m is not None else 0 for m in self._mappings]
         self._monitor = monitor
         self._seen_alarms = len(monitor.events) if monitor is not None else 0
         first = self._executions[0]
@@ -167,8 +168,8 @@ class DashboardFeed(Observer):
 
     def _events(self, t: float) -> None:
         for i, mapping in enumerate(self._mappings):
-            executed = getattr(mapping, "executed", None)
-            if executed is not None and len(executed) > self._seen_ops[i]:
+            executed = mapping.executed if mapping is not None else ()
+            if len(executed) > self._seen_ops[i]:
                 for start, name, args in executed[self._seen_ops[i]:]:
                     self.events.append({"kind": "op", "side": self.sides[i], "time": start, "name": name,
                                         "args": args})

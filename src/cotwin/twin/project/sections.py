@@ -22,7 +22,7 @@ from ...settings import setting
 if TYPE_CHECKING:
     from .load import TwinProject
 
-ENDPOINTS = ("mujoco", "broker")
+ENDPOINTS = ("mujoco", "broker")  # core's kinds (cotwin.twin.endpoints registers them and any other)
 PT_ENDPOINTS = ("opcua", "replay", "broker", "rtde")
 MAX_CYCLES_PER_STEP = 10 ** 6  # d-model cycles in one step ([cosim] parameters cycle_period)
 MAX_WAIT_S = 86_400.0  # s: the longest a twin waits for, or keeps, a broker message
@@ -233,8 +233,8 @@ class StandIn:
 class Platform:
     """The digital twin's robot and what is around it."""
 
-    endpoint: str = setting('the embedded simulator ("mujoco") or a robot behind RabbitMQ ("broker")',
-                            Key("str", "mujoco", choices=ENDPOINTS))
+    endpoint: str = setting('an endpoint kind by name (cotwin.twin.endpoints): the embedded simulator ("mujoco"), '
+                            'a robot behind RabbitMQ ("broker"), or one a package registers', Key("str", "mujoco", check=_name))
     queue: str = setting("broker: the robot's request queue", Key("str", "cotwin.robot", check=amqp_name_problem))
     url: str = setting("broker: the broker's URL", Key("str", URL, check=_amqp_url))
     scene: str = setting('around the robot: a scene kind by name (cotwin.pmodel.scenes: "none", "floor", "world" '
@@ -309,8 +309,9 @@ class Robot:
 class PT:
     """The physical twin of `cotwin twin`."""
 
-    endpoint: str = setting("how the PT is reached (each takes only its own keys below)",
-                            Key("str", required=True, choices=PT_ENDPOINTS))
+    endpoint: str = setting('how the PT is reached: an endpoint kind by name (cotwin.twin.endpoints): "opcua", '
+                            '"replay", "broker", "rtde" (each takes only its own keys below), or one a package '
+                            'registers', Key("str", required=True, check=_name))
     url: str | None = setting("opcua: opc.tcp://HOST:PORT; rtde: the robot's host; broker: an AMQP URL", Key("str"))
     log: str | None = setting("replay: the recorded log", Key("str"), path=True)
     queue: str = setting("broker: the robot's request queue", Key("str", "cotwin.robot", check=amqp_name_problem))
