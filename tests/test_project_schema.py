@@ -166,3 +166,17 @@ def test_fields_set_after_loading_are_what_overrides_and_the_writer_keep():
     assert (staged.rabbitmq.exchange, staged.end, staged.algorithm) == ("cotwin_elsewhere", 3.0, "gauss-seidel")
     text = staged.to_toml()
     assert 'exchange = "cotwin_elsewhere"' in text and "end = 3.0" in text and 'algorithm = "gauss-seidel"' in text
+
+
+def test_a_misspelt_value_of_a_closed_set_gets_the_nearest_valid_one(ur5e):
+    """Enum values get a "did you mean" as unknown keys do: the algorithm, the PT's endpoint, the resync
+    mode, a base written in capitals."""
+    path = ur5e / "typos.toml"
+    path.write_text(MODELS + '[cosim]\nalgorithm = "jacobii"\n[pt]\nendpoint = "opcau"\nurl = "opc.tcp://h:4840"\n'
+                    '[convergence]\nresync = "on_alarm"\n[platform]\nbase = "Free"\n')
+    with pytest.raises(CotwinError) as err:
+        load_project(path)
+    text = str(err.value)
+    for line, hint in ((6, "jacobi"), (8, "opcua"), (11, "on-alarm"), (13, "free")):
+        assert f"typos.toml:{line}:1: error: " in text and f"did you mean '{hint}'?" in text
+    assert len(err.value.findings) == 4

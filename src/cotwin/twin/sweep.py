@@ -17,6 +17,7 @@ from concurrent.futures.process import BrokenProcessPool
 from multiprocessing import get_context
 from pathlib import Path
 
+from ..config import did_you_mean
 from ..diagnostics import CotwinError
 from .scenario import Command, scalar_value
 
@@ -31,7 +32,7 @@ def grid(program, event: str, ranges: dict[str, list], at: float = 0.5) -> list[
     """One plan per combination of `ranges` (argument -> values): `event` with those arguments at `at` s."""
     events = {ev.name: ev for ev in program.inputs}
     if event not in events:
-        raise CotwinError(f"unknown event {event!r} (known: {', '.join(events)})")
+        raise CotwinError(f"unknown event {event!r}{did_you_mean(event, events)} (known: {', '.join(events)})")
     fields = {sc.path[-1] if sc.path else "value": (port, sc) for port, sc in events[event].value_ports}
     unknown = [k for k in ranges if k not in fields]
     if unknown:

@@ -232,6 +232,7 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     world, world_file = _world(file, s, existing, problems)
     stand_ins = _stand_ins(file, platform.stand_in, problems)
     panels = _panels(file, s.figure.panels, problems) if "panels" in _table(file.data, "figure") else None
+    _scene(file, platform.scene, world is not None or named_world(s), problems)
     _timing(file, cosim, problems)
     if pt is not None:
         problems.extend(_pt_keys(file, pt))
@@ -369,6 +370,45 @@ def _world(file: TomlFile, s, existing, problems: list[Finding]):
     except CotwinError as err:
         problems.extend(err.findings)
     return None, None
+
+
+def named_world(s) -> bool:
+    """The project gives a world ([platform] world or [world]), whether or not it could be read."""
+    return s.platform.world is not None or s.world is not None
+
+
+def _scene(file: TomlFile, name: str, world: bool, problems: list[Finding]) -> None:
+    """[platform] scene and the [scene] keys, checked with the rest of the file (not in a later round, once
+    the models are read): a kind named must be known and read every [scene] key, and a world given goes to
+    a "world" scene. "auto" without a world chooses a kind from the mapping, checked when the models are
+    read; here a [scene] key that no kind reads is already an error."""
+    from ...pmodel import scenes
+
+    if not isinstance(file.data.get("scene", {}), dict):
+        return  # [scene] itself is wrong (and reported)
+    options = _table(file.data, "scene")
+    if name == "auto" and world:
+        name = "world"
+    if name == "auto":
+        kinds = scenes.scene_kinds()
+        read = sorted({k for kind in kinds.values() for k in kind.options})
+        from ...config import did_you_mean
+
+        problems.extend(Finding(file.location(("scene", key)), Severity.ERROR,
+                                f"[scene] {key}: no scene kind reads it (keys read: {', '.join(read) or 'none'})"
+                                f"{did_you_mean(key, read)}") for key in options if key not in read)
+        return
+    try:
+        kind = scenes.scene_kind(name, file.location(("platform", "scene")))
+    except CotwinError as err:
+        problems.extend(err.findings)
+        return
+    problems.extend(scenes.unread_options(kind, name, options, lambda *key: file.location(key)))
+    if world and kind.name != "world":
+        what, at = ("[platform] world", ("platform", "world")) if file.data.get("platform", {}).get("world") \
+            is not None else ("[world]", ("world",))
+        problems.append(Finding(file.location(at), Severity.ERROR, f"{what}: the scene is '{kind.name}' "
+                                f"([platform] scene = \"{name}\"), which would ignore it"))
 
 
 def _stand_ins(file: TomlFile, items: tuple, problems: list[Finding]) -> dict:

@@ -11,7 +11,7 @@ import re
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
-from ...config import Key, is_number, shown, unique, within
+from ...config import Key, did_you_mean, is_number, shown, unique, within
 from ...cosim.execution import step_count
 from ...cosim.isolated import DEFAULT_TIMEOUT
 from ...diagnostics import CotwinError
@@ -363,6 +363,7 @@ class Plant:
 
 
 RESYNC = re.compile(r"every\s+(\d+)\s+steps?")
+RESYNC_WORDS = ("never", "on-alarm")
 MAX_EVERY = 10 ** 6
 
 
@@ -371,7 +372,7 @@ def _resync(value: str) -> str | None:
         return None
     match = RESYNC.fullmatch(value.strip())
     if match is None:
-        return f'must be "never", "on-alarm" or "every N steps", got {shown(value)}'
+        return f'must be "never", "on-alarm" or "every N steps", got {shown(value)}{did_you_mean(value, RESYNC_WORDS)}'
     if not 1 <= int(match.group(1)) <= MAX_EVERY:
         return f"every N steps takes N in 1..{MAX_EVERY}, got {match.group(1)}"
     return None
