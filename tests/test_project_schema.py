@@ -180,3 +180,33 @@ def test_a_misspelt_value_of_a_closed_set_gets_the_nearest_valid_one(ur5e):
     for line, hint in ((6, "jacobi"), (8, "opcua"), (11, "on-alarm"), (13, "free")):
         assert f"typos.toml:{line}:1: error: " in text and f"did you mean '{hint}'?" in text
     assert len(err.value.findings) == 4
+
+
+def test_a_section_the_command_does_not_read_is_a_warning_at_its_table(ur5e):
+    """[convergence] in a project `cotwin run` co-simulates (no live twin) is said to be ignored, as are the
+    other live-twin and plant sections; `cotwin twin` reads [convergence] and is not warned."""
+    path = ur5e / "conv.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text() + '\n[convergence]\nresync = "on-alarm"\n'
+                    '\n[deviation]\nabsolute = 0.1\n')
+    spec = load_project(path)
+    found = [str(f) for f in spec.ignored_sections("cotwin run")]
+    at = path.read_text().splitlines().index("[convergence]") + 1
+    assert found[0] == (f"{path}:{at}:1: warning: [convergence] applies only to cotwin twin, cotwin fleet: "
+                        "cotwin run ignores it")
+    assert len(found) == 2 and "[deviation]" in found[1]
+    assert spec.ignored_sections("cotwin twin") == []
+    assert load_project(ur5e / "cotwin.toml").ignored_sections("cotwin run") == []
+
+
+def test_cotwin_run_shows_the_warning_of_a_section_it_ignores(ur5e, tmp_path):
+    import subprocess
+    import sys
+
+    path = ur5e / "conv.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text() + '\n[convergence]\nresync = "on-alarm"\n')
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "run", str(path), "-o", str(tmp_path / "out"), "--end",
+                           "0.2"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    at = path.read_text().splitlines().index("[convergence]") + 1
+    assert f"conv.toml:{at}:1: warning: [convergence] applies only to cotwin twin, cotwin fleet: cotwin run ignores it" \
+        in proc.stderr

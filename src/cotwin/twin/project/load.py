@@ -22,8 +22,8 @@ from ...cosim.isolated import DEFAULT_TIMEOUT
 from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...pmodel.perturbation import Perturbation
 from ...settings import leaves, read, replace_path, tables
-from .sections import (CYCLE_PERIOD, SHAPES, STAND_IN_EXTENT, DeviationSettings, ProjectSettings, RabbitMQSettings,
-                       _amqp_url, timing_problems)
+from .sections import (CYCLE_PERIOD, READ_ONLY_BY, SHAPES, STAND_IN_EXTENT, DeviationSettings, ProjectSettings,
+                       RabbitMQSettings, _amqp_url, timing_problems)
 
 
 @dataclass(frozen=True)
@@ -105,6 +105,16 @@ class TwinProject:
             if key[:n] in self.locations:
                 return self.locations[key[:n]]
         return Location(str(self.path), 1, 1)
+
+    def ignored_sections(self, command: str) -> list[Finding]:
+        """A warning at each table of the project file that `command` (e.g. "cotwin run") does not read
+        (READ_ONLY_BY): a [convergence] in a project co-simulated by `cotwin run` would otherwise be
+        silently without effect."""
+        data = self.file.data if self.file is not None else {}
+        return sorted(Finding(self.location(section), Severity.WARNING,
+                              f"[{section}] applies only to {', '.join(readers)}: {command} ignores it")
+                      for section, readers in READ_ONLY_BY.items()
+                      if section in data and not any(r == command or r.startswith(command + " ") for r in readers))
 
     def with_overrides(self, **changes) -> "TwinProject":
         """This project with some keys set (None: left out), checked as if written in the file. A change is

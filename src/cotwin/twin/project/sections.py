@@ -433,6 +433,17 @@ SECTIONS: dict[str, Any] = {
 }
 
 
+# Sections only some commands read (every other section is read by every command that runs the project): a
+# command that runs a project holding one of them warns, at the table, that it ignores it (`ignored_sections`).
+LIVE_TWIN = ("cotwin twin", "cotwin fleet")
+READ_ONLY_BY: dict[str, tuple[str, ...]] = {
+    "pt": (*LIVE_TWIN, "cotwin plant", "cotwin test --pt project"),
+    "deviation": LIVE_TWIN,
+    "convergence": LIVE_TWIN,
+    "plant": ("cotwin plant",),
+}
+
+
 def project_settings(sections: dict[str, Any]) -> type:
     """The dataclass of a whole project file: one field per section, in order."""
     cls = dataclasses.make_dataclass("ProjectSettings", [(name, Any, f) for name, f in sections.items()],
