@@ -210,3 +210,14 @@ def test_cotwin_run_shows_the_warning_of_a_section_it_ignores(ur5e, tmp_path):
     at = path.read_text().splitlines().index("[convergence]") + 1
     assert f"conv.toml:{at}:1: warning: [convergence] applies only to cotwin twin, cotwin fleet: cotwin run ignores it" \
         in proc.stderr
+
+
+def test_a_pt_log_replays_in_place_of_a_pt_table_of_another_endpoint(ur5e):
+    """`cotwin twin twin.toml --pt-log LOG` (and a fleet entry's pt_log) on a project whose [pt] is an OPC UA
+    plant: its url was refused as a key 'replay' does not take, though the table is not what runs."""
+    spec = load_project(ur5e / "twin.toml", ur5e / "plan.csv")
+    assert spec.pt.endpoint == "replay" and spec.pt.log == ur5e / "plan.csv"
+    (ur5e / "bad.toml").write_text((ur5e / "twin.toml").read_text().replace('endpoint = "opcua"',
+                                                                             'endpoint = "opcua"\nlog = "x.csv"'))
+    with pytest.raises(CotwinError, match=r"\[pt\] log does not apply to endpoint 'opcua'"):
+        load_project(ur5e / "bad.toml", ur5e / "plan.csv")  # the table as written is still checked

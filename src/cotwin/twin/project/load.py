@@ -244,8 +244,8 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     panels = _panels(file, s.figure.panels, problems) if "panels" in _table(file.data, "figure") else None
     _scene(file, platform.scene, world is not None or named_world(s), problems)
     _timing(file, cosim, problems)
-    if pt is not None:
-        problems.extend(_pt_keys(file, pt))
+    if s.pt is not None:  # [pt] as written, against its own endpoint (a --pt-log replays in its place)
+        problems.extend(_pt_keys(file, s.pt))
     raise_problems(problems)
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.module, models.pmodel_name,
@@ -321,7 +321,7 @@ def _timing(file: TomlFile, cosim, problems: list[Finding]) -> None:
 PT_KEYS = {"opcua": ("url",), "rtde": ("url",), "replay": ("log", "offset"), "broker": ("queue", "url")}
 
 
-def _pt_keys(file: TomlFile, pt: PTSettings) -> list[Finding]:
+def _pt_keys(file: TomlFile, pt) -> list[Finding]:
     """[pt] keys its endpoint takes (one it would ignore is an error) and its url, checked as that
     endpoint reads it."""
     raw = file.data.get("pt")
