@@ -221,3 +221,20 @@ def test_a_pt_log_replays_in_place_of_a_pt_table_of_another_endpoint(ur5e):
                                                                              'endpoint = "opcua"\nlog = "x.csv"'))
     with pytest.raises(CotwinError, match=r"\[pt\] log does not apply to endpoint 'opcua'"):
         load_project(ur5e / "bad.toml", ur5e / "plan.csv")  # the table as written is still checked
+
+
+def test_the_checks_against_the_models_report_together(ur5e):
+    """A plan naming a misspelt input, [cosim] log naming no variable and a parameter the d-model lacks: one
+    error with the three, each at its place (they came one per attempt)."""
+    from cotwin.twin.run import load
+
+    (ur5e / "bad.csv").write_text("timestep,moveDiscreteComand\n1000,true\n")
+    path = ur5e / "models.toml"
+    path.write_text(MODELS + '[scenario]\nplan = "bad.csv"\n[cosim]\nlog = ["q9"]\nparameters = { seeed = 3 }\n')
+    with pytest.raises(CotwinError) as err:
+        load(path)
+    said = [str(f) for f in err.value.findings]
+    assert said[0].startswith(f"{ur5e / 'bad.csv'}:1:10: error: unknown d-model input 'moveDiscreteComand'; "
+                              "did you mean 'moveDiscreteCommand'?")
+    assert said[1].startswith(f"{path}:8:1: error: [cosim] log: unknown mapping variable(s) q9")
+    assert said[2].startswith(f"{path}:9:16: error: [cosim] parameters: the d-model has no parameter 'seeed'")

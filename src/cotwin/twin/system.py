@@ -142,6 +142,15 @@ def external_events(program, mapping_model) -> list[str]:
     return [ev.name for ev in program.inputs if ev.name not in defined or never(defined[ev.name])]
 
 
+def _gather(problems: list[Finding], make, fallback):
+    """`make()`, or `fallback` with its error's findings added to `problems` (reported with the others)."""
+    try:
+        return make()
+    except CotwinError as err:
+        problems.extend(err.findings)
+        return fallback
+
+
 class TwinSystem:
     """Units, connections, logged variables and delayed units of a twin project (see module doc)."""
 
@@ -157,13 +166,14 @@ class TwinSystem:
         program = self.models.program
         mapped = {ev.name for ev in self.models.mapping_model.input_events}
         command_ports = scenario_ports(program)
+        problems: list[Finding] = []  # the plan's, the log's, the parameters' and the panels': reported together
         if commands is not None:
             self.commands = list(commands)
             used = {p for c in self.commands for p, _ in c.values}
             self.source_ports = list(dict.fromkeys([*self.live_ports(), *(p for p in command_ports if p in used)]))
             self.source = CONTROLLER
         elif spec.plan is not None:
-            self.commands = read_scenario(spec.plan, program)
+            self.commands = _gather(problems, lambda: read_scenario(spec.plan, program), [])
             used = {p for c in self.commands for p, _ in c.values}
             self.source_ports = [p for p in command_ports if p in used]
             self.source = CONTROLLER
@@ -191,9 +201,13 @@ class TwinSystem:
             connections += [Connection(MAPPING.name, v, RABBITMQ.name, v) for v in self.models.monitored]
         self.connections = connections
         self.delayed = {MAPPING.name}
-        self.log = self._log_variables()
-        self.parameters = self._parameters(layout)
-        self._check_panels()
+        self.log = _gather(problems, self._log_variables, None)
+        shown = not problems  # the panels are checked against what a run shows: the plan's ports, the log
+        self.parameters = _gather(problems, lambda: self._parameters(layout), {})
+        if shown:
+            _gather(problems, self._check_panels, None)
+        if problems:
+            raise CotwinError(problems)
 
     def with_plan(self, commands) -> "TwinSystem":
         """This twin with `commands` as its source (the same models, derived once)."""
