@@ -119,6 +119,8 @@ def output(path: str | Path, inputs: Iterable[str | Path | None] = (), mode: int
     `text`), renamed over `path` when the block ends without an error, removed otherwise."""
     path = Path(path)
     check_outputs([path], inputs)
+    if path.is_dir():  # else the error would name the temporary file beside it
+        raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR, "is a folder: cannot write a file there")])
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, part = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
     try:

@@ -9,7 +9,7 @@ import click
 
 from .. import safejson
 from ..files import CAPS, check_outputs, output, read_bytes, write_text
-from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main, named_values, outcomes, output_path,
+from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main, named_values, outcomes, output_file,
                      tool_point)
 
 
@@ -33,7 +33,7 @@ def plan_file(path: str, program):
 @click.option("--from", "state", type=click.Path(), help="a saved DT state to fork (DIR/state of a run or a live twin)")
 @click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=60.0, show_default=True,
               help="simulate at most this long (s)")
-@click.option("-o", "--output", "out", callback=output_path, help="write the prediction as JSON here")
+@click.option("-o", "--output", "out", callback=output_file, help="write the prediction as JSON here")
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 def whatif(project: str, plan: str, state: str | None, horizon: float, out: str | None, strict: bool) -> None:
     """Predict what a plan would do: fork the DT (at a saved state, or at the start) and run the plan
@@ -76,7 +76,7 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
               help="simulate each what-if at most this long (s)")
 @click.option("--workers", type=click.IntRange(min=1, max=1024), help="local processes (default: one per CPU)")
 @click.option("--ray", "ray", help="run on Ray: 'auto' (the local cluster) or a cluster address")
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="the CSV of answers to write")
+@click.option("-o", "--output", "out", callback=output_file, required=True, help="the CSV of answers to write")
 def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, horizon: float, workers: int | None,
           ray: str | None, out: str) -> None:
     """Run one what-if per combination of argument values, in parallel (e.g. every hole of the plate:
@@ -125,7 +125,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
 @main.command()
 @click.argument("project", type=click.Path())
 @click.option("--pt-log", type=click.Path(), help="the PT's recorded run of the project's plan (a UR RTDE log) to fit")
-@click.option("-o", "--output", "out", callback=output_path, type=click.Path(), help="the calibration file to write (with --pt-log)")
+@click.option("-o", "--output", "out", callback=output_file, type=click.Path(), help="the calibration file to write (with --pt-log)")
 @click.option("--calibration", type=click.Path(), help="the calibration to check (with --check; default: the one "
               "just fitted, else the project's)")
 @click.option("--check", "check_log", type=click.Path(), help="another recorded run to replay on the calibrated DT")

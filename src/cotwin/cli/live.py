@@ -9,12 +9,12 @@ import click
 
 from ..diagnostics import CotwinError
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
-                     main, outcomes, output_path, said_restarts, serving_options, show_warnings, start_dashboard)
+                     main, outcomes, output_folder, said_restarts, serving_options, show_warnings, start_dashboard)
 
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
+@click.option("-o", "--output", "out", callback=output_folder, required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
 @click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))

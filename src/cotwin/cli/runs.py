@@ -9,13 +9,13 @@ import click
 from ..diagnostics import CotwinError
 from ..files import check_outputs
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_step_count,
-                     check_timing, main, outcomes, output_path, said_restarts, serving_options, show_warnings,
-                     start_dashboard)
+                     check_timing, main, outcomes, output_file, output_folder, said_restarts, serving_options,
+                     show_warnings, start_dashboard)
 
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
+@click.option("-o", "--output", "out", callback=output_folder, required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 def build(project: str, out: str, cc: str) -> None:
     """Build every artefact of a twin project (cotwin.toml); unchanged artefacts are kept."""
@@ -32,7 +32,7 @@ def build(project: str, out: str, cc: str) -> None:
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for outputs.csv, figure.png and the artefacts")
+@click.option("-o", "--output", "out", callback=output_folder, required=True, help="folder for outputs.csv, figure.png and the artefacts")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
 @click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
@@ -88,7 +88,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
 
 @main.command()
 @click.argument("multimodel", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, default=None, help="the CSV to write (default: outputs.csv beside it)")
+@click.option("-o", "--output", "out", callback=output_file, default=None, help="the CSV to write (default: outputs.csv beside it)")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True))
 @click.option("--end", type=click.FloatRange(min=0, min_open=True))
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
