@@ -238,3 +238,15 @@ def test_the_checks_against_the_models_report_together(ur5e):
                               "did you mean 'moveDiscreteCommand'?")
     assert said[1].startswith(f"{path}:8:1: error: [cosim] log: unknown mapping variable(s) q9")
     assert said[2].startswith(f"{path}:9:16: error: [cosim] parameters: the d-model has no parameter 'seeed'")
+
+
+def test_a_live_twin_without_a_pt_says_how_to_give_one_before_anything_else(ur5e, tmp_path):
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "twin", str(ur5e / "cotwin.toml"), "-o", str(tmp_path / "o"),
+                           "--end", "1"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1
+    assert proc.stderr == (f"{ur5e / 'cotwin.toml'}: error: a live twin needs a PT: a [pt] table (endpoint = opcua | "
+                           "replay | broker | rtde), or --pt-log LOG (a recorded run) or --pt-url opc.tcp://HOST:PORT "
+                           "(an OPC UA plant)\n")  # not after the plan's warnings, nor without the options

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, Finding, Location, Severity
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
                      main, outcomes, output_folder, said_restarts, serving_options, show_warnings, start_dashboard)
 
@@ -52,6 +52,10 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     if exchange is not None:
         spec = spec.with_overrides(scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange,
                                    realtime=True if realtime is None else realtime)
+    if spec.pt is None:  # said before the models are read and the plan's warnings shown
+        raise CotwinError([Finding(Location(str(spec.path), 0, 0), Severity.ERROR,
+                                   "a live twin needs a PT: a [pt] table (endpoint = opcua | replay | broker | rtde), "
+                                   "or --pt-log LOG (a recorded run) or --pt-url opc.tcp://HOST:PORT (an OPC UA plant)")])
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
     from ..twin.scenario import after_end
