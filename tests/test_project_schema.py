@@ -250,3 +250,16 @@ def test_a_live_twin_without_a_pt_says_how_to_give_one_before_anything_else(ur5e
     assert proc.stderr == (f"{ur5e / 'cotwin.toml'}: error: a live twin needs a PT: a [pt] table (endpoint = opcua | "
                            "replay | broker | rtde), or --pt-log LOG (a recorded run) or --pt-url opc.tcp://HOST:PORT "
                            "(an OPC UA plant)\n")  # not after the plan's warnings, nor without the options
+
+
+def test_a_plan_holding_no_command_is_said_not_taken_for_success(ur5e, tmp_path):
+    import subprocess
+    import sys
+
+    (ur5e / "empty.csv").write_text((ur5e / "plan.csv").read_text().splitlines()[0] + "\n")
+    (ur5e / "empty.toml").write_text((ur5e / "cotwin.toml").read_text().replace("plan.csv", "empty.csv"))
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "run", str(ur5e / "empty.toml"), "-o", str(tmp_path / "o"),
+                           "--end", "0.2"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert (f"{ur5e / 'empty.csv'}:1:1: warning: the plan holds no command: the d-model runs without commands from "
+            "outside") in proc.stderr

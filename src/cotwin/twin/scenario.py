@@ -93,6 +93,15 @@ def after_end(commands: list[Command], end: float, h: float = 0.0) -> list[Findi
                     f"({end:g} s): it is never sent") for c in commands if c.time >= end - 1e-9]
 
 
+def nothing_planned(plan: Path | None, commands: list[Command]) -> list[Finding]:
+    """A warning for a plan (or command list) that holds no command: the run goes ahead without commands from
+    outside, which a user who wrote a plan did not mean ("nothing happened" is said, not taken for success)."""
+    if plan is None or commands:
+        return []
+    return [Finding(Location(str(plan), 1, 1), Severity.WARNING, "the plan holds no command: the d-model runs "
+                    "without commands from outside")]
+
+
 def read_plan(path: str | Path, program: Program) -> list[Command]:
     path = Path(path)
     ports = scenario_ports(program)
