@@ -179,7 +179,9 @@ def did_you_mean(value, known) -> str:
     if not isinstance(value, str):
         return ""
     choices = [str(k) for k in known]
-    near = difflib.get_close_matches(value, choices, n=1, cutoff=0.6) or \
+    folded = {c.lower().replace("_", "-"): c for c in choices}  # "Free", "on_alarm", "target_x": case and dash
+    near = [folded[key] for key in [value.lower().replace("_", "-")] if key in folded] or \
+        difflib.get_close_matches(value, choices, n=1, cutoff=0.6) or \
         difflib.get_close_matches(value.lower().replace("_", "-"), choices, n=1, cutoff=0.6)
     return f"; did you mean '{near[0]}'?" if near else ""
 

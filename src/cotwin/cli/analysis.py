@@ -3,14 +3,38 @@
 from __future__ import annotations
 
 import sys
+from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 
 import click
 
 from .. import safejson
+from ..diagnostics import CotwinError, Location
+from ..plaindata import StateError
 from ..files import CAPS, check_outputs, output, read_bytes, write_text
 from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main, named_values, outcomes, output_file,
-                     tool_point)
+                     show_warnings, tool_point)
+
+
+def located(err: CotwinError, path: str | None) -> CotwinError:
+    """`err` with each finding that names no place put at `path` (the plan or state file it is about)."""
+    if path is None:
+        return err
+    found = [f if not f.location.path.startswith("<") else replace(f, location=Location(str(path), 0, 0))
+             for f in err.findings]
+    out = CotwinError(found)
+    out.__dict__.update({k: v for k, v in err.__dict__.items() if k != "findings"})
+    return out
+
+
+@contextmanager
+def about(path: str | None, *kinds: type):
+    """Errors of `kinds` (default CotwinError) raised in the block, located at `path` when they name no place."""
+    try:
+        yield
+    except tuple(kinds or (CotwinError,)) as err:
+        raise located(err, path) from None
 
 
 def plan_file(path: str, program):
@@ -23,7 +47,8 @@ def plan_file(path: str, program):
             data = safejson.loads(read_bytes(path, "plan"), CAPS["plan"])
         except safejson.Refused as err:
             raise click.BadParameter(f"{path}: {err}", param_hint="--plan") from None
-        return plan_from_json(data, program)
+        with about(path):
+            return plan_from_json(data, program)
     return read_scenario(path, program)
 
 
@@ -51,7 +76,11 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
     blob = read_bytes(state, "state") if state is not None else None  # capped: a state is a few MiB
     from ..twin.outcomes import Summary
 
-    prediction = predict(system, commands, blob, horizon=horizon)
+    from ..twin.scenario import nothing_planned
+
+    show_warnings(nothing_planned(Path(plan), commands))
+    with about(state, StateError):
+        prediction = predict(system, commands, blob, horizon=horizon)
     for c in prediction.commands:
         args = ", ".join(f"{k}={v}" for k, v in c.args.items())
         verdict = {True: "feasible", False: "NOT feasible", None: "feasibility unknown"}[c.feasible]
@@ -101,7 +130,8 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     blob = read_bytes(state, "state") if state else None
     started = time.perf_counter()
     with ProgressReport("sweeping", "what-ifs") as progress:
-        rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress)
+        with about(state, StateError):
+            rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress)
     wall = time.perf_counter() - started
     ordered = [r for r in rows if ERROR not in r] + [r for r in rows if ERROR in r]  # answers' columns first
     columns = list(dict.fromkeys(k for r in ordered for k in r))

@@ -33,10 +33,18 @@ def grid(program, event: str, ranges: dict[str, list], at: float = 0.5) -> list[
     events = {ev.name: ev for ev in program.inputs}
     if event not in events:
         raise CotwinError(f"unknown event {event!r}{did_you_mean(event, events)} (known: {', '.join(events)})")
-    fields = {sc.path[-1] if sc.path else "value": (port, sc) for port, sc in events[event].value_ports}
+    from .scenario import argument_keys
+
+    fields = argument_keys(events[event])  # by port (as plans and what-ifs name them) or by field name
+    ports = [port for port, _ in events[event].value_ports]
     unknown = [k for k in ranges if k not in fields]
     if unknown:
-        raise CotwinError(f"event {event} has no argument {', '.join(unknown)} (has {', '.join(fields) or 'none'})")
+        raise CotwinError(f"event {event} has no argument {', '.join(unknown)}{did_you_mean(unknown[0], fields)} "
+                          f"(has {', '.join(ports) or 'none'}, or by field name "
+                          f"{', '.join(k for k in fields if k not in ports) or 'none'})")
+    twice = [port for port in ports if sum(fields[k][0] == port for k in ranges) > 1]
+    if twice:
+        raise CotwinError(f"argument {', '.join(twice)} is given twice (by its port and by its field name)")
     names = list(ranges)
     empty = [n for n in names if not len(ranges[n])]
     if empty:

@@ -1,0 +1,57 @@
+"""What a new user meets with broken inputs (the probe of issue 'errors a user meets'): each error names its
+file, says what would be right, and nothing already produced is lost. Each through the real `cotwin` where
+the command is what the user runs."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cotwin.diagnostics import CotwinError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def cotwin(*args, cwd=None, timeout=600) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cotwin", *map(str, args)], capture_output=True, text=True, cwd=cwd,
+                          timeout=timeout)
+
+
+@pytest.fixture
+def ur5e(tmp_path) -> Path:
+    shutil.copytree(ROOT / "examples" / "ur5e", tmp_path / "ur5e")
+    return tmp_path / "ur5e"
+
+
+def test_a_whatif_plan_or_state_that_is_wrong_is_named(ur5e):
+    """A JSON plan's problems and a --from that is not a state said 'error: plan item 1: ...' and 'error: not a
+    cotwin state' without naming the file; an empty CSV plan predicted a completion in silence."""
+    (ur5e / "w.json").write_text('[{"time": 1, "event": "moveDiscreteComand", "args": {}}]')
+    proc = cotwin("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "w.json")
+    assert proc.returncode == 1 and proc.stderr.startswith(
+        f"{ur5e / 'w.json'}: error: plan item 1: unknown event 'moveDiscreteComand'; did you mean "
+        "'moveDiscreteCommand'?"), proc.stderr
+    proc = cotwin("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "plan.csv", "--from", ur5e / "plan.csv")
+    assert proc.returncode == 1 and proc.stderr.startswith(f"{ur5e / 'plan.csv'}: error: not a cotwin state"), \
+        proc.stderr
+    (ur5e / "empty.csv").write_text((ur5e / "plan.csv").read_text().splitlines()[0] + "\n")
+    proc = cotwin("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "empty.csv", "--horizon", "1")
+    assert f"{ur5e / 'empty.csv'}:1:1: warning: the plan holds no command" in proc.stderr
+
+
+def test_a_sweep_takes_an_argument_by_the_port_name_a_whatif_prints():
+    """The what-if prints MovementArgs_target_X=...; a sweep refused that name (it took only target_X)."""
+    from cotwin.twin.run import load
+    from cotwin.twin.sweep import grid
+
+    program = load(ROOT / "examples" / "ur5e" / "cotwin.toml").models.program
+    by_port = grid(program, "moveDiscreteCommand", {"MovementArgs_target_X": [1, 2], "target_Y": [3], "target_Z": [0]})
+    assert [dict(p[0].values)["MovementArgs_target_X"] for p in by_port] == [1, 2]
+    with pytest.raises(CotwinError, match="argument MovementArgs_target_X is given twice"):
+        grid(program, "moveDiscreteCommand", {"MovementArgs_target_X": [1], "target_X": [2]})
+    with pytest.raises(CotwinError, match="no argument target_x; did you mean 'target_X'"):
+        grid(program, "moveDiscreteCommand", {"target_x": [1]})
