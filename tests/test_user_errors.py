@@ -55,3 +55,25 @@ def test_a_sweep_takes_an_argument_by_the_port_name_a_whatif_prints():
         grid(program, "moveDiscreteCommand", {"MovementArgs_target_X": [1], "target_X": [2]})
     with pytest.raises(CotwinError, match="no argument target_x; did you mean 'target_X'"):
         grid(program, "moveDiscreteCommand", {"target_x": [1]})
+
+
+def test_a_fleet_file_for_a_project_a_project_for_a_fleet_and_a_folder_for_a_file_say_what_to_run(ur5e, tmp_path):
+    """`cotwin run fleet.toml` listed 'needs models' and every fleet key as unknown; `cotwin fleet cotwin.toml`
+    every project table; `cotwin run .` said 'Is a directory'. Each now says what the file is and what to run."""
+    from cotwin.twin.fleet.spec import read_fleet
+    from cotwin.twin.project import load_project
+
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text(f'[[twin]]\nname = "a"\nproject = "{ur5e / "replay.toml"}"\n')
+    with pytest.raises(CotwinError) as err:
+        load_project(fleet)
+    assert [str(f) for f in err.value.findings] == [
+        f"{fleet}:1:1: error: this is a fleet file ([[twin]] entries naming projects), not a twin project: run it "
+        "with `cotwin fleet fleet.toml -o DIR`, or give one of the projects it names"]
+    with pytest.raises(CotwinError) as err:
+        read_fleet(ur5e / "cotwin.toml")
+    assert len(err.value.findings) == 1 and "this is a twin project ([models]), not a fleet file: run it with " \
+        "`cotwin twin cotwin.toml -o DIR`" in str(err.value)
+    with pytest.raises(CotwinError, match=r"cannot read project file: it is a folder: name the project file in it "
+                                          r"\(it holds .*cotwin.toml"):
+        load_project(ur5e)

@@ -49,6 +49,10 @@ def read_bytes(path: str | Path, what: str, limit: int | None = None) -> bytes:
             if info.st_size > cap:
                 raise error(path, f"the {what} is {_size(info.st_size)}, over the {_size(cap)} cotwin reads")
             data = f.read(cap + 1)
+    except IsADirectoryError:
+        found = sorted(Path(path).glob("*.toml"))[:5] if what == "project file" else []
+        hint = f" (it holds {', '.join(p.name for p in found)})" if found else ""
+        raise error(path, f"cannot read {what}: it is a folder: name the {what} in it{hint}") from None
     except OSError as err:
         raise error(path, f"cannot read {what}: {err.strerror or err}") from None
     if len(data) > cap:  # grew while being read

@@ -132,6 +132,10 @@ def twin_project(entry: TwinEntry) -> TwinProject:
 def read_fleet(path: str | Path) -> FleetSpec:
     """Read and check a fleet file and every project it names (see module doc)."""
     file = TomlFile(path, "fleet file")
+    if "models" in file.data and "twin" not in file.data:  # a project given for a fleet file
+        raise CotwinError([Finding(file.location(("models",)), Severity.ERROR, "this is a twin project ([models]), "
+                                   f"not a fleet file: run it with `cotwin twin {file.path.name} -o DIR`, or name it "
+                                   "in a fleet file's [[twin]] project = \"...\" (docs/fleet.md)")])
     problems: list[Finding] = []
     data = SCHEMA.read(file.data, file, (), problems)
     fleet = data["fleet"] or {}

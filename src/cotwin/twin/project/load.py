@@ -214,6 +214,10 @@ def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProj
 
 def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     """The project `file.data` describes, resolved against the files it names."""
+    if "models" not in file.data and isinstance(file.data.get("twin"), list):  # a fleet file given for a project
+        raise CotwinError([Finding(file.location(("twin",)), Severity.ERROR, "this is a fleet file ([[twin]] entries "
+                                   "naming projects), not a twin project: run it with `cotwin fleet "
+                                   f"{file.path.name} -o DIR`, or give one of the projects it names")])
     problems: list[Finding] = []
     s = read(ProjectSettings, file.data, file, (), problems)
     base = file.path.parent
