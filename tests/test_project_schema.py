@@ -263,3 +263,12 @@ def test_a_plan_holding_no_command_is_said_not_taken_for_success(ur5e, tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert (f"{ur5e / 'empty.csv'}:1:1: warning: the plan holds no command: the d-model runs without commands from "
             "outside") in proc.stderr
+
+
+def test_history_is_ignored_by_a_run_without_its_page(ur5e):
+    path = ur5e / "hist.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text() + '\n[history]\nurl = "sqlite:///h.sqlite"\n')
+    spec = load_project(path)
+    assert [f.message for f in spec.ignored_sections("cotwin run")] == [
+        "[history] applies only to cotwin twin, cotwin fleet, cotwin run --dashboard: cotwin run ignores it"]
+    assert spec.ignored_sections("cotwin run --dashboard") == []

@@ -67,7 +67,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
         history = database_url(system.spec.history_url, Path(out))
     from ..twin.scenario import after_end, nothing_planned
 
-    show_warnings(system.spec.ignored_sections("cotwin run"))
+    show_warnings(system.spec.ignored_sections("cotwin run --dashboard" if dashboard else "cotwin run"))
     show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, system.spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "run", history, serving=serving)

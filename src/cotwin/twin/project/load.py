@@ -107,14 +107,15 @@ class TwinProject:
         return Location(str(self.path), 1, 1)
 
     def ignored_sections(self, command: str) -> list[Finding]:
-        """A warning at each table of the project file that `command` (e.g. "cotwin run") does not read
+        """A warning at each table of the project file that `command` (e.g. "cotwin run", or with the option
+        that makes it read more: "cotwin run --dashboard") does not read
         (READ_ONLY_BY): a [convergence] in a project co-simulated by `cotwin run` would otherwise be
         silently without effect."""
         data = self.file.data if self.file is not None else {}
         return sorted(Finding(self.location(section), Severity.WARNING,
                               f"[{section}] applies only to {', '.join(readers)}: {command} ignores it")
                       for section, readers in READ_ONLY_BY.items()
-                      if section in data and not any(r == command or r.startswith(command + " ") for r in readers))
+                      if section in data and command not in readers)
 
     def with_overrides(self, **changes) -> "TwinProject":
         """This project with some keys set (None: left out), checked as if written in the file. A change is

@@ -434,13 +434,15 @@ SECTIONS: dict[str, Any] = {
 
 
 # Sections only some commands read (every other section is read by every command that runs the project): a
-# command that runs a project holding one of them warns, at the table, that it ignores it (`ignored_sections`).
+# command that runs a project holding one of them warns, at the table, that it ignores it (`ignored_sections`);
+# a reader is a command with the option that makes it read the section, if any.
 LIVE_TWIN = ("cotwin twin", "cotwin fleet")
 READ_ONLY_BY: dict[str, tuple[str, ...]] = {
     "pt": (*LIVE_TWIN, "cotwin plant", "cotwin test --pt project"),
     "deviation": LIVE_TWIN,
     "convergence": LIVE_TWIN,
     "plant": ("cotwin plant",),
+    "history": (*LIVE_TWIN, "cotwin run --dashboard"),  # one run records no history; its page lists the store's
 }
 
 
