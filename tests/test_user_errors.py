@@ -77,3 +77,22 @@ def test_a_fleet_file_for_a_project_a_project_for_a_fleet_and_a_folder_for_a_fil
     with pytest.raises(CotwinError, match=r"cannot read project file: it is a folder: name the project file in it "
                                           r"\(it holds .*cotwin.toml"):
         load_project(ur5e)
+
+
+def test_a_broken_calibration_and_a_broken_plan_are_reported_together_at_their_places(ur5e):
+    """The calibration was read (and failed) before the plan was: fixing it revealed the plan's errors; a
+    [monitor] reading clashing with a mapping variable was said at the file's first line, not at the key."""
+    from cotwin.twin.run import load
+
+    (ur5e / "bad.csv").write_text("timestep,moveDiscreteComand\n1000,true\n")
+    (ur5e / "badcal.toml").write_text("this is not toml\n")
+    path = ur5e / "both.toml"
+    path.write_text('[models]\ndmodel = "arm.rst"\npmodel = "ur5e.pm"\nmapping = "mapping.pm"\n[scenario]\n'
+                    'plan = "bad.csv"\n[platform]\ncalibration = "badcal.toml"\n[monitor]\nreadings = { q0 = "x" }\n')
+    with pytest.raises(CotwinError) as err:
+        load(path)
+    said = [str(f) for f in err.value.findings]
+    assert any(s.startswith(f"{ur5e / 'bad.csv'}:1:10: error: unknown d-model input") for s in said), said
+    assert any(s.startswith(f"{ur5e / 'badcal.toml'}:1:") for s in said), said
+    assert any(s.startswith(f"{path}:10:14:") and "[monitor] readings q0: the mapping has variables" in s
+               for s in said), said

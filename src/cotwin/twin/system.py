@@ -84,11 +84,12 @@ def load_models(spec: TwinProject) -> TwinModels:
     project = load_checked(spec.model_files)
     program = build_program(project, spec.module)
     tree = build_tree(project, spec.pmodel_name, spec.stand_ins)
+    problems: list[Finding] = []  # the checks below report together (with the plan's, see the end)
     unused = sorted(set(spec.stand_ins) - tree.stood_in)
     if unused:
-        raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
-                                   f"[[platform.stand_in]] for {', '.join(unused)}: p-model {tree.name} names no such "
-                                   "mesh that cannot be read")])
+        problems.append(Finding(spec.location("platform", "stand_in"), Severity.ERROR,
+                                f"[[platform.stand_in]] for {', '.join(unused)}: p-model {tree.name} names no such "
+                                "mesh that cannot be read"))
     mappings = project.elements(MappingModel)
     if len(mappings) != 1:
         raise CotwinError([Finding(Location(str(spec.mapping), 1, 1), Severity.ERROR,
@@ -98,16 +99,22 @@ def load_models(spec: TwinProject) -> TwinModels:
     if spec.calibration is not None:
         from .calibration import Calibration
 
-        calibration = Calibration.read(spec.calibration)
-    scene = build_scene(spec, mapping, calibration)
+        calibration = _gather(problems, lambda: Calibration.read(spec.calibration), None)
+    scene = _gather(problems, lambda: build_scene(spec, mapping, calibration), None)
     variables = [v.name for v in mapping.variables]
-    if calibration is not None:
-        calibration.geometry.check_joints(ik.arm_joints(tree, ik.find_tool(tree)))  # it names this arm's joints
+    if calibration is not None:  # it names this arm's joints
+        _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, ik.find_tool(tree))), None)
     joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) else []
     clash = [n for n in spec.readings if n in variables or n in mirror_variables(variables, joints)]
     if clash:
-        raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
-                                   f"[monitor] readings {', '.join(clash)}: the mapping has variables of these names")])
+        problems.append(Finding(spec.location("monitor", "readings", clash[0]), Severity.ERROR,
+                                f"[monitor] readings {', '.join(clash)}: the mapping has variables of these names"))
+    if problems:
+        if spec.plan is not None:  # its problems too, not in a round of their own once these are fixed
+            from .scenario import read_scenario
+
+            _gather(problems, lambda: read_scenario(spec.plan, program), None)
+        raise CotwinError(problems)
     monitored = [*mirror_variables(variables, joints), *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project))
 
