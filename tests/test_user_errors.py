@@ -96,3 +96,15 @@ def test_a_broken_calibration_and_a_broken_plan_are_reported_together_at_their_p
     assert any(s.startswith(f"{ur5e / 'badcal.toml'}:1:") for s in said), said
     assert any(s.startswith(f"{path}:10:14:") and "[monitor] readings q0: the mapping has variables" in s
                for s in said), said
+
+
+def test_an_output_that_cannot_be_made_is_named_not_its_temporary_file(tmp_path):
+    """A file written where it cannot be (inside a file here; a read-only place alike) raised a bare OSError,
+    or one naming the temporary '.x.part' beside it."""
+    from cotwin.files import write_text
+
+    (tmp_path / "afile").write_text("precious")
+    with pytest.raises(CotwinError) as err:
+        write_text(tmp_path / "afile" / "x.txt", "x")
+    assert str(err.value).startswith(f"{tmp_path / 'afile' / 'x.txt'}: error: cannot write here: ")
+    assert (tmp_path / "afile").read_text() == "precious"

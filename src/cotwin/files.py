@@ -125,8 +125,12 @@ def output(path: str | Path, inputs: Iterable[str | Path | None] = (), mode: int
     check_outputs([path], inputs)
     if path.is_dir():  # else the error would name the temporary file beside it
         raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR, "is a folder: cannot write a file there")])
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, part = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, part = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
+    except OSError as err:  # named by the file asked for, not the temporary one beside it
+        raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR,
+                                   f"cannot write here: {err.strerror or err}")]) from None
     try:
         os.fchmod(fd, mode if mode is not None else 0o666 & ~_umask())
         with os.fdopen(fd, "w" if text else "wb", **({"encoding": "utf-8", "newline": newline} if text else {})) as f:
