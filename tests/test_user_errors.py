@@ -108,3 +108,16 @@ def test_an_output_that_cannot_be_made_is_named_not_its_temporary_file(tmp_path)
         write_text(tmp_path / "afile" / "x.txt", "x")
     assert str(err.value).startswith(f"{tmp_path / 'afile' / 'x.txt'}: error: cannot write here: ")
     assert (tmp_path / "afile").read_text() == "precious"
+
+
+def test_names_checked_against_the_models_get_the_nearest_one(ur5e):
+    from cotwin.twin.run import load
+
+    path = ur5e / "names.toml"
+    path.write_text('[models]\ndmodel = "arm.rst"\npmodel = "ur5e.pm"\nmapping = "mapping.pm"\n[cosim]\n'
+                    'log = ["Q0"]\nparameters = { cycle_perod = 0.1 }\n')
+    with pytest.raises(CotwinError) as err:
+        load(path)
+    text = str(err.value)
+    assert "unknown mapping variable(s) Q0; did you mean 'q0'?" in text
+    assert "no parameter 'cycle_perod'; did you mean 'cycle_period'?" in text

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from ..config import did_you_mean
 from ..cosim.isolated import DEFAULT_TIMEOUT
 from ..cosim.system import Connection, System
 from ..cosim.units import Unit
@@ -253,7 +254,8 @@ class TwinSystem:
         if unknown:
             raise CotwinError([Finding(spec.location("scenario", "rabbitmq", "commands"), Severity.ERROR,
                                        f"[scenario] rabbitmq commands: {', '.join(unknown)} are not input events "
-                                       f"of the d-model (it has {', '.join(ev.name for ev in program.inputs)})")])
+                                       f"of the d-model{did_you_mean(unknown[0], [ev.name for ev in program.inputs])} "
+                                       f"(it has {', '.join(ev.name for ev in program.inputs)})")])
         return [p for ev in program.inputs if ev.name in names for p in [ev.name, *(port for port, _ in ev.value_ports)]]
 
     def _log_variables(self) -> dict[str, list[str]]:
@@ -262,7 +264,8 @@ class TwinSystem:
         unknown = [n for n in names if n not in monitored]
         if unknown:
             raise CotwinError([Finding(self.spec.location("cosim", "log"), Severity.ERROR,
-                                       f"[cosim] log: unknown mapping variable(s) {', '.join(unknown)} "
+                                       f"[cosim] log: unknown mapping variable(s) {', '.join(unknown)}"
+                                       f"{did_you_mean(unknown[0], monitored)} "
                                        f"(monitored: {', '.join(monitored) or 'none'})")])
         program = self.models.program
         return {MAPPING.name: list(names), DMODEL.name: [program.state_port(m) for m in program.machines]}
@@ -280,7 +283,8 @@ class TwinSystem:
             at = self.spec.location("cosim", "parameters", name)
             if port is None:
                 problems.append(Finding(at, Severity.ERROR, f"[cosim] parameters: the d-model has no parameter "
-                                                            f"'{name}' (it has {', '.join(ports) or 'none'})"))
+                                                            f"'{name}'{did_you_mean(name, ports)} "
+                                                            f"(it has {', '.join(ports) or 'none'})"))
             elif port.fmi_type == "Boolean" and not isinstance(value, bool) or \
                     port.fmi_type == "Integer" and (isinstance(value, bool) or not isinstance(value, int)) or \
                     port.fmi_type == "Real" and (isinstance(value, bool) or not isinstance(value, (int, float))):
