@@ -272,3 +272,11 @@ def test_history_is_ignored_by_a_run_without_its_page(ur5e):
     assert [f.message for f in spec.ignored_sections("cotwin run")] == [
         "[history] applies only to cotwin twin, cotwin fleet, cotwin run --dashboard: cotwin run ignores it"]
     assert spec.ignored_sections("cotwin run --dashboard") == []
+
+
+def test_a_boolean_written_as_a_number_is_not_called_a_string(ur5e):
+    path = ur5e / "b.toml"
+    path.write_text(MODELS + "[cosim]\nrealtime = 1\n")
+    with pytest.raises(CotwinError) as err:
+        load_project(path)
+    assert str(err.value) == f"{path}:6:1: error: [cosim] realtime must be true or false (a TOML Boolean), got 1"

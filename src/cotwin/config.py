@@ -209,6 +209,8 @@ def shown(value, limit: int = 80) -> str:
 
 def _value(spec: Key, value, file: TomlFile, where: tuple, problems: list[Finding], name: str):
     test, words = _KINDS[spec.kind]
+    if spec.kind == "bool" and not isinstance(value, str):
+        words = "true or false (a TOML Boolean)"  # "not a string" would mislead about 1 or 0
     if not test(value):
         problems.append(Finding(file.location(where), Severity.ERROR, f"{name} must be {words}, got {shown(value)}"))
         return spec.default
