@@ -127,8 +127,8 @@ class Perturbation:
             value = getattr(self, key)
             for name in value if isinstance(value, dict) else ():
                 if name not in joints:
-                    out.append(((key, name), f"{key}: p-model {tree.name} has no actuated joint '{name}' "
-                                             f"(joints: {', '.join(joints)})"))
+                    out.append(((key, name), f"{key}: p-model {tree.name} has no actuated joint '{name}'"
+                                             f"{did_you_mean(name, joints)} (joints: {', '.join(joints)})"))
         return out
 
     def as_dict(self) -> dict:
