@@ -121,3 +121,24 @@ def test_names_checked_against_the_models_get_the_nearest_one(ur5e):
     text = str(err.value)
     assert "unknown mapping variable(s) Q0; did you mean 'q0'?" in text
     assert "no parameter 'cycle_perod'; did you mean 'cycle_period'?" in text
+
+
+def test_monitor_joints_and_figure_panels_are_said_at_their_keys_with_the_nearest_name(ur5e):
+    """[monitor] joints naming no joint said 'error: mirrored joints ...' with no file or line."""
+    from cotwin.twin.run import load
+
+    path = ur5e / "mon.toml"
+    text = ('[models]\ndmodel = "arm.rst"\npmodel = "ur5e.pm"\nmapping = "mapping.pm"\n[monitor]\n'
+            'joints = ["shoulder_pan_jont", "elbow_joint"]\n[figure]\n[[figure.panels]]\n'
+            'variables = ["mapping.Q1", "dmodl.x"]\n')
+    path.write_text(text)
+    with pytest.raises(CotwinError) as err:
+        load(path)
+    assert str(err.value).startswith(f"{path}:6:1: error: [monitor] joints: shoulder_pan_jont are not actuated joints "
+                                     "of p-model ur5e; did you mean 'shoulder_pan_joint'?")
+    path.write_text(text.replace("jont", "joint"))
+    with pytest.raises(CotwinError) as err:
+        load(path)
+    said = str(err.value)
+    assert "unit 'dmodl' is not one of this twin's; did you mean 'dmodel'?" in said
+    assert "mapping shows no variable 'Q1'; did you mean 'q1'?" in said

@@ -105,7 +105,13 @@ def load_models(spec: TwinProject) -> TwinModels:
     variables = [v.name for v in mapping.variables]
     if calibration is not None:  # it names this arm's joints
         _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, ik.find_tool(tree))), None)
-    joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) else []
+    actuated = [j.name for j in tree.actuated]
+    unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
+    if unknown:  # said at the key, with the nearest joint
+        problems.append(Finding(spec.location("monitor", "joints"), Severity.ERROR,
+                                f"[monitor] joints: {', '.join(unknown)} are not actuated joints of p-model "
+                                f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
+    joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) and not unknown else []
     clash = [n for n in spec.readings if n in variables or n in mirror_variables(variables, joints)]
     if clash:
         problems.append(Finding(spec.location("monitor", "readings", clash[0]), Severity.ERROR,
@@ -318,9 +324,10 @@ class TwinSystem:
             for name in names:
                 unit, variable = name.split(".")
                 if unit not in units:
-                    message = f"unit '{unit}' is not one of this twin's ({', '.join(units)})"
+                    message = f"unit '{unit}' is not one of this twin's{did_you_mean(unit, units)} ({', '.join(units)})"
                 elif variable not in columns[units[unit]]:
-                    message = (f"{unit} shows no variable '{variable}' (it shows "
+                    message = (f"{unit} shows no variable '{variable}'{did_you_mean(variable, sorted(columns[units[unit]]))} "
+                               f"(it shows "
                                f"{', '.join(sorted(columns[units[unit]])) or 'none'})")
                 else:
                     continue
