@@ -142,3 +142,31 @@ def test_monitor_joints_and_figure_panels_are_said_at_their_keys_with_the_neares
     said = str(err.value)
     assert "unit 'dmodl' is not one of this twin's; did you mean 'dmodel'?" in said
     assert "mapping shows no variable 'Q1'; did you mean 'q1'?" in said
+
+
+def test_an_interrupted_sweep_keeps_the_what_ifs_it_answered(ur5e, tmp_path):
+    """Ctrl-C in a sweep said 'interrupted' and wrote nothing: every what-if answered was lost."""
+    import os
+    import signal
+    import time
+
+    out = tmp_path / "sweep.csv"
+    env = {**os.environ, "COTWIN_PROGRESS_SECONDS": "0.2"}
+    proc = subprocess.Popen([sys.executable, "-m", "cotwin", "sweep", str(ur5e / "cotwin.toml"), "--event",
+                             "moveDiscreteCommand", "--arg", "target_X=0..15", "--arg", "target_Y=0..3", "--arg",
+                             "target_Z=0", "-o", str(out), "--workers", "2", "--horizon", "5"],
+                            stderr=subprocess.PIPE, text=True, env=env)
+    seen = ""
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:  # until some what-ifs are answered
+        line = proc.stderr.readline()
+        seen += line
+        if line.startswith("sweeping: ") and not line.startswith("sweeping: 0/"):
+            break
+    proc.send_signal(signal.SIGINT)
+    rest = proc.communicate(timeout=120)[1]
+    partial = tmp_path / "sweep.partial.csv"
+    assert proc.returncode == 130, seen + rest
+    rows = partial.read_text().splitlines()
+    assert f"error: interrupted after {len(rows) - 1} of 64 what-ifs; the {len(rows) - 1} answered are in {partial}" \
+        in rest and len(rows) > 1 and not out.exists()

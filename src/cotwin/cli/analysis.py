@@ -114,7 +114,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     import time
 
     from ..twin.run import load
-    from ..twin.sweep import ERROR, failures, grid, run_sweep
+    from ..twin.sweep import ERROR, SweepInterrupted, failures, grid, run_sweep
     from .progress import ProgressReport
 
     check_finite(horizon=horizon)
@@ -129,16 +129,28 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     plans = grid(system.models.program, event, ranges)
     blob = read_bytes(state, "state") if state else None
     started = time.perf_counter()
-    with ProgressReport("sweeping", "what-ifs") as progress:
-        with about(state, StateError):
-            rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress)
+    def write(path, rows: list[dict]) -> None:
+        ordered = [r for r in rows if ERROR not in r] + [r for r in rows if ERROR in r]  # answers' columns first
+        columns = list(dict.fromkeys(k for r in ordered for k in r))
+        with output(path, inputs, text=True, newline="") as f:
+            writer = csv.DictWriter(f, columns, lineterminator="\n")
+            writer.writeheader()
+            writer.writerows(rows)
+
+    try:
+        with ProgressReport("sweeping", "what-ifs") as progress:
+            with about(state, StateError):
+                rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress)
+    except SweepInterrupted as err:  # the what-ifs answered are kept beside the output
+        partial = Path(out).with_name(Path(out).stem + ".partial.csv")
+        if err.rows:
+            write(partial, err.rows)
+        stopped = CotwinError(f"{err.findings[0].message}; " + (f"the {len(err.rows)} answered are in {partial}"
+                                                                  if err.rows else "none was answered"))
+        stopped.interrupted = True
+        raise stopped from None
     wall = time.perf_counter() - started
-    ordered = [r for r in rows if ERROR not in r] + [r for r in rows if ERROR in r]  # answers' columns first
-    columns = list(dict.fromkeys(k for r in ordered for k in r))
-    with output(out, inputs, text=True, newline="") as f:
-        writer = csv.DictWriter(f, columns, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
+    write(out, rows)
     bad = failures(rows)
     for k, row in bad[:MAX_REPORTED]:
         where = ", ".join(f"{name}={value}" for name, value in row.items() if name != ERROR)

@@ -99,6 +99,15 @@ def failed(plan: list[Command], err: BaseException) -> dict:
     return {**point(plan), ERROR: f"internal error: {type(err).__name__}: {err} (a cotwin bug)\n{where}"}
 
 
+class SweepInterrupted(CotwinError):
+    """A sweep stopped by an interrupt: `rows` are the what-ifs answered by then (each with its grid point),
+    kept for the caller to write rather than lost with the others."""
+
+    def __init__(self, rows: list[dict], total: int):
+        super().__init__(f"interrupted after {len(rows)} of {total} what-ifs")
+        self.rows, self.total, self.interrupted = rows, total, True
+
+
 def failures(rows: list[dict]) -> list[tuple[int, dict]]:
     """(index, row) of the what-ifs that failed."""
     return [(k, r) for k, r in enumerate(rows) if r.get(ERROR)]
@@ -168,25 +177,31 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         report(0, len(plans))
         if workers == 1:
             _load(project, artefacts)
-            for plan in plans:
-                rows.append(_run(plan, state, horizon, step))
-                report(len(rows), len(plans))
+            try:
+                for plan in plans:
+                    rows.append(_run(plan, state, horizon, step))
+                    report(len(rows), len(plans))
+            except KeyboardInterrupt:
+                raise SweepInterrupted(rows, len(plans)) from None
             return rows
         size = max(1, min(len(plans) // (workers * 8), 64))  # small chunks: progress and balance
         chunks = [plans[k:k + size] for k in range(0, len(plans), size)]
         answers: dict[int, list[dict]] = {}
-        with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
-                                 initargs=(project, artefacts)) as pool:
-            futures = {pool.submit(_run_chunk, chunk, state, horizon, step): k for k, chunk in enumerate(chunks)}
-            done = 0
-            for future in as_completed(futures):
-                k = futures[future]
-                try:
-                    answers[k] = future.result()
-                except BrokenProcessPool:  # a worker died (a signal, out of memory): its what-ifs say so
-                    answers[k] = [{**point(plan), ERROR: DIED} for plan in chunks[k]]
-                done += len(answers[k])
-                report(done, len(plans))
+        try:
+            with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
+                                     initargs=(project, artefacts)) as pool:
+                futures = {pool.submit(_run_chunk, chunk, state, horizon, step): k for k, chunk in enumerate(chunks)}
+                done = 0
+                for future in as_completed(futures):
+                    k = futures[future]
+                    try:
+                        answers[k] = future.result()
+                    except BrokenProcessPool:  # a worker died (a signal, out of memory): its what-ifs say so
+                        answers[k] = [{**point(plan), ERROR: DIED} for plan in chunks[k]]
+                    done += len(answers[k])
+                    report(done, len(plans))
+        except KeyboardInterrupt:  # the answers so far are kept (in the plans' order), not lost
+            raise SweepInterrupted([row for k in sorted(answers) for row in answers[k]], len(plans)) from None
         return [row for k in range(len(chunks)) for row in answers[k]]
     finally:
         if scratch is not None:
