@@ -280,3 +280,11 @@ def test_a_boolean_written_as_a_number_is_not_called_a_string(ur5e):
     with pytest.raises(CotwinError) as err:
         load_project(path)
     assert str(err.value) == f"{path}:6:1: error: [cosim] realtime must be true or false (a TOML Boolean), got 1"
+
+
+def test_a_model_named_by_a_folder_is_said_to_be_one(ur5e):
+    path = ur5e / "dir.toml"
+    path.write_text(MODELS.replace('"arm.rst"', '"."'))
+    with pytest.raises(CotwinError) as err:
+        load_project(path)
+    assert str(err.value) == f"{path}:2:1: error: [models] dmodel: {ur5e / '.'} is a folder, not a file"

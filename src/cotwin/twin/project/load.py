@@ -228,7 +228,8 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
             return None
         target = base / value
         if not target.is_file():
-            problems.append(Finding(file.location((table, key)), Severity.ERROR, f"[{table}] {key}: no file {target}"))
+            what = f"{target} is a folder, not a file" if target.is_dir() else f"no file {target}"
+            problems.append(Finding(file.location((table, key)), Severity.ERROR, f"[{table}] {key}: {what}"))
         return target
 
     models = s.models
