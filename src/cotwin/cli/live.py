@@ -7,15 +7,15 @@ from pathlib import Path
 
 import click
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..twin.observing import TwinObserver
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
-                     main, outcomes, output_path, said_restarts, serving_options, show_warnings, start_dashboard)
+                     main, outcomes, output_folder, said_restarts, serving_options, show_warnings, start_dashboard)
 
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
+@click.option("-o", "--output", "out", callback=output_folder, required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
 @click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
@@ -53,10 +53,15 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     if exchange is not None:
         spec = spec.with_overrides(scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange,
                                    realtime=True if realtime is None else realtime)
+    if spec.pt is None:  # said before the models are read and the plan's warnings shown
+        raise CotwinError([Finding(Location(str(spec.path), 0, 0), Severity.ERROR,
+                                   "a live twin needs a PT: a [pt] table (endpoint = opcua | replay | broker | rtde), "
+                                   "or --pt-log LOG (a recorded run) or --pt-url opc.tcp://HOST:PORT (an OPC UA plant)")])
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
-    from ..twin.scenario import after_end
+    from ..twin.scenario import after_end, nothing_planned
 
+    show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
                            broker if whatif else None, serving)

@@ -9,13 +9,13 @@ import click
 from ..diagnostics import CotwinError
 from ..files import check_outputs
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_step_count,
-                     check_timing, main, outcomes, output_path, said_restarts, serving_options, show_warnings,
-                     start_dashboard)
+                     check_timing, main, outcomes, output_file, output_folder, said_restarts, serving_options,
+                     show_warnings, start_dashboard)
 
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
+@click.option("-o", "--output", "out", callback=output_folder, required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 def build(project: str, out: str, cc: str) -> None:
     """Build every artefact of a twin project (cotwin.toml); unchanged artefacts are kept."""
@@ -32,7 +32,7 @@ def build(project: str, out: str, cc: str) -> None:
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for outputs.csv, figure.png and the artefacts")
+@click.option("-o", "--output", "out", callback=output_folder, required=True, help="folder for outputs.csv, figure.png and the artefacts")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
 @click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
@@ -65,8 +65,10 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
-    from ..twin.scenario import after_end
+    from ..twin.scenario import after_end, nothing_planned
 
+    show_warnings(system.spec.ignored_sections("cotwin run --dashboard" if dashboard else "cotwin run"))
+    show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, system.spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "run", history, serving=serving)
     try:
@@ -87,7 +89,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
 
 @main.command()
 @click.argument("multimodel", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, default=None, help="the CSV to write (default: outputs.csv beside it)")
+@click.option("-o", "--output", "out", callback=output_file, default=None, help="the CSV to write (default: outputs.csv beside it)")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True))
 @click.option("--end", type=click.FloatRange(min=0, min_open=True))
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))

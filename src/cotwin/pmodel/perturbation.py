@@ -29,7 +29,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..config import Key, Schema, TomlFile, is_number, raise_problems
+from ..config import Key, Schema, TomlFile, did_you_mean, is_number, raise_problems
 from ..diagnostics import CotwinError, Finding, Severity
 from .ik import find_tool
 from .mjcf import TIMESTEP, to_mjcf
@@ -61,7 +61,7 @@ def _per_name(what: str, high: float, names: tuple[str, ...] = ()):
             return f"must be a number >= 0 or a table of {what} -> number >= 0, got {value!r}"
         for name, v in value.items():
             if names and name not in names:
-                return f"unknown {what} '{name}' (known: {', '.join(names)})"
+                return f"unknown {what} '{name}'{did_you_mean(name, names)} (known: {', '.join(names)})"
             if not _is_value(v) or v > high:
                 return f"{what} '{name}' must be a number in [0, {high:g}], got {v!r}"
         return None
@@ -127,8 +127,8 @@ class Perturbation:
             value = getattr(self, key)
             for name in value if isinstance(value, dict) else ():
                 if name not in joints:
-                    out.append(((key, name), f"{key}: p-model {tree.name} has no actuated joint '{name}' "
-                                             f"(joints: {', '.join(joints)})"))
+                    out.append(((key, name), f"{key}: p-model {tree.name} has no actuated joint '{name}'"
+                                             f"{did_you_mean(name, joints)} (joints: {', '.join(joints)})"))
         return out
 
     def as_dict(self) -> dict:

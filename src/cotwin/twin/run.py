@@ -120,18 +120,24 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         except (CotwinError, KeyboardInterrupt) as err:
             raise ended_early(err, execution.time, writer.kept()) from None
         figure = None
-        if plot:
-            from ..plot import figure as draw
+        try:
+            if plot:
+                from ..plot import figure as draw
 
-            figure = draw(out / "outputs.csv", out / "figure.png", figure_panels(system),
-                          title=f"{system.models.program.module.name}: step {step:g} s, {result.algorithm}")
-            path = path_columns(system)
-            if path is not None:
-                from ..plot import top_view
+                figure = draw(out / "outputs.csv", out / "figure.png", figure_panels(system),
+                              title=f"{system.models.program.module.name}: step {step:g} s, {result.algorithm}")
+                path = path_columns(system)
+                if path is not None:
+                    from ..plot import top_view
 
-                top_view(out / "outputs.csv", out / "path.png", system.models.scene, path,
-                         title=f"{system.models.program.module.name} in {system.models.scene.name or 'its world'}: "
-                               f"{end:g} s")
+                    top_view(out / "outputs.csv", out / "path.png", system.models.scene, path,
+                             title=f"{system.models.program.module.name} in "
+                                   f"{system.models.scene.name or 'its world'}: {end:g} s")
+        except KeyboardInterrupt:  # the run itself is done: say that its rows are all there
+            stopped = CotwinError(f"interrupted while drawing the figure; the run is complete: {result.rows} row(s) "
+                                  f"to t = {result.end_time:g} s in {out / 'outputs.csv'}")
+            stopped.interrupted = True
+            raise stopped from None
         return TwinRun(result, out / "outputs.csv", figure, cosim, units, watch.found,
                        ledger.summary(watch.found, not_applied(units.get("source"))))
 

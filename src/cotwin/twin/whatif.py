@@ -28,6 +28,7 @@ from pathlib import Path
 from .. import safejson
 from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution
+from ..config import did_you_mean
 from ..diagnostics import CotwinError
 from .build import dmodel_fmu
 from ..logcap import CappedLog
@@ -208,7 +209,8 @@ def plan_from_json(items: list, program) -> list[Command]:
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not (0 <= t < 1e6):
             raise CotwinError(f"plan item {k}: time must be a number of seconds >= 0, got {t!r:.80}")
         if name not in events:
-            raise CotwinError(f"plan item {k}: unknown event {name!r:.80} (known: {', '.join(events)})")
+            raise CotwinError(f"plan item {k}: unknown event {name!r:.80}{did_you_mean(name, events)} "
+                              f"(known: {', '.join(events)})")
         if not isinstance(args, dict):
             raise CotwinError(f"plan item {k}: args must be an object")
         values, wrong = command_values(events[name], args)

@@ -22,8 +22,8 @@ from ...cosim.isolated import DEFAULT_TIMEOUT
 from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...pmodel.perturbation import Perturbation
 from ...settings import leaves, read, replace_path, tables
-from .sections import (CYCLE_PERIOD, SHAPES, STAND_IN_EXTENT, DeviationSettings, ProjectSettings, RabbitMQSettings,
-                       _amqp_url, timing_problems)
+from .sections import (CYCLE_PERIOD, READ_ONLY_BY, SHAPES, STAND_IN_EXTENT, DeviationSettings, ProjectSettings,
+                       RabbitMQSettings, _amqp_url, timing_problems)
 
 
 @dataclass(frozen=True)
@@ -105,6 +105,17 @@ class TwinProject:
             if key[:n] in self.locations:
                 return self.locations[key[:n]]
         return Location(str(self.path), 1, 1)
+
+    def ignored_sections(self, command: str) -> list[Finding]:
+        """A warning at each table of the project file that `command` (e.g. "cotwin run", or with the option
+        that makes it read more: "cotwin run --dashboard") does not read
+        (READ_ONLY_BY): a [convergence] in a project co-simulated by `cotwin run` would otherwise be
+        silently without effect."""
+        data = self.file.data if self.file is not None else {}
+        return sorted(Finding(self.location(section), Severity.WARNING,
+                              f"[{section}] applies only to {', '.join(readers)}: {command} ignores it")
+                      for section, readers in READ_ONLY_BY.items()
+                      if section in data and command not in readers)
 
     def with_overrides(self, **changes) -> "TwinProject":
         """This project with some keys set (None: left out), checked as if written in the file. A change is
@@ -204,6 +215,10 @@ def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProj
 
 def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     """The project `file.data` describes, resolved against the files it names."""
+    if "models" not in file.data and isinstance(file.data.get("twin"), list):  # a fleet file given for a project
+        raise CotwinError([Finding(file.location(("twin",)), Severity.ERROR, "this is a fleet file ([[twin]] entries "
+                                   "naming projects), not a twin project: run it with `cotwin fleet "
+                                   f"{file.path.name} -o DIR`, or give one of the projects it names")])
     problems: list[Finding] = []
     s = read(ProjectSettings, file.data, file, (), problems)
     base = file.path.parent
@@ -213,7 +228,8 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
             return None
         target = base / value
         if not target.is_file():
-            problems.append(Finding(file.location((table, key)), Severity.ERROR, f"[{table}] {key}: no file {target}"))
+            what = f"{target} is a folder, not a file" if target.is_dir() else f"no file {target}"
+            problems.append(Finding(file.location((table, key)), Severity.ERROR, f"[{table}] {key}: {what}"))
         return target
 
     models = s.models
@@ -232,9 +248,10 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     world, world_file = _world(file, s, existing, problems)
     stand_ins = _stand_ins(file, platform.stand_in, problems)
     panels = _panels(file, s.figure.panels, problems) if "panels" in _table(file.data, "figure") else None
+    _scene(file, platform.scene, world is not None or named_world(s), problems)
     _timing(file, cosim, problems)
-    if pt is not None:
-        problems.extend(_pt_keys(file, pt))
+    if s.pt is not None:  # [pt] as written, against its own endpoint (a --pt-log replays in its place)
+        problems.extend(_pt_keys(file, s.pt))
     raise_problems(problems)
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.module, models.pmodel_name,
@@ -310,7 +327,7 @@ def _timing(file: TomlFile, cosim, problems: list[Finding]) -> None:
 PT_KEYS = {"opcua": ("url",), "rtde": ("url",), "replay": ("log", "offset"), "broker": ("queue", "url")}
 
 
-def _pt_keys(file: TomlFile, pt: PTSettings) -> list[Finding]:
+def _pt_keys(file: TomlFile, pt) -> list[Finding]:
     """[pt] keys its endpoint takes (one it would ignore is an error) and its url, checked as that
     endpoint reads it."""
     raw = file.data.get("pt")
@@ -369,6 +386,45 @@ def _world(file: TomlFile, s, existing, problems: list[Finding]):
     except CotwinError as err:
         problems.extend(err.findings)
     return None, None
+
+
+def named_world(s) -> bool:
+    """The project gives a world ([platform] world or [world]), whether or not it could be read."""
+    return s.platform.world is not None or s.world is not None
+
+
+def _scene(file: TomlFile, name: str, world: bool, problems: list[Finding]) -> None:
+    """[platform] scene and the [scene] keys, checked with the rest of the file (not in a later round, once
+    the models are read): a kind named must be known and read every [scene] key, and a world given goes to
+    a "world" scene. "auto" without a world chooses a kind from the mapping, checked when the models are
+    read; here a [scene] key that no kind reads is already an error."""
+    from ...pmodel import scenes
+
+    if not isinstance(file.data.get("scene", {}), dict):
+        return  # [scene] itself is wrong (and reported)
+    options = _table(file.data, "scene")
+    if name == "auto" and world:
+        name = "world"
+    if name == "auto":
+        kinds = scenes.scene_kinds()
+        read = sorted({k for kind in kinds.values() for k in kind.options})
+        from ...config import did_you_mean
+
+        problems.extend(Finding(file.location(("scene", key)), Severity.ERROR,
+                                f"[scene] {key}: no scene kind reads it (keys read: {', '.join(read) or 'none'})"
+                                f"{did_you_mean(key, read)}") for key in options if key not in read)
+        return
+    try:
+        kind = scenes.scene_kind(name, file.location(("platform", "scene")))
+    except CotwinError as err:
+        problems.extend(err.findings)
+        return
+    problems.extend(scenes.unread_options(kind, name, options, lambda *key: file.location(key)))
+    if world and kind.name != "world":
+        what, at = ("[platform] world", ("platform", "world")) if file.data.get("platform", {}).get("world") \
+            is not None else ("[world]", ("world",))
+        problems.append(Finding(file.location(at), Severity.ERROR, f"{what}: the scene is '{kind.name}' "
+                                f"([platform] scene = \"{name}\"), which would ignore it"))
 
 
 def _stand_ins(file: TomlFile, items: tuple, problems: list[Finding]) -> dict:

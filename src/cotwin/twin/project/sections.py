@@ -11,7 +11,7 @@ import re
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
-from ...config import Key, is_number, shown, unique, within
+from ...config import Key, did_you_mean, is_number, shown, unique, within
 from ...cosim.execution import step_count
 from ...cosim.isolated import DEFAULT_TIMEOUT
 from ...diagnostics import CotwinError
@@ -364,6 +364,7 @@ class Plant:
 
 
 RESYNC = re.compile(r"every\s+(\d+)\s+steps?")
+RESYNC_WORDS = ("never", "on-alarm")
 MAX_EVERY = 10 ** 6
 
 
@@ -372,7 +373,7 @@ def _resync(value: str) -> str | None:
         return None
     match = RESYNC.fullmatch(value.strip())
     if match is None:
-        return f'must be "never", "on-alarm" or "every N steps", got {shown(value)}'
+        return f'must be "never", "on-alarm" or "every N steps", got {shown(value)}{did_you_mean(value, RESYNC_WORDS)}'
     if not 1 <= int(match.group(1)) <= MAX_EVERY:
         return f"every N steps takes N in 1..{MAX_EVERY}, got {match.group(1)}"
     return None
@@ -430,6 +431,19 @@ SECTIONS: dict[str, Any] = {
     "history": setting("History.", section=History),
     "plant": setting("A perturbed plant.", section=Plant, optional=True),
     "convergence": setting("The DT pulled towards its PT (a live twin).", section=Convergence, optional=True),
+}
+
+
+# Sections only some commands read (every other section is read by every command that runs the project): a
+# command that runs a project holding one of them warns, at the table, that it ignores it (`ignored_sections`);
+# a reader is a command with the option that makes it read the section, if any.
+LIVE_TWIN = ("cotwin twin", "cotwin fleet")
+READ_ONLY_BY: dict[str, tuple[str, ...]] = {
+    "pt": (*LIVE_TWIN, "cotwin plant", "cotwin test --pt project"),
+    "deviation": LIVE_TWIN,
+    "convergence": LIVE_TWIN,
+    "plant": ("cotwin plant",),
+    "history": (*LIVE_TWIN, "cotwin run --dashboard"),  # one run records no history; its page lists the store's
 }
 
 
