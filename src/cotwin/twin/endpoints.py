@@ -69,9 +69,13 @@ def endpoint_kind(system: "TwinSystem", side: str, name: str) -> EndpointKind:
     """The kind a project names for `side`, or an error located at its key listing the known ones."""
     kinds = endpoint_kinds(side)
     if name not in kinds:
+        from difflib import get_close_matches
+
         key = ("pt", "endpoint") if side == "pt" else ("platform", "endpoint")
+        near = get_close_matches(name.lower(), sorted(kinds), n=1)
+        hint = f"; did you mean {near[0]!r}?" if near else ""
         raise CotwinError([Finding(system.spec.location(*key), Severity.ERROR,
-                                   f"{SIDES[side]}: no endpoint kind {name!r} (known: {', '.join(sorted(kinds))})")])
+                                   f"{SIDES[side]}: no endpoint kind {name!r} (known: {', '.join(sorted(kinds))}){hint}")])
     return kinds[name]
 
 
