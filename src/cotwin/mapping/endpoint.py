@@ -10,7 +10,7 @@ this interface plugs in without touching the mapping.
 from __future__ import annotations
 
 from dataclasses import fields as dataclass_fields, replace
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -36,6 +36,29 @@ class Endpoint(Protocol):
     def joint_positions(self) -> dict[str, float]: ...
     def joint_velocities(self) -> dict[str, float]: ...
     def joint(self, name: str) -> str: ...
+
+
+@runtime_checkable
+class ContactSensing(Protocol):
+    """An endpoint that says which other robots its robot touched in the step just made (a mapping's
+    `robot_contact()`)."""
+
+    def robot_contacts(self) -> set[str]: ...
+
+
+def advance_shared(world, endpoints: list["SimulatedEndpoint"], dt: float) -> None:
+    """Run a world of several robots (cotwin.pmodel.shared.SharedWorld) for dt, each robot's servos
+    following its own trajectory (set-points refreshed every CONTROL_PERIOD, as `SimulatedEndpoint.advance`
+    does for one), the physics stepped once for all of them."""
+    world.begin()
+    steps = world.steps_for(dt)
+    period = max(1, int(round(CONTROL_PERIOD / world.timestep)))
+    while steps > 0:
+        n = min(period, steps)
+        if all([endpoint.set_point(n) for endpoint in endpoints]):
+            n = steps
+        world.step(n)
+        steps -= n
 
 
 class SimulatedEndpoint:
@@ -140,16 +163,28 @@ class SimulatedEndpoint:
         period = max(1, int(round(CONTROL_PERIOD / sim.timestep)))
         while steps > 0:
             n = min(period, steps)
-            segment = self.segment
-            if segment is not None and segment is not self._held:
-                ahead = sim.time + n * sim.timestep
-                sim.write_actuators(segment.at(ahead))
-                if ahead >= segment.t0 + segment.duration:  # the set-point stays at the segment's end
-                    self._held = segment
-            if segment is None or segment is self._held:
+            if self.set_point(n):
                 n = steps
             sim.step(n)
             steps -= n
+
+    def set_point(self, steps: int) -> bool:
+        """Write the servos' set-points for the next `steps` physics steps (where the segment is at their
+        end); whether they hold from now on (no segment, or its end reached), so that the rest of a
+        step runs in one go. (A world of several robots calls it for each before stepping them all.)"""
+        sim = self.sim
+        segment = self.segment
+        if segment is not None and segment is not self._held:
+            ahead = sim.time + steps * sim.timestep
+            sim.write_actuators(segment.at(ahead))
+            if ahead >= segment.t0 + segment.duration:  # the set-point stays at the segment's end
+                self._held = segment
+        return segment is None or segment is self._held
+
+    def robot_contacts(self) -> set[str]:
+        """The other robots this one touched in the step just made (none for a robot alone in its world)."""
+        shared = self.sim.shared
+        return shared.robot_contacts(self.sim.prefix[:-1]) if shared is not None else set()
 
     @property
     def time(self) -> float:

@@ -448,7 +448,7 @@ class Mapping:
         self._geometry = geometry
         self._registry: FunctionRegistry | None = None
         self.functions = {**MATH, "inverse_kinematics": self._kinematics("inverse_kinematics"),
-                          "reachable": self._kinematics("reachable")}
+                          "reachable": self._kinematics("reachable"), "robot_contact": self.robot_contact}
         self.env = _Env(self, compiled)
         self.declared = {v.name for v in model.variables}
         self.asked: set[str] = set()  # variables operations assigned since the last report
@@ -498,6 +498,16 @@ class Mapping:
             return getattr(self.registry, name)(*args)
         call.__name__ = name
         return call
+
+    def robot_contact(self) -> bool:
+        """`robot_contact()`: did the robot touch another robot of its world in the step just made
+        (cotwin.pmodel.shared)? Always false for a robot alone in its world."""
+        from .endpoint import ContactSensing
+
+        if not isinstance(self.endpoint, ContactSensing):
+            raise CotwinError(f"mapping {self.model.name} calls robot_contact(), which its platform "
+                              f"({type(self.endpoint).__name__}) cannot tell")
+        return bool(self.endpoint.robot_contacts())
 
     def sensor(self, key: str, loc):
         readings = self.sensor_readings()

@@ -8,7 +8,8 @@ it in PARTS (tests/test_layering.py checks both, import by import):
   Imports nothing else of the twin.
 - assembly: scenarios and command sources (`scenario`, `commands`, `replay`, `rabbitmq`), the models
   and units of a twin (`system`, `mapping_unit`, `calibration`), artefacts (`build`, `fmu_slave`),
-  one co-simulated run (`run`, `clocked`, `waits`, `outcomes`), broker accounts (`broker_access`).
+  one co-simulated run (`run`, `clocked`, `waits`, `outcomes`), a cell of several robots (`cell`), broker
+  accounts (`broker_access`).
 - services: what runs beside a twin: deviation, history, what-if, the publisher, the OPC UA plant,
   the page (`dashboard`).
 - live: the live twin, PT and DT in lockstep (`runtime`), wiring the services.
@@ -19,7 +20,7 @@ it in PARTS (tests/test_layering.py checks both, import by import):
 PARTS: dict[str, tuple[str, ...]] = {
     "project": ("project",),
     "assembly": ("commands", "scenario", "replay", "calibration", "rabbitmq", "mapping_unit", "system", "build",
-                 "fmu_slave", "outcomes", "waits", "clocked", "convergence", "run", "broker_access"),
+                 "fmu_slave", "outcomes", "waits", "clocked", "convergence", "cell", "run", "broker_access"),
     "services": ("deviation", "history", "whatif", "publisher", "plant", "dashboard"),
     "live": ("runtime",),
     "analysis": ("sweep", "testing", "walks", "fleet"),

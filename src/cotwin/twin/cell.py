@@ -1,0 +1,378 @@
+"""A cell of several robots (`[[robots]]`): one scene, one physical world, each robot its own twin.
+
+Each robot is a twin of its own models (cotwin.twin.system.TwinSystem: the shared d-model, its own
+p-model and mapping, its own commands), and the cell puts them together:
+- one world (cotwin.pmodel.shared.SharedWorld): every robot's MJCF attached at its base pose in the
+  scene's frame, names scoped by the robot's name; the scene is built once, from the first robot's
+  mapping (`[platform] scene`, `[scene]`); each robot's cell geometry is its calibration's with the
+  plate moved by its base pose (the scene's frame seen from the robot), so that the same grid target is
+  the same point of the cell for every robot;
+- units: a command source per robot (`{controller}.NAME`), an instance of the same d-model FMU per robot
+  (`{dmodel}.NAME`: one file, several instances) and one mapping unit for the cell (`{mapping}.cell`)
+  hosting every robot's platform mapping, its ports scoped as `NAME.port`: in a step it runs every
+  robot's operations, steps the world once, then reports every robot's events;
+- commands: a plan whose columns are scoped by robot (`NAME.port`, e.g. `ur5e.moveDiscreteCommand`); a
+  row may leave a robot's cells empty (no command to it);
+- contacts between two robots are what each mapping's `robot_contact()` tells (cotwin.mapping.runtime),
+  e.g. its `collision` event: both d-models hear of it.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..cosim.algorithm import algorithm as make_algorithm
+from ..cosim.execution import Execution, RunResult, ended_early
+from ..cosim.observers import CSVWriter, Observer, Progress, RealTimePacer
+from ..cosim.system import Connection, System
+from ..cosim.units import Port, PythonUnit
+from ..diagnostics import CotwinError, Finding, Location, Severity
+from ..files import read_text
+from .project import TwinProject, check_timing
+from .scenario import Command, parse_value, scenario_ports
+from .system import CONTROLLER, DMODEL, MAPPING, TwinSystem, UnitSpec, build_scene, load_models
+
+CELL_MAPPING = UnitSpec("{mapping}", "cell", "mapping.fmu", "mapping")
+
+
+def controller_of(name: str) -> UnitSpec:
+    return UnitSpec(CONTROLLER.key, name, CONTROLLER.fmu, "source")
+
+
+def dmodel_of(name: str) -> UnitSpec:
+    return UnitSpec(DMODEL.key, name, DMODEL.fmu, "dmodel")
+
+
+def robot_project(spec: TwinProject, robot) -> TwinProject:
+    """One robot's project: the cell's settings with its own models and calibration, no scene (the cell
+    has one) and no source (the cell's plan gives each robot its commands)."""
+    return replace(spec, pmodel=robot.pmodel, mapping=robot.mapping, calibration=robot.calibration, scene="none",
+                   scene_options={}, world=None, world_file=None, plan=None, rabbitmq=None, log=None, panels=None,
+                   pmodel_name=None, robots=())
+
+
+def base_pose(robot) -> np.ndarray:
+    from ..pmodel.tree import transform
+
+    return transform(robot.xyz, robot.rpy)
+
+
+@dataclass
+class CellRobot:
+    """One robot of the cell: its settings ([[robots]]), its twin alone and its cell geometry."""
+
+    spec: object  # cotwin.twin.project.load.RobotSpec
+    system: TwinSystem
+    pose: np.ndarray  # its base in the scene's frame
+    geometry: object  # cotwin.pmodel.cell.CellGeometry: the plate seen from it
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def scoped(self, port: str) -> str:
+        return f"{self.name}.{port}"
+
+
+def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, list[Command]]:
+    """A cell's plan: `timestep` (ms), then columns `ROBOT.port` (a d-model input port); each row gives
+    each robot whose cells it fills one command (an empty cell: none for that robot). Problems are located
+    at their line and column, all together."""
+    path = Path(path)
+    ports = scenario_ports(program)
+    rows = list(csv.reader(read_text(path, "plan").splitlines()))
+    problems: list[Finding] = []
+
+    def problem(line: int, column: int, message: str) -> None:
+        problems.append(Finding(Location(str(path), line, column), Severity.ERROR, message))
+
+    if not rows or not rows[0] or rows[0][0].strip() != "timestep":
+        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
+                                   "a plan starts with a header whose first column is 'timestep' (ms)")])
+    header = [h.strip() for h in rows[0]]
+    columns: dict[int, tuple[str, str]] = {}
+    for k, h in enumerate(header[1:], start=1):
+        robot, _, port = h.partition(".")
+        if robot not in robots or not port:
+            problem(1, k + 1, f"column {h!r}: a cell's plan names ROBOT.port, ROBOT one of {', '.join(robots)}")
+        elif port not in ports:
+            problem(1, k + 1, f"column {h!r}: unknown d-model input '{port}' (known: {', '.join(ports)})")
+        elif h in header[1:k]:
+            problem(1, k + 1, f"column {h!r} appears twice")
+        else:
+            columns[k] = (robot, port)
+    for ev in program.inputs:
+        for robot in robots:
+            given = {port for r, port in columns.values() if r == robot}
+            missing = [port for port, _ in ev.value_ports if port not in given]
+            if ev.name in given and missing:
+                problem(1, 1, f"column '{robot}.{ev.name}' without its argument column(s) "
+                              f"{', '.join(robot + '.' + m for m in missing)}")
+    plans: dict[str, list[Command]] = {r: [] for r in robots}
+    for line, row in enumerate(rows[1:], start=2):
+        if not row or all(not cell.strip() for cell in row):
+            continue
+        if len(row) != len(header):
+            problem(line, 1, f"{len(row)} values for {len(header)} columns")
+            continue
+        try:
+            time_ms = parse_value(row[0], "Real")
+            if time_ms < 0:
+                raise ValueError("is negative: a plan cannot send into the past")
+        except ValueError as err:
+            problem(line, 1, f"timestep '{row[0].strip()[:40]}' {err}")
+            continue
+        values: dict[str, list] = {r: [] for r in robots}
+        for k, (robot, port) in columns.items():
+            cell = row[k].strip()
+            if not cell:
+                continue
+            try:
+                values[robot].append((port, parse_value(cell, ports[port])))
+            except ValueError as err:
+                problem(line, k + 1, f"column '{header[k]}': '{cell[:40]}' {err}")
+        for robot, given in values.items():
+            if given:
+                plans[robot].append(Command(time_ms / 1000.0, tuple(given), f"{path}:{line}:1"))
+    if problems:
+        raise CotwinError(problems)
+    return {r: sorted(c, key=lambda c: c.time) for r, c in plans.items()}
+
+
+class CellSystem:
+    """The co-simulation of a cell of several robots (see the module doc)."""
+
+    def __init__(self, spec: TwinProject):
+        from ..pmodel.cell import CellGeometry
+        from ..pmodel.tree import inverse
+
+        if not spec.robots:
+            raise CotwinError(f"{spec.path}: a cell names its robots in [[robots]]")
+        if spec.rabbitmq is not None:
+            raise CotwinError([Finding(spec.location("scenario", "rabbitmq"), Severity.ERROR,
+                                       "[scenario] rabbitmq: a cell of several robots takes its commands from a plan "
+                                       "(routing them per robot over the broker is not done yet)")])
+        self.spec = spec
+        alone = [(r, load_models(robot_project(spec, r))) for r in spec.robots]
+        programs = [m.program for _, m in alone]
+        first = programs[0]
+        for (r, m) in alone[1:]:
+            if m.program.module.name != first.module.name:
+                raise CotwinError(f"{spec.path}: robot {r.name}'s d-model module is {m.program.module.name}, "
+                                  f"not {first.module.name}: a cell's robots share one d-model")
+        names = [r.name for r in spec.robots]
+        plans = read_cell_plan(spec.plan, first, names) if spec.plan is not None else {n: [] for n in names}
+        self.robots: list[CellRobot] = []
+        for r, models in alone:
+            system = TwinSystem(robot_project(spec, r), models, plans[r.name] if spec.plan is not None else None)
+            geometry = models.calibration.geometry if models.calibration is not None else CellGeometry()
+            pose = base_pose(r)
+            self.robots.append(CellRobot(r, system, pose, geometry.with_plate(inverse(pose) @ geometry.plate_pose())))
+        self.scene = build_scene(spec, alone[0][1].mapping_model)
+        self.program = first
+        self.commands = [c for robot in self.robots for c in robot.system.commands]
+        self.units: list[UnitSpec] = []
+        self.connections: list[Connection] = []
+        self.log: dict[str, list[str]] = {CELL_MAPPING.name: []}
+        self.parameters: dict[str, dict] = {}
+        for robot in self.robots:
+            self._add(robot)
+        self.units.append(CELL_MAPPING)
+        self.delayed = {CELL_MAPPING.name}
+
+    def _add(self, robot: CellRobot) -> None:
+        system = robot.system
+        names = {DMODEL.name: dmodel_of(robot.name).name, MAPPING.name: CELL_MAPPING.name}
+        if system.source is not None:
+            names[system.source.name] = controller_of(robot.name).name
+            self.units.append(controller_of(robot.name))
+        self.units.append(dmodel_of(robot.name))
+
+        def port(unit: str, name: str) -> str:
+            return robot.scoped(name) if unit == MAPPING.name else name
+
+        self.connections += [Connection(names[c.source], port(c.source, c.output), names[c.target],
+                                        port(c.target, c.input)) for c in system.connections]
+        self.log[CELL_MAPPING.name] += [robot.scoped(v) for v in system.log[MAPPING.name]]
+        self.log[names[DMODEL.name]] = list(system.log[DMODEL.name])
+        for unit, values in system.parameters.items():
+            self.parameters[names[unit]] = dict(values)
+
+    @property
+    def digests(self) -> dict[str, str]:
+        return {k: v for robot in self.robots for k, v in robot.system.models.digests.items()}
+
+    def world(self):
+        """A fresh world of the cell's robots and scene."""
+        from ..pmodel.shared import PlacedRobot, SharedWorld
+
+        return SharedWorld([PlacedRobot(r.name, r.system.models.tree, r.pose) for r in self.robots], self.scene)
+
+    def mapping_unit(self, world) -> "CellMappingUnit":
+        """Every robot's platform mapping against its view of `world`, in one unit."""
+        from ..mapping.endpoint import SimulatedEndpoint
+        from ..mapping.runtime import Mapping
+        from .mapping_unit import MappingUnit
+
+        units = {}
+        for robot in self.robots:
+            models = robot.system.models
+            profile = models.calibration.profile if models.calibration is not None else None
+            endpoint = SimulatedEndpoint(world.view(robot.name), profile, robot.geometry)
+            mapping = Mapping(models.project, endpoint, geometry=robot.geometry, mirrors=self.spec.mirror_joints,
+                              monitor=self.spec.readings)
+            units[robot.name] = MappingUnit(MAPPING.name, models.program, mapping, robot.system.command_events)
+        return CellMappingUnit(CELL_MAPPING.name, world, units)
+
+    def instantiate(self, dmodel_fmu: str | Path) -> System:
+        """A fresh, checked co-simulation of the cell: the same d-model FMU instantiated once per robot."""
+        from ..cosim.isolated import fmu_unit
+
+        units = []
+        for robot in self.robots:
+            if robot.system.source is not None:
+                source = robot.system.source_unit()
+                source.name = controller_of(robot.name).name
+                units.append(source)
+            units.append(fmu_unit(dmodel_of(robot.name).name, dmodel_fmu, robot.system.isolated,
+                                  self.spec.unit_timeout))
+        units.append(self.mapping_unit(self.world()))
+        return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters,
+                         models=self.digests)
+
+
+class CellMappingUnit(PythonUnit):
+    """Every robot's mapping unit (cotwin.twin.mapping_unit) in one, over one world: ports scoped by robot;
+    in a step each robot acts (its operations), the world steps once, each robot reports."""
+
+    def __init__(self, name: str, world, units: dict):
+        ports = [Port(f"{robot}.{p.name}", p.type, p.causality) for robot, unit in units.items()
+                 for p in unit.ports.values()]
+        super().__init__(name, ports)
+        self.world = world
+        self.units = units
+        self.inputs = {robot: [p.name for p in unit.ports.values() if p.causality == "input"]
+                       for robot, unit in units.items()}
+
+    def instantiate(self, start: float) -> None:
+        super().instantiate(start)
+        for unit in self.units.values():
+            unit.instantiate(start)
+        self._collect()
+
+    def step(self, t: float, h: float) -> None:
+        from ..mapping.endpoint import advance_shared
+
+        for robot, unit in self.units.items():
+            unit.values.update({p: self.values[f"{robot}.{p}"] for p in self.inputs[robot]})
+            unit.act(t)
+        advance_shared(self.world, [unit.mapping.endpoint for unit in self.units.values()], h)
+        for unit in self.units.values():
+            unit.mapping.step(0.0)  # the world has moved: readings and mirrors refreshed
+            unit.reached(t + h)
+        self.time = t + h
+        self._collect()
+
+    def _collect(self) -> None:
+        for robot, unit in self.units.items():
+            for name, value in unit.values.items():
+                if unit.ports[name].causality == "output":
+                    self.values[f"{robot}.{name}"] = value
+
+    def terminate(self) -> None:
+        for unit in self.units.values():
+            unit.terminate()
+
+    def snapshot(self) -> dict:
+        raise CotwinError(f"unit {self.name}: a cell of several robots cannot save its state yet")
+
+    def restore(self, snapshot: dict) -> None:
+        raise CotwinError(f"unit {self.name}: a cell of several robots cannot restore a state yet")
+
+
+@dataclass
+class RobotOutcome:
+    """What became of one robot's commands in a cell's run."""
+
+    name: str
+    commands: int = 0  # commands its source applied
+    completed: int = 0  # moveCompleted-like events (answers) that came
+    collisions: list[float] = field(default_factory=list)  # when its d-model heard of a collision (steps it began)
+
+    def line(self) -> str:
+        hit = f"collision reported at t = {', '.join(f'{t:g}' for t in self.collisions)} s" if self.collisions \
+            else "no collision"
+        return f"{self.name}: {self.commands} command(s) applied, {self.completed} move(s) completed, {hit}"
+
+
+class CellOutcomes(Observer):
+    """Per robot: the commands its source applied, the moves completed (its `moveCompleted` event) and
+    the steps its d-model was told of a collision (its `collision` event), from the units' ports."""
+
+    def __init__(self, cell: CellSystem, completed: str = "moveCompleted", collision: str = "collision"):
+        self.cell = cell
+        self.completed, self.collision = completed, collision
+        self.robots = {r.name: RobotOutcome(r.name) for r in cell.robots}
+        self._before: dict[str, bool] = {}
+
+    def step_complete(self, execution) -> None:
+        units = execution.system.units
+        mapping = units[CELL_MAPPING.name]
+        for robot in self.cell.robots:
+            out = self.robots[robot.name]
+            source = controller_of(robot.name).name
+            if source in units:
+                out.commands += sum(1 for e in robot.system.command_events if units[source].values.get(e) is True)
+            if mapping.values.get(robot.scoped(self.completed)) is True:
+                out.completed += 1
+            hit = mapping.values.get(robot.scoped(self.collision)) is True
+            if hit and not self._before.get(robot.name):
+                out.collisions.append(round(execution.time, 9))
+            self._before[robot.name] = hit
+
+    def lines(self) -> list[str]:
+        return [r.line() for r in self.robots.values()]
+
+
+@dataclass
+class CellRun:
+    result: RunResult
+    csv: Path
+    system: System
+    outcomes: CellOutcomes
+    contacts: list  # (time, robot, robot) when a contact between two robots began
+
+
+def run_cell(cell: CellSystem, out: str | Path, step: float | None = None, end: float | None = None,
+             algorithm: str | None = None, realtime: bool | None = None, observers: list[Observer] | None = None,
+             progress=None, cc: str = "cc") -> CellRun:
+    """Co-simulate the cell into `out` (outputs.csv), building the d-model FMU once for every robot."""
+    from .build import dmodel_fmu, folder_lock
+    from .run import RUN_FILES
+
+    out = Path(out)
+    spec = cell.spec
+    end = spec.end if end is None else end
+    step = spec.step if step is None else step
+    check_timing(spec, step, end)
+    with folder_lock(out, RUN_FILES, spec.inputs):
+        fmu = dmodel_fmu(cell.robots[0].system, out, cc)
+        cosim = cell.instantiate(fmu)
+        writer = CSVWriter(out / "outputs.csv")
+        outcomes = CellOutcomes(cell)
+        chain: list[Observer] = [writer, outcomes, *(observers or [])]
+        if progress is not None:
+            chain.append(Progress(progress))
+        if spec.realtime if realtime is None else realtime:
+            chain.append(RealTimePacer())
+        execution = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain)
+        try:
+            result = execution.run(end)
+        except (CotwinError, KeyboardInterrupt) as err:
+            raise ended_early(err, execution.time, writer.kept()) from None
+        world = cosim.units[CELL_MAPPING.name].world
+        return CellRun(result, out / "outputs.csv", cosim, outcomes, list(world.contacts))
