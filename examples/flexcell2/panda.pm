@@ -2,6 +2,7 @@
 // collision meshes kept under meshes/collision; its visual meshes and their `annotation Visual` left out).
 // Link poses are the URDF link frames at zero joint values, in the model frame; joint poses are the URDF joint
 // origins, relative to the parent link. Each moving joint has a position servo and position, velocity, effort sensors.
+import physmod::joints::*
 import physmod::actuators::*
 import physmod::sensors::*
 

@@ -62,6 +62,8 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
                                  param_hint="--cycle-period")
     system = load(project)
     check_timing(system.spec, step, end)
+    if system.spec.robots:
+        return _run_cell(system, out, step, end, algorithm, realtime, cc, dashboard, version)
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
@@ -83,6 +85,27 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f})")
     outcomes({"": ran.outcomes}, strict)
+
+
+def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
+              cc: str, dashboard, version: str) -> None:
+    """`cotwin run` of a cell of several robots ([[robots]]): each robot's outcomes and the contacts between them."""
+    from ..twin.cell import run_cell
+    from ..twin.scenario import after_end
+    from .progress import ProgressReport
+
+    if dashboard is not None or version != "2":
+        raise click.UsageError("a cell of several robots runs without --dashboard, with --fmi 2 (not done yet)")
+    show_warnings(after_end(cell.commands, cell.spec.end if end is None else end))
+    with ProgressReport("co-simulating", "steps") as progress:
+        ran = run_cell(cell, out, step, end, algorithm, realtime, progress=progress, cc=cc)
+    r = ran.result
+    click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
+               f"(real-time factor {r.real_time_factor:.1f})")
+    for line in ran.outcomes.lines():
+        click.echo(line)
+    for time, first, second in ran.contacts:
+        click.echo(f"contact: {first} and {second} at t = {time:.3f} s")
 
 
 @main.command()

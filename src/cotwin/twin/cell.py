@@ -11,7 +11,7 @@ p-model and mapping, its own commands), and the cell puts them together:
   (`{dmodel}.NAME`: one file, several instances) and one mapping unit for the cell (`{mapping}.cell`)
   hosting every robot's platform mapping, its ports scoped as `NAME.port`: in a step it runs every
   robot's operations, steps the world once, then reports every robot's events;
-- commands: a plan whose columns are scoped by robot (`NAME.port`, e.g. `ur5e.moveDiscreteCommand`); a
+- commands: a plan whose columns are scoped by robot (`NAME.port`, e.g. `left.moveDiscreteCommand`); a
   row may leave a robot's cells empty (no command to it);
 - contacts between two robots are what each mapping's `robot_contact()` tells (cotwin.mapping.runtime),
   e.g. its `collision` event: both d-models hear of it.

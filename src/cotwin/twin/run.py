@@ -227,8 +227,14 @@ def monitored_panels(system: TwinSystem, number: str) -> list[tuple[str, list[st
 
 
 def load(project: str | Path | TwinProject) -> TwinSystem:
-    """The TwinSystem of a project file (or an already read project)."""
-    return TwinSystem(project if isinstance(project, TwinProject) else load_project(project))
+    """The TwinSystem of a project file (or an already read project); a cell of several robots
+    ([[robots]]) is a CellSystem (cotwin.twin.cell), which `cotwin run` runs with `run_cell`."""
+    spec = project if isinstance(project, TwinProject) else load_project(project)
+    if spec.robots:
+        from .cell import CellSystem
+
+        return CellSystem(spec)
+    return TwinSystem(spec)
 
 
 __all__ = ["MAPPING", "TwinRun", "dt_endpoint", "load", "python_unit", "run_twin"]

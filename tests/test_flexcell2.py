@@ -1,0 +1,159 @@
+"""examples/flexcell2: the UR5e and the Panda (imported from URDF) on one plate, one MuJoCo world, each with
+its own instance of the same d-model FMU, its own mapping and its own plan columns; contacts between the
+arms reported as collisions to both d-models; the generic core naming neither robot nor the cell."""
+
+from __future__ import annotations
+
+import csv
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cotwin.cosim.observers import Observer
+from cotwin.diagnostics import CotwinError
+from cotwin.twin.cell import CellSystem, read_cell_plan, run_cell
+from cotwin.twin.project import load_project
+
+ROOT = Path(__file__).resolve().parents[1]
+CELL = ROOT / "examples" / "flexcell2"
+ROBOTS = ("ur5e", "panda")
+
+
+class CollisionInputs(Observer):
+    """What each d-model FMU instance holds on its `collision` input after every step (read from the FMU)."""
+
+    def __init__(self):
+        self.seen: dict[str, list[float]] = {r: [] for r in ROBOTS}
+
+    def step_complete(self, execution) -> None:
+        for robot in ROBOTS:
+            if execution.system.units[f"{{dmodel}}.{robot}"].get(["collision"])["collision"]:
+                self.seen[robot].append(execution.time)
+
+
+def rows(csv_path: Path) -> list[dict]:
+    with open(csv_path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.fixture(scope="module")
+def apart(tmp_path_factory):
+    cell = CellSystem(load_project(CELL / "cotwin.toml"))
+    return cell, run_cell(cell, tmp_path_factory.mktemp("apart"))
+
+
+@pytest.fixture(scope="module")
+def collide(tmp_path_factory):
+    cell = CellSystem(load_project(CELL / "collide.toml"))
+    watch = CollisionInputs()
+    return cell, run_cell(cell, tmp_path_factory.mktemp("collide"), observers=[watch]), watch
+
+
+def test_apart_completes_every_move_of_both_arms(apart):
+    cell, ran = apart
+    table = rows(ran.csv)
+    for robot in ROBOTS:
+        planned = len(next(r for r in cell.robots if r.name == robot).system.commands)
+        assert planned == 4
+        completed = sum(r[f"{{mapping}}.cell.{robot}.moveCompleted"] == "true" for r in table)
+        infeasible = sum(r[f"{{mapping}}.cell.{robot}.nonfeasibleMoveDiscreteCommand"] == "true" for r in table)
+        assert (completed, infeasible) == (planned, 0), robot
+        assert not any(r[f"{{mapping}}.cell.{robot}.collision"] == "true" for r in table), robot
+        outcome = ran.outcomes.robots[robot]
+        assert (outcome.commands, outcome.completed, outcome.collisions) == (4, 4, [])
+    assert ran.contacts == []
+
+
+def test_both_arms_move_each_by_its_own_commands(apart):
+    _, ran = apart
+    table = rows(ran.csv)
+    first, last = table[0], table[-1]
+    for robot in ROBOTS:  # each arm's first joint turned away from where it started, differently
+        assert abs(float(last[f"{{mapping}}.cell.{robot}.q0"]) - float(first[f"{{mapping}}.cell.{robot}.q0"])) > 0.05
+    assert last["{mapping}.cell.ur5e.q0"] != last["{mapping}.cell.panda.q0"]
+
+
+def test_driving_both_arms_to_one_hole_reports_the_collision_to_both_dmodels(collide):
+    cell, ran, watch = collide
+    assert ran.contacts and {ran.contacts[0][1], ran.contacts[0][2]} == set(ROBOTS)
+    touched = ran.contacts[0][0]
+    for robot in ROBOTS:
+        assert watch.seen[robot], f"{robot}'s d-model never had its collision input set"
+        assert watch.seen[robot][0] == pytest.approx(touched, abs=0.2)  # in the step the arms touched
+        assert ran.outcomes.robots[robot].collisions
+    # the Panda, still moving when the arms met, is stopped by it: its move never completes
+    assert ran.outcomes.robots["panda"].completed == 0
+
+
+def test_each_robot_has_its_own_instance_of_the_same_dmodel_fmu(apart):
+    cell, ran = apart
+    units = ran.system.units
+    first, second = (units[f"{{dmodel}}.{r}"] for r in ROBOTS)
+    assert first is not second and first.path == second.path  # one FMU file, two instances
+    connected = {(c.source, c.output, c.target, c.input) for c in ran.system.connections}
+    for robot in ROBOTS:
+        assert ("{mapping}.cell", f"{robot}.collision", f"{{dmodel}}.{robot}", "collision") in connected
+        assert (f"{{controller}}.{robot}", "moveDiscreteCommand", f"{{dmodel}}.{robot}", "moveDiscreteCommand") in connected
+
+
+def test_two_robots_of_one_pmodel_share_a_world_without_name_clashes():
+    from cotwin.pmodel.shared import PlacedRobot, SharedWorld
+    from cotwin.pmodel.tree import transform
+    from cotwin.robosim.check import load_checked
+    from cotwin.pmodel.tree import build_tree
+
+    tree = build_tree(load_checked([CELL / "panda.pm"]), None, {})
+    world = SharedWorld([PlacedRobot("a", tree, transform((0, 0, 0), (0, 0, 0))),
+                         PlacedRobot("b", tree, transform((2.0, 0, 0), (0, 0, 0)))])
+    a, b = world.view("a"), world.view("b")
+    a.write_actuators({"panda_joint1": 0.5})
+    world.step(500)
+    assert a.joint_positions()["panda_joint1"] > 0.3
+    assert abs(b.joint_positions()["panda_joint1"]) < 1e-6
+    assert np.allclose(b.body_pose("panda_link0")[:3, 3], (2.0, 0.0, 0.0))
+    with pytest.raises(CotwinError, match="the world steps"):
+        a.step(1)
+    with pytest.raises(CotwinError, match="two robots of one world are called a"):
+        SharedWorld([PlacedRobot("a", tree, np.eye(4)), PlacedRobot("a", tree, np.eye(4))])
+
+
+def test_cell_project_errors_are_located(tmp_path):
+    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
+        shutil.copy(CELL / name, tmp_path / name)
+    text = (CELL / "cotwin.toml").read_text().replace('"../ur5e/', f'"{ROOT}/examples/ur5e/')
+    (tmp_path / "cotwin.toml").write_text(text.replace('name = "panda"', 'name = "ur5e"'))
+    with pytest.raises(CotwinError) as err:
+        load_project(tmp_path / "cotwin.toml")
+    assert "two robots are called 'ur5e'" in str(err.value) and err.value.findings[0].location.line > 1
+    (tmp_path / "cotwin.toml").write_text(text.replace('"panda.pm"', '"nowhere.pm"'))
+    with pytest.raises(CotwinError, match=r"\[\[robots\]\] pmodel of panda: no file"):
+        load_project(tmp_path / "cotwin.toml")
+    (tmp_path / "cotwin.toml").write_text(text.replace('arm.rst"', 'arm.rst"\npmodel = "panda.pm"', 1))
+    with pytest.raises(CotwinError) as err:
+        load_project(tmp_path / "cotwin.toml")
+    finding = err.value.findings[0]
+    assert "[models] pmodel: a cell's robots name their own" in finding.message
+    assert text.splitlines()[finding.location.line - 2].startswith("dmodel")  # at the key, the line after dmodel
+
+
+def test_a_plan_column_of_an_unknown_robot_is_located(tmp_path):
+    cell = CellSystem(load_project(CELL / "cotwin.toml"))
+    plan = tmp_path / "plan.csv"
+    plan.write_text("timestep,ur5e.moveDiscreteCommand,ur5e.MovementArgs_target_X,ur5e.MovementArgs_target_Y,"
+                    "ur5e.MovementArgs_target_Z,kuka.moveDiscreteCommand\n1000,true,1,2,0,true\n")
+    with pytest.raises(CotwinError) as err:
+        read_cell_plan(plan, cell.program, list(ROBOTS))
+    finding = err.value.findings[0]
+    assert "kuka.moveDiscreteCommand" in finding.message and (finding.location.line, finding.location.column) == (1, 6)
+
+
+def test_the_generic_core_names_neither_robot_nor_the_cell():
+    named = re.compile(r"ur5e|panda|flexcell|flex-cell|brick", re.IGNORECASE)
+    for module in ("twin/cell.py", "pmodel/shared.py"):
+        assert not named.search((ROOT / "src" / "cotwin" / module).read_text()), module
+    offenders = [str(p.relative_to(ROOT)) for p in (ROOT / "src" / "cotwin").rglob("*.py")
+                 if re.search(r"panda", p.read_text(), re.IGNORECASE)]
+    assert offenders == []
