@@ -176,6 +176,11 @@ class TwinProject:
                 value = _get(settings, path)
                 if spec.path and value is not None and (sections is None or path[0] in sections):
                     settings = replace_path(settings, path, rebase((self.path.parent / value).resolve()))
+            if settings.robots and (sections is None or "robots" in sections):  # [[robots]]: each one's files
+                settings = dataclasses.replace(settings, robots=tuple(dataclasses.replace(r, **{
+                    key: rebase((self.path.parent / getattr(r, key)).resolve()) for key in ("pmodel", "mapping",
+                                                                                         "calibration")
+                    if getattr(r, key) is not None}) for r in settings.robots))
         written = tables(settings)
         return dumps({k: v for k, v in written.items() if sections is None or k in sections}, header)
 

@@ -258,7 +258,7 @@ class Platform:
 
 @_section
 class CellRobot:
-    """Each has its own instance of the shared d-model FMU, its own mapping and commands (examples/flexcell2)."""
+    """Each has its own instance of the shared d-model FMU, its own mapping and its own commands."""
 
     name: str = setting("its name: the scope of its names in the shared world, of its units ({dmodel}.NAME) and of "
                         "its plan columns (NAME.port)", Key("str", required=True, check=_robot_name))
