@@ -47,6 +47,9 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
     spec = load_project(project, pt_log)
     check_timing(spec, step, end)
+    if spec.robots:
+        return _cell_twin(spec, out, step, end, algorithm, realtime, pt_log, pt_url, exchange, history, whatif,
+                          dashboard, cc)
     if pt_url is not None:
         spec = pt_with_url(spec, pt_url, pt_log is not None)
     if exchange is not None:
@@ -98,6 +101,32 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
 
         click.echo(summary(result.convergence))
     outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
+
+
+def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, exchange, history, whatif, dashboard,
+               cc: str) -> None:
+    """`cotwin twin` of a cell of several robots ([[robots]]): its perturbed plant as the PT (cotwin.twin.cell_live)."""
+    from ..twin.cell import CellSystem
+    from ..twin.cell_live import run_cell_twin
+    from .progress import ProgressReport
+
+    unsupported = [flag for flag, given in (("--pt-log", pt_log), ("--pt-url", pt_url), ("--rabbitmq", exchange),
+                                             ("--whatif", whatif), ("--dashboard", dashboard)) if given]
+    if unsupported:
+        raise click.UsageError(f"a cell of several robots is twinned with its own perturbed plant as the PT, its plan "
+                               f"as its commands: {', '.join(unsupported)} not done yet")
+    cell = CellSystem(spec)
+    with ProgressReport("twin", "s") as progress:
+        result = run_cell_twin(cell, out, step, end, algorithm, realtime, history, cc,
+                               observers=[TwinProgress(progress)])
+    r = result.pt
+    click.echo(f"{result.out}: PT and DT, {r.steps} steps each to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
+               f"(real-time factor {r.real_time_factor:.1f})")
+    click.echo(f"deviation: {result.alarm_count} alarm(s); report {result.out / 'deviation.json'}; "
+               f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
+    for side, outcomes in result.outcomes.items():
+        for line in outcomes.lines():
+            click.echo(f"{side.upper()}: {line}")
 
 
 class TwinProgress:

@@ -44,6 +44,7 @@ class PlacedRobot:
     name: str
     tree: KinematicTree
     pose: np.ndarray
+    mjcf: str | None = None  # an MJCF text derived from to_mjcf(tree, None, visual=False) to attach instead (a payload)
 
 
 def world_mjcf(scene, timestep: float = TIMESTEP) -> str:
@@ -80,7 +81,8 @@ class SharedWorld:
         bits = [1 << (FIRST_ROBOT_BIT + k) for k in range(len(robots))]
         everyone = sum(bits)
         for k, robot in enumerate(robots):
-            child = mujoco.MjSpec.from_string(to_mjcf(robot.tree, None, timestep, visual=False))
+            child = mujoco.MjSpec.from_string(robot.mjcf if robot.mjcf is not None else
+                                              to_mjcf(robot.tree, None, timestep, visual=False))
             for geom in child.geoms:
                 if geom.contype == ROBOT_CONTYPE and geom.conaffinity == ROBOT_CONAFFINITY:
                     geom.contype = ROBOT_CONTYPE | bits[k]

@@ -12,7 +12,8 @@ it in PARTS (tests/test_layering.py checks both, import by import):
   accounts (`broker_access`).
 - services: what runs beside a twin: deviation, history, what-if, the publisher, the OPC UA plant,
   the page (`dashboard`).
-- live: the live twin, PT and DT in lockstep (`runtime`), wiring the services.
+- live: the live twin, PT and DT in lockstep (`runtime`), wiring the services; that of a cell of several
+  robots (`cell_live`).
 - analysis: many runs or runs judged: sweeps, generated tests run on a twin, walks, fleets of live
   twins (`fleet`: on Ray, supervised, with an overview page).
 """
@@ -22,6 +23,6 @@ PARTS: dict[str, tuple[str, ...]] = {
     "assembly": ("commands", "scenario", "replay", "calibration", "rabbitmq", "mapping_unit", "system", "build",
                  "fmu_slave", "outcomes", "waits", "clocked", "convergence", "cell", "run", "broker_access"),
     "services": ("deviation", "history", "whatif", "publisher", "plant", "dashboard"),
-    "live": ("runtime",),
+    "live": ("runtime", "cell_live"),
     "analysis": ("sweep", "testing", "walks", "fleet"),
 }

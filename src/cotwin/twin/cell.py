@@ -206,11 +206,17 @@ class CellSystem:
     def digests(self) -> dict[str, str]:
         return {k: v for robot in self.robots for k, v in robot.system.models.digests.items()}
 
-    def world(self):
-        """A fresh world of the cell's robots and scene."""
+    def world(self, perturbation=None):
+        """A fresh world of the cell's robots and scene; with a perturbation (cotwin.pmodel.perturbation), the
+        perturbed plant of every robot in it (payload, friction, damping): a live twin's PT."""
         from ..pmodel.shared import PlacedRobot, SharedWorld
 
-        return SharedWorld([PlacedRobot(r.name, r.system.models.tree, r.pose) for r in self.robots], self.scene)
+        robots = [PlacedRobot(r.name, r.system.models.tree, r.pose) for r in self.robots]
+        if perturbation is not None:
+            from ..pmodel.perturbation import perturbed_world
+
+            return perturbed_world(robots, self.scene, perturbation)
+        return SharedWorld(robots, self.scene)
 
     def mapping_unit(self, world) -> "CellMappingUnit":
         """Every robot's platform mapping against its view of `world`, in one unit."""
@@ -228,8 +234,9 @@ class CellSystem:
             units[robot.name] = MappingUnit(MAPPING.name, models.program, mapping, robot.system.command_events)
         return CellMappingUnit(CELL_MAPPING.name, world, units)
 
-    def instantiate(self, dmodel_fmu: str | Path) -> System:
-        """A fresh, checked co-simulation of the cell: the same d-model FMU instantiated once per robot."""
+    def instantiate(self, dmodel_fmu: str | Path, world=None) -> System:
+        """A fresh, checked co-simulation of the cell (in `world`, by default a fresh nominal one): the same
+        d-model FMU instantiated once per robot."""
         from ..cosim.isolated import fmu_unit
 
         units = []
@@ -240,7 +247,7 @@ class CellSystem:
                 units.append(source)
             units.append(fmu_unit(dmodel_of(robot.name).name, dmodel_fmu, robot.system.isolated,
                                   self.spec.unit_timeout))
-        units.append(self.mapping_unit(self.world()))
+        units.append(self.mapping_unit(world if world is not None else self.world()))
         return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters,
                          models=self.digests)
 
