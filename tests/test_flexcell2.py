@@ -157,3 +157,55 @@ def test_the_generic_core_names_neither_robot_nor_the_cell():
     offenders = [str(p.relative_to(ROOT)) for p in (ROOT / "src" / "cotwin").rglob("*.py")
                  if re.search(r"panda", p.read_text(), re.IGNORECASE)]
     assert offenders == []
+
+
+def test_the_cell_twin_runs_pt_and_dt_with_deviation_and_history_per_robot(tmp_path):
+    import sqlite3
+
+    from cotwin.twin.cell_live import run_cell_twin
+
+    cell = CellSystem(load_project(CELL / "cotwin.toml"))
+    result = run_cell_twin(cell, tmp_path)
+    assert result.pt.steps == result.dt.steps == 160
+    for side in ("pt", "dt"):
+        for robot in ROBOTS:
+            outcome = result.outcomes[side].robots[robot]
+            assert (outcome.commands, outcome.completed, outcome.collisions) == (4, 4, []), (side, robot)
+    assert set(result.deviation) == set(ROBOTS)
+    for robot in ROBOTS:  # the perturbed plant (0.5 kg, 0.3 N m) moves measurably otherwise than the nominal DT
+        variables = result.deviation[robot]["variables"]
+        assert all(v.startswith(f"{robot}.q") for v in variables)
+        assert max(v["max_deviation"] for v in variables.values()) > 1e-4
+    db = sqlite3.connect(tmp_path / "history.sqlite")
+    machines = {row[0] for row in db.execute("select distinct machine from states")}
+    assert {m.split(".")[0] for m in machines} == set(ROBOTS)
+    assert db.execute("select count(*) from samples").fetchone()[0] == 2 * 160
+    assert (tmp_path / "pt" / "outputs.csv").is_file() and (tmp_path / "dt" / "outputs.csv").is_file()
+
+
+def test_a_heavier_plant_raises_alarms_naming_the_robot(tmp_path):
+    from cotwin.twin.cell_live import run_cell_twin
+
+    spec = load_project(CELL / "cotwin.toml").with_overrides(plant_payload=3.0, deviation_absolute=0.002, end=8.0)
+    result = run_cell_twin(CellSystem(spec), tmp_path)
+    assert result.alarms
+    for event in result.alarms:
+        assert event["twin"] in ROBOTS and event["variable"].startswith(event["twin"] + ".")
+
+
+def test_cotwin_run_and_twin_of_the_cell(tmp_path):
+    from click.testing import CliRunner
+
+    from cotwin.cli import main
+
+    ran = CliRunner().invoke(main, ["run", str(CELL / "collide.toml"), "-o", str(tmp_path / "run")])
+    assert ran.exit_code == 0, ran.output
+    assert re.search(r"^ur5e: 1 command\(s\) applied, .* collision reported at t = ", ran.output, re.MULTILINE)
+    assert re.search(r"^panda: 1 command\(s\) applied, 0 move\(s\) completed, collision reported", ran.output, re.MULTILINE)
+    assert "contact: ur5e and panda at t = " in ran.output
+    twin = CliRunner().invoke(main, ["twin", str(CELL / "collide.toml"), "-o", str(tmp_path / "twin")])
+    assert twin.exit_code == 0, twin.output
+    assert "PT and DT, 80 steps each" in twin.output and "PT: panda: 1 command(s) applied" in twin.output
+    refused = CliRunner().invoke(main, ["twin", str(CELL / "collide.toml"), "-o", str(tmp_path / "t2"),
+                                        "--pt-url", "opc.tcp://127.0.0.1:4999"])
+    assert refused.exit_code != 0 and "--pt-url not done yet" in refused.output

@@ -124,8 +124,8 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, e
                f"(real-time factor {r.real_time_factor:.1f})")
     click.echo(f"deviation: {result.alarm_count} alarm(s); report {result.out / 'deviation.json'}; "
                f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
-    for side, outcomes in result.outcomes.items():
-        for line in outcomes.lines():
+    for side, summary in result.outcomes.items():
+        for line in summary.lines():
             click.echo(f"{side.upper()}: {line}")
 
 
