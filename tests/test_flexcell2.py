@@ -209,3 +209,47 @@ def test_cotwin_run_and_twin_of_the_cell(tmp_path):
     refused = CliRunner().invoke(main, ["twin", str(CELL / "collide.toml"), "-o", str(tmp_path / "t2"),
                                         "--pt-url", "opc.tcp://127.0.0.1:4999"])
     assert refused.exit_code != 0 and "--pt-url not done yet" in refused.output
+
+
+def test_broker_commands_are_routed_per_robot(tmp_path, broker):
+    """Each robot's publisher sends on its own routing key (TO_COSIM.ROBOT); each arm does its own move."""
+    import threading
+    import uuid
+
+    from cotwin.twin.cell import routed
+    from cotwin.twin.publisher import Publisher, idle_values
+    from cotwin.twin.rabbitmq import port_types
+
+    exchange = f"cotwin.test.cell.{uuid.uuid4().hex[:8]}"
+    text = (CELL / "collide.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/")
+    text = text.replace('plan = "collide.csv"', f'rabbitmq = {{ exchange = "{exchange}" }}')
+    text = text.replace("end = 8.0", "end = 5.0\nrealtime = true")
+    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml"):
+        shutil.copy(CELL / name, tmp_path / name)
+    (tmp_path / "meshes").symlink_to(CELL / "meshes")
+    (tmp_path / "cotwin.toml").write_text(text)
+    cell = CellSystem(load_project(tmp_path / "cotwin.toml"))
+    assert [u.name for u in cell.units if u.role == "source"] == ["{rabbitmq}.ur5e", "{rabbitmq}.panda"]
+    plans = read_cell_plan(CELL / "apart.csv", cell.program, list(ROBOTS))  # different holes for each arm
+    publishers = []
+    for robot in cell.robots:
+        settings = routed(cell.spec.rabbitmq, robot.name)
+        assert settings.to_cosim == f"data.to_cosim.{robot.name}"
+        idle = idle_values(port_types(cell.program, robot.system.live_ports()))
+        publishers.append(Publisher(settings, plans[robot.name][:1], idle, period=0.2, end=5.0))
+    threads = [threading.Thread(target=p.run, daemon=True) for p in publishers]
+    for thread in threads:
+        thread.start()
+    ran = run_cell(cell, tmp_path / "out")
+    for thread in threads:
+        thread.join(timeout=30)
+    for robot in ROBOTS:
+        outcome = ran.outcomes.robots[robot]
+        assert (outcome.commands, outcome.completed, outcome.collisions) == (1, 1, []), robot
+    table = rows(ran.csv)
+    sent = {robot: [r for r in table if r[f"{{rabbitmq}}.{robot}.moveDiscreteCommand"] == "true"] for robot in ROBOTS}
+    for robot in ROBOTS:  # each robot's source got its own robot's command, with its own arguments
+        (row,) = sent[robot]
+        expected = dict(plans[robot][0].values)
+        assert int(row[f"{{rabbitmq}}.{robot}.MovementArgs_target_X"]) == expected["MovementArgs_target_X"]
+        assert int(row[f"{{rabbitmq}}.{robot}.MovementArgs_target_Y"]) == expected["MovementArgs_target_Y"]

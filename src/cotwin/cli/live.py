@@ -165,7 +165,9 @@ def pt_with_url(spec, url: str, replayed: bool):
 @click.option("--period", type=click.FloatRange(min=0.01, max=3600), default=0.5, show_default=True,
               help="seconds of wall time between messages")
 @click.option("--exchange", callback=exchange_name, help="the twin's exchange (default: the project's [scenario] rabbitmq exchange)")
-def publish(project: str, plan: str | None, period: float, exchange: str | None) -> None:
+@click.option("--robot", help="a cell of several robots ([[robots]]): publish this robot's commands (its plan columns "
+              "ROBOT.port), routed to it (TO_COSIM.ROBOT)")
+def publish(project: str, plan: str | None, period: float, exchange: str | None, robot: str | None) -> None:
     """Publish commands to a live twin over RabbitMQ, as the paper's arm publisher does: wait for the
     ready message, then every PERIOD send the command due at the echoed simulation time, else idle."""
     from dataclasses import replace
@@ -181,11 +183,25 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None)
     settings = system.spec.rabbitmq or RabbitMQSettings(exchange or "fmi_digital_twin_dt")
     if exchange:
         settings = replace(settings, exchange=exchange)
-    program = system.models.program
     if plan is None and system.spec.plan is None:
         raise click.BadParameter("the project has no plan: give one with --plan", param_hint="--plan")
-    commands = read_scenario(plan or system.spec.plan, program)
-    ports = system.live_ports()
+    if system.spec.robots:
+        from ..twin.cell import read_cell_plan, routed
+
+        names = [r.name for r in system.robots]
+        if robot not in names:
+            raise click.BadParameter(f"a cell's commands go to one robot: one of {', '.join(names)}",
+                                     param_hint="--robot")
+        program = system.program
+        settings = routed(settings, robot)
+        commands = read_cell_plan(plan or system.spec.plan, program, names)[robot]
+        ports = next(r for r in system.robots if r.name == robot).system.live_ports()
+    else:
+        if robot is not None:
+            raise click.BadParameter("only for a cell of several robots ([[robots]])", param_hint="--robot")
+        program = system.models.program
+        commands = read_scenario(plan or system.spec.plan, program)
+        ports = system.live_ports()
     publisher = Publisher(settings, commands, idle_values(port_types(program, ports)), period=period,
                           end=system.spec.end)
     click.echo(f"publishing {len(commands)} command(s) on exchange {settings.exchange} ({settings.to_cosim}); "

@@ -12,7 +12,9 @@ p-model and mapping, its own commands), and the cell puts them together:
   hosting every robot's platform mapping, its ports scoped as `NAME.port`: in a step it runs every
   robot's operations, steps the world once, then reports every robot's events;
 - commands: a plan whose columns are scoped by robot (`NAME.port`, e.g. `left.moveDiscreteCommand`); a
-  row may leave a robot's cells empty (no command to it);
+  row may leave a robot's cells empty (no command to it); or live from RabbitMQ, routed per robot: a
+  source per robot (`{rabbitmq}.NAME`) takes the messages published with routing key `TO_COSIM.NAME`
+  ([scenario] rabbitmq to_cosim, then the robot's name) and echoes on `FROM_COSIM.NAME`;
 - contacts between two robots are what each mapping's `robot_contact()` tells (cotwin.mapping.runtime),
   e.g. its `collision` event: both d-models hear of it.
 """
@@ -34,13 +36,19 @@ from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..files import read_text
 from .project import TwinProject, check_timing
 from .scenario import Command, parse_value, scenario_ports
-from .system import CONTROLLER, DMODEL, MAPPING, TwinSystem, UnitSpec, build_scene, load_models
+from .system import DMODEL, MAPPING, TwinSystem, UnitSpec, build_scene, load_models
 
 CELL_MAPPING = UnitSpec("{mapping}", "cell", "mapping.fmu", "mapping")
 
 
-def controller_of(name: str) -> UnitSpec:
-    return UnitSpec(CONTROLLER.key, name, CONTROLLER.fmu, "source")
+def source_of(name: str, source: UnitSpec) -> UnitSpec:
+    """Robot `name`'s command source: the controller of its plan's columns or its RabbitMQ unit."""
+    return UnitSpec(source.key, name, source.fmu, "source")
+
+
+def routed(settings, name: str):
+    """The broker settings of robot `name`'s commands: routing keys `TO_COSIM.NAME` and `FROM_COSIM.NAME`."""
+    return replace(settings, to_cosim=f"{settings.to_cosim}.{name}", from_cosim=f"{settings.from_cosim}.{name}")
 
 
 def dmodel_of(name: str) -> UnitSpec:
@@ -50,8 +58,9 @@ def dmodel_of(name: str) -> UnitSpec:
 def robot_project(spec: TwinProject, robot) -> TwinProject:
     """One robot's project: the cell's settings with its own models and calibration, no scene (the cell
     has one) and no source (the cell's plan gives each robot its commands)."""
+    rabbitmq = routed(spec.rabbitmq, robot.name) if spec.rabbitmq is not None else None
     return replace(spec, pmodel=robot.pmodel, mapping=robot.mapping, calibration=robot.calibration, scene="none",
-                   scene_options={}, world=None, world_file=None, plan=None, rabbitmq=None, log=None, panels=None,
+                   scene_options={}, world=None, world_file=None, plan=None, rabbitmq=rabbitmq, log=None, panels=None,
                    pmodel_name=None, robots=())
 
 
@@ -76,6 +85,11 @@ class CellRobot:
 
     def scoped(self, port: str) -> str:
         return f"{self.name}.{port}"
+
+    @property
+    def source(self) -> UnitSpec | None:
+        """Its command source's unit ({controller}.NAME or {rabbitmq}.NAME), if it has one."""
+        return source_of(self.name, self.system.source) if self.system.source is not None else None
 
 
 def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, list[Command]]:
@@ -152,10 +166,6 @@ class CellSystem:
 
         if not spec.robots:
             raise CotwinError(f"{spec.path}: a cell names its robots in [[robots]]")
-        if spec.rabbitmq is not None:
-            raise CotwinError([Finding(spec.location("scenario", "rabbitmq"), Severity.ERROR,
-                                       "[scenario] rabbitmq: a cell of several robots takes its commands from a plan "
-                                       "(routing them per robot over the broker is not done yet)")])
         self.spec = spec
         alone = [(r, load_models(robot_project(spec, r))) for r in spec.robots]
         programs = [m.program for _, m in alone]
@@ -188,8 +198,8 @@ class CellSystem:
         system = robot.system
         names = {DMODEL.name: dmodel_of(robot.name).name, MAPPING.name: CELL_MAPPING.name}
         if system.source is not None:
-            names[system.source.name] = controller_of(robot.name).name
-            self.units.append(controller_of(robot.name))
+            names[system.source.name] = robot.source.name
+            self.units.append(robot.source)
         self.units.append(dmodel_of(robot.name))
 
         def port(unit: str, name: str) -> str:
@@ -243,7 +253,7 @@ class CellSystem:
         for robot in self.robots:
             if robot.system.source is not None:
                 source = robot.system.source_unit()
-                source.name = controller_of(robot.name).name
+                source.name = robot.source.name
                 units.append(source)
             units.append(fmu_unit(dmodel_of(robot.name).name, dmodel_fmu, robot.system.isolated,
                                   self.spec.unit_timeout))
@@ -331,7 +341,7 @@ class CellOutcomes(Observer):
         mapping = units[CELL_MAPPING.name]
         for robot in self.cell.robots:
             out = self.robots[robot.name]
-            source = controller_of(robot.name).name
+            source = robot.source.name if robot.source is not None else None
             if source in units:
                 out.commands += sum(1 for e in robot.system.command_events if units[source].values.get(e) is True)
             if mapping.values.get(robot.scoped(self.completed)) is True:
