@@ -253,3 +253,13 @@ def test_broker_commands_are_routed_per_robot(tmp_path, broker):
         expected = dict(plans[robot][0].values)
         assert int(row[f"{{rabbitmq}}.{robot}.MovementArgs_target_X"]) == expected["MovementArgs_target_X"]
         assert int(row[f"{{rabbitmq}}.{robot}.MovementArgs_target_Y"]) == expected["MovementArgs_target_Y"]
+
+
+def test_commands_of_one_robot_refuse_a_cell_at_its_robots():
+    from cotwin.twin.run import load
+
+    with pytest.raises(CotwinError) as err:
+        load(CELL / "cotwin.toml")
+    finding = err.value.findings[0]
+    assert "takes a twin of one robot" in finding.message and finding.location.line > 1
+    assert isinstance(load(CELL / "cotwin.toml", cells=True), CellSystem)

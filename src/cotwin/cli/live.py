@@ -179,7 +179,7 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None,
     from ..twin.scenario import read_scenario
 
     check_finite(period=period)
-    system = load(project)
+    system = load(project, cells=True)
     settings = system.spec.rabbitmq or RabbitMQSettings(exchange or "fmi_digital_twin_dt")
     if exchange:
         settings = replace(settings, exchange=exchange)

@@ -23,7 +23,10 @@ def build(project: str, out: str, cc: str) -> None:
     from ..twin.build import build as build_all, folder_lock
     from ..twin.run import load
 
-    system = load(project)
+    system = load(project, cells=True)
+    if system.spec.robots:
+        raise CotwinError(f"{system.spec.path}: the artefacts of a cell of several robots (its FMUs for Maestro, "
+                          "multimodel.json) are not built yet: `cotwin run` and `cotwin twin` run it")
     with folder_lock(Path(out)):
         written = build_all(system, out, cc)
     for path in written.values():
@@ -60,7 +63,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     if cycle_period is not None and version != "3":
         raise click.BadParameter("only with --fmi 3 (an FMI 2.0 d-model takes [cosim] parameters cycle_period)",
                                  param_hint="--cycle-period")
-    system = load(project)
+    system = load(project, cells=True)
     check_timing(system.spec, step, end)
     if system.spec.robots:
         return _run_cell(system, out, step, end, algorithm, realtime, cc, dashboard, version)

@@ -226,11 +226,17 @@ def monitored_panels(system: TwinSystem, number: str) -> list[tuple[str, list[st
              names, "default") for k, ((what, unit), names) in enumerate(groups.items())]
 
 
-def load(project: str | Path | TwinProject) -> TwinSystem:
-    """The TwinSystem of a project file (or an already read project); a cell of several robots
-    ([[robots]]) is a CellSystem (cotwin.twin.cell), which `cotwin run` runs with `run_cell`."""
+def load(project: str | Path | TwinProject, cells: bool = False) -> TwinSystem:
+    """The TwinSystem of a project file (or an already read project). A cell of several robots ([[robots]])
+    is a CellSystem (cotwin.twin.cell) for a caller that takes one (`cells`), else a located error: what
+    takes a twin of one robot cannot take it."""
     spec = project if isinstance(project, TwinProject) else load_project(project)
     if spec.robots:
+        if not cells:
+            from ..diagnostics import Finding, Severity
+
+            raise CotwinError([Finding(spec.location("robots"), Severity.ERROR, "[[robots]]: this takes a twin of "
+                                       "one robot; a cell of several robots runs under `cotwin run` and `cotwin twin`")])
         from .cell import CellSystem
 
         return CellSystem(spec)
