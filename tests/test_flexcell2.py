@@ -263,3 +263,11 @@ def test_commands_of_one_robot_refuse_a_cell_at_its_robots():
     finding = err.value.findings[0]
     assert "takes a twin of one robot" in finding.message and finding.location.line > 1
     assert isinstance(load(CELL / "cotwin.toml", cells=True), CellSystem)
+
+
+def test_a_cell_plant_refuses_what_it_cannot_perturb_yet(tmp_path):
+    from cotwin.twin.cell_live import run_cell_twin
+
+    spec = load_project(CELL / "cotwin.toml").with_overrides(plant_latency_ms=20.0)
+    with pytest.raises(CotwinError, match=r"\[plant\] latency_ms: a cell's plant"):
+        run_cell_twin(CellSystem(spec), tmp_path)

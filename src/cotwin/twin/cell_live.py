@@ -72,6 +72,12 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
     if spec.pt is not None:
         raise CotwinError([Finding(spec.location("pt"), Severity.ERROR, "[pt]: a cell of several robots is twinned "
                                    "with its own perturbed plant ([plant]) as its PT; another PT is not done yet")])
+    plant = spec.plant or Perturbation()
+    unsupported = [key for key, value in (("latency_ms", plant.latency_ms), ("noise", plant.noise)) if value]
+    if unsupported:
+        raise CotwinError([Finding(spec.location("plant", key), Severity.ERROR, f"[plant] {key}: a cell's plant "
+                                   "perturbs its world (payload, friction, damping); latency and noise of its robots "
+                                   "are not done yet") for key in unsupported])
     out = Path(out)
     step = spec.step if step is None else step
     end = spec.end if end is None else end
@@ -83,7 +89,7 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
     writes = [f"{side}/{name}" for side in SIDES for name in ("outputs.csv", "outputs.partial.csv", "outputs.csv.part")]
     with folder_lock(out, [*writes, "deviation.json", *ARTEFACTS, *([store] if store else [])], spec.inputs):
         fmu = dmodel_fmu(cell.robots[0].system, out, cc)
-        worlds = {"pt": cell.world(spec.plant or Perturbation()), "dt": cell.world()}
+        worlds = {"pt": cell.world(plant), "dt": cell.world()}
         outcomes = {side: CellOutcomes(cell) for side in SIDES}
         executions = {}
         for side in SIDES:
