@@ -22,7 +22,8 @@ Readings of the mapping (see also docs/robosim-notation.md, section 8):
   equations and predicates hold with x bound to that value;
 - functions the models leave abstract come from a registry: the math functions, and an arm's
   kinematics (`inverse_kinematics`, `reachable`), set up on the first call only, so that a mapping
-  not calling them needs no arm;
+  not calling them needs no arm; `robot_contact()`: did the robot touch another robot of its world in
+  the step just made (a cell of several robots, cotwin.pmodel.shared);
 - mapping variables q0..qN and qd0..qdN mirror the positions and velocities of the mirrored joints
   (by default the arm's, in kinematic order), so they can be logged as in the paper; further
   monitored variables may mirror platform readings by path (`monitor`).
