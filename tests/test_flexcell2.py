@@ -271,3 +271,15 @@ def test_a_cell_plant_refuses_what_it_cannot_perturb_yet(tmp_path):
     spec = load_project(CELL / "cotwin.toml").with_overrides(plant_latency_ms=20.0)
     with pytest.raises(CotwinError, match=r"\[plant\] latency_ms: a cell's plant"):
         run_cell_twin(CellSystem(spec), tmp_path)
+
+
+def test_a_cells_log_names_are_scoped_by_robot_and_unsupported_tables_are_located(tmp_path):
+    spec = load_project(CELL / "cotwin.toml")
+    cell = CellSystem(spec.with_overrides(cosim_log=["ur5e.q0", "panda.q6"]))
+    assert cell.log["{mapping}.cell"] == ["ur5e.q0", "panda.q6"]
+    with pytest.raises(CotwinError, match=r"\[cosim\] log: q0: a cell's variables are named ROBOT.variable"):
+        CellSystem(spec.with_overrides(cosim_log=["q0"]))
+    with pytest.raises(CotwinError, match=r"\[monitor\] readings: not for a cell"):
+        CellSystem(spec.with_overrides(monitor_readings={"x": "panda::panda_link0.x"}))
+    ran = run_cell(cell, tmp_path, end=1.0)
+    assert ran.figure is not None and ran.figure.is_file()

@@ -57,11 +57,32 @@ def dmodel_of(name: str) -> UnitSpec:
 
 def robot_project(spec: TwinProject, robot) -> TwinProject:
     """One robot's project: the cell's settings with its own models and calibration, no scene (the cell
-    has one) and no source (the cell's plan gives each robot its commands)."""
+    has one), no source (the cell's plan gives each robot its commands; the broker's routing is its own)
+    and its own part of `[cosim] log` (names scoped `NAME.variable` there)."""
     rabbitmq = routed(spec.rabbitmq, robot.name) if spec.rabbitmq is not None else None
+    log = None if spec.log is None else [v.split(".", 1)[1] for v in spec.log if v.startswith(robot.name + ".")]
     return replace(spec, pmodel=robot.pmodel, mapping=robot.mapping, calibration=robot.calibration, scene="none",
-                   scene_options={}, world=None, world_file=None, plan=None, rabbitmq=rabbitmq, log=None, panels=None,
+                   scene_options={}, world=None, world_file=None, plan=None, rabbitmq=rabbitmq, log=log, panels=None,
                    pmodel_name=None, robots=())
+
+
+def check_cell_settings(spec: TwinProject) -> None:
+    """What a cell's project may not say (yet), located: [figure] panels, [monitor] readings (a reading's path
+    names one robot's p-model), a [cosim] log name not scoped by a robot of the cell."""
+    problems = []
+    if spec.panels is not None:
+        problems.append(Finding(spec.location("figure", "panels"), Severity.ERROR, "[figure] panels: a cell's figure is "
+                                "chosen from its models (panels of its own are not done yet)"))
+    if spec.readings:
+        problems.append(Finding(spec.location("monitor", "readings"), Severity.ERROR, "[monitor] readings: not for a "
+                                "cell of several robots yet (its robots' q<i>/qd<i> are monitored)"))
+    names = {r.name for r in spec.robots}
+    unscoped = [v for v in spec.log or () if v.split(".", 1)[0] not in names or "." not in v]
+    if unscoped:
+        problems.append(Finding(spec.location("cosim", "log"), Severity.ERROR, f"[cosim] log: {', '.join(unscoped)}: "
+                                f"a cell's variables are named ROBOT.variable, ROBOT one of {', '.join(sorted(names))}"))
+    if problems:
+        raise CotwinError(problems)
 
 
 def base_pose(robot) -> np.ndarray:
@@ -166,6 +187,7 @@ class CellSystem:
 
         if not spec.robots:
             raise CotwinError(f"{spec.path}: a cell names its robots in [[robots]]")
+        check_cell_settings(spec)
         self.spec = spec
         alone = [(r, load_models(robot_project(spec, r))) for r in spec.robots]
         programs = [m.program for _, m in alone]
@@ -362,12 +384,32 @@ class CellRun:
     system: System
     outcomes: CellOutcomes
     contacts: list  # (time, robot, robot) when a contact between two robots began
+    figure: Path | None = None
+
+
+def cell_panels(cell: CellSystem) -> list[tuple[str, list[str], str]]:
+    """The figure of a cell's run, chosen from its models, two panels per robot: its commands with the
+    platform events its mapping reports to its d-model, and its monitored variables."""
+    panels = []
+    for k, robot in enumerate(cell.robots, start=1):
+        system = robot.system
+        commands = [f"{robot.source.name}.{p}" for p in system.source_ports if p in system.command_events] \
+            if robot.source is not None else []
+        mapped = {ev.name for ev in system.models.mapping_model.input_events}
+        events = [f"{CELL_MAPPING.name}.{robot.scoped(ev.name)}" for ev in system.models.program.inputs
+                  if ev.name in mapped and ev.name not in system.command_events]
+        panels.append((f"({k}a) {robot.name}: commands, events [1 = true]", commands + events, "steps-post"))
+        monitored = [f"{CELL_MAPPING.name}.{robot.scoped(v)}" for v in system.log[MAPPING.name]]
+        if monitored:
+            panels.append((f"({k}b) {robot.name}: monitored [rad, rad/s]", monitored, "default"))
+    return panels
 
 
 def run_cell(cell: CellSystem, out: str | Path, step: float | None = None, end: float | None = None,
              algorithm: str | None = None, realtime: bool | None = None, observers: list[Observer] | None = None,
-             progress=None, cc: str = "cc") -> CellRun:
-    """Co-simulate the cell into `out` (outputs.csv), building the d-model FMU once for every robot."""
+             progress=None, cc: str = "cc", plot: bool = True) -> CellRun:
+    """Co-simulate the cell into `out` (outputs.csv and figure.png), building the d-model FMU once for every
+    robot."""
     from .build import dmodel_fmu, folder_lock
     from .run import RUN_FILES
 
@@ -392,4 +434,10 @@ def run_cell(cell: CellSystem, out: str | Path, step: float | None = None, end: 
         except (CotwinError, KeyboardInterrupt) as err:
             raise ended_early(err, execution.time, writer.kept()) from None
         world = cosim.units[CELL_MAPPING.name].world
-        return CellRun(result, out / "outputs.csv", cosim, outcomes, list(world.contacts))
+        figure = None
+        if plot:
+            from ..plot import figure as draw
+
+            figure = draw(out / "outputs.csv", out / "figure.png", cell_panels(cell),
+                          title=f"{cell.program.module.name} x {len(cell.robots)}: step {step:g} s, {result.algorithm}")
+        return CellRun(result, out / "outputs.csv", cosim, outcomes, list(world.contacts), figure)
