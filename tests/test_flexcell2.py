@@ -283,3 +283,50 @@ def test_a_cells_log_names_are_scoped_by_robot_and_unsupported_tables_are_locate
         CellSystem(spec.with_overrides(monitor_readings={"x": "panda::panda_link0.x"}))
     ran = run_cell(cell, tmp_path, end=1.0)
     assert ran.figure is not None and ran.figure.is_file()
+
+
+def _get(url: str):
+    import urllib.request
+
+    with urllib.request.urlopen(url, timeout=10) as r:
+        return r.status, r.read()
+
+
+def test_the_page_shows_both_robots_their_variables_and_both_dmodels(tmp_path):
+    import json
+
+    from cotwin.twin.cell_live import run_cell_twin
+    from cotwin.twin.dashboard import Dashboard
+
+    cell = CellSystem(load_project(CELL / "collide.toml"))
+    with Dashboard(cell, port=0, mode="run") as dash:
+        model = json.loads(_get(dash.url + "api/model")[1])["model"]
+        assert [r["label"] for r in model["robots"]] == list(ROBOTS)
+        panda = model["robots"][1]
+        assert panda["root_pose"][3] == pytest.approx(1.0) and panda["root_pose"][7] == pytest.approx(0.65)
+        assert any(g["kind"] == "box" and g.get("mesh") for link in panda["links"] for g in link["geoms"])
+        assert {j["variable"] for j in panda["joints"] if j["variable"]} == {f"panda.q{i}" for i in range(7)}
+        assert [m["name"] for m in model["machines"]] == ["ur5e: stm_ref", "panda: stm_ref"]
+        assert model["scene"]["plate"]
+        ran = run_cell(cell, tmp_path / "run", end=3.0, observers=[dash.feed])
+        status = json.loads(_get(dash.url + "api/status")[1])
+        assert status["state"] == "done" and status["time"] == pytest.approx(3.0)
+        rows, _, _ = dash.feed.samples.since(0)
+        names = [v["name"] for v in model["variables"]]
+        assert dash.feed.variables == names
+        last = rows[-1][2]
+        written = {k: float(v) for k, v in rows_of_csv(ran.csv)[-1].items() if k != "time"}
+        for name in ("ur5e.q0", "panda.q5"):
+            assert last[0][names.index(name)] == pytest.approx(written[f"{{mapping}}.cell.{name}"])
+        assert len(last[1]) == 2  # both d-models' states
+        assert {e["name"] for e in dash.feed.events if e["kind"] == "command"} == \
+            {"ur5e.moveDiscreteCommand", "panda.moveDiscreteCommand"}
+    with Dashboard(cell, port=0, mode="twin") as dash:
+        result = run_cell_twin(cell, tmp_path / "twin", end=3.0, observers=[dash.feed])
+        status = json.loads(_get(dash.url + "api/status")[1])
+        assert status["sides"] == ["pt", "dt"] and status["time"] == pytest.approx(3.0)
+        assert result.pt.steps == 30
+
+
+def rows_of_csv(path: Path) -> list[dict]:
+    return [{k: v for k, v in r.items() if v not in ("true", "false", "")} for r in rows(path)]

@@ -49,7 +49,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     check_timing(spec, step, end)
     if spec.robots:
         return _cell_twin(spec, out, step, end, algorithm, realtime, pt_log, pt_url, exchange, history, whatif,
-                          dashboard, cc)
+                          dashboard, cc, serving)
     if pt_url is not None:
         spec = pt_with_url(spec, pt_url, pt_log is not None)
     if exchange is not None:
@@ -104,21 +104,33 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
 
 
 def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, exchange, history, whatif, dashboard,
-               cc: str) -> None:
+               cc: str, serving: dict) -> None:
     """`cotwin twin` of a cell of several robots ([[robots]]): its perturbed plant as the PT (cotwin.twin.cell_live)."""
     from ..twin.cell import CellSystem
     from ..twin.cell_live import run_cell_twin
+    from ..twin.history import database_url
     from .progress import ProgressReport
 
     unsupported = [flag for flag, given in (("--pt-log", pt_log), ("--pt-url", pt_url), ("--rabbitmq", exchange),
-                                             ("--whatif", whatif), ("--dashboard", dashboard)) if given]
+                                             ("--whatif", whatif)) if given]
     if unsupported:
         raise click.UsageError(f"a cell of several robots is twinned with its own perturbed plant as the PT, its plan "
                                f"as its commands: {', '.join(unsupported)} not done yet")
     cell = CellSystem(spec)
-    with ProgressReport("twin", "s") as progress:
-        result = run_cell_twin(cell, out, step, end, algorithm, realtime, history, cc,
-                               observers=[TwinProgress(progress)])
+    dash = start_dashboard(cell, dashboard, "twin", database_url(history or spec.history_url, Path(out)), None, serving)
+    try:
+        with ProgressReport("twin", "s") as progress:
+            result = run_cell_twin(cell, out, step, end, algorithm, realtime, history, cc,
+                                   observers=[*([dash.feed] if dash else ()), TwinProgress(progress)])
+        if dash is not None:
+            dash.finish("done")
+    except BaseException as err:
+        if dash is not None:
+            dash.finish("failed", str(err) or type(err).__name__)
+        raise
+    finally:
+        if dash is not None:
+            dash.stop()
     r = result.pt
     click.echo(f"{result.out}: PT and DT, {r.steps} steps each to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f})")

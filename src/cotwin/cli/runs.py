@@ -66,7 +66,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     system = load(project, cells=True)
     check_timing(system.spec, step, end)
     if system.spec.robots:
-        return _run_cell(system, out, step, end, algorithm, realtime, cc, dashboard, version)
+        return _run_cell(system, out, step, end, algorithm, realtime, cc, dashboard, version, serving)
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
@@ -91,17 +91,23 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
 
 
 def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
-              cc: str, dashboard, version: str) -> None:
+              cc: str, dashboard, version: str, serving: dict) -> None:
     """`cotwin run` of a cell of several robots ([[robots]]): each robot's outcomes and the contacts between them."""
     from ..twin.cell import run_cell
     from ..twin.scenario import after_end
     from .progress import ProgressReport
 
-    if dashboard is not None or version != "2":
-        raise click.UsageError("a cell of several robots runs without --dashboard, with --fmi 2 (not done yet)")
+    if version != "2":
+        raise click.UsageError("a cell of several robots runs with --fmi 2 (not done yet with 3)")
     show_warnings(after_end(cell.commands, cell.spec.end if end is None else end))
-    with ProgressReport("co-simulating", "steps") as progress:
-        ran = run_cell(cell, out, step, end, algorithm, realtime, progress=progress, cc=cc)
+    dash = start_dashboard(cell, dashboard, "run", None, serving=serving)
+    try:
+        with ProgressReport("co-simulating", "steps") as progress:
+            ran = run_cell(cell, out, step, end, algorithm, realtime, progress=progress, cc=cc,
+                           observers=[dash.feed] if dash else None)
+    finally:
+        if dash is not None:
+            dash.stop()
     r = ran.result
     click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f})")

@@ -11,8 +11,9 @@ the services look at both:
   logged column of both sides, each robot's d-model state changes as machine `ROBOT.Machine`, the alarms.
 Results: DIR/pt/outputs.csv, DIR/dt/outputs.csv, DIR/deviation.json (a report per robot).
 
-Not yet: a PT over OPC UA (a plant server of the whole cell), the perturbation's latency and noise
-(an endpoint's, not the world's), commands from the broker, what-if forks and the page.
+Observers get `twin_started(twin)` and `twin_step(twin, k, t)` as a live twin's do (the page's feed,
+cotwin.twin.dashboard.feed.CellFeed). Not yet: a PT over OPC UA (a plant server of the whole cell), the
+perturbation's latency and noise (an endpoint's, not the world's), what-if forks.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol, runtime_checkable
 
 from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution, RunResult, step_count
@@ -34,12 +36,37 @@ from .system import MAPPING
 SIDES = ("pt", "dt")
 
 
+@runtime_checkable
+class TwinObserver(Protocol):
+    """An observer that also wants to know when both sides are initialised (the page's feed)."""
+
+    def twin_started(self, twin) -> None: ...
+
+
 @dataclass(frozen=True)
+class CellSide:
+    execution: Execution
+
+
+@dataclass
+class CellAlarms:
+    """Every robot's deviation alarms, in the order they were raised (what a live twin's observers read as
+    its monitor's `events`)."""
+
+    events: list[dict] = field(default_factory=list)
+
+
+@dataclass
 class CellTwin:
-    """What a cell twin's observers are given each step: the cell and the run's end time."""
+    """What a cell twin's observers are given (`twin_started(twin)` once both sides are initialised, then
+    `twin_step(twin, k, t)`), as a live twin's are: the sides, the alarms, the step and the end."""
 
     cell: CellSystem
     end: float
+    step_size: float
+    sides: dict[str, CellSide]
+    monitor: CellAlarms
+    convergence: None = None
 
 
 @dataclass
@@ -104,17 +131,20 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
                                              spec.deviation.lag_steps, spec.deviation.debounce_steps, twin=r.name)
                     for r in cell.robots}
         history = None
-        running = CellTwin(cell, end)
+        running = CellTwin(cell, end, step, {side: CellSide(e) for side, e in executions.items()}, CellAlarms())
         try:
             for execution in executions.values():
                 execution.initialize()
+            for observer in observers:
+                if isinstance(observer, TwinObserver):
+                    observer.twin_started(running)
             columns = {side: [f"{u}.{v}" for u, v in e.system.observed()] for side, e in executions.items()}
             history = HistoryRecorder(url, str(spec.path), "twin", step, executions["pt"].algorithm.name, columns)
             readers = {side: e.reader(e.system.observed()) for side, e in executions.items()}
             watched = {r.name: [(CELL_MAPPING.name, v) for v in monitors[r.name].variables] for r in cell.robots}
             program = cell.program
             machines = [(m.name, program.state_port(m), program.leaf_names(m)) for m in program.machines]
-            alarms: list[dict] = []
+            alarms = running.monitor.events
             for k in range(1, steps + 1):
                 for execution in executions.values():
                     execution.step()
