@@ -265,12 +265,19 @@ def test_commands_of_one_robot_refuse_a_cell_at_its_robots():
     assert isinstance(load(CELL / "cotwin.toml", cells=True), CellSystem)
 
 
-def test_a_cell_plant_refuses_what_it_cannot_perturb_yet(tmp_path):
+def test_the_cell_plants_latency_and_noise_reach_each_robot(tmp_path):
     from cotwin.twin.cell_live import run_cell_twin
 
-    spec = load_project(CELL / "cotwin.toml").with_overrides(plant_latency_ms=20.0)
-    with pytest.raises(CotwinError, match=r"\[plant\] latency_ms: a cell's plant"):
-        run_cell_twin(CellSystem(spec), tmp_path)
+    spec = load_project(CELL / "cotwin.toml").with_overrides(plant_latency_ms=300.0, plant_noise={"position": 0.001},
+                                                             plant_payload=0.0, plant_friction=0.0, end=6.0)
+    run_cell_twin(CellSystem(spec), tmp_path)
+    pt, dt = rows(tmp_path / "pt" / "outputs.csv"), rows(tmp_path / "dt" / "outputs.csv")
+    for robot in ROBOTS:
+        done = [next(float(r["time"]) for r in side if r[f"{{mapping}}.cell.{robot}.moveCompleted"] == "true")
+                for side in (pt, dt)]
+        assert done[0] >= done[1] + 0.2, robot  # its goals take effect 0.3 s later on the plant
+        before = [float(r[f"{{mapping}}.cell.{robot}.q0"]) for r in pt if float(r["time"]) < 1.0]
+        assert 0 < np.std(before) < 0.01, robot  # at rest, measured with noise
 
 
 def test_a_cells_log_names_are_scoped_by_robot_and_unsupported_tables_are_located(tmp_path):

@@ -46,19 +46,35 @@ class ContactSensing(Protocol):
     def robot_contacts(self) -> set[str]: ...
 
 
-def advance_shared(world, endpoints: list["SimulatedEndpoint"], dt: float) -> None:
+class SharedEndpoint(Protocol):
+    """A robot's endpoint on a world of several robots, which `advance_shared` drives: goals that take
+    effect later (a perturbed plant's latency) are applied when due, set-points written before each stretch
+    of physics steps."""
+
+    def next_due(self) -> float | None: ...  # when the next goal waiting for its time takes effect
+    def apply_due(self) -> None: ...  # apply the goals due by now
+    def set_point(self, steps: int) -> bool: ...
+
+
+def advance_shared(world, endpoints: list[SharedEndpoint], dt: float) -> None:
     """Run a world of several robots (cotwin.pmodel.shared.SharedWorld) for dt, each robot's servos
     following its own trajectory (set-points refreshed every CONTROL_PERIOD, as `SimulatedEndpoint.advance`
-    does for one), the physics stepped once for all of them."""
+    does for one), the physics stepped once for all of them, split where a robot's delayed goal falls due."""
     world.begin()
     steps = world.steps_for(dt)
     period = max(1, int(round(CONTROL_PERIOD / world.timestep)))
     while steps > 0:
-        n = min(period, steps)
+        for endpoint in endpoints:
+            endpoint.apply_due()
+        due = [int(round((d - world.time) / world.timestep)) for d in (e.next_due() for e in endpoints) if d is not None]
+        until_due = min([k for k in due if k > 0] or [steps])
+        n = min(period, steps, until_due)
         if all([endpoint.set_point(n) for endpoint in endpoints]):
-            n = steps
+            n = min(steps, until_due)
         world.step(n)
         steps -= n
+    for endpoint in endpoints:
+        endpoint.apply_due()
 
 
 class SimulatedEndpoint:
@@ -180,6 +196,12 @@ class SimulatedEndpoint:
             if ahead >= segment.t0 + segment.duration:  # the set-point stays at the segment's end
                 self._held = segment
         return segment is None or segment is self._held
+
+    def next_due(self) -> float | None:
+        return None  # its goals take effect at once
+
+    def apply_due(self) -> None:
+        return None
 
     def robot_contacts(self) -> set[str]:
         """The other robots this one touched in the step just made (none for a robot alone in its world)."""

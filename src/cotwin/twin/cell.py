@@ -250,25 +250,33 @@ class CellSystem:
             return perturbed_world(robots, self.scene, perturbation)
         return SharedWorld(robots, self.scene)
 
-    def mapping_unit(self, world) -> "CellMappingUnit":
-        """Every robot's platform mapping against its view of `world`, in one unit."""
+    def mapping_unit(self, world, perturbation=None) -> "CellMappingUnit":
+        """Every robot's platform mapping against its view of `world`, in one unit; with a perturbation, each
+        robot's endpoint adds its latency and noise (cotwin.mapping.perturbed; robot k's noise seeded with the
+        perturbation's seed + k), as a plant's robots do."""
+        from dataclasses import replace as changed
+
         from ..mapping.endpoint import SimulatedEndpoint
+        from ..mapping.perturbed import PerturbedEndpoint
         from ..mapping.runtime import Mapping
         from .mapping_unit import MappingUnit
 
         units = {}
-        for robot in self.robots:
+        for k, robot in enumerate(self.robots):
             models = robot.system.models
             profile = models.calibration.profile if models.calibration is not None else None
             endpoint = SimulatedEndpoint(world.view(robot.name), profile, robot.geometry)
+            if perturbation is not None:
+                endpoint = PerturbedEndpoint(endpoint, changed(perturbation, seed=perturbation.seed + k))
             mapping = Mapping(models.project, endpoint, geometry=robot.geometry, mirrors=self.spec.mirror_joints,
                               monitor=self.spec.readings)
             units[robot.name] = MappingUnit(MAPPING.name, models.program, mapping, robot.system.command_events)
         return CellMappingUnit(CELL_MAPPING.name, world, units)
 
-    def instantiate(self, dmodel_fmu: str | Path, world=None) -> System:
-        """A fresh, checked co-simulation of the cell (in `world`, by default a fresh nominal one): the same
-        d-model FMU instantiated once per robot."""
+    def instantiate(self, dmodel_fmu: str | Path, world=None, perturbation=None) -> System:
+        """A fresh, checked co-simulation of the cell (in `world`, by default a fresh nominal one; its robots'
+        endpoints perturbed by `perturbation`'s latency and noise, if given): the same d-model FMU
+        instantiated once per robot."""
         from ..cosim.isolated import fmu_unit
 
         units = []
@@ -279,7 +287,7 @@ class CellSystem:
                 units.append(source)
             units.append(fmu_unit(dmodel_of(robot.name).name, dmodel_fmu, robot.system.isolated,
                                   self.spec.unit_timeout))
-        units.append(self.mapping_unit(world if world is not None else self.world()))
+        units.append(self.mapping_unit(world if world is not None else self.world(), perturbation))
         return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters,
                          models=self.digests)
 

@@ -2,7 +2,8 @@
 
 The PT is the cell's plant: the same robots in a world perturbed as the project's `[plant]` table says
 (payload at each robot's tool, friction and damping on each robot's joints: cotwin.pmodel.perturbation
-perturbed_world); the DT is the nominal cell. Both are the cell's co-simulation (cotwin.twin.cell), the
+perturbed_world), each robot seen through the plant's latency and noise (cotwin.mapping.perturbed); the
+DT is the nominal cell. Both are the cell's co-simulation (cotwin.twin.cell), the
 same commands played into each, stepped in lockstep on one clock: step k of the PT, then of the DT, then
 the services look at both:
 - deviation per robot: one DeviationMonitor per robot over its monitored variables (its q<i>, ...), its
@@ -13,7 +14,7 @@ Results: DIR/pt/outputs.csv, DIR/dt/outputs.csv, DIR/deviation.json (a report pe
 
 Observers get `twin_started(twin)` and `twin_step(twin, k, t)` as a live twin's do (the page's feed,
 cotwin.twin.dashboard.feed.CellFeed). Not yet: a PT over OPC UA (a plant server of the whole cell), the
-perturbation's latency and noise (an endpoint's, not the world's), what-if forks.
+what-if forks.
 """
 
 from __future__ import annotations
@@ -100,11 +101,6 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
         raise CotwinError([Finding(spec.location("pt"), Severity.ERROR, "[pt]: a cell of several robots is twinned "
                                    "with its own perturbed plant ([plant]) as its PT; another PT is not done yet")])
     plant = spec.plant or Perturbation()
-    unsupported = [key for key, value in (("latency_ms", plant.latency_ms), ("noise", plant.noise)) if value]
-    if unsupported:
-        raise CotwinError([Finding(spec.location("plant", key), Severity.ERROR, f"[plant] {key}: a cell's plant "
-                                   "perturbs its world (payload, friction, damping); latency and noise of its robots "
-                                   "are not done yet") for key in unsupported])
     out = Path(out)
     step = spec.step if step is None else step
     end = spec.end if end is None else end
@@ -123,8 +119,8 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
             chain = [CSVWriter(out / side / "outputs.csv"), outcomes[side]]
             if side == "pt" and (spec.realtime if realtime is None else realtime):
                 chain.append(RealTimePacer())
-            executions[side] = Execution(cell.instantiate(fmu, worlds[side]), make_algorithm(algorithm or spec.algorithm),
-                                         step, 0.0, chain)
+            cosim = cell.instantiate(fmu, worlds[side], plant if side == "pt" else None)
+            executions[side] = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain)
         monitors = {r.name: DeviationMonitor([r.scoped(v) for v in spec.deviation.variables or
                                               r.system.log[MAPPING.name]],
                                              spec.deviation.absolute, spec.deviation.relative,

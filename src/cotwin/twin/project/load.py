@@ -239,10 +239,12 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     files = {k: existing("models", k, getattr(models, k, None)) for k in ("dmodel", "pmodel", "mapping")}
     robots = _robots(file, s.robots, problems)
     for key in ("pmodel", "mapping"):
+        if models is None:  # [models] is not a table: reported where it is read
+            break
         if robots and getattr(models, key) is not None:
             problems.append(Finding(file.location(("models", key)), Severity.ERROR,
                                     f"[models] {key}: a cell's robots name their own ([[robots]] {key})"))
-        elif not robots and getattr(models, key) is None and "models" in file.data:
+        elif not robots and getattr(models, key) is None:
             problems.append(Finding(file.location(("models",)), Severity.ERROR, f"[models] needs '{key}'"))
     if robots:
         files["pmodel"], files["mapping"] = robots[0].pmodel, robots[0].mapping
