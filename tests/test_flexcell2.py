@@ -337,3 +337,10 @@ def test_the_page_shows_both_robots_their_variables_and_both_dmodels(tmp_path):
 
 def rows_of_csv(path: Path) -> list[dict]:
     return [{k: v for k, v in r.items() if v not in ("true", "false", "")} for r in rows(path)]
+
+
+def test_a_cell_run_is_deterministic(tmp_path):
+    cell = CellSystem(load_project(CELL / "collide.toml"))
+    first = run_cell(cell, tmp_path / "a", end=3.0, plot=False)
+    second = run_cell(cell, tmp_path / "b", end=3.0, plot=False)
+    assert first.csv.read_text() == second.csv.read_text() and first.contacts == second.contacts
