@@ -70,6 +70,9 @@ def check_cell_settings(spec: TwinProject) -> None:
     """What a cell's project may not say (yet), located: [figure] panels, [monitor] readings (a reading's path
     names one robot's p-model), a [cosim] log name not scoped by a robot of the cell."""
     problems = []
+    if spec.plan is not None and spec.plan.suffix == ".toml":
+        problems.append(Finding(spec.location("scenario", "commands"), Severity.ERROR, "[scenario] commands: a cell's "
+                                "commands are a CSV plan whose columns are ROBOT.port ([scenario] plan)"))
     if spec.panels is not None:
         problems.append(Finding(spec.location("figure", "panels"), Severity.ERROR, "[figure] panels: a cell's figure is "
                                 "chosen from its models (panels of its own are not done yet)"))
