@@ -344,3 +344,24 @@ def test_a_cell_run_is_deterministic(tmp_path):
     first = run_cell(cell, tmp_path / "a", end=3.0, plot=False)
     second = run_cell(cell, tmp_path / "b", end=3.0, plot=False)
     assert first.csv.read_text() == second.csv.read_text() and first.contacts == second.contacts
+
+
+def test_the_cells_artefacts_run_in_the_multimodel_master_as_cotwin_run_does(tmp_path):
+    """cotwin build writes one d-model FMU instantiated per robot in multimodel.json; cotwin simulate of it
+    (the Python FMUs of the sources and the cell's mapping) writes the very rows cotwin run writes."""
+    import json
+    import subprocess
+    import sys
+
+    from cotwin.twin.build import build
+
+    cell = CellSystem(load_project(CELL / "collide.toml"))
+    written = build(cell, tmp_path / "build")
+    model = json.loads(written["multimodel"].read_text())
+    assert model["fmus"] == {"{controller}": "controller.fmu", "{dmodel}": "dmodel.fmu", "{mapping}": "mapping.fmu"}
+    assert model["connections"]["{mapping}.cell.panda.collision"] == ["{dmodel}.panda.collision"]
+    done = subprocess.run([sys.executable, "-m", "cotwin", "simulate", str(written["multimodel"]), "-o",
+                           str(tmp_path / "simulated.csv")], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0 and "corrupted" not in done.stderr, done.stderr
+    ran = run_cell(cell, tmp_path / "run", plot=False)
+    assert rows(tmp_path / "simulated.csv") == rows(ran.csv)

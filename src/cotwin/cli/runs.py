@@ -24,9 +24,6 @@ def build(project: str, out: str, cc: str) -> None:
     from ..twin.run import load
 
     system = load(project, cells=True)
-    if system.spec.robots:
-        raise CotwinError(f"{system.spec.path}: the artefacts of a cell of several robots (its FMUs for Maestro, "
-                          "multimodel.json) are not built yet: `cotwin run` and `cotwin twin` run it")
     with folder_lock(Path(out)):
         written = build_all(system, out, cc)
     for path in written.values():

@@ -276,6 +276,51 @@ class CellSystem:
             units[robot.name] = MappingUnit(MAPPING.name, models.program, mapping, robot.system.command_events)
         return CellMappingUnit(CELL_MAPPING.name, world, units)
 
+    def source_ports(self) -> list[str]:
+        """Every robot's command source's ports, together: one source FMU serves every robot's instance."""
+        return list(dict.fromkeys(p for robot in self.robots for p in robot.system.source_ports))
+
+    def python_unit(self, role: str, instance: str):
+        """The unit a Python FMU of the cell carries (cotwin.twin.fmu_slave): the cell's mapping, or robot
+        `instance`'s command source (any other instance, e.g. a packager's, gets the first robot's) with every
+        robot's source ports, so that one FMU file describes them all."""
+        if role == "mapping":
+            return self.mapping_unit(self.world())
+        robot = next((r for r in self.robots if r.name == instance), self.robots[0])
+        if robot.source is None or role != robot.system.source.instance:
+            raise CotwinError(f"unknown unit role '{role}' for the cell {self.spec.path}")
+        from .scenario import ScenarioUnit
+
+        if robot.system.source.instance == "controller":
+            return ScenarioUnit(robot.source.name, self.program, robot.system.commands, self.source_ports())
+        return robot.system.source_unit()
+
+    def multimodel(self, realtime: bool | None = None) -> dict:
+        """Maestro's multimodel.json of the cell: one FMU per kind ({dmodel}, {controller} or {rabbitmq},
+        {mapping}), instantiated once per robot where it is the robot's (the d-model FMU's reuse, as Maestro
+        writes it); the `cotwin` key (which Maestro ignores) holds the delays."""
+        connections: dict[str, list[str]] = {}
+        for c in self.connections:
+            connections.setdefault(f"{c.source}.{c.output}", []).append(f"{c.target}.{c.input}")
+        spec = self.spec
+        return {
+            "fmus": {u.key: u.fmu for u in self.units},
+            "connections": connections,
+            "parameters": {f"{unit}.{name}": value for unit, values in self.parameters.items()
+                           for name, value in values.items()},
+            "logVariables": self.log,
+            "algorithm": {"type": "fixed-step", "size": spec.step},
+            "startTime": 0.0,
+            "endTime": spec.end,
+            "simulationProgramDelay": spec.realtime if realtime is None else realtime,
+            # the Python FMUs (the cell's mapping, every robot's source) in processes of their own: in the master's
+            # process (pythonfmu's library loaded once per instance) a cell's run sometimes ended with the heap
+            # corrupted at exit ("corrupted double-linked list"); isolated, cotwin simulate ends cleanly
+            "cotwin": {"delayed": sorted(self.delayed), "algorithm": spec.algorithm,
+                       "isolate": {CELL_MAPPING.name: True,
+                                   **{r.source.name: True for r in self.robots if r.source is not None}}},
+        }
+
     def instantiate(self, dmodel_fmu: str | Path, world=None, perturbation=None) -> System:
         """A fresh, checked co-simulation of the cell (in `world`, by default a fresh nominal one; its robots'
         endpoints perturbed by `perturbation`'s latency and noise, if given): the same d-model FMU

@@ -48,9 +48,15 @@ def simulated_endpoint(system: TwinSystem):
     return SimulatedEndpoint(sim, calibration and calibration.profile, calibration and calibration.geometry)
 
 
-def python_unit(project: str | Path, role: str):
-    """A cotwin in-process unit of a twin project by role (inside cotwin's Python FMUs)."""
-    system = TwinSystem(load_project(project))
+def python_unit(project: str | Path, role: str, instance: str = ""):
+    """A cotwin in-process unit of a twin project by role (inside cotwin's Python FMUs). In a cell of several
+    robots the FMU's `instance` (its instance name's last part) names the robot whose command source it is."""
+    spec = load_project(project)
+    if spec.robots:
+        from .cell import CellSystem
+
+        return CellSystem(spec).python_unit(role, instance.rsplit(".", 1)[-1])
+    system = TwinSystem(spec)
     if role == "mapping":
         return system.mapping_unit(lambda: dt_endpoint(system))
     if system.source is not None and role == system.source.instance:
