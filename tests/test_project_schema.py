@@ -29,12 +29,14 @@ def ur5e(tmp_path) -> Path:
 
 
 def test_every_example_project_is_found():
-    assert len(PROJECTS) >= 6 and {p.parent.name for p in PROJECTS} == {"ur5e", "ur3e", "turtlebot"}
+    assert len(PROJECTS) >= 6 and {p.parent.name for p in PROJECTS} == {"ur5e", "ur3e", "turtlebot", "flexcell2"}
 
 
 def _resolved(value):
     if isinstance(value, Path):
         return value.resolve()
+    if isinstance(value, tuple):  # e.g. [[robots]]
+        return tuple(_resolved(v) for v in value)
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return dataclasses.replace(value, **{f.name: _resolved(getattr(value, f.name)) for f in dataclasses.fields(value)})
     return value

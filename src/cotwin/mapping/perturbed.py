@@ -30,6 +30,8 @@ class _Pending:
 class PerturbedEndpoint(Endpoint):
     """A SimulatedEndpoint seen through the perturbation's actuator latency and measurement noise."""
 
+    senses_contacts = True  # its simulator's contacts, as the inner endpoint's
+
     def __init__(self, inner: SimulatedEndpoint, perturbation: Perturbation):
         self.inner = inner
         self.perturbation = perturbation
@@ -109,6 +111,22 @@ class PerturbedEndpoint(Endpoint):
         if end - self.sim.time > half_step:
             self.inner.advance(end - self.sim.time)
         self._sample()
+
+    # ---- on a world of several robots (cotwin.mapping.endpoint.advance_shared steps it) ----
+    def next_due(self) -> float | None:
+        return self._pending[0].due if self._pending else None
+
+    def apply_due(self) -> None:
+        """Apply the goals due by now (within half a physics step)."""
+        now, half_step = self.sim.time, self.sim.timestep / 2
+        while self._pending and self._pending[0].due <= now + half_step:
+            self.inner.command(self._pending.pop(0).goals)
+
+    def set_point(self, steps: int) -> bool:
+        return self.inner.set_point(steps)
+
+    def robot_contacts(self) -> set[str]:
+        return self.inner.robot_contacts()
 
     def read_sensors(self) -> dict[str, float]:
         return dict(self._sensors)

@@ -30,7 +30,9 @@ class Endpoint:
     - `geometry`: the cell's geometry when the platform knows it (the embedded simulator's scene);
     - `sim`: the MuJoCo simulator, when the platform runs one in this process (contacts, forks);
     - `ends()`: when the platform's data ends, if it does (a replayed log holds its last sample after);
-    - `perturbation`: the perturbation a perturbed plant applies.
+    - `perturbation`: the perturbation a perturbed plant applies;
+    - `robot_contacts()`: the other robots its robot touched in the step just made (a mapping's
+      `robot_contact()`); `senses_contacts` says whether it can tell (a remote robot cannot).
     """
 
     tree: KinematicTree
@@ -39,6 +41,7 @@ class Endpoint:
     perturbation = None  # cotwin.pmodel.perturbation.Perturbation
     placeable = False
     saves_state = False
+    senses_contacts = False
 
     def start(self) -> None:
         raise NotImplementedError
@@ -79,6 +82,9 @@ class Endpoint:
     def actuator_names(self) -> list[str] | None:
         """The actuator paths this platform takes; None: it does not say."""
         return None
+
+    def robot_contacts(self) -> set[str]:
+        return set()
 
     def snapshot(self) -> dict:
         raise CotwinError(f"the platform ({type(self).__name__}) cannot save its state")

@@ -46,9 +46,15 @@ def simulated_endpoint(system: TwinSystem):
     return SimulatedEndpoint(sim, calibration and calibration.profile, calibration and calibration.geometry)
 
 
-def python_unit(project: str | Path, role: str):
-    """A cotwin in-process unit of a twin project by role (inside cotwin's Python FMUs)."""
-    system = TwinSystem(load_project(project))
+def python_unit(project: str | Path, role: str, instance: str = ""):
+    """A cotwin in-process unit of a twin project by role (inside cotwin's Python FMUs). In a cell of several
+    robots the FMU's `instance` (its instance name's last part) names the robot whose command source it is."""
+    spec = load_project(project)
+    if spec.robots:
+        from .cell import CellSystem
+
+        return CellSystem(spec).python_unit(role, instance.rsplit(".", 1)[-1])
+    system = TwinSystem(spec)
     if role == "mapping":
         return system.mapping_unit(lambda: dt_endpoint(system))
     if system.source is not None and role == system.source.instance:
@@ -234,9 +240,21 @@ def monitored_panels(system: TwinSystem, number: str) -> list[tuple[str, list[st
              names, "default") for k, ((what, unit), names) in enumerate(groups.items())]
 
 
-def load(project: str | Path | TwinProject) -> TwinSystem:
-    """The TwinSystem of a project file (or an already read project)."""
-    return TwinSystem(project if isinstance(project, TwinProject) else load_project(project))
+def load(project: str | Path | TwinProject, cells: bool = False) -> TwinSystem:
+    """The TwinSystem of a project file (or an already read project). A cell of several robots ([[robots]])
+    is a CellSystem (cotwin.twin.cell) for a caller that takes one (`cells`), else a located error: what
+    takes a twin of one robot cannot take it."""
+    spec = project if isinstance(project, TwinProject) else load_project(project)
+    if spec.robots:
+        if not cells:
+            from ..diagnostics import Finding, Severity
+
+            raise CotwinError([Finding(spec.location("robots"), Severity.ERROR, "[[robots]]: this takes a twin of "
+                                       "one robot; a cell of several robots runs under `cotwin run` and `cotwin twin`")])
+        from .cell import CellSystem
+
+        return CellSystem(spec)
+    return TwinSystem(spec)
 
 
 __all__ = ["MAPPING", "TwinRun", "dt_endpoint", "load", "python_unit", "run_twin"]

@@ -45,11 +45,12 @@ from pathlib import Path
 
 from ... import safejson
 from ...diagnostics import CotwinError, PicklableError
+from ..cell import CellSystem
 from ..system import MAPPING, RABBITMQ, TwinSystem
 from ..whatif import finite as _finite
 from .access import Access, Gate
-from .describe import describe
-from .feed import DashboardFeed
+from .describe import describe, describe_cell
+from .feed import CellFeed, DashboardFeed
 from .server import (HEADER_SECONDS, beyond_loopback, bound_socket, check_tls, protocol, serve_in_thread,
                      ws_protocol)
 
@@ -212,12 +213,14 @@ class Dashboard:
         self.period = period
         self.max_rate = max_rate
         self.backlog = backlog
-        self.feed = DashboardFeed(system) if system is not None and mode != "history" else None
+        cell = isinstance(system, CellSystem)  # a cell of several robots: its own description and feed
+        self.feed = (CellFeed if cell else DashboardFeed)(system) if system is not None and mode != "history" else None
         sides = ["pt", "dt"] if mode == "twin" else ["twin"]
-        self.whatif_url = whatif_url if system is not None and mode == "twin" else None  # the twin answers what-if
-        self.model = describe(system, sides, mode, {"whatif": self.whatif_url is not None}) if system is not None else None
+        self.whatif_url = whatif_url if system is not None and mode == "twin" and not cell else None  # what-if
+        self.model = None if system is None else describe_cell(system, sides, mode) if cell else \
+            describe(system, sides, mode, {"whatif": self.whatif_url is not None})
         self.publisher = None
-        if system is not None and system.source is RABBITMQ and mode != "history":
+        if system is not None and not cell and system.source is RABBITMQ and mode != "history":
             from ..rabbitmq import port_scalars, port_types
             from .commands import PagePublisher
 

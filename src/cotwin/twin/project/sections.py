@@ -85,6 +85,12 @@ def _name(value: str) -> str | None:
     return "must not be empty" if not value.strip() else None
 
 
+def _robot_name(value: str) -> str | None:
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", value):
+        return f"must be an identifier (letters, digits, '_'; it scopes names and plan columns), got {shown(value)}"
+    return None
+
+
 def _history_url(value: str) -> str | None:
     if not value.startswith(("sqlite:///", "postgresql://", "postgresql+", "postgres://")):
         return f"{value[:40]!r} is not a sqlite:///FILE or postgresql://... URL"
@@ -175,8 +181,10 @@ class Models:
     """Paths are relative to the project file."""
 
     dmodel: str = setting("the d-model (RoboSim .rst)", Key("str", required=True), path=True)
-    pmodel: str = setting("the p-model (.pm)", Key("str", required=True), path=True)
-    mapping: str = setting("the platform mapping (.pm)", Key("str", required=True), path=True)
+    pmodel: str | None = setting("the p-model (.pm); required unless [[robots]] names a cell's robots",
+                                 Key("str"), path=True)
+    mapping: str | None = setting("the platform mapping (.pm); required unless [[robots]] names a cell's robots",
+                                  Key("str"), path=True)
     module: str | None = setting("the d-model module (default: the file's only one)", Key("str", check=_name))
     pmodel_name: str | None = setting("the p-model's name (default: the file's only one)", Key("str", check=_name))
     fmu: str | None = setting("a d-model FMU built elsewhere, run in place of the one cotwin builds from dmodel "
@@ -246,6 +254,22 @@ class Platform:
     base: str = setting('the robot\'s base: fixed to the world, or "free" (a mobile robot)',
                         Key("str", "fixed", choices=("fixed", "free")))
     stand_in: tuple[StandIn, ...] = setting("shapes standing in for unreadable meshes", items=StandIn)
+
+
+@_section
+class CellRobot:
+    """Each has its own instance of the shared d-model FMU, its own mapping and its own commands."""
+
+    name: str = setting("its name: the scope of its names in the shared world, of its units ({dmodel}.NAME) and of "
+                        "its plan columns (NAME.port)", Key("str", required=True, check=_robot_name))
+    pmodel: str = setting("its p-model (.pm)", Key("str", required=True), path=True)
+    mapping: str = setting("its platform mapping (.pm)", Key("str", required=True), path=True)
+    calibration: str | None = setting("its cell geometry (docs/calibration.md: tool, IK reference); its [plate] is "
+                                      "where the scene's frame is in its own, laid over its base pose", Key("str"),
+                                      path=True)
+    xyz: tuple = setting("its base's position in the scene's frame (m)", Key("list", [0.0, 0.0, 0.0], check=_triple))
+    rpy: tuple = setting("its base's roll, pitch, yaw in the scene's frame (rad)",
+                         Key("list", [0.0, 0.0, 0.0], check=_triple))
 
 
 @_section
@@ -416,6 +440,8 @@ class Convergence:
 # entry here.
 SECTIONS: dict[str, Any] = {
     "models": setting("The three models.", Key("table", required=True), section=Models),
+    "robots": setting("A cell of several robots in one scene (the scene built from the first one's mapping); "
+                      "absent: the one robot of [models].", items=CellRobot),
     "scenario": setting("Where commands come from.", section=Scenario),
     "platform": setting("The DT's robot.", section=Platform),
     "world": setting("A world to walk in, written here instead of a file named by [platform] world; its keys are "
