@@ -98,6 +98,23 @@ def test_an_endpoint_kind_registered_outside_the_core_is_used_by_a_project_and_o
     assert calls[-1] == ("ended", "done", None)
 
 
+def test_a_registered_kind_says_which_pt_keys_it_takes(tmp_path):
+    register_endpoint(EndpointKind("queue-only", CountingEndpoint, ("pt",), "a test's PT", keys=("queue",)))
+    try:
+        project = project_with_pt(tmp_path, '[pt]\nendpoint = "queue-only"\nqueue = "q"\nurl = "opc.tcp://h:1"')
+        system = load(project)
+        with pytest.raises(CotwinError) as err:
+            LiveTwin(system, tmp_path / "out", end=1.0).run()
+    finally:
+        from cotwin.twin import endpoints
+
+        endpoints._KINDS.pop("queue-only", None)
+    (finding,) = err.value.findings
+    assert finding.message == "[pt] url does not apply to endpoint 'queue-only' (it takes queue)"
+    assert finding.location.line == project.read_text().splitlines().index('url = "opc.tcp://h:1"') + 1
+    assert not (tmp_path / "out" / "dmodel.fmu").exists()  # said before the d-model was built
+
+
 def test_an_unknown_endpoint_kind_is_a_located_error_listing_the_known_ones(tmp_path):
     system = load(project_with_pt(tmp_path, '[pt]\nendpoint = "carrier-pigeon"'))
     with pytest.raises(CotwinError) as err:

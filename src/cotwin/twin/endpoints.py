@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Callable
 
 from ..diagnostics import CotwinError, Finding, Severity
 from ..mapping.profile import robot_convention
-from .project import PTSettings
+from .project import PT_KEYS, PTSettings
 
 if TYPE_CHECKING:
     from ..mapping.platform import Endpoint
@@ -31,12 +31,14 @@ SIDES = {"pt": "[pt] endpoint", "dt": "[platform] endpoint"}
 @dataclass(frozen=True)
 class EndpointKind:
     """A kind of platform endpoint: `make(system, settings)` builds one; `sides` says which side of a twin
-    may use it ("pt", "dt")."""
+    may use it ("pt", "dt"); `keys` the [pt] keys it reads besides `endpoint` (None: any; one it would
+    ignore is an error at the key: core's kinds are checked so as the project is read)."""
 
     name: str
     make: Callable[["TwinSystem", PTSettings], "Endpoint"]
     sides: tuple[str, ...] = ("pt", "dt")
     doc: str = ""
+    keys: tuple[str, ...] | None = None
 
 
 _KINDS: dict[str, EndpointKind] = {}
@@ -91,9 +93,18 @@ def side_settings(system: "TwinSystem", side: str) -> PTSettings:
 
 
 def check_endpoints(system: "TwinSystem", *sides: str) -> None:
-    """The kinds the project names for these sides are known (checked before anything is built)."""
+    """The kinds the project names for these sides are known, and the PT's takes every [pt] key written
+    (checked before anything is built)."""
     for side in sides:
-        endpoint_kind(system, side, side_settings(system, side).endpoint)
+        kind = endpoint_kind(system, side, side_settings(system, side).endpoint)
+        if side == "pt" and kind.keys is not None:
+            spec = system.spec
+            ignored = [key[1] for key in spec.locations if len(key) == 2 and key[0] == "pt"
+                       and key[1] not in ("endpoint", *kind.keys)]
+            if ignored:
+                raise CotwinError([Finding(spec.location("pt", key), Severity.ERROR,
+                                           f"[pt] {key} does not apply to endpoint '{kind.name}' (it takes "
+                                           f"{', '.join(kind.keys) or 'no other key'})") for key in ignored])
 
 
 def make_endpoint(system: "TwinSystem", side: str) -> "Endpoint":
@@ -147,9 +158,11 @@ def _mujoco(system: "TwinSystem", settings: PTSettings):
     return simulated_endpoint(system)
 
 
-register_endpoint(EndpointKind("opcua", _opcua, ("pt",), "a plant served over OPC UA (cotwin plant) at url"))
-register_endpoint(EndpointKind("replay", _replay, ("pt",), "a recorded RTDE log, replayed"))
-register_endpoint(EndpointKind("broker", _broker, ("pt", "dt"), "a robot behind RabbitMQ, on its request queue"))
-register_endpoint(EndpointKind("rtde", _rtde, ("pt",), "a UR robot over RTDE at url"))
+register_endpoint(EndpointKind("opcua", _opcua, ("pt",), "a plant served over OPC UA (cotwin plant) at url",
+                               PT_KEYS["opcua"]))
+register_endpoint(EndpointKind("replay", _replay, ("pt",), "a recorded RTDE log, replayed", PT_KEYS["replay"]))
+register_endpoint(EndpointKind("broker", _broker, ("pt", "dt"), "a robot behind RabbitMQ, on its request queue",
+                               PT_KEYS["broker"]))
+register_endpoint(EndpointKind("rtde", _rtde, ("pt",), "a UR robot over RTDE at url", PT_KEYS["rtde"]))
 register_endpoint(EndpointKind("mujoco", _mujoco, ("dt",), "the embedded MuJoCo simulator (calibrated when the "
-                                                        "project names a calibration)"))
+                                                        "project names a calibration)", ()))
