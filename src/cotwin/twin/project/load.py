@@ -252,6 +252,8 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     _timing(file, cosim, problems)
     if s.pt is not None:  # [pt] as written, against its own endpoint (a --pt-log replays in its place)
         problems.extend(_pt_keys(file, s.pt))
+    if any(p.severity is Severity.ERROR for p in problems):
+        problems.extend(_model_errors([files[k] for k in ("dmodel", "pmodel", "mapping")]))
     raise_problems(problems)
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.module, models.pmodel_name,
@@ -274,6 +276,20 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
                 "stand_in": [_thawed(item) for item in platform.stand_in], "figure": _table(file.data, "figure")}
     spec.settings, spec.file, spec.pt_log = s, file, pt_log
     return spec
+
+
+def _model_errors(paths: list[Path | None]) -> list[Finding]:
+    """The errors of the model files a project names (read when the project itself has errors, so that the
+    models' are reported with them rather than once the project is fixed); none if a file is missing."""
+    from ...robosim.check import load_checked
+
+    if not all(p is not None and p.is_file() for p in paths):
+        return []
+    try:
+        load_checked(paths)
+    except CotwinError as err:
+        return [f for f in err.findings if f.severity is Severity.ERROR]
+    return []
 
 
 def _table(data: dict, key: str) -> dict:
