@@ -263,10 +263,11 @@ def dumps(tables: dict[str, dict], header: str = "") -> str:
     written as their shortest exact text, so that reading gives back the very same values."""
     lines = [f"# {line}" if line else "#" for line in header.splitlines()]
     for table, values in tables.items():
-        if lines:
-            lines.append("")
-        lines.append(f"[{table}]")
-        lines.extend(f"{key} = {_toml_value(value)}" for key, value in values.items() if value is not None)
+        for item in values if isinstance(values, list) else [values]:  # a list: an array of tables ([[name]])
+            if lines:
+                lines.append("")
+            lines.append(f"[[{table}]]" if isinstance(values, list) else f"[{table}]")
+            lines.extend(f"{key} = {_toml_value(value)}" for key, value in item.items() if value is not None)
     return "\n".join(lines) + "\n"
 
 

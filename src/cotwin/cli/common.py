@@ -35,7 +35,7 @@ ON_UNIT_FAILURE = click.option(
 def said_restarts(units) -> None:
     """Say which units were restarted from a state during the run (each restart was logged as it happened)."""
     for unit in units:
-        restarts = getattr(unit, "restarts", None)
+        restarts = unit.restarts
         if restarts:
             times = ", ".join(f"{t:g}" for t, _ in restarts[:20]) + (", ..." if len(restarts) > 20 else "")
             click.echo(f"unit {unit.name}: restarted {len(restarts)} time(s) from its last good state, at t = {times} s",

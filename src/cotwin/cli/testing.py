@@ -222,7 +222,7 @@ def _pt_endpoint(system, pt: str):
         if spec is None:
             raise click.BadParameter(f"{system.spec.path} has no [pt] table: name the plant's URL (--pt opc.tcp://...)",
                                      param_hint="--pt")
-        return (lambda: pt_endpoint(system)), f"the PT ({spec.endpoint}{' at ' + spec.url if getattr(spec, 'url', None) else ''})"
+        return (lambda: pt_endpoint(system)), f"the PT ({spec.endpoint}{' at ' + spec.url if spec.url else ''})"
     from ..mapping.opcua import OPCUAEndpoint
 
     return (lambda: OPCUAEndpoint(system.models.tree, pt)), f"the PT (OPC UA plant at {pt})"

@@ -78,13 +78,14 @@ def load_models(spec: TwinProject) -> TwinModels:
     from ..dmodel.program import build_program
     from ..mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints
     from ..pmodel import ik
+    from ..mapping.profile import profile_rays
     from ..pmodel.tree import build_tree
     from ..robosim.check import load_checked
     from ..robosim.pmodel_elements import Mapping as MappingModel
 
     project = load_checked(spec.model_files)
     program = build_program(project, spec.module)
-    tree = build_tree(project, spec.pmodel_name, spec.stand_ins)
+    tree = build_tree(project, spec.pmodel_name, spec.stand_ins, profile_rays(spec.profile))  # the robot's scanner
     problems: list[Finding] = []  # the checks below report together (with the plan's, see the end)
     unused = sorted(set(spec.stand_ins) - tree.stood_in)
     if unused:

@@ -32,6 +32,7 @@ from ..config import did_you_mean
 from ..diagnostics import CotwinError
 from .build import dmodel_fmu
 from ..logcap import CappedLog
+from ..service import BackgroundService
 from .scenario import Command
 from .system import DMODEL, MAPPING, TwinSystem
 from .outcomes import CommandLedger, CommandOutcome
@@ -65,7 +66,7 @@ class _Contacts:
         from ..pmodel import ik
         from ..pmodel.mjcf import ROBOT_CONTYPE
 
-        self.sim = getattr(endpoint, "sim", None)
+        self.sim = endpoint.sim
         if self.sim is None:
             return
         model = self.sim.model
@@ -245,7 +246,7 @@ def _worker_predict(plan_json: list, state: bytes, horizon: float, decimate: int
     return predict(system, plan, state, horizon=horizon, artefacts=artefacts, decimate=decimate).as_dict()
 
 
-class WhatIfService:
+class WhatIfService(BackgroundService):
     """Answers what-if requests of a live twin sent over the broker, without disturbing it.
 
     A request is a JSON object `{"plan": [{"time": s, "event": name, "args": {...}}], "horizon": s,
@@ -270,6 +271,7 @@ class WhatIfService:
         from ..mapping.amqp import connect, declare_exchange
         from .rabbitmq import EVENTS
 
+        BackgroundService.__init__(self, "cotwin what-if")
         self.exchange, self.routing_key = exchange, routing_key
         self.requests: queue.Queue = queue.Queue()
         self.answered = 0
@@ -296,12 +298,12 @@ class WhatIfService:
             channel.queue_bind(self.queue, exchange, routing_key=key)
         channel.basic_consume(self.queue, self._on_request, auto_ack=True)
         self._channel = channel
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="cotwin what-if", daemon=True)
-        self._thread.start()
+        self.start()
 
-    def _run(self) -> None:
-        while not self._stop.is_set():
+    def serve(self) -> None:
+        """The broker's thread: requests taken as they come, until the service stops or the broker is lost."""
+        self.ready()
+        while not self.stopping.is_set():
             try:
                 self._connection.process_data_events(time_limit=0.05)
             except Exception:  # noqa: BLE001 - a lost broker ends the service, not the twin
@@ -424,8 +426,7 @@ class WhatIfService:
             process.join(max(0.0, deadline - time.monotonic()))
             if process.is_alive():
                 process.kill()
-        self._stop.set()
-        self._thread.join(5)
+        self.stop(5)
         self.log.close()
         try:
             self._connection.close()

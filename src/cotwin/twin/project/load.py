@@ -36,6 +36,19 @@ class PTSettings:
     queue: str = "cotwin.robot"
     offset: float | None = None  # replay: log time at co-simulation time 0 (default: aligned on the first motion)
 
+@dataclass(frozen=True)
+class RobotSpec:
+    """One robot of a cell ([[robots]]) as resolved: its files found, its base pose in the scene's frame."""
+
+    name: str
+    pmodel: Path
+    mapping: Path
+    calibration: Path | None
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
+    index: int  # its place in [[robots]] (where its problems are reported)
+
+
 @dataclass
 class TwinProject:
     """A project resolved for running: its files found, its world, stand-ins and plant built. `settings` are
@@ -82,6 +95,7 @@ class TwinProject:
     file: TomlFile | None = field(default=None, repr=False)  # the file read (its data and where each key is)
     pt_log: Path | None = None  # a command's --pt-log, in place of [pt] log
     profile: Path | None = None  # [robot] profile: the controller's conventions (cotwin.mapping.profile)
+    robots: tuple[RobotSpec, ...] = ()  # [[robots]]: a cell of several (pmodel, mapping: the first one's)
 
     @property
     def model_files(self) -> list[Path]:
@@ -95,7 +109,7 @@ class TwinProject:
     def inputs(self) -> list[Path]:
         """Every file the project reads (no output of a run may replace one of them)."""
         found = [self.path, *self.model_files, self.plan, self.pt.log if self.pt else None, self.calibration,
-                 self.world_file, self.profile]
+                 self.world_file, self.profile, *(p for r in self.robots for p in (r.pmodel, r.mapping, r.calibration))]
         return [p for p in found if p is not None]
 
     def location(self, *key) -> Location:
@@ -173,6 +187,11 @@ class TwinProject:
                 value = _get(settings, path)
                 if spec.path and value is not None and (sections is None or path[0] in sections):
                     settings = replace_path(settings, path, rebase((self.path.parent / value).resolve()))
+            if settings.robots and (sections is None or "robots" in sections):  # [[robots]]: each one's files
+                settings = dataclasses.replace(settings, robots=tuple(dataclasses.replace(r, **{
+                    key: rebase((self.path.parent / getattr(r, key)).resolve()) for key in ("pmodel", "mapping",
+                                                                                         "calibration")
+                    if getattr(r, key) is not None}) for r in settings.robots))
         written = tables(settings)
         return dumps({k: v for k, v in written.items() if sections is None or k in sections}, header)
 
@@ -234,6 +253,17 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
 
     models = s.models
     files = {k: existing("models", k, getattr(models, k, None)) for k in ("dmodel", "pmodel", "mapping")}
+    robots = _robots(file, s.robots, problems)
+    for key in ("pmodel", "mapping"):
+        if models is None:  # [models] is not a table: reported where it is read
+            break
+        if robots and getattr(models, key) is not None:
+            problems.append(Finding(file.location(("models", key)), Severity.ERROR,
+                                    f"[models] {key}: a cell's robots name their own ([[robots]] {key})"))
+        elif not robots and getattr(models, key) is None:
+            problems.append(Finding(file.location(("models",)), Severity.ERROR, f"[models] needs '{key}'"))
+    if robots:
+        files["pmodel"], files["mapping"] = robots[0].pmodel, robots[0].mapping
     fmu = existing("models", "fmu", getattr(models, "fmu", None))
     scenario, platform, cosim, monitor = s.scenario, s.platform, s.cosim, s.monitor
     sources = [k for k in ("plan", "commands", "rabbitmq") if getattr(scenario, k) is not None]
@@ -269,6 +299,7 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     spec.isolate, spec.unit_timeout = cosim.isolate, float(cosim.unit_timeout)
     spec.convergence = s.convergence
     spec.profile = profile
+    spec.robots = tuple(robots)
     if world_file is not None:
         spec.world_file = world_file.path
     spec.locations = {key: file.location(key) for key in file.where}
@@ -290,6 +321,26 @@ def _model_errors(paths: list[Path | None]) -> list[Finding]:
     except CotwinError as err:
         return [f for f in err.findings if f.severity is Severity.ERROR]
     return []
+
+
+def _robots(file: TomlFile, items: tuple, problems: list[Finding]) -> list[RobotSpec]:
+    """[[robots]] resolved: names used once, files that exist."""
+    out, seen = [], set()
+    for i, r in enumerate(items):
+        if r.name in seen:
+            problems.append(Finding(file.location(("robots", i, "name")), Severity.ERROR,
+                                    f"[[robots]] name: two robots are called {r.name!r}"))
+        seen.add(r.name)
+        paths = {}
+        for key in ("pmodel", "mapping", "calibration"):
+            value = getattr(r, key)
+            paths[key] = None if value is None else file.path.parent / value
+            if value is not None and not paths[key].is_file():
+                problems.append(Finding(file.location(("robots", i, key)), Severity.ERROR,
+                                        f"[[robots]] {key} of {r.name}: no file {paths[key]}"))
+        out.append(RobotSpec(r.name, paths["pmodel"], paths["mapping"], paths["calibration"],
+                             tuple(float(v) for v in r.xyz), tuple(float(v) for v in r.rpy), i))
+    return out
 
 
 def _table(data: dict, key: str) -> dict:
