@@ -170,3 +170,24 @@ def test_an_interrupted_sweep_keeps_the_what_ifs_it_answered(ur5e, tmp_path):
     rows = partial.read_text().splitlines()
     assert f"error: interrupted after {len(rows) - 1} of 64 what-ifs; the {len(rows) - 1} answered are in {partial}" \
         in rest and len(rows) > 1 and not out.exists()
+
+
+def test_a_cell_plans_header_errors_are_at_their_columns_with_the_nearest_name(tmp_path):
+    """A cell's plan said its header's problems at the cell's index (1:3 for the 35th character) and without
+    a suggestion."""
+    from cotwin.twin.cell import read_cell_plan
+    from cotwin.twin.run import load
+
+    program = load(ROOT / "examples" / "ur5e" / "cotwin.toml").models.program
+    plan = tmp_path / "typo.csv"
+    plan.write_text("timestep,ur5e.moveDiscreteCommand,ur5f.MovementArgs_target_X,panda.moveDiscreteComand\n"
+                    "1000,true,1,true\n")
+    with pytest.raises(CotwinError) as err:
+        read_cell_plan(plan, program, ["ur5e", "panda"])
+    said = [str(f) for f in err.value.findings]
+    assert any(s.startswith(f"{plan}:1:10: error: column 'ur5e.moveDiscreteCommand' without its argument")
+               for s in said), said
+    assert any(s.startswith(f"{plan}:1:35: error: column 'ur5f.MovementArgs_target_X': a cell's plan names "
+                            "ROBOT.port, ROBOT one of ur5e, panda; did you mean 'ur5e'?") for s in said), said
+    assert any(s.startswith(f"{plan}:1:62: error: column 'panda.moveDiscreteComand': unknown d-model input "
+                            "'moveDiscreteComand'; did you mean 'moveDiscreteCommand'?") for s in said), said
