@@ -191,3 +191,16 @@ def test_a_cell_plans_header_errors_are_at_their_columns_with_the_nearest_name(t
                             "ROBOT.port, ROBOT one of ur5e, panda; did you mean 'ur5e'?") for s in said), said
     assert any(s.startswith(f"{plan}:1:62: error: column 'panda.moveDiscreteComand': unknown d-model input "
                             "'moveDiscreteComand'; did you mean 'moveDiscreteCommand'?") for s in said), said
+
+
+def test_cotwin_run_of_a_cell_says_which_of_its_tables_it_ignores(tmp_path):
+    """A cell's run returned before the warnings of `cotwin run`: its [plant] and [deviation] (read by its
+    live twin) were silently without effect."""
+    cell = ROOT / "examples" / "flexcell2" / "cotwin.toml"
+    proc = cotwin("run", cell, "-o", tmp_path / "out", "--end", "0.2")
+    assert proc.returncode == 0, proc.stderr
+    lines = cell.read_text().splitlines()
+    for table, readers in (("plant", "cotwin plant, cotwin twin of a cell ([[robots]]: its PT)"),
+                           ("deviation", "cotwin twin, cotwin fleet")):
+        at = lines.index(f"[{table}]") + 1
+        assert f"{cell}:{at}:1: warning: [{table}] applies only to {readers}: cotwin run ignores it" in proc.stderr
