@@ -147,7 +147,8 @@ def test_a_plan_column_of_an_unknown_robot_is_located(tmp_path):
     with pytest.raises(CotwinError) as err:
         read_cell_plan(plan, cell.program, list(ROBOTS))
     finding = err.value.findings[0]
-    assert "kuka.moveDiscreteCommand" in finding.message and (finding.location.line, finding.location.column) == (1, 6)
+    at = plan.read_text().index("kuka.") + 1  # the character column of the cell, not its index
+    assert "kuka.moveDiscreteCommand" in finding.message and (finding.location.line, finding.location.column) == (1, at)
 
 
 def test_the_generic_core_names_neither_robot_nor_the_cell():

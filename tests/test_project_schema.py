@@ -298,3 +298,19 @@ def test_a_model_named_by_a_folder_is_said_to_be_one(ur5e):
     with pytest.raises(CotwinError) as err:
         load_project(path)
     assert str(err.value) == f"{path}:2:1: error: [models] dmodel: {ur5e / '.'} is a folder, not a file"
+
+
+def test_a_projects_errors_come_with_its_models_errors(ur5e):
+    """A typo in the project hid the d-model's syntax error until it was fixed: the models are read too when
+    the project has errors, and their errors said with the project's."""
+    (ur5e / "arm.rst").write_text((ur5e / "arm.rst").read_text().replace("sref stm_ref", "sref stm ref", 1))
+    path = ur5e / "both.toml"
+    path.write_text(MODELS + '[cosim]\nalgorithm = "jacobii"\n')
+    with pytest.raises(CotwinError) as err:
+        load_project(path)
+    said = [str(f) for f in err.value.findings]
+    assert any(s.startswith(f"{ur5e / 'arm.rst'}:") and "unexpected 'stm'" in s for s in said), said
+    assert f"{path}:6:1: error: [cosim] algorithm must be one of 'jacobi', 'gauss-seidel', got 'jacobii'; " \
+           "did you mean 'jacobi'?" in said
+    (ur5e / "plain.toml").write_text(MODELS)
+    assert load_project(ur5e / "plain.toml").dmodel == ur5e / "arm.rst"  # no error of its own: models read later

@@ -170,3 +170,37 @@ def test_an_interrupted_sweep_keeps_the_what_ifs_it_answered(ur5e, tmp_path):
     rows = partial.read_text().splitlines()
     assert f"error: interrupted after {len(rows) - 1} of 64 what-ifs; the {len(rows) - 1} answered are in {partial}" \
         in rest and len(rows) > 1 and not out.exists()
+
+
+def test_a_cell_plans_header_errors_are_at_their_columns_with_the_nearest_name(tmp_path):
+    """A cell's plan said its header's problems at the cell's index (1:3 for the 35th character) and without
+    a suggestion."""
+    from cotwin.twin.cell import read_cell_plan
+    from cotwin.twin.run import load
+
+    program = load(ROOT / "examples" / "ur5e" / "cotwin.toml").models.program
+    plan = tmp_path / "typo.csv"
+    plan.write_text("timestep,ur5e.moveDiscreteCommand,ur5f.MovementArgs_target_X,panda.moveDiscreteComand\n"
+                    "1000,true,1,true\n")
+    with pytest.raises(CotwinError) as err:
+        read_cell_plan(plan, program, ["ur5e", "panda"])
+    said = [str(f) for f in err.value.findings]
+    assert any(s.startswith(f"{plan}:1:10: error: column 'ur5e.moveDiscreteCommand' without its argument")
+               for s in said), said
+    assert any(s.startswith(f"{plan}:1:35: error: column 'ur5f.MovementArgs_target_X': a cell's plan names "
+                            "ROBOT.port, ROBOT one of ur5e, panda; did you mean 'ur5e'?") for s in said), said
+    assert any(s.startswith(f"{plan}:1:62: error: column 'panda.moveDiscreteComand': unknown d-model input "
+                            "'moveDiscreteComand'; did you mean 'moveDiscreteCommand'?") for s in said), said
+
+
+def test_cotwin_run_of_a_cell_says_which_of_its_tables_it_ignores(tmp_path):
+    """A cell's run returned before the warnings of `cotwin run`: its [plant] and [deviation] (read by its
+    live twin) were silently without effect."""
+    cell = ROOT / "examples" / "flexcell2" / "cotwin.toml"
+    proc = cotwin("run", cell, "-o", tmp_path / "out", "--end", "0.2")
+    assert proc.returncode == 0, proc.stderr
+    lines = cell.read_text().splitlines()
+    for table, readers in (("plant", "cotwin plant, cotwin twin of a cell ([[robots]]: its PT)"),
+                           ("deviation", "cotwin twin, cotwin fleet")):
+        at = lines.index(f"[{table}]") + 1
+        assert f"{cell}:{at}:1: warning: [{table}] applies only to {readers}: cotwin run ignores it" in proc.stderr

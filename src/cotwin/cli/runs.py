@@ -62,6 +62,8 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
                                  param_hint="--cycle-period")
     system = load(project, cells=True)
     check_timing(system.spec, step, end)
+    reader = "cotwin run --dashboard" if dashboard and not system.spec.robots else "cotwin run"  # a cell: no history
+    show_warnings(system.spec.ignored_sections(reader))
     if system.spec.robots:
         return _run_cell(system, out, step, end, algorithm, realtime, cc, dashboard, version, serving)
     history = None  # one run records no history; the page lists the store's runs when there is one
@@ -69,7 +71,6 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
         history = database_url(system.spec.history_url, Path(out))
     from ..twin.scenario import after_end, nothing_planned
 
-    show_warnings(system.spec.ignored_sections("cotwin run --dashboard" if dashboard else "cotwin run"))
     show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, system.spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "run", history, serving=serving)
@@ -93,11 +94,12 @@ def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: 
               cc: str, dashboard, version: str, serving: dict) -> None:
     """`cotwin run` of a cell of several robots ([[robots]]): each robot's outcomes and the contacts between them."""
     from ..twin.cell import run_cell
-    from ..twin.scenario import after_end
+    from ..twin.scenario import after_end, nothing_planned
     from .progress import ProgressReport
 
     if version != "2":
         raise click.UsageError("a cell of several robots runs with --fmi 2 (not done yet with 3)")
+    show_warnings(nothing_planned(cell.spec.plan, cell.commands))
     show_warnings(after_end(cell.commands, cell.spec.end if end is None else end))
     dash = start_dashboard(cell, dashboard, "run", None, serving=serving)
     try:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..config import did_you_mean
 from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution, RunResult, ended_early
 from ..cosim.observers import CSVWriter, Observer, Progress, RealTimePacer
@@ -35,7 +36,7 @@ from ..cosim.units import Port, PythonUnit
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..files import read_text
 from .project import TwinProject, check_timing
-from .scenario import Command, parse_value, scenario_ports
+from .scenario import Command, _column_starts, parse_value, scenario_ports
 from .system import DMODEL, MAPPING, TwinSystem, UnitSpec, build_scene, load_models
 
 CELL_MAPPING = UnitSpec("{mapping}", "cell", "mapping.fmu", "mapping")
@@ -122,7 +123,8 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
     at their line and column, all together."""
     path = Path(path)
     ports = scenario_ports(program)
-    rows = list(csv.reader(read_text(path, "plan").splitlines()))
+    lines = read_text(path, "plan").splitlines()
+    rows = list(csv.reader(lines))
     problems: list[Finding] = []
 
     def problem(line: int, column: int, message: str) -> None:
@@ -132,15 +134,18 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
         raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
                                    "a plan starts with a header whose first column is 'timestep' (ms)")])
     header = [h.strip() for h in rows[0]]
+    starts = _column_starts(lines[0])  # where each cell of the header starts (characters, 1-based)
     columns: dict[int, tuple[str, str]] = {}
     for k, h in enumerate(header[1:], start=1):
         robot, _, port = h.partition(".")
         if robot not in robots or not port:
-            problem(1, k + 1, f"column {h!r}: a cell's plan names ROBOT.port, ROBOT one of {', '.join(robots)}")
+            problem(1, starts[k], f"column {h!r}: a cell's plan names ROBOT.port, ROBOT one of {', '.join(robots)}"
+                                  f"{did_you_mean(robot, robots) if port else ''}")
         elif port not in ports:
-            problem(1, k + 1, f"column {h!r}: unknown d-model input '{port}' (known: {', '.join(ports)})")
+            problem(1, starts[k], f"column {h!r}: unknown d-model input '{port}'{did_you_mean(port, ports)} "
+                                  f"(known: {', '.join(ports)})")
         elif h in header[1:k]:
-            problem(1, k + 1, f"column {h!r} appears twice")
+            problem(1, starts[k], f"column {h!r} appears twice")
         else:
             columns[k] = (robot, port)
     for ev in program.inputs:
@@ -148,7 +153,8 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
             given = {port for r, port in columns.values() if r == robot}
             missing = [port for port, _ in ev.value_ports if port not in given]
             if ev.name in given and missing:
-                problem(1, 1, f"column '{robot}.{ev.name}' without its argument column(s) "
+                at = next(k for k, column in columns.items() if column == (robot, ev.name))
+                problem(1, starts[at], f"column '{robot}.{ev.name}' without its argument column(s) "
                               f"{', '.join(robot + '.' + m for m in missing)}")
     plans: dict[str, list[Command]] = {r: [] for r in robots}
     for line, row in enumerate(rows[1:], start=2):
@@ -172,7 +178,8 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
             try:
                 values[robot].append((port, parse_value(cell, ports[port])))
             except ValueError as err:
-                problem(line, k + 1, f"column '{header[k]}': '{cell[:40]}' {err}")
+                cells = _column_starts(lines[line - 1])
+                problem(line, cells[k] if k < len(cells) else 1, f"column '{header[k]}': '{cell[:40]}' {err}")
         for robot, given in values.items():
             if given:
                 plans[robot].append(Command(time_ms / 1000.0, tuple(given), f"{path}:{line}:1"))

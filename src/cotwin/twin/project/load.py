@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from ...config import TomlFile, dumps, is_number, raise_problems, shown
+from ...config import TomlFile, did_you_mean, dumps, is_number, raise_problems, shown
 from ...cosim.isolated import DEFAULT_TIMEOUT
 from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...pmodel.perturbation import Perturbation
@@ -278,10 +278,12 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     world, world_file = _world(file, s, existing, problems)
     stand_ins = _stand_ins(file, platform.stand_in, problems)
     panels = _panels(file, s.figure.panels, problems) if "panels" in _table(file.data, "figure") else None
-    _scene(file, platform.scene, world is not None or named_world(s), problems)
+    _scene(file, s, problems)
     _timing(file, cosim, problems)
     if s.pt is not None:  # [pt] as written, against its own endpoint (a --pt-log replays in its place)
         problems.extend(_pt_keys(file, s.pt))
+    if any(p.severity is Severity.ERROR for p in problems):
+        problems.extend(_model_errors([files[k] for k in ("dmodel", "pmodel", "mapping")]))
     raise_problems(problems)
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.module, models.pmodel_name,
@@ -305,6 +307,20 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
                 "stand_in": [_thawed(item) for item in platform.stand_in], "figure": _table(file.data, "figure")}
     spec.settings, spec.file, spec.pt_log = s, file, pt_log
     return spec
+
+
+def _model_errors(paths: list[Path | None]) -> list[Finding]:
+    """The errors of the model files a project names (read when the project itself has errors, so that the
+    models' are reported with them rather than once the project is fixed); none if a file is missing."""
+    from ...robosim.check import load_checked
+
+    if not all(p is not None and p.is_file() for p in paths):
+        return []
+    try:
+        load_checked(paths)
+    except CotwinError as err:
+        return [f for f in err.findings if f.severity is Severity.ERROR]
+    return []
 
 
 def _robots(file: TomlFile, items: tuple, problems: list[Finding]) -> list[RobotSpec]:
@@ -439,12 +455,7 @@ def _world(file: TomlFile, s, existing, problems: list[Finding]):
     return None, None
 
 
-def named_world(s) -> bool:
-    """The project gives a world ([platform] world or [world]), whether or not it could be read."""
-    return s.platform.world is not None or s.world is not None
-
-
-def _scene(file: TomlFile, name: str, world: bool, problems: list[Finding]) -> None:
+def _scene(file: TomlFile, s, problems: list[Finding]) -> None:
     """[platform] scene and the [scene] keys, checked with the rest of the file (not in a later round, once
     the models are read): a kind named must be known and read every [scene] key, and a world given goes to
     a "world" scene. "auto" without a world chooses a kind from the mapping, checked when the models are
@@ -454,13 +465,11 @@ def _scene(file: TomlFile, name: str, world: bool, problems: list[Finding]) -> N
     if not isinstance(file.data.get("scene", {}), dict):
         return  # [scene] itself is wrong (and reported)
     options = _table(file.data, "scene")
-    if name == "auto" and world:
-        name = "world"
+    world = ("[platform] world", ("platform", "world")) if s.platform.world is not None else \
+        ("[world]", ("world",)) if s.world is not None else None  # given, whether or not it could be read
+    name = "world" if s.platform.scene == "auto" and world else s.platform.scene
     if name == "auto":
-        kinds = scenes.scene_kinds()
-        read = sorted({k for kind in kinds.values() for k in kind.options})
-        from ...config import did_you_mean
-
+        read = sorted({k for kind in scenes.scene_kinds().values() for k in kind.options})
         problems.extend(Finding(file.location(("scene", key)), Severity.ERROR,
                                 f"[scene] {key}: no scene kind reads it (keys read: {', '.join(read) or 'none'})"
                                 f"{did_you_mean(key, read)}") for key in options if key not in read)
@@ -470,12 +479,10 @@ def _scene(file: TomlFile, name: str, world: bool, problems: list[Finding]) -> N
     except CotwinError as err:
         problems.extend(err.findings)
         return
-    problems.extend(scenes.unread_options(kind, name, options, lambda *key: file.location(key)))
-    if world and kind.name != "world":
-        what, at = ("[platform] world", ("platform", "world")) if file.data.get("platform", {}).get("world") \
-            is not None else ("[world]", ("world",))
-        problems.append(Finding(file.location(at), Severity.ERROR, f"{what}: the scene is '{kind.name}' "
-                                f"([platform] scene = \"{name}\"), which would ignore it"))
+    problems.extend(scenes.unread_options(kind, s.platform.scene, options, lambda *key: file.location(key)))
+    if world is not None and kind.name != "world":
+        problems.append(Finding(file.location(world[1]), Severity.ERROR, f"{world[0]}: the scene is '{kind.name}' "
+                                f"([platform] scene = \"{s.platform.scene}\"), which would ignore it"))
 
 
 def _stand_ins(file: TomlFile, items: tuple, problems: list[Finding]) -> dict:

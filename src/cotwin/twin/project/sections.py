@@ -468,7 +468,7 @@ READ_ONLY_BY: dict[str, tuple[str, ...]] = {
     "pt": (*LIVE_TWIN, "cotwin plant", "cotwin test --pt project"),
     "deviation": LIVE_TWIN,
     "convergence": LIVE_TWIN,
-    "plant": ("cotwin plant",),
+    "plant": ("cotwin plant", "cotwin twin of a cell ([[robots]]: its PT)"),
     "history": (*LIVE_TWIN, "cotwin run --dashboard"),  # one run records no history; its page lists the store's
 }
 
