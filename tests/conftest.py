@@ -13,6 +13,12 @@ from pathlib import Path
 
 import pytest
 
+# The tests' Ray clusters are single nodes on 127.0.0.1 (on Linux, Ray otherwise registers its nodes at
+# the machine's outward address), with token authentication, as `ray start` sets one up by default, which
+# a driver joins only with RAY_AUTH_MODE=token (read once per process, so set before Ray is imported).
+os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+os.environ.setdefault("RAY_AUTH_MODE", "token")
+
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 SHARED = ROOT.parent / "shared" / "robosim"

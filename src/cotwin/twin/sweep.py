@@ -224,6 +224,22 @@ def _reachable(address: str, timeout: float = 5.0) -> None:
         raise CotwinError(f"cannot reach the Ray cluster at {address!r}: {err.strerror or err}") from None
 
 
+def join_hint(address: str, err: BaseException) -> str:
+    """Why joining a Ray head failed, where the cause is known: a head with token authentication (what
+    `ray start` sets up by default in recent Ray) joined by a driver that sends no token."""
+    import os
+
+    chain, seen = [], err
+    while seen is not None and len(chain) < 8:
+        chain.append(f"{type(seen).__name__}: {seen}")
+        seen = seen.__cause__ or seen.__context__
+    if any("InvalidAuthToken" in c or c.startswith("AuthenticationError") for c in chain) \
+            and os.environ.get("RAY_AUTH_MODE") != "token":
+        return (" (the cluster asks for a token: set RAY_AUTH_MODE=token in cotwin's environment; Ray reads the "
+                "token from ~/.ray/auth_token, RAY_AUTH_TOKEN_PATH or RAY_AUTH_TOKEN)")
+    return ""
+
+
 def _on_ray(project, plans, state, horizon, step, address, artefacts, report) -> list[dict]:
     try:
         import ray
@@ -235,7 +251,7 @@ def _on_ray(project, plans, state, horizon, step, address, artefacts, report) ->
         try:
             ray.init(address=address, logging_level="ERROR", log_to_driver=False)
         except (ConnectionError, RuntimeError, ValueError) as err:
-            raise CotwinError(f"cannot join the Ray cluster at {address!r}: {err}") from None
+            raise CotwinError(f"cannot join the Ray cluster at {address!r}: {err}{join_hint(address, err)}") from None
     try:
         remote = ray.remote(_ray_run)
         state_ref = ray.put(state)

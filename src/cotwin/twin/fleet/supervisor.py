@@ -74,7 +74,9 @@ class RayHosts:
                     _reachable(address)
                     ray.init(address=address, logging_level="ERROR", log_to_driver=False, configure_logging=False)
             except (ConnectionError, RuntimeError, ValueError) as err:
-                raise CotwinError(f"cannot start or join Ray at {address!r}: {err}") from None
+                from ..sweep import join_hint
+
+                raise CotwinError(f"cannot start or join Ray at {address!r}: {err}{join_hint(address, err)}") from None
         self.where = "a local Ray on 127.0.0.1" if address == "auto" else f"the Ray cluster at {address}"
         self.actor = ray.remote(num_cpus=0, max_concurrency=64, max_restarts=0)(TwinHost)
 
