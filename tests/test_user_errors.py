@@ -204,3 +204,16 @@ def test_cotwin_run_of_a_cell_says_which_of_its_tables_it_ignores(tmp_path):
                            ("deviation", "cotwin twin, cotwin fleet")):
         at = lines.index(f"[{table}]") + 1
         assert f"{cell}:{at}:1: warning: [{table}] applies only to {readers}: cotwin run ignores it" in proc.stderr
+
+
+def test_deviation_variables_get_the_nearest_monitored_one(ur5e, tmp_path):
+    from cotwin.twin.project import load_project
+    from cotwin.twin.run import load
+    from cotwin.twin.runtime import LiveTwin
+
+    path = ur5e / "dev.toml"
+    path.write_text((ur5e / "replay.toml").read_text().replace('"q1",', '"Q1",'))
+    system = load(load_project(path, ur5e / "plan.csv"))
+    with pytest.raises(CotwinError, match=r"\[deviation\] variables Q1 are not monitored mapping variables; did you "
+                                          r"mean 'q1'\?"):
+        LiveTwin(system, tmp_path / "out")

@@ -23,6 +23,7 @@ from pathlib import Path
 from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution, RunResult, ended_early, saved_execution, step_count
 from ..cosim.observers import CSVWriter, StateFile
+from ..config import did_you_mean
 from ..diagnostics import CotwinError, Finding, Severity
 from .project import check_timing
 from .build import ARTEFACTS, dmodel_fmu, folder_lock
@@ -111,7 +112,8 @@ class LiveTwin:
         if unknown:
             raise CotwinError([Finding(spec.location("deviation", "variables"), Severity.ERROR,
                                        f"[deviation] variables {', '.join(unknown)} are not monitored mapping "
-                                       f"variables ({', '.join(system.models.monitored) or 'none'})")])
+                                       f"variables{did_you_mean(unknown[0], system.models.monitored)} "
+                                       f"({', '.join(system.models.monitored) or 'none'})")])
         self.monitor = DeviationMonitor(self.variables, dev.absolute, dev.relative, dev.lag_steps, dev.debounce_steps,
                                         publish=self._alarm, twin=spec.path.stem)
         self._publisher = None
