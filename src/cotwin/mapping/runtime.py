@@ -484,6 +484,11 @@ class Mapping:
             raise CotwinError(f"monitored variable(s) {', '.join(clash)} already mirror joints")
         for path, _ in (c for op in self.operations.values() for c in op.commands):
             endpoint.joint(path)  # every commanded actuator exists on the endpoint
+        if compiled:  # each event's whole definition as one generated function (cotwin.mapping.generated)
+            from .generated import compile_event
+
+            for ev in self.events.values():
+                ev.occurs = compile_event(ev, self.env._compiler)
         self.started = False
 
     @property
