@@ -1,0 +1,141 @@
+"""The fused loop (cotwin.cosim.fused) gives the same run as the master's step-by-step loop (the FMU path):
+byte for byte in the CSV, on the paper's experiment, the pick-and-place and a random plan, under Jacobi and
+Gauss-Seidel; `cotwin run` uses it and says so, `--fmu-path` forces the step-by-step loop."""
+
+from __future__ import annotations
+
+import random
+import shutil
+
+import pytest
+
+from cotwin.cosim.algorithm import Jacobi
+from cotwin.cosim.execution import Execution
+from cotwin.cosim.fused import FusedLoop, applicable
+from cotwin.twin.build import build
+from cotwin.twin.run import load, run_twin
+from cotwin.twin.scenario import Command
+
+ALGORITHMS = ["jacobi", "gauss-seidel"]
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    from conftest import EXAMPLES
+
+    twins = {name: load(EXAMPLES / "ur5e" / name) for name in ("cotwin.toml", "pick_place_project.toml")}
+    out = tmp_path_factory.mktemp("build")
+    build(twins["cotwin.toml"], out)
+    return twins, out
+
+
+def random_plan(seed: int) -> list[Command]:
+    """Moves to random holes of the plate and gripper commands at random times (some while moving)."""
+    rng = random.Random(seed)
+    plan, t = [], 0.3
+    while t < 9.0:
+        kind = rng.choice(["move", "move", "open", "close"])
+        if kind == "move":
+            values = (("moveDiscreteCommand", True), ("MovementArgs_target_X", rng.randrange(0, 10)),
+                      ("MovementArgs_target_Y", rng.randrange(0, 24)), ("MovementArgs_target_Z", rng.randrange(0, 3)))
+        else:
+            values = ((f"{kind}GripperCommand", True),)
+        plan.append(Command(round(t, 1), values, f"{kind} at {t:.1f} s"))
+        t += rng.choice([0.1, 0.4, 1.0, 2.5])
+    return plan
+
+
+def twice(twin, built_dir, tmp_path, **options) -> tuple:
+    runs = []
+    for fused in (False, True):
+        out = tmp_path / ("fused" if fused else "fmu")
+        out.mkdir()
+        for name in ("dmodel.fmu", "build.json"):
+            shutil.copy(built_dir / name, out / name)
+        ran = run_twin(twin, out, plot=False, fused=fused, **options)
+        runs.append((ran, (out / "outputs.csv").read_bytes(), (out / "state").read_bytes()))
+    return runs
+
+
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
+@pytest.mark.parametrize("case", ["paper", "pick-and-place", "random"])
+def test_the_fused_loop_writes_the_csv_of_the_fmu_path_byte_for_byte(built, tmp_path, algorithm, case):
+    from conftest import FUZZ_SEED
+
+    twins, built_dir = built
+    twin = {"paper": twins["cotwin.toml"], "pick-and-place": twins["pick_place_project.toml"],
+            "random": twins["cotwin.toml"].with_plan(random_plan(FUZZ_SEED))}[case]
+    end = {"paper": None, "pick-and-place": None, "random": 10.0}[case]
+    (fmu, fmu_csv, fmu_state), (fused, fused_csv, fused_state) = twice(twin, built_dir, tmp_path, algorithm=algorithm,
+                                                                        end=end, step=0.01 if case == "random" else None)
+    assert fmu.result.stepping == "step by step" and fused.result.stepping == "fused"
+    assert fused_csv == fmu_csv
+    assert fused_csv.count(b"\n") == fused.result.rows + 1 > 100
+    assert fused_state == fmu_state  # the state left for a what-if too
+    assert [o.__dict__ for o in fused.outcomes.outcomes] == [o.__dict__ for o in fmu.outcomes.outcomes]
+
+
+class Counter:
+    """A unit counting its steps; fails at step `fail`."""
+
+    def __init__(self, fail: int | None = None):
+        from cotwin.cosim.units import Port, PythonUnit
+
+        class Unit(PythonUnit):
+            def step(unit, t, h):
+                if fail is not None and round(t / h) >= fail:
+                    from cotwin.diagnostics import CotwinError
+
+                    raise CotwinError("the counter breaks")
+                unit.values["n"] += 1
+
+        self.unit = Unit("{c}.c", [Port("n", "Integer", "output")])
+        self.unit.values["n"] = 0
+
+
+def test_a_failing_step_leaves_the_time_and_rows_of_the_last_step_done(tmp_path):
+    from cotwin.cosim.observers import CSVWriter
+    from cotwin.cosim.system import System
+    from cotwin.diagnostics import CotwinError
+
+    times = []
+    for fused in (False, True):
+        unit = Counter(fail=37).unit
+        writer = CSVWriter(tmp_path / f"{fused}.csv")
+        execution = Execution(System.of([unit], [], log={unit.name: ["n"]}), Jacobi(), 0.1, observers=[writer],
+                              fused=fused)
+        with pytest.raises(CotwinError, match="the counter breaks"):
+            execution.run(10.0)
+        times.append((execution.time, execution.steps, (tmp_path / f"{fused}.partial.csv").read_bytes()))
+    assert times[0] == times[1] and times[0][1] == 37
+
+
+def test_the_fused_loop_says_when_it_does_not_apply(tmp_path):
+    from cotwin.cosim.algorithm import Algorithm
+    from cotwin.cosim.system import System
+
+    class Other(Jacobi):
+        pass
+
+    unit = Counter().unit
+    execution = Execution(System.of([unit], [], log={unit.name: ["n"]}), Other(), 0.1, fused=True)
+    result = execution.run(1.0)
+    assert "does not apply" in result.stepping and "Other" in result.stepping and result.steps == 10
+    assert issubclass(Other, Algorithm)
+
+
+def test_the_generated_loop_is_deterministic_and_straight_line(tmp_path):
+    from cotwin.cosim.system import System
+
+    sources = []
+    for _ in range(2):
+        unit = Counter().unit
+        execution = Execution(System.of([unit], [], log={unit.name: ["n"]}), Jacobi(), 0.1)
+        execution.initialize()
+        assert applicable(execution) is None
+        loop = FusedLoop(execution)
+        loop.run(5)
+        assert execution.steps == 5 and unit.values["n"] == 5 and execution.time == pytest.approx(0.5)
+        sources.append(loop.source)
+        execution.close()
+    assert sources[0] == sources[1] and "for _ in range(n):" in sources[0]
