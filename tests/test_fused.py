@@ -138,4 +138,42 @@ def test_the_generated_loop_is_deterministic_and_straight_line(tmp_path):
         assert execution.steps == 5 and unit.values["n"] == 5 and execution.time == pytest.approx(0.5)
         sources.append(loop.source)
         execution.close()
-    assert sources[0] == sources[1] and "for _ in range(n):" in sources[0]
+    assert sources[0] == sources[1] and "for k in range(1, n + 1):" in sources[0]
+
+
+@pytest.mark.parametrize("fused", [False, True])
+def test_advance_steps_until_asked_to_stop_and_continues_from_there(fused):
+    from cotwin.cosim.system import System
+
+    unit = Counter().unit
+    execution = Execution(System.of([unit], [], log={unit.name: ["n"]}), Jacobi(), 0.1, fused=fused)
+    seen = []
+    done = execution.advance(100, until=lambda ex: seen.append(ex.time) or unit.values["n"] == 7)
+    assert done == 7 and execution.steps == 7 and seen[-1] == execution.time == pytest.approx(0.7)
+    assert execution.advance(3) == 3 and unit.values["n"] == 10 and execution.time == pytest.approx(1.0)
+    assert execution.stepping == ("fused" if fused else "step by step")
+    execution.close()
+
+
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
+def test_a_what_if_in_the_fused_loop_predicts_what_the_step_by_step_loop_predicts(built, tmp_path, algorithm):
+    """From the DT's state at the end of the paper's run: the same outcomes, states, trajectory, collisions."""
+    from conftest import FUZZ_SEED
+
+    from cotwin.twin.whatif import predict
+
+    twins, built_dir = built
+    twin = twins["cotwin.toml"]
+    for name in ("dmodel.fmu", "build.json"):
+        shutil.copy(built_dir / name, tmp_path / name)
+    run_twin(twin, tmp_path, plot=False, algorithm=algorithm)
+    state = (tmp_path / "state").read_bytes()
+    plan = [Command(c.time - 0.3, c.values, c.where) for c in random_plan(FUZZ_SEED)[:4]]
+    predictions = []
+    for fused in (False, True):
+        p = predict(twin, plan, state, horizon=12.0, algorithm=algorithm, artefacts=tmp_path, fused=fused)
+        data = p.as_dict()
+        data.pop("wall_seconds")
+        predictions.append(data)
+    assert predictions[0] == predictions[1]
+    assert len(predictions[0]["trajectory"]["time"]) > 10

@@ -145,6 +145,7 @@ class Execution:
         self._origin = (self.start, 0)  # (time, steps) from which step times are counted
         self._first = (self.start, 0)  # (time, steps) where this execution began (later for a fork)
         self.fused = fused
+        self._loop = None  # the fused loop `advance` made (rebuilt when the slots or observers change)
         self.stepping = "step by step"  # or "fused" (see run), or why the fused loop did not apply
 
     @property
@@ -216,6 +217,34 @@ class Execution:
             raise
         self.close()
         return self.result()
+
+    def advance(self, n: int, until=None) -> int:
+        """Up to n communication steps from the current time (initialised first if not yet), in the fused loop
+        when `fused` and it applies, else one `step` at a time; stops early after the first step at which
+        `until(execution)` is true (a what-if that has seen enough). Returns the steps done; a failure closes
+        the execution, as `step` does."""
+        if not self.initialized:
+            self.initialize()
+        if self.fused:
+            from .fused import FusedLoop, applicable
+
+            why = applicable(self)
+            if why is None:
+                loop = self._loop
+                if loop is None or not loop.current():
+                    loop = self._loop = FusedLoop(self)
+                self.stepping = "fused"
+                try:
+                    return loop.run(n, until)
+                except BaseException as err:
+                    self.close(err)
+                    raise
+            self.stepping = f"step by step: the fused loop does not apply ({why})"
+        for k in range(1, n + 1):
+            self.step()
+            if until is not None and until(self):
+                return k
+        return n
 
     def _run_fused(self) -> None:
         """The steps left in the fused loop (cotwin.cosim.fused), when it applies; `stepping` says."""

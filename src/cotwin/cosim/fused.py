@@ -45,12 +45,18 @@ class FusedLoop:
         self.source, names = _source(execution)
         namespace: dict[str, object] = {"__builtins__": __builtins__, **names}
         exec(compile(self.source, "<cotwin fused loop>", "exec"), namespace)  # noqa: S102 - generated above
-        self._run: Callable[[int], None] = namespace["run"]
+        self._run: Callable[[int, Callable | None], int] = namespace["run"]
+        self._data, self._observers = execution.algorithm.data, list(execution.observers)
 
-    def run(self, n: int) -> None:
-        """n steps (fewer if one fails: then the execution's steps and time are those of the last one done)."""
-        if n > 0:
-            self._run(n)
+    def run(self, n: int, until: Callable[[object], bool] | None = None) -> int:
+        """Up to n steps, the steps done returned: fewer if one fails (then the execution's steps and time are
+        those of the last one done) or when `until(execution)`, asked after each step's observers, is true."""
+        return self._run(n, until) if n > 0 else 0
+
+    def current(self) -> bool:
+        """Whether this loop still fits its execution (the algorithm's slots and the observers it was made for)."""
+        execution = self.execution
+        return self._data is execution.algorithm.data and self._observers == execution.observers
 
 
 def _source(execution) -> tuple[str, dict[str, object]]:
@@ -95,9 +101,9 @@ def _source(execution) -> tuple[str, dict[str, object]]:
         for k in range(count):
             read(k)
     observers = [bind("_seen", o.step_complete) for o in execution.observers]
-    lines = ["def run(n):",
+    lines = ["def run(n, until):",
              "    ex = EX",
-             "    for _ in range(n):",
+             "    for k in range(1, n + 1):",
              "        origin, done = ex._origin",
              "        steps = ex.steps",
              "        t = origin + (steps - done) * H",
@@ -105,6 +111,9 @@ def _source(execution) -> tuple[str, dict[str, object]]:
              "        steps += 1",
              "        ex.steps = steps",
              "        ex.time = origin + (steps - done) * H",
-             *(f"        {o}(ex)" for o in observers)]
+             *(f"        {o}(ex)" for o in observers),
+             "        if until is not None and until(ex):",
+             "            return k",
+             "    return n"]
     names["H"] = execution.step_size
     return "\n".join(lines) + "\n", names

@@ -91,8 +91,9 @@ class _Contacts:
 
 def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None, horizon: float = 60.0,
             step: float | None = None, algorithm: str | None = None, artefacts: str | Path | None = None,
-            settle: float = 0.3, decimate: int = 1, cc: str = "cc") -> Prediction:
-    """Run `plan` on a fork of the DT at `state` (None: from the project's initial state); see module doc."""
+            settle: float = 0.3, decimate: int = 1, cc: str = "cc", fused: bool = True) -> Prediction:
+    """Run `plan` on a fork of the DT at `state` (None: from the project's initial state); see module doc.
+    `fused`: in the fused loop (cotwin.cosim.fused, the same prediction), else step by step."""
     import tempfile
 
     from .run import simulated_endpoint
@@ -113,7 +114,7 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
         endpoint = simulated_endpoint(fork)
         cosim = fork.instantiate(fmu, endpoint)
         watch, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
-        execution = Execution(cosim, make_algorithm(algorithm), step, start, [watch, ledger])
+        execution = Execution(cosim, make_algorithm(algorithm), step, start, [watch, ledger], fused=fused)
         try:
             if state is not None:
                 execution.set_state(state, units=[DMODEL.name, MAPPING.name])
@@ -152,9 +153,9 @@ def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, st
             for v in monitored:
                 trajectory[v].append(values.get((MAPPING.name, v)))
 
-    record(execution.time)
-    while execution.time < end - 1e-9:
-        t = execution.step()
+    def seen_enough(execution) -> bool:  # after each step (in the fused loop): whether the what-if is over
+        nonlocal at_rest_since
+        t = execution.time
         record(t)
         collisions.extend({"kind": "event", "event": e, "time": t} for e in collision_events
                           if values.get((MAPPING.name, e)) is True)
@@ -172,13 +173,18 @@ def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, st
         outcomes = ledger.outcomes
         applied = len(outcomes) >= len(plan)
         if applied and t >= last_command and waits.found:
-            break  # blocked for good: the horizon would add nothing
+            return True  # blocked for good: the horizon would add nothing
         if applied and t >= last_command and at_rest_since is not None and t - at_rest_since >= settle:
             last = outcomes[-1] if outcomes else None
             if last is None or last.done is not None:
-                break
+                return True
             if not last.accepted and t - last.delivered >= settle + 3 * execution.step_size:
-                break  # delivered, never acted upon: the d-model ignored it
+                return True  # delivered, never acted upon: the d-model ignored it
+        return t >= end - 1e-9
+
+    record(execution.time)
+    if execution.time < end - 1e-9:
+        execution.advance(math.ceil((end - execution.time) / execution.step_size) + 1, until=seen_enough)
     outcomes = list(ledger.outcomes)
     for c in plan[len(outcomes):]:  # not applied within the horizon
         event = next(p for p, v in c.values if p in fork.command_events and v is True)
