@@ -177,3 +177,29 @@ def test_a_what_if_in_the_fused_loop_predicts_what_the_step_by_step_loop_predict
         predictions.append(data)
     assert predictions[0] == predictions[1]
     assert len(predictions[0]["trajectory"]["time"]) > 10
+
+
+@pytest.mark.parametrize("from_state", [False, True])
+def test_forks_reused_for_plan_after_plan_predict_what_a_fresh_fork_predicts(built, tmp_path, from_state):
+    """A sweep's what-ifs on one fork restored plan after plan: each prediction is `predict`'s, in any order,
+    reachable holes and not, from the initial state and from the end of the paper's run."""
+    from cotwin.twin.sweep import grid
+    from cotwin.twin.whatif import Forks, predict
+
+    twins, built_dir = built
+    twin = twins["cotwin.toml"]
+    for name in ("dmodel.fmu", "build.json"):
+        shutil.copy(built_dir / name, tmp_path / name)
+    state = None
+    if from_state:
+        run_twin(twin, tmp_path, plot=False)
+        state = (tmp_path / "state").read_bytes()
+    plans = grid(twin.models.program, "moveDiscreteCommand", {"target_X": [0, 15], "target_Y": [2, 23], "target_Z": [0]})
+    plans += [plans[0], random_plan(7)[:3]]  # the same plan again; another shape (gripper commands too)
+    with Forks(twin, state, artefacts=tmp_path) as forks:
+        reused = [forks.predict(plan, horizon=6.0).as_dict() for plan in plans]
+    fresh = [predict(twin, plan, state, horizon=6.0, artefacts=tmp_path).as_dict() for plan in plans]
+    for data in reused + fresh:
+        data.pop("wall_seconds")
+    assert reused == fresh
+    assert {c["feasible"] for p in fresh for c in p["commands"]} >= {True, False}

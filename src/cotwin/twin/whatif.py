@@ -128,6 +128,97 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
             execution.close()
 
 
+class Forks:
+    """What-ifs from one state, one after another, on forks built once (a sweep's many plans): the first plan
+    of a shape (the ports its commands drive) builds its fork as `predict` does and saves the fork's state
+    right after it is set up; every later plan of that shape swaps its commands into the fork's command
+    source and restores that state (the d-model FMU's, the simulator's, the mapping's, the values on the
+    connections: cotwin.cosim.state, at native speed), instead of building the simulator, the mapping and the
+    FMU instance anew. Each prediction is the one `predict` gives (tests/test_fused.py). A what-if that fails
+    drops its fork (the next one of its shape builds anew). `close` ends them all (a context manager)."""
+
+    def __init__(self, system: TwinSystem, state: bytes | None = None, step: float | None = None,
+                 algorithm: str | None = None, artefacts: str | Path | None = None, cc: str = "cc"):
+        self.system, self.state, self.cc = system, state, cc
+        self.step = system.spec.step if step is None else step
+        self.algorithm = algorithm or system.spec.algorithm
+        self.artefacts = artefacts
+        self.start = 0.0
+        if state is not None:
+            from ..cosim.execution import saved_execution
+
+            self.start = saved_execution(state)["time"]
+        self._forks: dict[frozenset, tuple] = {}  # plan shape -> (fork, execution, endpoint, saved state)
+        self._scratch = None
+
+    def __enter__(self) -> "Forks":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def predict(self, plan: list[Command], horizon: float = 60.0, settle: float = 0.3, decimate: int = 1) -> Prediction:
+        started = wallclock.perf_counter()
+        start = self.start
+        shifted = sorted((Command(start + c.time, c.values, c.where) for c in plan), key=lambda c: c.time)
+        shape = frozenset(p for c in shifted for p, _ in c.values)
+        built = self._forks.pop(shape, None)
+        try:
+            if built is None:
+                built = self._build(shifted)
+            fork, execution, endpoint, saved, fresh = built
+            if not fresh:
+                execution.system.units[fork.source.name].commands = shifted
+                execution.set_state(saved)  # the fork as it was set up (the source: this plan from its start)
+            watch, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
+            execution.observers = [watch, ledger]
+            for o in execution.observers:
+                o.simulation_initialized(execution)
+            prediction = _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started, watch,
+                                ledger)
+            prediction.blocked = [str(b) for b in watch.found]
+        except BaseException:
+            if built is not None:
+                built[1].close()
+            raise
+        self._forks[shape] = (fork, execution, endpoint, saved, False)  # ran: the next plan restores `saved`
+        return prediction
+
+    def _build(self, shifted: list[Command]) -> tuple:
+        import tempfile
+
+        from .run import simulated_endpoint
+
+        fork = self.system.with_plan(shifted)
+        artefacts = self.artefacts
+        if artefacts is None:
+            if self._scratch is None:
+                self._scratch = tempfile.TemporaryDirectory(prefix="cotwin-whatif-")
+            artefacts = self._scratch.name
+        fmu = dmodel_fmu(fork, Path(artefacts), self.cc)
+        endpoint = simulated_endpoint(fork)
+        execution = Execution(fork.instantiate(fmu, endpoint), make_algorithm(self.algorithm), self.step, self.start,
+                              [], fused=True)
+        try:
+            if self.state is not None:
+                execution.set_state(self.state, units=[DMODEL.name, MAPPING.name])
+            else:
+                execution.initialize()
+            saved = execution.get_state()
+        except BaseException:
+            execution.close()
+            raise
+        return fork, execution, endpoint, saved, True  # fresh: the first plan runs without a restore
+
+    def close(self) -> None:
+        for _, execution, _, _, _ in self._forks.values():
+            execution.close()
+        self._forks.clear()
+        if self._scratch is not None:
+            self._scratch.cleanup()
+            self._scratch = None
+
+
 def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, started, waits, ledger) -> Prediction:
     program = fork.models.program
     platform = [c.output for c in fork.connections if c.source == MAPPING.name and c.target == DMODEL.name
