@@ -203,3 +203,32 @@ def test_forks_reused_for_plan_after_plan_predict_what_a_fresh_fork_predicts(bui
         data.pop("wall_seconds")
     assert reused == fresh
     assert {c["feasible"] for p in fresh for c in p["commands"]} >= {True, False}
+
+
+def test_contacts_read_from_the_arrays_are_those_read_contact_by_contact(built):
+    """The what-if's contact check (cotwin.twin.whatif._Contacts) on random arm poses, many into the table or
+    the plate: the same contacts, first times and depths as reading MuJoCo's contacts one by one."""
+    import numpy as np
+
+    from cotwin.twin.run import simulated_endpoint
+    from cotwin.twin.whatif import _Contacts
+
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    endpoint = simulated_endpoint(twin)
+    contacts = _Contacts(endpoint, twin.models.tree)
+    sim, seen, rng = endpoint.sim, {}, np.random.default_rng(5)
+    model, data = sim.model, sim.data
+    for k in range(300):
+        sim.set_joint_state({j: float(rng.uniform(-3.1, 3.1)) for j in sim.joint_names})
+        contacts.check(0.01 * k)
+        for c in data.contact[: data.ncon]:  # the reference: contact by contact
+            g1, g2 = int(c.geom1), int(c.geom2)
+            if (g1 in contacts.robot) == (g2 in contacts.robot) or c.dist > -0.001:
+                continue
+            robot, other = (g1, g2) if g1 in contacts.robot else (g2, g1)
+            key = (model.body(model.geom_bodyid[robot]).name, model.body(model.geom_bodyid[other]).name)
+            entry = seen.setdefault(key, {"kind": "contact", "robot": key[0], "with": key[1], "first": 0.01 * k,
+                                          "depth": 0.0})
+            entry["depth"] = max(entry["depth"], -float(c.dist))
+    assert contacts.seen == seen and list(contacts.seen) == list(seen) and len(seen) >= 3

@@ -25,6 +25,8 @@ from concurrent.futures import CancelledError
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from .. import safejson
 from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution
@@ -72,21 +74,24 @@ class _Contacts:
         fingers = {j.child for j in tree.joints if j.name in tool.fingers}
         self.robot = {g for g in range(model.ngeom) if model.geom_contype[g] == ROBOT_CONTYPE
                       and model.body(model.geom_bodyid[g]).name not in fingers}
+        self._robot = np.array(sorted(self.robot), dtype=np.int64)
         self.seen: dict[tuple[str, str], dict] = {}
 
     def check(self, t: float) -> None:
         if self.sim is None:
             return
         model, data = self.sim.model, self.sim.data
-        for c in data.contact[: data.ncon]:
-            g1, g2 = int(c.geom1), int(c.geom2)
-            if (g1 in self.robot) == (g2 in self.robot) or c.dist > -0.001:
-                continue
-            robot, other = (g1, g2) if g1 in self.robot else (g2, g1)
+        if not data.ncon:
+            return
+        contact = data.contact  # the step's contacts as arrays: only the robot's penetrating ones, in order, in Python
+        g1, g2, dist = contact.geom1, contact.geom2, contact.dist
+        mine, theirs = np.isin(g1, self._robot), np.isin(g2, self._robot)
+        for k in np.flatnonzero((mine != theirs) & (dist <= -0.001)):
+            robot, other = (int(g1[k]), int(g2[k])) if mine[k] else (int(g2[k]), int(g1[k]))
             key = (model.body(model.geom_bodyid[robot]).name, model.body(model.geom_bodyid[other]).name)
             entry = self.seen.setdefault(key, {"kind": "contact", "robot": key[0], "with": key[1], "first": t,
                                                "depth": 0.0})
-            entry["depth"] = max(entry["depth"], -float(c.dist))
+            entry["depth"] = max(entry["depth"], -float(dist[k]))
 
 
 def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None, horizon: float = 60.0,
