@@ -232,3 +232,30 @@ def test_contacts_read_from_the_arrays_are_those_read_contact_by_contact(built):
                                           "depth": 0.0})
             entry["depth"] = max(entry["depth"], -float(c.dist))
     assert contacts.seen == seen and list(contacts.seen) == list(seen) and len(seen) >= 3
+
+
+@pytest.mark.parametrize("profile", ["quintic", "trapezoid"])
+def test_set_points_written_per_control_period_are_those_of_the_segment(built, profile):
+    """The endpoint's set-point written without a dict per control period (SimulatedEndpoint._set_point) puts
+    in MuJoCo's controls exactly what write_actuators(segment.at(t)) puts, clipping included."""
+    import numpy as np
+
+    from cotwin.mapping.motion import JointMove, Quintic
+    from cotwin.twin.run import simulated_endpoint
+
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    ours, theirs = simulated_endpoint(twin), simulated_endpoint(twin)
+    rng = np.random.default_rng(11)
+    for endpoint in (ours, theirs):
+        endpoint.profile = Quintic() if profile == "quintic" else JointMove()
+    joints = [j for j in ours.sim.joint_names if j in ours._positioned]
+    for k in range(20):
+        goals = {ours.actuator_names()[i]: float(rng.uniform(-7, 7)) for i in range(len(joints))}  # some out of range
+        for endpoint in (ours, theirs):
+            endpoint.command(goals)
+        segment = ours.segment
+        for t in np.linspace(segment.t0 - 0.1, segment.t0 + segment.duration + 0.1, 37):
+            ours._set_point(segment, float(t))
+            theirs.sim.write_actuators(segment.at(float(t)))
+            assert np.array_equal(ours.sim.controls, theirs.sim.controls)

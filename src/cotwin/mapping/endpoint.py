@@ -52,6 +52,7 @@ class SimulatedEndpoint:
         self._positioned = {j.name for j in self.tree.actuated if servo_mode(j) == "position"}
         self.segment: Segment | None = None
         self._held = None  # the segment whose final set-point the servos already hold
+        self._plan: tuple | None = None  # (segment, per joint (control index, start, goal - start, low, high))
         self.direct: dict[str, float] = {}  # joint -> the speed or effort last commanded
 
     def start(self) -> None:
@@ -143,13 +144,37 @@ class SimulatedEndpoint:
             segment = self.segment
             if segment is not None and segment is not self._held:
                 ahead = sim.time + n * sim.timestep
-                sim.write_actuators(segment.at(ahead))
+                self._set_point(segment, ahead)
                 if ahead >= segment.t0 + segment.duration:  # the set-point stays at the segment's end
                     self._held = segment
             if segment is None or segment is self._held:
                 n = steps
             sim.step(n)
             steps -= n
+
+    def _set_point(self, segment: Segment, t: float) -> None:
+        """The servos' set-point: `segment.at(t)` written as `write_actuators` writes it (clipped to each
+        servo's range), without building a dict per control period: each joint's start, move and servo
+        are looked up once per segment. The same floats (start + s * (goal - start)); anything unusual (a
+        value not finite, an unknown actuator) goes through `write_actuators`, which says what is wrong."""
+        plan = self._plan
+        if plan is None or plan[0] is not segment:
+            slots = self.sim.servo_slots(list(segment.goal))
+            moves = [(index, segment.start[j], segment.goal[j] - segment.start[j], low, high)
+                     for j, (index, low, high) in zip(segment.goal, slots)] if slots is not None else None
+            plan = self._plan = (segment, moves)
+        moves = plan[1]
+        if moves is None:
+            self.sim.write_actuators(segment.at(t))
+            return
+        s = segment.fraction(t)
+        ctrl = self.sim.controls
+        for index, start, move, low, high in moves:
+            value = start + s * move
+            if value.__class__ is not float or value - value != 0.0:
+                self.sim.write_actuators(segment.at(t))
+                return
+            ctrl[index] = low if value < low else high if value > high else value
 
     @property
     def time(self) -> float:

@@ -193,6 +193,18 @@ class PlatformSimulator:
             raise CotwinError(f"unknown joint '{name}' (joints: {', '.join(self._joint_qpos)})")
         return self._joint_qpos[name]
 
+    def servo_slots(self, names) -> list[tuple[int, float, float]] | None:
+        """Per actuator name, its control index and the range its targets are clipped to (as
+        `write_actuators` clips them), for a caller writing many set-points of the same actuators into
+        `controls`; None if a name is not an actuator (then `write_actuators` says so)."""
+        servos = self._servos
+        return [servos[n] for n in names] if all(n in servos for n in names) else None
+
+    @property
+    def controls(self) -> np.ndarray:
+        """MuJoCo's control vector (data.ctrl), written by `write_actuators`."""
+        return self._ctrl
+
     def write_actuators(self, targets: dict[str, float]) -> None:
         """Set actuator commands (rad or m for position servos, rad/s or m/s for velocity servos, N m or N
         for motors). Unknown names and non-finite values are errors; position targets outside a joint's
