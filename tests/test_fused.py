@@ -259,3 +259,41 @@ def test_set_points_written_per_control_period_are_those_of_the_segment(built, p
             ours._set_point(segment, float(t))
             theirs.sim.write_actuators(segment.at(float(t)))
             assert np.array_equal(ours.sim.controls, theirs.sim.controls)
+
+
+@pytest.mark.parametrize("profile", ["quintic", "trapezoid"])
+def test_the_native_control_loop_moves_the_robot_as_the_python_loop_does(built, profile, monkeypatch):
+    """cotwin.mapping.native: the endpoint's moves stepped by the C loop leave MuJoCo's whole state (positions,
+    velocities, controls, time) bit for bit where the Python loop leaves it, over moves that end inside a
+    step and others that do not, some clipped at a servo's range."""
+    import numpy as np
+
+    import cotwin.mapping.native as native
+    from cotwin.mapping.motion import JointMove, Quintic
+    from cotwin.twin.run import simulated_endpoint
+
+    real = native.advance_function()
+    assert real is not None  # a C compiler is here (the d-model needs one too)
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    ours, theirs = simulated_endpoint(twin), simulated_endpoint(twin)
+    for endpoint in (ours, theirs):
+        endpoint.profile = Quintic() if profile == "quintic" else JointMove()
+    made, natively = [], ours._advance_natively
+    monkeypatch.setattr(ours, "_advance_natively", lambda *args: made.append(natively(*args)) or made[-1])
+    names = ours.actuator_names()
+    rng = np.random.default_rng(3)
+    for k in range(12):
+        goals = {names[i]: float(rng.uniform(-4, 4)) for i in range(6)}
+        for endpoint in (ours, theirs):
+            endpoint.command(goals)
+        for dt in (0.001, 0.01, 0.013, 0.1, 0.5):
+            monkeypatch.setattr(native, "_LIB", real)
+            ours.advance(dt)
+            monkeypatch.setattr(native, "_LIB", False)  # the Python loop
+            theirs.advance(dt)
+            for name in ("qpos", "qvel", "ctrl", "act", "qacc_warmstart"):
+                assert np.array_equal(getattr(ours.sim.data, name), getattr(theirs.sim.data, name)), name
+            assert ours.sim.data.time == theirs.sim.data.time and ours.sim._steps == theirs.sim._steps
+            assert (ours._held is ours.segment) == (theirs._held is theirs.segment)
+    assert sum(made) > 1000

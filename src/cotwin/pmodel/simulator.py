@@ -91,6 +91,10 @@ class RayScanner:
         self.readings = {path: values[quantity] for path, quantity in self.ports.items()}
 
 
+_PLAIN_INTEGRATORS = (int(mujoco.mjtIntegrator.mjINT_EULER), int(mujoco.mjtIntegrator.mjINT_IMPLICIT),
+                      int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST))
+
+
 class PlatformSimulator:
     def __init__(self, tree: KinematicTree, scene=None, timestep: float = TIMESTEP, mjcf: str | None = None,
                  base: str = "fixed"):
@@ -192,6 +196,18 @@ class PlatformSimulator:
         if name not in self._joint_qpos:
             raise CotwinError(f"unknown joint '{name}' (joints: {', '.join(self._joint_qpos)})")
         return self._joint_qpos[name]
+
+    @property
+    def plain_stepping(self) -> bool:
+        """Whether `step(n)` is n of MuJoCo's mj_step and nothing between them (no ray sensor scans, no
+        obstacle contacts checked), with an integrator that advances time by one timestep per step: then a
+        caller may make the steps itself (cotwin.mapping.native) and count them with `stepped`."""
+        return not self.scanners and not self._obstacles and self.model.opt.integrator in _PLAIN_INTEGRATORS
+
+    def stepped(self, n: int) -> None:
+        """Count n physics steps a caller made with mj_step itself, and check the state as `step` does."""
+        self._steps += n
+        self._check()
 
     def servo_slots(self, names) -> list[tuple[int, float, float]] | None:
         """Per actuator name, its control index and the range its targets are clipped to (as
