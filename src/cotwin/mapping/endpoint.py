@@ -55,6 +55,7 @@ class SimulatedEndpoint:
         self._held = None  # the segment whose final set-point the servos already hold
         self._plan: tuple | None = None  # (segment, per joint (control index, start, goal - start, low, high))
         self._native_plan = None  # the same as ctypes arrays for cotwin.mapping.native, and the joints' count
+        self._native_memory = None  # the simulator's data and arrays as the C loop takes them
         self.direct: dict[str, float] = {}  # joint -> the speed or effort last commanded
 
     def start(self) -> None:
@@ -169,13 +170,16 @@ class SimulatedEndpoint:
         fn, mj_step = function
         sim = self.sim
         arrays, n = self._native_plan
-        time, held, done = ctypes.c_double(sim.data.time), ctypes.c_int(0), ctypes.c_int(0)
-        qpos, ctrl = sim.data.qpos, sim.controls
-        fn(mj_step, sim.model._address, sim.data._address, ctypes.byref(time), sim.timestep,
-           float(sim.model.opt.timestep), steps, period, arrays[0], n, *arrays[1:],
-           ctrl.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
-           qpos.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), qpos.size, ctypes.byref(held),
-           ctypes.byref(done))  # 1: a set-point not finite (the Python loop says so); 2: unstable
+        memory = self._native_memory
+        if memory is None or memory[0] is not sim.data:  # the simulator's arrays, as C pointers, once
+            data, double = sim.data, ctypes.POINTER(ctypes.c_double)
+            memory = self._native_memory = (data, sim.model._address, data._address, float(sim.model.opt.timestep),
+                                            sim.controls.ctypes.data_as(double), data.qpos.ctypes.data_as(double),
+                                            data.qpos.size, ctypes.c_double(), ctypes.c_int(), ctypes.c_int())
+        data, model_address, data_address, timestep, ctrl, qpos, nq, time, held, done = memory
+        time.value, held.value = data.time, 0
+        fn(mj_step, model_address, data_address, time, sim.timestep, timestep, steps, period, arrays[0], n,
+           *arrays[1:], ctrl, qpos, nq, held, done)  # 1: a set-point not finite (the Python loop says so); 2: unstable
         if done.value:
             sim.stepped(done.value)  # status 2 (the state not finite) raises here, as `step` does
         if time.value != sim.data.time:
