@@ -162,7 +162,8 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
     if artefacts is None:
         artefacts = scratch = tempfile.mkdtemp(prefix="cotwin-sweep-")
     try:
-        dmodel_fmu(load(project), artefacts)  # built once, before the workers share it
+        system = load(project)
+        dmodel_fmu(system, artefacts)  # built once, before the workers share it
         artefacts = str(artefacts)
         if ray is not None:
             return _on_ray(project, plans, state, horizon, step, ray, artefacts, report)
@@ -170,7 +171,8 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         rows: list[dict] = []
         report(0, len(plans))
         if workers == 1:
-            _load(project, artefacts)
+            global _SYSTEM
+            _SYSTEM = (system, artefacts)  # the project loaded above (loading it again costed a parse)
             with _forks(state, step) as forks:
                 for plan in plans:
                     rows.append(_run(plan, state, horizon, step, forks))
