@@ -37,6 +37,9 @@ demo: install-runtime
 		$(VENV)/bin/cotwin twin examples/ur5e/replay.toml -o $(OUT)/replay 2> $(OUT)/replay.log; \
 	else echo "replay of the real UR5e's log skipped: ../shared/data/ur5e/rtde_run1.csv is not here"; fi
 	$(VENV)/bin/cotwin run examples/ur3e/cotwin.toml -o $(OUT)/ur3e
+	$(VENV)/bin/cotwin run examples/flexcell2/cotwin.toml -o $(OUT)/flexcell2
+	$(VENV)/bin/cotwin run examples/flexcell2/collide.toml -o $(OUT)/flexcell2-collide
+	$(VENV)/bin/cotwin twin examples/flexcell2/cotwin.toml -o $(OUT)/flexcell2-twin
 	$(VENV)/bin/cotwin check examples/turtlebot
 	$(VENV)/bin/cotwin run examples/turtlebot/cotwin.toml -o $(OUT)/turtlebot
 	@if [ -f ../shared/robosim/mobile/OA_mapping.pm ]; then \

@@ -34,7 +34,7 @@ def robot(broker, twin, monkeypatch):
     server = RobotServer(SimulatedEndpoint(PlatformSimulator(twin.models.tree, twin.models.scene)), queue)
     thread = threading.Thread(target=server.serve, daemon=True)
     thread.start()
-    assert server.ready.wait(10)
+    assert server.connected.wait(10)
     yield server
     server.stop()
     thread.join(5)

@@ -72,7 +72,7 @@ def simulated(twin) -> SimulatedEndpoint:
 def serve_in_thread(server: RobotServer) -> threading.Thread:
     thread = threading.Thread(target=server.serve, daemon=True)
     thread.start()
-    assert server.ready.wait(10)
+    assert server.connected.wait(10)
     return thread
 
 
@@ -595,7 +595,7 @@ def test_the_robot_server_reconnects_when_the_broker_drops_it(broker, twin, clea
         deadline = time.monotonic() + 10
         while server.reconnects == 0 and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert server.reconnects == 1 and server.ready.wait(10) and thread.is_alive()  # back on its queue
+        assert server.reconnects == 1 and server.connected.wait(10) and thread.is_alive()  # back on its queue
         client = BrokerEndpoint(twin.models.tree, server.queue, timeout=5)
         assert client.call({"op": "state"})["ok"]
         client.close()

@@ -327,3 +327,50 @@ def test_a_fleet_records_into_one_postgresql_store(tmp_path, postgres_server):
     finally:
         with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
             conn.execute(f'DROP DATABASE "{name}" WITH (FORCE)')
+
+
+def test_every_project_problem_of_a_fleet_names_its_twin_and_a_duplicate_entry_is_still_checked(tmp_path):
+    """A project's problems are located in the project file and each says which twin (and which entry of
+    the fleet file) it belongs to, whatever order they are printed in; an entry with a wrong key or a name
+    given twice still has its project checked (fixing the name must not reveal a new round of errors)."""
+    from cotwin.twin.fleet.spec import read_fleet
+
+    log = write_log(tmp_path / "run.csv", span=2.0)
+    broken = tmp_path / "broken.toml"
+    broken.write_text(PROJECT.read_text().replace('step = 0.1', 'step = "fast"')
+                      .replace("[platform]", "[scene]\ncolour = 1\n\n[platform]\nscene = \"floor\"", 1))
+    path = fleet_file(tmp_path, [{"name": "a", "project": str(PROJECT), "pt_log": str(log)},
+                                 {"name": "a", "project": str(broken), "pt_log": str(log), "realtime": "yes"}])
+    with pytest.raises(CotwinError) as err:
+        read_fleet(path)
+    in_project = [f for f in err.value.findings if f.location.path == str(broken)]
+    assert {f.message.split(": ", 1)[1].split(" ")[0] for f in in_project} >= {"[cosim]", "[scene]"}, in_project
+    entry = [f for f in err.value.findings if "already the name of twin 1" in f.message][0].location.line
+    assert all(f.message.startswith(f"twin 'a' (project of {path}:") for f in in_project), in_project
+    assert all(f.location.line > entry for f in err.value.findings if f.location.path == str(path)
+               and "its project" in f.message)
+
+
+def test_the_models_problems_of_every_project_of_a_fleet_come_together_naming_their_twins(tmp_path):
+    """Problems found once the models are read ([cosim] log naming no variable) are reported for every
+    project at once, each naming the twins of its project; nothing is run."""
+    from cotwin.twin.fleet.spec import read_fleet
+    from cotwin.twin.fleet.supervisor import Fleet
+
+    import shutil
+
+    log = write_log(tmp_path / "run.csv", span=2.0)
+    shutil.copytree(PROJECT.parent, tmp_path / "ur5e")
+    projects = []
+    for name in ("one", "two"):
+        path = tmp_path / "ur5e" / f"{name}.toml"
+        path.write_text(PROJECT.read_text().replace("[cosim]", f'[cosim]\nlog = ["no_{name}"]'))
+        projects.append(path)
+    spec = read_fleet(fleet_file(tmp_path, [{"name": "a", "project": str(projects[0]), "pt_log": str(log)},
+                                            {"name": "b", "project": str(projects[1]), "pt_log": str(log)},
+                                            {"name": "c", "project": str(projects[0]), "pt_log": str(log)}]))
+    with pytest.raises(CotwinError) as err:
+        Fleet(spec, tmp_path / "out", ray=None).run()
+    said = {f.location.path: f.message for f in err.value.findings}
+    assert said[str(projects[0])].startswith("twins 'a', 'c' (") and "no_one" in said[str(projects[0])]
+    assert said[str(projects[1])].startswith("twin 'b' (") and "no_two" in said[str(projects[1])]

@@ -318,8 +318,8 @@ def test_an_unknown_scene_kind_is_refused_at_its_key_naming_the_known_ones(ur5e)
 
     path = ur5e / "kind.toml"
     path.write_text((ur5e / "cotwin.toml").read_text().replace("[platform]", '[platform]\nscene = "flexcel"'))
-    with pytest.raises(CotwinError, match=r"kind.toml:\d+:1: error: \[platform\] scene: no scene kind 'flexcel' "
-                                          r"\(known: auto, .*flexcell.*\)"):
+    with pytest.raises(CotwinError, match=r"kind.toml:\d+:1: error: \[platform\] scene: no scene kind 'flexcel'"
+                                          r"; did you mean 'flexcell'\? \(known: auto, .*flexcell.*\)"):
         load(path)
 
 

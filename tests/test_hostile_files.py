@@ -177,3 +177,21 @@ def test_an_input_that_is_not_a_file_is_refused_at_once(project, tmp_path):
 
     with pytest.raises(CotwinError, match="not a regular file"):
         files.read_text("/dev/zero", "model")
+
+
+def test_an_output_folder_that_is_a_file_and_an_output_file_that_is_a_folder_are_refused_up_front(project, tmp_path):
+    """-o naming a file where a folder is written (or a folder where a file is) said 'File exists: afile' or
+    named a temporary '.x.part' file, after the work was done; now the option is refused before any."""
+    (tmp_path / "afile").write_text("precious")
+    for args, said in ((("run", project / "cotwin.toml", "-o", tmp_path / "afile"), "afile: is a file, not a folder"),
+                       (("build", project / "cotwin.toml", "-o", tmp_path / "afile" / "x"),
+                        "would be made inside " + str(tmp_path / "afile") + ", a file"),
+                       (("build-dmodel", project / "arm.rst", "-o", tmp_path), "is a folder: name the file to write")):
+        proc = cotwin(*args)
+        assert proc.returncode == 2 and said in proc.stderr and "Invalid value for -o/--output" in proc.stderr, \
+            proc.stderr
+    assert (tmp_path / "afile").read_text() == "precious"
+    from cotwin.files import write_text
+
+    with pytest.raises(CotwinError, match="is a folder: cannot write a file there"):
+        write_text(tmp_path, "x")

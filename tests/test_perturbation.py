@@ -140,7 +140,7 @@ def test_plant_table_is_read_strictly_with_locations(tmp_path):
 def test_plant_table_names_joints_the_pmodel_has_and_options_override_it(tmp_path):
     path = _project(tmp_path, '[plant]\nfriction = { elbow = 1.0 }\n')
     with pytest.raises(CotwinError, match=r"cotwin.toml:6:14: error: friction: p-model ur5e has no actuated joint "
-                                          r"'elbow' \(joints: shoulder_pan_joint"):
+                                          r"'elbow'; did you mean 'elbow_joint'\? \(joints: shoulder_pan_joint"):
         load_plant(path)
     path.write_text(path.read_text().replace("elbow", "elbow_joint") + "payload = 1.0\nseed = 5\n")
     spec = load_project(path)

@@ -29,12 +29,14 @@ def ur5e(tmp_path) -> Path:
 
 
 def test_every_example_project_is_found():
-    assert len(PROJECTS) >= 6 and {p.parent.name for p in PROJECTS} == {"ur5e", "ur3e", "turtlebot"}
+    assert len(PROJECTS) >= 6 and {p.parent.name for p in PROJECTS} == {"ur5e", "ur3e", "turtlebot", "flexcell2"}
 
 
 def _resolved(value):
     if isinstance(value, Path):
         return value.resolve()
+    if isinstance(value, tuple):  # e.g. [[robots]]
+        return tuple(_resolved(v) for v in value)
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return dataclasses.replace(value, **{f.name: _resolved(getattr(value, f.name)) for f in dataclasses.fields(value)})
     return value
@@ -166,3 +168,149 @@ def test_fields_set_after_loading_are_what_overrides_and_the_writer_keep():
     assert (staged.rabbitmq.exchange, staged.end, staged.algorithm) == ("cotwin_elsewhere", 3.0, "gauss-seidel")
     text = staged.to_toml()
     assert 'exchange = "cotwin_elsewhere"' in text and "end = 3.0" in text and 'algorithm = "gauss-seidel"' in text
+
+
+def test_a_misspelt_value_of_a_closed_set_gets_the_nearest_valid_one(ur5e):
+    """Enum values get a "did you mean" as unknown keys do: the algorithm, the resync mode, a base written
+    in capitals when the project is read; the PT's endpoint (an open registry of kinds) when the twin is
+    assembled."""
+    path = ur5e / "typos.toml"
+    path.write_text(MODELS + '[cosim]\nalgorithm = "jacobii"\n[pt]\nendpoint = "opcau"\nurl = "opc.tcp://h:4840"\n'
+                    '[convergence]\nresync = "on_alarm"\n[platform]\nbase = "Free"\n')
+    with pytest.raises(CotwinError) as err:
+        load_project(path)
+    text = str(err.value)
+    for line, hint in ((6, "jacobi"), (11, "on-alarm"), (13, "free")):
+        assert f"typos.toml:{line}:1: error: " in text and f"did you mean '{hint}'?" in text
+    assert len(err.value.findings) == 3
+    from cotwin.twin.endpoints import check_endpoints
+    from cotwin.twin.system import TwinSystem
+
+    path.write_text(MODELS + '[pt]\nendpoint = "opcau"\nurl = "opc.tcp://h:4840"\n')
+    with pytest.raises(CotwinError) as err:
+        check_endpoints(TwinSystem(load_project(path)), "pt")
+    assert "typos.toml:6:1: error: " in str(err.value) and "did you mean 'opcua'?" in str(err.value)
+
+
+def test_a_section_the_command_does_not_read_is_a_warning_at_its_table(ur5e):
+    """[convergence] in a project `cotwin run` co-simulates (no live twin) is said to be ignored, as are the
+    other live-twin and plant sections; `cotwin twin` reads [convergence] and is not warned."""
+    path = ur5e / "conv.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text() + '\n[convergence]\nresync = "on-alarm"\n'
+                    '\n[deviation]\nabsolute = 0.1\n')
+    spec = load_project(path)
+    found = [str(f) for f in spec.ignored_sections("cotwin run")]
+    at = path.read_text().splitlines().index("[convergence]") + 1
+    assert found[0] == (f"{path}:{at}:1: warning: [convergence] applies only to cotwin twin, cotwin fleet: "
+                        "cotwin run ignores it")
+    assert len(found) == 2 and "[deviation]" in found[1]
+    assert spec.ignored_sections("cotwin twin") == []
+    assert load_project(ur5e / "cotwin.toml").ignored_sections("cotwin run") == []
+
+
+def test_cotwin_run_shows_the_warning_of_a_section_it_ignores(ur5e, tmp_path):
+    import subprocess
+    import sys
+
+    path = ur5e / "conv.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text() + '\n[convergence]\nresync = "on-alarm"\n')
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "run", str(path), "-o", str(tmp_path / "out"), "--end",
+                           "0.2"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    at = path.read_text().splitlines().index("[convergence]") + 1
+    assert f"conv.toml:{at}:1: warning: [convergence] applies only to cotwin twin, cotwin fleet: cotwin run ignores it" \
+        in proc.stderr
+
+
+def test_a_pt_log_replays_in_place_of_a_pt_table_of_another_endpoint(ur5e):
+    """`cotwin twin twin.toml --pt-log LOG` (and a fleet entry's pt_log) on a project whose [pt] is an OPC UA
+    plant: its url was refused as a key 'replay' does not take, though the table is not what runs."""
+    spec = load_project(ur5e / "twin.toml", ur5e / "plan.csv")
+    assert spec.pt.endpoint == "replay" and spec.pt.log == ur5e / "plan.csv"
+    (ur5e / "bad.toml").write_text((ur5e / "twin.toml").read_text().replace('endpoint = "opcua"',
+                                                                             'endpoint = "opcua"\nlog = "x.csv"'))
+    with pytest.raises(CotwinError, match=r"\[pt\] log does not apply to endpoint 'opcua'"):
+        load_project(ur5e / "bad.toml", ur5e / "plan.csv")  # the table as written is still checked
+
+
+def test_the_checks_against_the_models_report_together(ur5e):
+    """A plan naming a misspelt input, [cosim] log naming no variable and a parameter the d-model lacks: one
+    error with the three, each at its place (they came one per attempt)."""
+    from cotwin.twin.run import load
+
+    (ur5e / "bad.csv").write_text("timestep,moveDiscreteComand\n1000,true\n")
+    path = ur5e / "models.toml"
+    path.write_text(MODELS + '[scenario]\nplan = "bad.csv"\n[cosim]\nlog = ["q9"]\nparameters = { seeed = 3 }\n')
+    with pytest.raises(CotwinError) as err:
+        load(path)
+    said = [str(f) for f in err.value.findings]
+    assert said[0].startswith(f"{ur5e / 'bad.csv'}:1:10: error: unknown d-model input 'moveDiscreteComand'; "
+                              "did you mean 'moveDiscreteCommand'?")
+    assert said[1].startswith(f"{path}:8:1: error: [cosim] log: unknown mapping variable(s) q9")
+    assert said[2].startswith(f"{path}:9:16: error: [cosim] parameters: the d-model has no parameter 'seeed'")
+
+
+def test_a_live_twin_without_a_pt_says_how_to_give_one_before_anything_else(ur5e, tmp_path):
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "twin", str(ur5e / "cotwin.toml"), "-o", str(tmp_path / "o"),
+                           "--end", "1"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1
+    assert proc.stderr == (f"{ur5e / 'cotwin.toml'}: error: a live twin needs a PT: a [pt] table (endpoint = opcua | "
+                           "replay | broker | rtde), or --pt-log LOG (a recorded run) or --pt-url opc.tcp://HOST:PORT "
+                           "(an OPC UA plant)\n")  # not after the plan's warnings, nor without the options
+
+
+def test_a_plan_holding_no_command_is_said_not_taken_for_success(ur5e, tmp_path):
+    import subprocess
+    import sys
+
+    (ur5e / "empty.csv").write_text((ur5e / "plan.csv").read_text().splitlines()[0] + "\n")
+    (ur5e / "empty.toml").write_text((ur5e / "cotwin.toml").read_text().replace("plan.csv", "empty.csv"))
+    proc = subprocess.run([sys.executable, "-m", "cotwin", "run", str(ur5e / "empty.toml"), "-o", str(tmp_path / "o"),
+                           "--end", "0.2"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert (f"{ur5e / 'empty.csv'}:1:1: warning: the plan holds no command: the d-model runs without commands from "
+            "outside") in proc.stderr
+
+
+def test_history_is_ignored_by_a_run_without_its_page(ur5e):
+    path = ur5e / "hist.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text() + '\n[history]\nurl = "sqlite:///h.sqlite"\n')
+    spec = load_project(path)
+    assert [f.message for f in spec.ignored_sections("cotwin run")] == [
+        "[history] applies only to cotwin twin, cotwin fleet, cotwin run --dashboard: cotwin run ignores it"]
+    assert spec.ignored_sections("cotwin run --dashboard") == []
+
+
+def test_a_boolean_written_as_a_number_is_not_called_a_string(ur5e):
+    path = ur5e / "b.toml"
+    path.write_text(MODELS + "[cosim]\nrealtime = 1\n")
+    with pytest.raises(CotwinError) as err:
+        load_project(path)
+    assert str(err.value) == f"{path}:6:1: error: [cosim] realtime must be true or false (a TOML Boolean), got 1"
+
+
+def test_a_model_named_by_a_folder_is_said_to_be_one(ur5e):
+    path = ur5e / "dir.toml"
+    path.write_text(MODELS.replace('"arm.rst"', '"."'))
+    with pytest.raises(CotwinError) as err:
+        load_project(path)
+    assert str(err.value) == f"{path}:2:1: error: [models] dmodel: {ur5e / '.'} is a folder, not a file"
+
+
+def test_a_projects_errors_come_with_its_models_errors(ur5e):
+    """A typo in the project hid the d-model's syntax error until it was fixed: the models are read too when
+    the project has errors, and their errors said with the project's."""
+    (ur5e / "arm.rst").write_text((ur5e / "arm.rst").read_text().replace("sref stm_ref", "sref stm ref", 1))
+    path = ur5e / "both.toml"
+    path.write_text(MODELS + '[cosim]\nalgorithm = "jacobii"\n')
+    with pytest.raises(CotwinError) as err:
+        load_project(path)
+    said = [str(f) for f in err.value.findings]
+    assert any(s.startswith(f"{ur5e / 'arm.rst'}:") and "unexpected 'stm'" in s for s in said), said
+    assert f"{path}:6:1: error: [cosim] algorithm must be one of 'jacobi', 'gauss-seidel', got 'jacobii'; " \
+           "did you mean 'jacobi'?" in said
+    (ur5e / "plain.toml").write_text(MODELS)
+    assert load_project(ur5e / "plain.toml").dmodel == ur5e / "arm.rst"  # no error of its own: models read later

@@ -337,3 +337,22 @@ def test_values_into_an_fmu_are_checked_not_wrapped(system, tmp_path):
 
         with pytest.raises(CotwinError):
             checked_value("{u}.u", Port("p", kind, "input"), bad)
+
+
+def test_an_interrupt_while_the_figure_is_drawn_says_the_run_is_complete(project, tmp_path, monkeypatch):
+    """Ctrl-C after the last step, while figure.png is drawn, said only 'interrupted': the user could not tell
+    that outputs.csv was whole. The interrupt arrives in the drawing (as SIGINT raises it there)."""
+    import cotwin.plot
+    from cotwin.twin.run import run_twin
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cotwin.plot, "figure", interrupted)
+    out = tmp_path / "out"
+    with pytest.raises(CotwinError) as err:
+        run_twin(load(project / "cotwin.toml"), out, end=0.5)
+    assert err.value.interrupted
+    assert str(err.value) == ("error: interrupted while drawing the figure; the run is complete: 6 row(s) to "
+                              f"t = 0.5 s in {out / 'outputs.csv'}")
+    assert len((out / "outputs.csv").read_text().splitlines()) == 1 + 6

@@ -129,3 +129,57 @@ def test_the_generic_core_names_no_example():
                 line = text.count("\n", 0, match.start()) + 1
                 found.append(f"{path.relative_to(ROOT)}:{line}: {text[max(0, match.start() - 40):match.end() + 40]!r}")
     assert not found, "\n".join(found)
+
+
+def test_a_projects_scene_errors_are_reported_with_its_other_errors(ur5e):
+    """[scene] keys and the kind named are checked with the rest of the file, not in a round of their own
+    once the others are fixed; a misspelt kind or key gets the nearest valid one."""
+    from cotwin.twin.project import load_project
+
+    path = ur5e / "rounds.toml"
+    text = (ur5e / "cotwin.toml").read_text().replace("[platform]", '[platform]\nscene = "floor"')
+    path.write_text(text.replace('algorithm = "jacobi"', 'algorithm = "jacobii"') + "\n[scene]\ncolour = 1\n")
+    with pytest.raises(CotwinError) as err:
+        load_project(path)
+    text_of = str(err.value)
+    assert re.search(r"rounds.toml:\d+:1: error: \[cosim\] algorithm .*did you mean 'jacobi'", text_of)
+    assert re.search(r"rounds.toml:\d+:1: error: \[scene\] colour: the scene is 'floor'", text_of)
+    path.write_text(text.replace('scene = "floor"', 'scene = "flexcel"') + "\n[scene]\nbrick = [[1, 2]]\n")
+    with pytest.raises(CotwinError, match=r"no scene kind 'flexcel'; did you mean 'flexcell'"):
+        load_project(path)
+    path.write_text(text.replace('scene = "floor"', 'scene = "flexcell"') + "\n[scene]\nbrick = [[1, 2]]\n")
+    with pytest.raises(CotwinError, match=r"\[scene\] brick: .*did you mean 'bricks'"):
+        load_project(path)
+
+
+@pytest.fixture
+def stale_kind(tmp_path, monkeypatch):
+    """An installed distribution publishing a scene kind whose module is gone (an installation gone stale)."""
+    from cotwin.pmodel import scenes
+
+    info = tmp_path / "site" / "stalecells-1.0.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: stalecells\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text("[cotwin.scenes]\nghost = stalecells_gone.ghost:KIND\n")
+    monkeypatch.syspath_prepend(str(tmp_path / "site"))
+    monkeypatch.setattr(scenes, "_KINDS", dict(scenes._KINDS))
+    monkeypatch.setattr(scenes, "_BROKEN", {})
+    monkeypatch.setattr(scenes, "_loaded", False)
+    return "ghost"
+
+
+def test_a_scene_kind_whose_package_is_gone_is_named_and_auto_says_what_it_could_not_consider(ur5e, stale_kind,
+                                                                                               caplog):
+    from cotwin.twin.run import load
+
+    path = ur5e / "ghost.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text().replace("[platform]", '[platform]\nscene = "ghost"'))
+    with pytest.raises(CotwinError, match=r"ghost.toml:\d+:1: error: \[platform\] scene: scene kind 'ghost' is "
+                                          r"published by an installed package but cannot be loaded "
+                                          r"\(stalecells_gone.ghost:KIND: ModuleNotFoundError"):
+        load(path)
+    with caplog.at_level("WARNING", logger="cotwin.scenes"):
+        system = load(ur5e / "cotwin.toml")  # "auto": still the kind that fits, and a warning naming the lost one
+    assert type(system.models.scene).__name__ == "FlexCell"
+    assert any("scene = \"auto\" chose 'flexcell' but could not consider every installed kind: scene kind 'ghost'"
+               in r.getMessage() for r in caplog.records)

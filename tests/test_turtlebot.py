@@ -277,7 +277,7 @@ def test_bad_project_options_are_reported_at_their_keys(tmp_path):
     with pytest.raises(CotwinError, match=r"p-model Turtlebot3_Burger names no such mesh that cannot be read"):
         load(path)
     path.write_text(path.read_text().split("[[platform")[0])
-    with pytest.raises(CotwinError, match=r"the d-model has no parameter 'sed' \(it has cycle_period, seed\)"):
+    with pytest.raises(CotwinError, match=r"the d-model has no parameter 'sed'; did you mean 'seed'\? \(it has cycle_period, seed\)"):
         load(path)
 
 

@@ -155,4 +155,5 @@ def test_unwritable_output_is_a_readable_error(tmp_path):
     blocker.write_text("not a folder")
     proc = subprocess.run([sys.executable, "-m", "cotwin", "run", str(EXAMPLES / "ur5e" / "cotwin.toml"), "-o",
                            str(blocker / "out")], capture_output=True, text=True)
-    assert proc.returncode == 1 and proc.stderr.startswith("error: ") and "Traceback" not in proc.stderr
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr  # refused at the option, before any work
+    assert f"Invalid value for -o/--output: {blocker / 'out'}: would be made inside {blocker}, a file" in proc.stderr

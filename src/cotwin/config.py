@@ -173,6 +173,19 @@ def unknown_key(key: str, known, name: str) -> str:
     return f"unknown key '{key}' in {name}{hint} (known: {', '.join(known) or 'none'})"
 
 
+def did_you_mean(value, known) -> str:
+    """"; did you mean 'X'?" naming the valid value closest to a wrong one (a typo: "jacobii", "opcau",
+    "on_alarm"), or "" when none is close or the value is not a string."""
+    if not isinstance(value, str):
+        return ""
+    choices = [str(k) for k in known]
+    folded = {c.lower().replace("_", "-"): c for c in choices}  # "Free", "on_alarm", "target_x": case and dash
+    near = [folded[key] for key in [value.lower().replace("_", "-")] if key in folded] or \
+        difflib.get_close_matches(value, choices, n=1, cutoff=0.6) or \
+        difflib.get_close_matches(value.lower().replace("_", "-"), choices, n=1, cutoff=0.6)
+    return f"; did you mean '{near[0]}'?" if near else ""
+
+
 def table_name(at: tuple) -> str:
     """`[scenario.rabbitmq]`, `[[command]] 2`, or `the file` for the top level."""
     if not at:
@@ -196,12 +209,15 @@ def shown(value, limit: int = 80) -> str:
 
 def _value(spec: Key, value, file: TomlFile, where: tuple, problems: list[Finding], name: str):
     test, words = _KINDS[spec.kind]
+    if spec.kind == "bool" and not isinstance(value, str):
+        words = "true or false (a TOML Boolean)"  # "not a string" would mislead about 1 or 0
     if not test(value):
         problems.append(Finding(file.location(where), Severity.ERROR, f"{name} must be {words}, got {shown(value)}"))
         return spec.default
     if spec.choices and value not in spec.choices:
         problems.append(Finding(file.location(where), Severity.ERROR,
-                                f"{name} must be one of {', '.join(map(repr, spec.choices))}, got {shown(value)}"))
+                                f"{name} must be one of {', '.join(map(repr, spec.choices))}, got {shown(value)}"
+                                f"{did_you_mean(value, spec.choices)}"))
         return spec.default
     if spec.kind == "table" and spec.table is not None:
         return spec.table.read(value, file, where, problems)
@@ -247,10 +263,11 @@ def dumps(tables: dict[str, dict], header: str = "") -> str:
     written as their shortest exact text, so that reading gives back the very same values."""
     lines = [f"# {line}" if line else "#" for line in header.splitlines()]
     for table, values in tables.items():
-        if lines:
-            lines.append("")
-        lines.append(f"[{table}]")
-        lines.extend(f"{key} = {_toml_value(value)}" for key, value in values.items() if value is not None)
+        for item in values if isinstance(values, list) else [values]:  # a list: an array of tables ([[name]])
+            if lines:
+                lines.append("")
+            lines.append(f"[[{table}]]" if isinstance(values, list) else f"[{table}]")
+            lines.extend(f"{key} = {_toml_value(value)}" for key, value in item.items() if value is not None)
     return "\n".join(lines) + "\n"
 
 

@@ -49,6 +49,10 @@ def read_bytes(path: str | Path, what: str, limit: int | None = None) -> bytes:
             if info.st_size > cap:
                 raise error(path, f"the {what} is {_size(info.st_size)}, over the {_size(cap)} cotwin reads")
             data = f.read(cap + 1)
+    except IsADirectoryError:
+        found = sorted(Path(path).glob("*.toml"))[:5] if what == "project file" else []
+        hint = f" (it holds {', '.join(p.name for p in found)})" if found else ""
+        raise error(path, f"cannot read {what}: it is a folder: name the {what} in it{hint}") from None
     except OSError as err:
         raise error(path, f"cannot read {what}: {err.strerror or err}") from None
     if len(data) > cap:  # grew while being read
@@ -119,8 +123,14 @@ def output(path: str | Path, inputs: Iterable[str | Path | None] = (), mode: int
     `text`), renamed over `path` when the block ends without an error, removed otherwise."""
     path = Path(path)
     check_outputs([path], inputs)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, part = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
+    if path.is_dir():  # else the error would name the temporary file beside it
+        raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR, "is a folder: cannot write a file there")])
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, part = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
+    except OSError as err:  # named by the file asked for, not the temporary one beside it
+        raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR,
+                                   f"cannot write here: {err.strerror or err}")]) from None
     try:
         os.fchmod(fd, mode if mode is not None else 0o666 & ~_umask())
         with os.fdopen(fd, "w" if text else "wb", **({"encoding": "utf-8", "newline": newline} if text else {})) as f:

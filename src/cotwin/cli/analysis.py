@@ -3,14 +3,38 @@
 from __future__ import annotations
 
 import sys
+from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 
 import click
 
 from .. import safejson
+from ..diagnostics import CotwinError, Location
+from ..plaindata import StateError
 from ..files import CAPS, check_outputs, output, read_bytes, write_text
-from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main, named_values, outcomes, output_path,
-                     tool_point)
+from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main, named_values, outcomes, output_file,
+                     show_warnings, tool_point)
+
+
+def located(err: CotwinError, path: str | None) -> CotwinError:
+    """`err` with each finding that names no place put at `path` (the plan or state file it is about)."""
+    if path is None:
+        return err
+    found = [f if not f.location.path.startswith("<") else replace(f, location=Location(str(path), 0, 0))
+             for f in err.findings]
+    out = CotwinError(found)
+    out.__dict__.update({k: v for k, v in err.__dict__.items() if k != "findings"})
+    return out
+
+
+@contextmanager
+def about(path: str | None, *kinds: type):
+    """Errors of `kinds` (default CotwinError) raised in the block, located at `path` when they name no place."""
+    try:
+        yield
+    except tuple(kinds or (CotwinError,)) as err:
+        raise located(err, path) from None
 
 
 def plan_file(path: str, program):
@@ -23,7 +47,8 @@ def plan_file(path: str, program):
             data = safejson.loads(read_bytes(path, "plan"), CAPS["plan"])
         except safejson.Refused as err:
             raise click.BadParameter(f"{path}: {err}", param_hint="--plan") from None
-        return plan_from_json(data, program)
+        with about(path):
+            return plan_from_json(data, program)
     return read_scenario(path, program)
 
 
@@ -33,7 +58,7 @@ def plan_file(path: str, program):
 @click.option("--from", "state", type=click.Path(), help="a saved DT state to fork (DIR/state of a run or a live twin)")
 @click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=60.0, show_default=True,
               help="simulate at most this long (s)")
-@click.option("-o", "--output", "out", callback=output_path, help="write the prediction as JSON here")
+@click.option("-o", "--output", "out", callback=output_file, help="write the prediction as JSON here")
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 def whatif(project: str, plan: str, state: str | None, horizon: float, out: str | None, strict: bool) -> None:
     """Predict what a plan would do: fork the DT (at a saved state, or at the start) and run the plan
@@ -51,7 +76,11 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
     blob = read_bytes(state, "state") if state is not None else None  # capped: a state is a few MiB
     from ..twin.outcomes import Summary
 
-    prediction = predict(system, commands, blob, horizon=horizon)
+    from ..twin.scenario import nothing_planned
+
+    show_warnings(nothing_planned(Path(plan), commands))
+    with about(state, StateError):
+        prediction = predict(system, commands, blob, horizon=horizon)
     for c in prediction.commands:
         args = ", ".join(f"{k}={v}" for k, v in c.args.items())
         verdict = {True: "feasible", False: "NOT feasible", None: "feasibility unknown"}[c.feasible]
@@ -76,7 +105,7 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
               help="simulate each what-if at most this long (s)")
 @click.option("--workers", type=click.IntRange(min=1, max=1024), help="local processes (default: one per CPU)")
 @click.option("--ray", "ray", help="run on Ray: 'auto' (the local cluster) or a cluster address")
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="the CSV of answers to write")
+@click.option("-o", "--output", "out", callback=output_file, required=True, help="the CSV of answers to write")
 def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, horizon: float, workers: int | None,
           ray: str | None, out: str) -> None:
     """Run one what-if per combination of argument values, in parallel (e.g. every hole of the plate:
@@ -85,7 +114,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     import time
 
     from ..twin.run import load
-    from ..twin.sweep import ERROR, failures, grid, run_sweep
+    from ..twin.sweep import ERROR, SweepInterrupted, failures, grid, run_sweep
     from .progress import ProgressReport
 
     check_finite(horizon=horizon)
@@ -100,15 +129,28 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     plans = grid(system.models.program, event, ranges)
     blob = read_bytes(state, "state") if state else None
     started = time.perf_counter()
-    with ProgressReport("sweeping", "what-ifs") as progress:
-        rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress)
+    def write(path, rows: list[dict]) -> None:
+        ordered = [r for r in rows if ERROR not in r] + [r for r in rows if ERROR in r]  # answers' columns first
+        columns = list(dict.fromkeys(k for r in ordered for k in r))
+        with output(path, inputs, text=True, newline="") as f:
+            writer = csv.DictWriter(f, columns, lineterminator="\n")
+            writer.writeheader()
+            writer.writerows(rows)
+
+    try:
+        with ProgressReport("sweeping", "what-ifs") as progress:
+            with about(state, StateError):
+                rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress)
+    except SweepInterrupted as err:  # the what-ifs answered are kept beside the output
+        partial = Path(out).with_name(Path(out).stem + ".partial.csv")
+        if err.rows:
+            write(partial, err.rows)
+        stopped = CotwinError(f"{err.findings[0].message}; " + (f"the {len(err.rows)} answered are in {partial}"
+                                                                  if err.rows else "none was answered"))
+        stopped.interrupted = True
+        raise stopped from None
     wall = time.perf_counter() - started
-    ordered = [r for r in rows if ERROR not in r] + [r for r in rows if ERROR in r]  # answers' columns first
-    columns = list(dict.fromkeys(k for r in ordered for k in r))
-    with output(out, inputs, text=True, newline="") as f:
-        writer = csv.DictWriter(f, columns, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
+    write(out, rows)
     bad = failures(rows)
     for k, row in bad[:MAX_REPORTED]:
         where = ", ".join(f"{name}={value}" for name, value in row.items() if name != ERROR)
@@ -125,7 +167,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
 @main.command()
 @click.argument("project", type=click.Path())
 @click.option("--pt-log", type=click.Path(), help="the PT's recorded run of the project's plan (a UR RTDE log) to fit")
-@click.option("-o", "--output", "out", callback=output_path, type=click.Path(), help="the calibration file to write (with --pt-log)")
+@click.option("-o", "--output", "out", callback=output_file, type=click.Path(), help="the calibration file to write (with --pt-log)")
 @click.option("--calibration", type=click.Path(), help="the calibration to check (with --check; default: the one "
               "just fitted, else the project's)")
 @click.option("--check", "check_log", type=click.Path(), help="another recorded run to replay on the calibrated DT")

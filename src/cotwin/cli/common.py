@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import click
 
@@ -34,7 +35,7 @@ ON_UNIT_FAILURE = click.option(
 def said_restarts(units) -> None:
     """Say which units were restarted from a state during the run (each restart was logged as it happened)."""
     for unit in units:
-        restarts = getattr(unit, "restarts", None)
+        restarts = unit.restarts
         if restarts:
             times = ", ".join(f"{t:g}" for t, _ in restarts[:20]) + (", ..." if len(restarts) > 20 else "")
             click.echo(f"unit {unit.name}: restarted {len(restarts)} time(s) from its last good state, at t = {times} s",
@@ -45,6 +46,52 @@ def output_path(ctx, param, value: str | None) -> str | None:
     """An -o option: a path, never the empty string (which would write into the current folder)."""
     if value is not None and not value.strip():
         raise click.BadParameter("an empty path: name the file or folder to write", param_hint="-o/--output")
+    return value
+
+
+def _file_on_the_way(path: Path) -> Path | None:
+    """The first of `path` and its parents that exists as something other than a folder, if any."""
+    for at in [*reversed(path.parents), path]:
+        if at.exists() and not at.is_dir():
+            return at
+    return None
+
+
+def output_folder(ctx, param, value: str | None) -> str | None:
+    """An -o option naming a folder to write into: refused before anything runs if it (or a folder it would
+    be made in) is a file, or is a folder this user cannot write into."""
+    import os
+
+    value = output_path(ctx, param, value)
+    if value is None:
+        return None
+    blocking = _file_on_the_way(Path(value))
+    if blocking is not None:
+        what = "is a file" if blocking == Path(value) else f"would be made inside {blocking}, a file"
+        raise click.BadParameter(f"{value}: {what}, not a folder: name a folder to write into", param_hint="-o/--output")
+    existing = next(p for p in [Path(value), *Path(value).parents] if p.exists())
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise click.BadParameter(f"{value}: cannot write into {existing} (no permission)", param_hint="-o/--output")
+    return value
+
+
+def output_file(ctx, param, value: str | None) -> str | None:
+    """An -o option naming a file to write: refused before anything runs if it is a folder, or would be made
+    inside a file, or in a folder this user cannot write into."""
+    import os
+
+    value = output_path(ctx, param, value)
+    if value is None:
+        return None
+    path = Path(value)
+    if path.is_dir():
+        raise click.BadParameter(f"{value}: is a folder: name the file to write", param_hint="-o/--output")
+    blocking = _file_on_the_way(path.parent)
+    if blocking is not None:
+        raise click.BadParameter(f"{value}: would be made inside {blocking}, a file", param_hint="-o/--output")
+    existing = next(p for p in path.parents if p.exists())
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise click.BadParameter(f"{value}: cannot write into {existing} (no permission)", param_hint="-o/--output")
     return value
 
 

@@ -5,12 +5,12 @@ from __future__ import annotations
 import click
 
 from ..diagnostics import CotwinError
-from .common import address, main, output_path
+from .common import address, main, output_folder
 
 
 @main.command()
 @click.argument("fleet_file", metavar="FLEET.toml", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, required=True,
+@click.option("-o", "--output", "out", callback=output_folder, required=True,
               help="folder for each twin's DIR/NAME, fleet.json and the history store")
 @click.option("--ray", "ray", default="auto", show_default=True, metavar="auto|ADDRESS|off",
               help="where the twins run: a local Ray started here on 127.0.0.1 and stopped at the end (auto), a Ray "

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .common import address, main, output_path, serving_options, start_dashboard
+from .common import address, main, output_file, serving_options, start_dashboard
 
 
 @main.group()
@@ -45,7 +45,7 @@ def history_list(db: str | None, folder: str | None) -> None:
 @click.option("--db", help="database URL (sqlite:///file, postgresql://...)")
 @click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
 @click.option("--side", default="dt", show_default=True, help="pt or dt")
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="the CSV to write")
+@click.option("-o", "--output", "out", callback=output_file, required=True, help="the CSV to write")
 def history_export(run_id: int, db: str | None, folder: str | None, side: str, out: str) -> None:
     """Export one side of a run as a Maestro-format CSV."""
     from ..twin.history import export_csv

@@ -7,14 +7,15 @@ from pathlib import Path
 
 import click
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, Finding, Location, Severity
+from ..twin.observing import TwinObserver
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
-                     main, outcomes, output_path, said_restarts, serving_options, show_warnings, start_dashboard)
+                     main, outcomes, output_folder, said_restarts, serving_options, show_warnings, start_dashboard)
 
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
+@click.option("-o", "--output", "out", callback=output_folder, required=True, help="folder for pt/ and dt/ outputs.csv, deviation.json, figure.png")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
 @click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
@@ -47,15 +48,23 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
     spec = load_project(project, pt_log)
     check_timing(spec, step, end)
+    if spec.robots:
+        return _cell_twin(spec, out, step, end, algorithm, realtime, pt_log, pt_url, exchange, history, whatif,
+                          dashboard, cc, serving)
     if pt_url is not None:
         spec = pt_with_url(spec, pt_url, pt_log is not None)
     if exchange is not None:
         spec = spec.with_overrides(scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange,
                                    realtime=True if realtime is None else realtime)
+    if spec.pt is None:  # said before the models are read and the plan's warnings shown
+        raise CotwinError([Finding(Location(str(spec.path), 0, 0), Severity.ERROR,
+                                   "a live twin needs a PT: a [pt] table (endpoint = opcua | replay | broker | rtde), "
+                                   "or --pt-log LOG (a recorded run) or --pt-url opc.tcp://HOST:PORT (an OPC UA plant)")])
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
-    from ..twin.scenario import after_end
+    from ..twin.scenario import after_end, nothing_planned
 
+    show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
                            broker if whatif else None, serving)
@@ -100,7 +109,45 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
 
 
-class TwinProgress:
+def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, exchange, history, whatif, dashboard,
+               cc: str, serving: dict) -> None:
+    """`cotwin twin` of a cell of several robots ([[robots]]): its perturbed plant as the PT (cotwin.twin.cell_live)."""
+    from ..twin.cell import CellSystem
+    from ..twin.cell_live import run_cell_twin
+    from ..twin.history import database_url
+    from .progress import ProgressReport
+
+    unsupported = [flag for flag, given in (("--pt-log", pt_log), ("--pt-url", pt_url), ("--rabbitmq", exchange),
+                                             ("--whatif", whatif)) if given]
+    if unsupported:
+        raise click.UsageError(f"a cell of several robots is twinned with its own perturbed plant as the PT, its plan "
+                               f"as its commands: {', '.join(unsupported)} not done yet")
+    cell = CellSystem(spec)
+    dash = start_dashboard(cell, dashboard, "twin", database_url(history or spec.history_url, Path(out)), None, serving)
+    try:
+        with ProgressReport("twin", "s") as progress:
+            result = run_cell_twin(cell, out, step, end, algorithm, realtime, history, cc,
+                                   observers=[*([dash.feed] if dash else ()), TwinProgress(progress)])
+        if dash is not None:
+            dash.finish("done")
+    except BaseException as err:
+        if dash is not None:
+            dash.finish("failed", str(err) or type(err).__name__)
+        raise
+    finally:
+        if dash is not None:
+            dash.stop()
+    r = result.pt
+    click.echo(f"{result.out}: PT and DT, {r.steps} steps each to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
+               f"(real-time factor {r.real_time_factor:.1f})")
+    click.echo(f"deviation: {result.alarm_count} alarm(s); report {result.out / 'deviation.json'}; "
+               f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
+    for side, summary in result.outcomes.items():
+        for line in summary.lines():
+            click.echo(f"{side.upper()}: {line}")
+
+
+class TwinProgress(TwinObserver):
     """A live twin's observer that reports its simulated time against its end."""
 
     def __init__(self, report):
@@ -136,7 +183,9 @@ def pt_with_url(spec, url: str, replayed: bool):
 @click.option("--period", type=click.FloatRange(min=0.01, max=3600), default=0.5, show_default=True,
               help="seconds of wall time between messages")
 @click.option("--exchange", callback=exchange_name, help="the twin's exchange (default: the project's [scenario] rabbitmq exchange)")
-def publish(project: str, plan: str | None, period: float, exchange: str | None) -> None:
+@click.option("--robot", help="a cell of several robots ([[robots]]): publish this robot's commands (its plan columns "
+              "ROBOT.port), routed to it (TO_COSIM.ROBOT)")
+def publish(project: str, plan: str | None, period: float, exchange: str | None, robot: str | None) -> None:
     """Publish commands to a live twin over RabbitMQ, as the paper's arm publisher does: wait for the
     ready message, then every PERIOD send the command due at the echoed simulation time, else idle."""
     from dataclasses import replace
@@ -148,15 +197,29 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None)
     from ..twin.scenario import read_scenario
 
     check_finite(period=period)
-    system = load(project)
+    system = load(project, cells=True)
     settings = system.spec.rabbitmq or RabbitMQSettings(exchange or "fmi_digital_twin_dt")
     if exchange:
         settings = replace(settings, exchange=exchange)
-    program = system.models.program
     if plan is None and system.spec.plan is None:
         raise click.BadParameter("the project has no plan: give one with --plan", param_hint="--plan")
-    commands = read_scenario(plan or system.spec.plan, program)
-    ports = system.live_ports()
+    if system.spec.robots:
+        from ..twin.cell import read_cell_plan, routed
+
+        names = [r.name for r in system.robots]
+        if robot not in names:
+            raise click.BadParameter(f"a cell's commands go to one robot: one of {', '.join(names)}",
+                                     param_hint="--robot")
+        program = system.program
+        settings = routed(settings, robot)
+        commands = read_cell_plan(plan or system.spec.plan, program, names)[robot]
+        ports = next(r for r in system.robots if r.name == robot).system.live_ports()
+    else:
+        if robot is not None:
+            raise click.BadParameter("only for a cell of several robots ([[robots]])", param_hint="--robot")
+        program = system.models.program
+        commands = read_scenario(plan or system.spec.plan, program)
+        ports = system.live_ports()
     publisher = Publisher(settings, commands, idle_values(port_types(program, ports)), period=period,
                           end=system.spec.end)
     click.echo(f"publishing {len(commands)} command(s) on exchange {settings.exchange} ({settings.to_cosim}); "
@@ -217,7 +280,6 @@ def serve_robot(project: str, queue: str | None, url: str | None) -> None:
     whose [platform] endpoint is "broker". Needs COTWIN_ROBOT_SECRET (shared with the twin); broker
     credentials as for every link (docs/security.md). Stops on Ctrl-C or SIGTERM, never on a message."""
     import signal
-    import threading
 
     from ..mapping.amqp import redact, url_problem
     from ..mapping.broker import RobotServer
@@ -232,28 +294,20 @@ def serve_robot(project: str, queue: str | None, url: str | None) -> None:
     queue = queue or system.spec.queue
     simulator = PlatformSimulator(system.models.tree, system.models.scene, base=system.spec.base)
     server = RobotServer(SimulatedEndpoint(simulator), queue, url)
-    failure: list[CotwinError] = []
-
-    def serve() -> None:
-        try:
-            server.serve()
-        except CotwinError as err:
-            failure.append(err)
-
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: server.stop())
-    thread = threading.Thread(target=serve, name="robot server", daemon=True)
-    thread.start()
-    while thread.is_alive() and not server.ready.wait(0.2):
-        pass
-    if server.ready.is_set():
+        signal.signal(sig, lambda *_: server.stopping.set())  # the server's thread ends after its current message
+    try:
+        server.start(timeout=None)  # on its own thread (cotwin.service): until it is on its queue, or fails
+    except CotwinError:
+        if server.failure is not None:
+            raise
+    else:
         click.echo(f"serving the robot on queue {queue} at {redact(url)} (stop: Ctrl-C or SIGTERM)", err=True)
         click.echo("ready", err=False)
         sys.stdout.flush()
-    while thread.is_alive():
-        thread.join(0.2)
-    if failure:
-        raise failure[0]
+    while not server.wait(0.2):
+        pass
+    server.check()  # the broker stayed away
     click.echo(f"served {server.requests} request(s); refused {server.refused} unauthenticated, dropped "
                f"{server.dropped} unanswerable", err=True)
 

@@ -10,7 +10,7 @@ import click
 
 from ..diagnostics import CotwinError, Severity
 from ..files import check_outputs, write_text
-from .common import main, named_values, output_path, report, value_domains
+from .common import main, named_values, output_file, report, value_domains
 
 
 @main.command()
@@ -58,7 +58,7 @@ def tree_findings(project) -> list:
 @main.command("build-dmodel")
 @click.argument("model", nargs=-1, required=True)
 @click.option("--module", "module_name", help="the module to build (default: the only one)")
-@click.option("-o", "--output", callback=output_path, required=True, help="the FMU file to write")
+@click.option("-o", "--output", callback=output_file, required=True, help="the FMU file to write")
 @click.option("--cc", default="cc", show_default=True, help="C compiler")
 @click.option("--fmi", "version", type=click.Choice(["2", "3"]), default="2", show_default=True,
               help="FMI version: 3 makes the d-model's cycle a clock (Co-Simulation with Event Mode)")
@@ -91,7 +91,7 @@ def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, c
 @click.argument("model", nargs=-1, required=True)
 @click.option("--pmodel", "pmodel_name", help="the p-model to export (default: the one not used as a part)")
 @click.option("--format", "fmt", type=click.Choice(["sdf", "urdf", "mjcf"]), required=True)
-@click.option("-o", "--output", callback=output_path, required=True, help="the file to write")
+@click.option("-o", "--output", callback=output_file, required=True, help="the file to write")
 def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, output: str) -> None:
     """Write a p-model as SDF 1.6, URDF or MJCF (all three from one kinematic tree)."""
 

@@ -9,13 +9,13 @@ import click
 from ..diagnostics import CotwinError
 from ..files import check_outputs
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_step_count,
-                     check_timing, main, outcomes, output_path, said_restarts, serving_options, show_warnings,
-                     start_dashboard)
+                     check_timing, main, outcomes, output_file, output_folder, said_restarts, serving_options,
+                     show_warnings, start_dashboard)
 
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
+@click.option("-o", "--output", "out", callback=output_folder, required=True, help="folder for the FMUs, SDF/URDF/MJCF and multimodel.json")
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 def build(project: str, out: str, cc: str) -> None:
     """Build every artefact of a twin project (cotwin.toml); unchanged artefacts are kept."""
@@ -23,7 +23,7 @@ def build(project: str, out: str, cc: str) -> None:
     from ..twin.build import build as build_all, folder_lock
     from ..twin.run import load
 
-    system = load(project)
+    system = load(project, cells=True)
     with folder_lock(Path(out)):
         written = build_all(system, out, cc)
     for path in written.values():
@@ -32,7 +32,7 @@ def build(project: str, out: str, cc: str) -> None:
 
 @main.command()
 @click.argument("project", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="folder for outputs.csv, figure.png and the artefacts")
+@click.option("-o", "--output", "out", callback=output_folder, required=True, help="folder for outputs.csv, figure.png and the artefacts")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True), help="communication step size (s)")
 @click.option("--end", type=click.FloatRange(min=0, min_open=True), help="end time (s)")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))
@@ -62,13 +62,18 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     if cycle_period is not None and version != "3":
         raise click.BadParameter("only with --fmi 3 (an FMI 2.0 d-model takes [cosim] parameters cycle_period)",
                                  param_hint="--cycle-period")
-    system = load(project)
+    system = load(project, cells=True)
     check_timing(system.spec, step, end)
+    reader = "cotwin run --dashboard" if dashboard and not system.spec.robots else "cotwin run"  # a cell: no history
+    show_warnings(system.spec.ignored_sections(reader))
+    if system.spec.robots:
+        return _run_cell(system, out, step, end, algorithm, realtime, cc, dashboard, version, serving)
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
-    from ..twin.scenario import after_end
+    from ..twin.scenario import after_end, nothing_planned
 
+    show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, system.spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "run", history, serving=serving)
     try:
@@ -87,9 +92,37 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     outcomes({"": ran.outcomes}, strict)
 
 
+def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
+              cc: str, dashboard, version: str, serving: dict) -> None:
+    """`cotwin run` of a cell of several robots ([[robots]]): each robot's outcomes and the contacts between them."""
+    from ..twin.cell import run_cell
+    from ..twin.scenario import after_end, nothing_planned
+    from .progress import ProgressReport
+
+    if version != "2":
+        raise click.UsageError("a cell of several robots runs with --fmi 2 (not done yet with 3)")
+    show_warnings(nothing_planned(cell.spec.plan, cell.commands))
+    show_warnings(after_end(cell.commands, cell.spec.end if end is None else end))
+    dash = start_dashboard(cell, dashboard, "run", None, serving=serving)
+    try:
+        with ProgressReport("co-simulating", "steps") as progress:
+            ran = run_cell(cell, out, step, end, algorithm, realtime, progress=progress, cc=cc,
+                           observers=[dash.feed] if dash else None)
+    finally:
+        if dash is not None:
+            dash.stop()
+    r = ran.result
+    click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
+               f"(real-time factor {r.real_time_factor:.1f})")
+    for line in ran.outcomes.lines():
+        click.echo(line)
+    for time, first, second in ran.contacts:
+        click.echo(f"contact: {first} and {second} at t = {time:.3f} s")
+
+
 @main.command()
 @click.argument("multimodel", type=click.Path())
-@click.option("-o", "--output", "out", callback=output_path, default=None, help="the CSV to write (default: outputs.csv beside it)")
+@click.option("-o", "--output", "out", callback=output_file, default=None, help="the CSV to write (default: outputs.csv beside it)")
 @click.option("--step", type=click.FloatRange(min=0, min_open=True))
 @click.option("--end", type=click.FloatRange(min=0, min_open=True))
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]))

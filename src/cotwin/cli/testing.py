@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from .common import main, output_path, value_domains
+from .common import main, output_file, output_folder, value_domains
 
 
 def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str], str]:
@@ -59,7 +59,7 @@ def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str],
 @click.option("--drivers/--no-drivers", default=True, show_default=True,
               help="build each stub case as a test driver FMU (case_NN.fmu) reporting a verdict")
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the driver FMUs")
-@click.option("-o", "--output", "out", callback=output_path, required=True, help="the folder for the suite")
+@click.option("-o", "--output", "out", callback=output_folder, required=True, help="the folder for the suite")
 def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, domains: tuple[str, ...],
             commands: tuple[str, ...], answers: str, project: str | None, split: str, max_cycles: int, max_states: int,
             period: float, settle: float, drivers: bool, cc: str, out: str) -> None:
@@ -176,7 +176,7 @@ def pt_option(ctx, param, value: str | None) -> str | None:
 @click.option("--fmi", "version", type=click.Choice(["2", "3"]), default="2", show_default=True,
               help="the d-model FMU's FMI version (3: its cycle a clock)")
 @click.option("--case", "cases", multiple=True, metavar="NAME", help="run only this case (repeatable)")
-@click.option("-o", "--output", "out", callback=output_path, default=None,
+@click.option("-o", "--output", "out", callback=output_folder, default=None,
               help="folder for the built FMU (default: a temporary one)")
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
 def test_command(project: str, tests: str, pt: str | None, junit: str | None, algorithm: str | None, version: str,
@@ -222,7 +222,7 @@ def _pt_endpoint(system, pt: str):
         if spec is None:
             raise click.BadParameter(f"{system.spec.path} has no [pt] table: name the plant's URL (--pt opc.tcp://...)",
                                      param_hint="--pt")
-        return (lambda: pt_endpoint(system)), f"the PT ({spec.endpoint}{' at ' + spec.url if getattr(spec, 'url', None) else ''})"
+        return (lambda: pt_endpoint(system)), f"the PT ({spec.endpoint}{' at ' + spec.url if spec.url else ''})"
     from ..mapping.opcua import OPCUAEndpoint
 
     return (lambda: OPCUAEndpoint(system.models.tree, pt)), f"the PT (OPC UA plant at {pt})"
@@ -236,7 +236,7 @@ def _pt_endpoint(system, pt: str):
 @click.option("--cc", default="cc", show_default=True, help="C compiler (with --fmu)")
 @click.option("--min-kill", type=click.FloatRange(0, 100), metavar="PERCENT",
               help="exit 1 when fewer of the non-equivalent mutants are killed")
-@click.option("-o", "--output", "out", callback=output_path, default=None, help="write the outcomes as JSON")
+@click.option("-o", "--output", "out", callback=output_file, default=None, help="write the outcomes as JSON")
 def mutants(tests: str, model: tuple[str, ...], module_name: str | None, through_fmu: bool, cc: str,
             min_kill: float | None, out: str | None) -> None:
     """Mutate a d-model automatically and run a generated suite on every mutant: the kill rate, and why each

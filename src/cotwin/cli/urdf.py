@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import click
 
-from .common import main, output_path, report
+from .common import main, output_folder, report
 
 
 @main.command("import-urdf")
 @click.argument("urdf", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", callback=output_path, required=True,
+@click.option("-o", "--output", callback=output_folder, required=True,
               help="the folder to write the p-model (ROBOT.pm) and its meshes (meshes/...) into")
 @click.option("--package-path", "package_path", multiple=True, type=click.Path(file_okay=False),
               help="a folder that is, or holds, the ROS packages package:// names (repeatable; then ROS_PACKAGE_PATH)")

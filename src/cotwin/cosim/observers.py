@@ -187,32 +187,47 @@ def epoch_of(units, now: float, slack: float = 1.0) -> float | None:
     """The wall-clock time (time.time()) of simulation time 0 announced by a unit (`epoch`, e.g. the
     RabbitMQ source's t0), kept within [now - slack, now] so that a far-off publisher clock cannot
     stall or rush the run; None when no unit announces one."""
-    epochs = [e for e in (getattr(u, "epoch", None) for u in units) if e is not None]
+    epochs = [u.epoch for u in units if u.epoch is not None]
     return min(max(min(epochs), now - slack), now) if epochs else None
 
 
-class RealTimePacer(Observer):
-    """Keeps simulated time from running ahead of wall-clock time (scaled by `factor`): after a step that
-    ends at t, waits until factor * (wall time since the epoch) >= t - start. The epoch is when the
-    run was initialised, or the wall time of simulation time 0 a unit announces (a live command
-    source), so that the run keeps to the publisher's clock."""
+class Pacer:
+    """Keeps simulated time from running ahead of wall-clock time (scaled by `factor`): `begin` marks the
+    epoch, `wait(t)` waits until factor * (wall time since the epoch) >= t - start. The epoch is when
+    `begin` is called, or the wall time of simulation time 0 a unit announces (a live command source), so
+    that a run keeps to the publisher's clock. One pacer for `cotwin run --realtime` (RealTimePacer) and
+    the live twin (cotwin.twin.live_observers.Pacing)."""
 
     def __init__(self, factor: float = 1.0):
         if not (factor > 0 and math.isfinite(factor)):
             raise ValueError("the real-time factor must be a positive number")
         self.factor = factor
         self.started = 0.0
+        self.start = 0.0
 
-    def simulation_initialized(self, execution) -> None:
+    def begin(self, units, start: float) -> None:
+        """The epoch: now, or the wall time of simulation time 0 one of `units` announces; `start` the
+        simulated time the run begins at."""
+        self.start = start
         self.started = wallclock.perf_counter()
-        epoch = epoch_of(execution.system.units.values(), wallclock.time())
+        epoch = epoch_of(units, wallclock.time())
         if epoch is not None:
             self.started -= wallclock.time() - epoch
 
-    def step_complete(self, execution) -> None:
-        ahead = (execution.time - execution.start) / self.factor - (wallclock.perf_counter() - self.started)
+    def wait(self, time: float) -> None:
+        ahead = (time - self.start) / self.factor - (wallclock.perf_counter() - self.started)
         if ahead > 0:
             wallclock.sleep(ahead)
+
+
+class RealTimePacer(Observer, Pacer):
+    """A Pacer as an execution's observer: the epoch when the run was initialised, a wait after every step."""
+
+    def simulation_initialized(self, execution) -> None:
+        self.begin(execution.system.units.values(), execution.start)
+
+    def step_complete(self, execution) -> None:
+        self.wait(execution.time)
 
 
 class LiveFeed(Observer):

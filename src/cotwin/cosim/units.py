@@ -84,6 +84,14 @@ class Unit:
     name: str
     ports: dict[str, Port]
 
+    # optional abilities, declared with what a unit without them has (nothing probes a unit with getattr)
+    epoch: float | None = None  # wall time of simulation time 0, for a unit that keeps to a live clock
+    restarts: Sequence[tuple[float, str]] = ()  # (time, what happened) of each restart from a saved state
+    mapping = None  # an in-process mapping unit's runtime (cotwin.mapping.runtime): it can be asked
+    executed: Sequence[tuple[float, str, dict]] = ()  # an in-process mapping unit's operations run
+    command_queue = None  # a command source's commands not yet applied (cotwin.twin.commands.CommandQueue)
+    ticks: int | None = None  # a clocked unit's clock ticks run so far (None: the unit has no clocks)
+
     def inputs(self) -> list[str]:
         return [p.name for p in self.ports.values() if p.causality == "input"]
 

@@ -28,7 +28,9 @@ import pika
 
 from ..diagnostics import CotwinError
 from ..logcap import CappedLog
+from ..service import BackgroundService
 from .amqp import connect, redact, scrub
+from .platform import Endpoint
 from .robot_protocol import (MAX_REPLY, MAX_REQUEST, OPS, REPLY_QUEUE, ReplayGuard, RobotView, check_reply,
                              check_request, decode, load_secret, reply_headers, request_headers, validate_reply,
                              validate_request)
@@ -42,20 +44,21 @@ _LINK_ERRORS = (pika.exceptions.AMQPError, OSError)
 __all__ = ["BrokerEndpoint", "DEFAULT_URL", "OPS", "RobotServer", "validate_request"]
 
 
-class RobotServer:
-    """Serves an endpoint on a queue until `stop()` (run `serve` in a thread or its own process). It
-    answers every message it can with a reply or an error, and no message stops or crashes it."""
+class RobotServer(BackgroundService):
+    """Serves an endpoint on a queue until `stop()`: on its own thread (`start()`, cotwin.service), or
+    `serve()` called in a thread or process of the caller's. It answers every message it can with a reply
+    or an error, and no message stops or crashes it. `connected` is set while it is on its queue."""
 
     def __init__(self, endpoint, queue: str, url: str = DEFAULT_URL, secret: bytes | None = None,
                  environ: Mapping[str, str] | None = None, reconnect_s: float = 60.0):
+        BackgroundService.__init__(self, f"cotwin robot server {queue}")
         self.endpoint = endpoint
         self.queue = queue
         self.url = url
         self.environ = environ
         self.secret = secret if secret is not None else load_secret(os.environ if environ is None else environ)
         self.reconnect_s = reconnect_s
-        self.ready = threading.Event()
-        self._stop = threading.Event()
+        self.connected = threading.Event()
         self.guard = ReplayGuard()
         self._known: set[str] | None = None
         self.requests = 0  # authenticated requests answered
@@ -76,8 +79,8 @@ class RobotServer:
 
     def _actuators(self) -> set[str] | None:
         if self._known is None:
-            names = getattr(self.endpoint, "actuator_names", None)
-            self._known = set(names()) if names is not None else set()
+            names = self.endpoint.actuator_names()
+            self._known = set(names) if names is not None else set()
         return self._known or None
 
     def handle(self, body: bytes) -> bytes:
@@ -174,17 +177,18 @@ class RobotServer:
         connection = self._open()
         lost_at: float | None = None
         try:
-            while not self._stop.is_set():
+            while not self.stopping.is_set():
                 try:
                     if connection is None:
                         connection = self._open()
                         self.reconnects += 1
                         log.warning("robot server %s: reconnected after %.1f s", self.queue, wallclock.monotonic() - lost_at)
                         lost_at = None
-                    self.ready.set()
+                    self.connected.set()
+                    self.ready()
                     connection.process_data_events(time_limit=0.2)
                 except _LINK_ERRORS + (CotwinError,) as err:
-                    self.ready.clear()
+                    self.connected.clear()
                     _close(connection)
                     connection = None
                     now = wallclock.monotonic()
@@ -195,15 +199,16 @@ class RobotServer:
                     if now - lost_at > self.reconnect_s:
                         raise CotwinError(f"robot server {self.queue}: the broker at {redact(self.url)} stayed away "
                                           f"for {self.reconnect_s:g} s") from None
-                    self._stop.wait(0.5)
+                    self.stopping.wait(0.5)
         finally:
-            self.ready.clear()
+            self.connected.clear()
             _close(connection)
             self._warnings.close()  # how many refusals were counted but not logged
 
-    def stop(self) -> None:
-        """Stop serving (a local call: safe from another thread or a signal handler)."""
-        self._stop.set()
+    def stop(self, timeout: float | None = 10.0) -> bool:
+        """Stop serving: from another thread, or a signal handler (a local call; a thread of its own, started
+        by `start`, is joined)."""
+        return BackgroundService.stop(self, timeout)
 
 
 def _close(connection) -> None:
@@ -214,7 +219,7 @@ def _close(connection) -> None:
             pass
 
 
-class BrokerEndpoint:
+class BrokerEndpoint(Endpoint):
     """The mapping's view of a robot behind the broker (the same interface as SimulatedEndpoint).
     Only authenticated replies are taken, each checked against what the robot described."""
 

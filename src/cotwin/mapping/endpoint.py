@@ -3,8 +3,9 @@
 An endpoint takes servo goals by p-model path (`pmodel::link::joint::aref.port`) and moves each joint
 there along a trajectory planned by a motion profile (cotwin.mapping.motion: by default a quintic at
 the joints' velocity limits; a UR-style synchronised `movej`), all joints arriving together; it reads
-sensors by path (`pmodel::link::sref.port`). The MuJoCo simulator is the default; any object with
-this interface plugs in without touching the mapping.
+sensors by path (`pmodel::link::sref.port`). The MuJoCo simulator is the default; any subclass of
+cotwin.mapping.platform.Endpoint (the interface and its optional abilities) plugs in without touching the
+mapping.
 """
 
 from __future__ import annotations
@@ -20,26 +21,44 @@ from ..plaindata import fields, finite, of_type
 from ..pmodel.cell import CellGeometry
 from ..pmodel.mjcf import servo_mode
 from ..pmodel.simulator import PlatformSimulator, SimState
-from ..pmodel.tree import KinematicTree
 from .motion import MotionProfile, Quintic, Segment
+from .platform import Endpoint
 
 CONTROL_PERIOD = 0.002  # s between trajectory set-points sent to the servos
 
 
-class Endpoint(Protocol):
-    tree: KinematicTree
+class SharedEndpoint(Protocol):
+    """A robot's endpoint on a world of several robots, which `advance_shared` drives: goals that take
+    effect later (a perturbed plant's latency) are applied when due, set-points written before each stretch
+    of physics steps."""
 
-    def start(self) -> None: ...
-    def stop(self) -> None: ...
-    def read_sensors(self) -> dict[str, float]: ...
-    def command(self, goals: dict[str, float]) -> None: ...
-    def advance(self, dt: float) -> None: ...
-    def joint_positions(self) -> dict[str, float]: ...
-    def joint_velocities(self) -> dict[str, float]: ...
-    def joint(self, name: str) -> str: ...
+    def next_due(self) -> float | None: ...  # when the next goal waiting for its time takes effect
+    def apply_due(self) -> None: ...  # apply the goals due by now
+    def set_point(self, steps: int) -> bool: ...
 
 
-class SimulatedEndpoint:
+def advance_shared(world, endpoints: list[SharedEndpoint], dt: float) -> None:
+    """Run a world of several robots (cotwin.pmodel.shared.SharedWorld) for dt, each robot's servos
+    following its own trajectory (set-points refreshed every CONTROL_PERIOD, as `SimulatedEndpoint.advance`
+    does for one), the physics stepped once for all of them, split where a robot's delayed goal falls due."""
+    world.begin()
+    steps = world.steps_for(dt)
+    period = max(1, int(round(CONTROL_PERIOD / world.timestep)))
+    while steps > 0:
+        for endpoint in endpoints:
+            endpoint.apply_due()
+        due = [int(round((d - world.time) / world.timestep)) for d in (e.next_due() for e in endpoints) if d is not None]
+        until_due = min([k for k in due if k > 0] or [steps])
+        n = min(period, steps, until_due)
+        if all([endpoint.set_point(n) for endpoint in endpoints]):
+            n = min(steps, until_due)
+        world.step(n)
+        steps -= n
+    for endpoint in endpoints:
+        endpoint.apply_due()
+
+
+class SimulatedEndpoint(Endpoint):
     """The embedded MuJoCo platform with a trajectory generator in front of its servos. The cell's
     geometry (for the mapping's kinematics functions) is the scene's unless given."""
 
@@ -63,6 +82,8 @@ class SimulatedEndpoint:
 
     def stop(self) -> None:
         self.segment = None
+
+    placeable = saves_state = senses_contacts = True
 
     def place(self, positions: dict[str, float]) -> None:
         """Put the robot at rest at these joint positions (a live twin starts its DT where the PT is)."""
@@ -147,13 +168,7 @@ class SimulatedEndpoint:
             steps -= self._advance_natively(segment, steps, period)
         while steps > 0:
             n = min(period, steps)
-            segment = self.segment
-            if segment is not None and segment is not self._held:
-                ahead = sim.time + n * sim.timestep
-                self._set_point(segment, ahead)
-                if ahead >= segment.t0 + segment.duration:  # the set-point stays at the segment's end
-                    self._held = segment
-            if segment is None or segment is self._held:
+            if self.set_point(n):
                 n = steps
             sim.step(n)
             steps -= n
@@ -226,6 +241,30 @@ class SimulatedEndpoint:
                 self.sim.write_actuators(segment.at(t))
                 return
             ctrl[index] = low if value < low else high if value > high else value
+
+    def set_point(self, steps: int) -> bool:
+        """Write the servos' set-points for the next `steps` physics steps (where the segment is at their
+        end); whether they hold from now on (no segment, or its end reached), so that the rest of a
+        step runs in one go. (A world of several robots calls it for each before stepping them all.)"""
+        sim = self.sim
+        segment = self.segment
+        if segment is not None and segment is not self._held:
+            ahead = sim.time + steps * sim.timestep
+            self._set_point(segment, ahead)
+            if ahead >= segment.t0 + segment.duration:  # the set-point stays at the segment's end
+                self._held = segment
+        return segment is None or segment is self._held
+
+    def next_due(self) -> float | None:
+        return None  # its goals take effect at once
+
+    def apply_due(self) -> None:
+        return None
+
+    def robot_contacts(self) -> set[str]:
+        """The other robots this one touched in the step just made (none for a robot alone in its world)."""
+        shared = self.sim.shared
+        return shared.robot_contacts(self.sim.prefix[:-1]) if shared is not None else set()
 
     @property
     def time(self) -> float:

@@ -37,14 +37,15 @@ import json
 import logging
 import math
 import os
-import threading
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
 
 from ..diagnostics import CotwinError, PicklableError
 from ..pmodel.mjcf import pose_paths, sensor_name
 from ..pmodel.tree import KinematicTree
+from ..service import LoopThread
 from .opcua_auth import client_credentials, parse_url
+from .platform import Endpoint
 
 logging.getLogger("asyncua").addHandler(logging.NullHandler())  # a library logs; the application decides
 
@@ -159,7 +160,7 @@ class Layout:
 
 # ---- the client ----------------------------------------------------------------------------------
 
-class OPCUAEndpoint:
+class OPCUAEndpoint(Endpoint):
     """The mapping's view of a robot cell served over OPC UA (the same interface as SimulatedEndpoint).
 
     Every call has a timeout (`timeout` seconds, plus the wait of a free-running Advance); every reply is
@@ -182,9 +183,8 @@ class OPCUAEndpoint:
             if problem is not None:
                 raise CotwinError(f"the plant at {url} failed connect: {problem}") from None
             raise
-        self._loop = asyncio.new_event_loop()
-        self._thread = threading.Thread(target=self._loop.run_forever, name=f"opcua client {url}", daemon=True)
-        self._thread.start()
+        self._loop_thread = LoopThread(f"opcua client {url}").start()  # the client's calls run there
+        self._loop = self._loop_thread.loop
         self._client = None
         self._state: dict = {}
         self.time = 0.0
@@ -393,11 +393,7 @@ class OPCUAEndpoint:
                 future.result(min(self.timeout, 5.0))
             except Exception:
                 future.cancel()
-        if self._loop.is_running():
-            self._loop.call_soon_threadsafe(self._loop.stop)
-        self._thread.join(5)
-        if not self._loop.is_running():
-            self._loop.close()
+        self._loop_thread.stop(5)
 
     def __enter__(self) -> "OPCUAEndpoint":
         return self

@@ -15,6 +15,7 @@ from ..pmodel.mjcf import sensor_name
 from ..pmodel.perturbation import QUANTITIES, Perturbation, perturbed_simulator
 from ..pmodel.tree import KinematicTree
 from .endpoint import SimulatedEndpoint
+from .platform import Endpoint
 
 
 NOISE_OF = {"closest_range": "range", "range": "range"}  # sensor quantity -> the noise it gets, where they differ
@@ -26,8 +27,10 @@ class _Pending:
     goals: dict[str, float]
 
 
-class PerturbedEndpoint:
+class PerturbedEndpoint(Endpoint):
     """A SimulatedEndpoint seen through the perturbation's actuator latency and measurement noise."""
+
+    senses_contacts = True  # its simulator's contacts, as the inner endpoint's
 
     def __init__(self, inner: SimulatedEndpoint, perturbation: Perturbation):
         self.inner = inner
@@ -108,6 +111,22 @@ class PerturbedEndpoint:
         if end - self.sim.time > half_step:
             self.inner.advance(end - self.sim.time)
         self._sample()
+
+    # ---- on a world of several robots (cotwin.mapping.endpoint.advance_shared steps it) ----
+    def next_due(self) -> float | None:
+        return self._pending[0].due if self._pending else None
+
+    def apply_due(self) -> None:
+        """Apply the goals due by now (within half a physics step)."""
+        now, half_step = self.sim.time, self.sim.timestep / 2
+        while self._pending and self._pending[0].due <= now + half_step:
+            self.inner.command(self._pending.pop(0).goals)
+
+    def set_point(self, steps: int) -> bool:
+        return self.inner.set_point(steps)
+
+    def robot_contacts(self) -> set[str]:
+        return self.inner.robot_contacts()
 
     def read_sensors(self) -> dict[str, float]:
         return dict(self._sensors)

@@ -5,7 +5,11 @@ A profile file holds
     joint_offsets = [..]   # rad, one per arm joint: controller angle = p-model angle + offset
     base = [[..], ..]      # 4x4 rigid transform: the controller's base frame in the model frame
     name = ".."            # optional, for messages
-Without a profile the identity convention holds (controller joints = model joints, base = model frame).
+    [lidar]                # optional: the robot's scanner, for LiDAR annotations that leave values out
+    samples = 360          #   beams a turn; min_angle, max_angle (rad), range_min, range_max (m),
+    ...                    #   update_rate (scans a second); [sonar] likewise (cotwin.pmodel.kinds.RaySpec)
+Without a profile the identity convention holds (controller joints = model joints, base = model frame), and
+ray sensors take cotwin.pmodel.kinds.RAY_DEFAULTS where their annotations say nothing.
 """
 
 from __future__ import annotations
@@ -22,7 +26,8 @@ from ..diagnostics import CotwinError, Finding, Severity
 
 log = logging.getLogger("cotwin.twin")
 IDENTITY_BASE = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
-KEYS = ("name", "joint_offsets", "base")
+KEYS = ("name", "joint_offsets", "base", "lidar", "sonar")
+RAY_KEYS = ("samples", "min_angle", "max_angle", "range_min", "range_max", "update_rate")
 RIGID_TOLERANCE = 1e-6  # |R^T R - I| and |det R - 1| of a base's rotation
 
 
@@ -88,6 +93,51 @@ def read_profile(path: str | Path, joints: int | None = None) -> Convention:
         raise CotwinError(problems)
     return Convention(tuple(float(v) for v in offsets), tuple(tuple(float(v) for v in row) for row in base),
                       str(name))
+
+
+def profile_rays(profile: str | Path | None) -> dict:
+    """The ray sensors' defaults a profile gives ({"lidar": RaySpec, "sonar": RaySpec}, each from its table,
+    the values it leaves out from cotwin.pmodel.kinds.RAY_DEFAULTS); {} without a profile. Every problem is
+    an error at its key: an unknown key, a number that is not finite or out of range."""
+    from dataclasses import replace
+
+    from ..pmodel.kinds import RAY_DEFAULTS
+
+    if profile is None:
+        return {}
+    file = TomlFile(profile, "robot profile")
+    problems: list[Finding] = []
+    out = {}
+    for kind, default in RAY_DEFAULTS.items():
+        table = file.data.get(kind)
+        if table is None:
+            continue
+        if not isinstance(table, dict):
+            problems.append(Finding(file.location((kind,)), Severity.ERROR, f"[{kind}] must be a table of "
+                                    f"{', '.join(RAY_KEYS)}"))
+            continue
+        values = {}
+        for key, value in table.items():
+            where = file.location((kind, key))
+            if key not in RAY_KEYS:
+                problems.append(Finding(where, Severity.ERROR, f"[{kind}] {key}: unknown key (it takes "
+                                        f"{', '.join(RAY_KEYS)})"))
+            elif not _finite(value) or (key == "samples" and (value != int(value) or value < 1)) or \
+                    (key in ("range_max", "update_rate") and value <= 0) or (key == "range_min" and value < 0):
+                problems.append(Finding(where, Severity.ERROR, f"[{kind}] {key}: must be a finite number"
+                                        f"{' (a whole number >= 1)' if key == 'samples' else ''}"
+                                        f"{' > 0' if key in ('range_max', 'update_rate') else ''}"
+                                        f"{' >= 0' if key == 'range_min' else ''}, got {str(value)[:40]}"))
+            else:
+                values[key] = int(value) if key == "samples" else float(value)
+        spec = replace(default, **values)
+        if spec.range_min >= spec.range_max:
+            problems.append(Finding(file.location((kind,)), Severity.ERROR,
+                                    f"[{kind}] range_min {spec.range_min:g} m is not below range_max {spec.range_max:g} m"))
+        out[kind] = spec
+    if problems:
+        raise CotwinError(problems)
+    return out
 
 
 def robot_convention(profile: str | Path | None, joints: int | None = None) -> Convention:

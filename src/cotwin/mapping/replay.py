@@ -18,6 +18,7 @@ import numpy as np
 
 from ..diagnostics import CotwinError
 from ..pmodel.tree import KinematicTree
+from .platform import Endpoint
 from .profile import IDENTITY, Convention
 
 
@@ -64,7 +65,7 @@ class Recording:
 
 
 @dataclass
-class ReplayEndpoint:
+class ReplayEndpoint(Endpoint):
     tree: KinematicTree
     recording: Recording
     offset: float | None = None  # recording time at simulation time 0 (None: align on the first command)
@@ -125,7 +126,15 @@ class ReplayEndpoint:
         _, qd = self.recording.at(self.recording_time())
         return {j: 0.0 for j in self._held} | dict(zip(self.recording.joints, map(float, qd)))
 
+    def ends(self) -> tuple[float, str] | None:
+        """When the log ends in co-simulation time (known once it is aligned): its last sample holds after."""
+        if self.offset is None:
+            return None
+        return float(self.recording.times[-1]) - self.offset, f"the replayed log {self.recording.source}"
+
     # ---- state (a twin restarted from its last saved state goes on where the replay was) ----
+    saves_state = True
+
     def snapshot(self) -> dict:
         """Where the replay is: its time, its alignment and the joints it holds at commanded goals (the goals
         it took before are a report of the run so far, not state)."""

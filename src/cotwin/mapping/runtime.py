@@ -22,7 +22,8 @@ Readings of the mapping (see also docs/robosim-notation.md, section 8):
   equations and predicates hold with x bound to that value;
 - functions the models leave abstract come from a registry: the math functions, and an arm's
   kinematics (`inverse_kinematics`, `reachable`), set up on the first call only, so that a mapping
-  not calling them needs no arm;
+  not calling them needs no arm; `robot_contact()`: did the robot touch another robot of its world in
+  the step just made (a cell of several robots, cotwin.pmodel.shared);
 - mapping variables q0..qN and qd0..qdN mirror the positions and velocities of the mirrored joints
   (by default the arm's, in kinematic order), so they can be logged as in the paper; further
   monitored variables may mirror platform readings by path (`monitor`).
@@ -91,7 +92,7 @@ class FunctionRegistry:
     def __init__(self, endpoint, geometry: CellGeometry | None = None):
         self.endpoint = endpoint
         self.tree = endpoint.tree
-        self.geometry = geometry or getattr(endpoint, "geometry", None) or CellGeometry()
+        self.geometry = geometry or endpoint.geometry or CellGeometry()
         self.tool = self.geometry.find_tool(self.tree)
         self.arm = ik.arm_joints(self.tree, self.tool)
         self.geometry.check_joints(self.arm)
@@ -448,7 +449,7 @@ class Mapping:
         self._geometry = geometry
         self._registry: FunctionRegistry | None = None
         self.functions = {**MATH, "inverse_kinematics": self._kinematics("inverse_kinematics"),
-                          "reachable": self._kinematics("reachable")}
+                          "reachable": self._kinematics("reachable"), "robot_contact": self.robot_contact}
         self.env = _Env(self, compiled)
         self.declared = {v.name for v in model.variables}
         self.asked: set[str] = set()  # variables operations assigned since the last report
@@ -505,6 +506,14 @@ class Mapping:
             return getattr(self.registry, name)(*args)
         call.__name__ = name
         return call
+
+    def robot_contact(self) -> bool:
+        """`robot_contact()`: did the robot touch another robot of its world in the step just made
+        (cotwin.pmodel.shared)? Always false for a robot alone in its world."""
+        if not self.endpoint.senses_contacts:
+            raise CotwinError(f"mapping {self.model.name} calls robot_contact(), which its platform "
+                              f"({type(self.endpoint).__name__}) cannot tell")
+        return bool(self.endpoint.robot_contacts())
 
     def sensor(self, key: str, loc):
         readings = self.sensor_readings()
@@ -670,13 +679,12 @@ class Mapping:
     def snapshot(self) -> dict:
         """The runtime's state as plain data: its variables, whether it was started, the functions'
         cached solutions and the endpoint's state (an endpoint that cannot save one is an error)."""
-        save = getattr(self.endpoint, "snapshot", None)
-        if save is None:
+        if not self.endpoint.saves_state:
             raise CotwinError(f"mapping {self.model.name}: its platform ({type(self.endpoint).__name__}) cannot save "
                               "its state, so the mapping cannot either")
         return {"variables": dict(self.variables), "started": self.started,
                 "functions": self._registry.snapshot() if self._registry is not None else {},
-                "events": {name: ev.value for name, ev in self.events.items()}, "endpoint": save(),
+                "events": {name: ev.value for name, ev in self.events.items()}, "endpoint": self.endpoint.snapshot(),
                 "held": dict(self.held), "asked": sorted(self.asked), "pending": list(self.pending.items()),
                 "reports": self.reports, "delivered": dict(self.delivered)}
 

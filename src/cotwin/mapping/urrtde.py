@@ -15,7 +15,9 @@ import time as wallclock
 from typing import Mapping
 
 from ..diagnostics import CotwinError
+from .platform import Endpoint
 from .profile import IDENTITY, Convention
+
 
 def fields_to_state(fields: Mapping[str, float], arm: list[str],
                     convention: Convention = IDENTITY) -> tuple[dict[str, float], dict[str, float]]:
@@ -31,7 +33,7 @@ def fields_to_state(fields: Mapping[str, float], arm: list[str],
     return dict(zip(arm, map(float, convention.to_model(q)))), dict(zip(arm, qd))
 
 
-class RTDEEndpoint:
+class RTDEEndpoint(Endpoint):
     """The platform endpoint of a UR robot at `host` (needs `pip install cotwin[rtde]`)."""
 
     def __init__(self, tree, host: str, speed: float = 1.05, acceleration: float = 1.4,

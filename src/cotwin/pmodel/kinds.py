@@ -246,11 +246,13 @@ class RaySpec:
 
 
 
-#: a LiDAR without an annotation saying otherwise: a common 2D laser scanner (the one RoboTool's published
-#: mobile robot carries): 360 beams a turn, one a degree from straight ahead, 0.12 to 3.5 m, 5 turns a second
-PLANAR_LIDAR = RaySpec(360, 0.0, float(np.radians(359.0)), 0.12, 3.5, 5.0)
-#: a sonar without an annotation: one beam straight ahead, 2 cm to 4 m, 10 readings a second
+#: a LiDAR whose annotation leaves a value out, and whose robot profile gives none ([lidar] of the file
+#: `[robot] profile` names, cotwin.mapping.profile): a generic planar scanner, one beam a degree all round,
+#: 0.1 to 10 m, 10 turns a second. A particular robot's scanner is data its profile holds.
+PLANAR_LIDAR = RaySpec(360, 0.0, float(np.radians(359.0)), 0.1, 10.0, 10.0)
+#: a sonar without an annotation (or a profile's [sonar]): one beam straight ahead, 2 cm to 4 m, 10 readings a second
 SONAR = RaySpec(1, 0.0, 0.0, 0.02, 4.0, 10.0)
+RAY_DEFAULTS = {"lidar": PLANAR_LIDAR, "sonar": SONAR}  # by the profile table that replaces each
 RAY_QUANTITIES = ("closest_range", "closest_bearing", "range")
 _CLOSEST = ("closest", "nearest", "min")
 
@@ -279,11 +281,13 @@ def _entry(record: dict | None, *path: str):
     return record
 
 
-def ray_spec(sdf_type: str, annotation: dict | None) -> RaySpec:
+def ray_spec(sdf_type: str, annotation: dict | None, defaults: dict[str, RaySpec] | None = None) -> RaySpec:
     """The beams of a ray sensor: its SDF annotation's (`Ray { update_rate, ray = RayDetails { scan = Scan {
     horizontal = Scan_horizontal { samples, min_angle, max_angle } } range = Range { min, max } } }`,
-    `Sonar { sonar = SonarDetails { min, max } }`), each value not given from the default (PLANAR_LIDAR, SONAR)."""
-    base = SONAR if sdf_type == "sonar" else PLANAR_LIDAR
+    `Sonar { sonar = SonarDetails { min, max } }`), each value not given from `defaults` ("lidar", "sonar":
+    a robot profile's), else RAY_DEFAULTS."""
+    kinds = {**RAY_DEFAULTS, **(defaults or {})}
+    base = kinds["sonar"] if sdf_type == "sonar" else kinds["lidar"]
 
     def number(value, default: float) -> float:
         return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else default

@@ -29,7 +29,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..config import Key, Schema, TomlFile, is_number, raise_problems
+from ..config import Key, Schema, TomlFile, did_you_mean, is_number, raise_problems
 from ..diagnostics import CotwinError, Finding, Severity
 from .ik import find_tool
 from .mjcf import TIMESTEP, to_mjcf
@@ -61,7 +61,7 @@ def _per_name(what: str, high: float, names: tuple[str, ...] = ()):
             return f"must be a number >= 0 or a table of {what} -> number >= 0, got {value!r}"
         for name, v in value.items():
             if names and name not in names:
-                return f"unknown {what} '{name}' (known: {', '.join(names)})"
+                return f"unknown {what} '{name}'{did_you_mean(name, names)} (known: {', '.join(names)})"
             if not _is_value(v) or v > high:
                 return f"{what} '{name}' must be a number in [0, {high:g}], got {v!r}"
         return None
@@ -127,8 +127,8 @@ class Perturbation:
             value = getattr(self, key)
             for name in value if isinstance(value, dict) else ():
                 if name not in joints:
-                    out.append(((key, name), f"{key}: p-model {tree.name} has no actuated joint '{name}' "
-                                             f"(joints: {', '.join(joints)})"))
+                    out.append(((key, name), f"{key}: p-model {tree.name} has no actuated joint '{name}'"
+                                             f"{did_you_mean(name, joints)} (joints: {', '.join(joints)})"))
         return out
 
     def as_dict(self) -> dict:
@@ -213,3 +213,36 @@ def perturbed_simulator(tree: KinematicTree, scene, perturbation: Perturbation,
     for name, scale in perturbation.per_joint("damping", joints).items():
         sim.model.dof_damping[sim.model.joint(name).dofadr[0]] *= scale
     return sim
+
+
+def perturbed_world(robots: list, scene, perturbation: Perturbation, timestep: float = TIMESTEP):
+    """A world of several robots (cotwin.pmodel.shared.SharedWorld) with the perturbation's payload at each
+    robot's tool and its friction and damping on each robot's joints (a table by joint: the joints of that
+    name, on the robots that have them; a name no robot has is an error). Latency and noise are an
+    endpoint's (cotwin.mapping.perturbed), not the world's."""
+    from .shared import SharedWorld
+
+    for key in ("friction", "damping"):
+        value = getattr(perturbation, key)
+        if isinstance(value, dict):
+            known = {j.name for r in robots for j in r.tree.actuated}
+            unknown = sorted(set(value) - known)
+            if unknown:
+                raise CotwinError(f"[plant] {key}: {', '.join(unknown)} is no actuated joint of the cell's robots")
+    placed = [replace(r, mjcf=with_payload(to_mjcf(r.tree, None, timestep, visual=False), r.tree,
+                                           perturbation.payload)) for r in robots]
+    world = SharedWorld(placed, scene, timestep)
+    for r in robots:
+        joints = [j.name for j in r.tree.actuated]
+        prefix = world.prefix(r.name)
+        for key in ("friction", "damping"):
+            value = getattr(perturbation, key)
+            amounts = {n: float(v) for n, v in value.items() if n in joints} if isinstance(value, dict) else \
+                {j: float(value) for j in joints}
+            for name, amount in amounts.items():
+                dof = world.model.joint(prefix + name).dofadr[0]
+                if key == "friction":
+                    world.model.dof_frictionloss[dof] = amount
+                else:
+                    world.model.dof_damping[dof] *= amount
+    return world

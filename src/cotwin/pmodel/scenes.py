@@ -11,6 +11,7 @@ kind whose `fits(mapping)` holds, else none.
 
 from __future__ import annotations
 
+import logging
 import threading
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
@@ -23,6 +24,7 @@ from ..diagnostics import CotwinError, Finding, Location, Severity
 
 ENTRY_POINTS = "cotwin.scenes"  # the entry-point group of installed scene kinds
 EARTH = (0.0, 0.0, -9.81)
+log = logging.getLogger("cotwin.scenes")
 
 
 @runtime_checkable
@@ -98,6 +100,7 @@ class SceneKind:
 
 
 _KINDS: dict[str, SceneKind] = {}
+_BROKEN: dict[str, str] = {}  # entry-point name -> why it could not be loaded (an installation gone stale)
 _loaded = False
 _LOADING = threading.RLock()
 
@@ -116,43 +119,82 @@ def scene_kinds() -> dict[str, SceneKind]:
         if not _loaded:
             for ep in sorted(entry_points(group=ENTRY_POINTS), key=lambda e: e.name):
                 if ep.name not in _KINDS:
-                    kind = ep.load()
+                    try:
+                        kind = ep.load()
+                    except Exception as err:  # noqa: BLE001 - a package's module gone or broken: said where used
+                        _BROKEN[ep.name] = f"{ep.value}: {type(err).__name__}: {str(err)[:200]}"
+                        continue
+                    if not isinstance(kind, SceneKind):
+                        _BROKEN[ep.name] = f"{ep.value} is a {type(kind).__name__}, not a SceneKind"
+                        continue
                     _KINDS[kind.name] = kind
             _loaded = True
         return dict(_KINDS)
 
 
+def broken_kinds() -> dict[str, str]:
+    """Scene kinds installed packages publish (entry points) that could not be loaded, each with why: an
+    installation gone stale (its module removed or renamed) or a broken package."""
+    scene_kinds()
+    return dict(_BROKEN)
+
+
+def _unloadable(name: str) -> str:
+    return (f"scene kind {name!r} is published by an installed package but cannot be loaded "
+            f"({_BROKEN[name]}); reinstall that package (cotwin's own kinds: `make install`)")
+
+
 def scene_kind(name: str, at: Location | None = None) -> SceneKind:
-    """The kind called `name`, or a located error listing the known ones."""
+    """The kind called `name`, or a located error listing the known ones (or saying why an installed one
+    cannot be loaded)."""
+    from ..config import did_you_mean
+
     kinds = scene_kinds()
+    if name in _BROKEN and name not in kinds:
+        raise CotwinError([Finding(at or Location("<project>", 1, 1), Severity.ERROR,
+                                   f"[platform] scene: {_unloadable(name)}")])
     if name not in kinds:
         raise CotwinError([Finding(at or Location("<project>", 1, 1), Severity.ERROR,
-                                   f"[platform] scene: no scene kind {name!r} (known: auto, "
-                                   f"{', '.join(sorted(kinds))})")])
+                                   f"[platform] scene: no scene kind {name!r}{did_you_mean(name, ['auto', *kinds])} "
+                                   f"(known: auto, {', '.join(sorted(kinds))})")])
     return kinds[name]
 
 
 def choose_kind(name: str, request: SceneRequest, at: Location | None = None) -> SceneKind:
     """The kind a project's `[platform] scene` names; "auto": the world if given, else the first kind
-    (by name) that fits the mapping, else none."""
+    (by name) that fits the mapping, else none. An "auto" that could not consider every installed kind
+    (one whose package cannot be loaded) says so in a warning: its choice may not be the one meant."""
     if name != "auto":
         return scene_kind(name, at)
     if request.world is not None:
         return scene_kind("world")
     fitting = [k for k in scene_kinds().values() if k.fits is not None and k.fits(request.mapping)]
-    return sorted(fitting, key=lambda k: k.name)[0] if fitting else scene_kind("none")
+    chosen = sorted(fitting, key=lambda k: k.name)[0] if fitting else scene_kind("none")
+    if _BROKEN:
+        where = at or request.locate("platform", "scene")
+        log.warning("%s", Finding(where, Severity.WARNING, f'[platform] scene = "auto" chose \'{chosen.name}\' '
+                                  f"but could not consider every installed kind: "
+                                  f"{'; '.join(_unloadable(n) for n in sorted(_BROKEN))}; name the scene to be sure"))
+    return chosen
 
 
 def build_scene(name: str, request: SceneRequest, at: Location | None = None):
     """The scene a project asks for; a `[scene]` key its kind does not read is an error (never ignored)."""
     kind = choose_kind(name, request, at)
-    unread = [k for k in request.options if k not in kind.options]
+    unread = unread_options(kind, name, request.options, request.locate)
     if unread:
-        raise CotwinError([Finding(request.locate("scene", k), Severity.ERROR,
-                                   f"[scene] {k}: the scene is '{kind.name}' ([platform] scene = \"{name}\"), "
-                                   f"which would ignore it (it reads {', '.join(kind.options) or 'no keys'})")
-                           for k in unread])
+        raise CotwinError(unread)
     return kind.build(request)
+
+
+def unread_options(kind: SceneKind, name: str, options: dict, locate: Callable[..., Location]) -> list[Finding]:
+    """An error at each `[scene]` key the scene kind (chosen for `[platform] scene = name`) does not read."""
+    from ..config import did_you_mean
+
+    return [Finding(locate("scene", k), Severity.ERROR,
+                    f"[scene] {k}: the scene is '{kind.name}' ([platform] scene = \"{name}\"), which would ignore it "
+                    f"(it reads {', '.join(kind.options) or 'no keys'}){did_you_mean(k, kind.options)}")
+            for k in options if k not in kind.options]
 
 
 # ---- core's generic kinds ----------------------------------------------------------------------

@@ -97,23 +97,30 @@ _PLAIN_INTEGRATORS = (int(mujoco.mjtIntegrator.mjINT_EULER), int(mujoco.mjtInteg
 
 class PlatformSimulator:
     def __init__(self, tree: KinematicTree, scene=None, timestep: float = TIMESTEP, mjcf: str | None = None,
-                 base: str = "fixed"):
+                 base: str = "fixed", shared=None, prefix: str = ""):
         """`mjcf`: an MJCF text derived from `to_mjcf(tree, scene, timestep, visual=False, base=base)` to run
         instead of it (e.g. with a payload added by cotwin.pmodel.perturbation); names of joints, servos and
-        sensors must be kept. `base`: "fixed" to the world or "free" (a mobile robot), as `to_mjcf`."""
+        sensors must be kept. `base`: "fixed" to the world or "free" (a mobile robot), as `to_mjcf`.
+        `shared` (a cotwin.pmodel.shared.SharedWorld): this robot's view of a world of several robots, its
+        names scoped by `prefix` there; the world steps, not the view."""
         self.tree = tree
         self.scene = scene
         self.base = base
-        self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep, visual=False, base=base)
-        self.model = load(self.xml, tree)  # a refusal names the p-model element
-        self.data = mujoco.MjData(self.model)
+        self.shared = shared
+        self.prefix = prefix
+        if shared is not None:
+            self.xml, self.model, self.data = shared.xml, shared.model, shared.data
+        else:
+            self.xml = mjcf if mjcf is not None else to_mjcf(tree, scene, timestep, visual=False, base=base)
+            self.model = load(self.xml, tree)  # a refusal names the p-model element
+            self.data = mujoco.MjData(self.model)
         self.timestep = timestep
         self._inertial0 = (self.model.body_mass.copy(), self.model.body_inertia.copy())  # as compiled
-        self._joint_qpos = {j.name: self.model.joint(j.name).qposadr[0] for j in tree.actuated}
-        self._joint_dof = {j.name: self.model.joint(j.name).dofadr[0] for j in tree.actuated}
+        self._joint_qpos = {j.name: self.model.joint(prefix + j.name).qposadr[0] for j in tree.actuated}
+        self._joint_dof = {j.name: self.model.joint(prefix + j.name).dofadr[0] for j in tree.actuated}
         self._actuator: dict[str, int] = {}
         for j in tree.actuated:
-            index = self.model.actuator(servo_name(j)).id
+            index = self.model.actuator(prefix + servo_name(j)).id
             self._actuator[j.name] = index
             self._actuator[servo_name(j)] = index
             for servo in j.servos:
@@ -122,7 +129,7 @@ class PlatformSimulator:
         for sensor in tree.sensors:
             name = sensor_name(tree.name, sensor.link, sensor.name, sensor.port, sensor.via)
             try:
-                s = self.model.sensor(name)
+                s = self.model.sensor(prefix + name)
             except KeyError:
                 continue
             self._sensors[name] = (s.adr[0] + min(sensor.component, s.dim[0] - 1), 1)
@@ -149,13 +156,13 @@ class PlatformSimulator:
                 site = site_name(tree, sensor)
                 path = sensor_name(tree.name, sensor.link, sensor.name, sensor.port, sensor.via)
                 groups.setdefault(site, (sensor.ray, {}))[1][path] = sensor.quantity
-        self.scanners = [RayScanner(self, site, spec, ports) for site, (spec, ports) in groups.items()]
-        self._root = self.model.body(tree.root.name).id
+        self.scanners = [RayScanner(self, prefix + site, spec, ports) for site, (spec, ports) in groups.items()]
+        self._root = self.model.body(prefix + tree.root.name).id
         self._pose_paths = pose_paths(tree) if base == "free" else []
         # contacts with the scene's obstacles
-        names = list(scene.obstacle_names) if scene is not None else []
+        names = list(scene.obstacle_names) if scene is not None and shared is None else []  # a world's: its own
         self._obstacles = {self.model.geom(n).id for n in names}
-        robot_bodies = {self.model.body(l.name).id for l in tree.links}
+        robot_bodies = {self.model.body(prefix + l.name).id for l in tree.links}
         self._robot_geoms = {g for g in range(self.model.ngeom) if self.model.geom_bodyid[g] in robot_bodies}
         self._contact_steps = max(1, int(round(CONTACT_PERIOD / timestep)))
         self.touches: list[tuple[float, str, str]] = []  # (time, robot geom, obstacle) when a contact began
@@ -179,8 +186,13 @@ class PlatformSimulator:
     # ---- the API ----
     def reset(self, q: dict[str, float] | None = None) -> None:
         """Back to the model's initial state (joints at q, default 0), position servos holding that
-        position, speed and effort commands at 0."""
-        mujoco.mj_resetData(self.model, self.data)
+        position, speed and effort commands at 0. A view of a shared world resets its own joints only."""
+        if self.shared is None:
+            mujoco.mj_resetData(self.model, self.data)
+        else:
+            for name, adr in self._joint_qpos.items():
+                self.data.qpos[adr] = self.model.qpos0[adr]
+                self.data.qvel[self._joint_dof[name]] = 0.0
         for name, value in (q or {}).items():
             self.data.qpos[self._joint_adr(name)] = value
         for name, adr in self._joint_qpos.items():
@@ -200,9 +212,10 @@ class PlatformSimulator:
     @property
     def plain_stepping(self) -> bool:
         """Whether `step(n)` is n of MuJoCo's mj_step and nothing between them (no ray sensor scans, no
-        obstacle contacts checked), with an integrator that advances time by one timestep per step: then a
-        caller may make the steps itself (cotwin.mapping.native) and count them with `stepped`."""
-        return not self.scanners and not self._obstacles and self.model.opt.integrator in _PLAIN_INTEGRATORS
+        obstacle contacts checked, not a view of a shared world), with an integrator that advances time by one
+        timestep per step: then a caller may make the steps itself (cotwin.mapping.native) and count them with `stepped`."""
+        return self.shared is None and not self.scanners and not self._obstacles and \
+            self.model.opt.integrator in _PLAIN_INTEGRATORS
 
     def stepped(self, n: int) -> None:
         """Count n physics steps a caller made with mj_step itself, and check the state as `step` does."""
@@ -311,7 +324,10 @@ class PlatformSimulator:
 
     def step(self, steps: int) -> float:
         """Simulate `steps` physics steps (in one call into MuJoCo, split only where a ray sensor scans or
-        obstacle contacts are checked); returns the simulation time."""
+        obstacle contacts are checked); returns the simulation time. A view of a shared world does not step
+        it: the world steps, once for all its robots."""
+        if self.shared is not None:
+            raise CotwinError(f"robot {self.tree.name} shares its world with other robots: the world steps, not one robot")
         if not self.scanners and not self._obstacles:
             if steps > 0:
                 mujoco.mj_step(self.model, self.data, steps)
@@ -422,7 +438,7 @@ class PlatformSimulator:
 
     def body_pose(self, name: str) -> np.ndarray:
         try:
-            body = self.model.body(name)
+            body = self.model.body(self.prefix + name)
         except KeyError:
             raise CotwinError(f"no body '{name}' in the simulation") from None
         T = np.eye(4)

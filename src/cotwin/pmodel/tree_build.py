@@ -30,8 +30,8 @@ from ..robosim.pmodel_elements import (
 from ..robosim.pmodel_scope import PModelScope, element_reference, mesh_path
 from .inertia import FALLBACK_RADIUS, beyond_reach, default_inertia, reach, valid_inertia
 from .kinematics import ElementRef, Geom, KinematicTree, PlacedDevice, Sensor, Servo, StandIn, TJoint, TLink, transform
-from .kinds import JOINT_KINDS, annotated_sdf_type, body_quantity, joint_motion, ray_quantity, ray_spec, sdf_sensor_type, \
-    sensor_quantity, servo_command
+from .kinds import JOINT_KINDS, RaySpec, annotated_sdf_type, body_quantity, joint_motion, ray_quantity, ray_spec, \
+    sdf_sensor_type, sensor_quantity, servo_command
 from .meshes import READABLE, bounding_box
 
 DEFAULT_MASS = 1.0  # kg: RoboTool's for a link without inertial information
@@ -89,8 +89,10 @@ class _Named:
 
 
 class TreeBuilder:
-    def __init__(self, project, diag: Diagnostics, stand_ins: dict[str, list[StandIn]] | None = None):
+    def __init__(self, project, diag: Diagnostics, stand_ins: dict[str, list[StandIn]] | None = None,
+                 rays: dict[str, RaySpec] | None = None):
         self.project = project
+        self.rays = rays  # a robot profile's ray sensor defaults ("lidar", "sonar"), where it gives them
         self.diag = diag
         self.stand_ins = dict(stand_ins or {})
         self.stood_in: set[str] = set()  # stand-ins used
@@ -510,7 +512,7 @@ class TreeBuilder:
         joint_name = joint if joint is not None else (measured.name, holder.tlink) if measured is not None else None
         for name, _, pose, sim_type, record in placed:
             unknown = []
-            ray = ray_spec(sim_type, record) if sim_type in ("ray", "sonar") else None
+            ray = ray_spec(sim_type, record, self.rays) if sim_type in ("ray", "sonar") else None
             for port in (p for p in device.ports if p.kind == "output"):
                 body = body_quantity(sim_type, port.name)
                 if body is not None:
@@ -672,10 +674,11 @@ class TreeBuilder:
                               "numbers parameters (1, 2, 3, ... in the order it meets them)")
 
 
-def build_tree(project, pmodel_name: str | None = None, stand_ins: dict[str, list[StandIn]] | None = None
-               ) -> KinematicTree:
+def build_tree(project, pmodel_name: str | None = None, stand_ins: dict[str, list[StandIn]] | None = None,
+               rays: dict[str, RaySpec] | None = None) -> KinematicTree:
     """The kinematic tree of a p-model (the only one not used as a part, or the one named); `stand_ins`
-    gives shapes for mesh files (as the p-model names them) that cannot be read."""
+    gives shapes for mesh files (as the p-model names them) that cannot be read; `rays` the beams of ray
+    sensors whose annotations leave them out ("lidar", "sonar": a robot profile's, cotwin.mapping.profile)."""
     pmodels = project.elements(PModel)
     if pmodel_name is not None:
         pmodel = project.lookup("pmodel", pmodel_name)
@@ -696,7 +699,7 @@ def build_tree(project, pmodel_name: str | None = None, stand_ins: dict[str, lis
             raise CotwinError("several p-models: choose one with --pmodel: " + ", ".join(p.name for p in top or pmodels))
         pmodel = top[0]
     diag = Diagnostics()
-    builder = TreeBuilder(project, diag, stand_ins)
+    builder = TreeBuilder(project, diag, stand_ins, rays)
     tree = builder.build(pmodel)
     tree.findings = list(diag.findings)
     tree.stood_in = set(builder.stood_in)

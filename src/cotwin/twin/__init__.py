@@ -8,10 +8,13 @@ it in PARTS (tests/test_layering.py checks both, import by import):
   Imports nothing else of the twin.
 - assembly: scenarios and command sources (`scenario`, `commands`, `replay`, `rabbitmq`), the models
   and units of a twin (`system`, `mapping_unit`, `calibration`), artefacts (`build`, `fmu_slave`),
-  one co-simulated run (`run`, `clocked`, `waits`, `outcomes`), broker accounts (`broker_access`).
+  one co-simulated run (`run`, `clocked`, `waits`, `outcomes`), the PT's and DT's platform endpoints by kind
+  (`endpoints`), what watches a live twin (`observing`), a cell of several robots (`cell`), broker accounts
+  (`broker_access`).
 - services: what runs beside a twin: deviation, history, what-if, the publisher, the OPC UA plant,
   the page (`dashboard`).
-- live: the live twin, PT and DT in lockstep (`runtime`), wiring the services.
+- live: the live twin, PT and DT in lockstep (`runtime`), its services as its observers (`live_observers`);
+  that of a cell of several robots (`cell_live`).
 - analysis: many runs or runs judged: sweeps, generated tests run on a twin, walks, fleets of live
   twins (`fleet`: on Ray, supervised, with an overview page).
 """
@@ -19,8 +22,9 @@ it in PARTS (tests/test_layering.py checks both, import by import):
 PARTS: dict[str, tuple[str, ...]] = {
     "project": ("project",),
     "assembly": ("commands", "scenario", "replay", "calibration", "rabbitmq", "mapping_unit", "system", "build",
-                 "fmu_slave", "outcomes", "waits", "clocked", "convergence", "run", "broker_access"),
+                 "fmu_slave", "outcomes", "waits", "clocked", "observing", "convergence", "cell", "run", "endpoints",
+                 "broker_access"),
     "services": ("deviation", "history", "whatif", "publisher", "plant", "dashboard"),
-    "live": ("runtime",),
+    "live": ("live_observers", "runtime", "cell_live"),
     "analysis": ("sweep", "testing", "walks", "fleet"),
 }

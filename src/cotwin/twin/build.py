@@ -156,6 +156,8 @@ def build(system: TwinSystem, out: str | Path, cc: str = "cc") -> dict[str, Path
     from ..pmodel.urdf import to_urdf
 
     out = Path(out)
+    if system.spec.robots:
+        return build_cell(system, out, cc)
     tree, scene = system.models.tree, system.models.scene
     check_outputs([out / name for name in (*ARTEFACTS, f"{tree.name}.sdf", f"{tree.name}.urdf", f"{tree.name}_scene.xml",
                                            "multimodel.json", *(u.fmu for u in system.units))], system.spec.inputs)
@@ -170,7 +172,29 @@ def build(system: TwinSystem, out: str | Path, cc: str = "cc") -> dict[str, Path
     return written
 
 
-STAGED_SECTIONS = ("models", "scenario", "platform", "scene", "monitor", "cosim", "world")  # what the FMUs read
+def build_cell(cell, out: Path, cc: str = "cc") -> dict[str, Path]:
+    """Every artefact of a cell of several robots (cotwin.twin.cell): the d-model FMU (one file, an instance
+    per robot), each robot's SDF and URDF, the cell's world as MJCF, the Python FMUs and multimodel.json."""
+    trees = [r.system.models.tree for r in cell.robots]
+    names = [*(f"{r.name}.{kind}" for r in cell.robots for kind in ("sdf", "urdf")), "cell_scene.xml"]
+    check_outputs([out / name for name in (*ARTEFACTS, *names, "multimodel.json", *(u.fmu for u in cell.units))],
+                  cell.spec.inputs)
+    out.mkdir(parents=True, exist_ok=True)
+    record = Record(out)
+    written = {"dmodel": dmodel_fmu(cell.robots[0].system, out, cc, record)}
+    from ..pmodel.sdf import to_sdf
+    from ..pmodel.urdf import to_urdf
+
+    for robot, tree in zip(cell.robots, trees):
+        written[f"{robot.name}.sdf"] = write_text(out / f"{robot.name}.sdf", to_sdf(tree))
+        written[f"{robot.name}.urdf"] = write_text(out / f"{robot.name}.urdf", to_urdf(tree))
+    written["cell_scene.xml"] = write_text(out / "cell_scene.xml", cell.world().xml)
+    written.update(python_fmus(cell, out, record))
+    written["multimodel"] = write_text(out / "multimodel.json", json.dumps(cell.multimodel(), indent=2) + "\n")
+    return written
+
+
+STAGED_SECTIONS = ("models", "robots", "scenario", "platform", "scene", "monitor", "cosim", "world")  # the FMUs read
 
 
 def staged_project(system: TwinSystem, stage: Path) -> None:
@@ -192,7 +216,8 @@ def staged_project(system: TwinSystem, stage: Path) -> None:
     staged = spec.with_overrides(models_fmu=None, platform_world=None, world=spec.world.table if spec.world else None)
     text = staged.to_toml(STAGED_SECTIONS, rebase=lambda path: copy(path) if path.is_file() else None)
     (stage / "cotwin.toml").write_text(text)
-    for mesh in mesh_files(system.models.tree):  # the p-model names them relative to itself
+    trees = [r.system.models.tree for r in system.robots] if spec.robots else [system.models.tree]
+    for mesh in (m for tree in trees for m in mesh_files(tree)):  # the p-model names them relative to itself
         written = Path(mesh.written)
         if not written.is_absolute() and ".." not in written.parts:
             (stage / written).parent.mkdir(parents=True, exist_ok=True)
@@ -216,7 +241,7 @@ def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = Non
 
     out = Path(out)
     record = record or Record(out)
-    roles = [u for u in system.units if u.role != "dmodel"]
+    roles = list({u.fmu: u for u in system.units if u.role != "dmodel"}.values())  # a cell's: one FMU per kind
     written = {}
     with tempfile.TemporaryDirectory(prefix="cotwin-pyfmu-") as tmp:
         stage = Path(tmp) / "twin"
@@ -224,19 +249,21 @@ def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = Non
         staged = [p.read_bytes() for p in sorted(stage.rglob("*")) if p.is_file()]
         script = Path(__file__).parent / "fmu_slave.py"
         base_key = _digest(__version__, script.read_bytes(), *staged,
-                           *_cotwin_sources(("mapping/runtime.py", "twin/mapping_unit.py", "twin/rabbitmq.py")))
+                           *_cotwin_sources(("mapping/runtime.py", "twin/mapping_unit.py", "twin/rabbitmq.py",
+                                             "twin/cell.py", "pmodel/shared.py")))
         for unit in roles:
+            role = Path(unit.fmu).stem  # mapping, controller, rabbitmq: a twin's instance, a cell's kind
             target = out / unit.fmu
-            key = _digest(base_key, unit.instance)
-            written[unit.instance] = target
+            key = _digest(base_key, role)
+            written[role] = target
             if record.fresh(target, key):
                 continue
             record.forget(target)
-            work = Path(tmp) / unit.instance
+            work = Path(tmp) / role
             work.mkdir()
             shutil.copy(script, work / "fmu_slave.py")
             shutil.copytree(stage, work / "twin")
-            (work / "cotwin_unit.json").write_text(json.dumps({"role": unit.instance, "project": "twin/cotwin.toml"}))
+            (work / "cotwin_unit.json").write_text(json.dumps({"role": role, "project": "twin/cotwin.toml"}))
             fmu = FmuBuilder.build_FMU(work / "fmu_slave.py", dest=work,
                                        project_files=[work / "twin", work / "cotwin_unit.json"],
                                        canGetAndSetFMUstate=True, canSerializeFMUstate=True)

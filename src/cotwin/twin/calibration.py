@@ -551,7 +551,7 @@ def project_twin(system) -> tuple[DigitalTwin, Program, list[Command]]:
         raise CotwinError([Finding(Location(str(system.spec.path), 1, 1), Severity.ERROR,
                                    "calibration replays the plan the PT ran: the project needs [scenario] plan "
                                    "or commands")])
-    calibration = getattr(models, "calibration", None)  # the project's own, if it names one
+    calibration = models.calibration  # the project's own, if it names one
     twin = DigitalTwin(models.project, models.tree, models.scene, calibration and calibration.profile,
                        calibration and calibration.geometry)
     return twin, models.program, system.commands

@@ -29,6 +29,7 @@ import math
 import numpy as np
 
 from ..diagnostics import CotwinError, Finding, Severity
+from .observing import TwinObserver
 from .project.sections import Convergence as ConvergenceSettings
 
 log = logging.getLogger("cotwin.twin")
@@ -172,7 +173,7 @@ def effort_sensors(tree) -> dict[str, str]:
 
 # ---- the service ----------------------------------------------------------------------------------------
 
-class Convergence:
+class Convergence(TwinObserver):
     """A live twin's observer that resyncs the DT and estimates the payload (see the module doc). It runs
     first among the observers, after the step's deviation check and history record."""
 

@@ -27,7 +27,7 @@ class CotwinUnit(Fmi2Slave):
         from cotwin.twin.run import python_unit
 
         config = json.loads((Path(self.resources) / "cotwin_unit.json").read_text())
-        self.unit = python_unit(Path(self.resources) / config["project"], config["role"])
+        self.unit = python_unit(Path(self.resources) / config["project"], config["role"], self.instance_name)
         self.start_time = 0.0
         for port in self.unit.ports.values():
             is_input = port.causality == "input"

@@ -18,7 +18,6 @@ from __future__ import annotations
 import csv
 import json
 import queue
-import threading
 import time as wallclock
 from pathlib import Path
 
@@ -27,6 +26,7 @@ import sqlalchemy as sa
 from ..cosim.algorithm import UNSET
 from ..diagnostics import CotwinError
 from ..files import check_outputs, output
+from ..service import BackgroundService
 
 metadata = sa.MetaData()
 runs = sa.Table(
@@ -213,8 +213,9 @@ def _redact(url: str) -> str:
         return "<history url>"
 
 
-class HistoryRecorder:
-    """Records one run; every `record_*` call is queued and returns at once."""
+class HistoryRecorder(BackgroundService):
+    """Records one run; every `record_*` call is queued and returns at once, written by the recorder's
+    thread (cotwin.service.BackgroundService) in batches."""
 
     def __init__(self, url: str, project: str, kind: str, step: float, algorithm: str,
                  columns: dict[str, list[str]], batch_seconds: float = 0.5):
@@ -227,10 +228,17 @@ class HistoryRecorder:
                 algorithm=algorithm, columns=json.dumps(columns))).inserted_primary_key[0]
         self.batch_seconds = batch_seconds
         self._queue: queue.Queue = queue.Queue()
-        self._thread = threading.Thread(target=self._write, name="cotwin history", daemon=True)
-        self._thread.start()
         self.error: Exception | None = None
         self._last_state: dict[tuple[str, str], int] = {}
+        BackgroundService.__init__(self, "cotwin history")
+        self.start()
+
+    def serve(self) -> None:
+        self.ready()
+        self._write()
+
+    def interrupt(self) -> None:
+        self._queue.put(None)  # the writer ends once it has written what came before
 
     def _write(self) -> None:
         pending: dict[sa.Table, list[dict]] = {}
@@ -285,8 +293,8 @@ class HistoryRecorder:
                                        "size": event["size"], "event": json.dumps(event)}))
 
     def close(self, status: str = "done", message: str | None = None) -> None:
-        self._queue.put(None)
-        self._thread.join()
+        self.stop(None)
+        self.error = self.error or self.failure  # the writer's thread failed: the run's history is incomplete
         with self.engine.begin() as conn:
             conn.execute(runs.update().where(runs.c.id == self.run_id).values(
                 ended=wallclock.time(), status=status if self.error is None else "incomplete",

@@ -65,13 +65,22 @@ class MappingUnit(PythonUnit):
         self._report()
 
     def step(self, t: float, h: float) -> None:
+        self.act(t)
+        self.mapping.step(h)
+        self.reached(t + h)
+
+    def act(self, t: float) -> None:
+        """The step's first half: run the operations the d-model called (a cell of several robots acts
+        for each, steps their shared world once, then has each report: cotwin.twin.cell)."""
         for op, params in self.calls:
             if self.values.get(op):
                 args = {p: assemble(group, self.values.__getitem__) for p, group in params}
                 self.mapping.execute_operation(op, args)
                 self.executed.append((t, op, args))
-        self.mapping.step(h)
-        self.time = t + h
+
+    def reached(self, time: float) -> None:
+        """The step's second half, once the platform has moved: the events and monitored values at `time`."""
+        self.time = time
         self._report()
 
     def _report(self) -> None:

@@ -121,7 +121,7 @@ class CommandLedger(Observer):
 
     def simulation_initialized(self, execution) -> None:
         source = execution.system.units.get(self.system.source.name) if self.system.source is not None else None
-        self._queue = getattr(source, "command_queue", None)  # cotwin.twin.commands.CommandQueue
+        self._queue = source.command_queue if source is not None else None  # cotwin.twin.commands.CommandQueue
         self._seen = self._count()
         self._lag = 1 if execution.algorithm.name == "jacobi" else 0  # steps until the d-model reads a command
         slots = execution.algorithm.slots
@@ -190,7 +190,7 @@ class CommandLedger(Observer):
 
 def not_applied(source) -> list[CommandOutcome]:
     """The commands a run's source (unit) accepted but did not apply before the end: still in its queue."""
-    queue = getattr(source, "command_queue", None)
+    queue = source.command_queue if source is not None else None
     if queue is None:
         return []
     return [CommandOutcome(c.due, c.event, dict(c.values), origin=c.origin) for c in queue.waiting]

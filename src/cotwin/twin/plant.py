@@ -47,6 +47,7 @@ from ..mapping.opcua import (DT_MAX, NAMESPACE, ROBOT, RequestError, check_dt, c
 from ..mapping.opcua_auth import PlantCredentials, is_loopback, parse_url
 from ..mapping.perturbed import PerturbedEndpoint
 from ..pmodel.perturbation import Perturbation, check_joints, read_perturbation, read_table
+from ..service import BackgroundService
 
 log = logging.getLogger("cotwin.plant")
 logging.getLogger("asyncua").addHandler(logging.NullHandler())
@@ -102,7 +103,7 @@ def _ruleset():
     return Rules()
 
 
-class Plant:
+class Plant(BackgroundService):
     """A robot cell over OPC UA, driven by the embedded simulator (see the module doc).
 
     `start()` returns once the server listens (its URL in `url`, the real port if 0 was asked);
@@ -130,9 +131,7 @@ class Plant:
         self.sensors = sorted(endpoint.read_sensors())
         self.calls = 0
         self.refused = 0
-        self._thread: threading.Thread | None = None
-        self._ready = threading.Event()
-        self._failure: BaseException | None = None
+        BackgroundService.__init__(self, f"plant {url}")
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopping: asyncio.Event | None = None
         self._sim = ThreadPoolExecutor(max_workers=1, thread_name_prefix="plant-sim")
@@ -141,39 +140,34 @@ class Plant:
 
     # ---- life cycle ----
     def start(self, timeout: float = 30.0) -> "Plant":
+        """Serve on the plant's thread (cotwin.service.BackgroundService); CotwinError if it cannot."""
         self._credentials = PlantCredentials(self._environ)
-        self._thread = threading.Thread(target=self._serve, name=f"plant {self.url}", daemon=True)
-        self._thread.start()
-        if not self._ready.wait(timeout):
-            self.stop()
-            raise CotwinError(f"the plant did not start serving on {self.url} within {timeout:g} s")
-        if self._failure is not None:
-            failure, self._failure = self._failure, None
-            self.stop()
-            if isinstance(failure, OSError) and failure.errno == errno.EADDRINUSE:
-                raise CotwinError(f"cannot serve the plant on {self.url}: {in_use_message(self.host, self.port)}") from None
-            raise CotwinError(f"cannot serve the plant on {self.url}: {_reason(failure)}") from None
-        return self
+        return BackgroundService.start(self, timeout)
 
-    def stop(self) -> None:
-        if self._loop is not None and self._stopping is not None and self._thread and self._thread.is_alive():
+    def late(self, timeout: float) -> CotwinError:
+        return CotwinError(f"the plant did not start serving on {self.url} within {timeout:g} s")
+
+    def error_of(self, err: BaseException) -> CotwinError:
+        if isinstance(err, OSError) and err.errno == errno.EADDRINUSE:
+            return CotwinError(f"cannot serve the plant on {self.url}: {in_use_message(self.host, self.port)}")
+        return CotwinError(f"cannot serve the plant on {self.url}: {_reason(err)}")
+
+    def interrupt(self) -> None:
+        if self._loop is not None and self._stopping is not None:
             self._loop.call_soon_threadsafe(self._stopping.set)
-        if self._thread is not None:
-            self._thread.join(10)
-            self._thread = None
+
+    def stop(self, timeout: float | None = 10.0) -> bool:
+        ended = BackgroundService.stop(self, timeout)
         self._sim.shutdown(wait=True, cancel_futures=True)
         if self._credentials is not None:
             self._credentials.close()
             self._credentials = None
+        return ended
 
     @property
     def credentials_file(self) -> Path | None:
         """Where the generated operator credentials are (None when they come from the environment)."""
         return self._credentials.file if self._credentials is not None else None
-
-    @property
-    def running(self) -> bool:
-        return self._thread is not None and self._thread.is_alive() and self._ready.is_set()
 
     def __enter__(self) -> "Plant":
         return self.start()
@@ -181,18 +175,12 @@ class Plant:
     def __exit__(self, *exc) -> None:
         self.stop()
 
-    def _serve(self) -> None:
+    def serve(self) -> None:
         loop = asyncio.new_event_loop()
         self._loop = loop
         try:
-            loop.run_until_complete(self._main())
-        except BaseException as err:  # reported by start(), or logged if it happens later
-            if not self._ready.is_set():
-                self._failure = err
-            else:
-                log.error("the plant stopped: %s", _reason(err))
+            loop.run_until_complete(self._main())  # a failure: reported by start(), or logged once serving
         finally:
-            self._ready.set()
             loop.close()
 
     async def _main(self) -> None:
@@ -220,7 +208,7 @@ class Plant:
             self.url = f"opc.tcp://{self.host}:{self.port}"
         self._credentials.publish(self.url)  # the port is ours now: so is its credentials file
         await self._publish(await self._on_sim(self._snapshot))
-        self._ready.set()
+        self.ready()
         ticker = asyncio.create_task(self._run_free()) if self.free_running else None
         try:
             await self._stopping.wait()
@@ -292,7 +280,7 @@ class Plant:
                                    inputs, outputs)
 
     def _perturbation(self) -> dict:
-        p = getattr(self.endpoint, "perturbation", None)
+        p = self.endpoint.perturbation
         return p.as_dict() if isinstance(p, Perturbation) else {}
 
     # ---- calls ----

@@ -49,6 +49,7 @@ from ..config import is_number
 from ..diagnostics import CotwinError
 from ..logcap import CappedLog
 from ..mapping.amqp import connect, declare_exchange, redact
+from ..service import BackgroundService
 from .commands import CommandQueue, Occurrence, QueueFull
 from .project import RabbitMQSettings
 
@@ -387,13 +388,14 @@ class CommandStream:
         return accepted
 
 
-class RabbitMQBridge:
-    """The AMQP link of a live twin, on its own thread (see module doc). `receive` hands the messages
-    received so far to the co-simulation thread; `publish` is thread-safe."""
+class RabbitMQBridge(BackgroundService):
+    """The AMQP link of a live twin, on its own thread (see module doc; cotwin.service.BackgroundService).
+    `receive` hands the messages received so far to the co-simulation thread, and the link's failure when
+    it was lost for good; `publish` is thread-safe."""
 
     def __init__(self, settings: RabbitMQSettings, name: str = "cotwin bridge", expires_s: float = 600.0):
+        BackgroundService.__init__(self, name)
         self.settings = settings
-        self.name = name
         self.queue_name = f"cotwin.{settings.exchange}.{uuid.uuid4().hex[:12]}"
         self.expires_ms = int(expires_s * 1000)
         self.inbox: queue.Queue[Received] = queue.Queue(MAX_INBOX)
@@ -402,9 +404,6 @@ class RabbitMQBridge:
         self.outbox: deque[tuple[str, bytes]] = deque()
         self.connected = threading.Event()
         self.reconnects = 0
-        self.error: CotwinError | None = None
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._connection = None
         self._channel = None
 
@@ -433,9 +432,16 @@ class RabbitMQBridge:
             self._channel.basic_publish(self.settings.exchange, key, body)
             self.outbox.popleft()
 
-    def _run(self) -> None:
+    @property
+    def error(self) -> CotwinError | None:
+        """Why the link ended (lost and not restored in time), if it did."""
+        return self.error_of(self.failure) if self.failure is not None else None
+
+    def serve(self) -> None:
+        """The link: messages in, the outbox out, reconnecting when lost (CotwinError when it stays lost)."""
+        self.ready()  # connected by start(), in the caller's thread
         lost_at: float | None = None
-        while not self._stop.is_set():
+        while not self.stopping.is_set():
             try:
                 if self._connection is None or not self._connection.is_open:
                     self._open()
@@ -455,10 +461,9 @@ class RabbitMQBridge:
                     lost_at = now
                     log.warning("lost the broker connection (%s); reconnecting", type(err).__name__)
                 if now - lost_at > self.settings.timeout_s:
-                    self.error = CotwinError(f"RabbitMQ: the link to {redact(self.settings.url)} was lost and not "
-                                             f"restored within {self.settings.timeout_s:g} s ({type(err).__name__})")
-                    return
-                self._stop.wait(0.2)
+                    raise CotwinError(f"RabbitMQ: the link to {redact(self.settings.url)} was lost and not "
+                                      f"restored within {self.settings.timeout_s:g} s ({type(err).__name__})") from None
+                self.stopping.wait(0.2)
         try:
             if self._connection is not None and self._connection.is_open:
                 self._flush()
@@ -467,18 +472,13 @@ class RabbitMQBridge:
             pass
 
     # ---- the co-simulation side ----
-    @property
-    def started(self) -> bool:
-        return self._thread is not None
-
-    def start(self) -> "RabbitMQBridge":
+    def start(self, timeout: float | None = 30.0) -> "RabbitMQBridge":
         """Connect, bind and announce readiness (once); CotwinError if the broker cannot be reached."""
-        if self._thread is not None:
+        if self.started:
             return self
         self._open()  # in the caller's thread first, so a wrong URL is reported at once
         self.connected.set()
-        self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
-        self._thread.start()
+        BackgroundService.start(self, timeout)
         self.publish(self.settings.from_cosim, READY)
         return self
 
@@ -486,8 +486,7 @@ class RabbitMQBridge:
         self.outbox.append((routing_key, json.dumps(message, sort_keys=True).encode()))
 
     def receive(self, timeout: float) -> list[Received]:
-        if self.error is not None:
-            raise self.error
+        self.check()
         out = []
         try:
             out.append(self.inbox.get(timeout=timeout) if timeout > 0 else self.inbox.get_nowait())
@@ -498,10 +497,8 @@ class RabbitMQBridge:
         return out
 
     def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(5)
-            self._thread = None
+        if self.started:
+            self.stop(5)
         elif self._connection is not None:
             try:
                 self._connection.close()
@@ -658,18 +655,18 @@ class RabbitMQUnit(PythonUnit):
             self.bridge = None
 
 
-class EventPublisher:
+class EventPublisher(BackgroundService):
     """Publishes the twin's events (deviation alarms) as JSON on a topic exchange, from its own thread:
     the twin never waits for the broker; events that cannot be delivered are logged and dropped (they
     are also in the history and in deviation.json)."""
 
     def __init__(self, url: str, exchange: str, name: str = "cotwin events"):
-        self.url, self.exchange, self.name = url, exchange, name
+        BackgroundService.__init__(self, name)
+        self.url, self.exchange = url, exchange
         self._queue: queue.Queue = queue.Queue(maxsize=10_000)
         self.sent = 0
         self.failed = 0
-        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
-        self._thread.start()
+        self.start()
 
     def publish(self, routing_key: str, event: dict) -> None:
         try:
@@ -677,7 +674,8 @@ class EventPublisher:
         except queue.Full:
             self.failed += 1
 
-    def _run(self) -> None:
+    def serve(self) -> None:
+        self.ready()
         connection = channel = None
         while True:
             item = self._queue.get()
@@ -701,6 +699,8 @@ class EventPublisher:
             except Exception:  # noqa: BLE001
                 pass
 
+    def interrupt(self) -> None:
+        self._queue.put(None)  # the events queued before are published first
+
     def close(self) -> None:
-        self._queue.put(None)
-        self._thread.join(10)
+        self.stop(10)

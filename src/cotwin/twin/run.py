@@ -23,14 +23,12 @@ RUN_FILES = ("outputs.csv", "outputs.partial.csv", "outputs.csv.part", "state", 
 
 
 def dt_endpoint(system: TwinSystem):
-    """The platform of the project's (digital) twin: the embedded simulator (calibrated when the project
-    names a calibration), or a robot behind the broker."""
-    spec, models = system.spec, system.models
-    if spec.endpoint == "broker":
-        from ..mapping.broker import BrokerEndpoint
+    """The platform of the project's (digital) twin, as its [platform] endpoint names it
+    (cotwin.twin.endpoints): the embedded simulator (calibrated when the project names a calibration), a
+    robot behind the broker, or a kind registered from outside the core."""
+    from .endpoints import make_endpoint
 
-        return BrokerEndpoint(models.tree, spec.queue, spec.url)
-    return simulated_endpoint(system)
+    return make_endpoint(system, "dt")
 
 
 def simulated_endpoint(system: TwinSystem):
@@ -48,9 +46,15 @@ def simulated_endpoint(system: TwinSystem):
     return SimulatedEndpoint(sim, calibration and calibration.profile, calibration and calibration.geometry)
 
 
-def python_unit(project: str | Path, role: str):
-    """A cotwin in-process unit of a twin project by role (inside cotwin's Python FMUs)."""
-    system = TwinSystem(load_project(project))
+def python_unit(project: str | Path, role: str, instance: str = ""):
+    """A cotwin in-process unit of a twin project by role (inside cotwin's Python FMUs). In a cell of several
+    robots the FMU's `instance` (its instance name's last part) names the robot whose command source it is."""
+    spec = load_project(project)
+    if spec.robots:
+        from .cell import CellSystem
+
+        return CellSystem(spec).python_unit(role, instance.rsplit(".", 1)[-1])
+    system = TwinSystem(spec)
     if role == "mapping":
         return system.mapping_unit(lambda: dt_endpoint(system))
     if system.source is not None and role == system.source.instance:
@@ -97,6 +101,10 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         if restart:
             raise CotwinError("restart-from-state is for FMI 2.0 FMUs: the FMI 3.0 d-model runs in cotwin's process")
         cycle_period = clock_period(spec, step, cycle_period)
+    if endpoint is None:
+        from .endpoints import check_endpoints
+
+        check_endpoints(system, "dt")  # a kind no one registered: said before the d-model is built
     with folder_lock(out, RUN_FILES, spec.inputs):
         fmu = dmodel_fmu(system, out, cc, fmi=fmi)
         endpoint = endpoint if endpoint is not None else dt_endpoint(system)
@@ -120,18 +128,24 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
         except (CotwinError, KeyboardInterrupt) as err:
             raise ended_early(err, execution.time, writer.kept()) from None
         figure = None
-        if plot:
-            from ..plot import figure as draw
+        try:
+            if plot:
+                from ..plot import figure as draw
 
-            figure = draw(out / "outputs.csv", out / "figure.png", figure_panels(system),
-                          title=f"{system.models.program.module.name}: step {step:g} s, {result.algorithm}")
-            path = path_columns(system)
-            if path is not None:
-                from ..plot import top_view
+                figure = draw(out / "outputs.csv", out / "figure.png", figure_panels(system),
+                              title=f"{system.models.program.module.name}: step {step:g} s, {result.algorithm}")
+                path = path_columns(system)
+                if path is not None:
+                    from ..plot import top_view
 
-                top_view(out / "outputs.csv", out / "path.png", system.models.scene, path,
-                         title=f"{system.models.program.module.name} in {system.models.scene.name or 'its world'}: "
-                               f"{end:g} s")
+                    top_view(out / "outputs.csv", out / "path.png", system.models.scene, path,
+                             title=f"{system.models.program.module.name} in "
+                                   f"{system.models.scene.name or 'its world'}: {end:g} s")
+        except KeyboardInterrupt:  # the run itself is done: say that its rows are all there
+            stopped = CotwinError(f"interrupted while drawing the figure; the run is complete: {result.rows} row(s) "
+                                  f"to t = {result.end_time:g} s in {out / 'outputs.csv'}")
+            stopped.interrupted = True
+            raise stopped from None
         return TwinRun(result, out / "outputs.csv", figure, cosim, units, watch.found,
                        ledger.summary(watch.found, not_applied(units.get("source"))))
 
@@ -228,9 +242,21 @@ def monitored_panels(system: TwinSystem, number: str) -> list[tuple[str, list[st
              names, "default") for k, ((what, unit), names) in enumerate(groups.items())]
 
 
-def load(project: str | Path | TwinProject) -> TwinSystem:
-    """The TwinSystem of a project file (or an already read project)."""
-    return TwinSystem(project if isinstance(project, TwinProject) else load_project(project))
+def load(project: str | Path | TwinProject, cells: bool = False) -> TwinSystem:
+    """The TwinSystem of a project file (or an already read project). A cell of several robots ([[robots]])
+    is a CellSystem (cotwin.twin.cell) for a caller that takes one (`cells`), else a located error: what
+    takes a twin of one robot cannot take it."""
+    spec = project if isinstance(project, TwinProject) else load_project(project)
+    if spec.robots:
+        if not cells:
+            from ..diagnostics import Finding, Severity
+
+            raise CotwinError([Finding(spec.location("robots"), Severity.ERROR, "[[robots]]: this takes a twin of "
+                                       "one robot; a cell of several robots runs under `cotwin run` and `cotwin twin`")])
+        from .cell import CellSystem
+
+        return CellSystem(spec)
+    return TwinSystem(spec)
 
 
 __all__ = ["MAPPING", "TwinRun", "dt_endpoint", "load", "python_unit", "run_twin"]

@@ -6,30 +6,31 @@ step k of the DT, then the services look at both. Commands come from one source:
 side plays the same commands) or one RabbitMQ bridge and command stream shared by both sides, so
 every command reaches both in the same step exactly once; only the PT's unit echoes on `from_cosim`.
 
-After every step: deviation checking (DeviationMonitor), history (HistoryRecorder), alarms published
-on the broker (EventPublisher), and any observer (e.g. the dashboard's live feed). Results:
+After every step the twin tells its observers (cotwin.twin.observing): first its own services
+(cotwin.twin.live_observers: deviation checking, history, alarms published on the broker, what-if
+requests, [convergence]), then the caller's (e.g. the dashboard's live feed), then the real-time pacer
+the co-simulation uses too. The loop itself only steps both sides. Results:
 DIR/pt/outputs.csv and DIR/dt/outputs.csv (Maestro format), DIR/deviation.json, DIR/figure.png and
 the history store (DIR/history.sqlite unless the project names a database).
 """
 
 from __future__ import annotations
 
-import json
 import logging
-import time as wallclock
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..cosim.algorithm import UNSET, algorithm as make_algorithm
+from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution, RunResult, ended_early, saved_execution, step_count
-from ..cosim.observers import CSVWriter, StateFile, epoch_of
+from ..cosim.observers import CSVWriter, StateFile
 from ..diagnostics import CotwinError, Finding, Severity
-from ..files import write_text
-from ..mapping.profile import robot_convention
 from .project import check_timing
 from .build import ARTEFACTS, dmodel_fmu, folder_lock
 from .deviation import DeviationMonitor
-from .system import DMODEL, MAPPING, RABBITMQ, TwinSystem
+from .endpoints import check_endpoints, make_endpoint
+from .live_observers import AlarmPublisher, DeviationCheck, HistoryRecording, Pacing, WhatIfPolling
+from .observing import TwinObserver
+from .system import MAPPING, RABBITMQ, TwinSystem
 from .outcomes import CommandLedger
 from .waits import WaitWatch
 
@@ -37,36 +38,8 @@ log = logging.getLogger("cotwin.twin")
 
 
 def pt_endpoint(system: TwinSystem):
-    """The physical twin's platform, from the project's [pt] table."""
-    pt = system.spec.pt
-    if pt is None:
-        raise CotwinError(f"{system.spec.path}: a live twin needs a [pt] table (endpoint = opcua | replay | broker | rtde)")
-    tree = system.models.tree
-    if pt.endpoint == "opcua":
-        from ..mapping.opcua import OPCUAEndpoint
-
-        return OPCUAEndpoint(tree, pt.url)
-    if pt.endpoint == "broker":
-        from ..mapping.broker import BrokerEndpoint
-
-        return BrokerEndpoint(tree, pt.queue, pt.url or system.spec.url)
-    if pt.endpoint == "replay":
-        from ..mapping.replay import ReplayEndpoint, read_rtde_log
-        from ..pmodel import ik
-
-        arm = ik.arm_joints(tree, ik.find_tool(tree))
-        recording = read_rtde_log(pt.log, arm, robot_convention(system.spec.profile, len(arm)))
-        problem = recording.offset_problem(pt.offset) if pt.offset is not None else None
-        if problem is not None:
-            raise CotwinError(f"{system.spec.path}: [pt] offset: {problem}")
-        return ReplayEndpoint(tree, recording, pt.offset)
-    if pt.endpoint == "rtde":
-        from ..mapping.urrtde import RTDEEndpoint
-        from ..pmodel import ik
-
-        arm = ik.arm_joints(tree, ik.find_tool(tree))
-        return RTDEEndpoint(tree, pt.url, convention=robot_convention(system.spec.profile, len(arm)))
-    raise CotwinError(f"unknown PT endpoint {pt.endpoint!r}")
+    """The physical twin's platform, from the project's [pt] table (its kind from cotwin.twin.endpoints)."""
+    return make_endpoint(system, "pt")
 
 
 @dataclass
@@ -104,8 +77,9 @@ class LiveResult:
 
 
 class LiveTwin:
-    """A PT and a DT of one TwinSystem in lockstep (see module doc). `observers` get
-    `twin_step(twin, k, t)` after every step and `twin_started(twin)` once both are initialised."""
+    """A PT and a DT of one TwinSystem in lockstep (see module doc). `observers` (cotwin.twin.observing.
+    TwinObserver) get `twin_started(twin)` once both are initialised, `twin_step(twin, k, t)` after every
+    step, `twin_alarm(twin, event)` for each deviation alarm and `twin_ended(twin, status)` at the end."""
 
     def __init__(self, system: TwinSystem, out: str | Path, pt=None, dt=None, step: float | None = None,
                  end: float | None = None, algorithm: str | None = None, realtime: bool | None = None,
@@ -142,6 +116,9 @@ class LiveTwin:
                                         publish=self._alarm, twin=spec.path.stem)
         self._publisher = None
         self._history = None
+        self._watchers: list[TwinObserver] = []  # the twin's services, then `observers`, then pacing (run())
+        self.status: str | None = None  # done | stopped | failed, once the run is over
+        self.message: str | None = None  # why it did not finish, if it says
         self.convergence = None  # cotwin.twin.convergence.Convergence, when the project has [convergence]
         self._bridge = None
         self._stop = False
@@ -151,10 +128,8 @@ class LiveTwin:
     def _alarm(self, event: dict) -> None:
         log.warning("deviation alarm %s: %s = %.4g at t = %.3f s (threshold %.4g)", event["state"], event["variable"],
                     event["deviation"], event["time"], event["threshold"])
-        if self._history is not None:
-            self._history.record_alarm(event)
-        if self._publisher is not None:
-            self._publisher.publish(self.system.spec.deviation.routing_key, event)
+        for o in self._watchers:
+            o.twin_alarm(self, event)
 
     def stop(self) -> None:
         """Ask the run to end after the current step (from another thread, e.g. a signal handler)."""
@@ -203,7 +178,8 @@ class LiveTwin:
                 from .convergence import Convergence
 
                 self.convergence = Convergence(settings, self.system)
-                self.observers.insert(0, self.convergence)  # the DT corrected before anyone looks at it
+            check_endpoints(self.system, *(side for side, given in (("pt", self.pt_endpoint), ("dt", self.dt_endpoint))
+                                           if given is None))  # before the d-model is built
             fmu = dmodel_fmu(self.system, self.out, self.cc)
             pt_ep = self.pt_endpoint if self.pt_endpoint is not None else pt_endpoint(self.system)
             self._warn_if_outlasting(pt_ep)
@@ -221,6 +197,7 @@ class LiveTwin:
                     from .whatif import WhatIfService
 
                     self.whatif = WhatIfService(self.whatif_url, spec.deviation.exchange, spec.path, self.out)
+                self._watchers = self._services() + self.observers + ([Pacing()] if self.realtime else [])
                 return self._loop(url)
             except (CotwinError, KeyboardInterrupt) as err:
                 raise self._kept(err) from None
@@ -228,12 +205,10 @@ class LiveTwin:
                 for side in self.sides.values():
                     side.execution.close()
                 for endpoint in (pt_ep, dt_ep):  # sessions and threads of remote platforms
-                    close = getattr(endpoint, "close", None)
-                    if close is not None:
-                        try:
-                            close()
-                        except Exception:  # noqa: BLE001 - closing must not hide the run's outcome
-                            pass
+                    try:
+                        endpoint.close()
+                    except Exception:  # noqa: BLE001 - closing must not hide the run's outcome
+                        pass
                 if self._publisher is not None:
                     self._publisher.close()
                 if self.whatif is not None:
@@ -244,13 +219,10 @@ class LiveTwin:
     def _warn_if_outlasting(self, endpoint) -> None:
         """A replayed PT whose log ends before the run does holds its last sample: say so (a held pose would
         otherwise look like a robot at rest)."""
-        recording, offset = getattr(endpoint, "recording", None), getattr(endpoint, "offset", None)
-        if recording is None or offset is None:
-            return
-        last = float(recording.times[-1]) - offset
-        if last < self.end:
-            log.warning("the replayed log %s ends at t = %.3f s of the run, which goes on to %g s: its last sample "
-                        "holds from then on", recording.source, last, self.end)
+        ending = endpoint.ends()
+        if ending is not None and ending[0] < self.end:
+            log.warning("%s ends at t = %.3f s of the run, which goes on to %g s: its last sample holds from then on",
+                        ending[1], ending[0], self.end)
 
     def _kept(self, err: CotwinError | KeyboardInterrupt) -> CotwinError:
         """The error of a run that failed or was interrupted, saying where the rows it computed are (each
@@ -267,48 +239,22 @@ class LiveTwin:
 
         return EventPublisher(url, self.system.spec.deviation.exchange, "cotwin alarms")
 
-    def _prepare_recording(self) -> None:
-        """Readers bound once (after initialisation): what the history and the deviation check read each step."""
-        program = self.system.models.program
-        self._readers = {}
-        for name, side in self.sides.items():
-            execution = side.execution
-            machines = [(m.name, program.leaf_names(m)) for m in program.machines]
-            states = execution.reader([(DMODEL.name, program.state_port(m)) for m in program.machines])
-            self._readers[name] = (execution.reader(execution.system.observed()), states, machines,
-                                   execution.reader([(MAPPING.name, v) for v in self.variables]))
-        source = self.system.source
-        if source is not None:
-            events = [p for p in self.system.source_ports if p in self.system.command_events]
-            values = [p for p in self.system.source_ports if p not in self.system.command_events]
-            read = self.sides["pt"].execution.reader([(source.name, p) for p in events + values])
-            self._commands = (events, values, read)
-        else:
-            self._commands = None
-
-    def _record(self, k: int) -> None:
-        history = self._history
-        for name, (sample, states, machines, _) in self._readers.items():
-            t = self.sides[name].execution.time
-            history.record_sample(name, k, t, sample())
-            for (machine, leaves), state in zip(machines, states()):
-                if isinstance(state, int) and not isinstance(state, bool):
-                    history.record_state(name, k, t, machine, state, leaves[state] if 0 <= state < len(leaves) else "none")
-        if self._commands is not None:
-            events, values, read = self._commands
-            current = read()
-            fired = [e for e, v in zip(events, current) if v is True]
-            for event in fired:  # a command and the values it carries
-                history.record_command(k, self.time, event, True)
-                for port, value in zip(values, current[len(events):]):
-                    history.record_command(k, self.time, port, value)
-
-    def _deviation_step(self) -> None:
-        pt = {v: None if x is UNSET else x for v, x in zip(self.variables, self._readers["pt"][3]())}
-        dt = {v: None if x is UNSET else x for v, x in zip(self.variables, self._readers["dt"][3]())}
-        self.monitor.observe(self.time, pt, dt)
+    def _services(self) -> list[TwinObserver]:
+        """The twin's own services as its observers (cotwin.twin.live_observers), in the order they look at a
+        step: deviation (its alarms to all), history, alarms on the broker, what-if, [convergence] (the DT
+        corrected before the caller's observers look at it)."""
+        self.deviation = DeviationCheck(self.monitor, self.variables, self.out)
+        services: list[TwinObserver] = [self.deviation, HistoryRecording(self._history)]
+        if self._publisher is not None:
+            services.append(AlarmPublisher(self._publisher, self.system.spec.deviation.routing_key))
+        if self.whatif is not None:
+            services.append(WhatIfPolling(self.whatif))
+        if self.convergence is not None:
+            services.append(self.convergence)
+        return services
 
     def _loop(self, url: str) -> LiveResult:
+        """Step both sides in lockstep and tell the observers (the services among them) of each step."""
         pt, dt = self.sides["pt"], self.sides["dt"]
         total = step_count(self.end, self.step_size)
         status, message = "failed", None
@@ -319,36 +265,21 @@ class LiveTwin:
                 self.steps, self.time = pt.execution.steps, pt.execution.time
             else:
                 pt.execution.initialize()
-                place = getattr(self.sides["dt"].units["mapping"].mapping.endpoint, "place", None)
-                if place is not None:  # the DT starts where the PT is
-                    place(self.sides["pt"].units["mapping"].mapping.endpoint.joint_positions())
+                dt_platform = dt.units["mapping"].mapping.endpoint
+                if dt_platform.placeable:  # the DT starts where the PT is
+                    dt_platform.place(pt.units["mapping"].mapping.endpoint.joint_positions())
                 dt.execution.initialize()
             pt.execution.total_steps = dt.execution.total_steps = total
-            self._prepare_recording()
-            self._record(self.steps)
-            begun = self.time
-            for o in self.observers:
-                getattr(o, "twin_started", lambda twin: None)(self)
-            started = wallclock.perf_counter()
-            epoch = epoch_of(pt.execution.system.units.values(), wallclock.time())
-            if epoch is not None:  # keep to the live publisher's clock
-                started -= wallclock.time() - epoch
+            for o in self._watchers:
+                o.twin_started(self)
             self.looping = True
             while self.steps < total and not self._stop:
                 pt.execution.step()
                 dt.execution.step()
                 self.steps += 1
                 self.time = pt.execution.time
-                self._deviation_step()
-                self._record(self.steps)
-                if self.whatif is not None:
-                    self.whatif.poll(dt.execution)
-                for o in self.observers:
+                for o in self._watchers:
                     o.twin_step(self, self.steps, self.time)
-                if self.realtime:
-                    ahead = self.time - begun - (wallclock.perf_counter() - started)
-                    if ahead > 0:
-                        wallclock.sleep(ahead)
             status = "done" if not self._stop else "stopped"
         except CotwinError as err:
             message = "; ".join(f.message for f in err.findings)
@@ -361,13 +292,10 @@ class LiveTwin:
                 RuntimeError(message or "failed")
             for side in (pt, dt):
                 side.execution.close(error)
-            report = self.monitor.report()
-            report["pt"] = self.system.spec.pt.endpoint if self.system.spec.pt else "custom"
-            if self.convergence is not None:
-                report["convergence"] = self.convergence.report()
-            write_text(self.out / "deviation.json", json.dumps(report, indent=1) + "\n")
-            if self._history is not None:
-                self._history.close(status, message)
+            self.status, self.message = status, message
+            for o in self._watchers:
+                o.twin_ended(self, status)
+        report = self.deviation.report
         result = LiveResult(pt.execution.result(), dt.execution.result(), report, self.out, url,
                             self._history.run_id if self._history else None, dict(self.sides), list(self.monitor.events),
                             report.get("convergence", {}))

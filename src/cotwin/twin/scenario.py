@@ -28,7 +28,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..config import Key, Schema, TomlFile, is_number, raise_problems
+from ..config import Key, Schema, TomlFile, did_you_mean, is_number, raise_problems
 from ..cosim.units import INT32, Port, PythonUnit
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..dmodel.program import Program
@@ -93,6 +93,15 @@ def after_end(commands: list[Command], end: float, h: float = 0.0) -> list[Findi
                     f"({end:g} s): it is never sent") for c in commands if c.time >= end - 1e-9]
 
 
+def nothing_planned(plan: Path | None, commands: list[Command]) -> list[Finding]:
+    """A warning for a plan (or command list) that holds no command: the run goes ahead without commands from
+    outside, which a user who wrote a plan did not mean ("nothing happened" is said, not taken for success)."""
+    if plan is None or commands:
+        return []
+    return [Finding(Location(str(plan), 1, 1), Severity.WARNING, "the plan holds no command: the d-model runs "
+                    "without commands from outside")]
+
+
 def read_plan(path: str | Path, program: Program) -> list[Command]:
     path = Path(path)
     ports = scenario_ports(program)
@@ -117,7 +126,7 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
     columns = _column_starts(lines[0])
     for k, h in enumerate(header[1:], start=1):
         if h not in ports:
-            problem(1, columns[k], f"unknown d-model input '{h}' (known: {', '.join(ports)})")
+            problem(1, columns[k], f"unknown d-model input '{h}'{did_you_mean(h, ports)} (known: {', '.join(ports)})")
         elif h in header[1:k]:
             problem(1, columns[k], f"column '{h}' appears twice")
     for ev in program.inputs:
@@ -191,7 +200,8 @@ def read_toml(path: str | Path, program: Program) -> list[Command]:
             continue
         if name not in events:
             problems.append(Finding(file.location(at + ("event",)), Severity.ERROR,
-                                    f"[[command]] {i + 1}: unknown event {name!r} (known: {', '.join(events)})"))
+                                    f"[[command]] {i + 1}: unknown event {name!r}{did_you_mean(name, events)} "
+                                    f"(known: {', '.join(events)})"))
             continue
         args = item["args"] or {}
         values, wrong = command_values(events[name], args)

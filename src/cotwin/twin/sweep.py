@@ -17,6 +17,7 @@ from concurrent.futures.process import BrokenProcessPool
 from multiprocessing import get_context
 from pathlib import Path
 
+from ..config import did_you_mean
 from ..diagnostics import CotwinError
 from .scenario import Command, scalar_value
 
@@ -31,11 +32,19 @@ def grid(program, event: str, ranges: dict[str, list], at: float = 0.5) -> list[
     """One plan per combination of `ranges` (argument -> values): `event` with those arguments at `at` s."""
     events = {ev.name: ev for ev in program.inputs}
     if event not in events:
-        raise CotwinError(f"unknown event {event!r} (known: {', '.join(events)})")
-    fields = {sc.path[-1] if sc.path else "value": (port, sc) for port, sc in events[event].value_ports}
+        raise CotwinError(f"unknown event {event!r}{did_you_mean(event, events)} (known: {', '.join(events)})")
+    from .scenario import argument_keys
+
+    fields = argument_keys(events[event])  # by port (as plans and what-ifs name them) or by field name
+    ports = [port for port, _ in events[event].value_ports]
     unknown = [k for k in ranges if k not in fields]
     if unknown:
-        raise CotwinError(f"event {event} has no argument {', '.join(unknown)} (has {', '.join(fields) or 'none'})")
+        raise CotwinError(f"event {event} has no argument {', '.join(unknown)}{did_you_mean(unknown[0], fields)} "
+                          f"(has {', '.join(ports) or 'none'}, or by field name "
+                          f"{', '.join(k for k in fields if k not in ports) or 'none'})")
+    twice = [port for port in ports if sum(fields[k][0] == port for k in ranges) > 1]
+    if twice:
+        raise CotwinError(f"argument {', '.join(twice)} is given twice (by its port and by its field name)")
     names = list(ranges)
     empty = [n for n in names if not len(ranges[n])]
     if empty:
@@ -88,6 +97,15 @@ def failed(plan: list[Command], err: BaseException) -> dict:
 
     where = "".join(traceback.format_exception(err)[-3:]).strip()
     return {**point(plan), ERROR: f"internal error: {type(err).__name__}: {err} (a cotwin bug)\n{where}"}
+
+
+class SweepInterrupted(CotwinError):
+    """A sweep stopped by an interrupt: `rows` are the what-ifs answered by then (each with its grid point),
+    kept for the caller to write rather than lost with the others."""
+
+    def __init__(self, rows: list[dict], total: int):
+        super().__init__(f"interrupted after {len(rows)} of {total} what-ifs")
+        self.rows, self.total, self.interrupted = rows, total, True
 
 
 def failures(rows: list[dict]) -> list[tuple[int, dict]]:
@@ -173,26 +191,32 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         if workers == 1:
             global _SYSTEM
             _SYSTEM = (system, artefacts)  # the project loaded above (loading it again costed a parse)
-            with _forks(state, step) as forks:
-                for plan in plans:
-                    rows.append(_run(plan, state, horizon, step, forks))
-                    report(len(rows), len(plans))
+            try:
+                with _forks(state, step) as forks:
+                    for plan in plans:
+                        rows.append(_run(plan, state, horizon, step, forks))
+                        report(len(rows), len(plans))
+            except KeyboardInterrupt:
+                raise SweepInterrupted(rows, len(plans)) from None
             return rows
         size = max(1, min(len(plans) // (workers * 8), 64))  # small chunks: progress and balance
         chunks = [plans[k:k + size] for k in range(0, len(plans), size)]
         answers: dict[int, list[dict]] = {}
-        with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
-                                 initargs=(project, artefacts)) as pool:
-            futures = {pool.submit(_run_chunk, chunk, state, horizon, step): k for k, chunk in enumerate(chunks)}
-            done = 0
-            for future in as_completed(futures):
-                k = futures[future]
-                try:
-                    answers[k] = future.result()
-                except BrokenProcessPool:  # a worker died (a signal, out of memory): its what-ifs say so
-                    answers[k] = [{**point(plan), ERROR: DIED} for plan in chunks[k]]
-                done += len(answers[k])
-                report(done, len(plans))
+        try:
+            with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
+                                     initargs=(project, artefacts)) as pool:
+                futures = {pool.submit(_run_chunk, chunk, state, horizon, step): k for k, chunk in enumerate(chunks)}
+                done = 0
+                for future in as_completed(futures):
+                    k = futures[future]
+                    try:
+                        answers[k] = future.result()
+                    except BrokenProcessPool:  # a worker died (a signal, out of memory): its what-ifs say so
+                        answers[k] = [{**point(plan), ERROR: DIED} for plan in chunks[k]]
+                    done += len(answers[k])
+                    report(done, len(plans))
+        except KeyboardInterrupt:  # the answers so far are kept (in the plans' order), not lost
+            raise SweepInterrupted([row for k in sorted(answers) for row in answers[k]], len(plans)) from None
         return [row for k in range(len(chunks)) for row in answers[k]]
     finally:
         if scratch is not None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from ..config import did_you_mean
 from ..cosim.isolated import DEFAULT_TIMEOUT
 from ..cosim.system import Connection, System
 from ..cosim.units import Unit
@@ -77,18 +78,20 @@ def load_models(spec: TwinProject) -> TwinModels:
     from ..dmodel.program import build_program
     from ..mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints
     from ..pmodel import ik
+    from ..mapping.profile import profile_rays
     from ..pmodel.tree import build_tree
     from ..robosim.check import load_checked
     from ..robosim.pmodel_elements import Mapping as MappingModel
 
     project = load_checked(spec.model_files)
     program = build_program(project, spec.module)
-    tree = build_tree(project, spec.pmodel_name, spec.stand_ins)
+    tree = build_tree(project, spec.pmodel_name, spec.stand_ins, profile_rays(spec.profile))  # the robot's scanner
+    problems: list[Finding] = []  # the checks below report together (with the plan's, see the end)
     unused = sorted(set(spec.stand_ins) - tree.stood_in)
     if unused:
-        raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
-                                   f"[[platform.stand_in]] for {', '.join(unused)}: p-model {tree.name} names no such "
-                                   "mesh that cannot be read")])
+        problems.append(Finding(spec.location("platform", "stand_in"), Severity.ERROR,
+                                f"[[platform.stand_in]] for {', '.join(unused)}: p-model {tree.name} names no such "
+                                "mesh that cannot be read"))
     mappings = project.elements(MappingModel)
     if len(mappings) != 1:
         raise CotwinError([Finding(Location(str(spec.mapping), 1, 1), Severity.ERROR,
@@ -98,16 +101,28 @@ def load_models(spec: TwinProject) -> TwinModels:
     if spec.calibration is not None:
         from .calibration import Calibration
 
-        calibration = Calibration.read(spec.calibration)
-    scene = build_scene(spec, mapping, calibration)
+        calibration = _gather(problems, lambda: Calibration.read(spec.calibration), None)
+    scene = _gather(problems, lambda: build_scene(spec, mapping, calibration), None)
     variables = [v.name for v in mapping.variables]
-    if calibration is not None:
-        calibration.geometry.check_joints(ik.arm_joints(tree, ik.find_tool(tree)))  # it names this arm's joints
-    joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) else []
+    if calibration is not None:  # it names this arm's joints
+        _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, ik.find_tool(tree))), None)
+    actuated = [j.name for j in tree.actuated]
+    unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
+    if unknown:  # said at the key, with the nearest joint
+        problems.append(Finding(spec.location("monitor", "joints"), Severity.ERROR,
+                                f"[monitor] joints: {', '.join(unknown)} are not actuated joints of p-model "
+                                f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
+    joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) and not unknown else []
     clash = [n for n in spec.readings if n in variables or n in mirror_variables(variables, joints)]
     if clash:
-        raise CotwinError([Finding(Location(str(spec.path), 1, 1), Severity.ERROR,
-                                   f"[monitor] readings {', '.join(clash)}: the mapping has variables of these names")])
+        problems.append(Finding(spec.location("monitor", "readings", clash[0]), Severity.ERROR,
+                                f"[monitor] readings {', '.join(clash)}: the mapping has variables of these names"))
+    if problems:
+        if spec.plan is not None:  # its problems too, not in a round of their own once these are fixed
+            from .scenario import read_scenario
+
+            _gather(problems, lambda: read_scenario(spec.plan, program), None)
+        raise CotwinError(problems)
     monitored = [*mirror_variables(variables, joints), *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project))
 
@@ -142,6 +157,15 @@ def external_events(program, mapping_model) -> list[str]:
     return [ev.name for ev in program.inputs if ev.name not in defined or never(defined[ev.name])]
 
 
+def _gather(problems: list[Finding], make, fallback):
+    """`make()`, or `fallback` with its error's findings added to `problems` (reported with the others)."""
+    try:
+        return make()
+    except CotwinError as err:
+        problems.extend(err.findings)
+        return fallback
+
+
 class TwinSystem:
     """Units, connections, logged variables and delayed units of a twin project (see module doc)."""
 
@@ -157,13 +181,14 @@ class TwinSystem:
         program = self.models.program
         mapped = {ev.name for ev in self.models.mapping_model.input_events}
         command_ports = scenario_ports(program)
+        problems: list[Finding] = []  # the plan's, the log's, the parameters' and the panels': reported together
         if commands is not None:
             self.commands = list(commands)
             used = {p for c in self.commands for p, _ in c.values}
             self.source_ports = list(dict.fromkeys([*self.live_ports(), *(p for p in command_ports if p in used)]))
             self.source = CONTROLLER
         elif spec.plan is not None:
-            self.commands = read_scenario(spec.plan, program)
+            self.commands = _gather(problems, lambda: read_scenario(spec.plan, program), [])
             used = {p for c in self.commands for p, _ in c.values}
             self.source_ports = [p for p in command_ports if p in used]
             self.source = CONTROLLER
@@ -191,9 +216,13 @@ class TwinSystem:
             connections += [Connection(MAPPING.name, v, RABBITMQ.name, v) for v in self.models.monitored]
         self.connections = connections
         self.delayed = {MAPPING.name}
-        self.log = self._log_variables()
-        self.parameters = self._parameters(layout)
-        self._check_panels()
+        self.log = _gather(problems, self._log_variables, None)
+        shown = not problems  # the panels are checked against what a run shows: the plan's ports, the log
+        self.parameters = _gather(problems, lambda: self._parameters(layout), {})
+        if shown:
+            _gather(problems, self._check_panels, None)
+        if problems:
+            raise CotwinError(problems)
 
     def with_plan(self, commands) -> "TwinSystem":
         """This twin with `commands` as its source (the same models, derived once)."""
@@ -232,7 +261,8 @@ class TwinSystem:
         if unknown:
             raise CotwinError([Finding(spec.location("scenario", "rabbitmq", "commands"), Severity.ERROR,
                                        f"[scenario] rabbitmq commands: {', '.join(unknown)} are not input events "
-                                       f"of the d-model (it has {', '.join(ev.name for ev in program.inputs)})")])
+                                       f"of the d-model{did_you_mean(unknown[0], [ev.name for ev in program.inputs])} "
+                                       f"(it has {', '.join(ev.name for ev in program.inputs)})")])
         return [p for ev in program.inputs if ev.name in names for p in [ev.name, *(port for port, _ in ev.value_ports)]]
 
     def _log_variables(self) -> dict[str, list[str]]:
@@ -241,7 +271,8 @@ class TwinSystem:
         unknown = [n for n in names if n not in monitored]
         if unknown:
             raise CotwinError([Finding(self.spec.location("cosim", "log"), Severity.ERROR,
-                                       f"[cosim] log: unknown mapping variable(s) {', '.join(unknown)} "
+                                       f"[cosim] log: unknown mapping variable(s) {', '.join(unknown)}"
+                                       f"{did_you_mean(unknown[0], monitored)} "
                                        f"(monitored: {', '.join(monitored) or 'none'})")])
         program = self.models.program
         return {MAPPING.name: list(names), DMODEL.name: [program.state_port(m) for m in program.machines]}
@@ -259,7 +290,8 @@ class TwinSystem:
             at = self.spec.location("cosim", "parameters", name)
             if port is None:
                 problems.append(Finding(at, Severity.ERROR, f"[cosim] parameters: the d-model has no parameter "
-                                                            f"'{name}' (it has {', '.join(ports) or 'none'})"))
+                                                            f"'{name}'{did_you_mean(name, ports)} "
+                                                            f"(it has {', '.join(ports) or 'none'})"))
             elif port.fmi_type == "Boolean" and not isinstance(value, bool) or \
                     port.fmi_type == "Integer" and (isinstance(value, bool) or not isinstance(value, int)) or \
                     port.fmi_type == "Real" and (isinstance(value, bool) or not isinstance(value, (int, float))):
@@ -293,9 +325,10 @@ class TwinSystem:
             for name in names:
                 unit, variable = name.split(".")
                 if unit not in units:
-                    message = f"unit '{unit}' is not one of this twin's ({', '.join(units)})"
+                    message = f"unit '{unit}' is not one of this twin's{did_you_mean(unit, units)} ({', '.join(units)})"
                 elif variable not in columns[units[unit]]:
-                    message = (f"{unit} shows no variable '{variable}' (it shows "
+                    message = (f"{unit} shows no variable '{variable}'{did_you_mean(variable, sorted(columns[units[unit]]))} "
+                               f"(it shows "
                                f"{', '.join(sorted(columns[units[unit]])) or 'none'})")
                 else:
                     continue

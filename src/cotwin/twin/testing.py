@@ -93,7 +93,7 @@ class DModelTrace(Observer):
         self.unit = unit
         self.cycles: list[Observed] = []
         self.leaves = [program.leaf_names(m) for m in program.machines]
-        self.clocked = hasattr(unit, "ticks")
+        self.clocked = unit.ticks is not None  # an FMI 3.0 d-model: one cycle per clock tick
         self._ticks = 0
 
     def _states(self, values) -> list[str]:
@@ -442,10 +442,7 @@ class CaseRun:
         for _, op, _ in self.mapping.executed:
             executed[op] = executed.get(op, 0) + 1
         collisions = sum(n for e, n in self.platform_events.items() if "collision" in e.lower())
-        endpoint = getattr(self.mapping.mapping, "endpoint", None)
-        contacts = getattr(endpoint, "collisions", None)
-        return {"operations": executed, "events": dict(self.platform_events), "collisions": collisions
-                + (len(contacts) if isinstance(contacts, list) else 0)}
+        return {"operations": executed, "events": dict(self.platform_events), "collisions": collisions}
 
 
 def _key(record: dict):
@@ -530,9 +527,7 @@ def run_suite(system: TwinSystem, suite: SuiteFile, out: str | Path, endpoint=No
                 run = CaseRun(system, suite, case, fmu, made, algorithm or system.spec.algorithm, step, fmi)
                 results.append(run.run())
             finally:
-                close = getattr(made, "close", None)
-                if close is not None:
-                    close()
+                made.close()
             if progress is not None:
                 progress(k + 1, len(cases), results[-1])
     covered = list(dict.fromkeys(i for r in results for i in r.covered))

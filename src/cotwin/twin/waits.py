@@ -59,7 +59,7 @@ class WaitWatch(Observer):
 
     def simulation_initialized(self, execution) -> None:
         unit = execution.system.units.get(MAPPING.name)
-        self.mapping = getattr(unit, "mapping", None)  # an in-process mapping unit: it can be asked
+        self.mapping = unit.mapping if unit is not None else None  # an in-process mapping unit: it can be asked
         slots = execution.algorithm.slots
         self._states = execution.reader(self._ports)
         self._called = execution.reader([c for c in self._calls if c in slots])

@@ -30,9 +30,11 @@ import numpy as np
 from .. import safejson
 from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution
+from ..config import did_you_mean
 from ..diagnostics import CotwinError
 from .build import dmodel_fmu
 from ..logcap import CappedLog
+from ..service import BackgroundService
 from .scenario import Command
 from .system import DMODEL, MAPPING, TwinSystem
 from .outcomes import CommandLedger, CommandOutcome
@@ -66,7 +68,7 @@ class _Contacts:
         from ..pmodel import ik
         from ..pmodel.mjcf import ROBOT_CONTYPE
 
-        self.sim = getattr(endpoint, "sim", None)
+        self.sim = endpoint.sim
         if self.sim is None:
             return
         model = self.sim.model
@@ -309,7 +311,8 @@ def plan_from_json(items: list, program) -> list[Command]:
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not (0 <= t < 1e6):
             raise CotwinError(f"plan item {k}: time must be a number of seconds >= 0, got {t!r:.80}")
         if name not in events:
-            raise CotwinError(f"plan item {k}: unknown event {name!r:.80} (known: {', '.join(events)})")
+            raise CotwinError(f"plan item {k}: unknown event {name!r:.80}{did_you_mean(name, events)} "
+                              f"(known: {', '.join(events)})")
         if not isinstance(args, dict):
             raise CotwinError(f"plan item {k}: args must be an object")
         values, wrong = command_values(events[name], args)
@@ -345,7 +348,7 @@ def _worker_predict(plan_json: list, state: bytes, horizon: float, decimate: int
     return predict(system, plan, state, horizon=horizon, artefacts=artefacts, decimate=decimate).as_dict()
 
 
-class WhatIfService:
+class WhatIfService(BackgroundService):
     """Answers what-if requests of a live twin sent over the broker, without disturbing it.
 
     A request is a JSON object `{"plan": [{"time": s, "event": name, "args": {...}}], "horizon": s,
@@ -370,6 +373,7 @@ class WhatIfService:
         from ..mapping.amqp import connect, declare_exchange
         from .rabbitmq import EVENTS
 
+        BackgroundService.__init__(self, "cotwin what-if")
         self.exchange, self.routing_key = exchange, routing_key
         self.requests: queue.Queue = queue.Queue()
         self.answered = 0
@@ -396,12 +400,12 @@ class WhatIfService:
             channel.queue_bind(self.queue, exchange, routing_key=key)
         channel.basic_consume(self.queue, self._on_request, auto_ack=True)
         self._channel = channel
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="cotwin what-if", daemon=True)
-        self._thread.start()
+        self.start()
 
-    def _run(self) -> None:
-        while not self._stop.is_set():
+    def serve(self) -> None:
+        """The broker's thread: requests taken as they come, until the service stops or the broker is lost."""
+        self.ready()
+        while not self.stopping.is_set():
             try:
                 self._connection.process_data_events(time_limit=0.05)
             except Exception:  # noqa: BLE001 - a lost broker ends the service, not the twin
@@ -524,8 +528,7 @@ class WhatIfService:
             process.join(max(0.0, deadline - time.monotonic()))
             if process.is_alive():
                 process.kill()
-        self._stop.set()
-        self._thread.join(5)
+        self.stop(5)
         self.log.close()
         try:
             self._connection.close()

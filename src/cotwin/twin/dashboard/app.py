@@ -45,11 +45,12 @@ from pathlib import Path
 
 from ... import safejson
 from ...diagnostics import CotwinError, PicklableError
+from ..cell import CellSystem
 from ..system import MAPPING, RABBITMQ, TwinSystem
 from ..whatif import finite as _finite
 from .access import Access, Gate
-from .describe import describe
-from .feed import DashboardFeed
+from .describe import describe, describe_cell
+from .feed import CellFeed, DashboardFeed
 from .server import (HEADER_SECONDS, beyond_loopback, bound_socket, check_tls, protocol, serve_in_thread,
                      ws_protocol)
 
@@ -212,12 +213,14 @@ class Dashboard:
         self.period = period
         self.max_rate = max_rate
         self.backlog = backlog
-        self.feed = DashboardFeed(system) if system is not None and mode != "history" else None
+        cell = isinstance(system, CellSystem)  # a cell of several robots: its own description and feed
+        self.feed = (CellFeed if cell else DashboardFeed)(system) if system is not None and mode != "history" else None
         sides = ["pt", "dt"] if mode == "twin" else ["twin"]
-        self.whatif_url = whatif_url if system is not None and mode == "twin" else None  # the twin answers what-if
-        self.model = describe(system, sides, mode, {"whatif": self.whatif_url is not None}) if system is not None else None
+        self.whatif_url = whatif_url if system is not None and mode == "twin" and not cell else None  # what-if
+        self.model = None if system is None else describe_cell(system, sides, mode) if cell else \
+            describe(system, sides, mode, {"whatif": self.whatif_url is not None})
         self.publisher = None
-        if system is not None and system.source is RABBITMQ and mode != "history":
+        if system is not None and not cell and system.source is RABBITMQ and mode != "history":
             from ..rabbitmq import port_scalars, port_types
             from .commands import PagePublisher
 
@@ -233,8 +236,7 @@ class Dashboard:
         self._closing = threading.Event()  # ends the what-ifs the page waits for
         self.clients = 0
         self.skipped = 0  # samples clients skipped because they fell behind
-        self._server = None
-        self._thread: threading.Thread | None = None
+        self._served = None  # cotwin.twin.dashboard.server.ServedPage
         self._socket: socket.socket | None = None
 
     # ---- lifecycle ----
@@ -272,7 +274,7 @@ class Dashboard:
                                 limit_concurrency=MAX_CONNECTIONS, **tls)  # more at once are answered 503
         _cap_server_log()
         try:
-            self._server, self._thread = serve_in_thread(config, sock, "dashboard")
+            self._served = serve_in_thread(config, sock, "dashboard")
         except CotwinError:
             self.stop()
             raise
@@ -295,13 +297,11 @@ class Dashboard:
         self._closing.set()
         if self.publisher is not None:
             self.publisher.stop()
-        if self._server is not None:
-            if self._thread is not None and self._thread.is_alive():
+        if self._served is not None:
+            if self._served.running:
                 wallclock.sleep(min(2 * self.period, 0.2))  # let the streams send the final status
-            self._server.should_exit = True
-        if self._thread is not None:
-            self._thread.join(10)
-            self._thread = None
+            self._served.stop(10)
+            self._served = None
         if self._socket is not None:
             self._socket.close()
             self._socket = None

@@ -32,6 +32,7 @@ from ... import safejson
 from ...diagnostics import CotwinError
 from ...dmodel.program import Scalar
 from ...mapping.amqp import connect, declare_exchange
+from ...service import BackgroundService
 from ..project import RabbitMQSettings
 from ..publisher import idle_values, now_iso
 from ..rabbitmq import COMMANDS, MAX_BYTES, EchoClock, parse_message
@@ -48,7 +49,7 @@ class _CommandEvent:
     value_ports: list
 
 
-class PagePublisher:
+class PagePublisher(BackgroundService):
     MAX_WAITING = 64  # commands queued and not yet published
     MAX_SENT = 1000  # messages remembered (a heartbeat every period for days would grow a list without bound)
     MAX_TICKETS = 1000  # commands whose fate is remembered
@@ -64,7 +65,7 @@ class PagePublisher:
         self.idle = idle_values(types)
         self.period = period
         self.heartbeat = heartbeat
-        self.name = name
+        BackgroundService.__init__(self, name)
         self.bound = threading.Event()  # our queue is bound: the twin may announce itself now
         self.twin_ready = threading.Event()  # the twin's ready message came
         self.sent: deque[tuple[float, dict]] = deque(maxlen=self.MAX_SENT)  # (wall time, message), the newest
@@ -74,8 +75,6 @@ class PagePublisher:
         self._pending: queue.Queue[dict] = queue.Queue(self.MAX_WAITING)
         self._lock = threading.Lock()
         self.tickets: dict[str, dict] = {}  # command id -> what became of it (`ticket`), the newest MAX_TICKETS
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._started = False
 
     # ---- the page's side ----
@@ -123,25 +122,23 @@ class PagePublisher:
 
     # ---- the link thread ----
     def start(self, timeout: float = 10.0) -> "PagePublisher":
+        """Connect and bind on the link thread (cotwin.service.BackgroundService); CotwinError if it cannot."""
         self._started = True
-        self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
-        self._thread.start()
-        if not self.bound.wait(timeout) or self.error:
-            self.stop()
-            raise CotwinError(f"dashboard: cannot publish commands on RabbitMQ exchange '{self.settings.exchange}': "
-                              f"{self.error or 'no broker answer within %g s' % timeout}")
-        return self
+        return BackgroundService.start(self, timeout)
+
+    def _cannot(self, why: str) -> CotwinError:
+        return CotwinError(f"dashboard: cannot publish commands on RabbitMQ exchange '{self.settings.exchange}': {why}")
+
+    def late(self, timeout: float) -> CotwinError:
+        return self._cannot(f"no broker answer within {timeout:g} s")
 
     @property
     def stopped(self) -> bool:
         """The link thread was started and has ended or failed: a queued command would never leave."""
-        return self.error is not None or (self._started and (self._thread is None or not self._thread.is_alive()))
+        return self.error is not None or (self._started and not self.running)
 
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(5)
-            self._thread = None
+    def stop(self, timeout: float | None = 5.0) -> bool:
+        return BackgroundService.stop(self, timeout)
 
     def _on_echo(self, channel, method, props, body) -> None:
         self.echoes.take(body)  # never raises: a bad echo is refused and counted
@@ -154,7 +151,7 @@ class PagePublisher:
                 return
             self._acknowledged(data)
 
-    def _run(self) -> None:
+    def serve(self) -> None:
         s = self.settings
         try:
             connection = connect(s.url, self.name)
@@ -165,12 +162,12 @@ class PagePublisher:
             channel.basic_consume(own, self._on_echo, auto_ack=True)
         except (pika.exceptions.AMQPError, CotwinError, OSError) as err:
             self.error = str(err) or type(err).__name__
-            self.bound.set()
-            return
+            raise self._cannot(self.error) from None
         self.bound.set()
+        self.ready()
         try:
             next_tick = wallclock.monotonic()
-            while not self._stop.is_set():
+            while not self.stopping.is_set():
                 connection.process_data_events(time_limit=0.02)
                 if not self.twin_ready.is_set():
                     continue

@@ -113,14 +113,22 @@ def robot_drawing(tree, variables: dict[str, str]) -> dict:
     from ...pmodel.tree import inverse
 
     poses = {l.name: l.pose for l in tree.links}
-    links = [{"name": l.name, "geoms": [{"name": g.name, "kind": g.kind, "size": dict(g.size), "pose": _matrix(g.pose)}
-                                        for g in l.geoms]} for l in tree.links]
+    links = [{"name": l.name, "geoms": [_geom(g) for g in l.geoms]} for l in tree.links]
     joints = [{"name": j.name, "kind": j.kind, "parent": j.parent, "child": j.child,
                "axis": [round(float(v), 9) for v in j.axis],
                "before": _matrix(inverse(poses[j.parent]) @ j.pose), "after": _matrix(inverse(j.pose) @ poses[j.child]),
                "variable": variables.get(j.name)} for j in tree.joints]
     return {"name": tree.name, "root": tree.root.name, "root_pose": _matrix(tree.root.pose), "links": links,
             "joints": joints}
+
+
+def _geom(g) -> dict:
+    """A geom as the page draws it: a mesh as its bounding box (its size and centre as the tree gives them)."""
+    if g.kind != "mesh":
+        return {"name": g.name, "kind": g.kind, "size": dict(g.size), "pose": _matrix(g.pose)}
+    box = np.eye(4)
+    box[:3, 3] = g.center
+    return {"name": g.name, "kind": "box", "size": dict(g.size), "pose": _matrix(g.pose @ box), "mesh": True}
 
 
 def scene_drawing(scene) -> dict | None:
@@ -192,3 +200,58 @@ def describe(system: TwinSystem, sides: list[str], mode: str, features: dict | N
         "commands": command_panel(system),
         "features": {"whatif": False, **(features or {})},
     }
+
+
+# ---- a cell of several robots -----------------------------------------------------------------
+
+
+def describe_cell(cell, sides: list[str], mode: str, features: dict | None = None) -> dict:
+    """What the page draws of a cell of several robots (cotwin.twin.cell): every robot at its base pose, its
+    variables and d-model state machines scoped by its name (`ROBOT.q0`, "ROBOT: Machine"); no commands from
+    the page (a cell's commands come from its plan or its robots' broker routing)."""
+    from ...mapping.runtime import mirror_variables
+    from ...pmodel import ik
+    from ..cell import CELL_MAPPING
+
+    spec, program = cell.spec, cell.program
+    variables, machines, robots = [], [], []
+    for robot in cell.robots:
+        models = robot.system.models
+        joints = mirror_variables(models.monitored, ik.arm_joints(models.tree, ik.find_tool(models.tree)))
+        for v in models.monitored:
+            variables.append({"name": robot.scoped(v), "key": f"{CELL_MAPPING.name}.{robot.scoped(v)}",
+                              "joint": joints[v][0] if v in joints else None,
+                              "kind": joints[v][1] if v in joints else "value"})
+        positions = {joint: robot.scoped(v) for v, (joint, kind) in joints.items() if kind == "position"}
+        drawing = robot_drawing(models.tree, positions)
+        drawing["label"] = robot.name
+        drawing["root_pose"] = _matrix(robot.pose @ models.tree.root.pose)
+        robots.append(drawing)
+        for m in program.machines:
+            machine = machine_drawing(program, m)
+            machine["name"] = f"{robot.name}: {machine['name']}"
+            machines.append(machine)
+    return {
+        "project": str(spec.path), "module": program.module.name, "mode": mode, "sides": list(sides),
+        "step": spec.step, "end": spec.end, "algorithm": spec.algorithm, "pt": "plant" if "pt" in sides else None,
+        "variables": variables,
+        "deviation": None,
+        "machines": machines,
+        "robot": robots[0], "robots": robots,
+        "scene": scene_drawing(cell.scene),
+        "commands": cell_commands(cell),
+        "features": {"whatif": False, **(features or {})},
+    }
+
+
+def cell_commands(cell) -> dict:
+    """A cell's commands as the page lists them (the page sends none to a cell): its plan's, each value
+    scoped by its robot, or where its robots' broker routing takes them."""
+    spec = cell.spec
+    if spec.rabbitmq is not None:
+        s = spec.rabbitmq
+        return {"source": "rabbitmq", "events": [],
+                "broker": {"exchange": s.exchange, "to_cosim": f"{s.to_cosim}.ROBOT", "from_cosim": f"{s.from_cosim}.ROBOT"}}
+    planned = sorted(({"time": c.time, "values": {robot.scoped(p): v for p, v in c.values}}
+                      for robot in cell.robots for c in robot.system.commands), key=lambda c: c["time"])
+    return {"source": "plan", "plan": str(spec.plan), "planned": planned, "events": []}

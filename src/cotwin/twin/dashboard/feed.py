@@ -20,6 +20,7 @@ from __future__ import annotations
 import time as wallclock
 
 from ...cosim.observers import Observer
+from ..observing import TwinObserver
 from ..system import DMODEL, MAPPING, TwinSystem
 
 
@@ -63,24 +64,14 @@ class Ring:
         return min(self.count, self.capacity)
 
 
-class DashboardFeed(Observer):
+class DashboardFeed(Observer, TwinObserver):
     """Samples `(time, wall, [values side 1, states side 1, values side 2, ...])` per step, and events
     (dicts with `kind` = command | op | alarm | correction) as they happen (see module doc)."""
 
     def __init__(self, system: TwinSystem, capacity: int = 1 << 14, max_rate: float = 500.0,
                  event_capacity: int = 1 << 12):
-        program = system.models.program
         self.system = system
-        self.variables = list(system.models.monitored)
-        self._keys = [(MAPPING.name, v) for v in self.variables]
-        self._state_keys = [(DMODEL.name, program.state_port(m)) for m in program.machines]
-        source = system.source
-        self._commands = []  # (event key, name, [(port, key)])
-        if source is not None:
-            for ev in program.inputs:
-                if ev.name in system.command_events:
-                    self._commands.append(((source.name, ev.name), ev.name,
-                                           [(port, (source.name, port)) for port, _ in ev.value_ports]))
+        self._watch(system)
         self.samples = Ring(capacity)
         self.min_interval = 1.0 / max_rate  # s of wall time between two copied samples
         self._last_copy = float("-inf")
@@ -101,12 +92,26 @@ class DashboardFeed(Observer):
         self._corrections: list = []  # a LiveTwin's [convergence] corrections (cotwin.twin.convergence)
         self._seen_corrections = 0
 
+    def _watch(self, system: TwinSystem) -> None:
+        """What a sample copies (the monitored variables, the d-model's states) and which commands are events."""
+        program = system.models.program
+        self.variables = list(system.models.monitored)
+        self._keys = [(MAPPING.name, v) for v in self.variables]
+        self._state_keys = [(DMODEL.name, program.state_port(m)) for m in program.machines]
+        source = system.source
+        self._commands = []  # (event key, name, [(port, key)])
+        if source is not None:
+            for ev in program.inputs:
+                if ev.name in system.command_events:
+                    self._commands.append(((source.name, ev.name), ev.name,
+                                           [(port, (source.name, port)) for port, _ in ev.value_ports]))
+
     # ---- attaching ----
     def _attach(self, executions: dict, monitor=None, step: float | None = None, end: float | None = None) -> None:
         self.sides = list(executions)
         self._executions = list(executions.values())
         self._mappings = [e.system.units.get(MAPPING.name) for e in self._executions]
-        self._seen_ops = [len(getattr(m, "executed", ())) for m in self._mappings]
+        self._seen_ops = [len(m.executed) if m is not None else 0 for m in self._mappings]
         self._monitor = monitor
         self._seen_alarms = len(monitor.events) if monitor is not None else 0
         first = self._executions[0]
@@ -167,8 +172,8 @@ class DashboardFeed(Observer):
 
     def _events(self, t: float) -> None:
         for i, mapping in enumerate(self._mappings):
-            executed = getattr(mapping, "executed", None)
-            if executed is not None and len(executed) > self._seen_ops[i]:
+            executed = mapping.executed if mapping is not None else ()
+            if len(executed) > self._seen_ops[i]:
                 for start, name, args in executed[self._seen_ops[i]:]:
                     self.events.append({"kind": "op", "side": self.sides[i], "time": start, "name": name,
                                         "args": args})
@@ -198,3 +203,26 @@ class DashboardFeed(Observer):
             elapsed = last[1] - self.started_wall
             out["rtf"] = (last[0] - self.started_time) / elapsed if elapsed > 0 else None
         return out
+
+
+class CellFeed(DashboardFeed):
+    """The feed of a cell of several robots (cotwin.twin.cell): every robot's monitored variables (`ROBOT.q0`),
+    every robot's d-model states, in the order the page's description (describe_cell) lists them; commands
+    are named `ROBOT.event`."""
+
+    def _watch(self, cell) -> None:
+        from ..cell import CELL_MAPPING, dmodel_of
+
+        program = cell.program
+        self.variables, self._keys, self._state_keys, self._commands = [], [], [], []
+        for robot in cell.robots:
+            system = robot.system
+            names = [robot.scoped(v) for v in system.models.monitored]
+            self.variables += names
+            self._keys += [(CELL_MAPPING.name, v) for v in names]
+            self._state_keys += [(dmodel_of(robot.name).name, program.state_port(m)) for m in program.machines]
+            source = robot.source
+            for ev in program.inputs if source is not None else ():
+                if ev.name in system.command_events:
+                    self._commands.append(((source.name, ev.name), robot.scoped(ev.name),
+                                           [(port, (source.name, port)) for port, _ in ev.value_ports]))

@@ -14,13 +14,12 @@ import ipaddress
 import logging
 import socket
 import ssl
-import threading
-import time as wallclock
 from pathlib import Path
 
 from ...diagnostics import CotwinError
 from ...logcap import CappedLog
 from ...mapping.amqp import is_loopback
+from ...service import BackgroundService, reason
 
 log = logging.getLogger("cotwin.dashboard")
 HEADER_SECONDS = 10.0  # to send a request's line and headers (every request of a kept-alive connection)
@@ -136,19 +135,41 @@ def bound_socket(host: str, port: int, what: str) -> socket.socket:
     return sock
 
 
-def serve_in_thread(config, sock: socket.socket, what: str):
-    """A uvicorn server for `config` on `sock` in a daemon thread, returned (server, thread) once it is
-    serving; one that does not start within 10 s is stopped and a readable error."""
-    import uvicorn
+class ServedPage(BackgroundService):
+    """A uvicorn server for a page of ours on a bound socket, in its own thread (cotwin.service): ready once it
+    serves; one that does not start within the timeout is stopped and a readable error naming the page."""
 
-    server = uvicorn.Server(config)
-    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, name=f"cotwin {what}", daemon=True)
-    thread.start()
-    deadline = wallclock.monotonic() + 10
-    while not server.started:
-        if not thread.is_alive() or wallclock.monotonic() > deadline:
-            server.should_exit = True
-            thread.join(5)
-            raise CotwinError(f"{what}: the server did not start on {sock.getsockname()[0]}:{sock.getsockname()[1]}")
-        wallclock.sleep(0.01)
-    return server, thread
+    def __init__(self, config, sock: socket.socket, what: str):
+        import uvicorn
+
+        BackgroundService.__init__(self, f"cotwin {what}")
+        self.what, self.sock = what, sock
+        page = self
+
+        class Server(uvicorn.Server):
+            async def startup(self, sockets=None) -> None:
+                await super().startup(sockets=sockets)
+                if self.started:
+                    page.ready()
+
+        self.server = Server(config)
+
+    def serve(self) -> None:
+        self.server.run(sockets=[self.sock])
+
+    def interrupt(self) -> None:
+        self.server.should_exit = True
+
+    def late(self, timeout: float) -> CotwinError:
+        host, port = self.sock.getsockname()[:2]
+        return CotwinError(f"{self.what}: the server did not start on {host}:{port}")
+
+    def error_of(self, err: BaseException) -> CotwinError:
+        host, port = self.sock.getsockname()[:2]
+        return CotwinError(f"{self.what}: the server did not start on {host}:{port} ({reason(err)})")
+
+
+def serve_in_thread(config, sock: socket.socket, what: str, timeout: float = 10.0) -> ServedPage:
+    """A uvicorn server for `config` on `sock` in a daemon thread (a ServedPage), returned once it is serving;
+    one that does not start within `timeout` s is stopped and a readable error."""
+    return ServedPage(config, sock, what).start(timeout)

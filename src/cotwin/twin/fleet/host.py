@@ -17,6 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ...diagnostics import CotwinError
+from ...service import BackgroundService
+from ..observing import TwinObserver
 
 log = logging.getLogger("cotwin.fleet")
 # One twin of a host starts at a time: loading an FMU, FMPy changes the process's working directory to the
@@ -38,7 +40,7 @@ class TwinJob:
     routing_key: str | None = None  # the twin's alarms' routing key (the project's, naming the twin)
 
 
-class TwinWatch:
+class TwinWatch(TwinObserver):
     """A live twin's observer: its saved state every `every` steps (both sides), its real-time factor (the
     simulated time over the wall time it took since it started or resumed) and its lag behind the wall
     clock when it is paced to it (a twin that cannot keep real time is reported, never slowed further)."""
@@ -86,10 +88,12 @@ class TwinWatch:
         self.checkpoint, self.checkpoint_time, self.checkpoint_step = states, twin.time, twin.steps
 
 
-class RunningTwin:
-    """One twin running in a thread of its host."""
+class RunningTwin(BackgroundService):
+    """One twin running in a thread of its host (cotwin.service: started at once; its failure is its state,
+    the host goes on; `interrupt` asks its live twin to stop after the current step)."""
 
     def __init__(self, job: TwinJob, resume: dict[str, bytes] | None):
+        BackgroundService.__init__(self, f"twin {job.entry.name}")
         self.job = job
         self.resume = resume
         self.watch = TwinWatch(job.checkpoint_every, self._started)
@@ -101,7 +105,14 @@ class RunningTwin:
         self.run_id: int | None = None
         self.end: float | None = None
         self.sent_checkpoint = -1  # the checkpoint step last handed to the supervisor
-        self.thread = threading.Thread(target=self._run, name=f"twin {job.entry.name}", daemon=True)
+
+    def serve(self) -> None:
+        self.ready()  # the host does not wait for the twin: its state says how it goes
+        self._run()
+
+    def interrupt(self) -> None:
+        if self.live is not None:
+            self.live.stop()
 
     def _run(self) -> None:
         from ..run import load
@@ -205,7 +216,7 @@ class TwinHost:
     def start(self, job: TwinJob, resume: dict[str, bytes] | None = None) -> int:
         running = RunningTwin(job, resume)
         self.twins[job.entry.name] = running
-        running.thread.start()
+        running.start()
         return os.getpid()
 
     def status(self) -> list[dict]:
@@ -213,8 +224,7 @@ class TwinHost:
 
     def stop(self) -> None:
         for t in self.twins.values():
-            if t.live is not None:
-                t.live.stop()
+            t.interrupt()
 
     def pid(self) -> int:
         return os.getpid()
@@ -223,5 +233,5 @@ class TwinHost:
         """Whether every twin of this host has ended (waiting at most `timeout` s)."""
         deadline = wallclock.monotonic() + timeout
         for t in self.twins.values():
-            t.thread.join(max(0.0, deadline - wallclock.monotonic()))
-        return not any(t.thread.is_alive() for t in self.twins.values())
+            t.wait(max(0.0, deadline - wallclock.monotonic()))
+        return all(t.wait(0) for t in self.twins.values())

@@ -105,8 +105,7 @@ class FleetPage:
                               "serve it on 127.0.0.1 and reach it through an SSH tunnel or a proxy with "
                               "authentication")
         self.overview, self.host, self.port = overview, host, port
-        self._server = None
-        self._thread = None
+        self._served = None  # cotwin.twin.dashboard.server.ServedPage
 
     @property
     def url(self) -> str:
@@ -121,11 +120,10 @@ class FleetPage:
         self.port = sock.getsockname()[1]
         config = uvicorn.Config(app(self.overview, self.host), log_level="warning", access_log=False, lifespan="off",
                                 http=protocol(), proxy_headers=False, limit_concurrency=64, timeout_graceful_shutdown=2)
-        self._server, self._thread = serve_in_thread(config, sock, "fleet page")
+        self._served = serve_in_thread(config, sock, "fleet page")
         return self
 
     def stop(self) -> None:
-        if self._server is not None:
-            self._server.should_exit = True
-        if self._thread is not None:
-            self._thread.join(5)
+        if self._served is not None:
+            self._served.stop(5)
+            self._served = None

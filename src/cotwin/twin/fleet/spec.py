@@ -23,7 +23,7 @@ differs between its twin and the project it names (where its PT is, how long it 
     dashboard = "127.0.0.1:8101"    # serve this twin's own page there (linked from the overview)
 
 Every problem is reported at its key's line and column, all together; a project's own problems are
-reported in the project file, introduced by the entry that names it.
+reported in the project file, each naming its twin and the entry's line.
 """
 
 from __future__ import annotations
@@ -132,6 +132,10 @@ def twin_project(entry: TwinEntry) -> TwinProject:
 def read_fleet(path: str | Path) -> FleetSpec:
     """Read and check a fleet file and every project it names (see module doc)."""
     file = TomlFile(path, "fleet file")
+    if "models" in file.data and "twin" not in file.data:  # a project given for a fleet file
+        raise CotwinError([Finding(file.location(("models",)), Severity.ERROR, "this is a twin project ([models]), "
+                                   f"not a fleet file: run it with `cotwin twin {file.path.name} -o DIR`, or name it "
+                                   "in a fleet file's [[twin]] project = \"...\" (docs/fleet.md)")])
     problems: list[Finding] = []
     data = SCHEMA.read(file.data, file, (), problems)
     fleet = data["fleet"] or {}
@@ -152,23 +156,24 @@ def read_fleet(path: str | Path) -> FleetSpec:
             continue
         before = len(problems)
         v = TWIN.read(item, file, at, problems)
-        if len(problems) > before:
-            continue
-        name = v["name"]
+        good = len(problems) == before  # a wrong key of the entry: its project is still checked
+        name = v["name"] if isinstance(v["name"], str) else f"#{k + 1}"
         if name in seen:
             problems.append(Finding(file.location(at + ("name",)), Severity.ERROR,
                                     f"twin name {name!r} is already the name of twin {seen[name] + 1} (names are unique)"))
-            continue
-        seen[name] = k
+            good = False
+        seen.setdefault(name, k)
         if v["dashboard"] is not None:
             if v["dashboard"] in pages:
                 problems.append(Finding(file.location(at + ("dashboard",)), Severity.ERROR,
                                         f"twin {name!r}: dashboard {v['dashboard']} is already twin "
                                         f"{pages[v['dashboard']] + 1}'s"))
-                continue
-            pages[v["dashboard"]] = k
-        entry = _entry(file, at, v, problems)
-        if entry is not None:
+                good = False
+            pages.setdefault(v["dashboard"], k)
+        if not isinstance(v["project"], str):
+            continue  # no project named (reported)
+        entry = _entry(file, at, name, v, problems)
+        if entry is not None and good:
             twins.append(entry)
     raise_problems(problems)
     return FleetSpec(file.path, fleet.get("name") or file.path.stem, tuple(twins), fleet.get("history"),
@@ -176,10 +181,11 @@ def read_fleet(path: str | Path) -> FleetSpec:
                      float(fleet["restart_delay"]), fleet["workers"])
 
 
-def _entry(file: TomlFile, at: tuple, v: dict, problems: list[Finding]) -> TwinEntry | None:
-    """A checked entry: its project exists and reads well, and its overrides fit that project."""
+def _entry(file: TomlFile, at: tuple, name: str, v: dict, problems: list[Finding]) -> TwinEntry | None:
+    """A checked entry: its project exists and reads well, and its overrides fit that project. Each of the
+    project's own problems stays at its place in the project file and says which twin (and fleet file
+    line) it belongs to: sorted with the fleet's findings, it needs no header to be understood."""
     base = file.path.parent
-    name = v["name"]
     project = base / v["project"]
     if not project.is_file():
         problems.append(Finding(file.location(at + ("project",)), Severity.ERROR,
@@ -201,9 +207,10 @@ def _entry(file: TomlFile, at: tuple, v: dict, problems: list[Finding]) -> TwinE
     try:
         spec = twin_project(entry)
     except CotwinError as err:
-        problems.append(Finding(file.location(at + ("project",)), Severity.ERROR,
-                                f"twin {name!r}: its project {project} has {len(err.findings)} problem(s):"))
-        problems.extend(err.findings)
+        named = file.location(at + ("project",))
+        problems.append(Finding(named, Severity.ERROR, f"twin {name!r}: its project {project} has "
+                                f"{len(err.findings)} problem(s), each said at its place with this twin's name"))
+        problems.extend(replace(f, message=f"twin {name!r} (project of {named}): {f.message}") for f in err.findings)
         return None
     problems.extend(_fits(file, at, name, spec, overrides))
     return entry

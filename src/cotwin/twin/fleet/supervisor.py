@@ -185,18 +185,33 @@ class Fleet:
         self._stop = True
 
     def _build(self) -> dict[str, str]:
-        """The d-model FMU of each project, built once into DIR/.build/<digest> for its twins to copy."""
+        """The d-model FMU of each project, built once into DIR/.build/<digest> for its twins to copy. Every
+        project's models are read first and all their problems reported together, each naming the twins
+        of that project (not one project's, then the next's once it is fixed)."""
+        from dataclasses import replace
+
         from ..build import dmodel_fmu
         from ..run import load
 
-        builds: dict[str, str] = {}
+        systems, problems = {}, []
         for entry in self.spec.twins:
-            if entry.project in builds:
+            if entry.project in systems:
                 continue
-            folder = self.out / ".build" / hashlib.sha256(entry.project.encode()).hexdigest()[:16]
+            try:
+                systems[entry.project] = load(twin_project(entry))
+            except CotwinError as err:
+                systems[entry.project] = None
+                names = [repr(t.name) for t in self.spec.twins if t.project == entry.project]
+                said = f"twin{'s' if len(names) > 1 else ''} {', '.join(names)} ({self.spec.path})"
+                problems += [replace(f, message=f"{said}: {f.message}") for f in err.findings]
+        if problems:
+            raise CotwinError(problems)
+        builds: dict[str, str] = {}
+        for project, system in systems.items():
+            folder = self.out / ".build" / hashlib.sha256(project.encode()).hexdigest()[:16]
             folder.mkdir(parents=True, exist_ok=True)
-            dmodel_fmu(load(twin_project(entry)), folder, self.cc)
-            builds[entry.project] = str(folder)
+            dmodel_fmu(system, folder, self.cc)
+            builds[project] = str(folder)
         return builds
 
     def _job(self, record: TwinRecord, builds: dict[str, str]) -> TwinJob:

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from ...settings import reference
-from .sections import ProjectSettings
+from .sections import READ_ONLY_BY, ProjectSettings
 
 INTRO = """# The project file (`cotwin.toml`)
 
@@ -43,9 +43,18 @@ end = 20.0
 """
 
 
+def read_only_by() -> str:
+    """Which tables only some commands read (READ_ONLY_BY); another command warns that it ignores them."""
+    rows = "\n".join(f"- `[{section}]`: {', '.join(f'`{r}`' for r in readers)}"
+                     for section, readers in READ_ONLY_BY.items())
+    return ("\nEvery command that runs a project reads its models, scenario, platform and co-simulation tables; "
+            "these tables\nare read only by the commands listed (`cotwin run` given a project holding one warns, "
+            "at the table,\nthat it ignores it):\n\n" + rows + "\n")
+
+
 def project_reference() -> str:
     """The Markdown text of docs/project.md."""
-    return INTRO + "\n".join(reference(ProjectSettings)) + "\n"
+    return INTRO + read_only_by() + "\n".join(reference(ProjectSettings)) + "\n"
 
 
 DOC = Path(__file__).resolve().parents[4] / "docs" / "project.md"

@@ -17,13 +17,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from ...config import TomlFile, dumps, is_number, raise_problems, shown
+from ...config import TomlFile, did_you_mean, dumps, is_number, raise_problems, shown
 from ...cosim.isolated import DEFAULT_TIMEOUT
 from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...pmodel.perturbation import Perturbation
 from ...settings import leaves, read, replace_path, tables
-from .sections import (CYCLE_PERIOD, SHAPES, STAND_IN_EXTENT, DeviationSettings, ProjectSettings, RabbitMQSettings,
-                       _amqp_url, timing_problems)
+from .sections import (CYCLE_PERIOD, READ_ONLY_BY, SHAPES, STAND_IN_EXTENT, DeviationSettings, ProjectSettings,
+                       RabbitMQSettings, _amqp_url, timing_problems)
 
 
 @dataclass(frozen=True)
@@ -35,6 +35,19 @@ class PTSettings:
     log: Path | None = None
     queue: str = "cotwin.robot"
     offset: float | None = None  # replay: log time at co-simulation time 0 (default: aligned on the first motion)
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """One robot of a cell ([[robots]]) as resolved: its files found, its base pose in the scene's frame."""
+
+    name: str
+    pmodel: Path
+    mapping: Path
+    calibration: Path | None
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
+    index: int  # its place in [[robots]] (where its problems are reported)
+
 
 @dataclass
 class TwinProject:
@@ -82,6 +95,7 @@ class TwinProject:
     file: TomlFile | None = field(default=None, repr=False)  # the file read (its data and where each key is)
     pt_log: Path | None = None  # a command's --pt-log, in place of [pt] log
     profile: Path | None = None  # [robot] profile: the controller's conventions (cotwin.mapping.profile)
+    robots: tuple[RobotSpec, ...] = ()  # [[robots]]: a cell of several (pmodel, mapping: the first one's)
 
     @property
     def model_files(self) -> list[Path]:
@@ -95,7 +109,7 @@ class TwinProject:
     def inputs(self) -> list[Path]:
         """Every file the project reads (no output of a run may replace one of them)."""
         found = [self.path, *self.model_files, self.plan, self.pt.log if self.pt else None, self.calibration,
-                 self.world_file, self.profile]
+                 self.world_file, self.profile, *(p for r in self.robots for p in (r.pmodel, r.mapping, r.calibration))]
         return [p for p in found if p is not None]
 
     def location(self, *key) -> Location:
@@ -105,6 +119,17 @@ class TwinProject:
             if key[:n] in self.locations:
                 return self.locations[key[:n]]
         return Location(str(self.path), 1, 1)
+
+    def ignored_sections(self, command: str) -> list[Finding]:
+        """A warning at each table of the project file that `command` (e.g. "cotwin run", or with the option
+        that makes it read more: "cotwin run --dashboard") does not read
+        (READ_ONLY_BY): a [convergence] in a project co-simulated by `cotwin run` would otherwise be
+        silently without effect."""
+        data = self.file.data if self.file is not None else {}
+        return sorted(Finding(self.location(section), Severity.WARNING,
+                              f"[{section}] applies only to {', '.join(readers)}: {command} ignores it")
+                      for section, readers in READ_ONLY_BY.items()
+                      if section in data and command not in readers)
 
     def with_overrides(self, **changes) -> "TwinProject":
         """This project with some keys set (None: left out), checked as if written in the file. A change is
@@ -162,6 +187,11 @@ class TwinProject:
                 value = _get(settings, path)
                 if spec.path and value is not None and (sections is None or path[0] in sections):
                     settings = replace_path(settings, path, rebase((self.path.parent / value).resolve()))
+            if settings.robots and (sections is None or "robots" in sections):  # [[robots]]: each one's files
+                settings = dataclasses.replace(settings, robots=tuple(dataclasses.replace(r, **{
+                    key: rebase((self.path.parent / getattr(r, key)).resolve()) for key in ("pmodel", "mapping",
+                                                                                         "calibration")
+                    if getattr(r, key) is not None}) for r in settings.robots))
         written = tables(settings)
         return dumps({k: v for k, v in written.items() if sections is None or k in sections}, header)
 
@@ -204,6 +234,10 @@ def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProj
 
 def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     """The project `file.data` describes, resolved against the files it names."""
+    if "models" not in file.data and isinstance(file.data.get("twin"), list):  # a fleet file given for a project
+        raise CotwinError([Finding(file.location(("twin",)), Severity.ERROR, "this is a fleet file ([[twin]] entries "
+                                   "naming projects), not a twin project: run it with `cotwin fleet "
+                                   f"{file.path.name} -o DIR`, or give one of the projects it names")])
     problems: list[Finding] = []
     s = read(ProjectSettings, file.data, file, (), problems)
     base = file.path.parent
@@ -213,11 +247,23 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
             return None
         target = base / value
         if not target.is_file():
-            problems.append(Finding(file.location((table, key)), Severity.ERROR, f"[{table}] {key}: no file {target}"))
+            what = f"{target} is a folder, not a file" if target.is_dir() else f"no file {target}"
+            problems.append(Finding(file.location((table, key)), Severity.ERROR, f"[{table}] {key}: {what}"))
         return target
 
     models = s.models
     files = {k: existing("models", k, getattr(models, k, None)) for k in ("dmodel", "pmodel", "mapping")}
+    robots = _robots(file, s.robots, problems)
+    for key in ("pmodel", "mapping"):
+        if models is None:  # [models] is not a table: reported where it is read
+            break
+        if robots and getattr(models, key) is not None:
+            problems.append(Finding(file.location(("models", key)), Severity.ERROR,
+                                    f"[models] {key}: a cell's robots name their own ([[robots]] {key})"))
+        elif not robots and getattr(models, key) is None:
+            problems.append(Finding(file.location(("models",)), Severity.ERROR, f"[models] needs '{key}'"))
+    if robots:
+        files["pmodel"], files["mapping"] = robots[0].pmodel, robots[0].mapping
     fmu = existing("models", "fmu", getattr(models, "fmu", None))
     scenario, platform, cosim, monitor = s.scenario, s.platform, s.cosim, s.monitor
     sources = [k for k in ("plan", "commands", "rabbitmq") if getattr(scenario, k) is not None]
@@ -232,9 +278,12 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     world, world_file = _world(file, s, existing, problems)
     stand_ins = _stand_ins(file, platform.stand_in, problems)
     panels = _panels(file, s.figure.panels, problems) if "panels" in _table(file.data, "figure") else None
+    _scene(file, s, problems)
     _timing(file, cosim, problems)
-    if pt is not None:
-        problems.extend(_pt_keys(file, pt))
+    if s.pt is not None:  # [pt] as written, against its own endpoint (a --pt-log replays in its place)
+        problems.extend(_pt_keys(file, s.pt))
+    if any(p.severity is Severity.ERROR for p in problems):
+        problems.extend(_model_errors([files[k] for k in ("dmodel", "pmodel", "mapping")]))
     raise_problems(problems)
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.module, models.pmodel_name,
@@ -250,6 +299,7 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     spec.isolate, spec.unit_timeout = cosim.isolate, float(cosim.unit_timeout)
     spec.convergence = s.convergence
     spec.profile = profile
+    spec.robots = tuple(robots)
     if world_file is not None:
         spec.world_file = world_file.path
     spec.locations = {key: file.location(key) for key in file.where}
@@ -257,6 +307,40 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
                 "stand_in": [_thawed(item) for item in platform.stand_in], "figure": _table(file.data, "figure")}
     spec.settings, spec.file, spec.pt_log = s, file, pt_log
     return spec
+
+
+def _model_errors(paths: list[Path | None]) -> list[Finding]:
+    """The errors of the model files a project names (read when the project itself has errors, so that the
+    models' are reported with them rather than once the project is fixed); none if a file is missing."""
+    from ...robosim.check import load_checked
+
+    if not all(p is not None and p.is_file() for p in paths):
+        return []
+    try:
+        load_checked(paths)
+    except CotwinError as err:
+        return [f for f in err.findings if f.severity is Severity.ERROR]
+    return []
+
+
+def _robots(file: TomlFile, items: tuple, problems: list[Finding]) -> list[RobotSpec]:
+    """[[robots]] resolved: names used once, files that exist."""
+    out, seen = [], set()
+    for i, r in enumerate(items):
+        if r.name in seen:
+            problems.append(Finding(file.location(("robots", i, "name")), Severity.ERROR,
+                                    f"[[robots]] name: two robots are called {r.name!r}"))
+        seen.add(r.name)
+        paths = {}
+        for key in ("pmodel", "mapping", "calibration"):
+            value = getattr(r, key)
+            paths[key] = None if value is None else file.path.parent / value
+            if value is not None and not paths[key].is_file():
+                problems.append(Finding(file.location(("robots", i, key)), Severity.ERROR,
+                                        f"[[robots]] {key} of {r.name}: no file {paths[key]}"))
+        out.append(RobotSpec(r.name, paths["pmodel"], paths["mapping"], paths["calibration"],
+                             tuple(float(v) for v in r.xyz), tuple(float(v) for v in r.rpy), i))
+    return out
 
 
 def _table(data: dict, key: str) -> dict:
@@ -310,7 +394,7 @@ def _timing(file: TomlFile, cosim, problems: list[Finding]) -> None:
 PT_KEYS = {"opcua": ("url",), "rtde": ("url",), "replay": ("log", "offset"), "broker": ("queue", "url")}
 
 
-def _pt_keys(file: TomlFile, pt: PTSettings) -> list[Finding]:
+def _pt_keys(file: TomlFile, pt) -> list[Finding]:
     """[pt] keys its endpoint takes (one it would ignore is an error) and its url, checked as that
     endpoint reads it."""
     raw = file.data.get("pt")
@@ -369,6 +453,36 @@ def _world(file: TomlFile, s, existing, problems: list[Finding]):
     except CotwinError as err:
         problems.extend(err.findings)
     return None, None
+
+
+def _scene(file: TomlFile, s, problems: list[Finding]) -> None:
+    """[platform] scene and the [scene] keys, checked with the rest of the file (not in a later round, once
+    the models are read): a kind named must be known and read every [scene] key, and a world given goes to
+    a "world" scene. "auto" without a world chooses a kind from the mapping, checked when the models are
+    read; here a [scene] key that no kind reads is already an error."""
+    from ...pmodel import scenes
+
+    if not isinstance(file.data.get("scene", {}), dict):
+        return  # [scene] itself is wrong (and reported)
+    options = _table(file.data, "scene")
+    world = ("[platform] world", ("platform", "world")) if s.platform.world is not None else \
+        ("[world]", ("world",)) if s.world is not None else None  # given, whether or not it could be read
+    name = "world" if s.platform.scene == "auto" and world else s.platform.scene
+    if name == "auto":
+        read = sorted({k for kind in scenes.scene_kinds().values() for k in kind.options})
+        problems.extend(Finding(file.location(("scene", key)), Severity.ERROR,
+                                f"[scene] {key}: no scene kind reads it (keys read: {', '.join(read) or 'none'})"
+                                f"{did_you_mean(key, read)}") for key in options if key not in read)
+        return
+    try:
+        kind = scenes.scene_kind(name, file.location(("platform", "scene")))
+    except CotwinError as err:
+        problems.extend(err.findings)
+        return
+    problems.extend(scenes.unread_options(kind, s.platform.scene, options, lambda *key: file.location(key)))
+    if world is not None and kind.name != "world":
+        problems.append(Finding(file.location(world[1]), Severity.ERROR, f"{world[0]}: the scene is '{kind.name}' "
+                                f"([platform] scene = \"{s.platform.scene}\"), which would ignore it"))
 
 
 def _stand_ins(file: TomlFile, items: tuple, problems: list[Finding]) -> dict:

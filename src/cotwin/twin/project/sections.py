@@ -11,7 +11,7 @@ import re
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
-from ...config import Key, is_number, shown, unique, within
+from ...config import Key, did_you_mean, is_number, shown, unique, within
 from ...cosim.execution import step_count
 from ...cosim.isolated import DEFAULT_TIMEOUT
 from ...diagnostics import CotwinError
@@ -22,7 +22,7 @@ from ...settings import setting
 if TYPE_CHECKING:
     from .load import TwinProject
 
-ENDPOINTS = ("mujoco", "broker")
+ENDPOINTS = ("mujoco", "broker")  # core's kinds (cotwin.twin.endpoints registers them and any other)
 PT_ENDPOINTS = ("opcua", "replay", "broker", "rtde")
 MAX_CYCLES_PER_STEP = 10 ** 6  # d-model cycles in one step ([cosim] parameters cycle_period)
 MAX_WAIT_S = 86_400.0  # s: the longest a twin waits for, or keeps, a broker message
@@ -83,6 +83,12 @@ def timing_problems(step: float, end: float, cycle_period: float | None = None) 
 
 def _name(value: str) -> str | None:
     return "must not be empty" if not value.strip() else None
+
+
+def _robot_name(value: str) -> str | None:
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", value):
+        return f"must be an identifier (letters, digits, '_'; it scopes names and plan columns), got {shown(value)}"
+    return None
 
 
 def _history_url(value: str) -> str | None:
@@ -175,8 +181,10 @@ class Models:
     """Paths are relative to the project file."""
 
     dmodel: str = setting("the d-model (RoboSim .rst)", Key("str", required=True), path=True)
-    pmodel: str = setting("the p-model (.pm)", Key("str", required=True), path=True)
-    mapping: str = setting("the platform mapping (.pm)", Key("str", required=True), path=True)
+    pmodel: str | None = setting("the p-model (.pm); required unless [[robots]] names a cell's robots",
+                                 Key("str"), path=True)
+    mapping: str | None = setting("the platform mapping (.pm); required unless [[robots]] names a cell's robots",
+                                  Key("str"), path=True)
     module: str | None = setting("the d-model module (default: the file's only one)", Key("str", check=_name))
     pmodel_name: str | None = setting("the p-model's name (default: the file's only one)", Key("str", check=_name))
     fmu: str | None = setting("a d-model FMU built elsewhere, run in place of the one cotwin builds from dmodel "
@@ -233,8 +241,8 @@ class StandIn:
 class Platform:
     """The digital twin's robot and what is around it."""
 
-    endpoint: str = setting('the embedded simulator ("mujoco") or a robot behind RabbitMQ ("broker")',
-                            Key("str", "mujoco", choices=ENDPOINTS))
+    endpoint: str = setting('an endpoint kind by name (cotwin.twin.endpoints): the embedded simulator ("mujoco"), '
+                            'a robot behind RabbitMQ ("broker"), or one a package registers', Key("str", "mujoco", check=_name))
     queue: str = setting("broker: the robot's request queue", Key("str", "cotwin.robot", check=amqp_name_problem))
     url: str = setting("broker: the broker's URL", Key("str", URL, check=_amqp_url))
     scene: str = setting('around the robot: a scene kind by name (cotwin.pmodel.scenes: "none", "floor", "world" '
@@ -246,6 +254,22 @@ class Platform:
     base: str = setting('the robot\'s base: fixed to the world, or "free" (a mobile robot)',
                         Key("str", "fixed", choices=("fixed", "free")))
     stand_in: tuple[StandIn, ...] = setting("shapes standing in for unreadable meshes", items=StandIn)
+
+
+@_section
+class CellRobot:
+    """Each has its own instance of the shared d-model FMU, its own mapping and its own commands."""
+
+    name: str = setting("its name: the scope of its names in the shared world, of its units ({dmodel}.NAME) and of "
+                        "its plan columns (NAME.port)", Key("str", required=True, check=_robot_name))
+    pmodel: str = setting("its p-model (.pm)", Key("str", required=True), path=True)
+    mapping: str = setting("its platform mapping (.pm)", Key("str", required=True), path=True)
+    calibration: str | None = setting("its cell geometry (docs/calibration.md: tool, IK reference); its [plate] is "
+                                      "where the scene's frame is in its own, laid over its base pose", Key("str"),
+                                      path=True)
+    xyz: tuple = setting("its base's position in the scene's frame (m)", Key("list", [0.0, 0.0, 0.0], check=_triple))
+    rpy: tuple = setting("its base's roll, pitch, yaw in the scene's frame (rad)",
+                         Key("list", [0.0, 0.0, 0.0], check=_triple))
 
 
 @_section
@@ -309,8 +333,9 @@ class Robot:
 class PT:
     """The physical twin of `cotwin twin`."""
 
-    endpoint: str = setting("how the PT is reached (each takes only its own keys below)",
-                            Key("str", required=True, choices=PT_ENDPOINTS))
+    endpoint: str = setting('how the PT is reached: an endpoint kind by name (cotwin.twin.endpoints): "opcua", '
+                            '"replay", "broker", "rtde" (each takes only its own keys below), or one a package '
+                            'registers', Key("str", required=True, check=_name))
     url: str | None = setting("opcua: opc.tcp://HOST:PORT; rtde: the robot's host; broker: an AMQP URL", Key("str"))
     log: str | None = setting("replay: the recorded log", Key("str"), path=True)
     queue: str = setting("broker: the robot's request queue", Key("str", "cotwin.robot", check=amqp_name_problem))
@@ -363,6 +388,7 @@ class Plant:
 
 
 RESYNC = re.compile(r"every\s+(\d+)\s+steps?")
+RESYNC_WORDS = ("never", "on-alarm")
 MAX_EVERY = 10 ** 6
 
 
@@ -371,7 +397,7 @@ def _resync(value: str) -> str | None:
         return None
     match = RESYNC.fullmatch(value.strip())
     if match is None:
-        return f'must be "never", "on-alarm" or "every N steps", got {shown(value)}'
+        return f'must be "never", "on-alarm" or "every N steps", got {shown(value)}{did_you_mean(value, RESYNC_WORDS)}'
     if not 1 <= int(match.group(1)) <= MAX_EVERY:
         return f"every N steps takes N in 1..{MAX_EVERY}, got {match.group(1)}"
     return None
@@ -414,6 +440,8 @@ class Convergence:
 # entry here.
 SECTIONS: dict[str, Any] = {
     "models": setting("The three models.", Key("table", required=True), section=Models),
+    "robots": setting("A cell of several robots in one scene (the scene built from the first one's mapping); "
+                      "absent: the one robot of [models].", items=CellRobot),
     "scenario": setting("Where commands come from.", section=Scenario),
     "platform": setting("The DT's robot.", section=Platform),
     "world": setting("A world to walk in, written here instead of a file named by [platform] world; its keys are "
@@ -429,6 +457,19 @@ SECTIONS: dict[str, Any] = {
     "history": setting("History.", section=History),
     "plant": setting("A perturbed plant.", section=Plant, optional=True),
     "convergence": setting("The DT pulled towards its PT (a live twin).", section=Convergence, optional=True),
+}
+
+
+# Sections only some commands read (every other section is read by every command that runs the project): a
+# command that runs a project holding one of them warns, at the table, that it ignores it (`ignored_sections`);
+# a reader is a command with the option that makes it read the section, if any.
+LIVE_TWIN = ("cotwin twin", "cotwin fleet")
+READ_ONLY_BY: dict[str, tuple[str, ...]] = {
+    "pt": (*LIVE_TWIN, "cotwin plant", "cotwin test --pt project"),
+    "deviation": LIVE_TWIN,
+    "convergence": LIVE_TWIN,
+    "plant": ("cotwin plant", "cotwin twin of a cell ([[robots]]: its PT)"),
+    "history": (*LIVE_TWIN, "cotwin run --dashboard"),  # one run records no history; its page lists the store's
 }
 
 

@@ -57,7 +57,8 @@ class Live {
     import("./robot.js").then(({ RobotView }) => { // the 3D view loads beside the rest, never before it
       this.robot = new RobotView($("view"), model);
       page.robot = this.robot;
-      $("view-caption").textContent = `${model.robot.name}` + (this.sides.length > 1 ? " (PT orange ghost, DT grey)" : "");
+      const names = (model.robots || [model.robot]).map((r) => r.label || r.name).join(" and ");
+      $("view-caption").textContent = names + (this.sides.length > 1 ? " (PT orange ghost, DT grey)" : "");
       if (this.last) this.robot.pose(this.last);
     }).catch((err) => { $("view").textContent = `3D view unavailable: ${err}`; });
   }

@@ -51,6 +51,7 @@ class RobotModel {
       links[link.name] = group;
     }
     this.links = links;
+    this.label = robot.label || robot.name;
     this.root = fixed(matrix(robot.root_pose));
     this.root.add(links[robot.root]);
     this.motions = [];
@@ -140,12 +141,15 @@ export class RobotView {
       const p = model.scene.plate;
       target = new THREE.Vector3((p.x0 + p.x1) / 3, (p.y0 + p.y1) / 3, 0.2);
     }
-    this.robots = {};
+    this.robots = {}; // side -> its robots (a cell of several robots: model.robots, each at its base pose)
+    const drawings = model.robots || [model.robot];
     this.sides.forEach((side, i) => {
       const look = this.sides.length > 1 ? SIDE_LOOK[i] : SIDE_LOOK[1];
-      const robot = new RobotModel(model.robot, look);
-      this.robots[side] = robot;
-      scene.add(robot.root);
+      this.robots[side] = drawings.map((drawing) => {
+        const robot = new RobotModel(drawing, look);
+        scene.add(robot.root);
+        return robot;
+      });
     });
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.01, 50);
     this.camera.up.set(0, 0, 1);
@@ -203,19 +207,22 @@ export class RobotView {
       if (!values) return;
       const named = {};
       this.variables.forEach((name, k) => { named[name] = values[k]; });
-      moved = this.robots[side].pose(named) || moved;
+      for (const robot of this.robots[side]) moved = robot.pose(named) || moved;
     });
     if (moved) this.invalidate();
   }
 
   // world pose of every link of a side (row-major 4x4), as drawn: for checking against the p-model
+  // (several robots: keyed ROBOT/link)
   linkPoses(side) {
-    const robot = this.robots[side];
-    robot.root.updateMatrixWorld(true);
+    const robots = this.robots[side];
     const out = {};
-    for (const [name, group] of Object.entries(robot.links)) {
-      const m = group.matrixWorld.elements; // column-major
-      out[name] = [0, 1, 2, 3].flatMap((r) => [0, 1, 2, 3].map((c) => m[c * 4 + r]));
+    for (const robot of robots) {
+      robot.root.updateMatrixWorld(true);
+      for (const [name, group] of Object.entries(robot.links)) {
+        const m = group.matrixWorld.elements; // column-major
+        out[robots.length > 1 ? `${robot.label}/${name}` : name] = [0, 1, 2, 3].flatMap((r) => [0, 1, 2, 3].map((c) => m[c * 4 + r]));
+      }
     }
     return out;
   }

@@ -1,0 +1,368 @@
+"""examples/flexcell2: the UR5e and the Panda (imported from URDF) on one plate, one MuJoCo world, each with
+its own instance of the same d-model FMU, its own mapping and its own plan columns; contacts between the
+arms reported as collisions to both d-models; the generic core naming neither robot nor the cell."""
+
+from __future__ import annotations
+
+import csv
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cotwin.cosim.observers import Observer
+from cotwin.diagnostics import CotwinError
+from cotwin.twin.cell import CellSystem, read_cell_plan, run_cell
+from cotwin.twin.project import load_project
+
+ROOT = Path(__file__).resolve().parents[1]
+CELL = ROOT / "examples" / "flexcell2"
+ROBOTS = ("ur5e", "panda")
+
+
+class CollisionInputs(Observer):
+    """What each d-model FMU instance holds on its `collision` input after every step (read from the FMU)."""
+
+    def __init__(self):
+        self.seen: dict[str, list[float]] = {r: [] for r in ROBOTS}
+
+    def step_complete(self, execution) -> None:
+        for robot in ROBOTS:
+            if execution.system.units[f"{{dmodel}}.{robot}"].get(["collision"])["collision"]:
+                self.seen[robot].append(execution.time)
+
+
+def rows(csv_path: Path) -> list[dict]:
+    with open(csv_path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.fixture(scope="module")
+def apart(tmp_path_factory):
+    cell = CellSystem(load_project(CELL / "cotwin.toml"))
+    return cell, run_cell(cell, tmp_path_factory.mktemp("apart"))
+
+
+@pytest.fixture(scope="module")
+def collide(tmp_path_factory):
+    cell = CellSystem(load_project(CELL / "collide.toml"))
+    watch = CollisionInputs()
+    return cell, run_cell(cell, tmp_path_factory.mktemp("collide"), observers=[watch]), watch
+
+
+def test_apart_completes_every_move_of_both_arms(apart):
+    cell, ran = apart
+    table = rows(ran.csv)
+    for robot in ROBOTS:
+        planned = len(next(r for r in cell.robots if r.name == robot).system.commands)
+        assert planned == 4
+        completed = sum(r[f"{{mapping}}.cell.{robot}.moveCompleted"] == "true" for r in table)
+        infeasible = sum(r[f"{{mapping}}.cell.{robot}.nonfeasibleMoveDiscreteCommand"] == "true" for r in table)
+        assert (completed, infeasible) == (planned, 0), robot
+        assert not any(r[f"{{mapping}}.cell.{robot}.collision"] == "true" for r in table), robot
+        outcome = ran.outcomes.robots[robot]
+        assert (outcome.commands, outcome.completed, outcome.collisions) == (4, 4, [])
+    assert ran.contacts == []
+
+
+def test_both_arms_move_each_by_its_own_commands(apart):
+    _, ran = apart
+    table = rows(ran.csv)
+    first, last = table[0], table[-1]
+    for robot in ROBOTS:  # each arm's first joint turned away from where it started, differently
+        assert abs(float(last[f"{{mapping}}.cell.{robot}.q0"]) - float(first[f"{{mapping}}.cell.{robot}.q0"])) > 0.05
+    assert last["{mapping}.cell.ur5e.q0"] != last["{mapping}.cell.panda.q0"]
+
+
+def test_driving_both_arms_to_one_hole_reports_the_collision_to_both_dmodels(collide):
+    cell, ran, watch = collide
+    assert ran.contacts and {ran.contacts[0][1], ran.contacts[0][2]} == set(ROBOTS)
+    touched = ran.contacts[0][0]
+    for robot in ROBOTS:
+        assert watch.seen[robot], f"{robot}'s d-model never had its collision input set"
+        assert watch.seen[robot][0] == pytest.approx(touched, abs=0.2)  # in the step the arms touched
+        assert ran.outcomes.robots[robot].collisions
+    # the Panda, still moving when the arms met, is stopped by it: its move never completes
+    assert ran.outcomes.robots["panda"].completed == 0
+
+
+def test_each_robot_has_its_own_instance_of_the_same_dmodel_fmu(apart):
+    cell, ran = apart
+    units = ran.system.units
+    first, second = (units[f"{{dmodel}}.{r}"] for r in ROBOTS)
+    assert first is not second and first.path == second.path  # one FMU file, two instances
+    connected = {(c.source, c.output, c.target, c.input) for c in ran.system.connections}
+    for robot in ROBOTS:
+        assert ("{mapping}.cell", f"{robot}.collision", f"{{dmodel}}.{robot}", "collision") in connected
+        assert (f"{{controller}}.{robot}", "moveDiscreteCommand", f"{{dmodel}}.{robot}", "moveDiscreteCommand") in connected
+
+
+def test_two_robots_of_one_pmodel_share_a_world_without_name_clashes():
+    from cotwin.pmodel.shared import PlacedRobot, SharedWorld
+    from cotwin.pmodel.tree import transform
+    from cotwin.robosim.check import load_checked
+    from cotwin.pmodel.tree import build_tree
+
+    tree = build_tree(load_checked([CELL / "panda.pm"]), None, {})
+    world = SharedWorld([PlacedRobot("a", tree, transform((0, 0, 0), (0, 0, 0))),
+                         PlacedRobot("b", tree, transform((2.0, 0, 0), (0, 0, 0)))])
+    a, b = world.view("a"), world.view("b")
+    a.write_actuators({"panda_joint1": 0.5})
+    world.step(500)
+    assert a.joint_positions()["panda_joint1"] > 0.3
+    assert abs(b.joint_positions()["panda_joint1"]) < 1e-6
+    assert np.allclose(b.body_pose("panda_link0")[:3, 3], (2.0, 0.0, 0.0))
+    with pytest.raises(CotwinError, match="the world steps"):
+        a.step(1)
+    with pytest.raises(CotwinError, match="two robots of one world are called a"):
+        SharedWorld([PlacedRobot("a", tree, np.eye(4)), PlacedRobot("a", tree, np.eye(4))])
+
+
+def test_cell_project_errors_are_located(tmp_path):
+    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
+        shutil.copy(CELL / name, tmp_path / name)
+    text = (CELL / "cotwin.toml").read_text().replace('"../ur5e/', f'"{ROOT}/examples/ur5e/')
+    (tmp_path / "cotwin.toml").write_text(text.replace('name = "panda"', 'name = "ur5e"'))
+    with pytest.raises(CotwinError) as err:
+        load_project(tmp_path / "cotwin.toml")
+    assert "two robots are called 'ur5e'" in str(err.value) and err.value.findings[0].location.line > 1
+    (tmp_path / "cotwin.toml").write_text(text.replace('"panda.pm"', '"nowhere.pm"'))
+    with pytest.raises(CotwinError, match=r"\[\[robots\]\] pmodel of panda: no file"):
+        load_project(tmp_path / "cotwin.toml")
+    (tmp_path / "cotwin.toml").write_text(text.replace('arm.rst"', 'arm.rst"\npmodel = "panda.pm"', 1))
+    with pytest.raises(CotwinError) as err:
+        load_project(tmp_path / "cotwin.toml")
+    finding = err.value.findings[0]
+    assert "[models] pmodel: a cell's robots name their own" in finding.message
+    assert text.splitlines()[finding.location.line - 2].startswith("dmodel")  # at the key, the line after dmodel
+
+
+def test_a_plan_column_of_an_unknown_robot_is_located(tmp_path):
+    cell = CellSystem(load_project(CELL / "cotwin.toml"))
+    plan = tmp_path / "plan.csv"
+    plan.write_text("timestep,ur5e.moveDiscreteCommand,ur5e.MovementArgs_target_X,ur5e.MovementArgs_target_Y,"
+                    "ur5e.MovementArgs_target_Z,kuka.moveDiscreteCommand\n1000,true,1,2,0,true\n")
+    with pytest.raises(CotwinError) as err:
+        read_cell_plan(plan, cell.program, list(ROBOTS))
+    finding = err.value.findings[0]
+    at = plan.read_text().index("kuka.") + 1  # the character column of the cell, not its index
+    assert "kuka.moveDiscreteCommand" in finding.message and (finding.location.line, finding.location.column) == (1, at)
+
+
+def test_the_generic_core_names_neither_robot_nor_the_cell():
+    named = re.compile(r"ur5e|panda|flexcell|flex-cell|brick", re.IGNORECASE)
+    for module in ("twin/cell.py", "pmodel/shared.py"):
+        assert not named.search((ROOT / "src" / "cotwin" / module).read_text()), module
+    offenders = [str(p.relative_to(ROOT)) for p in (ROOT / "src" / "cotwin").rglob("*.py")
+                 if re.search(r"panda", p.read_text(), re.IGNORECASE)]
+    assert offenders == []
+
+
+def test_the_cell_twin_runs_pt_and_dt_with_deviation_and_history_per_robot(tmp_path):
+    import sqlite3
+
+    from cotwin.twin.cell_live import run_cell_twin
+
+    cell = CellSystem(load_project(CELL / "cotwin.toml"))
+    result = run_cell_twin(cell, tmp_path)
+    assert result.pt.steps == result.dt.steps == 160
+    for side in ("pt", "dt"):
+        for robot in ROBOTS:
+            outcome = result.outcomes[side].robots[robot]
+            assert (outcome.commands, outcome.completed, outcome.collisions) == (4, 4, []), (side, robot)
+    assert set(result.deviation) == set(ROBOTS)
+    for robot in ROBOTS:  # the perturbed plant (0.5 kg, 0.3 N m) moves measurably otherwise than the nominal DT
+        variables = result.deviation[robot]["variables"]
+        assert all(v.startswith(f"{robot}.q") for v in variables)
+        assert max(v["max_deviation"] for v in variables.values()) > 1e-4
+    db = sqlite3.connect(tmp_path / "history.sqlite")
+    machines = {row[0] for row in db.execute("select distinct machine from states")}
+    assert {m.split(".")[0] for m in machines} == set(ROBOTS)
+    assert db.execute("select count(*) from samples").fetchone()[0] == 2 * 160
+    assert (tmp_path / "pt" / "outputs.csv").is_file() and (tmp_path / "dt" / "outputs.csv").is_file()
+
+
+def test_a_heavier_plant_raises_alarms_naming_the_robot(tmp_path):
+    from cotwin.twin.cell_live import run_cell_twin
+
+    spec = load_project(CELL / "cotwin.toml").with_overrides(plant_payload=3.0, deviation_absolute=0.002, end=8.0)
+    result = run_cell_twin(CellSystem(spec), tmp_path)
+    assert result.alarms
+    for event in result.alarms:
+        assert event["twin"] in ROBOTS and event["variable"].startswith(event["twin"] + ".")
+
+
+def test_cotwin_run_and_twin_of_the_cell(tmp_path):
+    from click.testing import CliRunner
+
+    from cotwin.cli import main
+
+    ran = CliRunner().invoke(main, ["run", str(CELL / "collide.toml"), "-o", str(tmp_path / "run")])
+    assert ran.exit_code == 0, ran.output
+    assert re.search(r"^ur5e: 1 command\(s\) applied, .* collision reported at t = ", ran.output, re.MULTILINE)
+    assert re.search(r"^panda: 1 command\(s\) applied, 0 move\(s\) completed, collision reported", ran.output, re.MULTILINE)
+    assert "contact: ur5e and panda at t = " in ran.output
+    twin = CliRunner().invoke(main, ["twin", str(CELL / "collide.toml"), "-o", str(tmp_path / "twin")])
+    assert twin.exit_code == 0, twin.output
+    assert "PT and DT, 80 steps each" in twin.output and "PT: panda: 1 command(s) applied" in twin.output
+    refused = CliRunner().invoke(main, ["twin", str(CELL / "collide.toml"), "-o", str(tmp_path / "t2"),
+                                        "--pt-url", "opc.tcp://127.0.0.1:4999"])
+    assert refused.exit_code != 0 and "--pt-url not done yet" in refused.output
+
+
+def test_broker_commands_are_routed_per_robot(tmp_path, broker):
+    """Each robot's publisher sends on its own routing key (TO_COSIM.ROBOT); each arm does its own move."""
+    import threading
+    import uuid
+
+    from cotwin.twin.cell import routed
+    from cotwin.twin.publisher import Publisher, idle_values
+    from cotwin.twin.rabbitmq import port_types
+
+    exchange = f"cotwin.test.cell.{uuid.uuid4().hex[:8]}"
+    text = (CELL / "collide.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/")
+    text = text.replace('plan = "collide.csv"', f'rabbitmq = {{ exchange = "{exchange}" }}')
+    text = text.replace("end = 8.0", "end = 5.0\nrealtime = true")
+    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml"):
+        shutil.copy(CELL / name, tmp_path / name)
+    (tmp_path / "meshes").symlink_to(CELL / "meshes")
+    (tmp_path / "cotwin.toml").write_text(text)
+    cell = CellSystem(load_project(tmp_path / "cotwin.toml"))
+    assert [u.name for u in cell.units if u.role == "source"] == ["{rabbitmq}.ur5e", "{rabbitmq}.panda"]
+    plans = read_cell_plan(CELL / "apart.csv", cell.program, list(ROBOTS))  # different holes for each arm
+    publishers = []
+    for robot in cell.robots:
+        settings = routed(cell.spec.rabbitmq, robot.name)
+        assert settings.to_cosim == f"data.to_cosim.{robot.name}"
+        idle = idle_values(port_types(cell.program, robot.system.live_ports()))
+        publishers.append(Publisher(settings, plans[robot.name][:1], idle, period=0.2, end=5.0))
+    threads = [threading.Thread(target=p.run, daemon=True) for p in publishers]
+    for thread in threads:
+        thread.start()
+    ran = run_cell(cell, tmp_path / "out")
+    for thread in threads:
+        thread.join(timeout=30)
+    for robot in ROBOTS:
+        outcome = ran.outcomes.robots[robot]
+        assert (outcome.commands, outcome.completed, outcome.collisions) == (1, 1, []), robot
+    table = rows(ran.csv)
+    sent = {robot: [r for r in table if r[f"{{rabbitmq}}.{robot}.moveDiscreteCommand"] == "true"] for robot in ROBOTS}
+    for robot in ROBOTS:  # each robot's source got its own robot's command, with its own arguments
+        (row,) = sent[robot]
+        expected = dict(plans[robot][0].values)
+        assert int(row[f"{{rabbitmq}}.{robot}.MovementArgs_target_X"]) == expected["MovementArgs_target_X"]
+        assert int(row[f"{{rabbitmq}}.{robot}.MovementArgs_target_Y"]) == expected["MovementArgs_target_Y"]
+
+
+def test_commands_of_one_robot_refuse_a_cell_at_its_robots():
+    from cotwin.twin.run import load
+
+    with pytest.raises(CotwinError) as err:
+        load(CELL / "cotwin.toml")
+    finding = err.value.findings[0]
+    assert "takes a twin of one robot" in finding.message and finding.location.line > 1
+    assert isinstance(load(CELL / "cotwin.toml", cells=True), CellSystem)
+
+
+def test_the_cell_plants_latency_and_noise_reach_each_robot(tmp_path):
+    from cotwin.twin.cell_live import run_cell_twin
+
+    spec = load_project(CELL / "cotwin.toml").with_overrides(plant_latency_ms=300.0, plant_noise={"position": 0.001},
+                                                             plant_payload=0.0, plant_friction=0.0, end=6.0)
+    run_cell_twin(CellSystem(spec), tmp_path)
+    pt, dt = rows(tmp_path / "pt" / "outputs.csv"), rows(tmp_path / "dt" / "outputs.csv")
+    for robot in ROBOTS:
+        done = [next(float(r["time"]) for r in side if r[f"{{mapping}}.cell.{robot}.moveCompleted"] == "true")
+                for side in (pt, dt)]
+        assert done[0] >= done[1] + 0.2, robot  # its goals take effect 0.3 s later on the plant
+        before = [float(r[f"{{mapping}}.cell.{robot}.q0"]) for r in pt if float(r["time"]) < 1.0]
+        assert 0 < np.std(before) < 0.01, robot  # at rest, measured with noise
+
+
+def test_a_cells_log_names_are_scoped_by_robot_and_unsupported_tables_are_located(tmp_path):
+    spec = load_project(CELL / "cotwin.toml")
+    cell = CellSystem(spec.with_overrides(cosim_log=["ur5e.q0", "panda.q6"]))
+    assert cell.log["{mapping}.cell"] == ["ur5e.q0", "panda.q6"]
+    with pytest.raises(CotwinError, match=r"\[cosim\] log: q0: a cell's variables are named ROBOT.variable"):
+        CellSystem(spec.with_overrides(cosim_log=["q0"]))
+    with pytest.raises(CotwinError, match=r"\[monitor\] readings: not for a cell"):
+        CellSystem(spec.with_overrides(monitor_readings={"x": "panda::panda_link0.x"}))
+    ran = run_cell(cell, tmp_path, end=1.0)
+    assert ran.figure is not None and ran.figure.is_file()
+
+
+def _get(url: str):
+    import urllib.request
+
+    with urllib.request.urlopen(url, timeout=10) as r:
+        return r.status, r.read()
+
+
+def test_the_page_shows_both_robots_their_variables_and_both_dmodels(tmp_path):
+    import json
+
+    from cotwin.twin.cell_live import run_cell_twin
+    from cotwin.twin.dashboard import Dashboard
+
+    cell = CellSystem(load_project(CELL / "collide.toml"))
+    with Dashboard(cell, port=0, mode="run") as dash:
+        model = json.loads(_get(dash.url + "api/model")[1])["model"]
+        assert [r["label"] for r in model["robots"]] == list(ROBOTS)
+        panda = model["robots"][1]
+        assert panda["root_pose"][3] == pytest.approx(1.0) and panda["root_pose"][7] == pytest.approx(0.65)
+        assert any(g["kind"] == "box" and g.get("mesh") for link in panda["links"] for g in link["geoms"])
+        assert {j["variable"] for j in panda["joints"] if j["variable"]} == {f"panda.q{i}" for i in range(7)}
+        assert [m["name"] for m in model["machines"]] == ["ur5e: stm_ref", "panda: stm_ref"]
+        assert model["scene"]["plate"]
+        ran = run_cell(cell, tmp_path / "run", end=3.0, observers=[dash.feed])
+        status = json.loads(_get(dash.url + "api/status")[1])
+        assert status["state"] == "done" and status["time"] == pytest.approx(3.0)
+        rows, _, _ = dash.feed.samples.since(0)
+        names = [v["name"] for v in model["variables"]]
+        assert dash.feed.variables == names
+        last = rows[-1][2]
+        written = {k: float(v) for k, v in rows_of_csv(ran.csv)[-1].items() if k != "time"}
+        for name in ("ur5e.q0", "panda.q5"):
+            assert last[0][names.index(name)] == pytest.approx(written[f"{{mapping}}.cell.{name}"])
+        assert len(last[1]) == 2  # both d-models' states
+        assert {e["name"] for e in dash.feed.events if e["kind"] == "command"} == \
+            {"ur5e.moveDiscreteCommand", "panda.moveDiscreteCommand"}
+    with Dashboard(cell, port=0, mode="twin") as dash:
+        result = run_cell_twin(cell, tmp_path / "twin", end=3.0, observers=[dash.feed])
+        status = json.loads(_get(dash.url + "api/status")[1])
+        assert status["sides"] == ["pt", "dt"] and status["time"] == pytest.approx(3.0)
+        assert result.pt.steps == 30
+
+
+def rows_of_csv(path: Path) -> list[dict]:
+    return [{k: v for k, v in r.items() if v not in ("true", "false", "")} for r in rows(path)]
+
+
+def test_a_cell_run_is_deterministic(tmp_path):
+    cell = CellSystem(load_project(CELL / "collide.toml"))
+    first = run_cell(cell, tmp_path / "a", end=3.0, plot=False)
+    second = run_cell(cell, tmp_path / "b", end=3.0, plot=False)
+    assert first.csv.read_text() == second.csv.read_text() and first.contacts == second.contacts
+
+
+def test_the_cells_artefacts_run_in_the_multimodel_master_as_cotwin_run_does(tmp_path):
+    """cotwin build writes one d-model FMU instantiated per robot in multimodel.json; cotwin simulate of it
+    (the Python FMUs of the sources and the cell's mapping) writes the very rows cotwin run writes."""
+    import json
+    import subprocess
+    import sys
+
+    from cotwin.twin.build import build
+
+    cell = CellSystem(load_project(CELL / "collide.toml"))
+    written = build(cell, tmp_path / "build")
+    model = json.loads(written["multimodel"].read_text())
+    assert model["fmus"] == {"{controller}": "controller.fmu", "{dmodel}": "dmodel.fmu", "{mapping}": "mapping.fmu"}
+    assert model["connections"]["{mapping}.cell.panda.collision"] == ["{dmodel}.panda.collision"]
+    done = subprocess.run([sys.executable, "-m", "cotwin", "simulate", str(written["multimodel"]), "-o",
+                           str(tmp_path / "simulated.csv")], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0 and "corrupted" not in done.stderr, done.stderr
+    ran = run_cell(cell, tmp_path / "run", plot=False)
+    assert rows(tmp_path / "simulated.csv") == rows(ran.csv)

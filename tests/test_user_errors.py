@@ -1,0 +1,206 @@
+"""What a new user meets with broken inputs (the probe of issue 'errors a user meets'): each error names its
+file, says what would be right, and nothing already produced is lost. Each through the real `cotwin` where
+the command is what the user runs."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cotwin.diagnostics import CotwinError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def cotwin(*args, cwd=None, timeout=600) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cotwin", *map(str, args)], capture_output=True, text=True, cwd=cwd,
+                          timeout=timeout)
+
+
+@pytest.fixture
+def ur5e(tmp_path) -> Path:
+    shutil.copytree(ROOT / "examples" / "ur5e", tmp_path / "ur5e")
+    return tmp_path / "ur5e"
+
+
+def test_a_whatif_plan_or_state_that_is_wrong_is_named(ur5e):
+    """A JSON plan's problems and a --from that is not a state said 'error: plan item 1: ...' and 'error: not a
+    cotwin state' without naming the file; an empty CSV plan predicted a completion in silence."""
+    (ur5e / "w.json").write_text('[{"time": 1, "event": "moveDiscreteComand", "args": {}}]')
+    proc = cotwin("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "w.json")
+    assert proc.returncode == 1 and proc.stderr.startswith(
+        f"{ur5e / 'w.json'}: error: plan item 1: unknown event 'moveDiscreteComand'; did you mean "
+        "'moveDiscreteCommand'?"), proc.stderr
+    proc = cotwin("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "plan.csv", "--from", ur5e / "plan.csv")
+    assert proc.returncode == 1 and proc.stderr.startswith(f"{ur5e / 'plan.csv'}: error: not a cotwin state"), \
+        proc.stderr
+    (ur5e / "empty.csv").write_text((ur5e / "plan.csv").read_text().splitlines()[0] + "\n")
+    proc = cotwin("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "empty.csv", "--horizon", "1")
+    assert f"{ur5e / 'empty.csv'}:1:1: warning: the plan holds no command" in proc.stderr
+
+
+def test_a_sweep_takes_an_argument_by_the_port_name_a_whatif_prints():
+    """The what-if prints MovementArgs_target_X=...; a sweep refused that name (it took only target_X)."""
+    from cotwin.twin.run import load
+    from cotwin.twin.sweep import grid
+
+    program = load(ROOT / "examples" / "ur5e" / "cotwin.toml").models.program
+    by_port = grid(program, "moveDiscreteCommand", {"MovementArgs_target_X": [1, 2], "target_Y": [3], "target_Z": [0]})
+    assert [dict(p[0].values)["MovementArgs_target_X"] for p in by_port] == [1, 2]
+    with pytest.raises(CotwinError, match="argument MovementArgs_target_X is given twice"):
+        grid(program, "moveDiscreteCommand", {"MovementArgs_target_X": [1], "target_X": [2]})
+    with pytest.raises(CotwinError, match="no argument target_x; did you mean 'target_X'"):
+        grid(program, "moveDiscreteCommand", {"target_x": [1]})
+
+
+def test_a_fleet_file_for_a_project_a_project_for_a_fleet_and_a_folder_for_a_file_say_what_to_run(ur5e, tmp_path):
+    """`cotwin run fleet.toml` listed 'needs models' and every fleet key as unknown; `cotwin fleet cotwin.toml`
+    every project table; `cotwin run .` said 'Is a directory'. Each now says what the file is and what to run."""
+    from cotwin.twin.fleet.spec import read_fleet
+    from cotwin.twin.project import load_project
+
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text(f'[[twin]]\nname = "a"\nproject = "{ur5e / "replay.toml"}"\n')
+    with pytest.raises(CotwinError) as err:
+        load_project(fleet)
+    assert [str(f) for f in err.value.findings] == [
+        f"{fleet}:1:1: error: this is a fleet file ([[twin]] entries naming projects), not a twin project: run it "
+        "with `cotwin fleet fleet.toml -o DIR`, or give one of the projects it names"]
+    with pytest.raises(CotwinError) as err:
+        read_fleet(ur5e / "cotwin.toml")
+    assert len(err.value.findings) == 1 and "this is a twin project ([models]), not a fleet file: run it with " \
+        "`cotwin twin cotwin.toml -o DIR`" in str(err.value)
+    with pytest.raises(CotwinError, match=r"cannot read project file: it is a folder: name the project file in it "
+                                          r"\(it holds .*cotwin.toml"):
+        load_project(ur5e)
+
+
+def test_a_broken_calibration_and_a_broken_plan_are_reported_together_at_their_places(ur5e):
+    """The calibration was read (and failed) before the plan was: fixing it revealed the plan's errors; a
+    [monitor] reading clashing with a mapping variable was said at the file's first line, not at the key."""
+    from cotwin.twin.run import load
+
+    (ur5e / "bad.csv").write_text("timestep,moveDiscreteComand\n1000,true\n")
+    (ur5e / "badcal.toml").write_text("this is not toml\n")
+    path = ur5e / "both.toml"
+    path.write_text('[models]\ndmodel = "arm.rst"\npmodel = "ur5e.pm"\nmapping = "mapping.pm"\n[scenario]\n'
+                    'plan = "bad.csv"\n[platform]\ncalibration = "badcal.toml"\n[monitor]\nreadings = { q0 = "x" }\n')
+    with pytest.raises(CotwinError) as err:
+        load(path)
+    said = [str(f) for f in err.value.findings]
+    assert any(s.startswith(f"{ur5e / 'bad.csv'}:1:10: error: unknown d-model input") for s in said), said
+    assert any(s.startswith(f"{ur5e / 'badcal.toml'}:1:") for s in said), said
+    assert any(s.startswith(f"{path}:10:14:") and "[monitor] readings q0: the mapping has variables" in s
+               for s in said), said
+
+
+def test_an_output_that_cannot_be_made_is_named_not_its_temporary_file(tmp_path):
+    """A file written where it cannot be (inside a file here; a read-only place alike) raised a bare OSError,
+    or one naming the temporary '.x.part' beside it."""
+    from cotwin.files import write_text
+
+    (tmp_path / "afile").write_text("precious")
+    with pytest.raises(CotwinError) as err:
+        write_text(tmp_path / "afile" / "x.txt", "x")
+    assert str(err.value).startswith(f"{tmp_path / 'afile' / 'x.txt'}: error: cannot write here: ")
+    assert (tmp_path / "afile").read_text() == "precious"
+
+
+def test_names_checked_against_the_models_get_the_nearest_one(ur5e):
+    from cotwin.twin.run import load
+
+    path = ur5e / "names.toml"
+    path.write_text('[models]\ndmodel = "arm.rst"\npmodel = "ur5e.pm"\nmapping = "mapping.pm"\n[cosim]\n'
+                    'log = ["Q0"]\nparameters = { cycle_perod = 0.1 }\n')
+    with pytest.raises(CotwinError) as err:
+        load(path)
+    text = str(err.value)
+    assert "unknown mapping variable(s) Q0; did you mean 'q0'?" in text
+    assert "no parameter 'cycle_perod'; did you mean 'cycle_period'?" in text
+
+
+def test_monitor_joints_and_figure_panels_are_said_at_their_keys_with_the_nearest_name(ur5e):
+    """[monitor] joints naming no joint said 'error: mirrored joints ...' with no file or line."""
+    from cotwin.twin.run import load
+
+    path = ur5e / "mon.toml"
+    text = ('[models]\ndmodel = "arm.rst"\npmodel = "ur5e.pm"\nmapping = "mapping.pm"\n[monitor]\n'
+            'joints = ["shoulder_pan_jont", "elbow_joint"]\n[figure]\n[[figure.panels]]\n'
+            'variables = ["mapping.Q1", "dmodl.x"]\n')
+    path.write_text(text)
+    with pytest.raises(CotwinError) as err:
+        load(path)
+    assert str(err.value).startswith(f"{path}:6:1: error: [monitor] joints: shoulder_pan_jont are not actuated joints "
+                                     "of p-model ur5e; did you mean 'shoulder_pan_joint'?")
+    path.write_text(text.replace("jont", "joint"))
+    with pytest.raises(CotwinError) as err:
+        load(path)
+    said = str(err.value)
+    assert "unit 'dmodl' is not one of this twin's; did you mean 'dmodel'?" in said
+    assert "mapping shows no variable 'Q1'; did you mean 'q1'?" in said
+
+
+def test_an_interrupted_sweep_keeps_the_what_ifs_it_answered(ur5e, tmp_path):
+    """Ctrl-C in a sweep said 'interrupted' and wrote nothing: every what-if answered was lost."""
+    import os
+    import signal
+    import time
+
+    out = tmp_path / "sweep.csv"
+    env = {**os.environ, "COTWIN_PROGRESS_SECONDS": "0.2"}
+    proc = subprocess.Popen([sys.executable, "-m", "cotwin", "sweep", str(ur5e / "cotwin.toml"), "--event",
+                             "moveDiscreteCommand", "--arg", "target_X=0..15", "--arg", "target_Y=0..3", "--arg",
+                             "target_Z=0", "-o", str(out), "--workers", "2", "--horizon", "5"],
+                            stderr=subprocess.PIPE, text=True, env=env)
+    seen = ""
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:  # until some what-ifs are answered
+        line = proc.stderr.readline()
+        seen += line
+        if line.startswith("sweeping: ") and not line.startswith("sweeping: 0/"):
+            break
+    proc.send_signal(signal.SIGINT)
+    rest = proc.communicate(timeout=120)[1]
+    partial = tmp_path / "sweep.partial.csv"
+    assert proc.returncode == 130, seen + rest
+    rows = partial.read_text().splitlines()
+    assert f"error: interrupted after {len(rows) - 1} of 64 what-ifs; the {len(rows) - 1} answered are in {partial}" \
+        in rest and len(rows) > 1 and not out.exists()
+
+
+def test_a_cell_plans_header_errors_are_at_their_columns_with_the_nearest_name(tmp_path):
+    """A cell's plan said its header's problems at the cell's index (1:3 for the 35th character) and without
+    a suggestion."""
+    from cotwin.twin.cell import read_cell_plan
+    from cotwin.twin.run import load
+
+    program = load(ROOT / "examples" / "ur5e" / "cotwin.toml").models.program
+    plan = tmp_path / "typo.csv"
+    plan.write_text("timestep,ur5e.moveDiscreteCommand,ur5f.MovementArgs_target_X,panda.moveDiscreteComand\n"
+                    "1000,true,1,true\n")
+    with pytest.raises(CotwinError) as err:
+        read_cell_plan(plan, program, ["ur5e", "panda"])
+    said = [str(f) for f in err.value.findings]
+    assert any(s.startswith(f"{plan}:1:10: error: column 'ur5e.moveDiscreteCommand' without its argument")
+               for s in said), said
+    assert any(s.startswith(f"{plan}:1:35: error: column 'ur5f.MovementArgs_target_X': a cell's plan names "
+                            "ROBOT.port, ROBOT one of ur5e, panda; did you mean 'ur5e'?") for s in said), said
+    assert any(s.startswith(f"{plan}:1:62: error: column 'panda.moveDiscreteComand': unknown d-model input "
+                            "'moveDiscreteComand'; did you mean 'moveDiscreteCommand'?") for s in said), said
+
+
+def test_cotwin_run_of_a_cell_says_which_of_its_tables_it_ignores(tmp_path):
+    """A cell's run returned before the warnings of `cotwin run`: its [plant] and [deviation] (read by its
+    live twin) were silently without effect."""
+    cell = ROOT / "examples" / "flexcell2" / "cotwin.toml"
+    proc = cotwin("run", cell, "-o", tmp_path / "out", "--end", "0.2")
+    assert proc.returncode == 0, proc.stderr
+    lines = cell.read_text().splitlines()
+    for table, readers in (("plant", "cotwin plant, cotwin twin of a cell ([[robots]]: its PT)"),
+                           ("deviation", "cotwin twin, cotwin fleet")):
+        at = lines.index(f"[{table}]") + 1
+        assert f"{cell}:{at}:1: warning: [{table}] applies only to {readers}: cotwin run ignores it" in proc.stderr
