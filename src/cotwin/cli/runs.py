@@ -47,9 +47,11 @@ def build(project: str, out: str, cc: str) -> None:
                    "they are issued, under either algorithm)")
 @click.option("--cycle-period", type=click.FloatRange(min=0, min_open=True),
               help="with --fmi 3: seconds between d-model cycles, a whole number of steps [default: the step]")
+@click.option("--fmu-path", is_flag=True, help="step through the master's step-by-step loop, not the fused loop "
+                                               "(the same results; for comparison and other masters' view)")
 def run(project: str, out: str, step: float | None, end: float | None, algorithm: str | None,
         realtime: bool | None, dashboard: tuple[str, int] | None, cc: str, serving: dict, strict: bool,
-        on_unit_failure: str, version: str, cycle_period: float | None) -> None:
+        on_unit_failure: str, version: str, cycle_period: float | None, fmu_path: bool) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
     from ..twin.history import database_url
@@ -79,14 +81,14 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
             ran = run_twin(system, out, step, end, algorithm, realtime, cc=cc,
                            observers=[dash.feed] if dash else None, progress=progress,
                            restart=on_unit_failure == "restart-from-state", fmi=int(version),
-                           cycle_period=cycle_period)
+                           cycle_period=cycle_period, fused=not fmu_path)
     finally:
         if dash is not None:
             dash.stop()
     r = ran.result
     said_restarts(ran.system.units.values())
     click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
-               f"(real-time factor {r.real_time_factor:.1f})")
+               f"(real-time factor {r.real_time_factor:.1f}; stepping: {r.stepping})")
     outcomes({"": ran.outcomes}, strict)
 
 

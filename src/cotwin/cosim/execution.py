@@ -35,6 +35,7 @@ class RunResult:
     steps: int
     wall_seconds: float
     outputs: dict[str, object] = field(default_factory=dict)
+    stepping: str = "step by step"  # or "fused" (cotwin.cosim.fused), or why the fused loop did not apply
 
     @property
     def rows(self) -> int:
@@ -125,7 +126,9 @@ def model_differences(saved: dict[str, str], here: dict[str, str]) -> list[str]:
 
 class Execution:
     def __init__(self, system: System, algorithm: Algorithm, step_size: float, start: float = 0.0,
-                 observers: list[Observer] | tuple[Observer, ...] = ()):
+                 observers: list[Observer] | tuple[Observer, ...] = (), fused: bool = False):
+        """`fused`: `run` steps in the fused loop (cotwin.cosim.fused: the same values, without the per-step
+        bookkeeping) when it applies; `stepping` then says which loop ran."""
         if not step_size > 0:
             raise CotwinError(f"the step size must be positive, got {step_size!r}")
         self.system = system
@@ -141,6 +144,9 @@ class Execution:
         self._wall = 0.0
         self._origin = (self.start, 0)  # (time, steps) from which step times are counted
         self._first = (self.start, 0)  # (time, steps) where this execution began (later for a fork)
+        self.fused = fused
+        self._loop = None  # the fused loop `advance` made (rebuilt when the slots or observers change)
+        self.stepping = "step by step"  # or "fused" (see run), or why the fused loop did not apply
 
     @property
     def values(self):
@@ -202,6 +208,8 @@ class Execution:
         if not self.initialized:
             self.initialize()
         try:
+            if self.fused:
+                self._run_fused()
             while self.steps < self.total_steps:
                 self.step()
         except BaseException as err:
@@ -210,11 +218,55 @@ class Execution:
         self.close()
         return self.result()
 
+    def advance(self, n: int, until=None) -> int:
+        """Up to n communication steps from the current time (initialised first if not yet), in the fused loop
+        when `fused` and it applies, else one `step` at a time; stops early after the first step at which
+        `until(execution)` is true (a what-if that has seen enough). Returns the steps done; a failure closes
+        the execution, as `step` does."""
+        if not self.initialized:
+            self.initialize()
+        if self.fused:
+            from .fused import FusedLoop, applicable
+
+            why = applicable(self)
+            if why is None:
+                loop = self._loop
+                if loop is None or not loop.current():
+                    loop = self._loop = FusedLoop(self)
+                self.stepping = "fused"
+                try:
+                    return loop.run(n, until)
+                except BaseException as err:
+                    self.close(err)
+                    raise
+            self.stepping = f"step by step: the fused loop does not apply ({why})"
+        for k in range(1, n + 1):
+            self.step()
+            if until is not None and until(self):
+                return k
+        return n
+
+    def _run_fused(self) -> None:
+        """The steps left in the fused loop (cotwin.cosim.fused), when it applies; `stepping` says."""
+        from .fused import FusedLoop, applicable
+
+        why = applicable(self)
+        if why is not None:
+            self.stepping = f"step by step: the fused loop does not apply ({why})"
+            return
+        self.stepping = "fused"
+        loop = FusedLoop(self)
+        try:
+            loop.run(self.total_steps - self.steps)
+        except BaseException as err:
+            self.close(err)
+            raise
+
     def result(self) -> RunResult:
         outputs = {type(o).__name__: o.path for o in self.observers if getattr(o, "path", None) is not None}
         start, done = self._first
         return RunResult(self.algorithm.name, self.step_size, start, self.time, self.steps - done,
-                         wallclock.perf_counter() - self._wall, outputs)
+                         wallclock.perf_counter() - self._wall, outputs, self.stepping)
 
     # ---- state ----
     def get_state(self) -> bytes:

@@ -10,6 +10,7 @@ mapping.
 
 from __future__ import annotations
 
+import ctypes
 from dataclasses import fields as dataclass_fields, replace
 from typing import Protocol
 
@@ -71,6 +72,9 @@ class SimulatedEndpoint(Endpoint):
         self._positioned = {j.name for j in self.tree.actuated if servo_mode(j) == "position"}
         self.segment: Segment | None = None
         self._held = None  # the segment whose final set-point the servos already hold
+        self._plan: tuple | None = None  # (segment, per joint (control index, start, goal - start, low, high))
+        self._native_plan = None  # the same as ctypes arrays for cotwin.mapping.native, and the joints' count
+        self._native_memory = None  # the simulator's data and arrays as the C loop takes them
         self.direct: dict[str, float] = {}  # joint -> the speed or effort last commanded
 
     def start(self) -> None:
@@ -159,12 +163,84 @@ class SimulatedEndpoint(Endpoint):
         sim = self.sim
         steps = sim.steps_for(dt)
         period = max(1, int(round(CONTROL_PERIOD / sim.timestep)))
+        segment = self.segment
+        if steps > 0 and segment is not None and segment is not self._held and sim.plain_stepping:
+            steps -= self._advance_natively(segment, steps, period)
         while steps > 0:
             n = min(period, steps)
             if self.set_point(n):
                 n = steps
             sim.step(n)
             steps -= n
+
+    def _advance_natively(self, segment: Segment, steps: int, period: int) -> int:
+        """As many of `steps` as the C loop makes (cotwin.mapping.native: the same set-points and steps as the
+        loop in `advance`), 0 where it does not run here; the physics steps made are returned."""
+        from . import native
+
+        function = native.advance_function()
+        moves = self._moves(segment)
+        if function is None or moves is None:
+            return 0
+        fn, mj_step = function
+        sim = self.sim
+        arrays, n = self._native_plan
+        memory = self._native_memory
+        if memory is None or memory[0] is not sim.data:  # the simulator's arrays, as C pointers, once
+            data, double = sim.data, ctypes.POINTER(ctypes.c_double)
+            memory = self._native_memory = (data, sim.model._address, data._address, float(sim.model.opt.timestep),
+                                            sim.controls.ctypes.data_as(double), data.qpos.ctypes.data_as(double),
+                                            data.qpos.size, ctypes.c_double(), ctypes.c_int(), ctypes.c_int())
+        data, model_address, data_address, timestep, ctrl, qpos, nq, time, held, done = memory
+        time.value, held.value = data.time, 0
+        fn(mj_step, model_address, data_address, time, sim.timestep, timestep, steps, period, arrays[0], n,
+           *arrays[1:], ctrl, qpos, nq, held, done)  # 1: a set-point not finite (the Python loop says so); 2: unstable
+        if done.value:
+            sim.stepped(done.value)  # status 2 (the state not finite) raises here, as `step` does
+        if time.value != sim.data.time:
+            raise CotwinError(f"the native control loop kept time {time.value!r}, MuJoCo {sim.data.time!r}")
+        if held.value:
+            self._held = segment
+        return done.value  # status 1: a set-point not finite; the Python loop goes on and says so
+
+    def _moves(self, segment: Segment) -> list | None:
+        """Per joint of the segment: (control index, start, goal - start, low, high), once per segment (and
+        the same as ctypes arrays for the native loop); None when an actuator is unknown."""
+        plan = self._plan
+        if plan is None or plan[0] is not segment:
+            slots = self.sim.servo_slots(list(segment.goal))
+            moves = [(index, segment.start[j], segment.goal[j] - segment.start[j], low, high)
+                     for j, (index, low, high) in zip(segment.goal, slots)] if slots is not None else None
+            plan = self._plan = (segment, moves)
+            if moves is not None and all(m[1].__class__ is float and m[2].__class__ is float for m in moves):
+                n = len(moves)
+                doubles = ctypes.c_double * n
+                shape = (segment.t0, segment.duration, 1.0 if segment.shape == "trapezoid" else 0.0, segment.a,
+                         segment.v, segment.distance)
+                self._native_plan = ((ctypes.c_double * 6)(*map(float, shape)), (ctypes.c_int * n)(*(m[0] for m in moves)),
+                                     *(doubles(*(m[k] for m in moves)) for k in (1, 2, 3, 4))), n
+            else:
+                self._native_plan = None
+        return plan[1] if self._native_plan is not None else None
+
+    def _set_point(self, segment: Segment, t: float) -> None:
+        """The servos' set-point: `segment.at(t)` written as `write_actuators` writes it (clipped to each
+        servo's range), without building a dict per control period: each joint's start, move and servo
+        are looked up once per segment. The same floats (start + s * (goal - start)); anything unusual (a
+        value not finite, an unknown actuator) goes through `write_actuators`, which says what is wrong."""
+        self._moves(segment)
+        moves = self._plan[1]
+        if moves is None:
+            self.sim.write_actuators(segment.at(t))
+            return
+        s = segment.fraction(t)
+        ctrl = self.sim.controls
+        for index, start, move, low, high in moves:
+            value = start + s * move
+            if value.__class__ is not float or value - value != 0.0:
+                self.sim.write_actuators(segment.at(t))
+                return
+            ctrl[index] = low if value < low else high if value > high else value
 
     def set_point(self, steps: int) -> bool:
         """Write the servos' set-points for the next `steps` physics steps (where the segment is at their
@@ -174,7 +250,7 @@ class SimulatedEndpoint(Endpoint):
         segment = self.segment
         if segment is not None and segment is not self._held:
             ahead = sim.time + steps * sim.timestep
-            sim.write_actuators(segment.at(ahead))
+            self._set_point(segment, ahead)
             if ahead >= segment.t0 + segment.duration:  # the set-point stays at the segment's end
                 self._held = segment
         return segment is None or segment is self._held

@@ -479,12 +479,19 @@ class Mapping:
         else:
             joints = mirrored_joints(endpoint.tree, mirrors)
         self._mirrors = mirror_variables(names, joints)
+        self._mirror_q = [(var, joint) for var, (joint, kind) in self._mirrors.items() if kind == "position"]
+        self._mirror_qd = [(var, joint) for var, (joint, kind) in self._mirrors.items() if kind != "position"]
         self.monitor = dict(monitor or {})
         clash = [n for n in self.monitor if n in self._mirrors]
         if clash:
             raise CotwinError(f"monitored variable(s) {', '.join(clash)} already mirror joints")
         for path, _ in (c for op in self.operations.values() for c in op.commands):
             endpoint.joint(path)  # every commanded actuator exists on the endpoint
+        if compiled:  # each event's whole definition as one generated function (cotwin.mapping.generated)
+            from .generated import compile_event
+
+            for ev in self.events.values():
+                ev.occurs = compile_event(ev, self.env._compiler)
         self.started = False
 
     @property
@@ -558,27 +565,31 @@ class Mapping:
         in the following steps in the order they came. Called once per step, after `step`."""
         out: dict[str, tuple[bool, object]] = {}
         asked, came = [], []
+        held, pending, requested, answers = self.held, self.pending, self.asked, self.answers
+        nothing = (False, None)
         for name, ev in self.events.items():
-            holds = ev.occurs()
-            value = ev.value if holds else None
-            if name in self.answers:
-                before, old = self.held.get(name, (False, None))
-                again = bool(ev.reads & self.asked)
-                if again:  # asked anew: an occurrence still waiting is the previous request's answer
-                    self.pending.pop(name, None)
-                if holds and (again or not before or value != old):
-                    (asked if again else came).append((name, value))
-                out[name] = (False, None)
+            if ev.occurs():
+                state = (True, ev.value)
             else:
-                out[name] = (holds, value)
-            self.held[name] = (holds, value)
-        self.asked.clear()
+                state = nothing
+            if name in answers:
+                before, old = held.get(name, nothing)
+                again = not ev.reads.isdisjoint(requested)
+                if again:  # asked anew: an occurrence still waiting is the previous request's answer
+                    pending.pop(name, None)
+                if state[0] and (again or not before or state[1] != old):
+                    (asked if again else came).append((name, state[1]))
+                out[name] = nothing
+            else:
+                out[name] = state
+            held[name] = state
+        requested.clear()
         for name, value in asked + came:  # caused by an operation at the step's start, then by the platform
-            self.pending[name] = value
+            pending[name] = value
         self.reports += 1
-        if self.pending:
-            name = next(iter(self.pending))
-            out[name] = (True, self.pending.pop(name))
+        if pending:
+            name = next(iter(pending))
+            out[name] = (True, pending.pop(name))
             self.delivered[name] = self.reports
         return out
 
@@ -634,10 +645,15 @@ class Mapping:
     def _sync(self) -> None:
         self._readings = None
         if self._mirrors:
-            q = self.endpoint.joint_positions()
-            velocities = self.endpoint.joint_velocities()
-            for var, (joint, kind) in self._mirrors.items():
-                self.variables[var] = q.get(joint, 0.0) if kind == "position" else velocities.get(joint, 0.0)
+            variables = self.variables
+            if self._mirror_q:
+                q = self.endpoint.joint_positions()
+                for var, joint in self._mirror_q:
+                    variables[var] = q.get(joint, 0.0)
+            if self._mirror_qd:
+                velocities = self.endpoint.joint_velocities()
+                for var, joint in self._mirror_qd:
+                    variables[var] = velocities.get(joint, 0.0)
         if self.monitor:
             readings = self.sensor_readings()
             for var, path in self.monitor.items():

@@ -91,6 +91,10 @@ class RayScanner:
         self.readings = {path: values[quantity] for path, quantity in self.ports.items()}
 
 
+_PLAIN_INTEGRATORS = (int(mujoco.mjtIntegrator.mjINT_EULER), int(mujoco.mjtIntegrator.mjINT_IMPLICIT),
+                      int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST))
+
+
 class PlatformSimulator:
     def __init__(self, tree: KinematicTree, scene=None, timestep: float = TIMESTEP, mjcf: str | None = None,
                  base: str = "fixed", shared=None, prefix: str = ""):
@@ -204,6 +208,31 @@ class PlatformSimulator:
         if name not in self._joint_qpos:
             raise CotwinError(f"unknown joint '{name}' (joints: {', '.join(self._joint_qpos)})")
         return self._joint_qpos[name]
+
+    @property
+    def plain_stepping(self) -> bool:
+        """Whether `step(n)` is n of MuJoCo's mj_step and nothing between them (no ray sensor scans, no
+        obstacle contacts checked, not a view of a shared world), with an integrator that advances time by one
+        timestep per step: then a caller may make the steps itself (cotwin.mapping.native) and count them with `stepped`."""
+        return self.shared is None and not self.scanners and not self._obstacles and \
+            self.model.opt.integrator in _PLAIN_INTEGRATORS
+
+    def stepped(self, n: int) -> None:
+        """Count n physics steps a caller made with mj_step itself, and check the state as `step` does."""
+        self._steps += n
+        self._check()
+
+    def servo_slots(self, names) -> list[tuple[int, float, float]] | None:
+        """Per actuator name, its control index and the range its targets are clipped to (as
+        `write_actuators` clips them), for a caller writing many set-points of the same actuators into
+        `controls`; None if a name is not an actuator (then `write_actuators` says so)."""
+        servos = self._servos
+        return [servos[n] for n in names] if all(n in servos for n in names) else None
+
+    @property
+    def controls(self) -> np.ndarray:
+        """MuJoCo's control vector (data.ctrl), written by `write_actuators`."""
+        return self._ctrl
 
     def write_actuators(self, targets: dict[str, float]) -> None:
         """Set actuator commands (rad or m for position servos, rad/s or m/s for velocity servos, N m or N

@@ -63,6 +63,22 @@ def _digest(*parts: bytes | str) -> str:
     return h.hexdigest()
 
 
+_SOURCES: dict[tuple[int, str, int], tuple[object, dict[str, str]]] = {}  # (id(program), root, fmi) -> (program, sources)
+
+
+def _sources(program, root: Path, fmi: int, generate) -> dict[str, str]:
+    """The d-model FMU's generated sources, generated once per program object (a Program is not changed once
+    built; what-if forks and sweeps share their twin's): the check that an FMU is up to date costed a C
+    generation per what-if."""
+    key = (id(program), str(root), fmi)
+    known = _SOURCES.get(key)
+    if known is None or known[0] is not program:
+        if len(_SOURCES) >= 8:
+            _SOURCES.clear()
+        known = _SOURCES[key] = (program, generate(program, root))
+    return known[1]
+
+
 def _cotwin_sources(names=_GENERATORS) -> list[bytes]:
     root = Path(__file__).resolve().parents[1]
     return [(root / n).read_bytes() for n in names if (root / n).is_file()]
@@ -116,11 +132,11 @@ def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: R
     root = system.spec.path.parent
     program = system.models.program
     if fmi == 2:
-        sources, generators = fmu_sources(program, root), _cotwin_sources()
+        sources, generators = _sources(program, root, 2, fmu_sources), _cotwin_sources()
     else:
         from ..dmodel.fmi3 import build_fmu3, fmu3_sources
 
-        sources = fmu3_sources(program, root=root)
+        sources = _sources(program, root, 3, lambda program, root: fmu3_sources(program, root=root))
         generators = _cotwin_sources((*_GENERATORS, "dmodel/fmi3.py", "dmodel/fmi3_wrapper.c"))
     key = _digest(__version__, *(part for name in sorted(sources) for part in (name, sources[name])), cc, *generators)
     if not record.fresh(target, key):

@@ -82,12 +82,14 @@ class TwinRun:
 def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end: float | None = None,
              algorithm: str | None = None, realtime: bool | None = None, observers: list[Observer] | None = None,
              progress=None, plot: bool = True, endpoint=None, source=None, cc: str = "cc",
-             restart: bool = False, fmi: int = 2, cycle_period: float | None = None) -> TwinRun:
+             restart: bool = False, fmi: int = 2, cycle_period: float | None = None, fused: bool = True) -> TwinRun:
     """Co-simulate the twin into `out` (outputs.csv, figure.png), building the d-model FMU if it is
     missing or stale. The folder is locked for the run; a failed run keeps the previous result. With
     `restart`, a failed step of the d-model FMU is retried in a new process from its last good state. With
     `fmi` 3 the d-model is the FMI 3.0 FMU, its cycle a clock ticking every `cycle_period` (default: the
-    project's, else every step), a whole number of steps (cotwin.twin.clocked)."""
+    project's, else every step), a whole number of steps (cotwin.twin.clocked). `fused`: step in the fused
+    loop where it applies (cotwin.cosim.fused, the same CSV byte for byte); False forces the master's
+    step-by-step loop (the FMU path); the result's `stepping` says which ran."""
     out = Path(out)
     spec = system.spec
     end = spec.end if end is None else end
@@ -120,7 +122,7 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
             chain.append(Progress(progress))
         if spec.realtime if realtime is None else realtime:
             chain.append(RealTimePacer())
-        execution = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain)
+        execution = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain, fused=fused)
         try:
             result = execution.run(end)
         except (CotwinError, KeyboardInterrupt) as err:

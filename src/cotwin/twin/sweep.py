@@ -120,18 +120,30 @@ def _load(project: str, artefacts: str | None) -> None:
     _SYSTEM = (load(project), artefacts)
 
 
-def _run(plan: list[Command], state: bytes | None, horizon: float, step: float | None) -> dict:
+def _run(plan: list[Command], state: bytes | None, horizon: float, step: float | None, forks=None) -> dict:
+    """One what-if's row; on `forks` (cotwin.twin.whatif.Forks: one fork restored plan after plan) when given."""
     from .whatif import predict
 
     system, artefacts = _SYSTEM
     try:
+        if forks is not None:
+            return summary(forks.predict(plan, horizon=horizon, decimate=10**9))
         return summary(predict(system, plan, state, horizon=horizon, step=step, artefacts=artefacts, decimate=10**9))
     except Exception as err:  # noqa: BLE001 - one what-if's failure is its row, the sweep goes on
         return failed(plan, err)
 
 
+def _forks(state: bytes | None, step: float | None):
+    """Forks of the loaded twin at `state` for a run of what-ifs (closed by the caller when they are done)."""
+    from .whatif import Forks
+
+    system, artefacts = _SYSTEM
+    return Forks(system, state, step=step, artefacts=artefacts)
+
+
 def _run_chunk(plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None) -> list[dict]:
-    return [_run(plan, state, horizon, step) for plan in plans]
+    with _forks(state, step) as forks:
+        return [_run(plan, state, horizon, step, forks) for plan in plans]
 
 
 def _ray_run(project: str, artefacts: str | None, plan, state, horizon, step) -> dict:
@@ -168,7 +180,8 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
     if artefacts is None:
         artefacts = scratch = tempfile.mkdtemp(prefix="cotwin-sweep-")
     try:
-        dmodel_fmu(load(project), artefacts)  # built once, before the workers share it
+        system = load(project)
+        dmodel_fmu(system, artefacts)  # built once, before the workers share it
         artefacts = str(artefacts)
         if ray is not None:
             return _on_ray(project, plans, state, horizon, step, ray, artefacts, report)
@@ -176,11 +189,13 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         rows: list[dict] = []
         report(0, len(plans))
         if workers == 1:
-            _load(project, artefacts)
+            global _SYSTEM
+            _SYSTEM = (system, artefacts)  # the project loaded above (loading it again costed a parse)
             try:
-                for plan in plans:
-                    rows.append(_run(plan, state, horizon, step))
-                    report(len(rows), len(plans))
+                with _forks(state, step) as forks:
+                    for plan in plans:
+                        rows.append(_run(plan, state, horizon, step, forks))
+                        report(len(rows), len(plans))
             except KeyboardInterrupt:
                 raise SweepInterrupted(rows, len(plans)) from None
             return rows

@@ -25,6 +25,8 @@ from concurrent.futures import CancelledError
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from .. import safejson
 from ..cosim.algorithm import algorithm as make_algorithm
 from ..cosim.execution import Execution
@@ -74,27 +76,31 @@ class _Contacts:
         fingers = {j.child for j in tree.joints if j.name in tool.fingers}
         self.robot = {g for g in range(model.ngeom) if model.geom_contype[g] == ROBOT_CONTYPE
                       and model.body(model.geom_bodyid[g]).name not in fingers}
+        self._robot = np.array(sorted(self.robot), dtype=np.int64)
         self.seen: dict[tuple[str, str], dict] = {}
 
     def check(self, t: float) -> None:
         if self.sim is None:
             return
         model, data = self.sim.model, self.sim.data
-        for c in data.contact[: data.ncon]:
-            g1, g2 = int(c.geom1), int(c.geom2)
-            if (g1 in self.robot) == (g2 in self.robot) or c.dist > -0.001:
-                continue
-            robot, other = (g1, g2) if g1 in self.robot else (g2, g1)
+        if not data.ncon:
+            return
+        contact = data.contact  # the step's contacts as arrays: only the robot's penetrating ones, in order, in Python
+        g1, g2, dist = contact.geom1, contact.geom2, contact.dist
+        mine, theirs = np.isin(g1, self._robot), np.isin(g2, self._robot)
+        for k in np.flatnonzero((mine != theirs) & (dist <= -0.001)):
+            robot, other = (int(g1[k]), int(g2[k])) if mine[k] else (int(g2[k]), int(g1[k]))
             key = (model.body(model.geom_bodyid[robot]).name, model.body(model.geom_bodyid[other]).name)
             entry = self.seen.setdefault(key, {"kind": "contact", "robot": key[0], "with": key[1], "first": t,
                                                "depth": 0.0})
-            entry["depth"] = max(entry["depth"], -float(c.dist))
+            entry["depth"] = max(entry["depth"], -float(dist[k]))
 
 
 def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None, horizon: float = 60.0,
             step: float | None = None, algorithm: str | None = None, artefacts: str | Path | None = None,
-            settle: float = 0.3, decimate: int = 1, cc: str = "cc") -> Prediction:
-    """Run `plan` on a fork of the DT at `state` (None: from the project's initial state); see module doc."""
+            settle: float = 0.3, decimate: int = 1, cc: str = "cc", fused: bool = True) -> Prediction:
+    """Run `plan` on a fork of the DT at `state` (None: from the project's initial state); see module doc.
+    `fused`: in the fused loop (cotwin.cosim.fused, the same prediction), else step by step."""
     import tempfile
 
     from .run import simulated_endpoint
@@ -115,7 +121,7 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
         endpoint = simulated_endpoint(fork)
         cosim = fork.instantiate(fmu, endpoint)
         watch, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
-        execution = Execution(cosim, make_algorithm(algorithm), step, start, [watch, ledger])
+        execution = Execution(cosim, make_algorithm(algorithm), step, start, [watch, ledger], fused=fused)
         try:
             if state is not None:
                 execution.set_state(state, units=[DMODEL.name, MAPPING.name])
@@ -127,6 +133,97 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
             return prediction
         finally:
             execution.close()
+
+
+class Forks:
+    """What-ifs from one state, one after another, on forks built once (a sweep's many plans): the first plan
+    of a shape (the ports its commands drive) builds its fork as `predict` does and saves the fork's state
+    right after it is set up; every later plan of that shape swaps its commands into the fork's command
+    source and restores that state (the d-model FMU's, the simulator's, the mapping's, the values on the
+    connections: cotwin.cosim.state, at native speed), instead of building the simulator, the mapping and the
+    FMU instance anew. Each prediction is the one `predict` gives (tests/test_fused.py). A what-if that fails
+    drops its fork (the next one of its shape builds anew). `close` ends them all (a context manager)."""
+
+    def __init__(self, system: TwinSystem, state: bytes | None = None, step: float | None = None,
+                 algorithm: str | None = None, artefacts: str | Path | None = None, cc: str = "cc"):
+        self.system, self.state, self.cc = system, state, cc
+        self.step = system.spec.step if step is None else step
+        self.algorithm = algorithm or system.spec.algorithm
+        self.artefacts = artefacts
+        self.start = 0.0
+        if state is not None:
+            from ..cosim.execution import saved_execution
+
+            self.start = saved_execution(state)["time"]
+        self._forks: dict[frozenset, tuple] = {}  # plan shape -> (fork, execution, endpoint, saved state)
+        self._scratch = None
+
+    def __enter__(self) -> "Forks":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def predict(self, plan: list[Command], horizon: float = 60.0, settle: float = 0.3, decimate: int = 1) -> Prediction:
+        started = wallclock.perf_counter()
+        start = self.start
+        shifted = sorted((Command(start + c.time, c.values, c.where) for c in plan), key=lambda c: c.time)
+        shape = frozenset(p for c in shifted for p, _ in c.values)
+        built = self._forks.pop(shape, None)
+        try:
+            if built is None:
+                built = self._build(shifted)
+            fork, execution, endpoint, saved, fresh = built
+            if not fresh:
+                execution.system.units[fork.source.name].commands = shifted
+                execution.set_state(saved)  # the fork as it was set up (the source: this plan from its start)
+            watch, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
+            execution.observers = [watch, ledger]
+            for o in execution.observers:
+                o.simulation_initialized(execution)
+            prediction = _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started, watch,
+                                ledger)
+            prediction.blocked = [str(b) for b in watch.found]
+        except BaseException:
+            if built is not None:
+                built[1].close()
+            raise
+        self._forks[shape] = (fork, execution, endpoint, saved, False)  # ran: the next plan restores `saved`
+        return prediction
+
+    def _build(self, shifted: list[Command]) -> tuple:
+        import tempfile
+
+        from .run import simulated_endpoint
+
+        fork = self.system.with_plan(shifted)
+        artefacts = self.artefacts
+        if artefacts is None:
+            if self._scratch is None:
+                self._scratch = tempfile.TemporaryDirectory(prefix="cotwin-whatif-")
+            artefacts = self._scratch.name
+        fmu = dmodel_fmu(fork, Path(artefacts), self.cc)
+        endpoint = simulated_endpoint(fork)
+        execution = Execution(fork.instantiate(fmu, endpoint), make_algorithm(self.algorithm), self.step, self.start,
+                              [], fused=True)
+        try:
+            if self.state is not None:
+                execution.set_state(self.state, units=[DMODEL.name, MAPPING.name])
+            else:
+                execution.initialize()
+            saved = execution.get_state()
+        except BaseException:
+            execution.close()
+            raise
+        return fork, execution, endpoint, saved, True  # fresh: the first plan runs without a restore
+
+    def close(self) -> None:
+        for _, execution, _, _, _ in self._forks.values():
+            execution.close()
+        self._forks.clear()
+        if self._scratch is not None:
+            self._scratch.cleanup()
+            self._scratch = None
 
 
 def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, started, waits, ledger) -> Prediction:
@@ -154,9 +251,9 @@ def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, st
             for v in monitored:
                 trajectory[v].append(values.get((MAPPING.name, v)))
 
-    record(execution.time)
-    while execution.time < end - 1e-9:
-        t = execution.step()
+    def seen_enough(execution) -> bool:  # after each step (in the fused loop): whether the what-if is over
+        nonlocal at_rest_since
+        t = execution.time
         record(t)
         collisions.extend({"kind": "event", "event": e, "time": t} for e in collision_events
                           if values.get((MAPPING.name, e)) is True)
@@ -174,13 +271,18 @@ def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, st
         outcomes = ledger.outcomes
         applied = len(outcomes) >= len(plan)
         if applied and t >= last_command and waits.found:
-            break  # blocked for good: the horizon would add nothing
+            return True  # blocked for good: the horizon would add nothing
         if applied and t >= last_command and at_rest_since is not None and t - at_rest_since >= settle:
             last = outcomes[-1] if outcomes else None
             if last is None or last.done is not None:
-                break
+                return True
             if not last.accepted and t - last.delivered >= settle + 3 * execution.step_size:
-                break  # delivered, never acted upon: the d-model ignored it
+                return True  # delivered, never acted upon: the d-model ignored it
+        return t >= end - 1e-9
+
+    record(execution.time)
+    if execution.time < end - 1e-9:
+        execution.advance(math.ceil((end - execution.time) / execution.step_size) + 1, until=seen_enough)
     outcomes = list(ledger.outcomes)
     for c in plan[len(outcomes):]:  # not applied within the horizon
         event = next(p for p, v in c.values if p in fork.command_events and v is True)

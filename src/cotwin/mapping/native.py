@@ -1,0 +1,161 @@
+"""The endpoint's control-period loop in C: a move's set-points and MuJoCo's steps between them, in one call.
+
+`SimulatedEndpoint.advance` refreshes the servos' set-points every CONTROL_PERIOD (2 ms) along the move
+in flight, stepping MuJoCo between refreshes; in Python that loop cost about as much as the physics it
+drives at steps of 0.01 and 0.1 s (issue 23). This module compiles (once per machine, cached beside the
+IK solutions: cotwin.pmodel.ikcache.cache_dir, or in a temporary folder) a C function doing the same loop:
+the move's fraction (quintic or trapezoid, the same expressions in the same order as
+cotwin.mapping.motion, with floating-point contraction off so that every value is the same double), each
+joint's set-point start + s * move clipped to its servo's range, MuJoCo's own `mj_step` (its address
+taken from the library the `mujoco` module loaded) n times, and the simulator's check that the state
+stays finite after each call. So a run gives the same trajectory, bit for bit, as the Python loop
+(tests/test_fused.py and the byte-identical CSVs). Where it does not apply (no C compiler, a simulator
+with ray sensors or obstacle contacts to check between steps, a set-point that is not a finite number) the
+Python loop runs, as before.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import mujoco
+
+SOURCE = r"""
+#include <math.h>
+#include <stddef.h>
+
+typedef void (*step_fn)(const void *, void *);
+
+static double trapezoid_duration(double a, double v, double distance) {
+    if (distance <= 0) return 0.0;
+    if (distance >= v * v / a) return distance / v + v / a;
+    return 2.0 * sqrt(distance / a);
+}
+
+static double travelled(double a, double v, double distance, double elapsed) {
+    double total = trapezoid_duration(a, v, distance);
+    if (elapsed >= total) return distance;
+    if (elapsed <= 0) return 0.0;
+    double root = sqrt(a * distance);
+    double peak = root < v ? root : v;  /* Python's min(v, root): v unless root < v */
+    double ramp = peak / a;
+    if (elapsed <= ramp) return 0.5 * a * elapsed * elapsed;
+    if (elapsed <= total - ramp) return 0.5 * peak * ramp + peak * (elapsed - ramp);
+    double left = total - elapsed;
+    return distance - 0.5 * a * left * left;
+}
+
+static double fraction(const double *move, double t) {
+    /* move: t0, duration, trapezoid (0/1), a, v, distance */
+    double elapsed = t - move[0];
+    if (move[1] <= 0 || elapsed >= move[1]) return 1.0;
+    if (elapsed <= 0) return 0.0;
+    if (move[2] != 0.0) return travelled(move[3], move[4], move[5], elapsed) / move[5];
+    double tau = elapsed / move[1];
+    return pow(tau, 3.0) * (10 - 15 * tau + 6 * tau * tau);
+}
+
+/* Returns 0 when all `steps` are done; 1 when a set-point is not finite (nothing written in that period:
+   the caller's Python loop goes on from there and says why); 2 when the state became non-finite. `done`
+   counts the physics steps made; `held` is set once the set-point stays at the move's end; `time` is the
+   simulation time, advanced as MuJoCo advances it (the caller checks that they agree). */
+int cotwin_advance(step_fn step, const void *model, void *data, double *time, double timestep, double opt_timestep,
+                   int steps, int period, const double *move, int joints, const int *index,
+                   const double *start, const double *delta, const double *low, const double *high,
+                   double *ctrl, const double *qpos, int nq, int *held, int *done) {
+    *done = 0;
+    while (steps > 0) {
+        int n = period < steps ? period : steps;
+        if (!*held) {
+            double ahead = *time + n * timestep;
+            double s = fraction(move, ahead);
+            for (int k = 0; k < joints; k++) {
+                double value = start[k] + s * delta[k];
+                if (!(value - value == 0.0)) return 1;
+            }
+            for (int k = 0; k < joints; k++) {
+                double value = start[k] + s * delta[k];
+                ctrl[index[k]] = value < low[k] ? low[k] : value > high[k] ? high[k] : value;
+            }
+            if (ahead >= move[0] + move[1]) *held = 1;
+        }
+        if (*held) n = steps;
+        for (int k = 0; k < n; k++) {
+            step(model, data);
+            *time += opt_timestep;  /* as mj_step advances data->time (Euler and implicit integrators) */
+        }
+        *done += n;
+        steps -= n;
+        double sum = 0.0;
+        for (int k = 0; k < nq; k++) sum += qpos[k] * qpos[k];
+        if (!(sum - sum == 0.0)) return 2;
+    }
+    return 0;
+}
+"""
+
+_LIB: object = None  # the loaded function, False when it cannot be built here, None before trying
+
+
+def _build() -> ctypes.CDLL | None:
+    from ..pmodel.ikcache import cache_dir
+
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    if compiler is None:
+        return None
+    digest = hashlib.sha256(SOURCE.encode()).hexdigest()[:16]
+    folder = cache_dir()
+    folder = (folder / "native") if folder is not None else Path(tempfile.gettempdir()) / f"cotwin-native-{os.getuid()}"
+    target = folder / f"advance-{digest}.so"
+    if not target.is_file():
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(prefix="cotwin-cc-") as tmp:
+            source = Path(tmp) / "advance.c"
+            source.write_text(SOURCE)
+            built = Path(tmp) / "advance.so"
+            proc = subprocess.run([compiler, "-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off",
+                                   "-fno-fast-math", str(source), "-o", str(built), "-lm"],
+                                  capture_output=True, text=True, timeout=120)
+            if proc.returncode != 0 or not built.is_file():
+                return None
+            staged = folder / f".{target.name}.{os.getpid()}"
+            shutil.copy(built, staged)
+            os.replace(staged, target)  # whole, also when another process builds it at the same time
+    return ctypes.CDLL(str(target))
+
+
+def _mj_step():
+    """The address of MuJoCo's mj_step in the library the mujoco module loaded."""
+    folder = Path(mujoco.__file__).parent
+    libraries = sorted(folder.glob("libmujoco.so*"))
+    if not libraries:
+        return None
+    return ctypes.cast(ctypes.CDLL(str(libraries[0]))["mj_step"], ctypes.c_void_p).value
+
+
+def advance_function():
+    """The C loop (a ctypes function with its argument types), or None where it cannot run here."""
+    global _LIB
+    if _LIB is None:
+        try:
+            lib, step = _build(), _mj_step()
+        except (OSError, subprocess.SubprocessError):
+            lib, step = None, None
+        if lib is None or step is None:
+            _LIB = False
+        else:
+            fn = lib.cotwin_advance
+            P = ctypes.POINTER
+            fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, P(ctypes.c_double), ctypes.c_double,
+                           ctypes.c_double, ctypes.c_int, ctypes.c_int, P(ctypes.c_double), ctypes.c_int, P(ctypes.c_int),
+                           P(ctypes.c_double), P(ctypes.c_double), P(ctypes.c_double), P(ctypes.c_double),
+                           P(ctypes.c_double), P(ctypes.c_double), ctypes.c_int, P(ctypes.c_int), P(ctypes.c_int)]
+            fn.restype = ctypes.c_int
+            _LIB = (fn, step)
+    return _LIB or None
