@@ -250,10 +250,16 @@ def test_publish_drives_a_live_twin_that_answers_a_whatif(project, workdir, plan
     exchange = f"cotwin_e2e_{uuid.uuid4().hex[:8]}"
     alarms = f"cotwin_e2e_twin_{uuid.uuid4().hex[:8]}"
     toml = project / "twin.toml"
-    toml.write_text(toml.read_text() + f'exchange = "{alarms}"\n')  # [deviation] is the file's last table
+    # the plan's four holes 2.5 s apart (its closest spacing) instead of over 15 s: a paced run of 11 s, not 20
+    # (the publisher follows the project's end)
+    assert "end = 20.0\n" in toml.read_text()
+    toml.write_text(toml.read_text().replace("end = 20.0\n", "end = 11.0\n") + f'exchange = "{alarms}"\n')  # [deviation] is the file's last table
+    plan = (project / "plan.csv").read_text().splitlines()
+    (project / "plan.csv").write_text("\n".join([plan[0]] + [f"{ms}," + line.split(",", 1)[1] for ms, line in
+                                                             zip((1000, 3500, 6000, 8500), plan[1:], strict=True)]) + "\n")
     out = workdir / "live"
     twin = subprocess.Popen([sys.executable, "-m", "cotwin", "twin", str(toml), "-o", str(out), "--rabbitmq", exchange,
-                             "--whatif", "--end", "20"], cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             "--whatif", "--end", "11"], cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env)
     answers: dict[str, dict] = {}
 

@@ -168,19 +168,19 @@ def test_the_papers_publisher_pattern_binds_each_command_to_its_arguments_at_eve
     and none in four. Every move reaches the d-model once, with its own arguments, under both algorithms."""
     from conftest import EXAMPLES
 
-    moves = {2: (0, 23, 1), 10: (3, 20, 2), 18: (8, 10, 0)}  # ticks of 0.5 s: about 1, 5 and 9 s
+    moves = {2: (0, 23, 1), 7: (3, 20, 2), 12: (8, 10, 0)}  # ticks of 0.5 s: about 1, 3.5 and 6 s (a move takes < 2 s)
     results = {}
 
     def run(step, algorithm):
         system = load(EXAMPLES / "ur5e" / "live.toml")
         system.spec.rabbitmq = replace(system.spec.rabbitmq, exchange=f"cotwin_events_{uuid.uuid4().hex[:8]}")
         ready, done, sent = threading.Event(), threading.Event(), []
-        publisher = threading.Thread(target=publish_pattern, args=(system.spec.rabbitmq, moves, 26, 0.5, ready, done,
+        publisher = threading.Thread(target=publish_pattern, args=(system.spec.rabbitmq, moves, 20, 0.5, ready, done,
                                                                     sent), daemon=True)
         publisher.start()
         try:
             assert ready.wait(10)
-            results[(step, algorithm)] = (run_twin(system, tmp_path / f"{step}-{algorithm}", step=step, end=12.0,
+            results[(step, algorithm)] = (run_twin(system, tmp_path / f"{step}-{algorithm}", step=step, end=9.0,
                                                    algorithm=algorithm, plot=False, realtime=True), sent)
         except Exception as err:  # noqa: BLE001 - reported by the main thread
             results[(step, algorithm)] = err
