@@ -17,9 +17,9 @@ sys.path.insert(0, str(ROOT / "src"))
 from cotwin.mapping.profile import read_profile  # noqa: E402
 from cotwin.mapping.rtde import read_arm_log  # noqa: E402
 from cotwin.pmodel import ik  # noqa: E402
-from cotwin.twin.calibration import calibrate, plan_moves, project_twin  # noqa: E402
-from cotwin.twin.replay import replay  # noqa: E402
-from cotwin.twin.run import load  # noqa: E402
+from cotwin.twin.assembly.calibration import calibrate, plan_moves, project_twin  # noqa: E402
+from cotwin.twin.assembly.replay import replay  # noqa: E402
+from cotwin.twin.assembly.run import load  # noqa: E402
 from figures import figure, goal  # noqa: E402
 
 LOG = ROOT.parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"

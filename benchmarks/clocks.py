@@ -14,8 +14,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from cotwin.twin.clocked import servo_delays  # noqa: E402
-from cotwin.twin.run import load, run_twin  # noqa: E402
+from cotwin.twin.assembly.clocked import servo_delays  # noqa: E402
+from cotwin.twin.assembly.run import load, run_twin  # noqa: E402
 
 CONFIGS = (("FMI 2.0 Jacobi", "jacobi", 2), ("FMI 2.0 Gauss-Seidel", "gauss-seidel", 2), ("FMI 3.0 clocks, Jacobi", "jacobi", 3))
 GOAL = {"FMI 2.0 Jacobi": 3, "FMI 2.0 Gauss-Seidel": 1, "FMI 3.0 clocks, Jacobi": 1}

@@ -22,9 +22,9 @@ sys.path.insert(0, str(ROOT / "src"))
 from cotwin.mapping.opcua import OPCUAEndpoint  # noqa: E402
 from cotwin.mapping.perturbed import PerturbedEndpoint  # noqa: E402
 from cotwin.pmodel.perturbation import Perturbation  # noqa: E402
-from cotwin.twin.plant import Plant  # noqa: E402
-from cotwin.twin.run import load  # noqa: E402
-from cotwin.twin.runtime import LiveTwin  # noqa: E402
+from cotwin.twin.services.plant import Plant  # noqa: E402
+from cotwin.twin.assembly.run import load  # noqa: E402
+from cotwin.twin.live.runtime import LiveTwin  # noqa: E402
 from figures import figure, goal  # noqa: E402
 
 EXAMPLE = ROOT / "examples" / "ur5e"

@@ -25,9 +25,9 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from cotwin.mapping.endpoint import SimulatedEndpoint  # noqa: E402
 from cotwin.pmodel.simulator import PlatformSimulator  # noqa: E402
-from cotwin.twin.dashboard import Dashboard  # noqa: E402
-from cotwin.twin.run import load, run_twin  # noqa: E402
-from cotwin.twin.runtime import LiveTwin  # noqa: E402
+from cotwin.twin.services.dashboard import Dashboard  # noqa: E402
+from cotwin.twin.assembly.run import load, run_twin  # noqa: E402
+from cotwin.twin.live.runtime import LiveTwin  # noqa: E402
 from figures import figure, goal  # noqa: E402
 
 CHROMIUM = Path("/usr/bin/chromium")

@@ -19,8 +19,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from cotwin.twin.fleet.spec import read_fleet  # noqa: E402
-from cotwin.twin.fleet.supervisor import Fleet  # noqa: E402
+from cotwin.twin.analysis.fleet.spec import read_fleet  # noqa: E402
+from cotwin.twin.analysis.fleet.supervisor import Fleet  # noqa: E402
 from figures import figure, goal, shown  # noqa: E402
 
 PROJECT = ROOT / "examples" / "ur5e" / "replay.toml"

@@ -12,7 +12,7 @@ speed as a share of the same scene's physics alone, measured in this run.
   master's step-by-step loop, `cotwin run --fmu-path`) beside it. A what-if of the paper's plan (goal
   >= 0.5 of physics-only speed), both ways.
 - The 384-hole sweep in one process, both ways in this run: forks restored plan after plan in the fused
-  loop (cotwin.twin.whatif.Forks, what run_sweep does) against a fresh fork per what-if stepped by the
+  loop (cotwin.twin.services.whatif.Forks, what run_sweep does) against a fresh fork per what-if stepped by the
   master's loop (the way before issue 23; 44 s on this machine then): goal >= 5x, and the same answers.
 Figures are the best of a few repetitions (the machine is shared); ratios are taken within one run.
 """
@@ -33,11 +33,11 @@ sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from cotwin.cosim.observers import CSVWriter, Observer  # noqa: E402
-from cotwin.twin.build import build  # noqa: E402
-from cotwin.twin.run import load, run_twin  # noqa: E402
-from cotwin.twin.system import MAPPING  # noqa: E402
-from cotwin.twin.sweep import grid, run_sweep, summary  # noqa: E402
-from cotwin.twin.whatif import predict  # noqa: E402
+from cotwin.twin.assembly.build import build  # noqa: E402
+from cotwin.twin.assembly.run import load, run_twin  # noqa: E402
+from cotwin.twin.assembly.system import MAPPING  # noqa: E402
+from cotwin.twin.analysis.sweep import grid, run_sweep, summary  # noqa: E402
+from cotwin.twin.services.whatif import predict  # noqa: E402
 from figures import figure, goal  # noqa: E402
 from twin import END, PhysicsClock, Stopwatch, physics_alone  # noqa: E402
 

@@ -27,7 +27,7 @@ MAKE = r"""
 import json, sys, random
 import sqlalchemy as sa
 sys.path.insert(0, sys.argv[3])
-from cotwin.twin.history import HistoryRecorder, samples
+from cotwin.twin.services.history import HistoryRecorder, samples
 url, n = sys.argv[1], int(sys.argv[2])
 columns = json.loads(sys.argv[4])
 r = HistoryRecorder(url, "bench.toml", "twin", 0.01, "jacobi", {"pt": columns, "dt": columns})
@@ -57,9 +57,9 @@ def peak():
             return int(line.split()[1]) / 1024
 
 url, run, how = sys.argv[1], int(sys.argv[2]), sys.argv[3]
-from cotwin.twin.dashboard import Dashboard
-from cotwin.twin.dashboard.app import thin
-from cotwin.twin.history import read_run
+from cotwin.twin.services.dashboard import Dashboard
+from cotwin.twin.services.dashboard.app import thin
+from cotwin.twin.services.history import read_run
 base = peak()
 seconds = []
 if how == "peer":

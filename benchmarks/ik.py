@@ -33,7 +33,7 @@ from cotwin.pmodel.tree import build_tree, transform  # noqa: E402
 from cotwin.pmodel.xmltext import quat  # noqa: E402
 from cotwin.robosim.check import load_checked  # noqa: E402
 from cotwin.robosim.pmodel_elements import Mapping  # noqa: E402
-from cotwin.twin.calibration import Calibration  # noqa: E402
+from cotwin.twin.assembly.calibration import Calibration  # noqa: E402
 
 POSITION_TOL, ANGLE_TOL = 1e-4, 1e-3  # m, rad: success
 STARTS = 20

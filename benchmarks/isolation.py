@@ -33,8 +33,8 @@ from cotwin.cosim.execution import Execution  # noqa: E402
 from cotwin.cosim.isolated import IsolatedUnit, receive, send  # noqa: E402
 from cotwin.cosim.system import System  # noqa: E402
 from cotwin.cosim.units import FMUUnit  # noqa: E402
-from cotwin.twin.build import dmodel_fmu  # noqa: E402
-from cotwin.twin.run import dt_endpoint, load  # noqa: E402
+from cotwin.twin.assembly.build import dmodel_fmu  # noqa: E402
+from cotwin.twin.assembly.run import dt_endpoint, load  # noqa: E402
 
 VALUES = struct.Struct("<12d")
 ROUNDS = 5_000

@@ -24,9 +24,9 @@ sys.path.insert(0, str(ROOT / "src"))
 from cotwin.mapping.amqp import connect  # noqa: E402
 from cotwin.mapping.endpoint import SimulatedEndpoint  # noqa: E402
 from cotwin.pmodel.simulator import PlatformSimulator  # noqa: E402
-from cotwin.twin.rabbitmq import READY  # noqa: E402
-from cotwin.twin.run import load, run_twin  # noqa: E402
-from cotwin.twin.runtime import LiveTwin  # noqa: E402
+from cotwin.twin.assembly.rabbitmq import READY  # noqa: E402
+from cotwin.twin.assembly.run import load, run_twin  # noqa: E402
+from cotwin.twin.live.runtime import LiveTwin  # noqa: E402
 from figures import figure, goal, shown, spread  # noqa: E402
 
 

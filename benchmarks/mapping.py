@@ -13,7 +13,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from cotwin.mapping.endpoint import SimulatedEndpoint  # noqa: E402
 from cotwin.mapping.runtime import Mapping  # noqa: E402
-from cotwin.twin.run import load  # noqa: E402
+from cotwin.twin.assembly.run import load  # noqa: E402
 from cotwin.pmodel.simulator import PlatformSimulator  # noqa: E402
 from figures import figure  # noqa: E402
 

@@ -21,8 +21,8 @@ from cotwin.mapping.opcua import OPCUAEndpoint  # noqa: E402
 from cotwin.mapping.perturbed import PerturbedEndpoint  # noqa: E402
 from cotwin.pmodel.perturbation import Perturbation  # noqa: E402
 from cotwin.pmodel.simulator import PlatformSimulator  # noqa: E402
-from cotwin.twin.plant import Plant  # noqa: E402
-from cotwin.twin.run import load  # noqa: E402
+from cotwin.twin.services.plant import Plant  # noqa: E402
+from cotwin.twin.assembly.run import load  # noqa: E402
 from figures import figure  # noqa: E402
 
 STEPS = 400

@@ -17,8 +17,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from cotwin.pmodel.world import load_world  # noqa: E402
-from cotwin.twin.run import load  # noqa: E402
-from cotwin.twin.walks import walks  # noqa: E402
+from cotwin.twin.assembly.run import load  # noqa: E402
+from cotwin.twin.analysis.walks import walks  # noqa: E402
 from figures import figure  # noqa: E402
 
 EXAMPLE = ROOT / "examples" / "turtlebot"

@@ -30,8 +30,8 @@ from cotwin.cosim.libcosim import libcosim_execution  # noqa: E402
 from cotwin.cosim.multimodel import execution_for, read_multimodel  # noqa: E402
 from cotwin.cosim.observers import Observer  # noqa: E402
 from cotwin.pmodel.simulator import PlatformSimulator  # noqa: E402
-from cotwin.twin.build import build  # noqa: E402
-from cotwin.twin.run import load, run_twin  # noqa: E402
+from cotwin.twin.assembly.build import build  # noqa: E402
+from cotwin.twin.assembly.run import load, run_twin  # noqa: E402
 from figures import figure, goal  # noqa: E402
 from fmicalls import FMICallsOnly  # noqa: E402
 

@@ -15,9 +15,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from cotwin.twin.run import load, run_twin  # noqa: E402
-from cotwin.twin.sweep import grid, run_sweep  # noqa: E402
-from cotwin.twin.whatif import predict  # noqa: E402
+from cotwin.twin.assembly.run import load, run_twin  # noqa: E402
+from cotwin.twin.analysis.sweep import grid, run_sweep  # noqa: E402
+from cotwin.twin.services.whatif import predict  # noqa: E402
 from figures import figure  # noqa: E402
 
 PROJECT = ROOT / "examples" / "ur5e" / "cotwin.toml"

@@ -141,7 +141,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
 
 
 # ---- each d-model compiled once per session -----------------------------------------------------------
-# Most tests run a twin into a fresh folder, so cotwin's per-folder build record (cotwin.twin.build) finds
+# Most tests run a twin into a fresh folder, so cotwin's per-folder build record (cotwin.twin.assembly.build) finds
 # nothing and `cc` compiles the same generated C again: the same few models dozens of times a run. Here the
 # default compiler's output is kept for the session, keyed by a digest of the exact sources and module name,
 # and a repeated compile copies the binary instead. Only `cc` itself is memoised: a test that names another

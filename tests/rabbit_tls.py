@@ -13,7 +13,7 @@ import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cotwin.twin.broker_access import Role
+from cotwin.twin.assembly.broker_access import Role
 
 
 def broker_up(port: int = 5672) -> bool:

@@ -12,7 +12,7 @@ import pytest
 from cotwin.diagnostics import CotwinError
 from cotwin.mapping.broker import BrokerEndpoint, RobotServer, validate_request
 from cotwin.mapping.endpoint import SimulatedEndpoint
-from cotwin.twin.run import load, run_twin
+from cotwin.twin.assembly.run import load, run_twin
 from cotwin.pmodel.simulator import PlatformSimulator
 
 

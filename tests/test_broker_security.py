@@ -29,9 +29,9 @@ from cotwin.mapping.broker import BrokerEndpoint, RobotServer
 from cotwin.mapping.endpoint import SimulatedEndpoint
 from cotwin.mapping.robot_protocol import OPS, reply_headers, request_headers
 from cotwin.pmodel.simulator import PlatformSimulator
-from cotwin.twin.broker_access import rabbitmqctl_script, roles
+from cotwin.twin.assembly.broker_access import rabbitmqctl_script, roles
 from cotwin.twin.project import load_project
-from cotwin.twin.run import load, run_twin
+from cotwin.twin.assembly.run import load, run_twin
 from rabbit_tls import PKI, TLSBroker, close_connection, tools_missing
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -190,7 +190,7 @@ def _refused(action) -> int:
 
 def test_each_role_can_do_its_job_and_nothing_else(tls, clean_env):
     from cotwin.twin.project import RabbitMQSettings
-    from cotwin.twin.rabbitmq import EventPublisher, RabbitMQBridge
+    from cotwin.twin.assembly.rabbitmq import EventPublisher, RabbitMQBridge
 
     exchange = "fmi_digital_twin_dt"
     for key, value in tls.env("twin").items():
@@ -243,7 +243,7 @@ def _confirmed(connection):
 
 
 def test_what_if_requests_come_only_from_the_whatif_role_and_none_can_forge_alarms(tls, clean_env, tmp_path):
-    from cotwin.twin.whatif import WhatIfService
+    from cotwin.twin.services.whatif import WhatIfService
 
     for key, value in tls.env("twin").items():
         clean_env.setenv(key, value)

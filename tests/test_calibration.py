@@ -15,8 +15,8 @@ from cotwin.mapping.profile import IDENTITY, read_profile
 from cotwin.mapping.rtde import read_arm_log, write_rtde
 from cotwin.pmodel import ik
 from cotwin.pmodel.cell import CellGeometry, matrix_rpy
-from cotwin.twin.calibration import Calibration, calibrate, check, plan_moves, project_twin
-from cotwin.twin.run import load
+from cotwin.twin.assembly.calibration import Calibration, calibrate, check, plan_moves, project_twin
+from cotwin.twin.assembly.run import load
 
 # The calibrated DT against the real UR5e: within the 0.002 rad cotwin claims (README) while moving, and
 # within 0.001 rad at rest, where only the servo's settling and RTDE's rounding are left (the fit reaches
@@ -197,7 +197,7 @@ def test_a_log_of_other_moves_than_the_plan_is_refused(parts, tmp_path):
 
 
 def test_a_plan_whose_targets_lie_on_a_line_cannot_fix_the_plates_pose(example):
-    from cotwin.twin.calibration import fit_geometry
+    from cotwin.twin.assembly.calibration import fit_geometry
 
     with pytest.raises(CotwinError, match="three commanded targets not on one line"):
         fit_geometry(example.models.tree, np.array([[0.1, 0.2, 0.0], [0.2, 0.2, 0.0], [0.3, 0.2, 0.0]]),
@@ -235,7 +235,7 @@ def _calibrated_project(tmp_path, calibration_text=None):
 
 
 def test_the_calibrated_example_project_moves_the_tool_onto_the_calibrated_holes(tmp_path):
-    from cotwin.twin.run import dt_endpoint, run_twin
+    from cotwin.twin.assembly.run import dt_endpoint, run_twin
 
     system = load(_calibrated_project(tmp_path))
     calibration = system.models.calibration

@@ -16,8 +16,8 @@ from datetime import datetime, timedelta, timezone
 
 import pytest
 
-from cotwin.twin.rabbitmq import CommandStream, Received, port_arguments, port_types
-from cotwin.twin.run import load, run_twin
+from cotwin.twin.assembly.rabbitmq import CommandStream, Received, port_arguments, port_types
+from cotwin.twin.assembly.run import load, run_twin
 
 MOVE = "moveDiscreteCommand"
 ARGS = ("MovementArgs_target_X", "MovementArgs_target_Y", "MovementArgs_target_Z")
@@ -85,7 +85,7 @@ def test_a_command_takes_its_arguments_from_its_own_message(live):
 def test_commands_due_in_one_step_are_applied_in_the_next_steps_in_order_and_a_full_queue_refuses(live, monkeypatch):
     """Two stamped in the same millisecond and three more in one step: each applied in a step of its own,
     in order (issue 19 item 9: only the newest per step was taken, equal stamps dropped as not newer)."""
-    import cotwin.twin.rabbitmq as rabbitmq
+    import cotwin.twin.assembly.rabbitmq as rabbitmq
 
     stream, feed = stream_of(live)
     for k, dt in enumerate((1.0, 1.0, 1.02, 1.03, 1.04)):
@@ -115,7 +115,7 @@ def test_commands_due_in_one_step_are_applied_in_the_next_steps_in_order_and_a_f
 def test_a_plans_commands_due_in_one_step_are_all_applied_and_completed(live, tmp_path, algorithm):
     """A plan whose close, open and move fall in one step of 0.5 s: one per step, in order, none lost (the
     d-model may still be closing the gripper when the open comes, and then ignores that one)."""
-    from cotwin.twin.scenario import Command
+    from cotwin.twin.assembly.scenario import Command
 
     plan = [Command(1.0, (("closeGripperCommand", True),), "close"), Command(1.1, (("openGripperCommand", True),), "open"),
             Command(1.2, ((MOVE, True), *zip(ARGS, (0, 23, 1))), "move")]
@@ -222,8 +222,8 @@ def test_five_commands_posted_back_to_back_from_the_page_are_each_applied_once_a
     that applied it: five different steps, in a row, each command once."""
     from cotwin.mapping.endpoint import SimulatedEndpoint
     from cotwin.pmodel.simulator import PlatformSimulator
-    from cotwin.twin.dashboard.app import Dashboard
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.services.dashboard.app import Dashboard
+    from cotwin.twin.live.runtime import LiveTwin
 
     from conftest import EXAMPLES
 

@@ -13,7 +13,7 @@ from cotwin.mapping.motion import Segment
 from cotwin.mapping.perturbed import PerturbedEndpoint
 from cotwin.pmodel.perturbation import Perturbation
 from cotwin.twin.project import load_project
-from cotwin.twin.run import load
+from cotwin.twin.assembly.run import load
 
 pytest.importorskip("asyncua")
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "ur5e"
@@ -63,9 +63,9 @@ def against_plant(tmp_path_factory):
     """One 8 s live twin per resync setting, each against its own perturbed plant over OPC UA (payload
     estimated in both): resync -> (result, history rows of corrections)."""
     from cotwin.mapping.opcua import OPCUAEndpoint
-    from cotwin.twin.history import read_run
-    from cotwin.twin.plant import Plant
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.services.history import read_run
+    from cotwin.twin.services.plant import Plant
+    from cotwin.twin.live.runtime import LiveTwin
 
     out = {}
     for resync in ("never", "on-alarm"):
@@ -114,7 +114,7 @@ def test_the_payload_is_estimated_from_the_plants_torques_and_applied_to_the_dt(
     assert abs(payload["applied"] - payload["estimate"]) <= 2 * payload["std"] + 1e-9
     estimator = twin.convergence.estimator  # the DT's payload body carries what was applied
     assert estimator.model.body_mass[estimator.body] == pytest.approx(payload["applied"])
-    from cotwin.twin.convergence import summary
+    from cotwin.twin.assembly.convergence import summary
 
     assert f"payload {payload['estimate']:.4g} +- " in summary(result.convergence)  # what `cotwin twin` prints
     applied = [r for r in rows if r["kind"] == "payload"]
@@ -122,8 +122,8 @@ def test_the_payload_is_estimated_from_the_plants_torques_and_applied_to_the_dt(
 
 
 def test_every_n_steps_resyncs_on_schedule_and_marks_the_page(tmp_path):
-    from cotwin.twin.dashboard.feed import DashboardFeed
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.services.dashboard.feed import DashboardFeed
+    from cotwin.twin.live.runtime import LiveTwin
 
     system = load(project(tmp_path, 'resync = "every 10 steps"', end=3.0))
     pt = PerturbedEndpoint.build(system.models.tree, system.models.scene, PLANT)
@@ -143,9 +143,9 @@ def test_the_page_marks_each_resync_on_its_plot(tmp_path):
         pytest.skip(f"no Debian chromium at {chromium}")
     from playwright.sync_api import sync_playwright
 
-    from cotwin.twin.dashboard import Dashboard
-    from cotwin.twin.history import database_url
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.services.dashboard import Dashboard
+    from cotwin.twin.services.history import database_url
+    from cotwin.twin.live.runtime import LiveTwin
 
     system = load(project(tmp_path, 'resync = "every 10 steps"', end=2.0))
     pt = PerturbedEndpoint.build(system.models.tree, system.models.scene, PLANT)
@@ -177,7 +177,7 @@ def test_a_saved_state_carries_the_payload_applied_to_the_dt(tmp_path):
     """A what-if fork of a DT that was given an estimated payload restores that payload with its state."""
     from cotwin.cosim.state import pack, unpack
     from cotwin.mapping.endpoint import SimulatedEndpoint
-    from cotwin.twin.convergence import PayloadEstimator, effort_sensors, payload_simulator
+    from cotwin.twin.assembly.convergence import PayloadEstimator, effort_sensors, payload_simulator
 
     system = load(project(tmp_path, 'estimate = "payload"'))
     tree, scene = system.models.tree, system.models.scene
@@ -196,7 +196,7 @@ def test_a_saved_state_carries_the_payload_applied_to_the_dt(tmp_path):
 
 
 def test_estimating_the_payload_from_a_replayed_log_is_refused_at_its_key(tmp_path):
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.live.runtime import LiveTwin
 
     log = EXAMPLE.parents[1].parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"
     if not log.is_file():
@@ -214,7 +214,7 @@ def test_estimating_the_payload_from_a_replayed_log_is_refused_at_its_key(tmp_pa
 def test_a_brick_both_twins_carry_is_not_taken_for_the_payload(tmp_path):
     """Picking a brick up: its weight is in the PT's torques and in the DT's, so it cancels (the DT's own
     torques are the reference); only the payload the DT does not know is estimated."""
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.live.runtime import LiveTwin
 
     path = tmp_path / "cotwin.toml"
     path.write_text(f'[models]\ndmodel = "{EXAMPLE / "arm.rst"}"\npmodel = "{EXAMPLE / "ur5e.pm"}"\n'
@@ -231,7 +231,7 @@ def test_a_brick_both_twins_carry_is_not_taken_for_the_payload(tmp_path):
 
 
 def test_a_dt_behind_the_broker_cannot_be_corrected(tmp_path):
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.live.runtime import LiveTwin
 
     path = project(tmp_path, 'resync = "on-alarm"')
     path.write_text(path.read_text().replace("[cosim]", '[platform]\nendpoint = "broker"\n[cosim]'))

@@ -23,13 +23,13 @@ import pytest
 from cotwin.mapping.endpoint import SimulatedEndpoint
 from cotwin.pmodel.simulator import PlatformSimulator
 from cotwin.pmodel.tree import axis_angle
-from cotwin.twin.dashboard import Dashboard, parse_address
-from cotwin.twin.dashboard.describe import describe, machine_drawing, robot_drawing
-from cotwin.twin.dashboard.feed import Ring
-from cotwin.twin.dashboard.layout import Box, layered
-from cotwin.twin.history import database_url
-from cotwin.twin.run import load, run_twin
-from cotwin.twin.runtime import LiveTwin
+from cotwin.twin.services.dashboard import Dashboard, parse_address
+from cotwin.twin.services.dashboard.describe import describe, machine_drawing, robot_drawing
+from cotwin.twin.services.dashboard.feed import Ring
+from cotwin.twin.services.dashboard.layout import Box, layered
+from cotwin.twin.services.history import database_url
+from cotwin.twin.assembly.run import load, run_twin
+from cotwin.twin.live.runtime import LiveTwin
 
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM = Path("/usr/bin/chromium")

@@ -29,8 +29,8 @@ from pathlib import Path
 import pytest
 
 from cotwin.diagnostics import CotwinError
-from cotwin.twin.dashboard import Dashboard
-from cotwin.twin.dashboard.access import Person, hash_password, hash_token, new_token, read_access, write_access
+from cotwin.twin.services.dashboard import Dashboard
+from cotwin.twin.services.dashboard.access import Person, hash_password, hash_token, new_token, read_access, write_access
 
 ROOT = Path(__file__).resolve().parents[1]
 BROKER = "amqp://127.0.0.1:5672/%2F"
@@ -146,7 +146,7 @@ def access(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def live(broker):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     system = load(ROOT / "examples" / "ur5e" / "live.toml")
     name = f"cotwin_access_{uuid.uuid4().hex[:8]}"
@@ -156,7 +156,7 @@ def live(broker):
 
 
 def _history(folder: Path) -> str:
-    from cotwin.twin.history import HistoryRecorder
+    from cotwin.twin.services.history import HistoryRecorder
 
     url = f"sqlite:///{folder / 'history.sqlite'}"
     recorder = HistoryRecorder(url, "p.toml", "twin", 0.1, "jacobi", {"dt": ["{mapping}.mapping.q0"]}, batch_seconds=0.05)
@@ -296,7 +296,7 @@ def test_logins_open_sessions_that_end_when_the_access_file_drops_the_person(awa
             time.sleep(0.2)
         assert call("/api/status") == 401
         # guessing: throttled per address after MAX_FAILURES failures, each logged
-        from cotwin.twin.dashboard.access import MAX_FAILURES
+        from cotwin.twin.services.dashboard.access import MAX_FAILURES
 
         codes = [call("/login", {"name": "alice", "secret": f"guess {k}"}) for k in range(MAX_FAILURES + 2)]
         assert codes[-1] == 429 and codes.count(401) <= MAX_FAILURES
@@ -339,7 +339,7 @@ def test_a_browser_logs_in_as_operator_and_commands_the_twin(away, access, live,
     from playwright.sync_api import sync_playwright
 
     from cotwin.mapping.amqp import connect
-    from cotwin.twin.rabbitmq import READY
+    from cotwin.twin.assembly.rabbitmq import READY
 
     path, tokens = access
     exchange = live.spec.rabbitmq.exchange

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from cotwin.twin.dashboard import Dashboard
-from cotwin.twin.run import load
+from cotwin.twin.services.dashboard import Dashboard
+from cotwin.twin.assembly.run import load
 
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM = Path("/usr/bin/chromium")

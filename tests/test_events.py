@@ -8,8 +8,8 @@ import csv
 
 import pytest
 
-from cotwin.twin.run import load, run_twin
-from cotwin.twin.scenario import Command
+from cotwin.twin.assembly.run import load, run_twin
+from cotwin.twin.assembly.scenario import Command
 from test_twin_e2e import built, twin  # noqa: F401 - the example twin and its built FMU, shared fixtures
 
 ALGORITHMS = ["jacobi", "gauss-seidel"]

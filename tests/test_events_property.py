@@ -15,9 +15,9 @@ from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 from cotwin.cosim.observers import Observer
-from cotwin.twin.run import run_twin
-from cotwin.twin.scenario import Command
-from cotwin.twin.whatif import predict
+from cotwin.twin.assembly.run import run_twin
+from cotwin.twin.assembly.scenario import Command
+from cotwin.twin.services.whatif import predict
 from test_twin_e2e import built, twin  # noqa: F401 - the example twin and its built FMU, shared fixtures
 
 STEP = 0.1

@@ -23,7 +23,7 @@ from cotwin.pmodel.simulator import PlatformSimulator
 def twin():
     from conftest import EXAMPLES
 
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     return load(EXAMPLES / "ur5e" / "cotwin.toml")
 

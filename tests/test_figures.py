@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from cotwin.plot import draw
-from cotwin.twin.run import figure_panels, load, monitored_units
+from cotwin.twin.assembly.run import figure_panels, load, monitored_units
 
 ROOT = Path(__file__).resolve().parents[1]
 

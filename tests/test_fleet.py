@@ -58,9 +58,9 @@ def fleet_file(tmp: Path, twins: list[dict], fleet: str = "checkpoint_every = 5\
 def test_fleet_of_8_restarts_a_failed_twin_from_its_saved_state(tmp_path, ray_local):
     """One twin's process is killed mid-run (by PID): the supervisor says so, restarts it from its last saved
     state (not from 0) and it ends where an uninterrupted twin of the same project ends; the 7 others finish."""
-    from cotwin.twin.fleet.record import fleet_events
-    from cotwin.twin.fleet.spec import read_fleet
-    from cotwin.twin.fleet.supervisor import Fleet
+    from cotwin.twin.analysis.fleet.record import fleet_events
+    from cotwin.twin.analysis.fleet.spec import read_fleet
+    from cotwin.twin.analysis.fleet.supervisor import Fleet
 
     log = write_log(tmp_path / "run.csv")
     twins = [{"name": f"arm-{k}", "project": str(PROJECT), "pt_log": str(log), "end": 3.0} for k in range(7)]
@@ -104,9 +104,9 @@ def test_fleet_of_8_restarts_a_failed_twin_from_its_saved_state(tmp_path, ray_lo
 
 def test_overview_page_answers_with_each_twins_state(tmp_path):
     """The page (HTML and JSON) names every twin with its state while the fleet runs; a foreign Host is refused."""
-    from cotwin.twin.fleet.page import FleetPage
-    from cotwin.twin.fleet.spec import read_fleet
-    from cotwin.twin.fleet.supervisor import Fleet
+    from cotwin.twin.analysis.fleet.page import FleetPage
+    from cotwin.twin.analysis.fleet.spec import read_fleet
+    from cotwin.twin.analysis.fleet.supervisor import Fleet
 
     log = write_log(tmp_path / "run.csv")
     spec = read_fleet(fleet_file(tmp_path, [
@@ -148,7 +148,7 @@ def test_overview_page_answers_with_each_twins_state(tmp_path):
     ({"name": "a", "project": str(PROJECT), "pt_log": "LOG"}, "max_restarts = -1\n", (2, 1), "max_restarts"),
 ])
 def test_bad_fleet_files_give_located_errors(tmp_path, entry, fleet, where, message):
-    from cotwin.twin.fleet.spec import read_fleet
+    from cotwin.twin.analysis.fleet.spec import read_fleet
 
     log = write_log(tmp_path / "run.csv", span=2.0)
     entry = {k: (str(log) if v == "LOG" else v) for k, v in entry.items()}
@@ -161,7 +161,7 @@ def test_bad_fleet_files_give_located_errors(tmp_path, entry, fleet, where, mess
 
 
 def test_a_twin_named_twice_and_a_projects_own_problems_are_located(tmp_path):
-    from cotwin.twin.fleet.spec import read_fleet
+    from cotwin.twin.analysis.fleet.spec import read_fleet
 
     log = write_log(tmp_path / "run.csv", span=2.0)
     broken = tmp_path / "broken.toml"
@@ -183,8 +183,8 @@ def test_each_twins_alarms_go_to_the_broker_under_its_own_name(tmp_path, broker)
     import uuid
 
     from cotwin.mapping.amqp import connect, declare_exchange
-    from cotwin.twin.fleet.spec import read_fleet
-    from cotwin.twin.fleet.supervisor import Fleet
+    from cotwin.twin.analysis.fleet.spec import read_fleet
+    from cotwin.twin.analysis.fleet.supervisor import Fleet
 
     url = "amqp://127.0.0.1:5672/%2F"
     tag = uuid.uuid4().hex[:8]
@@ -235,8 +235,8 @@ def test_a_twin_whose_plant_is_killed_is_restarted_once_the_plant_is_back(tmp_pa
     import subprocess
     import sys
 
-    from cotwin.twin.fleet.spec import read_fleet
-    from cotwin.twin.fleet.supervisor import Fleet
+    from cotwin.twin.analysis.fleet.spec import read_fleet
+    from cotwin.twin.analysis.fleet.supervisor import Fleet
 
     pytest.importorskip("asyncua")
     monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))  # the plants' operator credentials, read by the twin
@@ -291,7 +291,7 @@ def test_a_twin_whose_plant_is_killed_is_restarted_once_the_plant_is_back(tmp_pa
 def test_without_ray_the_fleet_names_the_extra_and_the_way_without_it(monkeypatch):
     import sys
 
-    from cotwin.twin.fleet.supervisor import RayHosts
+    from cotwin.twin.analysis.fleet.supervisor import RayHosts
 
     monkeypatch.setitem(sys.modules, "ray", None)  # as where the ray extra is not installed
     with pytest.raises(CotwinError, match=r"pip install 'cotwin\[ray\]'.*--ray off"):
@@ -304,10 +304,10 @@ def test_a_fleet_records_into_one_postgresql_store(tmp_path, postgres_server):
 
     import psycopg
 
-    from cotwin.twin.fleet.record import fleet_events
-    from cotwin.twin.fleet.spec import read_fleet
-    from cotwin.twin.fleet.supervisor import Fleet
-    from cotwin.twin.history import database_url, list_runs
+    from cotwin.twin.analysis.fleet.record import fleet_events
+    from cotwin.twin.analysis.fleet.spec import read_fleet
+    from cotwin.twin.analysis.fleet.supervisor import Fleet
+    from cotwin.twin.services.history import database_url, list_runs
 
     name = f"cotwin_test_{uuid.uuid4().hex[:8]}"
     with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
@@ -333,7 +333,7 @@ def test_every_project_problem_of_a_fleet_names_its_twin_and_a_duplicate_entry_i
     """A project's problems are located in the project file and each says which twin (and which entry of
     the fleet file) it belongs to, whatever order they are printed in; an entry with a wrong key or a name
     given twice still has its project checked (fixing the name must not reveal a new round of errors)."""
-    from cotwin.twin.fleet.spec import read_fleet
+    from cotwin.twin.analysis.fleet.spec import read_fleet
 
     log = write_log(tmp_path / "run.csv", span=2.0)
     broken = tmp_path / "broken.toml"
@@ -354,8 +354,8 @@ def test_every_project_problem_of_a_fleet_names_its_twin_and_a_duplicate_entry_i
 def test_the_models_problems_of_every_project_of_a_fleet_come_together_naming_their_twins(tmp_path):
     """Problems found once the models are read ([cosim] log naming no variable) are reported for every
     project at once, each naming the twins of its project; nothing is run."""
-    from cotwin.twin.fleet.spec import read_fleet
-    from cotwin.twin.fleet.supervisor import Fleet
+    from cotwin.twin.analysis.fleet.spec import read_fleet
+    from cotwin.twin.analysis.fleet.supervisor import Fleet
 
     import shutil
 

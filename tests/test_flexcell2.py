@@ -14,7 +14,7 @@ import pytest
 
 from cotwin.cosim.observers import Observer
 from cotwin.diagnostics import CotwinError
-from cotwin.twin.cell import CellSystem, read_cell_plan, run_cell
+from cotwin.twin.assembly.cell import CellSystem, read_cell_plan, run_cell
 from cotwin.twin.project import load_project
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -163,7 +163,7 @@ def test_the_generic_core_names_neither_robot_nor_the_cell():
 def test_the_cell_twin_runs_pt_and_dt_with_deviation_and_history_per_robot(tmp_path):
     import sqlite3
 
-    from cotwin.twin.cell_live import run_cell_twin
+    from cotwin.twin.live.cell_live import run_cell_twin
 
     cell = CellSystem(load_project(CELL / "cotwin.toml"))
     result = run_cell_twin(cell, tmp_path)
@@ -185,7 +185,7 @@ def test_the_cell_twin_runs_pt_and_dt_with_deviation_and_history_per_robot(tmp_p
 
 
 def test_a_heavier_plant_raises_alarms_naming_the_robot(tmp_path):
-    from cotwin.twin.cell_live import run_cell_twin
+    from cotwin.twin.live.cell_live import run_cell_twin
 
     spec = load_project(CELL / "cotwin.toml").with_overrides(plant_payload=3.0, deviation_absolute=0.002, end=8.0)
     result = run_cell_twin(CellSystem(spec), tmp_path)
@@ -217,9 +217,9 @@ def test_broker_commands_are_routed_per_robot(tmp_path, broker):
     import threading
     import uuid
 
-    from cotwin.twin.cell import routed
-    from cotwin.twin.publisher import Publisher, idle_values
-    from cotwin.twin.rabbitmq import port_types
+    from cotwin.twin.assembly.cell import routed
+    from cotwin.twin.services.publisher import Publisher, idle_values
+    from cotwin.twin.assembly.rabbitmq import port_types
 
     exchange = f"cotwin.test.cell.{uuid.uuid4().hex[:8]}"
     text = (CELL / "collide.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/")
@@ -257,7 +257,7 @@ def test_broker_commands_are_routed_per_robot(tmp_path, broker):
 
 
 def test_commands_of_one_robot_refuse_a_cell_at_its_robots():
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     with pytest.raises(CotwinError) as err:
         load(CELL / "cotwin.toml")
@@ -267,7 +267,7 @@ def test_commands_of_one_robot_refuse_a_cell_at_its_robots():
 
 
 def test_the_cell_plants_latency_and_noise_reach_each_robot(tmp_path):
-    from cotwin.twin.cell_live import run_cell_twin
+    from cotwin.twin.live.cell_live import run_cell_twin
 
     spec = load_project(CELL / "cotwin.toml").with_overrides(plant_latency_ms=300.0, plant_noise={"position": 0.001},
                                                              plant_payload=0.0, plant_friction=0.0, end=6.0)
@@ -303,8 +303,8 @@ def _get(url: str):
 def test_the_page_shows_both_robots_their_variables_and_both_dmodels(tmp_path):
     import json
 
-    from cotwin.twin.cell_live import run_cell_twin
-    from cotwin.twin.dashboard import Dashboard
+    from cotwin.twin.live.cell_live import run_cell_twin
+    from cotwin.twin.services.dashboard import Dashboard
 
     cell = CellSystem(load_project(CELL / "collide.toml"))
     with Dashboard(cell, port=0, mode="run") as dash:
@@ -354,7 +354,7 @@ def test_the_cells_artefacts_run_in_the_multimodel_master_as_cotwin_run_does(tmp
     import subprocess
     import sys
 
-    from cotwin.twin.build import build
+    from cotwin.twin.assembly.build import build
 
     cell = CellSystem(load_project(CELL / "collide.toml"))
     written = build(cell, tmp_path / "build")

@@ -26,9 +26,9 @@ from cotwin.dmodel.interpreter import Interpreter
 from cotwin.dmodel.program import build_program
 from cotwin.cosim.driver import FMUDriver
 from cotwin.robosim.check import load_checked
-from cotwin.twin.clocked import servo_delays
-from cotwin.twin.run import dt_endpoint, load, run_twin
-from cotwin.twin.scenario import Command
+from cotwin.twin.assembly.clocked import servo_delays
+from cotwin.twin.assembly.run import dt_endpoint, load, run_twin
+from cotwin.twin.assembly.scenario import Command
 
 MOVE = {"target_X": 3, "target_Y": 20, "target_Z": 2}
 # a sequence that is not the example's: a move, its answers, a gripper command refused mid-move, then a close
@@ -191,7 +191,7 @@ def test_an_fmi3_twin_forks_from_its_saved_state_bit_for_bit(tmp_path):
     system = _short_plan(load(EXAMPLES / "ur5e" / "cotwin.toml"))
     fmu = tmp_path / "dmodel3.fmu"
     build_fmu3(system.models.program, fmu)
-    from cotwin.twin.clocked import clocked_system
+    from cotwin.twin.assembly.clocked import clocked_system
 
     def execution():
         return Execution(clocked_system(system, fmu, dt_endpoint(system), 0.1), algorithm("jacobi"), 0.1)
@@ -216,7 +216,7 @@ def test_simulate_runs_an_fmi3_dmodel_beside_fmi2_units(tmp_path):
     """`cotwin simulate` on the built multimodel with the d-model swapped for its FMI 3.0 FMU: the master loads
     each FMU by its version; the FMI 2.0 controller's command reaches the clocked d-model one step later (its
     output changes only at communication points), and the robot in the same step as the d-model's call."""
-    from cotwin.twin.build import build
+    from cotwin.twin.assembly.build import build
 
     out = tmp_path / "twin"
     build(load(EXAMPLES / "ur5e" / "cotwin.toml"), out)

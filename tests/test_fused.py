@@ -12,9 +12,9 @@ import pytest
 from cotwin.cosim.algorithm import Jacobi
 from cotwin.cosim.execution import Execution
 from cotwin.cosim.fused import FusedLoop, applicable
-from cotwin.twin.build import build
-from cotwin.twin.run import load, run_twin
-from cotwin.twin.scenario import Command
+from cotwin.twin.assembly.build import build
+from cotwin.twin.assembly.run import load, run_twin
+from cotwin.twin.assembly.scenario import Command
 
 ALGORITHMS = ["jacobi", "gauss-seidel"]
 
@@ -160,7 +160,7 @@ def test_a_what_if_in_the_fused_loop_predicts_what_the_step_by_step_loop_predict
     """From the DT's state at the end of the paper's run: the same outcomes, states, trajectory, collisions."""
     from conftest import FUZZ_SEED
 
-    from cotwin.twin.whatif import predict
+    from cotwin.twin.services.whatif import predict
 
     twins, built_dir = built
     twin = twins["cotwin.toml"]
@@ -183,8 +183,8 @@ def test_a_what_if_in_the_fused_loop_predicts_what_the_step_by_step_loop_predict
 def test_forks_reused_for_plan_after_plan_predict_what_a_fresh_fork_predicts(built, tmp_path, from_state):
     """A sweep's what-ifs on one fork restored plan after plan: each prediction is `predict`'s, in any order,
     reachable holes and not, from the initial state and from the end of the paper's run."""
-    from cotwin.twin.sweep import grid
-    from cotwin.twin.whatif import Forks, predict
+    from cotwin.twin.analysis.sweep import grid
+    from cotwin.twin.services.whatif import Forks, predict
 
     twins, built_dir = built
     twin = twins["cotwin.toml"]
@@ -206,12 +206,12 @@ def test_forks_reused_for_plan_after_plan_predict_what_a_fresh_fork_predicts(bui
 
 
 def test_contacts_read_from_the_arrays_are_those_read_contact_by_contact(built):
-    """The what-if's contact check (cotwin.twin.whatif._Contacts) on random arm poses, many into the table or
+    """The what-if's contact check (cotwin.twin.services.whatif._Contacts) on random arm poses, many into the table or
     the plate: the same contacts, first times and depths as reading MuJoCo's contacts one by one."""
     import numpy as np
 
-    from cotwin.twin.run import simulated_endpoint
-    from cotwin.twin.whatif import _Contacts
+    from cotwin.twin.assembly.run import simulated_endpoint
+    from cotwin.twin.services.whatif import _Contacts
 
     twins, _ = built
     twin = twins["cotwin.toml"]
@@ -241,7 +241,7 @@ def test_set_points_written_per_control_period_are_those_of_the_segment(built, p
     import numpy as np
 
     from cotwin.mapping.motion import JointMove, Quintic
-    from cotwin.twin.run import simulated_endpoint
+    from cotwin.twin.assembly.run import simulated_endpoint
 
     twins, _ = built
     twin = twins["cotwin.toml"]
@@ -270,7 +270,7 @@ def test_the_native_control_loop_moves_the_robot_as_the_python_loop_does(built, 
 
     import cotwin.mapping.native as native
     from cotwin.mapping.motion import JointMove, Quintic
-    from cotwin.twin.run import simulated_endpoint
+    from cotwin.twin.assembly.run import simulated_endpoint
 
     real = native.advance_function()
     assert real is not None  # a C compiler is here (the d-model needs one too)

@@ -17,8 +17,8 @@ from hypothesis import strategies as st
 from cotwin.cosim.multimodel import read_multimodel
 from cotwin.diagnostics import CotwinError
 from cotwin.twin.project import load_project
-from cotwin.twin.rabbitmq import parse_message
-from cotwin.twin.scenario import read_plan, read_toml
+from cotwin.twin.assembly.rabbitmq import parse_message
+from cotwin.twin.assembly.scenario import read_plan, read_toml
 
 from conftest import FUZZ_SEED  # noqa: E402
 
@@ -70,7 +70,7 @@ def project_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def program(project_dir):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     return load(project_dir / "cotwin.toml").models.program
 
@@ -114,8 +114,8 @@ def test_plan_csvs(project_dir, program, data):
 
 @pytest.fixture(scope="module")
 def multimodel_dir(project_dir, tmp_path_factory):
-    from cotwin.twin.build import build
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.build import build
+    from cotwin.twin.assembly.run import load
 
     out = tmp_path_factory.mktemp("fuzzmm")
     build(load(project_dir / "cotwin.toml"), out)

@@ -148,8 +148,8 @@ def test_every_number_key_and_option_is_finite(ur5e, tmp_path, value):
 
 
 def test_sweep_grids_refuse_empty_huge_and_repeated_arguments(ur5e, tmp_path):
-    from cotwin.twin.run import load
-    from cotwin.twin.sweep import MAX_PLANS, grid
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.analysis.sweep import MAX_PLANS, grid
 
     project, out = ur5e / "cotwin.toml", tmp_path / "s.csv"
     sweep = ["sweep", project, "--event", "moveDiscreteCommand", "-o", out]
@@ -194,7 +194,7 @@ def lines(path) -> int:
 
 
 def test_figure_panels_naming_unknown_units_or_variables_are_refused(ur5e):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     path = ur5e / "figure.toml"
     path.write_text((ur5e / "cotwin.toml").read_text() + '[figure]\npanels = [\n  { variables = ["mapping.q0"] },\n'
@@ -211,7 +211,7 @@ def test_figure_panels_naming_unknown_units_or_variables_are_refused(ur5e):
 
 
 def test_cosim_parameters_are_checked_against_the_fmu_at_their_key(ur5e):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     path = ur5e / "params.toml"
     path.write_text((ur5e / "cotwin.toml").read_text().replace(
@@ -254,7 +254,7 @@ def test_an_empty_output_path_is_refused(ur5e):
 
 
 def test_calibration_files_are_bounded_and_an_empty_one_is_refused(tmp_path):
-    from cotwin.twin.calibration import Calibration
+    from cotwin.twin.assembly.calibration import Calibration
 
     path = tmp_path / "calibration.toml"
     for text in ("", "# fitted by hand\n[fit]\nrmse = 1.0\n"):
@@ -300,7 +300,7 @@ def test_empty_duplicated_and_unbounded_platform_and_monitor_settings_are_refuse
 
 
 def test_bricks_off_the_plate_are_refused_at_their_key(ur5e):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     path = ur5e / "bricks.toml"
     path.write_text((ur5e / "cotwin.toml").read_text() + "\n[scene]\nbricks = [[-1, 1000000]]\n")
@@ -314,7 +314,7 @@ def test_bricks_off_the_plate_are_refused_at_their_key(ur5e):
 
 
 def test_an_unknown_scene_kind_is_refused_at_its_key_naming_the_known_ones(ur5e):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     path = ur5e / "kind.toml"
     path.write_text((ur5e / "cotwin.toml").read_text().replace("[platform]", '[platform]\nscene = "flexcel"'))
@@ -364,8 +364,8 @@ def test_number_options_are_bounded(ur5e, tmp_path):
 
 
 def test_a_run_asked_for_by_a_program_keeps_the_same_timing_rules(ur5e, tmp_path):
-    from cotwin.twin.run import load, run_twin
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.assembly.run import load, run_twin
+    from cotwin.twin.live.runtime import LiveTwin
 
     system = load(ur5e / "cotwin.toml")
     with pytest.raises(CotwinError, match=r"end: 1.05 s is not a whole number of steps of 0.1 s"):
@@ -378,8 +378,8 @@ def test_a_run_asked_for_by_a_program_keeps_the_same_timing_rules(ur5e, tmp_path
 
 
 def test_deviation_variables_the_mapping_does_not_monitor_are_located(ur5e, tmp_path):
-    from cotwin.twin.run import load
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import LiveTwin
 
     path = ur5e / "dev.toml"
     path.write_text((ur5e / "cotwin.toml").read_text() + '\n[deviation]\nvariables = ["q0", "q7"]\n')
@@ -389,7 +389,7 @@ def test_deviation_variables_the_mapping_does_not_monitor_are_located(ur5e, tmp_
 
 
 def test_bricks_or_a_world_the_scene_would_ignore_are_refused(ur5e):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     path = ur5e / "scene.toml"
     base = (ur5e / "cotwin.toml").read_text()
@@ -419,7 +419,7 @@ def test_pt_keys_its_endpoint_would_ignore_and_bad_pt_urls_are_refused(ur5e, pt,
 
 def test_an_integer_too_large_for_any_float_is_a_located_error(ur5e, tmp_path):
     from cotwin.pmodel.world import load_world
-    from cotwin.twin.calibration import Calibration
+    from cotwin.twin.assembly.calibration import Calibration
 
     huge = "9" * 400
     text = refused(ur5e, MODELS + f"[cosim]\nend = {huge}\n[platform]\nstand_in = [{{ mesh = \"a\", shape = "

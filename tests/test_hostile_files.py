@@ -59,9 +59,9 @@ def test_outputs_replace_links_left_where_they_go_and_never_write_through_them(p
     # the live twin's report and figure, and a history export
     from cotwin.mapping.endpoint import SimulatedEndpoint
     from cotwin.pmodel.simulator import PlatformSimulator
-    from cotwin.twin.history import export_csv
-    from cotwin.twin.run import load
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.services.history import export_csv
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import LiveTwin
 
     live = tmp_path / "live"
     links = _victims(live, ["deviation.json", "figure.png", "dt/outputs.csv.part", "pt/outputs.csv", "export.csv"])
@@ -116,7 +116,7 @@ def test_no_output_replaces_a_file_the_command_reads(project, tmp_path):
     assert proc.returncode == 1 and "calibration.toml" in proc.stderr and "which this command reads" in proc.stderr
     assert (project / "calibration.toml").read_text() == calibration
     # history export onto the store it reads
-    from cotwin.twin.history import HistoryRecorder
+    from cotwin.twin.services.history import HistoryRecorder
 
     store = tmp_path / "history.sqlite"
     recorder = HistoryRecorder(f"sqlite:///{store}", "p.toml", "twin", 0.1, "jacobi", {"dt": ["{mapping}.mapping.q0"]})

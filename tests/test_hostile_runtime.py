@@ -105,8 +105,8 @@ def test_a_replay_offset_past_the_logs_end_is_refused_naming_it_and_the_duration
     import logging
 
     from cotwin.twin.project import load_project
-    from cotwin.twin.run import load
-    from cotwin.twin.runtime import LiveTwin, pt_endpoint
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import LiveTwin, pt_endpoint
 
     toml = copied / "replay.toml"
     text = toml.read_text().replace('log = "../../../shared/data/ur5e/rtde_run1.csv"', f'log = "{RUN1}"')
@@ -157,7 +157,7 @@ def _twin(exchange: str, out: Path, *options) -> subprocess.Popen:
 def _await_ready(exchange: str, timeout: float = 60.0) -> None:
     """Until the twin says on from_cosim that it is bound and waiting for data."""
     from cotwin.mapping.amqp import connect
-    from cotwin.twin.rabbitmq import read_echo
+    from cotwin.twin.assembly.rabbitmq import read_echo
 
     connection = connect("amqp://127.0.0.1:5672/%2F", "cotwin test ready")
     try:
@@ -181,9 +181,9 @@ def _publisher(exchange: str, count: int):
     import threading
 
     from cotwin.twin.project import RabbitMQSettings
-    from cotwin.twin.publisher import Publisher, idle_values
-    from cotwin.twin.rabbitmq import port_types
-    from cotwin.twin.run import load
+    from cotwin.twin.services.publisher import Publisher, idle_values
+    from cotwin.twin.assembly.rabbitmq import port_types
+    from cotwin.twin.assembly.run import load
 
     system = load(EXAMPLES / "ur5e" / "live.toml")
     publisher = Publisher(RabbitMQSettings(exchange), [], idle_values(port_types(system.models.program,
@@ -260,7 +260,7 @@ def test_broker_messages_hours_off_are_refused_and_a_flood_of_them_is_not_logged
 
     from cotwin.mapping.amqp import connect
     from cotwin.twin.project import RabbitMQSettings
-    from cotwin.twin.rabbitmq import CommandStream, RabbitMQBridge
+    from cotwin.twin.assembly.rabbitmq import CommandStream, RabbitMQBridge
 
     settings = RabbitMQSettings(f"cotwin_hostile_{os.getpid()}_{time.monotonic_ns()}", timeout_s=10)
     assert settings.max_skew_s == 60
@@ -292,8 +292,8 @@ def test_broker_messages_hours_off_are_refused_and_a_flood_of_them_is_not_logged
 
 
 def test_an_end_time_between_steps_is_refused_before_anything_runs(run1, tmp_path):
-    from cotwin.twin.run import load, run_twin
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.assembly.run import load, run_twin
+    from cotwin.twin.live.runtime import LiveTwin
 
     for start, project, end in ((run_twin, "cotwin.toml", 1.05), (LiveTwin, "replay.toml", 0.05)):
         with pytest.raises(CotwinError) as err:  # 1.05 s ended silently at 1 s; 0.05 s ran no step at all
@@ -309,7 +309,7 @@ def test_an_end_time_between_steps_is_refused_before_anything_runs(run1, tmp_pat
 
 
 def test_broker_messages_that_say_two_things_or_name_no_real_zone_are_refused_with_the_reason():
-    from cotwin.twin.rabbitmq import parse_message
+    from cotwin.twin.assembly.rabbitmq import parse_message
 
     types = {"MovementArgs_target_X": "Integer"}
     for body, reason in ((b'{"time": "2026-01-01T00:00:00Z", "MovementArgs_target_X": 1, "MovementArgs_target_X": 9}',
@@ -322,8 +322,8 @@ def test_broker_messages_that_say_two_things_or_name_no_real_zone_are_refused_wi
 
 
 def test_commands_a_run_never_sends_are_named_not_dropped_silently():
-    from cotwin.twin.run import load
-    from cotwin.twin.scenario import after_end
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.assembly.scenario import after_end
 
     commands = load(EXAMPLES / "ur5e" / "cotwin.toml").commands  # the plan's commands at 1, 5.5, 8 and 15 s
     late = [str(f) for f in after_end(commands, 8.0)]

@@ -25,11 +25,11 @@ import pika
 import pytest
 
 from cotwin.diagnostics import CotwinError
-from cotwin.twin import rabbitmq
-from cotwin.twin.dashboard import Dashboard
-from cotwin.twin.dashboard.app import MAX_BODY, MAX_CONNECTIONS, MAX_WHATIFS
-from cotwin.twin.history import STALE_AFTER, HistoryRecorder, list_runs, read_run
-from cotwin.twin.run import load, run_twin
+from cotwin.twin.assembly import rabbitmq
+from cotwin.twin.services.dashboard import Dashboard
+from cotwin.twin.services.dashboard.app import MAX_BODY, MAX_CONNECTIONS, MAX_WHATIFS
+from cotwin.twin.services.history import STALE_AFTER, HistoryRecorder, list_runs, read_run
+from cotwin.twin.assembly.run import load, run_twin
 
 ROOT = Path(__file__).resolve().parents[1]
 BROKER = "amqp://127.0.0.1:5672/%2F"
@@ -234,7 +234,7 @@ def test_history_urls_out_of_range_are_refused_and_readers_never_create_a_store(
 
 RECORDER = """
 import sys, time
-from cotwin.twin.history import HistoryRecorder
+from cotwin.twin.services.history import HistoryRecorder
 r = HistoryRecorder(sys.argv[1], "p.toml", "twin", 0.1, "jacobi", {"dt": ["{mapping}.mapping.q0"]}, batch_seconds=0.05)
 for k in range(3):
     r.record_sample("dt", k, 0.1 * k, [float(k)])
@@ -266,7 +266,7 @@ def test_a_run_whose_twin_was_killed_is_shown_interrupted_not_running(tmp_path):
 
 def test_whatif_requests_without_reply_to_are_dropped_and_logged_and_the_count_is_safe(live, caplog):
     from cotwin.mapping.amqp import connect
-    from cotwin.twin.whatif import WhatIfService
+    from cotwin.twin.services.whatif import WhatIfService
 
     exchange = f"cotwin_hostile_wi_{uuid.uuid4().hex[:8]}"
     service = WhatIfService(BROKER, exchange, ROOT / "examples" / "ur5e" / "live.toml")
@@ -379,8 +379,8 @@ def test_page_commands_are_typed_strictly_bounded_and_refused_once_the_twin_ende
         code, answer = _post(url, {"event": MOVE, "values": good})
         assert code == 409 and "the twin has stopped" in answer["error"]
     # what the panel has sent is remembered within a bound, however long it heartbeats
-    from cotwin.twin.dashboard.commands import PagePublisher
-    from cotwin.twin.rabbitmq import port_types
+    from cotwin.twin.services.dashboard.commands import PagePublisher
+    from cotwin.twin.assembly.rabbitmq import port_types
 
     monkeypatch.setattr(PagePublisher, "MAX_SENT", 10)
     types = port_types(live.models.program, live.source_ports)
@@ -394,7 +394,7 @@ def test_page_commands_are_typed_strictly_bounded_and_refused_once_the_twin_ende
 def test_plan_values_take_the_models_literals_and_refuse_others_naming_the_argument(tmp_path):
     from cotwin.dmodel.program import build_program
     from cotwin.robosim.check import check_paths
-    from cotwin.twin.whatif import plan_from_json
+    from cotwin.twin.services.whatif import plan_from_json
 
     (tmp_path / "m.rst").write_text("""enumeration Dir { North East South West }
 datatype Goal { dir: Dir count: nat fast: boolean }
@@ -432,8 +432,8 @@ module Mod { cycleDef cycle == 1 robotic platform P { uses In uses Out } cref c 
         with pytest.raises(CotwinError, match=f"plan item 1: {why}".replace("(", r"\(").replace(")", r"\)")):
             plan_from_json([{"time": 1, "event": "go", "args": args}], program)
     # the page's panel: literals by name (a select), checked before anything is published
-    from cotwin.twin.dashboard.commands import PagePublisher
-    from cotwin.twin.rabbitmq import port_types
+    from cotwin.twin.services.dashboard.commands import PagePublisher
+    from cotwin.twin.assembly.rabbitmq import port_types
 
     [go] = program.inputs
     ports = [port for port, _ in go.value_ports]
@@ -444,7 +444,7 @@ module Mod { cycleDef cycle == 1 robotic platform P { uses In uses Out } cref c 
     with pytest.raises(ValueError, match="Goal_dir: 'Up' is not a literal of Dir.*Goal_count: -2 is negative"):
         panel.command("go", {"Goal_dir": "Up", "Goal_count": -2, "Goal_fast": False})
     # and the twin's own reader of broker messages: literals by name, refused beyond them, naming the key
-    from cotwin.twin.rabbitmq import parse_message, port_scalars
+    from cotwin.twin.assembly.rabbitmq import parse_message, port_scalars
 
     types, scalars = port_types(program, ["go", *ports]), port_scalars(program)
     stamp = datetime.now(timezone.utc).isoformat()
@@ -465,8 +465,8 @@ def test_a_stopped_twin_keeps_its_last_figure_and_state_and_the_streams_stay_bou
     from websockets.exceptions import ConnectionClosed
     from websockets.sync.client import connect as ws_connect
 
-    from cotwin.twin.dashboard import app
-    from cotwin.twin.dashboard.feed import Ring
+    from cotwin.twin.services.dashboard import app
+    from cotwin.twin.services.dashboard.feed import Ring
 
     system = load(ROOT / "examples" / "ur5e" / "cotwin.toml")
     with Dashboard(system, port=0, mode="run") as dash:
@@ -494,7 +494,7 @@ def test_a_stopped_twin_keeps_its_last_figure_and_state_and_the_streams_stay_bou
 
 def test_a_flood_of_bad_broker_messages_is_counted_but_neither_fills_the_log_nor_memory(live, caplog, monkeypatch):
     from cotwin.mapping.amqp import connect
-    from cotwin.twin.rabbitmq import CommandStream, RabbitMQBridge, port_types
+    from cotwin.twin.assembly.rabbitmq import CommandStream, RabbitMQBridge, port_types
 
     monkeypatch.setattr(rabbitmq, "MAX_QUEUED", 50)
     settings = live.spec.rabbitmq

@@ -17,9 +17,9 @@ from pathlib import Path
 import pytest
 
 from cotwin.diagnostics import CotwinError
-from cotwin.twin.dashboard import Dashboard
-from cotwin.twin.dashboard.app import MAX_CONNECTIONS
-from cotwin.twin.history import HistoryRecorder, list_runs, read_run
+from cotwin.twin.services.dashboard import Dashboard
+from cotwin.twin.services.dashboard.app import MAX_CONNECTIONS
+from cotwin.twin.services.history import HistoryRecorder, list_runs, read_run
 
 ROOT = Path(__file__).resolve().parents[1]
 COLUMNS = ["{mapping}.mapping.q0", "{mapping}.mapping.q1"]
@@ -27,7 +27,7 @@ COLUMNS = ["{mapping}.mapping.q0", "{mapping}.mapping.q1"]
 
 def _long_run(path: Path, count: int) -> tuple[str, int]:
     """A store holding one run of `count` samples per side (and as many commands), written in bulk."""
-    from cotwin.twin.history import commands, samples
+    from cotwin.twin.services.history import commands, samples
 
     url = f"sqlite:///{path}"
     recorder = HistoryRecorder(url, "p.toml", "twin", 0.01, "jacobi", {"pt": COLUMNS, "dt": COLUMNS})
@@ -132,7 +132,7 @@ def postgres(postgres_server):
 def test_another_applications_runs_table_in_postgresql_is_left_alone(postgres, tmp_path):
     import psycopg
 
-    from cotwin.twin.history import database_url, export_csv
+    from cotwin.twin.services.history import database_url, export_csv
 
     url, name = postgres
     with psycopg.connect(f"host=127.0.0.1 user=postgres dbname={name}", autocommit=True) as conn:
@@ -157,7 +157,7 @@ def test_a_store_of_cotwins_tables_in_public_is_still_read(postgres):
     """A store written before cotwin had a schema of its own: its tables are in `public`."""
     import psycopg
 
-    from cotwin.twin.history import database_url, metadata
+    from cotwin.twin.services.history import database_url, metadata
 
     url, name = postgres
     store = database_url(url)
@@ -192,9 +192,9 @@ def test_a_sqlite_file_of_another_application_is_named_not_written(tmp_path):
 def test_a_predeclared_exchange_of_another_type_is_a_located_error(broker, tmp_path):
     from cotwin.mapping.amqp import connect
     from cotwin.twin.project import RabbitMQSettings
-    from cotwin.twin.publisher import Publisher
-    from cotwin.twin.rabbitmq import RabbitMQBridge
-    from cotwin.twin.run import load
+    from cotwin.twin.services.publisher import Publisher
+    from cotwin.twin.assembly.rabbitmq import RabbitMQBridge
+    from cotwin.twin.assembly.run import load
 
     name = f"cotwin_fanout_{uuid.uuid4().hex[:8]}"
     link = connect("amqp://127.0.0.1:5672/%2F", "cotwin test another application")
@@ -212,7 +212,7 @@ def test_a_predeclared_exchange_of_another_type_is_a_located_error(broker, tmp_p
         system.spec.rabbitmq = replace(system.spec.rabbitmq, exchange=name)
         with pytest.raises(CotwinError, match="cannot publish commands .*fanout exchange"):
             Dashboard(system, port=0, mode="twin").start()
-        from cotwin.twin.whatif import WhatIfService
+        from cotwin.twin.services.whatif import WhatIfService
 
         with pytest.raises(CotwinError, match=r"not the topic exchange cotwin uses \(it is a direct exchange.*"
                                               r"\[deviation\] exchange"):

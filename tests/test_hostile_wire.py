@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from cotwin import safejson
-from cotwin.twin.rabbitmq import READY, EchoClock, echo_message, parse_echo
+from cotwin.twin.assembly.rabbitmq import READY, EchoClock, echo_message, parse_echo
 
 ROOT = Path(__file__).resolve().parents[1]
 BROKER = "amqp://127.0.0.1:5672/%2F"
@@ -109,7 +109,7 @@ class FakeTwin:
 
 
 def _live(exchange: str):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     system = load(ROOT / "examples" / "ur5e" / "live.toml")
     system.spec.rabbitmq = replace(system.spec.rabbitmq, exchange=exchange)
@@ -119,9 +119,9 @@ def _live(exchange: str):
 
 def test_a_flood_of_forged_echoes_does_not_end_cotwin_publish(broker):
     from cotwin.twin.project import RabbitMQSettings
-    from cotwin.twin.publisher import Publisher, idle_values
-    from cotwin.twin.rabbitmq import port_types
-    from cotwin.twin.scenario import read_scenario
+    from cotwin.twin.services.publisher import Publisher, idle_values
+    from cotwin.twin.assembly.rabbitmq import port_types
+    from cotwin.twin.assembly.scenario import read_scenario
 
     exchange = f"cotwin_forged_{uuid.uuid4().hex[:8]}"
     system = _live(exchange)
@@ -191,7 +191,7 @@ def _request(url: str, body: dict | None = None) -> tuple[int, dict]:
 
 
 def test_the_pages_publisher_survives_hostile_echoes_and_says_when_it_stopped(broker):
-    from cotwin.twin.dashboard import Dashboard
+    from cotwin.twin.services.dashboard import Dashboard
 
     exchange = f"cotwin_echo_{uuid.uuid4().hex[:8]}"
     command = {"event": "moveDiscreteCommand",

@@ -69,7 +69,7 @@ def test_the_mapping_uses_a_stored_solution_without_solving_and_solves_a_miss(tm
     from cotwin.mapping.runtime import FunctionRegistry
     from cotwin.pmodel import ik
     from cotwin.pmodel.simulator import PlatformSimulator
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     monkeypatch.setenv("COTWIN_CACHE", str(tmp_path))
     models = load(EXAMPLES / "ur5e" / "cotwin.toml").models

@@ -74,8 +74,8 @@ def test_a_faulting_fmu_ends_the_run_with_a_located_error_and_the_rows_so_far(fm
 
 def test_which_fmus_run_isolated(fmus, tmp_path):
     from conftest import EXAMPLES
-    from cotwin.twin.build import dmodel_fmu
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.build import dmodel_fmu
+    from cotwin.twin.assembly.run import load
 
     assert isinstance(fmu_unit("x", fmus["saves"]), IsolatedUnit)  # not built by cotwin: isolated by default
     assert isinstance(fmu_unit("x", fmus["saves"], isolate=False), FMUUnit)
@@ -129,8 +129,8 @@ def test_an_isolated_dmodel_runs_bit_for_bit_as_in_process_and_their_states_are_
     from conftest import EXAMPLES
     from cotwin.cosim.algorithm import algorithm
     from cotwin.cosim.execution import Execution
-    from cotwin.twin.build import dmodel_fmu
-    from cotwin.twin.run import dt_endpoint, load
+    from cotwin.twin.assembly.build import dmodel_fmu
+    from cotwin.twin.assembly.run import dt_endpoint, load
 
     system = load(EXAMPLES / "ur5e" / "cotwin.toml")
     fmu = dmodel_fmu(system, tmp_path)
@@ -176,7 +176,7 @@ def crashing_project(tmp_path_factory):
     """A copy of examples/ur5e whose d-model FMU, built elsewhere ([models] fmu), segfaults at the 40th
     fmi2DoStep of every process it runs in; and the outputs of the project as it is."""
     from conftest import EXAMPLES
-    from cotwin.twin.run import load, run_twin
+    from cotwin.twin.assembly.run import load, run_twin
 
     if shutil.which("cc") is None:
         pytest.skip("no C compiler (cc) to build the test FMUs")
@@ -206,8 +206,8 @@ def test_a_twin_run_survives_a_crashing_dmodel_fmu_with_restart_from_state(crash
 
 
 def test_the_live_twin_survives_a_crashing_dmodel_fmu_with_restart_from_state(crashing_project, tmp_path):
-    from cotwin.twin.run import load, simulated_endpoint
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.assembly.run import load, simulated_endpoint
+    from cotwin.twin.live.runtime import LiveTwin
 
     folder, clean = crashing_project
     system = load(folder / "crashing.toml")

@@ -71,6 +71,8 @@ def _twin_part(name: list[str]) -> str | None:
     """The part of cotwin.twin (PARTS) a dotted name inside it is in."""
     if len(name) < 3 or name[1] != "twin" or name[2] in ("PARTS", "__init__"):
         return None
+    if name[2] in PARTS:  # each part is a subpackage of cotwin.twin
+        return name[2]
     for part, modules in PARTS.items():
         if name[2] in modules:
             return part
@@ -118,10 +120,11 @@ def test_every_part_of_cotwin_has_a_layer():
 
 def test_a_twin_part_importing_a_later_one_is_found(tmp_path):
     fake = tmp_path / "cotwin"
-    (fake / "twin").mkdir(parents=True)
-    (fake / "twin" / "project.py").write_text("from .runtime import LiveTwin\nfrom .project.sections import SECTIONS\n")
-    (fake / "twin" / "system.py").write_text("def f():\n    from cotwin.twin.history import History\n")
+    (fake / "twin" / "project").mkdir(parents=True)
+    (fake / "twin" / "assembly").mkdir()
+    (fake / "twin" / "project" / "load.py").write_text("from ..live.runtime import LiveTwin\nfrom .sections import SECTIONS\n")
+    (fake / "twin" / "assembly" / "system.py").write_text("def f():\n    from cotwin.twin.services.history import History\n")
     assert upward_imports(fake) == [
-        "cotwin/twin/project.py:1: cotwin.twin's project part imports cotwin.twin.runtime, of its live part above it",
-        "cotwin/twin/system.py:2: cotwin.twin's assembly part imports cotwin.twin.history, of its services part "
-        "above it"]
+        "cotwin/twin/assembly/system.py:2: cotwin.twin's assembly part imports cotwin.twin.services, of its services "
+        "part above it",
+        "cotwin/twin/project/load.py:1: cotwin.twin's project part imports cotwin.twin.live, of its live part above it"]

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from cotwin.twin.deviation import DeviationMonitor
-from cotwin.twin.history import database_url, export_csv, list_runs, read_run
-from cotwin.twin.run import load
-from cotwin.twin.runtime import LiveTwin
+from cotwin.twin.services.deviation import DeviationMonitor
+from cotwin.twin.services.history import database_url, export_csv, list_runs, read_run
+from cotwin.twin.assembly.run import load
+from cotwin.twin.live.runtime import LiveTwin
 
 ROOT = Path(__file__).resolve().parents[1]
 RTDE_LOG = ROOT.parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"

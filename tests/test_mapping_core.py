@@ -8,7 +8,7 @@ import pytest
 from cotwin.diagnostics import CotwinError
 from cotwin.mapping.endpoint import SimulatedEndpoint
 from cotwin.mapping.runtime import Mapping
-from cotwin.twin.run import load
+from cotwin.twin.assembly.run import load
 from cotwin.pmodel.simulator import PlatformSimulator
 
 
@@ -56,7 +56,7 @@ def test_compiled_and_interpreted_mappings_run_the_same_twin(project, tmp_path, 
     from conftest import EXAMPLES
 
     import cotwin.mapping.runtime as runtime
-    from cotwin.twin.run import run_twin
+    from cotwin.twin.assembly.run import run_twin
 
     twin = load(EXAMPLES / "ur5e" / project)
     compiled = run_twin(twin, tmp_path / "compiled", plot=False)

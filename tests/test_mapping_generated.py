@@ -9,7 +9,7 @@ import pytest
 
 from cotwin.diagnostics import CotwinError
 from cotwin.mapping.runtime import Mapping
-from cotwin.twin.run import load, simulated_endpoint
+from cotwin.twin.assembly.run import load, simulated_endpoint
 
 
 def _pair(project):

@@ -17,8 +17,8 @@ from cotwin.cosim.multimodel import execution_for, read_multimodel
 from cotwin.cosim.observers import CSVWriter, RealTimePacer
 from cotwin.cosim.system import Connection, System, topological_order
 from cotwin.diagnostics import CotwinError
-from cotwin.twin.build import build
-from cotwin.twin.run import load
+from cotwin.twin.assembly.build import build
+from cotwin.twin.assembly.run import load
 
 
 @pytest.fixture(scope="module")

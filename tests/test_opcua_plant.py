@@ -21,8 +21,8 @@ from cotwin.mapping.opcua_auth import default_credentials_file
 from cotwin.mapping.perturbed import PerturbedEndpoint
 from cotwin.pmodel.perturbation import Perturbation
 from cotwin.pmodel.simulator import PlatformSimulator
-from cotwin.twin.plant import Plant
-from cotwin.twin.run import load, run_twin
+from cotwin.twin.services.plant import Plant
+from cotwin.twin.assembly.run import load, run_twin
 
 ua = pytest.importorskip("asyncua").ua
 ROOT = Path(__file__).resolve().parents[1]
@@ -358,7 +358,7 @@ def test_a_server_that_is_not_a_plant_is_named_as_such(twin):
     (Perturbation(payload=4.0, latency_ms=300, damping=3.0), True),
 ])
 def test_live_twin_with_the_plant_as_pt_alarms_beyond_the_threshold_only(twin, serve, tmp_path, perturbation, alarmed):
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.live.runtime import LiveTwin
 
     plant = serve(perturbation)
     with OPCUAEndpoint(twin.models.tree, plant.url, timeout=5, reset=True) as pt:

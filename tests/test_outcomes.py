@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from cotwin.diagnostics import CotwinError
-from cotwin.twin.run import load
+from cotwin.twin.assembly.run import load
 from test_reliability import project  # noqa: F401 - a copy of the UR5e example in tmp_path/ur5e
 
 HEADER = "timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,MovementArgs_target_Z\n"
@@ -60,7 +60,7 @@ def test_a_live_twin_sums_up_each_side(tmp_path):
 
     from cotwin.mapping.endpoint import SimulatedEndpoint
     from cotwin.pmodel.simulator import PlatformSimulator
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.live.runtime import LiveTwin
 
     system = load(EXAMPLES / "ur5e" / "cotwin.toml")
     pt = SimulatedEndpoint(PlatformSimulator(system.models.tree, system.models.scene))
@@ -90,8 +90,8 @@ def test_command_arguments_have_one_naming_and_old_files_keep_working(tmp_path):
     scenarios, what-if plans and the page also take the field name (target_X) older files use."""
     from conftest import EXAMPLES
 
-    from cotwin.twin.scenario import read_toml
-    from cotwin.twin.whatif import plan_from_json
+    from cotwin.twin.assembly.scenario import read_toml
+    from cotwin.twin.services.whatif import plan_from_json
 
     program = load(EXAMPLES / "ur5e" / "cotwin.toml").models.program
     canonical = {"MovementArgs_target_X": 3, "MovementArgs_target_Y": 20, "MovementArgs_target_Z": 2}
@@ -110,8 +110,8 @@ def test_command_arguments_have_one_naming_and_old_files_keep_working(tmp_path):
                                           r"of moveDiscreteCommand is given twice"):
         read_toml(scenario, program)
     # the page's panel: the same reader
-    from cotwin.twin.dashboard.commands import PagePublisher
-    from cotwin.twin.rabbitmq import port_scalars, port_types
+    from cotwin.twin.services.dashboard.commands import PagePublisher
+    from cotwin.twin.assembly.rabbitmq import port_scalars, port_types
 
     live = load(EXAMPLES / "ur5e" / "live.toml")
     [move] = [ev for ev in live.models.program.inputs if ev.name == "moveDiscreteCommand"]

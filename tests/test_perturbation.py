@@ -14,9 +14,9 @@ from cotwin.mapping.perturbed import PerturbedEndpoint
 from cotwin.pmodel.ik import find_tool
 from cotwin.pmodel.perturbation import PAYLOAD_BODY, Perturbation, perturbed_simulator, read_perturbation
 from cotwin.pmodel.simulator import PlatformSimulator
-from cotwin.twin.plant import load_plant
+from cotwin.twin.services.plant import load_plant
 from cotwin.twin.project import load_project
-from cotwin.twin.run import load
+from cotwin.twin.assembly.run import load
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "ur5e"
 

@@ -19,8 +19,8 @@ from cotwin.mapping.opcua import OPCUAEndpoint
 from cotwin.mapping.opcua_auth import default_credentials_file
 from cotwin.mapping.perturbed import PerturbedEndpoint
 from cotwin.pmodel.perturbation import Perturbation
-from cotwin.twin.plant import Plant
-from cotwin.twin.run import load
+from cotwin.twin.services.plant import Plant
+from cotwin.twin.assembly.run import load
 
 pytest.importorskip("asyncua")
 ROOT = Path(__file__).resolve().parents[1]

@@ -36,8 +36,8 @@ def copies(tmp_path_factory):
 
 
 def test_the_same_models_build_byte_identical_artefacts_from_any_folder_and_any_copy(copies, tmp_path, monkeypatch):
-    from cotwin.twin.build import build
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.build import build
+    from cotwin.twin.assembly.run import load
 
     one, other = copies
     builds = []
@@ -57,7 +57,7 @@ def test_the_same_models_build_byte_identical_artefacts_from_any_folder_and_any_
 
 def test_locations_in_the_generated_c_are_relative_to_the_project(copies, monkeypatch):
     from cotwin.dmodel.fmu import fmu_sources
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     one, _ = copies
     monkeypatch.chdir(one.parent)

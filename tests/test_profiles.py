@@ -107,8 +107,8 @@ def replay_project(tmp_path):
 
 
 def test_the_replay_pt_reads_the_log_through_the_projects_profile(replay_project, caplog):
-    from cotwin.twin.run import load
-    from cotwin.twin.runtime import pt_endpoint
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import pt_endpoint
 
     project, controller = replay_project
     with caplog.at_level(logging.WARNING, logger="cotwin.twin"):
@@ -123,8 +123,8 @@ def test_the_replay_pt_reads_the_log_through_the_projects_profile(replay_project
 
 
 def test_a_project_naming_a_missing_or_mismatched_profile_is_refused_at_its_key(replay_project, tmp_path):
-    from cotwin.twin.run import load
-    from cotwin.twin.runtime import pt_endpoint
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import pt_endpoint
 
     project, _ = replay_project
     with pytest.raises(CotwinError, match=r"replay.toml:\d+:1: error: \[robot\] profile: no file .*nowhere.toml"):

@@ -117,8 +117,8 @@ def test_a_written_project_keeps_only_what_differs_from_the_defaults(ur5e):
 
 
 def test_the_staged_copy_of_a_build_reads_back_as_the_project(ur5e, tmp_path):
-    from cotwin.twin.build import staged_project
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.build import staged_project
+    from cotwin.twin.assembly.run import load
 
     system = load(load_project(ur5e / "pick_place_project.toml").with_overrides(step=0.05))
     staged_project(system, tmp_path / "stage")
@@ -183,8 +183,8 @@ def test_a_misspelt_value_of_a_closed_set_gets_the_nearest_valid_one(ur5e):
     for line, hint in ((6, "jacobi"), (11, "on-alarm"), (13, "free")):
         assert f"typos.toml:{line}:1: error: " in text and f"did you mean '{hint}'?" in text
     assert len(err.value.findings) == 3
-    from cotwin.twin.endpoints import check_endpoints
-    from cotwin.twin.system import TwinSystem
+    from cotwin.twin.assembly.endpoints import check_endpoints
+    from cotwin.twin.assembly.system import TwinSystem
 
     path.write_text(MODELS + '[pt]\nendpoint = "opcau"\nurl = "opc.tcp://h:4840"\n')
     with pytest.raises(CotwinError) as err:
@@ -236,7 +236,7 @@ def test_a_pt_log_replays_in_place_of_a_pt_table_of_another_endpoint(ur5e):
 def test_the_checks_against_the_models_report_together(ur5e):
     """A plan naming a misspelt input, [cosim] log naming no variable and a parameter the d-model lacks: one
     error with the three, each at its place (they came one per attempt)."""
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     (ur5e / "bad.csv").write_text("timestep,moveDiscreteComand\n1000,true\n")
     path = ur5e / "models.toml"

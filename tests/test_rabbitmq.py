@@ -19,10 +19,10 @@ import pytest
 from cotwin.diagnostics import CotwinError
 from cotwin.mapping.amqp import connect
 from cotwin.pmodel import ik
-from cotwin.twin.publisher import Publisher, idle_values
-from cotwin.twin.rabbitmq import READY, CommandStream, Received, echo_message, parse_message, parse_time, port_types, read_echo
-from cotwin.twin.run import load, run_twin
-from cotwin.twin.scenario import read_plan
+from cotwin.twin.services.publisher import Publisher, idle_values
+from cotwin.twin.assembly.rabbitmq import READY, CommandStream, Received, echo_message, parse_message, parse_time, port_types, read_echo
+from cotwin.twin.assembly.run import load, run_twin
+from cotwin.twin.assembly.scenario import read_plan
 
 TYPES = {"moveDiscreteCommand": "Boolean", "MovementArgs_target_X": "Integer", "speed": "Real"}
 T0 = datetime(2025, 1, 31, 16, 1, 3, tzinfo=timezone.utc)
@@ -287,8 +287,8 @@ def test_rabbitmq_fmu_in_the_multimodel_takes_live_commands(broker, tmp_path):
     from fmpy.validation import validate_fmu
 
     from cotwin.cosim.multimodel import execution_for, read_multimodel
-    from cotwin.twin.build import build
-    from cotwin.twin.scenario import Command
+    from cotwin.twin.assembly.build import build
+    from cotwin.twin.assembly.scenario import Command
 
     system = live_system(f"cotwin_test_{uuid.uuid4().hex[:8]}", end=3.0)
     build(system, tmp_path)

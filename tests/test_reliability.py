@@ -20,10 +20,10 @@ from cotwin.cosim.multimodel import execution_for, read_multimodel
 from cotwin.cosim.system import Connection, System
 from cotwin.cosim.units import FMUUnit, Port, PythonUnit
 from cotwin.diagnostics import CotwinError
-from cotwin.twin.build import build, folder_lock
+from cotwin.twin.assembly.build import build, folder_lock
 from cotwin.twin.project import load_project
-from cotwin.twin.run import load
-from cotwin.twin.scenario import read_plan, read_toml
+from cotwin.twin.assembly.run import load
+from cotwin.twin.assembly.scenario import read_plan, read_toml
 
 
 def cotwin(*args, timeout=120) -> subprocess.CompletedProcess:
@@ -112,7 +112,7 @@ def test_two_commands_of_one_event_in_one_step_are_both_applied_in_order(system,
     carries one occurrence, so the second is applied in the next step, with its own arguments (issue 19:
     every accepted command applied, once, in order; it used to be refused); a step that separates them
     applies each in its own step."""
-    from cotwin.twin.run import run_twin
+    from cotwin.twin.assembly.run import run_twin
 
     plan = tmp_path / "plan.csv"
     plan.write_text("timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,MovementArgs_target_Z\n"
@@ -343,7 +343,7 @@ def test_an_interrupt_while_the_figure_is_drawn_says_the_run_is_complete(project
     """Ctrl-C after the last step, while figure.png is drawn, said only 'interrupted': the user could not tell
     that outputs.csv was whole. The interrupt arrives in the drawing (as SIGINT raises it there)."""
     import cotwin.plot
-    from cotwin.twin.run import run_twin
+    from cotwin.twin.assembly.run import run_twin
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt

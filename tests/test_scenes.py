@@ -72,8 +72,8 @@ def test_a_kind_of_ones_own_places_the_robot_its_obstacles_and_the_page(ur5e):
     """A project naming a kind registered outside cotwin gets that scene in its MJCF, simulator and page."""
     from cotwin.pmodel.mjcf import to_mjcf
     from cotwin.pmodel.simulator import PlatformSimulator
-    from cotwin.twin.dashboard.describe import scene_drawing
-    from cotwin.twin.run import load
+    from cotwin.twin.services.dashboard.describe import scene_drawing
+    from cotwin.twin.assembly.run import load
 
     path = ur5e / "pillar.toml"
     path.write_text((ur5e / "cotwin.toml").read_text().replace("[platform]", '[platform]\nscene = "test-pillar"')
@@ -91,7 +91,7 @@ def test_a_kind_of_ones_own_places_the_robot_its_obstacles_and_the_page(ur5e):
 
 
 def test_a_scene_key_its_kind_does_not_read_is_refused_at_the_key(ur5e):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     path = ur5e / "pillar.toml"
     text = (ur5e / "cotwin.toml").read_text().replace("[platform]", '[platform]\nscene = "test-pillar"')
@@ -105,7 +105,7 @@ def test_a_scene_key_its_kind_does_not_read_is_refused_at_the_key(ur5e):
 
 
 def test_auto_chooses_the_kind_that_fits_the_mapping_and_floor_is_an_empty_floor(ur5e):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     assert type(load(ur5e / "cotwin.toml").models.scene).__name__ == "FlexCell"  # the mapping has the grid
     path = ur5e / "floor.toml"
@@ -170,7 +170,7 @@ def stale_kind(tmp_path, monkeypatch):
 
 def test_a_scene_kind_whose_package_is_gone_is_named_and_auto_says_what_it_could_not_consider(ur5e, stale_kind,
                                                                                                caplog):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     path = ur5e / "ghost.toml"
     path.write_text((ur5e / "cotwin.toml").read_text().replace("[platform]", '[platform]\nscene = "ghost"'))

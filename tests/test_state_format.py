@@ -146,7 +146,7 @@ def test_the_numpy_dtype_state_is_refused_by_whatif_and_sweep_without_a_crash(tm
 
 
 def _execution(twin, fmu) -> Execution:
-    from cotwin.twin.run import dt_endpoint
+    from cotwin.twin.assembly.run import dt_endpoint
 
     return Execution(twin.instantiate(fmu, dt_endpoint(twin)), algorithm("jacobi"), 0.1)
 
@@ -420,7 +420,7 @@ def test_a_fork_at_any_step_goes_on_bit_for_bit(twin, fmu, name):
     """Forks every half second of a run (moves starting, in flight, a stop at 6 s under Gauss-Seidel) read
     what the straight run read: the simulator's sensors and body poses as its last step left them, not as
     mj_forward recomputes them at the restored positions (which made a fork at 6 s differ by 1e-6 rad)."""
-    from cotwin.twin.run import dt_endpoint
+    from cotwin.twin.assembly.run import dt_endpoint
 
     def execution() -> Execution:
         return Execution(twin.instantiate(fmu, dt_endpoint(twin)), algorithm(name), 0.1)

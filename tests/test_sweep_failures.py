@@ -122,8 +122,8 @@ def test_a_dead_worker_is_reported_per_whatif_not_as_a_broken_pool(tmp_path, mon
     """A worker killed by a signal (a crash in an FMU) fails its what-ifs, with the others answered."""
     from conftest import EXAMPLES
 
-    from cotwin.twin import sweep
-    from cotwin.twin.run import load
+    from cotwin.twin.analysis import sweep
+    from cotwin.twin.assembly.run import load
 
     plans = sweep.grid(load(EXAMPLES / "ur5e" / "cotwin.toml").models.program, "moveDiscreteCommand",
                        {"target_X": [0, 1], "target_Y": [3], "target_Z": [0]})

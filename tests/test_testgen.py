@@ -17,9 +17,9 @@ from cotwin.dmodel.testgen import generate
 from cotwin.dmodel.testgen_files import read_suite, write_suite
 from cotwin.dmodel.testgen_graph import explore
 from cotwin.robosim.check import load_checked
-from cotwin.twin.run import load
-from cotwin.twin.scenario import read_plan
-from cotwin.twin.testing import run_suite
+from cotwin.twin.assembly.run import load
+from cotwin.twin.assembly.scenario import read_plan
+from cotwin.twin.analysis.testing import run_suite
 
 UR5E = EXAMPLES / "ur5e"
 MODELS = [UR5E / "arm.rst", UR5E / "mapping.pm", UR5E / "ur5e.pm"]

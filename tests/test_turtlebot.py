@@ -23,9 +23,9 @@ from cotwin.pmodel.world import load_world
 from cotwin.robosim.check import load_checked
 from cotwin.dmodel.program import build_program
 from cotwin.twin.project import load_project
-from cotwin.twin.run import load, run_twin, simulated_endpoint
-from cotwin.twin.system import DMODEL, MAPPING
-from cotwin.twin.walks import walk
+from cotwin.twin.assembly.run import load, run_twin, simulated_endpoint
+from cotwin.twin.assembly.system import DMODEL, MAPPING
+from cotwin.twin.analysis.walks import walk
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "turtlebot"
@@ -206,7 +206,7 @@ def test_run_writes_fig18_and_a_top_view(own, tmp_path):
                            "--end", "4"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "figure.png").stat().st_size > 10_000 and (tmp_path / "path.png").stat().st_size > 10_000
-    from cotwin.twin.run import figure_panels
+    from cotwin.twin.assembly.run import figure_panels
 
     assert [(label, names) for label, names, _ in figure_panels(own)] == [
         ("(1) closest distance [m]", [f"{MAPPING.name}.closest_distance"]),
@@ -300,8 +300,8 @@ def test_an_event_binding_a_value_must_say_what_it_is(tmp_path, own):
 
 def _live(project: Path, out: Path, perturbation=None, end: float = 12.0):
     from cotwin.mapping.opcua import OPCUAEndpoint
-    from cotwin.twin.plant import load_plant
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.services.plant import load_plant
+    from cotwin.twin.live.runtime import LiveTwin
 
     system = load(project)
     options = {} if perturbation is None else {k: v for k, v in vars(perturbation).items()}
@@ -347,7 +347,7 @@ def test_the_multimodel_with_the_mapping_fmu_walks_the_same_walk(project, tmp_pa
     if project == "published.toml" and not (MOBILE / "OA_mapping.pm").is_file():
         pytest.skip(f"the paper's published mobile robot models are not at {MOBILE}")
     from cotwin.cosim.multimodel import execution_for, read_multimodel
-    from cotwin.twin.build import build
+    from cotwin.twin.assembly.build import build
 
     system = load(EXAMPLE / project)
     written = build(system, tmp_path / "build")

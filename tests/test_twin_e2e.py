@@ -11,9 +11,9 @@ import pytest
 from fmpy.validation import validate_fmu
 
 from cotwin.diagnostics import CotwinError
-from cotwin.twin.build import build
+from cotwin.twin.assembly.build import build
 from cotwin.twin.project import load_project
-from cotwin.twin.run import load, run_twin
+from cotwin.twin.assembly.run import load, run_twin
 from cotwin.pmodel import ik
 
 TOOL_TOLERANCE = 0.002  # m: the tool ends within 2 mm of the commanded hole
@@ -116,7 +116,7 @@ def test_bad_project_files_are_reported_with_the_file(tmp_path):
 
 
 def test_bad_scenarios_are_reported_with_their_place(twin, tmp_path):
-    from cotwin.twin.scenario import read_plan, read_toml
+    from cotwin.twin.assembly.scenario import read_plan, read_toml
 
     plan = tmp_path / "plan.csv"
     plan.write_text("timestep,moveDiscreteCommand,MovementArgs_target_X\n1000,true,abc\n")
@@ -132,7 +132,7 @@ def test_bad_scenarios_are_reported_with_their_place(twin, tmp_path):
 
 
 def test_out_of_range_command_is_not_feasible(twin, tmp_path):
-    from cotwin.twin.scenario import Command, ScenarioUnit
+    from cotwin.twin.assembly.scenario import Command, ScenarioUnit
 
     import shutil
 

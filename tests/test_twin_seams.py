@@ -16,10 +16,10 @@ from cotwin.diagnostics import CotwinError
 from cotwin.mapping.endpoint import SimulatedEndpoint
 from cotwin.pmodel.simulator import PlatformSimulator
 from cotwin.service import BackgroundService
-from cotwin.twin.endpoints import EndpointKind, endpoint_kinds, register_endpoint
-from cotwin.twin.observing import TwinObserver
-from cotwin.twin.run import load
-from cotwin.twin.runtime import LiveTwin
+from cotwin.twin.assembly.endpoints import EndpointKind, endpoint_kinds, register_endpoint
+from cotwin.twin.assembly.observing import TwinObserver
+from cotwin.twin.assembly.run import load
+from cotwin.twin.live.runtime import LiveTwin
 
 ROOT = Path(__file__).resolve().parents[1]
 UR5E = ROOT / "examples" / "ur5e"
@@ -83,7 +83,7 @@ def test_an_endpoint_kind_registered_outside_the_core_is_used_by_a_project_and_o
         CountingEndpoint.made.clear()
         result = LiveTwin(system, tmp_path / "out", end=1.0, observers=[recorder]).run()
     finally:
-        from cotwin.twin import endpoints
+        from cotwin.twin.assembly import endpoints
 
         endpoints._KINDS.pop("counting-sim", None)
     assert "counting-sim" not in endpoint_kinds()
@@ -106,7 +106,7 @@ def test_a_registered_kind_says_which_pt_keys_it_takes(tmp_path):
         with pytest.raises(CotwinError) as err:
             LiveTwin(system, tmp_path / "out", end=1.0).run()
     finally:
-        from cotwin.twin import endpoints
+        from cotwin.twin.assembly import endpoints
 
         endpoints._KINDS.pop("queue-only", None)
     (finding,) = err.value.findings

@@ -11,8 +11,8 @@ import pytest
 from cotwin.cosim.algorithm import algorithm
 from cotwin.cosim.execution import Execution
 from cotwin.diagnostics import CotwinError
-from cotwin.twin.build import build, dmodel_fmu
-from cotwin.twin.run import dt_endpoint, load
+from cotwin.twin.assembly.build import build, dmodel_fmu
+from cotwin.twin.assembly.run import dt_endpoint, load
 
 FORK = 1.5  # s: the first command (1.0 s) is being executed, its trajectory in flight
 UNTIL = 6.5  # s: past the second command (5.5 s)
@@ -68,7 +68,7 @@ def test_snapshot_run_on_restore_rerun_is_bit_identical(twin, fmu, name):
 
 
 def test_a_fork_runs_a_different_plan_without_touching_the_live_twin(twin, fmu):
-    from cotwin.twin.scenario import Command, ScenarioUnit
+    from cotwin.twin.assembly.scenario import Command, ScenarioUnit
 
     live = _execution(twin, fmu, "jacobi")
     live.initialize()

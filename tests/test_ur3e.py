@@ -54,7 +54,7 @@ def test_run_on_the_published_ur3e_completes_every_move():
 
 
 def test_the_plate_is_the_mappings_small_grid_within_reach(project):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     cell = load(project / "cotwin.toml").models.scene
     assert (cell.xmax, cell.ymax, cell.hole_dist) == (7, 7, 0.04)

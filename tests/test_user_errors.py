@@ -45,8 +45,8 @@ def test_a_whatif_plan_or_state_that_is_wrong_is_named(ur5e):
 
 def test_a_sweep_takes_an_argument_by_the_port_name_a_whatif_prints():
     """The what-if prints MovementArgs_target_X=...; a sweep refused that name (it took only target_X)."""
-    from cotwin.twin.run import load
-    from cotwin.twin.sweep import grid
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.analysis.sweep import grid
 
     program = load(ROOT / "examples" / "ur5e" / "cotwin.toml").models.program
     by_port = grid(program, "moveDiscreteCommand", {"MovementArgs_target_X": [1, 2], "target_Y": [3], "target_Z": [0]})
@@ -60,7 +60,7 @@ def test_a_sweep_takes_an_argument_by_the_port_name_a_whatif_prints():
 def test_a_fleet_file_for_a_project_a_project_for_a_fleet_and_a_folder_for_a_file_say_what_to_run(ur5e, tmp_path):
     """`cotwin run fleet.toml` listed 'needs models' and every fleet key as unknown; `cotwin fleet cotwin.toml`
     every project table; `cotwin run .` said 'Is a directory'. Each now says what the file is and what to run."""
-    from cotwin.twin.fleet.spec import read_fleet
+    from cotwin.twin.analysis.fleet.spec import read_fleet
     from cotwin.twin.project import load_project
 
     fleet = tmp_path / "fleet.toml"
@@ -82,7 +82,7 @@ def test_a_fleet_file_for_a_project_a_project_for_a_fleet_and_a_folder_for_a_fil
 def test_a_broken_calibration_and_a_broken_plan_are_reported_together_at_their_places(ur5e):
     """The calibration was read (and failed) before the plan was: fixing it revealed the plan's errors; a
     [monitor] reading clashing with a mapping variable was said at the file's first line, not at the key."""
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     (ur5e / "bad.csv").write_text("timestep,moveDiscreteComand\n1000,true\n")
     (ur5e / "badcal.toml").write_text("this is not toml\n")
@@ -111,7 +111,7 @@ def test_an_output_that_cannot_be_made_is_named_not_its_temporary_file(tmp_path)
 
 
 def test_names_checked_against_the_models_get_the_nearest_one(ur5e):
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     path = ur5e / "names.toml"
     path.write_text('[models]\ndmodel = "arm.rst"\npmodel = "ur5e.pm"\nmapping = "mapping.pm"\n[cosim]\n'
@@ -125,7 +125,7 @@ def test_names_checked_against_the_models_get_the_nearest_one(ur5e):
 
 def test_monitor_joints_and_figure_panels_are_said_at_their_keys_with_the_nearest_name(ur5e):
     """[monitor] joints naming no joint said 'error: mirrored joints ...' with no file or line."""
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.run import load
 
     path = ur5e / "mon.toml"
     text = ('[models]\ndmodel = "arm.rst"\npmodel = "ur5e.pm"\nmapping = "mapping.pm"\n[monitor]\n'
@@ -175,8 +175,8 @@ def test_an_interrupted_sweep_keeps_the_what_ifs_it_answered(ur5e, tmp_path):
 def test_a_cell_plans_header_errors_are_at_their_columns_with_the_nearest_name(tmp_path):
     """A cell's plan said its header's problems at the cell's index (1:3 for the 35th character) and without
     a suggestion."""
-    from cotwin.twin.cell import read_cell_plan
-    from cotwin.twin.run import load
+    from cotwin.twin.assembly.cell import read_cell_plan
+    from cotwin.twin.assembly.run import load
 
     program = load(ROOT / "examples" / "ur5e" / "cotwin.toml").models.program
     plan = tmp_path / "typo.csv"
@@ -208,8 +208,8 @@ def test_cotwin_run_of_a_cell_says_which_of_its_tables_it_ignores(tmp_path):
 
 def test_deviation_variables_get_the_nearest_monitored_one(ur5e, tmp_path):
     from cotwin.twin.project import load_project
-    from cotwin.twin.run import load
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import LiveTwin
 
     path = ur5e / "dev.toml"
     path.write_text((ur5e / "replay.toml").read_text().replace('"q1",', '"Q1",'))

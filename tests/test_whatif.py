@@ -19,10 +19,10 @@ import pytest
 
 from cotwin.cosim.observers import Observer
 from cotwin.diagnostics import CotwinError
-from cotwin.twin.run import load, run_twin
-from cotwin.twin.scenario import Command
-from cotwin.twin.sweep import grid, run_sweep
-from cotwin.twin.whatif import plan_from_json, predict
+from cotwin.twin.assembly.run import load, run_twin
+from cotwin.twin.assembly.scenario import Command
+from cotwin.twin.analysis.sweep import grid, run_sweep
+from cotwin.twin.services.whatif import plan_from_json, predict
 
 JOINTS = [f"q{i}" for i in range(6)]
 
@@ -119,7 +119,7 @@ def test_whatif_requests_over_the_broker_are_answered_without_disturbing_the_twi
     from cotwin.mapping.amqp import connect
     from cotwin.mapping.endpoint import SimulatedEndpoint
     from cotwin.pmodel.simulator import PlatformSimulator
-    from cotwin.twin.runtime import LiveTwin
+    from cotwin.twin.live.runtime import LiveTwin
 
     exchange = f"cotwin_test_{uuid.uuid4().hex[:8]}"
     system.spec.deviation = type(system.spec.deviation)(exchange=exchange)

@@ -2,7 +2,7 @@
 the d-model's operation calls, and the joint angles over time.
 
 Every axis names its unit; variables of different units are on different axes (the twin chooses the
-panels, cotwin.twin.run.figure_panels); within an axis each line has its own colour and, past ten
+panels, cotwin.twin.assembly.run.figure_panels); within an axis each line has its own colour and, past ten
 lines, its own dash pattern; legends sit beside the axes, never over the data."""
 
 from __future__ import annotations

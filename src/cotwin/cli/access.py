@@ -18,7 +18,7 @@ def dashboard_access() -> None:
 
 
 def _people(path: str) -> list:
-    from ..twin.dashboard.access import read_access
+    from ..twin.services.dashboard.access import read_access
 
     return read_access(path) if Path(path).exists() else []
 
@@ -32,7 +32,7 @@ def _people(path: str) -> list:
 def add(file: str, name: str, role: str, token: bool) -> None:
     """Let NAME use the dashboard as ROLE, with a password (asked for, or one line on standard input) or a
     generated token; replaces NAME's line if there is one. The file is created with mode 600."""
-    from ..twin.dashboard.access import NAME, Person, hash_password, hash_token, new_token, write_access
+    from ..twin.services.dashboard.access import NAME, Person, hash_password, hash_token, new_token, write_access
 
     if not NAME.match(name):
         raise click.BadParameter(f"{name[:40]!r} is not a name (letters, digits, . _ @ + -, at most 64)",
@@ -63,7 +63,7 @@ def add(file: str, name: str, role: str, token: bool) -> None:
 @click.argument("name")
 def remove(file: str, name: str) -> None:
     """Take NAME's access away (a running dashboard notices within a second, and ends NAME's sessions)."""
-    from ..twin.dashboard.access import write_access
+    from ..twin.services.dashboard.access import write_access
 
     people = _people(file)
     kept = [p for p in people if p.name != name]

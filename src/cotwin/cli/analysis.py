@@ -39,8 +39,8 @@ def about(path: str | None, *kinds: type):
 
 def plan_file(path: str, program):
     """A what-if plan: a plan CSV, a TOML command list or a JSON list of {time, event, args}."""
-    from ..twin.scenario import read_scenario
-    from ..twin.whatif import plan_from_json
+    from ..twin.assembly.scenario import read_scenario
+    from ..twin.services.whatif import plan_from_json
 
     if path.endswith(".json"):
         try:
@@ -65,8 +65,8 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
     ahead of real time; prints each command's outcome and the completion time."""
     import json
 
-    from ..twin.run import load
-    from ..twin.whatif import predict
+    from ..twin.assembly.run import load
+    from ..twin.services.whatif import predict
 
     check_finite(horizon=horizon)
     system = load(project)
@@ -74,9 +74,9 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
         check_outputs([out], [*system.spec.inputs, plan, state])
     commands = plan_file(plan, system.models.program)
     blob = read_bytes(state, "state") if state is not None else None  # capped: a state is a few MiB
-    from ..twin.outcomes import Summary
+    from ..twin.assembly.outcomes import Summary
 
-    from ..twin.scenario import nothing_planned
+    from ..twin.assembly.scenario import nothing_planned
 
     show_warnings(nothing_planned(Path(plan), commands))
     with about(state, StateError):
@@ -113,8 +113,8 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     import csv
     import time
 
-    from ..twin.run import load
-    from ..twin.sweep import ERROR, SweepInterrupted, failures, grid, run_sweep
+    from ..twin.assembly.run import load
+    from ..twin.analysis.sweep import ERROR, SweepInterrupted, failures, grid, run_sweep
     from .progress import ProgressReport
 
     check_finite(horizon=horizon)
@@ -187,7 +187,7 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     from ..pmodel.cell import CellGeometry
     from ..twin import calibration as cal
     from ..twin.project import load_project
-    from ..twin.run import load
+    from ..twin.assembly.run import load
     from .progress import ProgressReport
 
     if pt_log is None and check_log is None:

@@ -106,10 +106,10 @@ STRICT_HELP = ("exit with status 3 unless every command the run applied complete
 
 
 def outcomes(summaries: dict, strict: bool, per_command: bool = True) -> None:
-    """Each summary's counts and per-command lines (cotwin.twin.outcomes.Summary, by label: '' or PT, DT),
+    """Each summary's counts and per-command lines (cotwin.twin.assembly.outcomes.Summary, by label: '' or PT, DT),
     its warnings (no command completed, blocked waits), and with `strict` exit STRICT_EXIT if anything did
     not complete."""
-    from ..twin.outcomes import STRICT_EXIT
+    from ..twin.assembly.outcomes import STRICT_EXIT
 
     failures = 0
     for label, summary in summaries.items():
@@ -151,7 +151,7 @@ def address(ctx, param, value: str | None) -> tuple[str, int] | None:
     """A --dashboard HOST:PORT option."""
     if value is None:
         return None
-    from ..twin.dashboard.app import parse_address
+    from ..twin.services.dashboard.app import parse_address
 
     try:
         return parse_address(value)
@@ -192,7 +192,7 @@ def start_dashboard(system, address, mode: str, history_url: str | None, whatif_
         if serving and (serving["access"] or serving["tls"]):
             raise click.UsageError("--dashboard-access and --tls-cert go with --dashboard HOST:PORT")
         return None
-    from ..twin.dashboard import Dashboard
+    from ..twin.services.dashboard import Dashboard
 
     dash = Dashboard(system, *address, mode=mode, history_url=history_url, whatif_url=whatif_url,
                      **(serving or {})).start()

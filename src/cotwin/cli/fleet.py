@@ -1,4 +1,4 @@
-"""The fleet command: many live twins together (cotwin.twin.fleet)."""
+"""The fleet command: many live twins together (cotwin.twin.analysis.fleet)."""
 
 from __future__ import annotations
 
@@ -25,25 +25,25 @@ def fleet(fleet_file: str, out: str, ray: str, history: str | None, page: tuple[
     state. Exits 1 if a twin was given up."""
     import signal
 
-    from ..twin.fleet.spec import read_fleet
-    from ..twin.fleet.supervisor import Fleet
+    from ..twin.analysis.fleet.spec import read_fleet
+    from ..twin.analysis.fleet.supervisor import Fleet
 
     spec = read_fleet(fleet_file)
     if history is not None:
-        from ..twin.fleet.spec import _history
+        from ..twin.analysis.fleet.spec import _history
 
         problem = _history(history)
         if problem is not None:
             raise click.BadParameter(problem, param_hint="--history")
     if ray != "off" and ray != "auto":
-        from ..twin.sweep import _reachable
+        from ..twin.analysis.sweep import _reachable
 
         _reachable(ray)
     runner = Fleet(spec, out, ray=None if ray == "off" else ray, history=history, cc=cc,
                    say=lambda message: click.echo(message, err=True))
     served = None
     if page is not None:
-        from ..twin.fleet.page import FleetPage
+        from ..twin.analysis.fleet.page import FleetPage
 
         served = FleetPage(runner.overview, *page).start()
         click.echo(f"fleet page: {served.url}", err=True)

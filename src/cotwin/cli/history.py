@@ -16,7 +16,7 @@ def history() -> None:
 
 def history_db(db: str | None, folder: str | None) -> str:
 
-    from ..twin.history import database_url
+    from ..twin.services.history import database_url
 
     if db is None and folder is None:
         raise click.UsageError("give --db URL or --dir DIR (a twin's output folder, with history.sqlite)")
@@ -32,7 +32,7 @@ def history_list(db: str | None, folder: str | None) -> None:
     """List the runs of a history store."""
     import datetime
 
-    from ..twin.history import list_runs
+    from ..twin.services.history import list_runs
 
     for run in list_runs(history_db(db, folder)):
         started = datetime.datetime.fromtimestamp(run["started"]).isoformat(timespec="seconds")
@@ -48,7 +48,7 @@ def history_list(db: str | None, folder: str | None) -> None:
 @click.option("-o", "--output", "out", callback=output_file, required=True, help="the CSV to write")
 def history_export(run_id: int, db: str | None, folder: str | None, side: str, out: str) -> None:
     """Export one side of a run as a Maestro-format CSV."""
-    from ..twin.history import export_csv
+    from ..twin.services.history import export_csv
 
     path = export_csv(history_db(db, folder), run_id, side, out)
     click.echo(str(path))

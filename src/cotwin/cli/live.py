@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..diagnostics import CotwinError, Finding, Location, Severity
-from ..twin.observing import TwinObserver
+from ..twin.assembly.observing import TwinObserver
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
                      main, outcomes, output_folder, said_restarts, serving_options, show_warnings, start_dashboard)
 
@@ -37,10 +37,10 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
     with deviation checking, alarms and history."""
     import signal
-    from ..twin.history import database_url
+    from ..twin.services.history import database_url
     from ..twin.project import load_project
-    from ..twin.run import load
-    from ..twin.runtime import LiveTwin
+    from ..twin.assembly.run import load
+    from ..twin.live.runtime import LiveTwin
     from .progress import ProgressReport
 
     check_finite(step=step, end=end)
@@ -62,7 +62,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
                                    "or --pt-log LOG (a recorded run) or --pt-url opc.tcp://HOST:PORT (an OPC UA plant)")])
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
-    from ..twin.scenario import after_end, nothing_planned
+    from ..twin.assembly.scenario import after_end, nothing_planned
 
     show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, spec.end if end is None else end))
@@ -103,7 +103,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     click.echo(f"deviation: {result.deviation['alarms']} alarm(s); report {result.out / 'deviation.json'}; "
                f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
     if result.convergence:
-        from ..twin.convergence import summary
+        from ..twin.assembly.convergence import summary
 
         click.echo(summary(result.convergence))
     outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
@@ -111,10 +111,10 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
 
 def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, exchange, history, whatif, dashboard,
                cc: str, serving: dict) -> None:
-    """`cotwin twin` of a cell of several robots ([[robots]]): its perturbed plant as the PT (cotwin.twin.cell_live)."""
-    from ..twin.cell import CellSystem
-    from ..twin.cell_live import run_cell_twin
-    from ..twin.history import database_url
+    """`cotwin twin` of a cell of several robots ([[robots]]): its perturbed plant as the PT (cotwin.twin.live.cell_live)."""
+    from ..twin.assembly.cell import CellSystem
+    from ..twin.live.cell_live import run_cell_twin
+    from ..twin.services.history import database_url
     from .progress import ProgressReport
 
     unsupported = [flag for flag, given in (("--pt-log", pt_log), ("--pt-url", pt_url), ("--rabbitmq", exchange),
@@ -191,10 +191,10 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None,
     from dataclasses import replace
 
     from ..twin.project import RabbitMQSettings
-    from ..twin.publisher import Publisher, idle_values
-    from ..twin.rabbitmq import port_types
-    from ..twin.run import load
-    from ..twin.scenario import read_scenario
+    from ..twin.services.publisher import Publisher, idle_values
+    from ..twin.assembly.rabbitmq import port_types
+    from ..twin.assembly.run import load
+    from ..twin.assembly.scenario import read_scenario
 
     check_finite(period=period)
     system = load(project, cells=True)
@@ -204,7 +204,7 @@ def publish(project: str, plan: str | None, period: float, exchange: str | None,
     if plan is None and system.spec.plan is None:
         raise click.BadParameter("the project has no plan: give one with --plan", param_hint="--plan")
     if system.spec.robots:
-        from ..twin.cell import read_cell_plan, routed
+        from ..twin.assembly.cell import read_cell_plan, routed
 
         names = [r.name for r in system.robots]
         if robot not in names:
@@ -252,7 +252,7 @@ def plant(project: str, url: str | None, perturbation_file: str | None, seed: in
           latency_ms: float | None, noise: float | None, free_running: bool, reset_on_connect: bool) -> None:
     """Serve a stand-in robot cell over OPC UA: the project's models in the simulator, perturbed as its
     [plant] table and these options say, until SIGINT or SIGTERM."""
-    from ..twin.plant import load_plant
+    from ..twin.services.plant import load_plant
 
     check_finite(payload=payload, latency_ms=latency_ms, noise=noise)
     cell = load_plant(project, url, free_running, perturbation_file, reset_on_connect, seed=seed, payload=payload,
@@ -285,7 +285,7 @@ def serve_robot(project: str, queue: str | None, url: str | None) -> None:
     from ..mapping.broker import RobotServer
     from ..mapping.endpoint import SimulatedEndpoint
     from ..pmodel.simulator import PlatformSimulator
-    from ..twin.run import load
+    from ..twin.assembly.run import load
 
     system = load(project)
     url = url or system.spec.url
@@ -319,7 +319,7 @@ def serve_robot(project: str, queue: str | None, url: str | None) -> None:
 def broker_permissions(project: str, vhost: str, prefix: str) -> None:
     """Print the rabbitmqctl commands creating a vhost and one least-privilege user per role (twin,
     robot server, publisher, alarms monitor) for this project's exchanges and queues."""
-    from ..twin.broker_access import rabbitmqctl_script
+    from ..twin.assembly.broker_access import rabbitmqctl_script
     from ..twin.project import load_project
 
     click.echo(rabbitmqctl_script(load_project(project), vhost, prefix), nl=False)

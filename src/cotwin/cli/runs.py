@@ -20,8 +20,8 @@ from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, chec
 def build(project: str, out: str, cc: str) -> None:
     """Build every artefact of a twin project (cotwin.toml); unchanged artefacts are kept."""
 
-    from ..twin.build import build as build_all, folder_lock
-    from ..twin.run import load
+    from ..twin.assembly.build import build as build_all, folder_lock
+    from ..twin.assembly.run import load
 
     system = load(project, cells=True)
     with folder_lock(Path(out)):
@@ -54,8 +54,8 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
         on_unit_failure: str, version: str, cycle_period: float | None, fmu_path: bool) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
-    from ..twin.history import database_url
-    from ..twin.run import load, run_twin
+    from ..twin.services.history import database_url
+    from ..twin.assembly.run import load, run_twin
     from .progress import ProgressReport
 
     check_finite(step=step, end=end, **{"cycle-period": cycle_period})
@@ -71,7 +71,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
-    from ..twin.scenario import after_end, nothing_planned
+    from ..twin.assembly.scenario import after_end, nothing_planned
 
     show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, system.spec.end if end is None else end))
@@ -95,8 +95,8 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
 def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
               cc: str, dashboard, version: str, serving: dict) -> None:
     """`cotwin run` of a cell of several robots ([[robots]]): each robot's outcomes and the contacts between them."""
-    from ..twin.cell import run_cell
-    from ..twin.scenario import after_end, nothing_planned
+    from ..twin.assembly.cell import run_cell
+    from ..twin.assembly.scenario import after_end, nothing_planned
     from .progress import ProgressReport
 
     if version != "2":

@@ -24,7 +24,7 @@ def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str],
         return [e for e in events if e in named], "named by --command"
     mappings = [m for m in project.elements(Mapping)]
     if len(mappings) == 1:
-        from ..twin.system import external_events
+        from ..twin.assembly.system import external_events
 
         return external_events(program, mappings[0]), f"those mapping {mappings[0].name} does not produce"
     return events, "all input events (no mapping given: name commands with --command to stub the platform's answers)"
@@ -108,8 +108,8 @@ def try_on_platform(suite, project: str, out: str, period: float, settle: float)
     import tempfile
 
     from ..dmodel.testgen_files import read_suite, write_suite
-    from ..twin.run import load
-    from ..twin.testing import run_suite
+    from ..twin.assembly.run import load
+    from ..twin.analysis.testing import run_suite
 
     system = load(project)
     with tempfile.TemporaryDirectory(prefix="cotwin-testgen-") as tmp:
@@ -185,8 +185,8 @@ def test_command(project: str, tests: str, pt: str | None, junit: str | None, al
     import tempfile
 
     from ..dmodel.testgen_files import read_suite
-    from ..twin.run import load
-    from ..twin.testing import format_result, junit_xml, run_suite
+    from ..twin.assembly.run import load
+    from ..twin.analysis.testing import format_result, junit_xml, run_suite
 
     system = load(project)
     suite = read_suite(tests)
@@ -216,7 +216,7 @@ def test_command(project: str, tests: str, pt: str | None, junit: str | None, al
 def _pt_endpoint(system, pt: str):
     """A function making the PT's endpoint for each case, and how to name it."""
     if pt == "project":
-        from ..twin.runtime import pt_endpoint
+        from ..twin.live.runtime import pt_endpoint
 
         spec = system.spec.pt
         if spec is None:

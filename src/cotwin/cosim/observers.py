@@ -196,7 +196,7 @@ class Pacer:
     epoch, `wait(t)` waits until factor * (wall time since the epoch) >= t - start. The epoch is when
     `begin` is called, or the wall time of simulation time 0 a unit announces (a live command source), so
     that a run keeps to the publisher's clock. One pacer for `cotwin run --realtime` (RealTimePacer) and
-    the live twin (cotwin.twin.live_observers.Pacing)."""
+    the live twin (cotwin.twin.live.live_observers.Pacing)."""
 
     def __init__(self, factor: float = 1.0):
         if not (factor > 0 and math.isfinite(factor)):

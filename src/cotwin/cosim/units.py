@@ -89,7 +89,7 @@ class Unit:
     restarts: Sequence[tuple[float, str]] = ()  # (time, what happened) of each restart from a saved state
     mapping = None  # an in-process mapping unit's runtime (cotwin.mapping.runtime): it can be asked
     executed: Sequence[tuple[float, str, dict]] = ()  # an in-process mapping unit's operations run
-    command_queue = None  # a command source's commands not yet applied (cotwin.twin.commands.CommandQueue)
+    command_queue = None  # a command source's commands not yet applied (cotwin.twin.assembly.commands.CommandQueue)
     ticks: int | None = None  # a clocked unit's clock ticks run so far (None: the unit has no clocks)
 
     def inputs(self) -> list[str]:

@@ -3,7 +3,7 @@
 - `suite.json`: the model (module, digest of its texts), the criterion, every item with what covers
   it, the unreachable and uncovered items with their reasons, the minimisation's counts, the commands
   and answers among the input events, and the cases (name, cycles, answers, items).
-- `case_NN.csv`: the case as a TwinManager plan (cotwin.twin.scenario reads it): `timestep` in ms, then
+- `case_NN.csv`: the case as a TwinManager plan (cotwin.twin.assembly.scenario reads it): `timestep` in ms, then
   the events the case sends and their value ports; the inputs of cycle c at (c - 1) x period. A case
   whose answers are left to the platform lists its commands only, each `settle` seconds after the
   previous one when the platform had to answer in between.

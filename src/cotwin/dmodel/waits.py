@@ -5,7 +5,7 @@ it, through junctions, to another state) is guarded by input events of the platf
 waiting leaf, those events by their platform names. A way out whose guards read no platform event (a
 clock, a variable, no guard at all, an event from another machine) is one the machine may take by
 itself: such a state does not wait. What the state does while it waits (entry and during actions) is
-not looked at here; the run-time watch (cotwin.twin.waits) also asks that the machine calls nothing.
+not looked at here; the run-time watch (cotwin.twin.assembly.waits) also asks that the machine calls nothing.
 """
 
 from __future__ import annotations

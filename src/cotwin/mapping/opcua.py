@@ -1,6 +1,6 @@
 """A robot cell over OPC UA: the third kind of platform endpoint, and the protocol it speaks.
 
-`OPCUAEndpoint` is what the mapping talks to; the server is `cotwin plant` (cotwin.twin.plant), or
+`OPCUAEndpoint` is what the mapping talks to; the server is `cotwin plant` (cotwin.twin.services.plant), or
 any OPC UA server offering this address space (namespace `urn:cotwin:plant`, string node ids):
 
     Objects/

@@ -1,7 +1,7 @@
 """The twin layer: a project's models assembled into a co-simulation, run as a digital twin beside its
 physical twin, with the services and analyses around it. It may import every cotwin package below it
 (robosim, dmodel, pmodel, mapping, cosim); inside it, each part imports only its own and those before
-it in PARTS (tests/test_layering.py checks both, import by import):
+it in PARTS, each part a subpackage (tests/test_layering.py checks both, import by import):
 
 - project (a subpackage): the project file's schema (`project.sections`), reading, overrides and
   writing (`project.load`, all exported by `cotwin.twin.project`), its reference (`project.doc`).

@@ -22,7 +22,7 @@ from ...settings import setting
 if TYPE_CHECKING:
     from .load import TwinProject
 
-ENDPOINTS = ("mujoco", "broker")  # core's kinds (cotwin.twin.endpoints registers them and any other)
+ENDPOINTS = ("mujoco", "broker")  # core's kinds (cotwin.twin.assembly.endpoints registers them and any other)
 PT_ENDPOINTS = ("opcua", "replay", "broker", "rtde")
 MAX_CYCLES_PER_STEP = 10 ** 6  # d-model cycles in one step ([cosim] parameters cycle_period)
 MAX_WAIT_S = 86_400.0  # s: the longest a twin waits for, or keeps, a broker message
@@ -241,7 +241,7 @@ class StandIn:
 class Platform:
     """The digital twin's robot and what is around it."""
 
-    endpoint: str = setting('an endpoint kind by name (cotwin.twin.endpoints): the embedded simulator ("mujoco"), '
+    endpoint: str = setting('an endpoint kind by name (cotwin.twin.assembly.endpoints): the embedded simulator ("mujoco"), '
                             'a robot behind RabbitMQ ("broker"), or one a package registers', Key("str", "mujoco", check=_name))
     queue: str = setting("broker: the robot's request queue", Key("str", "cotwin.robot", check=amqp_name_problem))
     url: str = setting("broker: the broker's URL", Key("str", URL, check=_amqp_url))
@@ -333,7 +333,7 @@ class Robot:
 class PT:
     """The physical twin of `cotwin twin`."""
 
-    endpoint: str = setting('how the PT is reached: an endpoint kind by name (cotwin.twin.endpoints): "opcua", '
+    endpoint: str = setting('how the PT is reached: an endpoint kind by name (cotwin.twin.assembly.endpoints): "opcua", '
                             '"replay", "broker", "rtde" (each takes only its own keys below), or one a package '
                             'registers', Key("str", required=True, check=_name))
     url: str | None = setting("opcua: opc.tcp://HOST:PORT; rtde: the robot's host; broker: an AMQP URL", Key("str"))
@@ -405,7 +405,7 @@ def _resync(value: str) -> str | None:
 
 @_section
 class Convergence:
-    """A live twin's DT pulled towards its PT (cotwin.twin.convergence)."""
+    """A live twin's DT pulled towards its PT (cotwin.twin.assembly.convergence)."""
 
     resync: str = setting('when the PT\'s joint state is put into the DT: "never", "on-alarm" (every step with an '
                           'alarm raised or open) or "every N steps"', Key("str", "never", check=_resync))

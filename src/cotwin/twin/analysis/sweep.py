@@ -1,0 +1,286 @@
+"""Sweeps: many what-ifs in parallel, on a local process pool (default) or on Ray.
+
+A sweep is a list of plans (each a what-if from the same state); `grid` builds the common one: one
+command per combination of argument values ("which holes can the arm reach, and how fast?"). Every
+worker loads the project once and shares the d-model FMU built in `artefacts`; answers come back in the
+order of the plans and are the same whichever runs them (what-ifs are deterministic).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from multiprocessing import get_context
+from pathlib import Path
+
+from ...config import did_you_mean
+from ...diagnostics import CotwinError
+from ..assembly.scenario import Command, scalar_value
+
+_SYSTEM = None  # the worker's TwinSystem, loaded once per process
+MAX_PLANS = 100_000  # what-ifs of one sweep: a grid larger than this is a mistake, not a sweep
+ERROR = "error"  # the column of a failed what-if's error
+DIED = ("the worker process running this what-if (or another of its batch) died: killed by a signal (e.g. a crash "
+        "inside an FMU) or out of memory")
+
+
+def grid(program, event: str, ranges: dict[str, list], at: float = 0.5) -> list[list[Command]]:
+    """One plan per combination of `ranges` (argument -> values): `event` with those arguments at `at` s."""
+    events = {ev.name: ev for ev in program.inputs}
+    if event not in events:
+        raise CotwinError(f"unknown event {event!r}{did_you_mean(event, events)} (known: {', '.join(events)})")
+    from ..assembly.scenario import argument_keys
+
+    fields = argument_keys(events[event])  # by port (as plans and what-ifs name them) or by field name
+    ports = [port for port, _ in events[event].value_ports]
+    unknown = [k for k in ranges if k not in fields]
+    if unknown:
+        raise CotwinError(f"event {event} has no argument {', '.join(unknown)}{did_you_mean(unknown[0], fields)} "
+                          f"(has {', '.join(ports) or 'none'}, or by field name "
+                          f"{', '.join(k for k in fields if k not in ports) or 'none'})")
+    twice = [port for port in ports if sum(fields[k][0] == port for k in ranges) > 1]
+    if twice:
+        raise CotwinError(f"argument {', '.join(twice)} is given twice (by its port and by its field name)")
+    names = list(ranges)
+    empty = [n for n in names if not len(ranges[n])]
+    if empty:
+        raise CotwinError(f"argument {', '.join(empty)}: no values to sweep (an empty range)")
+    count = math.prod(len(ranges[n]) for n in names)
+    if count > MAX_PLANS:
+        sizes = " x ".join(f"{len(ranges[n])} {n}" for n in names)
+        raise CotwinError(f"a grid of {sizes} is {count} what-ifs, more than {MAX_PLANS}")
+    plans = []
+    for combo in itertools.product(*(ranges[n] for n in names)):
+        values = [(event, True)]
+        for name, value in zip(names, combo):
+            port, sc = fields[name]
+            try:
+                values.append((port, scalar_value(value, sc)))
+            except ValueError as err:
+                raise CotwinError(f"argument {name}: {value!r} {err}") from None
+        plans.append([Command(at, tuple(values), "sweep")])
+    return plans
+
+
+def summary(prediction) -> dict:
+    """One row of a sweep: per command its arguments, feasibility, acceptance and time to be done."""
+    out = {"completion_time": prediction.completion_time, "collisions": len(prediction.collisions)}
+    for k, c in enumerate(prediction.commands):
+        prefix = "" if len(prediction.commands) == 1 else f"c{k}_"
+        out.update({f"{prefix}{name}": value for name, value in c.args.items()})
+        out[f"{prefix}feasible"] = c.feasible
+        out[f"{prefix}accepted"] = c.accepted
+        out[f"{prefix}time_to_done"] = None if c.done is None or c.delivered is None else round(c.done - c.time, 9)
+    return out
+
+
+def point(plan: list[Command]) -> dict:
+    """A plan's arguments, named as `summary` names them: the grid point a what-if answers."""
+    out = {}
+    for k, command in enumerate(plan):
+        prefix = "" if len(plan) == 1 else f"c{k}_"
+        out.update({f"{prefix}{port}": value for port, value in command.values[1:]})
+    return out
+
+
+def failed(plan: list[Command], err: BaseException) -> dict:
+    """The row of a what-if that ended with an error: its grid point and the error, as text (a worker's
+    exception never has to cross a process boundary; a bug of cotwin's says so, with its traceback)."""
+    if isinstance(err, CotwinError):
+        return {**point(plan), ERROR: "\n".join(f.message if f.location.path.startswith("<") else str(f)
+                                                for f in err.findings)}
+    import traceback
+
+    where = "".join(traceback.format_exception(err)[-3:]).strip()
+    return {**point(plan), ERROR: f"internal error: {type(err).__name__}: {err} (a cotwin bug)\n{where}"}
+
+
+class SweepInterrupted(CotwinError):
+    """A sweep stopped by an interrupt: `rows` are the what-ifs answered by then (each with its grid point),
+    kept for the caller to write rather than lost with the others."""
+
+    def __init__(self, rows: list[dict], total: int):
+        super().__init__(f"interrupted after {len(rows)} of {total} what-ifs")
+        self.rows, self.total, self.interrupted = rows, total, True
+
+
+def failures(rows: list[dict]) -> list[tuple[int, dict]]:
+    """(index, row) of the what-ifs that failed."""
+    return [(k, r) for k, r in enumerate(rows) if r.get(ERROR)]
+
+
+def _load(project: str, artefacts: str | None) -> None:
+    global _SYSTEM
+    from ..assembly.run import load
+
+    _SYSTEM = (load(project), artefacts)
+
+
+def _run(plan: list[Command], state: bytes | None, horizon: float, step: float | None, forks=None) -> dict:
+    """One what-if's row; on `forks` (cotwin.twin.services.whatif.Forks: one fork restored plan after plan) when given."""
+    from ..services.whatif import predict
+
+    system, artefacts = _SYSTEM
+    try:
+        if forks is not None:
+            return summary(forks.predict(plan, horizon=horizon, decimate=10**9))
+        return summary(predict(system, plan, state, horizon=horizon, step=step, artefacts=artefacts, decimate=10**9))
+    except Exception as err:  # noqa: BLE001 - one what-if's failure is its row, the sweep goes on
+        return failed(plan, err)
+
+
+def _forks(state: bytes | None, step: float | None):
+    """Forks of the loaded twin at `state` for a run of what-ifs (closed by the caller when they are done)."""
+    from ..services.whatif import Forks
+
+    system, artefacts = _SYSTEM
+    return Forks(system, state, step=step, artefacts=artefacts)
+
+
+def _run_chunk(plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None) -> list[dict]:
+    with _forks(state, step) as forks:
+        return [_run(plan, state, horizon, step, forks) for plan in plans]
+
+
+def _ray_run(project: str, artefacts: str | None, plan, state, horizon, step) -> dict:
+    if _SYSTEM is None or str(_SYSTEM[0].spec.path) != str(Path(project)):
+        try:
+            _load(project, artefacts)
+        except Exception as err:  # noqa: BLE001 - the project does not load on this node: say so per what-if
+            return failed(plan, err)
+    return _run(plan, state, horizon, step)
+
+
+def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | None = None, horizon: float = 30.0,
+              step: float | None = None, workers: int | None = None, ray: str | None = None,
+              artefacts: str | Path | None = None, progress=None) -> list[dict]:
+    """Run every plan as a what-if; `ray` is a Ray address ("auto" joins the local cluster) or None
+    for a local process pool of `workers` processes (default: one per CPU; 1 runs in this process).
+
+    One row per plan, in the plans' order: `summary` of its prediction, or (a what-if that failed) its
+    grid point and the error in the ERROR column (`failures` lists them). `progress(done, total)` is
+    called as what-ifs finish."""
+    import shutil
+    import tempfile
+
+    from ..assembly.build import dmodel_fmu
+    from ..assembly.run import load
+
+    if state is not None:  # its format and times checked once here, before any worker reads it
+        from ...cosim.execution import saved_execution
+
+        saved_execution(state)
+    project = str(Path(project).resolve())
+    report = progress or (lambda done, total: None)
+    scratch = None
+    if artefacts is None:
+        artefacts = scratch = tempfile.mkdtemp(prefix="cotwin-sweep-")
+    try:
+        system = load(project)
+        dmodel_fmu(system, artefacts)  # built once, before the workers share it
+        artefacts = str(artefacts)
+        if ray is not None:
+            return _on_ray(project, plans, state, horizon, step, ray, artefacts, report)
+        workers = max(1, min(workers or os.cpu_count() or 1, len(plans)))  # no idle processes
+        rows: list[dict] = []
+        report(0, len(plans))
+        if workers == 1:
+            global _SYSTEM
+            _SYSTEM = (system, artefacts)  # the project loaded above (loading it again costed a parse)
+            try:
+                with _forks(state, step) as forks:
+                    for plan in plans:
+                        rows.append(_run(plan, state, horizon, step, forks))
+                        report(len(rows), len(plans))
+            except KeyboardInterrupt:
+                raise SweepInterrupted(rows, len(plans)) from None
+            return rows
+        size = max(1, min(len(plans) // (workers * 8), 64))  # small chunks: progress and balance
+        chunks = [plans[k:k + size] for k in range(0, len(plans), size)]
+        answers: dict[int, list[dict]] = {}
+        try:
+            with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
+                                     initargs=(project, artefacts)) as pool:
+                futures = {pool.submit(_run_chunk, chunk, state, horizon, step): k for k, chunk in enumerate(chunks)}
+                done = 0
+                for future in as_completed(futures):
+                    k = futures[future]
+                    try:
+                        answers[k] = future.result()
+                    except BrokenProcessPool:  # a worker died (a signal, out of memory): its what-ifs say so
+                        answers[k] = [{**point(plan), ERROR: DIED} for plan in chunks[k]]
+                    done += len(answers[k])
+                    report(done, len(plans))
+        except KeyboardInterrupt:  # the answers so far are kept (in the plans' order), not lost
+            raise SweepInterrupted([row for k in sorted(answers) for row in answers[k]], len(plans)) from None
+        return [row for k in range(len(chunks)) for row in answers[k]]
+    finally:
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _reachable(address: str, timeout: float = 5.0) -> None:
+    """Refuse a Ray address nobody listens at, at once: Ray itself retries an unreachable head for
+    minutes before it gives up ("auto" and "local" are Ray's to resolve)."""
+    import socket
+
+    if address in ("auto", "local"):
+        return
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit() or not 0 < int(port) < 65536:
+        raise CotwinError(f"a Ray address is 'auto', 'HOST:PORT' or 'ray://HOST:PORT', not {address!r}")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as err:
+        raise CotwinError(f"cannot reach the Ray cluster at {address!r}: {err.strerror or err}") from None
+
+
+def join_hint(address: str, err: BaseException) -> str:
+    """Why joining a Ray head failed, where the cause is known: a head with token authentication (what
+    `ray start` sets up by default in recent Ray) joined by a driver that sends no token."""
+    import os
+
+    chain, seen = [], err
+    while seen is not None and len(chain) < 8:
+        chain.append(f"{type(seen).__name__}: {seen}")
+        seen = seen.__cause__ or seen.__context__
+    if any("InvalidAuthToken" in c or c.startswith("AuthenticationError") for c in chain) \
+            and os.environ.get("RAY_AUTH_MODE") != "token":
+        return (" (the cluster asks for a token: set RAY_AUTH_MODE=token in cotwin's environment; Ray reads the "
+                "token from ~/.ray/auth_token, RAY_AUTH_TOKEN_PATH or RAY_AUTH_TOKEN)")
+    return ""
+
+
+def _on_ray(project, plans, state, horizon, step, address, artefacts, report) -> list[dict]:
+    try:
+        import ray
+    except ImportError:
+        raise CotwinError("sweeps on Ray need the ray extra: pip install 'cotwin[ray]'") from None
+    started_here = not ray.is_initialized()
+    if started_here:
+        _reachable(address)
+        try:
+            ray.init(address=address, logging_level="ERROR", log_to_driver=False)
+        except (ConnectionError, RuntimeError, ValueError) as err:
+            raise CotwinError(f"cannot join the Ray cluster at {address!r}: {err}{join_hint(address, err)}") from None
+    try:
+        remote = ray.remote(_ray_run)
+        state_ref = ray.put(state)
+        refs = [remote.remote(project, artefacts, plan, state_ref, horizon, step) for plan in plans]
+        deadline = time.monotonic() + max(600.0, 10.0 * len(plans))
+        pending = list(refs)
+        report(0, len(plans))
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=len(pending), timeout=min(1.0, max(0.0, deadline - time.monotonic())))
+            report(len(plans) - len(pending), len(plans))
+            if pending and time.monotonic() >= deadline:
+                raise CotwinError(f"the Ray cluster at {address!r} did not finish {len(plans)} what-ifs in time "
+                                  f"({len(plans) - len(pending)} done; are its workers starting?)")
+        return ray.get(refs)
+    finally:
+        if started_here:
+            ray.shutdown()

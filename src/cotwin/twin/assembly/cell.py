@@ -1,0 +1,506 @@
+"""A cell of several robots (`[[robots]]`): one scene, one physical world, each robot its own twin.
+
+Each robot is a twin of its own models (cotwin.twin.assembly.system.TwinSystem: the shared d-model, its own
+p-model and mapping, its own commands), and the cell puts them together:
+- one world (cotwin.pmodel.shared.SharedWorld): every robot's MJCF attached at its base pose in the
+  scene's frame, names scoped by the robot's name; the scene is built once, from the first robot's
+  mapping (`[platform] scene`, `[scene]`); each robot's cell geometry is its calibration's with the
+  plate moved by its base pose (the scene's frame seen from the robot), so that the same grid target is
+  the same point of the cell for every robot;
+- units: a command source per robot (`{controller}.NAME`), an instance of the same d-model FMU per robot
+  (`{dmodel}.NAME`: one file, several instances) and one mapping unit for the cell (`{mapping}.cell`)
+  hosting every robot's platform mapping, its ports scoped as `NAME.port`: in a step it runs every
+  robot's operations, steps the world once, then reports every robot's events;
+- commands: a plan whose columns are scoped by robot (`NAME.port`, e.g. `left.moveDiscreteCommand`); a
+  row may leave a robot's cells empty (no command to it); or live from RabbitMQ, routed per robot: a
+  source per robot (`{rabbitmq}.NAME`) takes the messages published with routing key `TO_COSIM.NAME`
+  ([scenario] rabbitmq to_cosim, then the robot's name) and echoes on `FROM_COSIM.NAME`;
+- contacts between two robots are what each mapping's `robot_contact()` tells (cotwin.mapping.runtime),
+  e.g. its `collision` event: both d-models hear of it.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ...config import did_you_mean
+from ...cosim.algorithm import algorithm as make_algorithm
+from ...cosim.execution import Execution, RunResult, ended_early
+from ...cosim.observers import CSVWriter, Observer, Progress, RealTimePacer
+from ...cosim.system import Connection, System
+from ...cosim.units import Port, PythonUnit
+from ...diagnostics import CotwinError, Finding, Location, Severity
+from ...files import read_text
+from ..project import TwinProject, check_timing
+from .scenario import Command, _column_starts, parse_value, scenario_ports
+from .system import DMODEL, MAPPING, TwinSystem, UnitSpec, build_scene, load_models
+
+CELL_MAPPING = UnitSpec("{mapping}", "cell", "mapping.fmu", "mapping")
+
+
+def source_of(name: str, source: UnitSpec) -> UnitSpec:
+    """Robot `name`'s command source: the controller of its plan's columns or its RabbitMQ unit."""
+    return UnitSpec(source.key, name, source.fmu, "source")
+
+
+def routed(settings, name: str):
+    """The broker settings of robot `name`'s commands: routing keys `TO_COSIM.NAME` and `FROM_COSIM.NAME`."""
+    return replace(settings, to_cosim=f"{settings.to_cosim}.{name}", from_cosim=f"{settings.from_cosim}.{name}")
+
+
+def dmodel_of(name: str) -> UnitSpec:
+    return UnitSpec(DMODEL.key, name, DMODEL.fmu, "dmodel")
+
+
+def robot_project(spec: TwinProject, robot) -> TwinProject:
+    """One robot's project: the cell's settings with its own models and calibration, no scene (the cell
+    has one), no source (the cell's plan gives each robot its commands; the broker's routing is its own)
+    and its own part of `[cosim] log` (names scoped `NAME.variable` there)."""
+    rabbitmq = routed(spec.rabbitmq, robot.name) if spec.rabbitmq is not None else None
+    log = None if spec.log is None else [v.split(".", 1)[1] for v in spec.log if v.startswith(robot.name + ".")]
+    return replace(spec, pmodel=robot.pmodel, mapping=robot.mapping, calibration=robot.calibration, scene="none",
+                   scene_options={}, world=None, world_file=None, plan=None, rabbitmq=rabbitmq, log=log, panels=None,
+                   pmodel_name=None, robots=())
+
+
+def check_cell_settings(spec: TwinProject) -> None:
+    """What a cell's project may not say (yet), located: [figure] panels, [monitor] readings (a reading's path
+    names one robot's p-model), a [cosim] log name not scoped by a robot of the cell."""
+    problems = []
+    if spec.plan is not None and spec.plan.suffix == ".toml":
+        problems.append(Finding(spec.location("scenario", "commands"), Severity.ERROR, "[scenario] commands: a cell's "
+                                "commands are a CSV plan whose columns are ROBOT.port ([scenario] plan)"))
+    if spec.panels is not None:
+        problems.append(Finding(spec.location("figure", "panels"), Severity.ERROR, "[figure] panels: a cell's figure is "
+                                "chosen from its models (panels of its own are not done yet)"))
+    if spec.readings:
+        problems.append(Finding(spec.location("monitor", "readings"), Severity.ERROR, "[monitor] readings: not for a "
+                                "cell of several robots yet (its robots' q<i>/qd<i> are monitored)"))
+    names = {r.name for r in spec.robots}
+    unscoped = [v for v in spec.log or () if v.split(".", 1)[0] not in names or "." not in v]
+    if unscoped:
+        problems.append(Finding(spec.location("cosim", "log"), Severity.ERROR, f"[cosim] log: {', '.join(unscoped)}: "
+                                f"a cell's variables are named ROBOT.variable, ROBOT one of {', '.join(sorted(names))}"))
+    if problems:
+        raise CotwinError(problems)
+
+
+def base_pose(robot) -> np.ndarray:
+    from ...pmodel.tree import transform
+
+    return transform(robot.xyz, robot.rpy)
+
+
+@dataclass
+class CellRobot:
+    """One robot of the cell: its settings ([[robots]]), its twin alone and its cell geometry."""
+
+    spec: object  # cotwin.twin.project.load.RobotSpec
+    system: TwinSystem
+    pose: np.ndarray  # its base in the scene's frame
+    geometry: object  # cotwin.pmodel.cell.CellGeometry: the plate seen from it
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def scoped(self, port: str) -> str:
+        return f"{self.name}.{port}"
+
+    @property
+    def source(self) -> UnitSpec | None:
+        """Its command source's unit ({controller}.NAME or {rabbitmq}.NAME), if it has one."""
+        return source_of(self.name, self.system.source) if self.system.source is not None else None
+
+
+def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, list[Command]]:
+    """A cell's plan: `timestep` (ms), then columns `ROBOT.port` (a d-model input port); each row gives
+    each robot whose cells it fills one command (an empty cell: none for that robot). Problems are located
+    at their line and column, all together."""
+    path = Path(path)
+    ports = scenario_ports(program)
+    lines = read_text(path, "plan").splitlines()
+    rows = list(csv.reader(lines))
+    problems: list[Finding] = []
+
+    def problem(line: int, column: int, message: str) -> None:
+        problems.append(Finding(Location(str(path), line, column), Severity.ERROR, message))
+
+    if not rows or not rows[0] or rows[0][0].strip() != "timestep":
+        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
+                                   "a plan starts with a header whose first column is 'timestep' (ms)")])
+    header = [h.strip() for h in rows[0]]
+    starts = _column_starts(lines[0])  # where each cell of the header starts (characters, 1-based)
+    columns: dict[int, tuple[str, str]] = {}
+    for k, h in enumerate(header[1:], start=1):
+        robot, _, port = h.partition(".")
+        if robot not in robots or not port:
+            problem(1, starts[k], f"column {h!r}: a cell's plan names ROBOT.port, ROBOT one of {', '.join(robots)}"
+                                  f"{did_you_mean(robot, robots) if port else ''}")
+        elif port not in ports:
+            problem(1, starts[k], f"column {h!r}: unknown d-model input '{port}'{did_you_mean(port, ports)} "
+                                  f"(known: {', '.join(ports)})")
+        elif h in header[1:k]:
+            problem(1, starts[k], f"column {h!r} appears twice")
+        else:
+            columns[k] = (robot, port)
+    for ev in program.inputs:
+        for robot in robots:
+            given = {port for r, port in columns.values() if r == robot}
+            missing = [port for port, _ in ev.value_ports if port not in given]
+            if ev.name in given and missing:
+                at = next(k for k, column in columns.items() if column == (robot, ev.name))
+                problem(1, starts[at], f"column '{robot}.{ev.name}' without its argument column(s) "
+                              f"{', '.join(robot + '.' + m for m in missing)}")
+    plans: dict[str, list[Command]] = {r: [] for r in robots}
+    for line, row in enumerate(rows[1:], start=2):
+        if not row or all(not cell.strip() for cell in row):
+            continue
+        if len(row) != len(header):
+            problem(line, 1, f"{len(row)} values for {len(header)} columns")
+            continue
+        try:
+            time_ms = parse_value(row[0], "Real")
+            if time_ms < 0:
+                raise ValueError("is negative: a plan cannot send into the past")
+        except ValueError as err:
+            problem(line, 1, f"timestep '{row[0].strip()[:40]}' {err}")
+            continue
+        values: dict[str, list] = {r: [] for r in robots}
+        for k, (robot, port) in columns.items():
+            cell = row[k].strip()
+            if not cell:
+                continue
+            try:
+                values[robot].append((port, parse_value(cell, ports[port])))
+            except ValueError as err:
+                cells = _column_starts(lines[line - 1])
+                problem(line, cells[k] if k < len(cells) else 1, f"column '{header[k]}': '{cell[:40]}' {err}")
+        for robot, given in values.items():
+            if given:
+                plans[robot].append(Command(time_ms / 1000.0, tuple(given), f"{path}:{line}:1"))
+    if problems:
+        raise CotwinError(problems)
+    return {r: sorted(c, key=lambda c: c.time) for r, c in plans.items()}
+
+
+class CellSystem:
+    """The co-simulation of a cell of several robots (see the module doc)."""
+
+    def __init__(self, spec: TwinProject):
+        from ...pmodel.cell import CellGeometry
+        from ...pmodel.tree import inverse
+
+        if not spec.robots:
+            raise CotwinError(f"{spec.path}: a cell names its robots in [[robots]]")
+        check_cell_settings(spec)
+        self.spec = spec
+        alone = [(r, load_models(robot_project(spec, r))) for r in spec.robots]
+        programs = [m.program for _, m in alone]
+        first = programs[0]
+        for (r, m) in alone[1:]:
+            if m.program.module.name != first.module.name:
+                raise CotwinError(f"{spec.path}: robot {r.name}'s d-model module is {m.program.module.name}, "
+                                  f"not {first.module.name}: a cell's robots share one d-model")
+        names = [r.name for r in spec.robots]
+        plans = read_cell_plan(spec.plan, first, names) if spec.plan is not None else {n: [] for n in names}
+        self.robots: list[CellRobot] = []
+        for r, models in alone:
+            system = TwinSystem(robot_project(spec, r), models, plans[r.name] if spec.plan is not None else None)
+            geometry = models.calibration.geometry if models.calibration is not None else CellGeometry()
+            pose = base_pose(r)
+            self.robots.append(CellRobot(r, system, pose, geometry.with_plate(inverse(pose) @ geometry.plate_pose())))
+        self.scene = build_scene(spec, alone[0][1].mapping_model)
+        self.program = first
+        self.commands = [c for robot in self.robots for c in robot.system.commands]
+        self.units: list[UnitSpec] = []
+        self.connections: list[Connection] = []
+        self.log: dict[str, list[str]] = {CELL_MAPPING.name: []}
+        self.parameters: dict[str, dict] = {}
+        for robot in self.robots:
+            self._add(robot)
+        self.units.append(CELL_MAPPING)
+        self.delayed = {CELL_MAPPING.name}
+
+    def _add(self, robot: CellRobot) -> None:
+        system = robot.system
+        names = {DMODEL.name: dmodel_of(robot.name).name, MAPPING.name: CELL_MAPPING.name}
+        if system.source is not None:
+            names[system.source.name] = robot.source.name
+            self.units.append(robot.source)
+        self.units.append(dmodel_of(robot.name))
+
+        def port(unit: str, name: str) -> str:
+            return robot.scoped(name) if unit == MAPPING.name else name
+
+        self.connections += [Connection(names[c.source], port(c.source, c.output), names[c.target],
+                                        port(c.target, c.input)) for c in system.connections]
+        self.log[CELL_MAPPING.name] += [robot.scoped(v) for v in system.log[MAPPING.name]]
+        self.log[names[DMODEL.name]] = list(system.log[DMODEL.name])
+        for unit, values in system.parameters.items():
+            self.parameters[names[unit]] = dict(values)
+
+    @property
+    def digests(self) -> dict[str, str]:
+        return {k: v for robot in self.robots for k, v in robot.system.models.digests.items()}
+
+    def world(self, perturbation=None):
+        """A fresh world of the cell's robots and scene; with a perturbation (cotwin.pmodel.perturbation), the
+        perturbed plant of every robot in it (payload, friction, damping): a live twin's PT."""
+        from ...pmodel.shared import PlacedRobot, SharedWorld
+
+        robots = [PlacedRobot(r.name, r.system.models.tree, r.pose) for r in self.robots]
+        if perturbation is not None:
+            from ...pmodel.perturbation import perturbed_world
+
+            return perturbed_world(robots, self.scene, perturbation)
+        return SharedWorld(robots, self.scene)
+
+    def mapping_unit(self, world, perturbation=None) -> "CellMappingUnit":
+        """Every robot's platform mapping against its view of `world`, in one unit; with a perturbation, each
+        robot's endpoint adds its latency and noise (cotwin.mapping.perturbed; robot k's noise seeded with the
+        perturbation's seed + k), as a plant's robots do."""
+        from dataclasses import replace as changed
+
+        from ...mapping.endpoint import SimulatedEndpoint
+        from ...mapping.perturbed import PerturbedEndpoint
+        from ...mapping.runtime import Mapping
+        from .mapping_unit import MappingUnit
+
+        units = {}
+        for k, robot in enumerate(self.robots):
+            models = robot.system.models
+            profile = models.calibration.profile if models.calibration is not None else None
+            endpoint = SimulatedEndpoint(world.view(robot.name), profile, robot.geometry)
+            if perturbation is not None:
+                endpoint = PerturbedEndpoint(endpoint, changed(perturbation, seed=perturbation.seed + k))
+            mapping = Mapping(models.project, endpoint, geometry=robot.geometry, mirrors=self.spec.mirror_joints,
+                              monitor=self.spec.readings)
+            units[robot.name] = MappingUnit(MAPPING.name, models.program, mapping, robot.system.command_events)
+        return CellMappingUnit(CELL_MAPPING.name, world, units)
+
+    def source_ports(self) -> list[str]:
+        """Every robot's command source's ports, together: one source FMU serves every robot's instance."""
+        return list(dict.fromkeys(p for robot in self.robots for p in robot.system.source_ports))
+
+    def python_unit(self, role: str, instance: str):
+        """The unit a Python FMU of the cell carries (cotwin.twin.assembly.fmu_slave): the cell's mapping, or robot
+        `instance`'s command source (any other instance, e.g. a packager's, gets the first robot's) with every
+        robot's source ports, so that one FMU file describes them all."""
+        if role == "mapping":
+            return self.mapping_unit(self.world())
+        robot = next((r for r in self.robots if r.name == instance), self.robots[0])
+        if robot.source is None or role != robot.system.source.instance:
+            raise CotwinError(f"unknown unit role '{role}' for the cell {self.spec.path}")
+        from .scenario import ScenarioUnit
+
+        if robot.system.source.instance == "controller":
+            return ScenarioUnit(robot.source.name, self.program, robot.system.commands, self.source_ports())
+        return robot.system.source_unit()
+
+    def multimodel(self, realtime: bool | None = None) -> dict:
+        """Maestro's multimodel.json of the cell: one FMU per kind ({dmodel}, {controller} or {rabbitmq},
+        {mapping}), instantiated once per robot where it is the robot's (the d-model FMU's reuse, as Maestro
+        writes it); the `cotwin` key (which Maestro ignores) holds the delays."""
+        connections: dict[str, list[str]] = {}
+        for c in self.connections:
+            connections.setdefault(f"{c.source}.{c.output}", []).append(f"{c.target}.{c.input}")
+        spec = self.spec
+        return {
+            "fmus": {u.key: u.fmu for u in self.units},
+            "connections": connections,
+            "parameters": {f"{unit}.{name}": value for unit, values in self.parameters.items()
+                           for name, value in values.items()},
+            "logVariables": self.log,
+            "algorithm": {"type": "fixed-step", "size": spec.step},
+            "startTime": 0.0,
+            "endTime": spec.end,
+            "simulationProgramDelay": spec.realtime if realtime is None else realtime,
+            # the Python FMUs (the cell's mapping, every robot's source) in processes of their own: in the master's
+            # process (pythonfmu's library loaded once per instance) a cell's run sometimes ended with the heap
+            # corrupted at exit ("corrupted double-linked list"); isolated, cotwin simulate ends cleanly
+            "cotwin": {"delayed": sorted(self.delayed), "algorithm": spec.algorithm,
+                       "isolate": {CELL_MAPPING.name: True,
+                                   **{r.source.name: True for r in self.robots if r.source is not None}}},
+        }
+
+    def instantiate(self, dmodel_fmu: str | Path, world=None, perturbation=None) -> System:
+        """A fresh, checked co-simulation of the cell (in `world`, by default a fresh nominal one; its robots'
+        endpoints perturbed by `perturbation`'s latency and noise, if given): the same d-model FMU
+        instantiated once per robot."""
+        from ...cosim.isolated import fmu_unit
+
+        units = []
+        for robot in self.robots:
+            if robot.system.source is not None:
+                source = robot.system.source_unit()
+                source.name = robot.source.name
+                units.append(source)
+            units.append(fmu_unit(dmodel_of(robot.name).name, dmodel_fmu, robot.system.isolated,
+                                  self.spec.unit_timeout))
+        units.append(self.mapping_unit(world if world is not None else self.world(), perturbation))
+        return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters,
+                         models=self.digests)
+
+
+class CellMappingUnit(PythonUnit):
+    """Every robot's mapping unit (cotwin.twin.assembly.mapping_unit) in one, over one world: ports scoped by robot;
+    in a step each robot acts (its operations), the world steps once, each robot reports."""
+
+    def __init__(self, name: str, world, units: dict):
+        ports = [Port(f"{robot}.{p.name}", p.type, p.causality) for robot, unit in units.items()
+                 for p in unit.ports.values()]
+        super().__init__(name, ports)
+        self.world = world
+        self.units = units
+        self.inputs = {robot: [p.name for p in unit.ports.values() if p.causality == "input"]
+                       for robot, unit in units.items()}
+
+    def instantiate(self, start: float) -> None:
+        super().instantiate(start)
+        for unit in self.units.values():
+            unit.instantiate(start)
+        self._collect()
+
+    def step(self, t: float, h: float) -> None:
+        from ...mapping.endpoint import advance_shared
+
+        for robot, unit in self.units.items():
+            unit.values.update({p: self.values[f"{robot}.{p}"] for p in self.inputs[robot]})
+            unit.act(t)
+        advance_shared(self.world, [unit.mapping.endpoint for unit in self.units.values()], h)
+        for unit in self.units.values():
+            unit.mapping.step(0.0)  # the world has moved: readings and mirrors refreshed
+            unit.reached(t + h)
+        self.time = t + h
+        self._collect()
+
+    def _collect(self) -> None:
+        for robot, unit in self.units.items():
+            for name, value in unit.values.items():
+                if unit.ports[name].causality == "output":
+                    self.values[f"{robot}.{name}"] = value
+
+    def terminate(self) -> None:
+        for unit in self.units.values():
+            unit.terminate()
+
+    def snapshot(self) -> dict:
+        raise CotwinError(f"unit {self.name}: a cell of several robots cannot save its state yet")
+
+    def restore(self, snapshot: dict) -> None:
+        raise CotwinError(f"unit {self.name}: a cell of several robots cannot restore a state yet")
+
+
+@dataclass
+class RobotOutcome:
+    """What became of one robot's commands in a cell's run."""
+
+    name: str
+    commands: int = 0  # commands its source applied
+    completed: int = 0  # moveCompleted-like events (answers) that came
+    collisions: list[float] = field(default_factory=list)  # when its d-model heard of a collision (steps it began)
+
+    def line(self) -> str:
+        hit = f"collision reported at t = {', '.join(f'{t:g}' for t in self.collisions)} s" if self.collisions \
+            else "no collision"
+        return f"{self.name}: {self.commands} command(s) applied, {self.completed} move(s) completed, {hit}"
+
+
+class CellOutcomes(Observer):
+    """Per robot: the commands its source applied, the moves completed (its `moveCompleted` event) and
+    the steps its d-model was told of a collision (its `collision` event), from the units' ports."""
+
+    def __init__(self, cell: CellSystem, completed: str = "moveCompleted", collision: str = "collision"):
+        self.cell = cell
+        self.completed, self.collision = completed, collision
+        self.robots = {r.name: RobotOutcome(r.name) for r in cell.robots}
+        self._before: dict[str, bool] = {}
+
+    def step_complete(self, execution) -> None:
+        units = execution.system.units
+        mapping = units[CELL_MAPPING.name]
+        for robot in self.cell.robots:
+            out = self.robots[robot.name]
+            source = robot.source.name if robot.source is not None else None
+            if source in units:
+                out.commands += sum(1 for e in robot.system.command_events if units[source].values.get(e) is True)
+            if mapping.values.get(robot.scoped(self.completed)) is True:
+                out.completed += 1
+            hit = mapping.values.get(robot.scoped(self.collision)) is True
+            if hit and not self._before.get(robot.name):
+                out.collisions.append(round(execution.time, 9))
+            self._before[robot.name] = hit
+
+    def lines(self) -> list[str]:
+        return [r.line() for r in self.robots.values()]
+
+
+@dataclass
+class CellRun:
+    result: RunResult
+    csv: Path
+    system: System
+    outcomes: CellOutcomes
+    contacts: list  # (time, robot, robot) when a contact between two robots began
+    figure: Path | None = None
+
+
+def cell_panels(cell: CellSystem) -> list[tuple[str, list[str], str]]:
+    """The figure of a cell's run, chosen from its models, two panels per robot: its commands with the
+    platform events its mapping reports to its d-model, and its monitored variables."""
+    panels = []
+    for k, robot in enumerate(cell.robots, start=1):
+        system = robot.system
+        commands = [f"{robot.source.name}.{p}" for p in system.source_ports if p in system.command_events] \
+            if robot.source is not None else []
+        mapped = {ev.name for ev in system.models.mapping_model.input_events}
+        events = [f"{CELL_MAPPING.name}.{robot.scoped(ev.name)}" for ev in system.models.program.inputs
+                  if ev.name in mapped and ev.name not in system.command_events]
+        panels.append((f"({k}a) {robot.name}: commands, events [1 = true]", commands + events, "steps-post"))
+        monitored = [f"{CELL_MAPPING.name}.{robot.scoped(v)}" for v in system.log[MAPPING.name]]
+        if monitored:
+            panels.append((f"({k}b) {robot.name}: monitored [rad, rad/s]", monitored, "default"))
+    return panels
+
+
+def run_cell(cell: CellSystem, out: str | Path, step: float | None = None, end: float | None = None,
+             algorithm: str | None = None, realtime: bool | None = None, observers: list[Observer] | None = None,
+             progress=None, cc: str = "cc", plot: bool = True) -> CellRun:
+    """Co-simulate the cell into `out` (outputs.csv and figure.png), building the d-model FMU once for every
+    robot."""
+    from .build import dmodel_fmu, folder_lock
+    from .run import RUN_FILES
+
+    out = Path(out)
+    spec = cell.spec
+    end = spec.end if end is None else end
+    step = spec.step if step is None else step
+    check_timing(spec, step, end)
+    with folder_lock(out, RUN_FILES, spec.inputs):
+        fmu = dmodel_fmu(cell.robots[0].system, out, cc)
+        cosim = cell.instantiate(fmu)
+        writer = CSVWriter(out / "outputs.csv")
+        outcomes = CellOutcomes(cell)
+        chain: list[Observer] = [writer, outcomes, *(observers or [])]
+        if progress is not None:
+            chain.append(Progress(progress))
+        if spec.realtime if realtime is None else realtime:
+            chain.append(RealTimePacer())
+        execution = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain)
+        try:
+            result = execution.run(end)
+        except (CotwinError, KeyboardInterrupt) as err:
+            raise ended_early(err, execution.time, writer.kept()) from None
+        world = cosim.units[CELL_MAPPING.name].world
+        figure = None
+        if plot:
+            from ...plot import figure as draw
+
+            figure = draw(out / "outputs.csv", out / "figure.png", cell_panels(cell),
+                          title=f"{cell.program.module.name} x {len(cell.robots)}: step {step:g} s, {result.algorithm}")
+        return CellRun(result, out / "outputs.csv", cosim, outcomes, list(world.contacts), figure)

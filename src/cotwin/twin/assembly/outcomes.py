@@ -1,0 +1,196 @@
+"""Honest outcomes: what became of every command a run applied (`cotwin run`, `twin`, `whatif`).
+
+`CommandLedger`, an observer, follows each command from the step that applied it (the source's
+`applied` list: cotwin.twin.assembly.commands) through the d-model and the mapping:
+- *taken*: in the step the d-model reads it (the next under Jacobi, the same under Gauss-Seidel) its
+  state changes or it calls an operation; else it was *not taken* (the d-model was busy: the state is
+  named). A command taken is `accepted`; the operations and platform events that follow, until the
+  next command taken, are its own;
+- *infeasible*: among its events one named `nonfeasible*`, `infeasible*`, `unreachable*` (feasible:
+  `feasible*`, `reachable*`), a naming convention of mappings such as the paper's;
+- *completed at t*: taken, not infeasible, and the d-model back at rest (the leaf each machine rests
+  in after its first cycle without inputs, e.g. Idle) at t; *never completed* otherwise.
+
+`Summary` words it, one line per command, with a warning when commands were applied and none
+completed; `strict_failures` lists what makes `--strict` exit with STRICT_EXIT.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+from ...cosim.observers import Observer
+from .system import DMODEL, MAPPING, TwinSystem
+
+INFEASIBLE = re.compile(r"^(non|in|un)(feasible|reachable)", re.IGNORECASE)
+FEASIBLE = re.compile(r"^(feasible|reachable)", re.IGNORECASE)
+STRICT_EXIT = 3  # `--strict`: a command applied but not completed, or none at all completed (docs/interop.md)
+
+
+def rest_states(program) -> dict[str, int]:
+    """The leaf each machine rests in after its first cycle with no inputs (e.g. Idle), by state port."""
+    from ...dmodel.interpreter import Interpreter
+
+    interp = Interpreter(program)
+    interp.step({})
+    return {program.state_port(m): interp.state_index(k) for k, m in enumerate(program.machines)}
+
+
+@dataclass
+class CommandOutcome:
+    time: float  # when it was due (simulation time; a what-if's plan time shifted to the fork's clock)
+    event: str
+    args: dict
+    delivered: float | None = None  # the end of the step that applied it
+    accepted: bool = False  # the d-model took it (its state changed or it called an operation)
+    operations: list[str] = field(default_factory=list)
+    events: list[str] = field(default_factory=list)  # platform events until the next command taken
+    feasible: bool | None = None
+    done: float | None = None  # back at rest after it
+    origin: str = ""  # where it came from (a plan's line, a message's time)
+    busy: str | None = None  # the d-model's state when it was not taken
+
+    @property
+    def verdict(self) -> str:
+        if self.delivered is None:
+            return "not applied"
+        if not self.accepted:
+            return "not taken"
+        if self.feasible is False:
+            return "infeasible"
+        return "completed" if self.done is not None else "never completed"
+
+    def describe(self) -> str:
+        args = ", ".join(f"{k}={v}" for k, v in self.args.items())
+        verdict = self.verdict
+        if verdict == "completed":
+            how = f"completed at t = {self.done:g} s"
+        elif verdict == "infeasible":
+            how = f"infeasible ({', '.join(e for e in self.events if INFEASIBLE.match(e))})"
+        elif verdict == "not taken":
+            how = f"not taken (the d-model was in state {self.busy})"
+        else:
+            how = {"never completed": "accepted, never completed", "not applied": "not applied before the end"}[verdict]
+        when = f"applied at t = {self.delivered:g} s" if self.delivered is not None else f"due at t = {self.time:g} s"
+        return f"{when} {self.event}({args}): {how}"
+
+
+@dataclass
+class Summary:
+    outcomes: list[CommandOutcome]
+    blocked: list[str] = field(default_factory=list)  # cotwin.twin.assembly.waits: waits for answers that cannot come
+
+    def counts(self) -> dict[str, int]:
+        out = {"completed": 0, "infeasible": 0, "not taken": 0, "never completed": 0, "not applied": 0}
+        for o in self.outcomes:
+            out[o.verdict] += 1
+        return out
+
+    def lines(self) -> list[str]:
+        if not self.outcomes:
+            return ["commands: none applied"]
+        counts = self.counts()
+        head = f"commands: {len(self.outcomes)}, " + ", ".join(f"{n} {what}" for what, n in counts.items() if n)
+        return [head, *(f"  {o.describe()}" for o in self.outcomes)]
+
+    def warnings(self) -> list[str]:
+        out = [f"blocked: {b}" for b in self.blocked]
+        if self.outcomes and not self.counts()["completed"]:
+            out.append(f"no command completed ({len(self.outcomes)} applied)")
+        return out
+
+    def strict_failures(self) -> list[str]:
+        """What `--strict` refuses: every command that did not complete, and blocked waits."""
+        return [o.describe() for o in self.outcomes if o.verdict != "completed"] + [f"blocked: {b}" for b in self.blocked]
+
+
+class CommandLedger(Observer):
+    """Follows every command a run applies (see module doc); `outcomes` grows as the run goes."""
+
+    def __init__(self, system: TwinSystem):
+        program = system.models.program
+        self.program = program
+        self.system = system
+        self.rest = rest_states(program)
+        self.outcomes: list[CommandOutcome] = []
+        self._states = [(program.state_port(m), m) for m in program.machines]
+        self._calls = [op.name for op in program.operations]
+        self._events = [c.output for c in system.connections if c.source == MAPPING.name and c.target == DMODEL.name
+                        and c.output in {ev.name for ev in program.inputs}]
+
+    def simulation_initialized(self, execution) -> None:
+        source = execution.system.units.get(self.system.source.name) if self.system.source is not None else None
+        self._queue = source.command_queue if source is not None else None  # cotwin.twin.assembly.commands.CommandQueue
+        self._seen = self._count()
+        self._lag = 1 if execution.algorithm.name == "jacobi" else 0  # steps until the d-model reads a command
+        slots = execution.algorithm.slots
+        self._calls_read = execution.reader([(DMODEL.name, c) for c in self._calls if (DMODEL.name, c) in slots])
+        self._events_read = execution.reader([(MAPPING.name, e) for e in self._events])
+        self._state_read = execution.reader([(DMODEL.name, port) for port, _ in self._states])
+        self._before = self._state_read()
+        self._waiting: list[tuple[int, CommandOutcome, tuple]] = []  # (steps to read, outcome, state when applied)
+        self._current: CommandOutcome | None = None
+
+    def _count(self) -> int:
+        return self._queue.applied_count if self._queue is not None else 0
+
+    def step_complete(self, execution) -> None:
+        t = execution.time
+        states = self._state_read()
+        calls = [c for c, v in zip(self._calls, self._calls_read()) if v is True]
+        events = [e for e, v in zip(self._events, self._events_read()) if v is True]
+        if self._count() > self._seen:
+            fresh = list(self._queue.applied)[-(self._count() - self._seen):]
+            self._seen = self._count()
+            for applied in fresh:
+                c = applied.command
+                outcome = CommandOutcome(c.due, c.event, dict(c.values), applied.time, origin=c.origin)
+                self.outcomes.append(outcome)
+                self._waiting.append((self._lag, outcome, self._before))
+        still = []
+        for steps, outcome, before in self._waiting:
+            if steps > 0:
+                still.append((steps - 1, outcome, before))
+                continue
+            if states != self._before or calls:  # read in this step: taken
+                outcome.accepted = True
+                self._current = outcome
+            else:
+                outcome.busy = self._names(states)
+        self._waiting = still
+        current = self._current
+        if current is not None:
+            current.operations.extend(c for c in calls if c not in current.operations)
+            for e in events:
+                if e not in current.events:
+                    current.events.append(e)
+                if current.feasible is None and INFEASIBLE.match(e):
+                    current.feasible = False
+                elif current.feasible is None and FEASIBLE.match(e):
+                    current.feasible = True
+            if current.done is None and self.resting(states):
+                current.done = t
+        self._before = states
+
+    def resting(self, states) -> bool:
+        return all(index == self.rest[port] for (port, _), index in zip(self._states, states))
+
+    def _names(self, states) -> str:
+        names = []
+        for (_, m), index in zip(self._states, states):
+            leaves = self.program.leaf_names(m)
+            names.append(leaves[index] if isinstance(index, int) and 0 <= index < len(leaves) else "none")
+        return ", ".join(names)
+
+    def summary(self, blocked=(), waiting=()) -> Summary:
+        """The outcomes so far, the commands `waiting` (not applied by the end) after them."""
+        return Summary([*self.outcomes, *waiting], [str(b) for b in blocked])
+
+
+def not_applied(source) -> list[CommandOutcome]:
+    """The commands a run's source (unit) accepted but did not apply before the end: still in its queue."""
+    queue = source.command_queue if source is not None else None
+    if queue is None:
+        return []
+    return [CommandOutcome(c.due, c.event, dict(c.values), origin=c.origin) for c in queue.waiting]

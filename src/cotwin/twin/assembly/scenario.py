@@ -1,0 +1,391 @@
+"""Scenarios of timed commands, and the controller unit that plays one.
+
+Two formats: a TwinManager plan CSV (column `timestep` in ms of simulated time, then d-model input
+ports; an event column true in a row sends that event) and a TOML list of commands:
+
+    [[command]]
+    time = 1.0                      # s
+    event = "moveDiscreteCommand"
+    args = { target_X = 0, target_Y = 23, target_Z = 1 }
+
+Arguments are named by their d-model port (`MovementArgs_target_X`, as in plan CSVs, on the RMQ FMU's
+wire and in the page's API: one naming everywhere); TOML scenarios and what-if plans also take the
+field name older files use (`target_X`, or `value` for an event carrying one primitive value). A
+command gives every argument of its event: it takes its arguments from itself, never from an earlier
+one.
+
+A command at time T is due in the step covering it (t <= T < t + h). Each raised event is an occurrence
+(cotwin.twin.assembly.commands) queued in time order: the controller applies one per step, as an output of that
+step true for exactly that step with its own arguments; commands due in the same step follow in the
+next steps, none is lost. Both readers are strict: times must be finite and non-negative, integers
+must fit the FMU's int32, and every problem is reported at its line and column.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from ...config import Key, Schema, TomlFile, did_you_mean, is_number, raise_problems
+from ...cosim.units import INT32, Port, PythonUnit
+from ...diagnostics import CotwinError, Finding, Location, Severity
+from ...dmodel.program import Program
+from ...files import read_text
+from ...plaindata import count
+from .commands import CommandQueue, Occurrence
+
+MAX_FIELD = 1 << 16  # characters: no cell of a plan is legitimately longer
+
+
+@dataclass(frozen=True)
+class Command:
+    time: float  # s
+    values: tuple[tuple[str, object], ...]  # port -> value
+    where: str
+
+
+def scenario_ports(program: Program) -> dict[str, str]:
+    """The d-model input ports a scenario may drive, with their FMI types."""
+    ports = {}
+    for ev in program.inputs:
+        ports[ev.name] = "Boolean"
+        for port, sc in ev.value_ports:
+            ports[port] = sc.fmi_type
+    return ports
+
+
+def parse_value(text: str, fmi: str) -> object:
+    """A plan cell as the port's FMI type, or ValueError saying why not."""
+    text = text.strip()
+    if fmi == "Boolean":
+        if text.lower() not in ("true", "false", "1", "0"):
+            raise ValueError("is not true/false")
+        return text.lower() in ("true", "1")
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"is not a valid {fmi.lower()}") from None
+    if not math.isfinite(value):
+        raise ValueError("is not a finite number")
+    if fmi == "Integer":
+        if value != int(value):
+            raise ValueError("is not a valid integer")
+        if not INT32[0] <= int(value) <= INT32[1]:
+            raise ValueError("does not fit an FMI Integer (int32)")
+        return int(value)
+    return value
+
+
+def _location(where: str) -> Location:
+    """A command's `where` (file:line:column, or a name such as "plan item 2") as a Location."""
+    parts = where.rsplit(":", 2)
+    if len(parts) == 3 and parts[1].isdigit() and parts[2].isdigit():
+        return Location(parts[0], int(parts[1]), int(parts[2]))
+    return Location(where, 1, 1)
+
+
+def after_end(commands: list[Command], end: float, h: float = 0.0) -> list[Finding]:
+    """Warnings for the commands a run to `end` never sends (the last step covers up to end): a plan
+    longer than its run, or a run cut short by --end, should say what it leaves out."""
+    return [Finding(_location(c.where), Severity.WARNING, f"this command at {c.time:g} s is after the run's end "
+                    f"({end:g} s): it is never sent") for c in commands if c.time >= end - 1e-9]
+
+
+def nothing_planned(plan: Path | None, commands: list[Command]) -> list[Finding]:
+    """A warning for a plan (or command list) that holds no command: the run goes ahead without commands from
+    outside, which a user who wrote a plan did not mean ("nothing happened" is said, not taken for success)."""
+    if plan is None or commands:
+        return []
+    return [Finding(Location(str(plan), 1, 1), Severity.WARNING, "the plan holds no command: the d-model runs "
+                    "without commands from outside")]
+
+
+def read_plan(path: str | Path, program: Program) -> list[Command]:
+    path = Path(path)
+    ports = scenario_ports(program)
+    text = read_text(path, "plan")  # capped; errors located
+    problems: list[Finding] = []
+
+    def problem(line: int, column: int, message: str) -> None:
+        problems.append(Finding(Location(str(path), line, column), Severity.ERROR, message))
+
+    lines = text.splitlines()
+    clip = min(MAX_FIELD * 4, csv.field_size_limit() - 1)  # a longer cell is reported below, not by csv
+    reader = csv.reader(line if len(line) <= clip else line[:clip] for line in lines)
+    try:
+        rows = list(reader)
+    except csv.Error as err:
+        raise CotwinError([Finding(Location(str(path), max(reader.line_num, 1), 1), Severity.ERROR,
+                                   f"bad CSV: {err}")]) from None
+    if not rows or not rows[0] or rows[0][0].strip() != "timestep":
+        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
+                                   "a plan starts with a header whose first column is 'timestep' (ms)")])
+    header = [h.strip() for h in rows[0]]
+    columns = _column_starts(lines[0])
+    for k, h in enumerate(header[1:], start=1):
+        if h not in ports:
+            problem(1, columns[k], f"unknown d-model input '{h}'{did_you_mean(h, ports)} (known: {', '.join(ports)})")
+        elif h in header[1:k]:
+            problem(1, columns[k], f"column '{h}' appears twice")
+    for ev in program.inputs:
+        missing = [port for port, _ in ev.value_ports if port not in header]
+        if ev.name in header and missing:
+            problem(1, columns[header.index(ev.name)], f"column '{ev.name}' without its argument column(s) "
+                    f"{', '.join(missing)}: a command takes its arguments from its own row")
+    commands = []
+    for line, row in enumerate(rows[1:], start=2):
+        if not row or all(not cell.strip() for cell in row):
+            continue
+        starts = _column_starts(lines[line - 1])
+        if len(lines[line - 1]) > clip or any(len(cell) > MAX_FIELD for cell in row):
+            problem(line, 1, f"a cell longer than {MAX_FIELD} characters")
+            continue
+        if len(row) != len(header):
+            problem(line, 1, f"{len(row)} values for {len(header)} columns")
+            continue
+        values, ok = [], True
+        try:
+            time_ms = parse_value(row[0], "Real")
+            if time_ms < 0:
+                raise ValueError("is negative: a plan cannot send into the past")
+        except ValueError as err:
+            problem(line, 1, f"timestep '{row[0].strip()[:40]}' {err}")
+            ok = False
+        for k, (h, cell) in enumerate(zip(header[1:], row[1:]), start=1):
+            if h not in ports:
+                continue
+            try:
+                values.append((h, parse_value(cell, ports[h])))
+            except ValueError as err:
+                problem(line, starts[k] if k < len(starts) else 1, f"column '{h}': '{cell.strip()[:40]}' {err}")
+                ok = False
+        if ok:
+            commands.append(Command(time_ms / 1000.0, tuple(values), f"{path}:{line}:1"))
+    raise_problems(problems)
+    return sorted(commands, key=lambda c: c.time)
+
+
+def _column_starts(line: str) -> list[int]:
+    """1-based columns where each comma-separated cell of a line starts (quotes not expected in plans)."""
+    starts, column = [1], 1
+    for ch in line:
+        column += 1
+        if ch == ",":
+            starts.append(column)
+    return starts
+
+
+COMMAND = Schema({"time": Key("nonnegative", required=True), "event": Key("str", required=True),
+                  "args": Key("table", {})})
+SCENARIO = Schema({"command": Key("list", required=True)})
+
+
+def read_toml(path: str | Path, program: Program) -> list[Command]:
+    path = Path(path)
+    file = TomlFile(path, "scenario")
+    problems: list[Finding] = []
+    data = SCENARIO.read(file.data, file, (), problems)
+    events = {ev.name: ev for ev in program.inputs}
+    commands = []
+    for i, item in enumerate(data.get("command") or [], start=0):
+        at = ("command", i)
+        if not isinstance(item, dict):
+            problems.append(Finding(file.location(at), Severity.ERROR, f"[[command]] {i + 1} must be a table"))
+            continue
+        item = COMMAND.read(item, file, at, problems)
+        name = item["event"]
+        if name is None:
+            continue
+        if name not in events:
+            problems.append(Finding(file.location(at + ("event",)), Severity.ERROR,
+                                    f"[[command]] {i + 1}: unknown event {name!r}{did_you_mean(name, events)} "
+                                    f"(known: {', '.join(events)})"))
+            continue
+        args = item["args"] or {}
+        values, wrong = command_values(events[name], args)
+        for key, message in wrong:
+            where = file.location(at + ("args", key)) if key in args else file.location(at)
+            problems.append(Finding(where, Severity.ERROR, f"[[command]] {i + 1}: {message}"))
+        if item["time"] is not None and not wrong:
+            line, column = file.location(at).line, file.location(at).column
+            commands.append(Command(float(item["time"]), tuple(values), f"{path}:{line}:{column}"))
+    if not commands and not problems:
+        problems.append(Finding(file.location(), Severity.ERROR, "the scenario has no [[command]]"))
+    raise_problems(problems)
+    return sorted(commands, key=lambda c: c.time)
+
+
+def typed_value(value, fmi: str) -> object:
+    """A TOML or JSON value as the port's FMI type, or ValueError saying why not (never coerced
+    silently: 1.5 is not an integer, 1 is not a Boolean, 2**32 does not fit int32)."""
+    if fmi == "Boolean":
+        if isinstance(value, bool):
+            return value
+        raise ValueError("is not true or false")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError("is not a number")
+    if not is_number(value):  # also an integer too large for any float
+        raise ValueError("is not a finite number")
+    if fmi == "Integer":
+        if isinstance(value, float):
+            raise ValueError("is not an integer")
+        if not INT32[0] <= value <= INT32[1]:
+            raise ValueError("does not fit an FMI Integer (int32)")
+        return value
+    return float(value)
+
+
+def scalar_value(value, sc, typed=None) -> object:
+    """A TOML or JSON value for the d-model input scalar `sc` (a dmodel Scalar): `typed` (typed_value, or a
+    reader's own FMI typing) within its RoboSim type: an enumeration takes one of its literals (by name, or
+    by index), a nat is not negative; ValueError saying why not."""
+    from ...robosim.types import NAT, EnumTy
+
+    typed = typed or typed_value
+    if isinstance(sc.ty, EnumTy):
+        names = [lit.name for lit in sc.ty.decl.literals]
+        if isinstance(value, str) and value in names:
+            return names.index(value)
+        index = typed(value, "Integer") if not isinstance(value, str) else None
+        if index is None or not 0 <= index < len(names):
+            raise ValueError(f"is not a literal of {sc.ty.decl.name} ({', '.join(names)}, or their index "
+                             f"0..{len(names) - 1})")
+        return index
+    out = typed(value, sc.fmi_type)
+    if sc.ty == NAT and out < 0:
+        raise ValueError("is negative (the input is a nat)")
+    return out
+
+
+def argument_keys(ev) -> dict[str, tuple[str, object]]:
+    """The names a command may give an argument of the d-model input event `ev` by -> (port, Scalar): its
+    port name (canonical: `MovementArgs_target_X`) and the field name older files use (`target_X`, or
+    `value` for an event carrying one primitive value)."""
+    keys = {port: (port, sc) for port, sc in ev.value_ports}
+    for port, sc in ev.value_ports:
+        keys.setdefault(sc.path[-1] if sc.path else "value", (port, sc))
+    return keys
+
+
+def command_values(ev, args: dict) -> tuple[list[tuple[str, object]], list[tuple[str | None, str]]]:
+    """A command of event `ev` with `args` (either naming, see `argument_keys`) as port values: the event
+    true, then each argument typed by `scalar_value`; and the problems, each with the key it is about
+    (None for the command as a whole): an unknown or doubly given argument, a wrong value, a missing one."""
+    keys = argument_keys(ev)
+    given: dict[str, object] = {}
+    problems: list[tuple[str | None, str]] = []
+    for key, value in args.items():
+        if key not in keys:
+            problems.append((key, f"event {ev.name} has no argument {str(key)[:80]!r} (it has "
+                                  f"{', '.join(port for port, _ in ev.value_ports) or 'none'})"))
+            continue
+        port, sc = keys[key]
+        if port in given:
+            problems.append((key, f"argument {port} of {ev.name} is given twice"))
+            continue
+        try:
+            given[port] = scalar_value(value, sc)
+        except ValueError as err:
+            problems.append((key, f"argument {key}: {value!r:.80} {err}"))
+            given[port] = None
+    missing = [port for port, _ in ev.value_ports if port not in given]
+    if missing:
+        problems.append((None, f"event {ev.name} carries {', '.join(missing)}: a command gives every argument "
+                               "(it never takes one from an earlier command)"))
+    return [(ev.name, True), *((port, given[port]) for port, _ in ev.value_ports if port in given)], problems
+
+
+def read_scenario(path: str | Path, program: Program) -> list[Command]:
+    return read_toml(path, program) if str(path).endswith(".toml") else read_plan(path, program)
+
+
+class ScenarioUnit(PythonUnit):
+    """The controller: plays a scenario's commands into the d-model's inputs, one event per step (see
+    module doc); `queue.applied` says when each was applied."""
+
+    def __init__(self, name: str, program: Program, commands: list[Command], ports: list[str] | None = None):
+        """Outputs: the ports the commands use, or `ports` (which must include them)."""
+        types = scenario_ports(program)
+        used = list(dict.fromkeys(port for c in commands for port, _ in c.values))
+        if ports is not None:
+            extra = [p for p in used if p not in ports]
+            if extra:
+                raise CotwinError(f"the scenario drives {', '.join(extra)}, which the unit {name} does not output")
+            used = list(ports)
+        super().__init__(name, [Port(p, types[p], "output") for p in used])
+        self.events = {ev.name for ev in program.inputs} & set(used)
+        self.arguments = {ev.name: [port for port, _ in ev.value_ports] for ev in program.inputs if ev.name in self.events}
+        self.commands = sorted(commands, key=lambda c: c.time)
+        self.queue = CommandQueue()
+        self._next = 0
+
+    @property
+    def command_events(self) -> set[str]:
+        return set(self.events)
+
+    @property
+    def command_queue(self) -> CommandQueue:
+        return self.queue
+
+    def instantiate(self, start: float) -> None:
+        super().instantiate(start)
+        self._next = 0
+        eps = 1e-9
+        while self._next < len(self.commands) and self.commands[self._next].time < start - eps:
+            self._next += 1
+
+    def step(self, t: float, h: float) -> None:
+        self.time = t + h
+        for ev in self.events:
+            self.values[ev] = False
+        self._offer_due(t, t + h - 1e-9)
+        self._apply(t + h)
+
+    def _offer_due(self, start: float, before: float) -> None:
+        """Offer the queue every command due before `before` not offered yet, each event with the values of
+        its own arguments (those due before `start` are skipped: a start in the middle of the plan)."""
+        eps = 1e-9
+        commands = self.commands
+        while self._next < len(commands) and commands[self._next].time < before:
+            c = commands[self._next]
+            self._next += 1
+            if c.time < start - eps:
+                continue
+            values = dict(c.values)
+            raised = [port for port, value in c.values if port in self.events and value is True]
+            for event in raised:
+                self.queue.offer(Occurrence(event, tuple((p, values[p]) for p in self.arguments[event] if p in values),
+                                            c.where, c.time))
+            bound = {p for event in raised for p in self.arguments[event]}
+            for port, value in c.values:  # values without their event: set as they come
+                if port not in self.events and port not in bound:
+                    self.values[port] = value
+
+    def _apply(self, at: float) -> None:
+        """Show the next waiting command (its event true, its arguments set), applied at time `at`."""
+        occurrence = self.queue.take(at)
+        if occurrence is not None:
+            self.values[occurrence.event] = True
+            self.values.update(occurrence.values)
+
+    # ---- state: the port values, the time reached, the next command to play and those waiting ----
+    STATE_KEYS = (*PythonUnit.STATE_KEYS, "next", "plan", "queue")
+
+    def snapshot(self) -> dict:
+        return {**super().snapshot(), "next": self._next, "plan": self._plan(), "queue": self.queue.snapshot()}
+
+    def restore(self, snapshot: dict) -> None:
+        """Continue where the saved unit was; a unit with another plan (a what-if) continues with the
+        first of its commands not yet due at the saved time, none waiting."""
+        super().restore(snapshot)
+        if snapshot["plan"] == self._plan():
+            self._next = count(snapshot["next"], f"unit {self.name}'s next command", len(self.commands))
+            self.queue.restore(snapshot["queue"], self.ports, f"unit {self.name}'s command queue")
+        else:
+            self._next = next((k for k, c in enumerate(self.commands) if c.time >= self.time - 1e-9), len(self.commands))
+            self.queue = CommandQueue()
+
+    def _plan(self) -> list[tuple[float, tuple]]:
+        return [(c.time, c.values) for c in self.commands]

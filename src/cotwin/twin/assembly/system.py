@@ -1,0 +1,420 @@
+"""The TwinSystem: a twin project's co-simulation, derived once from its models and settings.
+
+It names the units (a command source, the d-model FMU, the platform mapping), every connection
+between them, the logged variables and the delayed units; `cotwin build` writes it as Maestro's
+multimodel.json, `cotwin run` executes it, and the live runtime instantiates it twice (PT and DT),
+so the three cannot disagree.
+
+Connections come from the models alone: source -> d-model command events and their values; d-model
+operation calls and arguments -> mapping; mapping platform events -> d-model (the mapping's outputs
+are declared delayed, which breaks the d-model/mapping cycle under Gauss-Seidel); the mapping's
+monitored variables -> the source, when the source echoes them (the RabbitMQ bridge, as Listing 5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from ...config import did_you_mean
+from ...cosim.isolated import DEFAULT_TIMEOUT
+from ...cosim.system import Connection, System
+from ...cosim.units import Unit
+from ...diagnostics import CotwinError, Finding, Location, Severity
+from ..project import TwinProject
+
+
+@dataclass(frozen=True)
+class UnitSpec:
+    """One unit of the twin as Maestro names it: `{key}.instance`, from `fmu`; `role` says what it is."""
+
+    key: str
+    instance: str
+    fmu: str
+    role: str  # source | dmodel | mapping
+
+    @property
+    def name(self) -> str:
+        return f"{self.key}.{self.instance}"
+
+
+DMODEL = UnitSpec("{dmodel}", "dmodel", "dmodel.fmu", "dmodel")
+MAPPING = UnitSpec("{mapping}", "mapping", "mapping.fmu", "mapping")
+CONTROLLER = UnitSpec("{controller}", "controller", "controller.fmu", "source")
+RABBITMQ = UnitSpec("{rabbitmq}", "rabbitmq", "rabbitmq.fmu", "source")
+
+
+@dataclass
+class TwinModels:
+    """The checked models of a project and what is derived from them once."""
+
+    project: object  # cotwin.robosim.project.Project
+    program: object  # cotwin.dmodel.program.Program
+    tree: object  # cotwin.pmodel.tree.KinematicTree
+    mapping_model: object  # cotwin.robosim.pmodel_elements.Mapping
+    scene: object | None
+    monitored: list[str]
+    calibration: object | None = None  # cotwin.twin.assembly.calibration.Calibration: [platform] calibration
+    digests: dict[str, str] = field(default_factory=dict)  # model_digests: what a saved state names
+
+
+def model_digests(spec: TwinProject, project) -> dict[str, str]:
+    """What the DT is made from, by path relative to the project's folder (as in generated files): every
+    model file, the calibration and the world file, each with the sha256 of its bytes; a saved state
+    carries them, so that one restored into a DT of other models names the file that changed."""
+    import hashlib
+    import os
+
+    root = spec.path.parent.resolve()
+    files = [Path(f.path) for f in project.files if not str(f.path).startswith("<")]
+    files += [p for p in (spec.calibration, spec.world_file) if p is not None]
+    out = {}
+    for path in dict.fromkeys(p.resolve() for p in files):
+        out[Path(os.path.relpath(path, root)).as_posix()] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return dict(sorted(out.items()))
+
+
+def load_models(spec: TwinProject) -> TwinModels:
+    from ...dmodel.program import build_program
+    from ...mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints
+    from ...pmodel import ik
+    from ...mapping.profile import profile_rays
+    from ...pmodel.tree import build_tree
+    from ...robosim.check import load_checked
+    from ...robosim.pmodel_elements import Mapping as MappingModel
+
+    project = load_checked(spec.model_files)
+    program = build_program(project, spec.module)
+    tree = build_tree(project, spec.pmodel_name, spec.stand_ins, profile_rays(spec.profile))  # the robot's scanner
+    problems: list[Finding] = []  # the checks below report together (with the plan's, see the end)
+    unused = sorted(set(spec.stand_ins) - tree.stood_in)
+    if unused:
+        problems.append(Finding(spec.location("platform", "stand_in"), Severity.ERROR,
+                                f"[[platform.stand_in]] for {', '.join(unused)}: p-model {tree.name} names no such "
+                                "mesh that cannot be read"))
+    mappings = project.elements(MappingModel)
+    if len(mappings) != 1:
+        raise CotwinError([Finding(Location(str(spec.mapping), 1, 1), Severity.ERROR,
+                                   f"a twin needs exactly one mapping, found {len(mappings)}")])
+    mapping = mappings[0]
+    calibration = None
+    if spec.calibration is not None:
+        from .calibration import Calibration
+
+        calibration = _gather(problems, lambda: Calibration.read(spec.calibration), None)
+    scene = _gather(problems, lambda: build_scene(spec, mapping, calibration), None)
+    variables = [v.name for v in mapping.variables]
+    if calibration is not None:  # it names this arm's joints
+        _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, ik.find_tool(tree))), None)
+    actuated = [j.name for j in tree.actuated]
+    unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
+    if unknown:  # said at the key, with the nearest joint
+        problems.append(Finding(spec.location("monitor", "joints"), Severity.ERROR,
+                                f"[monitor] joints: {', '.join(unknown)} are not actuated joints of p-model "
+                                f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
+    joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) and not unknown else []
+    clash = [n for n in spec.readings if n in variables or n in mirror_variables(variables, joints)]
+    if clash:
+        problems.append(Finding(spec.location("monitor", "readings", clash[0]), Severity.ERROR,
+                                f"[monitor] readings {', '.join(clash)}: the mapping has variables of these names"))
+    if problems:
+        if spec.plan is not None:  # its problems too, not in a round of their own once these are fixed
+            from .scenario import read_scenario
+
+            _gather(problems, lambda: read_scenario(spec.plan, program), None)
+        raise CotwinError(problems)
+    monitored = [*mirror_variables(variables, joints), *spec.readings]
+    return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project))
+
+
+def build_scene(spec: TwinProject, mapping, calibration=None):
+    """The scene around the robot: the kind `[platform] scene` names (cotwin.pmodel.scenes, "auto": the
+    world if the project gives one, else a registered kind that fits the mapping, else none), built from
+    the mapping, the `[scene]` table and the calibrated cell geometry."""
+    from ...pmodel import scenes
+
+    request = scenes.SceneRequest(mapping, dict(spec.scene_options), calibration.geometry if calibration else None,
+                                  spec.world, spec.path.parent, spec.location)
+    kind = scenes.choose_kind(spec.scene, request, spec.location("platform", "scene"))
+    if spec.world is not None and kind.name != "world":
+        what, at = ("[platform] world", spec.location("platform", "world")) if spec.world_file else \
+            ("[world]", spec.location("world"))
+        raise CotwinError([Finding(at, Severity.ERROR, f"{what}: the scene is '{kind.name}' ([platform] scene = "
+                                   f"\"{spec.scene}\"), which would ignore it")])
+    return scenes.build_scene(kind.name, request)
+
+
+def external_events(program, mapping_model) -> list[str]:
+    """The d-model input events that come from outside the platform: those the mapping does not define,
+    or defines as never occurring (every condition the literal `false`)."""
+    from ...robosim import syntax as s
+
+    def never(ev) -> bool:
+        conditions = (*ev.equations, *ev.predicates)
+        return bool(conditions) and all(isinstance(c, s.Literal) and c.value is False for c in conditions)
+
+    defined = {ev.name: ev for ev in mapping_model.input_events}
+    return [ev.name for ev in program.inputs if ev.name not in defined or never(defined[ev.name])]
+
+
+def _gather(problems: list[Finding], make, fallback):
+    """`make()`, or `fallback` with its error's findings added to `problems` (reported with the others)."""
+    try:
+        return make()
+    except CotwinError as err:
+        problems.extend(err.findings)
+        return fallback
+
+
+class TwinSystem:
+    """Units, connections, logged variables and delayed units of a twin project (see module doc)."""
+
+    def __init__(self, spec: TwinProject, models: TwinModels | None = None, commands=None):
+        """`commands` (a list of scenario Commands) replaces the project's source of commands with that
+        plan over every port a live source carries (what-if forks and sweeps)."""
+        from ...dmodel.ports import PortLayout
+        from .mapping_unit import mapping_ports
+        from .scenario import read_scenario, scenario_ports
+
+        self.spec = spec
+        self.models = models or load_models(spec)
+        program = self.models.program
+        mapped = {ev.name for ev in self.models.mapping_model.input_events}
+        command_ports = scenario_ports(program)
+        problems: list[Finding] = []  # the plan's, the log's, the parameters' and the panels': reported together
+        if commands is not None:
+            self.commands = list(commands)
+            used = {p for c in self.commands for p, _ in c.values}
+            self.source_ports = list(dict.fromkeys([*self.live_ports(), *(p for p in command_ports if p in used)]))
+            self.source = CONTROLLER
+        elif spec.plan is not None:
+            self.commands = _gather(problems, lambda: read_scenario(spec.plan, program), [])
+            used = {p for c in self.commands for p, _ in c.values}
+            self.source_ports = [p for p in command_ports if p in used]
+            self.source = CONTROLLER
+        elif spec.rabbitmq is not None:
+            self.commands = []
+            self.source_ports = self.live_ports()
+            self.source = RABBITMQ
+        else:  # an autonomous robot: no commands from outside
+            self.commands = []
+            self.source_ports = []
+            self.source = None
+        self.command_events = set(self.source_ports) & {ev.name for ev in program.inputs}
+        self.units = [u for u in (self.source, DMODEL, MAPPING) if u is not None]
+        layout = PortLayout(program)
+        dmodel_inputs = {v.name for v in layout.variables if v.causality == "input"}
+        connections = []
+        if self.source is not None:
+            connections += [Connection(self.source.name, p, DMODEL.name, p) for p in self.source_ports]
+        for port in mapping_ports(program, mapped, self.command_events, self.models.monitored):
+            if port.causality == "input":
+                connections.append(Connection(DMODEL.name, port.name, MAPPING.name, port.name))
+            elif port.name in dmodel_inputs:
+                connections.append(Connection(MAPPING.name, port.name, DMODEL.name, port.name))
+        if self.source is RABBITMQ:  # the bridge publishes the monitored variables back (Listing 5)
+            connections += [Connection(MAPPING.name, v, RABBITMQ.name, v) for v in self.models.monitored]
+        self.connections = connections
+        self.delayed = {MAPPING.name}
+        self.log = _gather(problems, self._log_variables, None)
+        shown = not problems  # the panels are checked against what a run shows: the plan's ports, the log
+        self.parameters = _gather(problems, lambda: self._parameters(layout), {})
+        if shown:
+            _gather(problems, self._check_panels, None)
+        if problems:
+            raise CotwinError(problems)
+
+    def with_plan(self, commands) -> "TwinSystem":
+        """This twin with `commands` as its source (the same models, derived once)."""
+        return TwinSystem(self.spec, self.models, commands)
+
+    @property
+    def seed_port(self) -> str | None:
+        """The d-model FMU's parameter seeding its random source (uninterpreted functions, random()), if any."""
+        return next((p.port for p in self.models.program.parameters if p.machine < 0), None)
+
+    def with_seed(self, seed: int) -> "TwinSystem":
+        """This twin with another seed of its d-model's random source (another random walk)."""
+        if self.seed_port is None:
+            raise CotwinError(f"{self.spec.path}: the d-model draws no random values: it has no seed")
+        return self.with_parameters(**{self.seed_port: int(seed)})
+
+    def with_parameters(self, **values) -> "TwinSystem":
+        """This twin with d-model parameters set (e.g. `seed=3`: another random walk), the same models."""
+        spec = replace(self.spec, parameters={**self.spec.parameters, **values})
+        plan = self.commands if self.source is CONTROLLER and self.spec.plan is None else None  # a what-if's
+        return TwinSystem(spec, self.models, plan)
+
+    def in_world(self, world) -> "TwinSystem":
+        """This twin's models in another world (cotwin.pmodel.world.World), everything else the same."""
+        spec = replace(self.spec, world=world, world_file=None, scene="world",
+                       raw={**self.spec.raw, "world": world.table})
+        return TwinSystem(spec, replace(self.models, scene=world))
+
+    def live_ports(self) -> list[str]:
+        """The ports a live (RabbitMQ) source carries: the events of `[scenario] rabbitmq commands` (default:
+        the d-model inputs the mapping does not produce) and their value ports."""
+        program, spec = self.models.program, self.spec
+        names = spec.rabbitmq.commands if spec.rabbitmq is not None and spec.rabbitmq.commands is not None else \
+            external_events(program, self.models.mapping_model)
+        unknown = [n for n in names if n not in {ev.name for ev in program.inputs}]
+        if unknown:
+            raise CotwinError([Finding(spec.location("scenario", "rabbitmq", "commands"), Severity.ERROR,
+                                       f"[scenario] rabbitmq commands: {', '.join(unknown)} are not input events "
+                                       f"of the d-model{did_you_mean(unknown[0], [ev.name for ev in program.inputs])} "
+                                       f"(it has {', '.join(ev.name for ev in program.inputs)})")])
+        return [p for ev in program.inputs if ev.name in names for p in [ev.name, *(port for port, _ in ev.value_ports)]]
+
+    def _log_variables(self) -> dict[str, list[str]]:
+        monitored = self.models.monitored
+        names = self.spec.log if self.spec.log is not None else monitored
+        unknown = [n for n in names if n not in monitored]
+        if unknown:
+            raise CotwinError([Finding(self.spec.location("cosim", "log"), Severity.ERROR,
+                                       f"[cosim] log: unknown mapping variable(s) {', '.join(unknown)}"
+                                       f"{did_you_mean(unknown[0], monitored)} "
+                                       f"(monitored: {', '.join(monitored) or 'none'})")])
+        program = self.models.program
+        return {MAPPING.name: list(names), DMODEL.name: [program.state_port(m) for m in program.machines]}
+
+    def _parameters(self, layout) -> dict[str, dict[str, object]]:
+        """[cosim] parameters: values of the d-model FMU's parameters (its random seed, constants without a
+        value), checked against its ports."""
+        given = self.spec.parameters
+        if not given:
+            return {}
+        ports = {v.name: v for v in layout.variables if v.causality == "parameter"}
+        problems = []
+        for name, value in given.items():
+            port = ports.get(name)
+            at = self.spec.location("cosim", "parameters", name)
+            if port is None:
+                problems.append(Finding(at, Severity.ERROR, f"[cosim] parameters: the d-model has no parameter "
+                                                            f"'{name}'{did_you_mean(name, ports)} "
+                                                            f"(it has {', '.join(ports) or 'none'})"))
+            elif port.fmi_type == "Boolean" and not isinstance(value, bool) or \
+                    port.fmi_type == "Integer" and (isinstance(value, bool) or not isinstance(value, int)) or \
+                    port.fmi_type == "Real" and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                problems.append(Finding(at, Severity.ERROR, f"[cosim] parameters: {name} takes "
+                                        f"a{'n' if port.fmi_type[0] in 'I' else ''} {port.fmi_type}, not {value!r}"))
+            elif port.fmi_type == "Integer" and not -2 ** 31 <= value < 2 ** 31:
+                problems.append(Finding(at, Severity.ERROR, f"[cosim] parameters: {name} is an FMI Integer "
+                                        f"(32 bits): {value} is out of its range"))
+        if problems:
+            raise CotwinError(problems)
+        return {DMODEL.name: {name: (float(v) if ports[name].fmi_type == "Real" else v) for name, v in given.items()}}
+
+    def columns(self) -> dict[str, set[str]]:
+        """The variables each unit shows in a result (its connected outputs and logged variables)."""
+        out: dict[str, set[str]] = {u.name: set() for u in self.units}
+        for c in self.connections:
+            out[c.source].add(c.output)
+        for unit, names in self.log.items():
+            out[unit].update(names)
+        return out
+
+    def _check_panels(self) -> None:
+        """[figure] panels name variables a run shows (unit role or instance . variable), else an error
+        at the panel: a misspelt name would draw an empty panel."""
+        if self.spec.panels is None:
+            return
+        units = {u.role: u.name for u in self.units} | {u.instance: u.name for u in self.units}
+        columns = self.columns()
+        problems = []
+        for i, (_, names, _) in enumerate(self.spec.panels):
+            for name in names:
+                unit, variable = name.split(".")
+                if unit not in units:
+                    message = f"unit '{unit}' is not one of this twin's{did_you_mean(unit, units)} ({', '.join(units)})"
+                elif variable not in columns[units[unit]]:
+                    message = (f"{unit} shows no variable '{variable}'{did_you_mean(variable, sorted(columns[units[unit]]))} "
+                               f"(it shows "
+                               f"{', '.join(sorted(columns[units[unit]])) or 'none'})")
+                else:
+                    continue
+                problems.append(Finding(self.spec.location("figure", "panels", i, "variables"), Severity.ERROR,
+                                        f"[figure] panel {i + 1} variable {name!r}: {message}"))
+        if problems:
+            raise CotwinError(problems)
+
+    # ---- descriptions ----
+    def multimodel(self, realtime: bool | None = None) -> dict:
+        """Maestro's multimodel.json; the `cotwin` key (which Maestro ignores) holds the delays."""
+        connections: dict[str, list[str]] = {}
+        for c in self.connections:
+            connections.setdefault(f"{c.source}.{c.output}", []).append(f"{c.target}.{c.input}")
+        return {
+            "fmus": {u.key: u.fmu for u in self.units},
+            "connections": connections,
+            "parameters": {f"{unit}.{name}": value for unit, values in self.parameters.items()
+                           for name, value in values.items()},
+            "logVariables": self.log,
+            "algorithm": {"type": "fixed-step", "size": self.spec.step},
+            "startTime": 0.0,
+            "endTime": self.spec.end,
+            "simulationProgramDelay": self.spec.realtime if realtime is None else realtime,
+            "cotwin": {"delayed": sorted(self.delayed), "algorithm": self.spec.algorithm,
+                       **({"isolate": {DMODEL.name: self.isolated}} if self.isolated else {}),
+                       **({"unit_timeout": self.spec.unit_timeout} if self.spec.unit_timeout != DEFAULT_TIMEOUT else {})},
+        }
+
+    @property
+    def isolated(self) -> bool:
+        """Whether the d-model FMU runs in a process of its own: [cosim] isolate, else when cotwin did not
+        build it ([models] fmu)."""
+        return self.spec.isolate if self.spec.isolate is not None else self.spec.fmu is not None
+
+    # ---- instances ----
+    def mapping_unit(self, endpoint) -> Unit:
+        """The platform mapping against `endpoint`, or against what `endpoint()` returns when the unit is
+        instantiated (a function: describing the unit then never connects to the robot)."""
+        from ...mapping.runtime import Mapping
+        from .mapping_unit import MappingUnit
+
+        models = self.models
+        geometry = models.calibration.geometry if models.calibration is not None else None  # any endpoint's IK
+        options = {"geometry": geometry, "mirrors": self.spec.mirror_joints, "monitor": self.spec.readings}
+        if callable(endpoint):
+            return MappingUnit(MAPPING.name, models.program, lambda: Mapping(models.project, endpoint(), **options),
+                               self.command_events, {ev.name for ev in models.mapping_model.input_events},
+                               models.monitored)
+        return MappingUnit(MAPPING.name, models.program, Mapping(models.project, endpoint, **options),
+                           self.command_events)
+
+    def source_unit(self, bridge=None, stream=None, echo: bool = True) -> Unit | None:
+        """The command source: the scenario's controller, or the RabbitMQ unit reading from `bridge`
+        and `stream` (made from the project's settings when not given; a live twin shares one of each
+        between its PT and DT, so both get every command in the same step)."""
+        from .scenario import ScenarioUnit
+
+        if self.source is CONTROLLER:
+            return ScenarioUnit(CONTROLLER.name, self.models.program, self.commands, self.source_ports)
+        if self.source is RABBITMQ:
+            from .rabbitmq import RabbitMQUnit, port_arguments, port_scalars, port_types
+
+            program = self.models.program
+            return RabbitMQUnit(RABBITMQ.name, port_types(program, self.source_ports), self.models.monitored,
+                                self.spec.rabbitmq, bridge=bridge, stream=stream, events=self.command_events, echo=echo,
+                                scalars=port_scalars(program), arguments=port_arguments(program))
+        return None
+
+    def instantiate(self, dmodel_fmu: str | Path, endpoint, source: Unit | None = None,
+                    dmodel: Unit | None = None, restart: bool = False) -> System:
+        """A fresh, checked co-simulation of this twin against `endpoint` (the platform). The d-model FMU
+        runs in a process of its own when [cosim] isolate says so (by default when cotwin did not build
+        it: [models] fmu) or when `restart` (a failed step is retried in a new process from its last good
+        state)."""
+        from ...cosim.isolated import fmu_unit
+
+        units = []
+        if self.source is not None:
+            units.append(source if source is not None else self.source_unit())
+        units.append(dmodel if dmodel is not None else fmu_unit(DMODEL.name, dmodel_fmu, self.isolated,
+                                                                 self.spec.unit_timeout, restart))
+        units.append(self.mapping_unit(endpoint))
+        return System.of(units, self.connections, delayed=self.delayed, log=self.log, parameters=self.parameters,
+                         models=self.models.digests)
+
+
+    def units_by_role(self, system: System) -> dict[str, Unit]:
+        return {u.role: system.units[u.name] for u in self.units}

@@ -1,0 +1,105 @@
+"""The blocked-wait watch: says when the d-model waits for an answer that cannot come.
+
+An observer of a twin's execution. A machine *waits* in a leaf state whose every way out is guarded by
+platform events (cotwin.dmodel.waits). When it has stayed there for `patience` steps calling no
+operation, the watch asks the mapping about each event it waits for: a command may still be sent (no
+warning); an observation may still be sampled; an *answer* (cotwin.mapping.runtime) cannot come when a
+condition of it on what operations assign is false, or it holds still and was delivered already, since
+the machine calls no operation while it waits. When every answer it waits for cannot come and nothing
+else it waits for is a command or an answer that may come, the wait is blocked: a warning names the
+machine, the state, since when, the events and why each cannot come (once per wait).
+
+This is a run-time judgement, sound for what the d-model and the mapping do by themselves: it does not
+predict the platform (an observation such as `collision` is named as what could still end the wait).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+from ...cosim.observers import Observer
+from ...dmodel.waits import waits
+from .system import DMODEL, MAPPING, TwinSystem
+
+log = logging.getLogger("cotwin.twin")
+
+
+@dataclass
+class Blocked:
+    machine: str
+    state: str
+    since: float  # when the machine entered the state (s)
+    noticed: float  # when the watch said so (s)
+    events: list[str]
+    reasons: dict[str, str]  # answer -> why it cannot come
+    others: list[str]  # observations that could still end the wait
+
+    def __str__(self) -> str:
+        why = "; ".join(f"{e} cannot come ({r})" for e, r in self.reasons.items())
+        rest = f"; only {' or '.join(self.others)}, an observation of the platform, could end the wait" \
+            if self.others else ": it waits forever"
+        return (f"the d-model's machine {self.machine} waits in state {self.state} since t = {self.since:g} s for "
+                f"{' or '.join(self.events)}: {why}{rest}")
+
+
+class WaitWatch(Observer):
+    """See module doc; `found` lists the blocked waits seen, `prefix` marks the warning (e.g. "DT: ")."""
+
+    def __init__(self, system: TwinSystem, patience: int = 3, prefix: str = ""):
+        program = system.models.program
+        self.program = program
+        self.waits = waits(program)
+        self.commands = set(system.command_events)
+        self.patience = patience
+        self.prefix = prefix
+        self.found: list[Blocked] = []
+        self._ports = [(DMODEL.name, program.state_port(m)) for m in program.machines]
+        self._calls = [(DMODEL.name, op.name) for op in program.operations]
+
+    def simulation_initialized(self, execution) -> None:
+        unit = execution.system.units.get(MAPPING.name)
+        self.mapping = unit.mapping if unit is not None else None  # an in-process mapping unit: it can be asked
+        slots = execution.algorithm.slots
+        self._states = execution.reader(self._ports)
+        self._called = execution.reader([c for c in self._calls if c in slots])
+        self._since = [(None, execution.time, 0)] * len(self._ports)  # (leaf, entered at, steps idle)
+
+    def step_complete(self, execution) -> None:
+        if self.mapping is None:
+            return
+        calling = any(v is True for v in self._called())
+        for m, leaf in enumerate(self._states()):
+            previous, entered, idle = self._since[m]
+            if leaf != previous:
+                self._since[m] = (leaf, execution.time, 0)
+                continue
+            idle = 0 if calling else idle + 1
+            self._since[m] = (leaf, entered, idle)
+            if idle == self.patience:
+                self._judge(m, leaf, entered, execution.time)
+
+    def _judge(self, m: int, leaf, entered: float, now: float) -> None:
+        wait = self.waits.get((m, leaf)) if isinstance(leaf, int) else None
+        if wait is None or wait.events & self.commands:
+            return
+        reasons, others = {}, []
+        for event in sorted(wait.events):
+            if event not in self.mapping.events:
+                reasons[event] = "nothing produces it (neither a command nor an event of the mapping)"
+            elif event not in self.mapping.answers:
+                never = self.mapping.never(event)
+                if never:
+                    reasons[event] = never
+                else:
+                    others.append(event)
+            else:
+                why = self.mapping.cannot_come(event)
+                if why is None:
+                    return  # an answer that may still come
+                reasons[event] = why
+        if not reasons or not any(e in self.mapping.answers for e in reasons) and others:
+            return
+        blocked = Blocked(wait.machine, wait.state, entered, now, sorted(wait.events), reasons, others)
+        self.found.append(blocked)
+        log.warning("%st = %g s: %s", self.prefix, now, blocked)

@@ -1,0 +1,536 @@
+"""What-if: fork the digital twin at a state and run a hypothetical plan ahead of real time.
+
+`predict` builds a fresh DT of the same TwinSystem (same d-model FMU, same mapping, the embedded
+simulator) whose command source plays the plan, restores the saved state of the live DT into its
+d-model and mapping (the simulator, the trajectory in flight, the mapping's variables), and runs it
+as fast as it goes. The live twin is never touched: a state is bytes (cotwin.cosim.state), taken
+between two of its steps. A plan's times are relative to the fork.
+
+The answer (`Prediction`): the predicted trajectory of the monitored variables, the d-model's state
+changes, per command what became of it (cotwin.twin.assembly.outcomes: when it was applied, whether the d-model
+took it, its feasibility as the platform's answer says, when it was done: the d-model back at rest);
+waits for answers that cannot come (cotwin.twin.assembly.waits; the what-if ends there); collisions (the
+mapping's `collision` event, and contacts of the robot with the scene other than its fingers'); and
+the completion time of the whole plan.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+import time as wallclock
+from concurrent.futures import CancelledError
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ... import safejson
+from ...cosim.algorithm import algorithm as make_algorithm
+from ...cosim.execution import Execution
+from ...config import did_you_mean
+from ...diagnostics import CotwinError
+from ..assembly.build import dmodel_fmu
+from ...logcap import CappedLog
+from ...service import BackgroundService
+from ..assembly.scenario import Command
+from ..assembly.system import DMODEL, MAPPING, TwinSystem
+from ..assembly.outcomes import CommandLedger, CommandOutcome
+from ..assembly.waits import WaitWatch
+
+_WORKER = None  # (TwinSystem, artefacts) of a what-if worker process
+MAX_REQUEST = 1 << 20  # bytes of a what-if request (a plan of thousands of commands)
+
+
+@dataclass
+class Prediction:
+    start: float
+    end: float
+    step: float
+    commands: list[CommandOutcome]
+    states: list[tuple[float, str, str]]  # (time, machine, state)
+    trajectory: dict[str, list[float]]
+    collisions: list[dict]
+    completion_time: float | None
+    wall_seconds: float
+    blocked: list[str] = field(default_factory=list)  # waits for answers that cannot come (cotwin.twin.assembly.waits)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+class _Contacts:
+    """Contacts of the robot's bodies (its fingers excepted) with the scene, in the embedded simulator."""
+
+    def __init__(self, endpoint, tree):
+        from ...pmodel import ik
+        from ...pmodel.mjcf import ROBOT_CONTYPE
+
+        self.sim = endpoint.sim
+        if self.sim is None:
+            return
+        model = self.sim.model
+        tool = ik.find_tool(tree)
+        fingers = {j.child for j in tree.joints if j.name in tool.fingers}
+        self.robot = {g for g in range(model.ngeom) if model.geom_contype[g] == ROBOT_CONTYPE
+                      and model.body(model.geom_bodyid[g]).name not in fingers}
+        self._robot = np.array(sorted(self.robot), dtype=np.int64)
+        self.seen: dict[tuple[str, str], dict] = {}
+
+    def check(self, t: float) -> None:
+        if self.sim is None:
+            return
+        model, data = self.sim.model, self.sim.data
+        if not data.ncon:
+            return
+        contact = data.contact  # the step's contacts as arrays: only the robot's penetrating ones, in order, in Python
+        g1, g2, dist = contact.geom1, contact.geom2, contact.dist
+        mine, theirs = np.isin(g1, self._robot), np.isin(g2, self._robot)
+        for k in np.flatnonzero((mine != theirs) & (dist <= -0.001)):
+            robot, other = (int(g1[k]), int(g2[k])) if mine[k] else (int(g2[k]), int(g1[k]))
+            key = (model.body(model.geom_bodyid[robot]).name, model.body(model.geom_bodyid[other]).name)
+            entry = self.seen.setdefault(key, {"kind": "contact", "robot": key[0], "with": key[1], "first": t,
+                                               "depth": 0.0})
+            entry["depth"] = max(entry["depth"], -float(dist[k]))
+
+
+def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None, horizon: float = 60.0,
+            step: float | None = None, algorithm: str | None = None, artefacts: str | Path | None = None,
+            settle: float = 0.3, decimate: int = 1, cc: str = "cc", fused: bool = True) -> Prediction:
+    """Run `plan` on a fork of the DT at `state` (None: from the project's initial state); see module doc.
+    `fused`: in the fused loop (cotwin.cosim.fused, the same prediction), else step by step."""
+    import tempfile
+
+    from ..assembly.run import simulated_endpoint
+
+    started = wallclock.perf_counter()
+    spec = system.spec
+    step = spec.step if step is None else step
+    algorithm = algorithm or spec.algorithm
+    start = 0.0
+    if state is not None:
+        from ...cosim.execution import saved_execution
+
+        start = saved_execution(state)["time"]
+    shifted = sorted((Command(start + c.time, c.values, c.where) for c in plan), key=lambda c: c.time)
+    fork = system.with_plan(shifted)
+    with tempfile.TemporaryDirectory(prefix="cotwin-whatif-") as tmp:
+        fmu = dmodel_fmu(fork, Path(artefacts) if artefacts is not None else Path(tmp), cc)
+        endpoint = simulated_endpoint(fork)
+        cosim = fork.instantiate(fmu, endpoint)
+        watch, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
+        execution = Execution(cosim, make_algorithm(algorithm), step, start, [watch, ledger], fused=fused)
+        try:
+            if state is not None:
+                execution.set_state(state, units=[DMODEL.name, MAPPING.name])
+            else:
+                execution.initialize()
+            prediction = _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started, watch,
+                                ledger)
+            prediction.blocked = [str(b) for b in watch.found]
+            return prediction
+        finally:
+            execution.close()
+
+
+class Forks:
+    """What-ifs from one state, one after another, on forks built once (a sweep's many plans): the first plan
+    of a shape (the ports its commands drive) builds its fork as `predict` does and saves the fork's state
+    right after it is set up; every later plan of that shape swaps its commands into the fork's command
+    source and restores that state (the d-model FMU's, the simulator's, the mapping's, the values on the
+    connections: cotwin.cosim.state, at native speed), instead of building the simulator, the mapping and the
+    FMU instance anew. Each prediction is the one `predict` gives (tests/test_fused.py). A what-if that fails
+    drops its fork (the next one of its shape builds anew). `close` ends them all (a context manager)."""
+
+    def __init__(self, system: TwinSystem, state: bytes | None = None, step: float | None = None,
+                 algorithm: str | None = None, artefacts: str | Path | None = None, cc: str = "cc"):
+        self.system, self.state, self.cc = system, state, cc
+        self.step = system.spec.step if step is None else step
+        self.algorithm = algorithm or system.spec.algorithm
+        self.artefacts = artefacts
+        self.start = 0.0
+        if state is not None:
+            from ...cosim.execution import saved_execution
+
+            self.start = saved_execution(state)["time"]
+        self._forks: dict[frozenset, tuple] = {}  # plan shape -> (fork, execution, endpoint, saved state)
+        self._scratch = None
+
+    def __enter__(self) -> "Forks":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def predict(self, plan: list[Command], horizon: float = 60.0, settle: float = 0.3, decimate: int = 1) -> Prediction:
+        started = wallclock.perf_counter()
+        start = self.start
+        shifted = sorted((Command(start + c.time, c.values, c.where) for c in plan), key=lambda c: c.time)
+        shape = frozenset(p for c in shifted for p, _ in c.values)
+        built = self._forks.pop(shape, None)
+        try:
+            if built is None:
+                built = self._build(shifted)
+            fork, execution, endpoint, saved, fresh = built
+            if not fresh:
+                execution.system.units[fork.source.name].commands = shifted
+                execution.set_state(saved)  # the fork as it was set up (the source: this plan from its start)
+            watch, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
+            execution.observers = [watch, ledger]
+            for o in execution.observers:
+                o.simulation_initialized(execution)
+            prediction = _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started, watch,
+                                ledger)
+            prediction.blocked = [str(b) for b in watch.found]
+        except BaseException:
+            if built is not None:
+                built[1].close()
+            raise
+        self._forks[shape] = (fork, execution, endpoint, saved, False)  # ran: the next plan restores `saved`
+        return prediction
+
+    def _build(self, shifted: list[Command]) -> tuple:
+        import tempfile
+
+        from ..assembly.run import simulated_endpoint
+
+        fork = self.system.with_plan(shifted)
+        artefacts = self.artefacts
+        if artefacts is None:
+            if self._scratch is None:
+                self._scratch = tempfile.TemporaryDirectory(prefix="cotwin-whatif-")
+            artefacts = self._scratch.name
+        fmu = dmodel_fmu(fork, Path(artefacts), self.cc)
+        endpoint = simulated_endpoint(fork)
+        execution = Execution(fork.instantiate(fmu, endpoint), make_algorithm(self.algorithm), self.step, self.start,
+                              [], fused=True)
+        try:
+            if self.state is not None:
+                execution.set_state(self.state, units=[DMODEL.name, MAPPING.name])
+            else:
+                execution.initialize()
+            saved = execution.get_state()
+        except BaseException:
+            execution.close()
+            raise
+        return fork, execution, endpoint, saved, True  # fresh: the first plan runs without a restore
+
+    def close(self) -> None:
+        for _, execution, _, _, _ in self._forks.values():
+            execution.close()
+        self._forks.clear()
+        if self._scratch is not None:
+            self._scratch.cleanup()
+            self._scratch = None
+
+
+def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, started, waits, ledger) -> Prediction:
+    program = fork.models.program
+    platform = [c.output for c in fork.connections if c.source == MAPPING.name and c.target == DMODEL.name
+                and c.output in {ev.name for ev in program.inputs}]
+    monitored = fork.log[MAPPING.name]
+    state_ports = [(program.state_port(m), m) for m in program.machines]
+    collision_events = [e for e in platform if e.lower() == "collision"]
+    contacts = _Contacts(endpoint, fork.models.tree)
+    trajectory: dict[str, list[float]] = {"time": []}
+    for v in monitored:
+        trajectory[v] = []
+    states: list[tuple[float, str, str]] = []
+    collisions: list[dict] = []
+    last_state: dict[str, int] = {}
+    at_rest_since: float | None = None
+    last_command = plan[-1].time if plan else start
+    end = start + horizon
+    values = execution.values
+
+    def record(t: float) -> None:
+        if execution.steps % decimate == 0:
+            trajectory["time"].append(t)
+            for v in monitored:
+                trajectory[v].append(values.get((MAPPING.name, v)))
+
+    def seen_enough(execution) -> bool:  # after each step (in the fused loop): whether the what-if is over
+        nonlocal at_rest_since
+        t = execution.time
+        record(t)
+        collisions.extend({"kind": "event", "event": e, "time": t} for e in collision_events
+                          if values.get((MAPPING.name, e)) is True)
+        current = []
+        for port, m in state_ports:
+            index = values.get((DMODEL.name, port))
+            current.append(index)
+            if index != last_state.get(port):
+                leaves = program.leaf_names(m)
+                states.append((t, m.name, leaves[index] if isinstance(index, int) and 0 <= index < len(leaves) else "none"))
+                last_state[port] = index
+        resting = ledger.resting(current)
+        contacts.check(t)
+        at_rest_since = (at_rest_since if at_rest_since is not None else t) if resting else None
+        outcomes = ledger.outcomes
+        applied = len(outcomes) >= len(plan)
+        if applied and t >= last_command and waits.found:
+            return True  # blocked for good: the horizon would add nothing
+        if applied and t >= last_command and at_rest_since is not None and t - at_rest_since >= settle:
+            last = outcomes[-1] if outcomes else None
+            if last is None or last.done is not None:
+                return True
+            if not last.accepted and t - last.delivered >= settle + 3 * execution.step_size:
+                return True  # delivered, never acted upon: the d-model ignored it
+        return t >= end - 1e-9
+
+    record(execution.time)
+    if execution.time < end - 1e-9:
+        execution.advance(math.ceil((end - execution.time) / execution.step_size) + 1, until=seen_enough)
+    outcomes = list(ledger.outcomes)
+    for c in plan[len(outcomes):]:  # not applied within the horizon
+        event = next(p for p, v in c.values if p in fork.command_events and v is True)
+        outcomes.append(CommandOutcome(c.time, event, {p: v for p, v in c.values if p not in fork.command_events},
+                                       origin=c.where))
+    collisions.extend(contacts.seen.values() if contacts.sim is not None else [])
+    done = [o.done for o in outcomes]
+    completion = max(done) if done and all(d is not None for d in done) else (None if outcomes else execution.time)
+    return Prediction(start, execution.time, execution.step_size, outcomes, states, trajectory, collisions, completion,
+                      wallclock.perf_counter() - started)
+
+
+def plan_from_json(items: list, program) -> list[Command]:
+    """A what-if plan from JSON (a broker request or a file): [{"time": s, "event": name, "args": {...}}],
+    checked like a TOML scenario; CotwinError naming the item otherwise."""
+    from ..assembly.scenario import command_values
+
+    if not isinstance(items, list) or not items:
+        raise CotwinError("a what-if plan is a non-empty list of {time, event, args}")
+    events = {ev.name: ev for ev in program.inputs}
+    out = []
+    for k, item in enumerate(items, start=1):
+        if not isinstance(item, dict) or set(item) - {"time", "event", "args"}:
+            raise CotwinError(f"plan item {k}: expected {{time, event, args}}, got {item!r:.80}")
+        t, name, args = item.get("time"), item.get("event"), item.get("args", {})
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not (0 <= t < 1e6):
+            raise CotwinError(f"plan item {k}: time must be a number of seconds >= 0, got {t!r:.80}")
+        if name not in events:
+            raise CotwinError(f"plan item {k}: unknown event {name!r:.80}{did_you_mean(name, events)} "
+                              f"(known: {', '.join(events)})")
+        if not isinstance(args, dict):
+            raise CotwinError(f"plan item {k}: args must be an object")
+        values, wrong = command_values(events[name], args)
+        if wrong:
+            raise CotwinError([f"plan item {k}: {message}" for _, message in wrong])
+        out.append(Command(float(t), tuple(values), f"plan item {k}"))
+    return out
+
+
+# ---- what-if requests over the broker ------------------------------------------------------------
+
+def finite(value):
+    """`value` (JSON-ready) with NaN and infinities, which JSON lacks, as null."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite(v) for v in value]
+    return value
+
+
+def _worker_init(project: str, artefacts: str | None) -> None:
+    global _WORKER
+    from ..assembly.run import load
+
+    _WORKER = (load(project), artefacts)
+
+
+def _worker_predict(plan_json: list, state: bytes, horizon: float, decimate: int) -> dict:
+    system, artefacts = _WORKER
+    plan = plan_from_json(plan_json, system.models.program)
+    return predict(system, plan, state, horizon=horizon, artefacts=artefacts, decimate=decimate).as_dict()
+
+
+class WhatIfService(BackgroundService):
+    """Answers what-if requests of a live twin sent over the broker, without disturbing it.
+
+    A request is a JSON object `{"plan": [{"time": s, "event": name, "args": {...}}], "horizon": s,
+    "decimate": n}` published on the twin's topic exchange (`[deviation] exchange`, default `cotwin.twin`)
+    with routing key `twin.whatif` (or `twin.whatif.<anything>`), with `reply_to` and `correlation_id`
+    set. Between two steps the twin hands its DT's state to a separate process, which runs the plan on a
+    fork; the answer (`Prediction.as_dict()`, or `{"error": why}`) is published to `reply_to` (a
+    broker-named `amq.gen-*` queue: named queues get no answer) with the request's `correlation_id`.
+    Requests are validated like any broker message; a bad one gets an error answer and never reaches the
+    twin; one without a broker-named `reply_to` could never be answered and is dropped (and logged, at
+    most 20 lines per 10 s: a flood cannot fill the log); at most MAX_PENDING run at a time (the count is
+    shared by the broker's, the twin's and the pool's threads, under a lock); those accepted before the
+    twin ends are answered within `close`'s wait. Who may send requests is the broker's business: the
+    `whatif` role of docs/security.md may publish `twin.whatif` on the twin's exchange."""
+
+    def __init__(self, url: str, exchange: str, project: str | Path, artefacts: str | Path | None = None,
+                 workers: int = 1, routing_key: str = "twin.whatif"):
+        import queue
+        from concurrent.futures import ProcessPoolExecutor
+        from multiprocessing import get_context
+
+        from ...mapping.amqp import connect, declare_exchange
+        from ..assembly.rabbitmq import EVENTS
+
+        BackgroundService.__init__(self, "cotwin what-if")
+        self.exchange, self.routing_key = exchange, routing_key
+        self.requests: queue.Queue = queue.Queue()
+        self.answered = 0
+        self.dropped = 0  # requests that could not be answered (no reply_to)
+        self._pending = 0
+        self._lock = threading.Lock()
+        self._futures: set = set()  # forked and not yet answered
+        self._closing = False
+        self.log = CappedLog(logging.getLogger("cotwin.whatif"), "dropped what-if requests")
+        self._pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_init,
+                                         initargs=(str(Path(project).resolve()), str(artefacts) if artefacts else None))
+        self._connection = None
+        try:
+            self._connection = connect(url, "cotwin what-if")
+            channel = self._connection.channel()
+            declare_exchange(channel, exchange, "topic", url, EVENTS)
+        except CotwinError:
+            self._pool.shutdown(wait=False)
+            if self._connection is not None:
+                self._connection.close()
+            raise
+        self.queue = channel.queue_declare("", exclusive=True, auto_delete=True).method.queue
+        for key in (routing_key, routing_key + ".#"):
+            channel.queue_bind(self.queue, exchange, routing_key=key)
+        channel.basic_consume(self.queue, self._on_request, auto_ack=True)
+        self._channel = channel
+        self.start()
+
+    def serve(self) -> None:
+        """The broker's thread: requests taken as they come, until the service stops or the broker is lost."""
+        self.ready()
+        while not self.stopping.is_set():
+            try:
+                self._connection.process_data_events(time_limit=0.05)
+            except Exception:  # noqa: BLE001 - a lost broker ends the service, not the twin
+                import logging
+
+                logging.getLogger("cotwin.whatif").warning("what-if service: lost the broker; no more requests")
+                return
+
+    def _reply(self, props, answer: dict) -> None:
+        import json
+
+        import pika
+
+        if not props.reply_to or not props.reply_to.startswith("amq.gen-"):
+            return  # answers go only to broker-named (exclusive) reply queues, never to a named queue
+        body = json.dumps(finite(answer), default=float, allow_nan=False).encode()  # a diverged fork: null, not NaN
+        self._connection.add_callback_threadsafe(lambda: self._channel.basic_publish(
+            "", props.reply_to, body, pika.BasicProperties(correlation_id=props.correlation_id,
+                                                           content_type="application/json")))
+
+    MAX_PENDING = 4  # requests queued or running; more are answered "busy" (a fork costs a process's time)
+
+    def _on_request(self, channel, method, props, body) -> None:
+        if not props.reply_to or not props.reply_to.startswith("amq.gen-"):
+            self.dropped += 1
+            self.log.warning("what-if request dropped: %s (correlation_id %r)", "no reply_to" if not props.reply_to
+                             else f"reply_to {props.reply_to[:80]!r} is not a broker-named queue (amq.gen-*)",
+                             (props.correlation_id or "")[:80])
+            return
+        if self._closing:
+            self._reply(props, {"error": "the twin is stopping; it takes no more what-if requests"})
+            return
+        with self._lock:
+            busy = self._pending >= self.MAX_PENDING
+            if not busy:
+                self._pending += 1  # taken now, so no two threads both see room for one more
+        if busy:
+            self._reply(props, {"error": f"busy: {self.MAX_PENDING} what-ifs pending; try again later"})
+            return
+        try:
+            request = safejson.loads(body, MAX_REQUEST)
+            if not isinstance(request, dict):
+                raise ValueError("a request is a JSON object {plan, horizon, decimate}")
+            unknown = sorted(set(request) - {"plan", "horizon", "decimate"})
+            if unknown:
+                raise ValueError(f"unknown key {', '.join(repr(k[:40]) for k in unknown[:10])} "
+                                 "(a request is {plan, horizon, decimate})")
+            horizon = request.get("horizon", 30.0)
+            decimate = request.get("decimate", 1)
+            if isinstance(horizon, bool) or not isinstance(horizon, (int, float)) or not 0 < horizon <= 3600:
+                raise ValueError("horizon must be a number of seconds in (0, 3600]")
+            if isinstance(decimate, bool) or not isinstance(decimate, int) or decimate < 1:
+                raise ValueError("decimate must be a positive integer")
+            if not isinstance(request.get("plan"), list) or not request["plan"]:
+                raise ValueError("plan must be a non-empty list")
+        except ValueError as err:
+            self._release()
+            self._reply(props, {"error": f"bad what-if request: {err}"})
+            return
+        self.requests.put((props, request["plan"], float(horizon), decimate))
+
+    def poll(self, execution) -> None:
+        """Between two steps of the live twin: fork the DT's state for every waiting request."""
+        while not self.requests.empty():
+            props, plan, horizon, decimate = self.requests.get_nowait()
+            try:
+                state = execution.get_state()
+            except CotwinError as err:
+                self._release()
+                self._reply(props, {"error": "; ".join(f.message for f in err.findings)})
+                continue
+            try:
+                future = self._pool.submit(_worker_predict, plan, state, horizon, decimate)
+            except RuntimeError as err:  # the pool is shut down or broken (a worker died): the twin runs on
+                self._release()
+                self._reply(props, {"error": f"the what-if workers are gone ({type(err).__name__})"})
+                continue
+            with self._lock:
+                self._futures.add(future)
+            future.add_done_callback(lambda f, props=props: self._done(props, f))
+
+    def _done(self, props, future) -> None:
+        try:
+            answer = future.result()
+        except CotwinError as err:
+            answer = {"error": "; ".join(f.message for f in err.findings)}
+        except CancelledError:
+            answer = {"error": "the twin stopped before this what-if ran"}
+        except Exception as err:  # noqa: BLE001 - the worker's failure is the requester's answer
+            answer = {"error": f"{type(err).__name__}: {err}"}
+        with self._lock:
+            self.answered += 1
+            self._futures.discard(future)
+        self._release()
+        self._reply(props, answer)
+
+    def _release(self) -> None:
+        with self._lock:
+            self._pending -= 1
+
+    @property
+    def pending(self) -> int:
+        """Requests queued or running."""
+        with self._lock:
+            return self._pending
+
+    def close(self, wait: float = 60.0) -> None:
+        """Stop taking requests; answer those already forked (for at most `wait` seconds in all: a worker
+        still starting when the twin ends gets its queued requests done too), then drop the others."""
+        from concurrent.futures import wait as wait_for
+
+        self._closing = True
+        with self._lock:
+            futures = list(self._futures)
+        wait_for(futures, timeout=wait)
+        running = list((getattr(self._pool, "_processes", None) or {}).values())
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        deadline = time.monotonic() + wait
+        for process in running:
+            process.join(max(0.0, deadline - time.monotonic()))
+            if process.is_alive():
+                process.kill()
+        self.stop(5)
+        self.log.close()
+        try:
+            self._connection.close()
+        except Exception:  # noqa: BLE001
+            pass
