@@ -185,7 +185,7 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     from ..mapping.rtde import read_arm_log
     from ..pmodel import ik
     from ..pmodel.cell import CellGeometry
-    from ..twin import calibration as cal
+    from ..twin.assembly import calibration as cal
     from ..twin.project import load_project
     from ..twin.assembly.run import load
     from .progress import ProgressReport
