@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 import time
 from collections import Counter
+from pathlib import Path
 
 import click
 
@@ -16,23 +17,53 @@ from .common import main, named_values, output_file, report, value_domains
 @main.command()
 @click.argument("paths", nargs=-1, required=True)
 def check(paths: tuple[str, ...]) -> None:
-    """Parse, resolve and type-check RoboSim models (files or folders of .rst and .pm)."""
-    from ..robosim.check import check_paths
+    """Parse, resolve and type-check RoboSim models (files or folders of .rst and .pm, or a project file
+    .toml: its models, each robot's own set for a cell of several robots)."""
+    from ..robosim.check import CheckResult, check_paths
     from ..robosim.summary import summarise
 
-    result = check_paths(paths)
-    findings = list(result.findings)
+    projects = [p for p in paths if p.endswith(".toml")]
+    sets = [tuple(p for p in paths if not p.endswith(".toml"))] if len(projects) < len(paths) else []
+    problems: list = []
+    for project in projects:
+        try:
+            sets += model_sets(project)
+        except CotwinError as err:
+            problems += err.findings
+    results = [check_paths(files) for files in sets]
+    result = CheckResult([p for r in results for p in r.projects], problems + [f for r in results for f in r.findings])
+    findings = list(dict.fromkeys(result.findings))  # a d-model shared by a cell's robots says its problems once
     if result.ok:
         findings += [f for project in result.projects for f in tree_findings(project)]
     report(findings)
     if not result.ok:
-        errors = sum(f.severity is Severity.ERROR for f in result.findings)
+        errors = sum(f.severity is Severity.ERROR for f in findings)
         click.echo(f"{errors} error(s)", file=sys.stderr)
+        hint = [p for p in paths if not p.endswith(".toml") and Path(p).is_dir() and any(Path(p).glob("*.toml"))]
+        if hint:
+            click.echo(f"note: {', '.join(hint)} holds project files whose models may lie elsewhere: check a project "
+                       f"with `cotwin check {Path(hint[0]) / 'cotwin.toml'}` (each robot's models of a cell apart)",
+                       file=sys.stderr)
         sys.exit(1)
     warnings = Counter(f.location.path for f in findings if f.severity is Severity.WARNING)
+    shown = set()
     for source in (f for project in result.projects for f in project.files):
+        if source.path in shown:  # a d-model shared by a cell's robots
+            continue
+        shown.add(source.path)
         extra = f", {warnings[source.path]} warning(s)" if warnings[source.path] else ""
         click.echo(f"{source.path}: ok ({summarise(source)}{extra})")
+
+
+def model_sets(project: str) -> list[tuple[str, ...]]:
+    """The model files a project's twin is made of, one set per robot (a cell's robots share the d-model)."""
+    from ..twin.project import load_project
+
+    import os
+
+    spec = load_project(project)
+    files = [(spec.dmodel, r.pmodel, r.mapping) for r in spec.robots] if spec.robots else [tuple(spec.model_files)]
+    return [tuple(os.path.normpath(f) for f in group) for group in files]
 
 
 def tree_findings(project) -> list:
