@@ -39,7 +39,7 @@ demo: install-runtime
 	$(VENV)/bin/cotwin run examples/ur3e/cotwin.toml -o $(OUT)/ur3e
 	$(VENV)/bin/cotwin run examples/flexcell2/cotwin.toml -o $(OUT)/flexcell2
 	$(VENV)/bin/cotwin run examples/flexcell2/collide.toml -o $(OUT)/flexcell2-collide
-	$(VENV)/bin/cotwin twin examples/flexcell2/cotwin.toml -o $(OUT)/flexcell2-twin
+	$(VENV)/bin/cotwin twin examples/flexcell2/twin.toml -o $(OUT)/flexcell2-twin
 	$(VENV)/bin/cotwin check examples/turtlebot
 	$(VENV)/bin/cotwin run examples/turtlebot/cotwin.toml -o $(OUT)/turtlebot
 	@if [ -f ../shared/robosim/mobile/OA_mapping.pm ]; then \

@@ -167,7 +167,7 @@ def test_the_cell_twin_runs_pt_and_dt_with_deviation_and_history_per_robot(tmp_p
 
     from cotwin.twin.live.cell_live import run_cell_twin
 
-    cell = CellSystem(load_project(CELL / "cotwin.toml"))
+    cell = CellSystem(load_project(CELL / "twin.toml"))
     result = run_cell_twin(cell, tmp_path)
     assert result.pt.steps == result.dt.steps == 160
     for side in ("pt", "dt"):
@@ -189,7 +189,7 @@ def test_the_cell_twin_runs_pt_and_dt_with_deviation_and_history_per_robot(tmp_p
 def test_a_heavier_plant_raises_alarms_naming_the_robot(tmp_path):
     from cotwin.twin.live.cell_live import run_cell_twin
 
-    spec = load_project(CELL / "cotwin.toml").with_overrides(plant_payload=3.0, deviation_absolute=0.002, end=8.0)
+    spec = load_project(CELL / "twin.toml").with_overrides(plant_payload=3.0, deviation_absolute=0.002, end=8.0)
     result = run_cell_twin(CellSystem(spec), tmp_path)
     assert result.alarms
     for event in result.alarms:
@@ -271,7 +271,7 @@ def test_commands_of_one_robot_refuse_a_cell_at_its_robots():
 def test_the_cell_plants_latency_and_noise_reach_each_robot(tmp_path):
     from cotwin.twin.live.cell_live import run_cell_twin
 
-    spec = load_project(CELL / "cotwin.toml").with_overrides(plant_latency_ms=300.0, plant_noise={"position": 0.001},
+    spec = load_project(CELL / "twin.toml").with_overrides(plant_latency_ms=300.0, plant_noise={"position": 0.001},
                                                              plant_payload=0.0, plant_friction=0.0, end=6.0)
     run_cell_twin(CellSystem(spec), tmp_path)
     pt, dt = rows(tmp_path / "pt" / "outputs.csv"), rows(tmp_path / "dt" / "outputs.csv")
