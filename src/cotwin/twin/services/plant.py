@@ -215,6 +215,7 @@ class Plant(BackgroundService):
         finally:
             if ticker is not None:
                 ticker.cancel()
+            await _stop_clock(server)
             await server.stop()
 
     # ---- the address space ----
@@ -526,3 +527,17 @@ def load_plant(project, url: str | None = None, free_running: bool = False,
 
 
 __all__ = ["Plant", "load_plant", "read_perturbation"]
+
+
+async def _stop_clock(server) -> None:
+    """Cancel the server's once-a-second clock task: asyncua's stop waits for its next tick, so every plant
+    stop took up to a second (an asyncua without that task stops as before)."""
+    try:
+        clock = server.iserver.time_task
+    except AttributeError:
+        return
+    if clock is None or clock.done():
+        return
+    clock.cancel()
+    await asyncio.wait({clock})
+    server.iserver.time_task = None
