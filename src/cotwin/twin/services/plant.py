@@ -153,8 +153,13 @@ class Plant(BackgroundService):
         return CotwinError(f"cannot serve the plant on {self.url}: {_reason(err)}")
 
     def interrupt(self) -> None:
-        if self._loop is not None and self._stopping is not None:
-            self._loop.call_soon_threadsafe(self._stopping.set)
+        loop = self._loop
+        if loop is None or self._stopping is None or loop.is_closed():
+            return  # not serving (yet), or its start failed and its loop is gone
+        try:
+            loop.call_soon_threadsafe(self._stopping.set)
+        except RuntimeError:  # closed between the check and the call: nothing left to wake
+            pass
 
     def stop(self, timeout: float | None = 10.0) -> bool:
         ended = BackgroundService.stop(self, timeout)
@@ -181,6 +186,7 @@ class Plant(BackgroundService):
         try:
             loop.run_until_complete(self._main())  # a failure: reported by start(), or logged once serving
         finally:
+            self._loop = None  # stop() after a failed start has no loop to wake ("Event loop is closed")
             loop.close()
 
     async def _main(self) -> None:
