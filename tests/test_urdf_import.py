@@ -329,6 +329,28 @@ def test_our_own_arm_imports_with_every_feature_read(own_arm, tmp_path):
     assert "arm.urdf:" in notes and "mimics 'slide'" in notes and "friction 0.2" in notes
 
 
+def test_a_hand_edited_pmodel_or_mesh_is_kept_unless_force_and_an_identical_one_is_no_conflict(own_arm, tmp_path):
+    out = tmp_path / "out"
+    args = ["import-urdf", str(own_arm), "-o", str(out), "--package-path", str(tmp_path / "src")]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    pm, mesh = out / "my_arm.pm", out / "meshes" / "meshes" / "part.stl"
+    written = pm.read_bytes()
+    again = CliRunner().invoke(main, args)  # the same bytes: no conflict, the import repeats
+    assert again.exit_code == 0, again.output
+    pm.write_bytes(written + b"// my hand edit\n")
+    mesh.write_bytes(mesh.read_bytes() + b"\0")
+    edited_mesh = mesh.read_bytes()
+    refused = CliRunner().invoke(main, args)
+    assert isinstance(refused.exception, CotwinError)  # cotwin's entry reports it as located errors
+    shown = str(refused.exception)
+    assert f"{pm}: already there with other content" in shown and "--force" in shown
+    assert f"{mesh}: already there with other content" in shown
+    assert pm.read_bytes().endswith(b"// my hand edit\n") and mesh.read_bytes() == edited_mesh
+    forced = CliRunner().invoke(main, [*args, "--force"])
+    assert forced.exit_code == 0, forced.output
+    assert pm.read_bytes() == written and mesh.read_bytes() != edited_mesh
+
+
 def test_the_exported_urdf_keeps_a_continuous_joint_continuous(own_arm, tmp_path):
     result = import_urdf(own_arm, tmp_path / "out", [tmp_path / "src"])
     exported = tmp_path / "again.urdf"
