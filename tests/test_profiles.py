@@ -122,6 +122,21 @@ def test_the_replay_pt_reads_the_log_through_the_projects_profile(replay_project
     assert len([r for r in caplog.records if "no robot profile" in r.message]) == 1  # said once
 
 
+def test_the_no_profile_warning_names_the_project_file_and_its_robot_table(replay_project, caplog):
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import pt_endpoint
+
+    project, _ = replay_project
+    for robot in ("", "[robot]\n\n"):
+        path = project(robot)
+        line = next((n for n, row in enumerate(path.read_text().splitlines(), 1) if row == "[robot]"), 1)
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="cotwin.twin"):
+            pt_endpoint(load(path))
+        [said] = [r.getMessage() for r in caplog.records if "no robot profile" in r.getMessage()]
+        assert said.startswith(f"{path}:{line}:1: no robot profile named ([robot] profile)"), said
+
+
 def test_a_project_naming_a_missing_or_mismatched_profile_is_refused_at_its_key(replay_project, tmp_path):
     from cotwin.twin.assembly.run import load
     from cotwin.twin.live.runtime import pt_endpoint

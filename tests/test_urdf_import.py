@@ -329,6 +329,28 @@ def test_our_own_arm_imports_with_every_feature_read(own_arm, tmp_path):
     assert "arm.urdf:" in notes and "mimics 'slide'" in notes and "friction 0.2" in notes
 
 
+def test_a_hand_edited_pmodel_or_mesh_is_kept_unless_force_and_an_identical_one_is_no_conflict(own_arm, tmp_path):
+    out = tmp_path / "out"
+    args = ["import-urdf", str(own_arm), "-o", str(out), "--package-path", str(tmp_path / "src")]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    pm, mesh = out / "my_arm.pm", out / "meshes" / "meshes" / "part.stl"
+    written = pm.read_bytes()
+    again = CliRunner().invoke(main, args)  # the same bytes: no conflict, the import repeats
+    assert again.exit_code == 0, again.output
+    pm.write_bytes(written + b"// my hand edit\n")
+    mesh.write_bytes(mesh.read_bytes() + b"\0")
+    edited_mesh = mesh.read_bytes()
+    refused = CliRunner().invoke(main, args)
+    assert isinstance(refused.exception, CotwinError)  # cotwin's entry reports it as located errors
+    shown = str(refused.exception)
+    assert f"{pm}: already there with other content" in shown and "--force" in shown
+    assert f"{mesh}: already there with other content" in shown
+    assert pm.read_bytes().endswith(b"// my hand edit\n") and mesh.read_bytes() == edited_mesh
+    forced = CliRunner().invoke(main, [*args, "--force"])
+    assert forced.exit_code == 0, forced.output
+    assert pm.read_bytes() == written and mesh.read_bytes() != edited_mesh
+
+
 def test_the_exported_urdf_keeps_a_continuous_joint_continuous(own_arm, tmp_path):
     result = import_urdf(own_arm, tmp_path / "out", [tmp_path / "src"])
     exported = tmp_path / "again.urdf"
@@ -406,6 +428,14 @@ BAD = [
      "<limit effort='1' velocity='1'/>\n<axis xyz='0 0 0'/>") + "</robot>", "4:1", "joint 'j': a zero axis"),
     ("<robot name='r'>\n<link name='a'><inertial><mass value='-1'/><inertia ixx='1' ixy='0' ixz='0' iyy='1' iyz='0' "
      "izz='1'/></inertial></link></robot>", "2:26", "a negative mass"),
+    ("<robot name='r'>\n<link name='a'><inertial><mass value='1e300'/><inertia ixx='1' ixy='0' ixz='0' iyy='1' "
+     "iyz='0' izz='1'/></inertial></link></robot>", "2:26", "a mass of 1e+300 kg, more than a link may have"),
+    ("<robot name='r'>\n<link name='a'><inertial><mass value='nan'/><inertia ixx='1' ixy='0' ixz='0' iyy='1' "
+     "iyz='0' izz='1'/></inertial></link></robot>", "2:26", "value=\"nan\" must be 1 finite number"),
+    ("<robot name='r'>\n<link name='a'><inertial><mass value='1'/>\n<inertia ixx='-1' ixy='0' ixz='0' iyy='1' "
+     "iyz='0' izz='1'/></inertial></link></robot>", "3:1", "a negative moment of inertia (ixx=-1 kg m^2)"),
+    ("<robot name='r'>\n<link name='a'><inertial><mass value='1'/>\n<inertia ixx='1' ixy='1e300' ixz='0' iyy='1' "
+     "iyz='0' izz='1'/></inertial></link></robot>", "3:1", "inertia ixy=1e+300 kg m^2, more than a link may have"),
     ("<robot name='r'>\n<link name='a'><inertial><mass value='1'/>\n<inertia ixx='1' ixy='0' iyy='1' iyz='0' "
      "izz='1'/></inertial></link></robot>", "3:1", "<inertia> has no 'ixz' attribute"),
     ("<robot name='r'>\n<link name='a'><collision><geometry>\n<box size='1 2'/></geometry></collision></link></robot>",
@@ -453,6 +483,22 @@ def test_every_problem_of_a_file_is_reported_together(tmp_path):
     for where, text in (("3:1", "unknown joint type 'hinge'"), ("4:1", "a revolute joint needs <limit>"),
                         ("6:1", "gone.stl"), ("7:1", "names link 'zz'")):
         assert any(f"many.urdf:{where}" in line and text in line for line in lines), (where, lines)
+
+
+def test_a_links_impossible_mass_and_inertia_and_a_zero_axis_are_refused_together_at_their_elements(tmp_path):
+    urdf = tmp_path / "heavy.urdf"
+    urdf.write_text("<robot name='r'>\n<link name='a'/>\n<link name='b'><inertial>\n<mass value='1e300'/>\n"
+                    "<inertia ixx='1' ixy='0' ixz='0' iyy='-2' iyz='0' izz='1'/></inertial></link>\n"
+                    + _joint("j", "a", "b", "revolute", "<limit effort='1' velocity='1'/>\n<axis xyz='0 0 0'/>")
+                    + "</robot>")
+    with pytest.raises(CotwinError) as err:
+        import_urdf(urdf, tmp_path / "out")
+    lines = [str(f) for f in err.value.findings]
+    assert len(lines) == 3, lines
+    for where, text in (("4:1", "link 'b': a mass of 1e+300 kg"), ("5:1", "a negative moment of inertia (iyy=-2"),
+                        ("7:1", "joint 'j': a zero axis")):
+        assert any(f"heavy.urdf:{where}: error:" in line and text in line for line in lines), (where, lines)
+    assert not (tmp_path / "out").exists()
 
 
 def test_the_command_from_another_folder_prints_what_it_did_and_refuses_bad_input(own_arm, tmp_path, monkeypatch):

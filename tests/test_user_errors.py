@@ -217,3 +217,22 @@ def test_deviation_variables_get_the_nearest_monitored_one(ur5e, tmp_path):
     with pytest.raises(CotwinError, match=r"\[deviation\] variables Q1 are not monitored mapping variables; did you "
                                           r"mean 'q1'\?"):
         LiveTwin(system, tmp_path / "out")
+
+
+def test_a_run_that_ended_early_says_its_cause_first_then_what_it_kept():
+    """The cause of a failed run, however its place sorts, comes before "no rows computed" (or where the
+    rows are), in the error and in the error carried across processes."""
+    import pickle
+
+    from cotwin.cosim.execution import ended_early
+    from cotwin.diagnostics import Diagnostics, Location
+
+    diag = Diagnostics()
+    diag.error(Location("cotwin.toml", 3, 1), "unit 'arm' failed its step: the FMU returned fmi2Error")
+    diag.error(Location("arm.fmu", 0, 0), "the FMU's log: division by zero")
+    cause = CotwinError(diag.findings)
+    for err in (ended_early(cause, 0.5, "no rows computed"),
+                pickle.loads(pickle.dumps(ended_early(cause, 0.5, "no rows computed")))):
+        lines = str(err).splitlines()
+        assert lines[:2] == [str(f) for f in cause.findings] and lines[-1] == "error: no rows computed", lines
+        assert [str(f) for f in err.findings] == lines

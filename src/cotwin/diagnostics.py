@@ -56,11 +56,13 @@ class PicklableError(Exception):
 class CotwinError(PicklableError):
     """Bad input: carries every finding, each with its location. Never a bare traceback."""
 
-    def __init__(self, findings: Iterable[Finding | str] | str):
+    def __init__(self, findings: Iterable[Finding | str] | str, ordered: bool = False):
+        """Findings sorted by place; with `ordered`, in the order given (a cause, then what follows from it,
+        such as where a run that failed kept its rows)."""
         if isinstance(findings, str):
             findings = [findings]
-        self.findings = sorted(f if isinstance(f, Finding) else Finding(Location("<input>", 0, 0), Severity.ERROR, f)
-                               for f in findings)
+        given = [f if isinstance(f, Finding) else Finding(Location("<input>", 0, 0), Severity.ERROR, f) for f in findings]
+        self.findings = given if ordered else sorted(given)
         super().__init__("\n".join(str(f) for f in self.findings))
 
 

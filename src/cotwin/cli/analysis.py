@@ -205,7 +205,7 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
         check_outputs([out], [*system.spec.inputs, pt_log, check_log, calibration])
     twin, program, commands = cal.project_twin(system)
     arm = ik.arm_joints(system.models.tree, ik.find_tool(system.models.tree))
-    convention = robot_convention(system.spec.profile, len(arm))
+    convention = robot_convention(system.spec.profile, len(arm), system.spec.location("robot", "profile"))
     fitted = None
     if pt_log is not None:
         with ProgressReport("calibrating", "stages") as progress:

@@ -13,11 +13,13 @@ from .common import main, output_folder, report
               help="the folder to write the p-model (ROBOT.pm) and its meshes (meshes/...) into")
 @click.option("--package-path", "package_path", multiple=True, type=click.Path(file_okay=False),
               help="a folder that is, or holds, the ROS packages package:// names (repeatable; then ROS_PACKAGE_PATH)")
-def import_urdf(urdf: str, output: str, package_path: tuple[str, ...]) -> None:
+@click.option("--force", is_flag=True,
+              help="replace a p-model or mesh in the output folder that differs from what the import writes")
+def import_urdf(urdf: str, output: str, package_path: tuple[str, ...], force: bool) -> None:
     """Write a RoboSim p-model and its meshes from a URDF (docs/urdf-import.md)."""
     from ..pmodel.urdf_import import import_urdf as run
 
-    result = run(urdf, output, list(package_path))
+    result = run(urdf, output, list(package_path), force=force)
     kinds = ", ".join(f"{n} {k}" for k, n in result.joints.items() if n)
     meshes = f"; {len(result.meshes)} mesh file(s) under {result.file.parent / 'meshes'}" if result.meshes else ""
     click.echo(f"{result.file}: p-model {result.pmodel}: {result.links} links, {kinds or 'no'} joints{meshes}")

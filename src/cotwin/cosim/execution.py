@@ -74,7 +74,7 @@ def ended_early(err: BaseException, time: float, kept: str) -> CotwinError:
         stopped = CotwinError(f"interrupted at t = {time:g} s; {kept}")
         stopped.interrupted = True
         return stopped
-    return CotwinError([*err.findings, *CotwinError(kept).findings])
+    return CotwinError([*err.findings, *CotwinError(kept).findings], ordered=True)  # the cause first, then what was kept
 
 
 def saved_execution(state: bytes) -> dict:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import TomlFile
-from ..diagnostics import CotwinError, Finding, Severity
+from ..diagnostics import CotwinError, Finding, Location, Severity
 
 log = logging.getLogger("cotwin.twin")
 IDENTITY_BASE = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
@@ -140,11 +140,13 @@ def profile_rays(profile: str | Path | None) -> dict:
     return out
 
 
-def robot_convention(profile: str | Path | None, joints: int | None = None) -> Convention:
-    """The convention of a project's profile, or the identity with a warning that none was named."""
+def robot_convention(profile: str | Path | None, joints: int | None = None,
+                     where: Location | None = None) -> Convention:
+    """The convention of a project's profile, or the identity with a warning that none was named, at
+    `where` (the project file's [robot] table, or its start, where the profile would be named)."""
     if profile is None:
-        log.warning("no robot profile named ([robot] profile): the controller's joints and base frame are "
-                    "taken as the p-model's (identity)")
+        log.warning("%sno robot profile named ([robot] profile): the controller's joints and base frame are "
+                    "taken as the p-model's (identity)", f"{where}: " if where is not None else "")
         return IDENTITY
     return read_profile(profile, joints)
 

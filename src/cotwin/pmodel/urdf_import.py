@@ -285,6 +285,17 @@ class MeshCopies:
         self.taken.add(chosen)
         return chosen
 
+    def conflicts(self, folder: Path) -> list[Path]:
+        """The files in folder a copy would replace that hold other bytes than the mesh copied there
+        (a link is not one: copy_to replaces the link, never what it points at)."""
+        found = []
+        for mesh in sorted(self.by_source.values(), key=lambda m: m.written):
+            target = folder / mesh.written
+            if target.is_file() and not target.is_symlink() and not (
+                    os.path.samefile(target, mesh.source) or _same_bytes(target, mesh.source)):
+                found.append(target)
+        return found
+
     def copy_to(self, folder: Path) -> list[Path]:
         """Copy every mesh into folder (a file already there with the same bytes is left alone; a link
         there is replaced, not written through)."""
@@ -478,9 +489,10 @@ def package_roots(given: list[str | Path], environ: dict[str, str] | None = None
 
 
 def import_urdf(urdf: str | Path, out: str | Path, package_path: list[str | Path] = (),
-                environ: dict[str, str] | None = None, check: bool = True) -> ImportResult:
+                environ: dict[str, str] | None = None, check: bool = True, force: bool = False) -> ImportResult:
     """Write OUT/<robot>.pm and OUT/meshes/... from a URDF; CotwinError with every problem found (nothing
-    is written then). With `check`, the written p-model is read back as cotwin reads it (its warnings,
+    is written then). A p-model or mesh already in OUT with other bytes than the import's (a hand edit)
+    is refused, each named, unless `force`: the same bytes are no conflict, so an import repeats freely. With `check`, the written p-model is read back as cotwin reads it (its warnings,
     such as an inertia replaced or a mesh shown as a placeholder, are in the result's findings)."""
     urdf, out = Path(urdf), Path(out)
     diag = Diagnostics()
@@ -502,6 +514,8 @@ def import_urdf(urdf: str | Path, out: str | Path, package_path: list[str | Path
     out.mkdir(parents=True, exist_ok=True)
     file = out / f"{writer.name}.pm"
     check_outputs([file], [urdf])  # never over the URDF being imported
+    if not force:
+        _refuse_overwrites(file, text, meshes.conflicts(out))
     copies = meshes.copy_to(out)
     write_text(file, text)  # a new file renamed into place: never through a link left there
     kinds = {k: sum(j.type == k for j in robot.joints) for k in JOINT_DEVICES}
@@ -510,6 +524,15 @@ def import_urdf(urdf: str | Path, out: str | Path, package_path: list[str | Path
     if check:
         result.findings += read_back(file)
     return result
+
+
+def _refuse_overwrites(file: Path, text: str, meshes: list[Path]) -> None:
+    """CotwinError naming every file the import would replace with other bytes (the p-model, meshes)."""
+    changed = [file] if file.is_file() and not file.is_symlink() and file.read_bytes() != text.encode("utf-8") else []
+    changed += meshes
+    if changed:
+        raise CotwinError([f"{path}: already there with other content than import-urdf writes (edited by hand?): "
+                           "left as it is; --force replaces it" for path in changed])
 
 
 def _notes(robot: Robot) -> list[Finding]:

@@ -21,6 +21,8 @@ from xml.parsers import expat
 
 from ..diagnostics import Diagnostics, Location
 
+MAX_MASS = 1e6  # kg: a link heavier than a thousand tonnes is a typo or a unit slip, refused
+MAX_MOMENT = 1e6  # kg m^2: an inertia entry beyond this is refused likewise
 MAX_BYTES = 64 * 1024 * 1024  # a URDF larger than this is refused (the largest published ones are ~2 MB)
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 UNSUPPORTED_TYPES = ("floating", "planar")  # valid URDF that a p-model joint cannot say (one degree of freedom)
@@ -328,10 +330,38 @@ def _inertial(node: Node, read: _Reader, what: str) -> Inertial | None:
             inertia[key] = value
     if mass is None or len(inertia) < 6:
         return None
-    if mass < 0:
-        read.diag.error(mass_node.loc, f"{what}: a negative mass ({mass:g} kg)")
+    if not _physical(mass, mass_node, inertia, inertia_node, read, what):
         return None
     return Inertial(read.origin(node, f"inertial of {what}"), mass, inertia, node.loc)
+
+
+def _physical(mass: float, mass_node: Node, inertia: dict[str, float], inertia_node: Node, read: _Reader,
+              what: str) -> bool:
+    """Whether a link's mass and inertia are ones a body can have; each problem an error at its element,
+    mass and inertia both checked so that one run reports them together. Refused: a negative mass, a
+    mass or inertia entry beyond any robot's (a unit slip), a negative moment about an axis (ixx, iyy or
+    izz). An inertia merely not positive definite or against the triangle inequality is not refused:
+    published URDFs carry many (zero inertias of sensor frames, rounding of CAD exports), and cotwin's
+    tree builder replaces them by the geometry's with a warning the import shows (docs/urdf-import.md)."""
+    ok = True
+    if mass < 0:
+        read.diag.error(mass_node.loc, f"{what}: a negative mass ({mass:g} kg)")
+        ok = False
+    elif mass > MAX_MASS:
+        read.diag.error(mass_node.loc, f"{what}: a mass of {mass:g} kg, more than a link may have ({MAX_MASS:g} kg; "
+                        "a unit slip?)")
+        ok = False
+    beyond = [k for k, v in inertia.items() if abs(v) > MAX_MOMENT]
+    negative = [k for k in ("ixx", "iyy", "izz") if inertia[k] < 0]
+    if beyond:
+        read.diag.error(inertia_node.loc, f"{what}: inertia {', '.join(f'{k}={inertia[k]:g}' for k in beyond)} kg m^2, "
+                        f"more than a link may have ({MAX_MOMENT:g} kg m^2; a unit slip?)")
+        ok = False
+    elif negative:
+        read.diag.error(inertia_node.loc, f"{what}: a negative moment of inertia "
+                        f"({', '.join(f'{k}={inertia[k]:g}' for k in negative)} kg m^2): no body has one")
+        ok = False
+    return ok
 
 
 def _shape(node: Node, read: _Reader, what: str) -> Shape | None:

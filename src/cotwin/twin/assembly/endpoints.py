@@ -119,7 +119,7 @@ def _arm_convention(system: "TwinSystem"):
 
     tree = system.models.tree
     arm = ik.arm_joints(tree, ik.find_tool(tree))
-    return arm, robot_convention(system.spec.profile, len(arm))
+    return arm, robot_convention(system.spec.profile, len(arm), system.spec.location("robot", "profile"))
 
 
 def _opcua(system: "TwinSystem", settings: PTSettings):
