@@ -187,8 +187,9 @@ def compile_each_dmodel_once():
 # A `python -m cotwin` subprocess spends 1-2 s importing before it does anything. A test about what a command
 # says or writes, not about the process (signals, exit on a dead peer, environment), runs the same entry point
 # here: `cotwin.cli.entry`, with its error reporting and exit codes, its output captured as a subprocess's is.
-def cotwin_in_process(*args, cwd=None):
-    """Run `cotwin ARGS` through its entry point in this process; a CompletedProcess-like result."""
+def cotwin_in_process(*args, cwd=None, env: dict[str, str] | None = None):
+    """Run `cotwin ARGS` through its entry point in this process; a CompletedProcess-like result. `env`:
+    variables set for the command's duration only (the rest of os.environ is the test's, as a subprocess's)."""
     import contextlib
     import signal
     import subprocess
@@ -204,7 +205,7 @@ def cotwin_in_process(*args, cwd=None):
     import inspect
 
     separate = {"mix_stderr": False} if "mix_stderr" in inspect.signature(CliRunner).parameters else {}  # click 8.1
-    with CliRunner(**separate).isolation() as streams, contextlib.chdir(cwd or os.getcwd()):
+    with CliRunner(**separate).isolation(env=env) as streams, contextlib.chdir(cwd or os.getcwd()):
         out, err = streams[0], streams[1]
         saved, sys.argv = sys.argv, argv
         try:
