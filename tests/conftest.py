@@ -181,3 +181,41 @@ def compile_each_dmodel_once():
     fmu.compile_binary = memoised
     yield
     fmu.compile_binary = compile_binary
+
+
+# ---- `cotwin` in this process ----------------------------------------------------------------------------
+# A `python -m cotwin` subprocess spends 1-2 s importing before it does anything. A test about what a command
+# says or writes, not about the process (signals, exit on a dead peer, environment), runs the same entry point
+# here: `cotwin.cli.entry`, with its error reporting and exit codes, its output captured as a subprocess's is.
+def cotwin_in_process(*args, cwd=None, env: dict[str, str] | None = None):
+    """Run `cotwin ARGS` through its entry point in this process; a CompletedProcess-like result. `env`:
+    variables set for the command's duration only (the rest of os.environ is the test's, as a subprocess's)."""
+    import contextlib
+    import signal
+    import subprocess
+    import sys
+
+    from click.testing import CliRunner
+
+    from cotwin.cli import entry
+
+    argv = ["cotwin", *map(str, args)]
+    code = 0
+    sigterm = signal.getsignal(signal.SIGTERM)  # entry() installs its own: put pytest's back
+    import inspect
+
+    separate = {"mix_stderr": False} if "mix_stderr" in inspect.signature(CliRunner).parameters else {}  # click 8.1
+    with CliRunner(**separate).isolation(env=env) as streams, contextlib.chdir(cwd or os.getcwd()):
+        out, err = streams[0], streams[1]
+        saved, sys.argv = sys.argv, argv
+        try:
+            entry()
+        except SystemExit as stop:
+            code = stop.code if isinstance(stop.code, int) else (0 if stop.code is None else 1)
+        finally:
+            sys.argv = saved
+            signal.signal(signal.SIGTERM, sigterm)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        stdout, stderr = out.getvalue().decode(), err.getvalue().decode()
+    return subprocess.CompletedProcess(argv, code, stdout, stderr)

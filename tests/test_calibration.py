@@ -3,8 +3,6 @@ project key and the command."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -269,33 +267,29 @@ def test_a_project_naming_a_bad_calibration_reports_it(tmp_path):
 
 
 def test_the_command_fits_writes_and_checks(parts, tmp_path):
-    from conftest import EXAMPLES
+    from conftest import EXAMPLES, cotwin_in_process  # what calibrate prints and writes: in this process
 
     # the example project names the UR profile: the log is written as a UR controller would
     log = _pt_log(parts, tmp_path / "pt.csv", [1.23, 6.71, 9.02, 16.35],
                   convention=read_profile(EXAMPLES / "ur5e" / "ur.profile.toml", 6))
     out = tmp_path / "calibration.toml"
     project = str(EXAMPLES / "ur5e" / "cotwin.toml")
-    fit = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--pt-log", str(log), "-o", str(out)],
-                         capture_output=True, text=True)
+    fit = cotwin_in_process("calibrate", project, "--pt-log", str(log), "-o", str(out))
     assert fit.returncode == 0, fit.stderr
     assert "a = 1.200 rad/s^2, v = 0.900 rad/s" in fit.stdout
     after = fit.stdout.split("after (calibrated):")[1]
     assert sum("_joint" in line and line.count("RMSE") == 2 for line in after.splitlines()) == 6
     written = Calibration.read(out).profile
     assert isinstance(written, JointMove) and (written.a, written.v) == pytest.approx((1.2, 0.9), rel=1e-6)
-    checked = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--calibration", str(out),
-                              "--check", str(log)], capture_output=True, text=True)
+    checked = cotwin_in_process("calibrate", project, "--calibration", str(out), "--check", str(log))
     assert checked.returncode == 0, checked.stderr
     lines = [line for line in checked.stdout.splitlines() if "_joint" in line]
     assert len(lines) == 6 and all(line.count("RMSE") == 2 for line in lines)
     assert all(float(line.split("RMSE")[1].split()[0]) <= 0.01 for line in lines)
     bad = tmp_path / "bad.csv"
     bad.write_text("timestamp actual_q_0\n0 x\n")
-    refused = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--pt-log", str(bad), "-o",
-                              str(tmp_path / "c.toml")], capture_output=True, text=True)
+    refused = cotwin_in_process("calibrate", project, "--pt-log", str(bad), "-o", str(tmp_path / "c.toml"))
     assert refused.returncode == 1 and "bad.csv:1:1: error: the log has no column(s) actual_q_1" in refused.stderr
     assert "Traceback" not in refused.stderr
-    usage = subprocess.run([sys.executable, "-m", "cotwin", "calibrate", project, "--pt-log", str(log)],
-                           capture_output=True, text=True)
+    usage = cotwin_in_process("calibrate", project, "--pt-log", str(log))
     assert usage.returncode == 2 and "--pt-log needs -o FILE" in usage.stderr

@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+from conftest import cotwin_in_process
 from cotwin.diagnostics import Severity
 
 DMODEL = """interface I {
@@ -143,15 +144,14 @@ def test_all_findings_reported_together(check_texts):
 
 def test_cli_reports_findings_on_stderr_and_exits_1(tmp_path):
     (tmp_path / "m.rst").write_text(DMODEL.replace("to A exec", "to B exec"))
-    proc = subprocess.run([sys.executable, "-m", "cotwin", "check", str(tmp_path)], capture_output=True, text=True)
+    proc = cotwin_in_process("check", tmp_path)  # what it says and its status: no process needed
     assert proc.returncode == 1
     assert f"{tmp_path / 'm.rst'}:14:28: error: transition t1: unknown target state 'B'" in proc.stderr
     assert "Traceback" not in proc.stderr and proc.stdout == ""
 
 
 def test_cli_missing_path_is_a_finding(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "cotwin", "check", str(tmp_path / "nope.rst")],
-                          capture_output=True, text=True)
+    proc = cotwin_in_process("check", tmp_path / "nope.rst")
     assert proc.returncode == 1 and "no such file or folder" in proc.stderr and "Traceback" not in proc.stderr
 
 
@@ -169,7 +169,7 @@ def test_a_model_that_is_not_utf8_is_located_at_the_byte(tmp_path):
     lines = DMODEL.split("\n")
     lines[5] = lines[5] + " // caf\xe9"
     (tmp_path / "m.rst").write_bytes("\n".join(lines).encode("latin-1"))
-    proc = subprocess.run([sys.executable, "-m", "cotwin", "check", str(tmp_path)], capture_output=True, text=True)
+    proc = cotwin_in_process("check", tmp_path)  # what it says and its status: no process needed
     column = len(lines[5].encode("latin-1"))
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
     assert f"{tmp_path / 'm.rst'}:6:{column}: error: the file is not UTF-8 text (byte 0xe9)" in proc.stderr

@@ -12,12 +12,15 @@ from pathlib import Path
 
 import pytest
 
+from conftest import cotwin_in_process
 from cotwin.diagnostics import CotwinError
 
 ROOT = Path(__file__).resolve().parents[1]
 UR5E = ROOT / "examples" / "ur5e"
 
 
+# Where a test is about files written and messages, `cotwin_in_process`; `cotwin`, a process of its own with a
+# time limit, where a regression would hang (a FIFO) or exhaust memory (inputs over their cap).
 def cotwin(*args, cwd=None, timeout=300) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "cotwin", *map(str, args)], capture_output=True, text=True, cwd=cwd,
                           timeout=timeout)
@@ -49,7 +52,7 @@ def _victims(folder: Path, names: list[str]) -> dict[Path, Path]:
 def test_outputs_replace_links_left_where_they_go_and_never_write_through_them(project, tmp_path):
     out = tmp_path / "out"
     links = _victims(out, ["figure.png", "outputs.csv", "outputs.csv.part", "state", ".cotwin.lock", "build.json"])
-    proc = cotwin("run", project / "cotwin.toml", "-o", out, "--end", "1")
+    proc = cotwin_in_process("run", project / "cotwin.toml", "-o", out, "--end", "1")
     assert proc.returncode == 0, proc.stderr
     for link, victim in links.items():
         assert victim.read_text() == "precious", link.name  # untouched
@@ -81,7 +84,7 @@ def test_a_hard_link_planted_where_a_result_is_written_is_refused_not_truncated(
     victim = tmp_path / "victim.txt"
     victim.write_text("precious")
     os.link(victim, out / "outputs.csv.part")
-    proc = cotwin("run", project / "cotwin.toml", "-o", out, "--end", "0.5")
+    proc = cotwin_in_process("run", project / "cotwin.toml", "-o", out, "--end", "0.5")
     assert proc.returncode == 1 and "outputs.csv.part" in proc.stderr and "hard links" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr and victim.read_text() == "precious"
 
@@ -94,7 +97,7 @@ def test_no_output_replaces_a_file_the_command_reads(project, tmp_path):
     shutil.copy(plan, project / "out" / "outputs.csv")
     toml = project / "cotwin.toml"
     toml.write_text(toml.read_text().replace('plan = "plan.csv"', 'plan = "out/outputs.csv"'))
-    proc = cotwin("run", toml, "-o", project / "out", "--end", "1")
+    proc = cotwin_in_process("run", toml, "-o", project / "out", "--end", "1")
     assert proc.returncode == 1 and "would replace" in proc.stderr and "which this command reads" in proc.stderr
     assert (project / "out" / "outputs.csv").read_text() == before and not (project / "out" / "dmodel.fmu").exists()
     toml.write_text(toml.read_text().replace('plan = "out/outputs.csv"', 'plan = "plan.csv"'))
@@ -105,14 +108,14 @@ def test_no_output_replaces_a_file_the_command_reads(project, tmp_path):
                        (["sweep", toml, "--event", "moveDiscreteCommand", "--arg", "target_X=0", "--arg", "target_Y=0",
                          "--arg", "target_Z=0", "-o", toml], toml)):
         text = kept.read_text()
-        proc = cotwin(*args)
+        proc = cotwin_in_process(*args)
         assert proc.returncode == 1 and "would replace" in proc.stderr and "Traceback" not in proc.stderr, (args, proc.stderr)
         assert kept.read_text() == text
     # a fit never replaces the calibration it starts from
     log = tmp_path / "log.csv"
     log.write_text("timestamp\n")
     calibration = (project / "calibration.toml").read_text()
-    proc = cotwin("calibrate", project / "calibrated.toml", "--pt-log", log, "-o", project / "calibration.toml")
+    proc = cotwin_in_process("calibrate", project / "calibrated.toml", "--pt-log", log, "-o", project / "calibration.toml")
     assert proc.returncode == 1 and "calibration.toml" in proc.stderr and "which this command reads" in proc.stderr
     assert (project / "calibration.toml").read_text() == calibration
     # history export onto the store it reads
@@ -124,10 +127,10 @@ def test_no_output_replaces_a_file_the_command_reads(project, tmp_path):
     recorder.close()
     stored = store.read_bytes()
     for target in (store, tmp_path / "." / "history.sqlite"):
-        proc = cotwin("history", "export", "1", "--dir", tmp_path, "-o", target)
+        proc = cotwin_in_process("history", "export", "1", "--dir", tmp_path, "-o", target)
         assert proc.returncode == 1 and "which this command reads" in proc.stderr, proc.stderr
     assert store.read_bytes() == stored
-    proc = cotwin("history", "export", "1", "--dir", tmp_path, "-o", tmp_path / "run1.csv")
+    proc = cotwin_in_process("history", "export", "1", "--dir", tmp_path, "-o", tmp_path / "run1.csv")
     assert proc.returncode == 0 and (tmp_path / "run1.csv").read_text() == "time,{mapping}.mapping.q0\n0.0,0.5\n"
 
 
@@ -187,7 +190,7 @@ def test_an_output_folder_that_is_a_file_and_an_output_file_that_is_a_folder_are
                        (("build", project / "cotwin.toml", "-o", tmp_path / "afile" / "x"),
                         "would be made inside " + str(tmp_path / "afile") + ", a file"),
                        (("build-dmodel", project / "arm.rst", "-o", tmp_path), "is a folder: name the file to write")):
-        proc = cotwin(*args)
+        proc = cotwin_in_process(*args)
         assert proc.returncode == 2 and said in proc.stderr and "Invalid value for -o/--output" in proc.stderr, \
             proc.stderr
     assert (tmp_path / "afile").read_text() == "precious"

@@ -16,16 +16,17 @@ from pathlib import Path
 
 import pytest
 
-from conftest import EXAMPLES, ROOT
+from conftest import EXAMPLES, ROOT, cotwin_in_process
 from cotwin.diagnostics import CotwinError
 from cotwin.mapping import rtde
 
 RUN1 = ROOT.parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"
 
 
-def cotwin(*args, timeout=120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cotwin", *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout)
+def cotwin(*args) -> subprocess.CompletedProcess:
+    """`cotwin ARGS` in this process: the tests using it check messages, files and exit status (the ones
+    about signals and a twin ending midway start their own processes below)."""
+    return cotwin_in_process(*args)
 
 
 @pytest.fixture

@@ -5,11 +5,10 @@ exit status 3; arguments are named by their port everywhere, the field name acce
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 
+from conftest import cotwin_in_process
 from cotwin.diagnostics import CotwinError
 from cotwin.twin.assembly.run import load
 from test_reliability import project  # noqa: F401 - a copy of the UR5e example in tmp_path/ur5e
@@ -18,8 +17,9 @@ HEADER = "timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target
 
 
 def cotwin(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "cotwin", *map(str, args)], capture_output=True, text=True, cwd=cwd,
-                          timeout=600)
+    """`cotwin ARGS` through its entry point in this process: these tests are about what a run says and its
+    exit code, not about the process (a subprocess spent most of each test importing)."""
+    return cotwin_in_process(*args, cwd=cwd)
 
 
 def test_a_run_whose_commands_were_all_infeasible_says_so_and_strict_fails(project, tmp_path):

@@ -14,6 +14,7 @@ import time
 
 import pytest
 
+from conftest import cotwin_in_process
 from cotwin.cosim.algorithm import Jacobi
 from cotwin.cosim.execution import Execution
 from cotwin.cosim.multimodel import execution_for, read_multimodel
@@ -26,9 +27,10 @@ from cotwin.twin.assembly.run import load
 from cotwin.twin.assembly.scenario import read_plan, read_toml
 
 
-def cotwin(*args, timeout=120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cotwin", *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout)
+def cotwin(*args) -> subprocess.CompletedProcess:
+    """`cotwin ARGS` in this process: the tests using it check messages, artefacts and exit status (the
+    SIGTERM test starts its run as a process of its own)."""
+    return cotwin_in_process(*args)
 
 
 def clean(proc: subprocess.CompletedProcess) -> bool:

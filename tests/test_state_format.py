@@ -186,13 +186,13 @@ def _restore(twin, fmu, state: bytes) -> None:
 
 
 def test_a_nan_time_and_a_missing_key_are_located_by_whatif(saved, tmp_path):
-    from conftest import EXAMPLES
+    from conftest import EXAMPLES, cotwin_in_process
 
     project, plan = EXAMPLES / "ur5e" / "cotwin.toml", EXAMPLES / "ur5e" / "plan.csv"
     for name, edit, message in (("nan", lambda d: d.update(time=math.nan), "the saved state's time is nan, not a finite number"),
                                 ("missing", lambda d: d.pop("units"), "the saved state's execution lacks units")):
         (tmp_path / name).write_bytes(_edited(saved, edit))
-        run = _cotwin("whatif", str(project), "--plan", str(plan), "--from", name, cwd=tmp_path)
+        run = cotwin_in_process("whatif", project, "--plan", plan, "--from", name, cwd=tmp_path)  # a message: no process needed
         assert run.returncode == 1 and message in run.stderr, run.stderr[-2000:]
         assert "nan s" not in run.stderr and "cotwin bug" not in run.stderr
 

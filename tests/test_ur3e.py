@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import EXAMPLES, SHARED
+from conftest import EXAMPLES, SHARED, cotwin_in_process  # `cotwin run`: what it prints, in this process
 from test_cli_e2e import clean, cotwin, free_port, stop
 
 PUBLISHED = SHARED / "ur3e" / "ur3e_gripper.pm"
@@ -37,7 +37,7 @@ def completed(stdout: str) -> tuple[int, int]:
 
 
 def test_run_completes_every_move_on_its_own_plate(project):
-    proc = cotwin("run", project / "cotwin.toml", "-o", project / "out", cwd=project.parent.parent / "elsewhere")
+    proc = cotwin_in_process("run", project / "cotwin.toml", "-o", project / "out", cwd=project.parent.parent / "elsewhere")
     assert proc.returncode == 0 and clean(proc), proc.stderr[-2000:]
     assert completed(proc.stdout) == (4, 4), proc.stdout
 
@@ -47,7 +47,7 @@ def test_run_on_the_published_ur3e_completes_every_move():
         pytest.skip(f"the paper's published UR3e is not at {PUBLISHED} (only in the project workspace)")
     project = EXAMPLES / "ur3e" / "published.toml"
     out = Path(os.environ.get("TMPDIR", "/tmp")) / f"cotwin-ur3e-published-{os.getpid()}"
-    proc = cotwin("run", project, "-o", out, cwd=EXAMPLES.parent)
+    proc = cotwin_in_process("run", project, "-o", out, cwd=EXAMPLES.parent)
     shutil.rmtree(out, ignore_errors=True)
     assert proc.returncode == 0 and clean(proc), proc.stderr[-2000:]
     assert completed(proc.stdout) == (4, 4), proc.stdout

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import cotwin_in_process
 from cotwin.diagnostics import CotwinError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,15 +32,15 @@ def test_a_whatif_plan_or_state_that_is_wrong_is_named(ur5e):
     """A JSON plan's problems and a --from that is not a state said 'error: plan item 1: ...' and 'error: not a
     cotwin state' without naming the file; an empty CSV plan predicted a completion in silence."""
     (ur5e / "w.json").write_text('[{"time": 1, "event": "moveDiscreteComand", "args": {}}]')
-    proc = cotwin("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "w.json")
+    proc = cotwin_in_process("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "w.json")
     assert proc.returncode == 1 and proc.stderr.startswith(
         f"{ur5e / 'w.json'}: error: plan item 1: unknown event 'moveDiscreteComand'; did you mean "
         "'moveDiscreteCommand'?"), proc.stderr
-    proc = cotwin("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "plan.csv", "--from", ur5e / "plan.csv")
+    proc = cotwin_in_process("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "plan.csv", "--from", ur5e / "plan.csv")
     assert proc.returncode == 1 and proc.stderr.startswith(f"{ur5e / 'plan.csv'}: error: not a cotwin state"), \
         proc.stderr
     (ur5e / "empty.csv").write_text((ur5e / "plan.csv").read_text().splitlines()[0] + "\n")
-    proc = cotwin("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "empty.csv", "--horizon", "1")
+    proc = cotwin_in_process("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "empty.csv", "--horizon", "1")
     assert f"{ur5e / 'empty.csv'}:1:1: warning: the plan holds no command" in proc.stderr
 
 

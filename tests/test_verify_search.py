@@ -4,13 +4,11 @@ inputs are named with --domain, and a long search shows progress."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from conftest import cotwin_in_process
 from cotwin.dmodel.interpreter import Interpreter
 from cotwin.dmodel.program import build_program
 from cotwin.dmodel.verify import format_report, verify
@@ -49,8 +47,8 @@ module Mod { robotic platform P { uses I uses O } cref c = C
 
 
 def cotwin(*args, env=None, cwd=None):
-    return subprocess.run([sys.executable, "-m", "cotwin", *map(str, args)], capture_output=True, text=True,
-                          timeout=600, env=env, cwd=cwd)
+    """`cotwin ARGS` in this process: the tests check its report and exit status, not the process."""
+    return cotwin_in_process(*args, env=env, cwd=cwd)
 
 
 @pytest.fixture(scope="module")
@@ -111,7 +109,7 @@ def test_the_walk_with_its_documented_domain_is_verified(walk):
 
 
 def test_verify_shows_progress_and_takes_event_names_for_domains(tmp_path):
-    env = dict(os.environ, COTWIN_PROGRESS_SECONDS="0")
+    env = {"COTWIN_PROGRESS_SECONDS": "0"}
     proc = cotwin("verify", WALK, "--domain", "closestDistance=0.3,0.5,1.5", "--domain", "closest_angle=-45,0,45,120",
                   env=env, cwd=tmp_path)
     assert proc.returncode == 1, proc.stderr  # keep_going, and nothing else
