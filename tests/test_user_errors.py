@@ -197,7 +197,7 @@ def test_a_cell_plans_header_errors_are_at_their_columns_with_the_nearest_name(t
 def test_cotwin_run_of_a_cell_says_which_of_its_tables_it_ignores(tmp_path):
     """A cell's run returned before the warnings of `cotwin run`: its [plant] and [deviation] (read by its
     live twin) were silently without effect."""
-    cell = ROOT / "examples" / "flexcell2" / "cotwin.toml"
+    cell = ROOT / "examples" / "flexcell2" / "twin.toml"
     proc = cotwin("run", cell, "-o", tmp_path / "out", "--end", "0.2")
     assert proc.returncode == 0, proc.stderr
     lines = cell.read_text().splitlines()
