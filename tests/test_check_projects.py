@@ -26,10 +26,19 @@ def test_a_cell_project_checks_each_robots_models_apart():
             (name, result.output)
 
 
-def test_a_cell_folder_that_fails_as_one_set_points_at_its_project():
+def test_a_cell_folder_checks_each_robots_models_apart():
     result = check(str(CELL))
-    assert result.exit_code == 1
-    assert "check a project with `cotwin check" in result.output and "cotwin.toml" in result.output
+    assert result.exit_code == 0, result.output
+    for name in ("ur5e.pm", "ur5e_mapping.pm", "panda.pm", "panda_mapping.pm"):
+        assert sum(line.split(":")[0].endswith(name) for line in result.output.splitlines() if ": ok (" in line) == 1, \
+            (name, result.output)
+
+
+def test_a_single_robot_folder_still_checks_as_one_set():
+    result = check(str(EXAMPLES / "ur5e"))
+    assert result.exit_code == 0, result.output
+    assert "cotwin.toml" not in result.output
+    assert any(line.split(":")[0].endswith("mapping.pm") for line in result.output.splitlines()), result.output
 
 
 def test_an_error_in_one_robots_mapping_is_located_in_it(tmp_path):

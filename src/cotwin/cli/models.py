@@ -22,6 +22,7 @@ def check(paths: tuple[str, ...]) -> None:
     from ..robosim.check import CheckResult, check_paths
     from ..robosim.summary import summarise
 
+    paths = tuple(cell_project(p) or p for p in paths)
     projects = [p for p in paths if p.endswith(".toml")]
     sets = [tuple(p for p in paths if not p.endswith(".toml"))] if len(projects) < len(paths) else []
     problems: list = []
@@ -53,6 +54,20 @@ def check(paths: tuple[str, ...]) -> None:
         shown.add(source.path)
         extra = f", {warnings[source.path]} warning(s)" if warnings[source.path] else ""
         click.echo(f"{source.path}: ok ({summarise(source)}{extra})")
+
+
+def cell_project(path: str) -> str | None:
+    """A folder's cotwin.toml when it is a cell of several robots (its folder holds one mapping and one p-model
+    per robot, which checked as one set name each other's robot unknown), else None: the folder checks as one set."""
+    from ..twin.project import load_project
+
+    project = Path(path) / "cotwin.toml"
+    if not Path(path).is_dir() or not project.is_file():
+        return None
+    try:
+        return str(project) if load_project(str(project)).robots else None
+    except CotwinError:
+        return None  # not a readable project: the folder checks as one set, as before
 
 
 def model_sets(project: str) -> list[tuple[str, ...]]:

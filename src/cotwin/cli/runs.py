@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..files import check_outputs
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_step_count,
                      check_timing, main, outcomes, output_file, output_folder, said_restarts, serving_options,
@@ -118,6 +118,17 @@ def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: 
         click.echo(line)
     for time, first, second in ran.contacts:
         click.echo(f"contact: {first} and {second} at t = {time:.3f} s")
+    show_warnings(contacts_from_the_start(cell.spec, ran.contacts, step or cell.spec.step))
+
+
+def contacts_from_the_start(spec, contacts, step: float) -> list[Finding]:
+    """Robots that touch within the run's first step: placed in one another (their [[robots]] xyz/rpy overlap,
+    or their home postures cross), which a run reports as an ordinary collision, every move refused after it."""
+    where = Location(str(spec.path), 1, 1)
+    return [Finding(where, Severity.WARNING,
+                    f"{first} and {second} touch from the start (t = {time:.3f} s): their bases overlap or their "
+                    f"home postures cross; move them apart ([[robots]] xyz/rpy)")
+            for time, first, second in contacts if time <= step]
 
 
 @main.command()
