@@ -368,3 +368,15 @@ def test_the_cells_artefacts_run_in_the_multimodel_master_as_cotwin_run_does(tmp
     assert done.returncode == 0 and "corrupted" not in done.stderr, done.stderr
     ran = run_cell(cell, tmp_path / "run", plot=False)
     assert rows(tmp_path / "simulated.csv") == rows(ran.csv)
+
+
+def test_a_robots_infeasible_command_is_said_in_its_outcome(tmp_path):
+    """A robot whose command its mapping answers infeasible (a hole off its grid) says so, instead of only
+    '0 move(s) completed' (found trying a cell of one's own: the UR3e given a hole out of its reach)."""
+    plan = tmp_path / "plan.csv"
+    header = (CELL / "collide.csv").read_text().splitlines()[0]
+    plan.write_text(header + "\n1000,true,12,20,1,true,99,9,1\n")
+    cell = CellSystem(load_project(CELL / "collide.toml").with_overrides(scenario_plan=str(plan)))
+    lines = run_cell(cell, tmp_path / "out", end=4.0).outcomes.lines()
+    assert lines[0].startswith("ur5e: 1 command(s) applied, 1 move(s) completed, no collision"), lines
+    assert lines[1].startswith("panda: 1 command(s) applied, 0 move(s) completed, 1 infeasible,"), lines

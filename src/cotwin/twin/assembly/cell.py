@@ -36,6 +36,7 @@ from ...cosim.units import Port, PythonUnit
 from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...files import read_text
 from ..project import TwinProject, check_timing
+from .outcomes import INFEASIBLE
 from .scenario import Command, _column_starts, parse_value, scenario_ports
 from .system import DMODEL, MAPPING, TwinSystem, UnitSpec, build_scene, load_models
 
@@ -403,12 +404,14 @@ class RobotOutcome:
     name: str
     commands: int = 0  # commands its source applied
     completed: int = 0  # moveCompleted-like events (answers) that came
+    infeasible: int = 0  # answers saying a command cannot be done (events named nonfeasible*, infeasible*, ...)
     collisions: list[float] = field(default_factory=list)  # when its d-model heard of a collision (steps it began)
 
     def line(self) -> str:
         hit = f"collision reported at t = {', '.join(f'{t:g}' for t in self.collisions)} s" if self.collisions \
             else "no collision"
-        return f"{self.name}: {self.commands} command(s) applied, {self.completed} move(s) completed, {hit}"
+        refused = f", {self.infeasible} infeasible" if self.infeasible else ""
+        return f"{self.name}: {self.commands} command(s) applied, {self.completed} move(s) completed{refused}, {hit}"
 
 
 class CellOutcomes(Observer):
@@ -419,6 +422,8 @@ class CellOutcomes(Observer):
         self.cell = cell
         self.completed, self.collision = completed, collision
         self.robots = {r.name: RobotOutcome(r.name) for r in cell.robots}
+        self._refusals = {r.name: [ev.name for ev in r.system.models.mapping_model.input_events
+                                   if INFEASIBLE.match(ev.name)] for r in cell.robots}
         self._before: dict[str, bool] = {}
 
     def step_complete(self, execution) -> None:
@@ -431,6 +436,7 @@ class CellOutcomes(Observer):
                 out.commands += sum(1 for e in robot.system.command_events if units[source].values.get(e) is True)
             if mapping.values.get(robot.scoped(self.completed)) is True:
                 out.completed += 1
+            out.infeasible += sum(1 for e in self._refusals[robot.name] if mapping.values.get(robot.scoped(e)) is True)
             hit = mapping.values.get(robot.scoped(self.collision)) is True
             if hit and not self._before.get(robot.name):
                 out.collisions.append(round(execution.time, 9))
