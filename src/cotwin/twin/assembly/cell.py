@@ -37,8 +37,8 @@ from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...files import read_text
 from ..project import TwinProject, check_timing
 from .outcomes import INFEASIBLE
-from .scenario import Command, _column_starts, parse_value, scenario_ports
-from .system import DMODEL, MAPPING, TwinSystem, UnitSpec, build_scene, load_models
+from .scenario import Command, _column_starts, parse_value, row_time, scenario_ports
+from .system import DMODEL, MAPPING, TwinSystem, UnitSpec, build_scene, load_models, multimodel
 
 CELL_MAPPING = UnitSpec("{mapping}", "cell", "mapping.fmu", "mapping")
 
@@ -164,12 +164,8 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
         if len(row) != len(header):
             problem(line, 1, f"{len(row)} values for {len(header)} columns")
             continue
-        try:
-            time_ms = parse_value(row[0], "Real")
-            if time_ms < 0:
-                raise ValueError("is negative: a plan cannot send into the past")
-        except ValueError as err:
-            problem(line, 1, f"timestep '{row[0].strip()[:40]}' {err}")
+        time_ms = row_time(row, line, problem)
+        if time_ms is None:
             continue
         values: dict[str, list] = {r: [] for r in robots}
         for k, (robot, port) in columns.items():
@@ -307,27 +303,12 @@ class CellSystem:
         """Maestro's multimodel.json of the cell: one FMU per kind ({dmodel}, {controller} or {rabbitmq},
         {mapping}), instantiated once per robot where it is the robot's (the d-model FMU's reuse, as Maestro
         writes it); the `cotwin` key (which Maestro ignores) holds the delays."""
-        connections: dict[str, list[str]] = {}
-        for c in self.connections:
-            connections.setdefault(f"{c.source}.{c.output}", []).append(f"{c.target}.{c.input}")
-        spec = self.spec
-        return {
-            "fmus": {u.key: u.fmu for u in self.units},
-            "connections": connections,
-            "parameters": {f"{unit}.{name}": value for unit, values in self.parameters.items()
-                           for name, value in values.items()},
-            "logVariables": self.log,
-            "algorithm": {"type": "fixed-step", "size": spec.step},
-            "startTime": 0.0,
-            "endTime": spec.end,
-            "simulationProgramDelay": spec.realtime if realtime is None else realtime,
-            # the Python FMUs (the cell's mapping, every robot's source) in processes of their own: in the master's
-            # process (pythonfmu's library loaded once per instance) a cell's run sometimes ended with the heap
-            # corrupted at exit ("corrupted double-linked list"); isolated, cotwin simulate ends cleanly
-            "cotwin": {"delayed": sorted(self.delayed), "algorithm": spec.algorithm,
-                       "isolate": {CELL_MAPPING.name: True,
-                                   **{r.source.name: True for r in self.robots if r.source is not None}}},
-        }
+        # the Python FMUs (the cell's mapping, every robot's source) in processes of their own: in the master's
+        # process (pythonfmu's library loaded once per instance) a cell's run sometimes ended with the heap
+        # corrupted at exit ("corrupted double-linked list"); isolated, cotwin simulate ends cleanly
+        isolate = {CELL_MAPPING.name: True, **{r.source.name: True for r in self.robots if r.source is not None}}
+        return multimodel(self.spec, self.units, self.connections, self.parameters, self.log, self.delayed, realtime,
+                          {"isolate": isolate})
 
     def instantiate(self, dmodel_fmu: str | Path, world=None, perturbation=None) -> System:
         """A fresh, checked co-simulation of the cell (in `world`, by default a fresh nominal one; its robots'
@@ -358,8 +339,15 @@ class CellMappingUnit(PythonUnit):
         super().__init__(name, ports)
         self.world = world
         self.units = units
-        self.inputs = {robot: [p.name for p in unit.ports.values() if p.causality == "input"]
+        # (scoped name, the robot's name) of every input and output, made once: the step reads them all
+        self.inputs = {robot: [(f"{robot}.{p.name}", p.name) for p in unit.ports.values() if p.causality == "input"]
                        for robot, unit in units.items()}
+        self.outputs = {robot: [(f"{robot}.{p.name}", p.name) for p in unit.ports.values() if p.causality == "output"]
+                        for robot, unit in units.items()}
+        self.endpoints = [unit.mapping.endpoint for unit in units.values()]
+        from ...mapping.endpoint import advance_shared  # MuJoCo's side: loaded with a world, not with the cell
+
+        self._advance = advance_shared
 
     def instantiate(self, start: float) -> None:
         super().instantiate(start)
@@ -368,12 +356,11 @@ class CellMappingUnit(PythonUnit):
         self._collect()
 
     def step(self, t: float, h: float) -> None:
-        from ...mapping.endpoint import advance_shared
-
+        values = self.values
         for robot, unit in self.units.items():
-            unit.values.update({p: self.values[f"{robot}.{p}"] for p in self.inputs[robot]})
+            unit.values.update({name: values[scoped] for scoped, name in self.inputs[robot]})
             unit.act(t)
-        advance_shared(self.world, [unit.mapping.endpoint for unit in self.units.values()], h)
+        self._advance(self.world, self.endpoints, h)
         for unit in self.units.values():
             unit.mapping.step(0.0)  # the world has moved: readings and mirrors refreshed
             unit.reached(t + h)
@@ -381,10 +368,12 @@ class CellMappingUnit(PythonUnit):
         self._collect()
 
     def _collect(self) -> None:
+        values = self.values
         for robot, unit in self.units.items():
-            for name, value in unit.values.items():
-                if unit.ports[name].causality == "output":
-                    self.values[f"{robot}.{name}"] = value
+            own = unit.values
+            for scoped, name in self.outputs[robot]:
+                if name in own:
+                    values[scoped] = own[name]
 
     def terminate(self) -> None:
         for unit in self.units.values():
@@ -422,25 +411,28 @@ class CellOutcomes(Observer):
         self.cell = cell
         self.completed, self.collision = completed, collision
         self.robots = {r.name: RobotOutcome(r.name) for r in cell.robots}
-        self._refusals = {r.name: [ev.name for ev in r.system.models.mapping_model.input_events
-                                   if INFEASIBLE.match(ev.name)] for r in cell.robots}
+        # per robot, made once (the observer runs every step): its source, command events and scoped answers
+        self._watch = [(r.name, r.source.name if r.source is not None else None, sorted(r.system.command_events),
+                        r.scoped(completed), r.scoped(collision),
+                        [r.scoped(ev.name) for ev in r.system.models.mapping_model.input_events
+                         if INFEASIBLE.match(ev.name)]) for r in cell.robots]
         self._before: dict[str, bool] = {}
 
     def step_complete(self, execution) -> None:
         units = execution.system.units
-        mapping = units[CELL_MAPPING.name]
-        for robot in self.cell.robots:
-            out = self.robots[robot.name]
-            source = robot.source.name if robot.source is not None else None
+        answers = units[CELL_MAPPING.name].values
+        for name, source, events, completed, collision, refusals in self._watch:
+            out = self.robots[name]
             if source in units:
-                out.commands += sum(1 for e in robot.system.command_events if units[source].values.get(e) is True)
-            if mapping.values.get(robot.scoped(self.completed)) is True:
+                commanded = units[source].values
+                out.commands += sum(1 for e in events if commanded.get(e) is True)
+            if answers.get(completed) is True:
                 out.completed += 1
-            out.infeasible += sum(1 for e in self._refusals[robot.name] if mapping.values.get(robot.scoped(e)) is True)
-            hit = mapping.values.get(robot.scoped(self.collision)) is True
-            if hit and not self._before.get(robot.name):
+            out.infeasible += sum(1 for e in refusals if answers.get(e) is True)
+            hit = answers.get(collision) is True
+            if hit and not self._before.get(name):
                 out.collisions.append(round(execution.time, 9))
-            self._before[robot.name] = hit
+            self._before[name] = hit
 
     def lines(self) -> list[str]:
         return [r.line() for r in self.robots.values()]

@@ -56,6 +56,18 @@ def scenario_ports(program: Program) -> dict[str, str]:
     return ports
 
 
+def row_time(row: list[str], line: int, problem) -> float | None:
+    """A plan row's time (its first column, in ms), or None with the problem reported at the row."""
+    try:
+        time_ms = parse_value(row[0], "Real")
+        if time_ms < 0:
+            raise ValueError("is negative: a plan cannot send into the past")
+    except ValueError as err:
+        problem(line, 1, f"timestep '{row[0].strip()[:40]}' {err}")
+        return None
+    return time_ms
+
+
 def parse_value(text: str, fmi: str) -> object:
     """A plan cell as the port's FMI type, or ValueError saying why not."""
     text = text.strip()
@@ -145,14 +157,9 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
         if len(row) != len(header):
             problem(line, 1, f"{len(row)} values for {len(header)} columns")
             continue
-        values, ok = [], True
-        try:
-            time_ms = parse_value(row[0], "Real")
-            if time_ms < 0:
-                raise ValueError("is negative: a plan cannot send into the past")
-        except ValueError as err:
-            problem(line, 1, f"timestep '{row[0].strip()[:40]}' {err}")
-            ok = False
+        values = []
+        time_ms = row_time(row, line, problem)
+        ok = time_ms is not None
         for k, (h, cell) in enumerate(zip(header[1:], row[1:]), start=1):
             if h not in ports:
                 continue

@@ -74,6 +74,26 @@ def model_digests(spec: TwinProject, project) -> dict[str, str]:
     return dict(sorted(out.items()))
 
 
+def multimodel(spec: TwinProject, units, connections, parameters: dict, log: dict, delayed, realtime: bool | None,
+               cotwin: dict) -> dict:
+    """Maestro's multimodel.json of a co-simulation (a twin's or a cell's); its `cotwin` key (which Maestro
+    ignores) holds the delays, the algorithm and `cotwin`'s further settings."""
+    wired: dict[str, list[str]] = {}
+    for c in connections:
+        wired.setdefault(f"{c.source}.{c.output}", []).append(f"{c.target}.{c.input}")
+    return {
+        "fmus": {u.key: u.fmu for u in units},
+        "connections": wired,
+        "parameters": {f"{unit}.{name}": value for unit, values in parameters.items() for name, value in values.items()},
+        "logVariables": log,
+        "algorithm": {"type": "fixed-step", "size": spec.step},
+        "startTime": 0.0,
+        "endTime": spec.end,
+        "simulationProgramDelay": spec.realtime if realtime is None else realtime,
+        "cotwin": {"delayed": sorted(delayed), "algorithm": spec.algorithm, **cotwin},
+    }
+
+
 def load_models(spec: TwinProject) -> TwinModels:
     from ...dmodel.program import build_program
     from ...mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints
@@ -340,23 +360,10 @@ class TwinSystem:
     # ---- descriptions ----
     def multimodel(self, realtime: bool | None = None) -> dict:
         """Maestro's multimodel.json; the `cotwin` key (which Maestro ignores) holds the delays."""
-        connections: dict[str, list[str]] = {}
-        for c in self.connections:
-            connections.setdefault(f"{c.source}.{c.output}", []).append(f"{c.target}.{c.input}")
-        return {
-            "fmus": {u.key: u.fmu for u in self.units},
-            "connections": connections,
-            "parameters": {f"{unit}.{name}": value for unit, values in self.parameters.items()
-                           for name, value in values.items()},
-            "logVariables": self.log,
-            "algorithm": {"type": "fixed-step", "size": self.spec.step},
-            "startTime": 0.0,
-            "endTime": self.spec.end,
-            "simulationProgramDelay": self.spec.realtime if realtime is None else realtime,
-            "cotwin": {"delayed": sorted(self.delayed), "algorithm": self.spec.algorithm,
-                       **({"isolate": {DMODEL.name: self.isolated}} if self.isolated else {}),
-                       **({"unit_timeout": self.spec.unit_timeout} if self.spec.unit_timeout != DEFAULT_TIMEOUT else {})},
-        }
+        extra = {**({"isolate": {DMODEL.name: self.isolated}} if self.isolated else {}),
+                 **({"unit_timeout": self.spec.unit_timeout} if self.spec.unit_timeout != DEFAULT_TIMEOUT else {})}
+        return multimodel(self.spec, self.units, self.connections, self.parameters, self.log, self.delayed,
+                          realtime, extra)
 
     @property
     def isolated(self) -> bool:
