@@ -189,9 +189,26 @@ def test_the_cell_twin_runs_pt_and_dt_with_deviation_and_history_per_robot(tmp_p
 def test_a_heavier_plant_raises_alarms_naming_the_robot(tmp_path):
     from cotwin.twin.live.cell_live import run_cell_twin
 
+    from cotwin.twin.assembly.observing import TwinObserver
+
+    class Told(TwinObserver):  # a cell twin tells its observers what a live twin tells its own
+        def __init__(self):
+            self.said = []
+
+        def twin_started(self, twin):
+            self.said.append("started")
+
+        def twin_alarm(self, twin, event):
+            self.said.append(event["twin"])
+
+        def twin_ended(self, twin, status):
+            self.said.append(status)
+
+    told = Told()
     spec = load_project(CELL / "twin.toml").with_overrides(plant_payload=3.0, deviation_absolute=0.002, end=8.0)
-    result = run_cell_twin(CellSystem(spec), tmp_path)
+    result = run_cell_twin(CellSystem(spec), tmp_path, observers=[told])
     assert result.alarms
+    assert told.said == ["started", *[event["twin"] for event in result.alarms], "done"]
     for event in result.alarms:
         assert event["twin"] in ROBOTS and event["variable"].startswith(event["twin"] + ".")
 

@@ -22,26 +22,19 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol, runtime_checkable
 
 from ...cosim.algorithm import algorithm as make_algorithm
 from ...cosim.execution import Execution, RunResult, step_count
 from ...cosim.observers import CSVWriter, RealTimePacer
 from ...diagnostics import CotwinError, Finding, Severity
 from ...files import write_text
+from ..assembly.observing import TwinObserver
 from ..assembly.cell import CELL_MAPPING, CellOutcomes, CellSystem, dmodel_of
 from ..services.deviation import DeviationMonitor
 from ..project import check_timing
 from ..assembly.system import MAPPING
 
 SIDES = ("pt", "dt")
-
-
-@runtime_checkable
-class TwinObserver(Protocol):
-    """An observer that also wants to know when both sides are initialised (the page's feed)."""
-
-    def twin_started(self, twin) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -68,6 +61,7 @@ class CellTwin:
     sides: dict[str, CellSide]
     monitor: CellAlarms
     convergence: None = None
+    message: str | None = None  # why the run did not finish, when it did not
 
 
 @dataclass
@@ -88,9 +82,10 @@ class CellTwinResult:
 
 def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, end: float | None = None,
                   algorithm: str | None = None, realtime: bool | None = None, history_url: str | None = None,
-                  cc: str = "cc", observers=()) -> CellTwinResult:
+                  cc: str = "cc", observers: tuple[TwinObserver, ...] | list[TwinObserver] = ()) -> CellTwinResult:
     """Run the cell's PT (its perturbed plant) and DT in lockstep into `out` (see the module doc).
-    `observers` get `twin_step(twin, k, t)` after every step, as a live twin's do."""
+    `observers` are told as a live twin's are (cotwin.twin.assembly.observing): started, each step, each alarm,
+    ended."""
     from ...pmodel.perturbation import Perturbation
     from ..assembly.build import dmodel_fmu, folder_lock
     from ..assembly.build import ARTEFACTS
@@ -132,8 +127,7 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
             for execution in executions.values():
                 execution.initialize()
             for observer in observers:
-                if isinstance(observer, TwinObserver):
-                    observer.twin_started(running)
+                observer.twin_started(running)
             columns = {side: [f"{u}.{v}" for u, v in e.system.observed()] for side, e in executions.items()}
             history = HistoryRecorder(url, str(spec.path), "twin", step, executions["pt"].algorithm.name, columns)
             readers = {side: e.reader(e.system.observed()) for side, e in executions.items()}
@@ -160,6 +154,8 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
                     for event in monitors[robot.name].observe(t, pt, dt):
                         alarms.append(event)
                         history.record_alarm(event)
+                        for observer in observers:
+                            observer.twin_alarm(running, event)
                 for observer in observers:
                     observer.twin_step(running, k, t)
             results = {}
@@ -171,8 +167,13 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
                 execution.close(err)
             if history is not None:
                 history.close("failed", str(err) or type(err).__name__)
+            running.message = str(err) or type(err).__name__
+            for observer in observers:
+                observer.twin_ended(running, "failed")
             raise
         history.close()
+        for observer in observers:
+            observer.twin_ended(running, "done")
         deviation = {name: monitor.report() for name, monitor in monitors.items()}
         write_text(out / "deviation.json", json.dumps(deviation, indent=2) + "\n")
         return CellTwinResult(results["pt"], results["dt"], deviation, out, url, history.run_id, outcomes, alarms)
