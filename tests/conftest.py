@@ -141,46 +141,9 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
 
 
 # ---- each d-model compiled once per session -----------------------------------------------------------
-# Most tests run a twin into a fresh folder, so cotwin's per-folder build record (cotwin.twin.assembly.build) finds
-# nothing and `cc` compiles the same generated C again: the same few models dozens of times a run. Here the
-# default compiler's output is kept for the session, keyed by a digest of the exact sources and module name,
-# and a repeated compile copies the binary instead. Only `cc` itself is memoised: a test that names another
-# compiler (a wrapper that logs, a failing one, sanitizers) always runs it; commands run as subprocesses
-# compile as a user's do.
-_COMPILED = Path(_SESSION_CACHE) / "compiled"
-
-
-@pytest.fixture(scope="session", autouse=True)
-def compile_each_dmodel_once():
-    import hashlib
-    import uuid
-
-    from cotwin.dmodel import fmu
-
-    compile_binary = fmu.compile_binary
-
-    def memoised(sources: dict[str, str], ident: str, folder: Path, cc: str = "cc") -> Path:
-        if cc != "cc":
-            return compile_binary(sources, ident, folder, cc)
-        digest = hashlib.sha256(ident.encode())
-        for name in sorted(sources):
-            digest.update(b"\0" + name.encode() + b"\0" + sources[name].encode())
-        kept = _COMPILED / f"{digest.hexdigest()}.so"
-        if not kept.is_file():
-            built = compile_binary(sources, ident, folder, cc)
-            _COMPILED.mkdir(parents=True, exist_ok=True)
-            spare = kept.with_suffix(f".{uuid.uuid4().hex}.tmp")  # threads may build the same model at once
-            shutil.copyfile(built, spare)
-            os.replace(spare, kept)  # whole or not at all
-            return built
-        folder.mkdir(parents=True, exist_ok=True)
-        out = folder / f"{ident}.so"
-        shutil.copyfile(kept, out)
-        return out
-
-    fmu.compile_binary = memoised
-    yield
-    fmu.compile_binary = compile_binary
+# cotwin keeps every d-model it compiles in its cache, by the sources and the compiler
+# (cotwin.dmodel.fmu.compile_binary); the session's COTWIN_CACHE above makes that one cache for the whole run,
+# in this process and the commands it starts.
 
 
 # ---- `cotwin` in this process ----------------------------------------------------------------------------

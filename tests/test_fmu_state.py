@@ -84,19 +84,34 @@ def test_the_given_compiler_builds_the_fmu(program, tmp_path):
 
 
 def test_cli_honours_cc(tmp_path):
+    """Every build runs the given compiler (with no cache: a cached binary would be copied, not compiled)."""
     from conftest import EXAMPLES
 
     script, log = _compiler_wrapper(tmp_path)
+    env = {**os.environ, "COTWIN_CACHE": "off"}
     proc = subprocess.run([sys.executable, "-m", "cotwin", "build-dmodel", str(EXAMPLES / "ur5e" / "arm.rst"), "-o",
-                           str(tmp_path / "arm.fmu"), "--cc", str(script)], capture_output=True, text=True)
+                           str(tmp_path / "arm.fmu"), "--cc", str(script)], capture_output=True, text=True, env=env)
     assert proc.returncode == 0, proc.stderr
     assert log.is_file()
     log.unlink()
     out = tmp_path / "twin"
     proc = subprocess.run([sys.executable, "-m", "cotwin", "run", str(EXAMPLES / "ur5e" / "cotwin.toml"), "-o",
-                           str(out), "--end", "0.5", "--cc", str(script)], capture_output=True, text=True)
+                           str(out), "--end", "0.5", "--cc", str(script)], capture_output=True, text=True, env=env)
     assert proc.returncode == 0, proc.stderr
     assert log.is_file() and (out / "outputs.csv").is_file()
+
+
+def test_a_dmodel_compiled_once_is_copied_from_the_cache(program, tmp_path, monkeypatch):
+    """The same sources and compiler compile once: a second build (another folder, as a what-if's or a new
+    run's) copies the cached binary; a changed compiler command compiles again."""
+    monkeypatch.setenv("COTWIN_CACHE", str(tmp_path / "cache"))
+    script, log = _compiler_wrapper(tmp_path)
+    first = build_fmu(program, tmp_path / "a.fmu", cc=str(script))
+    assert log.read_text().count("fmi2.c") == 1
+    second = build_fmu(program, tmp_path / "b.fmu", cc=str(script))
+    assert log.read_text().count("fmi2.c") == 1 and first.read_bytes() == second.read_bytes()
+    build_fmu(program, tmp_path / "c.fmu", cc=f"{script} -DCOTWIN_OTHER=1")
+    assert log.read_text().count("fmi2.c") == 2
 
 
 def test_rollback_through_fmpy(program, fmu):

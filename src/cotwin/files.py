@@ -25,6 +25,18 @@ from typing import Iterable
 
 from .diagnostics import CotwinError, Finding, Location, Severity
 
+
+def cache_dir() -> Path | None:
+    """cotwin's cache (IK solutions, compiled d-models, native loops): $COTWIN_CACHE, "off" for none, else
+    $XDG_CACHE_HOME/cotwin or ~/.cache/cotwin."""
+    chosen = os.environ.get("COTWIN_CACHE")
+    if chosen == "off":
+        return None
+    if chosen:
+        return Path(chosen)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "cotwin"
+
 MiB = 1 << 20
 # What cotwin reads whole, by kind, at most (a published model is under 100 KiB, a plan of hours of
 # commands a few MiB; RTDE logs are read as they go, see cotwin.mapping.rtde).

@@ -29,8 +29,9 @@ from xml.sax.saxutils import escape
 
 import fmpy
 
+from .. import __version__
 from ..diagnostics import CotwinError
-from ..files import output as files_output
+from ..files import cache_dir, output as files_output
 from . import cnames
 from .ccode import generate_c
 from .ports import SLOT_ARRAY, PortLayout, Variable
@@ -222,10 +223,40 @@ def fmu_sources(program: Program, root: str | Path | None = None) -> dict[str, s
 def compile_binary(sources: dict[str, str], ident: str, folder: Path, cc: str = "cc") -> Path:
     """Compile the sources' .c files into folder/<ident>.so with the C compiler `cc` (a command, possibly with
     arguments, e.g. "ccache gcc"); paths are kept out of the binary so that it does not depend on
-    where it was built."""
+    where it was built. A binary compiled before from the same sources by the same compiler (the command and
+    the file it runs) is copied from cotwin's cache instead (cotwin.files.cache_dir; COTWIN_CACHE=off: none)."""
     command = shlex.split(cc)
-    if not command or shutil.which(command[0]) is None:
+    found = shutil.which(command[0]) if command else None
+    if found is None:
         raise CotwinError(f"no C compiler '{cc}' found on PATH (install gcc, or pass --cc)")
+    cache = cache_dir()
+    if cache is None:
+        return _compile(sources, ident, folder, cc)
+    compiler = Path(found).resolve()
+    info = compiler.stat()
+    digest = hashlib.sha256("\0".join((__version__, ident, cc, str(compiler), str(info.st_size),
+                                       str(info.st_mtime_ns))).encode())
+    for name in sorted(sources):
+        digest.update(b"\0" + name.encode() + b"\0" + sources[name].encode())
+    kept = cache / "binaries" / f"{digest.hexdigest()}.so"
+    folder.mkdir(parents=True, exist_ok=True)
+    out = folder / f"{ident}.so"
+    if kept.is_file():
+        shutil.copyfile(kept, out)
+        return out
+    built = _compile(sources, ident, folder, cc)
+    try:  # kept whole or not at all (two builds may finish at once); a cache that cannot be written is skipped
+        kept.parent.mkdir(parents=True, exist_ok=True)
+        spare = kept.with_name(f"{kept.name}.{uuid.uuid4().hex}.part")
+        shutil.copyfile(built, spare)
+        spare.replace(kept)
+    except OSError:
+        pass
+    return built
+
+
+def _compile(sources: dict[str, str], ident: str, folder: Path, cc: str = "cc") -> Path:
+    command = shlex.split(cc)
     with tempfile.TemporaryDirectory(prefix="cotwin-cc-") as tmp:
         src = Path(tmp)
         for name, text in sources.items():

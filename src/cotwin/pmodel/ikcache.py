@@ -15,16 +15,7 @@ import os
 from pathlib import Path
 
 from ..config import is_number
-
-
-def cache_dir() -> Path | None:
-    chosen = os.environ.get("COTWIN_CACHE")
-    if chosen == "off":
-        return None
-    if chosen:
-        return Path(chosen)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "cotwin"
+from ..files import cache_dir  # noqa: F401 - where callers have found it
 
 
 def _solution(entry) -> bool:
