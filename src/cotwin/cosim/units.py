@@ -30,6 +30,9 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
 
 from ..diagnostics import CotwinError
 from .state import fields, finite, of_type, pack, port_value, unpack
+from .pythonfmu_exit import install as _release_pythonfmu_at_exit
+
+_release_pythonfmu_at_exit()
 
 
 INT32 = (-(2 ** 31), 2 ** 31 - 1)

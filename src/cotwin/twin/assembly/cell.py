@@ -303,12 +303,7 @@ class CellSystem:
         """Maestro's multimodel.json of the cell: one FMU per kind ({dmodel}, {controller} or {rabbitmq},
         {mapping}), instantiated once per robot where it is the robot's (the d-model FMU's reuse, as Maestro
         writes it); the `cotwin` key (which Maestro ignores) holds the delays."""
-        # the Python FMUs (the cell's mapping, every robot's source) in processes of their own: in the master's
-        # process (pythonfmu's library loaded once per instance) a cell's run sometimes ended with the heap
-        # corrupted at exit ("corrupted double-linked list"); isolated, cotwin simulate ends cleanly
-        isolate = {CELL_MAPPING.name: True, **{r.source.name: True for r in self.robots if r.source is not None}}
-        return multimodel(self.spec, self.units, self.connections, self.parameters, self.log, self.delayed, realtime,
-                          {"isolate": isolate})
+        return multimodel(self.spec, self.units, self.connections, self.parameters, self.log, self.delayed, realtime, {})
 
     def instantiate(self, dmodel_fmu: str | Path, world=None, perturbation=None) -> System:
         """A fresh, checked co-simulation of the cell (in `world`, by default a fresh nominal one; its robots'
