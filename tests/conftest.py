@@ -4,6 +4,7 @@ a fresh cotwin cache for the session; and, at the end of a run, the tests skippe
 from __future__ import annotations
 
 import os
+import secrets
 import random
 import re
 import shutil
@@ -18,6 +19,9 @@ import pytest
 # a driver joins only with RAY_AUTH_MODE=token (read once per process, so set before Ray is imported).
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 os.environ.setdefault("RAY_AUTH_MODE", "token")
+# the tests' Ray heads and drivers share one token of this session (Ray also looks in ~/.ray/auth_token, which a
+# fresh machine does not have and the tests should not write)
+os.environ.setdefault("RAY_AUTH_TOKEN", secrets.token_hex(32))
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"

@@ -182,7 +182,9 @@ def test_the_cell_twin_runs_pt_and_dt_with_deviation_and_history_per_robot(tmp_p
     db = sqlite3.connect(tmp_path / "history.sqlite")
     machines = {row[0] for row in db.execute("select distinct machine from states")}
     assert {m.split(".")[0] for m in machines} == set(ROBOTS)
-    assert db.execute("select count(*) from samples").fetchone()[0] == 2 * 160
+    assert db.execute("select count(*) from samples").fetchone()[0] == 2 * 161  # the start, then every step
+    commands = {row[0] for row in db.execute("select distinct port from commands")}
+    assert {c.split(".")[0] for c in commands} == set(ROBOTS) and all("." in c for c in commands)
     assert (tmp_path / "pt" / "outputs.csv").is_file() and (tmp_path / "dt" / "outputs.csv").is_file()
 
 

@@ -210,3 +210,19 @@ def test_a_ray_address_nobody_listens_at_is_refused_at_once(system, tmp_path):
     with pytest.raises(CotwinError, match="a Ray address is 'auto', 'HOST:PORT'"):
         run_sweep(EXAMPLES / "ur5e" / "cotwin.toml", plans, horizon=2.0, ray="somewhere", artefacts=tmp_path)
     assert time.monotonic() - started < 60
+
+
+def test_a_join_refused_for_its_token_says_what_to_set(monkeypatch):
+    """Ray's refusal of a driver without the head's token names what to set: the mode when it is not on, else
+    where Ray looks for the token; any other failure gets no hint."""
+    from cotwin.twin.analysis.sweep import join_hint
+
+    class AuthenticationError(Exception):  # Ray's, by name (the hint reads the chain's type names)
+        pass
+
+    refused = AuthenticationError("Token authentication is enabled but no authentication token was found")
+    monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
+    assert "set RAY_AUTH_MODE=token" in join_hint("127.0.0.1:1", refused)
+    monkeypatch.setenv("RAY_AUTH_MODE", "token")
+    assert "RAY_AUTH_TOKEN" in join_hint("127.0.0.1:1", refused) and "the head's" in join_hint("127.0.0.1:1", refused)
+    assert join_hint("127.0.0.1:1", ConnectionError("refused")) == ""

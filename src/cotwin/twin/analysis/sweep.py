@@ -248,11 +248,13 @@ def join_hint(address: str, err: BaseException) -> str:
     while seen is not None and len(chain) < 8:
         chain.append(f"{type(seen).__name__}: {seen}")
         seen = seen.__cause__ or seen.__context__
-    if any("InvalidAuthToken" in c or c.startswith("AuthenticationError") for c in chain) \
-            and os.environ.get("RAY_AUTH_MODE") != "token":
+    if not any("InvalidAuthToken" in c or c.startswith("AuthenticationError") for c in chain):
+        return ""
+    if os.environ.get("RAY_AUTH_MODE") != "token":
         return (" (the cluster asks for a token: set RAY_AUTH_MODE=token in cotwin's environment; Ray reads the "
                 "token from ~/.ray/auth_token, RAY_AUTH_TOKEN_PATH or RAY_AUTH_TOKEN)")
-    return ""
+    return (" (the cluster's token is not here or not the one it has: Ray reads it from ~/.ray/auth_token, "
+            "RAY_AUTH_TOKEN_PATH or RAY_AUTH_TOKEN; give it the head's)")
 
 
 def _on_ray(project, plans, state, horizon, step, address, artefacts, report) -> list[dict]:

@@ -38,7 +38,8 @@ from ...files import read_text
 from ..project import TwinProject, check_timing
 from .outcomes import INFEASIBLE
 from .scenario import Command, _column_starts, parse_value, row_time, scenario_ports
-from .system import DMODEL, MAPPING, TwinSystem, UnitSpec, build_scene, load_models, multimodel
+from .system import (DMODEL, MAPPING, CommandPorts, MachinePort, TwinSystem, UnitSpec, build_scene, load_models,
+                     multimodel)
 
 CELL_MAPPING = UnitSpec("{mapping}", "cell", "mapping.fmu", "mapping")
 
@@ -279,6 +280,17 @@ class CellSystem:
                               monitor=self.spec.readings)
             units[robot.name] = MappingUnit(MAPPING.name, models.program, mapping, robot.system.command_events)
         return CellMappingUnit(CELL_MAPPING.name, world, units)
+
+    def state_machines(self) -> list[MachinePort]:
+        """Every robot's d-model state machines, each in its robot's d-model instance, named `ROBOT.machine`."""
+        return [replace(m, unit=dmodel_of(robot.name).name, machine=robot.scoped(m.machine))
+                for robot in self.robots for m in robot.system.state_machines()]
+
+    def command_ports(self) -> list[CommandPorts]:
+        """Every robot's command source's ports, in its robot's source instance, recorded as `ROBOT.port`."""
+        return [CommandPorts(robot.source.name, *(tuple((p, robot.scoped(name)) for p, name in ports)
+                                                  for ports in (c.events, c.values)))
+                for robot in self.robots for c in robot.system.command_ports()]
 
     def source_ports(self) -> list[str]:
         """Every robot's command source's ports, together: one source FMU serves every robot's instance."""

@@ -25,6 +25,28 @@ from ..project import TwinProject
 
 
 @dataclass(frozen=True)
+class MachinePort:
+    """A d-model state machine as the twin's services see it: the unit and output port holding its state
+    (the leaf state's index), the name it is recorded under (the machine's; `ROBOT.machine` in a cell) and
+    its leaf states' names."""
+
+    unit: str
+    machine: str
+    port: str
+    leaves: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class CommandPorts:
+    """A command source's ports as the twin's services record them: its event ports and the ports carrying
+    the values, each with the name recorded (the port's; `ROBOT.port` in a cell)."""
+
+    unit: str
+    events: tuple[tuple[str, str], ...]  # (port, recorded name)
+    values: tuple[tuple[str, str], ...]
+
+
+@dataclass(frozen=True)
 class UnitSpec:
     """One unit of the twin as Maestro names it: `{key}.instance`, from `fmu`; `role` says what it is."""
 
@@ -358,6 +380,19 @@ class TwinSystem:
             raise CotwinError(problems)
 
     # ---- descriptions ----
+    def state_machines(self) -> list[MachinePort]:
+        """Every state machine of the d-model, where its state is read (the history and the page record them)."""
+        program = self.models.program
+        return [MachinePort(DMODEL.name, m.name, program.state_port(m), tuple(program.leaf_names(m)))
+                for m in program.machines]
+
+    def command_ports(self) -> list[CommandPorts]:
+        """The command source's ports (none for an autonomous robot): what the history records of each command."""
+        if self.source is None:
+            return []
+        return [CommandPorts(self.source.name, tuple((p, p) for p in self.source_ports if p in self.command_events),
+                             tuple((p, p) for p in self.source_ports if p not in self.command_events))]
+
     def multimodel(self, realtime: bool | None = None) -> dict:
         """Maestro's multimodel.json; the `cotwin` key (which Maestro ignores) holds the delays."""
         extra = {**({"isolate": {DMODEL.name: self.isolated}} if self.isolated else {}),

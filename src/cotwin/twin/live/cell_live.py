@@ -5,16 +5,18 @@ The PT is the cell's plant: the same robots in a world perturbed as the project'
 perturbed_world), each robot seen through the plant's latency and noise (cotwin.mapping.perturbed); the
 DT is the nominal cell. Both are the cell's co-simulation (cotwin.twin.assembly.cell), the
 same commands played into each, stepped in lockstep on one clock: step k of the PT, then of the DT, then
-the services look at both:
-- deviation per robot: one DeviationMonitor per robot over its monitored variables (its q<i>, ...), its
+the observers look at both. The services are a live twin's own (cotwin.twin.live.live_observers):
+- deviation per robot: one DeviationCheck per robot over its monitored variables (its q<i>, ...), its
   alarms naming the robot (`twin`) and the variable scoped by it (`ROBOT.q0`);
-- history: one run in the history store (DIR/history.sqlite unless [history] url), its samples every
-  logged column of both sides, each robot's d-model state changes as machine `ROBOT.Machine`, the alarms.
+- history: HistoryRecording, one run in the history store (DIR/history.sqlite unless [history] url), its
+  samples every logged column of both sides, each robot's d-model state changes as machine
+  `ROBOT.Machine` and its commands as `ROBOT.port`, the alarms;
+- real-time pacing (Pacing), after the caller's observers.
 Results: DIR/pt/outputs.csv, DIR/dt/outputs.csv, DIR/deviation.json (a report per robot).
 
-Observers get `twin_started(twin)` and `twin_step(twin, k, t)` as a live twin's do (the page's feed,
-cotwin.twin.services.dashboard.feed.CellFeed). Not yet: a PT over OPC UA (a plant server of the whole cell), the
-what-if forks.
+Observers get what a live twin's get (cotwin.twin.assembly.observing; the page's feed is
+cotwin.twin.services.dashboard.feed.CellFeed). Not yet: a PT over OPC UA (a plant server of the whole
+cell), the what-if forks.
 """
 
 from __future__ import annotations
@@ -25,14 +27,15 @@ from pathlib import Path
 
 from ...cosim.algorithm import algorithm as make_algorithm
 from ...cosim.execution import Execution, RunResult, step_count
-from ...cosim.observers import CSVWriter, RealTimePacer
+from ...cosim.observers import CSVWriter
 from ...diagnostics import CotwinError, Finding, Severity
 from ...files import write_text
 from ..assembly.observing import TwinObserver
-from ..assembly.cell import CELL_MAPPING, CellOutcomes, CellSystem, dmodel_of
+from ..assembly.cell import CELL_MAPPING, CellOutcomes, CellSystem
 from ..services.deviation import DeviationMonitor
 from ..project import check_timing
 from ..assembly.system import MAPPING
+from .live_observers import DeviationCheck, HistoryRecording, Pacing
 
 SIDES = ("pt", "dt")
 
@@ -52,16 +55,29 @@ class CellAlarms:
 
 @dataclass
 class CellTwin:
-    """What a cell twin's observers are given (`twin_started(twin)` once both sides are initialised, then
-    `twin_step(twin, k, t)`), as a live twin's are: the sides, the alarms, the step and the end."""
+    """What a cell twin's observers are given, as a live twin's are: the cell (`system`), the sides, the
+    alarms, the step, the end, where the run is (`steps`, `time`) and why it did not finish (`message`)."""
 
-    cell: CellSystem
+    system: CellSystem
     end: float
     step_size: float
     sides: dict[str, CellSide]
     monitor: CellAlarms
+    watchers: list[TwinObserver] = field(default_factory=list)
     convergence: None = None
-    message: str | None = None  # why the run did not finish, when it did not
+    steps: int = 0
+    time: float = 0.0
+    message: str | None = None
+
+    @property
+    def cell(self) -> CellSystem:
+        return self.system
+
+    def alarm(self, event: dict) -> None:
+        """A robot's monitor raised or cleared an alarm: kept, and told to every observer."""
+        self.monitor.events.append(event)
+        for observer in self.watchers:
+            observer.twin_alarm(self, event)
 
 
 @dataclass
@@ -112,52 +128,33 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
         executions = {}
         for side in SIDES:
             chain = [CSVWriter(out / side / "outputs.csv"), outcomes[side]]
-            if side == "pt" and (spec.realtime if realtime is None else realtime):
-                chain.append(RealTimePacer())
             cosim = cell.instantiate(fmu, worlds[side], plant if side == "pt" else None)
             executions[side] = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain)
-        monitors = {r.name: DeviationMonitor([r.scoped(v) for v in spec.deviation.variables or
-                                              r.system.log[MAPPING.name]],
-                                             spec.deviation.absolute, spec.deviation.relative,
-                                             spec.deviation.lag_steps, spec.deviation.debounce_steps, twin=r.name)
-                    for r in cell.robots}
-        history = None
         running = CellTwin(cell, end, step, {side: CellSide(e) for side, e in executions.items()}, CellAlarms())
+        def check_of(robot) -> DeviationCheck:
+            variables = [robot.scoped(v) for v in spec.deviation.variables or robot.system.log[MAPPING.name]]
+            dev = spec.deviation
+            monitor = DeviationMonitor(variables, dev.absolute, dev.relative, dev.lag_steps, dev.debounce_steps,
+                                       publish=running.alarm, twin=robot.name)
+            return DeviationCheck(monitor, variables, unit=CELL_MAPPING.name)
+
+        checks = {r.name: check_of(r) for r in cell.robots}
+        paced = spec.realtime if realtime is None else realtime
+        history = None
         try:
             for execution in executions.values():
                 execution.initialize()
-            for observer in observers:
-                observer.twin_started(running)
             columns = {side: [f"{u}.{v}" for u, v in e.system.observed()] for side, e in executions.items()}
             history = HistoryRecorder(url, str(spec.path), "twin", step, executions["pt"].algorithm.name, columns)
-            readers = {side: e.reader(e.system.observed()) for side, e in executions.items()}
-            watched = {r.name: [(CELL_MAPPING.name, v) for v in monitors[r.name].variables] for r in cell.robots}
-            program = cell.program
-            machines = [(m.name, program.state_port(m), program.leaf_names(m)) for m in program.machines]
-            alarms = running.monitor.events
+            running.watchers = [*checks.values(), HistoryRecording(history), *observers, *([Pacing()] if paced else [])]
+            for observer in running.watchers:
+                observer.twin_started(running)
             for k in range(1, steps + 1):
                 for execution in executions.values():
                     execution.step()
-                t = executions["pt"].time
-                for side, execution in executions.items():
-                    history.record_sample(side, k, t, readers[side]())
-                    values = execution.values
-                    for robot in cell.robots:
-                        for machine, port, leaves in machines:
-                            state = values.get((dmodel_of(robot.name).name, port))
-                            if isinstance(state, int) and not isinstance(state, bool):
-                                history.record_state(side, k, t, f"{robot.name}.{machine}", state,
-                                                     leaves[state] if 0 <= state < len(leaves) else "none")
-                for robot in cell.robots:
-                    pt = {v: executions["pt"].values.get((unit, v)) for unit, v in watched[robot.name]}
-                    dt = {v: executions["dt"].values.get((unit, v)) for unit, v in watched[robot.name]}
-                    for event in monitors[robot.name].observe(t, pt, dt):
-                        alarms.append(event)
-                        history.record_alarm(event)
-                        for observer in observers:
-                            observer.twin_alarm(running, event)
-                for observer in observers:
-                    observer.twin_step(running, k, t)
+                running.steps, running.time = k, executions["pt"].time
+                for observer in running.watchers:
+                    observer.twin_step(running, k, running.time)
             results = {}
             for side, execution in executions.items():
                 execution.close()
@@ -165,15 +162,15 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
         except BaseException as err:
             for execution in executions.values():
                 execution.close(err)
-            if history is not None:
-                history.close("failed", str(err) or type(err).__name__)
             running.message = str(err) or type(err).__name__
-            for observer in observers:
+            if history is not None and not running.watchers:
+                history.close("failed", running.message)
+            for observer in running.watchers or observers:
                 observer.twin_ended(running, "failed")
             raise
-        history.close()
-        for observer in observers:
+        for observer in running.watchers:
             observer.twin_ended(running, "done")
-        deviation = {name: monitor.report() for name, monitor in monitors.items()}
+        deviation = {name: check.report for name, check in checks.items()}
         write_text(out / "deviation.json", json.dumps(deviation, indent=2) + "\n")
+        alarms = running.monitor.events
         return CellTwinResult(results["pt"], results["dt"], deviation, out, url, history.run_id, outcomes, alarms)

@@ -14,20 +14,22 @@ from ...cosim.algorithm import UNSET
 from ...cosim.observers import Pacer
 from ...files import write_text
 from ..assembly.observing import TwinObserver
-from ..assembly.system import DMODEL, MAPPING
+from ..assembly.system import MAPPING
 
 
 class DeviationCheck(TwinObserver):
-    """PT against DT after every step (the twin's DeviationMonitor); DIR/deviation.json when the run ends
-    (with the [convergence] report, if any)."""
+    """PT against DT after every step (a DeviationMonitor over ports of `unit`, by default the twin's mapping);
+    with `out`, DIR/deviation.json when the run ends (with the PT's kind and the [convergence] report, if
+    any). A cell has one per robot, over the robot's scoped ports of the cell's mapping, and writes them
+    together."""
 
-    def __init__(self, monitor, variables: list[str], out: Path):
-        self.monitor, self.variables, self.out = monitor, list(variables), out
+    def __init__(self, monitor, variables: list[str], out: Path | None = None, unit: str = MAPPING.name):
+        self.monitor, self.variables, self.out, self.unit = monitor, list(variables), out, unit
         self._readers: dict = {}
         self.report: dict = {}
 
     def twin_started(self, twin) -> None:
-        self._readers = {name: side.execution.reader([(MAPPING.name, v) for v in self.variables])
+        self._readers = {name: side.execution.reader([(self.unit, v) for v in self.variables])
                          for name, side in twin.sides.items()}
 
     def twin_step(self, twin, k: int, t: float) -> None:
@@ -37,10 +39,11 @@ class DeviationCheck(TwinObserver):
 
     def twin_ended(self, twin, status: str) -> None:
         report = self.monitor.report()
-        report["pt"] = twin.system.spec.pt.endpoint if twin.system.spec.pt else "custom"
-        if twin.convergence is not None:
-            report["convergence"] = twin.convergence.report()
-        write_text(self.out / "deviation.json", json.dumps(report, indent=1) + "\n")
+        if self.out is not None:
+            report["pt"] = twin.system.spec.pt.endpoint if twin.system.spec.pt else "custom"
+            if twin.convergence is not None:
+                report["convergence"] = twin.convergence.report()
+            write_text(self.out / "deviation.json", json.dumps(report, indent=1) + "\n")
         self.report = report
 
 
@@ -52,23 +55,21 @@ class HistoryRecording(TwinObserver):
         self.history = history
 
     def twin_started(self, twin) -> None:
-        """Readers bound once (after initialisation), then the samples the run starts from."""
+        """Readers bound once (after initialisation), then the samples the run starts from. What is recorded
+        comes from the twin's system: its state machines and its command sources (one of each per robot in a
+        cell, named by the robot)."""
         system = twin.system
-        program = system.models.program
+        machines = system.state_machines()
+        names = [(m.machine, m.leaves) for m in machines]
         self._readers = {}
         for name, side in twin.sides.items():
             execution = side.execution
-            machines = [(m.name, program.leaf_names(m)) for m in program.machines]
-            states = execution.reader([(DMODEL.name, program.state_port(m)) for m in program.machines])
-            self._readers[name] = (execution, execution.reader(execution.system.observed()), states, machines)
-        source = system.source
-        if source is not None:
-            events = [p for p in system.source_ports if p in system.command_events]
-            values = [p for p in system.source_ports if p not in system.command_events]
-            read = twin.sides["pt"].execution.reader([(source.name, p) for p in events + values])
-            self._commands = (events, values, read)
-        else:
-            self._commands = None
+            states = execution.reader([(m.unit, m.port) for m in machines])
+            self._readers[name] = (execution, execution.reader(execution.system.observed()), states, names)
+        pt = twin.sides["pt"].execution
+        self._commands = [([name for _, name in c.events], [name for _, name in c.values],
+                           pt.reader([(c.unit, p) for p, _ in (*c.events, *c.values)]))
+                          for c in system.command_ports()]
         self.twin_step(twin, twin.steps, twin.time)
 
     def twin_step(self, twin, k: int, t: float) -> None:
@@ -79,8 +80,7 @@ class HistoryRecording(TwinObserver):
             for (machine, leaves), state in zip(machines, states()):
                 if isinstance(state, int) and not isinstance(state, bool):
                     history.record_state(name, k, at, machine, state, leaves[state] if 0 <= state < len(leaves) else "none")
-        if self._commands is not None:
-            events, values, read = self._commands
+        for events, values, read in self._commands:
             current = read()
             fired = [e for e, v in zip(events, current) if v is True]
             for event in fired:  # a command and the values it carries
