@@ -399,3 +399,49 @@ def test_a_robots_infeasible_command_is_said_in_its_outcome(tmp_path):
     lines = run_cell(cell, tmp_path / "out", end=4.0).outcomes.lines()
     assert lines[0].startswith("ur5e: 1 command(s) applied, 1 move(s) completed, no collision"), lines
     assert lines[1].startswith("panda: 1 command(s) applied, 0 move(s) completed, 1 infeasible,"), lines
+
+
+def test_the_cell_twin_takes_broker_commands_routed_per_robot_into_both_sides(tmp_path, broker):
+    """`cotwin twin --rabbitmq` of a cell: each robot's commands (TO_COSIM.ROBOT) reach its PT and its DT in the
+    same step, once each (one bridge and stream per robot shared by both sides), and each arm does its own move
+    on both sides; the history records each command under its robot's name."""
+    import sqlite3
+    import threading
+    import uuid
+
+    from cotwin.twin.assembly.cell import routed
+    from cotwin.twin.assembly.rabbitmq import port_types
+    from cotwin.twin.live.cell_live import run_cell_twin
+    from cotwin.twin.services.publisher import Publisher, idle_values
+
+    exchange = f"cotwin.test.celltwin.{uuid.uuid4().hex[:8]}"
+    text = (CELL / "twin.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/")
+    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
+        shutil.copy(CELL / name, tmp_path / name)
+    (tmp_path / "meshes").symlink_to(CELL / "meshes")
+    (tmp_path / "twin.toml").write_text(text)
+    spec = load_project(tmp_path / "twin.toml").with_overrides(
+        scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange, realtime=True, end=5.0)
+    cell = CellSystem(spec)
+    assert [u.name for u in cell.units if u.role == "source"] == ["{rabbitmq}.ur5e", "{rabbitmq}.panda"]
+    plans = read_cell_plan(CELL / "apart.csv", cell.program, list(ROBOTS))
+    publishers = [Publisher(routed(cell.spec.rabbitmq, r.name), plans[r.name][:1],
+                            idle_values(port_types(cell.program, r.system.live_ports())), period=0.2, end=5.0)
+                  for r in cell.robots]
+    threads = [threading.Thread(target=p.run, daemon=True) for p in publishers]
+    for thread in threads:
+        thread.start()
+    result = run_cell_twin(cell, tmp_path / "out")
+    for thread in threads:
+        thread.join(timeout=30)
+    for side in ("pt", "dt"):
+        for robot in ROBOTS:
+            outcome = result.outcomes[side].robots[robot]
+            assert (outcome.commands, outcome.completed, outcome.collisions) == (1, 1, []), (side, robot)
+    for robot in ROBOTS:  # the same step on both sides
+        fired = {side: [r["time"] for r in rows(tmp_path / "out" / side / "outputs.csv")
+                        if r[f"{{rabbitmq}}.{robot}.moveDiscreteCommand"] == "true"] for side in ("pt", "dt")}
+        assert len(fired["pt"]) == 1 and fired["pt"] == fired["dt"], (robot, fired)
+    db = sqlite3.connect(tmp_path / "out" / "history.sqlite")
+    recorded = {row[0] for row in db.execute("select port from commands where value = 'true'")}
+    assert recorded == {f"{robot}.moveDiscreteCommand" for robot in ROBOTS}

@@ -78,6 +78,22 @@ def test_publishers_read_the_echo_and_the_ready_message_and_ignore_garbage():
         assert read_echo(garbage) == (False, None), garbage
 
 
+def test_a_waiting_twin_says_it_is_ready_again_so_a_late_publisher_hears_it(monkeypatch):
+    """A publisher started after the twin's first ready message waits for one: while the twin waits for its
+    first complete set of values it says it is ready again (every ANNOUNCE_SECONDS), and its error names where
+    it listens (exchange and routing key), not a generic 'to_cosim'."""
+    import cotwin.twin.assembly.rabbitmq as rabbitmq
+
+    monkeypatch.setattr(rabbitmq, "ANNOUNCE_SECONDS", 0.1)
+    said = []
+    stream = CommandStream(TYPES, {"moveDiscreteCommand"}, lambda timeout: time.sleep(min(timeout, 0.05)) or [],
+                           timeout=0.6, announce=lambda: said.append(time.monotonic()),
+                           origin="exchange 'x', routing key 'data.to_cosim.left'")
+    with pytest.raises(CotwinError, match="routing key 'data.to_cosim.left'"):
+        stream.start()
+    assert len(said) >= 3
+
+
 def test_stream_follows_the_rmq_fmu_time_semantics():
     feed = Feed()
     stream = CommandStream(TYPES, {"moveDiscreteCommand"}, feed, maxage=1.0, timeout=0.3)

@@ -48,14 +48,14 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
     spec = load_project(project, pt_log)
     check_timing(spec, step, end)
-    if spec.robots:
-        return _cell_twin(spec, out, step, end, algorithm, realtime, pt_log, pt_url, exchange, history, whatif,
-                          dashboard, cc, serving)
-    if pt_url is not None:
-        spec = pt_with_url(spec, pt_url, pt_log is not None)
     if exchange is not None:
         spec = spec.with_overrides(scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange,
                                    realtime=True if realtime is None else realtime)
+    if spec.robots:
+        return _cell_twin(spec, out, step, end, algorithm, realtime, pt_log, pt_url, history, whatif,
+                          dashboard, cc, serving)
+    if pt_url is not None:
+        spec = pt_with_url(spec, pt_url, pt_log is not None)
     if spec.pt is None:  # said before the models are read and the plan's warnings shown
         raise CotwinError([Finding(Location(str(spec.path), 0, 0), Severity.ERROR,
                                    "a live twin needs a PT: a [pt] table (endpoint = opcua | replay | broker | rtde), "
@@ -109,7 +109,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
 
 
-def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, exchange, history, whatif, dashboard,
+def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, history, whatif, dashboard,
                cc: str, serving: dict) -> None:
     """`cotwin twin` of a cell of several robots ([[robots]]): its perturbed plant as the PT (cotwin.twin.live.cell_live)."""
     from ..twin.assembly.cell import CellSystem
@@ -117,11 +117,10 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, e
     from ..twin.services.history import database_url
     from .progress import ProgressReport
 
-    unsupported = [flag for flag, given in (("--pt-log", pt_log), ("--pt-url", pt_url), ("--rabbitmq", exchange),
-                                             ("--whatif", whatif)) if given]
+    unsupported = [flag for flag, given in (("--pt-log", pt_log), ("--pt-url", pt_url), ("--whatif", whatif)) if given]
     if unsupported:
-        raise click.UsageError(f"a cell of several robots is twinned with its own perturbed plant as the PT, its plan "
-                               f"as its commands: {', '.join(unsupported)} not done yet")
+        raise click.UsageError(f"a cell of several robots is twinned with its own perturbed plant as the PT: "
+                               f"{', '.join(unsupported)} not done yet")
     cell = CellSystem(spec)
     dash = start_dashboard(cell, dashboard, "twin", database_url(history or spec.history_url, Path(out)), None, serving)
     try:

@@ -317,16 +317,17 @@ class CellSystem:
         writes it); the `cotwin` key (which Maestro ignores) holds the delays."""
         return multimodel(self.spec, self.units, self.connections, self.parameters, self.log, self.delayed, realtime, {})
 
-    def instantiate(self, dmodel_fmu: str | Path, world=None, perturbation=None) -> System:
+    def instantiate(self, dmodel_fmu: str | Path, world=None, perturbation=None, sources: dict | None = None) -> System:
         """A fresh, checked co-simulation of the cell (in `world`, by default a fresh nominal one; its robots'
         endpoints perturbed by `perturbation`'s latency and noise, if given): the same d-model FMU
-        instantiated once per robot."""
+        instantiated once per robot; each robot's command source from `sources` (by robot, e.g. a live twin's
+        shared broker streams), else a fresh one of its own."""
         from ...cosim.isolated import fmu_unit
 
         units = []
         for robot in self.robots:
             if robot.system.source is not None:
-                source = robot.system.source_unit()
+                source = sources[robot.name] if sources is not None else robot.system.source_unit()
                 source.name = robot.source.name
                 units.append(source)
             units.append(fmu_unit(dmodel_of(robot.name).name, dmodel_fmu, robot.system.isolated,

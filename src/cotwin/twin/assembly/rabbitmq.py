@@ -37,6 +37,7 @@ import re
 import threading
 import time as wallclock
 import uuid
+from typing import Callable
 from collections import deque
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta, timezone
@@ -56,6 +57,7 @@ from ..project import RabbitMQSettings
 log = logging.getLogger("cotwin.rabbitmq")
 
 READY = {"internal_status": "ready", "internal_message": "waiting for input data for simulation"}
+ANNOUNCE_SECONDS = 1.0  # the ready message is said again this often while the twin waits for its first values
 _ISO = re.compile(r"^(\d{4})-(\d{2})-(\d{2})[T ](\d{2}):(\d{2}):(\d{2})(?:[.,](\d{1,9}))?(Z|z|[+-]\d{2}:?\d{2})$")
 MAX_BYTES = 1 << 16  # a command message is a flat object of a few keys
 MAX_REFUSED = 1000  # reasons of refused messages kept (all are counted)
@@ -209,6 +211,8 @@ class CommandStream:
     scalars: dict | None = None  # port -> Scalar (RoboSim type), see parse_message
     applied: deque = field(default_factory=lambda: deque(maxlen=MAX_APPLIED))  # (sim, var, value, step end), the newest
     arguments: dict[str, list[str]] | None = None  # event -> its value ports (None: no event carries any)
+    origin: str = "to_cosim"  # where its messages come from, as an error says it (exchange and routing key)
+    announce: object = None  # callable() -> None: say again that the twin is ready (while waiting for the first values)
 
     def __post_init__(self) -> None:
         self.pending: list[tuple[datetime, dict[str, object], bytes]] = []  # before t0 is known
@@ -288,6 +292,7 @@ class CommandStream:
         """Wait (up to the timeout) until every variable has a value; t0 := the newest time then held."""
         deadline = wallclock.monotonic() + self.timeout
         latest: dict[str, tuple[datetime, object]] = {}
+        announced = wallclock.monotonic()
         while True:
             for stamp, values, _ in self.pending:
                 for var, value in values.items():
@@ -300,8 +305,11 @@ class CommandStream:
             left = deadline - wallclock.monotonic()
             if left <= 0:
                 raise CotwinError(f"no value for {', '.join(missing)} within {self.timeout:g} s of waiting for the "
-                                  "first complete set of commands (is a publisher sending on to_cosim?)")
+                                  f"first complete set of commands (is a publisher sending on {self.origin}?)")
             self._wait(min(left, 0.5), f"for the first value of {', '.join(missing)}")
+            if self.announce is not None and wallclock.monotonic() - announced >= ANNOUNCE_SECONDS:
+                self.announce()  # a publisher started after the first ready message hears it now
+                announced = wallclock.monotonic()
         self.t0 = max(stamp for stamp, _ in latest.values())
         for var, (stamp, value) in latest.items():
             self.held[var] = _Held((stamp - self.t0).total_seconds(), value)
@@ -507,6 +515,16 @@ class RabbitMQBridge(BackgroundService):
         self.log.close()
 
 
+def announcer(bridge: "RabbitMQBridge", settings) -> Callable[[], None]:
+    """Say the ready message again on `from_cosim` (a publisher ignores it once it has heard one)."""
+    return lambda: bridge.publish(settings.from_cosim, READY)
+
+
+def origin(settings) -> str:
+    """Where a twin's commands come from, as its errors name it: the exchange and the routing key."""
+    return f"exchange {settings.exchange!r}, routing key {settings.to_cosim!r}"
+
+
 def echo_message(inputs: dict[str, object], t: float, h: float) -> dict:
     """What the RMQ FMU publishes at the start of a step: its inputs, the wall-clock time and
     `simstep` (t + h in ms, as a string); Booleans as 1/0 (keys sorted when sent)."""
@@ -631,7 +649,8 @@ class RabbitMQUnit(PythonUnit):
         if self.stream is None:
             self.stream = CommandStream(self.types, self.events, self.bridge.receive, self.settings.maxage_ms / 1000,
                                         self.settings.timeout_s, scalars=self.scalars,
-                                        max_skew=self.settings.max_skew_s, arguments=self.arguments)
+                                        max_skew=self.settings.max_skew_s, arguments=self.arguments,
+                                        origin=origin(self.settings), announce=announcer(self.bridge, self.settings))
         if self.stream.t0 is None:
             self.stream.start()
         self.values.update({v: held.value if v not in self.events else False for v, held in self.stream.held.items()})

@@ -14,6 +14,9 @@ the observers look at both. The services are a live twin's own (cotwin.twin.live
 - real-time pacing (Pacing), after the caller's observers.
 Results: DIR/pt/outputs.csv, DIR/dt/outputs.csv, DIR/deviation.json (a report per robot).
 
+Commands come from the cell's plan (its ROBOT.port columns) or, with `[scenario] rabbitmq`, from the broker
+routed per robot (TO_COSIM.ROBOT): one bridge and command stream per robot feed both sides, so each command
+reaches the robot's PT and DT in the same step, and only the PT echoes (cotwin.twin.live.runtime.paired_sources).
 Observers get what a live twin's get (cotwin.twin.assembly.observing; the page's feed is
 cotwin.twin.services.dashboard.feed.CellFeed). Not yet: a PT over OPC UA (a plant server of the whole
 cell), the what-if forks.
@@ -36,6 +39,7 @@ from ..services.deviation import DeviationMonitor
 from ..project import check_timing
 from ..assembly.system import MAPPING
 from .live_observers import DeviationCheck, HistoryRecording, Pacing
+from .runtime import paired_sources
 
 SIDES = ("pt", "dt")
 
@@ -126,9 +130,13 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
         worlds = {"pt": cell.world(plant), "dt": cell.world()}
         outcomes = {side: CellOutcomes(cell) for side in SIDES}
         executions = {}
-        for side in SIDES:
+        paired = {r.name: paired_sources(r.system, f"cotwin cell twin ({r.name})", lambda: False)
+                  for r in cell.robots if r.system.source is not None}
+        bridges = [bridge for *_, bridge in paired.values() if bridge is not None]
+        for k, side in enumerate(SIDES):
             chain = [CSVWriter(out / side / "outputs.csv"), outcomes[side]]
-            cosim = cell.instantiate(fmu, worlds[side], plant if side == "pt" else None)
+            cosim = cell.instantiate(fmu, worlds[side], plant if side == "pt" else None,
+                                     {name: pair[k] for name, pair in paired.items()})
             executions[side] = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain)
         running = CellTwin(cell, end, step, {side: CellSide(e) for side, e in executions.items()}, CellAlarms())
         def check_of(robot) -> DeviationCheck:
@@ -142,6 +150,8 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
         paced = spec.realtime if realtime is None else realtime
         history = None
         try:
+            for bridge in bridges:  # every robot says it is ready before any waits for its first commands
+                bridge.start()
             for execution in executions.values():
                 execution.initialize()
             columns = {side: [f"{u}.{v}" for u, v in e.system.observed()] for side, e in executions.items()}
@@ -162,12 +172,16 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
         except BaseException as err:
             for execution in executions.values():
                 execution.close(err)
+            for bridge in bridges:
+                bridge.close()
             running.message = str(err) or type(err).__name__
             if history is not None and not running.watchers:
                 history.close("failed", running.message)
             for observer in running.watchers or observers:
                 observer.twin_ended(running, "failed")
             raise
+        for bridge in bridges:
+            bridge.close()
         for observer in running.watchers:
             observer.twin_ended(running, "done")
         deviation = {name: check.report for name, check in checks.items()}

@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 from ...cosim.algorithm import algorithm as make_algorithm
 from ...cosim.execution import Execution, RunResult, ended_early, saved_execution, step_count
@@ -41,6 +42,24 @@ log = logging.getLogger("cotwin.twin")
 def pt_endpoint(system: TwinSystem):
     """The physical twin's platform, from the project's [pt] table (its kind from cotwin.twin.assembly.endpoints)."""
     return make_endpoint(system, "pt")
+
+
+def paired_sources(system: TwinSystem, name: str, cancelled: Callable[[], bool]):
+    """The PT's and the DT's command sources of one robot, and the broker bridge they share (None when the
+    commands come from a plan): from RabbitMQ, one bridge and one command stream feed both, so every command
+    reaches both sides in the same step exactly once, and only the PT's unit echoes on `from_cosim`."""
+    if system.source is not RABBITMQ:
+        return system.source_unit(), system.source_unit(), None
+    from ..assembly.rabbitmq import (CommandStream, RabbitMQBridge, announcer, origin, port_arguments, port_scalars,
+                                     port_types)
+
+    settings, program = system.spec.rabbitmq, system.models.program
+    bridge = RabbitMQBridge(settings, name)  # started by the PT's unit when it initialises
+    stream = CommandStream(port_types(program, system.source_ports), system.command_events, bridge.receive,
+                           settings.maxage_ms / 1000, settings.timeout_s, scalars=port_scalars(program),
+                           cancelled=cancelled, max_skew=settings.max_skew_s, arguments=port_arguments(program),
+                           origin=origin(settings), announce=announcer(bridge, settings))
+    return system.source_unit(bridge, stream, echo=True), system.source_unit(bridge, stream, echo=False), bridge
 
 
 @dataclass
@@ -139,19 +158,8 @@ class LiveTwin:
 
     # ---- building ----
     def _sources(self):
-        system = self.system
-        if system.source is RABBITMQ:
-            from ..assembly.rabbitmq import CommandStream, RabbitMQBridge, port_arguments, port_scalars, port_types
-
-            settings = system.spec.rabbitmq
-            self._bridge = RabbitMQBridge(settings, "cotwin live twin")  # started by the PT's unit when it initialises
-            stream = CommandStream(port_types(system.models.program, system.source_ports), system.command_events,
-                                   self._bridge.receive, settings.maxage_ms / 1000, settings.timeout_s,
-                                   scalars=port_scalars(system.models.program), cancelled=lambda: self._stop,
-                                   max_skew=settings.max_skew_s, arguments=port_arguments(system.models.program))
-            return (system.source_unit(self._bridge, stream, echo=True),
-                    system.source_unit(self._bridge, stream, echo=False))
-        return system.source_unit(), system.source_unit()
+        pt, dt, self._bridge = paired_sources(self.system, "cotwin live twin", lambda: self._stop)
+        return pt, dt
 
     def _side(self, name: str, fmu: Path, endpoint, source) -> Side:
         cosim = self.system.instantiate(fmu, endpoint, source=source, restart=self.restart)
