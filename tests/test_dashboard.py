@@ -374,3 +374,69 @@ def test_the_page_follows_a_live_twin_commands_it_and_shows_its_alarms(browser, 
     predicted_tip = ik.tool_pose(models.tree, tool, {j: predicted[f"q{i}"][-1] for i, j in enumerate(arm)})[:3, 3]
     assert np.linalg.norm(predicted_tip - np.array(models.scene.hole(3, 20, 2))) < 0.002  # the fork went there
     assert max(abs(a - b) for a, b in zip(q[-1], [predicted[f"q{i}"][0] for i in range(6)])) < 0.05  # from live
+
+
+def test_the_page_commands_the_robot_it_names_in_a_cell(browser, tmp_path):
+    """A cell's live twin taking commands from the broker: the panel lists the robots; a command sent to the
+    Panda goes on the Panda's routing key, is applied to the Panda's PT and DT in one step and not to the UR5e;
+    the API refuses a command naming no robot, or one not in the cell, saying which robots there are."""
+    import shutil
+
+    from cotwin.twin.assembly.cell import CellSystem
+    from cotwin.twin.live.cell_live import run_cell_twin
+    from cotwin.twin.project import load_project
+
+    if not _broker_up():
+        _required("no RabbitMQ on 127.0.0.1:5672")
+    cell_dir = ROOT / "examples" / "flexcell2"
+    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
+        shutil.copy(cell_dir / name, tmp_path / name)
+    (tmp_path / "meshes").symlink_to(cell_dir / "meshes")
+    (tmp_path / "twin.toml").write_text((cell_dir / "twin.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/"))
+    exchange = f"cotwin_cell_dash_{uuid.uuid4().hex[:8]}"
+    spec = load_project(tmp_path / "twin.toml").with_overrides(
+        scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange, realtime=True, end=8.0)
+    cell = CellSystem(spec)
+    with Dashboard(cell, port=0, mode="twin") as dash:
+        assert dash.model["commands"]["robots"] == ["ur5e", "panda"]
+        code, body = _post(dash.url + "api/command", {"event": "moveDiscreteCommand", "values": {}})
+        assert code == 400 and "names no robot" in json.loads(body)["error"] and "ur5e, panda" in json.loads(body)["error"]
+        code, body = _post(dash.url + "api/command", {"robot": "kuka", "event": "moveDiscreteCommand", "values": {}})
+        assert code == 400 and "no robot 'kuka'" in json.loads(body)["error"]
+        outcome = {}
+
+        def run():
+            try:
+                outcome["result"] = run_cell_twin(cell, tmp_path / "out", observers=[dash.feed])
+                dash.finish("done")
+            except BaseException as err:  # noqa: BLE001 - reported by the test
+                outcome["error"] = err
+                dash.finish("failed", str(err))
+
+        runner = threading.Thread(target=run, daemon=True)
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        errors = []
+        page.on("pageerror", lambda err: errors.append(str(err)))
+        page.goto(dash.url)
+        page.wait_for_selector("body[data-ready=true]", timeout=10_000)
+        runner.start()
+        page.wait_for_function("Number(document.getElementById('samples').dataset.count) >= 5", timeout=30_000)
+        page.select_option("#command-robot", "panda")
+        form = page.locator('form[data-event="moveDiscreteCommand"]')
+        for port, value in (("MovementArgs_target_X", 7), ("MovementArgs_target_Y", 5), ("MovementArgs_target_Z", 0)):
+            form.locator(f'input[name="{port}"]').fill(str(value))
+        form.locator("button").click()
+        page.wait_for_selector("#sent li.confirmed", timeout=15_000)
+        assert "panda.moveDiscreteCommand" in page.inner_text("#sent li.confirmed")
+        runner.join(60)
+        assert "error" not in outcome, outcome.get("error")
+        assert errors == []
+        page.close()
+    for side in ("pt", "dt"):
+        with open(tmp_path / "out" / side / "outputs.csv") as f:
+            rows = list(csv.DictReader(f))
+        panda = [r for r in rows if r["{rabbitmq}.panda.moveDiscreteCommand"] == "true"]
+        assert len(panda) == 1 and [int(panda[0][f"{{rabbitmq}}.panda.MovementArgs_target_{a}"]) for a in "XY"] == [7, 5]
+        assert not any(r["{rabbitmq}.ur5e.moveDiscreteCommand"] == "true" for r in rows)
+    result = outcome["result"]
+    assert (result.outcomes["dt"].robots["panda"].commands, result.outcomes["dt"].robots["ur5e"].commands) == (1, 0)

@@ -190,6 +190,27 @@ def history_run(url: str, run_id: int, max_points: int = 4000) -> dict:
             "corrections": [{k: c[k] for k in ("time", "kind", "reason", "size")} for c in data.get("corrections", [])]}
 
 
+def page_publishers(system, events: list[dict], heartbeat) -> dict:
+    """The page's command publishers: one for a twin whose commands come from the broker (key None), one per
+    robot for such a cell (by robot, each on its robot's routing, cotwin.twin.assembly.cell.routed), none
+    when the commands come from a plan."""
+    from ...assembly.cell import routed
+    from ...assembly.rabbitmq import port_scalars, port_types
+    from .commands import PagePublisher
+
+    if isinstance(system, CellSystem):
+        program = system.program
+        return {robot.name: PagePublisher(routed(system.spec.rabbitmq, robot.name),
+                                          port_types(program, robot.system.source_ports), events, heartbeat=heartbeat,
+                                          scalars=port_scalars(program))
+                for robot in system.robots if robot.system.source is RABBITMQ}
+    if system.source is not RABBITMQ:
+        return {}
+    program = system.models.program
+    return {None: PagePublisher(system.spec.rabbitmq, port_types(program, system.source_ports), events,
+                                heartbeat=heartbeat, scalars=port_scalars(program))}
+
+
 class Dashboard:
     """The page of one twin (see module doc). `mode`: twin (a LiveTwin: pass `feed` to it as an
     observer), run (one twin: pass `feed` to run_twin's observers) or history (no live run)."""
@@ -219,15 +240,8 @@ class Dashboard:
         self.whatif_url = whatif_url if system is not None and mode == "twin" and not cell else None  # what-if
         self.model = None if system is None else describe_cell(system, sides, mode) if cell else \
             describe(system, sides, mode, {"whatif": self.whatif_url is not None})
-        self.publisher = None
-        if system is not None and not cell and system.source is RABBITMQ and mode != "history":
-            from ...assembly.rabbitmq import port_scalars, port_types
-            from .commands import PagePublisher
-
-            program = system.models.program
-            self.publisher = PagePublisher(system.spec.rabbitmq, port_types(program, system.source_ports),
-                                           self.model["commands"]["events"], heartbeat=heartbeat,
-                                           scalars=port_scalars(program))
+        self.publishers = page_publishers(system, self.model["commands"]["events"], heartbeat) \
+            if system is not None and mode != "history" else {}
         self._history_reads = asyncio.Semaphore(MAX_HISTORY_READS)
         self.whatifs = 0  # what-ifs from the page in flight
         self.whatif_timeout = 120.0  # s to wait for the twin's answer
@@ -238,6 +252,11 @@ class Dashboard:
         self.skipped = 0  # samples clients skipped because they fell behind
         self._served = None  # cotwin.twin.services.dashboard.server.ServedPage
         self._socket: socket.socket | None = None
+
+    @property
+    def publisher(self):
+        """A single twin's command publisher (None when its commands come from a plan, or for a cell: `publishers`)."""
+        return self.publishers.get(None)
 
     # ---- lifecycle ----
     @property
@@ -278,12 +297,12 @@ class Dashboard:
         except CotwinError:
             self.stop()
             raise
-        if self.publisher is not None:
-            try:
-                self.publisher.start()
-            except CotwinError:
-                self.stop()
-                raise
+        try:
+            for publisher in self.publishers.values():
+                publisher.start()
+        except CotwinError:
+            self.stop()
+            raise
         return self
 
     def finish(self, state: str, message: str | None = None) -> None:
@@ -295,8 +314,8 @@ class Dashboard:
         if self.feed is not None:
             self.feed.finish("stopped")
         self._closing.set()
-        if self.publisher is not None:
-            self.publisher.stop()
+        for publisher in self.publishers.values():
+            publisher.stop()
         if self._served is not None:
             if self._served.running:
                 wallclock.sleep(min(2 * self.period, 0.2))  # let the streams send the final status
@@ -340,7 +359,7 @@ class Dashboard:
             return JSONResponse({"error": err.message}, status_code=err.status)
 
         async def command(request):
-            if self.publisher is None:
+            if not self.publishers:
                 commands = self.model["commands"] if self.model else {"source": "history"}
                 why = {"plan": f"this twin's commands come from its plan ({commands.get('plan')}), not from the page",
                        "none": "this twin takes no commands"}.get(commands["source"], "no live twin to command")
@@ -349,40 +368,47 @@ class Dashboard:
                 body = await read_json(request, self._foreign(request.headers), seconds=self.body_seconds)
             except Refused as err:
                 return refused(err)
-            shape = "expected {\"event\": NAME, \"values\": {PORT: VALUE, ...}}"
+            robots = [name for name in self.publishers if name is not None]  # a cell's: the command names its robot
+            shape = ("expected {\"robot\": NAME, \"event\": NAME, \"values\": {PORT: VALUE, ...}}" if robots else
+                     "expected {\"event\": NAME, \"values\": {PORT: VALUE, ...}}")
             if not isinstance(body, dict):
                 return JSONResponse({"error": shape}, status_code=400)
-            unknown = sorted(set(body) - {"event", "values"})
+            unknown = sorted(set(body) - {"event", "values", *(["robot"] if robots else [])})
             if unknown or not isinstance(body.get("event"), str) or not isinstance(body.get("values", {}), dict):
                 why = f"unknown key {', '.join(repr(k[:40]) for k in unknown)}" if unknown \
                     else "'event' must be a name" if not isinstance(body.get("event"), str) else "'values' must be an object"
                 return JSONResponse({"error": f"{why}: {shape}"}, status_code=400)
+            robot = body.get("robot")
+            if robots and robot not in robots:
+                named = f"no robot {str(robot)[:40]!r} in this cell" if robot is not None else "the command names no robot"
+                return JSONResponse({"error": f"{named} (its robots: {', '.join(robots)}): {shape}"}, status_code=400)
+            publisher = self.publishers[robot]
             if self._ended():
                 return JSONResponse({"error": f"{self._ended()}; it takes no more commands"}, status_code=409)
             try:
-                message = self.publisher.command(body["event"], body.get("values", {}))
+                message = publisher.command(body["event"], body.get("values", {}))
             except ValueError as err:
                 return JSONResponse({"error": str(err)}, status_code=422)
             except CotwinError as err:  # the link thread stopped: nothing would leave
                 return JSONResponse({"error": "; ".join(f.message for f in err.findings)}, status_code=503)
             except queue.Full:
-                return JSONResponse({"error": f"{self.publisher.MAX_WAITING} commands are waiting to be published; "
+                return JSONResponse({"error": f"{publisher.MAX_WAITING} commands are waiting to be published; "
                                               "try again later"}, status_code=429, headers={"Retry-After": "1"})
-            if self.publisher.error:
-                return JSONResponse({"error": self.publisher.error}, status_code=503)
-            return await command_answer(message)
+            if publisher.error:
+                return JSONResponse({"error": publisher.error}, status_code=503)
+            return await command_answer(publisher, message)
 
-        async def command_answer(message: dict) -> JSONResponse:
+        async def command_answer(publisher, message: dict) -> JSONResponse:
             """Wait (up to command_seconds, while the twin is there) for the twin to apply or refuse the
             command: 200 with the step that applied it, 409 with the twin's refusal, else 202 (accepted:
             it will be applied; GET /api/command/{id} says when)."""
-            ident, ready = message["internal_id"], self.publisher.twin_ready.is_set()
+            ident, ready = message["internal_id"], publisher.twin_ready.is_set()
             deadline = wallclock.monotonic() + (self.command_seconds if ready else 0.0)
-            ticket = self.publisher.ticket(ident)
+            ticket = publisher.ticket(ident)
             while ticket["status"] not in ("applied", "refused") and wallclock.monotonic() < deadline \
                     and not self._closing.is_set():
                 await asyncio.sleep(0.02)
-                ticket = self.publisher.ticket(ident)
+                ticket = publisher.ticket(ident)
             if ticket["status"] == "refused":
                 return JSONResponse({"error": f"the twin refused the command: {ticket.get('internal_message')}",
                                      "id": ident}, status_code=409)
@@ -391,10 +417,11 @@ class Dashboard:
                                      "twin_ready": True})
             return JSONResponse({"queued": message, "id": ident, "status": ticket["status"],
                                  **({"place": ticket["place"]} if "place" in ticket else {}),
-                                 "twin_ready": self.publisher.twin_ready.is_set()}, status_code=202)
+                                 "twin_ready": publisher.twin_ready.is_set()}, status_code=202)
 
         async def command_status(request):
-            ticket = self.publisher.ticket(request.path_params["ident"]) if self.publisher is not None else None
+            ident = request.path_params["ident"]
+            ticket = next((t for t in (p.ticket(ident) for p in self.publishers.values()) if t is not None), None)
             if ticket is None:
                 return JSONResponse({"error": "no such command (or it is too old to be remembered)"}, status_code=404)
             return JSONResponse(ticket)
@@ -482,10 +509,13 @@ class Dashboard:
         out = self.feed.status() if self.feed is not None else {"state": "history"}
         out["clients"] = self.clients
         out["skipped"] = self.skipped
-        if self.publisher is not None:
-            out["broker"] = {"twin_ready": self.publisher.twin_ready.is_set(), "sent": self.publisher.sent_count,
-                             "running": not self.publisher.stopped, "echoes_refused": self.publisher.echoes.refused,
-                             "error": self.publisher.error or ("its link ended" if self.publisher.stopped else None)}
+        links = {name: {"twin_ready": p.twin_ready.is_set(), "sent": p.sent_count, "running": not p.stopped,
+                        "echoes_refused": p.echoes.refused, "error": p.error or ("its link ended" if p.stopped else None)}
+                 for name, p in self.publishers.items()}
+        if None in links:
+            out["broker"] = links[None]
+        elif links:  # a cell's: one link per robot
+            out["brokers"] = links
         return out
 
     async def _stream(self, websocket) -> None:

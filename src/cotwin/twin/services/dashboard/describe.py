@@ -207,8 +207,8 @@ def describe(system: TwinSystem, sides: list[str], mode: str, features: dict | N
 
 def describe_cell(cell, sides: list[str], mode: str, features: dict | None = None) -> dict:
     """What the page draws of a cell of several robots (cotwin.twin.assembly.cell): every robot at its base pose, its
-    variables and d-model state machines scoped by its name (`ROBOT.q0`, "ROBOT: Machine"); no commands from
-    the page (a cell's commands come from its plan or its robots' broker routing)."""
+    variables and d-model state machines scoped by its name (`ROBOT.q0`, "ROBOT: Machine"); commands from the
+    page to the robot it names when the cell's commands come from the broker (cell_commands)."""
     from ....mapping.runtime import mirror_variables
     from ....pmodel import ik
     from ...assembly.cell import CELL_MAPPING
@@ -245,12 +245,14 @@ def describe_cell(cell, sides: list[str], mode: str, features: dict | None = Non
 
 
 def cell_commands(cell) -> dict:
-    """A cell's commands as the page lists them (the page sends none to a cell): its plan's, each value
-    scoped by its robot, or where its robots' broker routing takes them."""
+    """A cell's commands as the page lists them: its plan's, each value scoped by its robot; or, from the
+    broker, the command events (one d-model: the same for every robot) with the robots the page may send
+    them to, each on its own routing (TO_COSIM.ROBOT)."""
     spec = cell.spec
     if spec.rabbitmq is not None:
         s = spec.rabbitmq
-        return {"source": "rabbitmq", "events": [],
+        return {"source": "rabbitmq", "events": command_panel(cell.robots[0].system)["events"],
+                "robots": [robot.name for robot in cell.robots],
                 "broker": {"exchange": s.exchange, "to_cosim": f"{s.to_cosim}.ROBOT", "from_cosim": f"{s.from_cosim}.ROBOT"}}
     planned = sorted(({"time": c.time, "values": {robot.scoped(p): v for p, v in c.values}}
                       for robot in cell.robots for c in robot.system.commands), key=lambda c: c["time"])

@@ -1,7 +1,8 @@
 // The command panel, built from the twin's command events (describe.py: commands.events): one form
 // per event with an input per value port. Sent through the server, which publishes on the twin's
 // broker as an external publisher does; when the twin's commands come from a plan the panel says so
-// and only lists the plan.
+// and only lists the plan. For a cell of several robots (commands.robots), a chooser names the robot each
+// command goes to (its own routing key).
 
 function h(tag, attrs = {}, ...children) {
   const e = document.createElement(tag);
@@ -32,6 +33,13 @@ export function buildPanel(container, caption, sentLog, commands) {
     const b = commands.broker;
     caption.textContent = `RabbitMQ ${b.exchange} → ${b.to_cosim}`;
   }
+  const robots = live && commands.robots ? commands.robots : null;
+  let chooser = null;
+  if (robots) {
+    chooser = h("select", { id: "command-robot", "aria-label": "robot" },
+      ...robots.map((name) => h("option", { value: name }, name)));
+    container.append(h("label", { class: "robot-choice" }, "robot ", chooser));
+  }
   for (const ev of commands.events) {
     const form = h("form", { class: "command", "data-event": ev.name });
     form.append(h("strong", {}, ev.name));
@@ -52,12 +60,14 @@ export function buildPanel(container, caption, sentLog, commands) {
         const input = form.elements[v.port];
         values[v.port] = v.type === "Boolean" ? input.checked : v.literals ? input.value : Number(input.value);
       }
-      const text = `${ev.name} ${Object.entries(values).map(([k, x]) => `${k.split("_").pop()}=${x}`).join(" ")}`;
+      const robot = chooser ? chooser.value : null;
+      const text = `${robot ? robot + "." : ""}${ev.name} ` +
+        Object.entries(values).map(([k, x]) => `${k.split("_").pop()}=${x}`).join(" ");
       const item = h("li", { class: "pending" }, `${new Date().toLocaleTimeString()} ${text}: sending`);
       sentLog.prepend(item);
       try {
         const r = await fetch("/api/command", { method: "POST", headers: { "Content-Type": "application/json" },
-          body: JSON.stringify({ event: ev.name, values }) });
+          body: JSON.stringify(robot ? { robot, event: ev.name, values } : { event: ev.name, values }) });
         const answer = await r.json();
         item.className = !r.ok ? "error" : answer.applied ? "confirmed" : "queued";
         item.textContent = `${new Date().toLocaleTimeString()} ${text}: ` + (!r.ok ? answer.error
