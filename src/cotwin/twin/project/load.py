@@ -288,9 +288,9 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     if s.pt is not None:  # [pt] as written, against its own endpoint (a --pt-log replays in its place)
         problems.extend(_pt_keys(file, s.pt))
     plant = Perturbation.from_table(dataclasses.asdict(s.plant)) if s.plant is not None else None
-    if any(p.severity is Severity.ERROR for p in problems):
-        problems.extend(_model_errors([files[k] for k in ("dmodel", "pmodel", "mapping")],
-                                      lambda tree: _plant_problems(plant, tree, file.location) if not robots else [],
+    if any(p.severity is Severity.ERROR for p in problems):  # a cell's [plant] is its robots' (perturbed_world)
+        against = None if plant is None or robots else (lambda tree: _plant_problems(plant, tree, file.location))
+        problems.extend(_model_errors([files[k] for k in ("dmodel", "pmodel", "mapping")], against,
                                       getattr(models, "pmodel_name", None), stand_ins))
     raise_problems(problems)
     spec = TwinProject(
@@ -317,8 +317,8 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     return spec
 
 
-def _model_errors(paths: list[Path | None], against_tree: Callable[[Any], list[Finding]], pmodel_name: str | None,
-                  stand_ins: dict) -> list[Finding]:
+def _model_errors(paths: list[Path | None], against_tree: Callable[[Any], list[Finding]] | None = None,
+                  pmodel_name: str | None = None, stand_ins: dict | None = None) -> list[Finding]:
     """The errors of the model files a project names (read when the project itself has errors, so that the
     models' are reported with them rather than once the project is fixed), then those `against_tree` finds
     in the project against the p-model's kinematic tree (the [plant] joints); none if a file is missing.
@@ -332,6 +332,8 @@ def _model_errors(paths: list[Path | None], against_tree: Callable[[Any], list[F
         project = load_checked(paths)
     except CotwinError as err:
         return [f for f in err.findings if f.severity is Severity.ERROR]
+    if against_tree is None:
+        return []
     try:
         tree = build_tree(project, pmodel_name, stand_ins)
     except CotwinError:
