@@ -137,6 +137,24 @@ def test_plant_table_is_read_strictly_with_locations(tmp_path):
     assert f"{path}:9:1: error: unknown key 'latency' in [plant]" in text
 
 
+@pytest.mark.parametrize("other, where, message", [
+    ("[cosim]\nstpe = 0.1\n", "9:1", "unknown key 'stpe' in [cosim]"),  # the project's schema
+    ("[monitor]\njoints = [\"wrist\"]\n", "9:1", "[monitor] joints: wrist are not actuated joints"),  # its models
+], ids=["schema", "models"])
+def test_cotwin_plant_reports_an_unknown_plant_joint_with_the_projects_other_errors(tmp_path, other, where, message):
+    """One run names every error: the [plant] joint the p-model lacks beside a schema error (found before
+    the models are read) or an error against the models, not in a round of its own once those are fixed."""
+    from conftest import cotwin_in_process
+
+    path = _project(tmp_path, '[plant]\nfriction = { elbow = 1.0 }\n\n' + other)
+    proc = cotwin_in_process("plant", path, "--opcua", "opc.tcp://127.0.0.1:0")
+    errors = [line for line in proc.stderr.splitlines() if ": error: " in line]
+    assert proc.returncode == 1 and len(errors) == 2, proc.stderr
+    assert errors[0].startswith(f"{path}:6:14: error: friction: p-model ur5e has no actuated joint 'elbow'"), errors
+    assert errors[1].startswith(f"{path}:{where}: error: ") and message in errors[1], errors
+    assert "Traceback" not in proc.stderr
+
+
 def test_plant_table_names_joints_the_pmodel_has_and_options_override_it(tmp_path):
     path = _project(tmp_path, '[plant]\nfriction = { elbow = 1.0 }\n')
     with pytest.raises(CotwinError, match=r"cotwin.toml:6:14: error: friction: p-model ur5e has no actuated joint "

@@ -275,6 +275,32 @@ def test_a_plan_holding_no_command_is_said_not_taken_for_success(ur5e, tmp_path)
             "outside") in proc.stderr
 
 
+PT = '\n[pt]\nendpoint = "opcua"\nurl = "opc.tcp://127.0.0.1:4840"\n'
+
+
+@pytest.mark.parametrize("command, pt, reader", [
+    (("whatif", "--plan", "none.csv"), "", "cotwin whatif"),  # each stops at its first input after the warnings
+    (("sweep", "--event", "noSuchEvent", "-o", "answers.csv"), "", "cotwin sweep"),
+    (("test", "none.json"), "", "cotwin test"),
+    (("test", "none.json", "--pt", "opc.tcp://127.0.0.1:4840"), "", "cotwin test"),
+    (("test", "none.json", "--pt"), PT, "cotwin test --pt project"),  # reads [pt]: no warning of it
+], ids=["whatif", "sweep", "test", "test --pt URL", "test --pt"])
+def test_a_single_robot_command_warns_of_the_convergence_table_it_ignores_as_run_does(ur5e, command, pt, reader):
+    """[convergence] steers only a live twin: whatif, sweep and test say at the table, in `cotwin run`'s words
+    (TwinProject.ignored_sections), that they ignore it; `cotwin test --pt` reads [pt] and says nothing of it."""
+    from conftest import cotwin_in_process
+
+    path = ur5e / "conv.toml"
+    path.write_text((ur5e / "cotwin.toml").read_text() + pt + '\n[convergence]\nresync = "on-alarm"\n')
+    at = path.read_text().splitlines().index("[convergence]") + 1
+    proc = cotwin_in_process(command[0], path, *command[1:], cwd=ur5e)
+    assert proc.returncode != 0  # the missing plan, event or suite, after the warning
+    warnings = [line for line in proc.stderr.splitlines() if ": warning: " in line]
+    assert warnings == [f"{path}:{at}:1: warning: [convergence] applies only to cotwin twin, cotwin fleet: {reader} "
+                        "ignores it"], proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
 def test_history_is_ignored_by_a_run_without_its_page(ur5e):
     path = ur5e / "hist.toml"
     path.write_text((ur5e / "cotwin.toml").read_text() + '\n[history]\nurl = "sqlite:///h.sqlite"\n')

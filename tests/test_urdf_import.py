@@ -460,6 +460,37 @@ BAD = [
 ]
 
 
+def _moving(extra: str, kind: str = "revolute") -> str:
+    """A robot of two links and one joint with `extra` in the joint, after a line break (its line is 4)."""
+    return ("<robot name='r'>\n" + _links("a", "b") + "\n" + _joint("j", "a", "b", kind,
+            "<limit effort='1' velocity='1'/>\n" + extra) + "</robot>")
+
+
+def _shape(geometry: str, origin: str = "") -> str:
+    """A robot of one link with a collision: `origin` on line 3, the geometry on the next line."""
+    return f"<robot name='r'>\n<link name='a'><collision>\n{origin or '<origin/>'}<geometry>\n{geometry}</geometry>" \
+           "</collision></link></robot>"
+
+
+BAD += [  # numbers no robot has: not finite (what cannot be computed), or finite beyond any robot's
+    (_moving("<origin xyz='nan 0 0'/>"), "4:1", "joint 'j': origin xyz=\"nan 0 0\" must be 3 finite numbers"),
+    (_moving("<origin rpy='0 -inf 0'/>"), "4:1", "joint 'j': origin rpy=\"0 -inf 0\" must be 3 finite numbers"),
+    (_moving("<axis xyz='0 0 inf'/>"), "4:1", "axis of joint 'j': axis xyz=\"0 0 inf\" must be 3 finite numbers"),
+    (_moving("<origin xyz='1e300 0 0'/>"), "4:1",
+     "joint 'j': origin xyz=\"1e300 0 0\": 1e+300 m, beyond any robot's (1e+06 m; a unit slip?)"),
+    (_moving("<origin rpy='0 0 1e300'/>"), "4:1", "joint 'j': origin rpy=\"0 0 1e300\": 1e+300 rad, beyond any robot's"),
+    (_moving("<axis xyz='1e300 1e300 0'/>"), "4:1", "joint 'j': axis xyz=\"1e300 1e300 0\" is too long to normalise"),
+    (_moving("<limit effort='1e300' velocity='1'/>").replace("<limit effort='1' velocity='1'/>\n", "\n"), "4:1",
+     "limit of joint 'j': limit effort=\"1e300\": 1e+300, beyond any robot's (1e+20; a unit slip?)"),
+    (_moving("<limit effort='1' velocity='1' upper='2e6'/>", "prismatic").replace("<limit effort='1' velocity='1'/>\n",
+     "\n"), "4:1", "limit of joint 'j': limit upper=\"2e6\": 2e+06 m, beyond any robot's"),
+    (_shape("<box size='1 1e300 1'/>"), "4:1", "collision of link 'a': box size=\"1 1e300 1\": 1e+300 m, beyond"),
+    (_shape("<cylinder radius='0.1' length='1e7'/>"), "4:1", "cylinder length=\"1e7\": 1e+07 m, beyond any robot's"),
+    (_shape("<sphere radius='1'/>", "<origin xyz='0 0 -1e9'/>"), "3:1",
+     "collision of link 'a': origin xyz=\"0 0 -1e9\": 1e+09 m, beyond any robot's"),
+]
+
+
 @pytest.mark.parametrize("text, where, message", BAD, ids=[m for _, _, m in BAD])
 def test_bad_urdf_is_reported_at_its_place(tmp_path, text, where, message):
     urdf = tmp_path / "bad.urdf"
@@ -499,6 +530,43 @@ def test_a_links_impossible_mass_and_inertia_and_a_zero_axis_are_refused_togethe
                         ("7:1", "joint 'j': a zero axis")):
         assert any(f"heavy.urdf:{where}: error:" in line and text in line for line in lines), (where, lines)
     assert not (tmp_path / "out").exists()
+
+
+def test_numbers_no_robot_has_are_refused_together_with_an_impossible_mass(tmp_path):
+    urdf = tmp_path / "odd.urdf"
+    urdf.write_text("<robot name='r'>\n<link name='a'><inertial>\n<mass value='1e300'/>\n<inertia ixx='1' ixy='0' ixz='0' "
+                    "iyy='1' iyz='0' izz='1'/></inertial><collision><geometry>\n<sphere radius='1e300'/></geometry>"
+                    "</collision></link>\n<link name='b'/>\n" + _joint("j", "a", "b", "fixed", "\n<origin xyz='nan 0 0'/>")
+                    + "</robot>")
+    with pytest.raises(CotwinError) as err:
+        import_urdf(urdf, tmp_path / "out")
+    lines = [str(f) for f in err.value.findings]
+    assert len(lines) == 3, lines
+    for where, text in (("3:1", "link 'a': a mass of 1e+300 kg"), ("5:1", "sphere radius=\"1e300\": 1e+300 m, beyond"),
+                        ("8:1", "joint 'j': origin xyz=\"nan 0 0\" must be 3 finite numbers")):
+        assert any(f"odd.urdf:{where}: error:" in line and text in line for line in lines), (where, lines)
+    assert not (tmp_path / "out").exists()
+
+
+def test_numbers_beyond_a_robots_are_warned_of_at_their_element_and_kept(tmp_path):
+    """An origin 2 km away, an angle in degrees, a 5 km box, a mesh scaled 5000 times: finite, possible for
+    the simulator, but no robot's: a warning at each element naming the attribute, the value kept."""
+    (tmp_path / "m.stl").write_text("solid m\nendsolid m\n")
+    urdf = tmp_path / "far.urdf"
+    urdf.write_text("<robot name='r'>\n<link name='a'><visual>\n<origin rpy='0 0 90'/><geometry>\n<box size='5000 1 1'/>"
+                    "</geometry></visual><visual><geometry>\n<mesh filename='m.stl' scale='5000 5000 5000'/></geometry>"
+                    "</visual></link>\n<link name='b'/>\n" + _joint("j", "a", "b", "fixed", "\n<origin xyz='0 2000 0'/>")
+                    + "</robot>")
+    result = import_urdf(urdf, tmp_path / "out", check=False)
+    lines = [str(f) for f in result.findings]
+    for where, text in (("3:1", "visual of link 'a': origin rpy=\"0 0 90\": 90 rad, more than a robot has (6.28319 rad; "
+                         "degrees written for radians?): kept as written"),
+                        ("4:1", "visual of link 'a': box size=\"5000 1 1\": 5000 m, more than a robot has (1000 m"),
+                        ("5:1", "mesh scale=\"5000 5000 5000\": 5000, more than a robot has (1000;"),
+                        ("8:1", "joint 'j': origin xyz=\"0 2000 0\": 2000 m, more than a robot has (1000 m; a unit slip?)")):
+        assert any(f"far.urdf:{where}: warning:" in line and text in line for line in lines), (where, lines)
+    text = result.file.read_text()
+    assert "y = 2000.0" in text and "rpy = (|0.0, 0.0, 90.0|)" in text and "size = (|5000.0, 1.0, 1.0|)" in text
 
 
 def test_the_command_from_another_folder_prints_what_it_did_and_refuses_bad_input(own_arm, tmp_path, monkeypatch):

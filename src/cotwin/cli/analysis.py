@@ -70,6 +70,7 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
 
     check_finite(horizon=horizon)
     system = load(project)
+    show_warnings(system.spec.ignored_sections("cotwin whatif"))  # [convergence], [pt]...: a live twin's
     if out:
         check_outputs([out], [*system.spec.inputs, plan, state])
     commands = plan_file(plan, system.models.program)
@@ -124,6 +125,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
             raise click.BadParameter(f"argument {name!r} is given twice", param_hint="--arg")
         ranges[name] = values
     system = load(project)
+    show_warnings(system.spec.ignored_sections("cotwin sweep"))  # [convergence], [pt]...: a live twin's
     inputs = [*system.spec.inputs, state]
     check_outputs([out], inputs)
     plans = grid(system.models.program, event, ranges)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from .common import main, output_file, output_folder, value_domains
+from .common import main, output_file, output_folder, show_warnings, value_domains
 
 
 def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str], str]:
@@ -189,6 +189,7 @@ def test_command(project: str, tests: str, pt: str | None, junit: str | None, al
     from ..twin.analysis.testing import format_result, junit_xml, run_suite
 
     system = load(project)
+    show_warnings(system.spec.ignored_sections("cotwin test --pt project" if pt == "project" else "cotwin test"))
     suite = read_suite(tests)
     endpoint, target = None, "the co-simulation (the project's simulated platform)"
     if pt is not None:

@@ -28,9 +28,10 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Callable
 
 from ..config import Key, Schema, TomlFile, did_you_mean, is_number, raise_problems
-from ..diagnostics import CotwinError, Finding, Severity
+from ..diagnostics import CotwinError, Finding, Location, Severity
 from .ik import find_tool
 from .mjcf import TIMESTEP, to_mjcf
 from .simulator import PlatformSimulator
@@ -168,15 +169,21 @@ def read_perturbation(path: str | Path) -> Perturbation:
     return read_table(file) or Perturbation()
 
 
+def joint_problems(perturbation: Perturbation, tree: KinematicTree,
+                   locate: Callable[[tuple], Location] | None = None) -> list[Finding]:
+    """An error for each joint named that the p-model does not have, at `locate(key path)` when the
+    perturbation was read from a file (a project's [plant]: cotwin.twin.project checks it with the
+    project's other problems)."""
+    where = locate or (lambda key: Location("<perturbation>", 0, 0))
+    return [Finding(where(key), Severity.ERROR, message) for key, message in perturbation.problems(tree)]
+
+
 def check_joints(perturbation: Perturbation, tree: KinematicTree, file: TomlFile | None = None,
                  at: tuple = ()) -> None:
     """Unknown joints are errors, located in `file` when the perturbation came from one."""
-    found = perturbation.problems(tree)
-    if not found:
-        return
-    if file is None:
-        raise CotwinError([message for _, message in found])
-    raise CotwinError([Finding(file.location(at + key), Severity.ERROR, message) for key, message in found])
+    found = joint_problems(perturbation, tree, None if file is None else (lambda key: file.location(at + key)))
+    if found:
+        raise CotwinError(found)
 
 
 # ---- application -------------------------------------------------------------------------------------

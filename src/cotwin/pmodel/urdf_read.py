@@ -3,7 +3,8 @@ inertials and visual and collision geometry, joints with origins, axes, limits, 
 
 Every problem is a finding at its place (file:line:column of the element), all of them collected:
 malformed XML, xacro left unexpanded, missing or malformed attributes, unknown joint types, unknown
-links, two roots, cycles, a link with two parents. The rules are urdfdom's (the ROS reference
+links, two roots, cycles, a link with two parents, a number not finite or beyond any robot's (Bound:
+a number merely beyond what robots have is a warning). The rules are urdfdom's (the ROS reference
 parser): `<limit>` with `effort` and `velocity` is required on revolute and prismatic joints
 (`lower` and `upper` default to 0), an axis defaults to (1, 0, 0), an `<inertial>` needs `<mass>`
 and `<inertia>`. Elements that describe no kinematics or inertia (`<gazebo>`, `<transmission>`,
@@ -27,6 +28,29 @@ MAX_BYTES = 64 * 1024 * 1024  # a URDF larger than this is refused (the largest 
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 UNSUPPORTED_TYPES = ("floating", "planar")  # valid URDF that a p-model joint cannot say (one degree of freedom)
 SHAPES = ("box", "cylinder", "sphere", "mesh", "capsule")
+
+
+@dataclass(frozen=True)
+class Bound:
+    """How large a finite number of a kind may be: beyond `warn` no robot has it (a warning at its element,
+    the value kept), beyond `refuse` none could (an error, as for a mass beyond MAX_MASS): such a number is
+    a slip, and the simulator's arithmetic on it (squares, products of transforms) means nothing."""
+
+    warn: float
+    refuse: float
+    unit: str
+    why: str
+
+
+#: lengths: origin offsets, geometry sizes, prismatic limits (published URDFs stay within 2 m)
+LENGTH = Bound(1e3, 1e6, " m", "a unit slip?")
+#: rpy angles (published URDFs stay within 3/2 pi)
+ANGLE = Bound(2 * math.pi, 1e6, " rad", "degrees written for radians?")
+#: a mesh's scale factors (published URDFs use 1 and 0.001)
+SCALE = Bound(1e3, 1e6, "", "a unit slip?")
+#: a joint's effort and velocity limits and a revolute joint's positions (published: up to 5e4, and
+#: +-1e16 as "unlimited"): only refused, far beyond
+LIMIT = Bound(1e20, 1e20, "", "a unit slip?")
 _XACRO = re.compile(r"\$\{|\$\(")
 
 
@@ -216,8 +240,24 @@ class _Reader:
         node = owner.first("origin")
         if node is None:
             return Origin()
-        return Origin(self.numbers(node, "xyz", 3, what, (0.0, 0.0, 0.0)),
-                      self.numbers(node, "rpy", 3, what, (0.0, 0.0, 0.0)))
+        xyz = self.numbers(node, "xyz", 3, what, (0.0, 0.0, 0.0))
+        rpy = self.numbers(node, "rpy", 3, what, (0.0, 0.0, 0.0))
+        self.plausible(node, "xyz", xyz, LENGTH, what)
+        self.plausible(node, "rpy", rpy, ANGLE, what)
+        return Origin(xyz, rpy)
+
+    def plausible(self, node: Node, name: str, values, bound: Bound, what: str) -> None:
+        """A finite attribute's numbers against what a robot has: the largest magnitude beyond the bound's
+        `warn` a warning at the element, beyond its `refuse` an error (both naming the attribute)."""
+        if not values:
+            return
+        worst = max(abs(v) for v in values)
+        shown = f"{what}: {node.tag} {name}=\"{node.attrs.get(name, '')[:60]}\": {worst:g}{bound.unit}"
+        if worst > bound.refuse:
+            self.diag.error(node.loc, f"{shown}, beyond any robot's ({bound.refuse:g}{bound.unit}; {bound.why})")
+        elif worst > bound.warn:
+            self.diag.warning(node.loc, f"{shown}, more than a robot has ({bound.warn:g}{bound.unit}; {bound.why}): "
+                              "kept as written")
 
 
 def read_urdf(path: str | Path, diag: Diagnostics) -> Robot | None:
@@ -408,6 +448,7 @@ def _geometry(node: Node, read: _Reader, what: str) -> Geometry | None:
         if not filename.strip():
             read.diag.error(node.loc, f"{what}: an empty mesh filename")
             return None
+        read.plausible(node, "scale", scale, SCALE, what)
         return Geometry("mesh", {}, filename.strip(), scale, node.loc)
     else:
         read.diag.error(node.loc, f"{what}: unknown geometry <{kind}> ({', '.join(SHAPES)})")
@@ -418,6 +459,8 @@ def _geometry(node: Node, read: _Reader, what: str) -> Geometry | None:
     if negative:
         read.diag.error(node.loc, f"{what}: a negative {kind} size ({', '.join(negative)})")
         return None
+    for key in ("size",) if kind == "box" else values:
+        read.plausible(node, key, values.values() if key == "size" else (values[key],), LENGTH, what)
     return Geometry(kind, values, loc=node.loc)
 
 
@@ -456,6 +499,9 @@ def _joint(node: Node, read: _Reader, ignored: Counter) -> Joint | None:
         axis = read.numbers(axis_node, "xyz", 3, f"axis of {what}", (1.0, 0.0, 0.0))
         if axis is not None and math.hypot(*axis) < 1e-12:
             read.diag.error(axis_node.loc, f"{what}: a zero axis")
+        elif axis is not None and not math.isfinite(sum(v * v for v in axis)):  # normalised, it would be zero
+            read.diag.error(axis_node.loc, f"{what}: axis xyz=\"{axis_node.attrs['xyz'][:60]}\" is too long to "
+                            "normalise (its squared length overflows): write a unit vector")
         elif axis is not None:
             joint.axis = axis
     limit = node.first("limit")
@@ -480,6 +526,9 @@ def _joint(node: Node, read: _Reader, ignored: Counter) -> Joint | None:
         for key in ("effort", "velocity"):
             if joint.limit.get(key, 0.0) < 0:
                 read.diag.error(limit.loc, f"{what}: a negative {key} limit")
+        for key, value in joint.limit.items():  # a prismatic joint's positions are lengths
+            bound = LENGTH if kind == "prismatic" and key in ("lower", "upper") else LIMIT
+            read.plausible(limit, key, (value,), bound, f"limit of {what}")
     elif kind in ("revolute", "prismatic"):
         read.diag.error(node.loc, f"{what}: a {kind} joint needs <limit> (lower, upper, effort, velocity)")
     dynamics = node.first("dynamics")

@@ -116,7 +116,12 @@ def multimodel(spec: TwinProject, units, connections, parameters: dict, log: dic
     }
 
 
-def load_models(spec: TwinProject) -> TwinModels:
+def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
+    """The checked models of a project, every problem found in them and in the project against them reported
+    together. With `plant`, the project's [plant] is this robot's (a project of one robot, as TwinSystem
+    loads it): the joints it names are checked too, so that `cotwin plant` reports them with the rest. A
+    cell's robots share its [plant] (a joint named applies to the robots that have it), checked against
+    them all by cotwin.pmodel.perturbation.perturbed_world."""
     from ...dmodel.program import build_program
     from ...mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints
     from ...pmodel import ik
@@ -129,6 +134,8 @@ def load_models(spec: TwinProject) -> TwinModels:
     program = build_program(project, spec.module)
     tree = build_tree(project, spec.pmodel_name, spec.stand_ins, profile_rays(spec.profile))  # the robot's scanner
     problems: list[Finding] = []  # the checks below report together (with the plan's, see the end)
+    if plant:  # a project's problem for every command, as [plant]'s types are (cotwin plant applies it)
+        problems += spec.plant_problems(tree)
     unused = sorted(set(spec.stand_ins) - tree.stood_in)
     if unused:
         problems.append(Finding(spec.location("platform", "stand_in"), Severity.ERROR,
@@ -219,7 +226,7 @@ class TwinSystem:
         from .scenario import read_scenario, scenario_ports
 
         self.spec = spec
-        self.models = models or load_models(spec)
+        self.models = models or load_models(spec, plant=True)  # a cell gives its robots' models
         program = self.models.program
         mapped = {ev.name for ev in self.models.mapping_model.input_events}
         command_ports = scenario_ports(program)

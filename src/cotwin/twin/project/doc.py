@@ -48,8 +48,8 @@ def read_only_by() -> str:
     rows = "\n".join(f"- `[{section}]`: {', '.join(f'`{r}`' for r in readers)}"
                      for section, readers in READ_ONLY_BY.items())
     return ("\nEvery command that runs a project reads its models, scenario, platform and co-simulation tables; "
-            "these tables\nare read only by the commands listed (`cotwin run` given a project holding one warns, "
-            "at the table,\nthat it ignores it):\n\n" + rows + "\n")
+            "these tables\nare read only by the commands listed (`cotwin run`, `cotwin whatif`, `cotwin sweep` and "
+            "`cotwin test`,\ngiven a project holding one, warn at the table that they ignore it):\n\n" + rows + "\n")
 
 
 def project_reference() -> str:

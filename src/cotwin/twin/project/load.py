@@ -131,6 +131,11 @@ class TwinProject:
                       for section, readers in READ_ONLY_BY.items()
                       if section in data and command not in readers)
 
+    def plant_problems(self, tree) -> list[Finding]:
+        """[plant]'s joints against the robot's kinematic tree (`tree`): an error at each joint it names that
+        the p-model does not have (see _plant_problems)."""
+        return _plant_problems(self.plant, tree, lambda key: self.location(*key))
+
     def with_overrides(self, **changes) -> "TwinProject":
         """This project with some keys set (None: left out), checked as if written in the file. A change is
         named SECTION_KEY (pt_url, scenario_rabbitmq_exchange) or by a key only one section has (step,
@@ -282,15 +287,18 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     _timing(file, cosim, problems)
     if s.pt is not None:  # [pt] as written, against its own endpoint (a --pt-log replays in its place)
         problems.extend(_pt_keys(file, s.pt))
-    if any(p.severity is Severity.ERROR for p in problems):
-        problems.extend(_model_errors([files[k] for k in ("dmodel", "pmodel", "mapping")]))
+    plant = Perturbation.from_table(dataclasses.asdict(s.plant)) if s.plant is not None else None
+    if any(p.severity is Severity.ERROR for p in problems):  # a cell's [plant] is its robots' (perturbed_world)
+        against = None if plant is None or robots else (lambda tree: _plant_problems(plant, tree, file.location))
+        problems.extend(_model_errors([files[k] for k in ("dmodel", "pmodel", "mapping")], against,
+                                      getattr(models, "pmodel_name", None), stand_ins))
     raise_problems(problems)
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.module, models.pmodel_name,
         plan, scenario.rabbitmq, platform.endpoint, platform.queue, platform.url, platform.scene,
         copy.deepcopy(_table(file.data, "scene")), calibration, float(cosim.step), float(cosim.end),
         cosim.algorithm, cosim.realtime, None if cosim.log is None else list(cosim.log), pt, s.deviation,
-        s.history.url, Perturbation.from_table(dataclasses.asdict(s.plant)) if s.plant is not None else None)
+        s.history.url, plant)
     spec.world, spec.world_file, spec.base, spec.stand_ins = world, world_file, platform.base, stand_ins
     spec.mirror_joints = list(monitor.joints) if isinstance(monitor.joints, tuple) else monitor.joints
     spec.readings = dict(monitor.readings)
@@ -309,18 +317,38 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     return spec
 
 
-def _model_errors(paths: list[Path | None]) -> list[Finding]:
+def _model_errors(paths: list[Path | None], against_tree: Callable[[Any], list[Finding]] | None = None,
+                  pmodel_name: str | None = None, stand_ins: dict | None = None) -> list[Finding]:
     """The errors of the model files a project names (read when the project itself has errors, so that the
-    models' are reported with them rather than once the project is fixed); none if a file is missing."""
+    models' are reported with them rather than once the project is fixed), then those `against_tree` finds
+    in the project against the p-model's kinematic tree (the [plant] joints); none if a file is missing.
+    A tree that cannot be built adds nothing here: its errors come when the project is read without errors."""
+    from ...pmodel.tree import build_tree
     from ...robosim.check import load_checked
 
     if not all(p is not None and p.is_file() for p in paths):
         return []
     try:
-        load_checked(paths)
+        project = load_checked(paths)
     except CotwinError as err:
         return [f for f in err.findings if f.severity is Severity.ERROR]
-    return []
+    if against_tree is None:
+        return []
+    try:
+        tree = build_tree(project, pmodel_name, stand_ins)
+    except CotwinError:
+        return []
+    return against_tree(tree)
+
+
+def _plant_problems(plant: Perturbation | None, tree, locate: Callable[[tuple], Location]) -> list[Finding]:
+    """[plant]'s joints against the p-model's actuated joints: an error at each it names that the robot lacks.
+    A project's problem whatever the command (as [plant]'s types are), reported with the project's others
+    (by load_project when it has errors, else by the twin's models, cotwin.twin.assembly.system), so that
+    `cotwin plant` does not find it in a round of its own once the rest is fixed."""
+    from ...pmodel.perturbation import joint_problems
+
+    return [] if plant is None else joint_problems(plant, tree, lambda key: locate(("plant", *key)))
 
 
 def _robots(file: TomlFile, items: tuple, problems: list[Finding]) -> list[RobotSpec]:

@@ -519,11 +519,11 @@ def load_plant(project, url: str | None = None, free_running: bool = False,
 
     system = load(project)
     spec = system.spec
-    perturbation, file, at = spec.plant or Perturbation(), TomlFile(spec.path, "project file"), ("plant",)
+    perturbation = spec.plant or Perturbation()  # its joints checked with the project's other problems (load)
     if perturbation_file is not None:
-        file, at = TomlFile(perturbation_file, "perturbation file"), ()
+        file = TomlFile(perturbation_file, "perturbation file")
         perturbation = read_table(file) or Perturbation()
-    check_joints(perturbation, system.models.tree, file, at)
+        check_joints(perturbation, system.models.tree, file)
     perturbation = perturbation.with_options(**options)
     if url is None:
         url = spec.pt.url if spec.pt is not None and spec.pt.endpoint == "opcua" and spec.pt.url else \
