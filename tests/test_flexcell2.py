@@ -151,6 +151,24 @@ def test_a_plan_column_of_an_unknown_robot_is_located(tmp_path):
     assert "kuka.moveDiscreteCommand" in finding.message and (finding.location.line, finding.location.column) == (1, at)
 
 
+def test_a_robot_given_some_of_its_cells_in_a_row_or_a_huge_cell_is_located(tmp_path):
+    """A row gives a robot all its columns or none: one empty argument beside its event (it was sent as 0), or
+    arguments with no event (the row was dropped without a word), is an error at the first empty cell; a cell
+    beyond the plan's limit is an error at its line, not csv's crash."""
+    cell = CellSystem(load_project(CELL / "cotwin.toml"))
+    header = (CELL / "apart.csv").read_text().splitlines()[0]
+    plan = tmp_path / "plan.csv"
+    plan.write_text(f"{header}\n1000,true,12,,1,true,2,9,1\n2000,,12,20,1,,,,\n3000,true,1,2,{'x' * 200_000},,,,\n")
+    with pytest.raises(CotwinError) as err:
+        read_cell_plan(plan, cell.program, list(ROBOTS))
+    found = [(f.location.line, f.location.column, f.message) for f in err.value.findings]
+    assert len(found) == 3, found
+    (l2, c2, m2), (l3, c3, m3), (l4, _, m4) = found
+    assert (l2, c2) == (2, len("1000,true,12,") + 1) and "robot ur5e: 'ur5e.MovementArgs_target_Y' empty" in m2
+    assert (l3, c3) == (3, len("2000,") + 1) and "'ur5e.moveDiscreteCommand' empty" in m3
+    assert l4 == 4 and "longer than" in m4
+
+
 def test_the_generic_core_names_neither_robot_nor_the_cell():
     """The issue's grep over src/cotwin, every file: no example's robot, cell or brick (the vendored
     three.js names the colour 'firebrick', a generic word)."""

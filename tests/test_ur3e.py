@@ -42,6 +42,9 @@ def test_run_completes_every_move_on_its_own_plate(project):
     assert completed(proc.stdout) == (4, 4), proc.stdout
 
 
+@pytest.mark.xfail(strict=True, reason="open: on the paper's published ur3e_gripper.pm the torque sensors read the effort "
+                   "limit (1000 N m) from t = 0 with the arm at home, so the mapping's collision event stops every move; "
+                   "the ledger counted those as completed until it knew stopping events (our ur3e.pm reads about 11 N m)")
 def test_run_on_the_published_ur3e_completes_every_move():
     if not PUBLISHED.is_file():
         pytest.skip(f"the paper's published UR3e is not at {PUBLISHED} (only in the project workspace)")
@@ -80,3 +83,17 @@ def test_twin_runs_against_its_perturbed_plant(project, tmp_path):
     out = proc.stdout + proc.stderr
     assert "PT and DT, 40 steps each" in out, out[-2000:]
     assert re.search(r"PT: commands: 1, 1 completed", out) and re.search(r"DT: commands: 1, 1 completed", out), out
+
+
+def test_a_move_stopped_by_a_collision_is_no_completion_and_strict_fails(project):
+    """The probe's finding: with its targets 20 mm above the plate the UR3e's wrist meets the plate on the
+    corner holes, the mapping reports `collision`, the d-model stops and returns to rest; the run said
+    '4 completed' (back at rest) and --strict exited 0, where the same robot as a cell said 2. Now such a
+    command is 'stopped by collision at t', and --strict fails."""
+    mapping = project / "mapping.pm"
+    mapping.write_text(re.sub(r"const Z_TABLE: real = [0-9.]+", "const Z_TABLE: real = 0.020", mapping.read_text()))
+    proc = cotwin_in_process("run", project / "cotwin.toml", "-o", project / "out", "--strict")
+    assert proc.returncode == 3, proc.stdout + proc.stderr[-2000:]
+    assert re.search(r"commands: 4, 2 completed, 2 stopped", proc.stdout), proc.stdout
+    assert "moveDiscreteCommand(MovementArgs_target_X=0, MovementArgs_target_Y=7, MovementArgs_target_Z=1): " \
+           "stopped by collision at t = 2.2 s" in proc.stdout

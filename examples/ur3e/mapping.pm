@@ -23,7 +23,7 @@ map UR3eMapping dmodel FlexCellArm to pmodel ur3e_gripper {
 	const HOLE_DIST: real = 0.04
 	const X_MAX: real = 0.46
 	const Y_MAX: real = 0.14
-	const Z_TABLE: real = 0.020
+	const Z_TABLE: real = 0.040  // targets 40 mm above the plate: at 20 mm the wrist met the plate on the corner holes
 	const XMAX: int = 7
 	const YMAX: int = 7
 	const ZMAX: int = 4

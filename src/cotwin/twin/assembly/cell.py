@@ -21,7 +21,6 @@ p-model and mapping, its own commands), and the cell puts them together:
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -37,7 +36,7 @@ from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...files import read_text
 from ..project import TwinProject, check_timing
 from .outcomes import INFEASIBLE
-from .scenario import Command, _column_starts, parse_value, row_time, scenario_ports
+from .scenario import MAX_FIELD, Command, _column_starts, parse_value, plan_rows, row_time, scenario_ports, too_long
 from .system import (DMODEL, MAPPING, CommandPorts, MachinePort, TwinSystem, UnitSpec, build_scene, load_models,
                      multimodel)
 
@@ -125,16 +124,12 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
     at their line and column, all together."""
     path = Path(path)
     ports = scenario_ports(program)
-    lines = read_text(path, "plan").splitlines()
-    rows = list(csv.reader(lines))
+    lines, rows = plan_rows(path, read_text(path, "plan"))
     problems: list[Finding] = []
 
     def problem(line: int, column: int, message: str) -> None:
         problems.append(Finding(Location(str(path), line, column), Severity.ERROR, message))
 
-    if not rows or not rows[0] or rows[0][0].strip() != "timestep":
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
-                                   "a plan starts with a header whose first column is 'timestep' (ms)")])
     header = [h.strip() for h in rows[0]]
     starts = _column_starts(lines[0])  # where each cell of the header starts (characters, 1-based)
     columns: dict[int, tuple[str, str]] = {}
@@ -162,22 +157,31 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
     for line, row in enumerate(rows[1:], start=2):
         if not row or all(not cell.strip() for cell in row):
             continue
+        if too_long(lines[line - 1], row):
+            problem(line, 1, f"a cell longer than {MAX_FIELD} characters")
+            continue
         if len(row) != len(header):
             problem(line, 1, f"{len(row)} values for {len(header)} columns")
             continue
         time_ms = row_time(row, line, problem)
         if time_ms is None:
             continue
+        cells = _column_starts(lines[line - 1])
         values: dict[str, list] = {r: [] for r in robots}
-        for k, (robot, port) in columns.items():
-            cell = row[k].strip()
-            if not cell:
+        for robot in robots:  # a row gives a robot all its columns (a command) or none (no command to it)
+            mine = [k for k, (r, _) in columns.items() if r == robot]
+            empty = [k for k in mine if not row[k].strip()]
+            if empty and len(empty) < len(mine):
+                problem(line, cells[empty[0]] if empty[0] < len(cells) else 1,
+                        f"robot {robot}: {', '.join(repr(header[k]) for k in empty)} empty beside its other columns: a "
+                        f"row gives a robot all its columns (a command) or none (no command to it)")
                 continue
-            try:
-                values[robot].append((port, parse_value(cell, ports[port])))
-            except ValueError as err:
-                cells = _column_starts(lines[line - 1])
-                problem(line, cells[k] if k < len(cells) else 1, f"column '{header[k]}': '{cell[:40]}' {err}")
+            for k in mine if not empty else ():
+                cell = row[k].strip()
+                try:
+                    values[robot].append((columns[k][1], parse_value(cell, ports[columns[k][1]])))
+                except ValueError as err:
+                    problem(line, cells[k] if k < len(cells) else 1, f"column '{header[k]}': '{cell[:40]}' {err}")
         for robot, given in values.items():
             if given:
                 plans[robot].append(Command(time_ms / 1000.0, tuple(given), f"{path}:{line}:1"))

@@ -8,8 +8,11 @@
   next command taken, are its own;
 - *infeasible*: among its events one named `nonfeasible*`, `infeasible*`, `unreachable*` (feasible:
   `feasible*`, `reachable*`), a naming convention of mappings such as the paper's;
-- *completed at t*: taken, not infeasible, and the d-model back at rest (the leaf each machine rests
-  in after its first cycle without inputs, e.g. Idle) at t; *never completed* otherwise.
+- *stopped*: among its events, before it completed, one that stops a move (named like `collision*`,
+  `*Collision`, `fault*`, `emergency*`, `protectiveStop`): the d-model then returns to rest having not done
+  it, which is no completion;
+- *completed at t*: taken, not infeasible, not stopped, and the d-model back at rest (the leaf each machine
+  rests in after its first cycle without inputs, e.g. Idle) at t; *never completed* otherwise.
 
 `Summary` words it, one line per command, with a warning when commands were applied and none
 completed; `strict_failures` lists what makes `--strict` exit with STRICT_EXIT.
@@ -25,6 +28,7 @@ from .system import DMODEL, MAPPING, TwinSystem
 
 INFEASIBLE = re.compile(r"^(non|in|un)(feasible|reachable)", re.IGNORECASE)
 FEASIBLE = re.compile(r"^(feasible|reachable)", re.IGNORECASE)
+STOPPING = re.compile(r"collision|fault|emergency|protective", re.IGNORECASE)  # events that stop a move
 STRICT_EXIT = 3  # `--strict`: a command applied but not completed, or none at all completed (docs/interop.md)
 
 
@@ -50,6 +54,7 @@ class CommandOutcome:
     done: float | None = None  # back at rest after it
     origin: str = ""  # where it came from (a plan's line, a message's time)
     busy: str | None = None  # the d-model's state when it was not taken
+    stopped: tuple[str, float] | None = None  # (event, time): a stopping event came before it completed
 
     @property
     def verdict(self) -> str:
@@ -59,6 +64,8 @@ class CommandOutcome:
             return "not taken"
         if self.feasible is False:
             return "infeasible"
+        if self.stopped is not None:
+            return "stopped"
         return "completed" if self.done is not None else "never completed"
 
     def describe(self) -> str:
@@ -70,6 +77,8 @@ class CommandOutcome:
             how = f"infeasible ({', '.join(e for e in self.events if INFEASIBLE.match(e))})"
         elif verdict == "not taken":
             how = f"not taken (the d-model was in state {self.busy})"
+        elif verdict == "stopped":
+            how = f"stopped by {self.stopped[0]} at t = {self.stopped[1]:g} s"
         else:
             how = {"never completed": "accepted, never completed", "not applied": "not applied before the end"}[verdict]
         when = f"applied at t = {self.delivered:g} s" if self.delivered is not None else f"due at t = {self.time:g} s"
@@ -82,7 +91,7 @@ class Summary:
     blocked: list[str] = field(default_factory=list)  # cotwin.twin.assembly.waits: waits for answers that cannot come
 
     def counts(self) -> dict[str, int]:
-        out = {"completed": 0, "infeasible": 0, "not taken": 0, "never completed": 0, "not applied": 0}
+        out = {"completed": 0, "stopped": 0, "infeasible": 0, "not taken": 0, "never completed": 0, "not applied": 0}
         for o in self.outcomes:
             out[o.verdict] += 1
         return out
@@ -169,6 +178,8 @@ class CommandLedger(Observer):
                     current.feasible = False
                 elif current.feasible is None and FEASIBLE.match(e):
                     current.feasible = True
+                if current.done is None and current.stopped is None and STOPPING.search(e):
+                    current.stopped = (e, t)
             if current.done is None and self.resting(states):
                 current.done = t
         self._before = states

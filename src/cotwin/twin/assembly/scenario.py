@@ -114,6 +114,30 @@ def nothing_planned(plan: Path | None, commands: list[Command]) -> list[Finding]
                     "without commands from outside")]
 
 
+CLIP = min(MAX_FIELD * 4, csv.field_size_limit() - 1)  # a line cut here: a longer cell is reported, not met by csv
+
+
+def plan_rows(path: Path, text: str) -> tuple[list[str], list[list[str]]]:
+    """A plan's lines and CSV rows (each line cut at CLIP, so that csv never meets a field beyond its limit;
+    `too_long` tells such a row), its header checked to start with `timestep`; bad CSV is a located error."""
+    lines = text.splitlines()
+    reader = csv.reader(line if len(line) <= CLIP else line[:CLIP] for line in lines)
+    try:
+        rows = list(reader)
+    except csv.Error as err:
+        raise CotwinError([Finding(Location(str(path), max(reader.line_num, 1), 1), Severity.ERROR,
+                                   f"bad CSV: {err}")]) from None
+    if not rows or not rows[0] or rows[0][0].strip() != "timestep":
+        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
+                                   "a plan starts with a header whose first column is 'timestep' (ms)")])
+    return lines, rows
+
+
+def too_long(line: str, row: list[str]) -> bool:
+    """Whether a plan row has a cell longer than MAX_FIELD (or its line was cut)."""
+    return len(line) > CLIP or any(len(cell) > MAX_FIELD for cell in row)
+
+
 def read_plan(path: str | Path, program: Program) -> list[Command]:
     path = Path(path)
     ports = scenario_ports(program)
@@ -123,17 +147,7 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
     def problem(line: int, column: int, message: str) -> None:
         problems.append(Finding(Location(str(path), line, column), Severity.ERROR, message))
 
-    lines = text.splitlines()
-    clip = min(MAX_FIELD * 4, csv.field_size_limit() - 1)  # a longer cell is reported below, not by csv
-    reader = csv.reader(line if len(line) <= clip else line[:clip] for line in lines)
-    try:
-        rows = list(reader)
-    except csv.Error as err:
-        raise CotwinError([Finding(Location(str(path), max(reader.line_num, 1), 1), Severity.ERROR,
-                                   f"bad CSV: {err}")]) from None
-    if not rows or not rows[0] or rows[0][0].strip() != "timestep":
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
-                                   "a plan starts with a header whose first column is 'timestep' (ms)")])
+    lines, rows = plan_rows(path, text)
     header = [h.strip() for h in rows[0]]
     columns = _column_starts(lines[0])
     for k, h in enumerate(header[1:], start=1):
@@ -151,7 +165,7 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
         if not row or all(not cell.strip() for cell in row):
             continue
         starts = _column_starts(lines[line - 1])
-        if len(lines[line - 1]) > clip or any(len(cell) > MAX_FIELD for cell in row):
+        if too_long(lines[line - 1], row):
             problem(line, 1, f"a cell longer than {MAX_FIELD} characters")
             continue
         if len(row) != len(header):
