@@ -5,6 +5,7 @@ arms reported as collisions to both d-models; the generic core naming neither ro
 from __future__ import annotations
 
 import csv
+import json
 import re
 import shutil
 from pathlib import Path
@@ -463,3 +464,64 @@ def test_the_cell_twin_takes_broker_commands_routed_per_robot_into_both_sides(tm
     db = sqlite3.connect(tmp_path / "out" / "history.sqlite")
     recorded = {row[0] for row in db.execute("select port from commands where value = 'true'")}
     assert recorded == {f"{robot}.moveDiscreteCommand" for robot in ROBOTS}
+
+
+def test_strict_fails_a_cell_run_whose_moves_did_not_all_complete(tmp_path):
+    """`cotwin run --strict` of a cell: the apart plan (every move of both arms completes) exits 0; the
+    colliding plan exits 3 naming each robot's moves not completed and the collision (it was ignored)."""
+    from conftest import cotwin_in_process
+
+    apart = cotwin_in_process("run", CELL / "cotwin.toml", "-o", tmp_path / "apart", "--strict")
+    assert apart.returncode == 0, apart.stderr[-2000:]
+    hit = cotwin_in_process("run", CELL / "collide.toml", "-o", tmp_path / "collide", "--strict")
+    assert hit.returncode == 3, hit.stdout + hit.stderr[-2000:]
+    assert "--strict: " in hit.stderr and "panda: collision reported at t = " in hit.stderr
+    refused = cotwin_in_process("run", CELL / "cotwin.toml", "-o", tmp_path / "r", "--on-unit-failure",
+                                "restart-from-state")
+    assert refused.returncode == 2 and "cannot save its state yet" in refused.stderr
+
+
+def test_an_interrupted_cell_twin_stops_after_the_step_and_keeps_its_results(tmp_path):
+    """Ctrl-C in a cell twin's step loop ends it after the step, as a single robot's twin does: both sides'
+    outputs.csv, deviation.json and a history run marked stopped (it printed only 'interrupted' and kept
+    partial files). Signals: a process of its own."""
+    import signal
+    import sqlite3
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "twin"
+    proc = subprocess.Popen([sys.executable, "-m", "cotwin", "twin", str(CELL / "twin.toml"), "-o", str(out),
+                             "--realtime"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "pt" / "outputs.csv.part").is_file() and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.1)
+        time.sleep(2.0)  # in the paced loop
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stderr[-2000:]
+    assert "stopping after this step" in stderr and "stopped early" in stdout
+    for side in ("pt", "dt"):
+        assert (out / side / "outputs.csv").is_file() and not (out / side / "outputs.partial.csv").exists()
+    assert set(json.loads((out / "deviation.json").read_text())) == set(ROBOTS)
+    (status,) = sqlite3.connect(out / "history.sqlite").execute("select status from runs").fetchone()
+    assert status == "stopped"
+
+
+def test_commands_after_the_end_are_warned_once_per_row_and_a_long_tail_summed_up():
+    """A cell's row holds a command per robot: one warning per row, not one per robot; a plan of thousands of
+    rows past the end gets its first ten and one line for the rest (it printed 298 000 lines)."""
+    from cotwin.twin.assembly.scenario import AFTER_END_SHOWN, Command, after_end
+
+    cell = CellSystem(load_project(CELL / "cotwin.toml"))
+    late = after_end(cell.commands, 4.0)
+    rows = {f.location.line for f in late}
+    assert len(late) == len(rows) == 3  # the rows at 5, 9 and 12 s, both robots' commands in each
+    many = [Command(10.0 + k, (("moveDiscreteCommand", True),), f"plan.csv:{k + 2}:1") for k in range(5000)]
+    said = after_end(many, 5.0)
+    assert len(said) == AFTER_END_SHOWN + 1 and f"and {5000 - AFTER_END_SHOWN} more" in said[-1].message

@@ -52,8 +52,11 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         spec = spec.with_overrides(scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange,
                                    realtime=True if realtime is None else realtime)
     if spec.robots:
+        if on_unit_failure != "stop":
+            raise click.BadParameter("a cell of several robots cannot save its state yet, so a failed step cannot be "
+                                     "retried from it", param_hint="--on-unit-failure")
         return _cell_twin(spec, out, step, end, algorithm, realtime, pt_log, pt_url, history, whatif,
-                          dashboard, cc, serving)
+                          dashboard, cc, serving, strict)
     if pt_url is not None:
         spec = pt_with_url(spec, pt_url, pt_log is not None)
     if spec.pt is None:  # said before the models are read and the plan's warnings shown
@@ -110,9 +113,15 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
 
 
 def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, history, whatif, dashboard,
-               cc: str, serving: dict) -> None:
-    """`cotwin twin` of a cell of several robots ([[robots]]): its perturbed plant as the PT (cotwin.twin.live.cell_live)."""
+               cc: str, serving: dict, strict: bool = False) -> None:
+    """`cotwin twin` of a cell of several robots ([[robots]]): its perturbed plant as the PT (cotwin.twin.live.cell_live).
+    An interrupt in the step loop ends the run after the step, its results kept as a finished run's; before
+    the loop, or a second one, at once (rows so far kept as partial results), as a single robot's twin does."""
+    import signal
+    import threading
+
     from ..twin.assembly.cell import CellSystem
+    from ..twin.assembly.scenario import after_end, nothing_planned
     from ..twin.live.cell_live import run_cell_twin
     from ..twin.services.history import database_url
     from .progress import ProgressReport
@@ -122,13 +131,30 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
         raise click.UsageError(f"a cell of several robots is twinned with its own perturbed plant as the PT: "
                                f"{', '.join(unsupported)} not done yet")
     cell = CellSystem(spec)
+    show_warnings(nothing_planned(cell.spec.plan, cell.commands))
+    show_warnings(after_end(cell.commands, spec.end if end is None else end))
+    stop, looping = threading.Event(), threading.Event()
+
+    class Looping(TwinObserver):
+        def twin_started(self, twin) -> None:
+            looping.set()
+
+    def interrupt(*_) -> None:
+        if not looping.is_set() or stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+        click.echo("stopping after this step (interrupt again to stop at once)", err=True)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, interrupt)
     dash = start_dashboard(cell, dashboard, "twin", database_url(history or spec.history_url, Path(out)), None, serving)
     try:
         with ProgressReport("twin", "s") as progress:
             result = run_cell_twin(cell, out, step, end, algorithm, realtime, history, cc,
-                                   observers=[*([dash.feed] if dash else ()), TwinProgress(progress)])
+                                   observers=[Looping(), *([dash.feed] if dash else ()), TwinProgress(progress)],
+                                   stop=stop)
         if dash is not None:
-            dash.finish("done")
+            dash.finish("stopped" if result.stopped else "done")
     except BaseException as err:
         if dash is not None:
             dash.finish("failed", str(err) or type(err).__name__)
@@ -138,12 +164,18 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
             dash.stop()
     r = result.pt
     click.echo(f"{result.out}: PT and DT, {r.steps} steps each to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
-               f"(real-time factor {r.real_time_factor:.1f})")
+               f"(real-time factor {r.real_time_factor:.1f}), {'stopped early' if result.stopped else 'done'}")
     click.echo(f"deviation: {result.alarm_count} alarm(s); report {result.out / 'deviation.json'}; "
                f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
     for side, summary in result.outcomes.items():
         for line in summary.lines():
             click.echo(f"{side.upper()}: {line}")
+    failures = [f"{side.upper()}: {f}" for side, summary in result.outcomes.items() for f in summary.strict_failures()]
+    if strict and failures:
+        from ..twin.assembly.outcomes import STRICT_EXIT
+
+        click.echo(f"--strict: {'; '.join(failures)}; exit status {STRICT_EXIT}", err=True)
+        sys.exit(STRICT_EXIT)
 
 
 class TwinProgress(TwinObserver):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 from pathlib import Path
 
 import click
@@ -67,7 +69,10 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     reader = "cotwin run --dashboard" if dashboard and not system.spec.robots else "cotwin run"  # a cell: no history
     show_warnings(system.spec.ignored_sections(reader))
     if system.spec.robots:
-        return _run_cell(system, out, step, end, algorithm, realtime, cc, dashboard, version, serving)
+        if on_unit_failure != "stop":
+            raise click.BadParameter("a cell of several robots cannot save its state yet, so a failed step cannot be "
+                                     "retried from it", param_hint="--on-unit-failure")
+        return _run_cell(system, out, step, end, algorithm, realtime, cc, dashboard, version, serving, strict)
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
@@ -93,7 +98,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
 
 
 def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
-              cc: str, dashboard, version: str, serving: dict) -> None:
+              cc: str, dashboard, version: str, serving: dict, strict: bool = False) -> None:
     """`cotwin run` of a cell of several robots ([[robots]]): each robot's outcomes and the contacts between them."""
     from ..twin.assembly.cell import run_cell
     from ..twin.assembly.scenario import after_end, nothing_planned
@@ -119,6 +124,12 @@ def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: 
     for time, first, second in ran.contacts:
         click.echo(f"contact: {first} and {second} at t = {time:.3f} s")
     show_warnings(contacts_from_the_start(cell.spec, ran.contacts, step or cell.spec.step))
+    failures = ran.outcomes.strict_failures()
+    if strict and failures:
+        from ..twin.assembly.outcomes import STRICT_EXIT
+
+        click.echo(f"--strict: {'; '.join(failures)}; exit status {STRICT_EXIT}", err=True)
+        sys.exit(STRICT_EXIT)
 
 
 def contacts_from_the_start(spec, contacts, step: float) -> list[Finding]:

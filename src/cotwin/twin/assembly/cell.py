@@ -449,6 +449,17 @@ class CellOutcomes(Observer):
     def lines(self) -> list[str]:
         return [r.line() for r in self.robots.values()]
 
+    def strict_failures(self) -> list[str]:
+        """What `--strict` refuses, per robot: commands applied that no completed move answered (stopped by a
+        collision, infeasible or still under way at the end), and collisions."""
+        out = []
+        for r in self.robots.values():
+            if r.completed < r.commands:
+                out.append(f"{r.name}: {r.commands - r.completed} of {r.commands} command(s) not completed")
+            if r.collisions:
+                out.append(f"{r.name}: collision reported at t = {', '.join(f'{t:g}' for t in r.collisions)} s")
+        return out
+
 
 @dataclass
 class CellRun:

@@ -98,11 +98,21 @@ def _location(where: str) -> Location:
     return Location(where, 1, 1)
 
 
+AFTER_END_SHOWN = 10  # warnings of commands after the end, one each; the rest summed up in one more
+
+
 def after_end(commands: list[Command], end: float, h: float = 0.0) -> list[Finding]:
     """Warnings for the commands a run to `end` never sends (the last step covers up to end): a plan
-    longer than its run, or a run cut short by --end, should say what it leaves out."""
-    return [Finding(_location(c.where), Severity.WARNING, f"this command at {c.time:g} s is after the run's end "
-                    f"({end:g} s): it is never sent") for c in commands if c.time >= end - 1e-9]
+    longer than its run, or a run cut short by --end, should say what it leaves out. One per plan row (a
+    cell's row holds several robots' commands), the first AFTER_END_SHOWN of them, then how many more."""
+    rows = list(dict.fromkeys((c.where, c.time) for c in commands if c.time >= end - 1e-9))
+    out = [Finding(_location(where), Severity.WARNING, f"this command at {time:g} s is after the run's end "
+                   f"({end:g} s): it is never sent") for where, time in rows[:AFTER_END_SHOWN]]
+    if len(rows) > AFTER_END_SHOWN:
+        out.append(Finding(_location(rows[AFTER_END_SHOWN][0]), Severity.WARNING,
+                           f"and {len(rows) - AFTER_END_SHOWN} more command(s) from here on after the run's end "
+                           f"({end:g} s): never sent"))
+    return out
 
 
 def nothing_planned(plan: Path | None, commands: list[Command]) -> list[Finding]:

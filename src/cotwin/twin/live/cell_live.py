@@ -25,6 +25,7 @@ cell), the what-if forks.
 from __future__ import annotations
 
 import json
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -94,6 +95,7 @@ class CellTwinResult:
     run_id: int | None
     outcomes: dict[str, CellOutcomes] = field(default_factory=dict)  # side -> per-robot outcomes
     alarms: list[dict] = field(default_factory=list)
+    stopped: bool = False  # asked to stop (`stop`) before its end: the steps so far, kept as a finished run's
 
     @property
     def alarm_count(self) -> int:
@@ -102,10 +104,11 @@ class CellTwinResult:
 
 def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, end: float | None = None,
                   algorithm: str | None = None, realtime: bool | None = None, history_url: str | None = None,
-                  cc: str = "cc", observers: tuple[TwinObserver, ...] | list[TwinObserver] = ()) -> CellTwinResult:
+                  cc: str = "cc", observers: tuple[TwinObserver, ...] | list[TwinObserver] = (),
+                  stop: threading.Event | None = None) -> CellTwinResult:
     """Run the cell's PT (its perturbed plant) and DT in lockstep into `out` (see the module doc).
     `observers` are told as a live twin's are (cotwin.twin.assembly.observing): started, each step, each alarm,
-    ended."""
+    ended. `stop`, once set, ends the run after the step under way, its results kept as a finished run's."""
     from ...pmodel.perturbation import Perturbation
     from ..assembly.build import dmodel_fmu, folder_lock
     from ..assembly.build import ARTEFACTS
@@ -159,7 +162,11 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
             running.watchers = [*checks.values(), HistoryRecording(history), *observers, *([Pacing()] if paced else [])]
             for observer in running.watchers:
                 observer.twin_started(running)
+            status = "done"
             for k in range(1, steps + 1):
+                if stop is not None and stop.is_set():
+                    status = "stopped"
+                    break
                 for execution in executions.values():
                     execution.step()
                 running.steps, running.time = k, executions["pt"].time
@@ -183,8 +190,9 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
         for bridge in bridges:
             bridge.close()
         for observer in running.watchers:
-            observer.twin_ended(running, "done")
+            observer.twin_ended(running, status)
         deviation = {name: check.report for name, check in checks.items()}
         write_text(out / "deviation.json", json.dumps(deviation, indent=2) + "\n")
         alarms = running.monitor.events
-        return CellTwinResult(results["pt"], results["dt"], deviation, out, url, history.run_id, outcomes, alarms)
+        return CellTwinResult(results["pt"], results["dt"], deviation, out, url, history.run_id, outcomes, alarms,
+                              status == "stopped")
