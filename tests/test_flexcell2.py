@@ -525,3 +525,21 @@ def test_commands_after_the_end_are_warned_once_per_row_and_a_long_tail_summed_u
     many = [Command(10.0 + k, (("moveDiscreteCommand", True),), f"plan.csv:{k + 2}:1") for k in range(5000)]
     said = after_end(many, 5.0)
     assert len(said) == AFTER_END_SHOWN + 1 and f"and {5000 - AFTER_END_SHOWN} more" in said[-1].message
+
+
+def test_a_cells_deviation_variables_are_robot_scoped_and_checked_where_written(tmp_path):
+    """`[deviation] variables` of a cell name ROBOT.variable (as its log and its alarms do): unknown robots and
+    variables are located at the key, together (a bare 'q0' was scoped twice into 'not observed:
+    {mapping}.cell.ur5e.ur5e.q0' without a place); a variable of one robot is compared for that robot only."""
+    from cotwin.twin.live.cell_live import run_cell_twin
+
+    spec = load_project(CELL / "twin.toml")
+    wrong = spec.with_overrides(deviation_variables=["ur5e.q0", "panda.q9", "q0", "kuka.q1"])
+    with pytest.raises(CotwinError) as err:
+        CellSystem(wrong)
+    messages = [f.message for f in err.value.findings]
+    assert len(messages) == 3 and all(f.location.line > 0 for f in err.value.findings), messages
+    for name in ("'panda.q9'", "'q0'", "'kuka.q1'"):
+        assert sum(name in m for m in messages) == 1, (name, messages)
+    result = run_cell_twin(CellSystem(spec.with_overrides(deviation_variables=["panda.q6"], end=2.0)), tmp_path)
+    assert list(result.deviation["panda"]["variables"]) == ["panda.q6"] and result.deviation["ur5e"]["variables"] == {}

@@ -90,6 +90,26 @@ def check_cell_settings(spec: TwinProject) -> None:
         raise CotwinError(problems)
 
 
+def check_deviation_variables(spec: TwinProject, robots: list["CellRobot"]) -> None:
+    """A cell's `[deviation] variables` name ROBOT.variable, as its [cosim] log and its alarms do, each a
+    variable that robot's mapping monitors; located, all together."""
+    if spec.deviation.variables is None:
+        return
+    monitored = {r.name: list(r.system.models.monitored) for r in robots}
+    problems = []
+    for name in spec.deviation.variables:
+        robot, _, variable = name.partition(".")
+        if robot not in monitored or not variable:
+            problems.append(f"{name!r}: a cell's deviation variables are named ROBOT.variable, ROBOT one of "
+                            f"{', '.join(monitored)}{did_you_mean(robot, list(monitored)) if variable else ''}")
+        elif variable not in monitored[robot]:
+            problems.append(f"{name!r}: robot {robot}'s mapping monitors no {variable!r}"
+                            f"{did_you_mean(variable, monitored[robot])} ({', '.join(monitored[robot]) or 'none'})")
+    if problems:
+        raise CotwinError([Finding(spec.location("deviation", "variables"), Severity.ERROR, f"[deviation] variables: {p}")
+                           for p in problems])
+
+
 def base_pose(robot) -> np.ndarray:
     from ...pmodel.tree import transform
 
@@ -216,6 +236,7 @@ class CellSystem:
             geometry = models.calibration.geometry if models.calibration is not None else CellGeometry()
             pose = base_pose(r)
             self.robots.append(CellRobot(r, system, pose, geometry.with_plate(inverse(pose) @ geometry.plate_pose())))
+        check_deviation_variables(spec, self.robots)
         self.scene = build_scene(spec, alone[0][1].mapping_model)
         self.program = first
         self.commands = [c for robot in self.robots for c in robot.system.commands]

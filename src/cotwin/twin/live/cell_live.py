@@ -142,8 +142,10 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
                                      {name: pair[k] for name, pair in paired.items()})
             executions[side] = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain)
         running = CellTwin(cell, end, step, {side: CellSide(e) for side, e in executions.items()}, CellAlarms())
-        def check_of(robot) -> DeviationCheck:
-            variables = [robot.scoped(v) for v in spec.deviation.variables or robot.system.log[MAPPING.name]]
+        def check_of(robot) -> DeviationCheck:  # [deviation] variables: ROBOT.variable (checked by the cell)
+            chosen = spec.deviation.variables
+            variables = [robot.scoped(v) for v in robot.system.log[MAPPING.name]] if chosen is None else \
+                [v for v in chosen if v.startswith(robot.name + ".")]
             dev = spec.deviation
             monitor = DeviationMonitor(variables, dev.absolute, dev.relative, dev.lag_steps, dev.debounce_steps,
                                        publish=running.alarm, twin=robot.name)
