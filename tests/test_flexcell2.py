@@ -543,3 +543,23 @@ def test_a_cells_deviation_variables_are_robot_scoped_and_checked_where_written(
         assert sum(name in m for m in messages) == 1, (name, messages)
     result = run_cell_twin(CellSystem(spec.with_overrides(deviation_variables=["panda.q6"], end=2.0)), tmp_path)
     assert list(result.deviation["panda"]["variables"]) == ["panda.q6"] and result.deviation["ur5e"]["variables"] == {}
+
+
+def test_platform_keys_of_one_robot_are_refused_for_a_cell_at_their_place(tmp_path):
+    """[platform] endpoint, base and calibration beside [[robots]] were ignored without a word (the run went
+    ahead on MuJoCo): each is an error at its key."""
+    text = (CELL / "cotwin.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/")
+    text = text.replace('[platform]\n', '[platform]\nendpoint = "broker"\nbase = "free"\ncalibration = "x.toml"\n')
+    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
+        shutil.copy(CELL / name, tmp_path / name)
+    (tmp_path / "meshes").symlink_to(CELL / "meshes")
+    (tmp_path / "x.toml").write_text("")
+    (tmp_path / "cotwin.toml").write_text(text)
+    with pytest.raises(CotwinError) as err:
+        CellSystem(load_project(tmp_path / "cotwin.toml"))
+    found = {f.message.split(":")[0]: f.location.line for f in err.value.findings}
+    lines = text.splitlines()
+    table = lines.index("[platform]")
+    for key in ("endpoint", "base", "calibration"):
+        assert found.get(f"[platform] {key}") == next(k + 1 for k, line in enumerate(lines)
+                                                      if k > table and line.startswith(key)), found

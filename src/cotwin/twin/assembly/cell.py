@@ -81,6 +81,13 @@ def check_cell_settings(spec: TwinProject) -> None:
     if spec.readings:
         problems.append(Finding(spec.location("monitor", "readings"), Severity.ERROR, "[monitor] readings: not for a "
                                 "cell of several robots yet (its robots' q<i>/qd<i> are monitored)"))
+    for key, why in (("endpoint", "a cell's robots run in its own MuJoCo world"), ("queue", "a cell's robots run in "
+                     "its own MuJoCo world"), ("url", "a cell's robots run in its own MuJoCo world"),
+                     ("base", "a cell's robots stand fixed where their [[robots]] xyz/rpy put them"),
+                     ("calibration", "each robot's calibration goes in its [[robots]] entry (calibration = FILE)")):
+        if ("platform", key) in spec.locations:
+            problems.append(Finding(spec.location("platform", key), Severity.ERROR, f"[platform] {key}: not read for a "
+                                    f"cell of several robots ({why})"))
     names = {r.name for r in spec.robots}
     unscoped = [v for v in spec.log or () if v.split(".", 1)[0] not in names or "." not in v]
     if unscoped:
