@@ -609,3 +609,19 @@ def test_a_pmodel_the_importer_wrote_wrongly_is_reported_as_its_bug(own_arm, tmp
     with pytest.raises(CotwinError) as err:
         import_urdf(own_arm, tmp_path / "out", [tmp_path / "src"])
     assert "a bug of the importer" in str(err.value) and "my_arm.pm:2:" in str(err.value)
+
+
+def test_an_arm_of_fewer_than_six_joints_is_told_why_the_ik_cannot_serve_it(own_arm, tmp_path):
+    """A 2-joint arm imported and twinned found every hole 'infeasible' without a word why: the IK says at its
+    first use that it reaches a full pose and needs 6 joints, naming the arm's."""
+    from cotwin.diagnostics import CotwinError
+    from cotwin.mapping.endpoint import SimulatedEndpoint
+    from cotwin.mapping.runtime import FunctionRegistry
+    from cotwin.pmodel.simulator import PlatformSimulator
+    from cotwin.pmodel.tree import build_tree
+    from cotwin.robosim.check import load_checked
+
+    result = import_urdf(own_arm, tmp_path / "out", [tmp_path / "src"])
+    tree = build_tree(load_checked([result.file]))
+    with pytest.raises(CotwinError, match=r"has 2 moving joint\(s\) \(link, elbow_joint\).*needs 6 or more"):
+        FunctionRegistry(SimulatedEndpoint(PlatformSimulator(tree, None)))

@@ -95,6 +95,11 @@ class FunctionRegistry:
         self.geometry = geometry or endpoint.geometry or CellGeometry()
         self.tool = self.geometry.find_tool(self.tree)
         self.arm = ik.arm_joints(self.tree, self.tool)
+        if len(self.arm) < ik.FULL_POSE_JOINTS:  # every target would be 'infeasible' without a word why
+            raise CotwinError(f"inverse_kinematics: p-model {self.tree.name}'s arm from its base to the tool link "
+                              f"{self.tool.link} has {len(self.arm)} moving joint(s) ({', '.join(self.arm) or 'none'}); "
+                              f"cotwin's IK reaches a full tool pose (position and orientation) and needs "
+                              f"{ik.FULL_POSE_JOINTS} or more (docs/new-robot.md)")
         self.geometry.check_joints(self.arm)
         reference = dict(zip(self.arm, self.geometry.reference)) if self.geometry.reference is not None else None
         self.solver = ik.Solver(self.tree, self.tool, reference, self.geometry.joint_offsets)

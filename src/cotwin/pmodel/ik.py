@@ -126,6 +126,9 @@ def _tool_frame(approach: np.ndarray, tip: np.ndarray, point) -> np.ndarray:
     return T
 
 
+FULL_POSE_JOINTS = 6  # an arm with fewer cannot reach a full pose (3 for position, 3 for orientation)
+
+
 def arm_joints(tree: KinematicTree, tool: Tool) -> list[str]:
     """The actuated joints on the path from the base to the tool link."""
     return [j.name for j in _path(tree, tool.link) if j.kind != "fixed"]
