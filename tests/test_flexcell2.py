@@ -8,6 +8,7 @@ import csv
 import json
 import re
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -563,3 +564,21 @@ def test_platform_keys_of_one_robot_are_refused_for_a_cell_at_their_place(tmp_pa
     for key in ("endpoint", "base", "calibration"):
         assert found.get(f"[platform] {key}") == next(k + 1 for k, line in enumerate(lines)
                                                       if k > table and line.startswith(key)), found
+
+
+def test_a_cells_plant_joints_are_located_and_may_name_one_robot(tmp_path):
+    """[plant] friction of a cell: a joint name applies to every robot that has it, ROBOT.joint to that robot
+    alone; an unknown name is an error at the table's key with the nearest name (it had no location)."""
+    from cotwin.pmodel.perturbation import Perturbation
+
+    spec = load_project(CELL / "twin.toml")
+    with pytest.raises(CotwinError) as err:
+        CellSystem(replace(spec, plant=Perturbation(friction={"bogus_joint": 2.0, "panda.panda_joint9": 1.0})))
+    assert len(err.value.findings) == 2 and all(f.location.line > 1 for f in err.value.findings)
+    said = " ".join(f.message for f in err.value.findings)
+    assert "'bogus_joint'" in said and "'panda.panda_joint9' is no actuated joint" in said and "did you mean" in said
+    cell = CellSystem(replace(spec, plant=Perturbation(friction={"panda.panda_joint1": 3.0})))
+    world = cell.world(cell.spec.plant)
+    loss = {name: world.model.dof_frictionloss[world.model.joint(world.prefix(name) + joint).dofadr[0]]
+            for name, joint in (("panda", "panda_joint1"), ("ur5e", "shoulder_pan_joint"))}
+    assert loss["panda"] == 3.0 and loss["ur5e"] != 3.0

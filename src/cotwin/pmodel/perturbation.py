@@ -222,6 +222,28 @@ def perturbed_simulator(tree: KinematicTree, scene, perturbation: Perturbation,
     return sim
 
 
+def cell_joint_problems(perturbation: Perturbation, robots: list, location=None) -> list:
+    """A cell's [plant] friction and damping tables: each key a joint name (on every robot that has it) or
+    ROBOT.joint (on that robot alone); a key naming no actuated joint of the cell's robots is an error at
+    `location(key)` (the project's place of the table), with the nearest name."""
+    from ..config import did_you_mean
+    from ..diagnostics import Finding, Location, Severity
+
+    names = {r.name: [j.name for j in r.tree.actuated] for r in robots}
+    known = sorted({j for joints in names.values() for j in joints} |
+                   {f"{robot}.{j}" for robot, joints in names.items() for j in joints})
+    out = []
+    for key in ("friction", "damping"):
+        value = getattr(perturbation, key)
+        for name in value if isinstance(value, dict) else ():
+            if name not in known:
+                where = location(key) if location is not None else Location("[plant]", 1, 1)
+                out.append(Finding(where, Severity.ERROR, f"[plant] {key}: {name!r} is no actuated joint of the "
+                                   f"cell's robots (a joint name, on every robot that has it, or ROBOT.joint)"
+                                   f"{did_you_mean(name, known)}"))
+    return out
+
+
 def perturbed_world(robots: list, scene, perturbation: Perturbation, timestep: float = TIMESTEP):
     """A world of several robots (cotwin.pmodel.shared.SharedWorld) with the perturbation's payload at each
     robot's tool and its friction and damping on each robot's joints (a table by joint: the joints of that
@@ -229,13 +251,9 @@ def perturbed_world(robots: list, scene, perturbation: Perturbation, timestep: f
     endpoint's (cotwin.mapping.perturbed), not the world's."""
     from .shared import SharedWorld
 
-    for key in ("friction", "damping"):
-        value = getattr(perturbation, key)
-        if isinstance(value, dict):
-            known = {j.name for r in robots for j in r.tree.actuated}
-            unknown = sorted(set(value) - known)
-            if unknown:
-                raise CotwinError(f"[plant] {key}: {', '.join(unknown)} is no actuated joint of the cell's robots")
+    problems = cell_joint_problems(perturbation, robots)
+    if problems:
+        raise CotwinError(problems)
     placed = [replace(r, mjcf=with_payload(to_mjcf(r.tree, None, timestep, visual=False), r.tree,
                                            perturbation.payload)) for r in robots]
     world = SharedWorld(placed, scene, timestep)
@@ -244,8 +262,10 @@ def perturbed_world(robots: list, scene, perturbation: Perturbation, timestep: f
         prefix = world.prefix(r.name)
         for key in ("friction", "damping"):
             value = getattr(perturbation, key)
-            amounts = {n: float(v) for n, v in value.items() if n in joints} if isinstance(value, dict) else \
-                {j: float(value) for j in joints}
+            amounts = {j: float(value) for j in joints} if not isinstance(value, dict) else \
+                {**{n: float(v) for n, v in value.items() if n in joints},  # a joint of that name on every robot
+                 **{n.split(".", 1)[1]: float(v) for n, v in value.items()  # ROBOT.joint: on that robot alone
+                    if n.startswith(r.name + ".") and n.split(".", 1)[1] in joints}}
             for name, amount in amounts.items():
                 dof = world.model.joint(prefix + name).dofadr[0]
                 if key == "friction":

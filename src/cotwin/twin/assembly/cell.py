@@ -244,6 +244,14 @@ class CellSystem:
             pose = base_pose(r)
             self.robots.append(CellRobot(r, system, pose, geometry.with_plate(inverse(pose) @ geometry.plate_pose())))
         check_deviation_variables(spec, self.robots)
+        if spec.plant is not None:  # its joints, located at the project's [plant] (perturbed_world applies it)
+            from ...pmodel.perturbation import cell_joint_problems
+            from ...pmodel.shared import PlacedRobot
+
+            problems = cell_joint_problems(spec.plant, [PlacedRobot(r.name, r.system.models.tree, r.pose)
+                                                        for r in self.robots], lambda key: spec.location("plant", key))
+            if problems:
+                raise CotwinError(problems)
         self.scene = build_scene(spec, alone[0][1].mapping_model)
         self.program = first
         self.commands = [c for robot in self.robots for c in robot.system.commands]
