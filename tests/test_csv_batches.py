@@ -70,3 +70,22 @@ def test_a_failed_run_keeps_every_row_it_produced_though_not_yet_formatted(tmp_p
     text = (tmp_path / "out.partial.csv").read_text()
     assert text.splitlines(keepends=True)[2:] == expected(seen).splitlines(keepends=True)
     assert len(seen) == 500 and "the 501 row(s) computed are in" in writer.kept()
+
+
+def test_a_run_that_ends_well_removes_an_earlier_failed_runs_rows_and_a_folder_in_the_way_is_said_first(tmp_path):
+    """After a failed run left out.partial.csv, a run into the same place that ends well replaces it (the old
+    partial rows stayed beside the new result); a folder where the result goes is refused before any step,
+    naming it (the run was computed, then failed at a temporary name)."""
+    failed, _, _ = run(tmp_path, batch=7, fail_at=0.2)
+    with pytest.raises(CotwinError):
+        failed.run(1.0)
+    assert (tmp_path / "out.partial.csv").is_file()
+    execution, _, _ = run(tmp_path, batch=7)
+    execution.run(0.5)
+    assert (tmp_path / "out.csv").is_file() and not (tmp_path / "out.partial.csv").exists()
+    (tmp_path / "out.csv").unlink()
+    (tmp_path / "out.csv").mkdir()
+    blocked, _, seen = run(tmp_path, batch=7)
+    with pytest.raises(CotwinError, match=r"out\.csv is a folder"):
+        blocked.run(0.5)
+    assert seen == []

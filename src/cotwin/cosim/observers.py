@@ -72,6 +72,9 @@ class CSVWriter(Observer):
 
     def simulation_initialized(self, execution) -> None:
         self.columns = self.columns if self.columns is not None else execution.system.observed()
+        if self.path.is_dir():  # found before the run, not when its rows are to be put in place
+            raise CotwinError(f"{self.path} is a folder: cannot write the results there; move it or choose "
+                              "another output")
         fd = open_exclusive(self.part)  # never through a link or a hard link planted at the .part name
         try:  # one writer per result file: another run writing it would interleave rows of its own
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -142,6 +145,8 @@ class CSVWriter(Observer):
         os.close(self._fd)
         self._fd = None
         os.replace(self.part, self.partial_path if error is not None else self.path)
+        if error is None and self.partial_path.is_file():  # an earlier failed run's rows: this run replaces them
+            self.partial_path.unlink()
 
 
 def _real(value) -> str:
