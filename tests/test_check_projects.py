@@ -66,3 +66,20 @@ def test_a_broken_project_file_is_reported_at_its_keys(tmp_path):
     bad.write_text('[models]\ndmodel = "nope.rst"\n')
     result = check(str(bad))
     assert result.exit_code == 1 and f"{bad}:2:1: error: [models] dmodel: no file" in result.output
+
+
+def test_a_project_whose_plan_cotwin_run_refuses_does_not_check_ok(tmp_path):
+    """`cotwin check PROJECT.toml` said ok for a project whose plan `cotwin run` rejects (an unknown robot's
+    column, an unknown port): the project is checked against its models as a run checks it, its plan's
+    problems located."""
+    for example, column in ((CELL, "kuka.moveDiscreteCommand"), (EXAMPLES / "ur5e", "fly")):
+        folder = tmp_path / example.name
+        shutil.copytree(example, folder, symlinks=True)
+        plan = folder / ("plan.csv" if example.name == "ur5e" else "apart.csv")
+        for toml in folder.glob("*.toml"):
+            toml.write_text(toml.read_text().replace("../ur5e/", f"{EXAMPLES}/ur5e/"))
+        lines = plan.read_text().splitlines()
+        plan.write_text("\n".join([lines[0] + f",{column}"] + [line + ",1" for line in lines[1:]]) + "\n")
+        result = check(str(folder / "cotwin.toml"))
+        assert result.exit_code == 1, result.output
+        assert f"{plan}:1:{len(lines[0]) + 2}: error: " in result.output and column in result.output

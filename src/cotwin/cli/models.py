@@ -34,10 +34,14 @@ def check(paths: tuple[str, ...]) -> None:
     results = [check_paths(files) for files in sets]
     result = CheckResult([p for r in results for p in r.projects], problems + [f for r in results for f in r.findings])
     findings = list(dict.fromkeys(result.findings))  # a d-model shared by a cell's robots says its problems once
-    if result.ok:
+    ok = result.ok
+    if ok:
         findings += [f for project in result.projects for f in tree_findings(project)]
+        twins = [twin_problems(project) for project in projects]  # the project against its models: its plan, ...
+        findings += [f for found in twins for f in found]
+        ok = not any(f.severity is Severity.ERROR for found in twins for f in found)
     report(findings)
-    if not result.ok:
+    if not ok:
         errors = sum(f.severity is Severity.ERROR for f in findings)
         click.echo(f"{errors} error(s)", file=sys.stderr)
         hint = [p for p in paths if not p.endswith(".toml") and Path(p).is_dir() and any(Path(p).glob("*.toml"))]
@@ -54,6 +58,18 @@ def check(paths: tuple[str, ...]) -> None:
         shown.add(source.path)
         extra = f", {warnings[source.path]} warning(s)" if warnings[source.path] else ""
         click.echo(f"{source.path}: ok ({summarise(source)}{extra})")
+
+
+def twin_problems(project: str) -> list:
+    """What a project says against its models once they check (its plan's columns and rows, its tables'
+    names of joints and variables, a cell's robots...): the checks `cotwin run` makes before it runs."""
+    from ..twin.assembly.run import load
+
+    try:
+        load(project, cells=True)
+    except CotwinError as err:
+        return list(err.findings)
+    return []
 
 
 def cell_project(path: str) -> str | None:
