@@ -582,3 +582,19 @@ def test_a_cells_plant_joints_are_located_and_may_name_one_robot(tmp_path):
     loss = {name: world.model.dof_frictionloss[world.model.joint(world.prefix(name) + joint).dofadr[0]]
             for name, joint in (("panda", "panda_joint1"), ("ur5e", "shoulder_pan_joint"))}
     assert loss["panda"] == 3.0 and loss["ur5e"] != 3.0
+
+
+def test_a_robots_model_errors_name_the_robot(tmp_path):
+    """The Panda given the UR5e's mapping: its errors (unknown p-model 'ur5e', every path) say which robot and
+    which pairing they come from (49 errors named no robot)."""
+    text = (CELL / "cotwin.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/")
+    text = text.replace('mapping = "panda_mapping.pm"', 'mapping = "ur5e_mapping.pm"')
+    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
+        shutil.copy(CELL / name, tmp_path / name)
+    (tmp_path / "meshes").symlink_to(CELL / "meshes")
+    (tmp_path / "cotwin.toml").write_text(text)
+    with pytest.raises(CotwinError) as err:
+        CellSystem(load_project(tmp_path / "cotwin.toml"))
+    errors = [f for f in err.value.findings if f.severity.value == "error"]
+    assert errors and all(f.message.startswith("robot panda (ur5e_mapping.pm on panda.pm): ") for f in errors)
+    assert any("unknown p-model 'ur5e'" in f.message for f in errors)

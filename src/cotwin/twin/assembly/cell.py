@@ -228,7 +228,15 @@ class CellSystem:
             raise CotwinError(f"{spec.path}: a cell names its robots in [[robots]]")
         check_cell_settings(spec)
         self.spec = spec
-        alone = [(r, load_models(robot_project(spec, r))) for r in spec.robots]
+        alone, problems = [], []
+        for r in spec.robots:  # every robot's models, their problems together, each said of its robot
+            try:
+                alone.append((r, load_models(robot_project(spec, r))))
+            except CotwinError as err:
+                problems += [replace(f, message=f"robot {r.name} ({Path(r.mapping).name} on {Path(r.pmodel).name}): "
+                                                f"{f.message}") for f in err.findings]
+        if problems:
+            raise CotwinError(problems)
         programs = [m.program for _, m in alone]
         first = programs[0]
         for (r, m) in alone[1:]:
