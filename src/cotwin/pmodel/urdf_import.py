@@ -57,7 +57,7 @@ RESERVED = {"link": {"world": "world_link"}}
 
 @dataclass(frozen=True)
 class Renaming:
-    kind: str  # robot | link | joint
+    kind: str  # robot | link | joint | mesh (its path under meshes/)
     urdf: str
     pmodel: str
     why: str
@@ -217,6 +217,7 @@ class MeshCopies:
         self.by_source: dict[Path, Mesh] = {}
         self.by_uri: dict[str, Mesh | None] = {}
         self.taken: set[str] = set()
+        self.renamed: list[Renaming] = []  # paths spelled otherwise than the URDF's (characters, clashes)
 
     def resolve(self, geometry: Geometry) -> Mesh | None:
         """The mesh a geometry names (once per URI as written), or None with an error at the geometry."""
@@ -273,8 +274,10 @@ class MeshCopies:
             return source.name
 
     def _place(self, wanted: str) -> str:
-        parts = [re.sub(r"[^A-Za-z0-9._-]", "_", p) for p in wanted.split("/") if p not in ("", ".", "..")]
+        raw = [p for p in wanted.split("/") if p not in ("", ".", "..")]
+        parts = [re.sub(r"[^A-Za-z0-9._-]", "_", p) for p in raw]
         path = "/".join([MESH_FOLDER, *parts]) if parts else f"{MESH_FOLDER}/mesh"
+        as_written = "/".join([MESH_FOLDER, *raw])
         stem, dot, suffix = path.rpartition(".")
         if not dot or "/" in suffix:
             stem, suffix = path, ""
@@ -283,6 +286,9 @@ class MeshCopies:
             chosen = f"{stem}_{k}.{suffix}" if suffix else f"{stem}_{k}"
             k += 1
         self.taken.add(chosen)
+        if chosen != as_written:
+            self.renamed.append(Renaming("mesh", as_written, chosen, "taken by another mesh" if chosen != path
+                                         else "characters a portable file name avoids"))
         return chosen
 
     def conflicts(self, folder: Path) -> list[Path]:
@@ -519,7 +525,8 @@ def import_urdf(urdf: str | Path, out: str | Path, package_path: list[str | Path
     copies = meshes.copy_to(out)
     write_text(file, text)  # a new file renamed into place: never through a link left there
     kinds = {k: sum(j.type == k for j in robot.joints) for k in JOINT_DEVICES}
-    result = ImportResult(writer.name, file, copies, writer.names.renamed, writer.devices, len(robot.links), kinds,
+    result = ImportResult(writer.name, file, copies, writer.names.renamed + meshes.renamed, writer.devices,
+                          len(robot.links), kinds,
                           dict(sorted(robot.ignored.items())), findings)
     if check:
         result.findings += read_back(file)
