@@ -598,3 +598,12 @@ def test_a_robots_model_errors_name_the_robot(tmp_path):
     errors = [f for f in err.value.findings if f.severity.value == "error"]
     assert errors and all(f.message.startswith("robot panda (ur5e_mapping.pm on panda.pm): ") for f in errors)
     assert any("unknown p-model 'ur5e'" in f.message for f in errors)
+
+
+def test_a_cell_run_cut_short_says_what_each_robots_plan_left_unapplied(tmp_path):
+    """A robot's commands not applied before the end are said in its outcome (a single robot's run lists them;
+    a cell's said only how many were applied), and --strict counts them."""
+    ran = run_cell(CellSystem(load_project(CELL / "cotwin.toml")), tmp_path, end=6.0, plot=False)
+    for robot in ROBOTS:
+        assert "2 command(s) applied (2 of its plan's 4 not applied before the end)" in ran.outcomes.robots[robot].line()
+    assert f"{ROBOTS[0]}: 2 of its plan's 4 command(s) not applied" in ran.outcomes.strict_failures()

@@ -451,12 +451,16 @@ class RobotOutcome:
     completed: int = 0  # moveCompleted-like events (answers) that came
     infeasible: int = 0  # answers saying a command cannot be done (events named nonfeasible*, infeasible*, ...)
     collisions: list[float] = field(default_factory=list)  # when its d-model heard of a collision (steps it began)
+    planned: int | None = None  # its plan's commands (None: they come from the broker)
 
     def line(self) -> str:
         hit = f"collision reported at t = {', '.join(f'{t:g}' for t in self.collisions)} s" if self.collisions \
             else "no collision"
         refused = f", {self.infeasible} infeasible" if self.infeasible else ""
-        return f"{self.name}: {self.commands} command(s) applied, {self.completed} move(s) completed{refused}, {hit}"
+        left = self.planned - self.commands if self.planned is not None else 0
+        waiting = f" ({left} of its plan's {self.planned} not applied before the end)" if left > 0 else ""
+        return (f"{self.name}: {self.commands} command(s) applied{waiting}, {self.completed} move(s) completed"
+                f"{refused}, {hit}")
 
 
 class CellOutcomes(Observer):
@@ -466,7 +470,8 @@ class CellOutcomes(Observer):
     def __init__(self, cell: CellSystem, completed: str = "moveCompleted", collision: str = "collision"):
         self.cell = cell
         self.completed, self.collision = completed, collision
-        self.robots = {r.name: RobotOutcome(r.name) for r in cell.robots}
+        self.robots = {r.name: RobotOutcome(r.name, planned=len(r.system.commands) if cell.spec.plan is not None else None)
+                       for r in cell.robots}
         # per robot, made once (the observer runs every step): its source, command events and scoped answers
         self._watch = [(r.name, r.source.name if r.source is not None else None, sorted(r.system.command_events),
                         r.scoped(completed), r.scoped(collision),
@@ -500,6 +505,8 @@ class CellOutcomes(Observer):
         for r in self.robots.values():
             if r.completed < r.commands:
                 out.append(f"{r.name}: {r.commands - r.completed} of {r.commands} command(s) not completed")
+            if r.planned is not None and r.commands < r.planned:
+                out.append(f"{r.name}: {r.planned - r.commands} of its plan's {r.planned} command(s) not applied")
             if r.collisions:
                 out.append(f"{r.name}: collision reported at t = {', '.join(f'{t:g}' for t in r.collisions)} s")
         return out
