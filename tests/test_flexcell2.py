@@ -607,3 +607,17 @@ def test_a_cell_run_cut_short_says_what_each_robots_plan_left_unapplied(tmp_path
     for robot in ROBOTS:
         assert "2 command(s) applied (2 of its plan's 4 not applied before the end)" in ran.outcomes.robots[robot].line()
     assert f"{ROBOTS[0]}: 2 of its plan's 4 command(s) not applied" in ran.outcomes.strict_failures()
+
+
+def test_rows_out_of_time_order_or_sharing_a_time_are_warned_at_their_line():
+    """Rows out of time order were sorted without a word, and rows sharing a time deferred without one: each
+    such row is warned about at its line, a cell's robots each judged on their own commands."""
+    from cotwin.twin.assembly.scenario import Command, plan_order
+
+    move = (("moveDiscreteCommand", True),)
+    said = plan_order([Command(5.0, move, "p.csv:2:1"), Command(1.0, move, "p.csv:3:1"), Command(6.0, move, "p.csv:4:1"),
+                       Command(6.0, move, "p.csv:5:1")])
+    assert [(f.location.line, "comes after one at 5 s" in f.message, "has the time of line 4" in f.message)
+            for f in said] == [(3, True, False), (5, False, True)]
+    cell = CellSystem(load_project(CELL / "cotwin.toml"))
+    assert [f for r in cell.robots for f in plan_order(r.system.commands)] == []  # one row per time, both robots

@@ -65,10 +65,11 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
                                    "or --pt-log LOG (a recorded run) or --pt-url opc.tcp://HOST:PORT (an OPC UA plant)")])
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
-    from ..twin.assembly.scenario import after_end, nothing_planned
+    from ..twin.assembly.scenario import after_end, nothing_planned, plan_order
 
     show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, spec.end if end is None else end))
+    show_warnings(plan_order(system.commands))
     dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
                            broker if whatif else None, serving)
     progress = ProgressReport("twin", "s").__enter__()
@@ -121,7 +122,7 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
     import threading
 
     from ..twin.assembly.cell import CellSystem
-    from ..twin.assembly.scenario import after_end, nothing_planned
+    from ..twin.assembly.scenario import after_end, nothing_planned, plan_order
     from ..twin.live.cell_live import run_cell_twin
     from ..twin.services.history import database_url
     from .progress import ProgressReport
@@ -133,6 +134,7 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
     cell = CellSystem(spec)
     show_warnings(nothing_planned(cell.spec.plan, cell.commands))
     show_warnings(after_end(cell.commands, spec.end if end is None else end))
+    show_warnings(dict.fromkeys(f for r in cell.robots for f in plan_order(r.system.commands)))
     stop, looping = threading.Event(), threading.Event()
 
     class Looping(TwinObserver):

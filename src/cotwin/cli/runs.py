@@ -76,10 +76,11 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
-    from ..twin.assembly.scenario import after_end, nothing_planned
+    from ..twin.assembly.scenario import after_end, nothing_planned, plan_order
 
     show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, system.spec.end if end is None else end))
+    show_warnings(plan_order(system.commands))
     dash = start_dashboard(system, dashboard, "run", history, serving=serving)
     try:
         with ProgressReport("co-simulating", "steps") as progress:
@@ -101,13 +102,14 @@ def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: 
               cc: str, dashboard, version: str, serving: dict, strict: bool = False) -> None:
     """`cotwin run` of a cell of several robots ([[robots]]): each robot's outcomes and the contacts between them."""
     from ..twin.assembly.cell import run_cell
-    from ..twin.assembly.scenario import after_end, nothing_planned
+    from ..twin.assembly.scenario import after_end, nothing_planned, plan_order
     from .progress import ProgressReport
 
     if version != "2":
         raise click.UsageError("a cell of several robots runs with --fmi 2 (not done yet with 3)")
     show_warnings(nothing_planned(cell.spec.plan, cell.commands))
     show_warnings(after_end(cell.commands, cell.spec.end if end is None else end))
+    show_warnings(dict.fromkeys(f for r in cell.robots for f in plan_order(r.system.commands)))
     dash = start_dashboard(cell, dashboard, "run", None, serving=serving)
     try:
         with ProgressReport("co-simulating", "steps") as progress:

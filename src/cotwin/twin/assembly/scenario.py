@@ -115,6 +115,26 @@ def after_end(commands: list[Command], end: float, h: float = 0.0) -> list[Findi
     return out
 
 
+def plan_order(commands: list[Command]) -> list[Finding]:
+    """Warnings for a plan whose rows are not in time order (commands are sent in time order, not the file's)
+    and for rows that share a time (a source applies one command per step: the others wait for the next
+    steps). One per plan row (a cell's row holds several robots' commands), the first AFTER_END_SHOWN."""
+    rows = sorted(dict.fromkeys((_location(c.where), c.time) for c in commands),
+                  key=lambda row: (row[0].path, row[0].line))
+    out, latest, seen = [], None, {}
+    for where, time in rows:
+        if latest is not None and time < latest[1]:
+            out.append(Finding(where, Severity.WARNING, f"this row at {time:g} s comes after one at {latest[1]:g} s "
+                               f"(line {latest[0].line}): commands are sent in time order, not in the plan's"))
+        elif time in seen:
+            out.append(Finding(where, Severity.WARNING, f"this row has the time of line {seen[time].line} ({time:g} s): "
+                               "one command is applied per step, this one in a later step"))
+        if latest is None or time >= latest[1]:
+            latest = (where, time)
+        seen.setdefault(time, where)
+    return out[:AFTER_END_SHOWN]
+
+
 def nothing_planned(plan: Path | None, commands: list[Command]) -> list[Finding]:
     """A warning for a plan (or command list) that holds no command: the run goes ahead without commands from
     outside, which a user who wrote a plan did not mean ("nothing happened" is said, not taken for success)."""
