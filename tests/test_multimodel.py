@@ -137,3 +137,22 @@ def test_realtime_pacing_keeps_wall_clock_behind_simulated_time():
     result = execution.run(0.3)
     assert time.perf_counter() - started >= 0.3 - 1e-3
     assert result.rows == 7
+
+
+def test_an_end_before_the_start_or_within_one_step_is_located_at_endtime(tmp_path):
+    """A multimodel whose endTime is -1 was refused without a line ('-1 s is shorter than one step'): the error is
+    at its endTime key."""
+    import json as _json
+
+    from cotwin.cosim.multimodel import read_multimodel
+    from cotwin.diagnostics import CotwinError
+
+    path = tmp_path / "mm.json"
+    text = _json.dumps({"fmus": {}, "connections": {}, "algorithm": {"type": "fixed-step", "size": 0.1},
+                        "startTime": 0.0, "endTime": -1}, indent=1)
+    path.write_text(text)
+    with pytest.raises(CotwinError) as err:
+        read_multimodel(path)
+    (finding,) = err.value.findings
+    line = next(k + 1 for k, row in enumerate(text.splitlines()) if '"endTime"' in row)
+    assert finding.location.line == line and "shorter than one step" in finding.message

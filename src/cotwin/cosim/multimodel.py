@@ -147,6 +147,14 @@ def read_multimodel(path: str | Path) -> MultiModel:
         problems.append((f"algorithm.size must be positive, got {algorithm['size']!r}", "size"))
     if not isinstance(data.get("simulationProgramDelay", False), bool):
         problems.append((f"simulationProgramDelay must be true or false, got {data['simulationProgramDelay']!r}", "simulationProgramDelay"))
+    if not problems:  # a span the master can keep exactly, said at endTime (the CLI's --step/--end are checked apart)
+        from .execution import step_count
+
+        try:
+            step_count(float(data.get("endTime", 10.0)) - float(data.get("startTime", 0.0)), float(algorithm.get("size", 0.1)))
+        except CotwinError as err:
+            problems.append((f"endTime {data.get('endTime', 10.0)!r} after startTime {data.get('startTime', 0.0)!r}: "
+                             f"{err.findings[0].message}", "endTime"))
     if problems:
         raise CotwinError([Finding(Location(str(path), *_place(text, needle)), Severity.ERROR, message)
                            for message, needle in problems])
