@@ -621,3 +621,19 @@ def test_rows_out_of_time_order_or_sharing_a_time_are_warned_at_their_line():
             for f in said] == [(3, True, False), (5, False, True)]
     cell = CellSystem(load_project(CELL / "cotwin.toml"))
     assert [f for r in cell.robots for f in plan_order(r.system.commands)] == []  # one row per time, both robots
+
+
+def test_a_build_removes_what_an_earlier_build_wrote_there_and_this_one_does_not(tmp_path):
+    """Building the cell where the single UR5e twin was built left ur5e_scene.xml (and a removed robot's files)
+    beside the new multimodel: a build removes the files the last build wrote that it does not write, and
+    nothing else (a file of the user's stays)."""
+    from cotwin.twin.assembly.build import build
+    from cotwin.twin.assembly.run import load
+
+    out = tmp_path / "build"
+    build(load(ROOT / "examples" / "ur5e" / "cotwin.toml"), out)
+    assert (out / "ur5e_scene.xml").is_file()
+    (out / "notes.txt").write_text("mine")
+    build(CellSystem(load_project(CELL / "cotwin.toml")), out)
+    assert not (out / "ur5e_scene.xml").exists() and (out / "cell_scene.xml").is_file()
+    assert (out / "notes.txt").read_text() == "mine" and (out / "panda.urdf").is_file() and (out / "dmodel.fmu").is_file()

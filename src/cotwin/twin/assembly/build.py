@@ -28,6 +28,7 @@ from ...files import check_outputs, open_exclusive, output, write_bytes, write_t
 from .system import TwinSystem
 
 RECORD = "build.json"
+WRITTEN = "written"  # build.json's list of the files the last `build` wrote (no artefact has that name)
 ARTEFACTS = ("dmodel.fmu", RECORD)  # and build()'s: the p-model files, the Python FMUs, multimodel.json
 _GENERATORS = ("dmodel/ccode.py", "dmodel/fmu.py", "dmodel/fmi2_wrapper.c", "dmodel/ports.py", "dmodel/program.py",
                "dmodel/interpreter.py")
@@ -106,6 +107,23 @@ class Record:
     def forget(self, target: Path) -> None:
         self.keys.pop(target.name, None)
 
+    def settle(self, written) -> list[Path]:
+        """Remove the files an earlier build wrote here that this one did not (a robot no longer in the cell,
+        a p-model renamed), and remember what this one wrote; only files a build wrote are ever removed.
+        Returns those removed."""
+        names = sorted({Path(p).name for p in written} | {RECORD})
+        before = self.keys.get(WRITTEN, [])
+        folder, gone = self.path.parent, []
+        for name in before if isinstance(before, list) else []:
+            path = folder / name if isinstance(name, str) and name == Path(name).name else None
+            if path is not None and name not in names and path.is_file() and not path.is_symlink():
+                path.unlink()
+                gone.append(path)
+                self.keys.pop(name, None)
+        self.keys[WRITTEN] = names
+        write_text(self.path, json.dumps(self.keys, indent=1, sort_keys=True) + "\n")
+        return gone
+
 
 def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: Record | None = None,
                fmi: int = 2) -> Path:
@@ -169,6 +187,7 @@ def build(system: TwinSystem, out: str | Path, cc: str = "cc") -> dict[str, Path
         written[name] = write_text(out / name, text)
     written.update(python_fmus(system, out, record))
     written["multimodel"] = write_text(out / "multimodel.json", json.dumps(system.multimodel(), indent=2) + "\n")
+    record.settle(written.values())
     return written
 
 
@@ -191,6 +210,7 @@ def build_cell(cell, out: Path, cc: str = "cc") -> dict[str, Path]:
     written["cell_scene.xml"] = write_text(out / "cell_scene.xml", cell.world().xml)
     written.update(python_fmus(cell, out, record))
     written["multimodel"] = write_text(out / "multimodel.json", json.dumps(cell.multimodel(), indent=2) + "\n")
+    record.settle(written.values())
     return written
 
 
