@@ -435,11 +435,43 @@ class CellMappingUnit(PythonUnit):
         for unit in self.units.values():
             unit.terminate()
 
+    # ---- state: every robot's mapping unit's (each holds the whole world's MuJoCo state, taken at one
+    # time: restoring them in turn sets the same world) and the world's contact bookkeeping ----
+    STATE_KEYS = (*PythonUnit.STATE_KEYS, "robots", "world")
+
     def snapshot(self) -> dict:
-        raise CotwinError(f"unit {self.name}: a cell of several robots cannot save its state yet")
+        world = self.world
+        return {**super().snapshot(), "robots": {name: unit.snapshot() for name, unit in self.units.items()},
+                "world": {"contacts": list(world.contacts), "touching": sorted(world._touching),
+                          "touched": {name: sorted(robots) for name, robots in world.touched.items()}}}
 
     def restore(self, snapshot: dict) -> None:
-        raise CotwinError(f"unit {self.name}: a cell of several robots cannot restore a state yet")
+        """Continue from a snapshot, checked first (cotwin.plaindata): the same robots, each robot's unit's own
+        checks, the world's contacts naming robots of the cell."""
+        from ...plaindata import fields, of_type
+
+        what = f"unit {self.name}"
+        fields(snapshot, what, self.STATE_KEYS)
+        robots = fields(of_type(snapshot["robots"], dict, f"{what}'s robots"), f"{what}'s robots", list(self.units))
+        world = fields(of_type(snapshot["world"], dict, f"{what}'s world"), f"{what}'s world",
+                       ("contacts", "touching", "touched"))
+        names = [r.name for r in self.world.robots]
+        contacts = of_type(world["contacts"], list, f"{what}'s contacts")
+        for entry in contacts:
+            if entry.__class__ is not tuple or len(entry) != 3 or entry[1] not in names or entry[2] not in names:
+                raise CotwinError(f"the saved state's {what}: contact {entry!r:.80} is not (time, robot, robot)")
+        touching = [tuple(pair) for pair in of_type(world["touching"], list, f"{what}'s touching")]
+        if any(len(p) != 2 or not all(i.__class__ is int and 0 <= i < len(names) for i in p) for p in touching):
+            raise CotwinError(f"the saved state's {what}: robots touching {touching!r:.80} are not pairs of robots")
+        touched = fields(of_type(world["touched"], dict, f"{what}'s touched"), f"{what}'s touched", names)
+        super().restore(snapshot)
+        for name, unit in self.units.items():
+            unit.restore(robots[name])
+        state = self.world
+        state.contacts = [tuple(entry) for entry in contacts]
+        state._touching = set(touching)
+        state.touched = {name: set(of_type(touched[name], list, f"{what}'s touched by {name}")) for name in names}
+        state._steps = int(round(state.data.time / state.timestep))  # the contact checks' cadence
 
 
 @dataclass
