@@ -121,3 +121,17 @@ def test_command_arguments_have_one_naming_and_old_files_keep_working(tmp_path):
     for args in (canonical, old):
         message = panel.command("moveDiscreteCommand", args)
         assert {k: message[k] for k in canonical} == canonical and message["moveDiscreteCommand"] is True
+
+
+def test_only_events_whose_name_says_a_move_stopped_stop_a_command():
+    """The words of an event's name decide: a collision, fault, emergency or protective stop does; a name that
+    says the opposite, or only contains those letters, does not (a match anywhere in the name turned
+    `collisionFree` or `setDefault` into 'stopped' and failed --strict)."""
+    from cotwin.twin.assembly.outcomes import stopping
+
+    for name in ("collision", "robotCollision", "collisionDetected", "protectiveStop", "emergencyStop", "fault",
+                 "fault_detected", "EMERGENCY"):
+        assert stopping(name), name
+    for name in ("noCollision", "collisionFree", "faultCleared", "resetFault", "setDefault", "defaultPose",
+                 "moveCompleted", "robotStopped", "nonfeasibleMoveDiscreteCommand"):
+        assert not stopping(name), name

@@ -623,8 +623,11 @@ def test_an_arm_of_fewer_than_six_joints_is_told_why_the_ik_cannot_serve_it(own_
 
     result = import_urdf(own_arm, tmp_path / "out", [tmp_path / "src"])
     tree = build_tree(load_checked([result.file]))
-    with pytest.raises(CotwinError, match=r"has 2 moving joint\(s\) \(link, elbow_joint\).*needs 6 or more"):
-        FunctionRegistry(SimulatedEndpoint(PlatformSimulator(tree, None)))
+    registry = FunctionRegistry(SimulatedEndpoint(PlatformSimulator(tree, None)))  # a mapping mirroring q<i> makes one
+    assert registry.arm == ["link", "elbow_joint"]
+    for call in (registry.inverse_kinematics, registry.reachable):
+        with pytest.raises(CotwinError, match=r"has 2 moving joint\(s\) \(link, elbow_joint\).*needs 6 or more"):
+            call(0.1, 0.0, 0.2)
 
 
 def test_a_mesh_path_spelled_otherwise_is_among_the_renamings(own_arm, tmp_path):

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import signal
 import sys
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Callable
 
 import click
 
@@ -287,3 +290,25 @@ def value_domains(program, domains: tuple[str, ...]) -> dict[str, list]:
     if len(resolved) < len(parsed):
         raise click.BadParameter("a port is given twice (by its name and by its event's)", param_hint="--domain")
     return resolved
+
+
+@contextmanager
+def interruptible(looping: Callable[[], bool], stopping: Callable[[], bool], stop: Callable[[], None]):
+    """SIGINT and SIGTERM for a live twin's run: in its step loop (`looping`), the run ends after the step (`stop`;
+    its results kept as a finished run's); before the loop (waiting for the broker, building) or at a second
+    signal (`stopping`), at once (KeyboardInterrupt: the rows so far kept as partial results). The handlers
+    that were there are put back after (a command run in-process leaves its host's as they were)."""
+    def interrupt(*_) -> None:
+        if not looping() or stopping():
+            raise KeyboardInterrupt
+        stop()
+        click.echo("stopping after this step (interrupt again to stop at once)", err=True)
+
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    for sig in before:
+        signal.signal(sig, interrupt)
+    try:
+        yield
+    finally:
+        for sig, handler in before.items():
+            signal.signal(sig, handler)

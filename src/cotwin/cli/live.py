@@ -10,7 +10,8 @@ import click
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..twin.assembly.observing import TwinObserver
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
-                     main, outcomes, output_folder, said_restarts, serving_options, show_warnings, start_dashboard)
+                     interruptible, main, outcomes, output_folder, said_restarts, serving_options, show_warnings,
+                     start_dashboard)
 
 
 @main.command()
@@ -36,7 +37,6 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
          dashboard: tuple[str, int] | None, cc: str, serving: dict, strict: bool, on_unit_failure: str) -> None:
     """Run a live twin: the project's physical twin ([pt]) and its digital twin in lockstep on one clock,
     with deviation checking, alarms and history."""
-    import signal
     from ..twin.services.history import database_url
     from ..twin.project import load_project
     from ..twin.assembly.run import load
@@ -77,18 +77,8 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
                         observers=[*([dash.feed] if dash else ()), TwinProgress(progress)], cc=cc,
                         whatif_url=broker if whatif else None, restart=on_unit_failure == "restart-from-state")
-
-        def interrupt(*_) -> None:
-            """In the step loop, end after the step (results kept as a finished run's); before it (waiting for
-            the broker, building) or at a second signal, at once (rows so far kept as partial results)."""
-            if not live.looping or live._stop:
-                raise KeyboardInterrupt
-            live.stop()
-            click.echo("stopping after this step (interrupt again to stop at once)", err=True)
-
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, interrupt)
-        result = live.run()
+        with interruptible(lambda: live.looping, lambda: live._stop, live.stop):
+            result = live.run()
         if dash is not None:
             dash.finish("stopped" if live._stop else "done")
     except BaseException as err:
@@ -118,7 +108,6 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
     """`cotwin twin` of a cell of several robots ([[robots]]): its perturbed plant as the PT (cotwin.twin.live.cell_live).
     An interrupt in the step loop ends the run after the step, its results kept as a finished run's; before
     the loop, or a second one, at once (rows so far kept as partial results), as a single robot's twin does."""
-    import signal
     import threading
 
     from ..twin.assembly.cell import CellSystem
@@ -141,17 +130,9 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
         def twin_started(self, twin) -> None:
             looping.set()
 
-    def interrupt(*_) -> None:
-        if not looping.is_set() or stop.is_set():
-            raise KeyboardInterrupt
-        stop.set()
-        click.echo("stopping after this step (interrupt again to stop at once)", err=True)
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, interrupt)
     dash = start_dashboard(cell, dashboard, "twin", database_url(history or spec.history_url, Path(out)), None, serving)
     try:
-        with ProgressReport("twin", "s") as progress:
+        with ProgressReport("twin", "s") as progress, interruptible(looping.is_set, stop.is_set, stop.set):
             result = run_cell_twin(cell, out, step, end, algorithm, realtime, history, cc,
                                    observers=[Looping(), *([dash.feed] if dash else ()), TwinProgress(progress)],
                                    stop=stop)

@@ -95,11 +95,6 @@ class FunctionRegistry:
         self.geometry = geometry or endpoint.geometry or CellGeometry()
         self.tool = self.geometry.find_tool(self.tree)
         self.arm = ik.arm_joints(self.tree, self.tool)
-        if len(self.arm) < ik.FULL_POSE_JOINTS:  # every target would be 'infeasible' without a word why
-            raise CotwinError(f"inverse_kinematics: p-model {self.tree.name}'s arm from its base to the tool link "
-                              f"{self.tool.link} has {len(self.arm)} moving joint(s) ({', '.join(self.arm) or 'none'}); "
-                              f"cotwin's IK reaches a full tool pose (position and orientation) and needs "
-                              f"{ik.FULL_POSE_JOINTS} or more (docs/new-robot.md)")
         self.geometry.check_joints(self.arm)
         reference = dict(zip(self.arm, self.geometry.reference)) if self.geometry.reference is not None else None
         self.solver = ik.Solver(self.tree, self.tool, reference, self.geometry.joint_offsets)
@@ -108,6 +103,11 @@ class FunctionRegistry:
         self.requests: list[tuple[float, float, float]] = []  # grid points asked of inverse_kinematics, in order
 
     def _solve(self, x, y, z) -> ik.IKResult:
+        if len(self.arm) < ik.FULL_POSE_JOINTS:  # every target would be 'infeasible' without a word why
+            raise CotwinError(f"inverse_kinematics: p-model {self.tree.name}'s arm from its base to the tool link "
+                              f"{self.tool.link} has {len(self.arm)} moving joint(s) ({', '.join(self.arm) or 'none'}); "
+                              f"cotwin's IK reaches a full tool pose (position and orientation) and needs "
+                              f"{ik.FULL_POSE_JOINTS} or more (docs/new-robot.md)")
         key = (round(float(x), 9), round(float(y), 9), round(float(z), 9))
         if key not in self._cache:
             pose = self.geometry.target_pose(key)

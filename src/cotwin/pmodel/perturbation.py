@@ -222,13 +222,12 @@ def perturbed_simulator(tree: KinematicTree, scene, perturbation: Perturbation,
     return sim
 
 
-def cell_joint_problems(perturbation: Perturbation, robots: list, location=None) -> list:
+def cell_joint_problems(perturbation: Perturbation, robots: list,
+                        location: Callable[[str], Location] = lambda key: Location("<[plant]>", 0, 0)) -> list[Finding]:
     """A cell's [plant] friction and damping tables: each key a joint name (on every robot that has it) or
     ROBOT.joint (on that robot alone); a key naming no actuated joint of the cell's robots is an error at
-    `location(key)` (the project's place of the table), with the nearest name."""
-    from ..config import did_you_mean
-    from ..diagnostics import Finding, Location, Severity
-
+    `location(key)` (the project's place of the table; by default none: the message names [plant]), with the
+    nearest name."""
     names = {r.name: [j.name for j in r.tree.actuated] for r in robots}
     known = sorted({j for joints in names.values() for j in joints} |
                    {f"{robot}.{j}" for robot, joints in names.items() for j in joints})
@@ -237,8 +236,7 @@ def cell_joint_problems(perturbation: Perturbation, robots: list, location=None)
         value = getattr(perturbation, key)
         for name in value if isinstance(value, dict) else ():
             if name not in known:
-                where = location(key) if location is not None else Location("[plant]", 1, 1)
-                out.append(Finding(where, Severity.ERROR, f"[plant] {key}: {name!r} is no actuated joint of the "
+                out.append(Finding(location(key), Severity.ERROR, f"[plant] {key}: {name!r} is no actuated joint of the "
                                    f"cell's robots (a joint name, on every robot that has it, or ROBOT.joint)"
                                    f"{did_you_mean(name, known)}"))
     return out

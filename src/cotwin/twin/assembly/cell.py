@@ -181,6 +181,18 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
                 problem(1, starts[at], f"column '{robot}.{ev.name}' without its argument column(s) "
                               f"{', '.join(robot + '.' + m for m in missing)}")
     plans: dict[str, list[Command]] = {r: [] for r in robots}
+    together: dict[str, list[list[int]]] = {r: [] for r in robots}  # per robot, columns given together
+    grouped: set[int] = set()
+    for ev in program.inputs:
+        for robot in robots:
+            at = {port: k for k, (r, port) in columns.items() if r == robot}
+            if ev.name in at:
+                group = [at[ev.name], *(at[port] for port, _ in ev.value_ports if port in at)]
+                together[robot].append(group)
+                grouped.update(group)
+    for k, (robot, _) in columns.items():  # a column of no event's: on its own
+        if k not in grouped:
+            together[robot].append([k])
     for line, row in enumerate(rows[1:], start=2):
         if not row or all(not cell.strip() for cell in row):
             continue
@@ -195,20 +207,21 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
             continue
         cells = _column_starts(lines[line - 1])
         values: dict[str, list] = {r: [] for r in robots}
-        for robot in robots:  # a row gives a robot all its columns (a command) or none (no command to it)
-            mine = [k for k, (r, _) in columns.items() if r == robot]
-            empty = [k for k in mine if not row[k].strip()]
-            if empty and len(empty) < len(mine):
-                problem(line, cells[empty[0]] if empty[0] < len(cells) else 1,
-                        f"robot {robot}: {', '.join(repr(header[k]) for k in empty)} empty beside its other columns: a "
-                        f"row gives a robot all its columns (a command) or none (no command to it)")
-                continue
-            for k in mine if not empty else ():
-                cell = row[k].strip()
-                try:
-                    values[robot].append((columns[k][1], parse_value(cell, ports[columns[k][1]])))
-                except ValueError as err:
-                    problem(line, cells[k] if k < len(cells) else 1, f"column '{header[k]}': '{cell[:40]}' {err}")
+        for robot, groups in together.items():  # an event and its arguments: all given (sent) or none (not sent)
+            for group in groups:
+                empty = [k for k in group if not row[k].strip()]
+                if empty and len(empty) < len(group):
+                    problem(line, cells[empty[0]] if empty[0] < len(cells) else 1,
+                            f"{', '.join(repr(header[k]) for k in empty)} empty beside "
+                            f"{', '.join(repr(header[k]) for k in group if k not in empty)}: an event and its "
+                            f"arguments are given together (the event sent) or not at all")
+                    continue
+                for k in group if not empty else ():
+                    cell, port = row[k].strip(), columns[k][1]
+                    try:
+                        values[robot].append((port, parse_value(cell, ports[port])))
+                    except ValueError as err:
+                        problem(line, cells[k] if k < len(cells) else 1, f"column '{header[k]}': '{cell[:40]}' {err}")
         for robot, given in values.items():
             if given:
                 plans[robot].append(Command(time_ms / 1000.0, tuple(given), f"{path}:{line}:1"))
@@ -232,11 +245,13 @@ class CellSystem:
         for r in spec.robots:  # every robot's models, their problems together, each said of its robot
             try:
                 alone.append((r, load_models(robot_project(spec, r))))
-            except CotwinError as err:
-                problems += [replace(f, message=f"robot {r.name} ({Path(r.mapping).name} on {Path(r.pmodel).name}): "
+            except CotwinError as err:  # the shared d-model's own problems once, the rest said of their robot
+                shared = str(spec.dmodel)
+                problems += [f if f.location.path == shared else
+                             replace(f, message=f"robot {r.name} ({Path(r.mapping).name} on {Path(r.pmodel).name}): "
                                                 f"{f.message}") for f in err.findings]
         if problems:
-            raise CotwinError(problems)
+            raise CotwinError(list(dict.fromkeys(problems)))
         programs = [m.program for _, m in alone]
         first = programs[0]
         for (r, m) in alone[1:]:

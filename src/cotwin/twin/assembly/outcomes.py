@@ -8,9 +8,9 @@
   next command taken, are its own;
 - *infeasible*: among its events one named `nonfeasible*`, `infeasible*`, `unreachable*` (feasible:
   `feasible*`, `reachable*`), a naming convention of mappings such as the paper's;
-- *stopped*: among its events, before it completed, one that stops a move (named like `collision*`,
-  `*Collision`, `fault*`, `emergency*`, `protectiveStop`): the d-model then returns to rest having not done
-  it, which is no completion;
+- *stopped*: among its events, before it completed, one that stops a move (a word of its name is collision,
+  fault, emergency or protective and none says the opposite: `stopping`): the d-model then returns to rest
+  having not done it, which is no completion;
 - *completed at t*: taken, not infeasible, not stopped, and the d-model back at rest (the leaf each machine
   rests in after its first cycle without inputs, e.g. Idle) at t; *never completed* otherwise.
 
@@ -28,7 +28,16 @@ from .system import DMODEL, MAPPING, TwinSystem
 
 INFEASIBLE = re.compile(r"^(non|in|un)(feasible|reachable)", re.IGNORECASE)
 FEASIBLE = re.compile(r"^(feasible|reachable)", re.IGNORECASE)
-STOPPING = re.compile(r"collision|fault|emergency|protective", re.IGNORECASE)  # events that stop a move
+STOPS = {"collision", "fault", "emergency", "protective"}  # a word of the name of an event that stops a move
+NOT_STOPS = {"no", "not", "non", "free", "clear", "cleared", "reset", "ok", "none"}  # ... unless it says the opposite
+
+
+def stopping(event: str) -> bool:
+    """Whether an event's name says a move was stopped: one of its words (camelCase or snake_case) is collision,
+    fault, emergency or protective (`collision`, `robotCollision`, `protectiveStop`, `fault_detected`), and none
+    says the opposite (`noCollision`, `collisionFree`, `faultCleared`, `resetFault`; `setDefault` has no such word)."""
+    words = {w.lower() for w in re.findall(r"[A-Z]?[a-z0-9]+|[A-Z]+(?![a-z])", event)}
+    return bool(words & STOPS) and not words & NOT_STOPS
 STRICT_EXIT = 3  # `--strict`: a command applied but not completed, or none at all completed (docs/interop.md)
 
 
@@ -178,7 +187,7 @@ class CommandLedger(Observer):
                     current.feasible = False
                 elif current.feasible is None and FEASIBLE.match(e):
                     current.feasible = True
-                if current.done is None and current.stopped is None and STOPPING.search(e):
+                if current.done is None and current.stopped is None and stopping(e):
                     current.stopped = (e, t)
             if current.done is None and self.resting(states):
                 current.done = t

@@ -102,6 +102,17 @@ class CellTwinResult:
         return sum(report["alarms"] for report in self.deviation.values())
 
 
+def deviation_check(spec, robot, alarm) -> DeviationCheck:
+    """Robot `robot`'s deviation check over its ports of the cell's mapping: [deviation] variables of its own
+    (ROBOT.variable, checked by the cell), else every variable it logs; its alarms name it and go to `alarm`."""
+    dev = spec.deviation
+    variables = [robot.scoped(v) for v in robot.system.log[MAPPING.name]] if dev.variables is None else \
+        [v for v in dev.variables if v.startswith(robot.name + ".")]
+    monitor = DeviationMonitor(variables, dev.absolute, dev.relative, dev.lag_steps, dev.debounce_steps,
+                               publish=alarm, twin=robot.name)
+    return DeviationCheck(monitor, variables, unit=CELL_MAPPING.name)
+
+
 def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, end: float | None = None,
                   algorithm: str | None = None, realtime: bool | None = None, history_url: str | None = None,
                   cc: str = "cc", observers: tuple[TwinObserver, ...] | list[TwinObserver] = (),
@@ -130,31 +141,25 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
     writes = [f"{side}/{name}" for side in SIDES for name in ("outputs.csv", "outputs.partial.csv", "outputs.csv.part")]
     with folder_lock(out, [*writes, "deviation.json", *ARTEFACTS, *([store] if store else [])], spec.inputs):
         fmu = dmodel_fmu(cell.robots[0].system, out, cc)
-        worlds = {"pt": cell.world(plant), "dt": cell.world()}
         outcomes = {side: CellOutcomes(cell) for side in SIDES}
-        executions = {}
-        paired = {r.name: paired_sources(r.system, f"cotwin cell twin ({r.name})", lambda: False)
-                  for r in cell.robots if r.system.source is not None}
-        bridges = [bridge for *_, bridge in paired.values() if bridge is not None]
-        for k, side in enumerate(SIDES):
-            chain = [CSVWriter(out / side / "outputs.csv"), outcomes[side]]
-            cosim = cell.instantiate(fmu, worlds[side], plant if side == "pt" else None,
-                                     {name: pair[k] for name, pair in paired.items()})
-            executions[side] = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain)
-        running = CellTwin(cell, end, step, {side: CellSide(e) for side, e in executions.items()}, CellAlarms())
-        def check_of(robot) -> DeviationCheck:  # [deviation] variables: ROBOT.variable (checked by the cell)
-            chosen = spec.deviation.variables
-            variables = [robot.scoped(v) for v in robot.system.log[MAPPING.name]] if chosen is None else \
-                [v for v in chosen if v.startswith(robot.name + ".")]
-            dev = spec.deviation
-            monitor = DeviationMonitor(variables, dev.absolute, dev.relative, dev.lag_steps, dev.debounce_steps,
-                                       publish=running.alarm, twin=robot.name)
-            return DeviationCheck(monitor, variables, unit=CELL_MAPPING.name)
-
-        checks = {r.name: check_of(r) for r in cell.robots}
+        executions: dict[str, Execution] = {}
+        bridges: list = []
+        running = CellTwin(cell, end, step, {}, CellAlarms())
+        cancelled = stop.is_set if stop is not None else (lambda: False)  # also ends the wait for first commands
         paced = spec.realtime if realtime is None else realtime
         history = None
-        try:
+        try:  # from the first thing built: whatever was built is closed if a later part fails
+            paired = {r.name: paired_sources(r.system, f"cotwin cell twin ({r.name})", cancelled)
+                      for r in cell.robots if r.system.source is not None}
+            bridges += [bridge for *_, bridge in paired.values() if bridge is not None]
+            worlds = {"pt": cell.world(plant), "dt": cell.world()}
+            for k, side in enumerate(SIDES):
+                chain = [CSVWriter(out / side / "outputs.csv"), outcomes[side]]
+                cosim = cell.instantiate(fmu, worlds[side], plant if side == "pt" else None,
+                                         {name: pair[k] for name, pair in paired.items()})
+                executions[side] = Execution(cosim, make_algorithm(algorithm or spec.algorithm), step, 0.0, chain)
+                running.sides[side] = CellSide(executions[side])
+            checks = {r.name: deviation_check(spec, r, running.alarm) for r in cell.robots}
             for bridge in bridges:  # every robot says it is ready before any waits for its first commands
                 bridge.start()
             for execution in executions.values():
