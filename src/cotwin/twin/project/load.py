@@ -291,7 +291,7 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     if any(p.severity is Severity.ERROR for p in problems):  # a cell's [plant] is its robots' (perturbed_world)
         against = None if plant is None or robots else (lambda tree: _plant_problems(plant, tree, file.location))
         problems.extend(_model_errors([files[k] for k in ("dmodel", "pmodel", "mapping")], against,
-                                      models.pmodel_name, stand_ins))
+                                      models.pmodel_name if models is not None else None, stand_ins))
     raise_problems(problems)
     spec = TwinProject(
         file.path, files["dmodel"], files["pmodel"], files["mapping"], models.module, models.pmodel_name,
