@@ -40,6 +40,7 @@ from ..services.deviation import DeviationMonitor
 from ..project import check_timing
 from ..assembly.system import MAPPING
 from .live_observers import DeviationCheck, HistoryRecording, Pacing
+from .lockstep import lockstep
 from .runtime import paired_sources
 
 SIDES = ("pt", "dt")
@@ -167,18 +168,7 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
             columns = {side: [f"{u}.{v}" for u, v in e.system.observed()] for side, e in executions.items()}
             history = HistoryRecorder(url, str(spec.path), "twin", step, executions["pt"].algorithm.name, columns)
             running.watchers = [*checks.values(), HistoryRecording(history), *observers, *([Pacing()] if paced else [])]
-            for observer in running.watchers:
-                observer.twin_started(running)
-            status = "done"
-            for k in range(1, steps + 1):
-                if stop is not None and stop.is_set():
-                    status = "stopped"
-                    break
-                for execution in executions.values():
-                    execution.step()
-                running.steps, running.time = k, executions["pt"].time
-                for observer in running.watchers:
-                    observer.twin_step(running, k, running.time)
+            status = lockstep(running, [executions[side] for side in SIDES], steps, running.watchers, cancelled)
             results = {}
             for side, execution in executions.items():
                 execution.close()

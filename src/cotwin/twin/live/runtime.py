@@ -31,6 +31,7 @@ from ..assembly.build import ARTEFACTS, dmodel_fmu, folder_lock
 from ..services.deviation import DeviationMonitor
 from ..assembly.endpoints import check_endpoints, make_endpoint
 from .live_observers import AlarmPublisher, DeviationCheck, HistoryRecording, Pacing, WhatIfPolling
+from .lockstep import lockstep
 from ..assembly.observing import TwinObserver
 from ..assembly.system import MAPPING, RABBITMQ, TwinSystem
 from ..assembly.outcomes import CommandLedger
@@ -280,17 +281,8 @@ class LiveTwin:
                     dt_platform.place(pt.units["mapping"].mapping.endpoint.joint_positions())
                 dt.execution.initialize()
             pt.execution.total_steps = dt.execution.total_steps = total
-            for o in self._watchers:
-                o.twin_started(self)
-            self.looping = True
-            while self.steps < total and not self._stop:
-                pt.execution.step()
-                dt.execution.step()
-                self.steps += 1
-                self.time = pt.execution.time
-                for o in self._watchers:
-                    o.twin_step(self, self.steps, self.time)
-            status = "done" if not self._stop else "stopped"
+            self.looping = True  # a stop request from now on ends the run after the step under way
+            status = lockstep(self, [pt.execution, dt.execution], total, self._watchers, lambda: self._stop)
         except CotwinError as err:
             message = "; ".join(f.message for f in err.findings)
             raise
