@@ -380,7 +380,7 @@ def test_the_page_commands_the_robot_it_names_in_a_cell(browser, tmp_path):
     """A cell's live twin taking commands from the broker: the panel lists the robots; a command sent to the
     Panda goes on the Panda's routing key, is applied to the Panda's PT and DT in one step and not to the UR5e;
     the API refuses a command naming no robot, or one not in the cell, saying which robots there are."""
-    import shutil
+    from test_flexcell2 import cell_copy
 
     from cotwin.twin.assembly.cell import CellSystem
     from cotwin.twin.live.cell_live import run_cell_twin
@@ -388,13 +388,8 @@ def test_the_page_commands_the_robot_it_names_in_a_cell(browser, tmp_path):
 
     if not _broker_up():
         _required("no RabbitMQ on 127.0.0.1:5672")
-    cell_dir = ROOT / "examples" / "flexcell2"
-    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
-        shutil.copy(cell_dir / name, tmp_path / name)
-    (tmp_path / "meshes").symlink_to(cell_dir / "meshes")
-    (tmp_path / "twin.toml").write_text((cell_dir / "twin.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/"))
     exchange = f"cotwin_cell_dash_{uuid.uuid4().hex[:8]}"
-    spec = load_project(tmp_path / "twin.toml").with_overrides(
+    spec = load_project(cell_copy(tmp_path, "twin.toml")).with_overrides(
         scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange, realtime=True, end=8.0)
     cell = CellSystem(spec)
     with Dashboard(cell, port=0, mode="twin") as dash:

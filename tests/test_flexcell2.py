@@ -24,6 +24,17 @@ CELL = ROOT / "examples" / "flexcell2"
 ROBOTS = ("ur5e", "panda")
 
 
+def cell_copy(folder: Path, project: str = "cotwin.toml", edit=lambda text: text) -> Path:
+    """The cell example's files in `folder` (its meshes linked), `project` rewritten by `edit` with the UR5e's
+    files named where they are: a user's copy of the cell, to change."""
+    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
+        shutil.copy(CELL / name, folder / name)
+    (folder / "meshes").symlink_to(CELL / "meshes")
+    text = (CELL / project).read_text().replace('"../ur5e/', f'"{ROOT}/examples/ur5e/')
+    (folder / project).write_text(edit(text))
+    return folder / project
+
+
 class CollisionInputs(Observer):
     """What each d-model FMU instance holds on its `collision` input after every step (read from the FMU)."""
 
@@ -123,9 +134,7 @@ def test_two_robots_of_one_pmodel_share_a_world_without_name_clashes():
 
 
 def test_cell_project_errors_are_located(tmp_path):
-    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
-        shutil.copy(CELL / name, tmp_path / name)
-    text = (CELL / "cotwin.toml").read_text().replace('"../ur5e/', f'"{ROOT}/examples/ur5e/')
+    text = cell_copy(tmp_path).read_text()  # the user's copy, changed three ways below
     (tmp_path / "cotwin.toml").write_text(text.replace('name = "panda"', 'name = "ur5e"'))
     with pytest.raises(CotwinError) as err:
         load_project(tmp_path / "cotwin.toml")
@@ -269,14 +278,9 @@ def test_broker_commands_are_routed_per_robot(tmp_path, broker):
     from cotwin.twin.assembly.rabbitmq import port_types
 
     exchange = f"cotwin.test.cell.{uuid.uuid4().hex[:8]}"
-    text = (CELL / "collide.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/")
-    text = text.replace('plan = "collide.csv"', f'rabbitmq = {{ exchange = "{exchange}" }}')
-    text = text.replace("end = 8.0", "end = 5.0\nrealtime = true")
-    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml"):
-        shutil.copy(CELL / name, tmp_path / name)
-    (tmp_path / "meshes").symlink_to(CELL / "meshes")
-    (tmp_path / "cotwin.toml").write_text(text)
-    cell = CellSystem(load_project(tmp_path / "cotwin.toml"))
+    project = cell_copy(tmp_path, "collide.toml", lambda text: text.replace(
+        'plan = "collide.csv"', f'rabbitmq = {{ exchange = "{exchange}" }}').replace("end = 8.0", "end = 5.0\nrealtime = true"))
+    cell = CellSystem(load_project(project))
     assert [u.name for u in cell.units if u.role == "source"] == ["{rabbitmq}.ur5e", "{rabbitmq}.panda"]
     plans = read_cell_plan(CELL / "apart.csv", cell.program, list(ROBOTS))  # different holes for each arm
     publishers = []
@@ -441,12 +445,7 @@ def test_the_cell_twin_takes_broker_commands_routed_per_robot_into_both_sides(tm
     from cotwin.twin.services.publisher import Publisher, idle_values
 
     exchange = f"cotwin.test.celltwin.{uuid.uuid4().hex[:8]}"
-    text = (CELL / "twin.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/")
-    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
-        shutil.copy(CELL / name, tmp_path / name)
-    (tmp_path / "meshes").symlink_to(CELL / "meshes")
-    (tmp_path / "twin.toml").write_text(text)
-    spec = load_project(tmp_path / "twin.toml").with_overrides(
+    spec = load_project(cell_copy(tmp_path, "twin.toml")).with_overrides(
         scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange, realtime=True, end=5.0)
     cell = CellSystem(spec)
     assert [u.name for u in cell.units if u.role == "source"] == ["{rabbitmq}.ur5e", "{rabbitmq}.panda"]
@@ -561,13 +560,10 @@ def test_a_cells_deviation_variables_are_robot_scoped_and_checked_where_written(
 def test_platform_keys_of_one_robot_are_refused_for_a_cell_at_their_place(tmp_path):
     """[platform] endpoint, base and calibration beside [[robots]] were ignored without a word (the run went
     ahead on MuJoCo): each is an error at its key."""
-    text = (CELL / "cotwin.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/")
-    text = text.replace('[platform]\n', '[platform]\nendpoint = "broker"\nbase = "free"\ncalibration = "x.toml"\n')
-    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
-        shutil.copy(CELL / name, tmp_path / name)
-    (tmp_path / "meshes").symlink_to(CELL / "meshes")
+    project = cell_copy(tmp_path, edit=lambda text: text.replace(
+        '[platform]\n', '[platform]\nendpoint = "broker"\nbase = "free"\ncalibration = "x.toml"\n'))
     (tmp_path / "x.toml").write_text("")
-    (tmp_path / "cotwin.toml").write_text(text)
+    text = project.read_text()
     with pytest.raises(CotwinError) as err:
         CellSystem(load_project(tmp_path / "cotwin.toml"))
     found = {f.message.split(":")[0]: f.location.line for f in err.value.findings}
@@ -599,12 +595,7 @@ def test_a_cells_plant_joints_are_located_and_may_name_one_robot(tmp_path):
 def test_a_robots_model_errors_name_the_robot(tmp_path):
     """The Panda given the UR5e's mapping: its errors (unknown p-model 'ur5e', every path) say which robot and
     which pairing they come from (49 errors named no robot)."""
-    text = (CELL / "cotwin.toml").read_text().replace("../ur5e/", f"{ROOT}/examples/ur5e/")
-    text = text.replace('mapping = "panda_mapping.pm"', 'mapping = "ur5e_mapping.pm"')
-    for name in ("ur5e_mapping.pm", "panda_mapping.pm", "panda.pm", "panda_cell.toml", "apart.csv"):
-        shutil.copy(CELL / name, tmp_path / name)
-    (tmp_path / "meshes").symlink_to(CELL / "meshes")
-    (tmp_path / "cotwin.toml").write_text(text)
+    cell_copy(tmp_path, edit=lambda text: text.replace('mapping = "panda_mapping.pm"', 'mapping = "ur5e_mapping.pm"'))
     with pytest.raises(CotwinError) as err:
         CellSystem(load_project(tmp_path / "cotwin.toml"))
     errors = [f for f in err.value.findings if f.severity.value == "error"]

@@ -36,7 +36,7 @@ from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...files import read_text
 from ..project import TwinProject, check_timing
 from .outcomes import INFEASIBLE
-from .scenario import MAX_FIELD, Command, _column_starts, parse_value, plan_rows, row_time, scenario_ports, too_long
+from .scenario import Command, _column_starts, data_rows, parse_value, plan_rows, row_time, scenario_ports
 from .system import (DMODEL, MAPPING, CommandPorts, MachinePort, TwinSystem, UnitSpec, build_scene, load_models,
                      multimodel)
 
@@ -193,15 +193,7 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
     for k, (robot, _) in columns.items():  # a column of no event's: on its own
         if k not in grouped:
             together[robot].append([k])
-    for line, row in enumerate(rows[1:], start=2):
-        if not row or all(not cell.strip() for cell in row):
-            continue
-        if too_long(lines[line - 1], row):
-            problem(line, 1, f"a cell longer than {MAX_FIELD} characters")
-            continue
-        if len(row) != len(header):
-            problem(line, 1, f"{len(row)} values for {len(header)} columns")
-            continue
+    for line, row in data_rows(lines, rows, len(header), problem):
         time_ms = row_time(row, line, problem)
         if time_ms is None:
             continue

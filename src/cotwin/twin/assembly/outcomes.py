@@ -21,6 +21,7 @@ completed; `strict_failures` lists what makes `--strict` exit with STRICT_EXIT.
 from __future__ import annotations
 
 import re
+from functools import lru_cache
 from dataclasses import dataclass, field
 
 from ...cosim.observers import Observer
@@ -32,6 +33,7 @@ STOPS = {"collision", "fault", "emergency", "protective"}  # a word of the name 
 NOT_STOPS = {"no", "not", "non", "free", "clear", "cleared", "reset", "ok", "none"}  # ... unless it says the opposite
 
 
+@lru_cache(maxsize=None)  # asked of the events of every step: a mapping has a few names
 def stopping(event: str) -> bool:
     """Whether an event's name says a move was stopped: one of its words (camelCase or snake_case) is collision,
     fault, emergency or protective (`collision`, `robotCollision`, `protectiveStop`, `fault_detected`), and none

@@ -27,6 +27,7 @@ import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 from ...config import Key, Schema, TomlFile, did_you_mean, is_number, raise_problems
 from ...cosim.units import INT32, Port, PythonUnit
@@ -149,7 +150,7 @@ CLIP = min(MAX_FIELD * 4, csv.field_size_limit() - 1)  # a line cut here: a long
 
 def plan_rows(path: Path, text: str) -> tuple[list[str], list[list[str]]]:
     """A plan's lines and CSV rows (each line cut at CLIP, so that csv never meets a field beyond its limit;
-    `too_long` tells such a row), its header checked to start with `timestep`; bad CSV is a located error."""
+    `data_rows` reports such a row), its header checked to start with `timestep`; bad CSV is a located error."""
     lines = text.splitlines()
     reader = csv.reader(line if len(line) <= CLIP else line[:CLIP] for line in lines)
     try:
@@ -163,9 +164,19 @@ def plan_rows(path: Path, text: str) -> tuple[list[str], list[list[str]]]:
     return lines, rows
 
 
-def too_long(line: str, row: list[str]) -> bool:
-    """Whether a plan row has a cell longer than MAX_FIELD (or its line was cut)."""
-    return len(line) > CLIP or any(len(cell) > MAX_FIELD for cell in row)
+def data_rows(lines: list[str], rows: list[list[str]], width: int, problem) -> Iterator[tuple[int, list[str]]]:
+    """A plan's rows after its header that can be read, with their line numbers: blank rows skipped; a row
+    with a cell longer than MAX_FIELD (or its line cut at CLIP) or of another width than the header's reported
+    through `problem(line, column, message)` and skipped."""
+    for line, row in enumerate(rows[1:], start=2):
+        if not row or all(not cell.strip() for cell in row):
+            continue
+        if len(lines[line - 1]) > CLIP or any(len(cell) > MAX_FIELD for cell in row):
+            problem(line, 1, f"a cell longer than {MAX_FIELD} characters")
+        elif len(row) != width:
+            problem(line, 1, f"{len(row)} values for {width} columns")
+        else:
+            yield line, row
 
 
 def read_plan(path: str | Path, program: Program) -> list[Command]:
@@ -191,16 +202,8 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
             problem(1, columns[header.index(ev.name)], f"column '{ev.name}' without its argument column(s) "
                     f"{', '.join(missing)}: a command takes its arguments from its own row")
     commands = []
-    for line, row in enumerate(rows[1:], start=2):
-        if not row or all(not cell.strip() for cell in row):
-            continue
+    for line, row in data_rows(lines, rows, len(header), problem):
         starts = _column_starts(lines[line - 1])
-        if too_long(lines[line - 1], row):
-            problem(line, 1, f"a cell longer than {MAX_FIELD} characters")
-            continue
-        if len(row) != len(header):
-            problem(line, 1, f"{len(row)} values for {len(header)} columns")
-            continue
         values = []
         time_ms = row_time(row, line, problem)
         ok = time_ms is not None
