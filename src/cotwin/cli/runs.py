@@ -94,7 +94,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     r = ran.result
     said_restarts(ran.system.units.values())
     click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
-               f"(real-time factor {r.real_time_factor:.1f}; stepping: {r.stepping})")
+               f"(real-time factor {r.real_time_factor:.1f}; stepping: {r.describe_stepping()})")
     outcomes({"": ran.outcomes}, strict)
 
 

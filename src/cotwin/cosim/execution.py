@@ -36,6 +36,16 @@ class RunResult:
     wall_seconds: float
     outputs: dict[str, object] = field(default_factory=dict)
     stepping: str = "step by step"  # or "fused" (cotwin.cosim.fused), or why the fused loop did not apply
+    native_steps: int = 0  # of the steps, those made in the native loop (cotwin.cosim.native)
+    native_why: str | None = None  # why the native loop did not apply, when the fused loop ran without it
+
+    def describe_stepping(self) -> str:
+        """How the steps were made, in a few words (for a run's summary line)."""
+        if self.stepping != "fused":
+            return self.stepping
+        if self.native_steps:
+            return f"fused, {self.native_steps} of {self.steps} steps in the native loop"
+        return f"fused (the native loop did not apply: {self.native_why})" if self.native_why else "fused"
 
     @property
     def rows(self) -> int:
@@ -146,6 +156,9 @@ class Execution:
         self._first = (self.start, 0)  # (time, steps) where this execution began (later for a fork)
         self.fused = fused
         self._loop = None  # the fused loop `advance` made (rebuilt when the slots or observers change)
+        self._native = None  # the native loop (cotwin.cosim.native) beside it, where it applies
+        self.native_steps = 0  # steps made in the native loop
+        self.native_why: str | None = "not tried"  # why the native loop did not apply (None: it did)
         self.stepping = "step by step"  # or "fused" (see run), or why the fused loop did not apply
 
     @property
@@ -235,7 +248,7 @@ class Execution:
                     loop = self._loop = FusedLoop(self)
                 self.stepping = "fused"
                 try:
-                    return loop.run(n, until)
+                    return loop.run(n, until) if until is not None else self._fused_steps(loop, n)
                 except BaseException as err:
                     self.close(err)
                     raise
@@ -257,16 +270,42 @@ class Execution:
         self.stepping = "fused"
         loop = FusedLoop(self)
         try:
-            loop.run(self.total_steps - self.steps)
+            self._fused_steps(loop, self.total_steps - self.steps)
         except BaseException as err:
             self.close(err)
             raise
+
+    def _fused_steps(self, loop, n: int) -> int:
+        """n steps: stretches of quiet steps in the native loop (cotwin.cosim.native) where it applies, the
+        others in the fused loop; `native_steps` counts the former, `native_why` says why none (or None)."""
+        from .native import QUIET_AFTER, NativeLoop
+
+        native = self._native
+        if native is None or not native.current():
+            try:
+                native = self._native = NativeLoop(self)
+                self.native_why = None
+            except ValueError as why:
+                self._native, self.native_why = None, str(why)
+                return loop.run(n)
+        done = 0
+        while done < n:
+            k = native.run(n - done)
+            if k:
+                self.native_steps += k
+            else:
+                k = loop.run(min(QUIET_AFTER, n - done))
+                if k == 0:
+                    break
+            done += k
+        return done
 
     def result(self) -> RunResult:
         outputs = {type(o).__name__: o.path for o in self.observers if getattr(o, "path", None) is not None}
         start, done = self._first
         return RunResult(self.algorithm.name, self.step_size, start, self.time, self.steps - done,
-                         wallclock.perf_counter() - self._wall, outputs, self.stepping)
+                         wallclock.perf_counter() - self._wall, outputs, self.stepping, self.native_steps,
+                         self.native_why if self.native_why != "not tried" else None)
 
     # ---- state ----
     def get_state(self) -> bytes:

@@ -26,6 +26,15 @@ class Observer:
 
     def step_complete(self, execution) -> None: ...
 
+    def repeated(self, execution, rows) -> None:
+        """Steps the native loop made at once in which only continuous values changed (cotwin.cosim.native:
+        `rows` is a StepRows); told before the last step of the stretch, which comes to `step_complete`. By
+        default each is told to `step_complete` in turn, as the current step."""
+        if type(self).step_complete is Observer.step_complete:
+            return
+        for _ in rows.replay(execution):
+            self.step_complete(execution)
+
     def simulation_ended(self, execution, error: BaseException | None) -> None: ...
 
 
@@ -69,6 +78,7 @@ class CSVWriter(Observer):
         self._rows: list[tuple] = []  # (time, values...) of steps not yet formatted
         self.batch = batch
         self._last_flush = 0.0
+        self._slots: list[int] | None = None  # the columns' slots (for rows the native loop made)
 
     def simulation_initialized(self, execution) -> None:
         self.columns = self.columns if self.columns is not None else execution.system.observed()
@@ -99,6 +109,26 @@ class CSVWriter(Observer):
             self._flush()
         elif len(rows) >= self.batch:
             self._format()
+
+    def repeated(self, execution, rows) -> None:
+        """The stretch's rows, held as `step_complete` holds them (formatted in batches)."""
+        from .rowtext import rows_text
+
+        slots = self._slots if self._slots is not None else self._slot_list(execution)
+        text = rows_text(rows.rows, slots, "".join(rows.kinds[i] for i in slots), rows.times)
+        if text is None:  # no C here: as step_complete holds them
+            self._rows.extend((round(t, 12), *values) for t, values in zip(rows.times, rows.values(slots)))
+        else:
+            self._format()  # the rows held before these come first
+            self._lines.append(text)
+        self.rows += len(rows)
+        if len(self._rows) >= self.batch:
+            self._format()
+
+    def _slot_list(self, execution) -> list[int]:
+        slots = execution.algorithm.slots
+        self._slots = [slots[c] for c in self.columns]
+        return self._slots
 
     def _row(self, execution) -> None:
         self._rows.append((round(execution.time, 12), *self._read()))
@@ -186,6 +216,9 @@ class Progress(Observer):
 
     def step_complete(self, execution) -> None:
         self.report(execution.steps, execution.total_steps)
+
+    def repeated(self, execution, rows) -> None:
+        return None  # the stretch's last step reports
 
 
 def epoch_of(units, now: float, slack: float = 1.0) -> float | None:
@@ -292,6 +325,9 @@ class StateFile(Observer):
     def step_complete(self, execution) -> None:
         if execution.total_steps and execution.steps >= execution.total_steps:
             self.save(execution)
+
+    def repeated(self, execution, rows) -> None:
+        return None  # never the last step: a stretch's last step comes to step_complete
 
     def save(self, execution) -> None:
         try:

@@ -16,7 +16,7 @@ import weakref
 from collections import deque
 from ctypes import (POINTER, byref, c_bool, c_char_p, c_double, c_int, c_int64, c_size_t, c_uint, c_void_p,
                     create_string_buffer)
-from ctypes import string_at as ctypes_string_at
+from ctypes import cast as ctypes_cast, string_at as ctypes_string_at
 from dataclasses import dataclass
 from operator import itemgetter
 from pathlib import Path
@@ -531,6 +531,49 @@ class FMUUnit(BoundByNames, Unit):
         self._plan(tuple(names))
         sources = [self._memory[self.vr[n]] for n in names]
         return lambda: [array[slot] for array, slot in sources]
+
+    def native_part(self, execution):
+        """Its step for the native loop (cotwin.cosim.native): inputs written into a cotwin-built FMU's port
+        arrays, fmi2DoStep called through its pointer, outputs read from the arrays; a reason (str) where it
+        cannot (an FMU of another tool, which keeps its values its own way)."""
+        from .native import NativePart, feeds, outputs
+
+        if self._memory is None:
+            return f"unit {self.name}'s FMU does not show its port arrays (not built by cotwin)"
+        arrays: list = []
+
+        def place(name: str) -> str:
+            array, index = self._memory[self.vr[name]]
+            if all(a is not array for a in arrays):
+                arrays.append(array)
+            k = next(i for i, a in enumerate(arrays) if a is array)
+            kind = {"Real": "double", "Integer": "int64_t", "Boolean": "bool"}[self.ports[name].type]
+            return f"(({kind} *)PP[{2 + k}])[{index}]"
+
+        lines = []
+        for name, slot in feeds(execution, self):
+            kind = self.ports[name].type
+            value = f"IN({slot})" if kind == "Real" else f"(int64_t)IN({slot})" if kind == "Integer" else f"(IN({slot}) != 0.0)"
+            lines.append(f"{place(name)} = {value};")
+        lines.append("{ int status = ((cotwin_do_step)PP[0])(PP[1], t, H, 1); if (status > 1) FAIL(10 + status); }")
+        for name, slot in outputs(execution, self).items():
+            kind = self.ports[name].type
+            read = place(name)
+            lines.append(f"N[{slot}] = " + (f"{read};" if kind == "Real" else f"(double){read};" if kind == "Integer"
+                                             else f"{read} ? 1.0 : 0.0;"))
+        do_step = ctypes_cast(self._fn["fmi2DoStep"], c_void_p).value
+        pointers = [do_step, self.component, *(ctypes_cast(a, c_void_p).value for a in arrays)]
+        def end(first: int, made: int, rows, doubles) -> None:
+            if made:  # as `step` leaves it: the last step's start
+                origin, done = execution._origin
+                self.time = origin + (first + made - 1 - done) * execution.step_size
+
+        def failed(code: int, t: float) -> None:
+            self.time = t
+            status = code - 10
+            self._failed("fmi2DoStep", status, f"returned {STATUS[status] if 0 <= status < len(STATUS) else status}")
+
+        return NativePart("\n".join(lines), pointers=pointers, end=end, failed=failed)
 
     # ---- state ----
     def get_state(self) -> bytes:

@@ -95,6 +95,14 @@ class MappingUnit(PythonUnit):
         for name in self.mapping.monitored:
             self.values[name] = float(self.mapping.variables[name])
 
+    def native_part(self, execution):
+        """Its quiet step for the native loop (cotwin.mapping.cstep), or why it has none."""
+        from ...cosim import native
+        from ...mapping.cstep import quiet_step
+
+        return quiet_step(self, execution, native.NativePart, native.feeds(execution, self),
+                          native.outputs(execution, self))
+
     def terminate(self) -> None:
         if self.mapping is not None and self.mapping.started:
             self.mapping.stop_mapping()

@@ -195,6 +195,12 @@ class CommandLedger(Observer):
                 current.done = t
         self._before = states
 
+    def repeated(self, execution, rows) -> None:
+        """Steps in which no state, call or event changed: each would find what the step before found (a
+        command taken, done or stopped is decided at a change), unless a command applied waits to be read."""
+        if self._waiting:
+            super().repeated(execution, rows)
+
     def resting(self, states) -> bool:
         return all(index == self.rest[port] for (port, _), index in zip(self._states, states))
 

@@ -424,6 +424,34 @@ class ScenarioUnit(PythonUnit):
             self.values[occurrence.event] = True
             self.values.update(occurrence.values)
 
+    def native_part(self, execution):
+        """Its step for the native loop (cotwin.cosim.native): nothing to do while no command is due and none
+        waits (its outputs stay as they are); `quiet` counts the steps before the next command is due."""
+        from ...cosim.native import NativePart
+
+        def quiet(n: int) -> int:
+            if len(self.queue) or any(self.values[ev] is True for ev in self.events):
+                return 0
+            if self._next >= len(self.commands):
+                return n
+            due = self.commands[self._next].time
+            origin, done = execution._origin
+            h = execution.step_size
+            first = execution.steps - done
+            k = max(0, min(n, int((due - origin) / h) - first - 1))  # an estimate, then made exact
+            while k > 0 and not due >= origin + (first + k - 1) * h + h - 1e-9:
+                k -= 1
+            while k < n and due >= origin + (first + k) * h + h - 1e-9:
+                k += 1
+            return k
+
+        def end(first: int, made: int, rows, doubles) -> None:
+            if made:  # as `step` leaves it: the last step's start plus its size
+                origin, done = execution._origin
+                self.time = origin + (first + made - 1 - done) * execution.step_size + execution.step_size
+
+        return NativePart("", quiet=quiet, end=end)
+
     # ---- state: the port values, the time reached, the next command to play and those waiting ----
     STATE_KEYS = (*PythonUnit.STATE_KEYS, "next", "plan", "queue")
 

@@ -79,6 +79,21 @@ class WaitWatch(Observer):
             if idle == self.patience:
                 self._judge(m, leaf, entered, execution.time)
 
+    def repeated(self, execution, rows) -> None:
+        """Steps in which no state changed and nothing was called: each machine idles one more step per row
+        (those not yet judged are told step by step, so that a judgement falls at its own step)."""
+        if self.mapping is None:
+            return
+        told = 0
+        if any(idle < self.patience for _, _, idle in self._since):
+            for _ in rows.replay(execution):
+                self.step_complete(execution)
+                told += 1
+                if all(idle >= self.patience for _, _, idle in self._since):
+                    break
+        rest = len(rows) - told
+        self._since = [(leaf, entered, idle + rest) for leaf, entered, idle in self._since]
+
     def _judge(self, m: int, leaf, entered: float, now: float) -> None:
         wait = self.waits.get((m, leaf)) if isinstance(leaf, int) else None
         if wait is None or wait.events & self.commands:

@@ -1,0 +1,402 @@
+"""The native loop: stretches of communication steps made in C, every unit's step included (issue 23).
+
+The fused loop (cotwin.cosim.fused) still makes each step in Python. Most steps of a twin change nothing
+but the platform's continuous readings: no command is due, no operation is called, no event comes or
+goes. The native loop makes those steps in one C function generated for the system: each unit gives its
+step as C (`NativePart`: the d-model FMU's doStep on its port arrays, the mapping's physics, mirrors and
+input events, a command source that has nothing due), composed in the algorithm's order (Jacobi: inputs
+from the previous step's outputs, every unit steps, every output read), the slots kept as doubles.
+
+A stretch (a *segment*) ends after the first step in which a value other than a continuous one (a unit's
+`continuous` outputs, e.g. the mapping's q0..qd5) changed, or when a unit says it cannot make the next
+step natively (a command due, an answer waiting): the fused loop then makes the steps in Python until
+the system is quiet again. So every discrete change is a step the Python objects see whole, and the
+steps made natively are the repeats between them. Observers hear of a segment's steps at once: all but
+the last through `Observer.repeated` (rows of the slots; by default each told as a step in turn), the
+last through `step_complete`, as always.
+
+The C source is a function of the system's structure alone (addresses are passed at each call), built
+once per machine and cached (cotwin.mapping.native's cache). A run gives the same values, byte for byte
+in its CSV, as the fused and the step-by-step loops (tests/test_native.py). Where it does not apply (no C
+compiler, Gauss-Seidel, a unit without a native step, a stop condition asked after every step) the
+fused loop runs alone and `why_not` says why.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .algorithm import UNSET, GaussSeidel, Jacobi
+
+QUIET_AFTER = 1  # Python steps after a segment ended on a change, before the next may start
+
+
+@dataclass
+class NativePart:
+    """A unit's step in C, for the native loop.
+
+    `step` is C statements run once per step, after the unit's inputs were set: they read the step's
+    start time `t` and size `H`, the slots at the step's start `S[...]`, write the unit's outputs into the
+    next slots `N[...]`, and use `PP[i]` (pointers) and `DD[i]` (doubles) given in `pointers` and
+    `doubles`. A failure: `FAIL(code)` (the step is not counted; `failed(code, t)` raises). `decls` holds
+    file-scope C (static functions) the step calls; names are prefixed by the unit's `prefix`.
+    `inputs`/`outputs` are the unit's port names bound to slots (outputs: `N[...]` written, or left as they
+    were). `quiet(n)`: how many of the next n steps the unit can make natively now (0: none). `begin()`:
+    refresh `pointers`/`doubles` before a segment. `end(first, made, rows, doubles)`: bring the Python object
+    up to date after it made `made` steps natively from step index `first` (rows: the slots after each
+    complete step; doubles: its `DD` as the steps left them). `PAUSE()` (before anything of the step is
+    done; Gauss-Seidel only) leaves the step to Python from this unit on. `continuous`: outputs whose change does not
+    end a segment.
+    """
+
+    step: str
+    decls: str = ""
+    pointers: list = field(default_factory=list)
+    doubles: list = field(default_factory=list)
+    quiet: Callable[[int], int] = lambda n: n
+    begin: Callable[[], None] = lambda: None
+    end: Callable[[int, int, np.ndarray, np.ndarray], None] = lambda first, made, rows, doubles: None
+    failed: Callable[[int, float], None] = lambda code, t: None
+    continuous: tuple[str, ...] = ()
+    slots: dict[str, int] = field(default_factory=dict)  # port -> slot (filled by the loop)
+
+
+def feeds(execution, unit) -> list[tuple[str, int]]:
+    """The unit's connected inputs and the slot each is set from (Jacobi: the previous step's output)."""
+    algorithm = execution.algorithm
+    k = algorithm.units.index(unit)
+    return [(name, algorithm._source_slot(key)) for name, key in algorithm.feeds[k]]
+
+
+def outputs(execution, unit) -> dict[str, int]:
+    """The unit's observed ports (its outputs the master reads) and their slots."""
+    algorithm = execution.algorithm
+    k = algorithm.units.index(unit)
+    return {name: algorithm.slots[(unit.name, name)] for name in algorithm.watched[k]}
+
+
+def why_not(execution) -> str | None:
+    """None when the native loop can run this (initialised) execution, else why not."""
+    if type(execution.algorithm) not in (Jacobi, GaussSeidel):
+        return f"its algorithm ({type(execution.algorithm).__name__}) is not cotwin's Jacobi or Gauss-Seidel"
+    if execution.algorithm.events:
+        return "a unit has clocks"
+    if shutil.which("cc") is None and shutil.which("gcc") is None:
+        return "no C compiler (cc) on this machine"
+    for unit in execution.algorithm.units:
+        part = getattr(type(unit), "native_part", None)
+        if part is None:
+            return f"unit {unit.name} ({type(unit).__name__}) has no native step"
+    return None
+
+
+class NativeLoop:
+    """Segments of steps in C for an initialised execution (see the module doc); `run` makes one."""
+
+    def __init__(self, execution):
+        why = why_not(execution)
+        if why is not None:
+            raise ValueError(why)
+        algorithm = execution.algorithm
+        self.execution = execution
+        self.seidel = isinstance(algorithm, GaussSeidel)
+        self.parts: list[NativePart] = []
+        for unit in algorithm.units:
+            part = unit.native_part(execution)
+            if isinstance(part, str):
+                raise ValueError(f"unit {unit.name}: {part}")
+            self.parts.append(part)
+        self.slots = len(algorithm.data)
+        kinds = {}  # slot -> 'r', 'i' or 'b'
+        for key, i in algorithm.slots.items():
+            port = execution.system.units[key[0]].ports[key[1]]
+            kinds[i] = {"Real": "r", "Integer": "i", "Boolean": "b"}.get(port.type, "?")
+        self.copies = list(algorithm.copies) if self.seidel else []  # (source, shadow): Gauss-Seidel's delayed outputs
+        for source, shadow in self.copies:
+            kinds[shadow] = kinds[source]
+        self.kinds = [kinds.get(i, "?") for i in range(self.slots)]
+        if "?" in self.kinds:
+            raise ValueError("a port of a type other than Real, Integer or Boolean is observed")
+        continuous = {algorithm.slots[(unit.name, name)] for unit, part in zip(algorithm.units, self.parts)
+                      for name in part.continuous if (unit.name, name) in algorithm.slots}
+        shadows = {shadow for _, shadow in self.copies}
+        self.discrete = [i for i in range(self.slots) if i not in continuous and i not in shadows]
+        self._data, self._observers = algorithm.data, list(execution.observers)
+        self.source = self._source()
+        self._fn = _compiled(self.source)
+
+    def _source(self) -> str:
+        algorithm = self.execution.algorithm
+        decls, body = [], []
+        pbase = dbase = 0
+        for k, (unit, part) in enumerate(zip(algorithm.units, self.parts)):
+            decls.append(part.decls)
+            body.append(f"    /* unit {unit.name} */")
+            body.append(f"    {{ void **PP = P + {pbase}; double *DD = D + {dbase}; (void)PP; (void)DD;")
+            body.append(f"#define FAIL(code) do {{ *failed = {k} * 1000 + (code); return j; }} while (0)")
+            if self.seidel:  # the step is finished in Python from this unit on
+                body.append(f"#define PAUSE() do {{ *paused = {k + 1}; memcpy(rows + (size_t)j * {self.slots}, N, "
+                            f"sizeof(double) * {self.slots}); return j; }} while (0)")
+            else:  # Jacobi: `quiet` rules a pause out (a unit's inputs are those of the step before)
+                body.append("#define PAUSE() FAIL(999)")
+            body.extend("    " + line for line in part.step.strip("\n").split("\n"))
+            body.append("#undef FAIL")
+            body.append("#undef PAUSE")
+            body.append("    }")
+            pbase += len(part.pointers)
+            dbase += len(part.doubles)
+        self._sizes = (pbase, dbase)
+        changed = " || ".join(f"N[{i}] != S[{i}]" for i in self.discrete) or "0"
+        lines = [_PRELUDE,
+                 "#define IN(slot) " + ("N[slot]" if self.seidel else "S[slot]") +
+                 ("  /* Gauss-Seidel: this step's outputs of the units before */" if self.seidel else
+                  "  /* Jacobi: the outputs of the step before */"),
+                 *decls,
+                 "int cotwin_segment(void **P, double *D, double *S, double *rows, int n, double origin, long long base,",
+                 "                   double H, int *failed, int *paused) {",
+                 f"  double N[{max(1, self.slots)}];",
+                 "  *failed = 0;",
+                 "  *paused = 0;",
+                 "  for (int j = 0; j < n; j++) {",
+                 "    double t = origin + (double)(base + j) * H;",
+                 f"    memcpy(N, S, sizeof(double) * {self.slots});",
+                 *(f"    N[{shadow}] = N[{source}];" for source, shadow in self.copies),
+                 *body,
+                 f"    int changed = {changed};",
+                 f"    memcpy(S, N, sizeof(double) * {self.slots});",
+                 f"    memcpy(rows + (size_t)j * {self.slots}, S, sizeof(double) * {self.slots});",
+                 "    if (changed) return j + 1;",
+                 "  }",
+                 "  return n;",
+                 "}"]
+        return "\n".join(lines) + "\n"
+
+    def current(self) -> bool:
+        """Whether this loop still fits its execution (the algorithm's slots and the observers it was made for)."""
+        execution = self.execution
+        return self._data is execution.algorithm.data and self._observers == execution.observers
+
+    def quiet(self, n: int) -> int:
+        """How many of the next n steps every unit can make natively now."""
+        data = self.execution.algorithm.data
+        if any(v is UNSET for v in data):
+            return 0
+        for part in self.parts:
+            n = min(n, part.quiet(n))
+            if n <= 0:
+                return 0
+        return n
+
+    def run(self, n: int) -> int:
+        """Up to n steps natively (fewer: see the module doc); the steps made, observers told. 0 when the
+        system is not quiet now (the caller makes a step in Python). A step a unit paused (Gauss-Seidel: an
+        operation called in it) is finished in Python, from that unit on, and counted."""
+        n = self.quiet(n)
+        if n <= 0:
+            return 0
+        execution, algorithm = self.execution, self.execution.algorithm
+        data = algorithm.data
+        for part in self.parts:
+            part.begin()
+        pointers = [p for part in self.parts for p in part.pointers]
+        doubles = [d for part in self.parts for d in part.doubles]
+        assert (len(pointers), len(doubles)) == self._sizes, "a native part changed its number of pointers or doubles"
+        P = (ctypes.c_void_p * max(1, len(pointers)))(*pointers)
+        D = np.array(doubles or [0.0], dtype=np.float64)
+        S = np.array([float(v) for v in data], dtype=np.float64)
+        before = S.copy()
+        rows = np.empty((n, self.slots), dtype=np.float64)
+        failed, paused = ctypes.c_int(0), ctypes.c_int(0)
+        origin, done = execution._origin
+        first = execution.steps
+        dptr = ctypes.POINTER(ctypes.c_double)
+        k = self._fn(ctypes.cast(P, ctypes.c_void_p), D.ctypes.data_as(dptr), S.ctypes.data_as(dptr),
+                     rows.ctypes.data_as(dptr), n, float(origin), first - done, execution.step_size,
+                     ctypes.byref(failed), ctypes.byref(paused))
+        pause = paused.value - 1  # the unit that paused step k, or -1
+        half = rows[k].copy() if pause >= 0 else None
+        rows = rows[:k]
+        if k:
+            self._commit(rows, before if k == 1 else rows[k - 2])
+        base = 0
+        for u, part in enumerate(self.parts):
+            part.end(first, k + (1 if 0 <= u < pause else 0) if pause >= 0 else k, rows,
+                     D[base:base + len(part.doubles)])
+            base += len(part.doubles)
+        if failed.value:
+            unit, code = divmod(failed.value, 1000)
+            self.parts[unit].failed(code, origin + (first + k - done) * execution.step_size)
+            raise RuntimeError(f"unit {algorithm.units[unit].name} failed in the native loop (code {code})")
+        if pause >= 0:
+            self._finish(half, pause)
+            self._tell(rows)
+            return k + 1
+        if k:
+            self._tell(rows[:-1])
+        return k
+
+    def _finish(self, half: np.ndarray, pause: int) -> None:
+        """The step a unit paused, made in Python from that unit on (as Gauss-Seidel makes it), counted."""
+        execution, algorithm = self.execution, self.execution.algorithm
+        data = algorithm.data
+        data[:] = _typed(half, self.kinds)
+        origin, done = execution._origin
+        t = origin + (execution.steps - done) * execution.step_size
+        for k in range(pause, len(algorithm.units)):
+            write, read = algorithm.writes[k], algorithm.reads[k]
+            if write is not None:
+                setter, pick = write
+                setter(pick(data))
+            algorithm.units[k].step(t, execution.step_size)
+            if read is not None:
+                getter, slots = read
+                for i, value in zip(slots, getter()):
+                    data[i] = value
+        execution.steps += 1
+        execution.time = origin + (execution.steps - done) * execution.step_size
+
+    def _commit(self, rows: np.ndarray, previous: np.ndarray) -> None:
+        """The execution's slots, steps and time after the segment; the Python units' inputs as they were
+        set for its last step (Jacobi: from the slots before it; Gauss-Seidel: from its own)."""
+        execution, algorithm = self.execution, self.execution.algorithm
+        data = algorithm.data
+        data[:] = _typed(rows[-1], self.kinds)
+        execution.steps += len(rows)
+        origin, done = execution._origin
+        execution.time = origin + (execution.steps - done) * execution.step_size
+        typed = data if self.seidel else _typed(previous, self.kinds)
+        for write in algorithm.writes:
+            if write is not None:
+                setter, pick = write
+                setter(pick(typed))
+
+    def _tell(self, repeats: np.ndarray) -> None:
+        """Observers hear of the repeated steps (the rows before the current step), then of the current one."""
+        execution = self.execution
+        if len(repeats):
+            batch = StepRows(execution, repeats, self.kinds)
+            for o in execution.observers:
+                o.repeated(execution, batch)
+        for o in execution.observers:
+            o.step_complete(execution)
+
+
+class StepRows:
+    """Steps an observer hears of at once: `times`, `steps` and the slots after each (`rows`, doubles);
+    `replay` makes each the execution's current step in turn (values typed as the ports hold them), and
+    puts the current one back after."""
+
+    def __init__(self, execution, rows: np.ndarray, kinds: list[str]):
+        self.rows, self.kinds = rows, kinds
+        n = len(rows)
+        origin, done = execution._origin
+        current = execution.steps - 1  # the start index of the current step; the rows are the steps before it
+        self.steps = list(range(current - n, current))  # each row's step index (its start)
+        self.times = [origin + (s + 1 - done) * execution.step_size for s in self.steps]  # each row's time (its end)
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def values(self, slots: list[int]) -> list[tuple]:
+        """The rows' values at these slots, typed, one tuple per row."""
+        kinds = [self.kinds[i] for i in slots]
+        columns = [_column(self.rows[:, i], kind) for i, kind in zip(slots, kinds)]
+        return list(zip(*columns)) if columns else [() for _ in self.rows]
+
+    def replay(self, execution):
+        data = execution.algorithm.data
+        kept = (list(data), execution.steps, execution.time)
+        try:
+            for row, steps in zip(self.rows, self.steps):
+                data[:] = _typed(row, self.kinds)
+                execution.steps = steps + 1
+                execution.time = self._time(execution, steps + 1)
+                yield
+        finally:
+            data[:], execution.steps, execution.time = kept
+
+    @staticmethod
+    def _time(execution, steps: int) -> float:
+        origin, done = execution._origin
+        return origin + (steps - done) * execution.step_size
+
+
+def _column(values: np.ndarray, kind: str) -> list:
+    if kind == "b":
+        return [v != 0.0 for v in values.tolist()]
+    if kind == "i":
+        return [int(v) for v in values.tolist()]
+    return values.tolist()
+
+
+def _typed(row: np.ndarray, kinds: list[str]) -> list:
+    return [(v != 0.0) if k == "b" else int(v) if k == "i" else v for v, k in zip(row.tolist(), kinds)]
+
+
+_PRELUDE = r"""
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdbool.h>
+#include <string.h>
+typedef void (*cotwin_mj_step)(const void *, void *);
+typedef int (*cotwin_do_step)(void *, double, double, int);
+"""
+
+_CACHE: dict[str, object] = {}
+
+
+def _compiled(source: str):
+    """The segment function of this source, compiled once per machine (cached by its hash)."""
+    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
+    if digest in _CACHE:
+        return _CACHE[digest]
+    lib = compile_library(source, "segment")
+    fn = lib.cotwin_segment
+    dptr = ctypes.POINTER(ctypes.c_double)
+    fn.argtypes = [ctypes.c_void_p, dptr, dptr, dptr, ctypes.c_int, ctypes.c_double, ctypes.c_longlong,
+                   ctypes.c_double, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int)]
+    fn.restype = ctypes.c_int
+    _CACHE[digest] = fn
+    return fn
+
+
+def compile_library(source: str, stem: str) -> ctypes.PyDLL:
+    """A C source built into a shared library once per machine (cached by its hash beside the IK
+    solutions, or in a temporary folder) and loaded with the GIL held in its calls; ValueError if it
+    cannot be built here."""
+    from ..pmodel.ikcache import cache_dir
+
+    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
+
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    if compiler is None:
+        raise ValueError("no C compiler (cc) on this machine")
+    folder = cache_dir()
+    folder = (folder / "native") if folder is not None else Path(tempfile.gettempdir()) / f"cotwin-native-{os.getuid()}"
+    target = folder / f"{stem}-{digest}.so"
+    if not target.is_file():
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(prefix="cotwin-cc-") as tmp:
+            path = Path(tmp) / f"{stem}.c"
+            path.write_text(source)
+            built = Path(tmp) / f"{stem}.so"
+            proc = subprocess.run([compiler, "-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off",
+                                   "-fno-fast-math", str(path), "-o", str(built), "-lm"],
+                                  capture_output=True, text=True, timeout=120)
+            if proc.returncode != 0 or not built.is_file():
+                raise ValueError(f"the native {stem} did not compile: {proc.stderr.strip()[:400]}")
+            staged = folder / f".{target.name}.{os.getpid()}"
+            shutil.copy(built, staged)
+            os.replace(staged, target)
+    return ctypes.PyDLL(str(target))  # the GIL held: an FMU's logger calls back into Python

@@ -1,0 +1,162 @@
+"""The native loop (cotwin.cosim.native): quiet stretches of steps made in C give the run the FMU path gives,
+byte for byte in the CSV, with the same outcomes and state; observers hear of every step; the CSV rows'
+text made in C (cotwin.cosim.rowtext) is repr's; where the loop does not apply, the run says why."""
+
+from __future__ import annotations
+
+import math
+import random
+import shutil
+import struct
+
+import numpy as np
+import pytest
+
+from cotwin.cosim.observers import Observer
+from cotwin.twin.assembly.build import build
+from cotwin.twin.assembly.run import load, run_twin
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    from conftest import EXAMPLES
+
+    twins = {name: load(EXAMPLES / "ur5e" / name) for name in ("cotwin.toml", "pick_place_project.toml")}
+    out = tmp_path_factory.mktemp("build")
+    build(twins["cotwin.toml"], out)
+    return twins, out
+
+
+class Seen(Observer):
+    """Every step's time, machine state and q0, as the observer is told of it."""
+
+    def simulation_initialized(self, execution) -> None:
+        self.steps = []
+        self.read = execution.reader([("{dmodel}.dmodel", "state"), ("{mapping}.mapping", "q0")])
+
+    def step_complete(self, execution) -> None:
+        self.steps.append((execution.steps, execution.time, *self.read()))
+
+
+def run(twin, built_dir, out, **options):
+    out.mkdir()
+    for name in ("dmodel.fmu", "build.json"):
+        shutil.copy(built_dir / name, out / name)
+    seen = Seen()
+    ran = run_twin(twin, out, plot=False, observers=[seen], **options)
+    return ran, (out / "outputs.csv").read_bytes(), (out / "state").read_bytes(), seen.steps
+
+
+@pytest.mark.parametrize("step", [0.1, 0.01, 0.001])
+@pytest.mark.parametrize("case, algorithm", [("paper", "jacobi"), ("paper", "gauss-seidel"),
+                                             ("pick-and-place", "gauss-seidel"), ("pick-and-place", "jacobi"),
+                                             ("random", "jacobi"), ("random", "gauss-seidel")])
+def test_the_native_loop_writes_the_csv_of_the_fmu_path_byte_for_byte(built, tmp_path, case, algorithm, step):
+    from conftest import FUZZ_SEED
+    from test_fused import random_plan
+
+    twins, built_dir = built
+    twin = {"paper": twins["cotwin.toml"], "pick-and-place": twins["pick_place_project.toml"],
+            "random": twins["cotwin.toml"].with_plan(random_plan(FUZZ_SEED))}[case]
+    end = 10.0 if case == "random" else None
+    fmu = run(twin, built_dir, tmp_path / "fmu", step=step, end=end, fused=False, algorithm=algorithm)
+    native = run(twin, built_dir, tmp_path / "native", step=step, end=end, algorithm=algorithm)
+    result = native[0].result
+    assert result.algorithm == algorithm
+    assert fmu[0].result.stepping == "step by step" and result.stepping == "fused"
+    assert result.native_steps > 0.8 * result.steps, result.describe_stepping()  # most steps are quiet
+    assert native[1] == fmu[1]  # the CSV
+    assert native[2] == fmu[2]  # the state left for a what-if
+    assert native[3] == fmu[3]  # every step told to an observer, with its time and values
+    assert [o.__dict__ for o in native[0].outcomes.outcomes] == [o.__dict__ for o in fmu[0].outcomes.outcomes]
+
+
+def test_the_run_says_how_many_steps_the_native_loop_made_and_why_not(built, tmp_path):
+    twins, built_dir = built
+    ran = run(twins["cotwin.toml"], built_dir, tmp_path / "jacobi", step=0.01)[0].result
+    assert "steps in the native loop" in ran.describe_stepping() and ran.native_why is None
+    ran = run(twins["cotwin.toml"], built_dir, tmp_path / "fmu", step=0.01, fused=False)[0].result
+    assert ran.native_steps == 0 and ran.describe_stepping() == "step by step"
+
+
+def test_a_unit_without_a_native_step_keeps_the_run_in_the_fused_loop(tmp_path):
+    from cotwin.cosim.algorithm import Jacobi
+    from cotwin.cosim.execution import Execution
+    from cotwin.cosim.system import System
+    from test_fused import Counter
+
+    unit = Counter().unit
+    execution = Execution(System.of([unit], [], log={unit.name: ["n"]}), Jacobi(), 0.1, fused=True)
+    result = execution.run(1.0)
+    assert result.steps == 10 and unit.values["n"] == 10 and result.native_steps == 0
+    assert "has no native step" in result.native_why and "{c}.c" in result.native_why
+
+
+def test_the_native_source_is_deterministic(built, tmp_path):
+    from cotwin.cosim.native import NativeLoop
+
+    twins, built_dir = built
+    sources = []
+    for k in range(2):
+        captured = []
+        original = NativeLoop._source
+
+        def spy(self):
+            text = original(self)
+            captured.append(text)
+            return text
+
+        NativeLoop._source = spy
+        try:
+            run(twins["cotwin.toml"], built_dir, tmp_path / f"run{k}", step=0.1)
+        finally:
+            NativeLoop._source = original
+        sources.append(captured[0])
+    assert sources[0] == sources[1] and "cotwin_segment" in sources[0]
+
+
+def reference(times, values, kinds) -> str:
+    """The rows as CSVWriter spells them from Python values (repr, true/false, round(t, 12))."""
+    lines = []
+    for t, row in zip(times, values):
+        cells = [("true" if v else "false") if k == "b" else repr(int(v)) if k == "i" else repr(v) for v, k in zip(row, kinds)]
+        lines.append(",".join([repr(round(t, 12)), *cells]) + "\n")
+    return "".join(lines)
+
+
+def test_the_rows_text_made_in_c_is_the_text_repr_makes():
+    from cotwin.cosim.rowtext import rows_text
+
+    rng = random.Random(7)
+
+    def number() -> float:
+        k = rng.random()
+        if k < 0.3:
+            return struct.unpack("d", struct.pack("Q", rng.getrandbits(64)))[0]  # any double, NaNs included
+        if k < 0.45:
+            return math.copysign(2.0 ** rng.randint(-1074, 1023), rng.choice([1, -1]))  # powers of two
+        if k < 0.65:
+            return round(rng.uniform(-1e3, 1e3), rng.randint(0, 17))
+        if k < 0.75:
+            return rng.choice([0.0, -0.0, math.inf, -math.inf, 1e16, 9.999999999999999e15, 1e-4, 9.9999e-5, 0.1])
+        return rng.uniform(-10, 10)
+
+    n = 20000
+    kinds = "rribrr"
+    values = []
+    for _ in range(n):
+        row = []
+        for kind in kinds:
+            row.append(number() if kind == "r" else float(rng.randint(-2 ** 40, 2 ** 40)) if kind == "i"
+                       else float(rng.random() < 0.5))
+        if rng.random() < 0.3 and values:
+            row[0] = values[-1][0]  # a value held from the row before (the text is remembered per column)
+        values.append(row)
+    times = [rng.choice([k * rng.choice([0.001, 0.01, 0.1, 0.0005, 1 / 3]), rng.uniform(0, 5000), 1e-9 * k,
+                         k * 0.001 + 20.0]) for k in range(n)]
+    rows = np.array(values)
+    text = rows_text(rows, list(range(len(kinds))), kinds, times)
+    assert text is not None, "no C compiler here"
+    assert text == reference(times, values, kinds)
+    # columns picked out of a wider row, in another order
+    assert rows_text(rows, [3, 0], "br", times[:]) == reference(times, [[r[3], r[0]] for r in values], "br")
