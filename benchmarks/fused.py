@@ -1,16 +1,18 @@
 """The twin at the physics limit (issue 23): where each communication step's time goes, and the twin's
 speed as a share of the same scene's physics alone, measured in this run.
 
-- A profile of the paper's 20 s experiment at steps 0.01 and 0.001 s (physics at 1 ms) in the fused loop
-  (cotwin.cosim.fused, what `cotwin run` uses), from inside the very run it describes: per step, each
-  unit's step (the d-model FMU, the command source, the mapping less the physics and the event report it
-  runs), the physics (mj_step), the mapping's event report (every input event's generated definition:
-  Mapping.report), the master's moves of values (the bound setters and getters), the CSV row, the other
-  observers, and the rest (the loop itself).
-- The 20 s experiment at steps 0.1, 0.01 and 0.001 s in the fused loop against physics alone (the scene's
-  20 000 mj_steps in one MuJoCo call): goals >= 0.95, >= 0.9 and >= 0.5 of its speed; the FMU path (the
-  master's step-by-step loop, `cotwin run --fmu-path`) beside it. A what-if of the paper's plan (goal
-  >= 0.5 of physics-only speed), both ways.
+- Two peers: MuJoCo alone stepping the scene with the arm at rest (the issue's peer: 20 000 mj_steps in one
+  call), and MuJoCo alone doing the twin's motion (the servos' set-points the twin wrote, one per control
+  period, replayed into the same scene in a C loop): the peer doing the same work as the twin's physics.
+  A moving arm costs MuJoCo more than one at rest (contacts and constraint iterations), so the goals are
+  judged against the same-motion peer; the share of the at-rest peer is printed beside.
+- A profile of the paper's 20 s experiment at steps 0.01 and 0.001 s (physics at 1 ms) as `cotwin run`
+  makes it: the native loop's C (cotwin.cosim.native: every unit's quiet step, with the physics given as
+  the same-motion peer's time), the CSV text of its rows, the steps made in Python (the fused loop, where
+  something changed), the observers told at the ends of stretches, and the rest.
+- The 20 s experiment at steps 0.1, 0.01 and 0.001 s against the same-motion peer: goals >= 0.95, >= 0.9
+  and >= 0.5 of its speed; the FMU path (the master's step-by-step loop, `cotwin run --fmu-path`) beside
+  it. A what-if of the paper's plan (goal >= 0.5 of physics-only speed), both ways.
 - The 384-hole sweep in one process, both ways in this run: forks restored plan after plan in the fused
   loop (cotwin.twin.services.whatif.Forks, what run_sweep does) against a fresh fork per what-if stepped by the
   master's loop (the way before issue 23; 44 s on this machine then): goal >= 5x, and the same answers.
@@ -26,20 +28,20 @@ import tempfile
 import time
 from pathlib import Path
 
-import mujoco
+import ctypes
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from cotwin.cosim.observers import CSVWriter, Observer  # noqa: E402
 from cotwin.twin.assembly.build import build  # noqa: E402
 from cotwin.twin.assembly.run import load, run_twin  # noqa: E402
-from cotwin.twin.assembly.system import MAPPING  # noqa: E402
 from cotwin.twin.analysis.sweep import grid, run_sweep, summary  # noqa: E402
 from cotwin.twin.services.whatif import predict  # noqa: E402
 from figures import figure, goal  # noqa: E402
-from twin import END, PhysicsClock, Stopwatch, physics_alone  # noqa: E402
+from twin import END, Stopwatch, physics_alone  # noqa: E402
 
 GOALS = {0.1: 0.95, 0.01: 0.9, 0.001: 0.5}  # share of physics-only speed, the issue's
 WHATIF_GOAL = 0.5  # a what-if of the paper's plan, share of physics-only speed (the issue's)
@@ -48,10 +50,10 @@ SWEEP_BEFORE = 44.0  # s, the 384-hole sweep in one process when issue 23 was fi
 
 
 class Timed:
-    """A callable counting the seconds spent in the one it wraps."""
+    """A callable counting the seconds spent in the one it wraps, and its calls."""
 
     def __init__(self, call):
-        self.call, self.seconds = call, 0.0
+        self.call, self.seconds, self.calls = call, 0.0, 0
 
     def __call__(self, *args):
         t0 = time.perf_counter()
@@ -59,69 +61,109 @@ class Timed:
             return self.call(*args)
         finally:
             self.seconds += time.perf_counter() - t0
+            self.calls += 1
 
 
-class Profiler(Observer):
-    """Wraps, once the run is initialised, every unit's step, the master's bound setters and getters and
-    the other observers' step_complete in timers (instance attributes the loop looks up each step)."""
-
-    def simulation_initialized(self, execution) -> None:
-        algorithm = execution.algorithm
-        self.units = {}
-        for unit in execution.system.units.values():
-            self.units[unit.name] = unit.step = Timed(unit.step)
-        self.moves = []
-        for k, write in enumerate(algorithm.writes):
-            if write is not None:
-                timed = Timed(write[0])
-                algorithm.writes[k] = (timed, write[1])
-                self.moves.append(timed)
-        for k, read in enumerate(algorithm.reads):
-            if read is not None:
-                timed = Timed(read[0])
-                algorithm.reads[k] = (timed, read[1])
-                self.moves.append(timed)
-        mapping = execution.system.units.get(MAPPING.name)
-        runtime = getattr(mapping, "mapping", None)  # the mapping runtime of an in-process mapping unit
-        self.report = None
-        self.events = {}
-        if runtime is not None:
-            self.report = runtime.report = Timed(runtime.report)
-            for name, event in runtime.events.items():
-                self.events[name] = event.occurs = Timed(event.occurs)
-        self.observers = {}
-        for o in execution.observers:
-            if o is not self:
-                self.observers[type(o).__name__] = o.step_complete = Timed(o.step_complete)
-        self.started = time.perf_counter()
-
-    def simulation_ended(self, execution, error) -> None:
-        self.seconds = time.perf_counter() - self.started
-        self.steps = execution.steps
+REPLAY = r"""
+typedef void (*step_fn)(const void *, void *);
+/* MuJoCo alone doing the twin's motion: per control period, the servos' set-points the twin wrote, then
+   the period's physics steps. */
+void cotwin_replay(step_fn step, const void *model, void *data, double *ctrl, const double *setpoints, int periods,
+                   int nu, int per) {
+    for (int p = 0; p < periods; p++) {
+        for (int k = 0; k < nu; k++) ctrl[k] = setpoints[(long)p * nu + k];
+        for (int k = 0; k < per; k++) step(model, data);
+    }
+}
+"""
 
 
-def profile(twin, build_dir: Path, folder: Path, step: float) -> tuple[dict[str, float], dict[str, float]]:
-    """Microseconds per communication step of each part of one 20 s run at this step, and of each of the
-    mapping's input events' definitions (inside its event report)."""
+def motion(twin, build_dir: Path, folder: Path) -> np.ndarray:
+    """The servos' set-points of the 20 s experiment, one row per control period (2 ms): the twin run at
+    one communication step per period, the set-points read after each step (written at its start)."""
+    from cotwin.mapping import endpoint as ep
+
     folder.mkdir(exist_ok=True)
     for name in ("dmodel.fmu", "build.json"):
         shutil.copy(build_dir / name, folder / name)
-    prof = Profiler()
-    with PhysicsClock() as physics:
-        run_twin(twin, folder, step=step, plot=False, observers=[prof])
-    per = lambda s: s / prof.steps * 1e6  # noqa: E731
-    report = prof.report.seconds if prof.report is not None else 0.0
-    units = {f"unit {name}: step" + (" less physics and event report" if name == MAPPING.name else ""):
-             t.seconds - (physics.seconds + report if name == MAPPING.name else 0.0) for name, t in prof.units.items()}
-    csv = sum(t.seconds for name, t in prof.observers.items() if name == CSVWriter.__name__)
-    others = sum(t.seconds for name, t in prof.observers.items() if name != CSVWriter.__name__)
-    moves = sum(t.seconds for t in prof.moves)
-    parts = {**units, "physics (mj_step, inside the mapping unit's step)": physics.seconds,
-             "mapping's event report (input events' conditions evaluated, inside its step)": report,
-             "master: values moved (setters, getters)": moves, "CSV row": csv, "other observers": others}
-    parts["master: the loop itself (rest)"] = prof.seconds - sum(parts.values())
-    events = {name: per(t.seconds) for name, t in prof.events.items()}
-    return {name: per(s) for name, s in parts.items()} | {"total": per(prof.seconds)}, events
+    rows = []
+    original = ep.SimulatedEndpoint.advance
+
+    def advance(self, dt):
+        original(self, dt)
+        rows.append(self.sim.controls.copy())
+
+    ep.SimulatedEndpoint.advance = advance
+    try:
+        run_twin(twin, folder, step=ep.CONTROL_PERIOD, plot=False, fused=False)
+    finally:
+        ep.SimulatedEndpoint.advance = original
+    return np.array(rows, dtype=np.float64)
+
+
+def physics_moving(twin, setpoints: np.ndarray) -> float:
+    """Seconds for the 20 s experiment's physics doing the twin's motion (its set-points replayed into the
+    same scene, the physics steps in one C loop): the peer doing the same work as the twin's physics."""
+    from cotwin.cosim.native import compile_library
+    from cotwin.mapping.endpoint import CONTROL_PERIOD
+    from cotwin.mapping.native import _mj_step
+    from cotwin.pmodel.simulator import PlatformSimulator
+
+    fn = compile_library(REPLAY, "replay").cotwin_replay
+    fn.restype = None
+    sim = PlatformSimulator(twin.models.tree, twin.models.scene)
+    per = int(round(CONTROL_PERIOD / sim.timestep))
+    periods = min(len(setpoints), int(round(END / CONTROL_PERIOD)))
+    flat = np.ascontiguousarray(setpoints[:periods])
+    assert flat.shape[1] == sim.model.nu
+    t0 = time.perf_counter()
+    fn(ctypes.c_void_p(_mj_step()), ctypes.c_void_p(sim.model._address), ctypes.c_void_p(sim.data._address),
+       ctypes.c_void_p(sim.data.ctrl.ctypes.data), ctypes.c_void_p(flat.ctypes.data), periods, sim.model.nu, per)
+    return time.perf_counter() - t0
+
+
+def profile(twin, build_dir: Path, folder: Path, step: float, physics: float) -> dict[str, float]:
+    """Microseconds per communication step of each part of one 20 s run at this step: the native loop's C
+    (every unit's quiet step, physics included; the physics given as the same-motion peer's share), the
+    CSV text of its rows, the steps made in Python (the fused loop: where something changed), observers
+    told at the ends of stretches and of repeats, and the rest."""
+    from cotwin.cosim import fused, native, rowtext
+
+    folder.mkdir(exist_ok=True)
+    for name in ("dmodel.fmu", "build.json"):
+        shutil.copy(build_dir / name, folder / name)
+    timers = {}
+    saved = (native._compiled, rowtext.rows_text, fused.FusedLoop.run, native.NativeLoop._tell)
+
+    def compiled(source):
+        timers["c"] = Timed(saved[0](source))
+        return timers["c"]
+
+    timers["text"] = Timed(saved[1])
+    timers["python"] = Timed(saved[2])
+    timers["told"] = Timed(saved[3])
+    native._compiled, rowtext.rows_text = compiled, timers["text"]
+    fused.FusedLoop.run = lambda self, *a: timers["python"](self, *a)
+    native.NativeLoop._tell = lambda self, *a: timers["told"](self, *a)
+    native._CACHE.clear()
+    watch = Stopwatch()
+    try:
+        ran = run_twin(twin, folder, step=step, plot=False, observers=[watch])
+    finally:
+        native._compiled, rowtext.rows_text, fused.FusedLoop.run, native.NativeLoop._tell = saved
+    steps = ran.result.steps
+    per = lambda s: s / steps * 1e6  # noqa: E731
+    c = timers["c"].seconds
+    parts = {"physics (the same-motion peer's time)": physics,
+             "the native loop's C less that physics (d-model, events, mirrors, slots)": c - physics,
+             "CSV text of the native loop's rows (C, repr's digits)": timers["text"].seconds,
+             "observers told of stretches (less the CSV text)": timers["told"].seconds - timers["text"].seconds,
+             f"steps made in Python (the fused loop: {timers['python'].calls} calls)": timers["python"].seconds}
+    parts["the rest (segments set up, slots moved, ...)"] = watch.seconds - sum(parts.values())
+    out = {name: per(s) for name, s in parts.items()}
+    out["total"] = per(watch.seconds)
+    out["native share of steps"] = ran.result.native_steps / steps
+    return out
 
 
 def experiment(twin, build_dir: Path, folder: Path, step: float, fused: bool = True) -> float:
@@ -144,36 +186,39 @@ def main() -> None:
         os.environ["COTWIN_CACHE"] = str(out / "cache")
         twin = load(project)
         build(twin, out / "build")
-        experiment(twin, out / "build", out / "warmup", 0.1)  # IK solutions cached, imports warm
+        experiment(twin, out / "build", out / "warmup", 0.1)  # IK solutions cached, imports warm, C built
+        setpoints = motion(twin, out / "build", out / "motion")
+        rest = min(physics_alone(twin) for _ in range(3))
+        moving = min(physics_moving(twin, setpoints) for _ in range(3))
+        print(f"peers: physics alone at rest {rest * 1e3:.1f} ms for the 20 s ({END / rest:.1f}x real time); "
+              f"physics doing the twin's motion (its set-points replayed) {moving * 1e3:.1f} ms ({END / moving:.1f}x): "
+              f"a moving arm costs MuJoCo {100 * (moving / rest - 1):.0f}% more than one at rest")
+        figure("physics alone doing the twin's motion (set-points replayed in C)", moving, "s",
+               peer="physics alone at rest (one mj_step call)", peer_value=rest)
         for step in (0.01, 0.001):
-            prof, events = profile(twin, out / "build", out / f"profile{step}", step)
-            total = prof.pop("total")
+            prof = profile(twin, out / "build", out / f"profile{step}", step, moving)
+            total, share = prof.pop("total"), prof.pop("native share of steps")
             for name, us in prof.items():
                 figure(f"profile, step {step:g} s: {name}", us, "us/step", share=us / total)
-            print(f"profile of the 20 s experiment at step {step:g} s (physics 1 ms), {total:.1f} us per step "
-                  "(timers included): " + "; ".join(f"{name} {us:.1f} us ({100 * us / total:.0f}%)"
-                                                    for name, us in prof.items()))
-            costly = sorted(events.items(), key=lambda item: -item[1])
-            for name, us in costly:
-                figure(f"profile, step {step:g} s: input event {name}'s definition", us, "us/step")
-            print(f"  of the event report, per input event (us/step): "
-                  + ", ".join(f"{name} {us:.1f}" for name, us in costly))
-        limit = min(physics_alone(twin) for _ in range(3))
+            print(f"profile of the 20 s experiment at step {step:g} s (physics 1 ms), {total:.1f} us per step, "
+                  f"{100 * share:.1f}% of the steps in the native loop: " +
+                  "; ".join(f"{name} {us:.1f} us ({100 * us / total:.0f}%)" for name, us in prof.items()))
         for step, target in GOALS.items():
             stepping = fmu = 1e9
             for _ in range(3 if step > 0.001 else 2):  # alternating, so that both see the machine's load alike
                 stepping = min(stepping, experiment(twin, out / "build", out / f"run{step}", step))
                 fmu = min(fmu, experiment(twin, out / "build", out / f"fmu{step}", step, fused=False))
-            ratio = limit / stepping
-            figure(f"20 s experiment, step {step:g} s, fused loop: real-time factor", END / stepping, "x",
-                   peer="physics alone (one mj_step call)", peer_value=END / limit, fmu_path=END / fmu)
-            print(f"20 s experiment, step {step:g} s: fused loop real-time factor {END / stepping:.1f}x "
-                  f"({stepping / (END / step) * 1e6:.1f} us/step), FMU path {END / fmu:.1f}x "
-                  f"({fmu / (END / step) * 1e6:.1f} us/step), peer physics alone {END / limit:.1f}x; share of "
-                  f"physics-only speed {ratio:.2f} (FMU path {limit / fmu:.2f}) "
+            ratio = moving / stepping
+            figure(f"20 s experiment, step {step:g} s, fused and native loops: real-time factor", END / stepping, "x",
+                   peer="physics alone doing the twin's motion", peer_value=END / moving, fmu_path=END / fmu,
+                   physics_at_rest=END / rest, share_of_physics_at_rest=rest / stepping)
+            print(f"20 s experiment, step {step:g} s: real-time factor {END / stepping:.1f}x "
+                  f"({stepping / (END / step) * 1e6:.1f} us/step), FMU path {END / fmu:.1f}x; peers: physics doing the "
+                  f"same motion {END / moving:.1f}x, physics at rest {END / rest:.1f}x; share of physics-only speed "
+                  f"{ratio:.2f} (at rest: {rest / stepping:.2f}; FMU path {moving / fmu:.2f}) "
                   f"({goal(f'share of physics-only speed at step {step:g} s', ratio, target)})")
 
-        whatif(twin, out, limit)
+        whatif(twin, out, moving)
         sweep(twin, out)
 
 

@@ -1,6 +1,7 @@
 """The native loop (cotwin.cosim.native): quiet stretches of steps made in C give the run the FMU path gives,
 byte for byte in the CSV, with the same outcomes and state; observers hear of every step; the CSV rows'
-text made in C (cotwin.cosim.rowtext) is repr's; where the loop does not apply, the run says why."""
+text made in C (cotwin.cosim.rowtext: Grisu3, else Python's own function) is repr's; where the loop does not
+apply, the run says why."""
 
 from __future__ import annotations
 
@@ -158,5 +159,11 @@ def test_the_rows_text_made_in_c_is_the_text_repr_makes():
     text = rows_text(rows, list(range(len(kinds))), kinds, times)
     assert text is not None, "no C compiler here"
     assert text == reference(times, values, kinds)
+    # every power of two, the extremes and the doubles next to them (the boundaries Grisu3 must weigh)
+    edges = [math.copysign(2.0 ** k, sign) for k in range(-1074, 1024) for sign in (1, -1)]
+    edges += [math.nextafter(x, 0.0) for x in edges] + [math.nextafter(x, math.copysign(math.inf, x)) for x in edges]
+    edges += [5e-324, 2.2250738585072014e-308, 1.7976931348623157e308, 9007199254740993.0, 1e22, 1e23, 0.3]
+    column = np.array(edges).reshape(-1, 1)
+    assert rows_text(column, [0], "r", [0.0] * len(edges)) == reference([0.0] * len(edges), column.tolist(), "r")
     # columns picked out of a wider row, in another order
     assert rows_text(rows, [3, 0], "br", times[:]) == reference(times, [[r[3], r[0]] for r in values], "br")

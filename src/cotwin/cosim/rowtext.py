@@ -2,10 +2,13 @@
 
 CSVWriter writes a step's time rounded to 12 digits and each value as Python's repr spells it (booleans
 true/false). Formatting the native loop's thousands of rows through Python tuples cost more than the
-physics; this function formats them in C with Python's own float-to-text function
-(PyOS_double_to_string: repr's shortest round-trip digits, and round()'s correctly rounded digits),
-passed by address, so the text is the one repr gives, byte for byte. None where it cannot be built here
-(then CSVWriter formats the rows itself).
+physics; this function formats them in C: a real by Grisu3 (the shortest digits that read back as the
+double, the closest of them, laid out as repr lays them out) where Grisu3 is certain, else by Python's own
+float-to-text function (PyOS_double_to_string, repr's), passed by address; a time by exact integer
+arithmetic where that is exact, else as round() and repr make it. So the text is the one repr gives, byte
+for byte (tests/test_native.py checks every power of two and its neighbours, and random doubles). A
+column's text is reused while its value holds still. None where it cannot be built here (then CSVWriter
+formats the rows itself).
 """
 
 from __future__ import annotations
@@ -14,8 +17,9 @@ import ctypes
 
 import numpy as np
 
-SOURCE = r"""
+_TEMPLATE = r"""
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 #include <stddef.h>
@@ -32,7 +36,12 @@ static int put(char *out, size_t cap, size_t *at, const char *text, size_t n) {
     return 1;
 }
 
+@GRISU@
+
 static int real(char *out, size_t cap, size_t *at, double value, to_text text, release free_text) {
+    char fast[40];
+    int n = shortest(value, fast);
+    if (n > 0) return put(out, cap, at, fast, (size_t)n);
     char *s = text(value, 'r', 0, 2 /* Py_DTSF_ADD_DOT_0 */, NULL);
     if (!s) return 0;
     int ok = put(out, cap, at, s, strlen(s));
@@ -47,6 +56,8 @@ static int real_memo(char *out, size_t cap, size_t *at, double value, memo *m, t
     unsigned long long bits;
     memcpy(&bits, &value, sizeof bits);
     if (m->n > 0 && m->bits == bits) return put(out, cap, at, m->text, (size_t)m->n);
+    int k = shortest(value, m->text);
+    if (k > 0) { m->n = k; m->bits = bits; return put(out, cap, at, m->text, (size_t)k); }
     char *s = text(value, 'r', 0, 2 /* Py_DTSF_ADD_DOT_0 */, NULL);
     if (!s) return 0;
     size_t n = strlen(s);
@@ -111,6 +122,181 @@ size_t cotwin_rows_text(const double *rows, int nrows, int stride, const int *sl
     return at;
 }
 """
+
+_GRISU = r"""
+/* repr's text of a double without Python, where that is certain: Grisu3 (Loitsch, "Printing floating-point
+   numbers quickly and accurately with integers", PLDI 2010) finds the shortest digits that read back as the
+   double and the closest such, or says it cannot be sure (about 0.5% of doubles), and the text is laid
+   out as repr lays it out. Returns the length, 0 when the caller must ask Python. */
+typedef struct { uint64_t f; int e; } diy;
+
+static const uint64_t POWER_F[] = {@POWER_F@};
+static const int16_t POWER_E[] = {@POWER_E@};
+#define POWER_KMIN (@KMIN@)
+#define POWER_COUNT (@COUNT@)
+
+static diy diy_mul(diy a, diy b) {
+    unsigned __int128 p = (unsigned __int128)a.f * b.f;
+    uint64_t high = (uint64_t)(p >> 64);
+    if ((uint64_t)p & (1ULL << 63)) high++;  /* rounded half up at bit 64 */
+    diy r = {high, a.e + b.e + 64};
+    return r;
+}
+
+static diy diy_normalized(diy a) {
+    int shift = __builtin_clzll(a.f);
+    a.f <<= shift;
+    a.e -= shift;
+    return a;
+}
+
+static int round_weed(char *buffer, int length, uint64_t distance_too_high_w, uint64_t unsafe_interval, uint64_t rest,
+                      uint64_t ten_kappa, uint64_t unit) {
+    uint64_t small_distance = distance_too_high_w - unit;
+    uint64_t big_distance = distance_too_high_w + unit;
+    while (rest < small_distance && unsafe_interval - rest >= ten_kappa &&
+           (rest + ten_kappa < small_distance || small_distance - rest >= rest + ten_kappa - small_distance)) {
+        buffer[length - 1]--;
+        rest += ten_kappa;
+    }
+    if (rest < big_distance && unsafe_interval - rest >= ten_kappa &&
+        (rest + ten_kappa < big_distance || big_distance - rest > rest + ten_kappa - big_distance)) return 0;
+    return (2 * unit <= rest) && (rest <= unsafe_interval - 4 * unit);
+}
+
+static int digit_gen(diy low, diy w, diy high, char *buffer, int *length, int *kappa) {
+    uint64_t unit = 1;
+    diy too_low = {low.f - unit, low.e}, too_high = {high.f + unit, high.e};
+    uint64_t unsafe_interval = too_high.f - too_low.f;
+    int shift = -w.e;
+    uint64_t one = 1ULL << shift;
+    uint32_t integrals = (uint32_t)(too_high.f >> shift);
+    uint64_t fractionals = too_high.f & (one - 1);
+    uint32_t divisor = 1;
+    int digits = 1;
+    while (digits < 10 && (uint64_t)divisor * 10 <= integrals) { divisor *= 10; digits++; }
+    if (integrals == 0) { divisor = 1; digits = 0; }
+    *kappa = digits;
+    *length = 0;
+    while (*kappa > 0) {
+        uint32_t digit = integrals / divisor;
+        buffer[(*length)++] = (char)('0' + digit);
+        integrals %= divisor;
+        (*kappa)--;
+        uint64_t rest = ((uint64_t)integrals << shift) + fractionals;
+        if (rest < unsafe_interval)
+            return round_weed(buffer, *length, too_high.f - w.f, unsafe_interval, rest, (uint64_t)divisor << shift, unit);
+        divisor /= 10;
+    }
+    for (;;) {
+        fractionals *= 10;
+        unit *= 10;
+        unsafe_interval *= 10;
+        buffer[(*length)++] = (char)('0' + (int)(fractionals >> shift));
+        fractionals &= one - 1;
+        (*kappa)--;
+        if (fractionals < unsafe_interval)
+            return round_weed(buffer, *length, (too_high.f - w.f) * unit, unsafe_interval, fractionals, one, unit);
+        if (*length >= 18) return 0;
+    }
+}
+
+static int shortest(double value, char *out) {
+    uint64_t bits;
+    memcpy(&bits, &value, sizeof bits);
+    int negative = (int)(bits >> 63);
+    int biased = (int)((bits >> 52) & 0x7FF);
+    uint64_t fraction = bits & ((1ULL << 52) - 1);
+    if (biased == 0x7FF || (biased == 0 && fraction == 0)) return 0;  /* inf, nan, zeros: Python says */
+    uint64_t f = biased ? fraction | (1ULL << 52) : fraction;
+    int e = biased ? biased - 1075 : -1074;
+    diy w = diy_normalized((diy){f, e});
+    diy plus = diy_normalized((diy){(f << 1) + 1, e - 1});
+    diy minus = (fraction == 0 && biased > 1) ? (diy){(f << 2) - 1, e - 2} : (diy){(f << 1) - 1, e - 1};
+    minus.f <<= minus.e - plus.e;
+    minus.e = plus.e;
+    /* 10^K with -60 <= its exponent + w.e + 64 <= -32 */
+    int K = (int)ceil((-60 - (w.e + 64) + 63) * 0.30102999566398114);
+    for (int tries = 0; tries < 4; tries++) {
+        int k = K - POWER_KMIN;
+        if (k < 0 || k >= POWER_COUNT) return 0;
+        int sum = POWER_E[k] + w.e + 64;
+        if (sum < -60) K++; else if (sum > -32) K--; else break;
+    }
+    int k = K - POWER_KMIN;
+    if (k < 0 || k >= POWER_COUNT) return 0;
+    int sum = POWER_E[k] + w.e + 64;
+    if (sum < -60 || sum > -32) return 0;
+    diy c = {POWER_F[k], POWER_E[k]};
+    char digits[24];
+    int length, kappa;
+    if (!digit_gen(diy_mul(minus, c), diy_mul(w, c), diy_mul(plus, c), digits, &length, &kappa)) return 0;
+    while (length > 1 && digits[length - 1] == '0') { length--; kappa++; }
+    if (length < 1 || digits[0] == '0') return 0;
+    int point = length + kappa - K;  /* value = 0.d1d2...dn x 10^point */
+    int at = 0;
+    if (negative) out[at++] = '-';
+    if (point <= -4 || point > 16) {  /* repr's exponent notation: d.ddde-05, de+16 */
+        out[at++] = digits[0];
+        if (length > 1) { out[at++] = '.'; memcpy(out + at, digits + 1, (size_t)(length - 1)); at += length - 1; }
+        int x = point - 1;
+        at += snprintf(out + at, 8, "e%c%02d", x < 0 ? '-' : '+', x < 0 ? -x : x);
+    } else if (point <= 0) {
+        out[at++] = '0'; out[at++] = '.';
+        for (int z = 0; z < -point; z++) out[at++] = '0';
+        memcpy(out + at, digits, (size_t)length); at += length;
+    } else if (point >= length) {
+        memcpy(out + at, digits, (size_t)length); at += length;
+        for (int z = 0; z < point - length; z++) out[at++] = '0';
+        out[at++] = '.'; out[at++] = '0';
+    } else {
+        memcpy(out + at, digits, (size_t)point); at += point;
+        out[at++] = '.';
+        memcpy(out + at, digits + point, (size_t)(length - point)); at += length - point;
+    }
+    out[at] = 0;
+    return at;
+}
+"""
+
+
+def _powers(kmin: int = -348, kmax: int = 341) -> tuple[list[int], list[int]]:
+    """10^K for K in [kmin, kmax] as 64-bit significands f (bit 63 set) and exponents e, f x 2^e rounded to
+    the nearest: exact integer arithmetic, so the table is the same on every machine."""
+    fs, es = [], []
+    for k in range(kmin, kmax + 1):
+        if k >= 0:
+            n, d = 10 ** k, 1
+        else:
+            n, d = 1, 10 ** -k
+        e = (n.bit_length() - d.bit_length()) - 64  # f = n / d / 2^e, adjusted into [2^63, 2^64)
+        while True:
+            num, den = (n, d << e) if e >= 0 else (n << -e, d)
+            f, r = divmod(num, den)
+            if f >= 1 << 64:
+                e += 1
+                continue
+            if f < 1 << 63:
+                e -= 1
+                continue
+            break
+        if 2 * r > den or (2 * r == den and f & 1):
+            f += 1
+            if f == 1 << 64:
+                f, e = 1 << 63, e + 1
+        fs.append(f)
+        es.append(e)
+    return fs, es
+
+
+def _source() -> str:
+    fs, es = _powers()
+    grisu = (_GRISU.replace("@POWER_F@", ", ".join(f"{f}ULL" for f in fs)).replace("@POWER_E@", ", ".join(map(str, es)))
+             .replace("@KMIN@", "-348").replace("@COUNT@", str(len(fs))))
+    return _TEMPLATE.replace("@GRISU@", grisu)
+
+
+SOURCE = _source()
 
 _FN: object = None
 MEMO = 64  # bytes of a column's memo (the C struct's 8 + 4 + 40, padded) with room to spare
