@@ -37,8 +37,10 @@ from typing import Callable
 import numpy as np
 
 from .algorithm import UNSET, GaussSeidel, Jacobi
+from .observers import Observer, hears_repeats
 
 QUIET_AFTER = 1  # Python steps after a segment ended on a change, before the next may start
+MAX_SEGMENT = 2000  # steps of one segment at most: its rows' memory bounded, Ctrl-C heard between segments
 
 
 @dataclass
@@ -97,6 +99,9 @@ def why_not(execution) -> str | None:
         part = getattr(type(unit), "native_part", None)
         if part is None:
             return f"unit {unit.name} ({type(unit).__name__}) has no native step"
+    for observer in execution.observers:
+        if not hears_repeats(observer):
+            return f"observer {type(observer).__name__} must see every step as it is made (it defines no `repeated`)"
     return None
 
 
@@ -188,9 +193,13 @@ class NativeLoop:
 
     def quiet(self, n: int) -> int:
         """How many of the next n steps every unit can make natively now."""
-        data = self.execution.algorithm.data
-        if any(v is UNSET for v in data):
+        execution = self.execution
+        if any(v is UNSET for v in execution.algorithm.data):
             return 0
+        for observer in execution.observers:
+            bound = observer.quiet_for(execution)
+            if bound is not None:
+                n = min(n, bound)
         for part in self.parts:
             n = min(n, part.quiet(n))
             if n <= 0:
@@ -201,7 +210,7 @@ class NativeLoop:
         """Up to n steps natively (fewer: see the module doc); the steps made, observers told. 0 when the
         system is not quiet now (the caller makes a step in Python). A step a unit paused (Gauss-Seidel: an
         operation called in it) is finished in Python, from that unit on, and counted."""
-        n = self.quiet(n)
+        n = self.quiet(min(n, MAX_SEGMENT))
         if n <= 0:
             return 0
         execution, algorithm = self.execution, self.execution.algorithm
@@ -286,7 +295,8 @@ class NativeLoop:
         if len(repeats):
             batch = StepRows(execution, repeats, self.kinds)
             for o in execution.observers:
-                o.repeated(execution, batch)
+                if type(o).repeated is not Observer.repeated:  # the others have nothing to do after a step
+                    o.repeated(execution, batch)
         for o in execution.observers:
             o.step_complete(execution)
 
@@ -361,7 +371,7 @@ def _compiled(source: str):
     digest = hashlib.sha256(source.encode()).hexdigest()[:20]
     if digest in _CACHE:
         return _CACHE[digest]
-    lib = compile_library(source, "segment")
+    lib = compile_library(source, "segment", keep_gil=False)  # other threads (a dashboard, a broker) run meanwhile
     fn = lib.cotwin_segment
     dptr = ctypes.POINTER(ctypes.c_double)
     fn.argtypes = [ctypes.c_void_p, dptr, dptr, dptr, ctypes.c_int, ctypes.c_double, ctypes.c_longlong,
@@ -371,9 +381,10 @@ def _compiled(source: str):
     return fn
 
 
-def compile_library(source: str, stem: str) -> ctypes.PyDLL:
+def compile_library(source: str, stem: str, keep_gil: bool = True) -> ctypes.CDLL:
     """A C source built into a shared library once per machine (cached by its hash beside the IK
-    solutions, or in a temporary folder) and loaded with the GIL held in its calls; ValueError if it
+    solutions, or in a temporary folder) and loaded; its calls hold the GIL (`keep_gil`: they call Python's
+    C API) or release it (a callback into Python, e.g. an FMU's logger, takes it back); ValueError if it
     cannot be built here."""
     from ..pmodel.ikcache import cache_dir
 
@@ -399,4 +410,4 @@ def compile_library(source: str, stem: str) -> ctypes.PyDLL:
             staged = folder / f".{target.name}.{os.getpid()}"
             shutil.copy(built, staged)
             os.replace(staged, target)
-    return ctypes.PyDLL(str(target))  # the GIL held: an FMU's logger calls back into Python
+    return (ctypes.PyDLL if keep_gil else ctypes.CDLL)(str(target))

@@ -28,14 +28,25 @@ class Observer:
 
     def repeated(self, execution, rows) -> None:
         """Steps the native loop made at once in which only continuous values changed (cotwin.cosim.native:
-        `rows` is a StepRows); told before the last step of the stretch, which comes to `step_complete`. By
-        default each is told to `step_complete` in turn, as the current step."""
-        if type(self).step_complete is Observer.step_complete:
-            return
-        for _ in rows.replay(execution):
-            self.step_complete(execution)
+        `rows` is a StepRows of the values on the connections); told before the last step of the stretch,
+        which comes to `step_complete` as it is made. An observer that does not define it must see every
+        step as it is made (it may read a unit's state, save the execution's ...): then the native loop does
+        not run. One that reads only the values may tell itself each row in turn (`rows.replay`)."""
+        raise NotImplementedError
+
+    def quiet_for(self, execution) -> int | None:
+        """How many steps from now the native loop may make, the last of them told to `step_complete` as it is
+        made (the others to `repeated`); None: any number."""
+        return None
 
     def simulation_ended(self, execution, error: BaseException | None) -> None: ...
+
+
+def hears_repeats(observer: Observer) -> bool:
+    """Whether the observer can be told of the native loop's repeated steps at once: it defines `repeated`,
+    or it has nothing to do after a step."""
+    kind = type(observer)
+    return kind.repeated is not Observer.repeated or kind.step_complete is Observer.step_complete
 
 
 def format_value(value) -> str:
@@ -267,6 +278,10 @@ class RealTimePacer(Observer, Pacer):
     def step_complete(self, execution) -> None:
         self.wait(execution.time)
 
+    def repeated(self, execution, rows) -> None:
+        for time in rows.times:  # each step waits for its own time
+            self.wait(time)
+
 
 class LiveFeed(Observer):
     """Publishes a sample {time, wall, values} per step to subscribers' bounded queues, never blocking
@@ -294,6 +309,10 @@ class LiveFeed(Observer):
     def step_complete(self, execution) -> None:
         if execution.steps % self.every == 0:
             self._publish(execution)
+
+    def repeated(self, execution, rows) -> None:
+        for _ in rows.replay(execution):  # it reads only the values on the connections
+            self.step_complete(execution)
 
     def _publish(self, execution) -> None:
         if not self.subscribers:

@@ -18,6 +18,9 @@ from ..robosim import syntax as s
 from .runtime import Mapping, _MappingNames
 
 
+MAX_PHYSICS = 20000  # physics steps of one native segment at most (Ctrl-C is heard between segments)
+
+
 class Unsupported(Exception):
     """A form the C spelling does not cover (the reason)."""
 
@@ -245,6 +248,7 @@ def quiet_step(unit, execution, make_part, feeds: list[tuple[str, int]], out: di
     state = {}
 
     def quiet(n: int) -> int:
+        n = min(n, max(1, MAX_PHYSICS // max(1, steps_per)))  # a segment of at most about a tenth of a second
         if mapping.pending or mapping.asked or (jacobi and any(data[i] is True for i in op_slots)):
             return 0
         segment = endpoint.segment

@@ -199,7 +199,8 @@ class CommandLedger(Observer):
         """Steps in which no state, call or event changed: each would find what the step before found (a
         command taken, done or stopped is decided at a change), unless a command applied waits to be read."""
         if self._waiting:
-            super().repeated(execution, rows)
+            for _ in rows.replay(execution):  # it reads only the values on the connections
+                self.step_complete(execution)
 
     def resting(self, states) -> bool:
         return all(index == self.rest[port] for (port, _), index in zip(self._states, states))

@@ -79,20 +79,17 @@ class WaitWatch(Observer):
             if idle == self.patience:
                 self._judge(m, leaf, entered, execution.time)
 
+    def quiet_for(self, execution) -> int | None:
+        """A machine not yet judged is judged `patience` idle steps after it entered its state: that step
+        must be made as the observer sees it (it asks the mapping, whose state is the step's)."""
+        waiting = [self.patience - idle for _, _, idle in self._since if idle < self.patience]
+        return min(waiting) if waiting and self.mapping is not None else None
+
     def repeated(self, execution, rows) -> None:
         """Steps in which no state changed and nothing was called: each machine idles one more step per row
-        (those not yet judged are told step by step, so that a judgement falls at its own step)."""
-        if self.mapping is None:
-            return
-        told = 0
-        if any(idle < self.patience for _, _, idle in self._since):
-            for _ in rows.replay(execution):
-                self.step_complete(execution)
-                told += 1
-                if all(idle >= self.patience for _, _, idle in self._since):
-                    break
-        rest = len(rows) - told
-        self._since = [(leaf, entered, idle + rest) for leaf, entered, idle in self._since]
+        (no judgement falls among them: see quiet_for)."""
+        if self.mapping is not None:
+            self._since = [(leaf, entered, idle + len(rows)) for leaf, entered, idle in self._since]
 
     def _judge(self, m: int, leaf, entered: float, now: float) -> None:
         wait = self.waits.get((m, leaf)) if isinstance(leaf, int) else None
