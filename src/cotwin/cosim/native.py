@@ -302,20 +302,28 @@ class NativeLoop:
 
 
 class StepRows:
-    """Steps an observer hears of at once: `times`, `steps` and the slots after each (`rows`, doubles);
-    `replay` makes each the execution's current step in turn (values typed as the ports hold them), and
-    puts the current one back after."""
+    """Steps an observer hears of at once: the slots after each (`rows`, doubles), each row's `steps` (its
+    start index) and `times` (its end), counted as the execution counts them (`counted`: origin, the first
+    row's steps since it, the step size); `replay` makes each the execution's current step in turn (values
+    typed as the ports hold them), and puts the current one back after."""
 
     def __init__(self, execution, rows: np.ndarray, kinds: list[str]):
         self.rows, self.kinds = rows, kinds
-        n = len(rows)
         origin, done = execution._origin
-        current = execution.steps - 1  # the start index of the current step; the rows are the steps before it
-        self.steps = list(range(current - n, current))  # each row's step index (its start)
-        self.times = [origin + (s + 1 - done) * execution.step_size for s in self.steps]  # each row's time (its end)
+        self.first = execution.steps - 1 - len(rows)  # the rows are the steps before the current one
+        self.counted = (origin, self.first + 1 - done, execution.step_size)
 
     def __len__(self) -> int:
         return len(self.rows)
+
+    @property
+    def steps(self) -> range:
+        return range(self.first, self.first + len(self.rows))
+
+    @property
+    def times(self) -> list[float]:
+        origin, n, h = self.counted
+        return [origin + (n + k) * h for k in range(len(self.rows))]
 
     def values(self, slots: list[int]) -> list[tuple]:
         """The rows' values at these slots, typed, one tuple per row."""
@@ -327,18 +335,12 @@ class StepRows:
         data = execution.algorithm.data
         kept = (list(data), execution.steps, execution.time)
         try:
-            for row, steps in zip(self.rows, self.steps):
+            for row, steps, time in zip(self.rows, self.steps, self.times):
                 data[:] = _typed(row, self.kinds)
-                execution.steps = steps + 1
-                execution.time = self._time(execution, steps + 1)
+                execution.steps, execution.time = steps + 1, time
                 yield
         finally:
             data[:], execution.steps, execution.time = kept
-
-    @staticmethod
-    def _time(execution, steps: int) -> float:
-        origin, done = execution._origin
-        return origin + (steps - done) * execution.step_size
 
 
 def _column(values: np.ndarray, kind: str) -> list:

@@ -126,7 +126,7 @@ class CSVWriter(Observer):
         from .rowtext import rows_text
 
         slots = self._slots if self._slots is not None else self._slot_list(execution)
-        text = rows_text(rows.rows, slots, "".join(rows.kinds[i] for i in slots), rows.times)
+        text = rows_text(rows.rows, slots, "".join(rows.kinds[i] for i in slots), counted=rows.counted)
         if text is None:  # no C here: as step_complete holds them
             self._rows.extend((round(t, 12), *values) for t, values in zip(rows.times, rows.values(slots)))
         else:

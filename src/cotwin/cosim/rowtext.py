@@ -14,6 +14,7 @@ formats the rows itself).
 from __future__ import annotations
 
 import ctypes
+import threading
 
 import numpy as np
 
@@ -88,17 +89,19 @@ static int time_text(double t, char *buffer) {
 /* rows: nrows x stride doubles; the columns' slots and kinds ('r', 'i', 'b'); times: each row's time.
    Returns the bytes written, or (size_t)-1 when cap was too small or text failed. */
 size_t cotwin_rows_text(const double *rows, int nrows, int stride, const int *slots, const char *kinds, int ncols,
-                        const double *times, char *out, size_t cap, to_text text, to_double number, release free_text,
-                        void *memory) {
+                        const double *times, double origin, long long first, double step, char *out, size_t cap,
+                        to_text text, to_double number, release free_text, void *memory) {
     size_t at = 0;
     char buffer[48];
     memo *memos = (memo *)memory;  /* one per column, zeroed by the caller */
     for (int r = 0; r < nrows; r++) {
-        int n = time_text(times[r], buffer);
+        /* the row's time: given, or origin + (first + r) * step as the execution counts it */
+        double time = times ? times[r] : origin + (double)(first + r) * step;
+        int n = time_text(time, buffer);
         if (n > 0) {
             if (!put(out, cap, &at, buffer, (size_t)n)) return (size_t)-1;
         } else {
-            char *rounded = text(times[r], 'f', 12, 0, NULL);  /* round(t, 12): correctly rounded, read back */
+            char *rounded = text(time, 'f', 12, 0, NULL);  /* round(t, 12): correctly rounded, read back */
             if (!rounded) return (size_t)-1;
             double t = number(rounded, NULL, NULL);
             free_text(rounded);
@@ -111,8 +114,14 @@ size_t cotwin_rows_text(const double *rows, int nrows, int stride, const int *sl
             if (kinds[c] == 'b') {
                 if (!(v != 0.0 ? put(out, cap, &at, "true", 4) : put(out, cap, &at, "false", 5))) return (size_t)-1;
             } else if (kinds[c] == 'i') {
-                int n = snprintf(buffer, sizeof buffer, "%lld", (long long)v);
-                if (!put(out, cap, &at, buffer, (size_t)n)) return (size_t)-1;
+                memo *m = &memos[c];
+                unsigned long long bits;
+                memcpy(&bits, &v, sizeof bits);
+                if (!(m->n > 0 && m->bits == bits)) {
+                    m->n = snprintf(m->text, sizeof m->text, "%lld", (long long)v);
+                    m->bits = bits;
+                }
+                if (!put(out, cap, &at, m->text, (size_t)m->n)) return (size_t)-1;
             } else if (!real_memo(out, cap, &at, v, &memos[c], text, free_text)) {
                 return (size_t)-1;
             }
@@ -314,8 +323,8 @@ def _function():
             return None
         fn = lib.cotwin_rows_text
         fn.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int,
-                       ctypes.c_void_p, ctypes.c_char_p, ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p,
-                       ctypes.c_void_p, ctypes.c_void_p]
+                       ctypes.c_void_p, ctypes.c_double, ctypes.c_longlong, ctypes.c_double, ctypes.c_char_p,
+                       ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
         fn.restype = ctypes.c_size_t
         api = ctypes.pythonapi
         addresses = [ctypes.cast(getattr(api, name), ctypes.c_void_p).value
@@ -324,21 +333,36 @@ def _function():
     return _FN or None
 
 
-def rows_text(rows: np.ndarray, slots: list[int], kinds: str, times: list[float]) -> str | None:
-    """The rows (doubles, the columns at `slots` of kinds 'r'/'i'/'b') as CSV lines after each row's time;
-    None where the C function cannot be built here."""
+def rows_text(rows: np.ndarray, slots: list[int], kinds: str, times: list[float] | None = None,
+              counted: tuple[float, int, float] | None = None) -> str | None:
+    """The rows (doubles, the columns at `slots` of kinds 'r'/'i'/'b') as CSV lines after each row's time:
+    `times`, or `counted` = (origin, n, step): row r's time is origin + (n + r) * step, as an execution counts
+    its steps. None where the C function cannot be built here."""
     function = _function()
     if function is None:
         return None
     fn, (text, number, release) = function
     rows = np.ascontiguousarray(rows, dtype=np.float64)
     columns = np.array(slots, dtype=np.intc)
-    at = np.array(times, dtype=np.float64)
+    at = np.array(times, dtype=np.float64) if times is not None else None
+    origin, first, step = counted if counted is not None else (0.0, 0, 0.0)
     cap = len(rows) * (len(slots) + 1) * 26 + 64  # 24 characters at most per number, a comma, a newline
-    out = ctypes.create_string_buffer(cap)
+    out = _buffer(cap)
     memos = ctypes.create_string_buffer(MEMO * max(1, len(slots)))  # zeroed
     n = fn(rows.ctypes.data, len(rows), rows.shape[1] if rows.ndim == 2 else 0, columns.ctypes.data,
-           kinds.encode("ascii"), len(slots), at.ctypes.data, out, cap, text, number, release, memos)
+           kinds.encode("ascii"), len(slots), at.ctypes.data if at is not None else None, origin, first, step, out,
+           cap, text, number, release, memos)
     if n == ctypes.c_size_t(-1).value:
         return None
-    return out.raw[:n].decode("ascii")
+    return ctypes.string_at(out, n).decode("ascii")
+
+
+_LOCAL = threading.local()
+
+
+def _buffer(size: int):
+    """A text buffer of at least `size` bytes, kept per thread (not zeroed: the function says how much it wrote)."""
+    buffer = getattr(_LOCAL, "buffer", None)
+    if buffer is None or len(buffer) < size:
+        buffer = _LOCAL.buffer = ctypes.create_string_buffer(max(size, 1 << 16))
+    return buffer
