@@ -16,7 +16,8 @@ speed as a share of the same scene's physics alone, measured in this run.
 - The 384-hole sweep in one process, both ways in this run: forks restored plan after plan in the fused
   loop (cotwin.twin.services.whatif.Forks, what run_sweep does) against a fresh fork per what-if stepped by the
   master's loop (the way before issue 23; 44 s on this machine then): goal >= 5x, and the same answers.
-Figures are the best of a few repetitions (the machine is shared); ratios are taken within one run.
+Figures are the best of a few repetitions, the peers measured between the twin's runs (the machine is a shared
+VM whose speed drifts by 10-20% within a minute); ratios are taken within one run.
 """
 
 from __future__ import annotations
@@ -55,10 +56,10 @@ class Timed:
     def __init__(self, call):
         self.call, self.seconds, self.calls = call, 0.0, 0
 
-    def __call__(self, *args):
+    def __call__(self, *args, **options):
         t0 = time.perf_counter()
         try:
-            return self.call(*args)
+            return self.call(*args, **options)
         finally:
             self.seconds += time.perf_counter() - t0
             self.calls += 1
@@ -205,8 +206,10 @@ def main() -> None:
                   "; ".join(f"{name} {us:.1f} us ({100 * us / total:.0f}%)" for name, us in prof.items()))
         for step, target in GOALS.items():
             stepping = fmu = 1e9
-            for _ in range(3 if step > 0.001 else 2):  # alternating, so that both see the machine's load alike
+            for _ in range(5 if step > 0.001 else 3):  # alternating, so that all see the machine's load alike
                 stepping = min(stepping, experiment(twin, out / "build", out / f"run{step}", step))
+                moving = min(moving, physics_moving(twin, setpoints))
+                rest = min(rest, physics_alone(twin))
                 fmu = min(fmu, experiment(twin, out / "build", out / f"fmu{step}", step, fused=False))
             ratio = moving / stepping
             figure(f"20 s experiment, step {step:g} s, fused and native loops: real-time factor", END / stepping, "x",
