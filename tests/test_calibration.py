@@ -293,3 +293,19 @@ def test_the_command_fits_writes_and_checks(parts, tmp_path):
     assert "Traceback" not in refused.stderr
     usage = cotwin_in_process("calibrate", project, "--pt-log", str(log))
     assert usage.returncode == 2 and "--pt-log needs -o FILE" in usage.stderr
+
+
+def test_a_replay_takes_its_physics_step(parts):
+    """A DT's replay at a coarser physics step (the calibration bench compares them against the real log):
+    its simulator steps at that step, and the moves still arrive where those at 1 ms arrive."""
+    twin, program, commands = parts[:3]
+    moves = plan_moves(twin, program, commands)
+    schedule = [(1.0 + 3.0 * k, c) for k, m in enumerate(moves[:2]) for c in m.calls]
+    times = np.arange(0.0, 8.0, 0.05)
+    start = np.array(twin.geometry.reference) if twin.geometry is not None else np.zeros(6)
+    assert twin.mapping(timestep=0.002).endpoint.sim.timestep == 0.002
+    from cotwin.twin.assembly.replay import replay
+
+    fine, coarse = (replay(twin, schedule, times, start, timestep=step) for step in (0.001, 0.002))
+    assert not np.array_equal(fine, coarse)  # another physics step: another trajectory
+    assert np.abs(fine[-1] - coarse[-1]).max() < 0.01  # at rest at the same target

@@ -67,14 +67,16 @@ class DigitalTwin:
     geometry: CellGeometry | None = None  # the DT's cell geometry (None: the scene's)
     mapping_name: str | None = None
 
-    def mapping(self, geometry: CellGeometry | None = None, profile: MotionProfile | None = None) -> Mapping:
+    def mapping(self, geometry: CellGeometry | None = None, profile: MotionProfile | None = None,
+                timestep: float | None = None) -> Mapping:
         """A fresh mapping runtime over a fresh simulator, the cell at `geometry`, moving by `profile`
-        (each the DT's own when not given)."""
+        (each the DT's own when not given), its physics at `timestep` (s; cotwin's 1 ms when not given)."""
         geometry = geometry or self.geometry
         scene = self.scene
         if scene is not None and geometry is not None:
             scene = scene.with_geometry(geometry)
-        endpoint = SimulatedEndpoint(PlatformSimulator(self.tree, scene), profile or self.profile, geometry)
+        simulator = PlatformSimulator(self.tree, scene) if timestep is None else PlatformSimulator(self.tree, scene, timestep)
+        endpoint = SimulatedEndpoint(simulator, profile or self.profile, geometry)
         return Mapping(self.project, endpoint, self.mapping_name)
 
 
@@ -93,10 +95,11 @@ def commanded_points(twin: DigitalTwin, calls: list[list[OperationCall]]) -> lis
 
 
 def replay(twin: DigitalTwin, schedule: list[tuple[float, OperationCall]], times: np.ndarray, start_q: np.ndarray,
-           geometry: CellGeometry | None = None, profile: MotionProfile | None = None) -> np.ndarray:
+           geometry: CellGeometry | None = None, profile: MotionProfile | None = None,
+           timestep: float | None = None) -> np.ndarray:
     """The DT's arm joints at `times` (s), started at posture `start_q` (arm joints) at t = 0, with the
-    operation calls of `schedule` executed at their times (to the simulator's step)."""
-    mapping = twin.mapping(geometry, profile)
+    operation calls of `schedule` executed at their times (to the simulator's step, `timestep`)."""
+    mapping = twin.mapping(geometry, profile, timestep)
     arm = mapping.registry.arm
     endpoint = mapping.endpoint
     endpoint.place(dict(zip(arm, map(float, start_q))))
