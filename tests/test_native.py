@@ -199,3 +199,69 @@ def test_an_observer_that_must_see_every_step_live_keeps_the_run_in_the_fused_lo
         states.append(saves.state)
     assert ran.result.native_steps == 0 and "observer Saves must see every step" in ran.result.native_why
     assert states[0] == states[1] is not None
+
+
+def test_the_math_functions_in_c_give_what_cotwins_math_functions_give():
+    """The mapping's events in C call cotwin's math functions as C (cotwin.mapping.cstep.C_FUNCTIONS): on
+    special values (domain errors, overflow, infinities, NaN, signed zeros) and random ones, each gives
+    what cotwin.robosim.operators.MATH gives (NaN where Python would raise)."""
+    import ctypes
+
+    from cotwin.cosim.native import compile_library
+    from cotwin.mapping.cstep import C_FUNCTIONS, C_MATH
+    from cotwin.robosim.operators import MATH
+
+    names = sorted(C_FUNCTIONS)
+    cases = "\n".join(f"        case {k}: return {C_FUNCTIONS[n][0]}({'x' if C_FUNCTIONS[n][1] == 1 else 'x, y'});"
+                      for k, n in enumerate(names))
+    source = ("#include <math.h>\n" + C_MATH +
+              f"double call(int k, double x, double y) {{\n    switch (k) {{\n{cases}\n    }}\n    return 0.0;\n}}\n")
+    call = compile_library(source, "mathtest").call
+    call.argtypes, call.restype = [ctypes.c_int, ctypes.c_double, ctypes.c_double], ctypes.c_double
+    rng = random.Random(5)
+    specials = [-2.0, -1.0, -0.5, -0.0, 0.0, 0.5, 1.0, 2.0, 709.0, 710.0, -745.0, 1e308, -1e308, 5e-324,
+                math.inf, -math.inf, math.nan]
+    values = specials + [rng.uniform(-10, 10) for _ in range(200)] + [rng.uniform(-1e3, 1e3) for _ in range(50)]
+    for k, name in enumerate(names):
+        pairs = [(x, 0.0) for x in values] if C_FUNCTIONS[name][1] == 1 else \
+            [(x, y) for x in specials for y in specials] + [(rng.uniform(-5, 5), rng.uniform(-5, 5)) for _ in range(200)]
+        for x, y in pairs:
+            expected = MATH[name](x) if C_FUNCTIONS[name][1] == 1 else MATH[name](x, y)
+            got = call(k, x, y)
+            assert (math.isnan(got) and math.isnan(expected)) or got == expected and \
+                math.copysign(1, got) == math.copysign(1, expected), (name, x, y, got, expected)
+
+
+MAPPING_FORMS = {  # input events of the example's mapping respelt with other forms the C spelling covers
+    "equation abs(ur5e::base_link::VS1.output_vel) < VELOCITY_TOLERANCE":
+        "equation max(abs(ur5e::base_link::VS1.output_vel), -sqrt(abs(ur5e::base_link::VS1.output_vel))) "
+        "< VELOCITY_TOLERANCE",
+    "equation abs(ur5e::shoulder_link::VS2.output_vel) < VELOCITY_TOLERANCE":
+        "equation not (min(ur5e::shoulder_link::VS2.output_vel, 1.0) * -1.0 >= VELOCITY_TOLERANCE \\/ "
+        "ur5e::shoulder_link::VS2.output_vel >= VELOCITY_TOLERANCE)",
+    "equation motion == Motion::moving":
+        "equation motion == Motion::moving /\\ (feasibility == Feasibility::infeasible => false) /\\ "
+        "exp(log(1.0 + abs(target_q[0]))) > 0.5 - atan2(0.0, 1.0)",
+}
+
+
+def test_a_mapping_of_other_forms_runs_in_the_native_loop_with_the_same_bytes(built, tmp_path):
+    """Input events spelt with min, max, sqrt, exp, log, atan2, not, =>, unary minus and enumerations run in the
+    native loop and give the FMU path's CSV byte for byte."""
+    from conftest import EXAMPLES
+
+    folder = tmp_path / "model"
+    shutil.copytree(EXAMPLES / "ur5e", folder)
+    text = (folder / "mapping.pm").read_text()
+    for old, new in MAPPING_FORMS.items():
+        assert old in text
+        text = text.replace(old, new)
+    (folder / "mapping.pm").write_text(text)
+    twin = load(folder / "cotwin.toml")
+    build(twin, tmp_path / "build")
+    fmu = run(twin, tmp_path / "build", tmp_path / "fmu", step=0.01, fused=False)
+    native = run(twin, tmp_path / "build", tmp_path / "native", step=0.01)
+    assert native[0].result.native_steps > 0.6 * native[0].result.steps, native[0].result.describe_stepping()
+    assert native[1] == fmu[1] and native[2] == fmu[2]
+    assert [o.__dict__ for o in native[0].outcomes.outcomes] == [o.__dict__ for o in fmu[0].outcomes.outcomes]
+    assert native[0].outcomes.counts()["completed"] == 4

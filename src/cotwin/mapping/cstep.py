@@ -15,8 +15,28 @@ from __future__ import annotations
 
 from ..diagnostics import CotwinError
 from ..robosim import syntax as s
+from ..robosim.operators import MATH
 from .runtime import Mapping, _MappingNames
 
+
+#: cotwin's math functions (cotwin.robosim.operators.MATH) in C, giving what they give: a domain error or an
+#: overflow NaN (Python raises, MATH returns NaN), min and max ignoring a NaN and otherwise Python's (the first
+#: of two equals: -0.0 and 0.0 keep their order): name -> (C function, arguments)
+C_FUNCTIONS = {"abs": ("fabs", 1), "min": ("m_min", 2), "max": ("m_max", 2), "sqrt": ("m_sqrt", 1), "sin": ("m_sin", 1),
+               "cos": ("m_cos", 1), "tan": ("m_tan", 1), "asin": ("m_asin", 1), "acos": ("m_acos", 1),
+               "atan": ("atan", 1), "atan2": ("atan2", 2), "exp": ("m_exp", 1), "log": ("m_log", 1)}
+C_MATH = r"""
+static double m_sqrt(double x) { return x < 0 ? NAN : sqrt(x); }
+static double m_sin(double x) { return isinf(x) ? NAN : sin(x); }
+static double m_cos(double x) { return isinf(x) ? NAN : cos(x); }
+static double m_tan(double x) { return isinf(x) ? NAN : tan(x); }
+static double m_asin(double x) { return (x < -1 || x > 1) ? NAN : asin(x); }
+static double m_acos(double x) { return (x < -1 || x > 1) ? NAN : acos(x); }
+static double m_exp(double x) { double r = exp(x); return (isinf(r) && isfinite(x)) ? NAN : r; }
+static double m_log(double x) { return x <= 0 ? NAN : log(x); }
+static double m_min(double a, double b) { return isnan(a) ? b : isnan(b) ? a : (b < a ? b : a); }
+static double m_max(double a, double b) { return isnan(a) ? b : isnan(b) ? a : (b > a ? b : a); }
+"""
 
 MAX_PHYSICS = 20000  # physics steps of one native segment at most (Ctrl-C is heard between segments)
 
@@ -41,7 +61,7 @@ class EventsInC:
                 raise Unsupported(f"input event {event.name} carries a value")
             functions.append(self._event(k, event))
         calls = "\n".join(f"    occ[{k}] = {prefix}event{k}(V, SD);" for k in range(len(functions)))
-        self.source = "\n".join(functions) + (f"\nstatic void {prefix}events(const double *V, const double *SD, int *occ) {{\n"
+        self.source = C_MATH + "\n".join(functions) + (f"\nstatic void {prefix}events(const double *V, const double *SD, int *occ) {{\n"
                                               f"{calls}\n}}\n")
 
     def slot(self, key) -> int:
@@ -131,9 +151,10 @@ class EventsInC:
 
     def _Call(self, e: s.Call, local) -> str:
         name = e.function.name.last if isinstance(e.function, s.Name) else None
-        if name == "abs" and len(e.args) == 1 and self.mapping.functions.get("abs") is not None:
-            return f"fabs({self.expr(e.args[0], local)})"
-        raise Unsupported(f"the function {name} at {e.loc}")
+        spelt = C_FUNCTIONS.get(name)
+        if spelt is None or self.mapping.functions.get(name) is not MATH[name] or len(e.args) != spelt[1]:
+            raise Unsupported(f"the function {name} at {e.loc}")
+        return f"{spelt[0]}({', '.join(self.expr(a, local) for a in e.args)})"
 
 
 def _special(value: float) -> str:
