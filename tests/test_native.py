@@ -241,13 +241,13 @@ MAPPING_FORMS = {  # input events of the example's mapping respelt with other fo
         "ur5e::shoulder_link::VS2.output_vel >= VELOCITY_TOLERANCE)",
     "equation motion == Motion::moving":
         "equation motion == Motion::moving /\\ (feasibility == Feasibility::infeasible => false) /\\ "
-        "exp(log(1.0 + abs(target_q[0]))) > 0.5 - atan2(0.0, 1.0)",
+        "exp(log(1.0 + abs(target_q[0]))) > 0.5 - atan2(0.0, 1.0) /\\ (if gripper_closing then true else 1 > 0 end)",
 }
 
 
 def test_a_mapping_of_other_forms_runs_in_the_native_loop_with_the_same_bytes(built, tmp_path):
-    """Input events spelt with min, max, sqrt, exp, log, atan2, not, =>, unary minus and enumerations run in the
-    native loop and give the FMU path's CSV byte for byte."""
+    """Input events spelt with min, max, sqrt, exp, log, atan2, not, =>, if-then-else, unary minus and
+    enumerations run in the native loop and give the FMU path's CSV byte for byte."""
     from conftest import EXAMPLES
 
     folder = tmp_path / "model"

@@ -149,6 +149,10 @@ class EventsInC:
             return f"(({left}) {e.op} ({right}))"
         raise Unsupported(f"the operator {e.op} at {e.loc}")
 
+    def _IfExpr(self, e: s.IfExpr, local) -> str:
+        condition, then, otherwise = (self.expr(x, local) for x in (e.condition, e.then, e.otherwise))
+        return f"((({condition}) != 0.0) ? ({then}) : ({otherwise}))"
+
     def _Call(self, e: s.Call, local) -> str:
         name = e.function.name.last if isinstance(e.function, s.Name) else None
         spelt = C_FUNCTIONS.get(name)
