@@ -198,7 +198,11 @@ def quiet_step(unit, execution, make_part, feeds: list[tuple[str, int]], out: di
         return f"its platform ({type(endpoint).__name__}) is not cotwin's simulated one"
     sim = endpoint.sim
     if not sim.plain_stepping:
-        return "its simulator checks something between physics steps (ray sensors, obstacle contacts, a shared world)"
+        why = ("its world is shared with other robots" if sim.shared is not None else
+               "its ray sensors scan between physics steps" if sim.scanners else
+               "its contacts with obstacles are checked between physics steps" if sim._obstacles else
+               f"its integrator ({sim.model.opt.integrator}) does not advance time by one timestep a step")
+        return f"{why} (the native step is MuJoCo's steps and nothing between them)"
     if mapping.monitor:
         return "it monitors readings other than the joints"
     if native.advance_function() is None:
