@@ -105,7 +105,7 @@ def motion(twin, build_dir: Path, folder: Path) -> np.ndarray:
 def physics_moving(twin, setpoints: np.ndarray) -> float:
     """Seconds for the 20 s experiment's physics doing the twin's motion (its set-points replayed into the
     same scene, the physics steps in one C loop): the peer doing the same work as the twin's physics."""
-    from cotwin.cosim.native import compile_library
+    from cotwin.cbuild import compile_library
     from cotwin.mapping.endpoint import CONTROL_PERIOD
     from cotwin.mapping.native import _mj_step
     from cotwin.pmodel.simulator import PlatformSimulator

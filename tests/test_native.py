@@ -207,7 +207,7 @@ def test_the_math_functions_in_c_give_what_cotwins_math_functions_give():
     what cotwin.robosim.operators.MATH gives (NaN where Python would raise)."""
     import ctypes
 
-    from cotwin.cosim.native import compile_library
+    from cotwin.cbuild import compile_library
     from cotwin.mapping.cstep import C_FUNCTIONS, C_MATH
     from cotwin.robosim.operators import MATH
 
@@ -265,3 +265,62 @@ def test_a_mapping_of_other_forms_runs_in_the_native_loop_with_the_same_bytes(bu
     assert native[1] == fmu[1] and native[2] == fmu[2]
     assert [o.__dict__ for o in native[0].outcomes.outcomes] == [o.__dict__ for o in fmu[0].outcomes.outcomes]
     assert native[0].outcomes.counts()["completed"] == 4
+
+
+def test_a_step_failing_inside_a_stretch_keeps_every_row_before_it(built, tmp_path, monkeypatch):
+    """A unit failing at t = 5 s, in Python and in C alike: the native run raises the same error and keeps the
+    same partial CSV as the step-by-step run (the stretch's steps before the failure are told to observers)."""
+    from cotwin.diagnostics import CotwinError
+    from cotwin.twin.assembly.scenario import ScenarioUnit
+
+    due = 5.0 - 1e-9
+    step, part = ScenarioUnit.step, ScenarioUnit.native_part
+
+    def failing_step(self, t, h):
+        if t >= due:
+            raise CotwinError(f"the scenario fails at t = {t:g}")
+        step(self, t, h)
+
+    def failing_part(self, execution):
+        native = part(self, execution)
+        native.step = f"if (t >= {due!r}) FAIL(7);"
+
+        def failed(code, t):
+            raise CotwinError(f"the scenario fails at t = {t:g}")
+        native.failed = failed
+        return native
+
+    monkeypatch.setattr(ScenarioUnit, "step", failing_step)
+    monkeypatch.setattr(ScenarioUnit, "native_part", failing_part)
+    twins, built_dir = built
+    kept = []
+    for fused in (False, True):
+        out = tmp_path / str(fused)
+        out.mkdir()
+        for name in ("dmodel.fmu", "build.json"):
+            shutil.copy(built_dir / name, out / name)
+        with pytest.raises(CotwinError, match="the scenario fails at t = 5") as caught:
+            run_twin(twins["cotwin.toml"], out, plot=False, fused=fused, step=0.01)
+        kept.append(((out / "outputs.partial.csv").read_bytes(), str(caught.value).replace(str(out), "OUT")))
+    assert kept[0] == kept[1]
+    assert kept[1][0].count(b"\n") == 502  # the header and t = 0 .. 5 (the failing step starts at 5)
+
+
+def test_a_real_port_holding_an_integer_keeps_its_spelling(built, tmp_path):
+    """A scenario's Real ports start as the integer 0 (a Python unit's default) until a command sets them: the
+    native rows spell them as the step-by-step rows do ("0", not "0.0"), and the state keeps them ints."""
+    from conftest import EXAMPLES
+
+    folder = tmp_path / "ur5e"
+    shutil.copytree(EXAMPLES / "ur5e", folder)
+    arm = (folder / "arm.rst").read_text()
+    for name in ("target_X", "target_Y", "target_Z"):
+        arm = arm.replace(f"{name}: int", f"{name}: real")
+    (folder / "arm.rst").write_text(arm)
+    twin = load(folder / "cotwin.toml")
+    build(twin, tmp_path / "build")
+    fmu = run(twin, tmp_path / "build", tmp_path / "fmu", step=0.1, fused=False)
+    native = run(twin, tmp_path / "build", tmp_path / "native", step=0.1)
+    assert native[0].result.native_steps > 0.6 * native[0].result.steps
+    assert b"0.1,false,0,0,0," in fmu[1]  # the integer zeros the rows must keep
+    assert native[1] == fmu[1] and native[2] == fmu[2]

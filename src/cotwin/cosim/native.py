@@ -3,62 +3,62 @@
 The fused loop (cotwin.cosim.fused) still makes each step in Python. Most steps of a twin change nothing
 but the platform's continuous readings: no command is due, no operation is called, no event comes or
 goes. The native loop makes those steps in one C function generated for the system: each unit gives its
-step as C (`NativePart`: the d-model FMU's doStep on its port arrays, the mapping's physics, mirrors and
-input events, a command source that has nothing due), composed in the algorithm's order (Jacobi: inputs
-from the previous step's outputs, every unit steps, every output read), the slots kept as doubles.
+step as C (`Unit.native_part`, a `NativePart`: the d-model FMU's doStep on its port arrays, the mapping's
+physics, mirrors and input events, a command source that has nothing due), composed in the algorithm's
+order (Jacobi: inputs from the previous step's outputs, every unit steps, every output read; Gauss-Seidel:
+unit by unit, its delayed outputs copied at the step's start), the slots kept as doubles.
 
 A stretch (a *segment*) ends after the first step in which a value other than a continuous one (a unit's
-`continuous` outputs, e.g. the mapping's q0..qd5) changed, or when a unit says it cannot make the next
-step natively (a command due, an answer waiting): the fused loop then makes the steps in Python until
-the system is quiet again. So every discrete change is a step the Python objects see whole, and the
-steps made natively are the repeats between them. Observers hear of a segment's steps at once: all but
-the last through `Observer.repeated` (rows of the slots; by default each told as a step in turn), the
-last through `step_complete`, as always.
+`continuous` outputs, e.g. the mapping's q0..qd5) changed, or in which a unit asked for it (`END_AFTER`:
+an answer came), or when a unit says it cannot make the next step natively (a command due, an answer
+waiting): the fused loop then makes the next step in Python. A unit may also pause a step before doing
+anything of it (`PAUSE`, Gauss-Seidel: an operation called within it), which Python then finishes. So every
+discrete change is a step the Python objects see whole, and the steps made natively are the repeats between
+them. Observers hear of a segment's steps at once: all but the last through `Observer.repeated` (rows of the
+slots), the last through `step_complete`, as always; an observer that defines no `repeated` keeps the run
+out of the native loop.
 
-The C source is a function of the system's structure alone (addresses are passed at each call), built
-once per machine and cached (cotwin.mapping.native's cache). A run gives the same values, byte for byte
-in its CSV, as the fused and the step-by-step loops (tests/test_native.py). Where it does not apply (no C
-compiler, Gauss-Seidel, a unit without a native step, a stop condition asked after every step) the
-fused loop runs alone and `why_not` says why.
+The C source is a function of the system's structure alone (addresses are passed at each call), built once
+per machine and cached (cotwin.cbuild). A run gives the same values, byte for byte in its CSV, as the fused
+and the step-by-step loops (tests/test_native.py). Where it does not apply (no C compiler, a unit without a
+native step, an observer that must see every step, a stop condition asked after every step) the fused loop
+runs alone and `why_not` says why.
 """
 
 from __future__ import annotations
 
 import ctypes
 import hashlib
-import os
-import shutil
-import subprocess
-import tempfile
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from ..cbuild import compile_library, compiler
 from .algorithm import UNSET, GaussSeidel, Jacobi
 from .observers import Observer, hears_repeats
 
 QUIET_AFTER = 1  # Python steps after a segment ended on a change, before the next may start
 MAX_SEGMENT = 2000  # steps of one segment at most: its rows' memory bounded, Ctrl-C heard between segments
+KINDS = {"Real": "r", "Integer": "i", "Boolean": "b"}  # a port's FMI type -> its kind in the rows
 
 
 @dataclass
 class NativePart:
     """A unit's step in C, for the native loop.
 
-    `step` is C statements run once per step, after the unit's inputs were set: they read the step's
-    start time `t` and size `H`, the slots at the step's start `S[...]`, write the unit's outputs into the
-    next slots `N[...]`, and use `PP[i]` (pointers) and `DD[i]` (doubles) given in `pointers` and
-    `doubles`. A failure: `FAIL(code)` (the step is not counted; `failed(code, t)` raises). `decls` holds
-    file-scope C (static functions) the step calls; names are prefixed by the unit's `prefix`.
-    `inputs`/`outputs` are the unit's port names bound to slots (outputs: `N[...]` written, or left as they
-    were). `quiet(n)`: how many of the next n steps the unit can make natively now (0: none). `begin()`:
-    refresh `pointers`/`doubles` before a segment. `end(first, made, rows, doubles)`: bring the Python object
-    up to date after it made `made` steps natively from step index `first` (rows: the slots after each
-    complete step; doubles: its `DD` as the steps left them). `PAUSE()` (before anything of the step is
-    done; Gauss-Seidel only) leaves the step to Python from this unit on. `continuous`: outputs whose change does not
-    end a segment.
+    `step` is C statements run once per step: they read the step's start time `t` and size `H` and the
+    unit's inputs `IN(slot)` (Jacobi: the step before's outputs; Gauss-Seidel: this step's), write the
+    unit's outputs into the next slots `N[slot]` (the ports named in `writes`; the others keep their
+    values), and use `PP[i]` (pointers) and `DD[i]` (doubles) given in `pointers` and `doubles`. `FAIL(code)`:
+    the step failed (not counted; `failed(code, t)` raises the error the step in Python raises). `PAUSE()`:
+    before anything of the step is done, leave it to Python from this unit on (Gauss-Seidel). `END_AFTER()`:
+    end the segment after this step. `decls` holds file-scope C (static functions, prefixed) the step calls.
+    `quiet(n)`: how many of the next n steps the unit can make natively now (0: none). `begin()`: refresh
+    `pointers`/`doubles` before a segment. `end(first, made, rows, doubles)`: bring the Python object up to
+    date after it made `made` steps natively from step index `first` (rows: the slots after each complete
+    step; doubles: its `DD` as the steps left them). `continuous`: outputs whose change does not end a
+    segment. `sets_inputs`: the C writes the unit's inputs itself (its Python setter is not called after).
     """
 
     step: str
@@ -70,11 +70,12 @@ class NativePart:
     end: Callable[[int, int, np.ndarray, np.ndarray], None] = lambda first, made, rows, doubles: None
     failed: Callable[[int, float], None] = lambda code, t: None
     continuous: tuple[str, ...] = ()
-    slots: dict[str, int] = field(default_factory=dict)  # port -> slot (filled by the loop)
+    writes: frozenset[str] = frozenset()
+    sets_inputs: bool = False
 
 
 def feeds(execution, unit) -> list[tuple[str, int]]:
-    """The unit's connected inputs and the slot each is set from (Jacobi: the previous step's output)."""
+    """The unit's connected inputs and the slot each is set from (Gauss-Seidel: a delayed unit's copy)."""
     algorithm = execution.algorithm
     k = algorithm.units.index(unit)
     return [(name, algorithm._source_slot(key)) for name, key in algorithm.feeds[k]]
@@ -88,17 +89,14 @@ def outputs(execution, unit) -> dict[str, int]:
 
 
 def why_not(execution) -> str | None:
-    """None when the native loop can run this (initialised) execution, else why not."""
+    """None when the native loop may run this (initialised) execution, else why not (the units may still
+    say why they cannot: NativeLoop)."""
     if type(execution.algorithm) not in (Jacobi, GaussSeidel):
         return f"its algorithm ({type(execution.algorithm).__name__}) is not cotwin's Jacobi or Gauss-Seidel"
     if execution.algorithm.events:
         return "a unit has clocks"
-    if shutil.which("cc") is None and shutil.which("gcc") is None:
+    if compiler() is None:
         return "no C compiler (cc) on this machine"
-    for unit in execution.algorithm.units:
-        part = getattr(type(unit), "native_part", None)
-        if part is None:
-            return f"unit {unit.name} ({type(unit).__name__}) has no native step"
     for observer in execution.observers:
         if not hears_repeats(observer):
             return f"observer {type(observer).__name__} must see every step as it is made (it defines no `repeated`)"
@@ -121,21 +119,22 @@ class NativeLoop:
             if isinstance(part, str):
                 raise ValueError(f"unit {unit.name}: {part}")
             self.parts.append(part)
-        self.slots = len(algorithm.data)
-        kinds = {}  # slot -> 'r', 'i' or 'b'
-        for key, i in algorithm.slots.items():
-            port = execution.system.units[key[0]].ports[key[1]]
-            kinds[i] = {"Real": "r", "Integer": "i", "Boolean": "b"}.get(port.type, "?")
+        self.width = len(algorithm.data)  # slots per row: the observed ports, then Gauss-Seidel's copies
+        kinds = {i: KINDS.get(execution.system.units[key[0]].ports[key[1]].type, "?") for key, i in algorithm.slots.items()}
         self.copies = list(algorithm.copies) if self.seidel else []  # (source, shadow): Gauss-Seidel's delayed outputs
         for source, shadow in self.copies:
             kinds[shadow] = kinds[source]
-        self.kinds = [kinds.get(i, "?") for i in range(self.slots)]
+        self.kinds = [kinds.get(i, "?") for i in range(self.width)]
         if "?" in self.kinds:
             raise ValueError("a port of a type other than Real, Integer or Boolean is observed")
+        written = {algorithm.slots[(unit.name, name)] for unit, part in zip(algorithm.units, self.parts)
+                   for name in part.writes if (unit.name, name) in algorithm.slots}
+        written |= {shadow for source, shadow in self.copies if source in written}
+        self.written = sorted(written)  # the slots C writes; the others hold still in a segment
         continuous = {algorithm.slots[(unit.name, name)] for unit, part in zip(algorithm.units, self.parts)
                       for name in part.continuous if (unit.name, name) in algorithm.slots}
         shadows = {shadow for _, shadow in self.copies}
-        self.discrete = [i for i in range(self.slots) if i not in continuous and i not in shadows]
+        self.discrete = [i for i in self.written if i not in continuous and i not in shadows]
         self._data, self._observers = algorithm.data, list(execution.observers)
         self.source = self._source()
         self._fn = _compiled(self.source)
@@ -144,14 +143,15 @@ class NativeLoop:
         algorithm = self.execution.algorithm
         decls, body = [], []
         pbase = dbase = 0
+        width = self.width
         for k, (unit, part) in enumerate(zip(algorithm.units, self.parts)):
             decls.append(part.decls)
             body.append(f"    /* unit {unit.name} */")
             body.append(f"    {{ void **PP = P + {pbase}; double *DD = D + {dbase}; (void)PP; (void)DD;")
             body.append(f"#define FAIL(code) do {{ *failed = {k} * 1000 + (code); return j; }} while (0)")
             if self.seidel:  # the step is finished in Python from this unit on
-                body.append(f"#define PAUSE() do {{ *paused = {k + 1}; memcpy(rows + (size_t)j * {self.slots}, N, "
-                            f"sizeof(double) * {self.slots}); return j; }} while (0)")
+                body.append(f"#define PAUSE() do {{ *paused = {k + 1}; memcpy(rows + (size_t)j * {width}, N, "
+                            f"sizeof(double) * {width}); return j; }} while (0)")
             else:  # Jacobi: `quiet` rules a pause out (a unit's inputs are those of the step before)
                 body.append("#define PAUSE() FAIL(999)")
             body.extend("    " + line for line in part.step.strip("\n").split("\n"))
@@ -166,21 +166,26 @@ class NativeLoop:
                  "#define IN(slot) " + ("N[slot]" if self.seidel else "S[slot]") +
                  ("  /* Gauss-Seidel: this step's outputs of the units before */" if self.seidel else
                   "  /* Jacobi: the outputs of the step before */"),
+                 "#define END_AFTER() (end_here = 1)",
                  *decls,
+                 "/* Up to n steps from step `base` (since `origin`); returns the steps made. `failed`: unit * 1000 + code",
+                 "   of a step that failed; `paused`: 1 + the unit that paused the step after them (rows[return] holds",
+                 "   its slots so far). rows: the slots after each step. */",
                  "int cotwin_segment(void **P, double *D, double *S, double *rows, int n, double origin, long long base,",
                  "                   double H, int *failed, int *paused) {",
-                 f"  double N[{max(1, self.slots)}];",
+                 f"  double N[{max(1, width)}];",
                  "  *failed = 0;",
                  "  *paused = 0;",
                  "  for (int j = 0; j < n; j++) {",
                  "    double t = origin + (double)(base + j) * H;",
-                 f"    memcpy(N, S, sizeof(double) * {self.slots});",
+                 "    int end_here = 0;",
+                 f"    memcpy(N, S, sizeof(double) * {width});",
                  *(f"    N[{shadow}] = N[{source}];" for source, shadow in self.copies),
                  *body,
                  f"    int changed = {changed};",
-                 f"    memcpy(S, N, sizeof(double) * {self.slots});",
-                 f"    memcpy(rows + (size_t)j * {self.slots}, S, sizeof(double) * {self.slots});",
-                 "    if (changed) return j + 1;",
+                 f"    memcpy(S, N, sizeof(double) * {width});",
+                 f"    memcpy(rows + (size_t)j * {width}, S, sizeof(double) * {width});",
+                 "    if (changed || end_here) return j + 1;",
                  "  }",
                  "  return n;",
                  "}"]
@@ -192,10 +197,15 @@ class NativeLoop:
         return self._data is execution.algorithm.data and self._observers == execution.observers
 
     def quiet(self, n: int) -> int:
-        """How many of the next n steps every unit can make natively now."""
+        """How many of the next n steps every unit can make natively now (and every observer lets pass)."""
         execution = self.execution
-        if any(v is UNSET for v in execution.algorithm.data):
+        data = execution.algorithm.data
+        if any(v is UNSET for v in data):
             return 0
+        for i in self._held_still():
+            value = data[i]
+            if value.__class__ not in _PLAIN or (value.__class__ is int and abs(value) > 2 ** 53):
+                return 0  # a value the rows cannot carry exactly as a double
         for observer in execution.observers:
             bound = observer.quiet_for(execution)
             if bound is not None:
@@ -206,15 +216,24 @@ class NativeLoop:
                 return 0
         return n
 
+    def _held_still(self) -> list[int]:
+        written = set(self.written)
+        return [i for i in range(self.width) if i not in written]
+
     def run(self, n: int) -> int:
         """Up to n steps natively (fewer: see the module doc); the steps made, observers told. 0 when the
-        system is not quiet now (the caller makes a step in Python). A step a unit paused (Gauss-Seidel: an
-        operation called in it) is finished in Python, from that unit on, and counted."""
+        system is not quiet now (the caller makes a step in Python). A step a unit paused is finished in
+        Python, from that unit on, and counted. A step that failed raises its error once the steps before it
+        are committed and told."""
         n = self.quiet(min(n, MAX_SEGMENT))
         if n <= 0:
             return 0
         execution, algorithm = self.execution, self.execution.algorithm
         data = algorithm.data
+        # the rows' kinds this segment: C writes its slots as their ports' types; the others hold still, as
+        # the Python objects they are (an Integer 0 in a Real port stays 0), and are put back as they were
+        held = {i: data[i] for i in self._held_still()}
+        kinds = [self.kinds[i] if i not in held else _KIND[held[i].__class__] for i in range(self.width)]
         for part in self.parts:
             part.begin()
         pointers = [p for part in self.parts for p in part.pointers]
@@ -224,7 +243,7 @@ class NativeLoop:
         D = np.array(doubles or [0.0], dtype=np.float64)
         S = np.array([float(v) for v in data], dtype=np.float64)
         before = S.copy()
-        rows = np.empty((n, self.slots), dtype=np.float64)
+        rows = np.empty((n, self.width), dtype=np.float64)
         failed, paused = ctypes.c_int(0), ctypes.c_int(0)
         origin, done = execution._origin
         first = execution.steps
@@ -232,33 +251,41 @@ class NativeLoop:
         k = self._fn(ctypes.cast(P, ctypes.c_void_p), D.ctypes.data_as(dptr), S.ctypes.data_as(dptr),
                      rows.ctypes.data_as(dptr), n, float(origin), first - done, execution.step_size,
                      ctypes.byref(failed), ctypes.byref(paused))
-        pause = paused.value - 1  # the unit that paused step k, or -1
-        half = rows[k].copy() if pause >= 0 else None
+        failing, code = divmod(failed.value, 1000) if failed.value else (-1, 0)
+        stopped = paused.value - 1 if paused.value else failing  # the unit that ended step k early, or -1
+        half = rows[k].copy() if paused.value else None
         rows = rows[:k]
         if k:
-            self._commit(rows, before if k == 1 else rows[k - 2])
+            self._commit(rows, before if k == 1 else rows[k - 2], kinds, held)
+        errors = []
         base = 0
         for u, part in enumerate(self.parts):
-            part.end(first, k + (1 if 0 <= u < pause else 0) if pause >= 0 else k, rows,
-                     D[base:base + len(part.doubles)])
+            made = k + 1 if 0 <= u < stopped else k  # the units before the one that stopped made step k too
+            try:
+                part.end(first, made, rows, D[base:base + len(part.doubles)])
+            except Exception as err:  # every part is brought up to date; the first error is raised after
+                errors.append(err)
             base += len(part.doubles)
-        if failed.value:
-            unit, code = divmod(failed.value, 1000)
-            self.parts[unit].failed(code, origin + (first + k - done) * execution.step_size)
-            raise RuntimeError(f"unit {algorithm.units[unit].name} failed in the native loop (code {code})")
-        if pause >= 0:
-            self._finish(half, pause)
-            self._tell(rows)
+        if failed.value or errors:
+            if k:
+                self._tell(rows[:-1], kinds)
+            if errors:
+                raise errors[0]
+            self.parts[failing].failed(code, origin + (first + k - done) * execution.step_size)
+            raise RuntimeError(f"unit {algorithm.units[failing].name} failed in the native loop (code {code})")
+        if paused.value:
+            self._finish(half, stopped, kinds, held)
+            self._tell(rows, kinds)
             return k + 1
         if k:
-            self._tell(rows[:-1])
+            self._tell(rows[:-1], kinds)
         return k
 
-    def _finish(self, half: np.ndarray, pause: int) -> None:
+    def _finish(self, half: np.ndarray, pause: int, kinds: list[str], held: dict[int, object]) -> None:
         """The step a unit paused, made in Python from that unit on (as Gauss-Seidel makes it), counted."""
         execution, algorithm = self.execution, self.execution.algorithm
         data = algorithm.data
-        data[:] = _typed(half, self.kinds)
+        data[:] = _typed(half, kinds, held)
         origin, done = execution._origin
         t = origin + (execution.steps - done) * execution.step_size
         for k in range(pause, len(algorithm.units)):
@@ -274,31 +301,35 @@ class NativeLoop:
         execution.steps += 1
         execution.time = origin + (execution.steps - done) * execution.step_size
 
-    def _commit(self, rows: np.ndarray, previous: np.ndarray) -> None:
-        """The execution's slots, steps and time after the segment; the Python units' inputs as they were
-        set for its last step (Jacobi: from the slots before it; Gauss-Seidel: from its own)."""
+    def _commit(self, rows: np.ndarray, previous: np.ndarray, kinds: list[str], held: dict[int, object]) -> None:
+        """The execution's slots, steps and time after the segment; the Python units' inputs as they were set
+        for its last step (Jacobi: from the slots before it; Gauss-Seidel: from its own)."""
         execution, algorithm = self.execution, self.execution.algorithm
         data = algorithm.data
-        data[:] = _typed(rows[-1], self.kinds)
+        data[:] = _typed(rows[-1], kinds, held)
         execution.steps += len(rows)
         origin, done = execution._origin
         execution.time = origin + (execution.steps - done) * execution.step_size
-        typed = data if self.seidel else _typed(previous, self.kinds)
-        for write in algorithm.writes:
-            if write is not None:
+        typed = data if self.seidel else _typed(previous, kinds, held)
+        for write, part in zip(algorithm.writes, self.parts):
+            if write is not None and not part.sets_inputs:
                 setter, pick = write
                 setter(pick(typed))
 
-    def _tell(self, repeats: np.ndarray) -> None:
+    def _tell(self, repeats: np.ndarray, kinds: list[str]) -> None:
         """Observers hear of the repeated steps (the rows before the current step), then of the current one."""
         execution = self.execution
         if len(repeats):
-            batch = StepRows(execution, repeats, self.kinds)
+            batch = StepRows(execution, repeats, kinds)
             for o in execution.observers:
                 if type(o).repeated is not Observer.repeated:  # the others have nothing to do after a step
                     o.repeated(execution, batch)
         for o in execution.observers:
             o.step_complete(execution)
+
+
+_PLAIN = (bool, int, float)
+_KIND = {bool: "b", int: "i", float: "r"}
 
 
 class StepRows:
@@ -351,8 +382,12 @@ def _column(values: np.ndarray, kind: str) -> list:
     return values.tolist()
 
 
-def _typed(row: np.ndarray, kinds: list[str]) -> list:
-    return [(v != 0.0) if k == "b" else int(v) if k == "i" else v for v, k in zip(row.tolist(), kinds)]
+def _typed(row: np.ndarray, kinds: list[str], held: dict[int, object] | None = None) -> list:
+    """A row of doubles as the values the ports hold (bool, int, float); `held`: slots put back as they were."""
+    out = [(v != 0.0) if k == "b" else int(v) if k == "i" else v for v, k in zip(row.tolist(), kinds)]
+    for i, value in (held or {}).items():
+        out[i] = value
+    return out
 
 
 _PRELUDE = r"""
@@ -381,35 +416,3 @@ def _compiled(source: str):
     fn.restype = ctypes.c_int
     _CACHE[digest] = fn
     return fn
-
-
-def compile_library(source: str, stem: str, keep_gil: bool = True) -> ctypes.CDLL:
-    """A C source built into a shared library once per machine (cached by its hash beside the IK
-    solutions, or in a temporary folder) and loaded; its calls hold the GIL (`keep_gil`: they call Python's
-    C API) or release it (a callback into Python, e.g. an FMU's logger, takes it back); ValueError if it
-    cannot be built here."""
-    from ..pmodel.ikcache import cache_dir
-
-    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
-
-    compiler = shutil.which("cc") or shutil.which("gcc")
-    if compiler is None:
-        raise ValueError("no C compiler (cc) on this machine")
-    folder = cache_dir()
-    folder = (folder / "native") if folder is not None else Path(tempfile.gettempdir()) / f"cotwin-native-{os.getuid()}"
-    target = folder / f"{stem}-{digest}.so"
-    if not target.is_file():
-        folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(prefix="cotwin-cc-") as tmp:
-            path = Path(tmp) / f"{stem}.c"
-            path.write_text(source)
-            built = Path(tmp) / f"{stem}.so"
-            proc = subprocess.run([compiler, "-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off",
-                                   "-fno-fast-math", str(path), "-o", str(built), "-lm"],
-                                  capture_output=True, text=True, timeout=120)
-            if proc.returncode != 0 or not built.is_file():
-                raise ValueError(f"the native {stem} did not compile: {proc.stderr.strip()[:400]}")
-            staged = folder / f".{target.name}.{os.getpid()}"
-            shutil.copy(built, staged)
-            os.replace(staged, target)
-    return (ctypes.PyDLL if keep_gil else ctypes.CDLL)(str(target))

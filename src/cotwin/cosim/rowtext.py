@@ -314,7 +314,7 @@ MEMO = 64  # bytes of a column's memo (the C struct's 8 + 4 + 40, padded) with r
 def _function():
     global _FN
     if _FN is None:
-        from .native import compile_library
+        from ..cbuild import compile_library
 
         try:
             lib = compile_library(SOURCE, "rowtext")

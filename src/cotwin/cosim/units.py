@@ -106,6 +106,10 @@ class Unit:
     def initialize(self) -> None: ...
     def step(self, t: float, h: float) -> None: ...
     def get(self, names: list[str]) -> dict[str, object]: ...
+
+    def native_part(self, execution):
+        """Its step as C for the native loop (cotwin.cosim.native.NativePart), or why it has none (a str)."""
+        return f"{type(self).__name__} has no native step"
     def terminate(self) -> None: ...
 
     def setter(self, names: list[str]) -> Callable[[Sequence], None]:
@@ -135,6 +139,8 @@ class Unit:
 FMI2_OK, FMI2_WARNING, FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL, FMI2_PENDING = range(6)
 STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
 _VR = POINTER(c_uint)
+BAD_INPUT = 3  # the native step's failure code for an input its setter would refuse
+
 _PROTOTYPES = {
     "fmi2SetReal": (c_void_p, _VR, c_size_t, POINTER(c_double)),
     "fmi2SetInteger": (c_void_p, _VR, c_size_t, POINTER(c_int)),
@@ -551,7 +557,14 @@ class FMUUnit(BoundByNames, Unit):
             return f"(({kind} *)PP[{2 + k}])[{index}]"
 
         lines = []
-        for name, slot in feeds(execution, self):
+        inputs = feeds(execution, self)
+        for name, slot in inputs:  # checked as the setter checks them: a Real finite, an Integer an int32
+            kind = self.ports[name].type
+            if kind == "Real":
+                lines.append(f"if (!(IN({slot}) - IN({slot}) == 0.0)) FAIL({BAD_INPUT});")
+            elif kind == "Integer":
+                lines.append(f"if (!(IN({slot}) >= {INT32[0]}.0 && IN({slot}) <= {INT32[1]}.0)) FAIL({BAD_INPUT});")
+        for name, slot in inputs:
             kind = self.ports[name].type
             value = f"IN({slot})" if kind == "Real" else f"(int64_t)IN({slot})" if kind == "Integer" else f"(IN({slot}) != 0.0)"
             lines.append(f"{place(name)} = {value};")
@@ -563,6 +576,7 @@ class FMUUnit(BoundByNames, Unit):
                                              else f"{read} ? 1.0 : 0.0;"))
         do_step = ctypes_cast(self._fn["fmi2DoStep"], c_void_p).value
         pointers = [do_step, self.component, *(ctypes_cast(a, c_void_p).value for a in arrays)]
+
         def end(first: int, made: int, rows, doubles) -> None:
             if made:  # as `step` leaves it: the last step's start
                 origin, done = execution._origin
@@ -570,10 +584,14 @@ class FMUUnit(BoundByNames, Unit):
 
         def failed(code: int, t: float) -> None:
             self.time = t
+            if code == BAD_INPUT:  # the setter says which input and why
+                data = execution.algorithm.data
+                self.setter([name for name, _ in inputs])([data[slot] for _, slot in inputs])
             status = code - 10
             self._failed("fmi2DoStep", status, f"returned {STATUS[status] if 0 <= status < len(STATUS) else status}")
 
-        return NativePart("\n".join(lines), pointers=pointers, end=end, failed=failed)
+        return NativePart("\n".join(lines), pointers=pointers, end=end, failed=failed,
+                          writes=frozenset(outputs(execution, self)), sets_inputs=True)
 
     # ---- state ----
     def get_state(self) -> bytes:

@@ -1,4 +1,4 @@
-"""A mapping's quiet step in C, for the native loop (cotwin.cosim.native, issue 23).
+"""A mapping's quiet step in C, for the native loop (cotwin.cosim.native, issue 23): `QuietStep`.
 
 A quiet step runs no operation: the platform moves for h (the endpoint's control loop, cotwin.mapping.native,
 and MuJoCo's mj_step), the mirrored variables take the joints' positions and velocities, and the report
@@ -174,177 +174,179 @@ def variable_values(mapping: Mapping, variables: list) -> list[float] | None:
         name, index = (key, None) if isinstance(key, str) else key
         value = mapping.variables.get(name)
         if index is not None:
-            if value.__class__ is str or not hasattr(value, "__len__") or index >= len(value):
+            try:
+                value = value[index] if value.__class__ is not str else None
+            except (TypeError, IndexError, KeyError):
                 return None
-            value = value[index]
         if value.__class__ not in (bool, int, float) or (value.__class__ is int and abs(value) > 2 ** 53):
             return None
         out.append(float(value))
     return out
 
 
-def quiet_step(unit, execution, make_part, feeds: list[tuple[str, int]], out: dict[str, int]):
-    """The MappingUnit's step for the native loop (`make_part(...)`: cotwin.cosim.native.NativePart, given by
-    the caller, a layer above), or why it has none (a str). `feeds`: its inputs and the slots they are set
-    from; `out`: its observed outputs and their slots."""
-    import ctypes
+# The step's doubles (DD): these scalars, then per input event whether it held at the last step and the
+# answers that came in it, then the variables the events read (EventsInC.variables).
+TIME, TIMESTEP, PHYSICS_TIMESTEP, STEPS, PERIOD, MOVING, MOVE_HELD, JOINTS, NQ, DONE, CAME = range(11)
+SCALARS = 11
+# Its pointers (PP): MuJoCo's mj_step, model and data, the data's arrays, the move's arrays (cotwin.mapping.native)
+MJ_STEP, MODEL, DATA, CTRL, QPOS, QVEL, SENSORDATA, MOVE = range(8)
+POINTERS = MOVE + 6  # the move: shape, joints' control indices, starts, deltas, lows, highs
 
-    from . import native
-    from .endpoint import SimulatedEndpoint
 
-    mapping: Mapping = unit.mapping
-    endpoint = mapping.endpoint
-    if type(endpoint) is not SimulatedEndpoint:
-        return f"its platform ({type(endpoint).__name__}) is not cotwin's simulated one"
-    sim = endpoint.sim
-    if not sim.plain_stepping:
-        why = ("its world is shared with other robots" if sim.shared is not None else
-               "its ray sensors scan between physics steps" if sim.scanners else
-               "its contacts with obstacles are checked between physics steps" if sim._obstacles else
-               f"its integrator ({sim.model.opt.integrator}) does not advance time by one timestep a step")
-        return f"{why} (the native step is MuJoCo's steps and nothing between them)"
-    if mapping.monitor:
-        return "it monitors readings other than the joints"
-    if native.advance_function() is None:
-        return "the endpoint's control loop cannot be built here"
-    sensor_address = {path: int(adr) for path, (adr, _) in sim._sensors.items()}
-    try:
-        events = EventsInC(mapping, sensor_address, "m_")
-    except Unsupported as why:
-        return f"an input event's definition has a form the C spelling does not cover: {why}"
-    names = list(mapping.events)
-    ports = [p.name for p in unit.event_ports]
-    if any(p not in out for p in ports) or any(m not in out for m in mapping.monitored):
-        return "an output of the mapping is not observed"
-    mirrors = []  # (variable, qpos or qvel, address or None)
-    for var, joint in mapping._mirror_q:
-        mirrors.append((var, 4, sim._joint_qpos.get(joint)))
-    for var, joint in mapping._mirror_qd:
-        mirrors.append((var, 5, sim._joint_dof.get(joint)))
-    E = len(names)
-    HELD, CAME = 11, 11 + E
-    VBASE = 11 + 2 * E
-    layout = events.variables
-    calls = {op for op, _ in unit.calls}
-    op_slots = [slot for name, slot in feeds if name in calls]
-    lines = [f"if ({' || '.join(f'IN({i}) != 0.0' for i in op_slots) or '0'}) PAUSE();  /* an operation to run */",
-             "double *time = &DD[0];",
-             "int steps = (int)DD[3], period = (int)DD[4];",
-             "cotwin_mj_step mjstep = (cotwin_mj_step)PP[0];",
-             "if (steps > 0 && DD[5] != 0.0 && DD[6] == 0.0) {",
-             "    int held = 0, done = 0;",
-             "    int status = cotwin_advance(mjstep, PP[1], PP[2], time, DD[1], DD[2], steps, period, (const double *)PP[7],",
-             "        (int)DD[7], (const int *)PP[8], (const double *)PP[9], (const double *)PP[10], (const double *)PP[11],",
-             "        (const double *)PP[12], (double *)PP[3], (const double *)PP[4], (int)DD[8], &held, &done);",
-             "    DD[9] += done;",
-             "    if (held) DD[6] = 1.0;",
-             "    if (status != 0) FAIL(status);",
-             "} else if (steps > 0) {",
-             "    for (int s = 0; s < steps; s++) { mjstep(PP[1], PP[2]); *time += DD[2]; }",
-             "    DD[9] += steps;",
-             "    const double *q = (const double *)PP[4]; double sum = 0.0;",
-             "    for (int s = 0; s < (int)DD[8]; s++) sum += q[s] * q[s];",
-             "    if (!(sum - sum == 0.0)) FAIL(2);",
-             "}",
-             f"double *V = DD + {VBASE}; (void)V;"]
-    for var, array, address in mirrors:
-        value = f"((const double *)PP[{array}])[{address}]" if address is not None else "0.0"
-        if var in layout:
-            lines.append(f"V[{layout.index(var)}] = {value};")
-        lines.append(f"N[{out[var]}] = {value};")
-    lines.append(f"int occ[{max(1, E)}]; m_events(V, (const double *)PP[6], occ);")
-    lines.append("int came = 0;")
-    lines.append(f"double outs[{max(1, E)}];")
-    for i, name in enumerate(names):
-        if name in mapping.answers:
-            lines.append(f"if (occ[{i}] && DD[{HELD + i}] == 0.0) DD[{CAME} + came++] = {i}; outs[{i}] = 0.0;")
-        else:
-            lines.append(f"outs[{i}] = occ[{i}] ? 1.0 : 0.0;")
-        lines.append(f"DD[{HELD + i}] = occ[{i}] ? 1.0 : 0.0;")
-    lines.append("if (came) outs[(int)DD[" + str(CAME) + "]] = 1.0;")
-    lines.append("DD[10] = came;")
-    for name in ports:
-        lines.append(f"N[{out[name]}] = outs[{names.index(name)}];")
-    decls = native.SOURCE + "\n" + events.source
-    jacobi = execution.algorithm.name == "jacobi"
-    data = execution.algorithm.data
-    steps_per = sim.steps_for(execution.step_size)
-    from .endpoint import CONTROL_PERIOD
+class QuietStep:
+    """A mapping's quiet step for the native loop (see the module doc), for a unit whose operation calls come
+    in at `op_slots`, whose events go out at `event_slots` (event -> slot) and monitored variables at
+    `monitored_slots`; `why` says why there is none (then the rest is not set)."""
 
-    period = max(1, int(round(CONTROL_PERIOD / sim.timestep)))
-    pointers: list = [0] * 13
-    doubles: list = [0.0] * (VBASE + len(layout))
-    state = {}
+    def __init__(self, mapping: Mapping, step_size: float, op_slots: list[int], event_slots: dict[str, int],
+                 monitored_slots: dict[str, int]):
+        from . import native
+        from .endpoint import CONTROL_PERIOD, SimulatedEndpoint
 
-    def quiet(n: int) -> int:
-        n = min(n, max(1, MAX_PHYSICS // max(1, steps_per)))  # a segment of at most about a tenth of a second
-        if mapping.pending or mapping.asked or (jacobi and any(data[i] is True for i in op_slots)):
+        self.mapping = mapping
+        self.why: str | None = None
+        endpoint = self.endpoint = mapping.endpoint
+        if type(endpoint) is not SimulatedEndpoint:
+            self.why = f"its platform ({type(endpoint).__name__}) is not cotwin's simulated one"
+            return
+        sim = self.sim = endpoint.sim
+        if not sim.plain_stepping:
+            why = ("its world is shared with other robots" if sim.shared is not None else
+                   "its ray sensors scan between physics steps" if sim.scanners else
+                   "its contacts with obstacles are checked between physics steps" if sim.obstacles else
+                   f"its integrator ({sim.model.opt.integrator}) does not advance time by one timestep a step")
+            self.why = f"{why} (the native step is MuJoCo's steps and nothing between them)"
+            return
+        if mapping.monitor:
+            self.why = "it monitors readings other than the joints"
+            return
+        if native.advance_function() is None:
+            self.why = "the endpoint's control loop cannot be built here (no C compiler?)"
+            return
+        try:
+            self.events = EventsInC(mapping, sim.sensor_addresses(), "m_")
+        except Unsupported as why:
+            self.why = f"an input event's definition has a form the C spelling does not cover: {why}"
+            return
+        self.names = list(mapping.events)
+        self.op_slots = list(op_slots)
+        self.steps = sim.steps_for(step_size)
+        self.period = max(1, int(round(CONTROL_PERIOD / sim.timestep)))
+        E = len(self.names)
+        self.held_at, self.came_at, self.variables_at = SCALARS, SCALARS + E, SCALARS + 2 * E
+        self.pointers: list = [0] * POINTERS
+        self.doubles: list = [0.0] * (self.variables_at + len(self.events.variables))
+        self.decls = native.SOURCE + "\n" + self.events.source
+        self.lines = self._lines(event_slots, monitored_slots)
+        self._values: list[float] = []
+        self._move = None
+
+    def _lines(self, event_slots: dict[str, int], monitored_slots: dict[str, int]) -> list[str]:
+        """One quiet step in C (inside the native loop's step: IN, N, PP, DD, FAIL, PAUSE, END_AFTER)."""
+        sim, layout, mapping = self.sim, self.events.variables, self.mapping
+        ops = " || ".join(f"IN({i}) != 0.0" for i in self.op_slots) or "0"
+        lines = [f"if ({ops}) PAUSE();  /* an operation to run: Python runs it */",
+                 f"double *time = &DD[{TIME}];",
+                 f"int steps = (int)DD[{STEPS}], period = (int)DD[{PERIOD}];",
+                 f"cotwin_mj_step mjstep = (cotwin_mj_step)PP[{MJ_STEP}];",
+                 f"if (steps > 0 && DD[{MOVING}] != 0.0 && DD[{MOVE_HELD}] == 0.0) {{  /* a move: its set-points */",
+                 "    int held = 0, done = 0;",
+                 f"    int status = cotwin_advance(mjstep, PP[{MODEL}], PP[{DATA}], time, DD[{TIMESTEP}], "
+                 f"DD[{PHYSICS_TIMESTEP}], steps, period,",
+                 f"        (const double *)PP[{MOVE}], (int)DD[{JOINTS}], (const int *)PP[{MOVE + 1}], "
+                 f"(const double *)PP[{MOVE + 2}],",
+                 f"        (const double *)PP[{MOVE + 3}], (const double *)PP[{MOVE + 4}], (const double *)PP[{MOVE + 5}],",
+                 f"        (double *)PP[{CTRL}], (const double *)PP[{QPOS}], (int)DD[{NQ}], &held, &done);",
+                 f"    DD[{DONE}] += done;",
+                 f"    if (held) DD[{MOVE_HELD}] = 1.0;",
+                 "    if (status != 0) FAIL(status);  /* 1: a set-point not finite; 2: the state not finite */",
+                 "} else if (steps > 0) {  /* the servos hold: the physics steps in one go, then the check */",
+                 f"    for (int s = 0; s < steps; s++) {{ mjstep(PP[{MODEL}], PP[{DATA}]); *time += DD[{PHYSICS_TIMESTEP}]; }}",
+                 f"    DD[{DONE}] += steps;",
+                 f"    const double *q = (const double *)PP[{QPOS}]; double sum = 0.0;",
+                 f"    for (int s = 0; s < (int)DD[{NQ}]; s++) sum += q[s] * q[s];",
+                 "    if (!(sum - sum == 0.0)) FAIL(2);",
+                 "}",
+                 f"double *V = DD + {self.variables_at}; (void)V;"]
+        for var, (joint, kind) in mapping.mirrors.items():
+            address = sim.joint_address(joint, kind)
+            value = f"((const double *)PP[{QPOS if kind == 'position' else QVEL}])[{address}]" \
+                if address is not None else "0.0"
+            if var in layout:
+                lines.append(f"V[{layout.index(var)}] = {value};")
+            lines.append(f"N[{monitored_slots[var]}] = {value};")
+        E = len(self.names)
+        lines += [f"int occ[{max(1, E)}]; m_events(V, (const double *)PP[{SENSORDATA}], occ);",
+                  f"int came = 0; double outs[{max(1, E)}];"]
+        for i, name in enumerate(self.names):  # Mapping.report with nothing asked
+            if name in mapping.answers:
+                lines.append(f"if (occ[{i}] && DD[{self.held_at + i}] == 0.0) DD[{self.came_at} + came++] = {i}; "
+                             f"outs[{i}] = 0.0;")
+            else:
+                lines.append(f"outs[{i}] = occ[{i}] ? 1.0 : 0.0;")
+            lines.append(f"DD[{self.held_at + i}] = occ[{i}] ? 1.0 : 0.0;")
+        lines += [f"if (came) {{ outs[(int)DD[{self.came_at}]] = 1.0; END_AFTER(); }}  /* the first answer delivered */",
+                  f"DD[{CAME}] = came;"]
+        lines += [f"N[{slot}] = outs[{self.names.index(name)}];" for name, slot in event_slots.items()]
+        return lines
+
+    def quiet(self, n: int, data: list, jacobi: bool) -> int:
+        """How many of the next n steps the mapping can make natively now: none while an answer waits, an
+        operation was asked, or (Jacobi) is called; none when the move in flight cannot run in C or a
+        variable the events read is not a plain number; at most about 20 000 physics steps."""
+        mapping = self.mapping
+        if mapping.pending or mapping.asked or (jacobi and any(data[i] is True for i in self.op_slots)):
             return 0
-        segment = endpoint.segment
-        if segment is not None and segment is not endpoint._held and endpoint._moves(segment) is None:
+        if self.endpoint.native_move() is False:
             return 0
-        values = variable_values(mapping, layout)
+        values = variable_values(mapping, self.events.variables)
         if values is None:
             return 0
-        state["values"] = values
-        return n
+        self._values = values
+        return min(n, max(1, MAX_PHYSICS // max(1, self.steps)))
 
-    def begin() -> None:
-        fn, mj_step = native.advance_function()
-        segment = endpoint.segment
-        moving = segment is not None and segment is not endpoint._held
+    def begin(self) -> None:
+        """The pointers and doubles of the segment about to run (after `quiet`)."""
+        import ctypes
+
+        from . import native
+
+        sim, mapping = self.sim, self.mapping
+        _, mj_step = native.advance_function()
+        move = self.endpoint.native_move()
         d = sim.data
-        address = lambda array: ctypes.cast(array, ctypes.c_void_p).value  # noqa: E731
-        pointers[:7] = [mj_step, sim.model._address, d._address, sim.controls.ctypes.data, d.qpos.ctypes.data,
-                        d.qvel.ctypes.data, d.sensordata.ctypes.data]
+        self.pointers[:MOVE] = [mj_step, sim.model._address, d._address, sim.controls.ctypes.data,
+                                d.qpos.ctypes.data, d.qvel.ctypes.data, d.sensordata.ctypes.data]
         joints = 0
-        if moving:
-            arrays, joints = endpoint._native_plan
-            pointers[7:13] = [address(a) for a in arrays]
-            state["arrays"] = arrays  # alive while the C loop reads them
+        if move:
+            segment, arrays, joints = move
+            self.pointers[MOVE:] = [ctypes.cast(a, ctypes.c_void_p).value for a in arrays]
         else:
-            pointers[7:13] = [0] * 6
-        doubles[:11] = [float(d.time), float(sim.timestep), float(sim.model.opt.timestep), float(steps_per),
-                        float(period), 1.0 if moving else 0.0, 0.0, float(joints), float(d.qpos.size), 0.0, 0.0]
-        for i, name in enumerate(names):
-            doubles[HELD + i] = 1.0 if mapping.held.get(name, (False, None))[0] else 0.0
-            doubles[CAME + i] = 0.0
-        doubles[VBASE:] = state["values"]
-        state["moving"] = segment if moving else None
+            self.pointers[MOVE:] = [0] * (POINTERS - MOVE)
+        self._move = move or None  # kept: its arrays stay alive while the C loop reads them
+        self.doubles[:SCALARS] = [float(d.time), float(sim.timestep), float(sim.model.opt.timestep), float(self.steps),
+                                  float(self.period), 1.0 if move else 0.0, 0.0, float(joints), float(d.qpos.size),
+                                  0.0, 0.0]
+        for i, name in enumerate(self.names):
+            self.doubles[self.held_at + i] = 1.0 if mapping.held.get(name, (False, None))[0] else 0.0
+            self.doubles[self.came_at + i] = 0.0
+        self.doubles[self.variables_at:] = self._values
 
-    def end(first: int, k: int, rows, dd) -> None:
-        done = int(dd[9])
-        if done:
-            sim.stepped(done)  # counted, and checked as `step` checks (an unstable state raises here)
-        if float(dd[0]) != sim.data.time:
-            raise CotwinError(f"the native loop kept time {float(dd[0])!r}, MuJoCo {sim.data.time!r}")
-        if state.get("moving") is not None and dd[6] != 0.0:
-            endpoint._held = state["moving"]
-        if not k:
-            return
-        mapping.reports += k
-        for i, name in enumerate(names):
-            ev = mapping.events[name]
-            mapping.held[name] = (True, ev.value) if dd[HELD + i] != 0.0 else (False, None)
-        came = [names[int(dd[CAME + j])] for j in range(int(dd[10]))]
-        if came:
-            mapping.delivered[came[0]] = mapping.reports
-            for name in came[1:]:
-                mapping.pending[name] = mapping.events[name].value
-        mapping._sync()
-        last = rows[-1]
-        for name in ports:
-            unit.values[name] = bool(last[out[name]] != 0.0)
-        for name in mapping.monitored:
-            unit.values[name] = float(last[out[name]])
-        origin, done = execution._origin
-        unit.time = origin + (first + k - 1 - done) * execution.step_size + execution.step_size
+    def end(self, made: int, dd) -> None:
+        """The mapping and its platform after `made` steps made natively (dd: the doubles they left)."""
+        sim = self.sim
+        self.endpoint.stepped_natively(int(dd[DONE]), self._move[0] if self._move and dd[MOVE_HELD] != 0.0 else None)
+        if float(dd[TIME]) != sim.data.time:
+            raise CotwinError(f"the native loop kept time {float(dd[TIME])!r}, MuJoCo {sim.data.time!r}")
+        if made:
+            held = {name: dd[self.held_at + i] != 0.0 for i, name in enumerate(self.names)}
+            came = [self.names[int(dd[self.came_at + j])] for j in range(int(dd[CAME]))]
+            self.mapping.reported_elsewhere(made, held, came)
 
-    def failed(code: int, t: float) -> None:
+    def failed(self, code: int, t: float) -> None:
+        """Raise the error the step made in Python raises: the physics unstable (2), a set-point not finite (1)."""
         if code == 2:
-            sim._check()
-        raise CotwinError(f"mapping {mapping.model.name} at t = {t:g} s: a servo set-point is not a finite number"
-                          if code == 1 else f"mapping {mapping.model.name} at t = {t:g} s: the native step failed ({code})")
-
-    return make_part("\n".join(lines), decls=decls, pointers=pointers, doubles=doubles, quiet=quiet, begin=begin,
-                      end=end, failed=failed, continuous=tuple(mapping.monitored))
+            self.sim.check()
+        if code == 1:
+            self.endpoint.set_point(self.period)  # writes the set-point the C loop found not finite: says which
+        raise CotwinError(f"mapping {self.mapping.model.name} at t = {t:g} s: the native step failed ({code})")

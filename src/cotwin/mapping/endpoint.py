@@ -203,6 +203,25 @@ class SimulatedEndpoint(Endpoint):
             self._held = segment
         return done.value  # status 1: a set-point not finite; the Python loop goes on and says so
 
+    def native_move(self):
+        """The move in flight for a native loop (cotwin.mapping.cstep): (segment, the control loop's C arrays, the
+        joints' count); None when the servos hold their set-point (no move, or its end reached); False when
+        the move cannot run in C (an unknown actuator, a number that is not a float)."""
+        segment = self.segment
+        if segment is None or segment is self._held:
+            return None
+        if self._moves(segment) is None:
+            return False
+        arrays, joints = self._native_plan
+        return segment, arrays, joints
+
+    def stepped_natively(self, steps: int, held: object | None) -> None:
+        """A native loop made `steps` physics steps (counted, not checked: the loop checked them), the move
+        `held` reaching its end (its set-point held from then on) or None."""
+        self.sim.stepped(steps, check=False)
+        if held is not None:
+            self._held = held
+
     def _moves(self, segment: Segment) -> list | None:
         """Per joint of the segment: (control index, start, goal - start, low, high), once per segment (and
         the same as ctypes arrays for the native loop); None when an actuator is unknown."""

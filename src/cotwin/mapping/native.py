@@ -2,8 +2,7 @@
 
 `SimulatedEndpoint.advance` refreshes the servos' set-points every CONTROL_PERIOD (2 ms) along the move
 in flight, stepping MuJoCo between refreshes; in Python that loop cost about as much as the physics it
-drives at steps of 0.01 and 0.1 s (issue 23). This module compiles (once per machine, cached beside the
-IK solutions: cotwin.pmodel.ikcache.cache_dir, or in a temporary folder) a C function doing the same loop:
+drives at steps of 0.01 and 0.1 s (issue 23). This module compiles (once per machine: cotwin.cbuild) a C function doing the same loop:
 the move's fraction (quintic or trapezoid, the same expressions in the same order as
 cotwin.mapping.motion, with floating-point contraction off so that every value is the same double), each
 joint's set-point start + s * move clipped to its servo's range, MuJoCo's own `mj_step` (its address
@@ -17,11 +16,7 @@ Python loop runs, as before.
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import os
-import shutil
 import subprocess
-import tempfile
 from pathlib import Path
 
 import mujoco
@@ -104,30 +99,12 @@ _LIB: object = None  # the loaded function, False when it cannot be built here, 
 
 
 def _build() -> ctypes.CDLL | None:
-    from ..pmodel.ikcache import cache_dir
+    from ..cbuild import compile_library
 
-    compiler = shutil.which("cc") or shutil.which("gcc")
-    if compiler is None:
+    try:
+        return compile_library(SOURCE, "advance", keep_gil=False)
+    except ValueError:
         return None
-    digest = hashlib.sha256(SOURCE.encode()).hexdigest()[:16]
-    folder = cache_dir()
-    folder = (folder / "native") if folder is not None else Path(tempfile.gettempdir()) / f"cotwin-native-{os.getuid()}"
-    target = folder / f"advance-{digest}.so"
-    if not target.is_file():
-        folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(prefix="cotwin-cc-") as tmp:
-            source = Path(tmp) / "advance.c"
-            source.write_text(SOURCE)
-            built = Path(tmp) / "advance.so"
-            proc = subprocess.run([compiler, "-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off",
-                                   "-fno-fast-math", str(source), "-o", str(built), "-lm"],
-                                  capture_output=True, text=True, timeout=120)
-            if proc.returncode != 0 or not built.is_file():
-                return None
-            staged = folder / f".{target.name}.{os.getpid()}"
-            shutil.copy(built, staged)
-            os.replace(staged, target)  # whole, also when another process builds it at the same time
-    return ctypes.CDLL(str(target))
 
 
 def _mj_step():

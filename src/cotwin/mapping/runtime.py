@@ -641,6 +641,24 @@ class Mapping:
             self._registry.stored.save()
         self.started = False
 
+    @property
+    def mirrors(self) -> dict[str, tuple[str, str]]:
+        """Mirrored variables: name -> (joint, "position" or "velocity"), in the order `monitored` lists them."""
+        return dict(self._mirrors)
+
+    def reported_elsewhere(self, reports: int, held: dict[str, bool], came: list[str]) -> None:
+        """`reports` steps made and reported by a native loop (cotwin.mapping.cstep) with nothing asked: the
+        events that held at the last of them, the answers that came in it (the first delivered, the others
+        waiting, in order); the sensor readings and mirrored variables read again."""
+        self.reports += reports
+        for name, occurs in held.items():
+            self.held[name] = (True, self.events[name].value) if occurs else (False, None)
+        if came:
+            self.delivered[came[0]] = self.reports
+            for name in came[1:]:
+                self.pending[name] = self.events[name].value
+        self._sync()
+
     # ---- time ----
     def step(self, dt: float) -> None:
         """Let the platform run for dt seconds, then refresh sensor readings and mirrored variables."""

@@ -217,10 +217,32 @@ class PlatformSimulator:
         return self.shared is None and not self.scanners and not self._obstacles and \
             self.model.opt.integrator in _PLAIN_INTEGRATORS
 
-    def stepped(self, n: int) -> None:
-        """Count n physics steps a caller made with mj_step itself, and check the state as `step` does."""
+    @property
+    def obstacles(self) -> frozenset[int]:
+        """The geoms whose contacts with the robot are checked between physics steps."""
+        return frozenset(self._obstacles)
+
+    def stepped(self, n: int, check: bool = True) -> None:
+        """Count n physics steps a caller made with mj_step itself, and check the state as `step` does (unless
+        the caller checked it itself: `check` False)."""
         self._steps += n
+        if check:
+            self._check()
+
+    def check(self) -> None:
+        """CotwinError if the state is no longer finite (the physics blew up), as `step` says it."""
         self._check()
+
+    def sensor_addresses(self) -> dict[str, int]:
+        """Every p-model sensor port by its mapping path (as `read_sensors` keys it): its index in MuJoCo's
+        sensordata (`read_sensors` reads that element; a ray scanner's or a free base's readings are not there)."""
+        return {path: int(adr) for path, (adr, _) in self._sensors.items()}
+
+    def joint_address(self, joint: str, kind: str = "position") -> int | None:
+        """Where an actuated joint's position (in qpos) or velocity (in qvel) is, as `joint_positions` and
+        `joint_velocities` read it; None for a joint the simulator does not have."""
+        table = self._joint_qpos if kind == "position" else self._joint_dof
+        return int(table[joint]) if joint in table else None
 
     def servo_slots(self, names) -> list[tuple[int, float, float]] | None:
         """Per actuator name, its control index and the range its targets are clipped to (as

@@ -96,12 +96,37 @@ class MappingUnit(PythonUnit):
             self.values[name] = float(self.mapping.variables[name])
 
     def native_part(self, execution):
-        """Its quiet step for the native loop (cotwin.mapping.cstep), or why it has none."""
-        from ...cosim import native
-        from ...mapping.cstep import quiet_step
+        """Its quiet step for the native loop (cotwin.mapping.cstep.QuietStep: the platform moves, the mirrors and
+        events in C), or why it has none; after a stretch, its ports and time as `step` leaves them."""
+        from ...cosim.native import NativePart, feeds, outputs
+        from ...mapping.cstep import QuietStep
 
-        return quiet_step(self, execution, native.NativePart, native.feeds(execution, self),
-                          native.outputs(execution, self))
+        out = outputs(execution, self)
+        if any(p.name not in out for p in self.event_ports) or any(m not in out for m in self.monitored):
+            return "an output of the mapping is not observed"
+        calls = {op for op, _ in self.calls}
+        quiet = QuietStep(self.mapping, execution.step_size, [slot for name, slot in feeds(execution, self) if name in calls],
+                          {p.name: out[p.name] for p in self.event_ports}, {m: out[m] for m in self.monitored})
+        if quiet.why is not None:
+            return quiet.why
+        data, jacobi = execution.algorithm.data, execution.algorithm.name == "jacobi"
+
+        def end(first: int, made: int, rows, doubles) -> None:
+            quiet.end(made, doubles)
+            if made and len(rows):
+                last = rows[-1]
+                for port in self.event_ports:
+                    self.values[port.name] = bool(last[out[port.name]] != 0.0)
+                for name in self.monitored:
+                    self.values[name] = float(last[out[name]])
+            if made:
+                origin, done = execution._origin
+                self.time = origin + (first + made - 1 - done) * execution.step_size + execution.step_size
+
+        return NativePart("\n".join(quiet.lines), decls=quiet.decls, pointers=quiet.pointers, doubles=quiet.doubles,
+                          quiet=lambda n: quiet.quiet(n, data, jacobi), begin=quiet.begin, end=end,
+                          failed=quiet.failed, continuous=tuple(self.monitored),
+                          writes=frozenset(p.name for p in self.event_ports) | frozenset(self.monitored))
 
     def terminate(self) -> None:
         if self.mapping is not None and self.mapping.started:
