@@ -324,3 +324,58 @@ def test_a_real_port_holding_an_integer_keeps_its_spelling(built, tmp_path):
     assert native[0].result.native_steps > 0.6 * native[0].result.steps
     assert b"0.1,false,0,0,0," in fmu[1]  # the integer zeros the rows must keep
     assert native[1] == fmu[1] and native[2] == fmu[2]
+
+
+def test_integer_arithmetic_in_an_event_stays_in_python_and_says_why(built, tmp_path):
+    """Integer arithmetic is exact in Python (and checked for overflow), not in doubles: an event reading
+    `a * a + 1 - a * a == 1` with a = 2^27 + 1 holds in Python and not in doubles, so the native step does
+    not spell it; the run says so, and its rows are the FMU path's."""
+    from conftest import EXAMPLES
+
+    folder = tmp_path / "model"
+    shutil.copytree(EXAMPLES / "ur5e", folder)
+    text = (folder / "mapping.pm").read_text()
+    text = text.replace("\tvar target_q:", "\tvar a: int = 134217729\n\tvar target_q:", 1)
+    text = text.replace("\t\tequation gripper_opening\n", "\t\tequation a * a + 1 - a * a == 1\n", 1)
+    (folder / "mapping.pm").write_text(text)
+    twin = load(folder / "cotwin.toml")
+    build(twin, tmp_path / "build")
+    fmu = run(twin, tmp_path / "build", tmp_path / "fmu", step=0.1, fused=False)
+    native = run(twin, tmp_path / "build", tmp_path / "native", step=0.1)
+    result = native[0].result
+    assert result.native_steps == 0 and "the operator * on an integer" in result.native_why
+    assert "mapping.pm:" in result.native_why  # where
+    assert native[1] == fmu[1] and native[2] == fmu[2]
+
+
+def test_what_an_fmu_logs_inside_a_stretch_carries_the_time_of_its_step(tmp_path, caplog):
+    """A warning the d-model logs from a step made in the native loop names that step's time, as from the
+    step-by-step loop (the unit's own time is only brought up to date after a stretch). The d-model here
+    calls stop every 301 cycles, twice within one step (cycle_period 5 ms at step 10 ms): the FMU warns."""
+    import logging
+
+    from conftest import EXAMPLES
+
+    folder = tmp_path / "model"
+    shutil.copytree(EXAMPLES / "ur5e", folder)
+    arm = (folder / "arm.rst").read_text()
+    arm = arm.replace("\tvar margs: MovementArgs\n", "\tvar margs: MovementArgs\n\tclock C\n", 1)
+    arm = arm.replace("\tstate Idle { }\n", "\tstate Idle { }\n\tstate Tick { entry $stop() }\n\tstate Tock { entry $stop() }\n", 1)
+    idle = "condition not ($moveDiscreteCommand \\/ $openGripperCommand \\/ $closeGripperCommand)\n\t}\n"
+    assert idle in arm
+    arm = arm.replace(idle, idle.replace(")\n", ") /\\ since(C) < 301\n") +
+                      "\ttransition tick {\n\t\tfrom Idle to Tick\n\t\t" + idle.replace(")\n", ") /\\ since(C) >= 301\n\t\taction #C\n")
+                      + "\ttransition tock { from Tick to Tock exec }\n\ttransition back { from Tock to Idle exec }\n", 1)
+    (folder / "arm.rst").write_text(arm)
+    project = (folder / "cotwin.toml").read_text().replace("[cosim]\n", "[cosim]\nparameters = { cycle_period = 0.005 }\n", 1)
+    (folder / "cotwin.toml").write_text(project)
+    twin = load(folder / "cotwin.toml")
+    build(twin, tmp_path / "build")
+    warned = []
+    for fused in (False, True):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING):
+            ran = run(twin, tmp_path / "build", tmp_path / str(fused), step=0.01, fused=fused)[0]
+        warned.append([r.getMessage() for r in caplog.records if "at t =" in r.getMessage() and "{dmodel}" in r.getMessage()])
+    assert ran.result.native_steps > 0.6 * ran.result.steps
+    assert warned[0] and warned[0] == warned[1]

@@ -289,15 +289,19 @@ class Execution:
                 self._native, self.native_why = None, str(why)
                 return loop.run(n)
         done = 0
-        while done < n:
-            k = native.run(n - done)
-            if k:
-                self.native_steps += k
-            else:
-                k = loop.run(min(QUIET_AFTER, n - done))
-                if k == 0:
-                    break
-            done += k
+        try:
+            while done < n:
+                k = native.run(n - done)
+                if k:
+                    self.native_steps += k
+                else:
+                    k = loop.run(min(QUIET_AFTER, n - done))
+                    if k == 0:
+                        break
+                done += k
+        finally:
+            if not self.native_steps:
+                self.native_why = f"no step was quiet enough: {native.idle()}"
         return done
 
     def result(self) -> RunResult:

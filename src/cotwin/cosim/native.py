@@ -29,6 +29,9 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import signal
+import threading
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -59,6 +62,7 @@ class NativePart:
     date after it made `made` steps natively from step index `first` (rows: the slots after each complete
     step; doubles: its `DD` as the steps left them). `continuous`: outputs whose change does not end a
     segment. `sets_inputs`: the C writes the unit's inputs itself (its Python setter is not called after).
+    `refusal()`: why `quiet` last said 0, in a few words.
     """
 
     step: str
@@ -72,6 +76,7 @@ class NativePart:
     continuous: tuple[str, ...] = ()
     writes: frozenset[str] = frozenset()
     sets_inputs: bool = False
+    refusal: Callable[[], str] = lambda: "it was not quiet"  # why `quiet` last said 0
 
 
 def feeds(execution, unit) -> list[tuple[str, int]]:
@@ -136,6 +141,7 @@ class NativeLoop:
         shadows = {shadow for _, shadow in self.copies}
         self.discrete = [i for i in self.written if i not in continuous and i not in shadows]
         self._data, self._observers = algorithm.data, list(execution.observers)
+        self.refusals: dict[str, int] = {}  # why steps were left to Python, and how often
         self.source = self._source()
         self._fn = _compiled(self.source)
 
@@ -205,16 +211,25 @@ class NativeLoop:
         for i in self._held_still():
             value = data[i]
             if value.__class__ not in _PLAIN or (value.__class__ is int and abs(value) > 2 ** 53):
-                return 0  # a value the rows cannot carry exactly as a double
+                why = "a value on a connection is not a number a double carries exactly"
+                self.refusals[why] = self.refusals.get(why, 0) + 1
+                return 0
         for observer in execution.observers:
             bound = observer.quiet_for(execution)
             if bound is not None:
                 n = min(n, bound)
-        for part in self.parts:
+        for unit, part in zip(execution.algorithm.units, self.parts):
             n = min(n, part.quiet(n))
             if n <= 0:
+                why = f"unit {unit.name}: {part.refusal()}"
+                self.refusals[why] = self.refusals.get(why, 0) + 1
                 return 0
         return n
+
+    def idle(self) -> str:
+        """Why steps were left to Python, the most frequent reason first (for a run that made none here)."""
+        ranked = sorted(self.refusals.items(), key=lambda item: -item[1])
+        return "; ".join(f"{why} ({n} steps)" for why, n in ranked[:3]) or "no step was quiet"
 
     def _held_still(self) -> list[int]:
         written = set(self.written)
@@ -224,10 +239,14 @@ class NativeLoop:
         """Up to n steps natively (fewer: see the module doc); the steps made, observers told. 0 when the
         system is not quiet now (the caller makes a step in Python). A step a unit paused is finished in
         Python, from that unit on, and counted. A step that failed raises its error once the steps before it
-        are committed and told."""
+        are committed and told. Ctrl-C waits until they are (a stretch is a tenth of a second at most)."""
         n = self.quiet(min(n, MAX_SEGMENT))
         if n <= 0:
             return 0
+        with _signals_held():
+            return self._run(n)
+
+    def _run(self, n: int) -> int:
         execution, algorithm = self.execution, self.execution.algorithm
         data = algorithm.data
         # the rows' kinds this segment: C writes its slots as their ports' types; the others hold still, as
@@ -326,6 +345,27 @@ class NativeLoop:
                     o.repeated(execution, batch)
         for o in execution.observers:
             o.step_complete(execution)
+
+
+@contextmanager
+def _signals_held():
+    """SIGINT and SIGTERM, where Python handles them, held until the block ends, then handled as they would
+    have been: an interrupt never falls between a stretch's steps committed and told (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[tuple[int, object]] = []
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    caught = {sig: handler for sig, handler in previous.items() if callable(handler)}
+    for sig in caught:
+        signal.signal(sig, lambda signum, frame: held.append((signum, frame)))
+    try:
+        yield
+    finally:
+        for sig, handler in caught.items():
+            signal.signal(sig, handler)
+        for signum, frame in held[:1]:
+            caught[signum](signum, frame)
 
 
 _PLAIN = (bool, int, float)

@@ -16,7 +16,7 @@ import weakref
 from collections import deque
 from ctypes import (POINTER, byref, c_bool, c_char_p, c_double, c_int, c_int64, c_size_t, c_uint, c_void_p,
                     create_string_buffer)
-from ctypes import cast as ctypes_cast, string_at as ctypes_string_at
+from ctypes import addressof, cast as ctypes_cast, string_at as ctypes_string_at
 from dataclasses import dataclass
 from operator import itemgetter
 from pathlib import Path
@@ -317,6 +317,7 @@ class FMUUnit(BoundByNames, Unit):
         self._getters: dict[tuple[str, ...], Callable] = {}
         self._fn: dict[str, object] = {}
         self._memory: dict[int, tuple[object, int]] | None = None
+        self._native_clock: c_double | None = None  # the step's time while a native stretch runs (its C writes it)
 
     # ---- the one path into the FMU ----
     def _call(self, call: str, fn, *args):
@@ -345,7 +346,8 @@ class FMUUnit(BoundByNames, Unit):
                               category.decode("utf-8", "replace") if category else "", text))
         self._fresh = min(self._fresh + 1, self.messages.maxlen)
         if status == FMI2_WARNING:  # the FMU goes on but says something is not quite right: the user hears it
-            log.warning("unit %s at t = %g s: %s", self.name, self.time, text)
+            now = self._native_clock.value if self._native_clock is not None else self.time  # inside a native stretch
+            log.warning("unit %s at t = %g s: %s", self.name, now, text)
 
     def _bind_functions(self) -> None:
         """The FMU's C functions with their prototypes (our own function objects, not FMPy's)."""
@@ -554,7 +556,7 @@ class FMUUnit(BoundByNames, Unit):
                 arrays.append(array)
             k = next(i for i, a in enumerate(arrays) if a is array)
             kind = {"Real": "double", "Integer": "int64_t", "Boolean": "bool"}[self.ports[name].type]
-            return f"(({kind} *)PP[{2 + k}])[{index}]"
+            return f"(({kind} *)PP[{3 + k}])[{index}]"
 
         lines = []
         inputs = feeds(execution, self)
@@ -568,6 +570,7 @@ class FMUUnit(BoundByNames, Unit):
             kind = self.ports[name].type
             value = f"IN({slot})" if kind == "Real" else f"(int64_t)IN({slot})" if kind == "Integer" else f"(IN({slot}) != 0.0)"
             lines.append(f"{place(name)} = {value};")
+        lines.append("*(double *)PP[2] = t;  /* the step's time, for what the FMU logs during it */")
         lines.append("{ int status = ((cotwin_do_step)PP[0])(PP[1], t, H, 1); if (status > 1) FAIL(10 + status); }")
         for name, slot in outputs(execution, self).items():
             kind = self.ports[name].type
@@ -575,9 +578,15 @@ class FMUUnit(BoundByNames, Unit):
             lines.append(f"N[{slot}] = " + (f"{read};" if kind == "Real" else f"(double){read};" if kind == "Integer"
                                              else f"{read} ? 1.0 : 0.0;"))
         do_step = ctypes_cast(self._fn["fmi2DoStep"], c_void_p).value
-        pointers = [do_step, self.component, *(ctypes_cast(a, c_void_p).value for a in arrays)]
+        clock = c_double(self.time)
+        pointers = [do_step, self.component, addressof(clock),
+                    *(ctypes_cast(a, c_void_p).value for a in arrays)]
+
+        def begin() -> None:
+            self._native_clock = clock
 
         def end(first: int, made: int, rows, doubles) -> None:
+            self._native_clock = None
             if made:  # as `step` leaves it: the last step's start
                 origin, done = execution._origin
                 self.time = origin + (first + made - 1 - done) * execution.step_size
@@ -590,7 +599,7 @@ class FMUUnit(BoundByNames, Unit):
             status = code - 10
             self._failed("fmi2DoStep", status, f"returned {STATUS[status] if 0 <= status < len(STATUS) else status}")
 
-        return NativePart("\n".join(lines), pointers=pointers, end=end, failed=failed,
+        return NativePart("\n".join(lines), pointers=pointers, begin=begin, end=end, failed=failed,
                           writes=frozenset(outputs(execution, self)), sets_inputs=True)
 
     # ---- state ----

@@ -47,13 +47,19 @@ class Unsupported(Exception):
 
 class EventsInC:
     """The C of a mapping's input events: `source` defines `static void {prefix}events(const double *V,
-    const double *SD, int *occ)`; `variables` lists what V holds (name or (name, index)) and `sensors` the
-    sensor data indices, both fixed by the mapping and the simulator."""
+    const double *SD, int *occ)`; `variables` lists what V holds (name or (name, index)) and `kinds` the
+    kind of value each held when spelt ('r' real, 'i' integer or enumeration, 'b' boolean: `variable_values`
+    refuses a value of another kind later), `sensor_address` the sensor data indices.
+
+    Every expression is spelt with its kind, so that the C computes what Python computes: reals and
+    integers up to 2^53 are the same doubles, comparisons and logic the same; integer arithmetic (exact in
+    Python, checked against overflow) and arithmetic on booleans (an error in Python) are not spelt."""
 
     def __init__(self, mapping: Mapping, sensor_address: dict[str, int], prefix: str):
         self.mapping = mapping
         self.sensor_address = sensor_address
         self.variables: list = []
+        self.kinds: list[str] = []
         self.prefix = prefix
         functions = []
         for k, event in enumerate(mapping.events.values()):
@@ -61,104 +67,128 @@ class EventsInC:
                 raise Unsupported(f"input event {event.name} carries a value")
             functions.append(self._event(k, event))
         calls = "\n".join(f"    occ[{k}] = {prefix}event{k}(V, SD);" for k in range(len(functions)))
-        self.source = C_MATH + "\n".join(functions) + (f"\nstatic void {prefix}events(const double *V, const double *SD, int *occ) {{\n"
-                                              f"{calls}\n}}\n")
+        self.source = (C_MATH + "\n".join(functions) +
+                       f"\nstatic void {prefix}events(const double *V, const double *SD, int *occ) {{\n{calls}\n}}\n")
 
-    def slot(self, key) -> int:
+    def slot(self, key, value, loc) -> tuple[str, str]:
+        """V[k] for a variable (or a vector's element) and its kind, from the value it holds now."""
+        kind = _KINDS.get(value.__class__)
+        if kind is None:
+            raise Unsupported(f"{key if isinstance(key, str) else '%s[%d]' % key} holds {type(value).__name__} at {loc}")
         if key not in self.variables:
             self.variables.append(key)
-        return self.variables.index(key)
+            self.kinds.append(kind)
+        return f"V[{self.variables.index(key)}]", kind
 
     def _event(self, k: int, event) -> str:
         lines = [f"static int {self.prefix}event{k}(const double *V, const double *SD) {{"]
-        local: set[str] = set()
+        local: dict[str, str] = {}  # the event's own variables and their kinds
         for var in event.model.variables:
             if var.init is not None:
-                lines.append(f"    double L_{var.name} = {self.expr(var.init, local)};")
-                local.add(var.name)
+                code, kind = self.expr(var.init, local)
+                lines.append(f"    double L_{var.name} = {code};")
+                local[var.name] = kind
         if not event.conditions:
             lines.append("    return 0;")
         for condition in event.conditions:
-            lines.append(f"    if (!({self.expr(condition, local)})) return 0;")
+            lines.append(f"    if (!({self.expr(condition, local)[0]})) return 0;")
         if event.conditions:
             lines.append("    return 1;")
         lines.append("}")
         return "\n".join(lines)
 
-    def expr(self, e: s.Expr, local: set[str]) -> str:
+    def expr(self, e: s.Expr, local: dict[str, str]) -> tuple[str, str]:
+        """The C of `e` and its kind ('r', 'i' or 'b'); Unsupported for a form not spelt."""
         method = getattr(self, f"_{type(e).__name__}", None)
         if method is None:
             raise Unsupported(f"{type(e).__name__} at {e.loc}")
         return method(e, local)
 
-    def _Literal(self, e: s.Literal, local) -> str:
+    def _Literal(self, e: s.Literal, local):
         value = e.value
         if value is True or value is False:
-            return "1.0" if value else "0.0"
+            return ("1.0" if value else "0.0"), "b"
         if value.__class__ in (int, float):
             if value.__class__ is int and abs(value) > 2 ** 53:
                 raise Unsupported(f"an integer beyond a double's at {e.loc}")
-            return f"({float(value).hex()})" if value == value and abs(value) != float("inf") else _special(float(value))
+            number = float(value)
+            code = f"({number.hex()})" if number == number and abs(number) != float("inf") else _special(number)
+            return code, _KINDS[value.__class__]
         raise Unsupported(f"a literal {value!r:.20} at {e.loc}")
 
-    def _Name(self, e: s.Name, local) -> str:
+    def _Name(self, e: s.Name, local):
         if len(e.name.parts) > 1:
             try:
-                return f"({float(self.mapping.enum_value(e.name)).hex()})"
+                return f"({float(self.mapping.enum_value(e.name)).hex()})", "i"
             except CotwinError:
                 raise Unsupported(f"the name {e.name} at {e.loc}") from None
         n = e.name.last
         if n in local:
-            return f"L_{n}"
+            return f"L_{n}", local[n]
         if n not in self.mapping.declared:
             raise Unsupported(f"the name {n} at {e.loc}")
-        return f"V[{self.slot(n)}]"
+        return self.slot(n, self.mapping.variables.get(n), e.loc)
 
-    def _FieldAccess(self, e: s.FieldAccess, local) -> str:
+    def _FieldAccess(self, e: s.FieldAccess, local):
         key = _MappingNames.sensor_key(e)
         if key is None or key not in self.sensor_address:
             raise Unsupported(f"the reading {key} at {e.loc}")
-        return f"SD[{self.sensor_address[key]}]"
+        return f"SD[{self.sensor_address[key]}]", "r"
 
-    def _IndexAccess(self, e: s.IndexAccess, local) -> str:
+    def _IndexAccess(self, e: s.IndexAccess, local):
         if not (isinstance(e.base, s.Name) and len(e.base.name.parts) == 1 and e.base.name.last not in local
                 and e.base.name.last in self.mapping.declared and isinstance(e.index, s.Literal)
                 and e.index.value.__class__ is int and e.index.value >= 0):
             raise Unsupported(f"an index at {e.loc}")
-        return f"V[{self.slot((e.base.name.last, e.index.value))}]"
+        name, index = e.base.name.last, e.index.value
+        try:
+            value = self.mapping.variables.get(name)[index]
+        except (TypeError, IndexError, KeyError):
+            raise Unsupported(f"the index {name}[{index}] at {e.loc}") from None
+        return self.slot((name, index), value, e.loc)
 
-    def _Unary(self, e: s.Unary, local) -> str:
-        operand = self.expr(e.operand, local)
+    def _Unary(self, e: s.Unary, local):
+        operand, kind = self.expr(e.operand, local)
         if e.op == "not":
-            return f"(!({operand}) ? 1.0 : 0.0)"
-        if e.op == "-":
-            return f"(-({operand}))"
-        raise Unsupported(f"the operator {e.op} at {e.loc}")
+            return f"(!({operand}) ? 1.0 : 0.0)", "b"
+        if e.op == "-" and kind != "b":
+            return f"(-({operand}))", kind
+        raise Unsupported(f"the operator {e.op} on {_NAMES[kind]} at {e.loc}")
 
-    def _Binary(self, e: s.Binary, local) -> str:
-        left, right = self.expr(e.left, local), self.expr(e.right, local)
+    def _Binary(self, e: s.Binary, local):
+        (left, a), (right, b) = self.expr(e.left, local), self.expr(e.right, local)
         if e.op == "/\\":
-            return f"((({left}) != 0.0 && ({right}) != 0.0) ? 1.0 : 0.0)"
+            return f"((({left}) != 0.0 && ({right}) != 0.0) ? 1.0 : 0.0)", "b"
         if e.op == "\\/":
-            return f"((({left}) != 0.0 || ({right}) != 0.0) ? 1.0 : 0.0)"
+            return f"((({left}) != 0.0 || ({right}) != 0.0) ? 1.0 : 0.0)", "b"
         if e.op == "=>":
-            return f"((({left}) == 0.0 || ({right}) != 0.0) ? 1.0 : 0.0)"
-        if e.op in ("<", "<=", ">", ">=", "==", "!="):
-            return f"((({left}) {e.op} ({right})) ? 1.0 : 0.0)"
-        if e.op in ("+", "-", "*"):
-            return f"(({left}) {e.op} ({right}))"
-        raise Unsupported(f"the operator {e.op} at {e.loc}")
+            return f"((({left}) == 0.0 || ({right}) != 0.0) ? 1.0 : 0.0)", "b"
+        if e.op in ("==", "!=") or (e.op in ("<", "<=", ">", ">=") and "b" not in (a, b)):
+            return f"((({left}) {e.op} ({right})) ? 1.0 : 0.0)", "b"
+        if e.op in ("+", "-", "*") and "b" not in (a, b) and (a, b) != ("i", "i"):
+            return f"(({left}) {e.op} ({right}))", "r"  # a real among them: Python's float arithmetic too
+        raise Unsupported(f"the operator {e.op} on {_NAMES[a]} and {_NAMES[b]} at {e.loc}")
 
-    def _IfExpr(self, e: s.IfExpr, local) -> str:
-        condition, then, otherwise = (self.expr(x, local) for x in (e.condition, e.then, e.otherwise))
-        return f"((({condition}) != 0.0) ? ({then}) : ({otherwise}))"
+    def _IfExpr(self, e: s.IfExpr, local):
+        (condition, _), (then, a), (otherwise, b) = (self.expr(x, local) for x in (e.condition, e.then, e.otherwise))
+        kind = a if a == b else "i" if "b" not in (a, b) else None  # an integer maybe: no integer arithmetic on it
+        if kind is None:
+            raise Unsupported(f"an if whose branches are a boolean and a number at {e.loc}")
+        return f"((({condition}) != 0.0) ? ({then}) : ({otherwise}))", kind
 
-    def _Call(self, e: s.Call, local) -> str:
+    def _Call(self, e: s.Call, local):
         name = e.function.name.last if isinstance(e.function, s.Name) else None
         spelt = C_FUNCTIONS.get(name)
         if spelt is None or self.mapping.functions.get(name) is not MATH[name] or len(e.args) != spelt[1]:
             raise Unsupported(f"the function {name} at {e.loc}")
-        return f"{spelt[0]}({', '.join(self.expr(a, local) for a in e.args)})"
+        args = [self.expr(a, local) for a in e.args]
+        if any(kind == "b" for _, kind in args):
+            raise Unsupported(f"the function {name} of a boolean at {e.loc}")
+        return f"{spelt[0]}({', '.join(code for code, _ in args)})", "r"
+
+
+_KINDS = {bool: "b", int: "i", float: "r"}
+_NAMES = {"b": "a boolean", "i": "an integer (exact in Python, not in a double)", "r": "a real"}
 
 
 def _special(value: float) -> str:
@@ -167,10 +197,11 @@ def _special(value: float) -> str:
     return "(1.0 / 0.0)" if value > 0 else "(-1.0 / 0.0)"
 
 
-def variable_values(mapping: Mapping, variables: list) -> list[float] | None:
-    """The values `EventsInC.variables` name, as doubles (None when one is not a plain number now)."""
+def variable_values(mapping: Mapping, variables: list, kinds: list[str]) -> list[float] | None:
+    """The values `EventsInC.variables` name, as doubles; None when one is no longer of the kind it was
+    spelt for, or an integer beyond 2^53 (then the step stays in Python, which says what is wrong)."""
     out = []
-    for key in variables:
+    for key, kind in zip(variables, kinds):
         name, index = (key, None) if isinstance(key, str) else key
         value = mapping.variables.get(name)
         if index is not None:
@@ -178,7 +209,7 @@ def variable_values(mapping: Mapping, variables: list) -> list[float] | None:
                 value = value[index] if value.__class__ is not str else None
             except (TypeError, IndexError, KeyError):
                 return None
-        if value.__class__ not in (bool, int, float) or (value.__class__ is int and abs(value) > 2 ** 53):
+        if _KINDS.get(value.__class__) != kind or (kind == "i" and abs(value) > 2 ** 53):
             return None
         out.append(float(value))
     return out
@@ -240,6 +271,7 @@ class QuietStep:
         self.lines = self._lines(event_slots, monitored_slots)
         self._values: list[float] = []
         self._move = None
+        self.refusal = ""  # why `quiet` last said 0
 
     def _lines(self, event_slots: dict[str, int], monitored_slots: dict[str, int]) -> list[str]:
         """One quiet step in C (inside the native loop's step: IN, N, PP, DD, FAIL, PAUSE, END_AFTER)."""
@@ -296,11 +328,14 @@ class QuietStep:
         variable the events read is not a plain number; at most about 20 000 physics steps."""
         mapping = self.mapping
         if mapping.pending or mapping.asked or (jacobi and any(data[i] is True for i in self.op_slots)):
+            self.refusal = "an operation runs or an answer waits"
             return 0
         if self.endpoint.native_move() is False:
+            self.refusal = "the move in flight cannot run in C"
             return 0
-        values = variable_values(mapping, self.events.variables)
+        values = variable_values(mapping, self.events.variables, self.events.kinds)
         if values is None:
+            self.refusal = "a variable its events read is no longer a number of its kind a double carries exactly"
             return 0
         self._values = values
         return min(n, max(1, MAX_PHYSICS // max(1, self.steps)))

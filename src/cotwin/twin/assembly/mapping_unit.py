@@ -126,7 +126,8 @@ class MappingUnit(PythonUnit):
         return NativePart("\n".join(quiet.lines), decls=quiet.decls, pointers=quiet.pointers, doubles=quiet.doubles,
                           quiet=lambda n: quiet.quiet(n, data, jacobi), begin=quiet.begin, end=end,
                           failed=quiet.failed, continuous=tuple(self.monitored),
-                          writes=frozenset(p.name for p in self.event_ports) | frozenset(self.monitored))
+                          writes=frozenset(p.name for p in self.event_ports) | frozenset(self.monitored),
+                          refusal=lambda: quiet.refusal)
 
     def terminate(self) -> None:
         if self.mapping is not None and self.mapping.started:

@@ -450,7 +450,7 @@ class ScenarioUnit(PythonUnit):
                 origin, done = execution._origin
                 self.time = origin + (first + made - 1 - done) * execution.step_size + execution.step_size
 
-        return NativePart("", quiet=quiet, end=end)
+        return NativePart("", quiet=quiet, end=end, refusal=lambda: "a command is due or waits")
 
     # ---- state: the port values, the time reached, the next command to play and those waiting ----
     STATE_KEYS = (*PythonUnit.STATE_KEYS, "next", "plan", "queue")
