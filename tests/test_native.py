@@ -18,14 +18,15 @@ from cotwin.twin.assembly.build import build
 from cotwin.twin.assembly.run import load, run_twin
 
 
-@pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    from conftest import EXAMPLES
+from test_fused import built  # noqa: F401 - the examples' twins and their build, a fixture
 
-    twins = {name: load(EXAMPLES / "ur5e" / name) for name in ("cotwin.toml", "pick_place_project.toml")}
-    out = tmp_path_factory.mktemp("build")
-    build(twins["cotwin.toml"], out)
-    return twins, out
+
+def artefacts(built_dir, out):
+    """A run's folder holding the build's d-model FMU and build record (so that the run builds nothing)."""
+    out.mkdir()
+    for name in ("dmodel.fmu", "build.json"):
+        shutil.copy(built_dir / name, out / name)
+    return out
 
 
 class Seen(Observer):
@@ -55,9 +56,7 @@ class Saves(Observer):
 
 
 def run(twin, built_dir, out, **options):
-    out.mkdir()
-    for name in ("dmodel.fmu", "build.json"):
-        shutil.copy(built_dir / name, out / name)
+    artefacts(built_dir, out)
     seen = Seen()
     ran = run_twin(twin, out, plot=False, observers=[seen], **options)
     return ran, (out / "outputs.csv").read_bytes(), (out / "state").read_bytes(), seen.steps
@@ -190,10 +189,7 @@ def test_an_observer_that_must_see_every_step_live_keeps_the_run_in_the_fused_lo
     twins, built_dir = built
     states = []
     for fused in (False, True):
-        out = tmp_path / str(fused)
-        out.mkdir()
-        for name in ("dmodel.fmu", "build.json"):
-            shutil.copy(built_dir / name, out / name)
+        out = artefacts(built_dir, tmp_path / str(fused))
         saves = Saves(at=50)
         ran = run_twin(twins["cotwin.toml"], out, plot=False, observers=[saves], fused=fused, step=0.01)
         states.append(saves.state)
@@ -295,10 +291,7 @@ def test_a_step_failing_inside_a_stretch_keeps_every_row_before_it(built, tmp_pa
     twins, built_dir = built
     kept = []
     for fused in (False, True):
-        out = tmp_path / str(fused)
-        out.mkdir()
-        for name in ("dmodel.fmu", "build.json"):
-            shutil.copy(built_dir / name, out / name)
+        out = artefacts(built_dir, tmp_path / str(fused))
         with pytest.raises(CotwinError, match="the scenario fails at t = 5") as caught:
             run_twin(twins["cotwin.toml"], out, plot=False, fused=fused, step=0.01)
         kept.append(((out / "outputs.partial.csv").read_bytes(), str(caught.value).replace(str(out), "OUT")))
