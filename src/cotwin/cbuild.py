@@ -27,14 +27,16 @@ def compiler() -> str | None:
     return shutil.which("cc") or shutil.which("gcc")
 
 
-def compile_library(source: str, stem: str, keep_gil: bool = True) -> ctypes.CDLL:
+def compile_library(source: str, stem: str, keep_gil: bool = True, include_dirs: tuple[str, ...] = ()) -> ctypes.CDLL:
     """`source` built into a shared library (cached: see the module doc) and loaded; its calls hold the GIL
     (`keep_gil`: they call Python's C API) or release it (a callback into Python, e.g. an FMU's logger, takes
-    it back). ValueError, saying why, when it cannot be built here."""
+    it back). `include_dirs`: where its #include <...> headers are (a source including a library's headers
+    names the library's version in a comment, so that another version builds anew). ValueError, saying why,
+    when it cannot be built here."""
     cc = compiler()
     if cc is None:
         raise ValueError("no C compiler (cc) on this machine")
-    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
+    digest = hashlib.sha256("\0".join([source, *include_dirs]).encode()).hexdigest()[:20]
     folder = cache_dir()
     folder = (folder / "native") if folder is not None else Path(tempfile.gettempdir()) / f"cotwin-native-{os.getuid()}"
     target = folder / f"{stem}-{digest}.so"
@@ -45,7 +47,7 @@ def compile_library(source: str, stem: str, keep_gil: bool = True) -> ctypes.CDL
             path.write_text(source)
             built = Path(tmp) / f"{stem}.so"
             try:
-                proc = subprocess.run([cc, *FLAGS, str(path), "-o", str(built), "-lm"], capture_output=True,
+                proc = subprocess.run([cc, *FLAGS, *(f"-I{d}" for d in include_dirs), str(path), "-o", str(built), "-lm"], capture_output=True,
                                       text=True, timeout=120)
             except (OSError, subprocess.SubprocessError) as err:
                 raise ValueError(f"the native {stem} could not be compiled: {err}") from None

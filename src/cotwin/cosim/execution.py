@@ -15,11 +15,11 @@ import math
 
 import time as wallclock
 from dataclasses import dataclass, field
-from typing import Iterable
+from typing import Callable, Iterable
 
 from ..diagnostics import CotwinError
 from .algorithm import Algorithm
-from .observers import Observer
+from .observers import Observer, Stop
 from .state import StateError, count, fields, finite, of_type, pack, port_value, unpack
 from .system import System
 
@@ -231,13 +231,20 @@ class Execution:
         self.close()
         return self.result()
 
-    def advance(self, n: int, until=None) -> int:
+    def advance(self, n: int, until: Stop | Callable[["Execution"], bool] | None = None) -> int:
         """Up to n communication steps from the current time (initialised first if not yet), in the fused loop
-        when `fused` and it applies, else one `step` at a time; stops early after the first step at which
-        `until(execution)` is true (a what-if that has seen enough). Returns the steps done; a failure closes
-        the execution, as `step` does."""
+        when `fused` and it applies (its quiet stretches in the native loop), else one `step` at a time; stops
+        early after the first step at which `until` is reached: a `Stop` among the observers (the native loop
+        may run: its `quiet_for` bounds the stretches), or a function of the execution asked after every step
+        (the native loop does not run). Returns the steps done; a failure closes the execution, as `step` does."""
         if not self.initialized:
             self.initialize()
+        if isinstance(until, Stop):
+            if until not in self.observers:
+                raise ValueError("a Stop ends a run only as one of its observers")
+            stop, until = until, until.reached
+        else:
+            stop = None
         if self.fused:
             from .fused import FusedLoop, applicable
 
@@ -248,7 +255,9 @@ class Execution:
                     loop = self._loop = FusedLoop(self)
                 self.stepping = "fused"
                 try:
-                    return loop.run(n, until) if until is not None else self._fused_steps(loop, n)
+                    if until is not None and stop is None:
+                        return loop.run(n, until)
+                    return self._fused_steps(loop, n, until)
                 except BaseException as err:
                     self.close(err)
                     raise
@@ -275,9 +284,11 @@ class Execution:
             self.close(err)
             raise
 
-    def _fused_steps(self, loop, n: int) -> int:
-        """n steps: stretches of quiet steps in the native loop (cotwin.cosim.native) where it applies, the
-        others in the fused loop; `native_steps` counts the former, `native_why` says why none (or None)."""
+    def _fused_steps(self, loop, n: int, until: Callable[["Execution"], bool] | None = None) -> int:
+        """Up to n steps: stretches of quiet steps in the native loop (cotwin.cosim.native) where it applies,
+        the others in the fused loop; `native_steps` counts the former, `native_why` says why none (or None).
+        `until` (a Stop's `reached`) is asked after each step the Python objects see whole: the last of a
+        stretch, each made in Python."""
         from .native import QUIET_AFTER, NativeLoop
 
         native = self._native
@@ -287,18 +298,23 @@ class Execution:
                 self.native_why = None
             except ValueError as why:
                 self._native, self.native_why = None, str(why)
-                return loop.run(n)
+                return loop.run(n, until)
         done = 0
         try:
             while done < n:
                 k = native.run(n - done)
                 if k:
                     self.native_steps += k
-                else:
-                    k = loop.run(min(QUIET_AFTER, n - done))
-                    if k == 0:
+                    done += k
+                    if until is not None and until(self):
                         break
+                    continue
+                k = loop.run(min(QUIET_AFTER, n - done), until)
+                if k == 0:
+                    break
                 done += k
+                if until is not None and until(self):
+                    break
         finally:
             if not self.native_steps:
                 self.native_why = f"no step was quiet enough: {native.idle()}"

@@ -62,7 +62,7 @@ class NativePart:
     date after it made `made` steps natively from step index `first` (rows: the slots after each complete
     step; doubles: its `DD` as the steps left them). `continuous`: outputs whose change does not end a
     segment. `sets_inputs`: the C writes the unit's inputs itself (its Python setter is not called after).
-    `refusal()`: why `quiet` last said 0, in a few words.
+    `refusal()`: why `quiet` last said 0, in a few words. `include_dirs`: where the headers `decls` includes are.
     """
 
     step: str
@@ -77,6 +77,7 @@ class NativePart:
     writes: frozenset[str] = frozenset()
     sets_inputs: bool = False
     refusal: Callable[[], str] = lambda: "it was not quiet"  # why `quiet` last said 0
+    include_dirs: tuple[str, ...] = ()
 
 
 def feeds(execution, unit) -> list[tuple[str, int]]:
@@ -143,7 +144,7 @@ class NativeLoop:
         self._data, self._observers = algorithm.data, list(execution.observers)
         self.refusals: dict[str, int] = {}  # why steps were left to Python, and how often
         self.source = self._source()
-        self._fn = _compiled(self.source)
+        self._fn = _compiled(self.source, tuple(sorted({d for part in self.parts for d in part.include_dirs})))
 
     def _source(self) -> str:
         algorithm = self.execution.algorithm
@@ -200,7 +201,8 @@ class NativeLoop:
     def current(self) -> bool:
         """Whether this loop still fits its execution (the algorithm's slots and the observers it was made for)."""
         execution = self.execution
-        return self._data is execution.algorithm.data and self._observers == execution.observers
+        return self._data is execution.algorithm.data and (self._observers == execution.observers or
+                                                           all(hears_repeats(o) for o in execution.observers))
 
     def quiet(self, n: int) -> int:
         """How many of the next n steps every unit can make natively now (and every observer lets pass)."""
@@ -443,12 +445,12 @@ typedef int (*cotwin_do_step)(void *, double, double, int);
 _CACHE: dict[str, object] = {}
 
 
-def _compiled(source: str):
+def _compiled(source: str, include_dirs: tuple[str, ...] = ()):
     """The segment function of this source, compiled once per machine (cached by its hash)."""
-    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
+    digest = hashlib.sha256("\0".join([source, *include_dirs]).encode()).hexdigest()[:20]
     if digest in _CACHE:
         return _CACHE[digest]
-    lib = compile_library(source, "segment", keep_gil=False)  # other threads (a dashboard, a broker) run meanwhile
+    lib = compile_library(source, "segment", keep_gil=False, include_dirs=include_dirs)  # other threads run meanwhile
     fn = lib.cotwin_segment
     dptr = ctypes.POINTER(ctypes.c_double)
     fn.argtypes = [ctypes.c_void_p, dptr, dptr, dptr, ctypes.c_int, ctypes.c_double, ctypes.c_longlong,

@@ -42,6 +42,16 @@ class Observer:
     def simulation_ended(self, execution, error: BaseException | None) -> None: ...
 
 
+class Stop(Observer):
+    """An observer that ends a run early (`Execution.advance(n, until=stop)`): `reached` is asked after each step
+    it was told of by `step_complete`. In the native loop those are the last step of each stretch, so its
+    `quiet_for` must end a stretch at any step at which it could be reached (a what-if that has seen enough:
+    cotwin.twin.services.whatif)."""
+
+    def reached(self, execution) -> bool:
+        return False
+
+
 def hears_repeats(observer: Observer) -> bool:
     """Whether the observer can be told of the native loop's repeated steps at once: it defines `repeated`,
     or it has nothing to do after a step."""

@@ -217,10 +217,10 @@ def variable_values(mapping: Mapping, variables: list, kinds: list[str]) -> list
 
 # The step's doubles (DD): these scalars, then per input event whether it held at the last step and the
 # answers that came in it, then the variables the events read (EventsInC.variables).
-TIME, TIMESTEP, PHYSICS_TIMESTEP, STEPS, PERIOD, MOVING, MOVE_HELD, JOINTS, NQ, DONE, CAME = range(11)
-SCALARS = 11
+TIME, TIMESTEP, PHYSICS_TIMESTEP, STEPS, PERIOD, MOVING, MOVE_HELD, JOINTS, NQ, DONE, CAME, DEPTH = range(12)
+SCALARS = 12
 # Its pointers (PP): MuJoCo's mj_step, model and data, the data's arrays, the move's arrays (cotwin.mapping.native)
-MJ_STEP, MODEL, DATA, CTRL, QPOS, QVEL, SENSORDATA, MOVE = range(8)
+MJ_STEP, MODEL, DATA, CTRL, QPOS, QVEL, SENSORDATA, WATCH, MOVE = range(9)  # WATCH: the watched geoms (a mask)
 POINTERS = MOVE + 6  # the move: shape, joints' control indices, starts, deltas, lows, highs
 
 
@@ -267,7 +267,8 @@ class QuietStep:
         self.held_at, self.came_at, self.variables_at = SCALARS, SCALARS + E, SCALARS + 2 * E
         self.pointers: list = [0] * POINTERS
         self.doubles: list = [0.0] * (self.variables_at + len(self.events.variables))
-        self.decls = native.SOURCE + "\n" + self.events.source
+        self.headers = mujoco_headers()
+        self.decls = native.SOURCE + "\n" + self.events.source + (self.headers[1] if self.headers else "")
         self.lines = self._lines(event_slots, monitored_slots)
         self._values: list[float] = []
         self._move = None
@@ -299,6 +300,8 @@ class QuietStep:
                  f"    for (int s = 0; s < (int)DD[{NQ}]; s++) sum += q[s] * q[s];",
                  "    if (!(sum - sum == 0.0)) FAIL(2);",
                  "}",
+                 *([f"if (PP[{WATCH}] && m_contact(PP[{DATA}], (const unsigned char *)PP[{WATCH}], DD[{DEPTH}])) "
+                    "END_AFTER();  /* a watched contact: the step is seen whole */"] if self.headers else []),
                  f"double *V = DD + {self.variables_at}; (void)V;"]
         for var, (joint, kind) in mapping.mirrors.items():
             address = sim.joint_address(joint, kind)
@@ -333,6 +336,9 @@ class QuietStep:
         if self.endpoint.native_move() is False:
             self.refusal = "the move in flight cannot run in C"
             return 0
+        if self.sim.contact_watch is not None and not self.headers:
+            self.refusal = "its contacts are watched after each step and MuJoCo's C headers are not installed"
+            return 0
         values = variable_values(mapping, self.events.variables, self.events.kinds)
         if values is None:
             self.refusal = "a variable its events read is no longer a number of its kind a double carries exactly"
@@ -350,8 +356,11 @@ class QuietStep:
         _, mj_step = native.advance_function()
         move = self.endpoint.native_move()
         d = sim.data
+        watch = sim.contact_watch
         self.pointers[:MOVE] = [mj_step, sim.model._address, d._address, sim.controls.ctypes.data,
-                                d.qpos.ctypes.data, d.qvel.ctypes.data, d.sensordata.ctypes.data]
+                                d.qpos.ctypes.data, d.qvel.ctypes.data, d.sensordata.ctypes.data,
+                                watch[0].ctypes.data if watch is not None else 0]
+        self._watch = watch  # kept: its mask stays alive while the C loop reads it
         joints = 0
         if move:
             segment, arrays, joints = move
@@ -361,7 +370,7 @@ class QuietStep:
         self._move = move or None  # kept: its arrays stay alive while the C loop reads them
         self.doubles[:SCALARS] = [float(d.time), float(sim.timestep), float(sim.model.opt.timestep), float(self.steps),
                                   float(self.period), 1.0 if move else 0.0, 0.0, float(joints), float(d.qpos.size),
-                                  0.0, 0.0]
+                                  0.0, 0.0, -watch[1] if watch is not None else 0.0]
         for i, name in enumerate(self.names):
             self.doubles[self.held_at + i] = 1.0 if mapping.held.get(name, (False, None))[0] else 0.0
             self.doubles[self.came_at + i] = 0.0
@@ -385,3 +394,30 @@ class QuietStep:
         if code == 1:
             self.endpoint.set_point(self.period)  # writes the set-point the C loop found not finite: says which
         raise CotwinError(f"mapping {self.mapping.model.name} at t = {t:g} s: the native step failed ({code})")
+
+
+CONTACT_CHECK = r"""
+/* Whether a contact of a watched geom with another one (or a flex) is at least `depth` deep (dist <= limit). */
+static int m_contact(const void *data, const unsigned char *watched, double limit) {
+    const mjData *d = (const mjData *)data;
+    for (int c = 0; c < d->ncon; c++) {
+        int a = d->contact[c].geom[0], b = d->contact[c].geom[1];
+        int mine = a >= 0 && watched[a], theirs = b >= 0 && watched[b];
+        if (mine != theirs && d->contact[c].dist <= limit) return 1;
+    }
+    return 0;
+}
+"""
+
+
+def mujoco_headers() -> tuple[tuple[str, ...], str] | None:
+    """(include dirs, C declarations) reading MuJoCo's mjData through the headers of the installed version (named
+    in the source: another version builds anew), or None where they are not installed."""
+    import os
+
+    import mujoco
+
+    folder = os.path.join(os.path.dirname(mujoco.__file__), "include")
+    if not os.path.isfile(os.path.join(folder, "mujoco", "mjdata.h")):
+        return None
+    return (folder,), f"/* MuJoCo {mujoco.__version__} */\n#include <mujoco/mjdata.h>\n{CONTACT_CHECK}"

@@ -167,6 +167,7 @@ class PlatformSimulator:
         self._contact_steps = max(1, int(round(CONTACT_PERIOD / timestep)))
         self.touches: list[tuple[float, str, str]] = []  # (time, robot geom, obstacle) when a contact began
         self._touching: set[tuple[int, int]] = set()
+        self.contact_watch: tuple[np.ndarray, float] | None = None  # see watch_contacts
         self.reset()
 
     # ---- names ----
@@ -221,6 +222,17 @@ class PlatformSimulator:
     def obstacles(self) -> frozenset[int]:
         """The geoms whose contacts with the robot are checked between physics steps."""
         return frozenset(self._obstacles)
+
+    def watch_contacts(self, geoms: list[int] | None, depth: float = 0.0) -> None:
+        """Say that someone checks, after each communication step, the contacts of these geoms with the others
+        deeper than `depth` (m): a what-if's record of the robot's contacts. A caller making many steps at
+        once (cotwin.mapping.cstep) then stops after a step that has one. None: nobody checks."""
+        if geoms is None:
+            self.contact_watch = None
+            return
+        mask = np.zeros(max(1, self.model.ngeom), dtype=np.uint8)
+        mask[list(geoms)] = 1
+        self.contact_watch = (mask, float(depth))
 
     def stepped(self, n: int, check: bool = True) -> None:
         """Count n physics steps a caller made with mj_step itself, and check the state as `step` does (unless

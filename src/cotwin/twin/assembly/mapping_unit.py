@@ -127,7 +127,7 @@ class MappingUnit(PythonUnit):
                           quiet=lambda n: quiet.quiet(n, data, jacobi), begin=quiet.begin, end=end,
                           failed=quiet.failed, continuous=tuple(self.monitored),
                           writes=frozenset(p.name for p in self.event_ports) | frozenset(self.monitored),
-                          refusal=lambda: quiet.refusal)
+                          refusal=lambda: quiet.refusal, include_dirs=quiet.headers[0] if quiet.headers else ())
 
     def terminate(self) -> None:
         if self.mapping is not None and self.mapping.started:

@@ -88,8 +88,13 @@ class WaitWatch(Observer):
     def repeated(self, execution, rows) -> None:
         """Steps in which no state changed and nothing was called: each machine idles one more step per row
         (no judgement falls among them: see quiet_for)."""
-        if self.mapping is not None:
-            self._since = [(leaf, entered, idle + len(rows)) for leaf, entered, idle in self._since]
+        if self.mapping is None:
+            return
+        slots = execution.algorithm.slots
+        first = rows.values([slots[port] for port in self._ports])[0]  # the stretch's states (a run's first rows: seen here)
+        times = rows.times
+        self._since = [(leaf, entered, idle + len(rows)) if leaf == previous else (leaf, times[0], len(rows) - 1)
+                       for leaf, (previous, entered, idle) in zip(first, self._since)]
 
     def _judge(self, m: int, leaf, entered: float, now: float) -> None:
         wait = self.waits.get((m, leaf)) if isinstance(leaf, int) else None

@@ -39,6 +39,7 @@ from ..assembly.scenario import Command
 from ..assembly.system import DMODEL, MAPPING, TwinSystem
 from ..assembly.outcomes import CommandLedger, CommandOutcome
 from ..assembly.waits import WaitWatch
+from ...cosim.observers import Stop
 
 _WORKER = None  # (TwinSystem, artefacts) of a what-if worker process
 MAX_REQUEST = 1 << 20  # bytes of a what-if request (a plan of thousands of commands)
@@ -56,9 +57,13 @@ class Prediction:
     completion_time: float | None
     wall_seconds: float
     blocked: list[str] = field(default_factory=list)  # waits for answers that cannot come (cotwin.twin.assembly.waits)
+    native_steps: int = 0  # of its steps, those made in the native loop (cotwin.cosim.native)
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+DEPTH = 0.001  # m: a contact of the robot recorded when it is this deep (MuJoCo's dist <= -DEPTH)
 
 
 class _Contacts:
@@ -78,6 +83,11 @@ class _Contacts:
                       and model.body(model.geom_bodyid[g]).name not in fingers}
         self._robot = np.array(sorted(self.robot), dtype=np.int64)
         self.seen: dict[tuple[str, str], dict] = {}
+        self.sim.watch_contacts(sorted(self.robot), DEPTH)  # a native stretch stops at a step with one
+
+    def stop(self) -> None:
+        if self.sim is not None:
+            self.sim.watch_contacts(None)
 
     def check(self, t: float) -> None:
         if self.sim is None:
@@ -88,7 +98,7 @@ class _Contacts:
         contact = data.contact  # the step's contacts as arrays: only the robot's penetrating ones, in order, in Python
         g1, g2, dist = contact.geom1, contact.geom2, contact.dist
         mine, theirs = np.isin(g1, self._robot), np.isin(g2, self._robot)
-        for k in np.flatnonzero((mine != theirs) & (dist <= -0.001)):
+        for k in np.flatnonzero((mine != theirs) & (dist <= -DEPTH)):
             robot, other = (int(g1[k]), int(g2[k])) if mine[k] else (int(g2[k]), int(g1[k]))
             key = (model.body(model.geom_bodyid[robot]).name, model.body(model.geom_bodyid[other]).name)
             entry = self.seen.setdefault(key, {"kind": "contact", "robot": key[0], "with": key[1], "first": t,
@@ -127,10 +137,7 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
                 execution.set_state(state, units=[DMODEL.name, MAPPING.name])
             else:
                 execution.initialize()
-            prediction = _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started, watch,
-                                ledger)
-            prediction.blocked = [str(b) for b in watch.found]
-            return prediction
+            return _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started, watch, ledger)
         finally:
             execution.close()
 
@@ -183,7 +190,6 @@ class Forks:
                 o.simulation_initialized(execution)
             prediction = _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started, watch,
                                 ledger)
-            prediction.blocked = [str(b) for b in watch.found]
         except BaseException:
             if built is not None:
                 built[1].close()
@@ -226,73 +232,163 @@ class Forks:
             self._scratch = None
 
 
-def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, started, waits, ledger) -> Prediction:
-    program = fork.models.program
-    platform = [c.output for c in fork.connections if c.source == MAPPING.name and c.target == DMODEL.name
-                and c.output in {ev.name for ev in program.inputs}]
-    monitored = fork.log[MAPPING.name]
-    state_ports = [(program.state_port(m), m) for m in program.machines]
-    collision_events = [e for e in platform if e.lower() == "collision"]
-    contacts = _Contacts(endpoint, fork.models.tree)
-    trajectory: dict[str, list[float]] = {"time": []}
-    for v in monitored:
-        trajectory[v] = []
-    states: list[tuple[float, str, str]] = []
-    collisions: list[dict] = []
-    last_state: dict[str, int] = {}
-    at_rest_since: float | None = None
-    last_command = plan[-1].time if plan else start
-    end = start + horizon
-    values = execution.values
+class Watch(Stop):
+    """What a what-if sees after each step (its trajectory, the d-model's state changes, collisions, contacts,
+    how long the arm has rested) and whether it has seen enough (`reached`): the plan applied and then done,
+    blocked, or ignored, or the horizon passed. Told of a native stretch's repeated steps at once, in which
+    nothing but continuous values changed: the state and collision ports are the stretch's first, the arm rests
+    or moves as at its start, and the simulator's contact watch ended the stretch at any step with a contact
+    (cotwin.mapping.cstep); `quiet_for` ends a stretch at the first step at which the what-if could be over."""
 
-    def record(t: float) -> None:
-        if execution.steps % decimate == 0:
-            trajectory["time"].append(t)
-            for v in monitored:
-                trajectory[v].append(values.get((MAPPING.name, v)))
+    def __init__(self, fork, endpoint, plan, start: float, horizon: float, settle: float, decimate: int,
+                 waits: WaitWatch, ledger: CommandLedger):
+        program = fork.models.program
+        self.program, self.plan, self.settle, self.decimate = program, plan, settle, decimate
+        self.waits, self.ledger = waits, ledger
+        platform = [c.output for c in fork.connections if c.source == MAPPING.name and c.target == DMODEL.name
+                    and c.output in {ev.name for ev in program.inputs}]
+        self.monitored = list(fork.log[MAPPING.name])
+        self.state_ports = [(program.state_port(m), m) for m in program.machines]
+        self.collision_events = [e for e in platform if e.lower() == "collision"]
+        self.contacts = _Contacts(endpoint, fork.models.tree)
+        self.trajectory: dict[str, list[float]] = {"time": [], **{v: [] for v in self.monitored}}
+        self.states: list[tuple[float, str, str]] = []
+        self.collisions: list[dict] = []
+        self.last_state: dict[str, int] = {}
+        self.at_rest_since: float | None = None
+        self.last_command = plan[-1].time if plan else start
+        self.end = start + horizon
+        self.over = False
 
-    def seen_enough(execution) -> bool:  # after each step (in the fused loop): whether the what-if is over
-        nonlocal at_rest_since
-        t = execution.time
-        record(t)
-        collisions.extend({"kind": "event", "event": e, "time": t} for e in collision_events
-                          if values.get((MAPPING.name, e)) is True)
-        current = []
-        for port, m in state_ports:
-            index = values.get((DMODEL.name, port))
-            current.append(index)
-            if index != last_state.get(port):
-                leaves = program.leaf_names(m)
-                states.append((t, m.name, leaves[index] if isinstance(index, int) and 0 <= index < len(leaves) else "none"))
-                last_state[port] = index
-        resting = ledger.resting(current)
-        contacts.check(t)
-        at_rest_since = (at_rest_since if at_rest_since is not None else t) if resting else None
-        outcomes = ledger.outcomes
-        applied = len(outcomes) >= len(plan)
-        if applied and t >= last_command and waits.found:
+    def simulation_initialized(self, execution) -> None:
+        slots = execution.algorithm.slots
+        self._values = execution.values
+        self._slots = [slots[(MAPPING.name, v)] for v in self.monitored]
+        self._collision_slots = [slots[(MAPPING.name, e)] for e in self.collision_events]
+        self._state_slots = [slots[(DMODEL.name, port)] for port, _ in self.state_ports]
+        self.resting = self.ledger.resting([self._values.get((DMODEL.name, port)) for port, _ in self.state_ports])
+        self.record(execution)
+
+    def record(self, execution) -> None:
+        if execution.steps % self.decimate == 0:
+            self.trajectory["time"].append(execution.time)
+            for v in self.monitored:
+                self.trajectory[v].append(self._values.get((MAPPING.name, v)))
+
+    def step_complete(self, execution) -> None:
+        t, values = execution.time, self._values
+        self.record(execution)
+        self.collisions.extend({"kind": "event", "event": e, "time": t} for e in self.collision_events
+                               if values.get((MAPPING.name, e)) is True)
+        current = [values.get((DMODEL.name, port)) for port, _ in self.state_ports]
+        self._entered(t, current)
+        self.resting = self.ledger.resting(current)
+        self.contacts.check(t)
+        if not self.resting:
+            self.at_rest_since = None
+        elif self.at_rest_since is None:
+            self.at_rest_since = t
+        self.over = self._over(t, execution.step_size)
+
+    def _entered(self, t: float, current: list) -> None:
+        """The machines' states at time t: those that changed noted."""
+        for (port, m), index in zip(self.state_ports, current):
+            if index != self.last_state.get(port):
+                leaves = self.program.leaf_names(m)
+                self.states.append((t, m.name, leaves[index] if isinstance(index, int) and 0 <= index < len(leaves)
+                                    else "none"))
+                self.last_state[port] = index
+
+    def _over(self, t: float, h: float) -> bool:
+        outcomes = self.ledger.outcomes
+        applied = len(outcomes) >= len(self.plan)
+        if applied and t >= self.last_command and self.waits.found:
             return True  # blocked for good: the horizon would add nothing
-        if applied and t >= last_command and at_rest_since is not None and t - at_rest_since >= settle:
+        if applied and t >= self.last_command and self.at_rest_since is not None and t - self.at_rest_since >= self.settle:
             last = outcomes[-1] if outcomes else None
             if last is None or last.done is not None:
                 return True
-            if not last.accepted and t - last.delivered >= settle + 3 * execution.step_size:
+            if not last.accepted and t - last.delivered >= self.settle + 3 * h:
                 return True  # delivered, never acted upon: the d-model ignored it
-        return t >= end - 1e-9
+        return t >= self.end - 1e-9
 
-    record(execution.time)
-    if execution.time < end - 1e-9:
-        execution.advance(math.ceil((end - execution.time) / execution.step_size) + 1, until=seen_enough)
-    outcomes = list(ledger.outcomes)
-    for c in plan[len(outcomes):]:  # not applied within the horizon
-        event = next(p for p, v in c.values if p in fork.command_events and v is True)
-        outcomes.append(CommandOutcome(c.time, event, {p: v for p, v in c.values if p not in fork.command_events},
-                                       origin=c.where))
-    collisions.extend(contacts.seen.values() if contacts.sim is not None else [])
-    done = [o.done for o in outcomes]
-    completion = max(done) if done and all(d is not None for d in done) else (None if outcomes else execution.time)
-    return Prediction(start, execution.time, execution.step_size, outcomes, states, trajectory, collisions, completion,
-                      wallclock.perf_counter() - started)
+    def repeated(self, execution, rows) -> None:
+        """Steps in which only continuous values changed: the trajectory's rows, a collision event held, and
+        the rest the arm took from the first of them (see the class doc)."""
+        times, steps = rows.times, rows.steps
+        self._entered(times[0], list(rows.values(self._state_slots)[0]))  # a run's first rows: its states seen here
+        kept = [k for k, s in enumerate(steps) if (s + 1) % self.decimate == 0]
+        if kept:
+            self.trajectory["time"].extend(times[k] for k in kept)
+            for v, column in zip(self.monitored, zip(*rows.values(self._slots))):
+                self.trajectory[v].extend(column[k] for k in kept)
+        for e, column in zip(self.collision_events, zip(*rows.values(self._collision_slots))):
+            self.collisions.extend({"kind": "event", "event": e, "time": t} for t, held in zip(times, column) if held)
+        if self.resting and self.at_rest_since is None:
+            self.at_rest_since = times[0]
+
+    def quiet_for(self, execution) -> int | None:
+        """Steps until the first at which the what-if could be over, its discrete values as they are now: the
+        first at which one of `_over`'s conditions on time (each spelt as `_over` spells it) turns true."""
+        t, h = execution.time, execution.step_size
+        since, settle = self.at_rest_since, self.settle
+        turns = [lambda x: x >= self.end - 1e-9, lambda x: x >= self.last_command]
+        if since is not None:
+            turns.append(lambda x: x - since >= settle)
+        outcomes = self.ledger.outcomes
+        if outcomes and outcomes[-1].delivered is not None:
+            delivered = outcomes[-1].delivered
+            turns.append(lambda x: x - delivered >= settle + 3 * h)
+        origin, done = execution._origin
+        at = lambda k: origin + (execution.steps + k - done) * h  # noqa: E731 (the time after k more steps, as counted)
+        bounds = [_first(lambda k: turned(at(k)), 1 << 20) for turned in turns if not turned(t)]
+        return min((b for b in bounds if b is not None), default=None)
+
+    def reached(self, execution) -> bool:
+        return self.over
+
+    def prediction(self, execution, fork, plan, start: float, started: float) -> Prediction:
+        outcomes = list(self.ledger.outcomes)
+        for c in plan[len(outcomes):]:  # not applied within the horizon
+            event = next(p for p, v in c.values if p in fork.command_events and v is True)
+            outcomes.append(CommandOutcome(c.time, event, {p: v for p, v in c.values if p not in fork.command_events},
+                                           origin=c.where))
+        collisions = self.collisions + (list(self.contacts.seen.values()) if self.contacts.sim is not None else [])
+        done = [o.done for o in outcomes]
+        completion = max(done) if done and all(d is not None for d in done) else (None if outcomes else execution.time)
+        return Prediction(start, execution.time, execution.step_size, outcomes, self.states, self.trajectory,
+                          collisions, completion, wallclock.perf_counter() - started,
+                          [str(b) for b in self.waits.found])
+
+
+def _first(holds, limit: int) -> int | None:
+    """The smallest k in 1..limit for which `holds(k)` (false, then true from some k on), or None."""
+    if not holds(limit):
+        return None
+    lo, hi = 1, limit
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if holds(mid):
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, started, waits, ledger) -> Prediction:
+    """Run the fork until its what-if is over (Watch), with the wait watch and the command ledger observing."""
+    watch = Watch(fork, endpoint, plan, start, horizon, settle, decimate, waits, ledger)
+    execution.observers = [waits, ledger, watch]
+    watch.simulation_initialized(execution)
+    native = execution.native_steps
+    try:
+        if execution.time < watch.end - 1e-9:
+            execution.advance(math.ceil((watch.end - execution.time) / execution.step_size) + 1, until=watch)
+    finally:
+        watch.contacts.stop()
+    prediction = watch.prediction(execution, fork, plan, start, started)
+    prediction.native_steps = execution.native_steps - native
+    return prediction
 
 
 def plan_from_json(items: list, program) -> list[Command]:

@@ -1,0 +1,167 @@
+"""What-ifs in the native loop (cotwin.twin.services.whatif.Watch, issue 23): a what-if's quiet stretches run in C
+and it predicts what the step-by-step loop predicts (trajectory, states, outcomes, collisions, contacts, the
+step at which it is over); the simulator's contact watch ends a stretch at a step with a contact, as the
+Python check would see it."""
+
+from __future__ import annotations
+
+import ctypes
+import shutil
+
+import numpy as np
+import pytest
+
+from cotwin.twin.assembly.run import run_twin
+from cotwin.twin.assembly.scenario import Command
+
+from test_fused import built, random_plan  # noqa: F401 - the examples' twins and their build, a fixture
+
+
+def without_wall_time(prediction) -> dict:
+    data = prediction.as_dict()
+    data.pop("wall_seconds")
+    data.pop("native_steps")
+    return data
+
+
+def end_state(twin, built_dir, out, algorithm="jacobi") -> bytes:
+    """The DT's state at the end of the paper's run."""
+    out.mkdir()
+    for name in ("dmodel.fmu", "build.json"):
+        shutil.copy(built_dir / name, out / name)
+    run_twin(twin, out, plot=False, algorithm=algorithm)
+    return (out / "state").read_bytes()
+
+
+@pytest.mark.parametrize("step", [0.1, 0.01])
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+def test_a_what_if_in_the_native_loop_predicts_what_the_step_by_step_loop_predicts(built, tmp_path, algorithm, step):
+    """The paper's plan and a random one from the end of the paper's run, and from the start: most steps are
+    made natively, and every field of the prediction (its end step included) is the step-by-step loop's."""
+    from conftest import FUZZ_SEED
+
+    from cotwin.twin.services.whatif import predict
+
+    twins, built_dir = built
+    twin = twins["cotwin.toml"]
+    state = end_state(twin, built_dir, tmp_path / "run", algorithm)
+    plans = [(twin.commands, None), ([Command(c.time - 0.3, c.values, c.where) for c in random_plan(FUZZ_SEED)[:4]], state)]
+    for plan, start in plans:
+        native = predict(twin, plan, start, horizon=12.0, step=step, algorithm=algorithm, artefacts=tmp_path)
+        stepped = predict(twin, plan, start, horizon=12.0, step=step, algorithm=algorithm, artefacts=tmp_path,
+                          fused=False)
+        assert without_wall_time(native) == without_wall_time(stepped)
+        steps = round((native.end - native.start) / step)
+        assert native.native_steps > steps // 2 and stepped.native_steps == 0
+        assert len(native.trajectory["time"]) == steps + 1
+
+
+def test_a_decimated_trajectory_keeps_the_steps_the_step_by_step_loop_keeps(built, tmp_path):
+    from cotwin.twin.services.whatif import predict
+
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    native = predict(twin, twin.commands[:2], None, horizon=8.0, step=0.01, artefacts=tmp_path, decimate=7)
+    stepped = predict(twin, twin.commands[:2], None, horizon=8.0, step=0.01, artefacts=tmp_path, decimate=7,
+                      fused=False)
+    assert without_wall_time(native) == without_wall_time(stepped) and native.native_steps > 100
+
+
+def driven_into_the_scene(twin, sim, seed: int = 5) -> None:
+    """The arm's servos given set-points of a pose in which the robot (not its fingers) touches the scene, the
+    arm where it is: it swings into the scene over the next steps (the pose found on a simulator of its own)."""
+    from cotwin.pmodel.ik import arm_joints, find_tool
+    from cotwin.twin.assembly.run import simulated_endpoint
+    from cotwin.twin.services.whatif import _Contacts
+
+    probe = simulated_endpoint(twin)
+    contacts, rng = _Contacts(probe, twin.models.tree), np.random.default_rng(seed)
+    arm = arm_joints(twin.models.tree, find_tool(twin.models.tree))
+    for _ in range(500):
+        inside = {j: float(rng.uniform(-3.1, 3.1)) for j in arm}
+        probe.sim.set_joint_state(inside)
+        contacts.check(0.0)
+        if contacts.seen:
+            sim.write_actuators(inside)
+            return
+    raise AssertionError("no contact pose found")
+
+
+def test_the_c_contact_check_finds_what_the_what_if_records(built):
+    """cotwin.mapping.cstep's contact check (MuJoCo's mjData read through its headers) against the what-if's own
+    (numpy over the contact arrays) on random poses: it says 'a contact' exactly when the what-if records one."""
+    from cotwin.cbuild import compile_library
+    from cotwin.mapping.cstep import mujoco_headers
+    from cotwin.twin.assembly.run import simulated_endpoint
+    from cotwin.twin.services.whatif import DEPTH, _Contacts
+
+    headers = mujoco_headers()
+    if headers is None:
+        pytest.skip("MuJoCo's C headers are not installed with the mujoco package here")
+    lib = compile_library(headers[1] + "int probe(const void *d, const unsigned char *w, double limit) "
+                          "{ return m_contact(d, w, limit); }\n", "contactprobe", include_dirs=headers[0])
+    lib.probe.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double]
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    endpoint = simulated_endpoint(twin)
+    contacts = _Contacts(endpoint, twin.models.tree)
+    sim, rng, found = endpoint.sim, np.random.default_rng(3), 0
+    mask, depth = sim.contact_watch
+    assert depth == DEPTH and sorted(np.flatnonzero(mask)) == sorted(contacts.robot)
+    for k in range(300):
+        sim.set_joint_state({j: float(rng.uniform(-3.1, 3.1)) for j in sim.joint_names})
+        contacts.seen.clear()
+        contacts.check(0.01 * k)
+        seen = bool(contacts.seen)
+        assert bool(lib.probe(sim.data._address, mask.ctypes.data, -depth)) == seen, k
+        found += seen
+    assert 10 < found < 290
+    contacts.stop()
+    assert sim.contact_watch is None
+
+
+def test_a_contact_inside_a_stretch_ends_it_where_the_what_if_records_it(built, tmp_path):
+    """A what-if from a state with the arm swinging into the scene: a contact begins some steps in, and deepens
+    over the next. Its first time and depth are the step-by-step loop's: each stretch ended at a step with one."""
+    from cotwin.twin.services.whatif import Forks, predict
+
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    with Forks(twin, None, artefacts=tmp_path) as forks:  # from the project's initial state
+        fork, execution, endpoint, _, _ = forks._build([])
+        driven_into_the_scene(twin, endpoint.sim)
+        pushed = execution.get_state()
+        execution.close()
+    plan = twin.commands[:1]
+    native = predict(twin, plan, pushed, horizon=3.0, step=0.01, artefacts=tmp_path)
+    stepped = predict(twin, plan, pushed, horizon=3.0, step=0.01, artefacts=tmp_path, fused=False)
+    assert [c for c in native.collisions if c["kind"] == "contact"], "the pose was meant to touch the scene"
+    assert without_wall_time(native) == without_wall_time(stepped)
+    assert native.native_steps > 50
+
+
+def test_a_what_if_from_a_blocked_state_says_it_blocked_since_its_first_step(tmp_path):
+    """A mapping that forgets to set `motion` (tests/test_events.py): the DT waits in Moving for an answer
+    that cannot come. A what-if from that state starts with its first steps in the native loop, and the wait
+    watch, told of them at once, finds the same wait at the same step since the same time as step by step."""
+    from conftest import EXAMPLES
+
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.services.whatif import predict
+
+    project = tmp_path / "ur5e"
+    shutil.copytree(EXAMPLES / "ur5e", project)
+    mapping = project / "mapping.pm"
+    forgot = mapping.read_text().replace("\t\taction motion = if ok then Motion::moving else motion end\n", "")
+    mapping.write_text(forgot)
+    (project / "plan.csv").write_text("timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,"
+                                      "MovementArgs_target_Z\n1000,true,0,23,1\n")
+    twin = load(project / "cotwin.toml")
+    ran = run_twin(twin, tmp_path / "out", end=3.0, plot=False)
+    assert len(ran.blocked) == 1
+    state = (tmp_path / "out" / "state").read_bytes()
+    plan = twin.commands[:1]
+    native = predict(twin, plan, state, horizon=4.0, step=0.01, artefacts=tmp_path / "out")
+    stepped = predict(twin, plan, state, horizon=4.0, step=0.01, artefacts=tmp_path / "out", fused=False)
+    assert native.blocked and native.blocked == stepped.blocked
+    assert without_wall_time(native) == without_wall_time(stepped) and native.native_steps > 0
