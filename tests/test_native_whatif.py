@@ -165,3 +165,36 @@ def test_a_what_if_from_a_blocked_state_says_it_blocked_since_its_first_step(tmp
     stepped = predict(twin, plan, state, horizon=4.0, step=0.01, artefacts=tmp_path / "out", fused=False)
     assert native.blocked and native.blocked == stepped.blocked
     assert without_wall_time(native) == without_wall_time(stepped) and native.native_steps > 0
+
+
+def test_a_what_if_at_a_coarser_physics_step_runs_its_simulator_at_it(built, tmp_path):
+    """--physics-step 0.002: the fork's MuJoCo steps 2 ms (half the physics steps of the default), the paper's
+    plan still completes, at the same times to within a step; Forks give what predict gives at it."""
+    from cotwin.twin.services.whatif import Forks, predict
+
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    fine = predict(twin, twin.commands, None, horizon=20.0, artefacts=tmp_path)
+    coarse = predict(twin, twin.commands, None, horizon=20.0, artefacts=tmp_path, physics_step=0.002)
+    with Forks(twin, None, artefacts=tmp_path, physics_step=0.002) as forks:
+        assert forks._build([])[2].sim.model.opt.timestep == 0.002
+        reused = [forks.predict(twin.commands, horizon=20.0) for _ in range(2)]
+    assert [without_wall_time(p) for p in reused] == [without_wall_time(coarse)] * 2
+    assert [c.done for c in coarse.commands] == pytest.approx([c.done for c in fine.commands], abs=0.1 + 1e-9)
+    assert coarse.trajectory["q0"] != fine.trajectory["q0"]  # other physics, other digits
+
+
+@pytest.mark.parametrize("physics, said", [(0.003, "is not a whole number of them"), (0.0, "above 0"),
+                                           (float("nan"), "above 0"), (0.02, "at most 0.01")])
+def test_a_physics_step_a_what_if_cannot_keep_is_refused_before_anything_runs(built, tmp_path, physics, said):
+    from cotwin.diagnostics import CotwinError
+    from cotwin.twin.analysis.sweep import grid, run_sweep
+    from cotwin.twin.services.whatif import predict
+
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    with pytest.raises(CotwinError, match=said):
+        predict(twin, twin.commands, None, artefacts=tmp_path, physics_step=physics)
+    plans = grid(twin.models.program, "moveDiscreteCommand", {"target_X": [0], "target_Y": [0], "target_Z": [0]})
+    with pytest.raises(CotwinError, match=said):
+        run_sweep(twin.spec.path, plans, workers=1, artefacts=tmp_path, physics_step=physics)

@@ -58,18 +58,23 @@ def plan_file(path: str, program):
 @click.option("--from", "state", type=click.Path(), help="a saved DT state to fork (DIR/state of a run or a live twin)")
 @click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=60.0, show_default=True,
               help="simulate at most this long (s)")
+@click.option("--physics-step", "physics_step", type=float, default=None,
+              help="the fork's physics step in s (default cotwin's 0.001; 0.002 kept the calibrated UR5e's "
+                   "fidelity, 0.004 did not: docs/benchmarks.md)")
 @click.option("-o", "--output", "out", callback=output_file, help="write the prediction as JSON here")
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
-def whatif(project: str, plan: str, state: str | None, horizon: float, out: str | None, strict: bool) -> None:
+def whatif(project: str, plan: str, state: str | None, horizon: float, physics_step: float | None, out: str | None,
+           strict: bool) -> None:
     """Predict what a plan would do: fork the DT (at a saved state, or at the start) and run the plan
     ahead of real time; prints each command's outcome and the completion time."""
     import json
 
     from ..twin.assembly.run import load
-    from ..twin.services.whatif import predict
+    from ..twin.services.whatif import physics_timing, predict
 
     check_finite(horizon=horizon)
     system = load(project)
+    physics_timing(system.spec.step, physics_step)
     show_warnings(system.spec.ignored_sections("cotwin whatif"))  # [convergence], [pt]...: a live twin's
     if out:
         check_outputs([out], [*system.spec.inputs, plan, state])
@@ -81,7 +86,7 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
 
     show_warnings(nothing_planned(Path(plan), commands))
     with about(state, StateError):
-        prediction = predict(system, commands, blob, horizon=horizon)
+        prediction = predict(system, commands, blob, horizon=horizon, physics_step=physics_step)
     for c in prediction.commands:
         args = ", ".join(f"{k}={v}" for k, v in c.args.items())
         verdict = {True: "feasible", False: "NOT feasible", None: "feasibility unknown"}[c.feasible]
@@ -104,11 +109,14 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, out: str 
 @click.option("--from", "state", type=click.Path(), help="a saved DT state to fork every what-if from")
 @click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=30.0, show_default=True,
               help="simulate each what-if at most this long (s)")
+@click.option("--physics-step", "physics_step", type=float, default=None,
+              help="each what-if's physics step in s (default cotwin's 0.001; 0.002 kept the calibrated UR5e's "
+                   "fidelity, 0.004 did not: docs/benchmarks.md)")
 @click.option("--workers", type=click.IntRange(min=1, max=1024), help="local processes (default: one per CPU)")
 @click.option("--ray", "ray", help="run on Ray: 'auto' (the local cluster) or a cluster address")
 @click.option("-o", "--output", "out", callback=output_file, required=True, help="the CSV of answers to write")
-def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, horizon: float, workers: int | None,
-          ray: str | None, out: str) -> None:
+def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, horizon: float,
+          physics_step: float | None, workers: int | None, ray: str | None, out: str) -> None:
     """Run one what-if per combination of argument values, in parallel (e.g. every hole of the plate:
     --event moveDiscreteCommand --arg target_X=0..15 --arg target_Y=0..23 --arg target_Z=0)."""
     import csv
@@ -142,7 +150,8 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     try:
         with ProgressReport("sweeping", "what-ifs") as progress:
             with about(state, StateError):
-                rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress)
+                rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress,
+                                 physics_step=physics_step)
     except SweepInterrupted as err:  # the what-ifs answered are kept beside the output
         partial = Path(out).with_name(Path(out).stem + ".partial.csv")
         if err.rows:

@@ -120,7 +120,8 @@ def _load(project: str, artefacts: str | None) -> None:
     _SYSTEM = (load(project), artefacts)
 
 
-def _run(plan: list[Command], state: bytes | None, horizon: float, step: float | None, forks=None) -> dict:
+def _run(plan: list[Command], state: bytes | None, horizon: float, step: float | None, forks=None,
+         physics: float | None = None) -> dict:
     """One what-if's row; on `forks` (cotwin.twin.services.whatif.Forks: one fork restored plan after plan) when given."""
     from ..services.whatif import predict
 
@@ -128,42 +129,45 @@ def _run(plan: list[Command], state: bytes | None, horizon: float, step: float |
     try:
         if forks is not None:
             return summary(forks.predict(plan, horizon=horizon, decimate=10**9))
-        return summary(predict(system, plan, state, horizon=horizon, step=step, artefacts=artefacts, decimate=10**9))
+        return summary(predict(system, plan, state, horizon=horizon, step=step, artefacts=artefacts, decimate=10**9,
+                               physics_step=physics))
     except Exception as err:  # noqa: BLE001 - one what-if's failure is its row, the sweep goes on
         return failed(plan, err)
 
 
-def _forks(state: bytes | None, step: float | None):
+def _forks(state: bytes | None, step: float | None, physics: float | None = None):
     """Forks of the loaded twin at `state` for a run of what-ifs (closed by the caller when they are done)."""
     from ..services.whatif import Forks
 
     system, artefacts = _SYSTEM
-    return Forks(system, state, step=step, artefacts=artefacts)
+    return Forks(system, state, step=step, artefacts=artefacts, physics_step=physics)
 
 
-def _run_chunk(plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None) -> list[dict]:
-    with _forks(state, step) as forks:
+def _run_chunk(plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None,
+               physics: float | None = None) -> list[dict]:
+    with _forks(state, step, physics) as forks:
         return [_run(plan, state, horizon, step, forks) for plan in plans]
 
 
-def _ray_run(project: str, artefacts: str | None, plan, state, horizon, step) -> dict:
+def _ray_run(project: str, artefacts: str | None, plan, state, horizon, step, physics=None) -> dict:
     if _SYSTEM is None or str(_SYSTEM[0].spec.path) != str(Path(project)):
         try:
             _load(project, artefacts)
         except Exception as err:  # noqa: BLE001 - the project does not load on this node: say so per what-if
             return failed(plan, err)
-    return _run(plan, state, horizon, step)
+    return _run(plan, state, horizon, step, physics=physics)
 
 
 def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | None = None, horizon: float = 30.0,
               step: float | None = None, workers: int | None = None, ray: str | None = None,
-              artefacts: str | Path | None = None, progress=None) -> list[dict]:
+              artefacts: str | Path | None = None, progress=None, physics_step: float | None = None) -> list[dict]:
     """Run every plan as a what-if; `ray` is a Ray address ("auto" joins the local cluster) or None
     for a local process pool of `workers` processes (default: one per CPU; 1 runs in this process).
 
     One row per plan, in the plans' order: `summary` of its prediction, or (a what-if that failed) its
     grid point and the error in the ERROR column (`failures` lists them). `progress(done, total)` is
-    called as what-ifs finish."""
+    called as what-ifs finish. `physics_step`: the what-ifs' physics steps (s; None: cotwin's 1 ms; see
+    cotwin.twin.services.whatif.physics_timing)."""
     import shutil
     import tempfile
 
@@ -181,10 +185,13 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         artefacts = scratch = tempfile.mkdtemp(prefix="cotwin-sweep-")
     try:
         system = load(project)
+        from ..services.whatif import physics_timing
+
+        physics_timing(system.spec.step if step is None else step, physics_step)  # once, not per what-if
         dmodel_fmu(system, artefacts)  # built once, before the workers share it
         artefacts = str(artefacts)
         if ray is not None:
-            return _on_ray(project, plans, state, horizon, step, ray, artefacts, report)
+            return _on_ray(project, plans, state, horizon, step, ray, artefacts, report, physics_step)
         workers = max(1, min(workers or os.cpu_count() or 1, len(plans)))  # no idle processes
         rows: list[dict] = []
         report(0, len(plans))
@@ -192,7 +199,7 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
             global _SYSTEM
             _SYSTEM = (system, artefacts)  # the project loaded above (loading it again costed a parse)
             try:
-                with _forks(state, step) as forks:
+                with _forks(state, step, physics_step) as forks:
                     for plan in plans:
                         rows.append(_run(plan, state, horizon, step, forks))
                         report(len(rows), len(plans))
@@ -205,7 +212,7 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         try:
             with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
                                      initargs=(project, artefacts)) as pool:
-                futures = {pool.submit(_run_chunk, chunk, state, horizon, step): k for k, chunk in enumerate(chunks)}
+                futures = {pool.submit(_run_chunk, chunk, state, horizon, step, physics_step): k for k, chunk in enumerate(chunks)}
                 done = 0
                 for future in as_completed(futures):
                     k = futures[future]
@@ -257,7 +264,7 @@ def join_hint(address: str, err: BaseException) -> str:
             "RAY_AUTH_TOKEN_PATH or RAY_AUTH_TOKEN; give it the head's)")
 
 
-def _on_ray(project, plans, state, horizon, step, address, artefacts, report) -> list[dict]:
+def _on_ray(project, plans, state, horizon, step, address, artefacts, report, physics=None) -> list[dict]:
     try:
         import ray
     except ImportError:
@@ -272,7 +279,7 @@ def _on_ray(project, plans, state, horizon, step, address, artefacts, report) ->
     try:
         remote = ray.remote(_ray_run)
         state_ref = ray.put(state)
-        refs = [remote.remote(project, artefacts, plan, state_ref, horizon, step) for plan in plans]
+        refs = [remote.remote(project, artefacts, plan, state_ref, horizon, step, physics) for plan in plans]
         deadline = time.monotonic() + max(600.0, 10.0 * len(plans))
         pending = list(refs)
         report(0, len(plans))

@@ -48,7 +48,7 @@ def estimates_payload(spec) -> bool:
     return settings is not None and settings.estimate == "payload"
 
 
-def payload_simulator(tree, scene, base: str = "fixed"):
+def payload_simulator(tree, scene, base: str = "fixed", timestep: float | None = None):
     """The embedded simulator with a payload body at the tool (cotwin.pmodel.perturbation.with_payload) of no
     mass until an estimate is applied: the DT of a twin estimating its payload, and its what-if forks (a
     saved state holds every body's pose, so the fork's model must have the same bodies)."""
@@ -56,8 +56,9 @@ def payload_simulator(tree, scene, base: str = "fixed"):
     from ...pmodel.perturbation import PAYLOAD_BODY, with_payload
     from ...pmodel.simulator import PlatformSimulator
 
-    xml = with_payload(to_mjcf(tree, scene, TIMESTEP, visual=False, base=base), tree, PLACEHOLDER_KG, base)
-    sim = PlatformSimulator(tree, scene, mjcf=xml, base=base)
+    timestep = TIMESTEP if timestep is None else timestep
+    xml = with_payload(to_mjcf(tree, scene, timestep, visual=False, base=base), tree, PLACEHOLDER_KG, base)
+    sim = PlatformSimulator(tree, scene, timestep, mjcf=xml, base=base)
     body = sim.model.body(PAYLOAD_BODY).id
     sim.model.body_mass[body] = 0.0
     sim.model.body_inertia[body] = 0.0

@@ -31,9 +31,10 @@ def dt_endpoint(system: TwinSystem):
     return make_endpoint(system, "dt")
 
 
-def simulated_endpoint(system: TwinSystem):
+def simulated_endpoint(system: TwinSystem, timestep: float | None = None):
     """The embedded simulator of the twin's models, calibrated when the project names a calibration (the
-    cell's geometry and the motion profile fitted to the PT): the DT, a what-if fork, a sweep's runs."""
+    cell's geometry and the motion profile fitted to the PT): the DT, a what-if fork, a sweep's runs; its
+    physics steps of `timestep` s (None: cotwin's 1 ms)."""
     from ...mapping.endpoint import SimulatedEndpoint
     from ...pmodel.simulator import PlatformSimulator
 
@@ -41,8 +42,9 @@ def simulated_endpoint(system: TwinSystem):
 
     models = system.models
     calibration = models.calibration
-    sim = payload_simulator(models.tree, models.scene, system.spec.base) if estimates_payload(system.spec) else \
-        PlatformSimulator(models.tree, models.scene, base=system.spec.base)  # [convergence] may give it a payload
+    physics = {} if timestep is None else {"timestep": timestep}
+    sim = payload_simulator(models.tree, models.scene, system.spec.base, **physics) if estimates_payload(system.spec) \
+        else PlatformSimulator(models.tree, models.scene, base=system.spec.base, **physics)  # [convergence]: a payload
     return SimulatedEndpoint(sim, calibration and calibration.profile, calibration and calibration.geometry)
 
 

@@ -63,6 +63,25 @@ class Prediction:
         return asdict(self)
 
 
+MAX_PHYSICS_STEP = 0.01  # s: a what-if's physics step at most (MuJoCo's contacts and servos need fine steps)
+
+
+def physics_timing(step: float, physics_step: float | None) -> None:
+    """CotwinError unless `physics_step` (s) is a positive number of at most MAX_PHYSICS_STEP of which the
+    communication step is a whole number. cotwin's 1 ms is the default; benchmarks/calibration.py measures
+    coarser steps against the real UR5e: 2 ms keeps the calibrated 0.002 rad, 4 ms does not."""
+    if physics_step is None:
+        return
+    if physics_step.__class__ not in (int, float) or not math.isfinite(physics_step) or \
+            not 0 < physics_step <= MAX_PHYSICS_STEP:
+        raise CotwinError(f"physics step {physics_step!r} s: give a number of seconds above 0 and at most "
+                          f"{MAX_PHYSICS_STEP:g} (cotwin's is 0.001)")
+    ticks = step / physics_step
+    if round(ticks) < 1 or abs(ticks - round(ticks)) > 1e-6 * ticks:
+        raise CotwinError(f"physics step {physics_step:g} s: the communication step {step:g} s is not a whole "
+                          f"number of them")
+
+
 DEPTH = 0.001  # m: a contact of the robot recorded when it is this deep (MuJoCo's dist <= -DEPTH)
 
 
@@ -108,9 +127,11 @@ class _Contacts:
 
 def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None, horizon: float = 60.0,
             step: float | None = None, algorithm: str | None = None, artefacts: str | Path | None = None,
-            settle: float = 0.3, decimate: int = 1, cc: str = "cc", fused: bool = True) -> Prediction:
+            settle: float = 0.3, decimate: int = 1, cc: str = "cc", fused: bool = True,
+            physics_step: float | None = None) -> Prediction:
     """Run `plan` on a fork of the DT at `state` (None: from the project's initial state); see module doc.
-    `fused`: in the fused loop (cotwin.cosim.fused, the same prediction), else step by step."""
+    `fused`: in the fused loop (cotwin.cosim.fused, the same prediction), else step by step. `physics_step`:
+    the fork's physics steps (s; None: cotwin's 1 ms; see `physics_timing`)."""
     import tempfile
 
     from ..assembly.run import simulated_endpoint
@@ -118,6 +139,7 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
     started = wallclock.perf_counter()
     spec = system.spec
     step = spec.step if step is None else step
+    physics_timing(step, physics_step)
     algorithm = algorithm or spec.algorithm
     start = 0.0
     if state is not None:
@@ -128,7 +150,7 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
     fork = system.with_plan(shifted)
     with tempfile.TemporaryDirectory(prefix="cotwin-whatif-") as tmp:
         fmu = dmodel_fmu(fork, Path(artefacts) if artefacts is not None else Path(tmp), cc)
-        endpoint = simulated_endpoint(fork)
+        endpoint = simulated_endpoint(fork, physics_step)
         cosim = fork.instantiate(fmu, endpoint)
         watch, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
         execution = Execution(cosim, make_algorithm(algorithm), step, start, [watch, ledger], fused=fused)
@@ -152,9 +174,12 @@ class Forks:
     drops its fork (the next one of its shape builds anew). `close` ends them all (a context manager)."""
 
     def __init__(self, system: TwinSystem, state: bytes | None = None, step: float | None = None,
-                 algorithm: str | None = None, artefacts: str | Path | None = None, cc: str = "cc"):
+                 algorithm: str | None = None, artefacts: str | Path | None = None, cc: str = "cc",
+                 physics_step: float | None = None):
         self.system, self.state, self.cc = system, state, cc
         self.step = system.spec.step if step is None else step
+        self.physics_step = physics_step
+        physics_timing(self.step, physics_step)
         self.algorithm = algorithm or system.spec.algorithm
         self.artefacts = artefacts
         self.start = 0.0
@@ -209,7 +234,7 @@ class Forks:
                 self._scratch = tempfile.TemporaryDirectory(prefix="cotwin-whatif-")
             artefacts = self._scratch.name
         fmu = dmodel_fmu(fork, Path(artefacts), self.cc)
-        endpoint = simulated_endpoint(fork)
+        endpoint = simulated_endpoint(fork, self.physics_step)
         execution = Execution(fork.instantiate(fmu, endpoint), make_algorithm(self.algorithm), self.step, self.start,
                               [], fused=True)
         try:
