@@ -105,6 +105,7 @@ def test_the_c_contact_check_finds_what_the_what_if_records(built):
     twin = twins["cotwin.toml"]
     endpoint = simulated_endpoint(twin)
     contacts = _Contacts(endpoint, twin.models.tree)
+    contacts.start()
     sim, rng, found = endpoint.sim, np.random.default_rng(3), 0
     mask, depth = sim.contact_watch
     assert depth == DEPTH and sorted(np.flatnonzero(mask)) == sorted(contacts.robot)
@@ -147,7 +148,7 @@ def test_a_what_if_from_a_blocked_state_says_it_blocked_since_its_first_step(tmp
     from conftest import EXAMPLES
 
     from cotwin.twin.assembly.run import load
-    from cotwin.twin.services.whatif import predict
+    from cotwin.twin.services.whatif import Forks, predict
 
     project = tmp_path / "ur5e"
     shutil.copytree(EXAMPLES / "ur5e", project)
@@ -165,6 +166,14 @@ def test_a_what_if_from_a_blocked_state_says_it_blocked_since_its_first_step(tmp
     stepped = predict(twin, plan, state, horizon=4.0, step=0.01, artefacts=tmp_path / "out", fused=False)
     assert native.blocked and native.blocked == stepped.blocked
     assert without_wall_time(native) == without_wall_time(stepped) and native.native_steps > 0
+    # a sweep's plans sharing their first second (no command due): the wait found in it is found once, since
+    # the same time, by every plan (Forks restores the shared start and what the wait watch had seen by then)
+    later = [[Command(1.0, c.values, c.where)] for c in (plan[0], plan[0])]
+    with Forks(twin, state, artefacts=tmp_path / "out") as forks:
+        shared = [without_wall_time(forks.predict(p, horizon=2.0)) for p in later]
+    assert forks._shared, "the plans were meant to share their start"
+    alone = [without_wall_time(predict(twin, p, state, horizon=2.0, artefacts=tmp_path / "out")) for p in later]
+    assert shared == alone and len(alone[0]["blocked"]) == 1
 
 
 def test_a_what_if_at_a_coarser_physics_step_runs_its_simulator_at_it(built, tmp_path):

@@ -133,7 +133,7 @@ def test_a_dead_worker_is_reported_per_whatif_not_as_a_broken_pool(tmp_path, mon
     assert next(v for k, v in rows[1].items() if k.endswith("target_X")) == 1
 
 
-def _die_on_x1(plans, state, horizon, step):
+def _die_on_x1(plans, state, horizon, step, physics=None):
     if any(dict(p[0].values).get("MovementArgs_target_X") == 1 for p in plans):
         os.kill(os.getpid(), 9)
     return [{"ok": True} for _ in plans]

@@ -96,6 +96,15 @@ class WaitWatch(Observer):
         self._since = [(leaf, entered, idle + len(rows)) if leaf == previous else (leaf, times[0], len(rows) - 1)
                        for leaf, (previous, entered, idle) in zip(first, self._since)]
 
+    def progress(self) -> tuple:
+        """What it has seen so far (each machine's state since when, idle how long; the waits found), to go on
+        from in a run restored to this step (a start shared by a sweep's plans: cotwin.twin.services.whatif)."""
+        return list(self._since), list(self.found)
+
+    def resume(self, progress: tuple) -> None:
+        since, found = progress
+        self._since, self.found = list(since), list(found)
+
     def _judge(self, m: int, leaf, entered: float, now: float) -> None:
         wait = self.waits.get((m, leaf)) if isinstance(leaf, int) else None
         if wait is None or wait.events & self.commands:

@@ -102,7 +102,11 @@ class _Contacts:
                       and model.body(model.geom_bodyid[g]).name not in fingers}
         self._robot = np.array(sorted(self.robot), dtype=np.int64)
         self.seen: dict[tuple[str, str], dict] = {}
-        self.sim.watch_contacts(sorted(self.robot), DEPTH)  # a native stretch stops at a step with one
+
+    def start(self) -> None:
+        """Watch the simulator's contacts while the what-if runs: a native stretch stops at a step with one."""
+        if self.sim is not None:
+            self.sim.watch_contacts(sorted(self.robot), DEPTH)
 
     def stop(self) -> None:
         if self.sim is not None:
@@ -188,6 +192,7 @@ class Forks:
 
             self.start = saved_execution(state)["time"]
         self._forks: dict[frozenset, tuple] = {}  # plan shape -> (fork, execution, endpoint, saved state)
+        self._shared: dict[tuple, tuple] = {}  # (shape, steps, decimate) -> (state, the watches' progress) then
         self._scratch = None
 
     def __enter__(self) -> "Forks":
@@ -206,18 +211,32 @@ class Forks:
             if built is None:
                 built = self._build(shifted)
             fork, execution, endpoint, saved, fresh = built
-            if not fresh:
-                execution.system.units[fork.source.name].commands = shifted
+            execution.system.units[fork.source.name].commands = shifted
+            quiet = _quiet_start(self._counted, self.step, shifted)
+            shared = self._shared.get((shape, quiet, decimate)) if quiet > 1 else None
+            if shared is not None:
+                execution.set_state(shared[0])  # the start this plan shares with the plans before it
+            elif not fresh:
                 execution.set_state(saved)  # the fork as it was set up (the source: this plan from its start)
-            watch, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
-            execution.observers = [watch, ledger]
+            waits, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
+            watch = Watch(fork, endpoint, shifted, start, horizon, settle, decimate, waits, ledger)
+            native = execution.native_steps
+            execution.observers = [waits, ledger, watch]
             for o in execution.observers:
                 o.simulation_initialized(execution)
-            prediction = _watch(fork, execution, endpoint, shifted, start, horizon, settle, decimate, started, watch,
-                                ledger)
+            if shared is not None:
+                waits.resume(shared[1])
+                watch.resume(shared[2])
+            elif quiet > 1:
+                _advance(execution, watch, quiet)
+                if not watch.over and not ledger.outcomes:
+                    self._shared[(shape, quiet, decimate)] = (execution.get_state(), waits.progress(), watch.progress())
+            prediction = _advance(execution, watch).prediction(execution, fork, shifted, start, started)
+            prediction.native_steps = execution.native_steps - native
         except BaseException:
             if built is not None:
                 built[1].close()
+            self._shared = {key: value for key, value in self._shared.items() if key[0] != shape}
             raise
         self._forks[shape] = (fork, execution, endpoint, saved, False)  # ran: the next plan restores `saved`
         return prediction
@@ -246,6 +265,7 @@ class Forks:
         except BaseException:
             execution.close()
             raise
+        self._counted = (*execution._origin, execution.steps)  # the start's steps, as counted (all forks alike)
         return fork, execution, endpoint, saved, True  # fresh: the first plan runs without a restore
 
     def close(self) -> None:
@@ -372,6 +392,21 @@ class Watch(Stop):
     def reached(self, execution) -> bool:
         return self.over
 
+    def progress(self) -> tuple:
+        """What it has seen so far, as copies (a start shared by a sweep's plans: Forks)."""
+        return ({k: list(v) for k, v in self.trajectory.items()}, list(self.states), [dict(c) for c in self.collisions],
+                {k: dict(v) for k, v in self.contacts.seen.items()}, dict(self.last_state), self.at_rest_since,
+                self.resting)
+
+    def resume(self, progress: tuple) -> None:
+        """Go on from `progress` (a run restored to the step it was taken at)."""
+        trajectory, states, collisions, seen, last, since, resting = progress
+        self.trajectory = {k: list(v) for k, v in trajectory.items()}
+        self.states, self.collisions = list(states), [dict(c) for c in collisions]
+        if self.contacts.sim is not None:
+            self.contacts.seen = {k: dict(v) for k, v in seen.items()}
+        self.last_state, self.at_rest_since, self.resting = dict(last), since, resting
+
     def prediction(self, execution, fork, plan, start: float, started: float) -> Prediction:
         outcomes = list(self.ledger.outcomes)
         for c in plan[len(outcomes):]:  # not applied within the horizon
@@ -400,18 +435,40 @@ def _first(holds, limit: int) -> int | None:
     return lo
 
 
+def _quiet_start(counted: tuple[float, int, int], h: float, plan: list[Command]) -> int:
+    """How many steps from the forks' start the command source offers nothing (the first command is due later):
+    the start every plan of a shape with its first command at that time shares, as ScenarioUnit.step counts
+    it. `counted`: the start's origin, steps since it and steps (Execution._origin, .steps)."""
+    if not plan:
+        return 0
+    due = plan[0].time
+    origin, done, steps = counted
+    k = 0
+    while k < 1 << 20 and not due < origin + (steps + k - done) * h + h - 1e-9:
+        k += 1
+    return k
+
+
+def _advance(execution, watch: Watch, steps: int | None = None) -> Watch:
+    """Step the fork until its what-if is over (or `steps` more), the contact watch set meanwhile."""
+    if steps is None:
+        steps = math.ceil((watch.end - execution.time) / execution.step_size) + 1
+    watch.contacts.start()
+    try:
+        if execution.time < watch.end - 1e-9 and not watch.over:
+            execution.advance(steps, until=watch)
+    finally:
+        watch.contacts.stop()
+    return watch
+
+
 def _watch(fork, execution, endpoint, plan, start, horizon, settle, decimate, started, waits, ledger) -> Prediction:
     """Run the fork until its what-if is over (Watch), with the wait watch and the command ledger observing."""
     watch = Watch(fork, endpoint, plan, start, horizon, settle, decimate, waits, ledger)
     execution.observers = [waits, ledger, watch]
     watch.simulation_initialized(execution)
     native = execution.native_steps
-    try:
-        if execution.time < watch.end - 1e-9:
-            execution.advance(math.ceil((watch.end - execution.time) / execution.step_size) + 1, until=watch)
-    finally:
-        watch.contacts.stop()
-    prediction = watch.prediction(execution, fork, plan, start, started)
+    prediction = _advance(execution, watch).prediction(execution, fork, plan, start, started)
     prediction.native_steps = execution.native_steps - native
     return prediction
 
