@@ -207,3 +207,20 @@ def test_a_physics_step_a_what_if_cannot_keep_is_refused_before_anything_runs(bu
     plans = grid(twin.models.program, "moveDiscreteCommand", {"target_X": [0], "target_Y": [0], "target_Z": [0]})
     with pytest.raises(CotwinError, match=said):
         run_sweep(twin.spec.path, plans, workers=1, artefacts=tmp_path, physics_step=physics)
+
+
+def test_a_plan_ending_before_the_shared_start_ends_where_it_would_alone(built, tmp_path):
+    """Forks share a start only with plans whose what-if lasts past it: one of 0.3 s after one of 6 s (both
+    with their command at 0.5 s) ends at 0.3 s, as predict makes it alone."""
+    from cotwin.twin.analysis.sweep import grid
+    from cotwin.twin.services.whatif import Forks, predict
+
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    plans = grid(twin.models.program, "moveDiscreteCommand", {"target_X": [3, 4], "target_Y": [5], "target_Z": [0]})
+    with Forks(twin, None, artefacts=tmp_path) as forks:
+        long = without_wall_time(forks.predict(plans[0], horizon=6.0))
+        short = without_wall_time(forks.predict(plans[1], horizon=0.3))
+    assert long == without_wall_time(predict(twin, plans[0], None, horizon=6.0, artefacts=tmp_path))
+    assert short == without_wall_time(predict(twin, plans[1], None, horizon=0.3, artefacts=tmp_path))
+    assert short["end"] == pytest.approx(0.3)

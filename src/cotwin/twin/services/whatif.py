@@ -192,7 +192,7 @@ class Forks:
 
             self.start = saved_execution(state)["time"]
         self._forks: dict[frozenset, tuple] = {}  # plan shape -> (fork, execution, endpoint, saved state)
-        self._shared: dict[tuple, tuple] = {}  # (shape, steps, decimate) -> (state, the watches' progress) then
+        self._shared: dict[tuple, tuple] = {}  # (shape, steps, decimate, horizon) -> (state, watches' progress) then
         self._scratch = None
 
     def __enter__(self) -> "Forks":
@@ -213,7 +213,8 @@ class Forks:
             fork, execution, endpoint, saved, fresh = built
             execution.system.units[fork.source.name].commands = shifted
             quiet = _quiet_start(self._counted, self.step, shifted)
-            shared = self._shared.get((shape, quiet, decimate)) if quiet > 1 else None
+            key = (shape, quiet, decimate, horizon)  # a start shared as long as the what-if lasts past it
+            shared = self._shared.get(key) if quiet > 1 else None
             if shared is not None:
                 execution.set_state(shared[0])  # the start this plan shares with the plans before it
             elif not fresh:
@@ -230,7 +231,7 @@ class Forks:
             elif quiet > 1:
                 _advance(execution, watch, quiet)
                 if not watch.over and not ledger.outcomes:
-                    self._shared[(shape, quiet, decimate)] = (execution.get_state(), waits.progress(), watch.progress())
+                    self._shared[key] = (execution.get_state(), waits.progress(), watch.progress())
             prediction = _advance(execution, watch).prediction(execution, fork, shifted, start, started)
             prediction.native_steps = execution.native_steps - native
         except BaseException:
