@@ -96,7 +96,9 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
     for c in prediction.collisions:
         click.echo(f"collision: {c}")
     click.echo(f"completion: {'t = %g s' % prediction.completion_time if prediction.completion_time is not None else 'not within the horizon'} "
-               f"(forked at t = {prediction.start:g} s, predicted to t = {prediction.end:g} s in {prediction.wall_seconds:.2f} s)")
+               f"(forked at t = {prediction.start:g} s, predicted to t = {prediction.end:g} s, {prediction.native_steps} of "
+               f"{round((prediction.end - prediction.start) / prediction.step)} steps in the native loop, in "
+               f"{prediction.wall_seconds:.2f} s)")
     if out:
         write_text(out, json.dumps(prediction.as_dict(), indent=1) + "\n", [*system.spec.inputs, plan, state])
     outcomes({"": Summary(prediction.commands, prediction.blocked)}, strict, per_command=False)  # said above
