@@ -64,20 +64,13 @@ def _digest(*parts: bytes | str) -> str:
     return h.hexdigest()
 
 
-_SOURCES: dict[tuple[int, str, int], tuple[object, dict[str, str]]] = {}  # (id(program), root, fmi) -> (program, sources)
-
-
 def _sources(program, root: Path, fmi: int, generate) -> dict[str, str]:
     """The d-model FMU's generated sources, generated once per program object (a Program is not changed once
     built; what-if forks and sweeps share their twin's): the check that an FMU is up to date costed a C
     generation per what-if."""
-    key = (id(program), str(root), fmi)
-    known = _SOURCES.get(key)
-    if known is None or known[0] is not program:
-        if len(_SOURCES) >= 8:
-            _SOURCES.clear()
-        known = _SOURCES[key] = (program, generate(program, root))
-    return known[1]
+    from ...memo import once_per
+
+    return once_per(program, ("sources", str(root), fmi), lambda: generate(program, root))
 
 
 def _cotwin_sources(names=_GENERATORS) -> list[bytes]:

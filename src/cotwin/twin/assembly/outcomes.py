@@ -25,6 +25,7 @@ from functools import lru_cache
 from dataclasses import dataclass, field
 
 from ...cosim.observers import Observer
+from ...memo import once_per
 from .system import DMODEL, MAPPING, TwinSystem
 
 INFEASIBLE = re.compile(r"^(non|in|un)(feasible|reachable)", re.IGNORECASE)
@@ -132,7 +133,7 @@ class CommandLedger(Observer):
         program = system.models.program
         self.program = program
         self.system = system
-        self.rest = rest_states(program)
+        self.rest = once_per(program, "rest states", lambda: rest_states(program))  # the same for every what-if
         self.outcomes: list[CommandOutcome] = []
         self._states = [(program.state_port(m), m) for m in program.machines]
         self._calls = [op.name for op in program.operations]

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 from ...cosim.observers import Observer
 from ...dmodel.waits import waits
+from ...memo import once_per
 from .system import DMODEL, MAPPING, TwinSystem
 
 log = logging.getLogger("cotwin.twin")
@@ -49,7 +50,7 @@ class WaitWatch(Observer):
     def __init__(self, system: TwinSystem, patience: int = 3, prefix: str = ""):
         program = system.models.program
         self.program = program
-        self.waits = waits(program)
+        self.waits = once_per(program, "waits", lambda: waits(program))  # the same for every what-if of it
         self.commands = set(system.command_events)
         self.patience = patience
         self.prefix = prefix

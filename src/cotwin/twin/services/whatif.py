@@ -34,6 +34,7 @@ from ...config import did_you_mean
 from ...diagnostics import CotwinError
 from ..assembly.build import dmodel_fmu
 from ...logcap import CappedLog
+from ...memo import once_per
 from ...service import BackgroundService
 from ..assembly.scenario import Command
 from ..assembly.system import DMODEL, MAPPING, TwinSystem
@@ -96,10 +97,11 @@ class _Contacts:
         if self.sim is None:
             return
         model = self.sim.model
-        tool = ik.find_tool(tree)
-        fingers = {j.child for j in tree.joints if j.name in tool.fingers}
-        self.robot = {g for g in range(model.ngeom) if model.geom_contype[g] == ROBOT_CONTYPE
-                      and model.body(model.geom_bodyid[g]).name not in fingers}
+        fingers = once_per(tree, "fingers", lambda: frozenset(j.child for j in tree.joints
+                                                               if j.name in ik.find_tool(tree).fingers))
+        self.robot = once_per(model, ("robot geoms", fingers), lambda: frozenset(
+            g for g in range(model.ngeom) if model.geom_contype[g] == ROBOT_CONTYPE
+            and model.body(model.geom_bodyid[g]).name not in fingers))  # the same for every what-if of a fork
         self._robot = np.array(sorted(self.robot), dtype=np.int64)
         self.seen: dict[tuple[str, str], dict] = {}
 

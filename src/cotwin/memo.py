@@ -1,0 +1,23 @@
+"""Results computed once per model object: a Program, a kinematic tree or a MuJoCo model is not changed once
+built, and what-if forks, sweeps and runs of one twin share it, so an analysis of it (the d-model's waits
+and resting states, its generated sources, the robot's geoms) need not be made again per what-if."""
+
+from __future__ import annotations
+
+from typing import Callable, TypeVar
+
+T = TypeVar("T")
+SIZE = 32  # results kept (the objects they are of kept alive with them); the oldest dropped beyond
+
+_KEPT: dict[tuple, tuple[object, object]] = {}  # (id(obj), key) -> (obj, result)
+
+
+def once_per(obj: object, key: object, compute: Callable[[], T]) -> T:
+    """compute() for `obj` and `key` (hashable), made once while obj is the same object (identity, not equality)."""
+    slot = (id(obj), key)
+    known = _KEPT.get(slot)
+    if known is None or known[0] is not obj:
+        if len(_KEPT) >= SIZE:
+            del _KEPT[next(iter(_KEPT))]
+        known = _KEPT[slot] = (obj, compute())
+    return known[1]  # type: ignore[return-value]
