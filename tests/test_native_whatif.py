@@ -52,7 +52,7 @@ def test_a_what_if_in_the_native_loop_predicts_what_the_step_by_step_loop_predic
                           fused=False)
         assert without_wall_time(native) == without_wall_time(stepped)
         steps = round((native.end - native.start) / step)
-        assert native.native_steps > steps // 2 and stepped.native_steps == 0
+        assert native.native_steps > (steps // 2 if plan is twin.commands else 0) and stepped.native_steps == 0
         assert len(native.trajectory["time"]) == steps + 1
 
 
@@ -171,7 +171,7 @@ def test_a_what_if_from_a_blocked_state_says_it_blocked_since_its_first_step(tmp
     later = [[Command(1.0, c.values, c.where)] for c in (plan[0], plan[0])]
     with Forks(twin, state, artefacts=tmp_path / "out") as forks:
         shared = [without_wall_time(forks.predict(p, horizon=2.0)) for p in later]
-    assert forks._shared, "the plans were meant to share their start"
+        assert forks._shared, "the plans were meant to share their start"
     alone = [without_wall_time(predict(twin, p, state, horizon=2.0, artefacts=tmp_path / "out")) for p in later]
     assert shared == alone and len(alone[0]["blocked"]) == 1
 

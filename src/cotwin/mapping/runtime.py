@@ -498,6 +498,7 @@ class Mapping:
             for ev in self.events.values():
                 ev.occurs = compile_event(ev, self.env._compiler)
         self.started = False
+        self._shape_cache: dict | None = None  # _shapes, worked out on first use
 
     @property
     def registry(self) -> FunctionRegistry:
@@ -766,7 +767,13 @@ class Mapping:
 
     def _shapes(self) -> dict:
         """Every variable's value shape (cotwin.plaindata.like): its declared type's default value, a number
-        for the mirrors and the monitored readings; None (anything) where the type gives no shape."""
+        for the mirrors and the monitored readings; None (anything) where the type gives no shape. Worked out
+        once per mapping (a sweep restores its fork's mapping per what-if)."""
+        if self._shape_cache is None:
+            self._shape_cache = self._work_out_shapes()
+        return self._shape_cache
+
+    def _work_out_shapes(self) -> dict:
         from ..dmodel.program import default_value
         from ..robosim.types import INT, NAT
 

@@ -99,11 +99,16 @@ class _Contacts:
         model = self.sim.model
         fingers = once_per(tree, "fingers", lambda: frozenset(j.child for j in tree.joints
                                                                if j.name in ik.find_tool(tree).fingers))
-        self.robot = once_per(model, ("robot geoms", fingers), lambda: frozenset(
-            g for g in range(model.ngeom) if model.geom_contype[g] == ROBOT_CONTYPE
-            and model.body(model.geom_bodyid[g]).name not in fingers))  # the same for every what-if of a fork
+        self.robot = frozenset(g for g in range(model.ngeom) if model.geom_contype[g] == ROBOT_CONTYPE
+                               and model.body(model.geom_bodyid[g]).name not in fingers)
         self._robot = np.array(sorted(self.robot), dtype=np.int64)
         self.seen: dict[tuple[str, str], dict] = {}
+
+    def again(self) -> "_Contacts":
+        """The same check for another what-if on the same simulator (a sweep's fork), nothing seen yet."""
+        if self.sim is not None:
+            self.seen = {}
+        return self
 
     def start(self) -> None:
         """Watch the simulator's contacts while the what-if runs: a native stretch stops at a step with one."""
@@ -195,6 +200,7 @@ class Forks:
             self.start = saved_execution(state)["time"]
         self._forks: dict[frozenset, tuple] = {}  # plan shape -> (fork, execution, endpoint, saved state)
         self._shared: dict[tuple, tuple] = {}  # (shape, steps, decimate, horizon) -> (state, watches' progress) then
+        self._contacts: dict[frozenset, _Contacts] = {}  # plan shape -> its fork's contact check
         self._scratch = None
 
     def __enter__(self) -> "Forks":
@@ -222,7 +228,9 @@ class Forks:
             elif not fresh:
                 execution.set_state(saved)  # the fork as it was set up (the source: this plan from its start)
             waits, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
-            watch = Watch(fork, endpoint, shifted, start, horizon, settle, decimate, waits, ledger)
+            watch = Watch(fork, endpoint, shifted, start, horizon, settle, decimate, waits, ledger,
+                          self._contacts.get(shape))
+            self._contacts[shape] = watch.contacts  # its robot's geoms worked out once per fork
             native = execution.native_steps
             execution.observers = [waits, ledger, watch]
             for o in execution.observers:
@@ -240,6 +248,7 @@ class Forks:
             if built is not None:
                 built[1].close()
             self._shared = {key: value for key, value in self._shared.items() if key[0] != shape}
+            self._contacts.pop(shape, None)
             raise
         self._forks[shape] = (fork, execution, endpoint, saved, False)  # ran: the next plan restores `saved`
         return prediction
@@ -275,6 +284,8 @@ class Forks:
         for _, execution, _, _, _ in self._forks.values():
             execution.close()
         self._forks.clear()
+        self._shared.clear()
+        self._contacts.clear()
         if self._scratch is not None:
             self._scratch.cleanup()
             self._scratch = None
@@ -289,7 +300,7 @@ class Watch(Stop):
     (cotwin.mapping.cstep); `quiet_for` ends a stretch at the first step at which the what-if could be over."""
 
     def __init__(self, fork, endpoint, plan, start: float, horizon: float, settle: float, decimate: int,
-                 waits: WaitWatch, ledger: CommandLedger):
+                 waits: WaitWatch, ledger: CommandLedger, contacts: _Contacts | None = None):
         program = fork.models.program
         self.program, self.plan, self.settle, self.decimate = program, plan, settle, decimate
         self.waits, self.ledger = waits, ledger
@@ -298,7 +309,7 @@ class Watch(Stop):
         self.monitored = list(fork.log[MAPPING.name])
         self.state_ports = [(program.state_port(m), m) for m in program.machines]
         self.collision_events = [e for e in platform if e.lower() == "collision"]
-        self.contacts = _Contacts(endpoint, fork.models.tree)
+        self.contacts = contacts.again() if contacts is not None else _Contacts(endpoint, fork.models.tree)
         self.trajectory: dict[str, list[float]] = {"time": [], **{v: [] for v in self.monitored}}
         self.states: list[tuple[float, str, str]] = []
         self.collisions: list[dict] = []
