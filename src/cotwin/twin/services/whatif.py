@@ -391,16 +391,16 @@ class Watch(Stop):
         first at which one of `_over`'s conditions on time (each spelt as `_over` spells it) turns true."""
         t, h = execution.time, execution.step_size
         since, settle = self.at_rest_since, self.settle
-        turns = [lambda x: x >= self.end - 1e-9, lambda x: x >= self.last_command]
+        turns = [(lambda x: x >= self.end - 1e-9, self.end), (lambda x: x >= self.last_command, self.last_command)]
         if since is not None:
-            turns.append(lambda x: x - since >= settle)
+            turns.append((lambda x: x - since >= settle, since + settle))
         outcomes = self.ledger.outcomes
         if outcomes and outcomes[-1].delivered is not None:
             delivered = outcomes[-1].delivered
-            turns.append(lambda x: x - delivered >= settle + 3 * h)
+            turns.append((lambda x: x - delivered >= settle + 3 * h, delivered + settle + 3 * h))
         origin, done = execution._origin
         at = lambda k: origin + (execution.steps + k - done) * h  # noqa: E731 (the time after k more steps, as counted)
-        bounds = [_first(lambda k: turned(at(k)), 1 << 20) for turned in turns if not turned(t)]
+        bounds = [_first(lambda k: turned(at(k)), (about - t) / h) for turned, about in turns if not turned(t)]
         return min((b for b in bounds if b is not None), default=None)
 
     def reached(self, execution) -> bool:
@@ -435,18 +435,29 @@ class Watch(Stop):
                           [str(b) for b in self.waits.found])
 
 
-def _first(holds, limit: int) -> int | None:
-    """The smallest k in 1..limit for which `holds(k)` (false, then true from some k on), or None."""
-    if not holds(limit):
-        return None
-    lo, hi = 1, limit
+def _first(holds, about: float, limit: int = 1 << 20) -> int | None:
+    """The smallest k in 1..limit for which `holds(k)` (false, then true from some k on), or None; `about`:
+    roughly where (a few steps either side), so that it is found in a few asks."""
+    k = min(limit, max(1, math.ceil(about)))
+    if holds(k):
+        while k > 1 and holds(k - 1):
+            k -= 1
+        return k
+    lo, step = k + 1, 1
+    while lo <= limit and not holds(lo):  # past it by doubling, then back
+        lo, step = lo + step, step * 2
+    if lo > limit:
+        if not holds(limit):
+            return None
+        lo = limit
+    hi, lo = lo, lo - step // 2 if step > 1 else lo
     while lo < hi:
         mid = (lo + hi) // 2
         if holds(mid):
             hi = mid
         else:
             lo = mid + 1
-    return lo
+    return hi
 
 
 def _quiet_start(counted: tuple[float, int, int], h: float, plan: list[Command]) -> int:
