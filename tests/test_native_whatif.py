@@ -224,3 +224,18 @@ def test_a_plan_ending_before_the_shared_start_ends_where_it_would_alone(built, 
     assert long == without_wall_time(predict(twin, plans[0], None, horizon=6.0, artefacts=tmp_path))
     assert short == without_wall_time(predict(twin, plans[1], None, horizon=0.3, artefacts=tmp_path))
     assert short["end"] == pytest.approx(0.3)
+
+
+def test_the_first_step_a_condition_turns_true_is_found_from_any_guess():
+    """whatif._first: the smallest k for a monotone condition, whatever the guess (far off either way, past the
+    limit), None when it never holds within the limit."""
+    import random
+
+    from cotwin.twin.services.whatif import _first
+
+    rng = random.Random(1)
+    for _ in range(5000):
+        limit = rng.choice([1, 5, 50, 1 << 20])
+        turns = rng.randint(1, limit + 3)
+        guess = turns + rng.uniform(-40, 40)
+        assert _first(lambda k: k >= turns, guess, limit) == (turns if turns <= limit else None)
