@@ -142,9 +142,22 @@ class NativeLoop:
         shadows = {shadow for _, shadow in self.copies}
         self.discrete = [i for i in self.written if i not in continuous and i not in shadows]
         self._data, self._observers = algorithm.data, list(execution.observers)
+        self._still = [i for i in range(self.width) if i not in written]  # the slots no C writes
+        self._kinds: dict[tuple, list[str]] = {}  # the rows' kinds by the classes of the values held still
+        self._asking, self._telling = self._listeners(self._observers)
+        self._pointers: tuple[list, object] = ([], None)  # the last segment's pointers and their C array
+        self._flags = (ctypes.c_int * 2)()  # failed, paused
+        self._flag_addresses = (ctypes.addressof(self._flags), ctypes.addressof(self._flags) + ctypes.sizeof(ctypes.c_int))
         self.refusals: dict[str, int] = {}  # why steps were left to Python, and how often
         self.source = self._source()
         self._fn = _compiled(self.source, tuple(sorted({d for part in self.parts for d in part.include_dirs})))
+
+    @staticmethod
+    def _listeners(observers: list) -> tuple[list, list]:
+        """The observers that bound the steps of a segment (they define `quiet_for`) and those told of its
+        repeats (they define `repeated`): the others have nothing to say or do there."""
+        return ([o for o in observers if type(o).quiet_for is not Observer.quiet_for],
+                [o for o in observers if type(o).repeated is not Observer.repeated])
 
     def _source(self) -> str:
         algorithm = self.execution.algorithm
@@ -210,13 +223,14 @@ class NativeLoop:
         data = execution.algorithm.data
         if any(v is UNSET for v in data):
             return 0
-        for i in self._held_still():
+        for i in self._still:
             value = data[i]
             if value.__class__ not in _PLAIN or (value.__class__ is int and abs(value) > 2 ** 53):
                 why = "a value on a connection is not a number a double carries exactly"
                 self.refusals[why] = self.refusals.get(why, 0) + 1
                 return 0
-        for observer in execution.observers:
+        observers = execution.observers
+        for observer in self._asking if observers == self._observers else observers:
             bound = observer.quiet_for(execution)
             if bound is not None:
                 n = min(n, bound)
@@ -234,8 +248,7 @@ class NativeLoop:
         return "; ".join(f"{why} ({n} steps)" for why, n in ranked[:3]) or "no step was quiet"
 
     def _held_still(self) -> list[int]:
-        written = set(self.written)
-        return [i for i in range(self.width) if i not in written]
+        return list(self._still)
 
     def run(self, n: int) -> int:
         """Up to n steps natively (fewer: see the module doc); the steps made, observers told. 0 when the
@@ -253,28 +266,26 @@ class NativeLoop:
         data = algorithm.data
         # the rows' kinds this segment: C writes its slots as their ports' types; the others hold still, as
         # the Python objects they are (an Integer 0 in a Real port stays 0), and are put back as they were
-        held = {i: data[i] for i in self._held_still()}
-        kinds = [self.kinds[i] if i not in held else _KIND[held[i].__class__] for i in range(self.width)]
+        held = {i: data[i] for i in self._still}
+        kinds = self._kinds_of(held)
         for part in self.parts:
             part.begin()
-        pointers = [p for part in self.parts for p in part.pointers]
+        P = self._pointer_array()
         doubles = [d for part in self.parts for d in part.doubles]
-        assert (len(pointers), len(doubles)) == self._sizes, "a native part changed its number of pointers or doubles"
-        P = (ctypes.c_void_p * max(1, len(pointers)))(*pointers)
+        assert len(doubles) == self._sizes[1], "a native part changed its number of doubles"
         D = np.array(doubles or [0.0], dtype=np.float64)
         S = np.array([float(v) for v in data], dtype=np.float64)
         before = S.copy()
         rows = np.empty((n, self.width), dtype=np.float64)
-        failed, paused = ctypes.c_int(0), ctypes.c_int(0)
+        flags = self._flags
         origin, done = execution._origin
         first = execution.steps
-        dptr = ctypes.POINTER(ctypes.c_double)
-        k = self._fn(ctypes.cast(P, ctypes.c_void_p), D.ctypes.data_as(dptr), S.ctypes.data_as(dptr),
-                     rows.ctypes.data_as(dptr), n, float(origin), first - done, execution.step_size,
-                     ctypes.byref(failed), ctypes.byref(paused))
-        failing, code = divmod(failed.value, 1000) if failed.value else (-1, 0)
-        stopped = paused.value - 1 if paused.value else failing  # the unit that ended step k early, or -1
-        half = rows[k].copy() if paused.value else None
+        k = self._fn(P, D.ctypes.data, S.ctypes.data, rows.ctypes.data, n, float(origin), first - done,
+                     execution.step_size, *self._flag_addresses)
+        failed, paused = flags[0], flags[1]
+        failing, code = divmod(failed, 1000) if failed else (-1, 0)
+        stopped = paused - 1 if paused else failing  # the unit that ended step k early, or -1
+        half = rows[k].copy() if paused else None
         rows = rows[:k]
         if k:
             self._commit(rows, before if k == 1 else rows[k - 2], kinds, held)
@@ -287,14 +298,14 @@ class NativeLoop:
             except Exception as err:  # every part is brought up to date; the first error is raised after
                 errors.append(err)
             base += len(part.doubles)
-        if failed.value or errors:
+        if failed or errors:
             if k:
                 self._tell(rows[:-1], kinds)
             if errors:
                 raise errors[0]
             self.parts[failing].failed(code, origin + (first + k - done) * execution.step_size)
             raise RuntimeError(f"unit {algorithm.units[failing].name} failed in the native loop (code {code})")
-        if paused.value:
+        if paused:
             self._finish(half, stopped, kinds, held)
             self._tell(rows, kinds)
             return k + 1
@@ -340,13 +351,32 @@ class NativeLoop:
     def _tell(self, repeats: np.ndarray, kinds: list[str]) -> None:
         """Observers hear of the repeated steps (the rows before the current step), then of the current one."""
         execution = self.execution
+        observers = execution.observers
         if len(repeats):
             batch = StepRows(execution, repeats, kinds)
-            for o in execution.observers:
-                if type(o).repeated is not Observer.repeated:  # the others have nothing to do after a step
-                    o.repeated(execution, batch)
-        for o in execution.observers:
+            for o in self._telling if observers == self._observers else self._listeners(observers)[1]:
+                o.repeated(execution, batch)  # the others have nothing to do after a step
+        for o in observers:
             o.step_complete(execution)
+
+    def _kinds_of(self, held: dict[int, object]) -> list[str]:
+        """The rows' kinds: the ports' where C writes, the held values' own elsewhere (made once per their classes)."""
+        key = tuple(value.__class__ for value in held.values())
+        kinds = self._kinds.get(key)
+        if kinds is None:
+            kinds = self._kinds[key] = [self.kinds[i] if i not in held else _KIND[held[i].__class__]
+                                        for i in range(self.width)]
+        return list(kinds)
+
+    def _pointer_array(self):
+        """The parts' pointers as the C array the segment reads (the last one again while they are the same)."""
+        pointers = [p for part in self.parts for p in part.pointers]
+        assert len(pointers) == self._sizes[0], "a native part changed its number of pointers"
+        last, array = self._pointers
+        if pointers != last:
+            array = (ctypes.c_void_p * max(1, len(pointers)))(*pointers)
+            self._pointers = (pointers, array)
+        return array
 
 
 @contextmanager
@@ -357,17 +387,27 @@ def _signals_held():
         yield
         return
     held: list[tuple[int, object]] = []
-    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous = {sig: _raw_signal.getsignal(sig) for sig in _HELD_SIGNALS}
     caught = {sig: handler for sig, handler in previous.items() if callable(handler)}
+    hold = lambda signum, frame: held.append((signum, frame))  # noqa: E731
     for sig in caught:
-        signal.signal(sig, lambda signum, frame: held.append((signum, frame)))
+        _raw_signal.signal(sig, hold)
     try:
         yield
     finally:
         for sig, handler in caught.items():
-            signal.signal(sig, handler)
+            _raw_signal.signal(sig, handler)
         for signum, frame in held[:1]:
             caught[signum](signum, frame)
+
+
+# signal's own functions, without the module's enum wrapping (which costs a caught ValueError per call, ~5 us:
+# a tenth of a segment's Python time); the handlers the same objects
+try:
+    import _signal as _raw_signal
+except ImportError:  # another Python than CPython
+    _raw_signal = signal
+_HELD_SIGNALS = (int(signal.SIGINT), int(signal.SIGTERM))
 
 
 _PLAIN = (bool, int, float)
@@ -452,9 +492,9 @@ def _compiled(source: str, include_dirs: tuple[str, ...] = ()):
         return _CACHE[digest]
     lib = compile_library(source, "segment", keep_gil=False, include_dirs=include_dirs)  # other threads run meanwhile
     fn = lib.cotwin_segment
-    dptr = ctypes.POINTER(ctypes.c_double)
-    fn.argtypes = [ctypes.c_void_p, dptr, dptr, dptr, ctypes.c_int, ctypes.c_double, ctypes.c_longlong,
-                   ctypes.c_double, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int)]
+    address = ctypes.c_void_p  # the arrays' addresses as integers (no pointer object made per call)
+    fn.argtypes = [ctypes.POINTER(ctypes.c_void_p), address, address, address, ctypes.c_int, ctypes.c_double,
+                   ctypes.c_longlong, ctypes.c_double, address, address]
     fn.restype = ctypes.c_int
     _CACHE[digest] = fn
     return fn
