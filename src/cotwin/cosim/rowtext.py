@@ -37,6 +37,16 @@ static int put(char *out, size_t cap, size_t *at, const char *text, size_t n) {
     return 1;
 }
 
+/* value's decimal digits, at least `width` (zeros before), at out; returns how many. */
+static int decimal(char *out, unsigned long long value, int width) {
+    char digits[24];
+    int n = 0;
+    do { digits[n++] = (char)('0' + value % 10); value /= 10; } while (value);
+    while (n < width) digits[n++] = '0';
+    for (int i = 0; i < n; i++) out[i] = digits[n - 1 - i];
+    return n;
+}
+
 @GRISU@
 
 static int real(char *out, size_t cap, size_t *at, double value, to_text text, release free_text) {
@@ -80,7 +90,9 @@ static int time_text(double t, char *buffer) {
     if (fabs(p - n) > 0.25) return 0;
     long long whole = (long long)n;
     long long units = whole / 1000000000000LL, fraction = whole % 1000000000000LL;
-    int at = snprintf(buffer, 40, "%lld.%012lld", units, fraction);
+    int at = decimal(buffer, (unsigned long long)units, 1);  /* "%lld.%012lld" without snprintf's cost */
+    buffer[at++] = '.';
+    at += decimal(buffer + at, (unsigned long long)fraction, 12);
     while (at > 0 && buffer[at - 1] == '0' && buffer[at - 2] != '.') at--;
     buffer[at] = 0;
     return at;
@@ -249,7 +261,9 @@ static int shortest(double value, char *out) {
         out[at++] = digits[0];
         if (length > 1) { out[at++] = '.'; memcpy(out + at, digits + 1, (size_t)(length - 1)); at += length - 1; }
         int x = point - 1;
-        at += snprintf(out + at, 8, "e%c%02d", x < 0 ? '-' : '+', x < 0 ? -x : x);
+        out[at++] = 'e';
+        out[at++] = x < 0 ? '-' : '+';
+        at += decimal(out + at, (unsigned long long)(x < 0 ? -x : x), 2);  /* "e%c%02d" without snprintf */
     } else if (point <= 0) {
         out[at++] = '0'; out[at++] = '.';
         for (int z = 0; z < -point; z++) out[at++] = '0';
