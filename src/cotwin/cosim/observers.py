@@ -95,7 +95,7 @@ class CSVWriter(Observer):
         self.partial_path = self.path.with_name(f"{self.path.stem}.partial{self.path.suffix}")
         self.rows = 0
         self._fd: int | None = None
-        self._lines: list[str] = []
+        self._lines: list[bytes] = []  # whole lines, as the file gets them
         self._rows: list[tuple] = []  # (time, values...) of steps not yet formatted
         self.batch = batch
         self._last_flush = 0.0
@@ -116,7 +116,7 @@ class CSVWriter(Observer):
         os.ftruncate(fd, 0)
         self._fd = fd
         header = ["time"] + [self.column_name(u, v) for u, v in self.columns]
-        self._lines.append(",".join(_csv_cell(h) for h in header) + "\n")
+        self._lines.append((",".join(_csv_cell(h) for h in header) + "\n").encode())
         self._read = execution.reader(list(self.columns))
         self._formats = column_formats(execution.system, list(self.columns))
         self._row(execution)
@@ -136,7 +136,7 @@ class CSVWriter(Observer):
         from .rowtext import rows_text
 
         slots = self._slots if self._slots is not None else self._slot_list(execution)
-        text = rows_text(rows.rows, slots, "".join(rows.kinds[i] for i in slots), counted=rows.counted)
+        text = rows_text(rows.rows, slots, "".join(rows.kinds[i] for i in slots), counted=rows.counted, encoded=True)
         if text is None:  # no C here: as step_complete holds them
             self._rows.extend((round(t, 12), *values) for t, values in zip(rows.times, rows.values(slots)))
         else:
@@ -165,7 +165,7 @@ class CSVWriter(Observer):
         if len(rows[0]) > 1 and _PLAIN.issuperset(map(type, chain.from_iterable(rows))):
             text = repr(rows)  # "[(t, v, ...), (t, v, ...)]": Python's repr spells each number as Maestro does
             text = text[2:-2].replace("), (", "\n").replace(", ", ",").replace("True", "true").replace("False", "false")
-            self._lines.append(text + "\n")
+            self._lines.append((text + "\n").encode())
         else:
             formats = self._formats
             for time, *values in rows:
@@ -173,13 +173,13 @@ class CSVWriter(Observer):
                     line = ",".join(map(repr, values)).replace("True", "true").replace("False", "false")
                 else:  # None, numpy scalars, ...: cell by cell
                     line = ",".join([f(v) for f, v in zip(formats, values)])
-                self._lines.append(f"{time!r},{line}\n" if values else f"{time!r}\n")
+                self._lines.append((f"{time!r},{line}\n" if values else f"{time!r}\n").encode())
         rows.clear()
 
     def _flush(self) -> None:
         self._format()
         if self._fd is not None and self._lines:
-            os.write(self._fd, "".join(self._lines).encode())
+            os.write(self._fd, b"".join(self._lines))
             self._lines.clear()
         self._last_flush = wallclock.monotonic()
 

@@ -348,10 +348,11 @@ def _function():
 
 
 def rows_text(rows: np.ndarray, slots: list[int], kinds: str, times: list[float] | None = None,
-              counted: tuple[float, int, float] | None = None) -> str | None:
+              counted: tuple[float, int, float] | None = None, encoded: bool = False) -> str | bytes | None:
     """The rows (doubles, the columns at `slots` of kinds 'r'/'i'/'b') as CSV lines after each row's time:
     `times`, or `counted` = (origin, n, step): row r's time is origin + (n + r) * step, as an execution counts
-    its steps. None where the C function cannot be built here."""
+    its steps; ASCII bytes with `encoded` (what a file gets: no decoding and encoding again). None where the C
+    function cannot be built here."""
     function = _function()
     if function is None:
         return None
@@ -368,7 +369,8 @@ def rows_text(rows: np.ndarray, slots: list[int], kinds: str, times: list[float]
            cap, text, number, release, memos)
     if n == ctypes.c_size_t(-1).value:
         return None
-    return ctypes.string_at(out, n).decode("ascii")
+    text = ctypes.string_at(out, n)
+    return text if encoded else text.decode("ascii")
 
 
 _LOCAL = threading.local()
