@@ -89,3 +89,29 @@ def test_a_run_that_ends_well_removes_an_earlier_failed_runs_rows_and_a_folder_i
     with pytest.raises(CotwinError, match=r"out\.csv is a folder"):
         blocked.run(0.5)
     assert seen == []
+
+
+class PlainWave(Wave):
+    """Plain numbers only (floats of every kind, ints, Booleans: what FMU ports hold), so that every batch of
+    rows is spelt in C (cotwin.cosim.rowtext) rather than by repr."""
+
+    def step(self, t: float, h: float) -> None:
+        k = round(t / h)
+        self.values.update(r=[1e-300 * k, -k / 3, 1e300 * k, math.inf, 0.1 * k, -0.0, math.nan][k % 7],
+                           i=(k * 1000003) * (-1) ** k, b=bool(k % 2))
+
+
+@pytest.mark.parametrize("batch", [1, 7, 256])
+def test_plain_rows_spelt_in_c_are_the_bytes_of_row_by_row_formatting(tmp_path, batch):
+    unit, seen = PlainWave(), []
+
+    class Record(CSVWriter):
+        def step_complete(self, execution):
+            seen.append((round(execution.time, 12), *(unit.values[p.name] for p in PORTS)))
+            super().step_complete(execution)
+
+    execution = Execution(System.of([unit], [], log={unit.name: ["r", "i", "b"]}), Jacobi(), 0.001,
+                          observers=[Record(tmp_path / "out.csv", batch=batch)])
+    execution.run(1.0)
+    lines = (tmp_path / "out.csv").read_text().splitlines(keepends=True)
+    assert "".join(lines[2:]) == expected(seen)

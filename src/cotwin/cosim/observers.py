@@ -14,6 +14,8 @@ import time as wallclock
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from ..diagnostics import CotwinError
 from ..files import open_exclusive, write_bytes
 from .algorithm import UNSET
@@ -76,8 +78,10 @@ def format_value(value) -> str:
 class CSVWriter(Observer):
     """Writes Maestro's outputs.csv: header `time,{key}.inst.var,...`, a row at the start and after every step.
 
-    Rows are held as values and formatted `batch` at a time (one repr of them all: the per-row cost was a
-    sixth of a 1 kHz step, issue 23); they go to `<name>.part` in whole lines, written at most every
+    Rows are held as values and formatted `batch` at a time (in C where they are plain numbers, else one repr of
+    them all: the per-row cost was a sixth of a 1 kHz step, issue 23); the native loop's stretches are held as
+    its doubles and spelt when written (all at once: between two stretches' physics every call runs with its
+    code and data out of the caches). They go to `<name>.part` in whole lines, written at most every
     `flush_seconds` (and at the end, also of a failed run),
     so a crash loses at most that much and never leaves half a line. A run that ends well renames the
     file into place; a failed run leaves the previous result untouched and keeps its own rows in
@@ -132,19 +136,21 @@ class CSVWriter(Observer):
             self._format()
 
     def repeated(self, execution, rows) -> None:
-        """The stretch's rows, held as `step_complete` holds them (formatted in batches)."""
-        from .rowtext import rows_text
+        """The stretch's rows, held as the doubles they are (after the rows held before them) and spelt when the
+        file gets them (cotwin.cosim.rowtext: all at once, not between two stretches' physics)."""
+        from .rowtext import available
 
         slots = self._slots if self._slots is not None else self._slot_list(execution)
-        text = rows_text(rows.rows, slots, "".join(rows.kinds[i] for i in slots), counted=rows.counted, encoded=True)
-        if text is None:  # no C here: as step_complete holds them
+        if not available():  # no C here: as step_complete holds them
             self._rows.extend((round(t, 12), *values) for t, values in zip(rows.times, rows.values(slots)))
+            if len(self._rows) >= self.batch:
+                self._format()
         else:
-            self._format()  # the rows held before these come first
-            self._lines.append(text)
+            if self._rows:
+                self._lines.append(self._rows)
+                self._rows = []
+            self._lines.append(_Stretch(rows.rows.copy(), slots, "".join(rows.kinds[i] for i in slots), rows.counted))
         self.rows += len(rows)
-        if len(self._rows) >= self.batch:
-            self._format()
 
     def _slot_list(self, execution) -> list[int]:
         slots = execution.algorithm.slots
@@ -157,29 +163,17 @@ class CSVWriter(Observer):
         self._format()
 
     def _format(self) -> None:
-        """The rows held, as lines (bulk: one repr of them all when every value is a plain float, int or
-        bool, which is what FMU ports hold; else cell by cell, Maestro's spelling: format_value)."""
-        rows = self._rows
-        if not rows:
-            return
-        if len(rows[0]) > 1 and _PLAIN.issuperset(map(type, chain.from_iterable(rows))):
-            text = repr(rows)  # "[(t, v, ...), (t, v, ...)]": Python's repr spells each number as Maestro does
-            text = text[2:-2].replace("), (", "\n").replace(", ", ",").replace("True", "true").replace("False", "false")
-            self._lines.append((text + "\n").encode())
-        else:
-            formats = self._formats
-            for time, *values in rows:
-                if _PLAIN.issuperset(map(type, values)):
-                    line = ",".join(map(repr, values)).replace("True", "true").replace("False", "false")
-                else:  # None, numpy scalars, ...: cell by cell
-                    line = ",".join([f(v) for f, v in zip(formats, values)])
-                self._lines.append((f"{time!r},{line}\n" if values else f"{time!r}\n").encode())
-        rows.clear()
+        """The rows held, as lines."""
+        if self._rows:
+            self._lines.append(_rows_bytes(self._rows, self._formats))
+            self._rows.clear()
 
     def _flush(self) -> None:
         self._format()
         if self._fd is not None and self._lines:
-            os.write(self._fd, b"".join(self._lines))
+            os.write(self._fd, b"".join([piece if piece.__class__ is bytes else
+                                         _rows_bytes(piece, self._formats) if piece.__class__ is list else
+                                         piece.text(self._formats) for piece in self._lines]))
             self._lines.clear()
         self._last_flush = wallclock.monotonic()
 
@@ -200,6 +194,69 @@ class CSVWriter(Observer):
             self.partial_path.unlink()
 
 
+class _Stretch:
+    """A native stretch's rows for a CSVWriter: the doubles (a copy), the columns' slots and kinds, and how
+    its rows' times are counted (StepRows.counted), spelt by `text` when the file gets them."""
+
+    __slots__ = ("rows", "slots", "kinds", "counted")
+
+    def __init__(self, rows: np.ndarray, slots: list[int], kinds: str, counted: tuple[float, int, float]):
+        self.rows, self.slots, self.kinds, self.counted = rows, slots, kinds, counted
+
+    def text(self, formats: list[Callable[[object], str]]) -> bytes:
+        from .rowtext import rows_text
+
+        text = rows_text(self.rows, self.slots, self.kinds, counted=self.counted, encoded=True)
+        if text is not None:
+            return text
+        origin, n, h = self.counted  # the C text failed: as StepRows gives the rows
+        typed = {"b": lambda v: v != 0.0, "i": int, "r": float}
+        values = [[typed[kind](v) for v in self.rows[:, slot].tolist()] for slot, kind in zip(self.slots, self.kinds)]
+        rows = [(round(origin + (n + k) * h, 12), *row) for k, row in enumerate(zip(*values) if values else
+                                                                                [()] * len(self.rows))]
+        return _rows_bytes(rows, formats)
+
+
+def _rows_bytes(rows: list[tuple], formats: list[Callable[[object], str]]) -> bytes:
+    """Rows (time, values...) as lines: in C when every value is plain (_plain_rows_text), else by one repr of
+    them all when every value is a plain float, int or bool (what FMU ports hold), else cell by cell
+    (Maestro's spelling: format_value)."""
+    if not rows:
+        return b""
+    text = _plain_rows_text(rows) if len(rows[0]) > 1 else None
+    if text is not None:
+        return text
+    if len(rows[0]) > 1 and _PLAIN.issuperset(map(type, chain.from_iterable(rows))):
+        text = repr(rows)  # "[(t, v, ...), (t, v, ...)]": Python's repr spells each number as Maestro does
+        text = text[2:-2].replace("), (", "\n").replace(", ", ",").replace("True", "true").replace("False", "false")
+        return (text + "\n").encode()
+    lines = []
+    for time, *values in rows:
+        if _PLAIN.issuperset(map(type, values)):
+            line = ",".join(map(repr, values)).replace("True", "true").replace("False", "false")
+        else:  # None, numpy scalars, ...: cell by cell
+            line = ",".join([f(v) for f, v in zip(formats, values)])
+        lines.append(f"{time!r},{line}\n" if values else f"{time!r}\n")
+    return "".join(lines).encode()
+
+
+def _plain_rows_text(rows: list[tuple]) -> bytes | None:
+    """Rows (time, values...) as lines made in C (cotwin.cosim.rowtext: repr's text, byte for byte) when every
+    value is a bool, an int a double carries exactly or a float, each column of one class in all of them (what
+    FMU ports hold); else None (then repr spells them): a row's repr cost 20 us, a tenth of a native stretch."""
+    from .rowtext import rows_text
+
+    classes = tuple(map(type, rows[0]))
+    kinds = "".join(_KIND_OF.get(cls, "?") for cls in classes[1:])
+    if classes[0] is not float or "?" in kinds or any(tuple(map(type, row)) != classes for row in rows[1:]):
+        return None
+    ints = [k + 1 for k, kind in enumerate(kinds) if kind == "i"]
+    if any(abs(row[k]) > 2 ** 53 for row in rows for k in ints):
+        return None
+    values = np.array(rows, dtype=np.float64)
+    return rows_text(values, list(range(1, len(classes))), kinds, times=values[:, 0], encoded=True)
+
+
 def _real(value) -> str:
     return repr(value) if value.__class__ is float else format_value(value)
 
@@ -213,6 +270,7 @@ def _integer(value) -> str:
 
 
 _PLAIN = frozenset((float, int, bool))  # what FMU ports hold; repr spells them as Maestro does, but Booleans
+_KIND_OF = {bool: "b", int: "i", float: "r"}  # a value's kind in cotwin.cosim.rowtext
 _FORMAT = {"Real": _real, "Boolean": _boolean, "Integer": _integer}
 
 

@@ -347,6 +347,11 @@ def _function():
     return _FN or None
 
 
+def available() -> bool:
+    """Whether rows_text can make text here (its C function built)."""
+    return _function() is not None
+
+
 def rows_text(rows: np.ndarray, slots: list[int], kinds: str, times: list[float] | None = None,
               counted: tuple[float, int, float] | None = None, encoded: bool = False) -> str | bytes | None:
     """The rows (doubles, the columns at `slots` of kinds 'r'/'i'/'b') as CSV lines after each row's time:
