@@ -144,6 +144,8 @@ class NativeLoop:
         self._data, self._observers = algorithm.data, list(execution.observers)
         self._still = [i for i in range(self.width) if i not in written]  # the slots no C writes
         self._kinds: dict[tuple, list[str]] = {}  # the rows' kinds by the classes of the values held still
+        self._bools = [i for i in self.written if self.kinds[i] == "b"]  # slots C writes as Booleans
+        self._ints = [i for i in self.written if self.kinds[i] == "i"]  # ... as Integers
         self._asking, self._telling = self._listeners(self._observers)
         self._pointers: tuple[list, object] = ([], None)  # the last segment's pointers and their C array
         self._flags = (ctypes.c_int * 2)()  # failed, paused
@@ -221,8 +223,9 @@ class NativeLoop:
         """How many of the next n steps every unit can make natively now (and every observer lets pass)."""
         execution = self.execution
         data = execution.algorithm.data
-        if any(v is UNSET for v in data):
-            return 0
+        for value in data:
+            if value is UNSET:
+                return 0
         for i in self._still:
             value = data[i]
             if value.__class__ not in _PLAIN or (value.__class__ is int and abs(value) > 2 ** 53):
@@ -317,7 +320,7 @@ class NativeLoop:
         """The step a unit paused, made in Python from that unit on (as Gauss-Seidel makes it), counted."""
         execution, algorithm = self.execution, self.execution.algorithm
         data = algorithm.data
-        data[:] = _typed(half, kinds, held)
+        data[:] = self._typed(half, held)
         origin, done = execution._origin
         t = origin + (execution.steps - done) * execution.step_size
         for k in range(pause, len(algorithm.units)):
@@ -338,11 +341,11 @@ class NativeLoop:
         for its last step (Jacobi: from the slots before it; Gauss-Seidel: from its own)."""
         execution, algorithm = self.execution, self.execution.algorithm
         data = algorithm.data
-        data[:] = _typed(rows[-1], kinds, held)
+        data[:] = self._typed(rows[-1], held)
         execution.steps += len(rows)
         origin, done = execution._origin
         execution.time = origin + (execution.steps - done) * execution.step_size
-        typed = data if self.seidel else _typed(previous, kinds, held)
+        typed = data if self.seidel else self._typed(previous, held)
         for write, part in zip(algorithm.writes, self.parts):
             if write is not None and not part.sets_inputs:
                 setter, pick = write
@@ -358,6 +361,18 @@ class NativeLoop:
                 o.repeated(execution, batch)  # the others have nothing to do after a step
         for o in observers:
             o.step_complete(execution)
+
+    def _typed(self, row: np.ndarray, held: dict[int, object]) -> list:
+        """A row as the values the ports hold (as _typed makes it: C's slots of their ports' types, the slots
+        held still put back as they were)."""
+        out = row.tolist()
+        for i in self._bools:
+            out[i] = out[i] != 0.0
+        for i in self._ints:
+            out[i] = int(out[i])
+        for i, value in held.items():
+            out[i] = value
+        return out
 
     def _kinds_of(self, held: dict[int, object]) -> list[str]:
         """The rows' kinds: the ports' where C writes, the held values' own elsewhere (made once per their classes)."""

@@ -272,6 +272,7 @@ class QuietStep:
         self.lines = self._lines(event_slots, monitored_slots)
         self._values: list[float] = []
         self._move = None
+        self._addressed: tuple | None = None  # (model, data, controls, move arrays, watch) `pointers` has addresses of
         self.refusal = ""  # why `quiet` last said 0
 
     def _lines(self, event_slots: dict[str, int], monitored_slots: dict[str, int]) -> list[str]:
@@ -353,20 +354,23 @@ class QuietStep:
         from . import native
 
         sim, mapping = self.sim, self.mapping
-        _, mj_step = native.advance_function()
         move = self.endpoint.native_move()
         d = sim.data
         watch = sim.contact_watch
-        self.pointers[:MOVE] = [mj_step, sim.model._address, d._address, sim.controls.ctypes.data,
-                                d.qpos.ctypes.data, d.qvel.ctypes.data, d.sensordata.ctypes.data,
-                                watch[0].ctypes.data if watch is not None else 0]
+        joints, arrays = (move[2], move[1]) if move else (0, None)
+        addressed = self._addressed  # the objects whose addresses `pointers` holds: looked up again when one changed
+        if addressed is None or addressed[0] is not sim.model or addressed[1] is not d or \
+                addressed[2] is not sim.controls or addressed[3] is not arrays or addressed[4] is not watch:
+            _, mj_step = native.advance_function()
+            self.pointers[:MOVE] = [mj_step, sim.model._address, d._address, sim.controls.ctypes.data,
+                                    d.qpos.ctypes.data, d.qvel.ctypes.data, d.sensordata.ctypes.data,
+                                    watch[0].ctypes.data if watch is not None else 0]
+            if move:
+                self.pointers[MOVE:] = [ctypes.cast(a, ctypes.c_void_p).value for a in arrays]
+            else:
+                self.pointers[MOVE:] = [0] * (POINTERS - MOVE)
+            self._addressed = (sim.model, d, sim.controls, arrays, watch)
         self._watch = watch  # kept: its mask stays alive while the C loop reads it
-        joints = 0
-        if move:
-            segment, arrays, joints = move
-            self.pointers[MOVE:] = [ctypes.cast(a, ctypes.c_void_p).value for a in arrays]
-        else:
-            self.pointers[MOVE:] = [0] * (POINTERS - MOVE)
         self._move = move or None  # kept: its arrays stay alive while the C loop reads them
         self.doubles[:SCALARS] = [float(d.time), float(sim.timestep), float(sim.model.opt.timestep), float(self.steps),
                                   float(self.period), 1.0 if move else 0.0, 0.0, float(joints), float(d.qpos.size),
@@ -379,12 +383,14 @@ class QuietStep:
     def end(self, made: int, dd) -> None:
         """The mapping and its platform after `made` steps made natively (dd: the doubles they left)."""
         sim = self.sim
+        dd = dd.tolist()  # Python floats: read many times, each numpy read makes a scalar
         self.endpoint.stepped_natively(int(dd[DONE]), self._move[0] if self._move and dd[MOVE_HELD] != 0.0 else None)
-        if float(dd[TIME]) != sim.data.time:
-            raise CotwinError(f"the native loop kept time {float(dd[TIME])!r}, MuJoCo {sim.data.time!r}")
+        if dd[TIME] != sim.data.time:
+            raise CotwinError(f"the native loop kept time {dd[TIME]!r}, MuJoCo {sim.data.time!r}")
         if made:
-            held = {name: dd[self.held_at + i] != 0.0 for i, name in enumerate(self.names)}
-            came = [self.names[int(dd[self.came_at + j])] for j in range(int(dd[CAME]))]
+            held_at, came_at = self.held_at, self.came_at
+            held = {name: dd[held_at + i] != 0.0 for i, name in enumerate(self.names)}
+            came = [self.names[int(dd[came_at + j])] for j in range(int(dd[CAME]))]
             self.mapping.reported_elsewhere(made, held, came)
 
     def failed(self, code: int, t: float) -> None:

@@ -110,15 +110,17 @@ class MappingUnit(PythonUnit):
         if quiet.why is not None:
             return quiet.why
         data, jacobi = execution.algorithm.data, execution.algorithm.name == "jacobi"
+        events = [(p.name, out[p.name]) for p in self.event_ports]
+        monitored = [(name, out[name]) for name in self.monitored]
 
         def end(first: int, made: int, rows, doubles) -> None:
             quiet.end(made, doubles)
             if made and len(rows):
-                last = rows[-1]
-                for port in self.event_ports:
-                    self.values[port.name] = bool(last[out[port.name]] != 0.0)
-                for name in self.monitored:
-                    self.values[name] = float(last[out[name]])
+                last, values = rows[-1].tolist(), self.values  # Python floats, as float() of each made them
+                for port, slot in events:
+                    values[port] = last[slot] != 0.0
+                for name, slot in monitored:
+                    values[name] = last[slot]
             if made:
                 origin, done = execution._origin
                 self.time = origin + (first + made - 1 - done) * execution.step_size + execution.step_size
