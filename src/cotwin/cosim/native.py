@@ -250,9 +250,6 @@ class NativeLoop:
         ranked = sorted(self.refusals.items(), key=lambda item: -item[1])
         return "; ".join(f"{why} ({n} steps)" for why, n in ranked[:3]) or "no step was quiet"
 
-    def _held_still(self) -> list[int]:
-        return list(self._still)
-
     def run(self, n: int) -> int:
         """Up to n steps natively (fewer: see the module doc); the steps made, observers told. 0 when the
         system is not quiet now (the caller makes a step in Python). A step a unit paused is finished in
@@ -291,7 +288,7 @@ class NativeLoop:
         half = rows[k].copy() if paused else None
         rows = rows[:k]
         if k:
-            self._commit(rows, before if k == 1 else rows[k - 2], kinds, held)
+            self._commit(rows, before if k == 1 else rows[k - 2], held)
         errors = []
         base = 0
         for u, part in enumerate(self.parts):
@@ -309,14 +306,14 @@ class NativeLoop:
             self.parts[failing].failed(code, origin + (first + k - done) * execution.step_size)
             raise RuntimeError(f"unit {algorithm.units[failing].name} failed in the native loop (code {code})")
         if paused:
-            self._finish(half, stopped, kinds, held)
+            self._finish(half, stopped, held)
             self._tell(rows, kinds)
             return k + 1
         if k:
             self._tell(rows[:-1], kinds)
         return k
 
-    def _finish(self, half: np.ndarray, pause: int, kinds: list[str], held: dict[int, object]) -> None:
+    def _finish(self, half: np.ndarray, pause: int, held: dict[int, object]) -> None:
         """The step a unit paused, made in Python from that unit on (as Gauss-Seidel makes it), counted."""
         execution, algorithm = self.execution, self.execution.algorithm
         data = algorithm.data
@@ -336,7 +333,7 @@ class NativeLoop:
         execution.steps += 1
         execution.time = origin + (execution.steps - done) * execution.step_size
 
-    def _commit(self, rows: np.ndarray, previous: np.ndarray, kinds: list[str], held: dict[int, object]) -> None:
+    def _commit(self, rows: np.ndarray, previous: np.ndarray, held: dict[int, object]) -> None:
         """The execution's slots, steps and time after the segment; the Python units' inputs as they were set
         for its last step (Jacobi: from the slots before it; Gauss-Seidel: from its own)."""
         execution, algorithm = self.execution, self.execution.algorithm

@@ -99,7 +99,7 @@ class CSVWriter(Observer):
         self.partial_path = self.path.with_name(f"{self.path.stem}.partial{self.path.suffix}")
         self.rows = 0
         self._fd: int | None = None
-        self._lines: list[bytes] = []  # whole lines, as the file gets them
+        self._lines: list = []  # in order: lines as the file gets them (bytes), rows of values, native _Stretch-es
         self._rows: list[tuple] = []  # (time, values...) of steps not yet formatted
         self.batch = batch
         self._last_flush = 0.0
