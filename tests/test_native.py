@@ -372,3 +372,31 @@ def test_what_an_fmu_logs_inside_a_stretch_carries_the_time_of_its_step(tmp_path
         warned.append([r.getMessage() for r in caplog.records if "at t =" in r.getMessage() and "{dmodel}" in r.getMessage()])
     assert ran.result.native_steps > 0.6 * ran.result.steps
     assert warned[0] and warned[0] == warned[1]
+
+
+def test_an_interrupt_during_a_stretch_is_handled_once_its_steps_are_told(built, tmp_path):
+    """A SIGINT that comes while a stretch's steps are committed and told (here sent by an observer told of its
+    repeats) is handled once they are: the stretch's last step reaches step_complete before the run stops."""
+    import os
+    import signal
+
+    from cotwin.diagnostics import CotwinError
+
+    class Interrupts(Observer):
+        def __init__(self):
+            self.sent, self.told = None, False
+
+        def step_complete(self, execution) -> None:
+            self.told = self.told or (self.sent is not None and execution.steps == self.sent)
+
+        def repeated(self, execution, rows) -> None:
+            if self.sent is None:
+                self.sent = execution.steps  # the stretch's last step, told to step_complete next
+                os.kill(os.getpid(), signal.SIGINT)
+
+    twins, built_dir = built
+    interrupts = Interrupts()
+    with pytest.raises((CotwinError, KeyboardInterrupt), match="interrupted"):
+        run_twin(twins["cotwin.toml"], artefacts(built_dir, tmp_path / "run"), step=0.01, plot=False,
+                 observers=[interrupts])
+    assert interrupts.sent is not None and interrupts.told
