@@ -214,10 +214,18 @@ class NativeLoop:
         return "\n".join(lines) + "\n"
 
     def current(self) -> bool:
-        """Whether this loop still fits its execution (the algorithm's slots and the observers it was made for)."""
+        """Whether this loop still fits its execution: the algorithm's slots it was made for, and observers that
+        hear repeats (another set of them, e.g. the next what-if's on a sweep's fork, is taken on here)."""
         execution = self.execution
-        return self._data is execution.algorithm.data and (self._observers == execution.observers or
-                                                           all(hears_repeats(o) for o in execution.observers))
+        if self._data is not execution.algorithm.data:
+            return False
+        observers = execution.observers
+        if self._observers != observers:
+            if not all(hears_repeats(o) for o in observers):
+                return False
+            self._observers = list(observers)
+            self._asking, self._telling = self._listeners(self._observers)
+        return True
 
     def quiet(self, n: int) -> int:
         """How many of the next n steps every unit can make natively now (and every observer lets pass)."""

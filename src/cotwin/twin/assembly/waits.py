@@ -82,9 +82,16 @@ class WaitWatch(Observer):
 
     def quiet_for(self, execution) -> int | None:
         """A machine not yet judged is judged `patience` idle steps after it entered its state: that step
-        must be made as the observer sees it (it asks the mapping, whose state is the step's)."""
-        waiting = [self.patience - idle for _, _, idle in self._since if idle < self.patience]
+        must be made as the observer sees it (it asks the mapping, whose state is the step's). A state with
+        nothing to judge (no wait, or one a command ends) bounds nothing; one not seen yet does."""
+        waiting = [self.patience - idle for m, (leaf, _, idle) in enumerate(self._since)
+                   if idle < self.patience and (leaf is None or self._judged(m, leaf))]
         return min(waiting) if waiting and self.mapping is not None else None
+
+    def _judged(self, m: int, leaf) -> bool:
+        """Whether machine m waiting in `leaf` would be judged (see _judge: a wait no command ends)."""
+        wait = self.waits.get((m, leaf)) if isinstance(leaf, int) else None
+        return wait is not None and not wait.events & self.commands
 
     def repeated(self, execution, rows) -> None:
         """Steps in which no state changed and nothing was called: each machine idles one more step per row
@@ -107,9 +114,9 @@ class WaitWatch(Observer):
         self._since, self.found = list(since), list(found)
 
     def _judge(self, m: int, leaf, entered: float, now: float) -> None:
-        wait = self.waits.get((m, leaf)) if isinstance(leaf, int) else None
-        if wait is None or wait.events & self.commands:
+        if not self._judged(m, leaf):
             return
+        wait = self.waits[(m, leaf)]
         reasons, others = {}, []
         for event in sorted(wait.events):
             if event not in self.mapping.events:
