@@ -193,8 +193,9 @@ def test_a_what_if_at_a_coarser_physics_step_runs_its_simulator_at_it(built, tmp
     assert coarse.trajectory["q0"] != fine.trajectory["q0"]  # other physics, other digits
 
 
-@pytest.mark.parametrize("physics, said", [(0.003, "is not a whole number of them"), (0.0, "above 0"),
-                                           (float("nan"), "above 0"), (0.02, "at most 0.01")])
+@pytest.mark.parametrize("physics, said", [(0.003, "is not a whole number of them"), (0.0, "from 0.0001 to 0.01"),
+                                           (float("nan"), "from 0.0001"), (0.02, "to 0.01"), (1e-320, "from 0.0001"),
+                                           (1e-9, "from 0.0001"), (True, "from 0.0001"), ("0.002", "from 0.0001")])
 def test_a_physics_step_a_what_if_cannot_keep_is_refused_before_anything_runs(built, tmp_path, physics, said):
     from cotwin.diagnostics import CotwinError
     from cotwin.twin.analysis.sweep import grid, run_sweep
@@ -239,3 +240,27 @@ def test_the_first_step_a_condition_turns_true_is_found_from_any_guess():
         turns = rng.randint(1, limit + 3)
         guess = turns + rng.uniform(-40, 40)
         assert _first(lambda k: k >= turns, guess, limit) == (turns if turns <= limit else None)
+
+
+def test_a_physics_step_computed_with_numpy_is_a_number_like_any_other(built, tmp_path):
+    from cotwin.twin.services.whatif import physics_timing
+
+    assert physics_timing(0.1, np.float64(0.002)) == 0.002 and physics_timing(0.1, np.float32(0.002)) is not None
+
+
+@pytest.mark.parametrize("step", [0.1, 0.01])
+@pytest.mark.parametrize("settle", [0.0, 1e-9, 0.05])
+def test_an_empty_plan_settles_at_the_step_the_step_by_step_loop_settles_at(built, tmp_path, step, settle):
+    """Nothing to apply, the arm at rest from the start: the what-if is over once it has rested `settle`, counted
+    from the first step; the native loop stopped a step late where `settle` is within a step (the bound on
+    the stretch knew of no rest before the stretch began)."""
+    from cotwin.twin.services.whatif import Forks, predict
+
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    native = predict(twin, [], None, horizon=1.0, step=step, settle=settle, artefacts=tmp_path)
+    stepped = predict(twin, [], None, horizon=1.0, step=step, settle=settle, artefacts=tmp_path, fused=False)
+    with Forks(twin, None, step=step, artefacts=tmp_path) as forks:
+        forked = forks.predict([], horizon=1.0, settle=settle)
+    assert without_wall_time(native) == without_wall_time(stepped) == without_wall_time(forked)
+    assert native.end < 1.0

@@ -74,7 +74,7 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
 
     check_finite(horizon=horizon)
     system = load(project)
-    physics_timing(system.spec.step, physics_step)
+    physics_timing(system.spec.step, physics_step, "--physics-step")
     show_warnings(system.spec.ignored_sections("cotwin whatif"))  # [convergence], [pt]...: a live twin's
     if out:
         check_outputs([out], [*system.spec.inputs, plan, state])
@@ -126,6 +126,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
 
     from ..twin.assembly.run import load
     from ..twin.analysis.sweep import ERROR, SweepInterrupted, failures, grid, run_sweep
+    from ..twin.services.whatif import physics_timing
     from .progress import ProgressReport
 
     check_finite(horizon=horizon)
@@ -135,6 +136,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
             raise click.BadParameter(f"argument {name!r} is given twice", param_hint="--arg")
         ranges[name] = values
     system = load(project)
+    physics_timing(system.spec.step, physics_step, "--physics-step")
     show_warnings(system.spec.ignored_sections("cotwin sweep"))  # [convergence], [pt]...: a live twin's
     inputs = [*system.spec.inputs, state]
     check_outputs([out], inputs)

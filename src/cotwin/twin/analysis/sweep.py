@@ -187,7 +187,7 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         system = load(project)
         from ..services.whatif import physics_timing
 
-        physics_timing(system.spec.step if step is None else step, physics_step)  # once, not per what-if
+        physics_step = physics_timing(system.spec.step if step is None else step, physics_step)  # once, not per what-if
         dmodel_fmu(system, artefacts)  # built once, before the workers share it
         artefacts = str(artefacts)
         if ray is not None:
@@ -209,25 +209,42 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         size = max(1, min(len(plans) // (workers * 8), 64))  # small chunks: progress and balance
         chunks = [plans[k:k + size] for k in range(0, len(plans), size)]
         answers: dict[int, list[dict]] = {}
+        pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
+                                   initargs=(project, artefacts))
         try:
-            with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
-                                     initargs=(project, artefacts)) as pool:
-                futures = {pool.submit(_run_chunk, chunk, state, horizon, step, physics_step): k for k, chunk in enumerate(chunks)}
-                done = 0
-                for future in as_completed(futures):
-                    k = futures[future]
-                    try:
-                        answers[k] = future.result()
-                    except BrokenProcessPool:  # a worker died (a signal, out of memory): its what-ifs say so
-                        answers[k] = [{**point(plan), ERROR: DIED} for plan in chunks[k]]
-                    done += len(answers[k])
-                    report(done, len(plans))
+            futures = {pool.submit(_run_chunk, chunk, state, horizon, step, physics_step): k
+                       for k, chunk in enumerate(chunks)}
+            done = 0
+            for future in as_completed(futures):
+                k = futures[future]
+                try:
+                    answers[k] = future.result()
+                except BrokenProcessPool:  # a worker died (a signal, out of memory): its what-ifs say so
+                    answers[k] = [{**point(plan), ERROR: DIED} for plan in chunks[k]]
+                done += len(answers[k])
+                report(done, len(plans))
         except KeyboardInterrupt:  # the answers so far are kept (in the plans' order), not lost
+            _stop(pool)
             raise SweepInterrupted([row for k in sorted(answers) for row in answers[k]], len(plans)) from None
+        except BaseException:
+            _stop(pool)
+            raise
+        pool.shutdown()
         return [row for k in range(len(chunks)) for row in answers[k]]
     finally:
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _stop(pool: ProcessPoolExecutor) -> None:
+    """End a pool at once: the chunks not started dropped, the workers stopped in the middle of theirs (an
+    interrupted sweep waited for every chunk queued, then threw their answers away)."""
+    workers = list((pool._processes or {}).values())  # CPython's; shutdown() forgets them
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in workers:
+        process.terminate()
+    for process in workers:
+        process.join(timeout=5)
 
 
 def _reachable(address: str, timeout: float = 5.0) -> None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import threading
 import time
 import time as wallclock
@@ -65,22 +66,26 @@ class Prediction:
 
 
 MAX_PHYSICS_STEP = 0.01  # s: a what-if's physics step at most (MuJoCo's contacts and servos need fine steps)
+MIN_PHYSICS_STEP = 1e-4  # s: at least (a finer one is a typo more likely than a need: 1e-9 ran for hours)
 
 
-def physics_timing(step: float, physics_step: float | None) -> None:
-    """CotwinError unless `physics_step` (s) is a positive number of at most MAX_PHYSICS_STEP of which the
-    communication step is a whole number. cotwin's 1 ms is the default; benchmarks/calibration.py measures
-    coarser steps against the real UR5e: 2 ms keeps the calibrated 0.002 rad, 4 ms does not."""
+def physics_timing(step: float, physics_step: float | None, what: str = "physics step") -> float | None:
+    """`physics_step` (s) as a float, or CotwinError naming `what` unless it is a number from MIN_PHYSICS_STEP
+    to MAX_PHYSICS_STEP of which the communication step is a whole number. cotwin's 1 ms is the default;
+    benchmarks/calibration.py measures coarser steps against the real UR5e: 2 ms keeps the calibrated
+    0.002 rad, 4 ms does not."""
     if physics_step is None:
-        return
-    if physics_step.__class__ not in (int, float) or not math.isfinite(physics_step) or \
-            not 0 < physics_step <= MAX_PHYSICS_STEP:
-        raise CotwinError(f"physics step {physics_step!r} s: give a number of seconds above 0 and at most "
+        return None
+    if isinstance(physics_step, bool) or not isinstance(physics_step, numbers.Real) or \
+            not MIN_PHYSICS_STEP <= float(physics_step) <= MAX_PHYSICS_STEP:  # NaN fails both
+        raise CotwinError(f"{what} {physics_step!r:.40} s: give a number of seconds from {MIN_PHYSICS_STEP:g} to "
                           f"{MAX_PHYSICS_STEP:g} (cotwin's is 0.001)")
+    physics_step = float(physics_step)
     ticks = step / physics_step
     if round(ticks) < 1 or abs(ticks - round(ticks)) > 1e-6 * ticks:
-        raise CotwinError(f"physics step {physics_step:g} s: the communication step {step:g} s is not a whole "
-                          f"number of them")
+        raise CotwinError(f"{what} {physics_step:g} s: the communication step {step:g} s is not a whole number of "
+                          f"them")
+    return physics_step
 
 
 DEPTH = 0.001  # m: a contact of the robot recorded when it is this deep (MuJoCo's dist <= -DEPTH)
@@ -150,7 +155,7 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
     started = wallclock.perf_counter()
     spec = system.spec
     step = spec.step if step is None else step
-    physics_timing(step, physics_step)
+    physics_step = physics_timing(step, physics_step)
     algorithm = algorithm or spec.algorithm
     start = 0.0
     if state is not None:
@@ -189,8 +194,7 @@ class Forks:
                  physics_step: float | None = None):
         self.system, self.state, self.cc = system, state, cc
         self.step = system.spec.step if step is None else step
-        self.physics_step = physics_step
-        physics_timing(self.step, physics_step)
+        self.physics_step = physics_timing(self.step, physics_step)
         self.algorithm = algorithm or system.spec.algorithm
         self.artefacts = artefacts
         self.start = 0.0
@@ -390,7 +394,11 @@ class Watch(Stop):
         """Steps until the first at which the what-if could be over, its discrete values as they are now: the
         first at which one of `_over`'s conditions on time (each spelt as `_over` spells it) turns true."""
         t, h = execution.time, execution.step_size
+        origin, done = execution._origin
+        at = lambda k: origin + (execution.steps + k - done) * h  # noqa: E731 (the time after k more steps, as counted)
         since, settle = self.at_rest_since, self.settle
+        if since is None and self.resting:
+            since = at(1)  # resting from the start: the rest counts from the first step (as `repeated` takes it)
         turns = [(lambda x: x >= self.end - 1e-9, self.end), (lambda x: x >= self.last_command, self.last_command)]
         if since is not None:
             turns.append((lambda x: x - since >= settle, since + settle))
@@ -398,8 +406,6 @@ class Watch(Stop):
         if outcomes and outcomes[-1].delivered is not None:
             delivered = outcomes[-1].delivered
             turns.append((lambda x: x - delivered >= settle + 3 * h, delivered + settle + 3 * h))
-        origin, done = execution._origin
-        at = lambda k: origin + (execution.steps + k - done) * h  # noqa: E731 (the time after k more steps, as counted)
         bounds = [_first(lambda k: turned(at(k)), (about - t) / h) for turned, about in turns if not turned(t)]
         return min((b for b in bounds if b is not None), default=None)
 
