@@ -59,8 +59,8 @@ def plan_file(path: str, program):
 @click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=60.0, show_default=True,
               help="simulate at most this long (s)")
 @click.option("--physics-step", "physics_step", type=float, default=None,
-              help="the fork's physics step in s (default cotwin's 0.001; 0.002 kept the calibrated UR5e's "
-                   "fidelity, 0.004 did not: docs/benchmarks.md)")
+              help="the fork's physics step in s (0.0001 to 0.01; default cotwin's 0.001; measure a coarser one "
+                   "against your robot's log first: docs/benchmarks.md)")
 @click.option("-o", "--output", "out", callback=output_file, help="write the prediction as JSON here")
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 def whatif(project: str, plan: str, state: str | None, horizon: float, physics_step: float | None, out: str | None,
@@ -112,8 +112,8 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
 @click.option("--horizon", type=click.FloatRange(min=0, min_open=True, max=MAX_HORIZON), default=30.0, show_default=True,
               help="simulate each what-if at most this long (s)")
 @click.option("--physics-step", "physics_step", type=float, default=None,
-              help="each what-if's physics step in s (default cotwin's 0.001; 0.002 kept the calibrated UR5e's "
-                   "fidelity, 0.004 did not: docs/benchmarks.md)")
+              help="each what-if's physics step in s (0.0001 to 0.01; default cotwin's 0.001; measure a coarser one "
+                   "against your robot's log first: docs/benchmarks.md)")
 @click.option("--workers", type=click.IntRange(min=1, max=1024), help="local processes (default: one per CPU)")
 @click.option("--ray", "ray", help="run on Ray: 'auto' (the local cluster) or a cluster address")
 @click.option("-o", "--output", "out", callback=output_file, required=True, help="the CSV of answers to write")

@@ -72,8 +72,8 @@ MIN_PHYSICS_STEP = 1e-4  # s: at least (a finer one is a typo more likely than a
 def physics_timing(step: float, physics_step: float | None, what: str = "physics step") -> float | None:
     """`physics_step` (s) as a float, or CotwinError naming `what` unless it is a number from MIN_PHYSICS_STEP
     to MAX_PHYSICS_STEP of which the communication step is a whole number. cotwin's 1 ms is the default;
-    benchmarks/calibration.py measures coarser steps against the real UR5e: 2 ms keeps the calibrated
-    0.002 rad, 4 ms does not."""
+    a coarser one is for a twin whose calibrated fidelity was measured to hold at it (benchmarks/calibration.py
+    replays a recorded run at several)."""
     if physics_step is None:
         return None
     if isinstance(physics_step, bool) or not isinstance(physics_step, numbers.Real) or \
