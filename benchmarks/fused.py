@@ -136,8 +136,8 @@ def profile(twin, build_dir: Path, folder: Path, step: float, physics: float) ->
     timers = {}
     saved = (native._compiled, rowtext.rows_text, fused.FusedLoop.run, native.NativeLoop._tell)
 
-    def compiled(source):
-        timers["c"] = Timed(saved[0](source))
+    def compiled(source, include_dirs=()):
+        timers["c"] = Timed(saved[0](source, include_dirs))
         return timers["c"]
 
     timers["text"] = Timed(saved[1])
