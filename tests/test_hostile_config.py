@@ -435,3 +435,17 @@ def test_an_integer_too_large_for_any_float_is_a_located_error(ur5e, tmp_path):
     with pytest.raises(CotwinError, match=r"w.toml:2:19: error: \[ik.joint_offsets\] elbow_joint: must be a list of 3 finite "
                                           r"numbers, got \[0, 0, 9+\.\.\. \(408 characters\)"):
         Calibration.read(path)
+
+
+@pytest.mark.parametrize("name", ["9" * 400 + ".pm"])
+def test_a_model_path_the_system_cannot_look_up_is_a_located_error(ur5e, name):
+    """A path longer than the system takes (found by the input fuzzer) raised OSError 'File name too long'
+    out of the project loader; it is an error at its key, the path cut short."""
+    text = (ur5e / "twin.toml").read_text()
+    assert 'mapping = "mapping.pm"' in text
+    (ur5e / "twin.toml").write_text(text.replace('mapping = "mapping.pm"', f'mapping = "{name}"'.replace("\0", "\\u0000")))
+    with pytest.raises(CotwinError) as err:
+        load_project(ur5e / "twin.toml")
+    said = [f for f in err.value.findings if "[models] mapping" in f.message]
+    assert said and "cannot be looked up" in said[0].message and len(said[0].message) < 400
+    assert said[0].location.line >= 1

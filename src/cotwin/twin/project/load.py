@@ -237,6 +237,20 @@ def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProj
     return _load(TomlFile(path, "project file"), None if pt_log is None else Path(pt_log))
 
 
+def file_problem(path: Path) -> str | None:
+    """Why `path` is not a file to read (no such file, a folder, a name the system refuses: too long, ...), or
+    None; the path cut to 200 characters in the message."""
+    shown = str(path) if len(str(path)) <= 200 else str(path)[:200] + "..."
+    try:
+        if path.is_file():
+            return None
+        return f"{shown} is a folder, not a file" if path.is_dir() else f"no file {shown}"
+    except OSError as err:
+        return f"{shown} cannot be looked up: {err.strerror or err}"
+    except ValueError as err:  # a NUL in the name
+        return f"{shown} cannot be looked up: {err}"
+
+
 def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     """The project `file.data` describes, resolved against the files it names."""
     if "models" not in file.data and isinstance(file.data.get("twin"), list):  # a fleet file given for a project
@@ -251,8 +265,8 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
         if value is None:
             return None
         target = base / value
-        if not target.is_file():
-            what = f"{target} is a folder, not a file" if target.is_dir() else f"no file {target}"
+        what = file_problem(target)
+        if what is not None:
             problems.append(Finding(file.location((table, key)), Severity.ERROR, f"[{table}] {key}: {what}"))
         return target
 
@@ -326,7 +340,7 @@ def _model_errors(paths: list[Path | None], against_tree: Callable[[Any], list[F
     from ...pmodel.tree import build_tree
     from ...robosim.check import load_checked
 
-    if not all(p is not None and p.is_file() for p in paths):
+    if not all(p is not None and file_problem(p) is None for p in paths):
         return []
     try:
         project = load_checked(paths)
@@ -363,9 +377,10 @@ def _robots(file: TomlFile, items: tuple, problems: list[Finding]) -> list[Robot
         for key in ("pmodel", "mapping", "calibration"):
             value = getattr(r, key)
             paths[key] = None if value is None else file.path.parent / value
-            if value is not None and not paths[key].is_file():
+            what = None if value is None else file_problem(paths[key])
+            if what is not None:
                 problems.append(Finding(file.location(("robots", i, key)), Severity.ERROR,
-                                        f"[[robots]] {key} of {r.name}: no file {paths[key]}"))
+                                        f"[[robots]] {key} of {r.name}: {what}"))
         out.append(RobotSpec(r.name, paths["pmodel"], paths["mapping"], paths["calibration"],
                              tuple(float(v) for v in r.xyz), tuple(float(v) for v in r.rpy), i))
     return out
@@ -472,7 +487,7 @@ def _world(file: TomlFile, s, existing, problems: list[Finding]):
     try:
         if named is not None:
             path = existing("platform", "world", named)
-            if path is None or not path.is_file():
+            if path is None or file_problem(path) is not None:
                 return None, None
             world_file = TomlFile(path, "world file")
             return read_world(world_file), world_file
