@@ -355,6 +355,17 @@ def read_scenario(path: str | Path, program: Program) -> list[Command]:
     return read_toml(path, program) if str(path).endswith(".toml") else read_plan(path, program)
 
 
+def steps_before_due(due: float, origin: float, first: int, h: float, n: int) -> int:
+    """How many of the next n steps (the first `first` steps after `origin`, of h s) offer no command due at
+    `due`: a step starting at t offers those due before t + h (ScenarioUnit.step)."""
+    k = max(0, min(n, int((due - origin) / h) - first - 1))  # an estimate, then made exact
+    while k > 0 and not due >= origin + (first + k - 1) * h + h - 1e-9:
+        k -= 1
+    while k < n and due >= origin + (first + k) * h + h - 1e-9:
+        k += 1
+    return k
+
+
 class ScenarioUnit(PythonUnit):
     """The controller: plays a scenario's commands into the d-model's inputs, one event per step (see
     module doc); `queue.applied` says when each was applied."""
@@ -434,16 +445,9 @@ class ScenarioUnit(PythonUnit):
                 return 0
             if self._next >= len(self.commands):
                 return n
-            due = self.commands[self._next].time
             origin, done = execution._origin
-            h = execution.step_size
-            first = execution.steps - done
-            k = max(0, min(n, int((due - origin) / h) - first - 1))  # an estimate, then made exact
-            while k > 0 and not due >= origin + (first + k - 1) * h + h - 1e-9:
-                k -= 1
-            while k < n and due >= origin + (first + k) * h + h - 1e-9:
-                k += 1
-            return k
+            return steps_before_due(self.commands[self._next].time, origin, execution.steps - done,
+                                    execution.step_size, n)
 
         def end(first: int, made: int, rows, doubles) -> None:
             if made:  # as `step` leaves it: the last step's start plus its size

@@ -470,14 +470,12 @@ def _quiet_start(counted: tuple[float, int, int], h: float, plan: list[Command])
     """How many steps from the forks' start the command source offers nothing (the first command is due later):
     the start every plan of a shape with its first command at that time shares, as ScenarioUnit.step counts
     it. `counted`: the start's origin, steps since it and steps (Execution._origin, .steps)."""
+    from ..assembly.scenario import steps_before_due
+
     if not plan:
         return 0
-    due = plan[0].time
     origin, done, steps = counted
-    k = 0
-    while k < 1 << 20 and not due < origin + (steps + k - done) * h + h - 1e-9:
-        k += 1
-    return k
+    return steps_before_due(plan[0].time, origin, steps - done, h, 1 << 20)
 
 
 def _advance(execution, watch: Watch, steps: int | None = None) -> Watch:
