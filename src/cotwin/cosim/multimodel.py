@@ -77,6 +77,9 @@ def read_multimodel(path: str | Path) -> MultiModel:
     for key, file in (data.get("fmus") or {}).items():
         if not re.fullmatch(r"\{[^}]+\}", key):
             problems.append((f"fmus: key '{key}' must look like '{{name}}'", key))
+        if not isinstance(file, str):
+            problems.append((f"fmus: '{key}' must name an FMU file, not {type(file).__name__}", key))
+            continue
         fmus[key] = (path.parent / file) if not Path(file).is_absolute() else Path(file)
         try:
             found = fmus[key].is_file()
