@@ -85,6 +85,24 @@ def test_whatif_sums_up_and_strict_fails_on_an_infeasible_command(tmp_path):
     assert "warning: no command completed (1 applied)" in proc.stderr
 
 
+def test_whatif_says_a_command_due_after_the_horizon_was_never_applied_not_ignored(tmp_path):
+    """A what-if's commands due after its horizon were never offered to the d-model: `cotwin whatif` says so
+    instead of "ignored by the d-model" (what it said of every command not taken)."""
+    from conftest import EXAMPLES
+
+    move = lambda t, x: {"time": t, "event": "moveDiscreteCommand",  # noqa: E731
+                         "args": {"MovementArgs_target_X": x, "MovementArgs_target_Y": 20, "MovementArgs_target_Z": 0}}
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps([move(0.5, 3), move(9.0, 5)]))
+    proc = cotwin("whatif", EXAMPLES / "ur5e" / "cotwin.toml", "--plan", plan, "--horizon", "4")
+    assert proc.returncode == 0, proc.stderr
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("t = ")]
+    assert len(lines) == 2, proc.stdout
+    assert ", accepted, done at t = " in lines[0]
+    assert ", never applied (due after the prediction ended), not done within the horizon" in lines[1]
+    assert "ignored" not in lines[1] and "commands: 2, 1 completed, 1 not applied" in proc.stdout
+
+
 def test_command_arguments_have_one_naming_and_old_files_keep_working(tmp_path):
     """The port name (MovementArgs_target_X: the RMQ FMU's wire, plan CSVs, the page) everywhere; TOML
     scenarios, what-if plans and the page also take the field name (target_X) older files use."""

@@ -69,6 +69,29 @@ def test_a_fork_replayed_with_the_live_commands_equals_the_straight_run_bit_for_
     assert [s for _, _, s in prediction.states][-1] == "Idle"
 
 
+def test_a_fork_of_a_state_saved_under_the_other_algorithm_goes_on_under_it(system, tmp_path):
+    """A what-if (and a sweep's what-ifs) fork the DT as it ran: a state saved under gauss-seidel (the project
+    says jacobi) is continued under gauss-seidel, bit for bit the straight run; asking for jacobi is refused."""
+    from cotwin.cosim.state import StateError
+    from cotwin.twin.analysis.sweep import failures
+
+    assert system.spec.algorithm == "jacobi"
+    fork = Fork(at=50)
+    run_twin(system, tmp_path, algorithm="gauss-seidel", plot=False, observers=[fork])
+    remaining = [Command(c.time - 5.0, c.values, c.where) for c in system.commands if c.time > 5.0]
+    prediction = predict(system, remaining, fork.state, horizon=15.0, artefacts=tmp_path)
+    live = rows(tmp_path / "outputs.csv")
+    assert len(prediction.trajectory["time"]) > 100
+    for k, t in enumerate(prediction.trajectory["time"]):
+        row = live[repr(round(t, 12))]
+        assert [float(row[f"{{mapping}}.mapping.{q}"]) for q in JOINTS] == [prediction.trajectory[q][k] for q in JOINTS]
+    with pytest.raises(StateError, match="taken under gauss-seidel, this execution runs jacobi"):
+        predict(system, remaining, fork.state, horizon=1.0, algorithm="jacobi", artefacts=tmp_path)
+    plans = grid(system.models.program, "moveDiscreteCommand", {"target_X": [0, 1], "target_Y": [0], "target_Z": [0]})
+    answers = run_sweep(system.spec.path, plans, fork.state, horizon=3.0, workers=1, artefacts=tmp_path)
+    assert len(answers) == 2 and not failures(answers), answers
+
+
 def test_forking_leaves_the_live_run_bit_for_bit_unchanged(system, tmp_path):
     plan = [Command(0.2, (("moveDiscreteCommand", True), ("MovementArgs_target_X", 15), ("MovementArgs_target_Y", 0),
                           ("MovementArgs_target_Z", 3)), "test")]

@@ -65,8 +65,8 @@ def plan_file(path: str, program):
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 def whatif(project: str, plan: str, state: str | None, horizon: float, physics_step: float | None, out: str | None,
            strict: bool) -> None:
-    """Predict what a plan would do: fork the DT (at a saved state, or at the start) and run the plan
-    ahead of real time; prints each command's outcome and the completion time."""
+    """Predict what a plan would do: fork the DT (at a saved state, under the algorithm it ran, or at the
+    start) and run the plan ahead of real time; prints each command's outcome and the completion time."""
     import json
 
     from ..twin.assembly.run import load
@@ -91,8 +91,7 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
         args = ", ".join(f"{k}={v}" for k, v in c.args.items())
         verdict = {True: "feasible", False: "NOT feasible", None: "feasibility unknown"}[c.feasible]
         done = f"done at t = {c.done:g} s" if c.done is not None else "not done within the horizon"
-        click.echo(f"t = {c.time:g} s {c.event}({args}): {verdict}, "
-                   f"{'accepted' if c.accepted else 'ignored by the d-model'}, {done}")
+        click.echo(f"t = {c.time:g} s {c.event}({args}): {verdict}, {_taken(c)}, {done}")
     for c in prediction.collisions:
         click.echo(f"collision: {c}")
     click.echo(f"completion: {'t = %g s' % prediction.completion_time if prediction.completion_time is not None else 'not within the horizon'} "
@@ -102,6 +101,16 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
     if out:
         write_text(out, json.dumps(prediction.as_dict(), indent=1) + "\n", [*system.spec.inputs, plan, state])
     outcomes({"": Summary(prediction.commands, prediction.blocked)}, strict, per_command=False)  # said above
+
+
+def _taken(c) -> str:
+    """Whether the d-model took a predicted command: a command never applied (due after the fork's end) was
+    not offered to it, so it cannot have ignored it."""
+    if c.delivered is None:
+        return "never applied (due after the prediction ended)"
+    if c.accepted:
+        return "accepted"
+    return "ignored by the d-model" + (f" (in {c.busy})" if c.busy else "")
 
 
 @main.command()

@@ -156,12 +156,13 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
     spec = system.spec
     step = spec.step if step is None else step
     physics_step = physics_timing(step, physics_step)
-    algorithm = algorithm or spec.algorithm
     start = 0.0
     if state is not None:
         from ...cosim.execution import saved_execution
 
-        start = saved_execution(state)["time"]
+        saved = saved_execution(state)
+        start, algorithm = saved["time"], algorithm or saved["algorithm"]  # the fork goes on as the DT ran
+    algorithm = algorithm or spec.algorithm
     shifted = sorted((Command(start + c.time, c.values, c.where) for c in plan), key=lambda c: c.time)
     fork = system.with_plan(shifted)
     with tempfile.TemporaryDirectory(prefix="cotwin-whatif-") as tmp:
@@ -195,13 +196,14 @@ class Forks:
         self.system, self.state, self.cc = system, state, cc
         self.step = system.spec.step if step is None else step
         self.physics_step = physics_timing(self.step, physics_step)
-        self.algorithm = algorithm or system.spec.algorithm
         self.artefacts = artefacts
         self.start = 0.0
         if state is not None:
             from ...cosim.execution import saved_execution
 
-            self.start = saved_execution(state)["time"]
+            saved = saved_execution(state)
+            self.start, algorithm = saved["time"], algorithm or saved["algorithm"]  # as the DT ran
+        self.algorithm = algorithm or system.spec.algorithm
         self._forks: dict[frozenset, tuple] = {}  # plan shape -> (fork, execution, endpoint, saved state)
         self._shared: dict[tuple, tuple] = {}  # (shape, steps, decimate, horizon) -> (state, watches' progress) then
         self._contacts: dict[frozenset, _Contacts] = {}  # plan shape -> its fork's contact check
