@@ -464,6 +464,11 @@ class StepRows:
         columns = [_column(self.rows[:, i], kind) for i, kind in zip(slots, kinds)]
         return list(zip(*columns)) if columns else [() for _ in self.rows]
 
+    def row(self, k: int, slots: list[int]) -> tuple:
+        """Row k's values at these slots, typed (one row read, not the stretch's columns)."""
+        row, kinds = self.rows[k].tolist(), self.kinds
+        return tuple((row[i] != 0.0) if kinds[i] == "b" else int(row[i]) if kinds[i] == "i" else row[i] for i in slots)
+
     def replay(self, execution):
         data = execution.algorithm.data
         kept = (list(data), execution.steps, execution.time)

@@ -349,10 +349,6 @@ class QuietStep:
 
     def begin(self) -> None:
         """The pointers and doubles of the segment about to run (after `quiet`)."""
-        import ctypes
-
-        from . import native
-
         sim, mapping = self.sim, self.mapping
         move = self.endpoint.native_move()
         d = sim.data
@@ -361,6 +357,10 @@ class QuietStep:
         addressed = self._addressed  # the objects whose addresses `pointers` holds: looked up again when one changed
         if addressed is None or addressed[0] is not sim.model or addressed[1] is not d or \
                 addressed[2] is not sim.controls or addressed[3] is not arrays or addressed[4] is not watch:
+            import ctypes
+
+            from . import native
+
             _, mj_step = native.advance_function()
             self.pointers[:MOVE] = [mj_step, sim.model._address, d._address, sim.controls.ctypes.data,
                                     d.qpos.ctypes.data, d.qvel.ctypes.data, d.sensordata.ctypes.data,

@@ -289,6 +289,14 @@ class _Env:
             raise CotwinError(f"{e.loc}: the expression cannot be evaluated: {err}") from None
 
 
+def _reads_only(condition: s.Expr, names: frozenset) -> bool:
+    """Whether a condition reads plain variables, all of them among `names`, and no field, call or sensor."""
+    found = [n for n in s.walk(condition) if isinstance(n, (s.Name, s.FieldAccess, s.Call, s.IndexAccess))]
+    plain = [n for n in found if isinstance(n, s.Name) and len(n.name.parts) == 1]
+    return bool(plain) and not any(isinstance(n, (s.FieldAccess, s.Call)) for n in found) and \
+        all(n.name.last in names for n in plain)
+
+
 class InputEvent:
     """An input event of the platform: occurs when all its equations hold; `e?x` with an equation
     `x == v` (or `v == x`) carries the value of v, and occurs only when that value is a measurement
@@ -311,6 +319,7 @@ class InputEvent:
             raise CotwinError(f"{model.loc}: input event {model.name} binds '{model.bind}' but no equation "
                               f"'{model.bind} == ...' says what its value is")
         self.value = None
+        self._requests: dict[tuple, list] = {}  # false_request_part's conditions, per (assigned, constants)
         local = {v.name for v in model.variables} | ({model.bind} if model.bind else set())
         expressions = [*model.equations, *model.predicates, *(v.init for v in model.variables if v.init is not None)]
         #: the mapping variables its definition reads (an answer when an operation assigns one of them)
@@ -322,12 +331,12 @@ class InputEvent:
         """A condition of its definition that reads only variables operations assign (and constants), no
         sensor, function or local name, and is false now: then no motion of the platform makes the event
         occur, only an operation that assigns one of those variables (None if there is no such condition)."""
-        for condition in (c for e in self.conditions for c in s.conjuncts(e)):
-            names = [n for n in s.walk(condition) if isinstance(n, (s.Name, s.FieldAccess, s.Call, s.IndexAccess))]
-            plain = [n for n in names if isinstance(n, s.Name) and len(n.name.parts) == 1]
-            if any(isinstance(n, (s.FieldAccess, s.Call)) for n in names) or not plain or \
-                    any(n.name.last not in assigned | constants for n in plain):
-                continue
+        key = (frozenset(assigned), frozenset(constants))
+        candidates = self._requests.get(key)
+        if candidates is None:  # the conditions of that form, found once (the names are the model's)
+            candidates = self._requests[key] = [c for e in self.conditions for c in s.conjuncts(e)
+                                                if _reads_only(c, key[0] | key[1])]
+        for condition in candidates:
             if not bool(self.runtime.env.eval(condition, {})):
                 return condition
         return None

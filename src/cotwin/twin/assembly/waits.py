@@ -99,7 +99,7 @@ class WaitWatch(Observer):
         if self.mapping is None:
             return
         slots = execution.algorithm.slots
-        first = rows.values([slots[port] for port in self._ports])[0]  # the stretch's states (a run's first rows: seen here)
+        first = rows.row(0, [slots[port] for port in self._ports])  # the stretch's states (a run's first rows: seen here)
         times = rows.times
         self._since = [(leaf, entered, idle + len(rows)) if leaf == previous else (leaf, times[0], len(rows) - 1)
                        for leaf, (previous, entered, idle) in zip(first, self._since)]

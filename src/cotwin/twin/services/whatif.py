@@ -381,7 +381,7 @@ class Watch(Stop):
         """Steps in which only continuous values changed: the trajectory's rows, a collision event held, and
         the rest the arm took from the first of them (see the class doc)."""
         times, steps = rows.times, rows.steps
-        self._entered(times[0], list(rows.values(self._state_slots)[0]))  # a run's first rows: its states seen here
+        self._entered(times[0], list(rows.row(0, self._state_slots)))  # a run's first rows: its states seen here
         kept = [k for k, s in enumerate(steps) if (s + 1) % self.decimate == 0]
         if kept:
             self.trajectory["time"].extend(times[k] for k in kept)
