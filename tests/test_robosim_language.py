@@ -355,6 +355,25 @@ function norm1(p: Pos): int { postcondition result == (if p.x < 0 then -p.x else
                                          ["flag!false", "out!30", "real_out!-5.0"]]
 
 
+def test_min_and_max_of_signed_zeros_are_the_same_in_the_interpreter_and_the_fmu(tmp_path):
+    """min/max of equal values give the first one (Python's rule) in both: C's fmin(0.0, -0.0) gives -0.0, which
+    atan2 tells apart (pi against -pi); NaN is skipped in both."""
+    import math
+
+    outputs = ["atan2(min(z, -z), -1.0)", "atan2(max(-z, z), -1.0)", "atan2(min(-z, z), -1.0)",
+               "atan2(max(z, -z), -1.0)", "min(sqrt(-1.0) * 0.0 + 2.0, 1.0)"]
+    states = "".join(f"\tstate S{k} {{ }}\n" for k in range(len(outputs) + 1))
+    moves = "".join(f"\ttransition t{k} {{ from S{k} to S{k + 1} exec action $real_out!({e}) }}\n"
+                    for k, e in enumerate(outputs))
+    files = machine("\tvar z: real = 0.0\n\tinitial i\n" + states + "\ttransition ti { from i to S0 }\n" + moves
+                    + f"\ttransition rest {{ from S{len(outputs)} to S{len(outputs)} exec }}\n",
+                    "function atan2(y: real, x: real): real { }\nfunction sqrt(x: real): real { }\n"
+                    "function min(a: real, b: real): real { }\nfunction max(a: real, b: real): real { }\n")
+    trace = run_both(tmp_path, files, [{}] * (len(outputs) + 1))
+    said = [float(o.split("!")[1]) for outs, _ in trace for o in outs]
+    assert said == [math.pi, -math.pi, -math.pi, math.pi, 1.0], trace
+
+
 def test_vectors_and_matrices(tmp_path):
     files = machine("""	var v: vector(int, 3) = [|1, 2, 3|]
 	var w: vector(real, 2)

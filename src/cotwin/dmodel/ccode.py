@@ -1418,6 +1418,9 @@ static int64_t ck_neg(Model *M, int64_t a, int at) {
     if (a == INT64_MIN) { fail_at(M, at, "integer overflow"); return 0; }
     return -a;
 }
+/* min/max as the interpreter's: NaN skipped, the first of equal ones (fmin(0.0, -0.0) may give either zero) */
+static double ck_min(double a, double b) { return isnan(a) ? b : isnan(b) ? a : (b < a ? b : a); }
+static double ck_max(double a, double b) { return isnan(a) ? b : isnan(b) ? a : (b > a ? b : a); }
 static const char *real_text(double x) { return isnan(x) ? "nan" : x > 0 ? "inf" : "-inf"; }
 static int64_t ck_floor(Model *M, double x, int at) {
     if (!isfinite(x)) { fail_atf(M, at, "floor: floor of %s", real_text(x)); return 0; }

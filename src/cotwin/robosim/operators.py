@@ -246,7 +246,7 @@ def _minmax(f):
             return b
         if math.isnan(b):
             return a
-        return f(a, b)  # C's fmin/fmax
+        return f(a, b)  # the first of equal ones (0.0 and -0.0): C's ck_min/ck_max, not fmin/fmax
     return run
 
 
@@ -259,7 +259,7 @@ MATH = {
 
 #: C spelling of the math functions (all on reals)
 C_MATH = {"sqrt": "sqrt", "sin": "sin", "cos": "cos", "tan": "tan", "asin": "asin", "acos": "acos", "atan": "atan",
-          "atan2": "atan2", "exp": "exp", "log": "log", "abs": "fabs", "min": "fmin", "max": "fmax", "pow": "pow",
+          "atan2": "atan2", "exp": "exp", "log": "log", "abs": "fabs", "min": "ck_min", "max": "ck_max", "pow": "pow",
           "floor": "ck_floor", "ceil": "ck_ceil"}
 
 
