@@ -249,3 +249,40 @@ def test_a_join_refused_for_its_token_says_what_to_set(monkeypatch):
     monkeypatch.setenv("RAY_AUTH_MODE", "token")
     assert "RAY_AUTH_TOKEN" in join_hint("127.0.0.1:1", refused) and "the head's" in join_hint("127.0.0.1:1", refused)
     assert join_hint("127.0.0.1:1", ConnectionError("refused")) == ""
+
+
+
+def test_a_plan_row_raising_two_events_or_none_is_predicted_occurrence_by_occurrence(system, tmp_path):
+    """A TwinManager plan CSV's row may raise two events (both applied, one step apart) or none (its arguments
+    only): the what-if waits for every occurrence the plan raises, not one per row. It ended once the first
+    row's two occurrences were applied, at the time of the last row, whose move it neither applied nor listed;
+    a row raising nothing made it wait to its horizon, then fail (StopIteration). Native, step by step and on
+    Forks alike."""
+    from cotwin.twin.assembly.scenario import read_plan
+    from cotwin.twin.services.whatif import Forks
+
+    header = "timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,MovementArgs_target_Z," \
+             "openGripperCommand\n"
+    (tmp_path / "two.csv").write_text(header + "500,true,3,20,2,true\n3000,true,8,10,0,false\n")
+    (tmp_path / "none.csv").write_text(header + "500,true,3,20,2,false\n1000,false,1,1,1,false\n")
+    two, none = (read_plan(tmp_path / name, system.models.program) for name in ("two.csv", "none.csv"))
+    answers = {}
+    for name, plan in (("two", two), ("none", none)):
+        found = [predict(system, plan, None, horizon=10.0, artefacts=tmp_path, fused=fused).as_dict()
+                 for fused in (True, False)]
+        with Forks(system, None, artefacts=tmp_path) as forks:
+            found += [forks.predict(plan, horizon=10.0).as_dict() for _ in range(2)]
+        for answer in found:
+            answer.pop("wall_seconds"), answer.pop("native_steps")
+            assert answer == found[0]
+        answers[name] = found[0]
+    commands = answers["two"]["commands"]
+    assert [(c["event"], c["delivered"] is not None) for c in commands] == \
+        [("moveDiscreteCommand", True), ("openGripperCommand", True), ("moveDiscreteCommand", True)]
+    assert commands[1]["args"] == {} and commands[2]["args"]["MovementArgs_target_X"] == 8
+    assert commands[2]["done"] is not None and answers["two"]["end"] > 3.5
+    assert [c["event"] for c in answers["none"]["commands"]] == ["moveDiscreteCommand"]
+    assert answers["none"]["completion_time"] is not None and answers["none"]["end"] < 5.0
+    short = predict(system, two, None, horizon=2.5, artefacts=tmp_path)  # the last move not applied: listed so
+    assert [c.delivered is None for c in short.commands] == [False, False, True] and short.commands[2].args == \
+        {"MovementArgs_target_X": 8, "MovementArgs_target_Y": 10, "MovementArgs_target_Z": 0}

@@ -321,6 +321,7 @@ class Watch(Stop):
         self.collisions: list[dict] = []
         self.last_state: dict[str, int] = {}
         self.at_rest_since: float | None = None
+        self.occurrences = occurrences(program, fork.command_events, plan)  # what the ledger will see applied
         self.last_command = plan[-1].time if plan else start
         self.end = start + horizon
         self.over = False
@@ -366,7 +367,7 @@ class Watch(Stop):
 
     def _over(self, t: float, h: float) -> bool:
         outcomes = self.ledger.outcomes
-        applied = len(outcomes) >= len(self.plan)
+        applied = len(outcomes) >= len(self.occurrences)
         if applied and t >= self.last_command and self.waits.found:
             return True  # blocked for good: the horizon would add nothing
         if applied and t >= self.last_command and self.at_rest_since is not None and t - self.at_rest_since >= self.settle:
@@ -431,16 +432,28 @@ class Watch(Stop):
 
     def prediction(self, execution, fork, plan, start: float, started: float) -> Prediction:
         outcomes = list(self.ledger.outcomes)
-        for c in plan[len(outcomes):]:  # not applied within the horizon
-            event = next(p for p, v in c.values if p in fork.command_events and v is True)
-            outcomes.append(CommandOutcome(c.time, event, {p: v for p, v in c.values if p not in fork.command_events},
-                                           origin=c.where))
+        for c, event, args in self.occurrences[len(outcomes):]:  # not applied within the horizon
+            outcomes.append(CommandOutcome(c.time, event, args, origin=c.where))
         collisions = self.collisions + (list(self.contacts.seen.values()) if self.contacts.sim is not None else [])
         done = [o.done for o in outcomes]
         completion = max(done) if done and all(d is not None for d in done) else (None if outcomes else execution.time)
         return Prediction(start, execution.time, execution.step_size, outcomes, self.states, self.trajectory,
                           collisions, completion, wallclock.perf_counter() - started,
                           [str(b) for b in self.waits.found])
+
+
+def occurrences(program, events: set[str], plan: list[Command]) -> list[tuple[Command, str, dict]]:
+    """The occurrences the plan's commands raise, in the order the controller applies them (ScenarioUnit: one
+    per event a command raises, in the command's order, with its own arguments): a plan row may raise several
+    events or none (a TwinManager plan CSV's row with every event false)."""
+    arguments = {ev.name: [port for port, _ in ev.value_ports] for ev in program.inputs}
+    out = []
+    for c in plan:
+        values = dict(c.values)
+        for port, value in c.values:
+            if port in events and value is True:
+                out.append((c, port, {p: values[p] for p in arguments.get(port, ()) if p in values}))
+    return out
 
 
 def _first(holds, about: float, limit: int = 1 << 20) -> int | None:
