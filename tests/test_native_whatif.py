@@ -193,6 +193,28 @@ def test_a_what_if_at_a_coarser_physics_step_runs_its_simulator_at_it(built, tmp
     assert coarse.trajectory["q0"] != fine.trajectory["q0"]  # other physics, other digits
 
 
+
+@pytest.mark.parametrize("step", [0.0125, 0.0015])
+def test_a_step_that_is_not_a_whole_number_of_the_default_physics_step_is_refused(built, tmp_path, step):
+    """A what-if's step (predict's, Forks', a sweep's) with the default physics step is checked as a project's
+    is: at 1.5 ms the simulator made 2 ms a step (its time ran a third ahead of the co-simulation's) and
+    predicted the move a third faster; at 12.5 ms it made 12. A physics step that divides it is taken."""
+    from cotwin.diagnostics import CotwinError
+    from cotwin.twin.analysis.sweep import grid, run_sweep
+    from cotwin.twin.services.whatif import Forks, predict
+
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    with pytest.raises(CotwinError, match="not a whole number of cotwin's 0.001 s physics steps"):
+        predict(twin, twin.commands[:1], None, horizon=1.0, step=step, artefacts=tmp_path)
+    with pytest.raises(CotwinError, match="not a whole number"):
+        Forks(twin, None, step=step, artefacts=tmp_path)
+    plans = grid(twin.models.program, "moveDiscreteCommand", {"target_X": [0], "target_Y": [0], "target_Z": [0]})
+    with pytest.raises(CotwinError, match="not a whole number"):
+        run_sweep(twin.spec.path, plans, step=step, workers=1, artefacts=tmp_path)
+    assert predict(twin, twin.commands[:1], None, horizon=0.5, step=step, artefacts=tmp_path, physics_step=0.0005).end
+
+
 @pytest.mark.parametrize("physics, said", [(0.003, "is not a whole number of them"), (0.0, "from 0.0001 to 0.01"),
                                            (float("nan"), "from 0.0001"), (0.02, "to 0.01"), (1e-320, "from 0.0001"),
                                            (1e-9, "from 0.0001"), (True, "from 0.0001"), ("0.002", "from 0.0001")])

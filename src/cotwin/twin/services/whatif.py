@@ -74,7 +74,14 @@ def physics_timing(step: float, physics_step: float | None, what: str = "physics
     to MAX_PHYSICS_STEP of which the communication step is a whole number. cotwin's 1 ms is the default;
     a coarser one is for a twin whose calibrated fidelity was measured to hold at it (benchmarks/calibration.py
     replays a recorded run at several)."""
-    if physics_step is None:
+    if physics_step is None:  # cotwin's own: the step must be a whole number of it too (as a project's step is)
+        from ...pmodel.mjcf import TIMESTEP
+
+        ticks = step / TIMESTEP
+        if round(ticks) < 1 or abs(ticks - round(ticks)) > 1e-6 * ticks:
+            raise CotwinError(f"the communication step {step:g} s is not a whole number of cotwin's {TIMESTEP:g} s "
+                              f"physics steps: the simulator would run {max(1, round(ticks)) * TIMESTEP:g} s a step; "
+                              f"give a {what} of which it is a whole number")
         return None
     if isinstance(physics_step, bool) or not isinstance(physics_step, numbers.Real) or \
             not MIN_PHYSICS_STEP <= float(physics_step) <= MAX_PHYSICS_STEP:  # NaN fails both
