@@ -208,7 +208,7 @@ def main() -> None:
                   "; ".join(f"{name} {us:.1f} us ({100 * us / total:.0f}%)" for name, us in prof.items()))
         for step, target in GOALS.items():
             stepping = fmu = 1e9
-            for _ in range(5 if step > 0.001 else 3):  # alternating, so that all see the machine's load alike
+            for _ in range(9 if step > 0.001 else 3):  # alternating, so that all see the machine's load alike (9: a run is 0.15 s)
                 stepping = min(stepping, experiment(twin, out / "build", out / f"run{step}", step))
                 moving = min(moving, physics_moving(twin, setpoints))
                 rest = min(rest, physics_alone(twin))

@@ -11,6 +11,7 @@ import pytest
 from conftest import cotwin_in_process
 from cotwin.diagnostics import CotwinError
 from cotwin.twin.assembly.run import load
+from cotwin.twin.services.whatif import predict
 from test_reliability import project  # noqa: F401 - a copy of the UR5e example in tmp_path/ur5e
 
 HEADER = "timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,MovementArgs_target_Z\n"
@@ -101,6 +102,28 @@ def test_whatif_says_a_command_due_after_the_horizon_was_never_applied_not_ignor
     assert ", accepted, done at t = " in lines[0]
     assert ", never applied (due after the prediction ended), not done within the horizon" in lines[1]
     assert "ignored" not in lines[1] and "commands: 2, 1 completed, 1 not applied" in proc.stdout
+
+
+def test_a_command_read_while_an_earlier_one_moves_the_d_model_on_is_not_taken(tmp_path):
+    """The d-model reads a gripper command in the cycle its move goes from Requested towards Moving: its state
+    changes, but on no way that reads the gripper command, so the command was not taken (it was counted as
+    taken, and the move's feasibility credited to it). Read in Idle (after an infeasible move), it is taken."""
+    from conftest import EXAMPLES
+
+    from cotwin.twin.assembly.scenario import read_plan
+
+    system = load(EXAMPLES / "ur5e" / "cotwin.toml")
+    head = "timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,MovementArgs_target_Z,openGripperCommand\n"
+    together = tmp_path / "together.csv"
+    together.write_text(head + "500,true,3,20,2,true\n")
+    move, gripper = predict(system, read_plan(together, system.models.program), horizon=6.0).commands
+    assert (move.event, move.accepted, move.feasible, move.verdict) == ("moveDiscreteCommand", True, True, "completed")
+    assert (gripper.event, gripper.accepted, gripper.verdict, gripper.busy) == \
+        ("openGripperCommand", False, "not taken", "Requested")
+    later = tmp_path / "later.csv"
+    later.write_text(head + "500,true,15,23,3,false\n800,false,0,0,0,true\n")
+    move, gripper = predict(system, read_plan(later, system.models.program), horizon=6.0).commands
+    assert move.verdict == "infeasible" and gripper.accepted and gripper.verdict == "completed"
 
 
 def test_command_arguments_have_one_naming_and_old_files_keep_working(tmp_path):

@@ -62,3 +62,58 @@ def waits(program: Program) -> dict[tuple[int, int], Wait]:
             if not free and events:
                 out[(m.index, k)] = Wait(m.name, ".".join(leaf.path), frozenset(events))
     return out
+
+
+class CycleReads:
+    """Which platform input events a machine may have read in a cycle that took it from one leaf to another
+    (`between`): the events the guards read on the cycle's possible paths from the leaf (its ways out, or those
+    of a state enclosing it) through junctions and the states entered (up to their `exec`) to the other leaf
+    (or a state enclosing it). An over-approximation: an event outside it was not taken in that cycle (a
+    command the d-model read while an earlier one moved it on: cotwin.twin.assembly.outcomes). None where it
+    cannot tell (a RoboChart trigger on the way, or too many paths)."""
+
+    LIMIT = 20000  # paths explored per question, beyond which it cannot tell
+
+    def __init__(self, program: Program):
+        self.program = program
+        self._cache: dict[tuple[int, int, int], frozenset[str] | None] = {}
+        self._machines = {m.index: m for m in program.machines}
+        self._platform = {m.index: {event: name for name, routes in program.input_routes.items()
+                                    for machine, event in routes if machine == m.index} for m in program.machines}
+
+    def between(self, machine: int, before: int, after: int) -> frozenset[str] | None:
+        key = (machine, before, after)
+        if key not in self._cache:
+            self._cache[key] = self._explore(machine, before, after)
+        return self._cache[key]
+
+    def _explore(self, machine: int, before: int, after: int) -> frozenset[str] | None:
+        m = self._machines.get(machine)
+        leaves = m.graph.leaves if m is not None else []
+        if not (0 <= before < len(leaves) and 0 <= after < len(leaves)):
+            return None
+        platform, start, goal = self._platform[machine], leaves[before], leaves[after]
+        arrivals = {id(goal), *(id(a) for a in goal.ancestors())}
+        found: set[str] = set()
+        stack = [(edge, frozenset()) for node in (start, *start.ancestors()) for edge in node.outgoing]
+        seen: set[tuple[int, frozenset]] = set()
+        while stack:
+            edge, read = stack.pop()
+            if (id(edge), read) in seen:
+                continue
+            seen.add((id(edge), read))
+            if len(seen) > self.LIMIT or edge.transition.trigger is not None:
+                return None
+            read = read | _events(edge.transition.condition, platform)[0]
+            target = edge.target
+            if id(target) in arrivals:
+                found |= read
+            inside, todo = [], [target]
+            while todo:  # the target and every node within it (a composite state's initial junction ...)
+                node = todo.pop()
+                inside.append(node)
+                todo.extend(node.children)
+            stack.extend((e, read) for node in (*inside, *target.ancestors()) for e in node.outgoing
+                         if not e.transition.is_exec)
+        return frozenset(found)
+

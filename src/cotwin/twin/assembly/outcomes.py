@@ -3,9 +3,10 @@
 `CommandLedger`, an observer, follows each command from the step that applied it (the source's
 `applied` list: cotwin.twin.assembly.commands) through the d-model and the mapping:
 - *taken*: in the step the d-model reads it (the next under Jacobi, the same under Gauss-Seidel) its
-  state changes or it calls an operation; else it was *not taken* (the d-model was busy: the state is
-  named). A command taken is `accepted`; the operations and platform events that follow, until the
-  next command taken, are its own;
+  state changes or it calls an operation, by a way that reads the command's event (a change an earlier
+  command's progress made, on transitions that never read it, is no taking: cotwin.dmodel.waits.CycleReads);
+  else it was *not taken* (the d-model was busy: the state it read it in is named). A command taken is
+  `accepted`; the operations and platform events that follow, until the next command taken, are its own;
 - *infeasible*: among its events one named `nonfeasible*`, `infeasible*`, `unreachable*` (feasible:
   `feasible*`, `reachable*`), a naming convention of mappings such as the paper's;
 - *stopped*: among its events, before it completed, one that stops a move (a word of its name is collision,
@@ -25,6 +26,7 @@ from functools import lru_cache
 from dataclasses import dataclass, field
 
 from ...cosim.observers import Observer
+from ...dmodel.waits import CycleReads
 from ...memo import once_per
 from .system import DMODEL, MAPPING, TwinSystem
 
@@ -134,6 +136,10 @@ class CommandLedger(Observer):
         self.program = program
         self.system = system
         self.rest = once_per(program, "rest states", lambda: rest_states(program))  # the same for every what-if
+        self.cycles = once_per(program, "cycle reads", lambda: CycleReads(program))
+        position = {m.index: k for k, m in enumerate(program.machines)}  # a machine's place among the state ports
+        self._readers = {name: sorted({(m, position[m]) for m, _ in routes if m in position})
+                         for name, routes in program.input_routes.items()}
         self.outcomes: list[CommandOutcome] = []
         self._states = [(program.state_port(m), m) for m in program.machines]
         self._calls = [op.name for op in program.operations]
@@ -174,11 +180,11 @@ class CommandLedger(Observer):
             if steps > 0:
                 still.append((steps - 1, outcome, before))
                 continue
-            if states != self._before or calls:  # read in this step: taken
+            if (states != self._before or calls) and self._may_read(outcome.event, self._before, states):  # taken
                 outcome.accepted = True
                 self._current = outcome
             else:
-                outcome.busy = self._names(states)
+                outcome.busy = self._names(self._before)
         self._waiting = still
         current = self._current
         if current is not None:
@@ -202,6 +208,17 @@ class CommandLedger(Observer):
         if self._waiting:
             for _ in rows.replay(execution):  # it reads only the values on the connections
                 self.step_complete(execution)
+
+    def _may_read(self, event: str, before, after) -> bool:
+        """Whether a machine reading `event` may have read it in the cycle that took it from `before` to `after`
+        (cotwin.dmodel.waits.CycleReads): a command the d-model reads while its state changes for another reason
+        (an earlier move going on) is not taken when no path of that change reads it."""
+        for m, k in self._readers.get(event, ()):
+            was, now = (before[k], after[k]) if k < min(len(before), len(after)) else (None, None)
+            read = self.cycles.between(m, was, now) if isinstance(was, int) and isinstance(now, int) else None
+            if read is None or event in read:
+                return True
+        return False
 
     def resting(self, states) -> bool:
         return all(index == self.rest[port] for (port, _), index in zip(self._states, states))
