@@ -360,3 +360,42 @@ def test_a_stub_case_is_a_test_driver_fmu_that_reports_its_verdict(tmp_path, arm
         assert (last["{driver}.case.verdict"], last["{driver}.case.divergence_cycle"]) == verdict, dmodel
     theirs = run_libcosim(read_multimodel(tmp_path / "dmodel.fmu.json"), {"{driver}.case": ["verdict"]}, end=1.0)
     assert theirs["{driver}.case.verdict"][-1] == 1
+
+
+def test_a_failed_testgen_leaves_the_earlier_suite_whole(tmp_path):
+    """A C compiler that fails, or a --project that cannot be loaded, is reported (exit 1) and leaves the suite
+    already in the folder as it was: its driver FMUs are not removed (they were, and the new index left)."""
+    tests = tmp_path / "tests"
+    proc = cotwin("testgen", UR5E / "arm.rst", "-o", tests)
+    assert proc.returncode == 0, proc.stderr
+    before = {p.name: p.read_bytes() for p in tests.iterdir()}
+    assert "case_01.fmu" in before
+    proc = cotwin("testgen", UR5E / "arm.rst", "--max-cycles", "5", "--cc", "false", "-o", tests)
+    assert proc.returncode == 1 and "the C compiler 'false' failed" in proc.stderr
+    proc = cotwin("testgen", *MODELS, "--answers", "auto", "--project", tmp_path / "none.toml", "-o", tests)
+    assert proc.returncode == 1 and "none.toml" in proc.stderr
+    assert {p.name: p.read_bytes() for p in tests.iterdir()} == before
+    proc = cotwin("testgen", *MODELS, "--answers", "auto", "--project", tmp_path / "none.toml", "-o", tmp_path / "new")
+    assert proc.returncode == 1 and not (tmp_path / "new").exists()
+
+
+def test_test_and_mutants_never_write_over_what_they_read(tmp_path, stub_suite):
+    """cotwin test --junit and cotwin mutants -o naming the project file, a model or a file of the suite are
+    refused by name before anything runs (the JUnit XML replaced cotwin.toml; the JSON replaced arm.rst)."""
+    import shutil
+
+    project = tmp_path / "ur5e"
+    shutil.copytree(UR5E, project)
+    kept = {p.name: p.read_bytes() for p in project.iterdir()}
+    proc = cotwin("test", project / "cotwin.toml", stub_suite, "--junit", project / "cotwin.toml")
+    assert proc.returncode == 1 and "the output would replace" in proc.stderr and "(--junit)" in proc.stderr
+    proc = cotwin("test", project / "cotwin.toml", stub_suite, "--junit", stub_suite / "case_01.csv")
+    assert proc.returncode == 1 and "the output would replace" in proc.stderr
+    proc = cotwin("test", project / "cotwin.toml", stub_suite, "--junit", tmp_path)
+    assert proc.returncode == 2 and "Invalid value for --junit" in proc.stderr and "[1/" not in proc.stderr
+    proc = cotwin("mutants", stub_suite, project / "arm.rst", "-o", project / "arm.rst")
+    assert proc.returncode == 1 and "the output would replace" in proc.stderr
+    proc = cotwin("mutants", stub_suite, project / "arm.rst", "-o", stub_suite / "suite.json")
+    assert proc.returncode == 1 and "the output would replace" in proc.stderr
+    assert {p.name: p.read_bytes() for p in project.iterdir()} == kept
+    assert (stub_suite / "suite.json").read_text().startswith("{")
