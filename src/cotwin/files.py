@@ -139,7 +139,8 @@ def output(path: str | Path, inputs: Iterable[str | Path | None] = (), mode: int
         raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR, "is a folder: cannot write a file there")])
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, part = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
+        stem = path.name.encode()[:200].decode(errors="ignore")  # a name of 255 bytes has a temporary one too
+        fd, part = tempfile.mkstemp(prefix=f".{stem}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
     except OSError as err:  # named by the file asked for, not the temporary one beside it
         raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR,
                                    f"cannot write here: {err.strerror or err}")]) from None
