@@ -399,3 +399,19 @@ def test_test_and_mutants_never_write_over_what_they_read(tmp_path, stub_suite):
     assert proc.returncode == 1 and "the output would replace" in proc.stderr
     assert {p.name: p.read_bytes() for p in project.iterdir()} == kept
     assert (stub_suite / "suite.json").read_text().startswith("{")
+
+
+def test_nan_and_too_short_periods_are_refused_by_option(tmp_path, stub_suite):
+    """testgen --period nan or --settle nan crashed (internal error: NaN is not JSON); --period 1e-320 wrote plans
+    whose every row was at time 0; mutants --min-kill nan made the gate never fail; build-dmodel --cycle-period
+    nan said so without naming the option."""
+    for args, option in ((["testgen", UR5E / "arm.rst", "--period", "nan"], "--period"),
+                         (["testgen", UR5E / "arm.rst", "--settle", "nan"], "--settle"),
+                         (["testgen", UR5E / "arm.rst", "--period", "1e-320"], "'--period'"),
+                         (["mutants", stub_suite, UR5E / "arm.rst", "--min-kill", "nan"], "--min-kill"),
+                         (["build-dmodel", UR5E / "arm.rst", "--fmi", "3", "--cycle-period", "nan"], "--cycle-period"),
+                         (["build-dmodel", UR5E / "arm.rst", "--fmi", "3", "--cycle-period", "1e-320"], "'--cycle-period'")):
+        out = tmp_path / ("d.fmu" if args[0] == "build-dmodel" else "t")
+        proc = cotwin(*args, *(["-o", out] if args[0] != "mutants" else []))
+        assert proc.returncode == 2 and f"Invalid value for {option}" in proc.stderr, (args, proc.stderr)
+        assert "internal error" not in proc.stderr and not out.exists()

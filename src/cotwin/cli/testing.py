@@ -8,7 +8,9 @@ from pathlib import Path
 import click
 
 from ..files import check_outputs, write_text
-from .common import main, output_file, output_folder, show_warnings, value_domains
+from .common import check_finite, main, output_file, output_folder, show_warnings, value_domains
+
+MIN_PERIOD = 1e-6  # s: a plan's times are in ms to 6 decimals, so a shorter cycle put every row at time 0
 
 
 def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str], str]:
@@ -53,7 +55,7 @@ def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str],
 @click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1, max=10 ** 8),
               help="stop exploring after this many states (states and transitions: also once every transition "
                    "was taken)")
-@click.option("--period", default=0.1, show_default=True, type=click.FloatRange(min=0, min_open=True, max=3600),
+@click.option("--period", default=0.1, show_default=True, type=click.FloatRange(min=MIN_PERIOD, max=3600),
               help="seconds per d-model cycle in the plans")
 @click.option("--settle", default=10.0, show_default=True, type=click.FloatRange(min=0, max=86_400),
               help="seconds a plan leaves the platform to answer (cases with --answers platform)")
@@ -71,6 +73,7 @@ def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, dom
     from ..dmodel.testgen_graph import explore
     from ..robosim.check import load_checked
 
+    check_finite(period=period, settle=settle)  # nan passes click's range checks
     if (answers == "auto") != (project is not None):
         raise click.BadParameter("--answers auto tries the cases on a project's simulated platform: give both",
                                  param_hint="--answers" if project is None else "--project")
@@ -273,6 +276,7 @@ def mutants(tests: str, model: tuple[str, ...], module_name: str | None, through
     from ..dmodel.testgen_mutants import analyse, format_report, make_mutants
     from ..robosim.check import load_checked
 
+    check_finite(**{"min-kill": min_kill})  # nan passed click's range and made the gate never fail
     files = [Path(m) for m in model]
     folders = [f for f in files if f.is_dir()]
     if folders:
