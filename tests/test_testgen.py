@@ -415,3 +415,15 @@ def test_nan_and_too_short_periods_are_refused_by_option(tmp_path, stub_suite):
         proc = cotwin(*args, *(["-o", out] if args[0] != "mutants" else []))
         assert proc.returncode == 2 and f"Invalid value for {option}" in proc.stderr, (args, proc.stderr)
         assert "internal error" not in proc.stderr and not out.exists()
+
+
+def test_mutants_of_a_suite_without_cases_is_refused(tmp_path, stub_suite):
+    """A suite whose index lists no case gave "0 killed ... kill rate 0%" and exit 0."""
+    import shutil
+
+    empty = tmp_path / "empty"
+    shutil.copytree(stub_suite, empty)
+    data = json.loads((empty / "suite.json").read_text())
+    (empty / "suite.json").write_text(json.dumps(data | {"cases": []}))
+    proc = cotwin("mutants", empty, UR5E / "arm.rst")
+    assert proc.returncode == 2 and "suite.json holds no case: nothing to run on the mutants" in proc.stderr

@@ -283,6 +283,8 @@ def mutants(tests: str, model: tuple[str, ...], module_name: str | None, through
         raise click.BadParameter(f"{folders[0]}: name the model files (the .rst files are mutated)", param_hint="MODEL")
     program = build_program(load_checked(files), module_name)
     suite = read_suite(tests)
+    if not suite.cases:  # every mutant would survive it: a kill rate of 0% and exit 0 said nothing was run
+        raise click.BadParameter(f"{tests}/suite.json holds no case: nothing to run on the mutants", param_hint="TESTS")
     if out:
         check_outputs([out], [*files, *suite_inputs(suite)])
     if suite.data.get("model_digest") != model_digest(program):
