@@ -238,7 +238,7 @@ def test_a_changed_dmodel_fails_the_suite_it_no_longer_meets(auto_suite, tmp_pat
 
 def test_cotwin_test_refuses_what_it_cannot_run_by_name(tmp_path, auto_suite):
     proc = cotwin("test", UR5E / "cotwin.toml", tmp_path / "nothing")
-    assert proc.returncode == 1 and "cannot read a test suite" in proc.stderr
+    assert proc.returncode == 1 and "cannot read test suite index" in proc.stderr
     proc = cotwin("test", UR5E / "cotwin.toml", auto_suite[0], "--pt", "http://x")
     assert proc.returncode != 0 and "give an OPC UA URL" in proc.stderr
     proc = cotwin("test", UR5E / "cotwin.toml", auto_suite[0], "--pt")
@@ -427,3 +427,19 @@ def test_mutants_of_a_suite_without_cases_is_refused(tmp_path, stub_suite):
     (empty / "suite.json").write_text(json.dumps(data | {"cases": []}))
     proc = cotwin("mutants", empty, UR5E / "arm.rst")
     assert proc.returncode == 2 and "suite.json holds no case: nothing to run on the mutants" in proc.stderr
+
+
+def test_a_suite_file_that_is_a_fifo_or_huge_is_refused_not_waited_on_or_read_whole(tmp_path, stub_suite):
+    """cotwin test waited forever on an oracle that was a FIFO, and read an oracle of any size whole."""
+    import os
+    import shutil
+
+    for name, make in (("fifo", lambda p: os.mkfifo(p)), ("huge", lambda p: p.write_bytes(b" " * (65 << 20) + b"{}"))):
+        suite = tmp_path / name
+        shutil.copytree(stub_suite, suite)
+        (suite / "case_01.oracle.json").unlink()
+        make(suite / "case_01.oracle.json")
+        proc = subprocess.run([str(Path(sys.executable).parent / "cotwin"), "test", str(UR5E / "cotwin.toml"),
+                               str(suite)], capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 1 and f"{suite}/case_01.oracle.json:1:1: error:" in proc.stderr, proc.stderr
+        assert ("not a regular file" if name == "fifo" else "over the 64 MiB cotwin reads") in proc.stderr
