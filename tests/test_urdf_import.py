@@ -655,3 +655,13 @@ def test_a_mesh_path_spelled_otherwise_is_among_the_renamings(own_arm, tmp_path)
     meshes = [(r.urdf, r.pmodel) for r in result.renamings if r.kind == "mesh"]
     assert meshes == [("meshes/my_description/meshes ü/lïnk 1.stl", "meshes/my_description/meshes__/l_nk_1.stl")]
     assert (tmp_path / "out" / "meshes" / "my_description" / "meshes__" / "l_nk_1.stl").is_file()
+
+
+def test_a_urdf_that_is_a_fifo_is_refused_not_waited_on(tmp_path):
+    import os
+
+    fifo = tmp_path / "robot.urdf"
+    os.mkfifo(fifo)
+    with pytest.raises(CotwinError, match="cannot read the URDF: not a regular file"):
+        import_urdf(fifo, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
