@@ -122,7 +122,8 @@ def check_outputs(outputs: Iterable[str | Path], inputs: Iterable[str | Path | N
             identity = None
         clashes += [(target, source) for source, spelled, inode in known
                     if absolute == spelled or (identity is not None and identity == inode)]
-    if clashes:
+    if clashes:  # an input named twice (the project's plan given as --plan too) is said once
+        clashes = list({(os.path.abspath(t), os.path.abspath(s)): (t, s) for t, s in clashes}.values())
         raise CotwinError([Finding(Location(str(target), 0, 0), Severity.ERROR,
                                    f"the output would replace {source}, which this command reads: choose another "
                                    f"output ({hint})") for target, source in clashes])
