@@ -309,3 +309,20 @@ def test_a_replay_takes_its_physics_step(parts):
     fine, coarse = (replay(twin, schedule, times, start, timestep=step) for step in (0.001, 0.002))
     assert not np.array_equal(fine, coarse)  # another physics step: another trajectory
     assert np.abs(fine[-1] - coarse[-1]).max() < 0.01  # at rest at the same target
+
+
+def test_a_log_start_putting_the_moves_hours_from_their_commands_is_refused_not_written(parts, tmp_path):
+    """--log-start 1e9 wrote latencies of 1e9 s, a file Calibration.read (so --check and every project) refuses;
+    a --log-start making moves start before their commands is written with a warning."""
+    from conftest import EXAMPLES, cotwin_in_process
+
+    log = _pt_log(parts, tmp_path / "pt.csv", [1.23, 6.71, 9.02, 16.35],
+                  convention=read_profile(EXAMPLES / "ur5e" / "ur.profile.toml", 6))
+    project = str(EXAMPLES / "ur5e" / "cotwin.toml")
+    out = tmp_path / "calibration.toml"
+    far = cotwin_in_process("calibrate", project, "--pt-log", str(log), "--log-start", "1e9", "-o", str(out))
+    assert far.returncode == 2 and "Invalid value for --log-start" in far.stderr and "latencies must be" in far.stderr
+    assert not out.exists()
+    early = cotwin_in_process("calibrate", project, "--pt-log", str(log), "--log-start", "-5", "-o", str(out))
+    assert early.returncode == 0 and "warning: with --log-start -5 s, 4 move(s) start before" in early.stderr
+    assert Calibration.read(out).timing.log_start == -5.0

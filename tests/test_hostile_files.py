@@ -110,6 +110,7 @@ def test_no_output_replaces_a_file_the_command_reads(project, tmp_path):
         text = kept.read_text()
         proc = cotwin_in_process(*args)
         assert proc.returncode == 1 and "would replace" in proc.stderr and "Traceback" not in proc.stderr, (args, proc.stderr)
+        assert proc.stderr.count("would replace") == 1, proc.stderr  # the project's plan given as --plan: said once
         assert kept.read_text() == text
     # a fit never replaces the calibration it starts from
     log = tmp_path / "log.csv"

@@ -189,6 +189,24 @@ def test_a_sqlite_file_of_another_application_is_named_not_written(tmp_path):
         assert db.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall() == [("runs",)]
 
 
+def test_history_list_of_a_store_without_runs_says_so_and_fails(tmp_path):
+    """An empty file, or a SQLite database of other tables, listed nothing and exited 0: as if it held no run
+    of a store that does. It says there is no run (exit 1), and leaves the file as it was."""
+    from conftest import cotwin_in_process
+
+    empty = tmp_path / "empty.db"
+    empty.write_bytes(b"")
+    other = tmp_path / "other.db"
+    with sqlite3.connect(other) as db:
+        db.execute("CREATE TABLE t (x)")
+    for path in (empty, other):
+        before = path.read_bytes()
+        proc = cotwin_in_process("history", "list", "--db", f"sqlite:///{path}")
+        assert proc.returncode == 1 and proc.stdout == "", proc.stdout
+        assert f"no run in the history database sqlite:///{path}" in proc.stderr
+        assert path.read_bytes() == before
+
+
 def test_a_predeclared_exchange_of_another_type_is_a_located_error(broker, tmp_path):
     from cotwin.mapping.amqp import connect
     from cotwin.twin.project import RabbitMQSettings

@@ -126,6 +126,18 @@ def test_a_command_read_while_an_earlier_one_moves_the_d_model_on_is_not_taken(t
     assert move.verdict == "infeasible" and gripper.accepted and gripper.verdict == "completed"
 
 
+def test_whatif_whose_only_command_is_due_after_the_horizon_does_not_say_it_was_applied(tmp_path):
+    """"commands: 1, 1 not applied" was followed by "warning: no command completed (1 applied)"."""
+    from conftest import EXAMPLES
+
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps([{"time": 9.0, "event": "moveDiscreteCommand", "args": {
+        "MovementArgs_target_X": 5, "MovementArgs_target_Y": 20, "MovementArgs_target_Z": 0}}]))
+    proc = cotwin("whatif", EXAMPLES / "ur5e" / "cotwin.toml", "--plan", plan, "--horizon", "1")
+    assert "commands: 1, 1 not applied" in proc.stdout
+    assert "warning: no command completed (0 of 1 applied)" in proc.stderr, proc.stderr
+
+
 def test_command_arguments_have_one_naming_and_old_files_keep_working(tmp_path):
     """The port name (MovementArgs_target_X: the RMQ FMU's wire, plan CSVs, the page) everywhere; TOML
     scenarios, what-if plans and the page also take the field name (target_X) older files use."""

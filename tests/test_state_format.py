@@ -197,6 +197,21 @@ def test_a_nan_time_and_a_missing_key_are_located_by_whatif(saved, tmp_path):
         assert "nan s" not in run.stderr and "cotwin bug" not in run.stderr
 
 
+def test_a_sweep_from_a_state_of_other_models_is_refused_once_before_any_whatif(saved, tmp_path):
+    """Each what-if failed alike (one line per grid point, a CSV of failures written, exit 1): a state of
+    other models is refused once, by the state's name, before any runs, as cotwin whatif does."""
+    from conftest import EXAMPLES, cotwin_in_process
+
+    (tmp_path / "other").write_bytes(_edited(saved, lambda d: d.update(models={"arm.rst": "0" * 64})))
+    run = cotwin_in_process("sweep", EXAMPLES / "ur5e" / "cotwin.toml", "--event", "moveDiscreteCommand",
+                            "--arg", "target_X=0..2", "--arg", "target_Y=23", "--arg", "target_Z=1", "--from", "other",
+                            "--workers", "1", "-o", "sweep.csv", cwd=tmp_path)
+    assert run.returncode == 1, run.stderr[-2000:]
+    assert run.stderr.count("the state was saved from other models than these: arm.rst changed") == 1
+    assert "other: error:" in run.stderr and "what-if 1 of" not in run.stderr
+    assert not (tmp_path / "sweep.csv").exists()
+
+
 MAPPING, DMODEL, CONTROLLER = "{mapping}.mapping", "{dmodel}.dmodel", "{controller}.controller"
 
 

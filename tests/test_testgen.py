@@ -238,7 +238,7 @@ def test_a_changed_dmodel_fails_the_suite_it_no_longer_meets(auto_suite, tmp_pat
 
 def test_cotwin_test_refuses_what_it_cannot_run_by_name(tmp_path, auto_suite):
     proc = cotwin("test", UR5E / "cotwin.toml", tmp_path / "nothing")
-    assert proc.returncode == 1 and "cannot read a test suite" in proc.stderr
+    assert proc.returncode == 1 and "cannot read test suite index" in proc.stderr
     proc = cotwin("test", UR5E / "cotwin.toml", auto_suite[0], "--pt", "http://x")
     assert proc.returncode != 0 and "give an OPC UA URL" in proc.stderr
     proc = cotwin("test", UR5E / "cotwin.toml", auto_suite[0], "--pt")
@@ -360,3 +360,86 @@ def test_a_stub_case_is_a_test_driver_fmu_that_reports_its_verdict(tmp_path, arm
         assert (last["{driver}.case.verdict"], last["{driver}.case.divergence_cycle"]) == verdict, dmodel
     theirs = run_libcosim(read_multimodel(tmp_path / "dmodel.fmu.json"), {"{driver}.case": ["verdict"]}, end=1.0)
     assert theirs["{driver}.case.verdict"][-1] == 1
+
+
+def test_a_failed_testgen_leaves_the_earlier_suite_whole(tmp_path):
+    """A C compiler that fails, or a --project that cannot be loaded, is reported (exit 1) and leaves the suite
+    already in the folder as it was: its driver FMUs are not removed (they were, and the new index left)."""
+    tests = tmp_path / "tests"
+    proc = cotwin("testgen", UR5E / "arm.rst", "-o", tests)
+    assert proc.returncode == 0, proc.stderr
+    before = {p.name: p.read_bytes() for p in tests.iterdir()}
+    assert "case_01.fmu" in before
+    proc = cotwin("testgen", UR5E / "arm.rst", "--max-cycles", "5", "--cc", "false", "-o", tests)
+    assert proc.returncode == 1 and "the C compiler 'false' failed" in proc.stderr
+    proc = cotwin("testgen", *MODELS, "--answers", "auto", "--project", tmp_path / "none.toml", "-o", tests)
+    assert proc.returncode == 1 and "none.toml" in proc.stderr
+    assert {p.name: p.read_bytes() for p in tests.iterdir()} == before
+    proc = cotwin("testgen", *MODELS, "--answers", "auto", "--project", tmp_path / "none.toml", "-o", tmp_path / "new")
+    assert proc.returncode == 1 and not (tmp_path / "new").exists()
+
+
+def test_test_and_mutants_never_write_over_what_they_read(tmp_path, stub_suite):
+    """cotwin test --junit and cotwin mutants -o naming the project file, a model or a file of the suite are
+    refused by name before anything runs (the JUnit XML replaced cotwin.toml; the JSON replaced arm.rst)."""
+    import shutil
+
+    project = tmp_path / "ur5e"
+    shutil.copytree(UR5E, project)
+    kept = {p.name: p.read_bytes() for p in project.iterdir()}
+    proc = cotwin("test", project / "cotwin.toml", stub_suite, "--junit", project / "cotwin.toml")
+    assert proc.returncode == 1 and "the output would replace" in proc.stderr and "(--junit)" in proc.stderr
+    proc = cotwin("test", project / "cotwin.toml", stub_suite, "--junit", stub_suite / "case_01.csv")
+    assert proc.returncode == 1 and "the output would replace" in proc.stderr
+    proc = cotwin("test", project / "cotwin.toml", stub_suite, "--junit", tmp_path)
+    assert proc.returncode == 2 and "Invalid value for --junit" in proc.stderr and "[1/" not in proc.stderr
+    proc = cotwin("mutants", stub_suite, project / "arm.rst", "-o", project / "arm.rst")
+    assert proc.returncode == 1 and "the output would replace" in proc.stderr
+    proc = cotwin("mutants", stub_suite, project / "arm.rst", "-o", stub_suite / "suite.json")
+    assert proc.returncode == 1 and "the output would replace" in proc.stderr
+    assert {p.name: p.read_bytes() for p in project.iterdir()} == kept
+    assert (stub_suite / "suite.json").read_text().startswith("{")
+
+
+def test_nan_and_too_short_periods_are_refused_by_option(tmp_path, stub_suite):
+    """testgen --period nan or --settle nan crashed (internal error: NaN is not JSON); --period 1e-320 wrote plans
+    whose every row was at time 0; mutants --min-kill nan made the gate never fail; build-dmodel --cycle-period
+    nan said so without naming the option."""
+    for args, option in ((["testgen", UR5E / "arm.rst", "--period", "nan"], "--period"),
+                         (["testgen", UR5E / "arm.rst", "--settle", "nan"], "--settle"),
+                         (["testgen", UR5E / "arm.rst", "--period", "1e-320"], "'--period'"),
+                         (["mutants", stub_suite, UR5E / "arm.rst", "--min-kill", "nan"], "--min-kill"),
+                         (["build-dmodel", UR5E / "arm.rst", "--fmi", "3", "--cycle-period", "nan"], "--cycle-period"),
+                         (["build-dmodel", UR5E / "arm.rst", "--fmi", "3", "--cycle-period", "1e-320"], "'--cycle-period'")):
+        out = tmp_path / ("d.fmu" if args[0] == "build-dmodel" else "t")
+        proc = cotwin(*args, *(["-o", out] if args[0] != "mutants" else []))
+        assert proc.returncode == 2 and f"Invalid value for {option}" in proc.stderr, (args, proc.stderr)
+        assert "internal error" not in proc.stderr and not out.exists()
+
+
+def test_mutants_of_a_suite_without_cases_is_refused(tmp_path, stub_suite):
+    """A suite whose index lists no case gave "0 killed ... kill rate 0%" and exit 0."""
+    import shutil
+
+    empty = tmp_path / "empty"
+    shutil.copytree(stub_suite, empty)
+    data = json.loads((empty / "suite.json").read_text())
+    (empty / "suite.json").write_text(json.dumps(data | {"cases": []}))
+    proc = cotwin("mutants", empty, UR5E / "arm.rst")
+    assert proc.returncode == 2 and "suite.json holds no case: nothing to run on the mutants" in proc.stderr
+
+
+def test_a_suite_file_that_is_a_fifo_or_huge_is_refused_not_waited_on_or_read_whole(tmp_path, stub_suite):
+    """cotwin test waited forever on an oracle that was a FIFO, and read an oracle of any size whole."""
+    import os
+    import shutil
+
+    for name, make in (("fifo", lambda p: os.mkfifo(p)), ("huge", lambda p: p.write_bytes(b" " * (65 << 20) + b"{}"))):
+        suite = tmp_path / name
+        shutil.copytree(stub_suite, suite)
+        (suite / "case_01.oracle.json").unlink()
+        make(suite / "case_01.oracle.json")
+        proc = subprocess.run([str(Path(sys.executable).parent / "cotwin"), "test", str(UR5E / "cotwin.toml"),
+                               str(suite)], capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 1 and f"{suite}/case_01.oracle.json:1:1: error:" in proc.stderr, proc.stderr
+        assert ("not a regular file" if name == "fifo" else "over the 64 MiB cotwin reads") in proc.stderr

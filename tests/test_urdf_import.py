@@ -602,6 +602,20 @@ def test_an_output_that_is_a_file_or_a_urdf_that_is_missing_is_refused(own_arm, 
     assert "none.urdf: error: cannot read the URDF" in str(err.value) and not (tmp_path / "out").exists()
 
 
+def test_a_robot_name_too_long_for_a_file_name_is_refused_at_the_robot_and_the_longest_is_written(tmp_path):
+    """A robot named by 5000 characters failed with "File name too long: " and the whole name, an empty output
+    folder left; one of 252 (a p-model file name of 255 bytes) failed on the temporary file written first."""
+    urdf = tmp_path / "long.urdf"
+    urdf.write_text("<robot name='" + "x" * 5000 + "'>\n" + _links("a") + "</robot>")
+    with pytest.raises(CotwinError) as err:
+        import_urdf(urdf, tmp_path / "out")
+    assert "long.urdf:1:1: error: the robot's name (5000 characters" in str(err.value)
+    assert len(str(err.value)) < 400 and not (tmp_path / "out").exists()
+    urdf.write_text("<robot name='" + "x" * 252 + "'>\n" + _links("a") + "</robot>")
+    result = import_urdf(urdf, tmp_path / "out")
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["x" * 252 + ".pm"] == [result.file.name]
+
+
 def test_a_pmodel_the_importer_wrote_wrongly_is_reported_as_its_bug(own_arm, tmp_path, monkeypatch):
     from cotwin.pmodel import urdf_import
 
@@ -641,3 +655,13 @@ def test_a_mesh_path_spelled_otherwise_is_among_the_renamings(own_arm, tmp_path)
     meshes = [(r.urdf, r.pmodel) for r in result.renamings if r.kind == "mesh"]
     assert meshes == [("meshes/my_description/meshes ü/lïnk 1.stl", "meshes/my_description/meshes__/l_nk_1.stl")]
     assert (tmp_path / "out" / "meshes" / "my_description" / "meshes__" / "l_nk_1.stl").is_file()
+
+
+def test_a_urdf_that_is_a_fifo_is_refused_not_waited_on(tmp_path):
+    import os
+
+    fifo = tmp_path / "robot.urdf"
+    os.mkfifo(fifo)
+    with pytest.raises(CotwinError, match="cannot read the URDF: not a regular file"):
+        import_urdf(fifo, tmp_path / "out")
+    assert not (tmp_path / "out").exists()

@@ -122,7 +122,8 @@ def check_outputs(outputs: Iterable[str | Path], inputs: Iterable[str | Path | N
             identity = None
         clashes += [(target, source) for source, spelled, inode in known
                     if absolute == spelled or (identity is not None and identity == inode)]
-    if clashes:
+    if clashes:  # an input named twice (the project's plan given as --plan too) is said once
+        clashes = list({(os.path.abspath(t), os.path.abspath(s)): (t, s) for t, s in clashes}.values())
         raise CotwinError([Finding(Location(str(target), 0, 0), Severity.ERROR,
                                    f"the output would replace {source}, which this command reads: choose another "
                                    f"output ({hint})") for target, source in clashes])
@@ -139,7 +140,8 @@ def output(path: str | Path, inputs: Iterable[str | Path | None] = (), mode: int
         raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR, "is a folder: cannot write a file there")])
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, part = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
+        stem = path.name.encode()[:200].decode(errors="ignore")  # a name of 255 bytes has a temporary one too
+        fd, part = tempfile.mkstemp(prefix=f".{stem}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
     except OSError as err:  # named by the file asked for, not the temporary one beside it
         raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR,
                                    f"cannot write here: {err.strerror or err}")]) from None

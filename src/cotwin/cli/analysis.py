@@ -236,6 +236,17 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
             report = cal.calibrate(twin, program, commands, read_arm_log(pt_log, convention), CellGeometry(tool=point),
                                    log_start, progress=progress)
         fitted = report.calibration
+        late = [x for x in fitted.timing.latencies if not -cal.SECONDS <= x <= cal.SECONDS]
+        if late:  # what Calibration.read refuses is not written (a file no project or --check could use)
+            raise click.BadParameter(
+                f"{log_start:g} s puts the log's moves {late[0]:g} s after the plan's commands (latencies must be "
+                f"within [{-cal.SECONDS:g}, {cal.SECONDS:g}] s): give the co-simulation time of the log's first row",
+                param_hint="--log-start")
+        early = [x for x in fitted.timing.latencies if x < 0]
+        if early:
+            click.echo(f"warning: with --log-start {log_start:g} s, {len(early)} move(s) start before the plan "
+                       f"commands them (latency {min(early):.3f} s): is --log-start the co-simulation time of the "
+                       "log's first row?", err=True)
         fitted.write(out, f"cotwin calibration of {Path(project).name}, fitted on {Path(pt_log).name} "
                           "(cotwin calibrate)")
         click.echo("\n".join(report.lines()))

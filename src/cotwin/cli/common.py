@@ -45,10 +45,15 @@ def said_restarts(units) -> None:
                        err=True)
 
 
+def _hint(param) -> str:
+    """How the option is named in its errors (-o/--output, --junit)."""
+    return "/".join(param.opts) if param is not None and param.opts else "-o/--output"
+
+
 def output_path(ctx, param, value: str | None) -> str | None:
     """An -o option: a path, never the empty string (which would write into the current folder)."""
     if value is not None and not value.strip():
-        raise click.BadParameter("an empty path: name the file or folder to write", param_hint="-o/--output")
+        raise click.BadParameter("an empty path: name the file or folder to write", param_hint=_hint(param))
     return value
 
 
@@ -88,13 +93,13 @@ def output_file(ctx, param, value: str | None) -> str | None:
         return None
     path = Path(value)
     if path.is_dir():
-        raise click.BadParameter(f"{value}: is a folder: name the file to write", param_hint="-o/--output")
+        raise click.BadParameter(f"{value}: is a folder: name the file to write", param_hint=_hint(param))
     blocking = _file_on_the_way(path.parent)
     if blocking is not None:
-        raise click.BadParameter(f"{value}: would be made inside {blocking}, a file", param_hint="-o/--output")
+        raise click.BadParameter(f"{value}: would be made inside {blocking}, a file", param_hint=_hint(param))
     existing = next(p for p in path.parents if p.exists())
     if not os.access(existing, os.W_OK | os.X_OK):
-        raise click.BadParameter(f"{value}: cannot write into {existing} (no permission)", param_hint="-o/--output")
+        raise click.BadParameter(f"{value}: cannot write into {existing} (no permission)", param_hint=_hint(param))
     return value
 
 

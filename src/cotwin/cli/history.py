@@ -34,7 +34,15 @@ def history_list(db: str | None, folder: str | None) -> None:
 
     from ..twin.services.history import list_runs
 
-    for run in list_runs(history_db(db, folder)):
+    url = history_db(db, folder)
+    found = list_runs(url)
+    if not found:  # an empty store, or a database (an empty file) that is no cotwin history store
+        from ..twin.services.history import _redact
+
+        click.echo(f"error: no run in the history database {_redact(url)} (cotwin twin records its runs there)",
+                   err=True)
+        raise SystemExit(1)
+    for run in found:
         started = datetime.datetime.fromtimestamp(run["started"]).isoformat(timespec="seconds")
         click.echo(f"{run['id']:>5}  {started}  {run['kind']:<5} {run['status']:<10} step {run['step']:g} s  "
                    f"{run['samples']} samples  {run['alarms']} alarm(s)  {run['project']}")

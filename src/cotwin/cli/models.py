@@ -11,7 +11,7 @@ import click
 
 from ..diagnostics import CotwinError, Severity
 from ..files import check_outputs, write_text
-from .common import main, named_values, output_file, report, value_domains
+from .common import check_finite, main, named_values, output_file, report, value_domains
 
 
 @main.command()
@@ -124,7 +124,7 @@ def tree_findings(project) -> list:
 @click.option("--cc", default="cc", show_default=True, help="C compiler")
 @click.option("--fmi", "version", type=click.Choice(["2", "3"]), default="2", show_default=True,
               help="FMI version: 3 makes the d-model's cycle a clock (Co-Simulation with Event Mode)")
-@click.option("--cycle-period", type=click.FloatRange(min=0, min_open=True, max=86_400),
+@click.option("--cycle-period", type=click.FloatRange(min=1e-6, max=86_400),
               help="FMI 3.0: the clock's default interval in seconds (the parameter cycle_period) [default: 0.1]")
 def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, cc: str, version: str,
                  cycle_period: float | None) -> None:
@@ -133,6 +133,7 @@ def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, c
     from ..dmodel.program import build_program
     from ..robosim.check import load_checked
 
+    check_finite(**{"cycle-period": cycle_period})
     check_outputs([output], model)
     if cycle_period is not None and version != "3":
         raise click.BadParameter("the FMI 2.0 FMU takes cycle_period as a parameter when run (0: one cycle per "

@@ -7,7 +7,10 @@ from pathlib import Path
 
 import click
 
-from .common import main, output_file, output_folder, show_warnings, value_domains
+from ..files import check_outputs, write_text
+from .common import check_finite, main, output_file, output_folder, show_warnings, value_domains
+
+MIN_PERIOD = 1e-6  # s: a plan's times are in ms to 6 decimals, so a shorter cycle put every row at time 0
 
 
 def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str], str]:
@@ -52,7 +55,7 @@ def command_events(project, program, named: tuple[str, ...]) -> tuple[list[str],
 @click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1, max=10 ** 8),
               help="stop exploring after this many states (states and transitions: also once every transition "
                    "was taken)")
-@click.option("--period", default=0.1, show_default=True, type=click.FloatRange(min=0, min_open=True, max=3600),
+@click.option("--period", default=0.1, show_default=True, type=click.FloatRange(min=MIN_PERIOD, max=3600),
               help="seconds per d-model cycle in the plans")
 @click.option("--settle", default=10.0, show_default=True, type=click.FloatRange(min=0, max=86_400),
               help="seconds a plan leaves the platform to answer (cases with --answers platform)")
@@ -70,6 +73,7 @@ def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, dom
     from ..dmodel.testgen_graph import explore
     from ..robosim.check import load_checked
 
+    check_finite(period=period, settle=settle)  # nan passes click's range checks
     if (answers == "auto") != (project is not None):
         raise click.BadParameter("--answers auto tries the cases on a project's simulated platform: give both",
                                  param_hint="--answers" if project is None else "--project")
@@ -77,6 +81,11 @@ def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, dom
     program = build_program(models, module_name)
     parsed = value_domains(program, domains)
     chosen, why = command_events(models, program, commands)
+    system = None
+    if answers == "auto":  # a project that cannot be loaded is refused before anything is written
+        from ..twin.assembly.run import load
+
+        system = load(project)
     from rich.progress import Progress
 
     with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
@@ -84,34 +93,44 @@ def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, dom
         graph = explore(program, parsed, max_states=max_states, until_all_taken=criterion != "transition-pairs",
                         progress=lambda done, found: bar.update(task, completed=found))
     suite = generate(graph, criterion, max_cycles, chosen, "platform" if answers == "auto" else answers, split)
-    write_suite(suite, out, period, settle)
-    if answers == "auto":
-        try_on_platform(suite, project, out, period, settle)
-    if drivers:
-        from ..dmodel.testgen_driver import build_driver
-        from ..dmodel.testgen_files import oracle
+    import os
+    import tempfile
 
-        write_suite(suite, out, period, settle, drivers=True)
-        for case in suite.cases:
-            if case.answers == "stub":
-                build_driver(program, case.name, oracle(case)["cycles"], Path(out) / f"{case.name}.fmu", cc)
+    # The suite is made in a folder of its own inside `out` and only then written over the suite there: a run
+    # that fails (a project the cases cannot run on, a C compiler that fails) or is interrupted leaves the
+    # earlier suite (its driver FMUs too) as it was, never a suite without its drivers.
+    Path(out).mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=".cotwin-testgen-", dir=out) as stage:
+        write_suite(suite, stage, period, settle)
+        if answers == "auto":
+            try_on_platform(suite, system, stage, period, settle)
+        built = []
+        if drivers:
+            from ..dmodel.testgen_driver import build_driver
+            from ..dmodel.testgen_files import oracle
+
+            for case in suite.cases:
+                if case.answers == "stub":
+                    built.append(build_driver(program, case.name, oracle(case)["cycles"],
+                                              Path(stage) / f"{case.name}.fmu", cc))
+        write_suite(suite, out, period, settle, drivers=drivers)
+        for fmu in built:
+            os.replace(fmu, Path(out) / Path(fmu).name)
     click.echo(format_suite(suite, period, why, out, drivers))
     if not suite.cases:
         click.echo("no case: nothing is reachable to cover", err=True)
         sys.exit(1)
 
 
-def try_on_platform(suite, project: str, out: str, period: float, settle: float) -> dict[str, str]:
+def try_on_platform(suite, system, out: str, period: float, settle: float) -> dict[str, str]:
     """--answers auto: every case (written with its answers left to the platform) run on the project's
     simulated platform; those it does not follow are rewritten with their answers stubbed. Returns
     {case: why it was stubbed}."""
     import tempfile
 
     from ..dmodel.testgen_files import read_suite, write_suite
-    from ..twin.assembly.run import load
     from ..twin.analysis.testing import run_suite
 
-    system = load(project)
     with tempfile.TemporaryDirectory(prefix="cotwin-testgen-") as tmp:
         result = run_suite(system, read_suite(out), tmp)
     stubbed = {}
@@ -171,7 +190,7 @@ def pt_option(ctx, param, value: str | None) -> str | None:
 @click.option("--pt", "pt", is_flag=False, flag_value="project", default=None, callback=pt_option, metavar="[URL]",
               help="run against the PT through the twin (hardware in the loop): the project's [pt], or the OPC UA "
                    "plant at URL")
-@click.option("--junit", type=click.Path(), help="write the results as JUnit XML")
+@click.option("--junit", callback=output_file, help="write the results as JUnit XML")
 @click.option("--algorithm", type=click.Choice(["jacobi", "gauss-seidel"]), help="(default: the project's)")
 @click.option("--fmi", "version", type=click.Choice(["2", "3"]), default="2", show_default=True,
               help="the d-model FMU's FMI version (3: its cycle a clock)")
@@ -191,6 +210,8 @@ def test_command(project: str, tests: str, pt: str | None, junit: str | None, al
     system = load(project)
     show_warnings(system.spec.ignored_sections("cotwin test --pt project" if pt == "project" else "cotwin test"))
     suite = read_suite(tests)
+    if junit:
+        check_outputs([junit], [*system.spec.inputs, *suite_inputs(suite)], "--junit")
     endpoint, target = None, "the co-simulation (the project's simulated platform)"
     if pt is not None:
         endpoint, target = _pt_endpoint(system, pt)
@@ -202,9 +223,7 @@ def test_command(project: str, tests: str, pt: str | None, junit: str | None, al
         result = run_suite(system, suite, out or tmp, endpoint, target, algorithm, int(version), cc,
                            list(cases) or None, progress)
     if junit:
-        path = Path(junit)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(junit_xml(result))
+        write_text(junit, junit_xml(result))
     click.echo(format_result(result))
     if junit:
         click.echo(f"JUnit XML: {junit}")
@@ -212,6 +231,12 @@ def test_command(project: str, tests: str, pt: str | None, junit: str | None, al
         click.echo("no case ran", err=True)
         sys.exit(1)
     sys.exit(0 if result.passed else 1)
+
+
+def suite_inputs(suite) -> list[Path]:
+    """The files of a suite that `cotwin test` and `cotwin mutants` read (an output must not replace them)."""
+    return [suite.folder / "suite.json", *(p for c in suite.cases
+                                           for p in (c.plan, suite.folder / f"{c.name}.oracle.json"))]
 
 
 def _pt_endpoint(system, pt: str):
@@ -251,12 +276,17 @@ def mutants(tests: str, model: tuple[str, ...], module_name: str | None, through
     from ..dmodel.testgen_mutants import analyse, format_report, make_mutants
     from ..robosim.check import load_checked
 
+    check_finite(**{"min-kill": min_kill})  # nan passed click's range and made the gate never fail
     files = [Path(m) for m in model]
     folders = [f for f in files if f.is_dir()]
     if folders:
         raise click.BadParameter(f"{folders[0]}: name the model files (the .rst files are mutated)", param_hint="MODEL")
     program = build_program(load_checked(files), module_name)
     suite = read_suite(tests)
+    if not suite.cases:  # every mutant would survive it: a kill rate of 0% and exit 0 said nothing was run
+        raise click.BadParameter(f"{tests}/suite.json holds no case: nothing to run on the mutants", param_hint="TESTS")
+    if out:
+        check_outputs([out], [*files, *suite_inputs(suite)])
     if suite.data.get("model_digest") != model_digest(program):
         raise click.BadParameter(f"{tests}/suite.json was generated from another d-model (module "
                                  f"{suite.data.get('module')}): mutate the model the suite was made from",
@@ -275,7 +305,7 @@ def mutants(tests: str, model: tuple[str, ...], module_name: str | None, through
         rows = [{"mutant": o.mutant.name, "operator": o.mutant.operator, "where": o.mutant.where,
                  "change": o.mutant.change, "status": o.status, "by": o.by, "equivalent": o.equivalent,
                  "explanation": o.explanation} for o in report.outcomes]
-        Path(out).write_text(json.dumps({"criterion": suite.criterion, "mutants": len(report.outcomes),
+        write_text(out, json.dumps({"criterion": suite.criterion, "mutants": len(report.outcomes),
                                          "valid": report.valid, "killed": len(report.of("killed")),
                                          "equivalent": report.equivalent, "kill_rate": report.kill_rate,
                                          "kill_rate_non_equivalent": report.kill_rate_non_equivalent,

@@ -192,7 +192,7 @@ def read_suite(folder: str | Path) -> SuiteFile:
     """A suite written by `write_suite`, every problem reported at its file."""
     folder = Path(folder)
     index = folder / "suite.json"
-    data = _read_json(index, "a test suite (cotwin testgen -o FOLDER writes one)")
+    data = _read_json(index, "test suite index (cotwin testgen -o FOLDER writes one)")
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise CotwinError([Finding(Location(str(index), 1, 1), Severity.ERROR,
                                    f"not a cotwin test suite (format {FORMAT!r} expected)")])
@@ -200,7 +200,7 @@ def read_suite(folder: str | Path) -> SuiteFile:
     for entry in data.get("cases", []):
         try:
             name, answers = entry["name"], entry["answers"]
-            record = _read_json(folder / entry["oracle"], "the case's oracle")
+            record = _read_json(folder / entry["oracle"], "case oracle")
             cycles = record["cycles"]
             if answers not in ("stub", "platform") or not isinstance(cycles, list):
                 raise KeyError("answers")
@@ -215,14 +215,14 @@ def read_suite(folder: str | Path) -> SuiteFile:
     return SuiteFile(folder, data, cases)
 
 
+SUITE_FILE_CAP = 64 * 1024 * 1024  # bytes of a suite's index or one oracle (a 30-cycle case's is a few KiB)
+
+
 def _read_json(path: Path, what: str):
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as err:
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
-                                   f"cannot read {what}: {err.strerror or err}")]) from None
-    except UnicodeDecodeError:
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, f"{what} is not UTF-8 text")]) from None
+    from ..files import read_text
+
+    # capped, and never blocking on a FIFO (Path.read_text read a file of any size whole, and waited on a FIFO)
+    text = read_text(path, what, SUITE_FILE_CAP)
     try:
         return json.loads(text)
     except json.JSONDecodeError as err:

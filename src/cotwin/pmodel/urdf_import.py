@@ -517,6 +517,10 @@ def import_urdf(urdf: str | Path, out: str | Path, package_path: list[str | Path
     findings = [f for f in diag.findings if f.severity is Severity.WARNING] + _notes(robot)
     if out.exists() and not out.is_dir():
         raise CotwinError(f"{out}: not a folder (-o names the folder to write the p-model and its meshes into)")
+    if len(f"{writer.name}.pm".encode()) > NAME_MAX:  # else "File name too long: " and the whole name, after mkdir
+        raise CotwinError([Finding(robot.loc, Severity.ERROR, f"the robot's name ({len(writer.name)} characters, "
+                                   f"{writer.name[:40]}...) is too long for the p-model's file name {{name}}.pm "
+                                   f"(at most {NAME_MAX - 3} bytes): give the robot a shorter name")])
     out.mkdir(parents=True, exist_ok=True)
     file = out / f"{writer.name}.pm"
     check_outputs([file], [urdf])  # never over the URDF being imported
@@ -531,6 +535,9 @@ def import_urdf(urdf: str | Path, out: str | Path, package_path: list[str | Path
     if check:
         result.findings += read_back(file)
     return result
+
+
+NAME_MAX = 255  # bytes of a file name (Linux, macOS, Windows)
 
 
 def _refuse_overwrites(file: Path, text: str, meshes: list[Path]) -> None:

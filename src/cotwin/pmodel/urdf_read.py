@@ -271,6 +271,9 @@ def read_urdf(path: str | Path, diag: Diagnostics) -> Robot | None:
         if size > MAX_BYTES:
             diag.error(Location(shown, 0, 0), f"the file has {size} bytes, more than a URDF may ({MAX_BYTES})")
             return None
+        if not path.is_file():  # a FIFO (or a device) was read from, waiting forever
+            diag.error(Location(shown, 0, 0), "cannot read the URDF: not a regular file")
+            return None
         data = path.read_bytes()
     except OSError as err:
         diag.error(Location(shown, 0, 0), f"cannot read the URDF: {err.strerror or err}")

@@ -185,6 +185,13 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         artefacts = scratch = tempfile.mkdtemp(prefix="cotwin-sweep-")
     try:
         system = load(project)
+        if state is not None:  # a state of other models fails every what-if alike: said once, before any runs
+            from ...cosim.execution import model_differences, saved_execution
+            from ...cosim.state import StateError
+
+            differences = model_differences(saved_execution(state)["models"], system.models.digests)
+            if differences:
+                raise StateError(f"the state was saved from other models than these: {'; '.join(differences)}")
         from ..services.whatif import physics_timing
 
         physics_step = physics_timing(system.spec.step if step is None else step, physics_step)  # once, not per what-if
