@@ -146,6 +146,23 @@ def test_pt_log_replaces_the_projects_missing_log_and_calibrate_names_the_key(ru
     assert f"{toml}:17:1: error: [pt] log: no file {copied}/../../../shared/data/ur5e/rtde_run1.csv" in proc.stderr
 
 
+def test_a_replay_project_without_its_recording_still_runs_predicts_and_sweeps_its_dt(copied, tmp_path):
+    """[pt] log is looked for only by the commands that read [pt]: `cotwin run`, `whatif` and `sweep` ignore [pt]
+    (and say so) and ran into "[pt] log: no file" on a replay project copied without its recording; `cotwin twin`
+    still refuses it at the key."""
+    toml = copied / "replay.toml"
+    proc = cotwin("run", toml, "-o", tmp_path / "run", "--end", "0.3")
+    assert proc.returncode == 0 and "[pt] applies only to" in proc.stderr and "[pt] log" not in proc.stderr, proc.stderr
+    proc = cotwin("whatif", toml, "--plan", copied / "plan.csv", "--horizon", "0.5")
+    assert proc.returncode == 0 and "[pt] log" not in proc.stderr, proc.stderr
+    proc = cotwin("sweep", toml, "--event", "moveDiscreteCommand", "--arg", "target_X=0", "--arg", "target_Y=0",
+                  "--arg", "target_Z=0", "--horizon", "0.5", "--workers", "1", "-o", tmp_path / "s.csv")
+    assert proc.returncode == 0 and "[pt] log" not in proc.stderr, proc.stderr
+    proc = cotwin("twin", toml, "-o", tmp_path / "twin", "--end", "0.3")
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr
+    assert f"{toml}:17:1: error: [pt] log: no file {copied}/../../../shared/data/ur5e/rtde_run1.csv" in proc.stderr
+
+
 # ---- on the real broker ----------------------------------------------------------------------
 
 def _twin(exchange: str, out: Path, *options) -> subprocess.Popen:

@@ -73,7 +73,7 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
     from ..twin.services.whatif import physics_timing, predict
 
     check_finite(horizon=horizon)
-    system = load(project)
+    system = load(project, reader="cotwin whatif")
     physics_timing(system.spec.step, physics_step, "--physics-step")
     show_warnings(system.spec.ignored_sections("cotwin whatif"))  # [convergence], [pt]...: a live twin's
     if out:
@@ -144,7 +144,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         if name in ranges:
             raise click.BadParameter(f"argument {name!r} is given twice", param_hint="--arg")
         ranges[name] = values
-    system = load(project)
+    system = load(project, reader="cotwin sweep")
     physics_timing(system.spec.step, physics_step, "--physics-step")
     show_warnings(system.spec.ignored_sections("cotwin sweep"))  # [convergence], [pt]...: a live twin's
     inputs = [*system.spec.inputs, state]

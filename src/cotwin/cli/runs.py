@@ -25,7 +25,7 @@ def build(project: str, out: str, cc: str) -> None:
     from ..twin.assembly.build import build as build_all, folder_lock
     from ..twin.assembly.run import load
 
-    system = load(project, cells=True)
+    system = load(project, cells=True, reader="cotwin build")
     with folder_lock(Path(out)):
         written = build_all(system, out, cc)
     for path in written.values():
@@ -64,7 +64,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     if cycle_period is not None and version != "3":
         raise click.BadParameter("only with --fmi 3 (an FMI 2.0 d-model takes [cosim] parameters cycle_period)",
                                  param_hint="--cycle-period")
-    system = load(project, cells=True)
+    system = load(project, cells=True, reader="cotwin run")
     check_timing(system.spec, step, end)
     reader = "cotwin run --dashboard" if dashboard and not system.spec.robots else "cotwin run"  # a cell: no history
     show_warnings(system.spec.ignored_sections(reader))

@@ -85,7 +85,7 @@ def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, dom
     if answers == "auto":  # a project that cannot be loaded is refused before anything is written
         from ..twin.assembly.run import load
 
-        system = load(project)
+        system = load(project, reader="cotwin testgen")
     from rich.progress import Progress
 
     with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
@@ -207,8 +207,9 @@ def test_command(project: str, tests: str, pt: str | None, junit: str | None, al
     from ..twin.assembly.run import load
     from ..twin.analysis.testing import format_result, junit_xml, run_suite
 
-    system = load(project)
-    show_warnings(system.spec.ignored_sections("cotwin test --pt project" if pt == "project" else "cotwin test"))
+    reader = "cotwin test --pt project" if pt == "project" else "cotwin test"
+    system = load(project, reader=reader)
+    show_warnings(system.spec.ignored_sections(reader))
     suite = read_suite(tests)
     if junit:
         check_outputs([junit], [*system.spec.inputs, *suite_inputs(suite)], "--junit")

@@ -113,11 +113,14 @@ def failures(rows: list[dict]) -> list[tuple[int, dict]]:
     return [(k, r) for k, r in enumerate(rows) if r.get(ERROR)]
 
 
+READER = "cotwin sweep"  # as READ_ONLY_BY names it: a sweep's what-ifs read no [pt]
+
+
 def _load(project: str, artefacts: str | None) -> None:
     global _SYSTEM
     from ..assembly.run import load
 
-    _SYSTEM = (load(project), artefacts)
+    _SYSTEM = (load(project, reader=READER), artefacts)
 
 
 def _run(plan: list[Command], state: bytes | None, horizon: float, step: float | None, forks=None,
@@ -184,7 +187,7 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
     if artefacts is None:
         artefacts = scratch = tempfile.mkdtemp(prefix="cotwin-sweep-")
     try:
-        system = load(project)
+        system = load(project, reader=READER)
         if state is not None:  # a state of other models fails every what-if alike: said once, before any runs
             from ...cosim.execution import model_differences, saved_execution
             from ...cosim.state import StateError

@@ -244,11 +244,12 @@ def monitored_panels(system: TwinSystem, number: str) -> list[tuple[str, list[st
              names, "default") for k, ((what, unit), names) in enumerate(groups.items())]
 
 
-def load(project: str | Path | TwinProject, cells: bool = False) -> TwinSystem:
+def load(project: str | Path | TwinProject, cells: bool = False, reader: str | None = None) -> TwinSystem:
     """The TwinSystem of a project file (or an already read project). A cell of several robots ([[robots]])
     is a CellSystem (cotwin.twin.assembly.cell) for a caller that takes one (`cells`), else a located error: what
-    takes a twin of one robot cannot take it."""
-    spec = project if isinstance(project, TwinProject) else load_project(project)
+    takes a twin of one robot cannot take it. `reader`: the command (load_project: one that ignores [pt] does not
+    look for its log)."""
+    spec = project if isinstance(project, TwinProject) else load_project(project, reader=reader)
     if spec.robots:
         if not cells:
             from ...diagnostics import Finding, Severity

@@ -49,7 +49,8 @@ def read_only_by() -> str:
                      for section, readers in READ_ONLY_BY.items())
     return ("\nEvery command that runs a project reads its models, scenario, platform and co-simulation tables; "
             "these tables\nare read only by the commands listed (`cotwin run`, `cotwin whatif`, `cotwin sweep` and "
-            "`cotwin test`,\ngiven a project holding one, warn at the table that they ignore it):\n\n" + rows + "\n")
+            "`cotwin test`,\ngiven a project holding one, warn at the table that they ignore it, and do not look for the "
+            "files it names,\nsuch as a `[pt]` recording):\n\n" + rows + "\n")
 
 
 def project_reference() -> str:

@@ -94,6 +94,7 @@ class TwinProject:
     settings: Any = None  # ProjectSettings: the sections as written
     file: TomlFile | None = field(default=None, repr=False)  # the file read (its data and where each key is)
     pt_log: Path | None = None  # a command's --pt-log, in place of [pt] log
+    reader: str | None = None  # the command that read it (load_project)
     profile: Path | None = None  # [robot] profile: the controller's conventions (cotwin.mapping.profile)
     robots: tuple[RobotSpec, ...] = ()  # [[robots]]: a cell of several (pmodel, mapping: the first one's)
 
@@ -161,7 +162,7 @@ class TwinProject:
                 table[path[-1]] = _as_toml(value)
         file = copy.copy(self.file)
         file.data = data
-        return _load(file, self.pt_log)
+        return _load(file, self.pt_log, self.reader)
 
     def current_settings(self):
         """The settings as this project now holds them: the file's, with the fields a caller may have set
@@ -231,10 +232,12 @@ def _as_toml(value):
 
 
 
-def load_project(path: str | Path, pt_log: str | Path | None = None) -> TwinProject:
+def load_project(path: str | Path, pt_log: str | Path | None = None, reader: str | None = None) -> TwinProject:
     """Read and check cotwin.toml; every problem is reported at its key, all together. `pt_log` (a command's
-    --pt-log) replaces [pt] log, which is then not looked for: the PT replays it."""
-    return _load(TomlFile(path, "project file"), None if pt_log is None else Path(pt_log))
+    --pt-log) replaces [pt] log, which is then not looked for: the PT replays it. `reader`: the command reading
+    it (as READ_ONLY_BY names them); one that ignores [pt] does not look for its log either (a replay project
+    copied without its recording still runs, predicts and sweeps its DT)."""
+    return _load(TomlFile(path, "project file"), None if pt_log is None else Path(pt_log), reader)
 
 
 def file_problem(path: Path) -> str | None:
@@ -251,8 +254,8 @@ def file_problem(path: Path) -> str | None:
         return f"{shown} cannot be looked up: {err}"
 
 
-def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
-    """The project `file.data` describes, resolved against the files it names."""
+def _load(file: TomlFile, pt_log: Path | None, reader: str | None = None) -> TwinProject:
+    """The project `file.data` describes, resolved against the files it names (see load_project: `reader`)."""
     if "models" not in file.data and isinstance(file.data.get("twin"), list):  # a fleet file given for a project
         raise CotwinError([Finding(file.location(("twin",)), Severity.ERROR, "this is a fleet file ([[twin]] entries "
                                    "naming projects), not a twin project: run it with `cotwin fleet "
@@ -291,7 +294,9 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
                                 f"[scenario] takes one source of commands, got {', '.join(sources)}"))
     plan = existing("scenario", sources[0], getattr(scenario, sources[0])) \
         if sources and sources[0] != "rabbitmq" else None
-    pt = _pt(file, s.pt, pt_log, existing, problems)
+    reads_pt = reader is None or reader in READ_ONLY_BY["pt"]
+    pt = _pt(file, s.pt, pt_log, existing if reads_pt else (lambda table, key, value: None if value is None else
+                                                            base / value), problems)
     calibration = existing("platform", "calibration", platform.calibration)
     profile = existing("robot", "profile", s.robot.profile)
     world, world_file = _world(file, s, existing, problems)
@@ -327,7 +332,7 @@ def _load(file: TomlFile, pt_log: Path | None) -> TwinProject:
     spec.locations = {key: file.location(key) for key in file.where}
     spec.raw = {"world": world.table if world is not None else None,
                 "stand_in": [_thawed(item) for item in platform.stand_in], "figure": _table(file.data, "figure")}
-    spec.settings, spec.file, spec.pt_log = s, file, pt_log
+    spec.settings, spec.file, spec.pt_log, spec.reader = s, file, pt_log, reader
     return spec
 
 
