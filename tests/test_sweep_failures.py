@@ -137,3 +137,16 @@ def _die_on_x1(plans, state, horizon, step, physics=None):
     if any(dict(p[0].values).get("MovementArgs_target_X") == 1 for p in plans):
         os.kill(os.getpid(), 9)
     return [{"ok": True} for _ in plans]
+
+
+def test_a_sweep_row_spells_a_completion_time_as_the_csv_of_a_run_does():
+    """A completion time is a step count times the step (264 * 0.1 = 26.400000000000002): the sweep's row holds it
+    rounded as outputs.csv rounds its times (26.4), not with the float's noise."""
+    from types import SimpleNamespace
+
+    from cotwin.twin.analysis.sweep import summary
+
+    assert 264 * 0.1 != 26.4
+    row = summary(SimpleNamespace(completion_time=264 * 0.1, collisions=[], commands=[]))
+    assert row["completion_time"] == 26.4 and repr(row["completion_time"]) == "26.4"
+    assert summary(SimpleNamespace(completion_time=None, collisions=[], commands=[]))["completion_time"] is None

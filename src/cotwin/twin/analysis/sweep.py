@@ -68,7 +68,8 @@ def grid(program, event: str, ranges: dict[str, list], at: float = 0.5) -> list[
 
 def summary(prediction) -> dict:
     """One row of a sweep: per command its arguments, feasibility, acceptance and time to be done."""
-    out = {"completion_time": prediction.completion_time, "collisions": len(prediction.collisions)}
+    done = prediction.completion_time  # a step count times the step: 26.400000000000002 written as 26.4, as outputs.csv does
+    out = {"completion_time": None if done is None else round(done, 12), "collisions": len(prediction.collisions)}
     for k, c in enumerate(prediction.commands):
         prefix = "" if len(prediction.commands) == 1 else f"c{k}_"
         out.update({f"{prefix}{name}": value for name, value in c.args.items()})
