@@ -4,6 +4,7 @@ the oracle on the co-simulation, JUnit, divergences) and cotwin mutants (the sui
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -12,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from conftest import EXAMPLES
+from cotwin.diagnostics import CotwinError
 from cotwin.dmodel.program import build_program
 from cotwin.dmodel.testgen import generate
 from cotwin.dmodel.testgen_files import read_suite, write_suite
@@ -180,6 +182,22 @@ def stub_suite(tmp_path_factory, graph):
     out = tmp_path_factory.mktemp("stub") / "tests"
     write_suite(generate(graph, "transitions"), out)
     return out
+
+
+def test_a_suite_index_with_a_period_that_is_no_duration_or_cases_that_are_no_list_is_refused_at_it(stub_suite, tmp_path):
+    """suite.json's period (NaN, 0, a string) and cases (not a list) are refused naming suite.json; the period
+    reached the master as "step size must be positive, got nan", and cases as a TypeError."""
+    copy = tmp_path / "tests"
+    shutil.copytree(stub_suite, copy)
+    data = json.loads((copy / "suite.json").read_text())
+    for key, value, said in [("period", float("nan"), "period nan is not a number of seconds"),
+                             ("period", 0, "period 0 is not a number of seconds"),
+                             ("period", "0.1", "period '0.1' is not a number of seconds"),
+                             ("cases", 3, "cases is not a list of case entries")]:
+        (copy / "suite.json").write_text(json.dumps({**data, key: value}))
+        with pytest.raises(CotwinError) as err:
+            read_suite(copy)
+        assert str(err.value).startswith(f"{copy / 'suite.json'}:1:1: error: {said}"), str(err.value)
 
 
 @pytest.mark.parametrize("algorithm,fmi", [("gauss-seidel", 2), ("jacobi", 3)])

@@ -197,7 +197,15 @@ def read_suite(folder: str | Path) -> SuiteFile:
         raise CotwinError([Finding(Location(str(index), 1, 1), Severity.ERROR,
                                    f"not a cotwin test suite (format {FORMAT!r} expected)")])
     cases, problems = [], []
-    for entry in data.get("cases", []):
+    period = data.get("period", 0.1)
+    if isinstance(period, bool) or not isinstance(period, (int, float)) or not 1e-6 <= period <= 3600:  # NaN too
+        problems.append(Finding(Location(str(index), 1, 1), Severity.ERROR,
+                                f"period {period!r:.40} is not a number of seconds from 1e-06 to 3600"))
+    entries = data.get("cases", [])
+    if not isinstance(entries, list):
+        problems.append(Finding(Location(str(index), 1, 1), Severity.ERROR, "cases is not a list of case entries"))
+        entries = []
+    for entry in entries:
         try:
             name, answers = entry["name"], entry["answers"]
             record = _read_json(folder / entry["oracle"], "case oracle")
