@@ -461,3 +461,14 @@ def test_a_suite_file_that_is_a_fifo_or_huge_is_refused_not_waited_on_or_read_wh
                                str(suite)], capture_output=True, text=True, timeout=120)
         assert proc.returncode == 1 and f"{suite}/case_01.oracle.json:1:1: error:" in proc.stderr, proc.stderr
         assert ("not a regular file" if name == "fifo" else "over the 64 MiB cotwin reads") in proc.stderr
+
+
+def test_a_domain_bound_beyond_an_integer_domain_says_so_not_that_it_is_no_number(tmp_path):
+    proc = cotwin("testgen", *MODELS, "--domain", "MovementArgs_target_X=0..1e308", "-o", tmp_path / "t")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "must be numbers" not in proc.stderr
+    assert "the range is too large: bound 1e308 is beyond what an integer domain" in proc.stderr
+    proc = cotwin("testgen", *MODELS, "--domain", "MovementArgs_target_X=0..2.5", "-o", tmp_path / "t")
+    assert proc.returncode == 2 and "bound 2.5 is not written as an integer" in proc.stderr
+    proc = cotwin("testgen", *MODELS, "--domain", "MovementArgs_target_X=0..nan", "-o", tmp_path / "t")
+    assert proc.returncode == 2 and "values must be numbers" in proc.stderr
