@@ -458,3 +458,11 @@ def test_a_fork_at_any_step_goes_on_bit_for_bit(twin, fmu, name):
             rows.append([repr(v) for v in fork.values.values()])
         fork.close()
         assert rows == straight[steps:], f"a fork at t = {steps / 10:g} s"
+
+
+def test_a_state_of_another_format_version_is_named_so_not_called_no_cotwin_state():
+    blob = pack("Mapping", {"a": 1})
+    with pytest.raises(StateError, match=r"a cotwin state of an unsupported version 3 \(this cotwin reads version 2"):
+        unpack(b"cotwin-state 3\n" + blob[len(MAGIC):], "Mapping")
+    with pytest.raises(StateError, match="not a cotwin state"):
+        unpack(b"cotwin-state x\n" + blob[len(MAGIC):], "Mapping")
