@@ -472,3 +472,17 @@ def test_a_domain_bound_beyond_an_integer_domain_says_so_not_that_it_is_no_numbe
     assert proc.returncode == 2 and "bound 2.5 is not written as an integer" in proc.stderr
     proc = cotwin("testgen", *MODELS, "--domain", "MovementArgs_target_X=0..nan", "-o", tmp_path / "t")
     assert proc.returncode == 2 and "values must be numbers" in proc.stderr
+
+
+def test_an_oracle_without_cycles_is_refused_at_the_oracle_not_at_the_index(stub_suite, tmp_path):
+    copy = tmp_path / "tests"
+    shutil.copytree(stub_suite, copy)
+    oracle = copy / json.loads((copy / "suite.json").read_text())["cases"][0]["oracle"]
+    record = json.loads(oracle.read_text())
+    for broken in ({k: v for k, v in record.items() if k != "cycles"}, {**record, "cycles": 3}, [1, 2]):
+        oracle.write_text(json.dumps(broken))
+        with pytest.raises(CotwinError) as err:
+            read_suite(copy)
+        assert str(err.value).startswith(f"{oracle}:1:1: error: not a case oracle: it has no list of cycles"), \
+            str(err.value)
+        assert "suite.json" not in str(err.value)

@@ -208,9 +208,13 @@ def read_suite(folder: str | Path) -> SuiteFile:
     for entry in entries:
         try:
             name, answers = entry["name"], entry["answers"]
-            record = _read_json(folder / entry["oracle"], "case oracle")
-            cycles = record["cycles"]
-            if answers not in ("stub", "platform") or not isinstance(cycles, list):
+            oracle_path = folder / entry["oracle"]
+            record = _read_json(oracle_path, "case oracle")
+            cycles = record.get("cycles") if isinstance(record, dict) else None
+            if not isinstance(cycles, list):  # the oracle's fault, at the oracle (not at the index)
+                raise CotwinError([Finding(Location(str(oracle_path), 1, 1), Severity.ERROR,
+                                           "not a case oracle: it has no list of cycles")])
+            if answers not in ("stub", "platform"):
                 raise KeyError("answers")
             cases.append(SuiteCase(name, answers, list(entry.get("covers", [])), list(entry.get("items", [])), cycles,
                                    folder / entry["plan"]))
