@@ -486,3 +486,25 @@ def test_an_oracle_without_cycles_is_refused_at_the_oracle_not_at_the_index(stub
         assert str(err.value).startswith(f"{oracle}:1:1: error: not a case oracle: it has no list of cycles"), \
             str(err.value)
         assert "suite.json" not in str(err.value)
+
+
+def test_case_files_outside_the_suite_folder_are_refused_at_the_index_by_entry(stub_suite, tmp_path):
+    """A case entry's plan or oracle that is an absolute path or climbs out with .. was followed as written."""
+    copy = tmp_path / "tests"
+    shutil.copytree(stub_suite, copy)
+    data = json.loads((copy / "suite.json").read_text())
+    outside = tmp_path / "outside.oracle.json"
+    shutil.copy(copy / data["cases"][0]["oracle"], outside)
+    first, second = data["cases"][0]["name"], data["cases"][1]["name"]
+    data["cases"][0]["oracle"] = str(outside)
+    data["cases"][1]["plan"] = "../tests/" + data["cases"][1]["plan"]
+    data["cases"][2]["plan"] = "sub/../" + data["cases"][2]["plan"]  # within the folder: fine
+    (copy / "suite.json").write_text(json.dumps(data))
+    with pytest.raises(CotwinError) as err:
+        read_suite(copy)
+    index = copy / "suite.json"
+    assert str(err.value).splitlines() == [
+        f"{index}:1:1: error: case entry {first!r}: its oracle {str(outside)!r} lies outside the suite's folder "
+        "(a suite's files live in its folder)",
+        f"{index}:1:1: error: case entry {second!r}: its plan '../tests/{second}.csv' lies outside the suite's folder "
+        "(a suite's files live in its folder)"], str(err.value)
