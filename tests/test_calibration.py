@@ -326,3 +326,18 @@ def test_a_log_start_putting_the_moves_hours_from_their_commands_is_refused_not_
     early = cotwin_in_process("calibrate", project, "--pt-log", str(log), "--log-start", "-5", "-o", str(out))
     assert early.returncode == 0 and "warning: with --log-start -5 s, 4 move(s) start before" in early.stderr
     assert Calibration.read(out).timing.log_start == -5.0
+
+
+def test_a_folder_given_for_a_log_or_calibration_is_called_a_folder_not_a_missing_file(tmp_path):
+    from conftest import EXAMPLES, cotwin_in_process
+
+    project = EXAMPLES / "ur5e" / "cotwin.toml"
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    fit = cotwin_in_process("calibrate", project, "--pt-log", str(folder), "-o", str(tmp_path / "c.toml"))
+    assert fit.returncode == 2 and f"--pt-log: {folder} is a folder, not a file" in fit.stderr, fit.stderr
+    assert "no file" not in fit.stderr
+    checked = cotwin_in_process("calibrate", project, "--calibration", str(folder), "--check", str(folder))
+    assert checked.returncode == 2 and f"{folder} is a folder, not a file" in checked.stderr, checked.stderr
+    missing = cotwin_in_process("calibrate", project, "--pt-log", str(tmp_path / "none.csv"), "-o", str(tmp_path / "c.toml"))
+    assert missing.returncode == 2 and f"no file {tmp_path / 'none.csv'}" in missing.stderr, missing.stderr

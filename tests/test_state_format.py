@@ -458,3 +458,26 @@ def test_a_fork_at_any_step_goes_on_bit_for_bit(twin, fmu, name):
             rows.append([repr(v) for v in fork.values.values()])
         fork.close()
         assert rows == straight[steps:], f"a fork at t = {steps / 10:g} s"
+
+
+def test_a_state_of_another_format_version_is_named_so_not_called_no_cotwin_state():
+    blob = pack("Mapping", {"a": 1})
+    with pytest.raises(StateError, match=r"a cotwin state of an unsupported version 3 \(this cotwin reads version 2"):
+        unpack(b"cotwin-state 3\n" + blob[len(MAGIC):], "Mapping")
+    with pytest.raises(StateError, match="not a cotwin state"):
+        unpack(b"cotwin-state x\n" + blob[len(MAGIC):], "Mapping")
+
+
+def test_a_state_of_an_unknown_algorithm_is_refused_by_whatif_and_sweep_at_the_state_file(saved, tmp_path):
+    from conftest import EXAMPLES, cotwin_in_process
+
+    project = EXAMPLES / "ur5e" / "cotwin.toml"
+    (tmp_path / "odd").write_bytes(_edited(saved, lambda d: d.update(algorithm="jacobx")))
+    message = "odd: error: the saved state's algorithm 'jacobx' is unknown (known: jacobi, gauss-seidel)"
+    run = cotwin_in_process("whatif", project, "--plan", EXAMPLES / "ur5e" / "plan.csv", "--from", "odd", cwd=tmp_path)
+    assert run.returncode == 1 and message in run.stderr, run.stderr[-2000:]
+    run = cotwin_in_process("sweep", project, "--event", "moveDiscreteCommand", "--arg", "target_X=0..1",
+                            "--arg", "target_Y=23", "--arg", "target_Z=1", "--from", "odd", "--workers", "1",
+                            "-o", "sweep.csv", cwd=tmp_path)
+    assert run.returncode == 1 and message in run.stderr and "what-if 1 of" not in run.stderr, run.stderr[-2000:]
+    assert not (tmp_path / "sweep.csv").exists()

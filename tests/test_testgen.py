@@ -461,3 +461,50 @@ def test_a_suite_file_that_is_a_fifo_or_huge_is_refused_not_waited_on_or_read_wh
                                str(suite)], capture_output=True, text=True, timeout=120)
         assert proc.returncode == 1 and f"{suite}/case_01.oracle.json:1:1: error:" in proc.stderr, proc.stderr
         assert ("not a regular file" if name == "fifo" else "over the 64 MiB cotwin reads") in proc.stderr
+
+
+def test_a_domain_bound_beyond_an_integer_domain_says_so_not_that_it_is_no_number(tmp_path):
+    proc = cotwin("testgen", *MODELS, "--domain", "MovementArgs_target_X=0..1e308", "-o", tmp_path / "t")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "must be numbers" not in proc.stderr
+    assert "the range is too large: bound 1e308 is beyond what an integer domain" in proc.stderr
+    proc = cotwin("testgen", *MODELS, "--domain", "MovementArgs_target_X=0..2.5", "-o", tmp_path / "t")
+    assert proc.returncode == 2 and "bound 2.5 is not written as an integer" in proc.stderr
+    proc = cotwin("testgen", *MODELS, "--domain", "MovementArgs_target_X=0..nan", "-o", tmp_path / "t")
+    assert proc.returncode == 2 and "values must be numbers" in proc.stderr
+
+
+def test_an_oracle_without_cycles_is_refused_at_the_oracle_not_at_the_index(stub_suite, tmp_path):
+    copy = tmp_path / "tests"
+    shutil.copytree(stub_suite, copy)
+    oracle = copy / json.loads((copy / "suite.json").read_text())["cases"][0]["oracle"]
+    record = json.loads(oracle.read_text())
+    for broken in ({k: v for k, v in record.items() if k != "cycles"}, {**record, "cycles": 3}, [1, 2]):
+        oracle.write_text(json.dumps(broken))
+        with pytest.raises(CotwinError) as err:
+            read_suite(copy)
+        assert str(err.value).startswith(f"{oracle}:1:1: error: not a case oracle: it has no list of cycles"), \
+            str(err.value)
+        assert "suite.json" not in str(err.value)
+
+
+def test_case_files_outside_the_suite_folder_are_refused_at_the_index_by_entry(stub_suite, tmp_path):
+    """A case entry's plan or oracle that is an absolute path or climbs out with .. was followed as written."""
+    copy = tmp_path / "tests"
+    shutil.copytree(stub_suite, copy)
+    data = json.loads((copy / "suite.json").read_text())
+    outside = tmp_path / "outside.oracle.json"
+    shutil.copy(copy / data["cases"][0]["oracle"], outside)
+    first, second = data["cases"][0]["name"], data["cases"][1]["name"]
+    data["cases"][0]["oracle"] = str(outside)
+    data["cases"][1]["plan"] = "../tests/" + data["cases"][1]["plan"]
+    data["cases"][2]["plan"] = "sub/../" + data["cases"][2]["plan"]  # within the folder: fine
+    (copy / "suite.json").write_text(json.dumps(data))
+    with pytest.raises(CotwinError) as err:
+        read_suite(copy)
+    index = copy / "suite.json"
+    assert str(err.value).splitlines() == [
+        f"{index}:1:1: error: case entry {first!r}: its oracle {str(outside)!r} lies outside the suite's folder "
+        "(a suite's files live in its folder)",
+        f"{index}:1:1: error: case entry {second!r}: its plan '../tests/{second}.csv' lies outside the suite's folder "
+        "(a suite's files live in its folder)"], str(err.value)

@@ -220,7 +220,9 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
         raise click.UsageError("--pt-log needs -o FILE: where to write the calibration")
     for option, path in (("--pt-log", pt_log), ("--check", check_log), ("--calibration", calibration)):
         if path is not None and not Path(path).is_file():
-            raise click.BadParameter(f"no file {path}", param_hint=option)
+            said = (f"{path} is a folder, not a file" if Path(path).is_dir() else
+                    f"{path} is not a regular file" if Path(path).exists() else f"no file {path}")
+            raise click.BadParameter(said, param_hint=option)
     if not math.isfinite(log_start):
         raise click.BadParameter(f"{log_start!r} is not a finite number", param_hint="--log-start")
     point = tool if tool in ("flange", "fingertips") else tool_point(tool)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import signal
 import sys
 from contextlib import contextmanager
@@ -252,6 +253,26 @@ def named_values(text: str, hint: str) -> tuple[str, list]:
         else:
             out = [int(v) if v.strip().lstrip("-").isdigit() else float(v) for v in values.split(",")]
     except ValueError:
+        if ".." in values:  # a bound such as 1e308 or 2.5 is a number, but no integer of a LOW..HIGH domain
+            for bound in values.split("..", 1):
+                try:
+                    int(bound)
+                    continue
+                except ValueError:
+                    pass
+                try:
+                    number = float(bound)
+                except ValueError:
+                    continue
+                if math.isnan(number):
+                    continue
+                shown = bound.strip()[:40]
+                if not math.isfinite(number) or abs(number) >= 2 ** 53:
+                    raise click.BadParameter(f"'{text[:80]}': the range is too large: bound {shown} is beyond what an "
+                                             f"integer domain LOW..HIGH can hold (at most {MAX_VALUES} values)",
+                                             param_hint=hint) from None
+                raise click.BadParameter(f"'{text[:80]}': bound {shown} is not written as an integer (LOW..HIGH "
+                                         "takes integers; NAME=v1,v2,... takes other numbers)", param_hint=hint) from None
         raise click.BadParameter(f"'{text[:80]}': values must be numbers", param_hint=hint) from None
     count = high - low + 1 if out is None else len(out)
     if count < 1:

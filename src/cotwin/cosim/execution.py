@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from typing import Callable, Iterable
 
 from ..diagnostics import CotwinError
-from .algorithm import Algorithm
+from .algorithm import ALGORITHMS, Algorithm
 from .observers import Observer, Stop
 from .state import StateError, count, fields, finite, of_type, pack, port_value, unpack
 from .system import System
@@ -94,6 +94,9 @@ def saved_execution(state: bytes) -> dict:
     data = fields(unpack(state, "Execution"), "execution", ("algorithm", "time", "steps", "step_size", "origin",
                                                              "values", "units"), ("models",))
     of_type(data["algorithm"], str, "algorithm")
+    if data["algorithm"] not in ALGORITHMS:
+        raise StateError(f"the saved state's algorithm {data['algorithm']!r:.60} is unknown (known: "
+                         f"{', '.join(ALGORITHMS)})")
     time = finite(data["time"], "time")
     steps = count(data["steps"], "number of steps", MAX_STEPS)
     step = finite(data["step_size"], "step size")

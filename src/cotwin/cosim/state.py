@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 
@@ -204,6 +205,10 @@ def unpack(blob: bytes | bytearray | memoryview, kind: str) -> object:
         raise StateError(f"a state saved by an earlier cotwin (a pickle, which this cotwin never reads: it could "
                          f"run code); save the {kind}'s state again with this cotwin")
     if bytes(view[:len(MAGIC)]) != MAGIC:
+        other = re.match(rb"cotwin-state ([0-9]{1,9})\n", bytes(view[:32]))
+        if other:  # a header of this format, of a version this cotwin does not read
+            raise StateError(f"a cotwin state of an unsupported version {int(other[1])} (this cotwin reads version "
+                             f"{MAGIC.split()[1].decode()}; expected a state of a {kind})")
         raise StateError(f"not a cotwin state (expected a state of a {kind})")
     at = len(MAGIC) + 8
     if len(view) < at:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -208,9 +209,20 @@ def read_suite(folder: str | Path) -> SuiteFile:
     for entry in entries:
         try:
             name, answers = entry["name"], entry["answers"]
-            record = _read_json(folder / entry["oracle"], "case oracle")
-            cycles = record["cycles"]
-            if answers not in ("stub", "platform") or not isinstance(cycles, list):
+            for key in ("plan", "oracle"):  # a suite's files live in its folder: none is reached outside it
+                if not isinstance(entry[key], str):
+                    raise TypeError(key)
+                if os.path.isabs(entry[key]) or os.path.normpath(entry[key]).split(os.sep)[0] == os.pardir:
+                    raise CotwinError([Finding(Location(str(index), 1, 1), Severity.ERROR,
+                                               f"case entry {str(name)[:40]!r}: its {key} {entry[key][:200]!r} lies "
+                                               f"outside the suite's folder (a suite's files live in its folder)")])
+            oracle_path = folder / entry["oracle"]
+            record = _read_json(oracle_path, "case oracle")
+            cycles = record.get("cycles") if isinstance(record, dict) else None
+            if not isinstance(cycles, list):  # the oracle's fault, at the oracle (not at the index)
+                raise CotwinError([Finding(Location(str(oracle_path), 1, 1), Severity.ERROR,
+                                           "not a case oracle: it has no list of cycles")])
+            if answers not in ("stub", "platform"):
                 raise KeyError("answers")
             cases.append(SuiteCase(name, answers, list(entry.get("covers", [])), list(entry.get("items", [])), cycles,
                                    folder / entry["plan"]))
