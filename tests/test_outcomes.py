@@ -188,3 +188,18 @@ def test_only_events_whose_name_says_a_move_stopped_stop_a_command():
     for name in ("noCollision", "collisionFree", "faultCleared", "resetFault", "setDefault", "defaultPose",
                  "moveCompleted", "robotStopped", "nonfeasibleMoveDiscreteCommand"):
         assert not stopping(name), name
+
+
+def test_a_command_taken_in_a_step_of_several_d_model_cycles_is_taken(tmp_path):
+    """With [cosim] parameters cycle_period shorter than the step (here five cycles a step) the d-model goes
+    from Idle past Requested's exec in the step that reads the move: the move was called 'not taken' (CycleReads
+    followed one cycle), though the arm moved and came back."""
+    from conftest import EXAMPLES
+
+    from cotwin.twin.assembly.scenario import read_plan
+
+    system = load(EXAMPLES / "ur5e" / "cotwin.toml").with_parameters(cycle_period=0.02)
+    plan = tmp_path / "plan.csv"
+    plan.write_text(HEADER + "500,true,0,23,1\n")
+    (move,) = predict(system, read_plan(plan, system.models.program), horizon=6.0).commands
+    assert (move.accepted, move.verdict) == (True, "completed"), move.describe()

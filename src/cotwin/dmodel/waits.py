@@ -68,9 +68,13 @@ class CycleReads:
     """Which platform input events a machine may have read in a cycle that took it from one leaf to another
     (`between`): the events the guards read on the cycle's possible paths from the leaf (its ways out, or those
     of a state enclosing it) through junctions and the states entered (up to their `exec`) to the other leaf
-    (or a state enclosing it). An over-approximation: an event outside it was not taken in that cycle (a
-    command the d-model read while an earlier one moved it on: cotwin.twin.assembly.outcomes). None where it
-    cannot tell (a RoboChart trigger on the way, or too many paths)."""
+    (or a state enclosing it), with the guards of the `exec` transitions out of that leaf (or a state enclosing
+    it: one of them chosen there ends the cycle, its target entered in the next) and the events the machine's
+    actions and software operations read anywhere (an `if $e` in an entry action). An over-approximation: an
+    event outside it was not taken in that cycle (a command the d-model read while an earlier one moved it on:
+    cotwin.twin.assembly.outcomes). `several`: the step ran several cycles (a d-model cycle_period shorter than
+    the step): the paths then go on past `exec`. None where it cannot tell (a RoboChart trigger on the way, too
+    many paths, or no path it knows of from the one leaf to the other)."""
 
     LIMIT = 20000  # paths explored per question, beyond which it cannot tell
 
@@ -80,14 +84,15 @@ class CycleReads:
         self._machines = {m.index: m for m in program.machines}
         self._platform = {m.index: {event: name for name, routes in program.input_routes.items()
                                     for machine, event in routes if machine == m.index} for m in program.machines}
+        self._actions = {m.index: _action_reads(m, self._platform[m.index]) for m in program.machines}
 
-    def between(self, machine: int, before: int, after: int) -> frozenset[str] | None:
-        key = (machine, before, after)
+    def between(self, machine: int, before: int, after: int, several: bool = False) -> frozenset[str] | None:
+        key = (machine, before, after, several)
         if key not in self._cache:
-            self._cache[key] = self._explore(machine, before, after)
+            self._cache[key] = self._explore(machine, before, after, several)
         return self._cache[key]
 
-    def _explore(self, machine: int, before: int, after: int) -> frozenset[str] | None:
+    def _explore(self, machine: int, before: int, after: int, several: bool = False) -> frozenset[str] | None:
         m = self._machines.get(machine)
         leaves = m.graph.leaves if m is not None else []
         if not (0 <= before < len(leaves) and 0 <= after < len(leaves)):
@@ -95,6 +100,7 @@ class CycleReads:
         platform, start, goal = self._platform[machine], leaves[before], leaves[after]
         arrivals = {id(goal), *(id(a) for a in goal.ancestors())}
         found: set[str] = set()
+        arrived = False
         stack = [(edge, frozenset()) for node in (start, *start.ancestors()) for edge in node.outgoing]
         seen: set[tuple[int, frozenset]] = set()
         while stack:
@@ -108,12 +114,46 @@ class CycleReads:
             target = edge.target
             if id(target) in arrivals:
                 found |= read
+                arrived = True
             inside, todo = [], [target]
             while todo:  # the target and every node within it (a composite state's initial junction ...)
                 node = todo.pop()
                 inside.append(node)
                 todo.extend(node.children)
             stack.extend((e, read) for node in (*inside, *target.ancestors()) for e in node.outgoing
-                         if not e.transition.is_exec)
-        return frozenset(found)
+                         if several or not e.transition.is_exec)
+        if not arrived:
+            return None
+        for node in (goal, *goal.ancestors()):  # the exec transition chosen where the cycle ends
+            for e in node.outgoing:
+                if e.transition.is_exec:
+                    if e.transition.trigger is not None:
+                        return None
+                    found |= _events(e.transition.condition, platform)[0]
+        return frozenset(found | self._actions[machine])
+
+
+def _action_reads(m, platform: dict[str, str]) -> set[str]:
+    """The platform events a machine's actions (entry, during, exit, a transition's) read, and everything its
+    software operations read (their guards too: CycleReads follows the machine's own graph only)."""
+    found: set[str] = set()
+
+    def read(expr):
+        events, other = _events(expr, platform)
+        found.update(events if not other else platform.values())  # an event it cannot name: any of them
+
+    for body in (m, *getattr(m, "frames", ())):
+        for node in body.graph.nodes:
+            state = node.node
+            for stmt in (getattr(state, "entry", None), getattr(state, "during", None), getattr(state, "exit", None)):
+                for sub in s.statements(stmt):
+                    for expr in s.statement_expressions(sub):
+                        read(expr)
+            for e in node.outgoing:
+                for sub in s.statements(e.transition.action):
+                    for expr in s.statement_expressions(sub):
+                        read(expr)
+                if body is not m:
+                    read(e.transition.condition)
+    return found
 

@@ -153,6 +153,11 @@ class CommandLedger(Observer):
         self._queue = source.command_queue if source is not None else None  # cotwin.twin.assembly.commands.CommandQueue
         self._seen = self._count()
         self._lag = 1 if execution.algorithm.name == "jacobi" else 0  # steps until the d-model reads a command
+        spec = getattr(self.system, "spec", None)
+        period = (getattr(spec, "parameters", None) or {}).get("cycle_period")
+        # a cycle_period shorter than the step runs several d-model cycles a step (cotwin.dmodel.fmu): a state
+        # change then spans cycles, on paths past `exec` (CycleReads `several`)
+        self._several = isinstance(period, (int, float)) and 0 < period < execution.step_size * (1 - 1e-9)
         slots = execution.algorithm.slots
         self._calls_read = execution.reader([(DMODEL.name, c) for c in self._calls if (DMODEL.name, c) in slots])
         self._events_read = execution.reader([(MAPPING.name, e) for e in self._events])
@@ -217,7 +222,8 @@ class CommandLedger(Observer):
         (an earlier move going on) is not taken when no path of that change reads it."""
         for m, k in self._readers.get(event, ()):
             was, now = (before[k], after[k]) if k < min(len(before), len(after)) else (None, None)
-            read = self.cycles.between(m, was, now) if isinstance(was, int) and isinstance(now, int) else None
+            read = self.cycles.between(m, was, now, self._several) if isinstance(was, int) and isinstance(now, int) \
+                else None
             if read is None or event in read:
                 return True
         return False
