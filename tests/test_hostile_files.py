@@ -199,3 +199,15 @@ def test_an_output_folder_that_is_a_file_and_an_output_file_that_is_a_folder_are
 
     with pytest.raises(CotwinError, match="is a folder: cannot write a file there"):
         write_text(tmp_path, "x")
+
+
+def test_an_output_whose_name_is_not_utf8_or_is_cut_inside_a_character_is_written(tmp_path):
+    """Linux names are bytes: one that is not UTF-8 (spelled with surrogates) failed with UnicodeEncodeError,
+    a traceback, since the temporary name beside it was cut to 200 bytes; a 255-byte name of 2-byte
+    characters is cut inside one."""
+    from cotwin.files import write_text
+
+    for name in (os.fsdecode(b"\xffplan.json"), "\u00e9" * 125 + ".json", "a" + "\u00e9" * 124 + "b.json"):
+        write_text(tmp_path / name, "{}\n")
+        assert (tmp_path / name).read_text() == "{}\n"
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".part")]

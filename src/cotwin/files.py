@@ -140,7 +140,9 @@ def output(path: str | Path, inputs: Iterable[str | Path | None] = (), mode: int
         raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR, "is a folder: cannot write a file there")])
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        stem = path.name.encode()[:200].decode(errors="ignore")  # a name of 255 bytes has a temporary one too
+        # a name of 255 bytes has a temporary one too: its first 200 bytes as the file system spells them (a name
+        # that is not UTF-8 has surrogates, which a strict encode refused; a cut character stays bytes)
+        stem = os.fsdecode(os.fsencode(path.name)[:200])
         fd, part = tempfile.mkstemp(prefix=f".{stem}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
     except OSError as err:  # named by the file asked for, not the temporary one beside it
         raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR,
