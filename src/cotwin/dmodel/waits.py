@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..robosim import syntax as s
-from ..robosim.dmodel_elements import Junction
+from ..robosim.dmodel_elements import Junction, State
 from .program import Program
 
 
@@ -142,10 +142,10 @@ def _action_reads(m, platform: dict[str, str]) -> set[str]:
         events, other = _events(expr, platform)
         found.update(events if not other else platform.values())  # an event it cannot name: any of them
 
-    for body in (m, *getattr(m, "frames", ())):
+    for body in (m, *m.frames):
         for node in body.graph.nodes:
             state = node.node
-            for stmt in (getattr(state, "entry", None), getattr(state, "during", None), getattr(state, "exit", None)):
+            for stmt in (state.entry, state.during, state.exit) if isinstance(state, State) else ():
                 for sub in s.statements(stmt):
                     for expr in s.statement_expressions(sub):
                         read(expr)

@@ -153,8 +153,7 @@ class CommandLedger(Observer):
         self._queue = source.command_queue if source is not None else None  # cotwin.twin.assembly.commands.CommandQueue
         self._seen = self._count()
         self._lag = 1 if execution.algorithm.name == "jacobi" else 0  # steps until the d-model reads a command
-        spec = getattr(self.system, "spec", None)
-        period = (getattr(spec, "parameters", None) or {}).get("cycle_period")
+        period = self.system.spec.parameters.get("cycle_period")
         # a cycle_period shorter than the step runs several d-model cycles a step (cotwin.dmodel.fmu): a state
         # change then spans cycles, on paths past `exec` (CycleReads `several`)
         self._several = isinstance(period, (int, float)) and 0 < period < execution.step_size * (1 - 1e-9)
