@@ -162,6 +162,25 @@ def test_a_plan_column_of_an_unknown_robot_is_located(tmp_path):
     assert "kuka.moveDiscreteCommand" in finding.message and (finding.location.line, finding.location.column) == (1, at)
 
 
+def test_a_plan_header_with_a_cell_quoted_over_two_lines_is_an_error_not_an_index_error(tmp_path):
+    """A quoted header cell holding a line break makes more header cells than its first line shows: the columns
+    after it are located at the line's start (an IndexError in both plan readers, found by the input fuzzer)."""
+    from conftest import EXAMPLES
+
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.assembly.scenario import read_plan
+
+    cell = CellSystem(load_project(CELL / "cotwin.toml"))
+    plan = tmp_path / "plan.csv"
+    plan.write_text('timestep,"x\ny",ur5e.moveDiscreteCommand,ur5e.moveDiscreteCommand\n1000,1,true,true\n')
+    with pytest.raises(CotwinError, match="appears twice"):
+        read_cell_plan(plan, cell.program, list(ROBOTS))
+    plan.write_text('timestep,"x\ny",moveDiscreteCommand,moveDiscreteCommand\n1000,1,true,true\n')
+    with pytest.raises(CotwinError) as err:
+        read_plan(plan, load(EXAMPLES / "ur5e" / "cotwin.toml").models.program)
+    assert any("appears twice" in f.message and f.location.line == 1 for f in err.value.findings), str(err.value)
+
+
 def test_a_robot_given_some_of_its_cells_in_a_row_or_a_huge_cell_is_located(tmp_path):
     """A row gives a robot all its columns or none: one empty argument beside its event (it was sent as 0), or
     arguments with no event (the row was dropped without a word), is an error at the first empty cell; a cell

@@ -159,17 +159,18 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
 
     header = [h.strip() for h in rows[0]]
     starts = _column_starts(lines[0])  # where each cell of the header starts (characters, 1-based)
+    column = lambda k: starts[k] if k < len(starts) else 1  # noqa: E731 - a quoted header cell may hold commas or lines
     columns: dict[int, tuple[str, str]] = {}
     for k, h in enumerate(header[1:], start=1):
         robot, _, port = h.partition(".")
         if robot not in robots or not port:
-            problem(1, starts[k], f"column {h!r}: a cell's plan names ROBOT.port, ROBOT one of {', '.join(robots)}"
+            problem(1, column(k), f"column {h!r}: a cell's plan names ROBOT.port, ROBOT one of {', '.join(robots)}"
                                   f"{did_you_mean(robot, robots) if port else ''}")
         elif port not in ports:
-            problem(1, starts[k], f"column {h!r}: unknown d-model input '{port}'{did_you_mean(port, ports)} "
+            problem(1, column(k), f"column {h!r}: unknown d-model input '{port}'{did_you_mean(port, ports)} "
                                   f"(known: {', '.join(ports)})")
         elif h in header[1:k]:
-            problem(1, starts[k], f"column {h!r} appears twice")
+            problem(1, column(k), f"column {h!r} appears twice")
         else:
             columns[k] = (robot, port)
     for ev in program.inputs:
@@ -178,7 +179,7 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
             missing = [port for port, _ in ev.value_ports if port not in given]
             if ev.name in given and missing:
                 at = next(k for k, column in columns.items() if column == (robot, ev.name))
-                problem(1, starts[at], f"column '{robot}.{ev.name}' without its argument column(s) "
+                problem(1, column(at), f"column '{robot}.{ev.name}' without its argument column(s) "
                               f"{', '.join(robot + '.' + m for m in missing)}")
     plans: dict[str, list[Command]] = {r: [] for r in robots}
     together: dict[str, list[list[int]]] = {r: [] for r in robots}  # per robot, columns given together

@@ -190,16 +190,17 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
 
     lines, rows = plan_rows(path, text)
     header = [h.strip() for h in rows[0]]
-    columns = _column_starts(lines[0])
+    starts = _column_starts(lines[0])
+    column = lambda k: starts[k] if k < len(starts) else 1  # noqa: E731 - a quoted header cell may hold commas or lines
     for k, h in enumerate(header[1:], start=1):
         if h not in ports:
-            problem(1, columns[k], f"unknown d-model input '{h}'{did_you_mean(h, ports)} (known: {', '.join(ports)})")
+            problem(1, column(k), f"unknown d-model input '{h}'{did_you_mean(h, ports)} (known: {', '.join(ports)})")
         elif h in header[1:k]:
-            problem(1, columns[k], f"column '{h}' appears twice")
+            problem(1, column(k), f"column '{h}' appears twice")
     for ev in program.inputs:
         missing = [port for port, _ in ev.value_ports if port not in header]
         if ev.name in header and missing:
-            problem(1, columns[header.index(ev.name)], f"column '{ev.name}' without its argument column(s) "
+            problem(1, column(header.index(ev.name)), f"column '{ev.name}' without its argument column(s) "
                     f"{', '.join(missing)}: a command takes its arguments from its own row")
     commands = []
     for line, row in data_rows(lines, rows, len(header), problem):
