@@ -205,7 +205,7 @@ def test_a_step_that_is_not_a_whole_number_of_the_default_physics_step_is_refuse
 
     twins, _ = built
     twin = twins["cotwin.toml"]
-    with pytest.raises(CotwinError, match="not a whole number of cotwin's 0.001 s physics steps"):
+    with pytest.raises(CotwinError, match="not a whole number of the simulator's 1 ms physics steps"):
         predict(twin, twin.commands[:1], None, horizon=1.0, step=step, artefacts=tmp_path)
     with pytest.raises(CotwinError, match="not a whole number"):
         Forks(twin, None, step=step, artefacts=tmp_path)

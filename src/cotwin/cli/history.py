@@ -37,9 +37,9 @@ def history_list(db: str | None, folder: str | None) -> None:
     url = history_db(db, folder)
     found = list_runs(url)
     if not found:  # an empty store, or a database (an empty file) that is no cotwin history store
-        from ..twin.services.history import _redact
+        from ..twin.services.history import redacted
 
-        click.echo(f"error: no run in the history database {_redact(url)} (cotwin twin records its runs there)",
+        click.echo(f"error: no run in the history database {redacted(url)} (cotwin twin records its runs there)",
                    err=True)
         raise SystemExit(1)
     for run in found:

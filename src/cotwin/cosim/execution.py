@@ -125,6 +125,13 @@ def saved_execution(state: bytes) -> dict:
     return {**data, "time": time, "steps": steps, "step_size": step, "origin": origin, "models": models}
 
 
+def check_models(saved: dict[str, str], here: dict[str, str]) -> None:
+    """StateError naming what differs when a state was saved from other models than these."""
+    differences = model_differences(saved, here)
+    if differences:
+        raise StateError(f"the state was saved from other models than these: {'; '.join(differences)}")
+
+
 def model_differences(saved: dict[str, str], here: dict[str, str]) -> list[str]:
     """What differs between the models (name -> digest) a state was saved from and these; nothing when
     either does not name its models."""
@@ -360,9 +367,7 @@ class Execution:
         saved = data["units"]
         chosen = set(self.system.units) if units is None else set(units)
         missing = sorted(chosen - set(saved))
-        differences = model_differences(data["models"], self.system.models)
-        if differences:
-            raise StateError(f"the state was saved from other models than these: {'; '.join(differences)}")
+        check_models(data["models"], self.system.models)
         if units is None and set(saved) != set(self.system.units):
             raise StateError(f"the saved state is of units {', '.join(sorted(saved))}, this system has "
                              f"{', '.join(sorted(self.system.units))}")

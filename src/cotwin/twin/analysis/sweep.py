@@ -190,12 +190,9 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
     try:
         system = load(project, reader=READER)
         if state is not None:  # a state of other models fails every what-if alike: said once, before any runs
-            from ...cosim.execution import model_differences, saved_execution
-            from ...cosim.state import StateError
+            from ...cosim.execution import check_models, saved_execution
 
-            differences = model_differences(saved_execution(state)["models"], system.models.digests)
-            if differences:
-                raise StateError(f"the state was saved from other models than these: {'; '.join(differences)}")
+            check_models(saved_execution(state)["models"], system.models.digests)
         from ..services.whatif import physics_timing
 
         physics_step = physics_timing(system.spec.step if step is None else step, physics_step)  # once, not per what-if

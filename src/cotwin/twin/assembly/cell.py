@@ -36,7 +36,7 @@ from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...files import read_text
 from ..project import TwinProject, check_timing
 from .outcomes import INFEASIBLE
-from .scenario import Command, _column_starts, data_rows, parse_value, plan_rows, row_time, scenario_ports
+from .scenario import Command, _column_at, _column_starts, data_rows, parse_value, plan_rows, row_time, scenario_ports
 from .system import (DMODEL, MAPPING, CommandPorts, MachinePort, TwinSystem, UnitSpec, build_scene, load_models,
                      multimodel)
 
@@ -159,7 +159,7 @@ def read_cell_plan(path: str | Path, program, robots: list[str]) -> dict[str, li
 
     header = [h.strip() for h in rows[0]]
     starts = _column_starts(lines[0])  # where each cell of the header starts (characters, 1-based)
-    column = lambda k: starts[k] if k < len(starts) else 1  # noqa: E731 - a quoted header cell may hold commas or lines
+    column = lambda k: _column_at(starts, k)  # noqa: E731
     columns: dict[int, tuple[str, str]] = {}
     for k, h in enumerate(header[1:], start=1):
         robot, _, port = h.partition(".")

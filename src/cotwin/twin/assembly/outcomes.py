@@ -119,8 +119,9 @@ class Summary:
 
     def warnings(self) -> list[str]:
         out = [f"blocked: {b}" for b in self.blocked]
-        if self.outcomes and not self.counts()["completed"]:
-            applied = len(self.outcomes) - self.counts()["not applied"]  # one due after the end was never applied
+        counts = self.counts()
+        if self.outcomes and not counts["completed"]:
+            applied = len(self.outcomes) - counts["not applied"]  # one due after the end was never applied
             out.append(f"no command completed ({applied} applied)" if applied == len(self.outcomes) else
                        f"no command completed ({applied} of {len(self.outcomes)} applied)")
         return out

@@ -191,7 +191,7 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
     lines, rows = plan_rows(path, text)
     header = [h.strip() for h in rows[0]]
     starts = _column_starts(lines[0])
-    column = lambda k: starts[k] if k < len(starts) else 1  # noqa: E731 - a quoted header cell may hold commas or lines
+    column = lambda k: _column_at(starts, k)  # noqa: E731
     for k, h in enumerate(header[1:], start=1):
         if h not in ports:
             problem(1, column(k), f"unknown d-model input '{h}'{did_you_mean(h, ports)} (known: {', '.join(ports)})")
@@ -214,12 +214,18 @@ def read_plan(path: str | Path, program: Program) -> list[Command]:
             try:
                 values.append((h, parse_value(cell, ports[h])))
             except ValueError as err:
-                problem(line, starts[k] if k < len(starts) else 1, f"column '{h}': '{cell.strip()[:40]}' {err}")
+                problem(line, _column_at(starts, k), f"column '{h}': '{cell.strip()[:40]}' {err}")
                 ok = False
         if ok:
             commands.append(Command(time_ms / 1000.0, tuple(values), f"{path}:{line}:1"))
     raise_problems(problems)
     return sorted(commands, key=lambda c: c.time)
+
+
+def _column_at(starts: list[int], k: int) -> int:
+    """Where cell k starts (_column_starts), or 1 where the line shows fewer cells than csv read (a quoted cell
+    holding a comma or a line break)."""
+    return starts[k] if k < len(starts) else 1
 
 
 def _column_starts(line: str) -> list[int]:
@@ -356,6 +362,14 @@ def read_scenario(path: str | Path, program: Program) -> list[Command]:
     return read_toml(path, program) if str(path).endswith(".toml") else read_plan(path, program)
 
 
+def occurrences(command: Command, events: set[str], arguments: dict[str, list[str]]) -> list[tuple[str, dict]]:
+    """The events a command raises (its command events set true), in its order, each with the values of its own
+    arguments (`arguments`: event -> its argument ports): what ScenarioUnit offers, one occurrence a step."""
+    values = dict(command.values)
+    return [(port, {p: values[p] for p in arguments.get(port, ()) if p in values})
+            for port, value in command.values if port in events and value is True]
+
+
 def steps_before_due(due: float, origin: float, first: int, h: float, n: int) -> int:
     """How many of the next n steps (the first `first` steps after `origin`, of h s) offer no command due at
     `due`: a step starting at t offers those due before t + h (ScenarioUnit.step)."""
@@ -419,12 +433,10 @@ class ScenarioUnit(PythonUnit):
             self._next += 1
             if c.time < start - eps:
                 continue
-            values = dict(c.values)
-            raised = [port for port, value in c.values if port in self.events and value is True]
-            for event in raised:
-                self.queue.offer(Occurrence(event, tuple((p, values[p]) for p in self.arguments[event] if p in values),
-                                            c.where, c.time))
-            bound = {p for event in raised for p in self.arguments[event]}
+            raised = occurrences(c, self.events, self.arguments)
+            for event, args in raised:
+                self.queue.offer(Occurrence(event, tuple(args.items()), c.where, c.time))
+            bound = {p for event, _ in raised for p in self.arguments[event]}
             for port, value in c.values:  # values without their event: set as they come
                 if port not in self.events and port not in bound:
                     self.values[port] = value

@@ -56,16 +56,24 @@ def routing_key_problem(value: str) -> str | None:
     return None
 
 
+def off_physics(step: float, physics: float = PHYSICS_STEP) -> str | None:
+    """Why `step` is not a whole number of physics steps of `physics` s (None when it is)."""
+    ticks = step / physics
+    if round(ticks) >= 1 and abs(ticks - round(ticks)) <= 1e-6 * ticks:
+        return None
+    nearest = max(1, round(ticks)) * physics
+    return (f"{step!r} s is not a whole number of the simulator's {physics * 1000:g} ms physics steps "
+            f"(nearest: {nearest:g} s)")
+
+
 def timing_problems(step: float, end: float, cycle_period: float | None = None) -> list[tuple[str, str]]:
     """(key, message) for a step and end time a run cannot keep exactly: a step that is not a whole
     number of the simulator's physics steps, an end time that is not a whole number of steps (it would
     be rounded), more than MAX_STEPS steps, or a d-model cycle that does not divide the step."""
     out = []
-    ticks = step / PHYSICS_STEP
-    if round(ticks) < 1 or abs(ticks - round(ticks)) > 1e-6 * ticks:
-        nearest = max(1, round(ticks)) * PHYSICS_STEP
-        out.append(("step", f"{step!r} s is not a whole number of the simulator's {PHYSICS_STEP * 1000:g} ms "
-                            f"physics steps (nearest: {nearest:g} s)"))
+    off = off_physics(step)
+    if off is not None:
+        out.append(("step", off))
     try:
         step_count(end, step)
     except CotwinError as err:

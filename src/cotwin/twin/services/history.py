@@ -135,7 +135,7 @@ def engine_for(url: str, create: bool = True) -> sa.Engine:
         with engine.connect() as conn:
             schema = _schema(conn, create)
     except (sa.exc.SQLAlchemyError, ImportError, ValueError) as err:
-        raise CotwinError(f"cannot open the history database {_redact(url)}: {type(err).__name__}: "
+        raise CotwinError(f"cannot open the history database {redacted(url)}: {type(err).__name__}: "
                           f"{str(err).splitlines()[0][:200]}") from None
     if schema is not None:
         engine = engine.execution_options(schema_translate_map={None: schema})
@@ -143,7 +143,7 @@ def engine_for(url: str, create: bool = True) -> sa.Engine:
         with engine.connect() as conn:
             _ours(conn, schema, url)
     except sa.exc.SQLAlchemyError as err:
-        raise CotwinError(f"cannot read the history database {_redact(url)}: {type(err).__name__}: "
+        raise CotwinError(f"cannot read the history database {redacted(url)}: {type(err).__name__}: "
                           f"{str(err).splitlines()[0][:200]}") from None
     return engine
 
@@ -182,7 +182,7 @@ def _ours(conn, schema: str | None, url: str) -> None:
             missing = _missing(inspector, name, schema)
             if missing:
                 where = f"{schema}.{name}" if schema else name
-                raise CotwinError(f"the history database {_redact(url)} has a table '{where}' that is not cotwin's "
+                raise CotwinError(f"the history database {redacted(url)} has a table '{where}' that is not cotwin's "
                                   f"(it has no column {', '.join(missing[:5])}): give cotwin a database of its own "
                                   f"({'another SQLite file' if schema is None else 'or drop that table'})")
 
@@ -200,13 +200,13 @@ def _reading(url: str, what):
     try:
         return what(engine)
     except sa.exc.SQLAlchemyError as err:
-        raise CotwinError(f"cannot read the history database {_redact(url)}: {type(err).__name__}: "
+        raise CotwinError(f"cannot read the history database {redacted(url)}: {type(err).__name__}: "
                           f"{str(err).splitlines()[0][:200]}") from None
     finally:
         engine.dispose()
 
 
-def _redact(url: str) -> str:
+def redacted(url: str) -> str:
     try:
         return sa.engine.make_url(url).render_as_string(hide_password=True)
     except Exception:  # noqa: BLE001
@@ -382,7 +382,7 @@ def read_run(url: str, run_id: int, now: float | None = None, max_points: int | 
     costs a reader what a short one does); with `max_events`, at most that many of each kind of event (the
     first ones). `counts` says how many the store holds of each."""
     if isinstance(run_id, bool) or not isinstance(run_id, int) or not 0 < run_id <= MAX_RUN_ID:
-        raise CotwinError(f"no run {run_id} in the history {_redact(url)} (run ids are 1, 2, ...)")
+        raise CotwinError(f"no run {run_id} in the history {redacted(url)} (run ids are 1, 2, ...)")
 
     def read(engine) -> dict:
         with engine.connect() as conn:
@@ -398,7 +398,7 @@ def read_run(url: str, run_id: int, now: float | None = None, max_points: int | 
                 out["alarms"] = [_json(r.event, "an alarm") for r in _events(conn, alarms, run_id, alarms.c.time,
                                                                              max_events, counts)]
             except ValueError as err:  # JSON written by something else than the recorder
-                raise CotwinError(f"run {run_id} in the history {_redact(url)} is damaged: {err}") from None
+                raise CotwinError(f"run {run_id} in the history {redacted(url)} is damaged: {err}") from None
             out["commands"] = [dict(r) for r in _events(conn, commands, run_id, commands.c.step, max_events, counts)]
             out["states"] = [dict(r) for r in _events(conn, states, run_id, states.c.step, max_events, counts)]
             schema = engine.get_execution_options().get("schema_translate_map", {}).get(None)
@@ -413,16 +413,16 @@ def read_run(url: str, run_id: int, now: float | None = None, max_points: int | 
 def _record(conn, url: str, run_id: int, now: float | None = None) -> tuple[dict, dict]:
     """A run's row (aged) and its columns per side, or CotwinError: no such run, or a damaged one."""
     if not _has_runs(conn):
-        raise CotwinError(f"no run {run_id} in the history {_redact(url)} (it holds no runs)")
+        raise CotwinError(f"no run {run_id} in the history {redacted(url)} (it holds no runs)")
     run = conn.execute(sa.select(runs).where(runs.c.id == run_id)).mappings().first()
     if run is None:
-        raise CotwinError(f"no run {run_id} in the history {_redact(url)}")
+        raise CotwinError(f"no run {run_id} in the history {redacted(url)}")
     try:
         columns = _json(run["columns"], "its columns")
     except ValueError as err:
-        raise CotwinError(f"run {run_id} in the history {_redact(url)} is damaged: {err}") from None
+        raise CotwinError(f"run {run_id} in the history {redacted(url)} is damaged: {err}") from None
     if not isinstance(columns, dict) or not all(isinstance(c, list) for c in columns.values()):
-        raise CotwinError(f"run {run_id} in the history {_redact(url)} is damaged: its columns are not a JSON "
+        raise CotwinError(f"run {run_id} in the history {redacted(url)} is damaged: its columns are not a JSON "
                           "object of lists")
     return _aged(conn, dict(run), now), columns
 
@@ -440,7 +440,7 @@ def export_csv(url: str, run_id: int, side: str, path: str | Path) -> Path:
     """One side of a run as a Maestro-format CSV (the same columns and spelling as the run wrote), read from
     the store a page at a time; never written over the store itself."""
     if isinstance(run_id, bool) or not isinstance(run_id, int) or not 0 < run_id <= MAX_RUN_ID:
-        raise CotwinError(f"no run {run_id} in the history {_redact(url)} (run ids are 1, 2, ...)")
+        raise CotwinError(f"no run {run_id} in the history {redacted(url)} (run ids are 1, 2, ...)")
     store = sqlite_path(url)
     check_outputs([path], [store])
 
@@ -464,5 +464,5 @@ def _write_side(conn, url: str, run_id: int, side: str, columns: list, path, sto
             for t, values in _side_samples(conn, run_id, side):
                 writer.writerow([format_value(round(t, 12)), *(format_value(v) for v in values)])
         except (ValueError, TypeError) as err:
-            raise CotwinError(f"run {run_id} in the history {_redact(url)} is damaged: {err}") from None
+            raise CotwinError(f"run {run_id} in the history {redacted(url)} is damaged: {err}") from None
     return Path(path)

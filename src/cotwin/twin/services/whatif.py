@@ -74,22 +74,19 @@ def physics_timing(step: float, physics_step: float | None, what: str = "physics
     to MAX_PHYSICS_STEP of which the communication step is a whole number. cotwin's 1 ms is the default;
     a coarser one is for a twin whose calibrated fidelity was measured to hold at it (benchmarks/calibration.py
     replays a recorded run at several)."""
-    if physics_step is None:  # cotwin's own: the step must be a whole number of it too (as a project's step is)
-        from ...pmodel.mjcf import TIMESTEP
+    from ..project.sections import off_physics
 
-        ticks = step / TIMESTEP
-        if round(ticks) < 1 or abs(ticks - round(ticks)) > 1e-6 * ticks:
-            raise CotwinError(f"the communication step {step:g} s is not a whole number of cotwin's {TIMESTEP:g} s "
-                              f"physics steps: the simulator would run {max(1, round(ticks)) * TIMESTEP:g} s a step; "
-                              f"give a {what} of which it is a whole number")
+    if physics_step is None:  # cotwin's own: the step must be a whole number of it too (as a project's step is)
+        off = off_physics(step)
+        if off is not None:
+            raise CotwinError(f"the communication step {off}: give a {what} of which it is a whole number")
         return None
     if isinstance(physics_step, bool) or not isinstance(physics_step, numbers.Real) or \
             not MIN_PHYSICS_STEP <= float(physics_step) <= MAX_PHYSICS_STEP:  # NaN fails both
         raise CotwinError(f"{what} {physics_step!r:.40} s: give a number of seconds from {MIN_PHYSICS_STEP:g} to "
                           f"{MAX_PHYSICS_STEP:g} (cotwin's is 0.001)")
     physics_step = float(physics_step)
-    ticks = step / physics_step
-    if round(ticks) < 1 or abs(ticks - round(ticks)) > 1e-6 * ticks:
+    if off_physics(step, physics_step) is not None:
         raise CotwinError(f"{what} {physics_step:g} s: the communication step {step:g} s is not a whole number of "
                           f"them")
     return physics_step
@@ -453,14 +450,10 @@ def occurrences(program, events: set[str], plan: list[Command]) -> list[tuple[Co
     """The occurrences the plan's commands raise, in the order the controller applies them (ScenarioUnit: one
     per event a command raises, in the command's order, with its own arguments): a plan row may raise several
     events or none (a TwinManager plan CSV's row with every event false)."""
+    from ..assembly.scenario import occurrences as raised
+
     arguments = {ev.name: [port for port, _ in ev.value_ports] for ev in program.inputs}
-    out = []
-    for c in plan:
-        values = dict(c.values)
-        for port, value in c.values:
-            if port in events and value is True:
-                out.append((c, port, {p: values[p] for p in arguments.get(port, ()) if p in values}))
-    return out
+    return [(c, event, args) for c in plan for event, args in raised(c, events, arguments)]
 
 
 def _first(holds, about: float, limit: int = 1 << 20) -> int | None:

@@ -341,6 +341,6 @@ def _behind(status: dict) -> bool:
 
 
 def _redacted(url: str) -> str:
-    from ...services.history import _redact
+    from ...services.history import redacted
 
-    return _redact(url)
+    return redacted(url)
