@@ -187,6 +187,30 @@ def test_a_clock_slower_than_the_step_keeps_a_command_for_its_next_tick(tmp_path
         run_twin(late, tmp_path / "odd", step=0.03, end=2.0, plot=False, fmi=3, cycle_period=0.1)
 
 
+@pytest.mark.parametrize("algorithm_name, period", [("jacobi", 0.1), ("gauss-seidel", 0.1), ("jacobi", 0.3)])
+def test_an_fmi3_twins_commands_are_judged_at_the_dmodels_tick(tmp_path, algorithm_name, period):
+    """The paper's plan with the d-model an FMI 3.0 FMU: a command crosses the d-model in the event phase of the
+    tick that reads it (its own step, or a later one with a clock slower than the step), so the ledger judges it
+    there: every move is taken and completes, as the run shows, under Jacobi as under Gauss-Seidel."""
+    system = load(EXAMPLES / "ur5e" / "cotwin.toml")
+    ran = run_twin(system, tmp_path / "run", plot=False, fmi=3, algorithm=algorithm_name, cycle_period=period)
+    moves = [t for t, op, _ in ran.mapping.executed if op == "movediscrete"]
+    assert len(moves) == 4  # the run did every move
+    assert [o.verdict for o in ran.outcomes.outcomes] == ["completed"] * 4, ran.outcomes.lines()
+    assert ran.blocked == []
+
+
+def test_a_slow_clock_blocks_the_wait_it_misses_an_answer_in_not_the_one_it_reads_later(tmp_path):
+    """d-model cycles of 0.5 s: an answer of the platform delivered between two ticks is read at the next one, so
+    the wait for it is not blocked (the first move completes); a move's completion delivered in the tick that
+    takes the d-model into Moving is lost (RoboSim: an event lasts one cycle), and that wait is blocked."""
+    system = load(EXAMPLES / "ur5e" / "cotwin.toml")
+    ran = run_twin(system, tmp_path / "run", plot=False, fmi=3, cycle_period=0.5)
+    verdicts = [o.verdict for o in ran.outcomes.outcomes]
+    assert verdicts == ["completed", "never completed", "not taken", "not taken"], ran.outcomes.lines()
+    assert [(b.state, b.since) for b in ran.blocked] == [("Moving", pytest.approx(6.0))]
+
+
 def test_an_fmi3_twin_forks_from_its_saved_state_bit_for_bit(tmp_path):
     system = _short_plan(load(EXAMPLES / "ur5e" / "cotwin.toml"))
     fmu = tmp_path / "dmodel3.fmu"

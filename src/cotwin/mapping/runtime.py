@@ -615,9 +615,11 @@ class Mapping:
             return f"the mapping defines it as never occurring ({ev.model.loc})"
         return None
 
-    def cannot_come(self, name: str) -> str | None:
+    def cannot_come(self, name: str, read_after: int = 2) -> str | None:
         """Why the answer `name` cannot occur unless an operation runs (None if it may, or is no answer):
-        a condition of it on what operations assign is false, or it holds still and occurred already."""
+        a condition of it on what operations assign is false, or it holds still and occurred already, delivered
+        `read_after` reports ago or more (the d-model has read it by then: two under FMI 2.0, the step after it
+        also under Jacobi; none when asked just after a clocked d-model's tick, which read what came before)."""
         if name not in self.answers or name in self.pending:
             return None
         ev = self.events[name]
@@ -628,8 +630,8 @@ class Mapping:
             by = sorted({op for v in reads for op in self.assigners[v]})
             return (f"its condition `{_source_text(false)}` ({false.loc}) is false and only an operation "
                     f"({', '.join(by)}) changes {', '.join(reads)}")
-        if self.held.get(name, (False, None))[0] and self.reports - self.delivered.get(name, self.reports - 2) >= 2:
-            # delivered two reports ago or more: the d-model has read it (the step after it, also under Jacobi)
+        if self.held.get(name, (False, None))[0] and \
+                self.reports - self.delivered.get(name, self.reports - read_after) >= read_after:
             return ("it holds still and occurred already: it occurs again only when it stops holding or an operation "
                     f"assigns {', '.join(sorted(ev.reads & set(self.assigners)))}")
         return None

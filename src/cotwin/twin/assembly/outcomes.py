@@ -2,7 +2,8 @@
 
 `CommandLedger`, an observer, follows each command from the step that applied it (the source's
 `applied` list: cotwin.twin.assembly.commands) through the d-model and the mapping:
-- *taken*: in the step the d-model reads it (the next under Jacobi, the same under Gauss-Seidel) its
+- *taken*: in the step the d-model reads it (the next under Jacobi, the same under Gauss-Seidel; with an
+  FMI 3.0 d-model, the first step whose event phase ran its cycle: a clock slower than the step keeps it) its
   state changes or it calls an operation, by a way that reads the command's event (a change an earlier
   command's progress made, on transitions that never read it, is no taking: cotwin.dmodel.waits.CycleReads);
   else it was *not taken* (the d-model was busy: the state it read it in is named). A command taken is
@@ -154,6 +155,11 @@ class CommandLedger(Observer):
         self._queue = source.command_queue if source is not None else None  # cotwin.twin.assembly.commands.CommandQueue
         self._seen = self._count()
         self._lag = 1 if execution.algorithm.name == "jacobi" else 0  # steps until the d-model reads a command
+        dmodel = execution.system.units.get(DMODEL.name)
+        # a clocked d-model (FMI 3.0) reads a command at its clock's first tick from the point it was applied:
+        # in that point's event phase, or at a later one when the clock is slower than the step
+        self._clocked = dmodel if dmodel is not None and dmodel.ticks is not None else None
+        self._ticks = self._clocked.ticks if self._clocked is not None else None
         period = self.system.spec.parameters.get("cycle_period")
         # a cycle_period shorter than the step runs several d-model cycles a step (cotwin.dmodel.fmu): a state
         # change then spans cycles, on paths past `exec` (CycleReads `several`)
@@ -172,6 +178,10 @@ class CommandLedger(Observer):
     def step_complete(self, execution) -> None:
         t = execution.time
         states = self._state_read()
+        ticked = None  # whether a clocked d-model ran its cycle since the last step (None: it cycles every step)
+        if self._clocked is not None:
+            ticks, ticked = self._clocked.ticks, self._clocked.ticks != self._ticks
+            self._ticks = ticks
         calls = [c for c, v in zip(self._calls, self._calls_read()) if v is True]
         events = [e for e, v in zip(self._events, self._events_read()) if v is True]
         if self._count() > self._seen:
@@ -184,7 +194,7 @@ class CommandLedger(Observer):
                 self._waiting.append((self._lag, outcome, self._before))
         still = []
         for steps, outcome, before in self._waiting:
-            if steps > 0:
+            if (steps > 0) if ticked is None else not ticked:
                 still.append((steps - 1, outcome, before))
                 continue
             if (states != self._before or calls) and self._may_read(outcome.event, self._before, states):  # taken

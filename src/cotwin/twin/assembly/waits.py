@@ -65,10 +65,18 @@ class WaitWatch(Observer):
         self._states = execution.reader(self._ports)
         self._called = execution.reader([c for c in self._calls if c in slots])
         self._since = [(None, execution.time, 0)] * len(self._ports)  # (leaf, entered at, steps idle)
+        dmodel = execution.system.units.get(DMODEL.name)
+        # a clocked d-model (FMI 3.0) changes and reads only at its clock's ticks: idle is counted in ticks
+        self._clocked = dmodel if dmodel is not None and dmodel.ticks is not None else None
+        self._ticks = self._clocked.ticks if self._clocked is not None else None
 
     def step_complete(self, execution) -> None:
         if self.mapping is None:
             return
+        if self._clocked is not None:
+            if self._clocked.ticks == self._ticks:
+                return  # no cycle since the last step: nothing changed, nothing was read
+            self._ticks = self._clocked.ticks
         calling = any(v is True for v in self._called())
         for m, leaf in enumerate(self._states()):
             previous, entered, idle = self._since[m]
@@ -128,7 +136,7 @@ class WaitWatch(Observer):
                 else:
                     others.append(event)
             else:
-                why = self.mapping.cannot_come(event)
+                why = self.mapping.cannot_come(event, 2 if self._clocked is None else 0)
                 if why is None:
                     return  # an answer that may still come
                 reasons[event] = why
