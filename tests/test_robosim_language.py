@@ -292,6 +292,52 @@ def test_dollar_expressions_sends_and_platform_calls(tmp_path):
     assert [t[0] for t in trace] == [["move(20.0, 20)", "out!20"], ["flag!true"], ["real_out!20.0"], ["real_out!20.0"]]
 
 
+def test_robosim_dollar_forms_as_robotool_reads_them(tmp_path):
+    """RoboSim.xtext: SimRefExp is an Atomic (`$v[1]`), its value and predicate are CallExps (`$e.f(x)`,
+    `$e?x:ok(x)`), and OutputCommunication sends with `.` as with `!` (`$e.v`, `$e.(n + 1)`, `$e.r.a`)."""
+    files = machine("""	var x: int
+	var v: vector(int, 2) = [| 5, 6 |]
+	var r: Pair
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	state B { }
+	transition t1 { from A to B condition $go?x:big(x) action r.a = x; $out.r.a; $flag.(x > $v[2]) }
+	transition t2 { from A to B condition $go.twice($v[1]) action $out.(x + 1); $flag.true }
+	transition t3 { from A to B exec condition not ($go?x:big(x) \\/ $go.twice($v[1])) action $out.v[1] }
+	transition t4 { from B to A exec }""", """datatype Pair { a: int b: int }
+function big(n: int): boolean { postcondition result == (n > 10) }
+function twice(n: int): int { postcondition result == 2 * n }
+""")
+    trace = run_both(tmp_path, files, [{"go": 20}, {"go": 10}, {"go": 3}, {}])
+    assert [t[0] for t in trace] == [["flag!true", "out!20"], ["flag!true", "out!21"], [], ["out!5"]]
+
+
+def test_robosim_dollar_index_alone_is_no_statement(tmp_path):
+    files = machine("""	var v: vector(int, 2)
+	initial i
+	state A { }
+	transition t0 { from i to A action $v[1] }""")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    assert errors(check_paths([tmp_path])) == [
+        ("m.rst", 31, 37, "'$v[...]' is not a statement: assign it ('$v[i] = e')")]
+
+
+def test_strings_take_xtext_escapes_and_stay_on_one_line(tmp_path):
+    """Xtext's STRING terminal decodes \\" \\' \\\\ \\n \\t \\uXXXX; cotwin keeps a string on its line so that
+    an unclosed quote is reported where it is."""
+    from cotwin.robosim.parser import parse_text
+
+    source, findings = parse_text('function f(): string { postcondition result == "a\\"b\\\\c\\n\\u0041\\q" }\n', "f.rct")
+    assert not findings
+    literal = source.elements[0].postconditions[0].right
+    assert literal.value == 'a"b\\c\nA\\q'
+    _, findings = parse_text('function f(): string { postcondition result == "a\nb" }\n', "f.rct")
+    assert [(f.location.line, f.location.column, f.message) for f in findings] == [
+        (1, 48, 'unterminated string: " without a closing " on its line (a line break in a string is written \\n)')]
+
+
 def test_statements(tmp_path):
     files = machine("""	var r: Pair
 	var v: vector(int, 3)

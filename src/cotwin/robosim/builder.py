@@ -18,7 +18,7 @@ from .dmodel_elements import (
     Communication, Connection, Controller, Final, Initial, Interface, InterfaceUse, Junction, MachineRef, Module,
     OperationDef, OperationRef, PlatformRef, ProbabilisticJunction, RoboticPlatform, State, StateMachine, Transition,
 )
-from .build_items import _Args, _Group, _Params, _Tagged, _flatten, _ident, _of, _tagged
+from .build_items import _Args, _Group, _Params, _Tagged, _flatten, _ident, _of, _string, _tagged
 from .builder_pmodel import PModelBuilder
 
 
@@ -247,7 +247,7 @@ class Builder(PModelBuilder):
         return s.Literal(float(token), self._tok_loc(token))
 
     def string_lit(self, meta, token):
-        return s.Literal(str(token)[1:-1], self._tok_loc(token))
+        return s.Literal(_string(token), self._tok_loc(token))
 
     def bool_lit(self, meta, token):
         return s.Literal(str(token) == "true", self._tok_loc(token))
@@ -343,7 +343,11 @@ class Builder(PModelBuilder):
         name = items[1] if items[0].type == "DOLLAR" else items[0]
         suffixes = items[2:] if items[0].type == "DOLLAR" else items[1:]
         loc = self._tok_loc(name)
-        target: s.Expr = s.Name(s.QName((_ident(name),), loc), loc)
+        return self._selected(s.Name(s.QName((_ident(name),), loc), loc), suffixes)
+
+    @staticmethod
+    def _selected(target: s.Expr, suffixes) -> s.Expr:
+        """`target` with its field and index selections applied, in order."""
         for kind, value, where in suffixes:
             if kind == "field":
                 target = s.FieldAccess(target, value, where)
@@ -351,6 +355,20 @@ class Builder(PModelBuilder):
                 for index in value:
                     target = s.IndexAccess(target, index, where)
         return target
+
+    def dollar_dot_value(self, meta, _dollar, event, value):
+        """`$e.3`, `$e.(x + 1)`: RoboSim's output `$e.v`, the same as `$e!v`."""
+        return s.Send(s.QName((_ident(event),), self._tok_loc(event)), value, self._loc(meta))
+
+    def dollar_dot_send(self, meta, _dollar, event, *suffixes):
+        """`$e.x.f[1]`: RoboSim's output `$e.v` with a value written as a name (read as `$e!x.f[1]`)."""
+        kind, first, where = suffixes[0]
+        if kind != "field":
+            name = _ident(event)
+            self.diag.error(self._loc(meta), f"'${name}[...]' is not a statement: assign it ('${name}[i] = e')")
+            return s.Skip(self._loc(meta))
+        value = self._selected(s.Name(s.QName((first,), where), where), suffixes[1:])
+        return s.Send(s.QName((_ident(event),), self._tok_loc(event)), value, self._loc(meta))
 
     # ---- d-model ----
     def rst_file(self, meta, *items):
