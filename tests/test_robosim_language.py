@@ -338,6 +338,25 @@ def test_strings_take_xtext_escapes_and_stay_on_one_line(tmp_path):
         (1, 48, 'unterminated string: " without a closing " on its line (a line break in a string is written \\n)')]
 
 
+def test_rct_trigger_guards_binding_the_sender_are_read(tmp_path):
+    """RoboChart.xtext's Communication: `e[| s = from |]` and `e[| s = from | p |]` (was a syntax error,
+    which refused the whole RoboTool project holding the .rct file)."""
+    (tmp_path / "a.rct").write_text("""package rc
+interface I { event g: int }
+stm M {
+	uses I
+	var x: int
+	initial i
+	state S {}
+	transition t0 { from i to S }
+	transition t1 { from S to S trigger g[| y = from | y > 2 |]?x }
+	transition t2 { from S to S trigger g[| z = from |] }
+}
+""")
+    result = check_paths([tmp_path])
+    assert errors(result) == []
+
+
 def test_statements(tmp_path):
     files = machine("""	var r: Pair
 	var v: vector(int, 3)

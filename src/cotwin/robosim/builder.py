@@ -567,7 +567,9 @@ class Builder(PModelBuilder):
                            ("simple", None))
         return Communication(_ident(event), kind, value, guard, self._tok_loc(event))
 
-    def trigger_guard(self, meta, expr=None):
+    def trigger_guard(self, meta, *items):
+        """`[| p |]`; `[| s = from | p |]` binds the sender s, which cotwin, not running RoboChart triggers, drops."""
+        expr = next((i for i in items if not isinstance(i, Token)), None)
         return _Tagged("guard", expr, self._loc(meta))
 
     def comm_input(self, meta, name):
