@@ -324,6 +324,21 @@ def test_robosim_dollar_index_alone_is_no_statement(tmp_path):
         ("m.rst", 31, 37, "'$v[...]' is not a statement: assign it ('$v[i] = e')")]
 
 
+def test_robosim_dollar_field_of_a_variable_is_one_clear_error(tmp_path):
+    """RoboSim's scope provider reads `$p.a` on a record variable p as p's field a; cotwin does not, and says
+    so once, where it was written (was: 'unknown input event' and a type error about the comparison)."""
+    files = machine("""	var p: Pair
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $p.a == 1 }""", "datatype Pair { a: int b: int }\n")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    assert errors(check_paths([tmp_path])) == [
+        ("m.rst", 33, 45, "'$p.a': 'p' is not an input event but a name with a value (RoboTool reads its field "
+                          "'a'): write 'p.a'")]
+
+
 def test_strings_take_xtext_escapes_and_stay_on_one_line(tmp_path):
     """Xtext's STRING terminal decodes \\" \\' \\\\ \\n \\t \\uXXXX; cotwin keeps a string on its line so that
     an unclosed quote is reported where it is."""
