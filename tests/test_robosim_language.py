@@ -410,6 +410,21 @@ def test_logic_comparisons_and_binding_forms(tmp_path):
     assert trace[3][0] == "error" and "'the' found 0 values, not exactly one" in trace[3][1]
 
 
+def test_equality_chains_nest_to_the_left_as_robotool_reads_them(tmp_path):
+    """RoboChart.xtext's Comp nests `b1 == b2 == b3` as `(b1 == b2) == b3` (cotwin read `b1 == b2 /\\ b2 == b3`,
+    true where RoboTool's is false, and refused `n == 1 == b`); ordering chains keep Z's reading."""
+    files = machine("""	var n: int
+	var b: boolean = false
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $go?n action
+		$flag!(b == b == b); $out!(if n == 1 == b then 1 else 0 end); $real_out!(if 0 < n <= 2 then 1.0 else 0.0 end) }
+	transition t2 { from A to A exec condition not $go }""")
+    trace = run_both(tmp_path, files, [{"go": 1}, {"go": 2}, {}])
+    assert [t[0] for t in trace] == [[], ["flag!false", "out!0", "real_out!1.0"], ["flag!false", "out!1", "real_out!1.0"]]
+
+
 def test_arithmetic_records_tuples_enumerations_functions(tmp_path):
     extra = """datatype Pos { x: int y: int }
 enumeration Dir { North East South West }

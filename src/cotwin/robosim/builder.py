@@ -23,6 +23,7 @@ from .builder_pmodel import PModelBuilder
 
 
 _NODES = (State, Initial, Junction, Final, ProbabilisticJunction)
+_ORDERINGS = frozenset(("<", "<=", ">", ">="))
 
 
 @v_args(meta=True, inline=True)
@@ -147,10 +148,18 @@ class Builder(PModelBuilder):
         return str(token)
 
     def comparison_chain(self, meta, first, *rest):
-        """`a < b <= c` reads as `a < b /\\ b <= c` (Z's chained relations)."""
+        """`a < b <= c` reads as `a < b /\\ b <= c` (Z's chained relations: RoboChart's left-nested reading
+        would compare a boolean with a number); a chain with `==`, `!=` or `in` nests to the left as
+        RoboChart.xtext's Comp does (`b1 == b2 == b3` is `(b1 == b2) == b3`, well typed there)."""
+        pairs = list(zip(rest[0::2], rest[1::2]))
+        if any(op not in _ORDERINGS for op, _ in pairs):
+            result = first
+            for op, right in pairs:
+                result = s.Binary(op, result, right, first.loc)
+            return result
         result = None
         left = first
-        for op, right in zip(rest[0::2], rest[1::2]):
+        for op, right in pairs:
             comparison = s.Binary(op, left, right, left.loc)
             result = comparison if result is None else s.Binary("/\\", result, comparison, result.loc)
             left = right
