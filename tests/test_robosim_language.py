@@ -313,6 +313,23 @@ function twice(n: int): int { postcondition result == 2 * n }
     assert [t[0] for t in trace] == [["flag!true", "out!20"], ["flag!true", "out!21"], [], ["out!5"]]
 
 
+def test_rct_synchronisations_with_a_value_are_read(tmp_path):
+    """RoboChart.xtext's CommunicationStmt `send? e.v` (SyncType, value a CallExp) in .rct files: `e.E::lit`,
+    `send e . 90`, `e.C` (RoboTool's own test models ChemicalDetector and test9 were syntax errors)."""
+    (tmp_path / "a.rct").write_text("""package rc
+enumeration Color { red amber }
+interface I { event light: Color event turn: int event e: int }
+stm M {
+	uses I
+	const C: int = 3
+	initial i
+	state S { entry send light . Color::amber; turn.90; e.C; e.(C + 1) }
+	transition t0 { from i to S action light.Color::red }
+}
+""")
+    assert errors(check_paths([tmp_path])) == []
+
+
 def test_robosim_dollar_index_alone_is_no_statement(tmp_path):
     files = machine("""	var v: vector(int, 2)
 	initial i

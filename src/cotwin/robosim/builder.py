@@ -360,24 +360,33 @@ class Builder(PModelBuilder):
         for kind, value, where in suffixes:
             if kind == "field":
                 target = s.FieldAccess(target, value, where)
+            elif kind == "qualified":
+                target = s.FieldAccess(target, "::".join(value), where)
             else:
                 for index in value:
                     target = s.IndexAccess(target, index, where)
         return target
 
-    def dollar_dot_value(self, meta, _dollar, event, value):
-        """`$e.3`, `$e.(x + 1)`: RoboSim's output `$e.v`, the same as `$e!v`."""
+    def dot_value_send(self, meta, *items):
+        """`$e.3`, `e.(x + 1)`: RoboSim's output `$e.v` (RoboChart's synchronisation `e.v`), read as `$e!v`."""
+        event = next(i for i in items if isinstance(i, Token) and i.type == "ID")
+        return s.Send(s.QName((_ident(event),), self._tok_loc(event)), items[-1], self._loc(meta))
+
+    def dot_send(self, meta, *items):
+        """`$e.x.f[1]`, `e.E::lit`: RoboSim's output `$e.v` (RoboChart's `e.v`) with a value written as a name."""
+        event = next(i for i in items if isinstance(i, Token) and i.type == "ID")
+        suffixes = [i for i in items if not isinstance(i, Token)]
+        kind, first, where = suffixes[0]
+        if kind == "index":
+            name = "$" * any(isinstance(i, Token) and i.type == "DOLLAR" for i in items) + _ident(event)
+            self.diag.error(self._loc(meta), f"'{name}[...]' is not a statement: assign it ('{name}[i] = e')")
+            return s.Skip(self._loc(meta))
+        parts = first if kind == "qualified" else (first,)
+        value = self._selected(s.Name(s.QName(parts, where), where), suffixes[1:])
         return s.Send(s.QName((_ident(event),), self._tok_loc(event)), value, self._loc(meta))
 
-    def dollar_dot_send(self, meta, _dollar, event, *suffixes):
-        """`$e.x.f[1]`: RoboSim's output `$e.v` with a value written as a name (read as `$e!x.f[1]`)."""
-        kind, first, where = suffixes[0]
-        if kind != "field":
-            name = _ident(event)
-            self.diag.error(self._loc(meta), f"'${name}[...]' is not a statement: assign it ('${name}[i] = e')")
-            return s.Skip(self._loc(meta))
-        value = self._selected(s.Name(s.QName((first,), where), where), suffixes[1:])
-        return s.Send(s.QName((_ident(event),), self._tok_loc(event)), value, self._loc(meta))
+    def qualified_suffix(self, meta, *names):
+        return ("qualified", tuple(_ident(n) for n in names), self._tok_loc(names[0]))
 
     # ---- d-model ----
     def rst_file(self, meta, *items):
