@@ -294,7 +294,7 @@ def test_dollar_expressions_sends_and_platform_calls(tmp_path):
 
 def test_robosim_dollar_forms_as_robotool_reads_them(tmp_path):
     """RoboSim.xtext: SimRefExp is an Atomic (`$v[1]`), its value and predicate are CallExps (`$e.f(x)`,
-    `$e?x:ok(x)`), and OutputCommunication sends with `.` as with `!` (`$e.v`, `$e.(n + 1)`, `$e.r.a`)."""
+    `$e?x:ok(x)`), and OutputCommunication sends with `.` as with `!` (`$e.v`, `$e.(n + 1)`, `$e.r.a`, `$e.f(x)`)."""
     files = machine("""	var x: int
 	var v: vector(int, 2) = [| 5, 6 |]
 	var r: Pair
@@ -303,14 +303,14 @@ def test_robosim_dollar_forms_as_robotool_reads_them(tmp_path):
 	transition t0 { from i to A }
 	state B { }
 	transition t1 { from A to B condition $go?x:big(x) action r.a = x; $out.r.a; $flag.(x > $v[2]) }
-	transition t2 { from A to B condition $go.twice($v[1]) action $out.(x + 1); $flag.true }
+	transition t2 { from A to B condition $go.twice($v[1]) action $out.twice(x); $flag.true }
 	transition t3 { from A to B exec condition not ($go?x:big(x) \\/ $go.twice($v[1])) action $out.v[1] }
 	transition t4 { from B to A exec }""", """datatype Pair { a: int b: int }
 function big(n: int): boolean { postcondition result == (n > 10) }
 function twice(n: int): int { postcondition result == 2 * n }
 """)
     trace = run_both(tmp_path, files, [{"go": 20}, {"go": 10}, {"go": 3}, {}])
-    assert [t[0] for t in trace] == [["flag!true", "out!20"], ["flag!true", "out!21"], [], ["out!5"]]
+    assert [t[0] for t in trace] == [["flag!true", "out!20"], ["flag!true", "out!40"], [], ["out!5"]]
 
 
 def test_rct_synchronisations_with_a_value_are_read(tmp_path):

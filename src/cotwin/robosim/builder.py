@@ -372,6 +372,14 @@ class Builder(PModelBuilder):
         event = next(i for i in items if isinstance(i, Token) and i.type == "ID")
         return s.Send(s.QName((_ident(event),), self._tok_loc(event)), items[-1], self._loc(meta))
 
+    def dot_call_send(self, meta, *items):
+        """`$e.f(x)`: RoboSim's output `$e.v` whose value is a call (a CallExp), read as `$e!f(x)`."""
+        event = next(i for i in items if isinstance(i, Token) and i.type == "ID")
+        function = next(i for i in items if isinstance(i, s.QName))
+        args = next((i for i in items if isinstance(i, _Args)), ())
+        call = self.call_expr(meta, s.Name(function, function.loc), args)
+        return s.Send(s.QName((_ident(event),), self._tok_loc(event)), call, self._loc(meta))
+
     def dot_send(self, meta, *items):
         """`$e.x.f[1]`, `e.E::lit`: RoboSim's output `$e.v` (RoboChart's `e.v`) with a value written as a name."""
         event = next(i for i in items if isinstance(i, Token) and i.type == "ID")
