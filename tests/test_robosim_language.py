@@ -292,6 +292,103 @@ def test_dollar_expressions_sends_and_platform_calls(tmp_path):
     assert [t[0] for t in trace] == [["move(20.0, 20)", "out!20"], ["flag!true"], ["real_out!20.0"], ["real_out!20.0"]]
 
 
+def test_robosim_dollar_forms_as_robotool_reads_them(tmp_path):
+    """RoboSim.xtext: SimRefExp is an Atomic (`$v[1]`), its value and predicate are CallExps (`$e.f(x)`,
+    `$e?x:ok(x)`), and OutputCommunication sends with `.` as with `!` (`$e.v`, `$e.(n + 1)`, `$e.r.a`, `$e.f(x)`)."""
+    files = machine("""	var x: int
+	var v: vector(int, 2) = [| 5, 6 |]
+	var r: Pair
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	state B { }
+	transition t1 { from A to B condition $go?x:big(x) action r.a = x; $out.r.a; $flag.(x > $v[2]) }
+	transition t2 { from A to B condition $go.twice($v[1]) action $out.twice(x); $flag.true }
+	transition t3 { from A to B exec condition not ($go?x:big(x) \\/ $go.twice($v[1])) action $out.v[1] }
+	transition t4 { from B to A exec }""", """datatype Pair { a: int b: int }
+function big(n: int): boolean { postcondition result == (n > 10) }
+function twice(n: int): int { postcondition result == 2 * n }
+""")
+    trace = run_both(tmp_path, files, [{"go": 20}, {"go": 10}, {"go": 3}, {}])
+    assert [t[0] for t in trace] == [["flag!true", "out!20"], ["flag!true", "out!40"], [], ["out!5"]]
+
+
+def test_rct_synchronisations_with_a_value_are_read(tmp_path):
+    """RoboChart.xtext's CommunicationStmt `send? e.v` (SyncType, value a CallExp) in .rct files: `e.E::lit`,
+    `send e . 90`, `e.C` (RoboTool's own test models ChemicalDetector and test9 were syntax errors)."""
+    (tmp_path / "a.rct").write_text("""package rc
+enumeration Color { red amber }
+interface I { event light: Color event turn: int event e: int }
+stm M {
+	uses I
+	const C: int = 3
+	initial i
+	state S { entry send light . Color::amber; turn.90; e.C; e.(C + 1) }
+	transition t0 { from i to S action light.Color::red }
+}
+""")
+    assert errors(check_paths([tmp_path])) == []
+
+
+def test_robosim_dollar_index_alone_is_no_statement(tmp_path):
+    files = machine("""	var v: vector(int, 2)
+	initial i
+	state A { }
+	transition t0 { from i to A action $v[1] }""")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    assert errors(check_paths([tmp_path])) == [
+        ("m.rst", 31, 37, "'$v[...]' is not a statement: assign it ('$v[i] = e')")]
+
+
+def test_robosim_dollar_field_of_a_variable_is_one_clear_error(tmp_path):
+    """RoboSim's scope provider reads `$p.a` on a record variable p as p's field a; cotwin does not, and says
+    so once, where it was written (was: 'unknown input event' and a type error about the comparison)."""
+    files = machine("""	var p: Pair
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $p.a == 1 }""", "datatype Pair { a: int b: int }\n")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    assert errors(check_paths([tmp_path])) == [
+        ("m.rst", 33, 45, "'$p.a': 'p' is not an input event but a name with a value (RoboTool reads its field "
+                          "'a'): write 'p.a'")]
+
+
+def test_strings_take_xtext_escapes_and_stay_on_one_line(tmp_path):
+    """Xtext's STRING terminal decodes \\" \\' \\\\ \\n \\t \\uXXXX; cotwin keeps a string on its line so that
+    an unclosed quote is reported where it is."""
+    from cotwin.robosim.parser import parse_text
+
+    source, findings = parse_text('function f(): string { postcondition result == "a\\"b\\\\c\\n\\u0041\\q" }\n', "f.rct")
+    assert not findings
+    literal = source.elements[0].postconditions[0].right
+    assert literal.value == 'a"b\\c\nA\\q'
+    _, findings = parse_text('function f(): string { postcondition result == "a\nb" }\n', "f.rct")
+    assert [(f.location.line, f.location.column, f.message) for f in findings] == [
+        (1, 48, 'unterminated string: " without a closing " on its line (a line break in a string is written \\n)')]
+
+
+def test_rct_trigger_guards_binding_the_sender_are_read(tmp_path):
+    """RoboChart.xtext's Communication: `e[| s = from |]` and `e[| s = from | p |]` (was a syntax error,
+    which refused the whole RoboTool project holding the .rct file)."""
+    (tmp_path / "a.rct").write_text("""package rc
+interface I { event g: int }
+stm M {
+	uses I
+	var x: int
+	initial i
+	state S {}
+	transition t0 { from i to S }
+	transition t1 { from S to S trigger g[| y = from | y > 2 |]?x }
+	transition t2 { from S to S trigger g[| z = from |] }
+}
+""")
+    result = check_paths([tmp_path])
+    assert errors(result) == []
+
+
 def test_statements(tmp_path):
     files = machine("""	var r: Pair
 	var v: vector(int, 3)
@@ -328,6 +425,21 @@ def test_logic_comparisons_and_binding_forms(tmp_path):
                                          ["flag!true", "out!7", "real_out!7.0"]]
     # `the` with no value: the same located error from both
     assert trace[3][0] == "error" and "'the' found 0 values, not exactly one" in trace[3][1]
+
+
+def test_equality_chains_nest_to_the_left_as_robotool_reads_them(tmp_path):
+    """RoboChart.xtext's Comp nests `b1 == b2 == b3` as `(b1 == b2) == b3` (cotwin read `b1 == b2 /\\ b2 == b3`,
+    true where RoboTool's is false, and refused `n == 1 == b`); ordering chains keep Z's reading."""
+    files = machine("""	var n: int
+	var b: boolean = false
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $go?n action
+		$flag!(b == b == b); $out!(if n == 1 == b then 1 else 0 end); $real_out!(if 0 < n <= 2 then 1.0 else 0.0 end) }
+	transition t2 { from A to A exec condition not $go }""")
+    trace = run_both(tmp_path, files, [{"go": 1}, {"go": 2}, {}])
+    assert [t[0] for t in trace] == [[], ["flag!false", "out!0", "real_out!1.0"], ["flag!false", "out!1", "real_out!1.0"]]
 
 
 def test_arithmetic_records_tuples_enumerations_functions(tmp_path):

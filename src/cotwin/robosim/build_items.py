@@ -3,6 +3,7 @@ and containers sort them by type. These small classes tag items that have no mod
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from lark import Token
@@ -45,6 +46,17 @@ def _of(items, cls) -> tuple:
 
 def _tagged(items, tag: str) -> list[_Tagged]:
     return [i for i in items if isinstance(i, _Tagged) and i.tag == tag]
+
+
+#: the escapes of Xtext's STRING terminal (its STRINGValueConverter): \b \t \n \f \r \" \' \\ and \uXXXX
+_ESCAPE = re.compile(r"\\(u[0-9a-fA-F]{4}|[btnfr\"'\\])")
+_ESCAPED = {"b": "\b", "t": "\t", "n": "\n", "f": "\f", "r": "\r"}
+
+
+def _string(token: Token) -> str:
+    """The text of a string literal: quotes removed, Xtext's escapes decoded (any other backslash is kept)."""
+    return _ESCAPE.sub(lambda m: chr(int(m[1][1:], 16)) if m[1][0] == "u" else _ESCAPED.get(m[1], m[1]),
+                       str(token)[1:-1])
 
 
 def _ident(token: Token) -> str:

@@ -18,11 +18,12 @@ from .dmodel_elements import (
     Communication, Connection, Controller, Final, Initial, Interface, InterfaceUse, Junction, MachineRef, Module,
     OperationDef, OperationRef, PlatformRef, ProbabilisticJunction, RoboticPlatform, State, StateMachine, Transition,
 )
-from .build_items import _Args, _Group, _Params, _Tagged, _flatten, _ident, _of, _tagged
+from .build_items import _Args, _Group, _Params, _Tagged, _flatten, _ident, _of, _string, _tagged
 from .builder_pmodel import PModelBuilder
 
 
 _NODES = (State, Initial, Junction, Final, ProbabilisticJunction)
+_ORDERINGS = frozenset(("<", "<=", ">", ">="))
 
 
 @v_args(meta=True, inline=True)
@@ -147,10 +148,18 @@ class Builder(PModelBuilder):
         return str(token)
 
     def comparison_chain(self, meta, first, *rest):
-        """`a < b <= c` reads as `a < b /\\ b <= c` (Z's chained relations)."""
+        """`a < b <= c` reads as `a < b /\\ b <= c` (Z's chained relations: RoboChart's left-nested reading
+        would compare a boolean with a number); a chain with `==`, `!=` or `in` nests to the left as
+        RoboChart.xtext's Comp does (`b1 == b2 == b3` is `(b1 == b2) == b3`, well typed there)."""
+        pairs = list(zip(rest[0::2], rest[1::2]))
+        if any(op not in _ORDERINGS for op, _ in pairs):
+            result = first
+            for op, right in pairs:
+                result = s.Binary(op, result, right, first.loc)
+            return result
         result = None
         left = first
-        for op, right in zip(rest[0::2], rest[1::2]):
+        for op, right in pairs:
             comparison = s.Binary(op, left, right, left.loc)
             result = comparison if result is None else s.Binary("/\\", result, comparison, result.loc)
             left = right
@@ -247,7 +256,7 @@ class Builder(PModelBuilder):
         return s.Literal(float(token), self._tok_loc(token))
 
     def string_lit(self, meta, token):
-        return s.Literal(str(token)[1:-1], self._tok_loc(token))
+        return s.Literal(_string(token), self._tok_loc(token))
 
     def bool_lit(self, meta, token):
         return s.Literal(str(token) == "true", self._tok_loc(token))
@@ -343,14 +352,49 @@ class Builder(PModelBuilder):
         name = items[1] if items[0].type == "DOLLAR" else items[0]
         suffixes = items[2:] if items[0].type == "DOLLAR" else items[1:]
         loc = self._tok_loc(name)
-        target: s.Expr = s.Name(s.QName((_ident(name),), loc), loc)
+        return self._selected(s.Name(s.QName((_ident(name),), loc), loc), suffixes)
+
+    @staticmethod
+    def _selected(target: s.Expr, suffixes) -> s.Expr:
+        """`target` with its field and index selections applied, in order."""
         for kind, value, where in suffixes:
             if kind == "field":
                 target = s.FieldAccess(target, value, where)
+            elif kind == "qualified":
+                target = s.FieldAccess(target, "::".join(value), where)
             else:
                 for index in value:
                     target = s.IndexAccess(target, index, where)
         return target
+
+    def dot_value_send(self, meta, *items):
+        """`$e.3`, `e.(x + 1)`: RoboSim's output `$e.v` (RoboChart's synchronisation `e.v`), read as `$e!v`."""
+        event = next(i for i in items if isinstance(i, Token) and i.type == "ID")
+        return s.Send(s.QName((_ident(event),), self._tok_loc(event)), items[-1], self._loc(meta))
+
+    def dot_call_send(self, meta, *items):
+        """`$e.f(x)`: RoboSim's output `$e.v` whose value is a call (a CallExp), read as `$e!f(x)`."""
+        event = next(i for i in items if isinstance(i, Token) and i.type == "ID")
+        function = next(i for i in items if isinstance(i, s.QName))
+        args = next((i for i in items if isinstance(i, _Args)), ())
+        call = self.call_expr(meta, s.Name(function, function.loc), args)
+        return s.Send(s.QName((_ident(event),), self._tok_loc(event)), call, self._loc(meta))
+
+    def dot_send(self, meta, *items):
+        """`$e.x.f[1]`, `e.E::lit`: RoboSim's output `$e.v` (RoboChart's `e.v`) with a value written as a name."""
+        event = next(i for i in items if isinstance(i, Token) and i.type == "ID")
+        suffixes = [i for i in items if not isinstance(i, Token)]
+        kind, first, where = suffixes[0]
+        if kind == "index":
+            name = "$" * any(isinstance(i, Token) and i.type == "DOLLAR" for i in items) + _ident(event)
+            self.diag.error(self._loc(meta), f"'{name}[...]' is not a statement: assign it ('{name}[i] = e')")
+            return s.Skip(self._loc(meta))
+        parts = first if kind == "qualified" else (first,)
+        value = self._selected(s.Name(s.QName(parts, where), where), suffixes[1:])
+        return s.Send(s.QName((_ident(event),), self._tok_loc(event)), value, self._loc(meta))
+
+    def qualified_suffix(self, meta, *names):
+        return ("qualified", tuple(_ident(n) for n in names), self._tok_loc(names[0]))
 
     # ---- d-model ----
     def rst_file(self, meta, *items):
@@ -549,7 +593,9 @@ class Builder(PModelBuilder):
                            ("simple", None))
         return Communication(_ident(event), kind, value, guard, self._tok_loc(event))
 
-    def trigger_guard(self, meta, expr=None):
+    def trigger_guard(self, meta, *items):
+        """`[| p |]`; `[| s = from | p |]` binds the sender s, which cotwin, not running RoboChart triggers, drops."""
+        expr = next((i for i in items if not isinstance(i, Token)), None)
         return _Tagged("guard", expr, self._loc(meta))
 
     def comm_input(self, meta, name):

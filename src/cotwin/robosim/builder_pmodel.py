@@ -10,7 +10,7 @@ from __future__ import annotations
 from lark import Token, Transformer, v_args
 
 from . import syntax as s
-from .build_items import _Group, _Tagged, _flatten, _ident, _of, _tagged
+from .build_items import _Group, _Tagged, _flatten, _ident, _of, _string, _tagged
 from .consteval import UNITS
 from .declarations import Import, SourceFile, VarDecl
 from .pmodel_elements import (
@@ -124,7 +124,7 @@ class PModelBuilder(Transformer):
         return Shape(kind, tuple(params), self._loc(meta))
 
     def mesh_file(self, meta, token):
-        return ("shape", s.Literal(str(token)[1:-1], self._tok_loc(token)), self._tok_loc(token))
+        return ("shape", s.Literal(_string(token), self._tok_loc(token)), self._tok_loc(token))
 
     def mesh_scaling(self, meta, value):
         return ("scaling", value, self._loc(meta))

@@ -125,6 +125,10 @@ def _syntax_finding(err: UnexpectedInput, path: str, parser: lark.Lark, text: st
     if position is not None and text.startswith("/*", position):
         return Finding(Location(path, max(line, 1), max(column, 1)), Severity.ERROR,
                        "unterminated comment: '/*' without a closing '*/'")
+    if isinstance(err, UnexpectedCharacters) and err.char in "\"'":
+        return Finding(Location(path, max(line, 1), max(column, 1)), Severity.ERROR,
+                       f"unterminated string: {err.char} without a closing {err.char} on its line "
+                       "(a line break in a string is written \\n)")
     if isinstance(err, UnexpectedToken) and (opener := _keyword_before(err, text)) is not None:
         line, column, word = opener
         return Finding(Location(path, line, column), Severity.ERROR,

@@ -199,6 +199,11 @@ class ExprChecker(ExprVisitor):
         symbol = self.scope.lookup(name) if len(e.event.parts) == 1 else None
         if symbol is not None and e.bind is None and e.predicate is None and e.value is None:
             return symbol.ty  # `$v`: the value of (required) variable v
+        if symbol is not None and isinstance(e.value, s.Name) and len(e.value.name.parts) == 1:
+            # RoboSim's scope reads `$p.f` on a variable p as its field f; cotwin reads `$e.v` on events only
+            self.diag.error(e.loc, f"'${name}.{e.value.name}': '{name}' is not an input event but a name with a value "
+                                   f"(RoboTool reads its field '{e.value.name}'): write '{name}.{e.value.name}'")
+            return UNKNOWN
         if self.events is None:
             self.diag.error(e.loc, f"'${e.event}' tests an input event; not allowed here")
         else:
