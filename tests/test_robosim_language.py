@@ -655,3 +655,25 @@ def test_robotool_projects_group_their_folders_and_rct_duplicates_warn(tmp_path)
     assert len(result.projects) == 1 and result.ok  # one RoboTool project: the .rst sees the .rct
     [warning] = [f for f in result.findings if f.severity is Severity.WARNING]
     assert warning.message.startswith("duplicate interface 'Decl::Ev'") and warning.message.endswith("the first one is used")
+
+
+def test_a_composite_states_entry_goes_through_its_initial_junction_before_its_own_transitions(tmp_path):
+    """Entering Q runs its initial transition into A (A's entry action, A the active leaf): a junction is part of
+    the transition through it, so Q's own transitions, chosen first from Q's states, are not chosen at the junction
+    (an exec one ended the cycle there: no leaf active, A never entered), in the interpreter and the FMU alike."""
+    files = machine("""	initial i
+	state S { }
+	transition t0 { from i to S }
+	state Q {
+		initial qi
+		state A { entry $out!1 during skip }
+		transition a { from qi to A }
+	}
+	transition t1 { from S to Q exec }
+	transition b { from Q to S exec condition $stop }
+	transition c { from Q to S condition $go }""")
+    trace = run_both(tmp_path, files, [{}, {}, {"go": 9}, {}, {"stop": None}, {}, {}])
+    outputs, states = [t[0] for t in trace], [t[1][0] for t in trace]
+    assert outputs == [[], ["out!1"], [], ["out!1"], [], [], ["out!1"]]  # Q entered into A each time it is entered
+    assert min(states) >= 0  # every cycle ends in a leaf state, never at a junction
+    assert states == [0, 1, 0, 1, 1, 0, 1]  # S, then A; Q's transitions taken from A (c at once, b's exec next cycle)
