@@ -260,3 +260,51 @@ def test_unsupported_variable_types_are_located(tmp_path):
     [finding] = err.value.findings
     assert (finding.location.line, finding.location.column) == (3, 6)
     assert "values of type string cannot be executed yet" in finding.message
+
+
+COMPOSITE_TIMEOUT = """
+interface Ops { go() }
+interface Cmds { event start }
+stm M {
+	cycleDef cycle == 1
+	clock T
+	input context { uses Cmds }
+	output context { requires Ops }
+	initial i0
+	state Idle { }
+	state Work {
+		initial w0
+		state Go { entry #T; $go() }
+		state Wait { }
+		transition w { from w0 to Go }
+		transition sent { from Go to Wait exec }
+		transition waiting { from Wait to Wait exec }
+	}
+	state Late { }
+	transition init { from i0 to Idle }
+	transition idle { from Idle to Idle exec condition not $start }
+	transition begin { from Idle to Work condition $start }
+	transition late { from Work to Late exec condition since(T) > 3 }
+	transition lateWait { from Late to Late exec }
+}
+controller C { cycleDef cycle == 1 uses Cmds requires Ops sref m = M
+	connection C on start to m on start (_async) }
+module Mod { cycleDef cycle == 1
+	robotic platform P { provides Ops uses Cmds }
+	cref c = C
+	connection P on start to c on start (_async) }
+"""
+
+
+def test_a_composite_is_entered_before_its_own_transitions_are_chosen(tmp_path):
+    """A composite state's timeout (since(T) > 3, T reset by its substate's entry) must not fire at its initial
+    junction, before the substate is entered: a command after a long idle used to go straight to Late, go()
+    never called (a user's sorter: every leg after a pause timed out at once). Interpreter and C alike."""
+    (tmp_path / "c.rst").write_text(COMPOSITE_TIMEOUT)
+    program = build_program(load_checked([tmp_path / "c.rst"]))
+    sequence = [{}] * 6 + [{"start": None}] + [{}] * 6
+    interp = Interpreter(program)
+    calls = [[str(o) for o in interp.step(inputs)] for inputs in sequence]
+    assert calls[6] == ["go()"] and calls[7:10] == [[], [], []]
+    assert interp.active_leaf() == "Late"
+    _differential(program, build_fmu(program, tmp_path / "c.fmu"), sequence)

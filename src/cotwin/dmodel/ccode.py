@@ -36,7 +36,7 @@ from ..robosim.visitor import ExprVisitor, describe
 from . import cnames
 from .cdata import CTypes, is_intlike, is_scalar
 from .cnames import c_comment, c_string, ident
-from .interpreter import MAX_STEPS, lca_index, shared_port_message
+from .interpreter import MAX_STEPS, choice_groups, lca_index, shared_port_message
 from .program import (
     Body, MachineInstance, OperationInstance, Program, beyond_int32_message, node_description, state_index,
 )
@@ -974,8 +974,7 @@ class CGenerator:
             if initial is not None:
                 out(f"if (!m{m.index}_inside(m{m.index}_{prefix}_parent, {f}active, {n.index})) "
                     f"{{ {f}active = {initial.index}; goto {prefix}_S_{initial.index}; }}")
-        groups = [a for a in reversed(n.ancestors())] + [n]
-        for group in groups:
+        for group in choice_groups(n):
             if not group.outgoing:
                 continue
             out("{")

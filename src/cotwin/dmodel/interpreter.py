@@ -678,8 +678,7 @@ class _Cycle:
             initial = self.graph.initial_of(node)
             if initial is not None and not self._inside(self.frame.active, index):
                 return ("go", [("enter", initial.index), ("settle", initial.index)])
-        groups = [a for a in reversed(node.ancestors())] + [node]
-        for group in groups:
+        for group in choice_groups(node):
             enabled = self.enabled(group.outgoing)
             if not enabled:
                 continue
@@ -748,6 +747,15 @@ def lca_index(edge) -> int:
         if id(node) in tgt:
             return node.index
     return -1
+
+
+def choice_groups(node) -> list:
+    """Whose transitions a node chooses from, outermost first: a state its ancestors' and its own; a junction
+    (an initial one too) only its own, since the machine never rests there: the transitions of a composite
+    state being entered must not cut its entry short at its initial junction (docs/robosim-notation.md, 6.4)."""
+    if isinstance(node.node, State):
+        return [*reversed(node.ancestors()), node]
+    return [node]
 
 
 def completion_tasks(graph, edge) -> list:
