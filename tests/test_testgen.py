@@ -508,3 +508,14 @@ def test_case_files_outside_the_suite_folder_are_refused_at_the_index_by_entry(s
         "(a suite's files live in its folder)",
         f"{index}:1:1: error: case entry {second!r}: its plan '../tests/{second}.csv' lies outside the suite's folder "
         "(a suite's files live in its folder)"], str(err.value)
+
+
+def test_a_long_distinguishing_sequence_reads_as_runs_of_equal_cycles():
+    """A mutant of a sorter's leg timeout (since(T) > 150) is told apart after 152 cycles; its explanation
+    listed `[1] {} [2] {} ... [151] {}` one by one, a line of a thousand characters. Runs are folded."""
+    from cotwin.dmodel.verify import format_trace
+
+    trace = [{}] * 151 + [{"sortCommand": 0}]
+    assert format_trace(trace) == "[1..151] {} [152] {sortCommand(0)}"
+    assert format_trace([{"a": None}, {}, {}, {"a": None}]) == "[1] {a} [2..3] {} [4] {a}"
+    assert format_trace([]) == ""

@@ -55,6 +55,20 @@ class Violation:
         return "\n".join(lines)
 
 
+def format_trace(trace: list[dict]) -> str:
+    """An input sequence on one line, `[k] {inputs}` per cycle, a run of cycles with the same inputs as one
+    `[i..j]`: a timeout told apart after 152 cycles reads `[1..151] {} [152] {start}`, not 152 entries."""
+    shown, k = [], 0
+    while k < len(trace):
+        end = k
+        while end + 1 < len(trace) and trace[end + 1] == trace[k]:
+            end += 1
+        cycles = f"{k + 1}" if end == k else f"{k + 1}..{end + 1}"
+        shown.append(f"[{cycles}] {format_inputs(trace[k])}")
+        k = end + 1
+    return " ".join(shown)
+
+
 def format_inputs(inputs: dict) -> str:
     if not inputs:
         return "{}"
