@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import sys
 from contextlib import contextmanager
-from dataclasses import replace
 from pathlib import Path
 
 import click
 
 from .. import safejson
-from ..diagnostics import CotwinError, Location
+from ..diagnostics import CotwinError, Location, placed
 from ..plaindata import StateError
 from ..files import CAPS, check_outputs, output, read_bytes, write_text
 from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main, named_values, outcomes, output_file,
@@ -19,13 +18,7 @@ from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main,
 
 def located(err: CotwinError, path: str | None) -> CotwinError:
     """`err` with each finding that names no place put at `path` (the plan or state file it is about)."""
-    if path is None:
-        return err
-    found = [f if not f.location.path.startswith("<") else replace(f, location=Location(str(path), 0, 0))
-             for f in err.findings]
-    out = CotwinError(found)
-    out.__dict__.update({k: v for k, v in err.__dict__.items() if k != "findings"})
-    return out
+    return err if path is None else placed(err, Location(str(path), 0, 0))
 
 
 @contextmanager
