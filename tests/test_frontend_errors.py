@@ -173,3 +173,37 @@ def test_a_model_that_is_not_utf8_is_located_at_the_byte(tmp_path):
     column = len(lines[5].encode("latin-1"))
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
     assert f"{tmp_path / 'm.rst'}:6:{column}: error: the file is not UTF-8 text (byte 0xe9)" in proc.stderr
+
+
+REPORTING = """interface Ops { move(x: int) }
+interface Cmd { event go: int }
+interface Out { event done }
+stm R {
+	var n: int
+	input context { uses Cmd }
+	output context { requires Ops uses Out }
+	initial i
+	state A { }
+	state B { entry $move(n); $done }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition not $go }
+	transition t2 { from A to B condition $go?n }
+	transition t3 { from B to A exec }
+}
+controller C { uses Cmd uses Out requires Ops sref r = R
+	connection C on go to r on go (_async)
+	connection r on done to C on done (_async) }
+module Mod { robotic platform RP { provides Ops uses Cmd uses Out } cref c = C
+	connection RP on go to c on go (_async)
+	connection c on done to RP on done (_async) }
+"""
+
+
+def test_an_event_the_d_model_sends_to_its_platform_is_no_unmapped_event(check_texts):
+    """A sorter's report `$sorted!count`, sent to the platform, drew 'platform event 'sorted' is not mapped': the
+    mapping notation maps input events only, so nothing could silence it. Its commands still may be unmapped."""
+    mapping = "map Map dmodel Mod to pmodel P {\n\tvar m: real\n\toperation move { action m = x }\n}\n"
+    result = check_texts({"m.rst": REPORTING, "p.pm": PMODEL, "map.pm": mapping})
+    assert errors(result) == []
+    unmapped = [f.message for f in result.findings if "is not mapped by" in f.message]
+    assert unmapped == ["platform event 'go' is not mapped by Map"]

@@ -89,3 +89,25 @@ def test_a_sensor_the_platform_stops_providing_is_a_located_error_in_both_forms(
         mapping.step(0.01)
         with pytest.raises(CotwinError, match=rf"mapping\.pm:\d+:\d+.*does not provide sensor '{missing}'"):
             mapping.get_event("robotStopped")
+
+
+def test_a_function_error_is_located_at_its_call_in_the_mapping(monkeypatch):
+    """The IK's refusal of a 2-joint arm ('needs 6 or more') named no place: `cotwin run` printed
+    'error: inverse_kinematics: ...' without the mapping's file and line. It is placed at the call."""
+    from conftest import EXAMPLES
+
+    from cotwin.mapping.runtime import FunctionRegistry
+
+    def refuse(self, *args):
+        raise CotwinError("inverse_kinematics: the arm has 2 moving joint(s); needs 6 or more")
+
+    monkeypatch.setattr(FunctionRegistry, "reachable", refuse)
+    twin = load(EXAMPLES / "ur5e" / "cotwin.toml").models
+    for compiled in (True, False):
+        mapping = _mapping(twin, compiled)
+        mapping.start_mapping()
+        with pytest.raises(CotwinError) as err:
+            mapping.execute_operation("movediscrete", {"target_X": 1, "target_Y": 20, "target_Z": 2})
+        [finding] = err.value.findings
+        assert finding.location.path.endswith("mapping.pm") and finding.location.line > 0, str(err.value)
+        assert "needs 6 or more" in finding.message

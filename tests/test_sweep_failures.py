@@ -150,3 +150,28 @@ def test_a_sweep_row_spells_a_completion_time_as_the_csv_of_a_run_does():
     row = summary(SimpleNamespace(completion_time=264 * 0.1, collisions=[], commands=[]))
     assert row["completion_time"] == 26.4 and repr(row["completion_time"]) == "26.4"
     assert summary(SimpleNamespace(completion_time=None, collisions=[], commands=[]))["completion_time"] is None
+
+
+def test_a_sweep_without_feasibility_answers_tallies_completions_not_zero_feasible():
+    """A d-model without feasibility events (a sorter on an imported arm) answered every what-if with
+    feasible empty: the sweep said '4 what-ifs ..., 0 feasible' of four completed moves. It says how many
+    completed, and how many were feasible only where some answer said so."""
+    from cotwin.twin.analysis.sweep import ERROR, tally
+
+    plain = [{"item": k, "feasible": None, "accepted": True, "time_to_done": 17.7} for k in range(4)]
+    assert tally(plain) == "4 completed"
+    answered = [{"target_X": 0, "feasible": True, "time_to_done": 3.1}, {"target_X": 1, "feasible": False,
+                "time_to_done": None}, {"target_X": 2, ERROR: "boom"}]
+    assert tally(answered) == "1 completed, 1 feasible"
+
+
+def test_feasibility_is_a_question_only_for_a_d_model_that_takes_its_answers():
+    """`cotwin whatif` said 'feasibility unknown' of every command of a d-model with no feasibility events."""
+    from conftest import EXAMPLES
+
+    from cotwin.dmodel.program import build_program
+    from cotwin.robosim.check import load_checked
+    from cotwin.twin.assembly.outcomes import answers_feasibility
+
+    assert answers_feasibility(build_program(load_checked([EXAMPLES / "ur5e" / "arm.rst"])))
+    assert not answers_feasibility(build_program(load_checked([EXAMPLES / "turtlebot" / "random_walk.rst"])))

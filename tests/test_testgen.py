@@ -508,3 +508,40 @@ def test_case_files_outside_the_suite_folder_are_refused_at_the_index_by_entry(s
         "(a suite's files live in its folder)",
         f"{index}:1:1: error: case entry {second!r}: its plan '../tests/{second}.csv' lies outside the suite's folder "
         "(a suite's files live in its folder)"], str(err.value)
+
+
+def test_a_long_distinguishing_sequence_reads_as_runs_of_equal_cycles():
+    """A mutant of a sorter's leg timeout (since(T) > 150) is told apart after 152 cycles; its explanation
+    listed `[1] {} [2] {} ... [151] {}` one by one, a line of a thousand characters. Runs are folded."""
+    from cotwin.dmodel.verify import format_trace
+
+    trace = [{}] * 151 + [{"sortCommand": 0}]
+    assert format_trace(trace) == "[1..151] {} [152] {sortCommand(0)}"
+    assert format_trace([{"a": None}, {}, {}, {"a": None}]) == "[1] {a} [2..3] {} [4] {a}"
+    assert format_trace([]) == ""
+
+
+def test_a_stub_cases_cycle_of_several_inputs_reaches_the_d_model_in_one_step():
+    """A sorter's transition-pairs case stubs `poseReached` and `stalled` in one cycle (the stall must win over the
+    arrival); `cotwin test` played them one per step, as a plan's commands, so every such case failed ('expected
+    poseReached, stalled, got poseReached'). A stub case's source shows a cycle's inputs together."""
+    from conftest import EXAMPLES
+
+    from cotwin.dmodel.program import build_program
+    from cotwin.robosim.check import load_checked
+    from cotwin.twin.assembly.scenario import Command, ScenarioUnit
+
+    program = build_program(load_checked([EXAMPLES / "ur5e" / "arm.rst"]))
+    cycle = Command(0.0, (("moveCompleted", True), ("collision", True)), "case_01 cycle 1")
+
+    def shown(together: bool) -> list[set[str]]:
+        unit = ScenarioUnit("{controller}.controller", program, [cycle], together=together)
+        unit.instantiate(0.0)
+        steps = []
+        for k in range(2):
+            unit.step(k * 0.1, 0.1)
+            steps.append({e for e in unit.events if unit.values[e] is True})
+        return steps
+
+    assert shown(True) == [{"moveCompleted", "collision"}, set()]
+    assert shown(False) == [{"moveCompleted"}, {"collision"}]  # a plan's, as a broker's: one per step

@@ -665,3 +665,21 @@ def test_a_urdf_that_is_a_fifo_is_refused_not_waited_on(tmp_path):
     with pytest.raises(CotwinError, match="cannot read the URDF: not a regular file"):
         import_urdf(fifo, tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+def test_a_robot_whose_zero_posture_is_beyond_its_limits_starts_at_them(tmp_path):
+    """The Kinova j2s6s200's joints 2, 3 and 5 have limits excluding 0 ([0.82, 5.46] rad...): started at 0, the
+    simulator threw them against their limits (joint 5 to 2.5 rad within 0.2 s, a torque that a mapping reads as a
+    stall). Each starts at the limit nearest 0, with a warning at the joint; the robot then rests where it starts."""
+    result = import_urdf(robot_data() / "robots/kinova_description/robots/kinova.urdf", tmp_path / "kinova")
+    tree = build_tree(load_checked([result.file]))
+    starts = {j.name: j.start for j in tree.actuated if j.start != 0.0}
+    assert set(starts) == {"j2s6s200_joint_2", "j2s6s200_joint_3", "j2s6s200_joint_5"}
+    assert all(start == next(j.lower for j in tree.actuated if j.name == name) for name, start in starts.items())
+    said = "\n".join(f.message for f in tree.findings)
+    assert "joint j2s6s200_joint_2: its zero position is outside its limits [0.820305, 5.46288]" in said
+    sim = PlatformSimulator(tree)
+    for step in range(2):
+        q = sim.joint_positions()
+        assert all(abs(q[name] - start) < 1e-6 for name, start in starts.items()), (step, q)
+        sim.step(200)

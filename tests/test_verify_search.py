@@ -118,3 +118,42 @@ def test_verify_shows_progress_and_takes_event_names_for_domains(tmp_path):
     assert progress and "states, limit 100000" in progress[-1] and "cycles/s" in progress[-1], proc.stderr
     twice = cotwin("verify", WALK, "--domain", "closestDistance=1", "--domain", "closest_distance=2")
     assert twice.returncode == 2 and "given twice" in twice.stderr
+
+
+VIA_A_VARIABLE = """interface I { event go: int }
+interface O { act(k: int) }
+stm M {
+	var n: int
+	var k: int
+	input context { uses I }
+	output context { requires O }
+	initial i
+	state A { }
+	state B { entry $act(k) }
+	state C { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition not $go }
+	transition t2 { from A to B condition $go?n action k = n % 3 }
+	transition t3 { from B to A exec condition k == 1 }
+	transition t4 { from B to C exec condition k != 1 }
+	transition t5 { from C to C exec }
+}
+controller C { uses I requires O sref m = M
+	connection C on go to m on go (_async) }
+module Mod { robotic platform P { uses I provides O } cref c = C
+	connection P on go to c on go (_async) }
+"""
+
+
+def test_a_value_that_reaches_a_guard_through_a_variable_is_not_data_independent(tmp_path):
+    """A sorter's `leg = BIN0 + item % 3`, its guards reading `leg`: verify said the command's value was read by no
+    condition and explored one representative value, so a value taking another branch (C, here) went unexplored
+    while the report said 'every behaviour'. The value now steers: its domain is explored."""
+    from cotwin.dmodel.verify import event_values
+
+    (tmp_path / "v.rst").write_text(VIA_A_VARIABLE)
+    program = build_program(load_checked([tmp_path / "v.rst"]))
+    values, notes = event_values(program, {})
+    assert notes == ["go: 2 value(s) from its domain"]
+    report = verify(program)
+    assert not report.unreached_states, report.unreached_states

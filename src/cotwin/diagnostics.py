@@ -66,6 +66,14 @@ class CotwinError(PicklableError):
         super().__init__("\n".join(str(f) for f in self.findings))
 
 
+def placed(err: CotwinError, location: Location) -> CotwinError:
+    """`err` with each finding that names no place put at `location` (what it is about: a file, an expression)."""
+    found = [f if not f.location.path.startswith("<") else Finding(location, f.severity, f.message) for f in err.findings]
+    out = CotwinError(found)
+    out.__dict__.update({k: v for k, v in err.__dict__.items() if k != "findings"})
+    return out
+
+
 class Diagnostics:
     """Collects findings so that all problems are reported together."""
 

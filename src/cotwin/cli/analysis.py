@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import sys
 from contextlib import contextmanager
-from dataclasses import replace
 from pathlib import Path
 
 import click
 
 from .. import safejson
-from ..diagnostics import CotwinError, Location
+from ..diagnostics import CotwinError, Location, placed
 from ..plaindata import StateError
 from ..files import CAPS, check_outputs, output, read_bytes, write_text
 from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main, named_values, outcomes, output_file,
@@ -19,13 +18,7 @@ from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main,
 
 def located(err: CotwinError, path: str | None) -> CotwinError:
     """`err` with each finding that names no place put at `path` (the plan or state file it is about)."""
-    if path is None:
-        return err
-    found = [f if not f.location.path.startswith("<") else replace(f, location=Location(str(path), 0, 0))
-             for f in err.findings]
-    out = CotwinError(found)
-    out.__dict__.update({k: v for k, v in err.__dict__.items() if k != "findings"})
-    return out
+    return err if path is None else placed(err, Location(str(path), 0, 0))
 
 
 @contextmanager
@@ -80,18 +73,19 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
         check_outputs([out], [*system.spec.inputs, plan, state])
     commands = plan_file(plan, system.models.program)
     blob = read_bytes(state, "state") if state is not None else None  # capped: a state is a few MiB
-    from ..twin.assembly.outcomes import Summary
+    from ..twin.assembly.outcomes import Summary, answers_feasibility
 
     from ..twin.assembly.scenario import nothing_planned
 
     show_warnings(nothing_planned(Path(plan), commands))
     with about(state, StateError):
         prediction = predict(system, commands, blob, horizon=horizon, physics_step=physics_step)
+    unknown = "feasibility unknown, " if answers_feasibility(system.models.program) else ""
     for c in prediction.commands:
         args = ", ".join(f"{k}={v}" for k, v in c.args.items())
-        verdict = {True: "feasible", False: "NOT feasible", None: "feasibility unknown"}[c.feasible]
+        verdict = {True: "feasible, ", False: "NOT feasible, ", None: unknown}[c.feasible]
         done = f"done at t = {c.done:g} s" if c.done is not None else "not done within the horizon"
-        click.echo(f"t = {c.time:g} s {c.event}({args}): {verdict}, {_taken(c)}, {done}")
+        click.echo(f"t = {c.time:g} s {c.event}({args}): {verdict}{_taken(c)}, {done}")
     for c in prediction.collisions:
         click.echo(f"collision: {c}")
     click.echo(f"completion: {'t = %g s' % prediction.completion_time if prediction.completion_time is not None else 'not within the horizon'} "
@@ -134,7 +128,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     import time
 
     from ..twin.assembly.run import load
-    from ..twin.analysis.sweep import ERROR, SweepInterrupted, failures, grid, run_sweep
+    from ..twin.analysis.sweep import ERROR, SweepInterrupted, failures, grid, run_sweep, tally
     from ..twin.services.whatif import physics_timing
     from .progress import ProgressReport
 
@@ -181,8 +175,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         click.echo(f"what-if {k + 1} of {len(rows)} ({where}) failed: {row[ERROR]}", err=True)
     if len(bad) > MAX_REPORTED:
         click.echo(f"... and {len(bad) - MAX_REPORTED} more failed what-if(s) (the {ERROR} column of {out})", err=True)
-    feasible = sum(1 for r in rows if r.get("feasible"))
-    click.echo(f"{out}: {len(rows)} what-ifs in {wall:.1f} s ({'Ray' if ray else 'local pool'}), {feasible} feasible"
+    click.echo(f"{out}: {len(rows)} what-ifs in {wall:.1f} s ({'Ray' if ray else 'local pool'}), {tally(rows)}"
                + (f", {len(bad)} FAILED" if bad else ""))
     if bad:
         sys.exit(1)

@@ -33,7 +33,7 @@ from ..robosim.parser import lark_parser, notation_of
 from .interpreter import ExecutionError, Interpreter
 from .program import Program, build_program
 from .testgen_files import SuiteFile, output_record
-from .verify import event_values, format_inputs, input_combinations
+from .verify import event_values, format_trace, input_combinations
 
 
 @dataclass
@@ -371,7 +371,7 @@ def analyse(original: Program, suite: SuiteFile, mutants: list[Mutant], model_fi
                                        "pairs explored, every input combination per cycle): no test can kill it")
             else:
                 outcome.equivalent = False
-                shown = " ".join(f"[{k}] {format_inputs(i)}" for k, i in enumerate(trace, start=1))
+                shown = format_trace(trace)
                 outcome.explanation = (f"told apart after {len(trace)} cycle(s) ({what}): {shown}; no case of the "
                                        f"{suite.criterion} suite holds that sequence")
         report.outcomes.append(outcome)

@@ -55,6 +55,20 @@ class Violation:
         return "\n".join(lines)
 
 
+def format_trace(trace: list[dict]) -> str:
+    """An input sequence on one line, `[k] {inputs}` per cycle, a run of cycles with the same inputs as one
+    `[i..j]`: a timeout told apart after 152 cycles reads `[1..151] {} [152] {start}`, not 152 entries."""
+    shown, k = [], 0
+    while k < len(trace):
+        end = k
+        while end + 1 < len(trace) and trace[end + 1] == trace[k]:
+            end += 1
+        cycles = f"{k + 1}" if end == k else f"{k + 1}..{end + 1}"
+        shown.append(f"[{cycles}] {format_inputs(trace[k])}")
+        k = end + 1
+    return " ".join(shown)
+
+
 def format_inputs(inputs: dict) -> str:
     if not inputs:
         return "{}"
@@ -90,28 +104,31 @@ class Report:
 
 
 def condition_variables(program: Program) -> set[str]:
-    """Variables read by any transition guard or `if` condition (where values steer control)."""
+    """Variables whose value steers control: read by a transition guard or an `if` condition, or assigned to one
+    that is (`leg = BIN0 + item % 3` where a guard reads `leg`: item's value then steers too, though no
+    condition names it)."""
     names: set[str] = set()
+    flows: list[tuple[str, set[str]]] = []  # (variable assigned, the variables its value reads)
 
-    def visit_expr(e):
-        for node in s.walk(e):
-            if isinstance(node, s.Name) and len(node.name.parts) == 1:
-                names.add(node.name.last)
+    def read(e) -> set[str]:
+        return {node.name.last for node in s.walk(e) if isinstance(node, s.Name) and len(node.name.parts) == 1}
 
     def visit_stmt(st):
         if isinstance(st, s.Sequence):
             for item in st.statements:
                 visit_stmt(item)
         elif isinstance(st, s.IfStmt):
-            visit_expr(st.condition)
+            names.update(read(st.condition))
             visit_stmt(st.then)
             if st.otherwise is not None:
                 visit_stmt(st.otherwise)
+        elif isinstance(st, s.Assign) and s.root_name(st.target) is not None:
+            flows.append((s.root_name(st.target).name.last, read(st.value)))
 
     for m in program.machines:
         for t in m.graph.transitions:
             if t.condition is not None:
-                visit_expr(t.condition)
+                names.update(read(t.condition))
             if t.action is not None:
                 visit_stmt(t.action)
         for n in m.graph.nodes:
@@ -119,6 +136,13 @@ def condition_variables(program: Program) -> set[str]:
                 for st in (n.node.entry, n.node.during, n.node.exit):
                     if st is not None:
                         visit_stmt(st)
+    grown = True
+    while grown:  # what flows into a steering variable steers too
+        before = len(names)
+        for target, sources in flows:
+            if target in names:
+                names |= sources
+        grown = len(names) > before
     return names
 
 

@@ -149,6 +149,8 @@ class PlatformSimulator:
         self._qpos, self._qvel = self.data.qpos, self.data.qvel
         self._ctrl, self._sensordata = self.data.ctrl, self.data.sensordata
         self._holds_position = {j.name for j in tree.actuated if servo_mode(j) == "position"}
+        for j in tree.actuated:  # the initial posture: within each joint's limits (TJoint.start)
+            self.model.qpos0[self._joint_qpos[j.name]] = j.start
         # ray sensors, by placed sensor; the free base's pose
         groups: dict[str, tuple] = {}
         for sensor in tree.sensors:

@@ -16,6 +16,8 @@ the model leaves open gets a documented default and a warning.
 
 from __future__ import annotations
 
+import math
+
 from collections import defaultdict
 from dataclasses import dataclass, field, replace
 
@@ -53,6 +55,11 @@ def _scalar(port) -> bool:
 def _label(name: str, value) -> str:
     """A replica's name: `1-Tip` for value 1 of `index i` on Tip (RoboTool's form), the name otherwise."""
     return name if value is None else f"{value}-{name}"
+
+
+def _bound(limit: float | None, absent: float) -> float:
+    """A joint limit as written, or the unbounded side it stands for when absent."""
+    return absent if limit is None else limit
 
 
 @dataclass(eq=False)
@@ -430,6 +437,10 @@ class TreeBuilder:
                 for key in ("lower", "upper", "velocity", "effort"):
                     if lim.get(key) is not None:
                         setattr(joint, key, self.num(lim.get(key), denv, f"limit {key} of {ref.name}"))
+                if joint.start != 0.0:
+                    self.diag.warning(ref.loc, f"joint {ref.name}: its zero position is outside its limits "
+                                      f"[{_bound(joint.lower, -math.inf):g}, {_bound(joint.upper, math.inf):g}]: the simulator "
+                                      f"starts it at {joint.start:g}")
         for aref in ref.actuators:
             actuator = self.scope.device_of(aref)
             gains = {n: self.num(e, env, f"{aref.name}.{n}") for n, e, _ in aref.instantiations}

@@ -128,8 +128,9 @@ class MappingChecker(Checker):
         for name, op in members.operations.items():
             if name not in seen and module is not None:
                 self.diag.warning(mapping.loc, f"platform operation '{name}' is not mapped by {mapping.name}")
+        sent = platform_outputs(module) if isinstance(module, Module) else set()
         for name in members.events:
-            if name not in seen and module is not None:
+            if name not in seen and name not in sent and module is not None:
                 self.diag.warning(mapping.loc, f"platform event '{name}' is not mapped by {mapping.name}")
 
     def _unique(self, seen: dict, name: str, loc, what: str) -> None:
@@ -155,3 +156,10 @@ class MappingChecker(Checker):
             return DeviceTy(found[2])
 
         return ExprChecker(self.types, self.diag, scope, self.functions, None, qualified)
+
+
+def platform_outputs(module: Module) -> set[str]:
+    """The platform's events the d-model sends to it (a connection from a controller to the platform): a mapping
+    maps input events only, so these are no event it leaves unmapped (a sorter's `sorted` report)."""
+    platform = module.platform.name if module.platform is not None else None
+    return {c.target_event for c in module.connections if c.target == platform and not c.bidirectional}

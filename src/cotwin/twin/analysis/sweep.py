@@ -79,6 +79,17 @@ def summary(prediction) -> dict:
     return out
 
 
+def tally(rows: list[dict]) -> str:
+    """What a sweep's answers came to: how many what-ifs completed their command and, where the mapping
+    answers feasibility (an event named feasible*, infeasible*, ...), how many were feasible. A d-model
+    without feasibility answers is not said to have had none feasible."""
+    answered = [r for r in rows if ERROR not in r]
+    done = [k for r in answered for k, v in r.items() if k.endswith("time_to_done") and v is not None]
+    said = [v for r in answered for k, v in r.items() if k.endswith("feasible") and v is not None]
+    out = f"{len(done)} completed"
+    return out + (f", {sum(1 for v in said if v)} feasible" if said else "")
+
+
 def point(plan: list[Command]) -> dict:
     """A plan's arguments, named as `summary` names them: the grid point a what-if answers."""
     out = {}

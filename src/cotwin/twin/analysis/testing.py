@@ -264,7 +264,8 @@ class CaseRun:
             else:
                 Source = ScenarioUnit
             self.driver = None
-            source = Source(CONTROLLER.name, program, _commands(case, program, step, lambda e: True), all_ports)
+            source = Source(CONTROLLER.name, program, _commands(case, program, step, lambda e: True), all_ports,
+                            together=True)  # a cycle's inputs arrive in one step, as the oracle has them
             fed = dmodel_inputs
         else:
             ports = [p for ev in program.inputs if ev.name in commands for p in [ev.name, *(n for n, _ in ev.value_ports)]]

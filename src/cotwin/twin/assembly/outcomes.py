@@ -37,6 +37,12 @@ STOPS = {"collision", "fault", "emergency", "protective"}  # a word of the name 
 NOT_STOPS = {"no", "not", "non", "free", "clear", "cleared", "reset", "ok", "none"}  # ... unless it says the opposite
 
 
+def answers_feasibility(program) -> bool:
+    """Whether a d-model takes feasibility answers (an input event named feasible*, infeasible*, ...): only then
+    is a command without one of unknown feasibility; for others feasibility is not a question."""
+    return any(FEASIBLE.match(ev.name) or INFEASIBLE.match(ev.name) for ev in program.inputs)
+
+
 @lru_cache(maxsize=None)  # asked of the events of every step: a mapping has a few names
 def stopping(event: str) -> bool:
     """Whether an event's name says a move was stopped: one of its words (camelCase or snake_case) is collision,

@@ -385,8 +385,11 @@ class ScenarioUnit(PythonUnit):
     """The controller: plays a scenario's commands into the d-model's inputs, one event per step (see
     module doc); `queue.applied` says when each was applied."""
 
-    def __init__(self, name: str, program: Program, commands: list[Command], ports: list[str] | None = None):
-        """Outputs: the ports the commands use, or `ports` (which must include them)."""
+    def __init__(self, name: str, program: Program, commands: list[Command], ports: list[str] | None = None,
+                 together: bool = False):
+        """Outputs: the ports the commands use, or `ports` (which must include them). `together`: every event due
+        in a step is shown in that step (a generated test case's cycle of several inputs, whose oracle has them
+        in one cycle), not one per step as a plan or a broker applies them."""
         types = scenario_ports(program)
         used = list(dict.fromkeys(port for c in commands for port, _ in c.values))
         if ports is not None:
@@ -399,6 +402,7 @@ class ScenarioUnit(PythonUnit):
         self.arguments = {ev.name: [port for port, _ in ev.value_ports] for ev in program.inputs if ev.name in self.events}
         self.commands = sorted(commands, key=lambda c: c.time)
         self.queue = CommandQueue()
+        self.together = together
         self._next = 0
 
     @property
@@ -442,9 +446,12 @@ class ScenarioUnit(PythonUnit):
                     self.values[port] = value
 
     def _apply(self, at: float) -> None:
-        """Show the next waiting command (its event true, its arguments set), applied at time `at`."""
-        occurrence = self.queue.take(at)
-        if occurrence is not None:
+        """Show the next waiting command (its event true, its arguments set), or with `together` every one
+        waiting, applied at time `at`."""
+        for _ in range(len(self.queue) if self.together else 1):
+            occurrence = self.queue.take(at)
+            if occurrence is None:
+                return
             self.values[occurrence.event] = True
             self.values.update(occurrence.values)
 
