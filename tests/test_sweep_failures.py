@@ -162,7 +162,30 @@ def test_a_sweep_without_feasibility_answers_tallies_completions_not_zero_feasib
     assert tally(plain) == "4 completed"
     answered = [{"target_X": 0, "feasible": True, "time_to_done": 3.1}, {"target_X": 1, "feasible": False,
                 "time_to_done": None}, {"target_X": 2, ERROR: "boom"}]
-    assert tally(answered) == "1 completed, 1 feasible"
+    assert tally(answered) == "1 completed, 1 feasible, 1 infeasible"
+    # an infeasible move the d-model came back to rest from (its time_to_done set) did not complete: the
+    # ledger's verdict is 'infeasible'; the tally said '2 completed, 0 feasible' of two infeasible holes
+    refused = [{"target_X": k, "feasible": False, "accepted": True, "time_to_done": 0.4} for k in range(2)]
+    assert tally(refused) == "0 completed, 0 feasible, 2 infeasible"
+    several = [{"c0_item": 1, "c0_feasible": True, "c0_time_to_done": 2.0, "c1_item": 2, "c1_feasible": False,
+                "c1_time_to_done": 0.3}]
+    assert tally(several) == "1 completed, 1 feasible, 1 infeasible"
+
+
+def test_a_sweep_says_which_arguments_it_sends_without_values(tmp_path):
+    """`--event moveDiscreteCommand --arg target_X=0..1 --arg MovementArgs_target_Z=1`: target_Y, given no values,
+    went as 0 in every what-if, a value no column of the CSV shows; the sweep warns, naming the port."""
+    from conftest import EXAMPLES
+
+    from cotwin.dmodel.program import build_program
+    from cotwin.robosim.check import load_checked
+    from cotwin.twin.analysis.sweep import unswept
+
+    program = build_program(load_checked([EXAMPLES / "ur5e" / "arm.rst"]))
+    ranges = {"target_X": [0, 1], "MovementArgs_target_Z": [1]}
+    assert unswept(program, "moveDiscreteCommand", ranges) == ["MovementArgs_target_Y"]
+    assert unswept(program, "moveDiscreteCommand", {**ranges, "target_Y": [0]}) == []
+    assert unswept(program, "openGripperCommand", {}) == []  # no arguments: nothing to say
 
 
 def test_feasibility_is_a_question_only_for_a_d_model_that_takes_its_answers():

@@ -128,7 +128,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     import time
 
     from ..twin.assembly.run import load
-    from ..twin.analysis.sweep import ERROR, SweepInterrupted, failures, grid, run_sweep, tally
+    from ..twin.analysis.sweep import ERROR, SweepInterrupted, failures, grid, run_sweep, tally, unswept
     from ..twin.services.whatif import physics_timing
     from .progress import ProgressReport
 
@@ -144,6 +144,11 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     inputs = [*system.spec.inputs, state]
     check_outputs([out], inputs)
     plans = grid(system.models.program, event, ranges)
+    missing = unswept(system.models.program, event, ranges)
+    if missing:  # sent as 0 in every what-if, a value no column shows
+        click.echo(f"warning: --arg gives no values for {', '.join(missing)}: every what-if sends "
+                   f"{'it' if len(missing) == 1 else 'them'} as 0 (the port's start value); to say so, "
+                   f"--arg {missing[0]}=0", err=True)
     blob = read_bytes(state, "state") if state else None
     started = time.perf_counter()
     def write(path, rows: list[dict]) -> None:

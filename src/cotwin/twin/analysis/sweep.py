@@ -66,6 +66,19 @@ def grid(program, event: str, ranges: dict[str, list], at: float = 0.5) -> list[
     return plans
 
 
+def unswept(program, event: str, ranges: dict[str, list]) -> list[str]:
+    """The ports of `event`'s arguments that `ranges` gives no values (by port or field name): every what-if of
+    the grid sends their start value, which no row of the sweep shows."""
+    from ..assembly.scenario import argument_keys
+
+    ev = next((e for e in program.inputs if e.name == event), None)
+    if ev is None:
+        return []
+    fields = argument_keys(ev)
+    given = {fields[k][0] for k in ranges if k in fields}
+    return [port for port, _ in ev.value_ports if port not in given]
+
+
 def summary(prediction) -> dict:
     """One row of a sweep: per command its arguments, feasibility, acceptance and time to be done."""
     done = prediction.completion_time  # a step count times the step: 26.400000000000002 written as 26.4, as outputs.csv does
@@ -80,14 +93,16 @@ def summary(prediction) -> dict:
 
 
 def tally(rows: list[dict]) -> str:
-    """What a sweep's answers came to: how many what-ifs completed their command and, where the mapping
-    answers feasibility (an event named feasible*, infeasible*, ...), how many were feasible. A d-model
-    without feasibility answers is not said to have had none feasible."""
-    answered = [r for r in rows if ERROR not in r]
-    done = [k for r in answered for k, v in r.items() if k.endswith("time_to_done") and v is not None]
-    said = [v for r in answered for k, v in r.items() if k.endswith("feasible") and v is not None]
-    out = f"{len(done)} completed"
-    return out + (f", {sum(1 for v in said if v)} feasible" if said else "")
+    """What a sweep's answers came to: how many commands completed (back at rest and not answered infeasible, as
+    the ledger judges them) and, where the mapping answers feasibility (an event named feasible*, infeasible*,
+    ...), how many were feasible and infeasible. A d-model without feasibility answers is not said to have had
+    none feasible; an infeasible command the d-model came back to rest from is not said to have completed."""
+    commands = [(r.get(k[:-len("time_to_done")] + "feasible"), v) for r in rows if ERROR not in r
+                for k, v in r.items() if k.endswith("time_to_done")]
+    completed = sum(1 for feasible, done in commands if done is not None and feasible is not False)
+    said = [feasible for feasible, _ in commands if feasible is not None]
+    out = f"{completed} completed"
+    return out + (f", {sum(1 for v in said if v)} feasible, {sum(1 for v in said if not v)} infeasible" if said else "")
 
 
 def point(plan: list[Command]) -> dict:
