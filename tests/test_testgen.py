@@ -208,6 +208,24 @@ def test_stub_cases_pass_under_gauss_seidel_and_fmi3_clocks(stub_suite, tmp_path
     assert len(result.covered) == 25
 
 
+def test_a_pair_in_the_first_cycle_says_why_jacobi_cannot_reach_it(graph, tmp_path):
+    """A transition-pairs case whose pair needs an input in the d-model's first cycle (init -> open) cannot be
+    covered under FMI 2.0 Jacobi, where a source's values reach the d-model a step late: its failure says so and
+    what to run instead (it said only 'not reached: pair PickPlace.init -> open'); under Gauss-Seidel it passes."""
+    out = tmp_path / "pairs"
+    write_suite(generate(graph, "transition-pairs"), out)
+    suite = read_suite(out)
+    first = [c for c in suite.cases if c.cycles and c.cycles[0].get("inputs")]
+    assert first, "the pairs suite has a case with an input in its first cycle"
+    names = {c.name for c in first}
+    jacobi = run_suite(load(UR5E / "cotwin.toml"), suite, tmp_path / "j", algorithm="jacobi", only=sorted(names))
+    for case in jacobi.cases:
+        assert not case.passed and "pair PickPlace.init -> " in str(case.divergence)
+        assert "no source can under Jacobi" in str(case.divergence) and "--algorithm gauss-seidel" in str(case.divergence)
+    seidel = run_suite(load(UR5E / "cotwin.toml"), suite, tmp_path / "g", algorithm="gauss-seidel", only=sorted(names))
+    assert all(c.passed for c in seidel.cases), [str(c.divergence) for c in seidel.cases]
+
+
 def test_a_platform_case_says_where_another_master_left_its_path(auto_suite, tmp_path):
     """With FMI 3.0 clocks the d-model's pick() reaches the gripper in the step it is called (under the project's
     Jacobi with FMI 2.0 a step later): the gripper reports closed a cycle earlier and the platform no longer

@@ -377,11 +377,20 @@ class CaseRun:
                                            "case sends its next command in", self.driver.stuck)
         if result.divergence is None and result.missing:
             result.divergence = self._left_path() or Divergence(
-                0, "coverage", f"the case's items ({len(case.items)})", f"not reached: {', '.join(result.missing)}")
+                0, "coverage", f"the case's items ({len(case.items)})",
+                f"not reached: {', '.join(result.missing)}{self._first_cycle_late()}")
         if error is not None:
             result.divergence = Divergence(len(self.trace.cycles), "run", "the co-simulation to complete",
                                            "; ".join(f.message for f in error.findings))
         return result
+
+    def _first_cycle_late(self) -> str:
+        """Why items of the d-model's first cycle cannot be reached under FMI 2.0 Jacobi: a source's values reach
+        the d-model a step late, so its first cycle reads no input, whatever a case gives it there."""
+        if self.fmi == 3 or self.algorithm != "jacobi" or not self.case.cycles or not self.case.cycles[0].get("inputs"):
+            return ""
+        return ("; the case gives the d-model inputs in its first cycle, which no source can under Jacobi (they reach "
+                "it a step late): run the suite with --algorithm gauss-seidel or --fmi 3")
 
     def _left_path(self) -> Divergence | None:
         """Where a run left the case's path: the first state (repeats collapsed) that differs."""
