@@ -157,3 +157,47 @@ def test_a_value_that_reaches_a_guard_through_a_variable_is_not_data_independent
     assert notes == ["go: 2 value(s) from its domain"]
     report = verify(program)
     assert not report.unreached_states, report.unreached_states
+
+
+COUNTER = """interface Ev { event tick event report: int }
+controller C { cycleDef cycle == 1 uses Ev sref m = M
+	connection C on tick to m on tick connection m on report to C on report }
+module Mod { cycleDef cycle == 1 robotic platform P { uses Ev } cref c = C
+	connection P on tick to c on tick (_async) connection c on report to P on report (_async) }
+stm M {
+	cycleDef cycle == 1
+	input context { uses Ev }
+	output context { uses Ev }
+	var count: int = 0
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $tick action count = count + %s ; $report!count }
+	transition t2 { from A to A exec condition not $tick }
+}
+"""
+
+
+def test_a_search_that_hits_its_limit_names_the_variable_that_grows(tmp_path):
+    """A counter that grows without bound makes every state new: verify and testgen stopped at their limit saying
+    only 'raise --max-states' (a user's mutants ran 8 minutes); they name the variable and how to bound it, and
+    say nothing of the kind where the search completes."""
+    from cotwin.cli.testing import format_suite
+    from cotwin.dmodel.testgen import generate
+    from cotwin.dmodel.testgen_graph import explore
+
+    (tmp_path / "c.rst").write_text(COUNTER % "1")
+    program = build_program(load_checked([tmp_path / "c.rst"]))
+    report = verify(program, max_states=200)
+    assert not report.complete
+    assert "; M.count took" in format_report(program, report) and "grows without bound" in report.growth
+    graph = explore(program, {}, max_states=100)
+    suite = generate(graph, "transitions")
+    assert not graph.complete
+    header = format_suite(suite, 0.1, "", str(tmp_path / "s")).splitlines()[0]
+    assert header.endswith("(INCOMPLETE: the state limit was reached; M.count took 50 values in the states explored: a "
+                           "variable that grows without bound makes every state new, so bound it in the model (e.g. a "
+                           "modulus) or compare it with a constant)"), header
+    (tmp_path / "c.rst").write_text(COUNTER % "1 - count")  # 0, 1, 0, ...: bounded
+    bounded = verify(build_program(load_checked([tmp_path / "c.rst"])), max_states=200)
+    assert bounded.complete and bounded.growth == ""

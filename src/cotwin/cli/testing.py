@@ -145,10 +145,13 @@ def try_on_platform(suite, system, out: str, period: float, settle: float) -> di
 
 
 def format_suite(suite, period: float, why: str, out: str, drivers: bool = False) -> str:
+    from ..dmodel.verify import growth_hint
+
     graph = suite.graph
     reached, covered = len(suite.reached), len(suite.covered)
     lines = [f"module {suite.program.module.name}: {len(graph.snapshots)} states, {graph.edges} distinct cycles explored "
-             f"in {graph.seconds:.2f} s" + ("" if graph.complete else " (INCOMPLETE: the state limit was reached)")
+             f"in {graph.seconds:.2f} s" + ("" if graph.complete else
+                                            f" (INCOMPLETE: the state limit was reached{growth_hint(suite.program, graph.snapshots)})")
              + (f" (stopped: {graph.stopped})" if graph.stopped else "")]
     lines += [f"  note: {n}" for n in graph.value_notes]
     lines.append(f"  commands: {', '.join(suite.commands) or 'none'} ({why}); platform answers: "

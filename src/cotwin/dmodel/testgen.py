@@ -395,8 +395,10 @@ def generate(graph: StateGraph, criterion: str = "transitions", max_cycles: int 
     if graph.complete:
         unreachable = [(cov.name(i), cov.why_unreached(i, reached_transitions)) for i in universe if i not in reached]
     else:  # nothing is known of what lies beyond the limit
+        from .verify import growth_hint
+
         limit = (f"not reached within the state limit ({len(graph.snapshots)} states): raise --max-states, or give "
-                 "--domain values of the inputs its conditions compare against")
+                 "--domain values of the inputs its conditions compare against" + growth_hint(program, graph.snapshots))
         unreachable = [(cov.name(i), limit) for i in universe if i not in reached]
     covered = set().union(*(w.covered for w in kept)) if kept else set()
     uncovered = [(cov.name(i), "no walk from the initial state reaches it") for i in universe

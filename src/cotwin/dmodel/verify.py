@@ -97,10 +97,35 @@ class Report:
     max_states: int = 0
     sampled: list[str] = field(default_factory=list)  # value ports explored with a default domain only
     random_values: tuple = ()  # what a real random draw took (empty: the model draws none)
+    growth: str = ""  # an incomplete search: the variables that grew (growth_hint)
 
     @property
     def ok(self) -> bool:
         return not self.violations and not self.unreached_states and not self.unreached_transitions and self.complete
+
+
+def widest_variables(program: Program, snapshots, top: int = 2) -> list[tuple[str, int]]:
+    """The machines' variables with the most values among explored interpreter snapshots (at least ten, most
+    first): a counter that grows without bound makes every state new, so a search that hit its limit names it."""
+    values: dict[tuple[int, str], set] = {}
+    for snap in snapshots:
+        for m, (_, frames) in enumerate(snap[0]):
+            for name, value in (frames[0][3] if frames else ()):
+                values.setdefault((m, name), set()).add(value)
+    machines = {m.index: m.machine.name for m in program.machines}
+    ranked = sorted(((f"{machines.get(m, m)}.{name}", len(seen)) for (m, name), seen in values.items()),
+                    key=lambda item: -item[1])
+    return [(name, n) for name, n in ranked[:top] if n >= 10]
+
+
+def growth_hint(program: Program, snapshots) -> str:
+    """What to say of a search that hit its state limit: the variables taking the most values, if any grows."""
+    wide = widest_variables(program, snapshots)
+    if not wide:
+        return ""
+    named = ", ".join(f"{name} took {n} values" for name, n in wide)
+    return (f"; {named} in the states explored: a variable that grows without bound makes every state new, so "
+            "bound it in the model (e.g. a modulus) or compare it with a constant")
 
 
 def condition_variables(program: Program) -> set[str]:
@@ -340,6 +365,8 @@ def verify(program: Program, domains: dict[str, list] | None = None, max_states:
                     depth[nxt] = depth[snap] + 1
                     queue.append(nxt)
     report.states = len(parent)
+    if not report.complete:
+        report.growth = growth_hint(program, parent)
     report.random_values = draws.reals if drew else ()
     report.violations = sorted(found.values(), key=lambda v: (len(v.trace), v.property))
     for m in program.machines:
@@ -368,7 +395,7 @@ def format_report(program: Program, report: Report) -> str:
     if not report.complete:
         lines.append(f"  INCOMPLETE: the search stopped at its limit of {report.max_states} states: what it "
                      "found holds, what it did not reach is not judged (raise --max-states"
-                     + (f"; {sampled}" if sampled else "") + ")")
+                     + (f"; {sampled}" if sampled else "") + report.growth + ")")
     props = [("timelock", "deadlock/timelock freedom"), ("determinism", "determinism"),
              ("divergence", "divergence freedom"), ("repeated-output", "at most one of each output per cycle")]
     for key, title in props:
