@@ -239,3 +239,36 @@ def test_a_predeclared_exchange_of_another_type_is_a_located_error(broker, tmp_p
         channel.exchange_delete(name)
         channel.exchange_delete(name + ".events")
         link.close()
+
+
+@pytest.mark.parametrize("args", [("twin", "examples/ur5e/replay.toml", "-o", "{out}", "--history"),
+                                  ("fleet", "fleet.toml", "-o", "{out}", "--history"),
+                                  ("history", "list", "--db"), ("dashboard", "--db")])
+@pytest.mark.parametrize("url, message", [
+    ("sqlite://", "'sqlite://' is not a sqlite:///FILE or postgresql://... URL"),
+    ("sqlite:///:memory:", "'sqlite:///:memory:' is a database in memory, lost when the command ends"),
+    ("history.sqlite", "'history.sqlite' is not a sqlite:///FILE"),
+])
+def test_a_history_url_option_in_memory_or_of_another_scheme_is_refused_at_the_option(tmp_path, args, url, message):
+    """`cotwin twin --history sqlite://` ran, recorded its run in memory (a traceback from SQLAlchemy's pool on
+    stderr) and lost it at exit; `foo://x` or a bare file name ran the models first and ended on SQLAlchemy's
+    words. Every history URL option is checked as the project's [history] url is, before anything runs."""
+    from conftest import cotwin_in_process
+
+    proc = cotwin_in_process(*(a.format(out=tmp_path / "out") for a in args), url, cwd=ROOT)
+    assert proc.returncode == 2, proc.stderr
+    option = args[-1]
+    assert f"Invalid value for '{option}': {message}" in proc.stderr
+    assert "Traceback" not in proc.stderr and not (tmp_path / "out").exists()
+
+
+def test_a_projects_history_url_in_memory_is_refused_at_its_key(tmp_path):
+    from cotwin.twin.project import load_project
+
+    project = tmp_path / "p.toml"
+    text = (ROOT / "examples/ur5e/cotwin.toml").read_text().replace('"arm.rst"', f'"{ROOT}/examples/ur5e/arm.rst"')
+    for name in ("ur5e.pm", "mapping.pm", "plan.csv", "ur.profile.toml"):
+        text = text.replace(f'"{name}"', f'"{ROOT}/examples/ur5e/{name}"')
+    project.write_text(text + '\n[history]\nurl = "sqlite:///"\n')
+    with pytest.raises(CotwinError, match=r"p.toml:\d+:\d+: .*'sqlite:///' is a database in memory"):
+        load_project(project)

@@ -10,8 +10,8 @@ import click
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..twin.assembly.observing import TwinObserver
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
-                     interruptible, main, outcomes, output_folder, said_restarts, serving_options, show_warnings,
-                     start_dashboard)
+                     history_url, interruptible, main, outcomes, output_folder, said_restarts, serving_options,
+                     show_warnings, start_dashboard)
 
 
 @main.command()
@@ -25,7 +25,7 @@ from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, chec
 @click.option("--pt-url", metavar="URL", help="where the PT is (overrides [pt] url; opc.tcp://HOST:PORT is an OPC UA "
               "plant even without a [pt] table)")
 @click.option("--rabbitmq", "exchange", callback=exchange_name, help="take commands live from RabbitMQ on this exchange (overrides [scenario])")
-@click.option("--history", "history", help="history database URL (default: [history] url, else DIR/history.sqlite)")
+@click.option("--history", "history", callback=history_url, help="history database URL (default: [history] url, else DIR/history.sqlite)")
 @click.option("--whatif", "whatif", is_flag=True, help="answer what-if requests sent over the broker (see docs)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
