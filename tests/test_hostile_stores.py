@@ -272,3 +272,75 @@ def test_a_projects_history_url_in_memory_is_refused_at_its_key(tmp_path):
     project.write_text(text + '\n[history]\nurl = "sqlite:///"\n')
     with pytest.raises(CotwinError, match=r"p.toml:\d+:\d+: .*'sqlite:///' is a database in memory"):
         load_project(project)
+
+
+def test_a_store_another_writer_holds_locked_is_a_located_error_before_the_run(tmp_path):
+    """A SQLite store another process holds a write lock on (or a read-only one) raised SQLAlchemy's
+    OperationalError from the recorder: `cotwin twin` called it a cotwin bug (exit 70)."""
+    path = tmp_path / "h.sqlite"
+    HistoryRecorder(f"sqlite:///{path}", "p.toml", "twin", 0.1, "jacobi", {"dt": COLUMNS}).close()
+    holder = sqlite3.connect(path, isolation_level=None)
+    holder.execute("BEGIN IMMEDIATE")  # another writer's transaction
+    try:
+        with pytest.raises(CotwinError, match=f"cannot write the history database sqlite:///{path}: "
+                                              "OperationalError: .*database is locked"):
+            HistoryRecorder(f"sqlite:///{path}", "p.toml", "twin", 0.1, "jacobi", {"dt": COLUMNS})
+    finally:
+        holder.execute("ROLLBACK")
+        holder.close()
+
+
+def test_a_store_lost_midway_is_said_not_raised(postgres):
+    """A PostgreSQL store that went away during the run (here: dropped) made `close()` raise, and the twin
+    ended with an internal error instead of its summary and figure; records lost on the way were not said."""
+    import psycopg
+
+    from cotwin.twin.services.history import database_url
+
+    url, name = postgres
+    recorder = HistoryRecorder(database_url(url), "p.toml", "twin", 0.1, "jacobi", {"dt": COLUMNS}, batch_seconds=0.05)
+    recorder.record_sample("dt", 0, 0.0, [0.5, 1.5])
+    time.sleep(0.3)
+    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
+        conn.execute(f'DROP DATABASE "{name}" WITH (FORCE)')
+    recorder.record_sample("dt", 1, 0.1, [0.6, 1.6])
+    time.sleep(0.3)
+    recorder.close()
+    assert recorder.problem is not None
+    assert recorder.problem.startswith(f"the history of run {recorder.run_id} in postgresql+psycopg://postgres@"
+                                       f"127.0.0.1:5432/{name} is incomplete (1 record(s) not written, the first "
+                                       "failure: OperationalError")
+
+
+def test_a_twin_whose_store_failed_midway_says_its_history_is_incomplete(postgres, tmp_path):
+    """The twin's connection to its PostgreSQL store cut during the run: the records of that batch were lost,
+    the run was marked incomplete in the store, but `cotwin twin` printed its usual summary and exited 0."""
+    import threading
+
+    import psycopg
+
+    from conftest import cotwin_in_process
+
+    url, name = postgres
+    log = ROOT.parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"
+    if not log.is_file():
+        pytest.skip(f"the recorded UR5e run is not at {log} (only in the project workspace)")
+
+    def cut() -> None:  # once samples arrive, end the twin's sessions (as a restarted server or a network cut does)
+        with psycopg.connect(f"host=127.0.0.1 user=postgres dbname={name}", autocommit=True) as conn:
+            for _ in range(600):
+                if conn.execute("SELECT to_regclass('cotwin.samples') IS NOT NULL").fetchone()[0] and \
+                        conn.execute("SELECT count(*) FROM cotwin.samples").fetchone()[0] > 0:
+                    break
+                time.sleep(0.1)
+            conn.execute("SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE datname = %s AND "
+                         "pid <> pg_backend_pid()", (name,))
+
+    cutter = threading.Thread(target=cut)
+    cutter.start()
+    proc = cotwin_in_process("twin", ROOT / "examples/ur5e/replay.toml", "-o", tmp_path / "out", "--end", "4",
+                             "--realtime", "--pt-log", log, "--history", url)
+    cutter.join()
+    assert proc.returncode == 1, proc.stderr
+    assert "is incomplete (" in proc.stderr and "the run's outputs in" in proc.stderr, proc.stderr
+    assert (tmp_path / "out" / "pt" / "outputs.csv").is_file() and (tmp_path / "out" / "figure.png").is_file()

@@ -100,7 +100,11 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         from ..twin.assembly.convergence import summary
 
         click.echo(summary(result.convergence))
+    if result.history_problem is not None:  # the outputs are whole, but the store the user reads later is not
+        click.echo(f"error: {result.history_problem}; the run's outputs in {result.out} are whole", err=True)
     outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
+    if result.history_problem is not None:
+        sys.exit(1)
 
 
 def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, history, whatif, dashboard,

@@ -95,6 +95,7 @@ class LiveResult:
     sides: dict[str, Side] = field(default_factory=dict)
     alarms: list[dict] = field(default_factory=list)
     convergence: dict = field(default_factory=dict)  # [convergence]: its corrections and estimate
+    history_problem: str | None = None  # why the run's history is incomplete (its store failed), if it is
 
 
 class LiveTwin:
@@ -300,7 +301,7 @@ class LiveTwin:
         report = self.deviation.report
         result = LiveResult(pt.execution.result(), dt.execution.result(), report, self.out, url,
                             self._history.run_id if self._history else None, dict(self.sides), list(self.monitor.events),
-                            report.get("convergence", {}))
+                            report.get("convergence", {}), self._history.problem if self._history else None)
         if status == "done":
             self._figure()
         return result
