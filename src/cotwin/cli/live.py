@@ -100,11 +100,16 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         from ..twin.assembly.convergence import summary
 
         click.echo(summary(result.convergence))
-    if result.history_problem is not None:  # the outputs are whole, but the store the user reads later is not
-        click.echo(f"error: {result.history_problem}; the run's outputs in {result.out} are whole", err=True)
+    incomplete_history(result)
     outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
     if result.history_problem is not None:
         sys.exit(1)
+
+
+def incomplete_history(result) -> None:
+    """Say that a twin's history store failed during the run: its outputs are whole, the store is not."""
+    if result.history_problem is not None:
+        click.echo(f"error: {result.history_problem}; the run's outputs in {result.out} are whole", err=True)
 
 
 def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, history, whatif, dashboard,
@@ -157,12 +162,15 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
     for side, summary in result.outcomes.items():
         for line in summary.lines():
             click.echo(f"{side.upper()}: {line}")
+    incomplete_history(result)
     failures = [f"{side.upper()}: {f}" for side, summary in result.outcomes.items() for f in summary.strict_failures()]
     if strict and failures:
         from ..twin.assembly.outcomes import STRICT_EXIT
 
         click.echo(f"--strict: {'; '.join(failures)}; exit status {STRICT_EXIT}", err=True)
         sys.exit(STRICT_EXIT)
+    if result.history_problem is not None:
+        sys.exit(1)
 
 
 class TwinProgress(TwinObserver):
