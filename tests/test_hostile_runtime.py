@@ -349,3 +349,38 @@ def test_commands_a_run_never_sends_are_named_not_dropped_silently():
     assert late == [f"{plan}:4:1: warning: this command at 8 s is after the run's end (8 s): it is never sent",
                     f"{plan}:5:1: warning: this command at 15 s is after the run's end (8 s): it is never sent"]
     assert after_end(commands, 15.1) == []
+
+
+def test_a_second_interrupt_while_a_stopped_twin_ends_leaves_both_sides_and_its_history_whole(run1, copied, tmp_path):
+    """Ctrl-C then Ctrl-C again 50 ms later: the second landed while the first was ending the run (an FMU being
+    terminated). The PT's rows stayed in outputs.csv.part, the DT's became outputs.csv, the history run stayed
+    'running', and the error said 'PT: no rows computed; DT: no rows computed' of a run that had computed 6 steps."""
+    from cotwin.twin.assembly.observing import TwinObserver
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import LiveTwin
+    from cotwin.twin.project import load_project
+    from cotwin.twin.services.history import list_runs
+
+    class SecondInterrupt(TwinObserver):
+        """Stops the twin at step 5 (a first Ctrl-C) and interrupts the PT's units as they end (a second)."""
+
+        def twin_step(self, twin, k: int, t: float) -> None:
+            if k == 5:
+                twin.stop()
+                unit = next(iter(twin.sides["pt"].execution.system.units.values()))
+                ending = unit.terminate
+
+                def interrupted() -> None:
+                    ending()
+                    raise KeyboardInterrupt
+
+                unit.terminate = interrupted
+
+    system = load(load_project(copied / "replay.toml", str(RUN1)))
+    live = LiveTwin(system, tmp_path / "out", end=2.0, observers=[SecondInterrupt()])
+    with pytest.raises(CotwinError) as err:
+        live.run()
+    for side in ("pt", "dt"):
+        assert f"{side.upper()}: the 6 row(s) computed are in {tmp_path / 'out' / side / 'outputs.csv'}" in str(err.value)
+        assert not (tmp_path / "out" / side / "outputs.csv.part").exists()
+    assert [run["status"] for run in list_runs(f"sqlite:///{tmp_path / 'out' / 'history.sqlite'}")] == ["stopped"]

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Callable
 
 from ...cosim.algorithm import algorithm as make_algorithm
-from ...cosim.execution import Execution, RunResult, ended_early, saved_execution, step_count
+from ...cosim.execution import Execution, RunResult, ended_early, saved_execution, step_count, uninterrupted
 from ...cosim.observers import CSVWriter, StateFile
 from ...config import did_you_mean
 from ...diagnostics import CotwinError, Finding, Severity
@@ -293,11 +293,9 @@ class LiveTwin:
         finally:
             error = None if status == "done" or (status == "stopped" and message is None) else \
                 RuntimeError(message or "failed")
-            for side in (pt, dt):
-                side.execution.close(error)
             self.status, self.message = status, message
-            for o in self._watchers:
-                o.twin_ended(self, status)
+            uninterrupted([*(lambda side=side: side.execution.close(error) for side in (pt, dt)),
+                           *(lambda o=o: o.twin_ended(self, status) for o in self._watchers)])
         report = self.deviation.report
         result = LiveResult(pt.execution.result(), dt.execution.result(), report, self.out, url,
                             self._history.run_id if self._history else None, dict(self.sides), list(self.monitor.events),
