@@ -344,3 +344,36 @@ def test_a_twin_whose_store_failed_midway_says_its_history_is_incomplete(postgre
     assert proc.returncode == 1, proc.stderr
     assert "is incomplete (" in proc.stderr and "the run's outputs in" in proc.stderr, proc.stderr
     assert (tmp_path / "out" / "pt" / "outputs.csv").is_file() and (tmp_path / "out" / "figure.png").is_file()
+
+
+def test_twins_starting_together_on_a_new_postgresql_store_all_record(postgres):
+    """Three `cotwin twin` started at once on a new PostgreSQL database: one or two failed with a unique
+    violation in PostgreSQL's catalogue ("pg_type_typname_nsp_index"), since CREATE SCHEMA/TABLE IF NOT EXISTS
+    run by sessions at the same moment is not safe; the makers of the tables take turns now."""
+    import threading
+
+    import psycopg
+
+    from cotwin.twin.services.history import database_url
+
+    url, name = postgres
+    for _ in range(3):  # a race: a few rounds on a store made anew
+        with psycopg.connect(f"host=127.0.0.1 user=postgres dbname={name}", autocommit=True) as conn:
+            conn.execute("DROP SCHEMA IF EXISTS cotwin CASCADE")
+        start, failures, recorders = threading.Barrier(8), [], []
+
+        def record() -> None:
+            start.wait()
+            try:
+                recorders.append(HistoryRecorder(database_url(url), "p.toml", "twin", 0.1, "jacobi", {"dt": COLUMNS}))
+            except CotwinError as err:
+                failures.append(str(err))
+
+        threads = [threading.Thread(target=record) for _ in range(8)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+        for recorder in recorders:
+            recorder.close()
+        assert failures == [] and len(recorders) == 8

@@ -153,6 +153,7 @@ def _schema(conn, create: bool) -> str | None:
     inspector = sa.inspect(conn)
     if create:
         try:
+            _take_turns(conn)
             conn.execute(sa.schema.CreateSchema(SCHEMA, if_not_exists=True))
             conn.commit()
         except sa.exc.SQLAlchemyError as err:
@@ -164,6 +165,25 @@ def _schema(conn, create: bool) -> str | None:
             and _missing(inspector, "runs", "public") == []:
         return "public"  # a store written before cotwin had its own schema
     return SCHEMA
+
+
+TABLES_LOCK = 0x636F7477696E  # "cotwin": the PostgreSQL advisory lock on which the makers of its schema and tables queue
+
+
+def create_tables(engine: sa.Engine, *schemas: sa.MetaData) -> None:
+    """cotwin's history tables (and those of `schemas`), made once however many twins start at once on a new
+    store: PostgreSQL's CREATE ... IF NOT EXISTS run by two sessions at once fails in one of them (a unique
+    violation in its catalogue), so the makers take turns."""
+    with engine.begin() as conn:
+        _take_turns(conn)
+        for tables in (metadata, *schemas):
+            tables.create_all(conn)
+
+
+def _take_turns(conn) -> None:
+    """Wait for TABLES_LOCK until the end of `conn`'s transaction (PostgreSQL; SQLite locks its file itself)."""
+    if conn.dialect.name == "postgresql":
+        conn.execute(sa.text("SELECT pg_advisory_xact_lock(:key)"), {"key": TABLES_LOCK})
 
 
 def _missing(inspector, table: str, schema: str | None) -> list[str]:
@@ -229,7 +249,7 @@ class HistoryRecorder(BackgroundService):
         self.engine, self.url = engine_for(url), url
         self.columns = columns
         try:
-            metadata.create_all(self.engine)
+            create_tables(self.engine)
             with self.engine.begin() as conn:
                 self.run_id = conn.execute(runs.insert().values(
                     project=project, kind=kind, started=wallclock.time(), status="running", step=step,
