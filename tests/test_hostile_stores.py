@@ -377,3 +377,16 @@ def test_twins_starting_together_on_a_new_postgresql_store_all_record(postgres):
         for recorder in recorders:
             recorder.close()
         assert failures == [] and len(recorders) == 8
+
+
+@pytest.mark.parametrize("command", [("history", "list"), ("history", "export", "1", "-o", "{tmp}/e.csv"), ("dashboard",)])
+def test_a_store_given_twice_is_refused_not_half_ignored(tmp_path, command):
+    """--db and --dir together: --db was read and --dir ignored without a word (history export wrote another
+    store's run 1)."""
+    from conftest import cotwin_in_process
+
+    url, _ = _long_run(tmp_path / "history.sqlite", 3)
+    other, _ = _long_run(tmp_path / "other.sqlite", 5)
+    proc = cotwin_in_process(*(a.format(tmp=tmp_path) for a in command), "--db", other, "--dir", tmp_path)
+    assert proc.returncode == 2 and "give --db URL or --dir DIR" in proc.stderr and "one of them" in proc.stderr
+    assert not (tmp_path / "e.csv").exists()

@@ -18,8 +18,8 @@ def history_db(db: str | None, folder: str | None) -> str:
 
     from ..twin.services.history import database_url
 
-    if db is None and folder is None:
-        raise click.UsageError("give --db URL or --dir DIR (a twin's output folder, with history.sqlite)")
+    if (db is None) == (folder is None):  # both: one of them would be ignored without a word
+        raise click.UsageError("give --db URL or --dir DIR (a twin's output folder, with history.sqlite), one of them")
     if folder is not None and not (Path(folder) / "history.sqlite").is_file():
         raise click.BadParameter(f"no history.sqlite in {folder}", param_hint="--dir")
     return database_url(db, Path(folder) if folder else None)
