@@ -372,3 +372,23 @@ def test_live_twin_with_the_plant_as_pt_alarms_beyond_the_threshold_only(twin, s
         return [r["time"] for r in rows if r["{controller}.controller.moveDiscreteCommand"] == "true"]
 
     assert delivered("pt") == delivered("dt") == ["1.1", "5.6"]  # the plan's commands before 8 s, once each
+
+
+def test_a_server_that_never_answers_is_a_timeout_without_asyncios_leftovers_in_the_log(twin, caplog):
+    """A port that accepts but never speaks (not a plant, or a plant hung): the connect timed out as it should,
+    but the connect task given up on was left pending when the client's loop closed, and asyncio printed
+    "Task was destroyed but it is pending!" with the coroutine's repr (logged: on the user's stderr from the CLI)."""
+    import gc
+
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen()
+    url = f"opc.tcp://127.0.0.1:{silent.getsockname()[1]}"
+    try:
+        with pytest.raises(CotwinError, match=f"the plant at {url} did not answer connect within 1 s"):
+            OPCUAEndpoint(twin.models.tree, url, timeout=1, environ={"COTWIN_OPCUA_USER": "cotwin",
+                                                                     "COTWIN_OPCUA_PASSWORD": "not-a-plant-1234"})
+        gc.collect()
+    finally:
+        silent.close()
+    assert not [r for r in caplog.records if "Task was destroyed" in r.getMessage()]
