@@ -384,3 +384,22 @@ def test_a_second_interrupt_while_a_stopped_twin_ends_leaves_both_sides_and_its_
         assert f"{side.upper()}: the 6 row(s) computed are in {tmp_path / 'out' / side / 'outputs.csv'}" in str(err.value)
         assert not (tmp_path / "out" / side / "outputs.csv.part").exists()
     assert [run["status"] for run in list_runs(f"sqlite:///{tmp_path / 'out' / 'history.sqlite'}")] == ["stopped"]
+
+
+def test_a_twin_stopped_as_asked_keeps_its_figure_as_a_finished_runs(run1, copied, tmp_path):
+    """Ctrl-C in the steps ends the run after the step, "its results kept as a finished run's" (docs/live-twin.md):
+    the outputs and deviation.json were, but not figure.png."""
+    from cotwin.twin.assembly.observing import TwinObserver
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import LiveTwin
+    from cotwin.twin.project import load_project
+
+    class CtrlC(TwinObserver):
+        def twin_step(self, twin, k: int, t: float) -> None:
+            if k == 5:
+                twin.stop()
+
+    system = load(load_project(copied / "replay.toml", str(RUN1)))
+    result = LiveTwin(system, tmp_path / "out", end=2.0, observers=[CtrlC()]).run()
+    assert result.pt.steps == 5 and (tmp_path / "out" / "deviation.json").is_file()
+    assert (tmp_path / "out" / "figure.png").is_file()

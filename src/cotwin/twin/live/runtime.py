@@ -300,7 +300,7 @@ class LiveTwin:
         result = LiveResult(pt.execution.result(), dt.execution.result(), report, self.out, url,
                             self._history.run_id if self._history else None, dict(self.sides), list(self.monitor.events),
                             report.get("convergence", {}), self._history.problem if self._history else None)
-        if status == "done":
+        if status in ("done", "stopped"):  # a run stopped as asked is kept as a finished run's, its figure too
             self._figure()
         return result
 
