@@ -338,9 +338,17 @@ def serve_robot(project: str, queue: str | None, url: str | None) -> None:
                f"{server.dropped} unanswerable", err=True)
 
 
+def broker_name(ctx, param, value: str) -> str:
+    """A vhost or user name for rabbitmqctl: not empty (RabbitMQ refuses it) and one printable line."""
+    if not value.strip() or not value.isprintable():
+        raise click.BadParameter(f"{value!r}: a name of printable characters, not empty")
+    return value
+
+
 @main.command("broker-permissions")
 @click.argument("project", type=click.Path())
-@click.option("--vhost", default="cotwin", show_default=True, help="the virtual host of the twin's links")
+@click.option("--vhost", default="cotwin", show_default=True, callback=broker_name,
+              help="the virtual host of the twin's links")
 @click.option("--prefix", default="cotwin-", show_default=True, help="user names: PREFIX + role")
 def broker_permissions(project: str, vhost: str, prefix: str) -> None:
     """Print the rabbitmqctl commands creating a vhost and one least-privilege user per role (twin,
