@@ -403,3 +403,24 @@ def test_a_twin_stopped_as_asked_keeps_its_figure_as_a_finished_runs(run1, copie
     result = LiveTwin(system, tmp_path / "out", end=2.0, observers=[CtrlC()]).run()
     assert result.pt.steps == 5 and (tmp_path / "out" / "deviation.json").is_file()
     assert (tmp_path / "out" / "figure.png").is_file()
+
+
+def test_a_value_refused_from_a_message_whose_others_are_taken_is_not_called_a_dropped_message(caplog):
+    """An unknown key or a wrongly typed value in a message was logged "message dropped: ..." while the
+    message's other values were taken: whoever read the log looked for a lost command that was applied."""
+    import json
+    import logging
+    from datetime import datetime, timezone
+
+    from cotwin.twin.assembly.rabbitmq import CommandStream, Received
+
+    body = json.dumps({"time": datetime.now(timezone.utc).isoformat(), "moveDiscreteCommand": False,
+                       "MovementArgs_target_X": 2, "MovementArgs_target_Y": "3", "bogus": 1}).encode()
+    sent = [[Received(body, time.time())]]
+    types = {"moveDiscreteCommand": "Boolean", "MovementArgs_target_X": "Integer", "MovementArgs_target_Y": "Integer"}
+    stream = CommandStream(types, {"moveDiscreteCommand"}, lambda timeout: sent.pop() if sent else [], 1.0, 1.0)
+    with caplog.at_level(logging.WARNING, logger="cotwin.rabbitmq"), pytest.raises(CotwinError):
+        stream.start()  # MovementArgs_target_Y never gets a value
+    logged = [r.getMessage() for r in caplog.records if r.name == "cotwin.rabbitmq" and
+              ("bogus" in r.getMessage() or "is not a number" in r.getMessage())]
+    assert len(logged) == 2 and all(m.startswith("value dropped (the rest of its message taken): ") for m in logged), logged
