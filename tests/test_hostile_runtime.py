@@ -349,3 +349,78 @@ def test_commands_a_run_never_sends_are_named_not_dropped_silently():
     assert late == [f"{plan}:4:1: warning: this command at 8 s is after the run's end (8 s): it is never sent",
                     f"{plan}:5:1: warning: this command at 15 s is after the run's end (8 s): it is never sent"]
     assert after_end(commands, 15.1) == []
+
+
+def test_a_second_interrupt_while_a_stopped_twin_ends_leaves_both_sides_and_its_history_whole(run1, copied, tmp_path):
+    """Ctrl-C then Ctrl-C again 50 ms later: the second landed while the first was ending the run (an FMU being
+    terminated). The PT's rows stayed in outputs.csv.part, the DT's became outputs.csv, the history run stayed
+    'running', and the error said 'PT: no rows computed; DT: no rows computed' of a run that had computed 6 steps."""
+    from cotwin.twin.assembly.observing import TwinObserver
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import LiveTwin
+    from cotwin.twin.project import load_project
+    from cotwin.twin.services.history import list_runs
+
+    class SecondInterrupt(TwinObserver):
+        """Stops the twin at step 5 (a first Ctrl-C) and interrupts the PT's units as they end (a second)."""
+
+        def twin_step(self, twin, k: int, t: float) -> None:
+            if k == 5:
+                twin.stop()
+                unit = next(iter(twin.sides["pt"].execution.system.units.values()))
+                ending = unit.terminate
+
+                def interrupted() -> None:
+                    ending()
+                    raise KeyboardInterrupt
+
+                unit.terminate = interrupted
+
+    system = load(load_project(copied / "replay.toml", str(RUN1)))
+    live = LiveTwin(system, tmp_path / "out", end=2.0, observers=[SecondInterrupt()])
+    with pytest.raises(CotwinError) as err:
+        live.run()
+    for side in ("pt", "dt"):
+        assert f"{side.upper()}: the 6 row(s) computed are in {tmp_path / 'out' / side / 'outputs.csv'}" in str(err.value)
+        assert not (tmp_path / "out" / side / "outputs.csv.part").exists()
+    assert [run["status"] for run in list_runs(f"sqlite:///{tmp_path / 'out' / 'history.sqlite'}")] == ["stopped"]
+
+
+def test_a_twin_stopped_as_asked_keeps_its_figure_as_a_finished_runs(run1, copied, tmp_path):
+    """Ctrl-C in the steps ends the run after the step, "its results kept as a finished run's" (docs/live-twin.md):
+    the outputs and deviation.json were, but not figure.png."""
+    from cotwin.twin.assembly.observing import TwinObserver
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import LiveTwin
+    from cotwin.twin.project import load_project
+
+    class CtrlC(TwinObserver):
+        def twin_step(self, twin, k: int, t: float) -> None:
+            if k == 5:
+                twin.stop()
+
+    system = load(load_project(copied / "replay.toml", str(RUN1)))
+    result = LiveTwin(system, tmp_path / "out", end=2.0, observers=[CtrlC()]).run()
+    assert result.pt.steps == 5 and (tmp_path / "out" / "deviation.json").is_file()
+    assert (tmp_path / "out" / "figure.png").is_file()
+
+
+def test_a_value_refused_from_a_message_whose_others_are_taken_is_not_called_a_dropped_message(caplog):
+    """An unknown key or a wrongly typed value in a message was logged "message dropped: ..." while the
+    message's other values were taken: whoever read the log looked for a lost command that was applied."""
+    import json
+    import logging
+    from datetime import datetime, timezone
+
+    from cotwin.twin.assembly.rabbitmq import CommandStream, Received
+
+    body = json.dumps({"time": datetime.now(timezone.utc).isoformat(), "moveDiscreteCommand": False,
+                       "MovementArgs_target_X": 2, "MovementArgs_target_Y": "3", "bogus": 1}).encode()
+    sent = [[Received(body, time.time())]]
+    types = {"moveDiscreteCommand": "Boolean", "MovementArgs_target_X": "Integer", "MovementArgs_target_Y": "Integer"}
+    stream = CommandStream(types, {"moveDiscreteCommand"}, lambda timeout: sent.pop() if sent else [], 1.0, 1.0)
+    with caplog.at_level(logging.WARNING, logger="cotwin.rabbitmq"), pytest.raises(CotwinError):
+        stream.start()  # MovementArgs_target_Y never gets a value
+    logged = [r.getMessage() for r in caplog.records if r.name == "cotwin.rabbitmq" and
+              ("bogus" in r.getMessage() or "is not a number" in r.getMessage())]
+    assert len(logged) == 2 and all(m.startswith("value dropped (the rest of its message taken): ") for m in logged), logged

@@ -569,3 +569,16 @@ def test_a_saved_state_reads_robosim_values_back_and_holds_no_other_class():
             unpack(MAGIC + evil, "Mapping")
     with pytest.raises(StateError, match="holds only plain data, not a cotwin.diagnostics.CotwinError"):
         pack("Mapping", CotwinError("x"))
+
+
+def test_a_request_path_cannot_forge_lines_or_escapes_in_the_refusal_log(tmp_path, caplog):
+    """GET /api/history/1%0Afake... wrote the decoded path into the log: a line break (a forged line, e.g. a
+    login that never happened) and terminal escapes (ESC [31m) reached whoever reads the log."""
+    url, _ = _recorded(tmp_path / "history.sqlite")
+    caplog.set_level(logging.WARNING, logger="cotwin.dashboard")
+    with Dashboard(None, port=0, mode="history", history_url=url) as dash:
+        code, _ = _request(dash.url + "api/history/1%0Adashboard%20login%20of%20admin%1b%5b31m%E2%80%A8")
+        assert code == 400
+    logged = [r.getMessage() for r in caplog.records if r.name == "cotwin.dashboard"]
+    assert logged and all(m.isprintable() for m in logged), logged
+    assert any("GET /api/history/1\\ndashboard login of admin\\x1b[31m\\u2028 from 127.0.0.1: 400" in m for m in logged)

@@ -372,3 +372,47 @@ def test_live_twin_with_the_plant_as_pt_alarms_beyond_the_threshold_only(twin, s
         return [r["time"] for r in rows if r["{controller}.controller.moveDiscreteCommand"] == "true"]
 
     assert delivered("pt") == delivered("dt") == ["1.1", "5.6"]  # the plan's commands before 8 s, once each
+
+
+def test_a_server_that_never_answers_is_a_timeout_without_asyncios_leftovers_in_the_log(twin, caplog):
+    """A port that accepts but never speaks (not a plant, or a plant hung): the connect timed out as it should,
+    but the connect task given up on was left pending when the client's loop closed, and asyncio printed
+    "Task was destroyed but it is pending!" with the coroutine's repr (logged: on the user's stderr from the CLI)."""
+    import gc
+
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen()
+    url = f"opc.tcp://127.0.0.1:{silent.getsockname()[1]}"
+    try:
+        with pytest.raises(CotwinError, match=f"the plant at {url} did not answer connect within 1 s"):
+            OPCUAEndpoint(twin.models.tree, url, timeout=1, environ={"COTWIN_OPCUA_USER": "cotwin",
+                                                                     "COTWIN_OPCUA_PASSWORD": "not-a-plant-1234"})
+        gc.collect()
+    finally:
+        silent.close()
+    assert not [r for r in caplog.records if "Task was destroyed" in r.getMessage()]
+
+
+def test_a_plant_on_the_ipv6_loopback_and_a_free_port_serves_and_says_its_url(twin):
+    """opc.tcp://[::1]:0 (the IPv6 loopback the plant allows, a free port) failed at start: its URL was spelt
+    opc.tcp://::1:PORT, which no one can read back ("Port could not be cast to integer value"), and asyncio's
+    pending tasks followed on stderr. A URL without a port was said without it (the default 4840 served).
+    `with plant.start():` made a second account, and left the served one's credentials file behind."""
+    from cotwin.mapping.opcua_auth import parse_url
+
+    try:
+        socket.create_server(("::1", 0), family=socket.AF_INET6).close()
+    except OSError:
+        pytest.skip("no IPv6 loopback here")
+    plant = Plant(PerturbedEndpoint.build(twin.models.tree, twin.models.scene, Perturbation()), "opc.tcp://[::1]:0")
+    with plant.start():  # started twice (start, then the with): the account served is the one its file holds
+        assert parse_url(plant.url) == ("::1", plant.port) and plant.port > 0
+        assert plant.url == f"opc.tcp://[::1]:{plant.port}"
+        credentials = plant.credentials_file
+        assert credentials is not None and credentials.is_file()
+        with OPCUAEndpoint(twin.models.tree, plant.url, timeout=5) as endpoint:
+            assert endpoint.layout.joints
+    assert not credentials.exists()  # removed at stop, not left behind
+    unstarted = Plant(PerturbedEndpoint.build(twin.models.tree, twin.models.scene, Perturbation()), "opc.tcp://127.0.0.1")
+    assert unstarted.url == "opc.tcp://127.0.0.1:4840"

@@ -152,3 +152,19 @@ def test_undecodable_bytes_are_reported(tmp_path):
     path.write_bytes(HEADER.encode() + b"\n0.0 0 0 \xff\xfe 0 0 0\n")
     with pytest.raises(CotwinError, match=r"x.csv:2:\d+: error: the log is not UTF-8"):
         read_arm_log(path)
+
+
+def test_a_vector_field_with_some_of_its_columns_is_refused_not_read_as_absent(tmp_path):
+    """A log holding target_q_0..2, 4, 5 but not target_q_3 was read as a log without set-points: calibrate
+    fitted the motion profile to the measured joints instead, without a word. Missing actual_q_3 is said once."""
+    targets = " ".join(f"target_q_{i}" for i in (0, 1, 2, 4, 5))
+    path = tmp_path / "x.csv"
+    path.write_text(f"{HEADER} {targets}\n" + "".join(f"{t / 10} 0 0 0 0 0 0 0 0 0 0 0\n" for t in range(3)))
+    with pytest.raises(CotwinError) as err:
+        read_arm_log(path)
+    assert str(err.value) == (f"{path}:1:{len(HEADER) + 2}: error: the field target_q lacks column(s) target_q_3: a "
+                              "vector read by cotwin has all of target_q_0..target_q_5, or none")
+    path.write_text(HEADER.replace(" actual_q_3", "") + "\n0 0 0 0 0 0\n0.1 0 0 0 0 0\n")
+    with pytest.raises(CotwinError) as err:
+        read_arm_log(path)
+    assert str(err.value).count("actual_q_3") == 1

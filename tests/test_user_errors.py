@@ -252,3 +252,12 @@ def test_a_run_that_ended_early_says_its_cause_first_then_what_it_kept():
         lines = str(err).splitlines()
         assert lines[:2] == [str(f) for f in cause.findings] and lines[-1] == "error: no rows computed", lines
         assert [str(f) for f in err.findings] == lines
+
+
+@pytest.mark.parametrize("vhost", ["", "  ", "cot\nwin"])
+def test_broker_permissions_refuses_a_vhost_rabbitmq_would_refuse(ur5e, vhost):
+    """--vhost '' printed `rabbitmqctl add_vhost ''` and permissions on it: a script that fails half-way."""
+    from conftest import cotwin_in_process
+
+    proc = cotwin_in_process("broker-permissions", ur5e / "live.toml", "--vhost", vhost)
+    assert proc.returncode == 2 and "Invalid value for '--vhost'" in proc.stderr and proc.stdout == ""

@@ -1,6 +1,8 @@
 """A warning log a hostile client cannot flood: at most `burst` warnings per `window` seconds are
 written; the others are counted and summed up in one line ("N more ... not logged") when the next
-window opens or the log is closed. What was refused is counted in full either way.
+window opens or the log is closed. What was refused is counted in full either way. Nor can it forge
+lines: the text arguments of a warning (a request's path, a message's words) are logged with their line
+breaks and other control characters escaped, so one warning is one line of the log.
 """
 
 from __future__ import annotations
@@ -8,6 +10,11 @@ from __future__ import annotations
 import logging
 import threading
 import time as wallclock
+
+
+def printable(text: str) -> str:
+    """`text` with every character that is not printable (line breaks, terminal escapes) as its escape."""
+    return text if text.isprintable() else "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 class CappedLog:
@@ -34,7 +41,7 @@ class CappedLog:
                 self.suppressed += 1
                 return False
             self._in_window += 1
-        self.logger.warning(text, *args)
+        self.logger.warning(text, *(printable(a) if isinstance(a, str) else a for a in args))
         return True
 
     def close(self) -> None:

@@ -160,7 +160,18 @@ class LoopThread(BackgroundService):
 
     def interrupt(self) -> None:
         if not self.loop.is_closed():
-            self.loop.call_soon_threadsafe(self.loop.stop)
+            self.loop.call_soon_threadsafe(lambda: self.loop.create_task(self._wind_down()))
+
+    async def _wind_down(self, grace: float = 2.0) -> None:
+        """Cancel what still runs on the loop (a call given up on, e.g. a connect that timed out), let it end
+        (at most `grace` s), then stop the loop: a task still pending when the loop closes is a stray
+        "Task was destroyed but it is pending!" on the user's stderr."""
+        tasks = asyncio.all_tasks(self.loop) - {asyncio.current_task()}
+        for task in tasks:
+            task.cancel()
+        if tasks:
+            await asyncio.wait(tasks, timeout=grace)
+        self.loop.stop()
 
     def stop(self, timeout: float | None = 10.0) -> bool:
         ended = super().stop(timeout)

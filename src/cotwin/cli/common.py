@@ -143,6 +143,16 @@ def exchange_name(ctx, param, value: str | None) -> str | None:
     return value
 
 
+def history_url(ctx, param, value: str | None) -> str | None:
+    """A history store's URL option (--history, --db), checked as the project's [history] url is."""
+    from ..twin.project import history_url_problem
+
+    problem = None if value is None else history_url_problem(value)
+    if problem:
+        raise click.BadParameter(problem)
+    return value
+
+
 def check_timing(spec, step: float | None, end: float | None) -> None:
     """--step and --end checked with the project's other timing (cotwin.twin.project.timing_problems)."""
     from ..twin.project import CYCLE_PERIOD, cycle_period, timing_problems

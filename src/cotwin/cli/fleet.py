@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from ..diagnostics import CotwinError
-from .common import address, main, output_folder
+from .common import address, history_url, main, output_folder
 
 
 @main.command()
@@ -15,7 +15,7 @@ from .common import address, main, output_folder
 @click.option("--ray", "ray", default="auto", show_default=True, metavar="auto|ADDRESS|off",
               help="where the twins run: a local Ray started here on 127.0.0.1 and stopped at the end (auto), a Ray "
                    "cluster (HOST:PORT or ray://HOST:PORT), or threads of this process (off)")
-@click.option("--history", help="history database URL for every twin (default: [fleet] history, else DIR/history.sqlite)")
+@click.option("--history", callback=history_url, help="history database URL for every twin (default: [fleet] history, else DIR/history.sqlite)")
 @click.option("--page", "page", metavar="HOST:PORT", callback=address,
               help="serve the fleet's overview page at HOST:PORT (loopback) while the fleet runs")
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMUs")
@@ -29,12 +29,6 @@ def fleet(fleet_file: str, out: str, ray: str, history: str | None, page: tuple[
     from ..twin.analysis.fleet.supervisor import Fleet
 
     spec = read_fleet(fleet_file)
-    if history is not None:
-        from ..twin.analysis.fleet.spec import _history
-
-        problem = _history(history)
-        if problem is not None:
-            raise click.BadParameter(problem, param_hint="--history")
     if ray != "off" and ray != "auto":
         from ..twin.analysis.sweep import _reachable
 

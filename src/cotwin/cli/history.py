@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .common import address, main, output_file, serving_options, start_dashboard
+from .common import address, history_url, main, output_file, serving_options, start_dashboard
 
 
 @main.group()
@@ -18,15 +18,15 @@ def history_db(db: str | None, folder: str | None) -> str:
 
     from ..twin.services.history import database_url
 
-    if db is None and folder is None:
-        raise click.UsageError("give --db URL or --dir DIR (a twin's output folder, with history.sqlite)")
+    if (db is None) == (folder is None):  # both: one of them would be ignored without a word
+        raise click.UsageError("give --db URL or --dir DIR (a twin's output folder, with history.sqlite), one of them")
     if folder is not None and not (Path(folder) / "history.sqlite").is_file():
         raise click.BadParameter(f"no history.sqlite in {folder}", param_hint="--dir")
     return database_url(db, Path(folder) if folder else None)
 
 
 @history.command("list")
-@click.option("--db", help="database URL (sqlite:///file, postgresql://...)")
+@click.option("--db", callback=history_url, help="database URL (sqlite:///file, postgresql://...)")
 @click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
 def history_list(db: str | None, folder: str | None) -> None:
     """List the runs of a history store."""
@@ -50,7 +50,7 @@ def history_list(db: str | None, folder: str | None) -> None:
 
 @history.command("export")
 @click.argument("run_id", type=int)
-@click.option("--db", help="database URL (sqlite:///file, postgresql://...)")
+@click.option("--db", callback=history_url, help="database URL (sqlite:///file, postgresql://...)")
 @click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
 @click.option("--side", default="dt", show_default=True, help="pt or dt")
 @click.option("-o", "--output", "out", callback=output_file, required=True, help="the CSV to write")
@@ -63,7 +63,7 @@ def history_export(run_id: int, db: str | None, folder: str | None, side: str, o
 
 
 @main.command("dashboard")
-@click.option("--db", help="history database URL (sqlite:///file, postgresql://...)")
+@click.option("--db", callback=history_url, help="history database URL (sqlite:///file, postgresql://...)")
 @click.option("--dir", "folder", type=click.Path(), help="a twin's output folder (its history.sqlite)")
 @click.option("--at", "address", default="127.0.0.1:8050", show_default=True, metavar="HOST:PORT", callback=address,
               help="where to serve the page")

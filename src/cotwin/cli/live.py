@@ -10,8 +10,8 @@ import click
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..twin.assembly.observing import TwinObserver
 from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
-                     interruptible, main, outcomes, output_folder, said_restarts, serving_options, show_warnings,
-                     start_dashboard)
+                     history_url, interruptible, main, outcomes, output_folder, said_restarts, serving_options,
+                     show_warnings, start_dashboard)
 
 
 @main.command()
@@ -25,7 +25,7 @@ from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, chec
 @click.option("--pt-url", metavar="URL", help="where the PT is (overrides [pt] url; opc.tcp://HOST:PORT is an OPC UA "
               "plant even without a [pt] table)")
 @click.option("--rabbitmq", "exchange", callback=exchange_name, help="take commands live from RabbitMQ on this exchange (overrides [scenario])")
-@click.option("--history", "history", help="history database URL (default: [history] url, else DIR/history.sqlite)")
+@click.option("--history", "history", callback=history_url, help="history database URL (default: [history] url, else DIR/history.sqlite)")
 @click.option("--whatif", "whatif", is_flag=True, help="answer what-if requests sent over the broker (see docs)")
 @click.option("--dashboard", "dashboard", metavar="HOST:PORT", callback=address, help=DASHBOARD_HELP)
 @click.option("--cc", default="cc", show_default=True, help="C compiler for the d-model FMU")
@@ -100,7 +100,16 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         from ..twin.assembly.convergence import summary
 
         click.echo(summary(result.convergence))
+    incomplete_history(result)
     outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
+    if result.history_problem is not None:
+        sys.exit(1)
+
+
+def incomplete_history(result) -> None:
+    """Say that a twin's history store failed during the run: its outputs are whole, the store is not."""
+    if result.history_problem is not None:
+        click.echo(f"error: {result.history_problem}; the run's outputs in {result.out} are whole", err=True)
 
 
 def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, history, whatif, dashboard,
@@ -153,12 +162,15 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
     for side, summary in result.outcomes.items():
         for line in summary.lines():
             click.echo(f"{side.upper()}: {line}")
+    incomplete_history(result)
     failures = [f"{side.upper()}: {f}" for side, summary in result.outcomes.items() for f in summary.strict_failures()]
     if strict and failures:
         from ..twin.assembly.outcomes import STRICT_EXIT
 
         click.echo(f"--strict: {'; '.join(failures)}; exit status {STRICT_EXIT}", err=True)
         sys.exit(STRICT_EXIT)
+    if result.history_problem is not None:
+        sys.exit(1)
 
 
 class TwinProgress(TwinObserver):
@@ -326,9 +338,17 @@ def serve_robot(project: str, queue: str | None, url: str | None) -> None:
                f"{server.dropped} unanswerable", err=True)
 
 
+def broker_name(ctx, param, value: str) -> str:
+    """A vhost or user name for rabbitmqctl: not empty (RabbitMQ refuses it) and one printable line."""
+    if not value.strip() or not value.isprintable():
+        raise click.BadParameter(f"{value!r}: a name of printable characters, not empty")
+    return value
+
+
 @main.command("broker-permissions")
 @click.argument("project", type=click.Path())
-@click.option("--vhost", default="cotwin", show_default=True, help="the virtual host of the twin's links")
+@click.option("--vhost", default="cotwin", show_default=True, callback=broker_name,
+              help="the virtual host of the twin's links")
 @click.option("--prefix", default="cotwin-", show_default=True, help="user names: PREFIX + role")
 def broker_permissions(project: str, vhost: str, prefix: str) -> None:
     """Print the rabbitmqctl commands creating a vhost and one least-privilege user per role (twin,

@@ -77,6 +77,28 @@ def step_count(span: float, step: float, start: float = 0.0, what: str | None = 
     raise CotwinError(f"{what}: {problem}" if what else problem)
 
 
+def uninterrupted(calls: Iterable[Callable[[], object]]) -> None:
+    """Each of `calls` in turn, even if an interrupt (a second Ctrl-C, SIGTERM) arrives during one: the ending of
+    a run (units ended, result files renamed, its history closed) is never left half-done; the first
+    interrupt is raised once the last call is made."""
+    late = None
+    for call in calls:
+        try:
+            call()
+        except KeyboardInterrupt as err:
+            late = late or err
+    if late is not None:
+        raise late
+
+
+def _terminated(unit) -> None:
+    """End one unit; its failure must not stop the others from ending."""
+    try:
+        unit.terminate()
+    except Exception:  # noqa: BLE001
+        pass
+
+
 def ended_early(err: BaseException, time: float, kept: str) -> CotwinError:
     """The error of a run that failed (`err` a CotwinError) or was interrupted (KeyboardInterrupt) at `time`,
     saying where the rows it computed are (`kept`, e.g. CSVWriter.kept()); `interrupted` marks the latter."""
@@ -412,10 +434,5 @@ class Execution:
         if self.closed:
             return
         self.closed = True
-        for unit in self.system.units.values():
-            try:
-                unit.terminate()
-            except Exception:  # noqa: BLE001 - ending one unit must not stop the others from ending
-                pass
-        for o in self.observers:
-            o.simulation_ended(self, error)
+        uninterrupted([*(lambda unit=unit: _terminated(unit) for unit in self.system.units.values()),
+                       *(lambda o=o: o.simulation_ended(self, error) for o in self.observers)])

@@ -98,6 +98,7 @@ class CSVWriter(Observer):
         self.part = self.path.with_name(self.path.name + ".part")
         self.partial_path = self.path.with_name(f"{self.path.stem}.partial{self.path.suffix}")
         self.rows = 0
+        self.kept_in: Path | None = None  # where the rows went when the run ended (result or partial file)
         self._fd: int | None = None
         self._lines: list = []  # in order: lines as the file gets them (bytes), rows of values, native _Stretch-es
         self._rows: list[tuple] = []  # (time, values...) of steps not yet formatted
@@ -178,9 +179,10 @@ class CSVWriter(Observer):
         self._last_flush = wallclock.monotonic()
 
     def kept(self) -> str:
-        """Where the rows of a run that failed or was interrupted are, for its error message."""
-        if self.rows and self.partial_path.is_file():
-            return f"the {self.rows} row(s) computed are in {self.partial_path}"
+        """Where the rows of a run that failed or was interrupted are, for its error message (in the result file
+        itself if the run ended as asked before the interrupt came)."""
+        if self.rows and self.kept_in is not None and self.kept_in.is_file():
+            return f"the {self.rows} row(s) computed are in {self.kept_in}"
         return "no rows computed"
 
     def simulation_ended(self, execution, error: BaseException | None) -> None:
@@ -189,7 +191,8 @@ class CSVWriter(Observer):
         self._flush()
         os.close(self._fd)
         self._fd = None
-        os.replace(self.part, self.partial_path if error is not None else self.path)
+        self.kept_in = self.partial_path if error is not None else self.path
+        os.replace(self.part, self.kept_in)
         if error is None and self.partial_path.is_file():  # an earlier failed run's rows: this run replaces them
             self.partial_path.unlink()
 

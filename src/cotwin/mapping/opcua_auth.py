@@ -58,6 +58,11 @@ def parse_url(url: str) -> tuple[str, int]:
     return parts.hostname, 4840 if port is None else port
 
 
+def opc_url(host: str, port: int) -> str:
+    """The opc.tcp:// URL of (host, port), an IPv6 address in brackets (what parse_url reads back)."""
+    return f"opc.tcp://[{host}]:{port}" if ":" in host else f"opc.tcp://{host}:{port}"
+
+
 def is_loopback(host: str) -> bool:
     if host == "localhost":
         return True

@@ -228,6 +228,18 @@ def write_rtde(path: str | Path, timestamp, q, qd=None, target_q=None, target_qd
     return write_text(path, " ".join(names) + "\n" + "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in rows))
 
 
+def _partial_vectors(columns, reported) -> list[tuple[str, list[int]]]:
+    """(field, its missing indices) of every vector field cotwin reads (RANGES) that the header has only
+    some elements of (those `reported` missing already aside): read as absent, it would silently give way to
+    another field (the measured joints)."""
+    out = []
+    for field_name in RANGES:
+        absent = [k for k in range(JOINTS) if f"{field_name}_{k}" not in columns]
+        if 0 < len(absent) < JOINTS and not any(f"{field_name}_{k}" in reported for k in absent):
+            out.append((field_name, absent))
+    return out
+
+
 def read_rtde(path: str | Path, required=LIVE) -> RTDELog:
     """Read an RTDE log strictly; `required` columns must be present. The file is read line by line
     into one array (8 bytes a value), so a long log costs its size, not several times it."""
@@ -254,6 +266,10 @@ def read_rtde(path: str | Path, required=LIVE) -> RTDELog:
     if missing:
         diag.error(Location(where, header_row, 1), f"the log has no column(s) {', '.join(missing)} (an RTDE log "
                    f"with {_names(required)} is needed; is the file space-separated?)")
+    for field_name, absent in _partial_vectors(seen, missing):
+        diag.error(Location(where, header_row, seen[f"{field_name}_{min(set(range(JOINTS)) - set(absent))}"]),
+                   f"the field {field_name} lacks column(s) {', '.join(f'{field_name}_{k}' for k in absent)}: a "
+                   f"vector read by cotwin has all of {field_name}_0..{field_name}_{JOINTS - 1}, or none")
     diag.raise_if_errors()
     bounds = [RANGES.get(name.rsplit("_", 1)[0]) if name[-1:].isdigit() else None for name in header]
     values, numbers, errors, last = array("d"), array("q"), 0, header_row

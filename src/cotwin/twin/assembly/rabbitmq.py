@@ -194,6 +194,9 @@ class _Held:
     value: object
 
 
+VALUE_DROPPED = "value dropped (the rest of its message taken)"  # a refusal of one value, not of its message
+
+
 @dataclass
 class CommandStream:
     """The RMQ FMU's time semantics (see module doc) over messages taken from `receive(timeout)`."""
@@ -229,11 +232,12 @@ class CommandStream:
         self.acks: deque[dict] = deque(maxlen=MAX_REFUSED)  # what to tell the senders (CommandStream.take_acks)
         self._sequence = 0
 
-    def _refuse(self, reason: str, body: bytes = b"") -> None:
+    def _refuse(self, reason: str, body: bytes = b"", what: str = "message dropped") -> None:
+        """Count and log a refusal: of the whole message, or (`what`) of one of its values, the rest taken."""
         excerpt = body[:80].decode("utf-8", "replace") if body else ""
         self.refused.append((wallclock.time(), reason))
         self.refused_count += 1
-        self.log.warning("message dropped: %s%s", reason, f" [{excerpt!r}]" if excerpt else "")
+        self.log.warning("%s: %s%s", what, reason, f" [{excerpt!r}]" if excerpt else "")
 
     def _take(self, messages: list[Received]) -> None:
         for m in messages:
@@ -248,7 +252,7 @@ class CommandStream:
                              f"max_skew_s = {self.max_skew:g} s: is the publisher's clock set?)", m.body)
                 continue
             for reason in parsed.dropped:
-                self._refuse(reason, m.body)
+                self._refuse(reason, m.body, VALUE_DROPPED)
             self.latest_wall = m.wall
             if self.t0 is None:
                 self.pending.append((parsed.time, parsed.values, m.body))
@@ -374,7 +378,8 @@ class CommandStream:
                 held = self.held.get(var)
                 if held is not None and sim <= held.sim:
                     if not quiet:
-                        self._refuse(f"{var} at t = {sim:.3f} s is not newer than the value held (t = {held.sim:.3f} s)")
+                        self._refuse(f"{var} at t = {sim:.3f} s is not newer than the value held (t = {held.sim:.3f} s)",
+                                     what=VALUE_DROPPED)
                     continue
                 self.held[var] = _Held(sim, value)
                 self.applied.append((sim, var, value, step_end))

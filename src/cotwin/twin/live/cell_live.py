@@ -97,6 +97,7 @@ class CellTwinResult:
     outcomes: dict[str, CellOutcomes] = field(default_factory=dict)  # side -> per-robot outcomes
     alarms: list[dict] = field(default_factory=list)
     stopped: bool = False  # asked to stop (`stop`) before its end: the steps so far, kept as a finished run's
+    history_problem: str | None = None  # why the run's history is incomplete (its store failed), if it is
 
     @property
     def alarm_count(self) -> int:
@@ -192,4 +193,4 @@ def run_cell_twin(cell: CellSystem, out: str | Path, step: float | None = None, 
         write_text(out / "deviation.json", json.dumps(deviation, indent=2) + "\n")
         alarms = running.monitor.events
         return CellTwinResult(results["pt"], results["dt"], deviation, out, url, history.run_id, outcomes, alarms,
-                              status == "stopped")
+                              status == "stopped", history.problem)

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Callable
 
 from ...cosim.algorithm import algorithm as make_algorithm
-from ...cosim.execution import Execution, RunResult, ended_early, saved_execution, step_count
+from ...cosim.execution import Execution, RunResult, ended_early, saved_execution, step_count, uninterrupted
 from ...cosim.observers import CSVWriter, StateFile
 from ...config import did_you_mean
 from ...diagnostics import CotwinError, Finding, Severity
@@ -95,6 +95,7 @@ class LiveResult:
     sides: dict[str, Side] = field(default_factory=dict)
     alarms: list[dict] = field(default_factory=list)
     convergence: dict = field(default_factory=dict)  # [convergence]: its corrections and estimate
+    history_problem: str | None = None  # why the run's history is incomplete (its store failed), if it is
 
 
 class LiveTwin:
@@ -292,16 +293,14 @@ class LiveTwin:
         finally:
             error = None if status == "done" or (status == "stopped" and message is None) else \
                 RuntimeError(message or "failed")
-            for side in (pt, dt):
-                side.execution.close(error)
             self.status, self.message = status, message
-            for o in self._watchers:
-                o.twin_ended(self, status)
+            uninterrupted([*(lambda side=side: side.execution.close(error) for side in (pt, dt)),
+                           *(lambda o=o: o.twin_ended(self, status) for o in self._watchers)])
         report = self.deviation.report
         result = LiveResult(pt.execution.result(), dt.execution.result(), report, self.out, url,
                             self._history.run_id if self._history else None, dict(self.sides), list(self.monitor.events),
-                            report.get("convergence", {}))
-        if status == "done":
+                            report.get("convergence", {}), self._history.problem if self._history else None)
+        if status in ("done", "stopped"):  # a run stopped as asked is kept as a finished run's, its figure too
             self._figure()
         return result
 

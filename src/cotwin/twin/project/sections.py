@@ -99,9 +99,13 @@ def _robot_name(value: str) -> str | None:
     return None
 
 
-def _history_url(value: str) -> str | None:
+def history_url_problem(value: str) -> str | None:
+    """Why `value` cannot name a history store: not a SQLite file's or PostgreSQL's URL, or a SQLite database in
+    memory (`sqlite:///`, `sqlite:///:memory:`), whose history would be gone when the command ends."""
     if not value.startswith(("sqlite:///", "postgresql://", "postgresql+", "postgres://")):
         return f"{value[:40]!r} is not a sqlite:///FILE or postgresql://... URL"
+    if value.startswith("sqlite:///") and value[len("sqlite:///"):].split("?", 1)[0] in ("", ":memory:"):
+        return f"{value[:40]!r} is a database in memory, lost when the command ends: name a file (sqlite:///FILE)"
     return None
 
 
@@ -373,7 +377,7 @@ class History:
     """Where a live twin's history is kept."""
 
     url: str | None = setting("sqlite:///FILE or postgresql://... (default: OUT/history.sqlite)",
-                              Key("str", check=_history_url))
+                              Key("str", check=history_url_problem))
 
 
 PLANT_MEANINGS = {"seed": "the random seed of the plant's noise", "payload": "kg at the tool",

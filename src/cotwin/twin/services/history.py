@@ -135,16 +135,14 @@ def engine_for(url: str, create: bool = True) -> sa.Engine:
         with engine.connect() as conn:
             schema = _schema(conn, create)
     except (sa.exc.SQLAlchemyError, ImportError, ValueError) as err:
-        raise CotwinError(f"cannot open the history database {redacted(url)}: {type(err).__name__}: "
-                          f"{str(err).splitlines()[0][:200]}") from None
+        raise failed("open", url, err) from None
     if schema is not None:
         engine = engine.execution_options(schema_translate_map={None: schema})
     try:
         with engine.connect() as conn:
             _ours(conn, schema, url)
     except sa.exc.SQLAlchemyError as err:
-        raise CotwinError(f"cannot read the history database {redacted(url)}: {type(err).__name__}: "
-                          f"{str(err).splitlines()[0][:200]}") from None
+        raise failed("read", url, err) from None
     return engine
 
 
@@ -155,6 +153,7 @@ def _schema(conn, create: bool) -> str | None:
     inspector = sa.inspect(conn)
     if create:
         try:
+            _take_turns(conn)
             conn.execute(sa.schema.CreateSchema(SCHEMA, if_not_exists=True))
             conn.commit()
         except sa.exc.SQLAlchemyError as err:
@@ -166,6 +165,25 @@ def _schema(conn, create: bool) -> str | None:
             and _missing(inspector, "runs", "public") == []:
         return "public"  # a store written before cotwin had its own schema
     return SCHEMA
+
+
+TABLES_LOCK = 0x636F7477696E  # "cotwin": the PostgreSQL advisory lock on which the makers of its schema and tables queue
+
+
+def create_tables(engine: sa.Engine, *schemas: sa.MetaData) -> None:
+    """cotwin's history tables (and those of `schemas`), made once however many twins start at once on a new
+    store: PostgreSQL's CREATE ... IF NOT EXISTS run by two sessions at once fails in one of them (a unique
+    violation in its catalogue), so the makers take turns."""
+    with engine.begin() as conn:
+        _take_turns(conn)
+        for tables in (metadata, *schemas):
+            tables.create_all(conn)
+
+
+def _take_turns(conn) -> None:
+    """Wait for TABLES_LOCK until the end of `conn`'s transaction (PostgreSQL; SQLite locks its file itself)."""
+    if conn.dialect.name == "postgresql":
+        conn.execute(sa.text("SELECT pg_advisory_xact_lock(:key)"), {"key": TABLES_LOCK})
 
 
 def _missing(inspector, table: str, schema: str | None) -> list[str]:
@@ -200,10 +218,19 @@ def _reading(url: str, what):
     try:
         return what(engine)
     except sa.exc.SQLAlchemyError as err:
-        raise CotwinError(f"cannot read the history database {redacted(url)}: {type(err).__name__}: "
-                          f"{str(err).splitlines()[0][:200]}") from None
+        raise failed("read", url, err) from None
     finally:
         engine.dispose()
+
+
+def failed(verb: str, url: str, err: Exception) -> CotwinError:
+    """The error of a store that could not be opened, read or written: the store (no password) and the cause."""
+    return CotwinError(f"cannot {verb} the history database {redacted(url)}: {_cause(err)}")
+
+
+def _cause(err: Exception) -> str:
+    """A database error in one line: its kind and the first line of its words."""
+    return f"{type(err).__name__}: {(str(err).splitlines() or [''])[0][:200]}"
 
 
 def redacted(url: str) -> str:
@@ -219,16 +246,21 @@ class HistoryRecorder(BackgroundService):
 
     def __init__(self, url: str, project: str, kind: str, step: float, algorithm: str,
                  columns: dict[str, list[str]], batch_seconds: float = 0.5):
-        self.engine = engine_for(url)
-        metadata.create_all(self.engine)
+        self.engine, self.url = engine_for(url), url
         self.columns = columns
-        with self.engine.begin() as conn:
-            self.run_id = conn.execute(runs.insert().values(
-                project=project, kind=kind, started=wallclock.time(), status="running", step=step,
-                algorithm=algorithm, columns=json.dumps(columns))).inserted_primary_key[0]
+        try:
+            create_tables(self.engine)
+            with self.engine.begin() as conn:
+                self.run_id = conn.execute(runs.insert().values(
+                    project=project, kind=kind, started=wallclock.time(), status="running", step=step,
+                    algorithm=algorithm, columns=json.dumps(columns))).inserted_primary_key[0]
+        except sa.exc.SQLAlchemyError as err:  # e.g. a read-only file: said before the twin starts
+            self.engine.dispose()
+            raise failed("write", url, err) from None
         self.batch_seconds = batch_seconds
         self._queue: queue.Queue = queue.Queue()
-        self.error: Exception | None = None
+        self.error: Exception | None = None  # the first write that failed
+        self.lost = 0  # records not written
         self._last_state: dict[tuple[str, str], int] = {}
         BackgroundService.__init__(self, "cotwin history")
         self.start()
@@ -263,7 +295,8 @@ class HistoryRecorder(BackgroundService):
                         for table, rows in pending.items():
                             conn.execute(table.insert(), rows)
                 except sa.exc.SQLAlchemyError as err:  # keep the twin running; report at close
-                    self.error = err
+                    self.error = self.error or err
+                    self.lost += sum(len(rows) for rows in pending.values())
                 pending = {}
 
     def record_sample(self, side: str, step: int, t: float, values) -> None:
@@ -293,13 +326,28 @@ class HistoryRecorder(BackgroundService):
                                        "size": event["size"], "event": json.dumps(event)}))
 
     def close(self, status: str = "done", message: str | None = None) -> None:
+        """Write what is queued and the run's end; a store that fails (gone, full, read-only) is said by `problem`,
+        never raised: the run's own results are kept either way."""
         self.stop(None)
         self.error = self.error or self.failure  # the writer's thread failed: the run's history is incomplete
-        with self.engine.begin() as conn:
-            conn.execute(runs.update().where(runs.c.id == self.run_id).values(
-                ended=wallclock.time(), status=status if self.error is None else "incomplete",
-                message=message if self.error is None else f"history writes failed: {self.error}"))
-        self.engine.dispose()
+        try:
+            with self.engine.begin() as conn:
+                conn.execute(runs.update().where(runs.c.id == self.run_id).values(
+                    ended=wallclock.time(), status=status if self.error is None else "incomplete",
+                    message=message if self.error is None else f"history writes failed: {self.error}"))
+        except sa.exc.SQLAlchemyError as err:
+            self.error = self.error or err
+        finally:
+            self.engine.dispose()
+
+    @property
+    def problem(self) -> str | None:
+        """Why the run's history is incomplete (None if every record and its end were written)."""
+        if self.error is None:
+            return None
+        lost = f"{self.lost} record(s) not written, " if self.lost else ""
+        return (f"the history of run {self.run_id} in {redacted(self.url)} is incomplete ({lost}the first failure: "
+                f"{_cause(self.error)})")
 
 
 def _has_runs(engine) -> bool:

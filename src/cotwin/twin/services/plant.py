@@ -44,7 +44,7 @@ from ...diagnostics import CotwinError
 from ...listeners import in_use_message
 from ...mapping.opcua import (DT_MAX, NAMESPACE, ROBOT, RequestError, check_dt, check_goal_ranges, check_goals, check_time,
                              parse_goals)
-from ...mapping.opcua_auth import PlantCredentials, is_loopback, parse_url
+from ...mapping.opcua_auth import PlantCredentials, is_loopback, opc_url, parse_url
 from ...mapping.perturbed import PerturbedEndpoint
 from ...pmodel.perturbation import Perturbation, check_joints, read_perturbation, read_table
 from ...service import BackgroundService
@@ -119,7 +119,7 @@ class Plant(BackgroundService):
                               "to anyone who can reach it")
         self.endpoint = endpoint
         self.host, self.port = host, port
-        self.url = url
+        self.url = opc_url(host, port)  # with its port, also when the URL given leaves the default out
         self.free_running = free_running
         self.mode = "free-running" if free_running else "lockstep"
         self.reset_on_connect = reset_on_connect
@@ -140,8 +140,10 @@ class Plant(BackgroundService):
 
     # ---- life cycle ----
     def start(self, timeout: float = 30.0) -> "Plant":
-        """Serve on the plant's thread (cotwin.service.BackgroundService); CotwinError if it cannot."""
-        self._credentials = PlantCredentials(self._environ)
+        """Serve on the plant's thread (cotwin.service.BackgroundService); CotwinError if it cannot. Starting a
+        started plant does nothing (`with plant.start():` made a new account, and the served one's file was left)."""
+        if not self.started:
+            self._credentials = PlantCredentials(self._environ)
         return BackgroundService.start(self, timeout)
 
     def late(self, timeout: float) -> CotwinError:
@@ -198,8 +200,7 @@ class Plant(BackgroundService):
         server = Server(user_manager=_Operators(self._credentials.credentials,
                                                 self._operator_connected if self.reset_on_connect else None))
         await server.init()
-        server.set_endpoint(f"opc.tcp://{self.host}:{self.port}/" if ":" not in self.host
-                            else f"opc.tcp://[{self.host}]:{self.port}/")
+        server.set_endpoint(opc_url(self.host, self.port) + "/")
         server.set_server_name(f"cotwin plant: {self._tree.name}")
         await server.set_application_uri(f"urn:cotwin:plant:{self._tree.name}")
         server.set_security_policy([ua.SecurityPolicyType.NoSecurity], permission_ruleset=_ruleset())
@@ -211,7 +212,7 @@ class Plant(BackgroundService):
         await server.start()
         if self.port == 0:
             self.port = server.bserver.port
-            self.url = f"opc.tcp://{self.host}:{self.port}"
+            self.url = opc_url(self.host, self.port)
         self._credentials.publish(self.url)  # the port is ours now: so is its credentials file
         await self._publish(await self._on_sim(self._snapshot))
         self.ready()

@@ -27,15 +27,12 @@ class FleetRecorder:
     """Writes the fleet's events (few: one per start, failure or end) as they happen."""
 
     def __init__(self, url: str, fleet: str):
-        from ...services.history import engine_for
+        from ...services.history import create_tables, engine_for
 
         self.engine = engine_for(url)
         self.fleet = fleet
         try:
-            from ...services.history import metadata as history
-
-            history.create_all(self.engine)  # once, before the twins' recorders race to make them
-            metadata.create_all(self.engine)
+            create_tables(self.engine, metadata)  # once, before the twins' recorders start
         except sa.exc.SQLAlchemyError as err:
             raise CotwinError(f"cannot make the fleet's table in the history database: {str(err).splitlines()[0][:200]}") \
                 from None

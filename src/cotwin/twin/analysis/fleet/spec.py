@@ -33,7 +33,8 @@ from pathlib import Path
 
 from ....config import Key, Schema, TomlFile, raise_problems, within
 from ....diagnostics import CotwinError, Finding, Severity
-from ...project import PTSettings, TwinProject, load_project, pt_url_problem, timing_problems, cycle_period
+from ...project import (PTSettings, TwinProject, cycle_period, history_url_problem, load_project, pt_url_problem,
+                        timing_problems)
 
 MAX_TWINS = 1000
 _NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789-_")
@@ -55,12 +56,6 @@ def _address(value: str) -> str | None:
     return None
 
 
-def _history(value: str) -> str | None:
-    if not value.startswith(("sqlite:///", "postgresql://", "postgresql+", "postgres://")):
-        return f"{value[:40]!r} is not a sqlite:///FILE or postgresql://... URL"
-    return None
-
-
 def _broker(value: str) -> str | None:
     from ...project.sections import _amqp_url
 
@@ -69,7 +64,7 @@ def _broker(value: str) -> str | None:
 
 FLEET = Schema({
     "name": Key("str", check=_twin_name),
-    "history": Key("str", check=_history),
+    "history": Key("str", check=history_url_problem),
     "alarms": Key("str", check=_broker),
     "checkpoint_every": Key("int", 10, check=within(1, 10 ** 6, "steps")),
     "max_restarts": Key("int", 3, check=within(0, 100)),
