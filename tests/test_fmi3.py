@@ -258,3 +258,17 @@ def test_simulate_runs_an_fmi3_dmodel_beside_fmi2_units(tmp_path):
     # the arm started a step earlier with the FMI 3.0 d-model
     assert abs(float(rows["mm3"][-1]["{mapping}.mapping.q0"])) > abs(float(rows["multimodel"][-1]["{mapping}.mapping.q0"]))
     shutil.rmtree(out, ignore_errors=True)
+
+
+@pytest.mark.parametrize("algorithm_name", ["jacobi", "gauss-seidel"])
+def test_a_command_at_the_runs_start_is_judged_under_fmi3(tmp_path, algorithm_name):
+    """A command due at t = 0 crosses a clocked d-model in the run's first event phase, before any step: the robot
+    moved and arrived, but the ledger, starting after that phase, took it for one applied before the run and said
+    'commands: none applied'. It is judged by the d-model's first cycle (from its initial junction)."""
+    system = load(EXAMPLES / "ur5e" / "cotwin.toml").with_plan([Command(0.0, (
+        ("moveDiscreteCommand", True), ("MovementArgs_target_X", 0), ("MovementArgs_target_Y", 23),
+        ("MovementArgs_target_Z", 1)), "plan item 1")])
+    ran = run_twin(system, tmp_path / "run", end=2.0, plot=False, fmi=3, algorithm=algorithm_name)
+    assert [t for t, op, _ in ran.mapping.executed if op == "movediscrete"] == [0.0]  # the move ran, from t = 0
+    [outcome] = ran.outcomes.outcomes
+    assert (outcome.delivered, outcome.accepted, outcome.verdict) == (0.0, True, "completed"), ran.outcomes.lines()

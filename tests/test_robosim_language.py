@@ -677,3 +677,18 @@ def test_a_composite_states_entry_goes_through_its_initial_junction_before_its_o
     assert outputs == [[], ["out!1"], [], ["out!1"], [], [], ["out!1"]]  # Q entered into A each time it is entered
     assert min(states) >= 0  # every cycle ends in a leaf state, never at a junction
     assert states == [0, 1, 0, 1, 1, 0, 1]  # S, then A; Q's transitions taken from A (c at once, b's exec next cycle)
+
+
+def test_a_variables_field_alone_as_a_statement_is_one_clear_error(tmp_path):
+    """`p.a` (or `$p.a`) alone reads as RoboSim's output `$e.v` on an event p: a record variable p drew 'unknown
+    output event 'p'' and 'unknown name 'a'' besides, two errors for one mistake. One says what p is."""
+    for written in ("p.a", "$p.a"):
+        files = machine(f"""	var p: Pair
+	initial i
+	state A {{ }}
+	transition t0 {{ from i to A action {written} }}""", "datatype Pair { a: int b: int }\n")
+        for name, text in files.items():
+            (tmp_path / name).write_text(text)
+        [(path, line, _, message)] = errors(check_paths([tmp_path]))
+        assert (path, line) == ("m.rst", 32), message
+        assert message.startswith("'p' is not an output event but a name with a value"), message

@@ -201,3 +201,71 @@ def test_a_search_that_hits_its_limit_names_the_variable_that_grows(tmp_path):
     (tmp_path / "c.rst").write_text(COUNTER % "1 - count")  # 0, 1, 0, ...: bounded
     bounded = verify(build_program(load_checked([tmp_path / "c.rst"])), max_states=200)
     assert bounded.complete and bounded.growth == ""
+
+
+VALUE_TESTED = """interface I { event sort: int }
+interface O { a() b() }
+stm M {
+	input context { uses I }
+	output context { requires O }
+	initial i
+	state Idle { }
+	state A { entry $a() }
+	state B { entry $b() }
+	transition t0 { from i to Idle }
+	transition one { from Idle to B condition $sort.1 }
+	transition other { from Idle to A condition $sort /\\ not $sort.1 }
+	transition idle { from Idle to Idle exec condition not $sort }
+	transition ta { from A to A exec }
+	transition tb { from B to B exec }
+}
+controller C { uses I requires O sref m = M
+	connection C on sort to m on sort (_async) }
+module Mod { robotic platform P { uses I provides O } cref c = C
+	connection P on sort to c on sort (_async) }
+"""
+
+VIA_AN_OPERATION = """interface I { event go: int }
+interface O { act() other() }
+interface Soft { place(k: int) }
+operation place(k: int) {
+	requires O
+	initial a
+	junction j
+	final f
+	transition t { from a to j }
+	transition ta { from j to f condition k == 1 action $act() }
+	transition tb { from j to f condition k != 1 action $other() }
+}
+stm M {
+	var n: int
+	input context { uses I }
+	output context { requires O requires Soft }
+	initial i
+	state A { }
+	state B { entry place(n) }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition not $go }
+	transition t2 { from A to B condition $go?n }
+	transition t3 { from B to B exec }
+}
+controller C { uses I requires O sref m = M opref p = place
+	connection C on go to m on go (_async) }
+module Mod { robotic platform P { uses I provides O } cref c = C
+	connection P on go to c on go (_async) }
+"""
+
+
+@pytest.mark.parametrize("text", [VALUE_TESTED, VIA_AN_OPERATION], ids=["value-test", "operation-argument"])
+def test_a_value_a_guard_tests_directly_or_in_an_operation_is_not_data_independent(tmp_path, text):
+    """`$sort.1` compares the event's value itself (no variable bound), and `place(n)` hands it to an operation
+    whose guards read its parameter: verify called both values 'read by no condition' and explored one (0), so
+    `$sort.1`'s state B was reported unreachable and place's k == 1 branch never explored."""
+    from cotwin.dmodel.verify import event_values
+
+    (tmp_path / "v.rst").write_text(text)
+    program = build_program(load_checked([tmp_path / "v.rst"]))
+    _, notes = event_values(program, {})
+    assert notes[0].endswith("2 value(s) from its domain"), notes
+    report = verify(program)
+    assert not report.unreached_states, report.unreached_states

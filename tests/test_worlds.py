@@ -14,7 +14,7 @@ import pytest
 from cotwin.diagnostics import Severity
 from cotwin.pmodel.simulator import PlatformSimulator
 from cotwin.pmodel.tree import StandIn, build_tree, transform
-from cotwin.pmodel.world import Obstacle, World, load_world, lowest_point
+from cotwin.pmodel.world import Obstacle, World, _corners, load_world, lowest_point
 from cotwin.robosim.check import load_checked
 
 MODELS = Path(__file__).parent / "models" / "pmodel"
@@ -155,3 +155,18 @@ def test_a_world_file_round_trip_geometry(tmp_path):
     assert clearance == pytest.approx([0.4, 0.0, 0.5])  # the box turned 90 deg; inside the post; the arena wall
     full = world.coverage(np.array([[-1.5, y] for y in np.linspace(-1, 1, 3)] + [[1.5, 1.0]]), 10.0)
     assert full == 1.0 and world.coverage(np.array([[-1.0, 0.0]]), 0.2) < 0.05
+
+
+def test_a_robot_is_placed_by_the_posture_it_starts_in_not_by_its_zero_posture():
+    """A joint whose limits exclude 0 starts at the limit nearest 0 (TJoint.start), but the world put the robot's
+    lowest point on the floor as it is with every joint at 0: an arm started folded below its base (the shoulder
+    at 3 rad) was placed as if upright, through the floor, and its footprint measured upright too."""
+    tree = build_tree(load_checked([Path(__file__).parents[1] / "examples" / "ur5e" / "ur5e.pm"]))
+    lift = next(j for j in tree.actuated if j.name == "shoulder_lift_joint")
+    upright = lowest_point(tree)
+    lift.lower, lift.upper = 3.0, 3.1
+    assert lift.start == 3.0
+    poses = tree.geom_poses({"shoulder_lift_joint": 3.0})
+    folded = min(float(_corners(g, poses[g.name])[:, 2].min()) for l in tree.links for g in l.geoms if not g.placeholder)
+    assert folded < upright - 0.5
+    assert lowest_point(tree) == pytest.approx(folded)

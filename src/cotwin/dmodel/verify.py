@@ -129,9 +129,10 @@ def growth_hint(program: Program, snapshots) -> str:
 
 
 def condition_variables(program: Program) -> set[str]:
-    """Variables whose value steers control: read by a transition guard or an `if` condition, or assigned to one
-    that is (`leg = BIN0 + item % 3` where a guard reads `leg`: item's value then steers too, though no
-    condition names it)."""
+    """Variables whose value steers control: read by a transition guard or an `if` condition, of a machine or of
+    an operation it calls, or assigned to one that is (`leg = BIN0 + item % 3` where a guard reads `leg`: item's
+    value then steers too, though no condition names it), also as an operation's argument (`place(item)` where
+    place's guards read its parameter)."""
     names: set[str] = set()
     flows: list[tuple[str, set[str]]] = []  # (variable assigned, the variables its value reads)
 
@@ -149,18 +150,22 @@ def condition_variables(program: Program) -> set[str]:
                 visit_stmt(st.otherwise)
         elif isinstance(st, s.Assign) and s.root_name(st.target) is not None:
             flows.append((s.root_name(st.target).name.last, read(st.value)))
+        elif isinstance(st, s.CallStmt) and (callee := calls.get(st.operation.last)) is not None:
+            flows.extend((param, read(arg)) for (param, _), arg in zip(callee.params, st.args))
 
     for m in program.machines:
-        for t in m.graph.transitions:
-            if t.condition is not None:
-                names.update(read(t.condition))
-            if t.action is not None:
-                visit_stmt(t.action)
-        for n in m.graph.nodes:
-            if isinstance(n.node, State):
-                for st in (n.node.entry, n.node.during, n.node.exit):
-                    if st is not None:
-                        visit_stmt(st)
+        for body in (m, *m.frames):
+            calls = body.calls
+            for t in body.graph.transitions:
+                if t.condition is not None:
+                    names.update(read(t.condition))
+                if t.action is not None:
+                    visit_stmt(t.action)
+            for n in body.graph.nodes:
+                if isinstance(n.node, State):
+                    for st in (n.node.entry, n.node.during, n.node.exit):
+                        if st is not None:
+                            visit_stmt(st)
     grown = True
     while grown:  # what flows into a steering variable steers too
         before = len(names)
@@ -171,15 +176,20 @@ def condition_variables(program: Program) -> set[str]:
     return names
 
 
+def _event_tests(program: Program, event: str) -> list[s.EventTest]:
+    """The tests `$e`, `$e?x`, `$e.v` of input event `event` in the guards of the machines it reaches."""
+    return [node for machine, name in program.input_routes.get(event, ())
+            for t in program.machines[machine].graph.transitions if t.condition is not None
+            for node in s.walk(t.condition) if isinstance(node, s.EventTest) and node.event.last == name]
+
+
 def _bound_variables(program: Program, event: str) -> set[str]:
-    out = set()
-    for machine, name in program.input_routes.get(event, ()):
-        for t in program.machines[machine].graph.transitions:
-            if t.condition is not None:
-                for node in s.walk(t.condition):
-                    if isinstance(node, s.EventTest) and node.event.last == name and node.bind:
-                        out.add(node.bind)
-    return out
+    return {node.bind for node in _event_tests(program, event) if node.bind}
+
+
+def _value_tested(program: Program, event: str) -> bool:
+    """Whether a guard compares the event's value itself (`$sort.1`): that value steers control, no variable bound."""
+    return any(node.value is not None for node in _event_tests(program, event))
 
 
 def _default_domain(sc: Scalar) -> list:
@@ -222,10 +232,10 @@ def event_values(program: Program, domains: dict[str, list],
             continue
         ports = ev.value_ports
         explicit = {port: domains[port] for port, _ in ports if port in domains}
-        bound = _bound_variables(program, ev.name)
-        if bound & relevant:
+        steers = bool(_bound_variables(program, ev.name) & relevant) or _value_tested(program, ev.name)
+        if steers:
             sampled.extend(port for port, sc in ports if port not in explicit and not _whole_domain(sc))
-        if not explicit and not (bound & relevant):
+        if not explicit and not steers:
             combos = [{sc.path: _default_domain(sc)[0] for _, sc in ports}]
             notes.append(f"{ev.name}: its value is not read by any condition (data independent): "
                          f"1 representative value explores every behaviour")

@@ -86,18 +86,22 @@ class CycleReads:
                                     for machine, event in routes if machine == m.index} for m in program.machines}
         self._actions = {m.index: _action_reads(m, self._platform[m.index]) for m in program.machines}
 
-    def between(self, machine: int, before: int, after: int, several: bool = False) -> frozenset[str] | None:
+    def between(self, machine: int, before: int | None, after: int, several: bool = False) -> frozenset[str] | None:
+        """What a cycle taking the machine from leaf `before` (None: its first cycle, from its initial junction) to
+        leaf `after` may have read, or None where that cannot be told."""
         key = (machine, before, after, several)
         if key not in self._cache:
             self._cache[key] = self._explore(machine, before, after, several)
         return self._cache[key]
 
-    def _explore(self, machine: int, before: int, after: int, several: bool = False) -> frozenset[str] | None:
+    def _explore(self, machine: int, before: int | None, after: int, several: bool = False) -> frozenset[str] | None:
         m = self._machines.get(machine)
         leaves = m.graph.leaves if m is not None else []
-        if not (0 <= before < len(leaves) and 0 <= after < len(leaves)):
+        start = m.graph.initial_of(None) if before is None and m is not None else \
+            leaves[before] if before is not None and 0 <= before < len(leaves) else None
+        if start is None or not 0 <= after < len(leaves):
             return None
-        platform, start, goal = self._platform[machine], leaves[before], leaves[after]
+        platform, goal = self._platform[machine], leaves[after]
         arrivals = {id(goal), *(id(a) for a in goal.ancestors())}
         found: set[str] = set()
         arrived = False

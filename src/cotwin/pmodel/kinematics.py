@@ -268,6 +268,11 @@ class KinematicTree:
             world[child] = world[parent] @ before @ motion @ after
         return world
 
+    @property
+    def start_posture(self) -> dict[str, float]:
+        """The joint values the simulator starts from (TJoint.start): what a world places the robot by."""
+        return {j.name: j.start for j in self.actuated}
+
     def geom_poses(self, q: dict[str, float] | None = None) -> dict[str, np.ndarray]:
         links = self.forward(q)
         return {g.name: links[l.name] @ g.pose for l in self.links for g in l.geoms}

@@ -221,9 +221,9 @@ class World(SceneBase):
 
 
 def lowest_point(tree: KinematicTree) -> float:
-    """The lowest z (model frame, joints at zero) of the robot's colliding geometry."""
+    """The lowest z (model frame, joints as the simulator starts them) of the robot's colliding geometry."""
     low = math.inf
-    for name, T in tree.geom_poses().items():
+    for name, T in tree.geom_poses(tree.start_posture).items():
         g = next(g for l in tree.links for g in l.geoms if g.name == name)
         if g.placeholder:
             continue
@@ -235,7 +235,7 @@ def footprint_radius(tree: KinematicTree) -> float:
     """The largest horizontal distance from the base's origin to the robot's colliding geometry."""
     base = tree.root.pose
     far = 0.0
-    for name, T in tree.geom_poses().items():
+    for name, T in tree.geom_poses(tree.start_posture).items():
         g = next(g for l in tree.links for g in l.geoms if g.name == name)
         if g.placeholder:
             continue

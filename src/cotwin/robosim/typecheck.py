@@ -600,9 +600,7 @@ class ExprChecker(ExprVisitor):
         elif isinstance(stmt, s.Send):
             name = stmt.event.last
             if name not in outputs:
-                self.diag.error(stmt.event.loc, f"unknown output event '{stmt.event}'")
-                if stmt.value is not None:
-                    self.check(stmt.value)
+                self._unknown_output(stmt)
                 return
             ty = outputs[name]
             if ty is None and stmt.value is not None:
@@ -620,6 +618,19 @@ class ExprChecker(ExprVisitor):
             self.check(stmt.deadline)
         elif isinstance(stmt, s.Receive):
             self.check(stmt.target)
+
+    def _unknown_output(self, stmt: s.Send) -> None:
+        """One error for a send on no output event: a variable's name in the event's place (`p.f` alone, read as
+        `$e.v`, sending f on p) says so, its field not called an unknown name besides."""
+        symbol = self.scope.lookup(stmt.event.last) if len(stmt.event.parts) == 1 else None
+        if symbol is not None:
+            self.diag.error(stmt.event.loc, f"'{stmt.event}' is not an output event but a name with a value: "
+                                            f"'{stmt.event}.v' alone is no statement (RoboSim's `$e.v` sends v on "
+                                            f"event e); assign it ('{stmt.event}.v = e') or send it ('$e!{stmt.event}')")
+            return
+        self.diag.error(stmt.event.loc, f"unknown output event '{stmt.event}'")
+        if stmt.value is not None:
+            self.check(stmt.value)
 
     def _arguments(self, stmt, args, params: list[Ty], name: str) -> None:
         if len(args) != len(params):

@@ -3,7 +3,8 @@
 `CommandLedger`, an observer, follows each command from the step that applied it (the source's
 `applied` list: cotwin.twin.assembly.commands) through the d-model and the mapping:
 - *taken*: in the step the d-model reads it (the next under Jacobi, the same under Gauss-Seidel; with an
-  FMI 3.0 d-model, the first step whose event phase ran its cycle: a clock slower than the step keeps it) its
+  FMI 3.0 d-model, the first step whose event phase ran its cycle: a clock slower than the step keeps it; one
+  due at the run's start crosses in the event phase before the first step, the d-model's first cycle) its
   state changes or it calls an operation, by a way that reads the command's event (a change an earlier
   command's progress made, on transitions that never read it, is no taking: cotwin.dmodel.waits.CycleReads);
   else it was *not taken* (the d-model was busy: the state it read it in is named). A command taken is
@@ -160,11 +161,15 @@ class CommandLedger(Observer):
         source = execution.system.units.get(self.system.source.name) if self.system.source is not None else None
         self._queue = source.command_queue if source is not None else None  # cotwin.twin.assembly.commands.CommandQueue
         self._seen = self._count()
-        self._lag = 1 if execution.algorithm.name == "jacobi" else 0  # steps until the d-model reads a command
         dmodel = execution.system.units.get(DMODEL.name)
         # a clocked d-model (FMI 3.0) reads a command at its clock's first tick from the point it was applied:
         # in that point's event phase, or at a later one when the clock is slower than the step
         self._clocked = dmodel if dmodel is not None and dmodel.ticks is not None else None
+        # a run's first event phase (at its start, before any step) may have applied commands and ticked: the
+        # d-model's first cycle, from its initial junction, read them (judged below, not passed over as old)
+        first = self._seen if self._clocked is not None and execution.steps == 0 and self._clocked.ticks else 0
+        self._seen -= first
+        self._lag = 1 if execution.algorithm.name == "jacobi" else 0  # steps until the d-model reads a command
         self._ticks = self._clocked.ticks if self._clocked is not None else None
         period = self.system.spec.parameters.get("cycle_period")
         # a cycle_period shorter than the step runs several d-model cycles a step (cotwin.dmodel.fmu): a state
@@ -177,6 +182,10 @@ class CommandLedger(Observer):
         self._before = self._state_read()
         self._waiting: list[tuple[int, CommandOutcome, tuple]] = []  # (steps to read, outcome, state when applied)
         self._current: CommandOutcome | None = None
+        if first:
+            calls = [c for c, v in zip(self._calls, self._calls_read()) if v is True]
+            for outcome in self._fresh():
+                self._judge(outcome, None, self._before, calls)
 
     def _count(self) -> int:
         return self._queue.applied_count if self._queue is not None else 0
@@ -190,24 +199,14 @@ class CommandLedger(Observer):
             self._ticks = ticks
         calls = [c for c, v in zip(self._calls, self._calls_read()) if v is True]
         events = [e for e, v in zip(self._events, self._events_read()) if v is True]
-        if self._count() > self._seen:
-            fresh = list(self._queue.applied)[-(self._count() - self._seen):]
-            self._seen = self._count()
-            for applied in fresh:
-                c = applied.command
-                outcome = CommandOutcome(c.due, c.event, dict(c.values), applied.time, origin=c.origin)
-                self.outcomes.append(outcome)
-                self._waiting.append((self._lag, outcome, self._before))
+        for outcome in self._fresh():
+            self._waiting.append((self._lag, outcome, self._before))
         still = []
         for steps, outcome, before in self._waiting:
             if (steps > 0) if ticked is None else not ticked:
                 still.append((steps - 1, outcome, before))
                 continue
-            if (states != self._before or calls) and self._may_read(outcome.event, self._before, states):  # taken
-                outcome.accepted = True
-                self._current = outcome
-            else:
-                outcome.busy = self._names(self._before)
+            self._judge(outcome, self._before, states, calls)
         self._waiting = still
         current = self._current
         if current is not None:
@@ -225,6 +224,25 @@ class CommandLedger(Observer):
                 current.done = t
         self._before = states
 
+    def _fresh(self) -> list[CommandOutcome]:
+        """The outcomes of the commands applied since the last look, recorded."""
+        if self._count() <= self._seen:
+            return []
+        fresh = list(self._queue.applied)[-(self._count() - self._seen):]
+        self._seen = self._count()
+        outcomes = [CommandOutcome(a.command.due, a.command.event, dict(a.command.values), a.time,
+                                   origin=a.command.origin) for a in fresh]
+        self.outcomes.extend(outcomes)
+        return outcomes
+
+    def _judge(self, outcome: CommandOutcome, before: tuple | None, states: tuple, calls: list[str]) -> None:
+        """Taken or not, by the cycle that took the d-model from `before` (None: its first) to `states`."""
+        if (before is None or states != before or calls) and self._may_read(outcome.event, before, states):
+            outcome.accepted = True
+            self._current = outcome
+        else:
+            outcome.busy = self._names(before)
+
     def repeated(self, execution, rows) -> None:
         """Steps in which no state, call or event changed: each would find what the step before found (a
         command taken, done or stopped is decided at a change), unless a command applied waits to be read."""
@@ -233,13 +251,14 @@ class CommandLedger(Observer):
                 self.step_complete(execution)
 
     def _may_read(self, event: str, before, after) -> bool:
-        """Whether a machine reading `event` may have read it in the cycle that took it from `before` to `after`
-        (cotwin.dmodel.waits.CycleReads): a command the d-model reads while its state changes for another reason
+        """Whether a machine reading `event` may have read it in the cycle that took it from `before` (None: its
+        first cycle) to `after` (cotwin.dmodel.waits.CycleReads): a command the d-model reads while its state changes for another reason
         (an earlier move going on) is not taken when no path of that change reads it."""
         for m, k in self._readers.get(event, ()):
-            was, now = (before[k], after[k]) if k < min(len(before), len(after)) else (None, None)
-            read = self.cycles.between(m, was, now, self._several) if isinstance(was, int) and isinstance(now, int) \
-                else None
+            was = None if before is None else before[k] if k < len(before) else "?"
+            now = after[k] if k < len(after) else None
+            read = self.cycles.between(m, was, now, self._several) \
+                if (was is None or isinstance(was, int)) and isinstance(now, int) else None
             if read is None or event in read:
                 return True
         return False
@@ -248,6 +267,8 @@ class CommandLedger(Observer):
         return all(index == self.rest[port] for (port, _), index in zip(self._states, states))
 
     def _names(self, states) -> str:
+        if states is None:  # before the d-model's first cycle
+            return "its initial junction"
         names = []
         for (_, m), index in zip(self._states, states):
             leaves = self.program.leaf_names(m)
