@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from typing import Callable
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, placed
 from ..robosim import syntax as s
 from ..robosim.evaluator import _call_name, index
 from ..robosim.operators import BINARY, MATH, MATRIX_UNARY, negate
@@ -33,6 +33,8 @@ def _call(function, values: tuple, name: str, loc):
         result = function(*values)
     except EvalError as err:
         raise EvalError(err.kind, f"{name}: {err.message}", err.loc or loc) from None
+    except CotwinError as err:  # a function's own error (the IK's) names no place: its call is it
+        raise placed(err, loc) from None
     except (TypeError, ValueError, OverflowError, ZeroDivisionError) as err:
         raise EvalError("domain", f"cannot evaluate {name}: {err}", loc) from None
     return checked(result, loc) if is_int(result) else result

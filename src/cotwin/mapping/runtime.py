@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 from dataclasses import fields
 
-from ..diagnostics import CotwinError, placed
+from ..diagnostics import CotwinError
 from ..plaindata import count, fields as state_fields, finite, like, of_type
 from ..pmodel import ik
 from ..pmodel.ikcache import SolutionCache
@@ -285,8 +285,6 @@ class _Env:
             return run(scope)
         except EvalError as err:
             raise CotwinError(f"{err.loc or e.loc}: {err.message}") from None
-        except CotwinError as err:  # a function's (the IK's) error names no place: the call in the mapping is it
-            raise placed(err, e.loc) from None
         except (TypeError, ValueError, AttributeError, KeyError, IndexError) as err:
             raise CotwinError(f"{e.loc}: the expression cannot be evaluated: {err}") from None
 

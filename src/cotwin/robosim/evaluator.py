@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Callable
 
+from ..diagnostics import CotwinError, placed
 from . import syntax as s
 from .operators import BINARY, MATRIX_UNARY, SHORT_CIRCUIT, Interval, negate, short_circuit, tuple_item
 from .values import (
@@ -142,6 +143,8 @@ class Evaluator(ExprVisitor):
             result = fn(*args)
         except EvalError as err:
             raise EvalError(err.kind, f"{_call_name(e)}: {err.message}", err.loc or e.loc) from None
+        except CotwinError as err:  # a function's own error (the IK's) names no place: its call is it
+            raise placed(err, e.loc) from None
         except (TypeError, ValueError, OverflowError, ZeroDivisionError) as err:
             raise EvalError("domain", f"cannot evaluate {_call_name(e)}: {err}", e.loc) from None
         return checked(result, e.loc) if is_int(result) else result
@@ -371,6 +374,8 @@ class ClosureCompiler(ExprVisitor):
                 result = f(*values)
             except EvalError as err:
                 raise EvalError(err.kind, f"{name}: {err.message}", err.loc or loc) from None
+            except CotwinError as err:  # a function's own error (the IK's) names no place: its call is it
+                raise placed(err, loc) from None
             except (TypeError, ValueError, OverflowError, ZeroDivisionError) as err:
                 raise EvalError("domain", f"cannot evaluate {name}: {err}", loc) from None
             return checked(result, loc) if is_int(result) else result
