@@ -150,6 +150,25 @@ def test_an_output_named_like_a_model_in_a_folder_given_as_models_is_refused(pro
         assert kept.read_text() == text
 
 
+def test_an_output_that_is_a_device_or_a_fifo_is_refused_not_replaced(project, tmp_path):
+    """`simulate -o /dev/null` run as root renamed the CSV over the device: /dev/null became a file. A FIFO
+    stands in for the device here (replaced alike, by anyone)."""
+    from cotwin.files import write_text
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    proc = cotwin_in_process("export-pmodel", project / "ur5e.pm", "--format", "urdf", "-o", fifo)
+    assert proc.returncode == 2 and "is a FIFO, not a file" in proc.stderr, proc.stderr
+    with pytest.raises(CotwinError, match="is a FIFO, not a file"):
+        write_text(fifo, "x")
+    out = tmp_path / "out"
+    out.mkdir()
+    os.mkfifo(out / "outputs.csv")
+    proc = cotwin_in_process("run", project / "cotwin.toml", "-o", out, "--end", "0.5")
+    assert proc.returncode == 1 and "is a FIFO, not a file" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+    assert fifo.is_fifo() and (out / "outputs.csv").is_fifo()
+
+
 def _sparse(path: Path, size: int = 8 << 30) -> Path:
     with open(path, "wb") as f:
         f.truncate(size)  # no disk used: a hole of 8 GiB
