@@ -5,6 +5,7 @@ round-trips; names, meshes, packages, joints and devices; bad URDF reported at i
 from __future__ import annotations
 
 import importlib.metadata
+import os
 import struct
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -499,6 +500,39 @@ def test_bad_urdf_is_reported_at_its_place(tmp_path, text, where, message):
         import_urdf(urdf, tmp_path / "out")
     shown = str(err.value)
     assert f"bad.urdf:{where}" in shown and message in shown, shown
+    assert not (tmp_path / "out").exists()
+
+
+ONE = [  # each said once, as what it is
+    ("<robot name=''>\n" + _links("a") + "</robot>", "1:1", "the robot: <robot> has an empty 'name'"),
+    ("<robot name='r'>\n<link name=''/></robot>", "2:1", "a link: <link> has an empty 'name'"),
+    ("<robot name='r'>\n" + _links("a", "b") + "\n<joint name=' ' type='fixed'><parent link='a'/><child link='b'/>"
+     "</joint></robot>", "3:1", "a joint: <joint> has an empty 'name'"),
+    ("<robot name='r'>\n<link name='a'><visual><geometry>\n<mesh filename='package://'/></geometry></visual></link>"
+     "</robot>", "3:1", "mesh 'package://': names no package"),
+    ("<robot name='r'>\n<link name='a'><visual><geometry>\n<mesh filename='meshes'/></geometry></visual></link>"
+     "</robot>", "3:1", "mesh 'meshes': a folder, not a mesh file"),
+    ("<robot name='r'>\n<link name='a'><visual><geometry>\n<mesh filename='pipe.stl'/></geometry></visual></link>"
+     "</robot>", "3:1", "mesh 'pipe.stl': not a regular file (a FIFO, a device?)"),
+    ("<robot name='r'>\n<xacro:include filename='x'/>" + _links("a") + "</robot>", "2:1",
+     "expand it first (`xacro arm.urdf.xacro > arm.urdf`)"),
+]
+
+
+@pytest.mark.parametrize("text, where, message", ONE, ids=[m for _, _, m in ONE])
+def test_an_empty_name_a_mesh_that_is_no_file_and_a_bare_package_uri_are_one_error_each(tmp_path, text, where, message):
+    """An empty link name was imported as `_` and an empty robot name replaced by the file's; `package://` was
+    looked for as the first package folder ('no such file' and 'one slash too many'); a folder or a FIFO named as
+    a mesh was 'no such file'; an empty <link> also gave 'robot has no <link>'; the xacro hint for arm.urdf.xacro
+    said `> arm.urdf.urdf`."""
+    (tmp_path / "meshes").mkdir()
+    os.mkfifo(tmp_path / "pipe.stl")
+    urdf = tmp_path / "arm.urdf.xacro"
+    urdf.write_text(text)
+    with pytest.raises(CotwinError) as err:
+        import_urdf(urdf, tmp_path / "out", package_path=[tmp_path])
+    (finding,) = err.value.findings
+    assert f"arm.urdf.xacro:{where}" in str(err.value) and message in finding.message, str(err.value)
     assert not (tmp_path / "out").exists()
 
 

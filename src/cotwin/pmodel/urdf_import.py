@@ -233,6 +233,9 @@ class MeshCopies:
             package = parsed.netloc
             if not package:  # package:///NAME/...: an extra slash (talos_data's URDFs have it)
                 package, _, rest = unquote(parsed.path).lstrip("/").partition("/")
+                if not package:  # `package://` alone was looked for as the first package folder
+                    self.diag.error(where, f"mesh '{uri}': names no package (package://PACKAGE/PATH)")
+                    return None
                 parsed = parsed._replace(netloc=package, path="/" + rest)
                 self.diag.warning(where, f"mesh '{uri}': read as package://{package}/{rest} (one slash too many)")
             root = self.packages.find(package)
@@ -260,7 +263,7 @@ class MeshCopies:
                             f"{parsed.scheme}:// (download the file and name it)")
             return None
         if not source.is_file():
-            self.diag.error(where, f"mesh '{uri}': no such file ({source})")
+            self.diag.error(where, f"mesh '{uri}': {_not_a_file(source)} ({source})")
             return None
         key = source.resolve()
         if key not in self.by_source:
@@ -317,6 +320,13 @@ class MeshCopies:
             shutil.copyfile(mesh.source, target)
             written.append(target)
         return written
+
+
+def _not_a_file(source: Path) -> str:
+    """Why a mesh's path is not read: missing, a folder, or a FIFO or device (which would be read forever)."""
+    if source.is_dir():
+        return "a folder, not a mesh file"
+    return "not a regular file (a FIFO, a device?)" if source.exists() else "no such file"
 
 
 def _same_bytes(a: Path, b: Path) -> bool:

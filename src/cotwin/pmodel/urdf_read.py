@@ -216,6 +216,15 @@ class _Reader:
             self.diag.error(node.loc, f"{what}: <{node.tag}> has no '{name}' attribute")
         return value
 
+    def name(self, node: Node, what: str) -> str | None:
+        """An element's name attribute: one that is empty (`name=""`, or only spaces) names nothing, and is
+        refused as a missing one is (an empty link name became `_`, an empty robot name the file's)."""
+        value = self.attr(node, "name", what)
+        if value is not None and not value.strip():
+            self.diag.error(node.loc, f"{what}: <{node.tag}> has an empty 'name'")
+            return None
+        return value
+
     def numbers(self, node: Node, name: str, count: int, what: str, default=None):
         text = node.attrs.get(name)
         if text is None:
@@ -294,7 +303,7 @@ def read_urdf(path: str | Path, diag: Diagnostics) -> Robot | None:
 def _xacro_left(root: Node, path: Path, diag: Diagnostics) -> bool:
     """Report xacro macros and ${...} / $(...) substitutions left in the file."""
     found = False
-    hint = f"expand it first (`xacro {path.name} > {path.stem}.urdf`)"
+    hint = f"expand it first (`xacro {path.name} > {path.name.removesuffix('.xacro').removesuffix('.urdf')}.urdf`)"
     stack = [root]
     while stack:
         node = stack.pop()
@@ -312,7 +321,7 @@ def _xacro_left(root: Node, path: Path, diag: Diagnostics) -> bool:
 
 def _robot(root: Node, path: Path, diag: Diagnostics) -> Robot | None:
     read = _Reader(diag)
-    name = read.attr(root, "name", "the robot") or path.stem
+    name = read.name(root, "the robot") or path.stem
     ignored: Counter = Counter()
     readers = {"link": _link, "joint": _joint}
     declared: dict[str, dict] = {"link": {}, "joint": {}}  # kind -> name -> element, in the file's order
@@ -332,14 +341,15 @@ def _robot(root: Node, path: Path, diag: Diagnostics) -> Robot | None:
     links, joints = list(seen_links.values()), list(seen_joints.values())
     robot = Robot(name, path, links, joints, ignored, root.loc)
     if not links:
-        diag.error(root.loc, f"robot '{name}' has no <link>")
+        if not root.all("link"):  # else each <link> has said why it was not read
+            diag.error(root.loc, f"robot '{name}' has no <link>")
         return None
     _check_structure(robot, seen_links, seen_joints, diag)
     return robot
 
 
 def _link(node: Node, read: _Reader, ignored: Counter) -> Link | None:
-    name = read.attr(node, "name", "a link")
+    name = read.name(node, "a link")
     if name is None:
         return None
     what = f"link '{name}'"
@@ -468,7 +478,7 @@ def _geometry(node: Node, read: _Reader, what: str) -> Geometry | None:
 
 
 def _joint(node: Node, read: _Reader, ignored: Counter) -> Joint | None:
-    name = read.attr(node, "name", "a joint")
+    name = read.name(node, "a joint")
     kind = read.attr(node, "type", f"joint '{name}'" if name else "a joint")
     if name is None or kind is None:
         return None
