@@ -362,6 +362,19 @@ def test_the_exported_urdf_keeps_a_continuous_joint_continuous(own_arm, tmp_path
     assert limits["elbow_joint"] == {"type": "revolute", "lower": -2.0, "upper": 2.5, "effort": 30.0, "velocity": 3.0}
 
 
+def test_a_continuous_joint_without_limit_is_exported_without_one(tmp_path):
+    """A continuous joint the URDF gave no <limit> came back with effort="0" velocity="0": a joint that,
+    read by ROS, can neither push nor move."""
+    urdf = tmp_path / "spin.urdf"
+    urdf.write_text("<robot name='spin'>" + _links("a", "b") + _joint("wheel", "a", "b", "continuous") + "</robot>")
+    result = import_urdf(urdf, tmp_path / "out")
+    exported = tmp_path / "again.urdf"
+    run = CliRunner().invoke(main, ["export-pmodel", str(result.file), "--format", "urdf", "-o", str(exported)])
+    assert run.exit_code == 0, run.output
+    assert urdf_limits(exported)["wheel"] == {"type": "continuous"}
+    assert ET.parse(exported).getroot().find("joint[@name='wheel']/limit") is None
+
+
 def test_package_uris_resolve_through_the_package_path_ros_package_path_and_the_urdfs_folders(own_arm, tmp_path):
     # the folder holding the package, given with --package-path
     assert import_urdf(own_arm, tmp_path / "a", [tmp_path / "src"]).meshes

@@ -65,9 +65,10 @@ def to_urdf(tree: KinematicTree) -> str:
         if j.kind != "fixed":
             sub(el, "axis", xyz=nums(j.axis))
             limits = {k: num(getattr(j, k)) for k in ("lower", "upper", "effort", "velocity") if getattr(j, k) is not None}
-            limits.setdefault("effort", "0")
-            limits.setdefault("velocity", "0")
-            sub(el, "limit", **limits)
+            if limits or not unlimited:  # a continuous joint needs none: effort and velocity 0 would say it cannot move
+                limits.setdefault("effort", "0")
+                limits.setdefault("velocity", "0")
+                sub(el, "limit", **limits)
             sub(el, "dynamics", damping=num(j.damping))
     for root in tree.roots[1:]:  # URDF has one root: a free body of the p-model floats from the base
         el = sub(robot, "joint", name=f"{root.name}_free", type="floating")
