@@ -362,6 +362,21 @@ def test_the_exported_urdf_keeps_a_continuous_joint_continuous(own_arm, tmp_path
     assert limits["elbow_joint"] == {"type": "revolute", "lower": -2.0, "upper": 2.5, "effort": 30.0, "velocity": 3.0}
 
 
+def test_a_negative_moment_that_rounds_zero_is_imported_and_a_real_one_refused(tmp_path):
+    """iCub's r_hip_2 has ixx = iyy = -5.42101e-20 (a CAD export's zero): refusing every negative moment refused
+    example-robot-data's icub.urdf and icub_reduced.urdf, which the import took before."""
+    def robot(moment: str) -> Path:
+        urdf = tmp_path / f"hip{moment}.urdf"
+        urdf.write_text(f"<robot name='hip'><link name='a'><inertial><mass value='0.526'/><inertia ixx='{moment}' "
+                        f"ixy='0' ixz='0' iyy='{moment}' iyz='0' izz='0'/></inertial></link></robot>")
+        return urdf
+
+    result = import_urdf(robot("-5.42101e-20"), tmp_path / "icub")
+    assert any("inertia of link a is not physical" in f.message for f in result.findings), result.findings
+    with pytest.raises(CotwinError, match="a negative moment of inertia"):
+        import_urdf(robot("-1e-6"), tmp_path / "bad")
+
+
 def test_a_continuous_joint_without_limit_is_exported_without_one(tmp_path):
     """A continuous joint the URDF gave no <limit> came back with effort="0" velocity="0": a joint that,
     read by ROS, can neither push nor move."""

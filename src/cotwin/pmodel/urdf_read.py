@@ -24,6 +24,7 @@ from ..diagnostics import Diagnostics, Location
 
 MAX_MASS = 1e6  # kg: a link heavier than a thousand tonnes is a typo or a unit slip, refused
 MAX_MOMENT = 1e6  # kg m^2: an inertia entry beyond this is refused likewise
+ROUNDOFF_MOMENT = 1e-12  # kg m^2: a negative moment this small is a CAD export's rounding of zero (iCub: -5.4e-20)
 MAX_BYTES = 64 * 1024 * 1024  # a URDF larger than this is refused (the largest published ones are ~2 MB)
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 UNSUPPORTED_TYPES = ("floating", "planar")  # valid URDF that a p-model joint cannot say (one degree of freedom)
@@ -393,7 +394,7 @@ def _physical(mass: float, mass_node: Node, inertia: dict[str, float], inertia_n
     """Whether a link's mass and inertia are ones a body can have; each problem an error at its element,
     mass and inertia both checked so that one run reports them together. Refused: a negative mass, a
     mass or inertia entry beyond any robot's (a unit slip), a negative moment about an axis (ixx, iyy or
-    izz). An inertia merely not positive definite or against the triangle inequality is not refused:
+    izz) beyond ROUNDOFF_MOMENT. An inertia merely not positive definite or against the triangle inequality is not refused:
     published URDFs carry many (zero inertias of sensor frames, rounding of CAD exports), and cotwin's
     tree builder replaces them by the geometry's with a warning the import shows (docs/urdf-import.md)."""
     ok = True
@@ -405,7 +406,7 @@ def _physical(mass: float, mass_node: Node, inertia: dict[str, float], inertia_n
                         "a unit slip?)")
         ok = False
     beyond = [k for k, v in inertia.items() if abs(v) > MAX_MOMENT]
-    negative = [k for k in ("ixx", "iyy", "izz") if inertia[k] < 0]
+    negative = [k for k in ("ixx", "iyy", "izz") if inertia[k] < -ROUNDOFF_MOMENT]
     if beyond:
         read.diag.error(inertia_node.loc, f"{what}: inertia {', '.join(f'{k}={inertia[k]:g}' for k in beyond)} kg m^2, "
                         f"more than a link may have ({MAX_MOMENT:g} kg m^2; a unit slip?)")
