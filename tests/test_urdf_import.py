@@ -377,6 +377,19 @@ def test_a_negative_moment_that_rounds_zero_is_imported_and_a_real_one_refused(t
         import_urdf(robot("-1e-6"), tmp_path / "bad")
 
 
+def test_an_exported_mesh_uri_in_a_folder_named_with_a_hash_reads_back(own_arm, tmp_path):
+    """Exported as file:///.../my #1 robot/meshes/..., the '#' cut the URI (a fragment): importing cotwin's own
+    URDF export said 'no such file (.../my )'."""
+    result = import_urdf(own_arm, tmp_path / "my #1 robot", [tmp_path / "src"])
+    exported = tmp_path / "again.urdf"
+    for fmt, out in (("urdf", exported), ("sdf", tmp_path / "again.sdf")):
+        run = CliRunner().invoke(main, ["export-pmodel", str(result.file), "--format", fmt, "-o", str(out)])
+        assert run.exit_code == 0, run.output
+        assert "my %231 robot/meshes/" in out.read_text() and "my #1" not in out.read_text()
+    again = import_urdf(exported, tmp_path / "back")  # the collision meshes (visuals are not exported)
+    assert [m.name for m in again.meshes] == ["part.stl"], again.meshes
+
+
 def test_a_continuous_joint_without_limit_is_exported_without_one(tmp_path):
     """A continuous joint the URDF gave no <limit> came back with effort="0" velocity="0": a joint that,
     read by ROS, can neither push nor move."""

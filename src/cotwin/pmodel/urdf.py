@@ -9,7 +9,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 from .tree import Geom, KinematicTree, inverse, matrix_rpy
-from .xmltext import num, nums, sub, to_text
+from .xmltext import file_uri, num, nums, sub, to_text
 
 
 def _origin(parent: ET.Element, T: np.ndarray) -> None:
@@ -23,7 +23,7 @@ def _geometry(parent: ET.Element, g: Geom) -> None:
     elif g.kind in ("cylinder", "capsule"):
         sub(geometry, "cylinder", radius=num(g.size["radius"]), length=num(g.size["length"]))
     elif g.kind == "mesh":
-        sub(geometry, "mesh", filename=f"file://{g.mesh}", scale=nums(g.scale))
+        sub(geometry, "mesh", filename=file_uri(g.mesh), scale=nums(g.scale))
     else:
         sub(geometry, "sphere", radius=num(g.size["radius"]))
 
