@@ -555,6 +555,10 @@ ONE = [  # each said once, as what it is
      "</robot>", "3:1", "mesh 'meshes': a folder, not a mesh file"),
     ("<robot name='r'>\n<link name='a'><visual><geometry>\n<mesh filename='pipe.stl'/></geometry></visual></link>"
      "</robot>", "3:1", "mesh 'pipe.stl': not a regular file (a FIFO, a device?)"),
+    ("<robot name='r'>\n" + _links("a", "b", "c", "d") + "\n" + "\n".join(
+        _joint(f"j{k}", p, c, "continuous", f"<mimic joint='j{k % 3 + 1}'/>") for k, (p, c) in
+        enumerate((("a", "b"), ("b", "c"), ("c", "d")), 1)) + "</robot>", "3:",
+     "mimic joints form a cycle: j1 -> j2 -> j3 -> j1"),
     ("<robot name='r'>\n<xacro:include filename='x'/>" + _links("a") + "</robot>", "2:1",
      "expand it first (`xacro arm.urdf.xacro > arm.urdf`)"),
 ]
@@ -562,7 +566,7 @@ ONE = [  # each said once, as what it is
 
 @pytest.mark.parametrize("text, where, message", ONE, ids=[m for _, _, m in ONE])
 def test_an_empty_name_a_mesh_that_is_no_file_and_a_bare_package_uri_are_one_error_each(tmp_path, text, where, message):
-    """An empty link name was imported as `_` and an empty robot name replaced by the file's; `package://` was
+    """Mimics in a loop were imported (with a warning per joint); an empty link name was imported as `_` and an empty robot name replaced by the file's; `package://` was
     looked for as the first package folder ('no such file' and 'one slash too many'); a folder or a FIFO named as
     a mesh was 'no such file'; an empty <link> also gave 'robot has no <link>'; the xacro hint for arm.urdf.xacro
     said `> arm.urdf.urdf`."""

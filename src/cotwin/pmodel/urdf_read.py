@@ -587,6 +587,7 @@ def _check_structure(robot: Robot, links: dict[str, Link], joints: dict[str, Joi
                 diag.error(j.mimic.loc, f"joint '{j.name}' mimics the fixed joint '{leader.name}'")
             elif leader.name == j.name:
                 diag.error(j.mimic.loc, f"joint '{j.name}' mimics itself")
+    _mimic_cycles(joints, diag)
     if diag.has_errors:
         return
     roots = [l for l in robot.links if l.name not in parent_of]
@@ -617,3 +618,19 @@ def _check_structure(robot: Robot, links: dict[str, Link], joints: dict[str, Joi
         if link.name == min(loop):  # report each cycle once, at its first link by name
             path = " -> ".join(f"{parent_of[n].parent} --{parent_of[n].name}--> {n}" for n in reversed(loop))
             diag.error(parent_of[link.name].loc, f"joints form a cycle: {path}")
+
+
+def _mimic_cycles(joints: dict[str, Joint], diag: Diagnostics) -> None:
+    """Mimics that lead back to their follower (j1 mimics j2, j2 mimics j1): no joint of the loop has a value
+    of its own. Each loop once, at its first joint by name."""
+    for joint in joints.values():
+        chain, at = [], joint
+        while at is not None and at.mimic is not None and at.name not in chain:
+            chain.append(at.name)
+            at = joints.get(at.mimic.joint)
+        if at is None or at.name not in chain or at.name == at.mimic.joint:  # no loop, or one mimicking itself (said)
+            continue
+        loop = chain[chain.index(at.name):]
+        if joint.name == min(loop):
+            path = " -> ".join([*loop, loop[0]])
+            diag.error(joint.mimic.loc, f"mimic joints form a cycle: {path} (each follows the next, none has a value)")
