@@ -762,3 +762,20 @@ def test_a_robot_whose_zero_posture_is_beyond_its_limits_starts_at_them(tmp_path
         q = sim.joint_positions()
         assert all(abs(q[name] - start) < 1e-6 for name, start in starts.items()), (step, q)
         sim.step(200)
+
+
+@pytest.mark.parametrize("name, text, said", [
+    ("cut.stl", "solid x\n facet normal 0 0 1\n outer loop\n vertex 0 0 0\n vertex 1 0 0\n vertex 0 1", "its vertex #3"),
+    ("word.stl", "solid x\n vertex a b c\n", "its vertex #1"),
+    ("short.obj", "v 1 2\nv 3 4 5\n", "its v #1"),
+])
+def test_a_text_mesh_with_a_vertex_that_is_not_three_numbers_is_a_named_placeholder(tmp_path, name, text, said):
+    """A truncated ASCII STL was an internal error (IndexError) after the p-model was written; a vertex of words,
+    or of two numbers, a warning in Python's or numpy's words that named no file."""
+    (tmp_path / name).write_text(text)
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(f"<robot name='r'><link name='a'><collision><geometry><mesh filename='{name}'/></geometry>"
+                    "</collision></link></robot>")
+    result = import_urdf(urdf, tmp_path / "out")
+    shown = [f.message for f in result.findings if name in f.message]
+    assert len(shown) == 1 and said in shown[0] and "is not three numbers" in shown[0], result.findings
