@@ -779,3 +779,18 @@ def test_a_text_mesh_with_a_vertex_that_is_not_three_numbers_is_a_named_placehol
     result = import_urdf(urdf, tmp_path / "out")
     shown = [f.message for f in result.findings if name in f.message]
     assert len(shown) == 1 and said in shown[0] and "is not three numbers" in shown[0], result.findings
+
+
+def test_a_forced_import_replaces_a_mesh_hard_linked_to_another_file_and_leaves_that_file(own_arm, tmp_path):
+    """`--force` copied the mesh into the file there: a hard link planted at meshes/... had its other name
+    (a file outside the output folder) overwritten."""
+    out = tmp_path / "out"
+    result = import_urdf(own_arm, out, [tmp_path / "src"])
+    mesh = result.meshes[0]
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    mesh.unlink()
+    os.link(victim, mesh)
+    again = import_urdf(own_arm, out, [tmp_path / "src"], force=True)
+    assert victim.read_text() == "precious"
+    assert mesh in again.meshes and os.stat(mesh).st_nlink == 1 and mesh.read_bytes() != b"precious"

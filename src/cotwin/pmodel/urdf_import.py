@@ -24,7 +24,6 @@ from __future__ import annotations
 import os
 import posixpath
 import re
-import shutil
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -33,7 +32,7 @@ from urllib.parse import unquote, urlparse
 import numpy as np
 
 from ..diagnostics import CotwinError, Diagnostics, Finding, Severity
-from ..files import check_outputs, write_text
+from ..files import check_outputs, read_bytes, write_bytes, write_text
 from .tree import matrix_rpy, transform
 from .urdf_read import Geometry, Joint, Link, Origin, Robot, Shape, read_urdf
 
@@ -306,18 +305,14 @@ class MeshCopies:
         return found
 
     def copy_to(self, folder: Path) -> list[Path]:
-        """Copy every mesh into folder (a file already there with the same bytes is left alone; a link
-        there is replaced, not written through)."""
+        """Copy every mesh into folder (a file already there with the same bytes is left alone; a link, or a
+        hard link, there is replaced by a new file, not written through: files.write_bytes)."""
         written = []
         for mesh in sorted(self.by_source.values(), key=lambda m: m.written):
             target = folder / mesh.written
-            target.parent.mkdir(parents=True, exist_ok=True)
-            if target.is_symlink():
-                target.unlink()
-            elif target.exists() and (os.path.samefile(target, mesh.source) or _same_bytes(target, mesh.source)):
-                written.append(target)
-                continue
-            shutil.copyfile(mesh.source, target)
+            if not (target.exists() and not target.is_symlink()
+                    and (os.path.samefile(target, mesh.source) or _same_bytes(target, mesh.source))):
+                write_bytes(target, read_bytes(mesh.source, "mesh"), [mesh.source])
             written.append(target)
         return written
 
