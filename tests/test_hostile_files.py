@@ -135,6 +135,40 @@ def test_no_output_replaces_a_file_the_command_reads(project, tmp_path):
     assert proc.returncode == 0 and (tmp_path / "run1.csv").read_text() == "time,{mapping}.mapping.q0\n0.0,0.5\n"
 
 
+def test_an_output_named_like_a_model_in_a_folder_given_as_models_is_refused(project, tmp_path):
+    """`export-pmodel models -o models/arm.pm` wrote the URDF over the p-model it had just read (exit 0)."""
+    models = tmp_path / "models"
+    models.mkdir()
+    for name in ("ur5e.pm", "arm.rst"):
+        shutil.copy(project / name, models / name)
+    for args, kept in ((["export-pmodel", models, "--format", "urdf", "-o", models / "ur5e.pm"], models / "ur5e.pm"),
+                       (["build-dmodel", models, "-o", models / "arm.rst"], models / "arm.rst")):
+        text = kept.read_text()
+        proc = cotwin_in_process(*args)
+        assert proc.returncode == 1 and "would replace" in proc.stderr and "Traceback" not in proc.stderr, (args, proc.stderr)
+        assert proc.stderr.count("would replace") == 1, proc.stderr
+        assert kept.read_text() == text
+
+
+def test_an_output_that_is_a_device_or_a_fifo_is_refused_not_replaced(project, tmp_path):
+    """`simulate -o /dev/null` run as root renamed the CSV over the device: /dev/null became a file. A FIFO
+    stands in for the device here (replaced alike, by anyone)."""
+    from cotwin.files import write_text
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    proc = cotwin_in_process("export-pmodel", project / "ur5e.pm", "--format", "urdf", "-o", fifo)
+    assert proc.returncode == 2 and "is a FIFO, not a file" in proc.stderr, proc.stderr
+    with pytest.raises(CotwinError, match="is a FIFO, not a file"):
+        write_text(fifo, "x")
+    out = tmp_path / "out"
+    out.mkdir()
+    os.mkfifo(out / "outputs.csv")
+    proc = cotwin_in_process("run", project / "cotwin.toml", "-o", out, "--end", "0.5")
+    assert proc.returncode == 1 and "is a FIFO, not a file" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+    assert fifo.is_fifo() and (out / "outputs.csv").is_fifo()
+
+
 def _sparse(path: Path, size: int = 8 << 30) -> Path:
     with open(path, "wb") as f:
         f.truncate(size)  # no disk used: a hole of 8 GiB

@@ -156,3 +156,49 @@ def test_an_end_before_the_start_or_within_one_step_is_located_at_endtime(tmp_pa
     (finding,) = err.value.findings
     line = next(k + 1 for k, row in enumerate(text.splitlines()) if '"endTime"' in row)
     assert finding.location.line == line and "shorter than one step" in finding.message
+
+
+@pytest.mark.parametrize("change, said", [
+    (lambda m: m.update(fmus=["a.fmu"]), "fmus must be an object"),
+    (lambda m: m.update(connections=[1, 2]), "connections must be an object"),
+    (lambda m: m.update(parameters=[1]), "parameters must be an object"),
+    (lambda m: m.update(logVariables=[1]), "logVariables must be an object"),
+    (lambda m: m["logVariables"].update({"{a}.a": 5}), "logVariables.{a}.a must be a list of strings"),
+    (lambda m: m["logVariables"].update({"{a}.a": "x"}), "logVariables.{a}.a must be a list of strings"),
+    (lambda m: m.update(algorithm=[0.1]), "algorithm must be an object"),
+    (lambda m: m.update(cotwin=[1]), "cotwin must be an object"),
+    (lambda m: m.update(cotwin={"delayed": "{a}.a"}), "cotwin.delayed must be a list of strings"),
+    (lambda m: m.update(cotwin={"delayed": [5]}), "cotwin.delayed must be a list of strings"),
+    (lambda m: m.update(cotwin={"algorithm": "magic"}), "cotwin.algorithm must be one of jacobi, gauss-seidel"),
+    (lambda m: m.update(parameters={"{a}.a.p": [1]}), "'{a}.a.p' must be a number, a Boolean or a string"),
+    (lambda m: m["algorithm"].update(size="0.1"), "algorithm.size must be a finite number"),
+])
+def test_a_multimodel_section_of_the_wrong_kind_is_one_located_error(tmp_path, change, said):
+    """`fmus` as a list, `algorithm` as a number, `cotwin` as a list were internal errors (AttributeError); a
+    string for `cotwin.delayed` or a log list was read one character per unit or variable; a size given as a
+    string was said twice."""
+    (tmp_path / "a.fmu").write_bytes(b"")
+    mm = {"fmus": {"{a}": "a.fmu"}, "connections": {}, "logVariables": {"{a}.a": ["x"]},
+          "algorithm": {"type": "fixed-step", "size": 0.1}, "startTime": 0.0, "endTime": 1.0}
+    change(mm)
+    path = tmp_path / "mm.json"
+    path.write_text(json.dumps(mm))
+    with pytest.raises(CotwinError) as err:
+        read_multimodel(path)
+    (finding,) = [f for f in err.value.findings if "not a known" not in f.message]  # a bad `fmus` leaves {a} unknown
+    assert said in finding.message and finding.location.line == 1 and finding.location.column > 1, finding
+
+
+@pytest.mark.parametrize("text, said", [
+    ('{"fmus": {}, "startTime": 0, "endTime": 1, "startTime": 3}', "the key 'startTime' appears twice"),
+    ('{"fmus": {}, "endTime": 1' + "0" * 5000 + "}", "a number of 5001 digits"),
+    ('{"fmus": {}, "algorithm": {"type": "fixed-step", "size": NaN}}', "NaN is not a JSON number"),
+])
+def test_a_multimodel_key_given_twice_or_a_number_json_lacks_is_refused(tmp_path, text, said):
+    """A second startTime silently won; an endTime of 5000 digits was an internal error (Python's int limit)."""
+    path = tmp_path / "mm.json"
+    path.write_text(text)
+    with pytest.raises(CotwinError) as err:
+        read_multimodel(path)
+    (finding,) = err.value.findings
+    assert said in finding.message and finding.location.path == str(path), finding

@@ -142,6 +142,20 @@ def test_robotool_refuses_what_cotwin_refuses(tmp_path):
                                                           "box length in link L must be positive, is -1"]
 
 
+def test_a_number_that_is_not_finite_is_refused_where_it_is_written(tmp_path):
+    """`mass 1e400` (infinity), a pose of 0.0/0.0, a joint limit of 1e400 and an axis of 1e400 checked 'ok' and
+    reached the MJCF as mass="inf", range="-inf inf", axis="nan nan nan"."""
+    text = ("pmodel P {\n local link L { def { inertial information { mass 1e400 } } pose { x = 0.0/0.0 } }\n"
+            " local link M { def { } local joint J { def { annotation Revolute { axis = Axis { xyz = (|0, 0, 1e400|) }\n"
+            " limit = Limit { lower = -1e400 upper = 1 velocity = 1 effort = 1 } } } flexibly connected to L } } }")
+    result = _project(tmp_path, text)
+    errors = [(f.location.line, f.message) for f in result.findings if f.severity is Severity.ERROR]
+    assert errors == [(2, "mass of link L must be a finite number, is inf"),
+                      (2, "pose x of link L must be a finite number, is nan"),
+                      (3, "annotation Axis.xyz must be finite, is (|0, 0, inf|)"),
+                      (4, "annotation Limit.lower must be finite, is -inf")], errors
+
+
 ANNOTATED = f"""pmodel Drive {{
 	part g = Gear
 	local link Ref {{ def {{ }} {BOX} }}

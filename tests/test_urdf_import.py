@@ -5,6 +5,7 @@ round-trips; names, meshes, packages, joints and devices; bad URDF reported at i
 from __future__ import annotations
 
 import importlib.metadata
+import os
 import struct
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -361,6 +362,47 @@ def test_the_exported_urdf_keeps_a_continuous_joint_continuous(own_arm, tmp_path
     assert limits["elbow_joint"] == {"type": "revolute", "lower": -2.0, "upper": 2.5, "effort": 30.0, "velocity": 3.0}
 
 
+def test_a_negative_moment_that_rounds_zero_is_imported_and_a_real_one_refused(tmp_path):
+    """iCub's r_hip_2 has ixx = iyy = -5.42101e-20 (a CAD export's zero): refusing every negative moment refused
+    example-robot-data's icub.urdf and icub_reduced.urdf, which the import took before."""
+    def robot(moment: str) -> Path:
+        urdf = tmp_path / f"hip{moment}.urdf"
+        urdf.write_text(f"<robot name='hip'><link name='a'><inertial><mass value='0.526'/><inertia ixx='{moment}' "
+                        f"ixy='0' ixz='0' iyy='{moment}' iyz='0' izz='0'/></inertial></link></robot>")
+        return urdf
+
+    result = import_urdf(robot("-5.42101e-20"), tmp_path / "icub")
+    assert any("inertia of link a is not physical" in f.message for f in result.findings), result.findings
+    with pytest.raises(CotwinError, match="a negative moment of inertia"):
+        import_urdf(robot("-1e-6"), tmp_path / "bad")
+
+
+def test_an_exported_mesh_uri_in_a_folder_named_with_a_hash_reads_back(own_arm, tmp_path):
+    """Exported as file:///.../my #1 robot/meshes/..., the '#' cut the URI (a fragment): importing cotwin's own
+    URDF export said 'no such file (.../my )'."""
+    result = import_urdf(own_arm, tmp_path / "my #1 robot", [tmp_path / "src"])
+    exported = tmp_path / "again.urdf"
+    for fmt, out in (("urdf", exported), ("sdf", tmp_path / "again.sdf")):
+        run = CliRunner().invoke(main, ["export-pmodel", str(result.file), "--format", fmt, "-o", str(out)])
+        assert run.exit_code == 0, run.output
+        assert "my %231 robot/meshes/" in out.read_text() and "my #1" not in out.read_text()
+    again = import_urdf(exported, tmp_path / "back")  # the collision meshes (visuals are not exported)
+    assert [m.name for m in again.meshes] == ["part.stl"], again.meshes
+
+
+def test_a_continuous_joint_without_limit_is_exported_without_one(tmp_path):
+    """A continuous joint the URDF gave no <limit> came back with effort="0" velocity="0": a joint that,
+    read by ROS, can neither push nor move."""
+    urdf = tmp_path / "spin.urdf"
+    urdf.write_text("<robot name='spin'>" + _links("a", "b") + _joint("wheel", "a", "b", "continuous") + "</robot>")
+    result = import_urdf(urdf, tmp_path / "out")
+    exported = tmp_path / "again.urdf"
+    run = CliRunner().invoke(main, ["export-pmodel", str(result.file), "--format", "urdf", "-o", str(exported)])
+    assert run.exit_code == 0, run.output
+    assert urdf_limits(exported)["wheel"] == {"type": "continuous"}
+    assert ET.parse(exported).getroot().find("joint[@name='wheel']/limit") is None
+
+
 def test_package_uris_resolve_through_the_package_path_ros_package_path_and_the_urdfs_folders(own_arm, tmp_path):
     # the folder holding the package, given with --package-path
     assert import_urdf(own_arm, tmp_path / "a", [tmp_path / "src"]).meshes
@@ -499,6 +541,43 @@ def test_bad_urdf_is_reported_at_its_place(tmp_path, text, where, message):
         import_urdf(urdf, tmp_path / "out")
     shown = str(err.value)
     assert f"bad.urdf:{where}" in shown and message in shown, shown
+    assert not (tmp_path / "out").exists()
+
+
+ONE = [  # each said once, as what it is
+    ("<robot name=''>\n" + _links("a") + "</robot>", "1:1", "the robot: <robot> has an empty 'name'"),
+    ("<robot name='r'>\n<link name=''/></robot>", "2:1", "a link: <link> has an empty 'name'"),
+    ("<robot name='r'>\n" + _links("a", "b") + "\n<joint name=' ' type='fixed'><parent link='a'/><child link='b'/>"
+     "</joint></robot>", "3:1", "a joint: <joint> has an empty 'name'"),
+    ("<robot name='r'>\n<link name='a'><visual><geometry>\n<mesh filename='package://'/></geometry></visual></link>"
+     "</robot>", "3:1", "mesh 'package://': names no package"),
+    ("<robot name='r'>\n<link name='a'><visual><geometry>\n<mesh filename='meshes'/></geometry></visual></link>"
+     "</robot>", "3:1", "mesh 'meshes': a folder, not a mesh file"),
+    ("<robot name='r'>\n<link name='a'><visual><geometry>\n<mesh filename='pipe.stl'/></geometry></visual></link>"
+     "</robot>", "3:1", "mesh 'pipe.stl': not a regular file (a FIFO, a device?)"),
+    ("<robot name='r'>\n" + _links("a", "b", "c", "d") + "\n" + "\n".join(
+        _joint(f"j{k}", p, c, "continuous", f"<mimic joint='j{k % 3 + 1}'/>") for k, (p, c) in
+        enumerate((("a", "b"), ("b", "c"), ("c", "d")), 1)) + "</robot>", "3:",
+     "mimic joints form a cycle: j1 -> j2 -> j3 -> j1"),
+    ("<robot name='r'>\n<xacro:include filename='x'/>" + _links("a") + "</robot>", "2:1",
+     "expand it first (`xacro arm.urdf.xacro > arm.urdf`)"),
+]
+
+
+@pytest.mark.parametrize("text, where, message", ONE, ids=[m for _, _, m in ONE])
+def test_an_empty_name_a_mesh_that_is_no_file_and_a_bare_package_uri_are_one_error_each(tmp_path, text, where, message):
+    """Mimics in a loop were imported (with a warning per joint); an empty link name was imported as `_` and an empty robot name replaced by the file's; `package://` was
+    looked for as the first package folder ('no such file' and 'one slash too many'); a folder or a FIFO named as
+    a mesh was 'no such file'; an empty <link> also gave 'robot has no <link>'; the xacro hint for arm.urdf.xacro
+    said `> arm.urdf.urdf`."""
+    (tmp_path / "meshes").mkdir()
+    os.mkfifo(tmp_path / "pipe.stl")
+    urdf = tmp_path / "arm.urdf.xacro"
+    urdf.write_text(text)
+    with pytest.raises(CotwinError) as err:
+        import_urdf(urdf, tmp_path / "out", package_path=[tmp_path])
+    (finding,) = err.value.findings
+    assert f"arm.urdf.xacro:{where}" in str(err.value) and message in finding.message, str(err.value)
     assert not (tmp_path / "out").exists()
 
 
@@ -683,3 +762,35 @@ def test_a_robot_whose_zero_posture_is_beyond_its_limits_starts_at_them(tmp_path
         q = sim.joint_positions()
         assert all(abs(q[name] - start) < 1e-6 for name, start in starts.items()), (step, q)
         sim.step(200)
+
+
+@pytest.mark.parametrize("name, text, said", [
+    ("cut.stl", "solid x\n facet normal 0 0 1\n outer loop\n vertex 0 0 0\n vertex 1 0 0\n vertex 0 1", "its vertex #3"),
+    ("word.stl", "solid x\n vertex a b c\n", "its vertex #1"),
+    ("short.obj", "v 1 2\nv 3 4 5\n", "its v #1"),
+])
+def test_a_text_mesh_with_a_vertex_that_is_not_three_numbers_is_a_named_placeholder(tmp_path, name, text, said):
+    """A truncated ASCII STL was an internal error (IndexError) after the p-model was written; a vertex of words,
+    or of two numbers, a warning in Python's or numpy's words that named no file."""
+    (tmp_path / name).write_text(text)
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(f"<robot name='r'><link name='a'><collision><geometry><mesh filename='{name}'/></geometry>"
+                    "</collision></link></robot>")
+    result = import_urdf(urdf, tmp_path / "out")
+    shown = [f.message for f in result.findings if name in f.message]
+    assert len(shown) == 1 and said in shown[0] and "is not three numbers" in shown[0], result.findings
+
+
+def test_a_forced_import_replaces_a_mesh_hard_linked_to_another_file_and_leaves_that_file(own_arm, tmp_path):
+    """`--force` copied the mesh into the file there: a hard link planted at meshes/... had its other name
+    (a file outside the output folder) overwritten."""
+    out = tmp_path / "out"
+    result = import_urdf(own_arm, out, [tmp_path / "src"])
+    mesh = result.meshes[0]
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    mesh.unlink()
+    os.link(victim, mesh)
+    again = import_urdf(own_arm, out, [tmp_path / "src"], force=True)
+    assert victim.read_text() == "precious"
+    assert mesh in again.meshes and os.stat(mesh).st_nlink == 1 and mesh.read_bytes() != b"precious"

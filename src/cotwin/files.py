@@ -129,6 +129,24 @@ def check_outputs(outputs: Iterable[str | Path], inputs: Iterable[str | Path | N
                                    f"output ({hint})") for target, source in clashes])
 
 
+def special_file(path: str | Path) -> str | None:
+    """What `path` is when it is there as neither a file, a folder nor a link (a device, a FIFO, a socket), else
+    None: an output renamed over it replaces it (`-o /dev/null` run as root left a CSV where the device was)."""
+    try:
+        mode = os.lstat(path).st_mode
+    except OSError:
+        return None
+    kinds = ((stat.S_ISCHR, "a device"), (stat.S_ISBLK, "a device"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"))
+    return next((kind for test, kind in kinds if test(mode)), None)
+
+
+def refuse_special(path: str | Path) -> None:
+    """CotwinError if `path` is a device, a FIFO or a socket (`special_file`): cotwin writes a file in its place."""
+    kind = special_file(path)
+    if kind is not None:
+        raise error(path, f"is {kind}, not a file: cotwin writes its output as a new file in its place; name a file")
+
+
 @contextmanager
 def output(path: str | Path, inputs: Iterable[str | Path | None] = (), mode: int | None = None, text: bool = False,
            newline: str | None = None):
@@ -136,6 +154,7 @@ def output(path: str | Path, inputs: Iterable[str | Path | None] = (), mode: int
     `text`), renamed over `path` when the block ends without an error, removed otherwise."""
     path = Path(path)
     check_outputs([path], inputs)
+    refuse_special(path)
     if path.is_dir():  # else the error would name the temporary file beside it
         raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR, "is a folder: cannot write a file there")])
     try:

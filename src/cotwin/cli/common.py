@@ -12,6 +12,7 @@ from typing import Callable
 import click
 
 from ..diagnostics import CotwinError, Severity
+from ..files import special_file
 
 MAX_HORIZON = 86_400.0  # s: the longest a what-if looks ahead
 MAX_VALUES = 100_000  # values of one --arg or --domain
@@ -95,6 +96,9 @@ def output_file(ctx, param, value: str | None) -> str | None:
     path = Path(value)
     if path.is_dir():
         raise click.BadParameter(f"{value}: is a folder: name the file to write", param_hint=_hint(param))
+    special = special_file(path)
+    if special is not None:  # the output would be renamed over it: /dev/null replaced, run as root
+        raise click.BadParameter(f"{value}: is {special}, not a file: name a file to write", param_hint=_hint(param))
     blocking = _file_on_the_way(path.parent)
     if blocking is not None:
         raise click.BadParameter(f"{value}: would be made inside {blocking}, a file", param_hint=_hint(param))

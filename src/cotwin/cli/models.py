@@ -117,6 +117,14 @@ def tree_findings(project) -> list:
     return out
 
 
+def models_read(paths: tuple[str, ...]) -> list[str | Path]:
+    """The paths given and the model files in the folders among them: an output named like one of those
+    (`-o models/arm.pm` with `models` given) would replace a model the command reads."""
+    from ..robosim.project import model_files
+
+    return [*paths, *model_files(paths)[0]]
+
+
 @main.command("build-dmodel")
 @click.argument("model", nargs=-1, required=True)
 @click.option("--module", "module_name", help="the module to build (default: the only one)")
@@ -134,7 +142,7 @@ def build_dmodel(model: tuple[str, ...], module_name: str | None, output: str, c
     from ..robosim.check import load_checked
 
     check_finite(**{"cycle-period": cycle_period})
-    check_outputs([output], model)
+    check_outputs([output], models_read(model))
     if cycle_period is not None and version != "3":
         raise click.BadParameter("the FMI 2.0 FMU takes cycle_period as a parameter when run (0: one cycle per "
                                  "step); --cycle-period sets the FMI 3.0 clock's default", param_hint="--cycle-period")
@@ -164,10 +172,11 @@ def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, out
     from ..pmodel.urdf import to_urdf
     from ..robosim.check import load_checked
 
-    check_outputs([output], model)
+    inputs = models_read(model)
+    check_outputs([output], inputs)
     tree = build_tree(load_checked(model), pmodel_name)
     text = {"sdf": to_sdf, "urdf": to_urdf, "mjcf": to_mjcf}[fmt](tree)
-    path = write_text(output, text, model)
+    path = write_text(output, text, inputs)
     kinds = {k: sum(j.kind == k for j in tree.joints) for k in ("revolute", "prismatic", "fixed")}
     click.echo(f"{path}: {fmt} of p-model {tree.name}: {len(tree.links)} links, {kinds['revolute']} revolute, "
                f"{kinds['prismatic']} prismatic and {kinds['fixed']} fixed joints, {len(tree.sensors)} sensor ports")

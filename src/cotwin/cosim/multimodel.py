@@ -15,9 +15,10 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .. import safejson
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..files import read_text
-from .algorithm import algorithm as make_algorithm
+from .algorithm import ALGORITHMS, algorithm as make_algorithm
 from .execution import Execution
 from .observers import CSVWriter, Observer, RealTimePacer
 from .system import Connection, System
@@ -63,7 +64,9 @@ def read_multimodel(path: str | Path) -> MultiModel:
     problems: list[tuple[str, str | None]] = []  # (message, the JSON string it is about)
     text = read_text(path, "multimodel")  # capped; located errors
     try:
-        data = json.loads(text)
+        data = safejson.decode(text)  # a key twice, a number of 5000 digits: refused, not one value chosen or a crash
+    except safejson.Refused as err:
+        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, f"bad JSON: {err}")]) from None
     except RecursionError:
         raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, "bad JSON: nested too deeply")]) from None
     except json.JSONDecodeError as err:
@@ -74,7 +77,7 @@ def read_multimodel(path: str | Path) -> MultiModel:
         if key not in KNOWN_KEYS:
             problems.append((f"unknown key '{key}' (Maestro would ignore it silently)", key))
     fmus = {}
-    for key, file in (data.get("fmus") or {}).items():
+    for key, file in _section(data, "fmus", dict, problems).items():
         if not re.fullmatch(r"\{[^}]+\}", key):
             problems.append((f"fmus: key '{key}' must look like '{{name}}'", key))
         if not isinstance(file, str):
@@ -100,30 +103,36 @@ def read_multimodel(path: str | Path) -> MultiModel:
         return m.group(1), m.group(2), m.group(3)
 
     connections = []
-    for out, targets in (data.get("connections") or {}).items():
+    for out, targets in _section(data, "connections", dict, problems).items():
         src = port(out, "connections")
         for target in targets if isinstance(targets, list) else [targets]:
             dst = port(target, "connections")
             if src and dst:
                 connections.append((*src, *dst))
     parameters: dict[tuple[str, str], dict] = {}
-    for name, value in (data.get("parameters") or {}).items():
+    for name, value in _section(data, "parameters", dict, problems).items():
         p = port(name, "parameters")
-        if p:
+        if not isinstance(value, (bool, int, float, str)):
+            problems.append((f"parameters: '{name}' must be a number, a Boolean or a string, got {json.dumps(value)[:60]}",
+                             name))
+        elif p:
             parameters.setdefault(p[:2], {})[p[2]] = value
     log: dict[tuple[str, str], list[str]] = {}
-    for inst, names in (data.get("logVariables") or {}).items():
+    for inst, names in _section(data, "logVariables", dict, problems).items():
         m = re.match(r"^(\{[^}]+\})\.([A-Za-z_]\w*)$", inst)
         if m is None or m.group(1) not in fmus:
             problems.append((f"logVariables: '{inst}' is not a known '{{key}}.instance'", inst))
             continue
-        log[(m.group(1), m.group(2))] = list(names)
-    algorithm = data.get("algorithm") or {}
-    if algorithm.get("type", "fixed-step") != "fixed-step" or not isinstance(algorithm.get("size"), (int, float)):
+        log[(m.group(1), m.group(2))] = _section(data["logVariables"], inst, list, problems, "logVariables", str)
+    algorithm = _section(data, "algorithm", dict, problems)
+    if algorithm.get("type", "fixed-step") != "fixed-step":
         problems.append(("algorithm: only {'type': 'fixed-step', 'size': seconds} is supported", "algorithm"))
-    extra = data.get("cotwin") or {}
+    extra = _section(data, "cotwin", dict, problems)
+    if extra.get("algorithm", "jacobi") not in ALGORITHMS:
+        problems.append((f"cotwin.algorithm must be one of {', '.join(ALGORITHMS)}, got {extra['algorithm']!r}",
+                         "algorithm"))
     delayed = set()
-    for inst in extra.get("delayed", []):
+    for inst in _section(extra, "delayed", list, problems, "cotwin", str):
         m = re.match(r"^(\{[^}]+\})\.([A-Za-z_]\w*)$", inst)
         if m:
             delayed.add((m.group(1), m.group(2)))
@@ -144,9 +153,9 @@ def read_multimodel(path: str | Path) -> MultiModel:
     problems.extend(_phantoms(connections, log))
     for key, value in (("startTime", data.get("startTime", 0.0)), ("endTime", data.get("endTime", 10.0)),
                        ("algorithm.size", algorithm.get("size", 0.1))):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if not _number(value):
             problems.append((f"{key} must be a finite number, got {value!r}", key.split(".")[-1]))
-    if isinstance(algorithm.get("size"), (int, float)) and not algorithm["size"] > 0:
+    if _number(algorithm.get("size")) and not algorithm["size"] > 0:
         problems.append((f"algorithm.size must be positive, got {algorithm['size']!r}", "size"))
     if not isinstance(data.get("simulationProgramDelay", False), bool):
         problems.append((f"simulationProgramDelay must be true or false, got {data['simulationProgramDelay']!r}", "simulationProgramDelay"))
@@ -165,6 +174,25 @@ def read_multimodel(path: str | Path) -> MultiModel:
                       float(data.get("startTime", 0.0)), float(data.get("endTime", 10.0)),
                       bool(data.get("simulationProgramDelay", False)), extra.get("algorithm", "jacobi"), delayed,
                       isolate, float(timeout))
+
+
+def _number(value) -> bool:
+    """A JSON number that is finite (not a Boolean, which Python counts as an int)."""
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+
+
+def _section(table: dict, key: str, kind: type, problems: list, within: str = "", item: type | None = None):
+    """`table[key]` when it is a `kind` (an object or a list, of `item`s), else empty with a problem: a list
+    given for `fmus` was a crash, a string for `cotwin.delayed` was read as one unit per character."""
+    value = table.get(key)
+    if value is None:
+        return kind()
+    where = f"{within}.{key}" if within else key
+    shown = {dict: "an object", list: "a list"}[kind] + (f" of {'strings' if item is str else item.__name__}" if item else "")
+    if not isinstance(value, kind) or (item is not None and not all(isinstance(v, item) for v in value)):
+        problems.append((f"{where} must be {shown}, got {json.dumps(value)[:60]}", key))
+        return kind()
+    return value
 
 
 def _phantoms(connections, log) -> list[tuple[str, str]]:

@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from ..diagnostics import CotwinError
-from ..files import open_exclusive, write_bytes
+from ..files import open_exclusive, refuse_special, write_bytes
 from .algorithm import UNSET
 
 
@@ -111,6 +111,7 @@ class CSVWriter(Observer):
         if self.path.is_dir():  # found before the run, not when its rows are to be put in place
             raise CotwinError(f"{self.path} is a folder: cannot write the results there; move it or choose "
                               "another output")
+        refuse_special(self.path)  # its rows are renamed over it at the end: a device would be replaced
         fd = open_exclusive(self.part)  # never through a link or a hard link planted at the .part name
         try:  # one writer per result file: another run writing it would interleave rows of its own
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)

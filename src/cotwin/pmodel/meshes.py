@@ -31,12 +31,30 @@ def _vertices(path: str, mtime: float) -> np.ndarray:
                 rows = np.frombuffer(data, dtype=np.uint8, offset=84).reshape(count, 50)
                 return rows[:, 12:48].copy().view("<f4").reshape(-1, 3).astype(float)
         words = data.decode("ascii", errors="replace").split()
-        return np.array([[float(words[i + 1]), float(words[i + 2]), float(words[i + 3])]
-                         for i, w in enumerate(words) if w == "vertex"], dtype=float).reshape(-1, 3)
+        return _points(path, "vertex", [words[i + 1:i + 4] for i, w in enumerate(words) if w == "vertex"])
     if suffix == ".obj":
-        rows = [line.split()[1:4] for line in data.decode("utf-8", errors="replace").splitlines() if line.startswith("v ")]
-        return np.array(rows, dtype=float).reshape(-1, 3)
+        return _points(path, "v", [line.split()[1:4] for line in data.decode("utf-8", errors="replace").splitlines()
+                                   if line.startswith("v ")])
     raise ValueError(f"cannot read meshes of type '{suffix}' (readable: {', '.join(READABLE)})")
+
+
+def _points(path: str, keyword: str, rows: list[list[str]]) -> np.ndarray:
+    """The vertices of a text mesh, each row three numbers; ValueError naming the file and the first row that
+    is not (a truncated ASCII STL was an IndexError, a crash; a row of two an error in numpy's words)."""
+    if all(len(row) == 3 for row in rows):
+        try:
+            return np.array(rows, dtype=float).reshape(-1, 3)
+        except ValueError:
+            pass
+    bad = next(k for k, row in enumerate(rows) if not _three_numbers(row))
+    raise ValueError(f"mesh '{path}': its {keyword} #{bad + 1} is not three numbers ({' '.join(rows[bad])[:40]!r})")
+
+
+def _three_numbers(row: list[str]) -> bool:
+    try:
+        return len([float(v) for v in row]) == 3
+    except ValueError:
+        return False
 
 
 def bounding_box(path: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -24,7 +24,7 @@ from dataclasses import replace
 import numpy as np
 
 from .kinematics import ElementRef, Geom, KinematicTree, PlacedDevice, TJoint, inverse, transform
-from .xmltext import num, pose_text, sub, to_text
+from .xmltext import file_uri, num, pose_text, sub, to_text
 
 #: RoboTool's SDF generator turns every sensor by this (a pitch of pi/2) after its p-model pose
 ROBOTOOL_SENSOR_TURN = transform(rpy=(0.0, np.pi / 2, 0.0))
@@ -48,7 +48,7 @@ def _geometry(parent: ET.Element, g: Geom) -> None:
         sub(shape, "length", num(g.size["length"]))
     elif g.kind == "mesh":
         mesh = sub(geometry, "mesh")
-        sub(mesh, "uri", f"file://{g.mesh}")
+        sub(mesh, "uri", file_uri(g.mesh))
         sub(mesh, "scale", " ".join(num(v) for v in g.scale))
     else:
         sphere = sub(geometry, "sphere")

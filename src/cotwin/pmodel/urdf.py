@@ -9,7 +9,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 from .tree import Geom, KinematicTree, inverse, matrix_rpy
-from .xmltext import num, nums, sub, to_text
+from .xmltext import file_uri, num, nums, sub, to_text
 
 
 def _origin(parent: ET.Element, T: np.ndarray) -> None:
@@ -23,7 +23,7 @@ def _geometry(parent: ET.Element, g: Geom) -> None:
     elif g.kind in ("cylinder", "capsule"):
         sub(geometry, "cylinder", radius=num(g.size["radius"]), length=num(g.size["length"]))
     elif g.kind == "mesh":
-        sub(geometry, "mesh", filename=f"file://{g.mesh}", scale=nums(g.scale))
+        sub(geometry, "mesh", filename=file_uri(g.mesh), scale=nums(g.scale))
     else:
         sub(geometry, "sphere", radius=num(g.size["radius"]))
 
@@ -65,9 +65,10 @@ def to_urdf(tree: KinematicTree) -> str:
         if j.kind != "fixed":
             sub(el, "axis", xyz=nums(j.axis))
             limits = {k: num(getattr(j, k)) for k in ("lower", "upper", "effort", "velocity") if getattr(j, k) is not None}
-            limits.setdefault("effort", "0")
-            limits.setdefault("velocity", "0")
-            sub(el, "limit", **limits)
+            if limits or not unlimited:  # a continuous joint needs none: effort and velocity 0 would say it cannot move
+                limits.setdefault("effort", "0")
+                limits.setdefault("velocity", "0")
+                sub(el, "limit", **limits)
             sub(el, "dynamics", damping=num(j.damping))
     for root in tree.roots[1:]:  # URDF has one root: a free body of the p-model floats from the base
         el = sub(robot, "joint", name=f"{root.name}_free", type="floating")

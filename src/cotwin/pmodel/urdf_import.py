@@ -24,7 +24,6 @@ from __future__ import annotations
 import os
 import posixpath
 import re
-import shutil
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -33,7 +32,7 @@ from urllib.parse import unquote, urlparse
 import numpy as np
 
 from ..diagnostics import CotwinError, Diagnostics, Finding, Severity
-from ..files import check_outputs, write_text
+from ..files import check_outputs, read_bytes, write_bytes, write_text
 from .tree import matrix_rpy, transform
 from .urdf_read import Geometry, Joint, Link, Origin, Robot, Shape, read_urdf
 
@@ -233,6 +232,9 @@ class MeshCopies:
             package = parsed.netloc
             if not package:  # package:///NAME/...: an extra slash (talos_data's URDFs have it)
                 package, _, rest = unquote(parsed.path).lstrip("/").partition("/")
+                if not package:  # `package://` alone was looked for as the first package folder
+                    self.diag.error(where, f"mesh '{uri}': names no package (package://PACKAGE/PATH)")
+                    return None
                 parsed = parsed._replace(netloc=package, path="/" + rest)
                 self.diag.warning(where, f"mesh '{uri}': read as package://{package}/{rest} (one slash too many)")
             root = self.packages.find(package)
@@ -260,7 +262,7 @@ class MeshCopies:
                             f"{parsed.scheme}:// (download the file and name it)")
             return None
         if not source.is_file():
-            self.diag.error(where, f"mesh '{uri}': no such file ({source})")
+            self.diag.error(where, f"mesh '{uri}': {_not_a_file(source)} ({source})")
             return None
         key = source.resolve()
         if key not in self.by_source:
@@ -303,20 +305,23 @@ class MeshCopies:
         return found
 
     def copy_to(self, folder: Path) -> list[Path]:
-        """Copy every mesh into folder (a file already there with the same bytes is left alone; a link
-        there is replaced, not written through)."""
+        """Copy every mesh into folder (a file already there with the same bytes is left alone; a link, or a
+        hard link, there is replaced by a new file, not written through: files.write_bytes)."""
         written = []
         for mesh in sorted(self.by_source.values(), key=lambda m: m.written):
             target = folder / mesh.written
-            target.parent.mkdir(parents=True, exist_ok=True)
-            if target.is_symlink():
-                target.unlink()
-            elif target.exists() and (os.path.samefile(target, mesh.source) or _same_bytes(target, mesh.source)):
-                written.append(target)
-                continue
-            shutil.copyfile(mesh.source, target)
+            if not (target.exists() and not target.is_symlink()
+                    and (os.path.samefile(target, mesh.source) or _same_bytes(target, mesh.source))):
+                write_bytes(target, read_bytes(mesh.source, "mesh"), [mesh.source])
             written.append(target)
         return written
+
+
+def _not_a_file(source: Path) -> str:
+    """Why a mesh's path is not read: missing, a folder, or a FIFO or device (which would be read forever)."""
+    if source.is_dir():
+        return "a folder, not a mesh file"
+    return "not a regular file (a FIFO, a device?)" if source.exists() else "no such file"
 
 
 def _same_bytes(a: Path, b: Path) -> bool:

@@ -24,6 +24,7 @@ from ..diagnostics import Diagnostics, Location
 
 MAX_MASS = 1e6  # kg: a link heavier than a thousand tonnes is a typo or a unit slip, refused
 MAX_MOMENT = 1e6  # kg m^2: an inertia entry beyond this is refused likewise
+ROUNDOFF_MOMENT = 1e-12  # kg m^2: a negative moment this small is a CAD export's rounding of zero (iCub: -5.4e-20)
 MAX_BYTES = 64 * 1024 * 1024  # a URDF larger than this is refused (the largest published ones are ~2 MB)
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 UNSUPPORTED_TYPES = ("floating", "planar")  # valid URDF that a p-model joint cannot say (one degree of freedom)
@@ -216,6 +217,15 @@ class _Reader:
             self.diag.error(node.loc, f"{what}: <{node.tag}> has no '{name}' attribute")
         return value
 
+    def name(self, node: Node, what: str) -> str | None:
+        """An element's name attribute: one that is empty (`name=""`, or only spaces) names nothing, and is
+        refused as a missing one is (an empty link name became `_`, an empty robot name the file's)."""
+        value = self.attr(node, "name", what)
+        if value is not None and not value.strip():
+            self.diag.error(node.loc, f"{what}: <{node.tag}> has an empty 'name'")
+            return None
+        return value
+
     def numbers(self, node: Node, name: str, count: int, what: str, default=None):
         text = node.attrs.get(name)
         if text is None:
@@ -294,7 +304,7 @@ def read_urdf(path: str | Path, diag: Diagnostics) -> Robot | None:
 def _xacro_left(root: Node, path: Path, diag: Diagnostics) -> bool:
     """Report xacro macros and ${...} / $(...) substitutions left in the file."""
     found = False
-    hint = f"expand it first (`xacro {path.name} > {path.stem}.urdf`)"
+    hint = f"expand it first (`xacro {path.name} > {path.name.removesuffix('.xacro').removesuffix('.urdf')}.urdf`)"
     stack = [root]
     while stack:
         node = stack.pop()
@@ -312,7 +322,7 @@ def _xacro_left(root: Node, path: Path, diag: Diagnostics) -> bool:
 
 def _robot(root: Node, path: Path, diag: Diagnostics) -> Robot | None:
     read = _Reader(diag)
-    name = read.attr(root, "name", "the robot") or path.stem
+    name = read.name(root, "the robot") or path.stem
     ignored: Counter = Counter()
     readers = {"link": _link, "joint": _joint}
     declared: dict[str, dict] = {"link": {}, "joint": {}}  # kind -> name -> element, in the file's order
@@ -332,14 +342,15 @@ def _robot(root: Node, path: Path, diag: Diagnostics) -> Robot | None:
     links, joints = list(seen_links.values()), list(seen_joints.values())
     robot = Robot(name, path, links, joints, ignored, root.loc)
     if not links:
-        diag.error(root.loc, f"robot '{name}' has no <link>")
+        if not root.all("link"):  # else each <link> has said why it was not read
+            diag.error(root.loc, f"robot '{name}' has no <link>")
         return None
     _check_structure(robot, seen_links, seen_joints, diag)
     return robot
 
 
 def _link(node: Node, read: _Reader, ignored: Counter) -> Link | None:
-    name = read.attr(node, "name", "a link")
+    name = read.name(node, "a link")
     if name is None:
         return None
     what = f"link '{name}'"
@@ -383,7 +394,7 @@ def _physical(mass: float, mass_node: Node, inertia: dict[str, float], inertia_n
     """Whether a link's mass and inertia are ones a body can have; each problem an error at its element,
     mass and inertia both checked so that one run reports them together. Refused: a negative mass, a
     mass or inertia entry beyond any robot's (a unit slip), a negative moment about an axis (ixx, iyy or
-    izz). An inertia merely not positive definite or against the triangle inequality is not refused:
+    izz) beyond ROUNDOFF_MOMENT. An inertia merely not positive definite or against the triangle inequality is not refused:
     published URDFs carry many (zero inertias of sensor frames, rounding of CAD exports), and cotwin's
     tree builder replaces them by the geometry's with a warning the import shows (docs/urdf-import.md)."""
     ok = True
@@ -395,7 +406,7 @@ def _physical(mass: float, mass_node: Node, inertia: dict[str, float], inertia_n
                         "a unit slip?)")
         ok = False
     beyond = [k for k, v in inertia.items() if abs(v) > MAX_MOMENT]
-    negative = [k for k in ("ixx", "iyy", "izz") if inertia[k] < 0]
+    negative = [k for k in ("ixx", "iyy", "izz") if inertia[k] < -ROUNDOFF_MOMENT]
     if beyond:
         read.diag.error(inertia_node.loc, f"{what}: inertia {', '.join(f'{k}={inertia[k]:g}' for k in beyond)} kg m^2, "
                         f"more than a link may have ({MAX_MOMENT:g} kg m^2; a unit slip?)")
@@ -468,7 +479,7 @@ def _geometry(node: Node, read: _Reader, what: str) -> Geometry | None:
 
 
 def _joint(node: Node, read: _Reader, ignored: Counter) -> Joint | None:
-    name = read.attr(node, "name", "a joint")
+    name = read.name(node, "a joint")
     kind = read.attr(node, "type", f"joint '{name}'" if name else "a joint")
     if name is None or kind is None:
         return None
@@ -576,6 +587,7 @@ def _check_structure(robot: Robot, links: dict[str, Link], joints: dict[str, Joi
                 diag.error(j.mimic.loc, f"joint '{j.name}' mimics the fixed joint '{leader.name}'")
             elif leader.name == j.name:
                 diag.error(j.mimic.loc, f"joint '{j.name}' mimics itself")
+    _mimic_cycles(joints, diag)
     if diag.has_errors:
         return
     roots = [l for l in robot.links if l.name not in parent_of]
@@ -606,3 +618,19 @@ def _check_structure(robot: Robot, links: dict[str, Link], joints: dict[str, Joi
         if link.name == min(loop):  # report each cycle once, at its first link by name
             path = " -> ".join(f"{parent_of[n].parent} --{parent_of[n].name}--> {n}" for n in reversed(loop))
             diag.error(parent_of[link.name].loc, f"joints form a cycle: {path}")
+
+
+def _mimic_cycles(joints: dict[str, Joint], diag: Diagnostics) -> None:
+    """Mimics that lead back to their follower (j1 mimics j2, j2 mimics j1): no joint of the loop has a value
+    of its own. Each loop once, at its first joint by name."""
+    for joint in joints.values():
+        chain, at = [], joint
+        while at is not None and at.mimic is not None and at.name not in chain:
+            chain.append(at.name)
+            at = joints.get(at.mimic.joint)
+        if at is None or at.name not in chain or at.name == at.mimic.joint:  # no loop, or one mimicking itself (said)
+            continue
+        loop = chain[chain.index(at.name):]
+        if joint.name == min(loop):
+            path = " -> ".join([*loop, loop[0]])
+            diag.error(joint.mimic.loc, f"mimic joints form a cycle: {path} (each follows the next, none has a value)")

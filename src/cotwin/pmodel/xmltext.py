@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 
@@ -12,6 +13,16 @@ from .tree import matrix_rpy
 def num(x: float) -> str:
     text = f"{float(x):.12g}"
     return "0" if text in ("-0", "0", "-0.0") else text
+
+
+def file_uri(path: str | Path) -> str:
+    """A mesh's file:// URI with '%', '#' and '?' escaped: `file:///a/my #1 robot/x.stl` written raw was cut at
+    the '#' (a fragment) by every reader, cotwin's import too. Other characters stay as written (a space too:
+    Gazebo reads the path after file:// without decoding it)."""
+    return "file://" + "".join(_URI_ESCAPES.get(c, c) for c in str(Path(path).absolute()))
+
+
+_URI_ESCAPES = {"%": "%25", "#": "%23", "?": "%3F"}
 
 
 def nums(values) -> str:

@@ -10,6 +10,8 @@ solver output refers to solver variables it never declares).
 
 from __future__ import annotations
 
+import math
+
 from .checker import Checker
 from . import syntax as s
 from .consteval import UNITS, ConstEnv, ParameterNumbering, try_evaluate
@@ -36,7 +38,15 @@ SOLVER_OPERATORS = frozenset({"derivative", "integral", "adj", "submatrix", "tra
 
 
 def _is_number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
+    """A finite number: `mass 1e400 kg` (read as infinity) or 0.0/0.0 is none, and reached the MJCF as inf/nan."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _numbers_in(value) -> list[float]:
+    """The numbers of an evaluated constant: itself, or a vector's entries."""
+    if isinstance(value, tuple):
+        return [v for item in value for v in _numbers_in(item)]
+    return [value] if isinstance(value, (int, float)) and not isinstance(value, bool) else []
 
 
 class PModelChecker(Checker):
@@ -330,7 +340,7 @@ class PModelChecker(Checker):
         if value is None:
             return None
         if not _is_number(value):
-            self.diag.error(expr.loc, f"{what} must be a number, is {value!r}")
+            self.diag.error(expr.loc, f"{what} must be a finite number, is {value!r}")
             return None
         return value
 
@@ -422,7 +432,9 @@ class PModelChecker(Checker):
             if isinstance(entry.value, AnnotationRecord):
                 self.annotation(entry.value, env)
             elif self._pmodel is None or element_reference(entry.value, self._pmodel, self._link, self.scope) is None:
-                try_evaluate(entry.value, env, self.diag, f"annotation {record.name}.{entry.key}")
+                value = try_evaluate(entry.value, env, self.diag, f"annotation {record.name}.{entry.key}")
+                if any(not math.isfinite(v) for v in _numbers_in(value)):  # a limit of 1e400: range="-inf inf"
+                    self.diag.error(entry.value.loc, f"annotation {record.name}.{entry.key} must be finite, is {value!r}")
 
     def pose(self, pose: Pose, env: ConstEnv, where: str) -> None:
         for key, value, _ in pose.fields:
