@@ -250,3 +250,18 @@ def test_a_command_a_slow_clocks_tick_read_with_one_of_higher_priority_is_not_ta
     verdicts = _verdicts(proc)
     assert "not taken" not in verdicts[0]
     assert verdicts[1] == "applied at t = 0.5 s closeGripperCommand(): not taken (the d-model was in state Idle)"
+
+
+def test_whatif_says_an_infeasible_command_is_never_done_not_that_the_horizon_was_short(tmp_path):
+    """An infeasible move ended the prediction at about 1 s of a 30 s horizon, and `cotwin whatif` said 'not done
+    within the horizon' and 'completion: not within the horizon', as if a longer horizon could do it."""
+    from conftest import EXAMPLES
+
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps([{"time": 0.5, "event": "moveDiscreteCommand", "args": {
+        "MovementArgs_target_X": 15, "MovementArgs_target_Y": 23, "MovementArgs_target_Z": 3}}]))
+    proc = cotwin("whatif", EXAMPLES / "ur5e" / "cotwin.toml", "--plan", plan, "--horizon", "30")
+    assert proc.returncode == 0, proc.stderr
+    line = next(line for line in proc.stdout.splitlines() if line.startswith("t = "))
+    assert line.endswith("NOT feasible, accepted, never done"), line
+    assert "completion: never (1 command(s) not taken, infeasible or stopped)" in proc.stdout
