@@ -4,6 +4,7 @@ exit status 3; arguments are named by their port everywhere, the field name acce
 
 from __future__ import annotations
 
+import csv
 import json
 
 import pytest
@@ -265,3 +266,17 @@ def test_whatif_says_an_infeasible_command_is_never_done_not_that_the_horizon_wa
     line = next(line for line in proc.stdout.splitlines() if line.startswith("t = "))
     assert line.endswith("NOT feasible, accepted, never done"), line
     assert "completion: never (1 command(s) not taken, infeasible or stopped)" in proc.stdout
+
+
+def test_a_plan_rows_cells_for_an_event_it_does_not_raise_leave_the_last_commands_arguments(project, tmp_path):
+    """A clock of 0.3 s: the move applied at 0.4 s is read at the tick at 0.6 s; the open row at 0.5 s carried
+    cells 5, 9, 2 for the move's arguments, which were set, so the d-model moved to (5, 9, 2) while the summary
+    said the move to (3, 13, 2) completed."""
+    (project / "plan.csv").write_text(GRIPPER + "400,true,3,13,2,false,false\n500,false,5,9,2,false,true\n")
+    out = tmp_path / "out"
+    proc = cotwin("run", project / "cotwin.toml", "-o", out, "--end", "1", "--fmi", "3", "--cycle-period", "0.3")
+    assert proc.returncode == 0, proc.stderr
+    with open(out / "outputs.csv") as f:
+        calls = [(r["time"], *(r["{dmodel}.dmodel.target_" + a] for a in "XYZ")) for r in csv.DictReader(f)
+                 if r["{dmodel}.dmodel.movediscrete"] == "true"]
+    assert calls == [("0.6", "3", "13", "2")]
