@@ -4,6 +4,7 @@ exit status 3; arguments are named by their port everywhere, the field name acce
 
 from __future__ import annotations
 
+import csv
 import json
 
 import pytest
@@ -203,3 +204,79 @@ def test_a_command_taken_in_a_step_of_several_d_model_cycles_is_taken(tmp_path):
     plan.write_text(HEADER + "500,true,0,23,1\n")
     (move,) = predict(system, read_plan(plan, system.models.program), horizon=6.0).commands
     assert (move.accepted, move.verdict) == (True, "completed"), move.describe()
+
+
+GRIPPER = HEADER.rstrip("\n") + ",closeGripperCommand,openGripperCommand\n"
+
+
+def _verdicts(proc) -> list[str]:
+    """The outcome lines of a run's summary, after 'commands:'."""
+    lines = proc.stdout.splitlines()
+    head = next(k for k, line in enumerate(lines) if line.startswith("commands:"))
+    return [line.strip() for line in lines[head + 1:] if line.startswith("  applied")]
+
+
+def test_a_command_done_in_the_cycle_that_takes_the_next_completed(project, tmp_path):
+    """The gripper closed and the d-model went AwaitClosed -> Idle -> Requested in one cycle (0.4 s): the state
+    port never showed Idle, and the close was called 'accepted, never completed'."""
+    (project / "plan.csv").write_text(GRIPPER + "0,false,0,0,0,true,false\n200,true,7,7,0,false,false\n")
+    proc = cotwin("run", project / "cotwin.toml", "-o", tmp_path / "out", "--end", "3")
+    assert proc.returncode == 0, proc.stderr
+    verdicts = _verdicts(proc)
+    assert verdicts[0] == "applied at t = 0.1 s closeGripperCommand(): completed at t = 0.4 s"
+    assert verdicts[1].startswith("applied at t = 0.3 s moveDiscreteCommand(") and "completed at t = " in verdicts[1]
+
+
+def test_a_command_applied_again_before_a_slow_clocks_tick_replaces_the_first(project, tmp_path):
+    """A clock of 0.3 s, a step of 0.1 s: the tick at 0.6 s reads one moveDiscreteCommand, with the arguments of
+    the last applied (0.5 s); both were called taken (the first 'completed', or 'accepted, never completed')."""
+    (project / "plan.csv").write_text(GRIPPER + "400,true,4,16,0,false,false\n500,true,7,7,0,false,false\n")
+    proc = cotwin("run", project / "cotwin.toml", "-o", tmp_path / "out", "--end", "1", "--fmi", "3",
+                  "--cycle-period", "0.3")
+    assert proc.returncode == 0, proc.stderr
+    verdicts = _verdicts(proc)
+    assert verdicts[0].endswith("not taken (replaced by the one applied at t = 0.5 s before the d-model's cycle "
+                                "read it)")
+    assert "moveDiscreteCommand(MovementArgs_target_X=7" in verdicts[1] and "not taken" not in verdicts[1]
+
+
+def test_a_command_a_slow_clocks_tick_read_with_one_of_higher_priority_is_not_taken(project, tmp_path):
+    """The tick at 0.6 s reads a moveDiscreteCommand (0.4 s) and a closeGripperCommand (0.5 s): Idle leaves for
+    the move (its guard `$closeGripperCommand /\\ not $moveDiscreteCommand`), yet the close was called taken, as
+    Idle's exec guard, read in the cycle before, was counted among what the cycle Idle -> Requested read."""
+    (project / "plan.csv").write_text(GRIPPER + "400,true,4,16,0,false,false\n500,false,0,0,0,true,false\n")
+    proc = cotwin("run", project / "cotwin.toml", "-o", tmp_path / "out", "--end", "1", "--fmi", "3",
+                  "--cycle-period", "0.3")
+    assert proc.returncode == 0, proc.stderr
+    verdicts = _verdicts(proc)
+    assert "not taken" not in verdicts[0]
+    assert verdicts[1] == "applied at t = 0.5 s closeGripperCommand(): not taken (the d-model was in state Idle)"
+
+
+def test_whatif_says_an_infeasible_command_is_never_done_not_that_the_horizon_was_short(tmp_path):
+    """An infeasible move ended the prediction at about 1 s of a 30 s horizon, and `cotwin whatif` said 'not done
+    within the horizon' and 'completion: not within the horizon', as if a longer horizon could do it."""
+    from conftest import EXAMPLES
+
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps([{"time": 0.5, "event": "moveDiscreteCommand", "args": {
+        "MovementArgs_target_X": 15, "MovementArgs_target_Y": 23, "MovementArgs_target_Z": 3}}]))
+    proc = cotwin("whatif", EXAMPLES / "ur5e" / "cotwin.toml", "--plan", plan, "--horizon", "30")
+    assert proc.returncode == 0, proc.stderr
+    line = next(line for line in proc.stdout.splitlines() if line.startswith("t = "))
+    assert line.endswith("NOT feasible, accepted, never done"), line
+    assert "completion: never (1 command(s) not taken, infeasible or stopped)" in proc.stdout
+
+
+def test_a_plan_rows_cells_for_an_event_it_does_not_raise_leave_the_last_commands_arguments(project, tmp_path):
+    """A clock of 0.3 s: the move applied at 0.4 s is read at the tick at 0.6 s; the open row at 0.5 s carried
+    cells 5, 9, 2 for the move's arguments, which were set, so the d-model moved to (5, 9, 2) while the summary
+    said the move to (3, 13, 2) completed."""
+    (project / "plan.csv").write_text(GRIPPER + "400,true,3,13,2,false,false\n500,false,5,9,2,false,true\n")
+    out = tmp_path / "out"
+    proc = cotwin("run", project / "cotwin.toml", "-o", out, "--end", "1", "--fmi", "3", "--cycle-period", "0.3")
+    assert proc.returncode == 0, proc.stderr
+    with open(out / "outputs.csv") as f:
+        calls = [(r["time"], *(r["{dmodel}.dmodel.target_" + a] for a in "XYZ")) for r in csv.DictReader(f)
+                 if r["{dmodel}.dmodel.movediscrete"] == "true"]
+    assert calls == [("0.6", "3", "13", "2")]

@@ -84,17 +84,34 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
     for c in prediction.commands:
         args = ", ".join(f"{k}={v}" for k, v in c.args.items())
         verdict = {True: "feasible, ", False: "NOT feasible, ", None: unknown}[c.feasible]
-        done = f"done at t = {c.done:g} s" if c.done is not None else "not done within the horizon"
-        click.echo(f"t = {c.time:g} s {c.event}({args}): {verdict}{_taken(c)}, {done}")
+        click.echo(f"t = {c.time:g} s {c.event}({args}): {verdict}{_taken(c)}, {_done(c)}")
     for c in prediction.collisions:
         click.echo(f"collision: {c}")
-    click.echo(f"completion: {'t = %g s' % prediction.completion_time if prediction.completion_time is not None else 'not within the horizon'} "
+    click.echo(f"completion: {_completion(prediction)} "
                f"(forked at t = {prediction.start:g} s, predicted to t = {prediction.end:g} s, {prediction.native_steps} of "
                f"{round((prediction.end - prediction.start) / prediction.step)} steps in the native loop, in "
                f"{prediction.wall_seconds:.2f} s)")
     if out:
         write_text(out, json.dumps(prediction.as_dict(), indent=1) + "\n", [*system.spec.inputs, plan, state])
     outcomes({"": Summary(prediction.commands, prediction.blocked)}, strict, per_command=False)  # said above
+
+
+NEVER_DONE = ("not taken", "infeasible", "stopped")  # verdicts no longer horizon would change
+
+
+def _done(c) -> str:
+    """When a predicted command was done; one not taken, infeasible or stopped is never done, whatever the horizon."""
+    if c.verdict == "completed":
+        return f"done at t = {c.done:g} s"
+    return "never done" if c.verdict in NEVER_DONE else "not done within the horizon"
+
+
+def _completion(prediction) -> str:
+    """When the whole plan was done: never when a command of it will never be (not taken, infeasible, stopped)."""
+    if prediction.completion_time is not None:
+        return f"t = {prediction.completion_time:g} s"
+    never = sum(c.verdict in NEVER_DONE for c in prediction.commands)
+    return f"never ({never} command(s) not taken, infeasible or stopped)" if never else "not within the horizon"
 
 
 def _taken(c) -> str:
@@ -104,6 +121,8 @@ def _taken(c) -> str:
         return "never applied (due after the prediction ended)"
     if c.accepted:
         return "accepted"
+    if c.replaced is not None:
+        return f"replaced by the one applied at t = {c.replaced:g} s before the d-model's cycle read it"
     return "ignored by the d-model" + (f" (in {c.busy})" if c.busy else "")
 
 

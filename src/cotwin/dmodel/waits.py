@@ -81,6 +81,7 @@ class CycleReads:
     def __init__(self, program: Program):
         self.program = program
         self._cache: dict[tuple[int, int, int], frozenset[str] | None] = {}
+        self._passes: dict[tuple, bool] = {}
         self._machines = {m.index: m for m in program.machines}
         self._platform = {m.index: {event: name for name, routes in program.input_routes.items()
                                     for machine, event in routes if machine == m.index} for m in program.machines}
@@ -94,7 +95,19 @@ class CycleReads:
             self._cache[key] = self._explore(machine, before, after, several)
         return self._cache[key]
 
-    def _explore(self, machine: int, before: int | None, after: int, several: bool = False) -> frozenset[str] | None:
+    def passes(self, machine: int, before: int, after: int, through: int, several: bool = False) -> bool:
+        """Whether every cycle taking the machine from leaf `before` to leaf `after` enters leaf `through` on the
+        way (Idle entered and left in one cycle: the d-model came back to rest and took the next command at once);
+        False where that cannot be told."""
+        key = (machine, before, after, several, through)
+        if key not in self._passes:
+            known = through not in (before, after) and self.between(machine, before, after, several) is not None
+            self._passes[key] = known and self._explore(machine, before, after, several, avoid=through) is None
+        return self._passes[key]
+
+    def _explore(self, machine: int, before: int | None, after: int, several: bool = False,
+                 avoid: int | None = None) -> frozenset[str] | None:
+        """`between`'s paths; `avoid`: a leaf no path may enter (None back when no path avoids it)."""
         m = self._machines.get(machine)
         leaves = m.graph.leaves if m is not None else []
         start = m.graph.initial_of(None) if before is None and m is not None else \
@@ -105,17 +118,23 @@ class CycleReads:
         arrivals = {id(goal), *(id(a) for a in goal.ancestors())}
         found: set[str] = set()
         arrived = False
-        stack = [(edge, frozenset()) for node in (start, *start.ancestors()) for edge in node.outgoing]
-        seen: set[tuple[int, frozenset]] = set()
+        # an exec transition out of the leaf was chosen by the cycle before (which read its guard), its target
+        # entered in this one
+        stack = [(edge, frozenset(), edge.transition.is_exec) for node in (start, *start.ancestors())
+                 for edge in node.outgoing]
+        seen: set[tuple[int, frozenset, bool]] = set()
         while stack:
-            edge, read = stack.pop()
-            if (id(edge), read) in seen:
+            edge, read, chosen = stack.pop()
+            if (id(edge), read, chosen) in seen:
                 continue
-            seen.add((id(edge), read))
+            seen.add((id(edge), read, chosen))
             if len(seen) > self.LIMIT or edge.transition.trigger is not None:
                 return None
-            read = read | _events(edge.transition.condition, platform)[0]
+            if not chosen:
+                read = read | _events(edge.transition.condition, platform)[0]
             target = edge.target
+            if avoid is not None and target is leaves[avoid]:
+                continue
             if id(target) in arrivals:
                 found |= read
                 arrived = True
@@ -124,7 +143,7 @@ class CycleReads:
                 node = todo.pop()
                 inside.append(node)
                 todo.extend(node.children)
-            stack.extend((e, read) for node in (*inside, *target.ancestors()) for e in node.outgoing
+            stack.extend((e, read, False) for node in (*inside, *target.ancestors()) for e in node.outgoing
                          if several or not e.transition.is_exec)
         if not arrived:
             return None

@@ -7,7 +7,9 @@
   due at the run's start crosses in the event phase before the first step, the d-model's first cycle) its
   state changes or it calls an operation, by a way that reads the command's event (a change an earlier
   command's progress made, on transitions that never read it, is no taking: cotwin.dmodel.waits.CycleReads);
-  else it was *not taken* (the d-model was busy: the state it read it in is named). A command taken is
+  else it was *not taken* (the d-model was busy: the state it read it in is named; or, before the tick of a clock
+  slower than the step, the same event was applied again: the tick reads one occurrence, with the last one's
+  values, so the earlier is *replaced*). A command taken is
   `accepted`; the operations and platform events that follow, until the next command taken, are its own;
 - *infeasible*: among its events one named `nonfeasible*`, `infeasible*`, `unreachable*` (feasible:
   `feasible*`, `reachable*`), a naming convention of mappings such as the paper's;
@@ -15,7 +17,8 @@
   fault, emergency or protective and none says the opposite: `stopping`): the d-model then returns to rest
   having not done it, which is no completion;
 - *completed at t*: taken, not infeasible, not stopped, and the d-model back at rest (the leaf each machine
-  rests in after its first cycle without inputs, e.g. Idle) at t; *never completed* otherwise.
+  rests in after its first cycle without inputs, e.g. Idle) at t, or passed through it in the cycle at t that
+  took the next command (AwaitClosed -> Idle -> Requested: CycleReads.passes); *never completed* otherwise.
 
 `Summary` words it, one line per command, with a warning when commands were applied and none
 completed; `strict_failures` lists what makes `--strict` exit with STRICT_EXIT.
@@ -77,6 +80,7 @@ class CommandOutcome:
     origin: str = ""  # where it came from (a plan's line, a message's time)
     busy: str | None = None  # the d-model's state when it was not taken
     stopped: tuple[str, float] | None = None  # (event, time): a stopping event came before it completed
+    replaced: float | None = None  # not taken: the same event applied at this time reached the d-model's cycle instead
 
     @property
     def verdict(self) -> str:
@@ -97,6 +101,8 @@ class CommandOutcome:
             how = f"completed at t = {self.done:g} s"
         elif verdict == "infeasible":
             how = f"infeasible ({', '.join(e for e in self.events if INFEASIBLE.match(e))})"
+        elif verdict == "not taken" and self.replaced is not None:
+            how = f"not taken (replaced by the one applied at t = {self.replaced:g} s before the d-model's cycle read it)"
         elif verdict == "not taken":
             how = f"not taken (the d-model was in state {self.busy})"
         elif verdict == "stopped":
@@ -182,6 +188,7 @@ class CommandLedger(Observer):
         self._before = self._state_read()
         self._waiting: list[tuple[int, CommandOutcome, tuple]] = []  # (steps to read, outcome, state when applied)
         self._current: CommandOutcome | None = None
+        self._taken_at: float | None = None  # when the current command was taken (None: the d-model's first cycle)
         if first:
             calls = [c for c, v in zip(self._calls, self._calls_read()) if v is True]
             for outcome in self._fresh():
@@ -201,12 +208,14 @@ class CommandLedger(Observer):
         events = [e for e, v in zip(self._events, self._events_read()) if v is True]
         for outcome in self._fresh():
             self._waiting.append((self._lag, outcome, self._before))
-        still = []
+        still, read = [], []
         for steps, outcome, before in self._waiting:
             if (steps > 0) if ticked is None else not ticked:
                 still.append((steps - 1, outcome, before))
-                continue
-            self._judge(outcome, self._before, states, calls)
+            else:
+                read.append(outcome)
+        for outcome in self._read_by_cycle(read):
+            self._judge(outcome, self._before, states, calls, t)
         self._waiting = still
         current = self._current
         if current is not None:
@@ -224,6 +233,17 @@ class CommandLedger(Observer):
                 current.done = t
         self._before = states
 
+    @staticmethod
+    def _read_by_cycle(outcomes: list[CommandOutcome]) -> list[CommandOutcome]:
+        """Of the commands one d-model cycle reads (several, applied in the steps before the tick of a clock
+        slower than the step), those it can have read: an event applied again before the tick is one occurrence
+        with the last one's values, so the earlier are replaced, not taken."""
+        last = {o.event: o for o in outcomes}
+        for o in outcomes:
+            if last[o.event] is not o:
+                o.replaced = last[o.event].delivered
+        return [o for o in outcomes if o.replaced is None]
+
     def _fresh(self) -> list[CommandOutcome]:
         """The outcomes of the commands applied since the last look, recorded."""
         if self._count() <= self._seen:
@@ -235,11 +255,16 @@ class CommandLedger(Observer):
         self.outcomes.extend(outcomes)
         return outcomes
 
-    def _judge(self, outcome: CommandOutcome, before: tuple | None, states: tuple, calls: list[str]) -> None:
-        """Taken or not, by the cycle that took the d-model from `before` (None: its first) to `states`."""
+    def _judge(self, outcome: CommandOutcome, before: tuple | None, states: tuple, calls: list[str],
+               t: float | None = None) -> None:
+        """Taken or not, by the cycle that took the d-model from `before` (None: its first) to `states` at `t`."""
         if (before is None or states != before or calls) and self._may_read(outcome.event, before, states):
             outcome.accepted = True
-            self._current = outcome
+            current = self._current
+            if current is not None and current.done is None and current.stopped is None \
+                    and self._taken_at != t and self._rested_between(before, states):
+                current.done = t  # back at rest and off again with this command, within one cycle
+            self._current, self._taken_at = outcome, t
         else:
             outcome.busy = self._names(before)
 
@@ -262,6 +287,16 @@ class CommandLedger(Observer):
             if read is None or event in read:
                 return True
         return False
+
+    def _rested_between(self, before: tuple | None, after: tuple) -> bool:
+        """Whether the d-model was at rest within the cycle from `before` to `after` though neither shows it:
+        every machine rests at one end or enters its rest leaf on every way between them."""
+        if before is None or len(before) != len(self._states) or len(after) != len(self._states):
+            return False
+        return all(was == self.rest[port] or now == self.rest[port] or
+                   isinstance(was, int) and isinstance(now, int) and
+                   self.cycles.passes(m.index, was, now, self.rest[port], self._several)
+                   for (port, m), was, now in zip(self._states, before, after))
 
     def resting(self, states) -> bool:
         return all(index == self.rest[port] for (port, _), index in zip(self._states, states))

@@ -400,6 +400,9 @@ class ScenarioUnit(PythonUnit):
         super().__init__(name, [Port(p, types[p], "output") for p in used])
         self.events = {ev.name for ev in program.inputs} & set(used)
         self.arguments = {ev.name: [port for port, _ in ev.value_ports] for ev in program.inputs if ev.name in self.events}
+        # an event's arguments are set with it only: a plan row's cells for an event it does not raise (a CSV's
+        # 0s) would overwrite those of one applied before, which a clock slower than the step reads at its tick
+        self.argument_ports = {port for ports in self.arguments.values() for port in ports}
         self.commands = sorted(commands, key=lambda c: c.time)
         self.queue = CommandQueue()
         self.together = together
@@ -440,9 +443,8 @@ class ScenarioUnit(PythonUnit):
             raised = occurrences(c, self.events, self.arguments)
             for event, args in raised:
                 self.queue.offer(Occurrence(event, tuple(args.items()), c.where, c.time))
-            bound = {p for event, _ in raised for p in self.arguments[event]}
-            for port, value in c.values:  # values without their event: set as they come
-                if port not in self.events and port not in bound:
+            for port, value in c.values:  # values of no event: set as they come
+                if port not in self.events and port not in self.argument_ports:
                     self.values[port] = value
 
     def _apply(self, at: float) -> None:

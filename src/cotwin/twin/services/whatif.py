@@ -439,7 +439,8 @@ class Watch(Stop):
         for c, event, args in self.occurrences[len(outcomes):]:  # not applied within the horizon
             outcomes.append(CommandOutcome(c.time, event, args, origin=c.where))
         collisions = self.collisions + (list(self.contacts.seen.values()) if self.contacts.sim is not None else [])
-        done = [o.done for o in outcomes]
+        # the plan is done when every command completed: one infeasible or stopped also comes back to rest
+        done = [o.done if o.verdict == "completed" else None for o in outcomes]
         completion = max(done) if done and all(d is not None for d in done) else (None if outcomes else execution.time)
         return Prediction(start, execution.time, execution.step_size, outcomes, self.states, self.trajectory,
                           collisions, completion, wallclock.perf_counter() - started,
