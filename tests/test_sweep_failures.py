@@ -172,6 +172,24 @@ def test_a_sweep_without_feasibility_answers_tallies_completions_not_zero_feasib
     assert tally(several) == "1 completed, 1 feasible, 1 infeasible"
 
 
+def test_a_sweep_row_gives_no_time_to_done_for_an_infeasible_move(tmp_path):
+    """A hole out of reach: the d-model comes back to rest 0.4 s after the command, which the row gave as its
+    time_to_done beside an empty completion_time; a move that did not complete has no time to be done."""
+    from conftest import EXAMPLES
+
+    from cotwin.twin.analysis.sweep import grid, run_sweep
+    from cotwin.twin.assembly.run import load
+
+    project = EXAMPLES / "ur5e" / "cotwin.toml"
+    plans = grid(load(project).models.program, "moveDiscreteCommand",
+                 {"target_X": [0, 8], "target_Y": [0, 10], "target_Z": [1, 0]})
+    rows = {(r["MovementArgs_target_X"], r["MovementArgs_target_Y"], r["MovementArgs_target_Z"]): r
+            for r in run_sweep(project, plans, workers=1)}
+    refused, reached = rows[(0, 0, 1)], rows[(8, 10, 0)]
+    assert refused["feasible"] is False and refused["time_to_done"] is None and refused["completion_time"] is None
+    assert reached["feasible"] is True and reached["time_to_done"] > 0 and reached["completion_time"] is not None
+
+
 def test_a_sweep_says_which_arguments_it_sends_without_values(tmp_path):
     """`--event moveDiscreteCommand --arg target_X=0..1 --arg MovementArgs_target_Z=1`: target_Y, given no values,
     went as 0 in every what-if, a value no column of the CSV shows; the sweep warns, naming the port."""

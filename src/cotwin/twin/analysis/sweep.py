@@ -88,7 +88,9 @@ def summary(prediction) -> dict:
         out.update({f"{prefix}{name}": value for name, value in c.args.items()})
         out[f"{prefix}feasible"] = c.feasible
         out[f"{prefix}accepted"] = c.accepted
-        out[f"{prefix}time_to_done"] = None if c.done is None or c.delivered is None else round(c.done - c.time, 9)
+        # done only when completed (the ledger's verdict): an infeasible or stopped move the d-model came back to
+        # rest from has a return time, not a time to be done (its row's completion_time is empty too)
+        out[f"{prefix}time_to_done"] = round(c.done - c.time, 9) if c.verdict == "completed" else None
     return out
 
 
