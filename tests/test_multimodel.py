@@ -202,3 +202,20 @@ def test_a_multimodel_key_given_twice_or_a_number_json_lacks_is_refused(tmp_path
         read_multimodel(path)
     (finding,) = err.value.findings
     assert said in finding.message and finding.location.path == str(path), finding
+
+
+def test_a_number_constant_or_key_json_refuses_is_located_where_it_is_written(tmp_path):
+    """Infinity, NaN, 1e400 and a key given twice are refused by the JSON reader before any key is checked: the
+    error named the file's start (1:1); it names the line and column of what was refused."""
+    from cotwin.cosim.multimodel import read_multimodel
+
+    cases = {'{\n  "fmus": {},\n  "endTime": Infinity\n}\n': (3, 14, "Infinity is not a JSON number"),
+             '{"note": "NaN here",\n "endTime":   -Infinity}': (2, 15, "-Infinity is not a JSON number"),
+             '{"x": 1,\n  "x": 2}': (2, 3, "the key 'x' appears twice"),
+             '{"s": "1e400", "e":\n 1e400}': (2, 2, "the number 1e400 is beyond the range of a double")}
+    for k, (text, (line, column, said)) in enumerate(cases.items()):
+        path = tmp_path / f"m{k}.json"
+        path.write_text(text)
+        with pytest.raises(CotwinError) as err:
+            read_multimodel(path)
+        assert str(err.value).startswith(f"{path}:{line}:{column}: error: bad JSON: {said}"), str(err.value)

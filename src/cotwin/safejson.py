@@ -22,7 +22,28 @@ _ESCAPED_SURROGATE = re.compile(r"\\u[dD][89a-fA-F]")
 
 
 class Refused(ValueError):
-    """A message that is not the JSON cotwin reads; the text says why (and where, when JSON says)."""
+    """A message that is not the JSON cotwin reads; the text says why (and where, when JSON says). `token` is the
+    text refused (a number, a constant, a key given twice: its `nth` occurrence), for a file's reader to locate."""
+
+    def __init__(self, message: str, token: str | None = None, nth: int = 1):
+        super().__init__(message)
+        self.token, self.nth = token, nth
+
+
+_TOKENS = re.compile(r'"(?:[^"\\]|\\.)*"|-?Infinity|NaN|-?[0-9][0-9.eE+-]*|[^"\-0-9IN]+|.', re.S)
+
+
+def position(text: str, token: str, nth: int = 1) -> tuple[int, int] | None:
+    """Line and column (from 1) of the nth occurrence of `token` as a whole JSON token of `text` (a string, a
+    number, a constant; not a part of a string), or None."""
+    seen = 0
+    for match in _TOKENS.finditer(text):
+        if match.group() == token:
+            seen += 1
+            if seen == nth:
+                line = text.count("\n", 0, match.start()) + 1
+                return line, match.start() - (text.rfind("\n", 0, match.start()) + 1) + 1
+    return None
 
 
 def loads(body: bytes | bytearray | str, limit: int, depth: int = MAX_DEPTH):
@@ -65,21 +86,21 @@ def loads_object(body: bytes | bytearray | str, limit: int, depth: int = MAX_DEP
 
 def _integer(text: str) -> int:
     if len(text) > MAX_NUMBER:
-        raise Refused(f"a number of {len(text)} digits ({text[:12]}...; at most {MAX_NUMBER} characters)")
+        raise Refused(f"a number of {len(text)} digits ({text[:12]}...; at most {MAX_NUMBER} characters)", text)
     return int(text)
 
 
 def _real(text: str) -> float:
     if len(text) > MAX_NUMBER:
-        raise Refused(f"a number of {len(text)} characters ({text[:12]}...; at most {MAX_NUMBER})")
+        raise Refused(f"a number of {len(text)} characters ({text[:12]}...; at most {MAX_NUMBER})", text)
     value = float(text)
     if not math.isfinite(value):
-        raise Refused(f"the number {text} is beyond the range of a double")
+        raise Refused(f"the number {text} is beyond the range of a double", text)
     return value
 
 
 def _constant(name: str):
-    raise Refused(f"{name} is not a JSON number")
+    raise Refused(f"{name} is not a JSON number", name)
 
 
 def _object(pairs: list[tuple[str, object]]) -> dict:
@@ -87,7 +108,7 @@ def _object(pairs: list[tuple[str, object]]) -> dict:
     if len(out) != len(pairs):
         seen: set[str] = set()
         twice = next(k for k, _ in pairs if k in seen or seen.add(k))
-        raise Refused(f"the key {_show(twice)} appears twice: which value is meant?")
+        raise Refused(f"the key {_show(twice)} appears twice: which value is meant?", json.dumps(twice), 2)
     return out
 
 

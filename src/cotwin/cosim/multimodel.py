@@ -65,8 +65,9 @@ def read_multimodel(path: str | Path) -> MultiModel:
     text = read_text(path, "multimodel")  # capped; located errors
     try:
         data = safejson.decode(text)  # a key twice, a number of 5000 digits: refused, not one value chosen or a crash
-    except safejson.Refused as err:
-        raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, f"bad JSON: {err}")]) from None
+    except safejson.Refused as err:  # at the refused number, constant or key where it can be found, else the start
+        line, column = (safejson.position(text, err.token, err.nth) if err.token else None) or (1, 1)
+        raise CotwinError([Finding(Location(str(path), line, column), Severity.ERROR, f"bad JSON: {err}")]) from None
     except RecursionError:
         raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR, "bad JSON: nested too deeply")]) from None
     except json.JSONDecodeError as err:
