@@ -144,6 +144,11 @@ class Frame:
                 tuple(sorted(self.clocks.items())), tuple(sorted(self.entered.items())))
 
     @staticmethod
+    def frozen_variables(data) -> tuple:
+        """The (name, frozen value) pairs of a frame as `freeze` wrote it."""
+        return data[3]
+
+    @staticmethod
     def thaw(data) -> "Frame":
         body, active, tasks, variables, clocks, entered = data
         return Frame(body, active, tasks, {k: thaw(v) for k, v in variables}, dict(clocks), dict(entered))

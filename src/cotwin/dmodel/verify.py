@@ -31,7 +31,7 @@ from typing import Callable
 from ..robosim import syntax as s
 from ..robosim.dmodel_elements import State
 from ..robosim.types import BOOL, REAL, EnumTy, RecordTy
-from .interpreter import ExecutionError, Interpreter
+from .interpreter import ExecutionError, Frame, Interpreter
 from .program import Program, Scalar, scalars
 
 
@@ -110,7 +110,7 @@ def widest_variables(program: Program, snapshots, top: int = 2) -> list[tuple[st
     values: dict[tuple[int, str], set] = {}
     for snap in snapshots:
         for m, (_, frames) in enumerate(snap[0]):
-            for name, value in (frames[0][3] if frames else ()):
+            for name, value in (Frame.frozen_variables(frames[0]) if frames else ()):
                 values.setdefault((m, name), set()).add(value)
     machines = {m.index: m.machine.name for m in program.machines}
     ranked = sorted(((f"{machines.get(m, m)}.{name}", len(seen)) for (m, name), seen in values.items()),

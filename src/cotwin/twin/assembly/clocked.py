@@ -40,6 +40,31 @@ class ClockedScenario(ScenarioUnit):
         self.time = t + h
 
 
+class DModelCycles:
+    """Whether the d-model ran a cycle since the last look, for observers that judge what it read: a clocked one
+    (FMI 3.0) runs one at each tick of its clock (`Unit.ticks`, counted by the unit), in the event phase before
+    the step's results; one that is not clocked runs one every step."""
+
+    def __init__(self, execution) -> None:
+        from .system import DMODEL
+
+        unit = execution.system.units.get(DMODEL.name)
+        self.unit = unit if unit is not None and unit.ticks is not None else None
+        self.seen = self.unit.ticks if self.unit is not None else 0  # ticks when last looked (at the start: before it)
+
+    @property
+    def clocked(self) -> bool:
+        return self.unit is not None
+
+    def ran(self) -> bool:
+        """Whether a cycle ran since the last call (always, for a d-model that is not clocked)."""
+        if self.unit is None:
+            return True
+        ticks = self.unit.ticks
+        ran, self.seen = ticks != self.seen, ticks
+        return ran
+
+
 def clock_period(spec, step: float, period: float | None = None) -> float:
     """The FMI 3.0 d-model's clock interval: `period`, else the project's [cosim] parameters cycle_period,
     else the step; a whole number of steps (its ticks fall on communication points), else CotwinError."""

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from ...cosim.observers import Observer
 from ...dmodel.waits import CycleReads
 from ...memo import once_per
+from .clocked import DModelCycles
 from .system import DMODEL, MAPPING, TwinSystem
 
 INFEASIBLE = re.compile(r"^(non|in|un)(feasible|reachable)", re.IGNORECASE)
@@ -167,16 +168,14 @@ class CommandLedger(Observer):
         source = execution.system.units.get(self.system.source.name) if self.system.source is not None else None
         self._queue = source.command_queue if source is not None else None  # cotwin.twin.assembly.commands.CommandQueue
         self._seen = self._count()
-        dmodel = execution.system.units.get(DMODEL.name)
         # a clocked d-model (FMI 3.0) reads a command at its clock's first tick from the point it was applied:
         # in that point's event phase, or at a later one when the clock is slower than the step
-        self._clocked = dmodel if dmodel is not None and dmodel.ticks is not None else None
+        self._cycles = DModelCycles(execution)
         # a run's first event phase (at its start, before any step) may have applied commands and ticked: the
         # d-model's first cycle, from its initial junction, read them (judged below, not passed over as old)
-        first = self._seen if self._clocked is not None and execution.steps == 0 and self._clocked.ticks else 0
+        first = self._seen if self._cycles.clocked and execution.steps == 0 and self._cycles.seen else 0
         self._seen -= first
         self._lag = 1 if execution.algorithm.name == "jacobi" else 0  # steps until the d-model reads a command
-        self._ticks = self._clocked.ticks if self._clocked is not None else None
         period = self.system.spec.parameters.get("cycle_period")
         # a cycle_period shorter than the step runs several d-model cycles a step (cotwin.dmodel.fmu): a state
         # change then spans cycles, on paths past `exec` (CycleReads `several`)
@@ -200,10 +199,7 @@ class CommandLedger(Observer):
     def step_complete(self, execution) -> None:
         t = execution.time
         states = self._state_read()
-        ticked = None  # whether a clocked d-model ran its cycle since the last step (None: it cycles every step)
-        if self._clocked is not None:
-            ticks, ticked = self._clocked.ticks, self._clocked.ticks != self._ticks
-            self._ticks = ticks
+        ticked = self._cycles.ran() if self._cycles.clocked else None  # None: a cycle every step, read after _lag
         calls = [c for c, v in zip(self._calls, self._calls_read()) if v is True]
         events = [e for e, v in zip(self._events, self._events_read()) if v is True]
         for outcome in self._fresh():
@@ -214,7 +210,7 @@ class CommandLedger(Observer):
                 still.append((steps - 1, outcome, before))
             else:
                 read.append(outcome)
-        for outcome in self._read_by_cycle(read):
+        for outcome in self._read_by_cycle(read) if read else ():
             self._judge(outcome, self._before, states, calls, t)
         self._waiting = still
         current = self._current
@@ -280,10 +276,10 @@ class CommandLedger(Observer):
         first cycle) to `after` (cotwin.dmodel.waits.CycleReads): a command the d-model reads while its state changes for another reason
         (an earlier move going on) is not taken when no path of that change reads it."""
         for m, k in self._readers.get(event, ()):
-            was = None if before is None else before[k] if k < len(before) else "?"
+            was = before[k] if before is not None and k < len(before) else None
             now = after[k] if k < len(after) else None
-            read = self.cycles.between(m, was, now, self._several) \
-                if (was is None or isinstance(was, int)) and isinstance(now, int) else None
+            known = isinstance(now, int) and (before is None or isinstance(was, int))  # else: cannot tell
+            read = self.cycles.between(m, was, now, self._several) if known else None
             if read is None or event in read:
                 return True
         return False

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from ...cosim.observers import Observer
 from ...dmodel.waits import waits
 from ...memo import once_per
+from .clocked import DModelCycles
 from .system import DMODEL, MAPPING, TwinSystem
 
 log = logging.getLogger("cotwin.twin")
@@ -65,18 +66,13 @@ class WaitWatch(Observer):
         self._states = execution.reader(self._ports)
         self._called = execution.reader([c for c in self._calls if c in slots])
         self._since = [(None, execution.time, 0)] * len(self._ports)  # (leaf, entered at, steps idle)
-        dmodel = execution.system.units.get(DMODEL.name)
-        # a clocked d-model (FMI 3.0) changes and reads only at its clock's ticks: idle is counted in ticks
-        self._clocked = dmodel if dmodel is not None and dmodel.ticks is not None else None
-        self._ticks = self._clocked.ticks if self._clocked is not None else None
+        self._cycles = DModelCycles(execution)  # a clocked d-model changes and reads at its ticks: idle counted in them
 
     def step_complete(self, execution) -> None:
         if self.mapping is None:
             return
-        if self._clocked is not None:
-            if self._clocked.ticks == self._ticks:
-                return  # no cycle since the last step: nothing changed, nothing was read
-            self._ticks = self._clocked.ticks
+        if not self._cycles.ran():
+            return  # a clocked d-model with no cycle since the last step: nothing changed, nothing was read
         calling = any(v is True for v in self._called())
         for m, leaf in enumerate(self._states()):
             previous, entered, idle = self._since[m]
@@ -136,7 +132,7 @@ class WaitWatch(Observer):
                 else:
                     others.append(event)
             else:
-                why = self.mapping.cannot_come(event, 2 if self._clocked is None else 0)
+                why = self.mapping.cannot_come(event, 0 if self._cycles.clocked else 2)
                 if why is None:
                     return  # an answer that may still come
                 reasons[event] = why
