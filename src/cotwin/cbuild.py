@@ -15,6 +15,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+import threading
 from pathlib import Path
 
 from .files import cache_dir
@@ -53,7 +54,7 @@ def compile_library(source: str, stem: str, keep_gil: bool = True, include_dirs:
                 raise ValueError(f"the native {stem} could not be compiled: {err}") from None
             if proc.returncode != 0 or not built.is_file():
                 raise ValueError(f"the native {stem} did not compile: {proc.stderr.strip()[:400]}")
-            staged = folder / f".{target.name}.{os.getpid()}"
+            staged = folder / f".{target.name}.{os.getpid()}.{threading.get_ident()}"  # threads of a sweep too
             shutil.copy(built, staged)
             os.replace(staged, target)  # whole, also when another process builds it at the same time
     return (ctypes.PyDLL if keep_gil else ctypes.CDLL)(str(target))

@@ -18,6 +18,6 @@ def once_per(obj: object, key: object, compute: Callable[[], T]) -> T:
     known = _KEPT.get(slot)
     if known is None or known[0] is not obj:
         if len(_KEPT) >= SIZE:
-            del _KEPT[next(iter(_KEPT))]
+            _KEPT.pop(next(iter(_KEPT), None), None)  # another thread may have dropped it first
         known = _KEPT[slot] = (obj, compute())
     return known[1]  # type: ignore[return-value]

@@ -137,10 +137,13 @@ def _taken(c) -> str:
               help="each what-if's physics step in s (0.0001 to 0.01; default cotwin's 0.001; measure a coarser one "
                    "against your robot's log first: docs/benchmarks.md)")
 @click.option("--workers", type=click.IntRange(min=1, max=1024), help="local processes (default: one per CPU)")
+@click.option("--threads", type=click.IntRange(min=1, max=1024), default=1, show_default=True,
+              help="what-ifs at once in this process instead of a pool of processes: no start-up per process, the "
+                   "physics of each runs outside Python's lock; a crash inside an FMU ends the whole sweep")
 @click.option("--ray", "ray", help="run on Ray: 'auto' (the local cluster) or a cluster address")
 @click.option("-o", "--output", "out", callback=output_file, required=True, help="the CSV of answers to write")
 def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, horizon: float,
-          physics_step: float | None, workers: int | None, ray: str | None, out: str) -> None:
+          physics_step: float | None, workers: int | None, threads: int, ray: str | None, out: str) -> None:
     """Run one what-if per combination of argument values, in parallel (e.g. every hole of the plate:
     --event moveDiscreteCommand --arg target_X=0..15 --arg target_Y=0..23 --arg target_Z=0)."""
     import csv
@@ -152,6 +155,8 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     from .progress import ProgressReport
 
     check_finite(horizon=horizon)
+    if threads > 1 and (ray is not None or workers is not None):
+        raise click.UsageError("--threads runs the what-ifs in this process: not with --workers or --ray")
     ranges: dict[str, list] = {}
     for name, values in (named_values(a, "--arg") for a in args):
         if name in ranges:
@@ -182,7 +187,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         with ProgressReport("sweeping", "what-ifs") as progress:
             with about(state, StateError):
                 rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress,
-                                 physics_step=physics_step)
+                                 physics_step=physics_step, threads=threads)
     except SweepInterrupted as err:  # the what-ifs answered are kept beside the output
         partial = Path(out).with_name(Path(out).stem + ".partial.csv")
         if err.rows:
@@ -199,7 +204,9 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         click.echo(f"what-if {k + 1} of {len(rows)} ({where}) failed: {row[ERROR]}", err=True)
     if len(bad) > MAX_REPORTED:
         click.echo(f"... and {len(bad) - MAX_REPORTED} more failed what-if(s) (the {ERROR} column of {out})", err=True)
-    click.echo(f"{out}: {len(rows)} what-ifs in {wall:.1f} s ({'Ray' if ray else 'local pool'}), {tally(rows)}"
+    ran_on = ("Ray" if ray else f"this process, {threads} threads" if threads > 1 else "this process" if workers == 1
+              else "local pool")
+    click.echo(f"{out}: {len(rows)} what-ifs in {wall:.1f} s ({ran_on}), {tally(rows)}"
                + (f", {len(bad)} FAILED" if bad else ""))
     if bad:
         sys.exit(1)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 from pathlib import Path
 
 from ..config import is_number
@@ -64,7 +65,7 @@ class SolutionCache:
             return
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            part = self.path.with_name(f"{self.path.name}.{os.getpid()}.part")
+            part = self.path.with_name(f"{self.path.name}.{os.getpid()}.{threading.get_ident()}.part")  # per thread
             part.write_text(json.dumps({"fingerprint": self.fingerprint, "solutions": self.entries}))
             part.replace(self.path)
             self._dirty = False

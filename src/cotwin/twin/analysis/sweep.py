@@ -1,9 +1,12 @@
-"""Sweeps: many what-ifs in parallel, on a local process pool (default) or on Ray.
+"""Sweeps: many what-ifs in parallel, on a local process pool (default), on threads of this process, or on Ray.
 
 A sweep is a list of plans (each a what-if from the same state); `grid` builds the common one: one
 command per combination of argument values ("which holes can the arm reach, and how fast?"). Every
 worker loads the project once and shares the d-model FMU built in `artefacts`; answers come back in the
-order of the plans and are the same whichever runs them (what-ifs are deterministic).
+order of the plans and are the same whichever runs them (what-ifs are deterministic). Threads share the loaded
+twin and pay no start-up; they run side by side because the native loop, where a what-if spends most of its time,
+runs without the GIL (each thread steps its own forks); a crash inside an FMU ends the whole process, which a
+process pool would have reported per what-if.
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ from __future__ import annotations
 import itertools
 import math
 import os
+import threading
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
@@ -192,9 +196,11 @@ def _ray_run(project: str, artefacts: str | None, plan, state, horizon, step, ph
 
 def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | None = None, horizon: float = 30.0,
               step: float | None = None, workers: int | None = None, ray: str | None = None,
-              artefacts: str | Path | None = None, progress=None, physics_step: float | None = None) -> list[dict]:
+              artefacts: str | Path | None = None, progress=None, physics_step: float | None = None,
+              threads: int = 1) -> list[dict]:
     """Run every plan as a what-if; `ray` is a Ray address ("auto" joins the local cluster) or None
-    for a local process pool of `workers` processes (default: one per CPU; 1 runs in this process).
+    for a local process pool of `workers` processes (default: one per CPU; 1 runs in this process), or, with
+    `threads` > 1, `threads` what-ifs at once in this process (see the module doc).
 
     One row per plan, in the plans' order: `summary` of its prediction, or (a what-if that failed) its
     grid point and the error in the ERROR column (`failures` lists them). `progress(done, total)` is
@@ -206,6 +212,12 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
     from ..assembly.build import dmodel_fmu
     from ..assembly.run import load
 
+    if threads < 1:
+        raise CotwinError(f"a sweep runs on one thread or more, not {threads}")
+    if threads > 1 and (ray is not None or workers not in (None, 1)):
+        raise CotwinError("threads run the what-ifs in this process: not with a pool of processes (workers) or Ray")
+    if threads > 1:
+        workers = 1
     if state is not None:  # its format and times checked once here, before any worker reads it
         from ...cosim.execution import saved_execution
 
@@ -234,6 +246,8 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         if workers == 1:
             global _SYSTEM
             _SYSTEM = (system, artefacts)  # the project loaded above (loading it again costed a parse)
+            if threads > 1:
+                return _threaded(plans, state, horizon, step, physics_step, min(threads, len(plans)), report)
             try:
                 with _forks(state, step, physics_step) as forks:
                     for plan in plans:
@@ -270,6 +284,57 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
     finally:
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _threaded(plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None,
+              physics: float | None, threads: int, report) -> list[dict]:
+    """The what-ifs on `threads` threads of this process, each taking the next plan and keeping its own forks;
+    rows in the plans' order. An interrupt keeps the answers so far (SweepInterrupted) once each thread has
+    ended the what-if in hand and closed its forks."""
+    rows: list[dict | None] = [None] * len(plans)
+    pending = iter(range(len(plans)))
+    lock, stop = threading.Lock(), threading.Event()
+    errors: list[BaseException] = []
+    done = 0
+
+    def work() -> None:
+        nonlocal done
+        try:
+            with _forks(state, step, physics) as forks:
+                while not stop.is_set():
+                    with lock:
+                        k = next(pending, None)
+                    if k is None:
+                        return
+                    row = _run(plans[k], state, horizon, step, forks)
+                    with lock:
+                        rows[k] = row
+                        done += 1
+                        report(done, len(plans))
+        except BaseException as err:  # noqa: BLE001 - not a what-if's failure (those are rows): the sweep's
+            errors.append(err)
+            stop.set()
+
+    pool = [threading.Thread(target=work, name=f"cotwin-sweep-{n}", daemon=True) for n in range(threads)]
+    try:
+        for thread in pool:
+            thread.start()
+        for thread in pool:
+            while thread.is_alive():
+                thread.join(0.25)  # woken for an interrupt, which only this (the main) thread receives
+    except KeyboardInterrupt:
+        stop.set()
+        try:  # each thread ends after the what-if in hand: one left inside the native loop would crash the exit
+            for thread in pool:
+                thread.join()
+        except KeyboardInterrupt:  # a second interrupt: the answers now, whatever the threads are doing
+            pass
+        with lock:
+            answered = [row for row in rows if row is not None]
+        raise SweepInterrupted(answered, len(plans)) from None
+    if errors:
+        raise errors[0]
+    return rows  # type: ignore[return-value] - every plan answered when no thread failed
 
 
 def _stop(pool: ProcessPoolExecutor) -> None:
