@@ -4,6 +4,8 @@ and resting states, its generated sources, the robot's geoms) need not be made a
 
 from __future__ import annotations
 
+from functools import lru_cache
+from types import CodeType
 from typing import Callable, TypeVar
 
 T = TypeVar("T")
@@ -21,3 +23,11 @@ def once_per(obj: object, key: object, compute: Callable[[], T]) -> T:
             _KEPT.pop(next(iter(_KEPT), None), None)  # another thread may have dropped it first
         known = _KEPT[slot] = (obj, compute())
     return known[1]  # type: ignore[return-value]
+
+
+@lru_cache(maxsize=256)
+def code(source: str, filename: str) -> CodeType:
+    """`source` compiled (a code object is immutable, so one serves every exec of the same generated text): a
+    run's fused loop and a mapping's event functions are the same text run after run, and compiling them
+    costed about a millisecond a run."""
+    return compile(source, filename, "exec")

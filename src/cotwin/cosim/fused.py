@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from typing import Callable
 
+from .. import memo
 from .algorithm import GaussSeidel, Jacobi
 
 
@@ -44,7 +45,7 @@ class FusedLoop:
         self.execution = execution
         self.source, names = _source(execution)
         namespace: dict[str, object] = {"__builtins__": __builtins__, **names}
-        exec(compile(self.source, "<cotwin fused loop>", "exec"), namespace)  # noqa: S102 - generated above
+        exec(memo.code(self.source, "<cotwin fused loop>"), namespace)  # noqa: S102 - generated above
         self._run: Callable[[int, Callable | None], int] = namespace["run"]
         self._data, self._observers = execution.algorithm.data, list(execution.observers)
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from typing import Callable
 
+from .. import memo
 from ..diagnostics import CotwinError, placed
 from ..robosim import syntax as s
 from ..robosim.evaluator import _call_name, index
@@ -190,7 +191,7 @@ def compile_event(event, compiler) -> Callable[[], bool]:
     namespace = {"RT": rt, "EVENT": event, "_TUPLES": _TUPLES, "_index": index, "_negate": negate, "_call": _call,
                  "_isfinite": math.isfinite, "_EvalError": EvalError, "_CotwinError": CotwinError, "_CAUGHT": _CAUGHT,
                  "_sensor": rt.sensor, "_noval": _no_value, "__builtins__": __builtins__, **names}
-    code = compile(source, f"<mapping {rt.model.name}: input event {event.name}>", "exec")
+    code = memo.code(source, f"<mapping {rt.model.name}: input event {event.name}>")
     exec(code, namespace)  # noqa: S102 - source generated above from the checked mapping model
     occurs = namespace["occurs"]
     occurs.source = source
