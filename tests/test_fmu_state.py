@@ -269,3 +269,56 @@ def test_port_memory_and_fmi_calls_move_the_same_values(program, fmu):
         direct.terminate()
         calls.terminate()
 
+
+
+def test_instances_of_a_cotwin_fmu_share_one_cached_folder_and_step_apart(program, fmu, tmp_path, monkeypatch):
+    """Extracting the d-model FMU and removing its nine files cost each run ~2 ms: a cotwin-built FMU is
+    extracted once into the cache and shared; its instances still keep their own state, and the folder
+    outlives the instance that ends first."""
+    monkeypatch.setenv("COTWIN_CACHE", str(tmp_path / "cache"))
+    a, b = FMUUnit("a", fmu), FMUUnit("b", fmu)
+    try:
+        for u in (a, b):
+            u.instantiate(0.0)
+            u.initialize()
+        assert a.folder == b.folder and a.folder.startswith(str(tmp_path / "cache" / "fmu"))
+        a.set(_inputs(program, COMMAND))
+        a.step(0.0, 1.0)
+        b.set(_inputs(program, {}))
+        b.step(0.0, 1.0)
+        assert a.get(["state"]) != b.get(["state"])  # the command moved a, not b
+        a.terminate()
+        b.set(_inputs(program, COMMAND))
+        b.step(1.0, 1.0)  # the library and folder are still b's after a ended
+        assert os.path.isdir(b.folder)
+        folder = b.folder
+    finally:
+        a.terminate()
+        b.terminate()
+    assert os.path.isdir(folder)  # kept for the next run
+    again = FMUUnit("c", fmu)
+    again.instantiate(0.0)
+    assert again.folder == folder
+    again.terminate()
+
+
+def test_without_a_cache_or_for_a_damaged_one_an_instance_has_its_own_folder(program, fmu, tmp_path, monkeypatch):
+    monkeypatch.setenv("COTWIN_CACHE", "off")
+    unit = FMUUnit("a", fmu)
+    unit.instantiate(0.0)
+    own = unit.folder
+    assert "cache" not in own and os.path.isdir(own)
+    unit.terminate()
+    assert not os.path.exists(own)  # removed with the instance
+    monkeypatch.setenv("COTWIN_CACHE", str(tmp_path / "cache"))
+    unit = FMUUnit("b", fmu)
+    unit.instantiate(0.0)
+    shared = unit.folder
+    unit.terminate()
+    for binary in (tmp_path / "cache" / "fmu").glob("*/binaries/*/*"):
+        binary.unlink()  # the cached folder damaged: an instance extracts its own
+    unit = FMUUnit("c", fmu)
+    unit.instantiate(0.0)
+    assert unit.folder != shared and os.path.isfile(os.path.join(unit.folder, "modelDescription.xml"))
+    unit.initialize()
+    unit.terminate()

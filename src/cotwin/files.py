@@ -27,7 +27,7 @@ from .diagnostics import CotwinError, Finding, Location, Severity
 
 
 def cache_dir() -> Path | None:
-    """cotwin's cache (IK solutions, compiled d-models, native loops): $COTWIN_CACHE, "off" for none, else
+    """cotwin's cache (IK solutions, compiled d-models and their extracted FMUs, native loops): $COTWIN_CACHE, "off" for none, else
     $XDG_CACHE_HOME/cotwin or ~/.cache/cotwin."""
     chosen = os.environ.get("COTWIN_CACHE")
     if chosen == "off":

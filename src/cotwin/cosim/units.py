@@ -8,8 +8,13 @@ the call.
 
 from __future__ import annotations
 
+import hashlib
+import io
 import math
+import os
 import shutil
+import threading
+import zipfile
 import itertools
 import logging
 import weakref
@@ -294,6 +299,37 @@ def fmu_state(md, serialized: bytes, time: float) -> bytes:
     return pack("FMU", {"guid": md.guid, "model": md.modelName, "time": time, "fmu": serialized})
 
 
+def _unpacked(path: Path, md, unzip_dir: str | None) -> tuple[str, bool]:
+    """Where an FMU's files are, and whether they are this instance's own (removed at its end). A cotwin-built
+    FMU that may be instantiated more than once per process is extracted once per machine into cotwin's cache,
+    under the digest of its bytes, and shared by every instance of it: its C keeps no state outside an instance
+    and writes nothing into its folder, and extracting and removing its nine files cost each run about two
+    milliseconds. Any other FMU, or no cache (COTWIN_CACHE=off), gets a folder of its own, as FMPy makes it."""
+    from ..files import cache_dir
+
+    folder = cache_dir()
+    if (unzip_dir is not None or folder is None or md.generationTool != "cotwin"
+            or md.coSimulation is None or md.coSimulation.canBeInstantiatedOnlyOncePerProcess):
+        return str(extract(str(path), unzip_dir)), True
+    data = path.read_bytes()
+    target = folder / "fmu" / hashlib.sha256(data).hexdigest()[:24]
+    binary = target / "binaries" / fmpy.platform / f"{md.coSimulation.modelIdentifier}{fmpy.sharedLibraryExtension}"
+    if binary.is_file():
+        return str(target), False
+    target.parent.mkdir(parents=True, exist_ok=True)
+    staged = target.with_name(f".{target.name}.{os.getpid()}.{threading.get_ident()}")
+    shutil.rmtree(staged, ignore_errors=True)
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        archive.extractall(staged)
+    try:
+        os.replace(staged, target)  # whole, also when another process or thread extracts it at the same time
+    except OSError:  # there already: another process or thread extracted it first (a folder is not replaced)
+        shutil.rmtree(staged, ignore_errors=True)
+        if not binary.is_file():  # a folder of that name without the binary (damaged): this instance's own
+            return str(extract(str(path), None)), True
+    return str(target), False
+
+
 class FMUUnit(BoundByNames, Unit):
     """An FMI 2.0 co-simulation FMU in this process: FMPy reads, extracts, loads and instantiates it;
     every call into the FMU then goes through `_call`, which checks the returned status. Values move
@@ -308,6 +344,7 @@ class FMUUnit(BoundByNames, Unit):
         self.fmu = None
         self.component = None
         self.folder = None
+        self._own_folder = True  # removed at terminate (not a shared, cached extraction: see _unpacked)
         self.time = 0.0
         self.status = "new"  # new | instantiated | error | fatal
         self.messages: deque[tuple[str, str, str]] = deque(maxlen=50)  # (status, category, message) logged
@@ -395,7 +432,7 @@ class FMUUnit(BoundByNames, Unit):
     def instantiate(self, start: float) -> None:
         self.time = start
         try:
-            self.folder = extract(str(self.path), self.unzip_dir)
+            self.folder, self._own_folder = _unpacked(self.path, self.md, self.unzip_dir)
         except Exception as err:  # a bad zip
             raise UnitError(self.name, start, "extract", str(err)) from None
         self.fmu = self._call("load", lambda: FMU2Slave(
@@ -441,7 +478,8 @@ class FMUUnit(BoundByNames, Unit):
             self.fmu = None
             self.component = None
         if self.folder:
-            shutil.rmtree(self.folder, ignore_errors=True)
+            if self._own_folder:
+                shutil.rmtree(self.folder, ignore_errors=True)
             self.folder = None
 
     # ---- port values ----
