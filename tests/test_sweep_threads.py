@@ -71,3 +71,31 @@ def test_an_interrupted_threaded_sweep_keeps_its_answers_and_stops_at_once(tmp_p
         in rest and len(rows) > 1 and not out.exists()
     assert len(rows) - 1 < 150 and waited < 8.0, f"{len(rows) - 1} answered, {waited:.1f} s after the interrupt"
     assert "Traceback" not in rest
+
+
+def test_threads_read_the_fmus_model_description_one_at_a_time(tmp_path, monkeypatch):
+    """FMPy validates a model description with libxml2's schema parser, which threads reading at once corrupted
+    (every later what-if of the sweep then failed: 'cannot read dmodel.fmu: Internal error:
+    xmlSchemaPValAttrNodeValue, the given type is not a built-in type'): the threads' forks read theirs in turn."""
+    import threading
+
+    from cotwin.cosim import units
+
+    reading, most, lock = [0], [0], threading.Lock()
+    plain = units.read_model_description
+
+    def watched(*args, **kwargs):
+        with lock:
+            reading[0] += 1
+            most[0] = max(most[0], reading[0])
+        try:
+            time.sleep(0.2)  # long enough for the other threads' forks to come to theirs
+            return plain(*args, **kwargs)
+        finally:
+            with lock:
+                reading[0] -= 1
+
+    monkeypatch.setattr(units, "read_model_description", watched)
+    plans = grid(load(PROJECT).models.program, "moveDiscreteCommand", {"target_X": [0, 1, 2], "target_Y": [0], "target_Z": [0]})
+    rows = run_sweep(PROJECT, plans, horizon=2.0, threads=3, artefacts=tmp_path)
+    assert not [r for r in rows if r.get("error")] and most[0] == 1, (most[0], rows)
