@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -99,3 +100,103 @@ def test_threads_read_the_fmus_model_description_one_at_a_time(tmp_path, monkeyp
     plans = grid(load(PROJECT).models.program, "moveDiscreteCommand", {"target_X": [0, 1, 2], "target_Y": [0], "target_Z": [0]})
     rows = run_sweep(PROJECT, plans, horizon=2.0, threads=3, artefacts=tmp_path)
     assert not [r for r in rows if r.get("error")] and most[0] == 1, (most[0], rows)
+
+
+def test_an_interrupt_while_the_threads_start_keeps_the_sweep_not_a_bug(tmp_path, monkeypatch):
+    """Ctrl-C as the threads were started (Thread.start waits for each) joined one never started: 'internal error:
+    RuntimeError: cannot join thread before it is started' instead of the interrupted sweep."""
+    import threading
+
+    from cotwin.twin.analysis import sweep
+    from cotwin.twin.analysis.sweep import SweepInterrupted
+
+    plain = threading.Thread.start
+
+    def start(thread):
+        if thread.name == "cotwin-sweep-0":
+            os.kill(os.getpid(), signal.SIGINT)  # as the first thread starts, before the second has
+        plain(thread)
+
+    monkeypatch.setattr(sweep.threading.Thread, "start", start)
+    plans = grid(load(PROJECT).models.program, "moveDiscreteCommand", {"target_X": [0, 1, 2], "target_Y": [0], "target_Z": [0]})
+    with pytest.raises(SweepInterrupted) as caught:
+        run_sweep(PROJECT, plans, horizon=2.0, threads=3, artefacts=tmp_path)
+    assert caught.value.total == 3 and caught.value.running == 0
+
+
+def test_a_second_interrupt_ends_the_process_without_finalising_under_the_threads(tmp_path):
+    """A second Ctrl-C does not wait for the what-ifs in hand: the partial answers are written and the process ends
+    at once, without the interpreter's exit (which, under a thread still in the native loop or a compile, crashed:
+    SIGSEGV instead of exit 130). The what-ifs here hold a thread in C (outside the GIL) for 20 s each."""
+    script = tmp_path / "held.py"
+    script.write_text(
+        "import atexit, ctypes, sys, threading, time\n"
+        "from cotwin.twin.analysis import sweep\n"
+        "plain = sweep._run\n"
+        "def held(plan, *args, **kwargs):\n"
+        "    if plan[0].values[1][1] != 0:  # the first what-if answers at once, the others stay in C\n"
+        "        held = time.monotonic() + 20\n"
+        "        while time.monotonic() < held:  # a signal ends one sleep early, not the hold\n"
+        "            ctypes.CDLL(None).usleep(100_000)\n"
+        "    return plain(plan, *args, **kwargs)\n"
+        "sweep._run = held\n"
+        "atexit.register(lambda: print('FINALISED', file=sys.stderr))\n"
+        "from cotwin.cli import entry\n"
+        "sys.argv = ['cotwin', *sys.argv[1:]]\n"
+        "entry()\n")
+    import cotwin
+
+    out = tmp_path / "sweep.csv"
+    here = str(Path(cotwin.__file__).resolve().parents[1])  # this cotwin, whatever PYTHONPATH says from another folder
+    env = {**os.environ, "COTWIN_PROGRESS_SECONDS": "0", "PYTHONPATH": here}
+    proc = subprocess.Popen([sys.executable, str(script), "sweep", str(PROJECT), "--event", "moveDiscreteCommand",
+                             "--arg", "target_X=0..3", "--arg", "target_Y=0", "--arg", "target_Z=0", "-o", str(out),
+                             "--threads", "2", "--horizon", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    seen = ""
+    while "sweeping: 1/4 " not in seen:  # the first answered, both threads now held
+        line = proc.stderr.readline()
+        assert line, seen
+        seen += line
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    time.sleep(0.5)
+    interrupted = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, rest = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and time.monotonic() - interrupted < 5.0, seen + rest
+    assert "error: interrupted after 1 of 4 what-ifs; the 1 answered are in" in rest
+    assert len((tmp_path / "sweep.partial.csv").read_text().splitlines()) == 2
+    assert "FINALISED" not in rest and "Traceback" not in rest, rest
+
+
+def test_an_interrupt_waits_for_every_threads_whatif_in_hand(tmp_path, monkeypatch):
+    """On Python 3.11 a Thread.join interrupted by Ctrl-C marks the thread it waited for ended though it runs on
+    (bpo-45274's fix): the interrupted sweep waited for the other threads only, and returned (and the process exited)
+    with that one inside its what-if."""
+    import threading
+
+    from cotwin.twin.analysis import sweep
+    from cotwin.twin.analysis.sweep import SweepInterrupted
+
+    plain, lock, in_hand = sweep._run, threading.Lock(), [0]
+
+    def held(plan, *args, **kwargs):
+        with lock:
+            if in_hand[0] == 0 and not held.signalled:
+                held.signalled = True
+                threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT)).start()
+            in_hand[0] += 1
+        try:
+            time.sleep(3.0 if threading.current_thread().name == "cotwin-sweep-0" else 1.0)
+            return plain(plan, *args, **kwargs)
+        finally:
+            with lock:
+                in_hand[0] -= 1
+
+    held.signalled = False
+    monkeypatch.setattr(sweep, "_run", held)
+    plans = grid(load(PROJECT).models.program, "moveDiscreteCommand", {"target_X": [0, 1, 2, 3], "target_Y": [0], "target_Z": [0]})
+    with pytest.raises(SweepInterrupted) as caught:
+        run_sweep(PROJECT, plans, horizon=2.0, threads=2, artefacts=tmp_path)
+    assert in_hand[0] == 0 and caught.value.running == 0 and len(caught.value.rows) == 2
