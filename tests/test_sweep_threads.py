@@ -200,3 +200,34 @@ def test_an_interrupt_waits_for_every_threads_whatif_in_hand(tmp_path, monkeypat
     with pytest.raises(SweepInterrupted) as caught:
         run_sweep(PROJECT, plans, horizon=2.0, threads=2, artefacts=tmp_path)
     assert in_hand[0] == 0 and caught.value.running == 0 and len(caught.value.rows) == 2
+
+
+def test_the_threads_fork_their_sweeps_twin_whatever_another_sweep_loads_meanwhile(tmp_path, monkeypatch):
+    """The threads took the twin to fork from the module's _SYSTEM when they started: another sweep of the process
+    loading its project meanwhile made them answer that project's what-ifs (here one whose d-model divides by X)."""
+    import shutil
+    import threading
+
+    from cotwin.twin.analysis import sweep
+
+    other = tmp_path / "dividing"
+    shutil.copytree(EXAMPLES / "ur5e", other)
+    arm = other / "arm.rst"
+    arm.write_text(arm.read_text().replace("var margs: MovementArgs", "var margs: MovementArgs\n\tvar k: int")
+                   .replace("state Requested { entry $movediscrete(", "state Requested { entry k = 10 / margs.target_X; $movediscrete("))
+    meanwhile = (load(other / "cotwin.toml", reader=sweep.READER), str(tmp_path / "other"))
+    from cotwin.twin.assembly.build import dmodel_fmu
+
+    dmodel_fmu(meanwhile[0], meanwhile[1])
+    monkeypatch.setattr(sweep, "_SYSTEM", sweep._SYSTEM)  # put back after the test
+    plain = threading.Thread.start
+
+    def start(thread):
+        if thread.name == "cotwin-sweep-1":
+            sweep._SYSTEM = meanwhile  # as another sweep of this process would, loading its project
+        plain(thread)
+
+    monkeypatch.setattr(sweep.threading.Thread, "start", start)
+    plans = grid(load(PROJECT).models.program, "moveDiscreteCommand", {"target_X": [0], "target_Y": [0, 1, 2, 3], "target_Z": [0]})
+    rows = run_sweep(PROJECT, plans, horizon=2.0, threads=2, artefacts=tmp_path / "mine")
+    assert not [r for r in rows if r.get("error")], rows

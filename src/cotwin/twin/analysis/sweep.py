@@ -172,11 +172,12 @@ def _run(plan: list[Command], state: bytes | None, horizon: float, step: float |
         return failed(plan, err)
 
 
-def _forks(state: bytes | None, step: float | None, physics: float | None = None):
-    """Forks of the loaded twin at `state` for a run of what-ifs (closed by the caller when they are done)."""
+def _forks(state: bytes | None, step: float | None, physics: float | None = None, loaded: tuple | None = None):
+    """Forks of the loaded twin (`loaded`, else the worker's) at `state` for a run of what-ifs (closed by the caller
+    when they are done)."""
     from ..services.whatif import Forks
 
-    system, artefacts = _SYSTEM
+    system, artefacts = loaded or _SYSTEM
     return Forks(system, state, step=step, artefacts=artefacts, physics_step=physics)
 
 
@@ -248,7 +249,7 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
             global _SYSTEM
             _SYSTEM = (system, artefacts)  # the project loaded above (loading it again costed a parse)
             if threads > 1:
-                return _threaded(plans, state, horizon, step, physics_step, min(threads, len(plans)), report)
+                return _threaded(_SYSTEM, plans, state, horizon, step, physics_step, min(threads, len(plans)), report)
             try:
                 with _forks(state, step, physics_step) as forks:
                     for plan in plans:
@@ -287,9 +288,10 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
             shutil.rmtree(scratch, ignore_errors=True)
 
 
-def _threaded(plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None,
+def _threaded(loaded: tuple, plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None,
               physics: float | None, threads: int, report) -> list[dict]:
-    """The what-ifs on `threads` threads of this process, each taking the next plan and keeping its own forks;
+    """The what-ifs on `threads` threads of this process, each taking the next plan and keeping its own forks of
+    `loaded` (the twin and artefacts: not _SYSTEM, which another sweep of this process may set meanwhile);
     rows in the plans' order. An interrupt keeps the answers so far (SweepInterrupted) once each thread has
     ended the what-if in hand and closed its forks."""
     rows: list[dict | None] = [None] * len(plans)
@@ -303,7 +305,7 @@ def _threaded(plans: list[list[Command]], state: bytes | None, horizon: float, s
     def work(ends: threading.Event) -> None:
         nonlocal done
         try:
-            with _forks(state, step, physics) as forks:
+            with _forks(state, step, physics, loaded) as forks:
                 while not stop.is_set():
                     with lock:
                         k = next(pending, None)
