@@ -231,3 +231,35 @@ def test_the_threads_fork_their_sweeps_twin_whatever_another_sweep_loads_meanwhi
     plans = grid(load(PROJECT).models.program, "moveDiscreteCommand", {"target_X": [0], "target_Y": [0, 1, 2, 3], "target_Z": [0]})
     rows = run_sweep(PROJECT, plans, horizon=2.0, threads=2, artefacts=tmp_path / "mine")
     assert not [r for r in rows if r.get("error")], rows
+
+
+def test_a_second_interrupt_as_the_process_exits_prints_no_traceback(tmp_path):
+    """Ctrl-C twice quickly: the second, reaching the interpreter's exit (an atexit hook, as pythonfmu_exit's is),
+    printed 'Exception ignored in atexit callback' and a traceback."""
+    import cotwin
+
+    script = tmp_path / "exiting.py"
+    script.write_text(
+        "import atexit, sys, time\n"
+        "def slow():\n"
+        "    print('EXITING', file=sys.stderr, flush=True)\n"
+        "    time.sleep(1.5)\n"
+        "atexit.register(slow)\n"
+        "from cotwin.cli import entry\n"
+        "sys.argv = ['cotwin', *sys.argv[1:]]\n"
+        "entry()\n")
+    env = {**os.environ, "COTWIN_PROGRESS_SECONDS": "0", "PYTHONPATH": str(Path(cotwin.__file__).resolve().parents[1])}
+    proc = subprocess.Popen([sys.executable, str(script), "sweep", str(PROJECT), "--event", "moveDiscreteCommand",
+                             "--arg", "target_X=0..15", "--arg", "target_Y=0", "--arg", "target_Z=0", "--horizon", "2",
+                             "--threads", "2", "-o", str(tmp_path / "sweep.csv")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    seen = ""
+    for wanted in ("sweeping: 0/", "EXITING"):
+        while wanted not in seen:
+            line = proc.stderr.readline()
+            assert line, seen
+            seen += line
+        proc.send_signal(signal.SIGINT)
+    _, rest = proc.communicate(timeout=60)
+    assert proc.returncode == 130, seen + rest
+    assert "Traceback" not in seen + rest and "Exception ignored" not in seen + rest, seen + rest
