@@ -99,3 +99,15 @@ def test_the_mapping_uses_a_stored_solution_without_solving_and_solves_a_miss(tm
     third = registry()  # a corrupt entry: solved again, not a crash
     assert np.allclose(third.inverse_kinematics(0.3, 0.4, 0.05), q, atol=1e-9)
 
+
+
+def test_caches_of_one_file_saved_in_turn_keep_each_others_solutions(tmp_path):
+    """A threaded sweep's forks each solve their holes into a cache of the same file: the last one saved wrote only
+    its own (a cold 16-hole sweep on 4 threads left 4 of its 16 solutions, the others solved again next time)."""
+    first, second = SolutionCache(FINGERPRINT, tmp_path), SolutionCache(FINGERPRINT, tmp_path)
+    first.put("a", SOLUTION)
+    second.put("b", SOLUTION)
+    first.save()
+    second.save()
+    again = SolutionCache(FINGERPRINT, tmp_path)
+    assert again.loaded == 2 and again.get("a") == again.get("b") == SOLUTION

@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -71,3 +72,194 @@ def test_an_interrupted_threaded_sweep_keeps_its_answers_and_stops_at_once(tmp_p
         in rest and len(rows) > 1 and not out.exists()
     assert len(rows) - 1 < 150 and waited < 8.0, f"{len(rows) - 1} answered, {waited:.1f} s after the interrupt"
     assert "Traceback" not in rest
+
+
+def test_threads_read_the_fmus_model_description_one_at_a_time(tmp_path, monkeypatch):
+    """FMPy validates a model description with libxml2's schema parser, which threads reading at once corrupted
+    (every later what-if of the sweep then failed: 'cannot read dmodel.fmu: Internal error:
+    xmlSchemaPValAttrNodeValue, the given type is not a built-in type'): the threads' forks read theirs in turn."""
+    import threading
+
+    from cotwin.cosim import units
+
+    reading, most, lock = [0], [0], threading.Lock()
+    plain = units.read_model_description
+
+    def watched(*args, **kwargs):
+        with lock:
+            reading[0] += 1
+            most[0] = max(most[0], reading[0])
+        try:
+            time.sleep(0.2)  # long enough for the other threads' forks to come to theirs
+            return plain(*args, **kwargs)
+        finally:
+            with lock:
+                reading[0] -= 1
+
+    monkeypatch.setattr(units, "read_model_description", watched)
+    plans = grid(load(PROJECT).models.program, "moveDiscreteCommand", {"target_X": [0, 1, 2], "target_Y": [0], "target_Z": [0]})
+    rows = run_sweep(PROJECT, plans, horizon=2.0, threads=3, artefacts=tmp_path)
+    assert not [r for r in rows if r.get("error")] and most[0] == 1, (most[0], rows)
+
+
+def test_an_interrupt_while_the_threads_start_keeps_the_sweep_not_a_bug(tmp_path, monkeypatch):
+    """Ctrl-C as the threads were started (Thread.start waits for each) joined one never started: 'internal error:
+    RuntimeError: cannot join thread before it is started' instead of the interrupted sweep."""
+    import threading
+
+    from cotwin.twin.analysis import sweep
+    from cotwin.twin.analysis.sweep import SweepInterrupted
+
+    plain = threading.Thread.start
+
+    def start(thread):
+        if thread.name == "cotwin-sweep-0":
+            os.kill(os.getpid(), signal.SIGINT)  # as the first thread starts, before the second has
+        plain(thread)
+
+    monkeypatch.setattr(sweep.threading.Thread, "start", start)
+    plans = grid(load(PROJECT).models.program, "moveDiscreteCommand", {"target_X": [0, 1, 2], "target_Y": [0], "target_Z": [0]})
+    with pytest.raises(SweepInterrupted) as caught:
+        run_sweep(PROJECT, plans, horizon=2.0, threads=3, artefacts=tmp_path)
+    assert caught.value.total == 3 and caught.value.running == 0
+
+
+def test_a_second_interrupt_ends_the_process_without_finalising_under_the_threads(tmp_path):
+    """A second Ctrl-C does not wait for the what-ifs in hand: the partial answers are written and the process ends
+    at once, without the interpreter's exit (which, under a thread still in the native loop or a compile, crashed:
+    SIGSEGV instead of exit 130). The what-ifs here hold a thread in C (outside the GIL) for 20 s each."""
+    script = tmp_path / "held.py"
+    script.write_text(
+        "import atexit, ctypes, sys, threading, time\n"
+        "from cotwin.twin.analysis import sweep\n"
+        "plain = sweep._run\n"
+        "def held(plan, *args, **kwargs):\n"
+        "    if plan[0].values[1][1] != 0:  # the first what-if answers at once, the others stay in C\n"
+        "        held = time.monotonic() + 20\n"
+        "        while time.monotonic() < held:  # a signal ends one sleep early, not the hold\n"
+        "            ctypes.CDLL(None).usleep(100_000)\n"
+        "    return plain(plan, *args, **kwargs)\n"
+        "sweep._run = held\n"
+        "atexit.register(lambda: print('FINALISED', file=sys.stderr))\n"
+        "from cotwin.cli import entry\n"
+        "sys.argv = ['cotwin', *sys.argv[1:]]\n"
+        "entry()\n")
+    import cotwin
+
+    out = tmp_path / "sweep.csv"
+    here = str(Path(cotwin.__file__).resolve().parents[1])  # this cotwin, whatever PYTHONPATH says from another folder
+    env = {**os.environ, "COTWIN_PROGRESS_SECONDS": "0", "PYTHONPATH": here}
+    proc = subprocess.Popen([sys.executable, str(script), "sweep", str(PROJECT), "--event", "moveDiscreteCommand",
+                             "--arg", "target_X=0..3", "--arg", "target_Y=0", "--arg", "target_Z=0", "-o", str(out),
+                             "--threads", "2", "--horizon", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    seen = ""
+    while "sweeping: 1/4 " not in seen:  # the first answered, both threads now held
+        line = proc.stderr.readline()
+        assert line, seen
+        seen += line
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    time.sleep(0.5)
+    interrupted = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, rest = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and time.monotonic() - interrupted < 5.0, seen + rest
+    assert "error: interrupted after 1 of 4 what-ifs; the 1 answered are in" in rest
+    assert len((tmp_path / "sweep.partial.csv").read_text().splitlines()) == 2
+    assert "FINALISED" not in rest and "Traceback" not in rest, rest
+
+
+def test_an_interrupt_waits_for_every_threads_whatif_in_hand(tmp_path, monkeypatch):
+    """On Python 3.11 a Thread.join interrupted by Ctrl-C marks the thread it waited for ended though it runs on
+    (bpo-45274's fix): the interrupted sweep waited for the other threads only, and returned (and the process exited)
+    with that one inside its what-if."""
+    import threading
+
+    from cotwin.twin.analysis import sweep
+    from cotwin.twin.analysis.sweep import SweepInterrupted
+
+    plain, lock, in_hand = sweep._run, threading.Lock(), [0]
+
+    def held(plan, *args, **kwargs):
+        with lock:
+            if in_hand[0] == 0 and not held.signalled:
+                held.signalled = True
+                threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT)).start()
+            in_hand[0] += 1
+        try:
+            time.sleep(3.0 if threading.current_thread().name == "cotwin-sweep-0" else 1.0)
+            return plain(plan, *args, **kwargs)
+        finally:
+            with lock:
+                in_hand[0] -= 1
+
+    held.signalled = False
+    monkeypatch.setattr(sweep, "_run", held)
+    plans = grid(load(PROJECT).models.program, "moveDiscreteCommand", {"target_X": [0, 1, 2, 3], "target_Y": [0], "target_Z": [0]})
+    with pytest.raises(SweepInterrupted) as caught:
+        run_sweep(PROJECT, plans, horizon=2.0, threads=2, artefacts=tmp_path)
+    assert in_hand[0] == 0 and caught.value.running == 0 and len(caught.value.rows) == 2
+
+
+def test_the_threads_fork_their_sweeps_twin_whatever_another_sweep_loads_meanwhile(tmp_path, monkeypatch):
+    """The threads took the twin to fork from the module's _SYSTEM when they started: another sweep of the process
+    loading its project meanwhile made them answer that project's what-ifs (here one whose d-model divides by X)."""
+    import shutil
+    import threading
+
+    from cotwin.twin.analysis import sweep
+
+    other = tmp_path / "dividing"
+    shutil.copytree(EXAMPLES / "ur5e", other)
+    arm = other / "arm.rst"
+    arm.write_text(arm.read_text().replace("var margs: MovementArgs", "var margs: MovementArgs\n\tvar k: int")
+                   .replace("state Requested { entry $movediscrete(", "state Requested { entry k = 10 / margs.target_X; $movediscrete("))
+    meanwhile = (load(other / "cotwin.toml", reader=sweep.READER), str(tmp_path / "other"))
+    from cotwin.twin.assembly.build import dmodel_fmu
+
+    dmodel_fmu(meanwhile[0], meanwhile[1])
+    monkeypatch.setattr(sweep, "_SYSTEM", sweep._SYSTEM)  # put back after the test
+    plain = threading.Thread.start
+
+    def start(thread):
+        if thread.name == "cotwin-sweep-1":
+            sweep._SYSTEM = meanwhile  # as another sweep of this process would, loading its project
+        plain(thread)
+
+    monkeypatch.setattr(sweep.threading.Thread, "start", start)
+    plans = grid(load(PROJECT).models.program, "moveDiscreteCommand", {"target_X": [0], "target_Y": [0, 1, 2, 3], "target_Z": [0]})
+    rows = run_sweep(PROJECT, plans, horizon=2.0, threads=2, artefacts=tmp_path / "mine")
+    assert not [r for r in rows if r.get("error")], rows
+
+
+def test_a_second_interrupt_as_the_process_exits_prints_no_traceback(tmp_path):
+    """Ctrl-C twice quickly: the second, reaching the interpreter's exit (an atexit hook, as pythonfmu_exit's is),
+    printed 'Exception ignored in atexit callback' and a traceback."""
+    import cotwin
+
+    script = tmp_path / "exiting.py"
+    script.write_text(
+        "import atexit, sys, time\n"
+        "def slow():\n"
+        "    print('EXITING', file=sys.stderr, flush=True)\n"
+        "    time.sleep(1.5)\n"
+        "atexit.register(slow)\n"
+        "from cotwin.cli import entry\n"
+        "sys.argv = ['cotwin', *sys.argv[1:]]\n"
+        "entry()\n")
+    env = {**os.environ, "COTWIN_PROGRESS_SECONDS": "0", "PYTHONPATH": str(Path(cotwin.__file__).resolve().parents[1])}
+    proc = subprocess.Popen([sys.executable, str(script), "sweep", str(PROJECT), "--event", "moveDiscreteCommand",
+                             "--arg", "target_X=0..15", "--arg", "target_Y=0", "--arg", "target_Z=0", "--horizon", "2",
+                             "--threads", "2", "-o", str(tmp_path / "sweep.csv")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    seen = ""
+    for wanted in ("sweeping: 0/", "EXITING"):
+        while wanted not in seen:
+            line = proc.stderr.readline()
+            assert line, seen
+            seen += line
+        proc.send_signal(signal.SIGINT)
+    _, rest = proc.communicate(timeout=60)
+    assert proc.returncode == 130, seen + rest
+    assert "Traceback" not in seen + rest and "Exception ignored" not in seen + rest, seen + rest

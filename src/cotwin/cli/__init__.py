@@ -17,6 +17,15 @@ def _terminate(signum, frame) -> None:
     raise KeyboardInterrupt(f"signal {signum}")
 
 
+def _interrupted() -> None:
+    """Exit 130 after an interrupt, deaf to another: a second Ctrl-C during the interpreter's exit (its atexit
+    hooks, e.g. cotwin.cosim.pythonfmu_exit's) printed 'Exception ignored in atexit callback' and a traceback."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.exit(130)
+
+
 def entry() -> None:
     """Entry point: every error escaping a command is reported as a message, never a traceback.
     SIGTERM ends a run like Ctrl-C: units are ended properly and the rows so far are kept."""
@@ -27,13 +36,15 @@ def entry() -> None:
         main(standalone_mode=False)
     except CotwinError as err:
         report(err.findings)
-        sys.exit(130 if getattr(err, "interrupted", False) else 1)
+        if getattr(err, "interrupted", False):
+            _interrupted()
+        sys.exit(1)
     except OSError as err:  # a file or folder that cannot be read or written
         click.echo(f"error: {err.strerror or err}{f': {err.filename}' if err.filename else ''}", err=True)
         sys.exit(1)
     except (click.exceptions.Abort, KeyboardInterrupt):
         click.echo("interrupted", err=True)
-        sys.exit(130)
+        _interrupted()
     except click.ClickException as err:
         err.show()
         sys.exit(err.exit_code)

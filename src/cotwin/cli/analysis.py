@@ -13,7 +13,7 @@ from ..diagnostics import CotwinError, Location, placed
 from ..plaindata import StateError
 from ..files import CAPS, check_outputs, output, read_bytes, write_text
 from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main, named_values, outcomes, output_file,
-                     show_warnings, tool_point)
+                     report, show_warnings, tool_point)
 
 
 def located(err: CotwinError, path: str | None) -> CotwinError:
@@ -147,6 +147,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     """Run one what-if per combination of argument values, in parallel (e.g. every hole of the plate:
     --event moveDiscreteCommand --arg target_X=0..15 --arg target_Y=0..23 --arg target_Z=0)."""
     import csv
+    import os
     import time
 
     from ..twin.assembly.run import load
@@ -195,6 +196,11 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         stopped = CotwinError(f"{err.findings[0].message}; " + (f"the {len(err.rows)} answered are in {partial}"
                                                                   if err.rows else "none was answered"))
         stopped.interrupted = True
+        if err.running:  # threads left in their what-ifs: the interpreter's exit under them crashed (SIGSEGV)
+            report(stopped.findings)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(130)
         raise stopped from None
     wall = time.perf_counter() - started
     write(out, rows)

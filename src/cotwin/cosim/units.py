@@ -17,6 +17,7 @@ import threading
 import zipfile
 import itertools
 import logging
+import threading
 import weakref
 from collections import deque
 from ctypes import (POINTER, byref, c_bool, c_char_p, c_double, c_int, c_int64, c_size_t, c_uint, c_void_p,
@@ -269,13 +270,23 @@ class BoundByNames:
         return dict(zip(names, read()))
 
 
+_READING = threading.Lock()  # libxml2's schema parser (FMPy validates every model description) is not thread-safe
+
+
+def model_description(path: str | Path):
+    """FMPy's model description of the FMU at `path`, read (and validated) one thread at a time: a sweep's
+    threads reading theirs at once corrupted libxml2's schema types for the rest of the process."""
+    with _READING:
+        return read_model_description(str(path))
+
+
 def read_fmu(name: str, path: Path):
     """An FMU's model description, its ports (Real, Integer and Boolean inputs, outputs and parameters) by
     name and their value references; CotwinError naming unit `name` for a file that is no co-simulation FMU."""
     if not path.is_file():
         raise CotwinError(f"unit {name}: no FMU at {path}")
     try:
-        md = read_model_description(str(path))
+        md = model_description(path)
     except Exception as err:  # FMPy raises many kinds for a bad zip or XML
         raise CotwinError(f"unit {name}: cannot read {path}: {err}") from None
     if md.coSimulation is None:

@@ -27,6 +27,26 @@ def _solution(entry) -> bool:
             and isinstance(entry["iterations"], int) and not isinstance(entry["iterations"], bool))
 
 
+def _stored(path: Path, fingerprint: str) -> tuple[dict[str, dict], bool]:
+    """The solutions of `fingerprint` in the file at `path` (none for a file of another solver or one that cannot
+    be read), and whether the file held only such solutions."""
+    if not path.is_file():
+        return {}, True
+    try:
+        data = json.loads(path.read_text())
+        if isinstance(data, dict) and data.get("fingerprint") == fingerprint:
+            solutions = data.get("solutions")
+            stored = solutions.items() if isinstance(solutions, dict) else ()
+            entries = {key: value for key, value in stored if _solution(value)}
+            return entries, len(entries) == len(stored) and isinstance(solutions, dict)
+    except (OSError, ValueError):
+        pass
+    return {}, True
+
+
+_SAVING = threading.Lock()  # a sweep's threads, each with its forks' cache of one file, save in turn
+
+
 class SolutionCache:
     """Solutions (plain data) by target key, for one solver fingerprint."""
 
@@ -36,17 +56,10 @@ class SolutionCache:
         self.entries: dict[str, dict] = {}
         self.loaded = 0
         self._dirty = False
-        if self.path is not None and self.path.is_file():
-            try:
-                data = json.loads(self.path.read_text())
-                if isinstance(data, dict) and data.get("fingerprint") == fingerprint:
-                    solutions = data.get("solutions")
-                    stored = solutions.items() if isinstance(solutions, dict) else ()
-                    self.entries = {key: value for key, value in stored if _solution(value)}
-                    self.loaded = len(self.entries)
-                    self._dirty = self.loaded != len(stored) or not isinstance(solutions, dict)  # rewrite it clean
-            except (OSError, ValueError):
-                pass
+        if self.path is not None:
+            self.entries, clean = _stored(self.path, fingerprint)
+            self.loaded = len(self.entries)
+            self._dirty = not clean  # rewrite it clean
         self.fingerprint = fingerprint
 
     @staticmethod
@@ -65,9 +78,11 @@ class SolutionCache:
             return
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            part = self.path.with_name(f"{self.path.name}.{os.getpid()}.{threading.get_ident()}.part")  # per thread
-            part.write_text(json.dumps({"fingerprint": self.fingerprint, "solutions": self.entries}))
-            part.replace(self.path)
+            with _SAVING:  # with the solutions saved since this cache was read (another thread's forks'), not over them
+                self.entries = {**_stored(self.path, self.fingerprint)[0], **self.entries}
+                part = self.path.with_name(f"{self.path.name}.{os.getpid()}.{threading.get_ident()}.part")  # per thread
+                part.write_text(json.dumps({"fingerprint": self.fingerprint, "solutions": self.entries}))
+                part.replace(self.path)
             self._dirty = False
         except OSError:  # a read-only home: the cache is an optimisation, never a failure
             pass

@@ -139,6 +139,7 @@ class SweepInterrupted(CotwinError):
     def __init__(self, rows: list[dict], total: int):
         super().__init__(f"interrupted after {len(rows)} of {total} what-ifs")
         self.rows, self.total, self.interrupted = rows, total, True
+        self.running = 0  # threads of a threaded sweep still in their what-if (a second interrupt did not wait)
 
 
 def failures(rows: list[dict]) -> list[tuple[int, dict]]:
@@ -171,11 +172,12 @@ def _run(plan: list[Command], state: bytes | None, horizon: float, step: float |
         return failed(plan, err)
 
 
-def _forks(state: bytes | None, step: float | None, physics: float | None = None):
-    """Forks of the loaded twin at `state` for a run of what-ifs (closed by the caller when they are done)."""
+def _forks(state: bytes | None, step: float | None, physics: float | None = None, loaded: tuple | None = None):
+    """Forks of the loaded twin (`loaded`, else the worker's) at `state` for a run of what-ifs (closed by the caller
+    when they are done)."""
     from ..services.whatif import Forks
 
-    system, artefacts = _SYSTEM
+    system, artefacts = loaded or _SYSTEM
     return Forks(system, state, step=step, artefacts=artefacts, physics_step=physics)
 
 
@@ -247,7 +249,7 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
             global _SYSTEM
             _SYSTEM = (system, artefacts)  # the project loaded above (loading it again costed a parse)
             if threads > 1:
-                return _threaded(plans, state, horizon, step, physics_step, min(threads, len(plans)), report)
+                return _threaded(_SYSTEM, plans, state, horizon, step, physics_step, min(threads, len(plans)), report)
             try:
                 with _forks(state, step, physics_step) as forks:
                     for plan in plans:
@@ -286,9 +288,10 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
             shutil.rmtree(scratch, ignore_errors=True)
 
 
-def _threaded(plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None,
+def _threaded(loaded: tuple, plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None,
               physics: float | None, threads: int, report) -> list[dict]:
-    """The what-ifs on `threads` threads of this process, each taking the next plan and keeping its own forks;
+    """The what-ifs on `threads` threads of this process, each taking the next plan and keeping its own forks of
+    `loaded` (the twin and artefacts: not _SYSTEM, which another sweep of this process may set meanwhile);
     rows in the plans' order. An interrupt keeps the answers so far (SweepInterrupted) once each thread has
     ended the what-if in hand and closed its forks."""
     rows: list[dict | None] = [None] * len(plans)
@@ -297,10 +300,12 @@ def _threaded(plans: list[list[Command]], state: bytes | None, horizon: float, s
     errors: list[BaseException] = []
     done = 0
 
-    def work() -> None:
+    ended = [threading.Event() for _ in range(threads)]  # set by each thread as it ends (see below)
+
+    def work(ends: threading.Event) -> None:
         nonlocal done
         try:
-            with _forks(state, step, physics) as forks:
+            with _forks(state, step, physics, loaded) as forks:
                 while not stop.is_set():
                     with lock:
                         k = next(pending, None)
@@ -314,24 +319,34 @@ def _threaded(plans: list[list[Command]], state: bytes | None, horizon: float, s
         except BaseException as err:  # noqa: BLE001 - not a what-if's failure (those are rows): the sweep's
             errors.append(err)
             stop.set()
+        finally:
+            ends.set()
 
-    pool = [threading.Thread(target=work, name=f"cotwin-sweep-{n}", daemon=True) for n in range(threads)]
+    from ...cosim.native import _signals_held
+
+    # waited for on `ended`, not Thread.join: Python 3.11's join interrupted by Ctrl-C marks the thread it waited
+    # for ended though it runs on (bpo-45274's fix), and the interrupted sweep did not wait for that one
+    pool = [threading.Thread(target=work, args=(ends,), name=f"cotwin-sweep-{n}", daemon=True)
+            for n, ends in enumerate(ended)]
     try:
-        for thread in pool:
-            thread.start()
-        for thread in pool:
-            while thread.is_alive():
-                thread.join(0.25)  # woken for an interrupt, which only this (the main) thread receives
+        with _signals_held():  # an interrupt while threads start is raised once all have (one never started is unjoinable)
+            for thread in pool:
+                thread.start()
+        for ends in ended:
+            while not ends.wait(0.25):  # woken for an interrupt, which only this (the main) thread receives
+                pass
     except KeyboardInterrupt:
         stop.set()
         try:  # each thread ends after the what-if in hand: one left inside the native loop would crash the exit
-            for thread in pool:
-                thread.join()
+            for ends in ended:
+                ends.wait()
         except KeyboardInterrupt:  # a second interrupt: the answers now, whatever the threads are doing
             pass
         with lock:
             answered = [row for row in rows if row is not None]
-        raise SweepInterrupted(answered, len(plans)) from None
+        stopped = SweepInterrupted(answered, len(plans))
+        stopped.running = sum(not ends.is_set() for ends in ended)
+        raise stopped from None
     if errors:
         raise errors[0]
     return rows  # type: ignore[return-value] - every plan answered when no thread failed
