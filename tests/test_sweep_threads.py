@@ -263,3 +263,15 @@ def test_a_second_interrupt_as_the_process_exits_prints_no_traceback(tmp_path):
     _, rest = proc.communicate(timeout=60)
     assert proc.returncode == 130, seen + rest
     assert "Traceback" not in seen + rest and "Exception ignored" not in seen + rest, seen + rest
+
+
+def test_options_that_would_be_ignored_are_refused_and_one_worker_goes_with_threads(tmp_path):
+    """`--ray auto --workers 2` dropped --workers without a word; `--threads 2 --workers 1` (one process, as the
+    API accepts it) was refused."""
+    base = [sys.executable, "-m", "cotwin", "sweep", str(PROJECT), "--event", "moveDiscreteCommand", "--arg",
+            "target_X=0", "--arg", "target_Y=3", "--arg", "target_Z=0", "--horizon", "1", "-o", str(tmp_path / "a.csv")]
+    ray = subprocess.run([*base, "--ray", "auto", "--workers", "2"], capture_output=True, text=True, timeout=120)
+    assert ray.returncode == 2 and "--workers sizes the local pool of processes" in ray.stderr, ray.stderr
+    one = subprocess.run([*base, "--threads", "2", "--workers", "1"], capture_output=True, text=True, timeout=300)
+    assert one.returncode == 0, one.stderr
+    assert "1 what-ifs" in one.stdout

@@ -156,8 +156,10 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     from .progress import ProgressReport
 
     check_finite(horizon=horizon)
-    if threads > 1 and (ray is not None or workers is not None):
+    if threads > 1 and (ray is not None or workers not in (None, 1)):
         raise click.UsageError("--threads runs the what-ifs in this process: not with --workers or --ray")
+    if ray is not None and workers is not None:  # dropped without a word before
+        raise click.UsageError("--workers sizes the local pool of processes: Ray places the what-ifs on its own workers")
     ranges: dict[str, list] = {}
     for name, values in (named_values(a, "--arg") for a in args):
         if name in ranges:
