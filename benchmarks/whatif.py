@@ -86,6 +86,9 @@ def holes(z: int = 0) -> None:
     t0 = time.perf_counter()
     pool = run_sweep(PROJECT, plans, horizon=8.0, workers=workers)
     timings[f"local pool ({workers})"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    threaded = run_sweep(PROJECT, plans, horizon=8.0, threads=workers)
+    timings[f"one process, {workers} threads"] = time.perf_counter() - t0
     try:
         import ray  # noqa: F401
     except ImportError:
@@ -111,7 +114,7 @@ def holes(z: int = 0) -> None:
     times = sorted(r["time_to_done"] for r in one if r["feasible"] and r["time_to_done"] is not None)
     print(f"sweep of the 384 holes at Z = {z}: {feasible} reachable (time to reach from home: median "
           f"{times[len(times) // 2]:.1f} s, max {times[-1]:.1f} s); answers equal on every runner: "
-          f"{pool == one and (ray_result is None or ray_result == one)}")
+          f"{pool == one and threaded == one and (ray_result is None or ray_result == one)}")
     base = timings["one process"]
     for name, seconds in timings.items():
         figure(f"sweep of 384 holes: {name}", seconds, "s", peer="one process", peer_value=base)
