@@ -151,6 +151,12 @@ def test_an_input_event_the_controller_connects_to_nothing_is_warned_of_at_the_m
             if "connects nothing" in f.message]
     assert said == [(Severity.WARNING, 7, "controller C connects nothing to input event stop of m: it never occurs "
                      "in M (add e.g. 'connection C on stop to m on stop (_async)')")]
+    # and an event the controller passes on that the module connects to nothing
+    (tmp_path / "m.rst").write_text(files["m.rst"].replace("\tconnection P on stop to c on stop (_async)\n", ""))
+    said = [(f.severity, f.location.line, f.message) for f in check_paths([tmp_path]).findings
+            if "connects nothing" in f.message]
+    assert said == [(Severity.WARNING, 17, "module Mod connects nothing to event stop of c: controller C passes it to its "
+                     "machines, which never see it (add e.g. 'connection P on stop to c on stop (_async)')")]
 
 
 def test_operations_definitions_references_and_calls(tmp_path):

@@ -176,6 +176,18 @@ class DModelChecker(Checker):
                 if missing:
                     self.diag.error(loc, f"{where} does not provide operation(s) {', '.join(missing)} that "
                                          f"controller {ctrl.name} requires")
+        for name, ctrl, loc in controllers:  # an event a controller passes to its machines that nothing brings it
+            if ctrl is None:
+                continue
+            fed = {c.target_event for c in module.connections if c.target == name}
+            unfed = list(dict.fromkeys(c.source_event for c in ctrl.connections
+                                       if c.source == ctrl.name and c.source_event not in fed))
+            if unfed:
+                events, it = ("event", "it") if len(unfed) == 1 else ("events", "them")
+                self.diag.warning(loc, f"{where} connects nothing to {events} {', '.join(unfed)} of {name}: controller "
+                                       f"{ctrl.name} passes {it} to its machines, which never see {it} (add e.g. "
+                                       f"'connection {platform_node_name(module)} on {unfed[0]} to {name} on {unfed[0]} "
+                                       "(_async)')")
         self._connections(module.connections, endpoints, where, platform_node_name(module))
 
     def _controller_required_ops(self, ctrl: Controller) -> list[str]:
