@@ -71,3 +71,42 @@ def test_an_interrupted_threaded_sweep_keeps_its_answers_and_stops_at_once(tmp_p
         in rest and len(rows) > 1 and not out.exists()
     assert len(rows) - 1 < 150 and waited < 8.0, f"{len(rows) - 1} answered, {waited:.1f} s after the interrupt"
     assert "Traceback" not in rest
+
+
+def test_threads_read_fmu_model_descriptions_one_at_a_time(tmp_path, monkeypatch):
+    """A new user's sweep on 2 threads failed every what-if at random: 'cannot read .../dmodel.fmu: Internal error:
+    xmlSchemaPValAttrNodeValue, the given type is not a built-in type' (FMPy builds an XML Schema at every read and
+    libxml2 sets its built-in types up on first use without a lock). Reads of a model description never overlap."""
+    import threading
+
+    from cotwin.cosim import units
+
+    inside, most = [0], [0]
+    guard = threading.Lock()
+
+    def reading(path, *args, **kwargs):
+        with guard:
+            inside[0] += 1
+            most[0] = max(most[0], inside[0])
+        time.sleep(0.05)
+        with guard:
+            inside[0] -= 1
+        raise ValueError("not read")
+
+    monkeypatch.setattr(units, "read_model_description", reading)
+    fmu = tmp_path / "x.fmu"
+    fmu.write_bytes(b"")
+    said = []
+
+    def read():
+        try:
+            units.read_fmu("u", fmu)
+        except CotwinError as err:
+            said.append(str(err))
+
+    threads = [threading.Thread(target=read) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert most[0] == 1 and len(said) == 4 and all("cannot read" in s for s in said)

@@ -31,7 +31,7 @@ from ctypes import c_double, c_int, c_uint
 from pathlib import Path
 from typing import Callable, Sequence
 
-from fmpy import extract, read_model_description
+from fmpy import extract
 from fmpy.fmi3 import FMU3Slave, fmi3FMUState
 
 from ..diagnostics import CotwinError
@@ -39,7 +39,7 @@ from .state import pack, unpack
 from . import isolated
 from .isolated import DEFAULT_TIMEOUT
 from ..plaindata import StateError, count, fields, finite, of_type, port_value
-from .units import Port, Unit, UnitError, checked_value
+from .units import Port, Unit, UnitError, checked_value, model_description
 
 STATUS = ("fmi3OK", "fmi3Warning", "fmi3Discard", "fmi3Error", "fmi3Fatal")
 PORT_TYPE = {"Float64": "Real", "Float32": "Real", "Int8": "Integer", "UInt8": "Integer", "Int16": "Integer",
@@ -53,7 +53,7 @@ PERIODIC = ("constant", "fixed", "tunable")
 
 def fmi_version(path: str | Path) -> str:
     try:
-        return read_model_description(str(path)).fmiVersion
+        return model_description(path).fmiVersion
     except Exception as err:  # FMPy raises many kinds for a bad zip or XML
         raise CotwinError(f"cannot read {path}: {err}") from None
 
@@ -92,7 +92,7 @@ class FMU3Unit(Unit):
         if not self.path.is_file():
             raise CotwinError(f"unit {name}: no FMU at {self.path}")
         try:
-            self.md = read_model_description(str(self.path))
+            self.md = model_description(self.path)
         except Exception as err:
             raise CotwinError(f"unit {name}: cannot read {self.path}: {err}") from None
         if not self.md.fmiVersion.startswith("3.") or self.md.coSimulation is None:

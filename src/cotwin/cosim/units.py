@@ -12,6 +12,7 @@ import math
 import shutil
 import itertools
 import logging
+import threading
 import weakref
 from collections import deque
 from ctypes import (POINTER, byref, c_bool, c_char_p, c_double, c_int, c_int64, c_size_t, c_uint, c_void_p,
@@ -264,13 +265,25 @@ class BoundByNames:
         return dict(zip(names, read()))
 
 
+_DESCRIBING = threading.Lock()
+
+
+def model_description(path: Path | str):
+    """FMPy's reading of an FMU's model description, one thread at a time: FMPy builds an XML Schema for every
+    read, and libxml2 sets up its built-in schema types on first use without a lock, so two threads reading at
+    once (a sweep on threads) failed at random ('xmlSchemaPValAttrNodeValue, the given type is not a built-in
+    type', 'Document is not valid XML Schema')."""
+    with _DESCRIBING:
+        return read_model_description(str(path))
+
+
 def read_fmu(name: str, path: Path):
     """An FMU's model description, its ports (Real, Integer and Boolean inputs, outputs and parameters) by
     name and their value references; CotwinError naming unit `name` for a file that is no co-simulation FMU."""
     if not path.is_file():
         raise CotwinError(f"unit {name}: no FMU at {path}")
     try:
-        md = read_model_description(str(path))
+        md = model_description(path)
     except Exception as err:  # FMPy raises many kinds for a bad zip or XML
         raise CotwinError(f"unit {name}: cannot read {path}: {err}") from None
     if md.coSimulation is None:
