@@ -206,3 +206,35 @@ def _examples():
     from conftest import EXAMPLES
 
     return EXAMPLES / "ur5e"
+
+
+def test_a_joint_started_at_its_limit_does_not_stall_the_solver(tmp_path):
+    """A new user's arm with a lift (a prismatic joint, 0 to 0.25 m) whose reference is its lower limit: a target
+    the arm reaches with the lift 3 mm up was 'unreachable' (12 mm off, lift 0), every start stalled as Newton's step
+    pushed the lift below its limit, was clipped back and never lowered the error. A joint at its limit pushed
+    beyond it is left out of that step."""
+    from cotwin.pmodel.urdf_import import import_urdf
+
+    def link(name, z):
+        return (f"<link name='{name}'><inertial><origin xyz='0 0 {z}'/><mass value='1'/><inertia ixx='0.01' ixy='0' "
+                f"ixz='0' iyy='0.01' iyz='0' izz='0.01'/></inertial></link>")
+
+    def joint(name, kind, parent, child, xyz, axis, limits="lower='-2.5' upper='2.5'"):
+        return (f"<joint name='{name}' type='{kind}'><parent link='{parent}'/><child link='{child}'/>"
+                f"<origin xyz='{xyz}'/><axis xyz='{axis}'/><limit {limits} effort='50' velocity='1'/></joint>")
+
+    urdf = tmp_path / "lift.urdf"
+    urdf.write_text("<robot name='lift'>" + "".join(link(n, 0.05) for n in ("p", "t", "c", "u", "f", "a", "b"))
+                    + "<link name='tip'/>"
+                    + joint("swivel", "revolute", "p", "t", "0 0 0.1", "0 0 1")
+                    + joint("lift", "prismatic", "t", "c", "0 0 0.2", "0 0 1", "lower='0' upper='0.25'")
+                    + joint("shoulder", "revolute", "c", "u", "0 0 0.3", "0 1 0")
+                    + joint("elbow", "revolute", "u", "f", "0.3 0 0", "0 1 0")
+                    + joint("pitch", "revolute", "f", "a", "0.25 0 0", "0 1 0")
+                    + joint("roll", "revolute", "a", "b", "0.05 0 0", "1 0 0", "lower='-3.2' upper='3.2'")
+                    + "<joint name='mount' type='fixed'><parent link='b'/><child link='tip'/><origin xyz='0.08 0 0'/>"
+                    + "</joint></robot>")
+    tree = build_tree(load_checked([import_urdf(urdf, tmp_path / "out").file]))
+    found = ik.Solver(tree, ik.find_tool(tree)).branch(CellGeometry().target_pose((0.4, 0.0, 0.5)))
+    assert found.position_error < 1e-9 and found.angle_error < 1e-9, found
+    assert 0.0 < found.q["lift"] < 0.25

@@ -136,6 +136,29 @@ def test_modules_platform_references_and_connections(tmp_path):
     assert any("must not have a state machine outside a controller" in m for *_, m in errors(check_paths([tmp_path])))
 
 
+def test_an_input_event_the_controller_connects_to_nothing_is_warned_of_at_the_machine_reference(tmp_path):
+    """A new user's controller without its connections checked clean, verified 'never reached', and ran with every
+    command 'not taken (the d-model was in state Ready)': an input event of a machine's input context that no
+    connection of its controller brings never occurs. It is a warning at the machine's reference, naming the events."""
+    files = machine("""	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $go /\\ not $stop }""")
+    (tmp_path / "m.rst").write_text(files["m.rst"])
+    assert not [f for f in check_paths([tmp_path]).findings if "connects nothing" in f.message]
+    (tmp_path / "m.rst").write_text(files["m.rst"].replace("\tconnection C on stop to m on stop\n", ""))
+    said = [(f.severity, f.location.line, f.message) for f in check_paths([tmp_path]).findings
+            if "connects nothing" in f.message]
+    assert said == [(Severity.WARNING, 7, "controller C connects nothing to input event stop of m: it never occurs "
+                     "in M (add e.g. 'connection C on stop to m on stop (_async)')")]
+    # and an event the controller passes on that the module connects to nothing
+    (tmp_path / "m.rst").write_text(files["m.rst"].replace("\tconnection P on stop to c on stop (_async)\n", ""))
+    said = [(f.severity, f.location.line, f.message) for f in check_paths([tmp_path]).findings
+            if "connects nothing" in f.message]
+    assert said == [(Severity.WARNING, 17, "module Mod connects nothing to event stop of c: controller C passes it to its "
+                     "machines, which never see it (add e.g. 'connection P on stop to c on stop (_async)')")]
+
+
 def test_operations_definitions_references_and_calls(tmp_path):
     extra = """interface Shared { var n: int }
 interface Soft { add(k: int) twice(k: int) }

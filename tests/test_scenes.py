@@ -114,6 +114,22 @@ def test_auto_chooses_the_kind_that_fits_the_mapping_and_floor_is_an_empty_floor
     assert floor.obstacle_names == [] and floor.geometry is None and floor.drawing() is None
 
 
+def test_auto_puts_a_free_base_that_nothing_else_fits_on_a_floor(tmp_path):
+    """A new user's mobile robot (base = "free", no world, a mapping no scene kind fits) got scene 'none' and fell
+    for ever (its base at z = -314 m after 8 s) while its commands all 'completed'. "auto" puts it on a floor;
+    named "none" it is still none, and a fixed base stays without one."""
+    from cotwin.twin.assembly.run import load
+
+    walk = ROOT / "examples" / "turtlebot"
+    models = "\n".join(f'{k} = "{walk / v}"' for k, v in (("dmodel", "random_walk.rst"),
+                                                         ("pmodel", "turtlebot3_burger.pm"), ("mapping", "walk_mapping.pm")))
+    for platform, kind in (('base = "free"', "floor"), ('base = "free"\nscene = "none"', "none"), ("", "none")):
+        path = tmp_path / "mobile.toml"
+        path.write_text(f"[models]\n{models}\n[platform]\n{platform}\n[cosim]\nstep = 0.2\nend = 1.0\n")
+        scene = load(path).models.scene  # None: no scene
+        assert (scene.name if scene is not None else "none") == kind, platform
+
+
 def test_the_generic_core_names_no_example():
     """No file under src/cotwin names an example's robot, cell or world (they live in examples/ and in
     packages registering scene kinds, such as cotwin_cells); the one generic word allowed is the CSS

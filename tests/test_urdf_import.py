@@ -189,7 +189,8 @@ def test_the_exported_urdf_round_trips_kinematics_inertials_and_limits(imported,
         if name not in replaced:
             assert np.allclose(i2, inertia, atol=1e-12), link
             compared += 1
-    assert compared >= 4 and compared == len(theirs) - len(massless) - len(replaced & {pm.get(l, l) for l in theirs})
+    ours = {pm.get(l, l) for l in theirs}  # a link without <inertial> is imported massless too, and not compared
+    assert compared >= 4 and compared == len(theirs) - len(massless & ours) - len(replaced & ours)
 
 
 def test_each_moving_joint_is_commanded_and_read_through_its_paths(imported):
@@ -794,3 +795,40 @@ def test_a_forced_import_replaces_a_mesh_hard_linked_to_another_file_and_leaves_
     again = import_urdf(own_arm, out, [tmp_path / "src"], force=True)
     assert victim.read_text() == "precious"
     assert mesh in again.meshes and os.stat(mesh).st_nlink == 1 and mesh.read_bytes() != b"precious"
+
+
+def test_a_massless_tool_frame_is_imported_massless_not_as_a_one_kg_m2_flywheel(tmp_path):
+    """A URDF link without <inertial> is massless (a tool or sensor frame: tool0, tcp, a nozzle). Imported without
+    inertial information it took RoboTool's default, 1 kg m^2 about each axis: on a small arm's continuous wrist
+    that flywheel swung for ever and no move completed. It is imported as mass 0: the simulator's 1 kg with the
+    inertia of its geometry (a 5 cm sphere), with the zero mass warned of at the link."""
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text("<robot name='r'>\n"
+                    "<link name='a'><inertial><mass value='1'/><inertia ixx='0.01' ixy='0' ixz='0' iyy='0.01' iyz='0' "
+                    "izz='0.01'/></inertial></link>\n" + _links("tip") + "\n"
+                    + _joint("mount", "a", "tip", "fixed", "<origin xyz='0.1 0 0'/>") + "</robot>")
+    result = import_urdf(urdf, tmp_path / "out")
+    tree = build_tree(load_checked([result.file]))
+    tip = next(l for l in tree.links if l.name == "tip")
+    assert tip.mass == 1.0 and np.abs(tip.inertia).max() < 0.01, tip.inertia
+    said = "\n".join(f.message for f in result.findings)
+    assert "mass of link tip is 0" in said and "1 kg m^2" not in said
+
+
+def test_the_import_says_which_tool_link_and_arm_joints_the_ik_takes_by_default(tmp_path):
+    """Unitree's Z1 ends in a revolute jaw: the IK's default tool was the jaw, and the jaw its arm's 7th joint, without a
+    word. The import names the tool link and the arm's joints, and where another tool link is named."""
+    def link(name):
+        return (f"<link name='{name}'><inertial><mass value='1'/><inertia ixx='0.01' ixy='0' ixz='0' iyy='0.01' iyz='0' "
+                f"izz='0.01'/></inertial></link>")
+
+    names = ["base", "l1", "l2", "l3", "l4", "l5", "stator", "jaw"]
+    joints = [_joint(f"j{k + 1}", names[k], names[k + 1], "revolute",
+                     f"<origin xyz='0 0 0.1'/><axis xyz='{'0 0 1' if k % 2 == 0 else '0 1 0'}'/>"
+                     "<limit lower='-3' upper='3' effort='10' velocity='1'/>") for k in range(7)]
+    urdf = tmp_path / "jaw.urdf"
+    urdf.write_text("<robot name='jaw_arm'>" + "".join(map(link, names)) + "".join(joints) + "</robot>")
+    run = CliRunner().invoke(main, ["import-urdf", str(urdf), "-o", str(tmp_path / "out")])
+    assert run.exit_code == 0, run.output
+    assert ("inverse_kinematics: tool link jaw (the end of the longest chain of moving joints), arm joints j1, j2, j3, "
+            "j4, j5, j6, j7 (7); another tool link: [tool] link in the cell geometry (docs/calibration.md)") in run.output

@@ -38,6 +38,31 @@ def import_urdf(urdf: str, output: str, package_path: tuple[str, ...], force: bo
             base, _, command = d.command.rpartition("::")
             readings = ", ".join(r.rpartition("::")[2] for r in d.readings.values())
             click.echo(f"  {d.joint} ({d.kind}): {base}::{{{command}; {readings}}}")
+        said = _ik_tool(result.file)
+        if said:
+            click.echo(said)
     else:
         click.echo("no moving joint: nothing for a mapping to command")
     report(result.findings)
+
+
+def _ik_tool(pmodel) -> str | None:
+    """Which link inverse_kinematics takes as the tool by default and so which joints are its arm: a jaw or a
+    sensor frame at the end of the longest chain was taken silently (a gripper's revolute jaw as a 7th arm joint)."""
+    from ..diagnostics import CotwinError
+    from ..pmodel import ik
+    from ..pmodel.tree import build_tree
+    from ..robosim.check import load_checked
+
+    try:
+        tree = build_tree(load_checked([pmodel]))
+        tool = ik.find_tool(tree)
+    except CotwinError:  # the p-model's own problems are reported with the import's findings
+        return None
+    arm = ik.arm_joints(tree, tool)
+    if len(arm) < ik.FULL_POSE_JOINTS:  # no arm for the IK (a mobile base, a hand): nothing to say
+        return None
+    why = (f"the link carrying the fingers {', '.join(tool.fingers)}" if tool.fingers
+           else "the end of the longest chain of moving joints")
+    return (f"inverse_kinematics: tool link {tool.link} ({why}), arm joints {', '.join(arm)} ({len(arm)}); "
+            "another tool link: [tool] link in the cell geometry (docs/calibration.md)")

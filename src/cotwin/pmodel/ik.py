@@ -454,6 +454,11 @@ class Solver:
             if norm < self.TOLERANCE:
                 break
             step = J.T @ np.linalg.solve(J @ J.T + damping * np.eye(6), e)
+            pinned = ((q <= chain.lower) & (step < 0)) | ((q >= chain.upper) & (step > 0))
+            if pinned.any():  # a joint at its limit pushed beyond it: solve without it (else the clipped step
+                # never lowers the error and the damping grows until the start is given up)
+                free = J * ~pinned
+                step = free.T @ np.linalg.solve(free @ free.T + damping * np.eye(6), e)
             largest = np.abs(step).max()
             if largest > 0.5:
                 step *= 0.5 / largest

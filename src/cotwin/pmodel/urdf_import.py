@@ -408,6 +408,9 @@ class Writer:
             matrix = " ".join(f"{k} = {num(i.inertia[k])}" for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))
             definition += ["\t\t\tinertial information {", f"\t\t\t\tmass {num(i.mass)} kg",
                            f"\t\t\t\tinertia matrix {{ {matrix} }}", *origin_block(i.origin, "\t\t\t\t"), "\t\t\t}"]
+        else:  # URDF's massless link (a tool or sensor frame): mass 0, not RoboTool's 1 kg and 1 kg m^2 for a
+            # link without inertial information, which made a massless tool frame a flywheel on the wrist
+            definition += ["\t\t\tinertial information {", "\t\t\t\tmass 0 kg", "\t\t\t}"]
         for shape in link.visuals:
             definition += self.visual(shape)
         if definition:

@@ -13,7 +13,7 @@ from __future__ import annotations
 from . import syntax as s
 from .checker import Checker
 from .consteval import ConstError, const_env, evaluate
-from .declarations import EnumDecl, FunctionDecl, RecordDecl
+from .declarations import EnumDecl, EventDecl, FunctionDecl, RecordDecl
 from .dmodel_elements import (
     Connection, Controller, Final, Initial, Interface, Junction, Module, OperationDef, RoboticPlatform, State,
     StateMachine,
@@ -176,6 +176,18 @@ class DModelChecker(Checker):
                 if missing:
                     self.diag.error(loc, f"{where} does not provide operation(s) {', '.join(missing)} that "
                                          f"controller {ctrl.name} requires")
+        for name, ctrl, loc in controllers:  # an event a controller passes to its machines that nothing brings it
+            if ctrl is None:
+                continue
+            fed = {c.target_event for c in module.connections if c.target == name}
+            unfed = list(dict.fromkeys(c.source_event for c in ctrl.connections
+                                       if c.source == ctrl.name and c.source_event not in fed))
+            if unfed:
+                events, it = ("event", "it") if len(unfed) == 1 else ("events", "them")
+                self.diag.warning(loc, f"{where} connects nothing to {events} {', '.join(unfed)} of {name}: controller "
+                                       f"{ctrl.name} passes {it} to its machines, which never see {it} (add e.g. "
+                                       f"'connection {platform_node_name(module)} on {unfed[0]} to {name} on {unfed[0]} "
+                                       "(_async)')")
         self._connections(module.connections, endpoints, where, platform_node_name(module))
 
     def _controller_required_ops(self, ctrl: Controller) -> list[str]:
@@ -272,7 +284,27 @@ class DModelChecker(Checker):
             if unprovided:
                 self.diag.error(loc, f"{ctrl.name} does not provide operation(s) {', '.join(unprovided)} that "
                                      f"{machine.name} requires (require them, or define them with operation/opref)")
+            # an input event of the machine's input context that no connection of the controller brings: it
+            # never occurs there, and its commands are 'not taken' with no word why
+            fed = {c.target_event for c in ctrl.connections if c.target == name} | {
+                c.source_event for c in ctrl.connections if c.source == name and c.bidirectional}
+            unfed = [ev for ev in self._context_inputs(machine, source) if ev not in fed]
+            if unfed:
+                events, they = ("input event", "it never occurs") if len(unfed) == 1 else ("input events", "they never occur")
+                self.diag.warning(loc, f"{where} connects nothing to {events} {', '.join(unfed)} of {name}: {they} in "
+                                       f"{machine.name} (add e.g. 'connection {ctrl.name} on {unfed[0]} to {name} on "
+                                       f"{unfed[0]} (_async)')")
         self._connections(ctrl.connections, endpoints, where)
+
+    def _context_inputs(self, machine: StateMachine, source) -> list[str]:
+        """The events of a machine's input context (its own and its interfaces'): events it only takes."""
+        names: dict[str, None] = {}  # in the order written
+        for item in machine.input_context:
+            if isinstance(item, EventDecl):
+                names[item.name] = None
+            elif (interface := interface_of(self.project, item, source, None)) is not None:
+                names.update((ev.name, None) for ev in interface.events)
+        return list(names)
 
     # ---- state machines ----
     def _check_OperationDef(self, machine) -> None:

@@ -178,13 +178,16 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
 
 def build_scene(spec: TwinProject, mapping, calibration=None):
     """The scene around the robot: the kind `[platform] scene` names (cotwin.pmodel.scenes, "auto": the
-    world if the project gives one, else a registered kind that fits the mapping, else none), built from
+    world if the project gives one, else a registered kind that fits the mapping, else a floor under a free
+    base, else none), built from
     the mapping, the `[scene]` table and the calibrated cell geometry."""
     from ...pmodel import scenes
 
     request = scenes.SceneRequest(mapping, dict(spec.scene_options), calibration.geometry if calibration else None,
                                   spec.world, spec.path.parent, spec.location)
     kind = scenes.choose_kind(spec.scene, request, spec.location("platform", "scene"))
+    if spec.scene == "auto" and spec.base == "free" and kind.name == "none":  # a mobile robot fell for ever
+        kind = scenes.scene_kind("floor")
     if spec.world is not None and kind.name != "world":
         what, at = ("[platform] world", spec.location("platform", "world")) if spec.world_file else \
             ("[world]", spec.location("world"))

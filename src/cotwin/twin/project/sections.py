@@ -259,7 +259,8 @@ class Platform:
     url: str = setting("broker: the broker's URL", Key("str", URL, check=_amqp_url))
     scene: str = setting('around the robot: a scene kind by name (cotwin.pmodel.scenes: "none", "floor", "world" '
                          '(a world file or [world] table), or one an installed package registers); "auto": the '
-                         "world if one is given, else a registered kind that fits the mapping, else none",
+                         "world if one is given, else a registered kind that fits the mapping, else a floor under a free base "
+                         "(a mobile robot would fall for ever), else none",
                          Key("str", "auto", check=_name))
     calibration: str | None = setting("a calibration file (docs/calibration.md)", Key("str"), path=True)
     world: str | None = setting("a world file (cotwin.pmodel.world); or a [world] table here", Key("str"), path=True)
