@@ -9,6 +9,7 @@ in place whole, so that processes building the same source at once never load ha
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import hashlib
 import os
@@ -28,6 +29,29 @@ def compiler() -> str | None:
     return shutil.which("cc") or shutil.which("gcc")
 
 
+def _folders() -> list[Path]:
+    """Where built libraries are kept, in the order tried: cotwin's cache, then a temporary folder (no cache, or
+    one that cannot be written: read-only, full, COTWIN_CACHE naming a file)."""
+    cache = cache_dir()
+    temporary = Path(tempfile.gettempdir()) / f"cotwin-native-{os.getuid()}"
+    return [cache / "native", temporary] if cache is not None else [temporary]
+
+
+def _placed(built: Path, target: Path) -> bool:
+    """`built` copied to `target` whole (also when another process or thread builds it at the same time); False
+    when `target`'s folder cannot be written."""
+    staged = target.with_name(f".{target.name}.{os.getpid()}.{threading.get_ident()}")  # threads of a sweep too
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(built, staged)
+        os.replace(staged, target)
+        return True
+    except OSError:
+        with contextlib.suppress(OSError):  # ENOTDIR when the cache is a file
+            staged.unlink(missing_ok=True)
+        return False
+
+
 def compile_library(source: str, stem: str, keep_gil: bool = True, include_dirs: tuple[str, ...] = ()) -> ctypes.CDLL:
     """`source` built into a shared library (cached: see the module doc) and loaded; its calls hold the GIL
     (`keep_gil`: they call Python's C API) or release it (a callback into Python, e.g. an FMU's logger, takes
@@ -38,11 +62,9 @@ def compile_library(source: str, stem: str, keep_gil: bool = True, include_dirs:
     if cc is None:
         raise ValueError("no C compiler (cc) on this machine")
     digest = hashlib.sha256("\0".join([source, *include_dirs]).encode()).hexdigest()[:20]
-    folder = cache_dir()
-    folder = (folder / "native") if folder is not None else Path(tempfile.gettempdir()) / f"cotwin-native-{os.getuid()}"
-    target = folder / f"{stem}-{digest}.so"
-    if not target.is_file():
-        folder.mkdir(parents=True, exist_ok=True)
+    places = [folder / f"{stem}-{digest}.so" for folder in _folders()]
+    target = next((place for place in places if place.is_file()), None)
+    if target is None:
         with tempfile.TemporaryDirectory(prefix="cotwin-cc-") as tmp:
             path = Path(tmp) / f"{stem}.c"
             path.write_text(source)
@@ -54,7 +76,7 @@ def compile_library(source: str, stem: str, keep_gil: bool = True, include_dirs:
                 raise ValueError(f"the native {stem} could not be compiled: {err}") from None
             if proc.returncode != 0 or not built.is_file():
                 raise ValueError(f"the native {stem} did not compile: {proc.stderr.strip()[:400]}")
-            staged = folder / f".{target.name}.{os.getpid()}.{threading.get_ident()}"  # threads of a sweep too
-            shutil.copy(built, staged)
-            os.replace(staged, target)  # whole, also when another process builds it at the same time
+            target = next((place for place in places if _placed(built, place)), built)
+            if target == built:  # nowhere to keep it: loaded from here (a loaded library outlives its file)
+                return (ctypes.PyDLL if keep_gil else ctypes.CDLL)(str(target))
     return (ctypes.PyDLL if keep_gil else ctypes.CDLL)(str(target))
