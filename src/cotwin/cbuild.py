@@ -29,12 +29,18 @@ def compiler() -> str | None:
     return shutil.which("cc") or shutil.which("gcc")
 
 
-def _folders() -> list[Path]:
-    """Where built libraries are kept, in the order tried: cotwin's cache, then a temporary folder (no cache, or
-    one that cannot be written: read-only, full, COTWIN_CACHE naming a file)."""
+def _folder() -> Path:
+    """Where a built library is kept: cotwin's cache, or a temporary folder when there is none or it cannot be
+    written (read-only, COTWIN_CACHE naming a file): the cache is an optimisation, never a failure."""
     cache = cache_dir()
-    temporary = Path(tempfile.gettempdir()) / f"cotwin-native-{os.getuid()}"
-    return [cache / "native", temporary] if cache is not None else [temporary]
+    if cache is not None:
+        try:
+            (cache / "native").mkdir(parents=True, exist_ok=True)
+            if os.access(cache / "native", os.W_OK):
+                return cache / "native"
+        except OSError:
+            pass
+    return Path(tempfile.gettempdir()) / f"cotwin-native-{os.getuid()}"
 
 
 def _placed(built: Path, target: Path) -> bool:
@@ -62,9 +68,12 @@ def compile_library(source: str, stem: str, keep_gil: bool = True, include_dirs:
     if cc is None:
         raise ValueError("no C compiler (cc) on this machine")
     digest = hashlib.sha256("\0".join([source, *include_dirs]).encode()).hexdigest()[:20]
-    places = [folder / f"{stem}-{digest}.so" for folder in _folders()]
-    target = next((place for place in places if place.is_file()), None)
-    if target is None:
+    name = f"{stem}-{digest}.so"
+    cache = cache_dir()
+    target = cache / "native" / name if cache is not None else None  # a read-only cache may hold it
+    if target is None or not target.is_file():
+        target = _folder() / name
+    if not target.is_file():
         with tempfile.TemporaryDirectory(prefix="cotwin-cc-") as tmp:
             path = Path(tmp) / f"{stem}.c"
             path.write_text(source)
@@ -76,7 +85,6 @@ def compile_library(source: str, stem: str, keep_gil: bool = True, include_dirs:
                 raise ValueError(f"the native {stem} could not be compiled: {err}") from None
             if proc.returncode != 0 or not built.is_file():
                 raise ValueError(f"the native {stem} did not compile: {proc.stderr.strip()[:400]}")
-            target = next((place for place in places if _placed(built, place)), built)
-            if target == built:  # nowhere to keep it: loaded from here (a loaded library outlives its file)
-                return (ctypes.PyDLL if keep_gil else ctypes.CDLL)(str(target))
+            if not _placed(built, target):  # nowhere to keep it: loaded from here (a loaded library outlives its file)
+                return (ctypes.PyDLL if keep_gil else ctypes.CDLL)(str(built))
     return (ctypes.PyDLL if keep_gil else ctypes.CDLL)(str(target))
