@@ -9,6 +9,7 @@ import stat
 import subprocess
 import sys
 import zipfile
+from pathlib import Path
 
 import pytest
 from fmpy import extract, read_model_description
@@ -322,3 +323,27 @@ def test_without_a_cache_or_for_a_damaged_one_an_instance_has_its_own_folder(pro
     assert unit.folder != shared and os.path.isfile(os.path.join(unit.folder, "modelDescription.xml"))
     unit.initialize()
     unit.terminate()
+
+
+@pytest.mark.parametrize("cache", ["read-only", "a file"])
+def test_a_cache_that_cannot_be_written_gives_an_instance_its_own_folder(program, fmu, tmp_path, monkeypatch, cache):
+    """The cache is an optimisation: a read-only cache folder, or COTWIN_CACHE naming a file, failed the run
+    ('extract failed at t = 0 s: [Errno 20] Not a directory: .../fmu')."""
+    if cache == "a file":
+        (tmp_path / "cache").write_text("not a folder")
+    monkeypatch.setenv("COTWIN_CACHE", str(tmp_path / "cache"))
+
+    def refused(folder, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(folder))
+
+    if cache == "read-only":  # chmod 555 does not stop root, who may run the tests: the refusal made by hand
+        monkeypatch.setattr(Path, "mkdir", refused)
+    unit = FMUUnit("a", fmu)
+    unit.instantiate(0.0)
+    own = unit.folder
+    assert os.path.isfile(os.path.join(own, "modelDescription.xml")) and not own.startswith(str(tmp_path / "cache"))
+    unit.initialize()
+    unit.step(0.0, 1.0)
+    unit.terminate()
+    assert not os.path.exists(own)  # removed with the instance
+    assert not list(tmp_path.glob("cache/fmu/.*"))  # no staged folder left behind

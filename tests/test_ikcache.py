@@ -111,3 +111,39 @@ def test_caches_of_one_file_saved_in_turn_keep_each_others_solutions(tmp_path):
     second.save()
     again = SolutionCache(FINGERPRINT, tmp_path)
     assert again.loaded == 2 and again.get("a") == again.get("b") == SOLUTION
+
+
+def test_a_process_saving_the_file_meanwhile_keeps_its_solutions(tmp_path, monkeypatch):
+    """A pool's workers end their chunks at once: another process saving between this one's reading the file and
+    writing it lost its solutions (the lock of 407dcd5 held only this process's threads)."""
+    import subprocess
+    import sys
+
+    from cotwin.pmodel import ikcache
+
+    child = ("import sys; from cotwin.pmodel.ikcache import SolutionCache; from pathlib import Path; "
+             f"c = SolutionCache({FINGERPRINT!r}, Path(sys.argv[1])); c.put('b', {SOLUTION!r}); "
+             "print('ready', flush=True); c.save()")
+    read = ikcache._stored
+    other = []
+
+    def meanwhile(path, fingerprint):  # this save has read the file: the other process saves now
+        found = read(path, fingerprint)
+        proc = subprocess.Popen([sys.executable, "-c", child, str(tmp_path)], stdout=subprocess.PIPE, text=True,
+                                env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+        assert proc.stdout.readline().strip() == "ready"
+        try:
+            proc.wait(timeout=1.5)  # done at once unless it waits for this save
+        except subprocess.TimeoutExpired:
+            pass
+        other.append(proc)
+        return found
+
+    first = SolutionCache(FINGERPRINT, tmp_path)
+    first.put("a", SOLUTION)
+    monkeypatch.setattr(ikcache, "_stored", meanwhile)
+    first.save()
+    monkeypatch.setattr(ikcache, "_stored", read)
+    assert other[0].wait(timeout=60) == 0
+    again = SolutionCache(FINGERPRINT, tmp_path)
+    assert again.loaded == 2 and again.get("a") == again.get("b") == SOLUTION

@@ -233,9 +233,11 @@ def test_the_threads_fork_their_sweeps_twin_whatever_another_sweep_loads_meanwhi
     assert not [r for r in rows if r.get("error")], rows
 
 
-def test_a_second_interrupt_as_the_process_exits_prints_no_traceback(tmp_path):
+@pytest.mark.parametrize("second", [signal.SIGINT, signal.SIGTERM])
+def test_a_second_interrupt_as_the_process_exits_prints_no_traceback(tmp_path, second):
     """Ctrl-C twice quickly: the second, reaching the interpreter's exit (an atexit hook, as pythonfmu_exit's is),
-    printed 'Exception ignored in atexit callback' and a traceback."""
+    printed 'Exception ignored in atexit callback' and a traceback; so did a SIGTERM there (a service manager's
+    stop after a Ctrl-C), which cotwin takes as an interrupt."""
     import cotwin
 
     script = tmp_path / "exiting.py"
@@ -254,12 +256,12 @@ def test_a_second_interrupt_as_the_process_exits_prints_no_traceback(tmp_path):
                              "--threads", "2", "-o", str(tmp_path / "sweep.csv")],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
     seen = ""
-    for wanted in ("sweeping: 0/", "EXITING"):
+    for wanted, sent in (("sweeping: 0/", signal.SIGINT), ("EXITING", second)):
         while wanted not in seen:
             line = proc.stderr.readline()
             assert line, seen
             seen += line
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(sent)
     _, rest = proc.communicate(timeout=60)
     assert proc.returncode == 130, seen + rest
     assert "Traceback" not in seen + rest and "Exception ignored" not in seen + rest, seen + rest

@@ -9,6 +9,7 @@ in place whole, so that processes building the same source at once never load ha
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import hashlib
 import os
@@ -28,6 +29,35 @@ def compiler() -> str | None:
     return shutil.which("cc") or shutil.which("gcc")
 
 
+def _folder() -> Path:
+    """Where a built library is kept: cotwin's cache, or a temporary folder when there is none or it cannot be
+    written (read-only, COTWIN_CACHE naming a file): the cache is an optimisation, never a failure."""
+    cache = cache_dir()
+    if cache is not None:
+        try:
+            (cache / "native").mkdir(parents=True, exist_ok=True)
+            if os.access(cache / "native", os.W_OK):
+                return cache / "native"
+        except OSError:
+            pass
+    return Path(tempfile.gettempdir()) / f"cotwin-native-{os.getuid()}"
+
+
+def _placed(built: Path, target: Path) -> bool:
+    """`built` copied to `target` whole (also when another process or thread builds it at the same time); False
+    when `target`'s folder cannot be written."""
+    staged = target.with_name(f".{target.name}.{os.getpid()}.{threading.get_ident()}")  # threads of a sweep too
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(built, staged)
+        os.replace(staged, target)
+        return True
+    except OSError:
+        with contextlib.suppress(OSError):  # ENOTDIR when the cache is a file
+            staged.unlink(missing_ok=True)
+        return False
+
+
 def compile_library(source: str, stem: str, keep_gil: bool = True, include_dirs: tuple[str, ...] = ()) -> ctypes.CDLL:
     """`source` built into a shared library (cached: see the module doc) and loaded; its calls hold the GIL
     (`keep_gil`: they call Python's C API) or release it (a callback into Python, e.g. an FMU's logger, takes
@@ -38,11 +68,12 @@ def compile_library(source: str, stem: str, keep_gil: bool = True, include_dirs:
     if cc is None:
         raise ValueError("no C compiler (cc) on this machine")
     digest = hashlib.sha256("\0".join([source, *include_dirs]).encode()).hexdigest()[:20]
-    folder = cache_dir()
-    folder = (folder / "native") if folder is not None else Path(tempfile.gettempdir()) / f"cotwin-native-{os.getuid()}"
-    target = folder / f"{stem}-{digest}.so"
+    name = f"{stem}-{digest}.so"
+    cache = cache_dir()
+    target = cache / "native" / name if cache is not None else None  # a read-only cache may hold it
+    if target is None or not target.is_file():
+        target = _folder() / name
     if not target.is_file():
-        folder.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(prefix="cotwin-cc-") as tmp:
             path = Path(tmp) / f"{stem}.c"
             path.write_text(source)
@@ -54,7 +85,6 @@ def compile_library(source: str, stem: str, keep_gil: bool = True, include_dirs:
                 raise ValueError(f"the native {stem} could not be compiled: {err}") from None
             if proc.returncode != 0 or not built.is_file():
                 raise ValueError(f"the native {stem} did not compile: {proc.stderr.strip()[:400]}")
-            staged = folder / f".{target.name}.{os.getpid()}.{threading.get_ident()}"  # threads of a sweep too
-            shutil.copy(built, staged)
-            os.replace(staged, target)  # whole, also when another process builds it at the same time
+            if not _placed(built, target):  # nowhere to keep it: loaded from here (a loaded library outlives its file)
+                return (ctypes.PyDLL if keep_gil else ctypes.CDLL)(str(built))
     return (ctypes.PyDLL if keep_gil else ctypes.CDLL)(str(target))

@@ -18,11 +18,13 @@ def _terminate(signum, frame) -> None:
 
 
 def _interrupted() -> None:
-    """Exit 130 after an interrupt, deaf to another: a second Ctrl-C during the interpreter's exit (its atexit
-    hooks, e.g. cotwin.cosim.pythonfmu_exit's) printed 'Exception ignored in atexit callback' and a traceback."""
+    """Exit 130 after an interrupt, deaf to another: a second Ctrl-C, or a SIGTERM (an interrupt too, see
+    `entry`), during the interpreter's exit (its atexit hooks, e.g. cotwin.cosim.pythonfmu_exit's) printed
+    'Exception ignored in atexit callback' and a traceback."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     sys.exit(130)
 
 

@@ -17,7 +17,6 @@ import threading
 import zipfile
 import itertools
 import logging
-import threading
 import weakref
 from collections import deque
 from ctypes import (POINTER, byref, c_bool, c_char_p, c_double, c_int, c_int64, c_size_t, c_uint, c_void_p,
@@ -315,7 +314,8 @@ def _unpacked(path: Path, md, unzip_dir: str | None) -> tuple[str, bool]:
     FMU that may be instantiated more than once per process is extracted once per machine into cotwin's cache,
     under the digest of its bytes, and shared by every instance of it: its C keeps no state outside an instance
     and writes nothing into its folder, and extracting and removing its nine files cost each run about two
-    milliseconds. Any other FMU, or no cache (COTWIN_CACHE=off), gets a folder of its own, as FMPy makes it."""
+    milliseconds. Any other FMU, no cache (COTWIN_CACHE=off), or a cache that cannot be written (read-only, full,
+    a file) gets a folder of its own, as FMPy makes it: the cache is an optimisation, never a failure."""
     from ..files import cache_dir
 
     folder = cache_dir()
@@ -327,17 +327,19 @@ def _unpacked(path: Path, md, unzip_dir: str | None) -> tuple[str, bool]:
     binary = target / "binaries" / fmpy.platform / f"{md.coSimulation.modelIdentifier}{fmpy.sharedLibraryExtension}"
     if binary.is_file():
         return str(target), False
-    target.parent.mkdir(parents=True, exist_ok=True)
     staged = target.with_name(f".{target.name}.{os.getpid()}.{threading.get_ident()}")
-    shutil.rmtree(staged, ignore_errors=True)
-    with zipfile.ZipFile(io.BytesIO(data)) as archive:
-        archive.extractall(staged)
+    shutil.rmtree(staged, ignore_errors=True)  # a killed run's with this process's and thread's id
     try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        with zipfile.ZipFile(io.BytesIO(data)) as archive:
+            archive.extractall(staged)
         os.replace(staged, target)  # whole, also when another process or thread extracts it at the same time
-    except OSError:  # there already: another process or thread extracted it first (a folder is not replaced)
+    except OSError:  # there already (another process or thread extracted it first: a folder is not replaced), or
+        pass  # a cache that cannot be written
+    finally:
         shutil.rmtree(staged, ignore_errors=True)
-        if not binary.is_file():  # a folder of that name without the binary (damaged): this instance's own
-            return str(extract(str(path), None)), True
+    if not binary.is_file():  # not cached, or a folder of that name without the binary (damaged): this instance's own
+        return str(extract(str(path), None)), True
     return str(target), False
 
 

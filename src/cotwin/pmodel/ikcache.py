@@ -10,9 +10,11 @@ ignored (and rewritten), as is an entry that is not a solution as this module wr
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import threading
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..config import is_number
@@ -47,6 +49,16 @@ def _stored(path: Path, fingerprint: str) -> tuple[dict[str, dict], bool]:
 _SAVING = threading.Lock()  # a sweep's threads, each with its forks' cache of one file, save in turn
 
 
+@contextmanager
+def _saving(path: Path):
+    """The file at `path` for this save alone: another thread of this process (_SAVING) or another process (an
+    flock on a file beside it: a pool's workers end their chunks at once) saving it waits, and so merges what this
+    one wrote instead of writing over it."""
+    with _SAVING, open(path.with_name(f"{path.name}.lock"), "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released as the file closes
+        yield
+
+
 class SolutionCache:
     """Solutions (plain data) by target key, for one solver fingerprint."""
 
@@ -78,7 +90,7 @@ class SolutionCache:
             return
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            with _SAVING:  # with the solutions saved since this cache was read (another thread's forks'), not over them
+            with _saving(self.path):  # with the solutions saved since this cache was read (another thread's or process's)
                 self.entries = {**_stored(self.path, self.fingerprint)[0], **self.entries}
                 part = self.path.with_name(f"{self.path.name}.{os.getpid()}.{threading.get_ident()}.part")  # per thread
                 part.write_text(json.dumps({"fingerprint": self.fingerprint, "solutions": self.entries}))
