@@ -8,6 +8,8 @@ import secrets
 import random
 import re
 import shutil
+import subprocess
+import sys
 import tempfile
 from collections import Counter
 from pathlib import Path
@@ -186,3 +188,37 @@ def cotwin_in_process(*args, cwd=None, env: dict[str, str] | None = None):
         sys.stderr.flush()
         stdout, stderr = out.getvalue().decode(), err.getvalue().decode()
     return subprocess.CompletedProcess(argv, code, stdout, stderr)
+
+
+def interrupted_sweep(project: Path, tmp_path: Path, *options: str) -> tuple[subprocess.Popen, str, float, list[int]]:
+    """`cotwin sweep` of 192 holes with `options` (--workers N, --threads N) sent Ctrl-C once some what-ifs are
+    answered; checks the interrupted sweep's exit, message and partial CSV (the answers kept, not the output) and
+    gives the process, its stderr after the interrupt, the seconds it took to end and its children then."""
+    import signal
+    import time
+
+    out = tmp_path / "sweep.csv"
+    env = {**os.environ, "COTWIN_PROGRESS_SECONDS": "0.2"}
+    proc = subprocess.Popen([sys.executable, "-m", "cotwin", "sweep", str(project), "--event", "moveDiscreteCommand",
+                             "--arg", "target_X=0..15", "--arg", "target_Y=0..11", "--arg", "target_Z=0", "-o", str(out),
+                             "--horizon", "5", "--physics-step", "0.0002", *options],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    seen = ""
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:  # until some what-ifs are answered
+        line = proc.stderr.readline()
+        seen += line
+        if not line or line.startswith("sweeping: ") and not line.startswith("sweeping: 0/"):
+            break
+    children = [int(pid) for pid in Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()]
+    interrupted = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    rest = proc.communicate(timeout=120)[1]
+    waited = time.monotonic() - interrupted
+    partial = tmp_path / "sweep.partial.csv"
+    assert proc.returncode == 130, seen + rest
+    rows = partial.read_text().splitlines()
+    assert f"error: interrupted after {len(rows) - 1} of 192 what-ifs; the {len(rows) - 1} answered are in {partial}" \
+        in rest and len(rows) > 1 and not out.exists()
+    assert len(rows) - 1 < 150 and waited < 8.0, f"{len(rows) - 1} answered, {waited:.1f} s after the interrupt"
+    return proc, rest, waited, children

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import EXAMPLES
+from conftest import EXAMPLES, interrupted_sweep
 from cotwin.diagnostics import CotwinError
 from cotwin.twin.analysis.sweep import grid, run_sweep
 from cotwin.twin.assembly.run import load
@@ -48,29 +48,7 @@ def test_threads_are_one_process_not_with_a_pool_or_ray():
 
 
 def test_an_interrupted_threaded_sweep_keeps_its_answers_and_stops_at_once(tmp_path):
-    out = tmp_path / "sweep.csv"
-    env = {**os.environ, "COTWIN_PROGRESS_SECONDS": "0.2"}
-    proc = subprocess.Popen([sys.executable, "-m", "cotwin", "sweep", str(PROJECT), "--event", "moveDiscreteCommand",
-                             "--arg", "target_X=0..15", "--arg", "target_Y=0..11", "--arg", "target_Z=0", "-o", str(out),
-                             "--threads", "2", "--horizon", "5", "--physics-step", "0.0002"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
-    seen = ""
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline:  # until some what-ifs are answered
-        line = proc.stderr.readline()
-        seen += line
-        if not line or line.startswith("sweeping: ") and not line.startswith("sweeping: 0/"):
-            break
-    interrupted = time.monotonic()
-    proc.send_signal(signal.SIGINT)
-    stdout, rest = proc.communicate(timeout=120)
-    waited = time.monotonic() - interrupted
-    partial = tmp_path / "sweep.partial.csv"
-    assert proc.returncode == 130, seen + rest
-    rows = partial.read_text().splitlines()
-    assert f"error: interrupted after {len(rows) - 1} of 192 what-ifs; the {len(rows) - 1} answered are in {partial}" \
-        in rest and len(rows) > 1 and not out.exists()
-    assert len(rows) - 1 < 150 and waited < 8.0, f"{len(rows) - 1} answered, {waited:.1f} s after the interrupt"
+    _, rest, _, _ = interrupted_sweep(PROJECT, tmp_path, "--threads", "2")
     assert "Traceback" not in rest
 
 

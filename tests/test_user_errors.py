@@ -148,34 +148,12 @@ def test_monitor_joints_and_figure_panels_are_said_at_their_keys_with_the_neares
 def test_an_interrupted_sweep_keeps_the_what_ifs_it_answered(ur5e, tmp_path):
     """Ctrl-C in a sweep said 'interrupted' and wrote nothing: every what-if answered was lost. With workers,
     it then waited for every chunk queued (tens of seconds) and threw their answers away: it stops them."""
-    import os
-    import signal
     import time
 
-    out = tmp_path / "sweep.csv"
-    env = {**os.environ, "COTWIN_PROGRESS_SECONDS": "0.2"}
-    proc = subprocess.Popen([sys.executable, "-m", "cotwin", "sweep", str(ur5e / "cotwin.toml"), "--event",
-                             "moveDiscreteCommand", "--arg", "target_X=0..15", "--arg", "target_Y=0..11", "--arg",
-                             "target_Z=0", "-o", str(out), "--workers", "2", "--horizon", "5", "--physics-step",
-                             "0.0002"], stderr=subprocess.PIPE, text=True, env=env)
-    seen = ""
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline:  # until some what-ifs are answered
-        line = proc.stderr.readline()
-        seen += line
-        if line.startswith("sweeping: ") and not line.startswith("sweeping: 0/"):
-            break
-    workers = [int(pid) for pid in Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()]
-    interrupted = time.monotonic()
-    proc.send_signal(signal.SIGINT)
-    rest = proc.communicate(timeout=120)[1]
-    waited = time.monotonic() - interrupted
-    partial = tmp_path / "sweep.partial.csv"
-    assert proc.returncode == 130, seen + rest
-    rows = partial.read_text().splitlines()
-    assert f"error: interrupted after {len(rows) - 1} of 192 what-ifs; the {len(rows) - 1} answered are in {partial}" \
-        in rest and len(rows) > 1 and not out.exists()
-    assert len(rows) - 1 < 150 and waited < 8.0, f"{len(rows) - 1} answered, {waited:.1f} s after the interrupt"
+    from conftest import interrupted_sweep
+
+    _, _, _, workers = interrupted_sweep(ur5e / "cotwin.toml", tmp_path, "--workers", "2")
+
     def running(pid: int) -> bool:
         try:
             return "zombie" not in Path(f"/proc/{pid}/status").read_text()

@@ -9,17 +9,16 @@ in place whole, so that processes building the same source at once never load ha
 
 from __future__ import annotations
 
-import contextlib
 import ctypes
 import hashlib
 import os
 import shutil
 import subprocess
 import tempfile
-import threading
 from pathlib import Path
 
-from .files import cache_dir
+from .diagnostics import CotwinError
+from .files import cache_dir, write_bytes
 
 FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
 
@@ -44,17 +43,12 @@ def _folder() -> Path:
 
 
 def _placed(built: Path, target: Path) -> bool:
-    """`built` copied to `target` whole (also when another process or thread builds it at the same time); False
-    when `target`'s folder cannot be written."""
-    staged = target.with_name(f".{target.name}.{os.getpid()}.{threading.get_ident()}")  # threads of a sweep too
+    """`built` copied to `target` whole (files.write_bytes: also when another process or thread builds it at the
+    same time); False when `target`'s folder cannot be written."""
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy(built, staged)
-        os.replace(staged, target)
+        write_bytes(target, built.read_bytes())
         return True
-    except OSError:
-        with contextlib.suppress(OSError):  # ENOTDIR when the cache is a file
-            staged.unlink(missing_ok=True)
+    except (OSError, CotwinError):  # ENOTDIR when the cache is a file
         return False
 
 

@@ -266,7 +266,7 @@ class NativeLoop:
         n = self.quiet(min(n, MAX_SEGMENT))
         if n <= 0:
             return 0
-        with _signals_held():
+        with signals_held():
             return self._run(n)
 
     def _run(self, n: int) -> int:
@@ -400,7 +400,7 @@ class NativeLoop:
 
 
 @contextmanager
-def _signals_held():
+def signals_held():
     """SIGINT and SIGTERM, where Python handles them, held until the block ends, then handled as they would
     have been: an interrupt never falls between a stretch's steps committed and told (main thread only)."""
     if threading.current_thread() is not threading.main_thread():

@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import fcntl
 import json
-import os
 import threading
 from contextlib import contextmanager
 from pathlib import Path
 
 from ..config import is_number
-from ..files import cache_dir  # noqa: F401 - where callers have found it
+from ..diagnostics import CotwinError
+from ..files import cache_dir, write_text  # noqa: F401 - cache_dir: where callers have found it
 
 
 def _solution(entry) -> bool:
@@ -92,9 +92,7 @@ class SolutionCache:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             with _saving(self.path):  # with the solutions saved since this cache was read (another thread's or process's)
                 self.entries = {**_stored(self.path, self.fingerprint)[0], **self.entries}
-                part = self.path.with_name(f"{self.path.name}.{os.getpid()}.{threading.get_ident()}.part")  # per thread
-                part.write_text(json.dumps({"fingerprint": self.fingerprint, "solutions": self.entries}))
-                part.replace(self.path)
+                write_text(self.path, json.dumps({"fingerprint": self.fingerprint, "solutions": self.entries}))
             self._dirty = False
-        except OSError:  # a read-only home: the cache is an optimisation, never a failure
+        except (OSError, CotwinError):  # a read-only home: the cache is an optimisation, never a failure
             pass

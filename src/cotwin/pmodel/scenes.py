@@ -6,7 +6,7 @@ by an installed package under the entry-point group `cotwin.scenes` (an object `
 project names it (`[platform] scene = "NAME"`, its own keys in a `[scene]` table). Core itself registers
 only generic kinds: "none" (the robot alone), "floor" (an empty floor) and "world" (a floor with walls
 and obstacles, cotwin.pmodel.world). "auto" takes the world if the project gives one, else the first
-kind whose `fits(mapping)` holds, else none.
+kind whose `fits(mapping)` holds, else a floor under a free base (a mobile robot), else none.
 """
 
 from __future__ import annotations
@@ -82,6 +82,7 @@ class SceneRequest:
     world: Any = None  # cotwin.pmodel.world.World from [platform] world or [world], or None
     base: Any = None  # the project's folder (a scene's data files are relative to it)
     locate: Callable[..., Location] = field(default=lambda *key: Location("<project>", 1, 1))
+    free_base: bool = False  # a mobile robot ([platform] base = "free"): "auto" stands it on a floor, not in a void
 
     def error(self, key: str, message: str) -> CotwinError:
         return CotwinError([Finding(self.locate("scene", key), Severity.ERROR, f"[scene] {key}: {message}")])
@@ -162,14 +163,16 @@ def scene_kind(name: str, at: Location | None = None) -> SceneKind:
 
 def choose_kind(name: str, request: SceneRequest, at: Location | None = None) -> SceneKind:
     """The kind a project's `[platform] scene` names; "auto": the world if given, else the first kind
-    (by name) that fits the mapping, else none. An "auto" that could not consider every installed kind
-    (one whose package cannot be loaded) says so in a warning: its choice may not be the one meant."""
+    (by name) that fits the mapping, else a floor under a free base, else none. An "auto" that could not
+    consider every installed kind (one whose package cannot be loaded) says so in a warning: its choice may not
+    be the one meant."""
     if name != "auto":
         return scene_kind(name, at)
     if request.world is not None:
         return scene_kind("world")
     fitting = [k for k in scene_kinds().values() if k.fits is not None and k.fits(request.mapping)]
-    chosen = sorted(fitting, key=lambda k: k.name)[0] if fitting else scene_kind("none")
+    unfit = "floor" if request.free_base else "none"  # a free base with nothing under it fell for ever
+    chosen = sorted(fitting, key=lambda k: k.name)[0] if fitting else scene_kind(unfit)
     if _BROKEN:
         where = at or request.locate("platform", "scene")
         log.warning("%s", Finding(where, Severity.WARNING, f'[platform] scene = "auto" chose \'{chosen.name}\' '

@@ -136,10 +136,10 @@ class SweepInterrupted(CotwinError):
     """A sweep stopped by an interrupt: `rows` are the what-ifs answered by then (each with its grid point),
     kept for the caller to write rather than lost with the others."""
 
-    def __init__(self, rows: list[dict], total: int):
+    def __init__(self, rows: list[dict], total: int, running: int = 0):
         super().__init__(f"interrupted after {len(rows)} of {total} what-ifs")
         self.rows, self.total, self.interrupted = rows, total, True
-        self.running = 0  # threads of a threaded sweep still in their what-if (a second interrupt did not wait)
+        self.running = running  # threads of a threaded sweep still in their what-if (a second interrupt did not wait)
 
 
 def failures(rows: list[dict]) -> list[tuple[int, dict]]:
@@ -322,14 +322,14 @@ def _threaded(loaded: tuple, plans: list[list[Command]], state: bytes | None, ho
         finally:
             ends.set()
 
-    from ...cosim.native import _signals_held
+    from ...cosim.native import signals_held
 
     # waited for on `ended`, not Thread.join: Python 3.11's join interrupted by Ctrl-C marks the thread it waited
     # for ended though it runs on (bpo-45274's fix), and the interrupted sweep did not wait for that one
     pool = [threading.Thread(target=work, args=(ends,), name=f"cotwin-sweep-{n}", daemon=True)
             for n, ends in enumerate(ended)]
     try:
-        with _signals_held():  # an interrupt while threads start is raised once all have (one never started is unjoinable)
+        with signals_held():  # an interrupt while threads start is raised once all have (one never started is unjoinable)
             for thread in pool:
                 thread.start()
         for ends in ended:
@@ -344,9 +344,7 @@ def _threaded(loaded: tuple, plans: list[list[Command]], state: bytes | None, ho
             pass
         with lock:
             answered = [row for row in rows if row is not None]
-        stopped = SweepInterrupted(answered, len(plans))
-        stopped.running = sum(not ends.is_set() for ends in ended)
-        raise stopped from None
+        raise SweepInterrupted(answered, len(plans), running=sum(not ends.is_set() for ends in ended)) from None
     if errors:
         raise errors[0]
     return rows  # type: ignore[return-value] - every plan answered when no thread failed

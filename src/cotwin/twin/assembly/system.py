@@ -184,10 +184,8 @@ def build_scene(spec: TwinProject, mapping, calibration=None):
     from ...pmodel import scenes
 
     request = scenes.SceneRequest(mapping, dict(spec.scene_options), calibration.geometry if calibration else None,
-                                  spec.world, spec.path.parent, spec.location)
+                                  spec.world, spec.path.parent, spec.location, free_base=spec.base == "free")
     kind = scenes.choose_kind(spec.scene, request, spec.location("platform", "scene"))
-    if spec.scene == "auto" and spec.base == "free" and kind.name == "none":  # a mobile robot fell for ever
-        kind = scenes.scene_kind("floor")
     if spec.world is not None and kind.name != "world":
         what, at = ("[platform] world", spec.location("platform", "world")) if spec.world_file else \
             ("[world]", spec.location("world"))
