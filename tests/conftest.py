@@ -3,6 +3,8 @@ a fresh cotwin cache for the session; and, at the end of a run, the tests skippe
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
 import secrets
 import random
@@ -82,6 +84,25 @@ def broker():
     _service(5672, "RabbitMQ", "rabbitmq-server -detached")
 
 
+@contextlib.contextmanager
+def machine_lock(name: str):
+    """Held by one test process of this machine at a time (`make test` runs its files on pytest-xdist's
+    workers): for what is one per machine, e.g. Ray, whose `ray stop --force` ends every cluster here."""
+    with open(Path(tempfile.gettempdir()) / f"cotwin-tests-{name}.lock", "a") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(held, fcntl.LOCK_UN)
+
+
+@pytest.fixture
+def ray_alone():
+    """This test's Ray cluster is the only one on the machine while it runs (see machine_lock)."""
+    with machine_lock("ray"):
+        yield
+
+
 @pytest.fixture(scope="session")
 def postgres_server():
     _service(5432, "PostgreSQL", "pg_ctlcluster --skip-systemctl-redirect $(ls /etc/postgresql) main start")
@@ -105,7 +126,8 @@ def pytest_report_header(config) -> str:
 
 
 def pytest_unconfigure(config) -> None:
-    shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
+    if not hasattr(config, "workerinput"):  # under pytest-xdist the workers share it: the controller removes it
+        shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
 
 
 # ---- why tests skipped, grouped by cause -------------------------------------------------------------

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import machine_lock
 from cotwin.diagnostics import CotwinError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,10 +40,11 @@ def write_log(path: Path, span: float = 12.0) -> Path:
 @pytest.fixture(scope="module")
 def ray_local():
     ray = pytest.importorskip("ray")
-    ray.init(address="local", _node_ip_address="127.0.0.1", include_dashboard=False, num_cpus=2,
-             logging_level="ERROR", log_to_driver=False, configure_logging=False)
-    yield ray
-    ray.shutdown()
+    with machine_lock("ray"):  # the only Ray cluster on the machine meanwhile
+        ray.init(address="local", _node_ip_address="127.0.0.1", include_dashboard=False, num_cpus=2,
+                 logging_level="ERROR", log_to_driver=False, configure_logging=False)
+        yield ray
+        ray.shutdown()
 
 
 def fleet_file(tmp: Path, twins: list[dict], fleet: str = "checkpoint_every = 5\nmax_restarts = 2\nrestart_delay = 0.2\n") -> Path:
