@@ -239,3 +239,25 @@ def test_broker_permissions_refuses_a_vhost_rabbitmq_would_refuse(ur5e, vhost):
 
     proc = cotwin_in_process("broker-permissions", ur5e / "live.toml", "--vhost", vhost)
     assert proc.returncode == 2 and "Invalid value for '--vhost'" in proc.stderr and proc.stdout == ""
+
+
+INTERRUPTED_IMPORT = """
+import importlib.abc, sys
+
+class Interrupt(importlib.abc.MetaPathFinder):  # Ctrl-C arriving while cotwin's CLI is being imported
+    def find_spec(self, name, path=None, target=None):
+        if name == "cotwin.cli":
+            raise KeyboardInterrupt
+        return None
+
+sys.meta_path.insert(0, Interrupt())
+sys.argv = ["cotwin", "--help"]
+import runpy
+runpy.run_module("cotwin", run_name="__main__")
+"""
+
+
+def test_ctrl_c_while_the_command_is_still_importing_is_an_interrupt_not_a_traceback():
+    """The first tenths of a second of every command are imports: an interrupt there exits 130 with one line."""
+    proc = subprocess.run([sys.executable, "-c", INTERRUPTED_IMPORT], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 130 and proc.stderr == "interrupted\n", proc.stderr[-2000:]
