@@ -66,10 +66,17 @@ class CotwinError(PicklableError):
         super().__init__("\n".join(str(f) for f in self.findings))
 
 
+class Interrupted(CotwinError):
+    """A command or run stopped by an interrupt (Ctrl-C, or SIGTERM, which cotwin takes as one): its findings say
+    what was kept; the command line exits 130 after reporting it."""
+
+
 def placed(err: CotwinError, location: Location) -> CotwinError:
-    """`err` with each finding that names no place put at `location` (what it is about: a file, an expression)."""
+    """`err` with each finding that names no place put at `location` (what it is about: a file, an expression);
+    of its class (an Interrupted stays one), its other attributes kept."""
     found = [f if not f.location.path.startswith("<") else Finding(location, f.severity, f.message) for f in err.findings]
-    out = CotwinError(found)
+    out = CotwinError.__new__(type(err))
+    CotwinError.__init__(out, found)
     out.__dict__.update({k: v for k, v in err.__dict__.items() if k != "findings"})
     return out
 

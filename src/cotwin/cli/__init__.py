@@ -6,7 +6,7 @@ import sys
 
 import click
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, Interrupted
 from . import access, analysis, fleet, history, live, models, runs, testing, urdf  # noqa: F401 - each module registers its commands
 from .common import main, report
 
@@ -38,7 +38,7 @@ def entry() -> None:
         main(standalone_mode=False)
     except CotwinError as err:
         report(err.findings)
-        if getattr(err, "interrupted", False):
+        if isinstance(err, Interrupted):
             _interrupted()
         sys.exit(1)
     except OSError as err:  # a file or folder that cannot be read or written

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from .. import safejson
-from ..diagnostics import CotwinError, Location, placed
+from ..diagnostics import CotwinError, Interrupted, Location, placed
 from ..plaindata import StateError
 from ..files import CAPS, check_outputs, output, read_bytes, write_text
 from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main, named_values, outcomes, output_file,
@@ -195,9 +195,8 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         partial = Path(out).with_name(Path(out).stem + ".partial.csv")
         if err.rows:
             write(partial, err.rows)
-        stopped = CotwinError(f"{err.findings[0].message}; " + (f"the {len(err.rows)} answered are in {partial}"
+        stopped = Interrupted(f"{err.findings[0].message}; " + (f"the {len(err.rows)} answered are in {partial}"
                                                                   if err.rows else "none was answered"))
-        stopped.interrupted = True
         if err.running:  # threads left in their what-ifs: the interpreter's exit under them crashed (SIGSEGV)
             report(stopped.findings)
             sys.stdout.flush()

@@ -17,7 +17,7 @@ import time as wallclock
 from dataclasses import dataclass, field
 from typing import Callable, Iterable
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, Interrupted
 from .algorithm import ALGORITHMS, Algorithm
 from .observers import Observer, Stop
 from .state import StateError, count, fields, finite, of_type, pack, port_value, unpack
@@ -101,11 +101,9 @@ def _terminated(unit) -> None:
 
 def ended_early(err: BaseException, time: float, kept: str) -> CotwinError:
     """The error of a run that failed (`err` a CotwinError) or was interrupted (KeyboardInterrupt) at `time`,
-    saying where the rows it computed are (`kept`, e.g. CSVWriter.kept()); `interrupted` marks the latter."""
+    saying where the rows it computed are (`kept`, e.g. CSVWriter.kept()); the latter is an Interrupted."""
     if isinstance(err, KeyboardInterrupt):
-        stopped = CotwinError(f"interrupted at t = {time:g} s; {kept}")
-        stopped.interrupted = True
-        return stopped
+        return Interrupted(f"interrupted at t = {time:g} s; {kept}")
     return CotwinError([*err.findings, *CotwinError(kept).findings], ordered=True)  # the cause first, then what was kept
 
 

@@ -22,7 +22,7 @@ from multiprocessing import get_context
 from pathlib import Path
 
 from ...config import did_you_mean
-from ...diagnostics import CotwinError
+from ...diagnostics import CotwinError, Interrupted
 from ..assembly.scenario import Command, scalar_value
 
 _SYSTEM = None  # the worker's TwinSystem, loaded once per process
@@ -132,13 +132,13 @@ def failed(plan: list[Command], err: BaseException) -> dict:
     return {**point(plan), ERROR: f"internal error: {type(err).__name__}: {err} (a cotwin bug)\n{where}"}
 
 
-class SweepInterrupted(CotwinError):
+class SweepInterrupted(Interrupted):
     """A sweep stopped by an interrupt: `rows` are the what-ifs answered by then (each with its grid point),
     kept for the caller to write rather than lost with the others."""
 
     def __init__(self, rows: list[dict], total: int, running: int = 0):
         super().__init__(f"interrupted after {len(rows)} of {total} what-ifs")
-        self.rows, self.total, self.interrupted = rows, total, True
+        self.rows, self.total = rows, total
         self.running = running  # threads of a threaded sweep still in their what-if (a second interrupt did not wait)
 
 

@@ -11,7 +11,7 @@ from ...cosim.algorithm import algorithm as make_algorithm
 from ...cosim.execution import Execution, RunResult, ended_early
 from ...cosim.observers import CSVWriter, Observer, Progress, RealTimePacer, StateFile
 from ...cosim.system import System
-from ...diagnostics import CotwinError
+from ...diagnostics import CotwinError, Interrupted
 from .build import ARTEFACTS, dmodel_fmu, folder_lock
 from ..project import TwinProject, check_timing, load_project
 from .system import MAPPING, TwinSystem
@@ -144,10 +144,8 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
                              title=f"{system.models.program.module.name} in "
                                    f"{system.models.scene.name or 'its world'}: {end:g} s")
         except KeyboardInterrupt:  # the run itself is done: say that its rows are all there
-            stopped = CotwinError(f"interrupted while drawing the figure; the run is complete: {result.rows} row(s) "
-                                  f"to t = {result.end_time:g} s in {out / 'outputs.csv'}")
-            stopped.interrupted = True
-            raise stopped from None
+            raise Interrupted(f"interrupted while drawing the figure; the run is complete: {result.rows} row(s) "
+                              f"to t = {result.end_time:g} s in {out / 'outputs.csv'}") from None
         return TwinRun(result, out / "outputs.csv", figure, cosim, units, watch.found,
                        ledger.summary(watch.found, not_applied(units.get("source"))))
 
