@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import math
+import operator
 import re
 
 import numpy as np
@@ -41,6 +42,10 @@ _VALUES = {cls.__name__: cls for cls in (VectorValue, MatrixValue, TupleValue, S
 _DTYPES = {name: np.dtype(name) for name in
            ("|b1", "|i1", "|u1", "<i2", "<u2", "<i4", "<u4", "<i8", "<u8", "<f4", "<f8")}
 _CONSTANTS = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+_SCALARS = frozenset((str, int, bool, type(None)))
+_KEPT = lambda v: v.__class__ in _SCALARS or (v.__class__ is float and v - v == 0.0)  # noqa: E731 - saved as they are
+_STR = {str}
+_TAGGED = operator.methodcaller("startswith", "$")  # a key spelt like a tag: the dict is saved as pairs
 
 
 # ---- writing ----
@@ -57,10 +62,22 @@ class _Writer:
         if depth > MAX_DEPTH:
             raise StateError(f"a state nested deeper than {MAX_DEPTH} levels cannot be saved")
         cls = value.__class__
-        if value is None or cls in (bool, str) or (cls is int and not isinstance(value, bool)):
+        if cls is str or cls is int or cls is bool or value is None:  # the most common first: a state is mostly these
             return value
         if cls is float:
             return value if math.isfinite(value) else {"$float": repr(value)}
+        if depth >= MAX_DEPTH:  # its items would be nested too deeply: each raises (an empty one is saved)
+            kept = lambda v: False  # noqa: E731
+        else:  # items saved as they are, without a call each: plain scalars and finite floats (v - v is 0.0)
+            kept = _KEPT
+        if cls is list:
+            return [v if kept(v) else self.encode(v, depth + 1) for v in value]
+        if cls is dict:
+            if set(map(type, value)) <= _STR and not any(map(_TAGGED, value)):
+                return {k: v if kept(v) else self.encode(v, depth + 1) for k, v in value.items()}
+            return {"$dict": [[self.encode(k, depth + 1), self.encode(v, depth + 1)] for k, v in value.items()]}
+        if cls is tuple:
+            return {"$tuple": [v if kept(v) else self.encode(v, depth + 1) for v in value]}
         if isinstance(value, np.ndarray):
             array = self._numeric(value)
             return {"$array": self.blob(array.tobytes()), "dtype": array.dtype.str, "shape": list(array.shape)}
@@ -71,16 +88,8 @@ class _Writer:
             return {"$bytes": self.blob(bytes(value))}
         if cls.__name__ in _VALUES and _VALUES[cls.__name__] is cls:
             return {"$value": cls.__name__, "items": self._items(value, depth, cls is SetValue)}
-        if cls is list:
-            return [self.encode(v, depth + 1) for v in value]
-        if cls is tuple:
-            return {"$tuple": [self.encode(v, depth + 1) for v in value]}
         if cls in (set, frozenset):
             return {"$set" if cls is set else "$frozenset": self._items(value, depth, True)}
-        if cls is dict:
-            if all(k.__class__ is str and not k.startswith("$") for k in value):
-                return {k: self.encode(v, depth + 1) for k, v in value.items()}
-            return {"$dict": [[self.encode(k, depth + 1), self.encode(v, depth + 1)] for k, v in value.items()]}
         raise StateError(f"a state holds only plain data, not a {cls.__module__}.{cls.__qualname__}")
 
     def _items(self, values, depth: int, unordered: bool) -> list:
