@@ -51,7 +51,7 @@ demo: install-runtime
 	@echo "TurtleBot3 random walk (Fig. 18 and a top view): $(OUT)/turtlebot/figure.png, $(OUT)/turtlebot/path.png; live: $(OUT)/turtlebot-twin/"
 
 test: install
-	$(PY) -m pytest -q -n auto --dist loadfile
+	$(PY) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder
 
 bench: install
 	$(PY) benchmarks/run.py
