@@ -23,7 +23,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("mapping",),
     ("cosim",),
     ("twin",),
-    ("cli", "__main__"),
+    ("cli", "launch", "__main__"),
 ]
 
 
