@@ -376,3 +376,60 @@ def test_the_models_problems_of_every_project_of_a_fleet_come_together_naming_th
     said = {f.location.path: f.message for f in err.value.findings}
     assert said[str(projects[0])].startswith("twins 'a', 'c' (") and "no_one" in said[str(projects[0])]
     assert said[str(projects[1])].startswith("twin 'b' (") and "no_two" in said[str(projects[1])]
+
+
+def test_a_twin_whose_history_store_refuses_its_writes_is_reported_by_name_and_the_others_go_on(tmp_path, postgres_server):
+    """The fleet's PostgreSQL store starts refusing one twin's samples mid-run (a trigger raising for that twin's
+    run once it holds a few): that twin runs to its end as the other does, and the fleet's summary (fleet.json),
+    its messages and its exit status say that this twin's history is incomplete and why."""
+    import json
+    import shutil
+    import subprocess
+    import sys
+    import uuid
+
+    import psycopg
+
+    from cotwin.twin.services.history import create_tables, database_url, engine_for
+
+    name = f"cotwin_test_{uuid.uuid4().hex[:8]}"
+    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    url = f"postgresql://postgres@127.0.0.1:5432/{name}"
+    try:
+        engine = engine_for(database_url(url))
+        create_tables(engine)
+        engine.dispose()
+        with psycopg.connect(f"host=127.0.0.1 user=postgres dbname={name}", autocommit=True) as conn:
+            conn.execute("""CREATE FUNCTION cotwin.refuse() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN
+                IF NEW.run IN (SELECT id FROM cotwin.runs WHERE project LIKE '%/refused/%')
+                   AND (SELECT count(*) FROM cotwin.samples WHERE run = NEW.run) >= 4 THEN
+                    RAISE EXCEPTION 'this store takes no more samples of run %', NEW.run;
+                END IF;
+                RETURN NEW; END $$""")
+            conn.execute("CREATE TRIGGER refuse BEFORE INSERT ON cotwin.samples FOR EACH ROW EXECUTE FUNCTION cotwin.refuse()")
+        refused = tmp_path / "refused"  # b's project, by another path than a's: the trigger tells its runs apart
+        shutil.copytree(PROJECT.parent, refused)
+        log = write_log(tmp_path / "run.csv", span=3.0)
+        path = fleet_file(tmp_path, [{"name": "a", "project": str(PROJECT), "pt_log": str(log), "end": 1.5},
+                                     {"name": "b", "project": str(refused / PROJECT.name), "pt_log": str(log),
+                                      "end": 1.5}])
+        done = subprocess.run([sys.executable, "-m", "cotwin", "fleet", str(path), "-o", str(tmp_path / "out"),
+                               "--ray", "off", "--history", url], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+        summary = json.loads((tmp_path / "out" / "fleet.json").read_text())
+        twins = {t["name"]: t for t in summary["twins"]}
+        assert twins["a"]["state"] == twins["b"]["state"] == "done" and twins["a"]["time"] == twins["b"]["time"]
+        assert not twins["a"]["history_problems"]
+        [problem] = twins["b"]["history_problems"]
+        assert "is incomplete" in problem["message"] and "this store takes no more samples" in problem["message"]
+        said = [line for line in done.stderr.splitlines() if line.startswith("twin b: ")]
+        assert said and all("history" in line and "this store takes no more samples" in line for line in said)
+        assert not any(line.startswith("twin a: ") for line in done.stderr.splitlines())
+        assert "incomplete history: b" in done.stderr
+        from cotwin.twin.analysis.fleet.record import fleet_events
+
+        assert [e["twin"] for e in fleet_events(database_url(url)) if e["event"] == "history incomplete"] == ["b"]
+    finally:
+        with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
+            conn.execute(f'DROP DATABASE "{name}" WITH (FORCE)')

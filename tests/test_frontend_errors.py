@@ -207,3 +207,40 @@ def test_an_event_the_d_model_sends_to_its_platform_is_no_unmapped_event(check_t
     assert errors(result) == []
     unmapped = [f.message for f in result.findings if "is not mapped by" in f.message]
     assert unmapped == ["platform event 'go' is not mapped by Map"]
+
+
+def test_duplicate_pmodel_names_are_located_errors(check_texts):
+    """Two elements of one p-model scope (p-model, link, joint, fragment, device) with one name are each an
+    error at the second declaration naming the first; one name in two scopes (a joint j in two links) is not."""
+    text = """import physmod::joints::*
+import physmod::sensors::*
+import physmod::actuators::*
+pmodel P {
+	const k: real = 1
+	const k: real = 2
+	local link base {
+		def { inertial information { mass 1.0 kg } }
+		jref j = Revolute { flexibly connected to tip }
+		jref j = Revolute { flexibly connected to tip2 }
+		sref S = VelocitySensor
+		sref S = VelocitySensor
+		local body B { def { box ( length = 1 , width = 1 , height = 1 ) } }
+		local body B { def { box ( length = 1 , width = 1 , height = 1 ) } }
+	}
+	local link tip { def { inertial information { mass 1.0 kg } }
+		jref j = Revolute { flexibly connected to tip2 }
+		sref j = VelocitySensor
+	}
+	local link tip2 { def { inertial information { mass 1.0 kg } } }
+	local link tip2 { def { inertial information { mass 2.0 kg } } }
+}
+"""
+    found = errors(check_texts({"p.pm": text}))
+    assert sorted(found) == [
+        ("p.pm", 6, 8, "duplicate constant 'k' in p-model P (first declared at line 5, column 8)"),
+        ("p.pm", 10, 8, "duplicate joint 'j' in link base (first declared at line 9, column 8)"),
+        ("p.pm", 12, 8, "duplicate sensor 'S' in link base (first declared at line 11, column 8)"),
+        ("p.pm", 14, 14, "duplicate body 'B' in link base (first declared at line 13, column 14)"),
+        ("p.pm", 18, 8, "duplicate sensor 'j' in link tip (first declared as a joint at line 17, column 8)"),
+        ("p.pm", 21, 13, "duplicate link 'tip2' in p-model P (first declared at line 20, column 13)"),
+    ]

@@ -415,6 +415,57 @@ def test_a_failed_testgen_leaves_the_earlier_suite_whole(tmp_path):
     assert proc.returncode == 1 and not (tmp_path / "new").exists()
 
 
+def test_a_failure_during_the_final_write_of_a_suite_leaves_the_earlier_suite_whole(graph, tmp_path, monkeypatch):
+    """The suite's last file failing half-way through its write (a full disk, an interrupt) leaves every file of
+    the suite already in the folder as it was, and no part-written file beside them: nothing of the new suite
+    is in the folder before all of it is written (it was written file by file over the earlier one)."""
+    import errno
+    import io
+
+    out = tmp_path / "tests"
+    write_suite(generate(graph, "transitions"), out)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    suite = generate(graph, "transition-pairs", split="length")  # other cases, in other files
+    opened, last = [], 1 + 2 * len(suite.cases)  # the index, and a plan and an oracle per case
+    real_open = io.open
+
+    class Full:
+        """A file that takes half of what is written to it, then fails as a full disk does."""
+
+        def __init__(self, f):
+            self.f = f
+
+        def write(self, text):
+            self.f.write(text[:len(text) // 2])
+            self.f.flush()
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.f.close()
+
+        def __getattr__(self, name):
+            return getattr(self.f, name)
+
+    def failing_open(file, mode="r", *args, **kwargs):
+        f = real_open(file, mode, *args, **kwargs)
+        if "w" in mode:
+            opened.append(file)
+            if len(opened) == last:
+                return Full(f)
+        return f
+
+    monkeypatch.setattr(io, "open", failing_open)
+    with pytest.raises(OSError, match="No space left"):
+        write_suite(suite, out)
+    monkeypatch.undo()
+    assert len(opened) == last  # the failure was injected into the suite's last write
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert read_suite(out).data["criterion"] == "transitions"
+
+
 def test_test_and_mutants_never_write_over_what_they_read(tmp_path, stub_suite):
     """cotwin test --junit and cotwin mutants -o naming the project file, a model or a file of the suite are
     refused by name before anything runs (the JUnit XML replaced cotwin.toml; the JSON replaced arm.rst)."""

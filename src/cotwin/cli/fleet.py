@@ -22,7 +22,7 @@ from .common import address, history_url, main, output_folder
 def fleet(fleet_file: str, out: str, ray: str, history: str | None, page: tuple[str, int] | None, cc: str) -> None:
     """Run a fleet of live twins (each a project, as `cotwin twin` runs it) on Ray: one history store, alarms
     per twin on the broker, an overview page, and a supervisor restarting a failed twin from its last saved
-    state. Exits 1 if a twin was given up."""
+    state. Exits 1 if a twin was given up or its history could not be wholly recorded."""
     import signal
 
     from ..twin.analysis.fleet.spec import read_fleet
@@ -66,7 +66,15 @@ def fleet(fleet_file: str, out: str, ray: str, history: str | None, page: tuple[
                    f"alarm(s); {t['restarts']} restart(s)")
         if t["state"] == "failed":
             given_up.append(t["name"])
+        for problem in t.get("history_problems") or []:  # its store failed: its outputs are whole, its history is not
+            attempt = problem["attempt"]
+            folder = runner.out / t["name"] / (f"restart-{attempt}" if attempt else "")
+            click.echo(f"twin {t['name']}{f' (restart {attempt})' if attempt else ''}: {problem['message']}; its "
+                       f"outputs in {folder} are whole", err=True)
     click.echo(f"fleet {summary['fleet']}: {len(summary['twins'])} twin(s); summary {runner.out / 'fleet.json'}; "
                f"history {summary['history']}")
-    if given_up:
-        raise CotwinError(f"twin(s) given up: {', '.join(given_up)} (see the messages above)")
+    incomplete = [t["name"] for t in summary["twins"] if t.get("history_problems")]
+    if given_up or incomplete:
+        said = ([f"twin(s) given up: {', '.join(given_up)}"] if given_up else []) + \
+            ([f"incomplete history: {', '.join(incomplete)}"] if incomplete else [])
+        raise CotwinError(f"{'; '.join(said)} (see the messages above)")

@@ -20,10 +20,12 @@ from __future__ import annotations
 import json
 import math
 import os
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..diagnostics import CotwinError, Finding, Location, Severity
+from ..files import write_text
 from .interpreter import Output
 from .program import Program, get_path
 from .testgen import Case, Suite, model_digest
@@ -138,26 +140,31 @@ def write_suite(suite: Suite, folder: str | Path, period: float = 0.1, settle: f
                 drivers: bool = False) -> list[Path]:
     """Write the suite into `folder` (see module doc); returns the files written. Files of an earlier suite
     that this one does not have (more cases then) are removed, so the folder holds one suite. With `drivers`
-    the index names each stub case's test driver FMU (cotwin.dmodel.testgen_driver builds them)."""
+    the index names each stub case's test driver FMU (cotwin.dmodel.testgen_driver builds them).
+
+    Every file is written whole (files.write_text) in a folder of its own beside the suite, and only then
+    moved over the earlier suite's, the index last: a write that fails or is interrupted (a full disk, ^C)
+    leaves the earlier suite as it was, with no part-written file among it."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     commands = set(suite.commands)
-    files: dict[str, str] = {"suite.json": _dump(suite_record(suite, period, settle, drivers))}
+    files: dict[str, str] = {}
     keep = {f"{c.name}.fmu" for c in suite.cases if drivers and c.answers == "stub"}
     for case in suite.cases:
         header, rows = plan_rows(suite.program, case, commands, period, settle)
         files[f"{case.name}.csv"] = "\n".join(",".join(r) for r in [header, *rows]) + "\n"
         files[f"{case.name}.oracle.json"] = _dump(oracle(case))
+    files["suite.json"] = _dump(suite_record(suite, period, settle, drivers))  # last: it names the cases
+    with tempfile.TemporaryDirectory(prefix=".cotwin-suite-", dir=folder) as stage:
+        for name, text in files.items():
+            write_text(Path(stage) / name, text)
+        written = []
+        for name in files:  # renames within one file system: no file is ever part-written
+            os.replace(Path(stage) / name, folder / name)
+            written.append(folder / name)
     for stale in folder.glob("case_*"):
         if stale.name not in files and stale.name not in keep and stale.suffix in (".csv", ".json", ".fmu"):
             stale.unlink()
-    written = []
-    for name, text in files.items():
-        path = folder / name
-        part = path.with_name(path.name + ".part")
-        part.write_text(text)
-        part.replace(path)
-        written.append(path)
     return written
 
 

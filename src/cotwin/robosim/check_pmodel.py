@@ -98,17 +98,31 @@ class PModelChecker(Checker):
                 names.add(item if isinstance(item, str) else item.name)
         return names
 
+    def _unique(self, where: str, **groups) -> None:
+        """Report every element of one scope that repeats an earlier one's name, at the second declaration,
+        naming the first: a p-model's constants, variables, links, parts and joints, a link's variables,
+        bodies, joints, sensors and actuators, a joint's sensors and actuators share one namespace (RoboTool's
+        qualified names, P::link::S, and dm_control's per-scope names); the exports and the mapping's
+        paths name an element by it, so a second one would silently shadow, duplicate or rename the first."""
+        seen: dict[str, tuple[str, s.Location]] = {}
+        for what, items in groups.items():
+            for item in items:
+                if item.name in seen:
+                    first_what, first = seen[item.name]
+                    as_what = "" if first_what == what else f" as a {first_what}"
+                    self.diag.error(item.loc, f"duplicate {what} '{item.name}' in {where} (first declared{as_what} "
+                                    f"at line {first.line}, column {first.column})")
+                else:
+                    seen[item.name] = (what, item.loc)
+
     def _file_names(self) -> set[str]:
         env = self.scope.file_env()
         return set(env.definitions) | set(env.parameters)
 
     # ---- devices ----
     def device(self, device: Device, env: ConstEnv, outer_names: set[str] | None = None) -> None:
-        seen: dict[str, s.Location] = {}
+        self._unique(f"{device.kind} {device.name}", port=device.ports)
         for port in device.ports:
-            if port.name in seen:
-                self.diag.error(port.loc, f"duplicate port '{port.name}' in {device.kind} {device.name}")
-            seen[port.name] = port.loc
             self.types.resolve(port.type)
         denv = self.scope.device_env(device, (), env)
         for port in device.ports:
@@ -142,6 +156,8 @@ class PModelChecker(Checker):
         holder = PModel(fragment.name, (), fragment.links, (), fragment.loc, fragment.variables, fragment.equations)
         known = self._scope_names(fragment.variables) | self._file_names()
         self._names(fragment.equations, known, f"an equation of fragment {fragment.name}")
+        self._unique(f"fragment {fragment.name}", variable=fragment.variables, link=fragment.links,
+                     joint=fragment.joints, sensor=fragment.sensors, actuator=fragment.actuators)
         self._pmodel = holder
         children: dict[str, str] = {}
         for link in fragment.links:
@@ -166,11 +182,8 @@ class PModelChecker(Checker):
                  | self._file_names() | self._solution_names(pmodel))
         self._names(pmodel.equations, known, f"an equation of p-model {pmodel.name}")
         self._names(pmodel.constraints, known, f"a constraint of p-model {pmodel.name}")
-        names: dict[str, Link] = {}
-        for link in pmodel.links:
-            if link.name in names:
-                self.diag.error(link.loc, f"duplicate link '{link.name}' (first at line {names[link.name].loc.line})")
-            names[link.name] = link
+        self._unique(f"p-model {pmodel.name}", constant=pmodel.constants, variable=pmodel.variables,
+                     link=pmodel.links, part=pmodel.parts, joint=pmodel.joints)
         for part in pmodel.parts:
             self.part(part, pmodel, env)
         children: dict[str, str] = {}
@@ -243,6 +256,8 @@ class PModelChecker(Checker):
     def link(self, link: Link, pmodel: PModel, env: ConstEnv, children: dict[str, str], known: set[str]) -> None:
         where = f"link {link.name}"
         self._link = link
+        self._unique(where, variable=link.variables, body=link.bodies, joint=link.joints, sensor=link.sensors,
+                     actuator=link.actuators)
         env = self.index(link.index, env, where)
         decl = None
         if link.ref is not None:
@@ -348,6 +363,7 @@ class PModelChecker(Checker):
     def joint(self, joint: JointRef, link: Link | None, pmodel: PModel, env: ConstEnv,
               children: dict[str, str], known: set[str]) -> None:
         where = f"joint {joint.name}"
+        self._unique(where, actuator=joint.actuators, sensor=joint.sensors)
         env = self.index(joint.index, env, where)
         device = self.scope.joint_device(joint)
         if joint.local is not None:

@@ -187,11 +187,18 @@ class RunningTwin(BackgroundService):
                "pid": os.getpid(), "alarms": len(monitor.events) if monitor is not None else 0,
                "deviating": sorted(monitor.active) if monitor is not None else [],
                "deviation": _worst(monitor), "checkpoint_time": w.checkpoint_time, "saving": w.saving,
-               "out": self.job.out}
+               "out": self.job.out, "history_problem": _history_problem(live)}
         if w.checkpoint is not None and w.checkpoint_step != self.sent_checkpoint:
             out["checkpoint"] = w.checkpoint
             self.sent_checkpoint = w.checkpoint_step
         return out
+
+
+def _history_problem(live) -> str | None:
+    """Why the twin's run is not (wholly) recorded in the fleet's store, if it is not: its recorder keeps the twin
+    running when the store refuses or loses its writes, and says so only by its `problem`."""
+    history = live._history if live is not None else None
+    return history.problem if history is not None else None
 
 
 def _worst(monitor) -> float | None:

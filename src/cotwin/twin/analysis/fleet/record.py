@@ -16,7 +16,7 @@ fleet_twins = sa.Table(
     sa.Column("twin", sa.String(64), nullable=False),
     sa.Column("attempt", sa.Integer, nullable=False),
     sa.Column("run", sa.Integer),  # the twin's run in `runs` (None: it failed before it recorded one)
-    sa.Column("event", sa.String(32), nullable=False),  # started | failed | restarting | given up | done | stopped
+    sa.Column("event", sa.String(32), nullable=False),  # started | failed | restarting | given up | done | stopped | history incomplete
     sa.Column("time", sa.Float),  # the twin's simulated time (restarting: the saved state's)
     sa.Column("wall", sa.Float, nullable=False),
     sa.Column("message", sa.Text),

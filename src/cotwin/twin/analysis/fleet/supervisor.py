@@ -3,7 +3,9 @@ a failed twin from its last saved state and says so (logged, and recorded in the
 
 Each twin's folder is DIR/NAME (a restart's DIR/NAME/restart-K: the rows of the attempt that failed stay
 where they were written); every attempt records its run in the one history store, and `fleet_twins`
-(cotwin.twin.analysis.fleet.record) names the twin and attempt of each run, with every failure and restart.
+(cotwin.twin.analysis.fleet.record) names the twin and attempt of each run, with every failure and restart. A
+twin whose writes the store refuses or loses goes on running (its outputs are whole); the fleet says so, names
+it in its summary and records it ('history incomplete').
 """
 
 from __future__ import annotations
@@ -120,6 +122,7 @@ class TwinRecord:
     failures: list[dict] = field(default_factory=list)
     restart_at: float | None = None  # monotonic time a pending restart is due
     final: bool = False
+    history_problems: list[dict] = field(default_factory=list)  # per attempt: why its run's history is incomplete
 
     @property
     def state(self) -> str:
@@ -259,6 +262,8 @@ class Fleet:
                                         status.get("time"), f"in {status.get('out')}")
                 with self._lock:
                     record.status = status
+                if status.get("history_problem"):
+                    self._history_failed(record, status["history_problem"])
                 if status["state"] == "failed":
                     self._failed(record, status.get("message") or "failed")
                 elif status["state"] in ("done", "stopped"):
@@ -315,6 +320,19 @@ class Fleet:
         self.recorder.event(name, record.attempt, record.status.get("run_id"), "restarting", record.checkpoint_time,
                             said)
 
+    def _history_failed(self, record: TwinRecord, problem: str) -> None:
+        """The twin's store refuses or lost its writes: said once per attempt (the twin goes on, as its recorder
+        lets it) and recorded, and kept up to date for the summary (more records are lost as it runs)."""
+        with self._lock:
+            known = next((p for p in record.history_problems if p["attempt"] == record.attempt), None)
+            if known is not None:
+                known["message"] = problem
+                return
+            record.history_problems.append({"attempt": record.attempt, "message": problem})
+        self.say(f"twin {record.entry.name}: {problem}; the twin goes on running")
+        self.recorder.event(record.entry.name, record.attempt, record.status.get("run_id"), "history incomplete",
+                            record.status.get("time"), problem)
+
     # ---- what is shown ----
     def overview(self) -> dict:
         """Every twin's state, time, pace, deviation and alarms, and the fleet's (the page's JSON)."""
@@ -325,7 +343,7 @@ class Fleet:
                 s.pop("checkpoint", None)
                 s.update(name=record.entry.name, state=record.state, restarts=record.restarts,
                          failures=list(record.failures), checkpoint_time=record.checkpoint_time,
-                         behind=_behind(s))
+                         behind=_behind(s), history_problems=[dict(p) for p in record.history_problems])
                 twins.append(s)
         return {"fleet": self.spec.name, "file": str(self.spec.path), "hosts": self.backend.where if self.backend else None,
                 "history": _redacted(self.history), "started": self.started, "twins": twins}
