@@ -433,3 +433,22 @@ def test_a_twin_whose_history_store_refuses_its_writes_is_reported_by_name_and_t
     finally:
         with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
             conn.execute(f'DROP DATABASE "{name}" WITH (FORCE)')
+
+
+def test_each_restart_and_give_up_is_said_once_on_the_command_line(tmp_path):
+    """The supervisor said a restart in the command's voice and logged it too; with no logging set up the
+    logger printed to stderr as well, so every restart and give-up came twice."""
+    import subprocess
+    import sys
+
+    log = write_log(tmp_path / "run.csv", span=3.0)
+    lines = log.read_text().splitlines()
+    lines[8] = lines[8].split()[0] + " nan" * 12  # a PT sample that is no number: the twin fails at once
+    log.write_text("\n".join(lines) + "\n")
+    path = fleet_file(tmp_path, [{"name": "a", "project": str(PROJECT), "pt_log": str(log), "end": 1.5}],
+                      fleet="checkpoint_every = 5\nmax_restarts = 1\nrestart_delay = 0.2\n")
+    done = subprocess.run([sys.executable, "-m", "cotwin", "fleet", str(path), "-o", str(tmp_path / "out"), "--ray", "off"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr[-3000:]
+    said = [line for line in done.stderr.splitlines() if line.startswith("twin a failed")]
+    assert len(said) == 2 and "restarting it afresh" in said[0] and "given up after 1 restart(s)" in said[1], said

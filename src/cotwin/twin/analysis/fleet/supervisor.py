@@ -143,7 +143,7 @@ class Fleet:
         self.ray = ray
         self.history = database_url(history or spec.history, self.out)
         self.cc = cc
-        self.say = say or (lambda message: None)  # the command's voice (restarts, give-ups)
+        self._say = say  # the command's voice (restarts, give-ups); without one, the "cotwin.fleet" logger
         self.twins = {e.name: TwinRecord(e) for e in spec.twins}
         self.hosts: list = []
         self.backend = None
@@ -296,6 +296,14 @@ class Fleet:
                     other.host = host
             return host
 
+    def _tell(self, level: int, said: str) -> None:
+        """Say it in the command's voice, or log it where there is none: once (a logger with no handler of its
+        own prints to stderr too, which printed each restart twice)."""
+        if self._say is not None:
+            self._say(said)
+        else:
+            log.log(level, said)
+
     def _failed(self, record: TwinRecord, message: str) -> None:
         name, t = record.entry.name, record.status.get("time")
         record.failures.append({"attempt": record.attempt, "time": t, "message": message})
@@ -305,8 +313,7 @@ class Fleet:
             record.status = {**record.status, "state": "failed", "message": message}
             said = (f"twin {name} failed at t = {t if t is not None else 0:g} s: {message}; given up after "
                     f"{record.restarts} restart(s)")
-            log.error(said)
-            self.say(said)
+            self._tell(logging.ERROR, said)
             self.recorder.event(name, record.attempt, record.status.get("run_id"), "given up", t, message)
             return
         record.restart_at = wallclock.monotonic() + self.spec.restart_delay
@@ -315,8 +322,7 @@ class Fleet:
                  else f"afresh (its states cannot be saved: {saving})" if saving else "afresh (no saved state yet)")
         said = (f"twin {name} failed at t = {t if t is not None else 0:g} s: {message}; restarting it {where} "
                 f"(restart {record.restarts + 1} of at most {self.spec.max_restarts})")
-        log.warning(said)
-        self.say(said)
+        self._tell(logging.WARNING, said)
         self.recorder.event(name, record.attempt, record.status.get("run_id"), "restarting", record.checkpoint_time,
                             said)
 
@@ -329,7 +335,7 @@ class Fleet:
                 known["message"] = problem
                 return
             record.history_problems.append({"attempt": record.attempt, "message": problem})
-        self.say(f"twin {record.entry.name}: {problem}; the twin goes on running")
+        self._tell(logging.WARNING, f"twin {record.entry.name}: {problem}; the twin goes on running")
         self.recorder.event(record.entry.name, record.attempt, record.status.get("run_id"), "history incomplete",
                             record.status.get("time"), problem)
 
