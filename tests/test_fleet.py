@@ -452,3 +452,46 @@ def test_each_restart_and_give_up_is_said_once_on_the_command_line(tmp_path):
     assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr[-3000:]
     said = [line for line in done.stderr.splitlines() if line.startswith("twin a failed")]
     assert len(said) == 2 and "restarting it afresh" in said[0] and "given up after 1 restart(s)" in said[1], said
+
+
+def test_the_fleets_own_events_refused_by_its_store_are_said_and_fail_the_command(tmp_path, postgres_server):
+    """The store refuses the fleet's record of a twin's end (a trigger on fleet_twins): the fleet said nothing of
+    it (the error was kept "for the end" and never read); now it is said when it happens, in fleet.json and in the
+    exit status, and the twin's own outputs and history are whole."""
+    import json
+    import subprocess
+    import sys
+    import uuid
+
+    import psycopg
+
+    from cotwin.twin.analysis.fleet.record import metadata
+    from cotwin.twin.services.history import create_tables, database_url, engine_for
+
+    name = f"cotwin_test_{uuid.uuid4().hex[:8]}"
+    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    url = f"postgresql://postgres@127.0.0.1:5432/{name}"
+    try:
+        engine = engine_for(database_url(url))
+        create_tables(engine, metadata)
+        engine.dispose()
+        with psycopg.connect(f"host=127.0.0.1 user=postgres dbname={name}", autocommit=True) as conn:
+            conn.execute("""CREATE FUNCTION cotwin.refuse_end() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN
+                IF NEW.event = 'done' THEN RAISE EXCEPTION 'this store takes no ends'; END IF;
+                RETURN NEW; END $$""")
+            conn.execute("CREATE TRIGGER refuse BEFORE INSERT ON cotwin.fleet_twins FOR EACH ROW EXECUTE FUNCTION cotwin.refuse_end()")
+        log = write_log(tmp_path / "run.csv", span=3.0)
+        path = fleet_file(tmp_path, [{"name": "a", "project": str(PROJECT), "pt_log": str(log), "end": 1.0}])
+        done = subprocess.run([sys.executable, "-m", "cotwin", "fleet", str(path), "-o", str(tmp_path / "out"),
+                               "--ray", "off", "--history", url], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr[-3000:]
+        summary = json.loads((tmp_path / "out" / "fleet.json").read_text())
+        assert summary["twins"][0]["state"] == "done" and not summary["twins"][0]["history_problems"]
+        assert "1 not written" in summary["events_problem"] and "this store takes no ends" in summary["events_problem"]
+        said = [line for line in done.stderr.splitlines() if "the fleet's events are incomplete" in line]
+        assert len(said) == 2 and "the fleet goes on" in said[0], done.stderr[-3000:]  # when it happened, and at the end
+        assert "incomplete history: the fleet's events" in done.stderr
+    finally:
+        with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
+            conn.execute(f'DROP DATABASE "{name}" WITH (FORCE)')

@@ -74,6 +74,9 @@ def fleet(fleet_file: str, out: str, ray: str, history: str | None, page: tuple[
     click.echo(f"fleet {summary['fleet']}: {len(summary['twins'])} twin(s); summary {runner.out / 'fleet.json'}; "
                f"history {summary['history']}")
     incomplete = [t["name"] for t in summary["twins"] if t.get("history_problems")]
+    if summary.get("events_problem"):  # said when it happened; again here, beside the summary
+        click.echo(f"fleet {summary['fleet']}: {summary['events_problem']}", err=True)
+        incomplete.append("the fleet's events")
     if given_up or incomplete:
         said = ([f"twin(s) given up: {', '.join(given_up)}"] if given_up else []) + \
             ([f"incomplete history: {', '.join(incomplete)}"] if incomplete else [])

@@ -26,7 +26,8 @@ fleet_twins = sa.Table(
 class FleetRecorder:
     """Writes the fleet's events (few: one per start, failure or end) as they happen."""
 
-    def __init__(self, url: str, fleet: str):
+    def __init__(self, url: str, fleet: str, on_error=None):
+        """`on_error(problem)` is told of the first event that could not be written (the fleet goes on)."""
         from ...services.history import create_tables, engine_for
 
         self.engine = engine_for(url)
@@ -37,6 +38,8 @@ class FleetRecorder:
             raise CotwinError(f"cannot make the fleet's table in the history database: {str(err).splitlines()[0][:200]}") \
                 from None
         self.error: Exception | None = None
+        self.lost = 0  # events not written
+        self.on_error = on_error
 
     def event(self, twin: str, attempt: int, run: int | None, event: str, time: float | None,
               message: str | None) -> None:
@@ -45,8 +48,20 @@ class FleetRecorder:
                 conn.execute(fleet_twins.insert().values(fleet=self.fleet, twin=twin, attempt=attempt, run=run,
                                                          event=event, time=time, wall=wallclock.time(),
                                                          message=message))
-        except sa.exc.SQLAlchemyError as err:  # the fleet goes on; said at the end
-            self.error = err
+        except sa.exc.SQLAlchemyError as err:  # the fleet goes on; said when it happens and in the summary
+            self.lost += 1
+            first = self.error is None
+            if first:
+                self.error = err
+            if self.on_error is not None and first:
+                self.on_error(self.problem())
+
+    def problem(self) -> str | None:
+        """What went wrong writing the fleet's events (None: nothing), in a line."""
+        if self.error is None:
+            return None
+        return (f"the fleet's events are incomplete in its history store ({self.lost} not written, the first "
+                f"failure: {str(self.error).splitlines()[0][:200]})")
 
     def close(self) -> None:
         self.engine.dispose()

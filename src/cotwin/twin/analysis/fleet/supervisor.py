@@ -159,7 +159,8 @@ class Fleet:
 
         self.out.mkdir(parents=True, exist_ok=True)
         builds = self._build()
-        self.recorder = FleetRecorder(self.history, self.spec.name)
+        self.recorder = FleetRecorder(self.history, self.spec.name,
+                                      on_error=lambda problem: self._tell(logging.WARNING, f"{problem}; the fleet goes on"))
         self.backend = LocalHosts() if self.ray is None else RayHosts(self.ray, None)
         try:
             shared = self.backend.new() if self.spec.workers else None
@@ -352,7 +353,8 @@ class Fleet:
                          behind=_behind(s), history_problems=[dict(p) for p in record.history_problems])
                 twins.append(s)
         return {"fleet": self.spec.name, "file": str(self.spec.path), "hosts": self.backend.where if self.backend else None,
-                "history": _redacted(self.history), "started": self.started, "twins": twins}
+                "history": _redacted(self.history), "started": self.started, "twins": twins,
+                "events_problem": self.recorder.problem() if self.recorder is not None else None}
 
     def summary(self) -> dict:
         return self.overview()
