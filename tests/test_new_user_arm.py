@@ -192,3 +192,17 @@ def test_the_ik_vector_of_the_arms_size_runs_and_completes(tmp_path):
     run = cotwin_in_process("run", project, "-o", tmp_path / "out")
     assert run.returncode == 0, run.stderr
     assert "commands: 1, 1 completed" in run.stdout
+
+
+def test_a_command_sent_while_the_arm_moves_is_not_taken_and_the_move_under_way_completes(tmp_path):
+    # Going waits on itself by an exec self-loop, re-calling goto every cycle; its exec way out to Idle (on
+    # $unreachable) could in principle be followed by Idle -> Going on the new command in one cycle. With
+    # `unreachable` never sent, that way was not open: the second command was not taken, the first completed
+    # (it used to be the other way round: the second 'completed', the first 'never completed').
+    plan = "timestep,inspectCommand,Point_x,Point_y,Point_z\n500,true,0.4,0.1,0.3\n800,true,0.3,-0.2,0.2\n"
+    project = xarm_project(tmp_path, mapping(), plan=plan)
+    run = cotwin_in_process("run", project, "-o", tmp_path / "out")
+    assert run.returncode == 0, run.stderr
+    first, second = [line for line in run.stdout.splitlines() if line.strip().startswith("applied at")]
+    assert "Point_x=0.4" in first and "completed at" in first
+    assert "Point_x=0.3" in second and "not taken (the d-model was in state Going)" in second
