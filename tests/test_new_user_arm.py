@@ -206,3 +206,20 @@ def test_a_command_sent_while_the_arm_moves_is_not_taken_and_the_move_under_way_
     first, second = [line for line in run.stdout.splitlines() if line.strip().startswith("applied at")]
     assert "Point_x=0.4" in first and "completed at" in first
     assert "Point_x=0.3" in second and "not taken (the d-model was in state Going)" in second
+
+
+def test_a_monitored_reading_named_like_an_operation_argument_is_an_error_at_its_key(tmp_path):
+    # `[monitor] readings = { z = ... }` beside goto(x, y, z): the reading and the argument would be one port of
+    # the mapping's unit; the run used to stop at wiring with "unit {mapping}.mapping has no input 'z'"
+    project = xarm_project(tmp_path, mapping())
+    text = project.read_text() + '[monitor]\nreadings = { z = "UF_ROBOT::link_base::joint1::joint1_position.output_position" }\n'
+    project.write_text(text)
+    line = text.splitlines().index("[monitor]") + 2
+    run = cotwin_in_process("run", project, "-o", tmp_path / "out")
+    assert run.returncode != 0
+    assert f"cotwin.toml:{line}:" in run.stderr
+    assert "z (already an argument of operation goto)" in run.stderr
+    assert "has no input" not in run.stderr
+    # another name runs
+    project.write_text(text.replace("readings = { z =", "readings = { base_angle ="))
+    assert cotwin_in_process("run", project, "-o", tmp_path / "out2").returncode == 0
