@@ -87,12 +87,15 @@ class CycleReads:
                                     for machine, event in routes if machine == m.index} for m in program.machines}
         self._actions = {m.index: _action_reads(m, self._platform[m.index]) for m in program.machines}
 
-    def between(self, machine: int, before: int | None, after: int, several: bool = False) -> frozenset[str] | None:
+    def between(self, machine: int, before: int | None, after: int, several: bool = False,
+                absent: frozenset[str] = frozenset()) -> frozenset[str] | None:
         """What a cycle taking the machine from leaf `before` (None: its first cycle, from its initial junction) to
-        leaf `after` may have read, or None where that cannot be told."""
-        key = (machine, before, after, several)
+        leaf `after` may have read, or None where that cannot be told. `absent`: platform events that did not
+        occur when the cycle before read its guards: an `exec` transition out of `before` whose guard needs one
+        of them (Going -> Idle on `$unreachable`) was not chosen then, so no path starts with it."""
+        key = (machine, before, after, several, absent)
         if key not in self._cache:
-            self._cache[key] = self._explore(machine, before, after, several)
+            self._cache[key] = self._explore(machine, before, after, several, absent=absent)
         return self._cache[key]
 
     def passes(self, machine: int, before: int, after: int, through: int, several: bool = False) -> bool:
@@ -106,7 +109,7 @@ class CycleReads:
         return self._passes[key]
 
     def _explore(self, machine: int, before: int | None, after: int, several: bool = False,
-                 avoid: int | None = None) -> frozenset[str] | None:
+                 avoid: int | None = None, absent: frozenset[str] = frozenset()) -> frozenset[str] | None:
         """`between`'s paths; `avoid`: a leaf no path may enter (None back when no path avoids it)."""
         m = self._machines.get(machine)
         leaves = m.graph.leaves if m is not None else []
@@ -121,7 +124,8 @@ class CycleReads:
         # an exec transition out of the leaf was chosen by the cycle before (which read its guard), its target
         # entered in this one
         stack = [(edge, frozenset(), edge.transition.is_exec) for node in (start, *start.ancestors())
-                 for edge in node.outgoing]
+                 for edge in node.outgoing
+                 if not (edge.transition.is_exec and _required(edge.transition.condition, platform) & absent)]
         seen: set[tuple[int, frozenset, bool]] = set()
         while stack:
             edge, read, chosen = stack.pop()
@@ -154,6 +158,18 @@ class CycleReads:
                         return None
                     found |= _events(e.transition.condition, platform)[0]
         return frozenset(found | self._actions[machine])
+
+
+def _required(expr, platform: dict[str, str]) -> set[str]:
+    """Platform events a guard cannot hold without (`$a /\\ not $b`: a; `$a \\/ $b`: none; `$a \\/ ($a /\\ x)`: a)."""
+    if isinstance(expr, s.EventTest):
+        name = platform.get(expr.event.last)
+        return {name} if name is not None else set()
+    if isinstance(expr, s.Binary) and expr.op == "/\\":
+        return _required(expr.left, platform) | _required(expr.right, platform)
+    if isinstance(expr, s.Binary) and expr.op == "\\/":
+        return _required(expr.left, platform) & _required(expr.right, platform)
+    return set()
 
 
 def _action_reads(m, platform: dict[str, str]) -> set[str]:

@@ -46,7 +46,7 @@ from ..robosim.operators import MATH
 from ..robosim.values import EvalError
 from ..robosim.declarations import EnumDecl
 from ..robosim.pmodel_elements import Mapping as MappingModel
-from ..robosim.types import EnumTy, TypeResolver
+from ..robosim.types import EnumTy, TypeResolver, VectorTy
 from ..diagnostics import Diagnostics
 
 MIRROR_PREFIXES = (("q", "position"), ("qd", "velocity"))
@@ -513,8 +513,24 @@ class Mapping:
     def registry(self) -> FunctionRegistry:
         """The arm's kinematics functions, set up on first use (a mapping that never calls them needs no arm)."""
         if self._registry is None:
-            self._registry = FunctionRegistry(self.endpoint, self._geometry)
+            registry = FunctionRegistry(self.endpoint, self._geometry)
+            self._check_kinematics_result(registry)
+            self._registry = registry
         return self._registry
+
+    def _check_kinematics_result(self, registry: FunctionRegistry) -> None:
+        """The mapping's declared `inverse_kinematics(...): vector(real, N)` must have one value per arm joint:
+        with fewer, the last joints would never be commanded (and the tool miss its target while moves
+        'complete'); with more, the values past the arm's would be read as nothing."""
+        fn = self.project.visible_functions(self.source).get("inverse_kinematics")
+        if fn is None:
+            return
+        ty = self.resolver.resolve(fn.result)
+        if isinstance(ty, VectorTy) and ty.size is not None and ty.size != len(registry.arm):
+            raise CotwinError(f"{fn.loc}: inverse_kinematics is declared to return {ty}, but p-model "
+                              f"{registry.tree.name}'s arm from its base to the tool link {registry.tool.link} has "
+                              f"{len(registry.arm)} moving joints ({', '.join(registry.arm)}): declare "
+                              f"vector(real, {len(registry.arm)}) and command every one of them")
 
     def _kinematics(self, name: str):
         def call(*args):

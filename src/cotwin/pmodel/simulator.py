@@ -149,8 +149,10 @@ class PlatformSimulator:
         self._qpos, self._qvel = self.data.qpos, self.data.qvel
         self._ctrl, self._sensordata = self.data.ctrl, self.data.sensordata
         self._holds_position = {j.name for j in tree.actuated if servo_mode(j) == "position"}
-        for j in tree.actuated:  # the initial posture: within each joint's limits (TJoint.start)
-            self.model.qpos0[self._joint_qpos[j.name]] = j.start
+        # the initial posture: within each joint's limits (TJoint.start), set in qpos by `reset`; never in
+        # model.qpos0, which is MuJoCo's reference configuration (a hinge turns by qpos - qpos0): a joint whose
+        # limits exclude 0 would read its start while its link stood at 0, every angle off by that much
+        self._start = {j.name: float(j.start) for j in tree.actuated if j.name in self._joint_qpos}
         # ray sensors, by placed sensor; the free base's pose
         groups: dict[str, tuple] = {}
         for sensor in tree.sensors:
@@ -188,14 +190,17 @@ class PlatformSimulator:
 
     # ---- the API ----
     def reset(self, q: dict[str, float] | None = None) -> None:
-        """Back to the model's initial state (joints at q, default 0), position servos holding that
-        position, speed and effort commands at 0. A view of a shared world resets its own joints only."""
+        """Back to the model's initial state (joints at q, default their start: 0 or the limit nearest it),
+        position servos holding that position, speed and effort commands at 0. A view of a shared world resets
+        its own joints only."""
         if self.shared is None:
             mujoco.mj_resetData(self.model, self.data)
         else:
             for name, adr in self._joint_qpos.items():
                 self.data.qpos[adr] = self.model.qpos0[adr]
                 self.data.qvel[self._joint_dof[name]] = 0.0
+        for name, value in self._start.items():
+            self.data.qpos[self._joint_qpos[name]] = value
         for name, value in (q or {}).items():
             self.data.qpos[self._joint_adr(name)] = value
         for name, adr in self._joint_qpos.items():

@@ -27,6 +27,7 @@ completed; `strict_failures` lists what makes `--strict` exit with STRICT_EXIT.
 from __future__ import annotations
 
 import re
+from collections import deque
 from functools import lru_cache
 from dataclasses import dataclass, field
 
@@ -185,6 +186,9 @@ class CommandLedger(Observer):
         self._events_read = execution.reader([(MAPPING.name, e) for e in self._events])
         self._state_read = execution.reader([(DMODEL.name, port) for port, _ in self._states])
         self._before = self._state_read()
+        # the platform events of the last steps seen: those in none of them were absent when the d-model's cycle
+        # before the one judged read its exec guards (a step not seen repeats the one before it)
+        self._recent: deque[frozenset[str]] = deque(maxlen=3)
         self._waiting: list[tuple[int, CommandOutcome, tuple]] = []  # (steps to read, outcome, state when applied)
         self._current: CommandOutcome | None = None
         self._taken_at: float | None = None  # when the current command was taken (None: the d-model's first cycle)
@@ -202,6 +206,7 @@ class CommandLedger(Observer):
         ticked = self._cycles.ran() if self._cycles.clocked else None  # None: a cycle every step, read after _lag
         calls = [c for c, v in zip(self._calls, self._calls_read()) if v is True]
         events = [e for e, v in zip(self._events, self._events_read()) if v is True]
+        self._recent.append(frozenset(events))
         for outcome in self._fresh():
             self._waiting.append((self._lag, outcome, self._before))
         still, read = [], []
@@ -254,7 +259,8 @@ class CommandLedger(Observer):
     def _judge(self, outcome: CommandOutcome, before: tuple | None, states: tuple, calls: list[str],
                t: float | None = None) -> None:
         """Taken or not, by the cycle that took the d-model from `before` (None: its first) to `states` at `t`."""
-        if (before is None or states != before or calls) and self._may_read(outcome.event, before, states):
+        if (before is None or states != before or calls) and self._may_read(outcome.event, before, states,
+                                                                              self._absent()):
             outcome.accepted = True
             current = self._current
             if current is not None and current.done is None and current.stopped is None \
@@ -271,7 +277,15 @@ class CommandLedger(Observer):
             for _ in rows.replay(execution):  # it reads only the values on the connections
                 self.step_complete(execution)
 
-    def _may_read(self, event: str, before, after) -> bool:
+    def _absent(self) -> frozenset[str]:
+        """The platform events that occurred in none of the last steps: the cycle before the one judged read its
+        guards without them. Nothing is known so at a run's start, of a clocked d-model (its cycle before may lie
+        further back) or of several cycles a step."""
+        if self._cycles.clocked or self._several or len(self._recent) < (self._recent.maxlen or 0):
+            return frozenset()
+        return frozenset(self._events).difference(*self._recent)
+
+    def _may_read(self, event: str, before, after, absent: frozenset[str] = frozenset()) -> bool:
         """Whether a machine reading `event` may have read it in the cycle that took it from `before` (None: its
         first cycle) to `after` (cotwin.dmodel.waits.CycleReads): a command the d-model reads while its state changes for another reason
         (an earlier move going on) is not taken when no path of that change reads it."""
@@ -279,7 +293,7 @@ class CommandLedger(Observer):
             was = before[k] if before is not None and k < len(before) else None
             now = after[k] if k < len(after) else None
             known = isinstance(now, int) and (before is None or isinstance(was, int))  # else: cannot tell
-            read = self.cycles.between(m, was, now, self._several) if known else None
+            read = self.cycles.between(m, was, now, self._several, absent) if known else None
             if read is None or event in read:
                 return True
         return False

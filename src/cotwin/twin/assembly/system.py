@@ -166,6 +166,17 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     if clash:
         problems.append(Finding(spec.location("monitor", "readings", clash[0]), Severity.ERROR,
                                 f"[monitor] readings {', '.join(clash)}: the mapping has variables of these names"))
+    # a reading is an output of the mapping's unit: a name the d-model's operations, their argument ports or the
+    # mapping's events already give a port of that unit would be wired twice (a reading `z` and goto(x, y, z))
+    ports = {op.name: f"operation {op.name}" for op in program.operations}
+    ports.update({port: f"an argument of operation {op.name}" for op in program.operations
+                  for args in op.arg_ports for port, _ in args})
+    ports.update({ev.name: f"event {ev.name}" for ev in mapping.input_events})
+    taken = [n for n in spec.readings if n in ports and n not in clash]
+    if taken:
+        problems.append(Finding(spec.location("monitor", "readings", taken[0]), Severity.ERROR,
+                                "[monitor] readings " + ", ".join(f"{n} (already {ports[n]})" for n in taken) +
+                                ": each reading needs a name of its own (e.g. " + repr(f"{taken[0]}_reading") + ")"))
     if problems:
         if spec.plan is not None:  # its problems too, not in a round of their own once these are fixed
             from .scenario import read_scenario
