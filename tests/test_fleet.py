@@ -1,6 +1,6 @@
 """Fleets of twins (cotwin fleet): located errors in fleet files, a fleet of 8 on Ray whose one twin fails and
 is restarted from its last saved state while the others finish, and the overview page answering with each
-twin's state. One Ray for the module (started on 127.0.0.1, stopped at the end)."""
+twin's state. The one test on Ray starts its own on 127.0.0.1 and stops it at its end."""
 
 from __future__ import annotations
 
@@ -37,10 +37,13 @@ def write_log(path: Path, span: float = 12.0) -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def ray_local():
+    """A local Ray for one test, the machine's only one meanwhile (conftest.machine_lock): held for the module,
+    it kept every other test process's Ray test waiting through this file's long tests without Ray, that wait
+    counted in its timeout."""
     ray = pytest.importorskip("ray")
-    with machine_lock("ray"):  # the only Ray cluster on the machine meanwhile
+    with machine_lock("ray"):
         ray.init(address="local", _node_ip_address="127.0.0.1", include_dashboard=False, num_cpus=2,
                  logging_level="ERROR", log_to_driver=False, configure_logging=False)
         yield ray
