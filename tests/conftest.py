@@ -140,6 +140,10 @@ LONGEST_FIRST = ("test_dmodel_random.py", "test_pythonfmu_exit.py", "test_fleet.
 
 
 def pytest_collection_modifyitems(config, items) -> None:
+    """On pytest-xdist's workers only (each collects, all alike; the controller does not): a run on one process
+    keeps the order it always had, files as collected."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
     rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the rest as collected
 
