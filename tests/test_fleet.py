@@ -60,6 +60,7 @@ def fleet_file(tmp: Path, twins: list[dict], fleet: str = "checkpoint_every = 5\
     return path
 
 
+@pytest.mark.timeout(900)  # its time includes waiting for the other Ray test (conftest.machine_lock)
 def test_fleet_of_8_restarts_a_failed_twin_from_its_saved_state(tmp_path, ray_local):
     """One twin's process is killed mid-run (by PID): the supervisor says so, restarts it from its last saved
     state (not from 0) and it ends where an uninterrupted twin of the same project ends; the 7 others finish."""
