@@ -140,6 +140,11 @@ LONGEST_FIRST = ("test_dmodel_random.py", "test_pythonfmu_exit.py", "test_fleet.
 
 
 def pytest_collection_modifyitems(config, items) -> None:
+    """On pytest-xdist's workers only (each collects, all alike; the controller does not): a run on one process
+    keeps the order it always had, files as collected. A worker is told by its config, as in pytest_unconfigure,
+    not by PYTEST_XDIST_WORKER, which a pytest the tests start (test_session) inherits."""
+    if not hasattr(config, "workerinput"):
+        return
     rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the rest as collected
 

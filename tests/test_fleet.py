@@ -1,6 +1,6 @@
 """Fleets of twins (cotwin fleet): located errors in fleet files, a fleet of 8 on Ray whose one twin fails and
 is restarted from its last saved state while the others finish, and the overview page answering with each
-twin's state. One Ray for the module (started on 127.0.0.1, stopped at the end)."""
+twin's state. The one test on Ray starts its own on 127.0.0.1 and stops it at its end."""
 
 from __future__ import annotations
 
@@ -37,10 +37,13 @@ def write_log(path: Path, span: float = 12.0) -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def ray_local():
+    """A local Ray for one test, the machine's only one meanwhile (conftest.machine_lock): held for the module,
+    it kept every other test process's Ray test waiting through this file's long tests without Ray, that wait
+    counted in its timeout."""
     ray = pytest.importorskip("ray")
-    with machine_lock("ray"):  # the only Ray cluster on the machine meanwhile
+    with machine_lock("ray"):
         ray.init(address="local", _node_ip_address="127.0.0.1", include_dashboard=False, num_cpus=2,
                  logging_level="ERROR", log_to_driver=False, configure_logging=False)
         yield ray
@@ -57,6 +60,7 @@ def fleet_file(tmp: Path, twins: list[dict], fleet: str = "checkpoint_every = 5\
     return path
 
 
+@pytest.mark.timeout(900)  # its time includes waiting for the other Ray test (conftest.machine_lock)
 def test_fleet_of_8_restarts_a_failed_twin_from_its_saved_state(tmp_path, ray_local):
     """One twin's process is killed mid-run (by PID): the supervisor says so, restarts it from its last saved
     state (not from 0) and it ends where an uninterrupted twin of the same project ends; the 7 others finish."""
@@ -199,7 +203,8 @@ def test_each_twins_alarms_go_to_the_broker_under_its_own_name(tmp_path, broker)
         channel = connection.channel()
         declare_exchange(channel, "cotwin.twin", "topic", url, "the test")
         queue = channel.queue_declare("", exclusive=True).method.queue
-        channel.queue_bind(queue, "cotwin.twin", routing_key="twin.alarm.*")
+        for name in names:  # its own twins' only: under make test's workers, other tests' twins raise alarms there too
+            channel.queue_bind(queue, "cotwin.twin", routing_key=f"twin.alarm.{name}")
         summary = Fleet(spec, tmp_path / "out", ray=None).run()
         assert all(t["state"] == "done" for t in summary["twins"])
         raised = {t["name"]: t["alarms"] for t in summary["twins"]}

@@ -244,3 +244,31 @@ pmodel P {
         ("p.pm", 18, 8, "duplicate sensor 'j' in link tip (first declared as a joint at line 17, column 8)"),
         ("p.pm", 21, 13, "duplicate link 'tip2' in p-model P (first declared at line 20, column 13)"),
     ]
+
+
+def test_duplicate_names_in_a_joint_and_in_a_fragment_are_located_errors(check_texts):
+    """The scopes the test above leaves out: a joint's actuators, a fragment's links (each checked by its own
+    call, so each needs its own case)."""
+    text = """import physmod::joints::*
+import physmod::sensors::*
+import physmod::actuators::*
+pmodel P {
+	local link base {
+		def { inertial information { mass 1.0 kg } }
+		jref j = Revolute { flexibly connected to tip
+			aref M = ControlledMotor { }
+			aref M = ControlledMotor { }
+		}
+	}
+	local link tip { def { inertial information { mass 1.0 kg } } }
+}
+fragment F {
+	local link L { def { inertial information { mass 1.0 kg } } }
+	local link L { def { inertial information { mass 1.0 kg } } }
+}
+"""
+    found = [e for e in errors(check_texts({"p.pm": text})) if "duplicate" in e[3]]
+    assert sorted(found) == [
+        ("p.pm", 9, 9, "duplicate actuator 'M' in joint j (first declared at line 8, column 9)"),
+        ("p.pm", 16, 13, "duplicate link 'L' in fragment F (first declared at line 15, column 13)"),
+    ]

@@ -362,3 +362,21 @@ def test_an_interrupt_while_the_figure_is_drawn_says_the_run_is_complete(project
     assert str(err.value) == ("error: interrupted while drawing the figure; the run is complete: 6 row(s) to "
                               f"t = 0.5 s in {out / 'outputs.csv'}")
     assert len((out / "outputs.csv").read_text().splitlines()) == 1 + 6
+
+
+def test_an_interrupt_located_at_its_file_stays_an_interrupt():
+    """placed() (a what-if's or sweep's error put at its state or plan file) keeps the error's class and what it
+    carries: an interrupted sweep so located still exits 130 with its answers kept, not 1 with them lost."""
+    import pickle
+
+    from cotwin.diagnostics import Location, placed
+    from cotwin.twin.analysis.sweep import SweepInterrupted
+
+    rows = [{"target_X": 1, "feasible": True}]
+    err = placed(SweepInterrupted(rows, 4, running=1), Location("state.bin", 0, 0))
+    assert type(err) is SweepInterrupted and isinstance(err, Interrupted)
+    assert (err.rows, err.total, err.running) == (rows, 4, 1)
+    assert [(f.location.path, f.message) for f in err.findings] == [("state.bin", "interrupted after 1 of 4 what-ifs")]
+    again = pickle.loads(pickle.dumps(err))  # as it comes back from a worker process
+    assert type(again) is SweepInterrupted and again.rows == rows and str(again) == str(err)
+    assert type(placed(CotwinError("bad"), Location("plan.csv", 0, 0))) is CotwinError

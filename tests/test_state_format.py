@@ -481,3 +481,95 @@ def test_a_state_of_an_unknown_algorithm_is_refused_by_whatif_and_sweep_at_the_s
                             "-o", "sweep.csv", cwd=tmp_path)
     assert run.returncode == 1 and message in run.stderr and "what-if 1 of" not in run.stderr, run.stderr[-2000:]
     assert not (tmp_path / "sweep.csv").exists()
+
+
+from cotwin.cosim.state import _Writer as _WRITER  # noqa: E402 - the writer of today, the one tested
+
+
+class _Before:
+    """The state writer as it was before it kept plain items without a call each (a969638): the reference the
+    faster one must match byte for byte (a saved state is compared and hashed by its bytes)."""
+
+    def __init__(self):
+        from cotwin.cosim import state
+
+        self.state, self.blobs = state, []
+        self.writer = _WRITER()
+        self.writer.encode = self.encode  # _items and the blobs go on through the same writer
+
+    def encode(self, value, depth: int = 0):
+        s, w = self.state, self.writer
+        if depth > s.MAX_DEPTH:
+            raise StateError(f"a state nested deeper than {s.MAX_DEPTH} levels cannot be saved")
+        cls = value.__class__
+        if value is None or cls in (bool, str) or (cls is int and not isinstance(value, bool)):
+            return value
+        if cls is float:
+            return value if math.isfinite(value) else {"$float": repr(value)}
+        if isinstance(value, np.ndarray):
+            array = w._numeric(value)
+            return {"$array": w.blob(array.tobytes()), "dtype": array.dtype.str, "shape": list(array.shape)}
+        if isinstance(value, np.generic):
+            array = w._numeric(np.asarray(value))
+            return {"$scalar": w.blob(array.tobytes()), "dtype": array.dtype.str}
+        if cls in (bytes, bytearray, memoryview):
+            return {"$bytes": w.blob(bytes(value))}
+        if cls.__name__ in s._VALUES and s._VALUES[cls.__name__] is cls:
+            return {"$value": cls.__name__, "items": w._items(value, depth, cls is SetValue)}
+        if cls is list:
+            return [self.encode(v, depth + 1) for v in value]
+        if cls is tuple:
+            return {"$tuple": [self.encode(v, depth + 1) for v in value]}
+        if cls in (set, frozenset):
+            return {"$set" if cls is set else "$frozenset": w._items(value, depth, True)}
+        if cls is dict:
+            if all(k.__class__ is str and not k.startswith("$") for k in value):
+                return {k: self.encode(v, depth + 1) for k, v in value.items()}
+            return {"$dict": [[self.encode(k, depth + 1), self.encode(v, depth + 1)] for k, v in value.items()]}
+        raise StateError(f"a state holds only plain data, not a {cls.__module__}.{cls.__qualname__}")
+
+
+def _random_state(rng: random.Random, depth: int):
+    """Plain data of every kind a state holds, nested up to `depth` (past the limit, too)."""
+    scalars = [lambda: rng.choice(["", "a", "$x", "$float", "é"]), lambda: rng.randrange(-2 ** 70, 2 ** 70),
+               lambda: rng.choice([True, False, None]), lambda: rng.choice([0.0, -0.0, 1.5, math.nan, math.inf,
+                                                                           -math.inf, rng.uniform(-1e9, 1e9)]),
+               lambda: np.float32(rng.random()), lambda: np.arange(rng.randrange(4), dtype="<i4"),
+               lambda: bytes(rng.randrange(256) for _ in range(3)), lambda: np.int64(7)]
+    if depth <= 0 or rng.random() < 0.3:
+        return rng.choice(scalars)()
+    items = [_random_state(rng, depth - 1) for _ in range(rng.randrange(4))]
+    keys = [rng.choice(["k", "$k", "v", 1, (1, 2), None]) if rng.random() < 0.2 else f"k{n}" for n in range(len(items))]
+    return rng.choice([lambda: items, lambda: tuple(items), lambda: dict(zip(keys, items)),
+                       lambda: {x for x in items if isinstance(x, (str, int))},
+                       lambda: frozenset(x for x in items if isinstance(x, (str, float)))])()
+
+
+def _deep(rng: random.Random, levels: int, leaf):
+    for _ in range(levels):
+        leaf = rng.choice([lambda v: [1, v, 2.5], lambda v: (v, None), lambda v: {"a": v, "b": "s"}])(leaf)
+    return leaf
+
+
+def test_state_bytes_are_those_of_the_writer_before_it_was_made_faster(monkeypatch):
+    """Random states of every kind, and states at and past the depth limit, give the same bytes (or the same
+    refusal) as the writer before a969638 gave."""
+    from conftest import FUZZ_SEED
+    from cotwin.cosim import state
+
+    rng = random.Random(FUZZ_SEED)
+    cases = [_random_state(rng, 6) for _ in range(2000)]
+    cases += [_deep(rng, state.MAX_DEPTH + extra, leaf) for extra in (-2, -1, 0, 1) for leaf in
+              (1, 1.5, math.nan, "s", [], {}, (), [1, 2], {"$a": 1}, np.float64(2.0))]
+
+    def written(writer_class, data):
+        monkeypatch.setattr(state, "_Writer", writer_class)
+        try:
+            return pack("unit", data)
+        except StateError as err:
+            return str(err)
+        finally:
+            monkeypatch.undo()
+
+    for data in cases:
+        assert written(_WRITER, data) == written(lambda: _Before().writer, data), (FUZZ_SEED, data)

@@ -188,6 +188,7 @@ def test_whatif_requests_over_the_broker_are_answered_without_disturbing_the_twi
     assert "bad what-if request" in answers["bad"]["error"] and "unknown event 'fly'" in answers["worse"]["error"]
 
 
+@pytest.mark.timeout(900)  # its time includes waiting for the other Ray test (conftest.machine_lock)
 def test_a_sweep_gives_the_same_answers_on_a_local_pool_and_on_ray(system, tmp_path, ray_alone):
     """On a Ray head of its own on 127.0.0.1, with token authentication (conftest: RAY_AUTH_MODE), joined
     by its address."""

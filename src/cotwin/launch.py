@@ -8,6 +8,7 @@ import sys
 
 
 def main() -> None:
+    """The `cotwin` command (and `python -m cotwin`): cotwin.cli.entry, once its modules are imported."""
     try:
         from .cli import entry
     except KeyboardInterrupt:
