@@ -108,6 +108,21 @@ def postgres_server():
     _service(5432, "PostgreSQL", "pg_ctlcluster --skip-systemctl-redirect $(ls /etc/postgresql) main start")
 
 
+@pytest.fixture
+def postgres_database(postgres_server):
+    """A fresh database on the loopback PostgreSQL, dropped afterwards: (its URL, its name)."""
+    import uuid
+
+    import psycopg
+
+    name = f"cotwin_test_{uuid.uuid4().hex[:8]}"
+    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    yield f"postgresql://postgres@127.0.0.1:5432/{name}", name
+    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
+        conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+
+
 # ---- one fresh cache per test session -------------------------------------------------------------
 # cotwin caches IK solutions in $COTWIN_CACHE (else ~/.cache/cotwin): tests that shared the user's cache
 # depended on what earlier runs had solved. Every test session gets its own, empty, inherited by the

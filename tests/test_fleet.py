@@ -305,35 +305,24 @@ def test_without_ray_the_fleet_names_the_extra_and_the_way_without_it(monkeypatc
         RayHosts("auto")
 
 
-def test_a_fleet_records_into_one_postgresql_store(tmp_path, postgres_server):
+def test_a_fleet_records_into_one_postgresql_store(tmp_path, postgres_database):
     """Every twin's run and the fleet's own events go to the one PostgreSQL store the fleet names."""
-    import uuid
-
-    import psycopg
-
     from cotwin.twin.analysis.fleet.record import fleet_events
     from cotwin.twin.analysis.fleet.spec import read_fleet
     from cotwin.twin.analysis.fleet.supervisor import Fleet
     from cotwin.twin.services.history import database_url, list_runs
 
-    name = f"cotwin_test_{uuid.uuid4().hex[:8]}"
-    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
-        conn.execute(f'CREATE DATABASE "{name}"')
-    url = f"postgresql://postgres@127.0.0.1:5432/{name}"
-    try:
-        log = write_log(tmp_path / "run.csv", span=3.0)
-        spec = read_fleet(fleet_file(tmp_path, [{"name": n, "project": str(PROJECT), "pt_log": str(log), "end": 1.0}
-                                                for n in ("a", "b")], fleet=f'history = "{url}"\n'))
-        summary = Fleet(spec, tmp_path / "out", ray=None).run()
-        assert all(t["state"] == "done" for t in summary["twins"])
-        assert not (tmp_path / "out" / "history.sqlite").exists()
-        runs = list_runs(database_url(url))
-        events = fleet_events(database_url(url))
-        assert {e["twin"] for e in events if e["event"] == "done"} == {"a", "b"}
-        assert {e["run"] for e in events if e["event"] == "done"} == {r["id"] for r in runs}
-    finally:
-        with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
-            conn.execute(f'DROP DATABASE "{name}" WITH (FORCE)')
+    url, _ = postgres_database
+    log = write_log(tmp_path / "run.csv", span=3.0)
+    spec = read_fleet(fleet_file(tmp_path, [{"name": n, "project": str(PROJECT), "pt_log": str(log), "end": 1.0}
+                                            for n in ("a", "b")], fleet=f'history = "{url}"\n'))
+    summary = Fleet(spec, tmp_path / "out", ray=None).run()
+    assert all(t["state"] == "done" for t in summary["twins"])
+    assert not (tmp_path / "out" / "history.sqlite").exists()
+    runs = list_runs(database_url(url))
+    events = fleet_events(database_url(url))
+    assert {e["twin"] for e in events if e["event"] == "done"} == {"a", "b"}
+    assert {e["run"] for e in events if e["event"] == "done"} == {r["id"] for r in runs}
 
 
 def test_every_project_problem_of_a_fleet_names_its_twin_and_a_duplicate_entry_is_still_checked(tmp_path):
@@ -383,7 +372,7 @@ def test_the_models_problems_of_every_project_of_a_fleet_come_together_naming_th
     assert said[str(projects[1])].startswith("twin 'b' (") and "no_two" in said[str(projects[1])]
 
 
-def test_a_twin_whose_history_store_refuses_its_writes_is_reported_by_name_and_the_others_go_on(tmp_path, postgres_server):
+def test_a_twin_whose_history_store_refuses_its_writes_is_reported_by_name_and_the_others_go_on(tmp_path, postgres_database):
     """The fleet's PostgreSQL store starts refusing one twin's samples mid-run (a trigger raising for that twin's
     run once it holds a few): that twin runs to its end as the other does, and the fleet's summary (fleet.json),
     its messages and its exit status say that this twin's history is incomplete and why."""
@@ -391,53 +380,44 @@ def test_a_twin_whose_history_store_refuses_its_writes_is_reported_by_name_and_t
     import shutil
     import subprocess
     import sys
-    import uuid
-
     import psycopg
 
     from cotwin.twin.services.history import create_tables, database_url, engine_for
 
-    name = f"cotwin_test_{uuid.uuid4().hex[:8]}"
-    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
-        conn.execute(f'CREATE DATABASE "{name}"')
-    url = f"postgresql://postgres@127.0.0.1:5432/{name}"
-    try:
-        engine = engine_for(database_url(url))
-        create_tables(engine)
-        engine.dispose()
-        with psycopg.connect(f"host=127.0.0.1 user=postgres dbname={name}", autocommit=True) as conn:
-            conn.execute("""CREATE FUNCTION cotwin.refuse() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN
-                IF NEW.run IN (SELECT id FROM cotwin.runs WHERE project LIKE '%/refused/%')
-                   AND (SELECT count(*) FROM cotwin.samples WHERE run = NEW.run) >= 4 THEN
-                    RAISE EXCEPTION 'this store takes no more samples of run %', NEW.run;
-                END IF;
-                RETURN NEW; END $$""")
-            conn.execute("CREATE TRIGGER refuse BEFORE INSERT ON cotwin.samples FOR EACH ROW EXECUTE FUNCTION cotwin.refuse()")
-        refused = tmp_path / "refused"  # b's project, by another path than a's: the trigger tells its runs apart
-        shutil.copytree(PROJECT.parent, refused)
-        log = write_log(tmp_path / "run.csv", span=3.0)
-        path = fleet_file(tmp_path, [{"name": "a", "project": str(PROJECT), "pt_log": str(log), "end": 1.5},
-                                     {"name": "b", "project": str(refused / PROJECT.name), "pt_log": str(log),
-                                      "end": 1.5}])
-        done = subprocess.run([sys.executable, "-m", "cotwin", "fleet", str(path), "-o", str(tmp_path / "out"),
-                               "--ray", "off", "--history", url], capture_output=True, text=True, timeout=600)
-        assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
-        summary = json.loads((tmp_path / "out" / "fleet.json").read_text())
-        twins = {t["name"]: t for t in summary["twins"]}
-        assert twins["a"]["state"] == twins["b"]["state"] == "done" and twins["a"]["time"] == twins["b"]["time"]
-        assert not twins["a"]["history_problems"]
-        [problem] = twins["b"]["history_problems"]
-        assert "is incomplete" in problem["message"] and "this store takes no more samples" in problem["message"]
-        said = [line for line in done.stderr.splitlines() if line.startswith("twin b: ")]
-        assert said and all("history" in line and "this store takes no more samples" in line for line in said)
-        assert not any(line.startswith("twin a: ") for line in done.stderr.splitlines())
-        assert "incomplete history: b" in done.stderr
-        from cotwin.twin.analysis.fleet.record import fleet_events
+    url, name = postgres_database
+    engine = engine_for(database_url(url))
+    create_tables(engine)
+    engine.dispose()
+    with psycopg.connect(f"host=127.0.0.1 user=postgres dbname={name}", autocommit=True) as conn:
+        conn.execute("""CREATE FUNCTION cotwin.refuse() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN
+            IF NEW.run IN (SELECT id FROM cotwin.runs WHERE project LIKE '%/refused/%')
+               AND (SELECT count(*) FROM cotwin.samples WHERE run = NEW.run) >= 4 THEN
+                RAISE EXCEPTION 'this store takes no more samples of run %', NEW.run;
+            END IF;
+            RETURN NEW; END $$""")
+        conn.execute("CREATE TRIGGER refuse BEFORE INSERT ON cotwin.samples FOR EACH ROW EXECUTE FUNCTION cotwin.refuse()")
+    refused = tmp_path / "refused"  # b's project, by another path than a's: the trigger tells its runs apart
+    shutil.copytree(PROJECT.parent, refused)
+    log = write_log(tmp_path / "run.csv", span=3.0)
+    path = fleet_file(tmp_path, [{"name": "a", "project": str(PROJECT), "pt_log": str(log), "end": 1.5},
+                                 {"name": "b", "project": str(refused / PROJECT.name), "pt_log": str(log),
+                                  "end": 1.5}])
+    done = subprocess.run([sys.executable, "-m", "cotwin", "fleet", str(path), "-o", str(tmp_path / "out"),
+                           "--ray", "off", "--history", url], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    summary = json.loads((tmp_path / "out" / "fleet.json").read_text())
+    twins = {t["name"]: t for t in summary["twins"]}
+    assert twins["a"]["state"] == twins["b"]["state"] == "done" and twins["a"]["time"] == twins["b"]["time"]
+    assert not twins["a"]["history_problems"]
+    [problem] = twins["b"]["history_problems"]
+    assert "is incomplete" in problem["message"] and "this store takes no more samples" in problem["message"]
+    said = [line for line in done.stderr.splitlines() if line.startswith("twin b: ")]
+    assert said and all("history" in line and "this store takes no more samples" in line for line in said)
+    assert not any(line.startswith("twin a: ") for line in done.stderr.splitlines())
+    assert "incomplete history: b" in done.stderr
+    from cotwin.twin.analysis.fleet.record import fleet_events
 
-        assert [e["twin"] for e in fleet_events(database_url(url)) if e["event"] == "history incomplete"] == ["b"]
-    finally:
-        with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
-            conn.execute(f'DROP DATABASE "{name}" WITH (FORCE)')
+    assert [e["twin"] for e in fleet_events(database_url(url)) if e["event"] == "history incomplete"] == ["b"]
 
 
 def test_each_restart_and_give_up_is_said_once_on_the_command_line(tmp_path):
@@ -459,44 +439,35 @@ def test_each_restart_and_give_up_is_said_once_on_the_command_line(tmp_path):
     assert len(said) == 2 and "restarting it afresh" in said[0] and "given up after 1 restart(s)" in said[1], said
 
 
-def test_the_fleets_own_events_refused_by_its_store_are_said_and_fail_the_command(tmp_path, postgres_server):
+def test_the_fleets_own_events_refused_by_its_store_are_said_and_fail_the_command(tmp_path, postgres_database):
     """The store refuses the fleet's record of a twin's end (a trigger on fleet_twins): the fleet said nothing of
     it (the error was kept "for the end" and never read); now it is said when it happens, in fleet.json and in the
     exit status, and the twin's own outputs and history are whole."""
     import json
     import subprocess
     import sys
-    import uuid
-
     import psycopg
 
     from cotwin.twin.analysis.fleet.record import metadata
     from cotwin.twin.services.history import create_tables, database_url, engine_for
 
-    name = f"cotwin_test_{uuid.uuid4().hex[:8]}"
-    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
-        conn.execute(f'CREATE DATABASE "{name}"')
-    url = f"postgresql://postgres@127.0.0.1:5432/{name}"
-    try:
-        engine = engine_for(database_url(url))
-        create_tables(engine, metadata)
-        engine.dispose()
-        with psycopg.connect(f"host=127.0.0.1 user=postgres dbname={name}", autocommit=True) as conn:
-            conn.execute("""CREATE FUNCTION cotwin.refuse_end() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN
-                IF NEW.event = 'done' THEN RAISE EXCEPTION 'this store takes no ends'; END IF;
-                RETURN NEW; END $$""")
-            conn.execute("CREATE TRIGGER refuse BEFORE INSERT ON cotwin.fleet_twins FOR EACH ROW EXECUTE FUNCTION cotwin.refuse_end()")
-        log = write_log(tmp_path / "run.csv", span=3.0)
-        path = fleet_file(tmp_path, [{"name": "a", "project": str(PROJECT), "pt_log": str(log), "end": 1.0}])
-        done = subprocess.run([sys.executable, "-m", "cotwin", "fleet", str(path), "-o", str(tmp_path / "out"),
-                               "--ray", "off", "--history", url], capture_output=True, text=True, timeout=600)
-        assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr[-3000:]
-        summary = json.loads((tmp_path / "out" / "fleet.json").read_text())
-        assert summary["twins"][0]["state"] == "done" and not summary["twins"][0]["history_problems"]
-        assert "1 not written" in summary["events_problem"] and "this store takes no ends" in summary["events_problem"]
-        said = [line for line in done.stderr.splitlines() if "the fleet's events are incomplete" in line]
-        assert len(said) == 2 and "the fleet goes on" in said[0], done.stderr[-3000:]  # when it happened, and at the end
-        assert "incomplete history: the fleet's events" in done.stderr
-    finally:
-        with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
-            conn.execute(f'DROP DATABASE "{name}" WITH (FORCE)')
+    url, name = postgres_database
+    engine = engine_for(database_url(url))
+    create_tables(engine, metadata)
+    engine.dispose()
+    with psycopg.connect(f"host=127.0.0.1 user=postgres dbname={name}", autocommit=True) as conn:
+        conn.execute("""CREATE FUNCTION cotwin.refuse_end() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN
+            IF NEW.event = 'done' THEN RAISE EXCEPTION 'this store takes no ends'; END IF;
+            RETURN NEW; END $$""")
+        conn.execute("CREATE TRIGGER refuse BEFORE INSERT ON cotwin.fleet_twins FOR EACH ROW EXECUTE FUNCTION cotwin.refuse_end()")
+    log = write_log(tmp_path / "run.csv", span=3.0)
+    path = fleet_file(tmp_path, [{"name": "a", "project": str(PROJECT), "pt_log": str(log), "end": 1.0}])
+    done = subprocess.run([sys.executable, "-m", "cotwin", "fleet", str(path), "-o", str(tmp_path / "out"),
+                           "--ray", "off", "--history", url], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr[-3000:]
+    summary = json.loads((tmp_path / "out" / "fleet.json").read_text())
+    assert summary["twins"][0]["state"] == "done" and not summary["twins"][0]["history_problems"]
+    assert "1 not written" in summary["events_problem"] and "this store takes no ends" in summary["events_problem"]
+    said = [line for line in done.stderr.splitlines() if "the fleet's events are incomplete" in line]
+    assert len(said) == 2 and "the fleet goes on" in said[0], done.stderr[-3000:]  # when it happened, and at the end
+    assert "incomplete history: the fleet's events" in done.stderr

@@ -117,16 +117,9 @@ def test_a_client_that_never_finishes_its_request_head_is_closed_and_the_page_se
 # ---- another application's names ------------------------------------------------------------------
 
 @pytest.fixture
-def postgres(postgres_server):
-    """A fresh database on the loopback PostgreSQL, dropped afterwards."""
-    import psycopg
-
-    name = f"cotwin_hostile_{uuid.uuid4().hex[:8]}"
-    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
-        conn.execute(f'CREATE DATABASE "{name}"')
-    yield f"postgresql://postgres@127.0.0.1:5432/{name}", name
-    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
-        conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+def postgres(postgres_database):
+    """A fresh database on the loopback PostgreSQL, dropped afterwards (conftest.postgres_database)."""
+    return postgres_database
 
 
 def test_another_applications_runs_table_in_postgresql_is_left_alone(postgres, tmp_path):

@@ -7,7 +7,6 @@ import csv
 import json
 import subprocess
 import sys
-import uuid
 from pathlib import Path
 
 import pytest
@@ -91,16 +90,9 @@ def test_replayed_pt_beside_the_dt_gives_a_deviation_report(recorded, tmp_path):
 
 
 @pytest.fixture
-def postgres(postgres_server):
-    """A fresh database on the loopback PostgreSQL, dropped afterwards."""
-    import psycopg
-
-    name = f"cotwin_test_{uuid.uuid4().hex[:8]}"
-    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
-        conn.execute(f'CREATE DATABASE "{name}"')
-    yield f"postgresql://postgres@127.0.0.1:5432/{name}"
-    with psycopg.connect("host=127.0.0.1 user=postgres dbname=postgres", autocommit=True) as conn:
-        conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+def postgres(postgres_database):
+    """A fresh database on the loopback PostgreSQL, dropped afterwards (conftest.postgres_database)."""
+    return postgres_database[0]
 
 
 def test_history_in_sqlite_and_postgresql_has_the_same_content_and_round_trips(postgres, tmp_path):
