@@ -217,3 +217,40 @@ def test_no_wait_is_said_blocked_in_a_run_that_completes(twin, built, tmp_path, 
     ran, rows = run(twin, built, tmp_path, [move(*m) for m in plan], algorithm, end=8.0 if len(plan) == 2 else 14.0)
     assert ran.blocked == []
     assert len(true_at(rows, f"{MAPPING}.moveCompleted")) == len(plan) - (len(plan) == 3)
+
+
+def test_a_wait_whose_answer_may_still_come_does_not_end_a_native_stretch(twin, built, tmp_path):
+    """The blocked-wait watch judges a wait `patience` steps after the d-model entered it, on a step seen whole.
+    While the move is under way its answer may come, and stays so until it comes (which ends the stretch
+    anyway): the judgement cannot find it blocked, so it must not end the native stretch there (issue 23: a
+    stretch end per command for nothing). A wait that is blocked is still found (the tests above)."""
+    from cotwin.cosim.observers import Observer
+
+    class Whole(Observer):
+        def __init__(self):
+            self.steps: list[int] = []
+
+        def step_complete(self, execution) -> None:
+            self.steps.append(execution.steps)
+
+        def repeated(self, execution, rows) -> None:
+            return None
+
+    import shutil
+
+    for name in ("dmodel.fmu", "build.json"):
+        shutil.copy(built / name, tmp_path / name)
+    whole = Whole()
+    ran = run_twin(twin.with_plan([move(1.0, 0, 23, 1)]), tmp_path, step=0.1, end=4.0, plot=False, observers=[whole])
+    assert ran.result.native_steps > 0 and ran.blocked == []
+    with open(tmp_path / "outputs.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    program = twin.models.program
+    leaves = program.leaf_names(program.machines[0])
+    step = {round(float(r["time"]) / 0.1): r for r in rows}
+    entered = min(k for k, r in step.items() if leaves[int(r[f"{DMODEL}.state"])] == "Moving")
+    came = min(k for k, r in step.items() if r[f"{MAPPING}.moveCompleted"] == "true")
+    judged = entered + 3  # WaitWatch's patience
+    assert judged < came - 1  # the move is still under way when the watch judges
+    assert entered in whole.steps and came in whole.steps  # changes are seen whole
+    assert judged not in whole.steps

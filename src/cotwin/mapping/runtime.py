@@ -652,6 +652,14 @@ class Mapping:
                     f"assigns {', '.join(sorted(ev.reads & set(self.assigners)))}")
         return None
 
+    def stays_possible(self, name: str) -> bool:
+        """Whether the answer `name` may come now and stays so over any steps made without an operation until
+        it comes: it waits for no step (not pending), does not hold (it comes by coming to hold, so it cannot
+        hold without having come) and no condition of it on what operations assign is false (those variables
+        change only when an operation runs). `cannot_come` says None at each such step."""
+        return name in self.answers and name not in self.pending and not self.held.get(name, (False, None))[0] \
+            and self.cannot_come(name) is None
+
     def event_value(self, name: str):
         """The value the event carried when it last occurred (None before, or for an event without one)."""
         if name not in self.events:

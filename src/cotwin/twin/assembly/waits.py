@@ -87,10 +87,21 @@ class WaitWatch(Observer):
     def quiet_for(self, execution) -> int | None:
         """A machine not yet judged is judged `patience` idle steps after it entered its state: that step
         must be made as the observer sees it (it asks the mapping, whose state is the step's). A state with
-        nothing to judge (no wait, or one a command ends) bounds nothing; one not seen yet does."""
+        nothing to judge (no wait, one a command ends, or one the judgement lets pass whenever it falls among
+        the stretch's steps: `_passes`) bounds nothing; one not seen yet does."""
+        if self.mapping is None:
+            return None
         waiting = [self.patience - idle for m, (leaf, _, idle) in enumerate(self._since)
-                   if idle < self.patience and (leaf is None or self._judged(m, leaf))]
-        return min(waiting) if waiting and self.mapping is not None else None
+                   if idle < self.patience and (leaf is None or self._judged(m, leaf) and not self._passes(m, leaf))]
+        return min(waiting) if waiting else None
+
+    def _passes(self, m: int, leaf) -> bool:
+        """Whether the judgement of machine m waiting in `leaf` finds it not blocked at any step of a stretch
+        starting now: an answer it waits for may come and stays so until it comes (Mapping.stays_possible),
+        and its coming ends the stretch. A stretch of the native loop calls no operation (one called ends it
+        first). The judgement then changes nothing, so its step need not be seen whole: each command's move
+        was cut in two here, a stretch end per command (issue 23)."""
+        return any(self.mapping.stays_possible(event) for event in self.waits[(m, leaf)].events)
 
     def _judged(self, m: int, leaf) -> bool:
         """Whether machine m waiting in `leaf` would be judged (see _judge: a wait no command ends)."""
