@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import pickle
 import random
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -573,3 +574,141 @@ def test_state_bytes_are_those_of_the_writer_before_it_was_made_faster(monkeypat
 
     for data in cases:
         assert written(_WRITER, data) == written(lambda: _Before().writer, data), (FUZZ_SEED, data)
+
+
+from cotwin.cosim.state import _Reader as _READER  # noqa: E402 - the reader of today, the one tested
+
+
+class _ReaderBefore(_READER):
+    """The state reader as it was before it read plain items without a call each and floats by json's own parser
+    (issue 23, stop 36): the reference the faster one must match, value for value and refusal for refusal."""
+
+    def __init__(self, blobs):
+        from cotwin.cosim import state
+
+        super().__init__(blobs)
+        self.s = state
+
+    def decode(self, node, depth: int = 0):
+        s = self.s
+        if depth > s.MAX_DEPTH:
+            raise StateError(f"a damaged cotwin state (nested deeper than {s.MAX_DEPTH} levels)")
+        cls = node.__class__
+        if node is None or cls in (bool, int, float, str):
+            return node
+        if cls is list:
+            return [self.decode(v, depth + 1) for v in node]
+        if any(k.startswith("$") for k in node):
+            return self._tagged(node, depth)
+        return {k: self.decode(v, depth + 1) for k, v in node.items()}
+
+    def _tagged(self, node: dict, depth: int):
+        s = self.s
+        tag = next(k for k in node if k.startswith("$"))
+        shapes = {"$float": {"$float"}, "$tuple": {"$tuple"}, "$set": {"$set"}, "$frozenset": {"$frozenset"},
+                  "$dict": {"$dict"}, "$bytes": {"$bytes"}, "$array": {"$array", "dtype", "shape"},
+                  "$scalar": {"$scalar", "dtype"}, "$value": {"$value", "items"}}
+        if tag not in shapes or set(node) != shapes[tag]:
+            raise StateError(f"a damaged cotwin state (an entry {sorted(node)!r:.80} is not plain data)")
+        body = node[tag]
+        if tag == "$float":
+            if body not in s._CONSTANTS:
+                raise StateError(f"a damaged cotwin state ({body!r:.40} is not nan, inf or -inf)")
+            return s._CONSTANTS[body]
+        if tag == "$bytes":
+            return bytes(self.blob(body))
+        if tag in ("$array", "$scalar"):
+            return self._array(node, tag)
+        items = node["items"] if tag == "$value" else body
+        if items.__class__ is not list:
+            raise StateError(f"a damaged cotwin state ({tag} holds no list)")
+        if tag == "$dict":
+            if not all(p.__class__ is list and len(p) == 2 for p in items):
+                raise StateError("a damaged cotwin state ($dict holds no [key, value] pairs)")
+            out = {}
+            for key, value in items:
+                key = self.decode(key, depth + 1)
+                try:
+                    out[key] = self.decode(value, depth + 1)
+                except TypeError:  # an unhashable key (a list, a dict)
+                    raise StateError(f"a damaged cotwin state (a key {key!r:.60} that cannot be a key)") from None
+            return out
+        values = [self.decode(v, depth + 1) for v in items]
+        try:
+            if tag == "$value":
+                kind = s._VALUES.get(body) if body.__class__ is str else None
+                if kind is None:
+                    raise StateError(f"a damaged cotwin state ({body!r:.60} is not a RoboSim value)")
+                if kind in (SeqValue, SetValue) and len(values) > s.CAPACITY:
+                    raise StateError(f"a damaged cotwin state (a {body} of {len(values)} elements, more than {s.CAPACITY})")
+                return kind(values)
+            return {"$tuple": tuple, "$set": set, "$frozenset": frozenset}[tag](values)
+        except TypeError:  # unhashable elements of a set
+            raise StateError(f"a damaged cotwin state (a {tag[1:]} of elements that cannot be in one)") from None
+
+
+def _finite_float(text: str) -> float:
+    """The reader before: each JSON float parsed by this call, refused there unless finite."""
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{text[:40]} is not a finite number")
+    return value
+
+
+def _unpack_before(blob: bytes, kind: str):
+    """`unpack` with the reader before (its JSON floats parsed by a call each, each checked finite there)."""
+    import json as _json
+
+    from cotwin.cosim import state
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(state, "_Reader", _ReaderBefore)
+        real = _json.loads
+        patch.setattr(state.json, "loads", lambda text, **kw: real(text, parse_float=_finite_float, **kw))
+        return state.unpack(blob, kind)
+
+
+def _read(unpacker, blob: bytes):
+    """What a reader makes of the bytes: the data written again (bytes: the writer keeps every type), or the error
+    (the finite-number refusal names the JSON text before and the number now: the same refusal)."""
+    try:
+        return pack("unit", unpacker(blob, "unit"))
+    except StateError as err:
+        return re.sub(r"\(([^()]*) is not a finite number\)", "(not a finite number)", str(err))
+
+
+def _nested_json(levels: int, leaf: str) -> bytes:
+    """A state whose data nests `levels` lists deep around `leaf` (JSON text), past what the writer writes."""
+    head = ('{"kind":"unit","blobs":[],"data":' + "[" * levels + leaf + "]" * levels + "}").encode()
+    return MAGIC + len(head).to_bytes(8, "little") + head
+
+
+def test_states_read_as_the_reader_before_it_was_made_faster():
+    """Random states of every kind, states at and past the depth limit (written, and crafted past what the
+    writer writes) and random damage to their bytes read as the reader before gave: the same data, the same
+    refusal. A sweep restores its fork's state once a plan: the reader was a tenth of a what-if (issue 23)."""
+    from conftest import FUZZ_SEED
+    from cotwin.cosim import state
+
+    rng = random.Random(FUZZ_SEED)
+    blobs = []
+    for data in [_random_state(rng, 6) for _ in range(1500)] + \
+            [_deep(rng, state.MAX_DEPTH + extra, leaf) for extra in (-3, -2, -1) for leaf in
+             (1, 1.5, math.nan, "s", [], {}, (), [1, 2], {"$a": 1}, np.float64(2.0))]:
+        try:
+            blobs.append(pack("unit", data))
+        except StateError:
+            continue
+    blobs += [_nested_json(state.MAX_DEPTH + extra, leaf) for extra in (-1, 0, 1, 2)
+              for leaf in ("1", "1.5", "1e999", '"s"', "[]", "{}", '{"$tuple":[1]}', '{"a":-1e999}', "null")]
+    for blob in list(blobs[:300]):
+        for _ in range(3):  # damaged: a byte of the structure or of a binary part changed
+            bad = bytearray(blob)
+            at = rng.randrange(len(MAGIC) + 8, len(bad))
+            bad[at] = rng.choice([rng.randrange(256), ord("$"), ord("["), ord("{"), ord('"'), ord("9"), ord("e")])
+            blobs.append(bytes(bad))
+    for blob in blobs:
+        now, before = _read(unpack, blob), _read(_unpack_before, blob)
+        if isinstance(now, str) and isinstance(before, str) and "(not a finite number)" in now + before:
+            continue  # refused both ways: before, at the float as JSON was parsed; now, maybe for a problem found first
+        assert now == before, (FUZZ_SEED, blob[:200])

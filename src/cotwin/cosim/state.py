@@ -46,6 +46,11 @@ _SCALARS = frozenset((str, int, bool, type(None)))
 _KEPT = lambda v: v.__class__ in _SCALARS or (v.__class__ is float and v - v == 0.0)  # noqa: E731 - saved as they are
 _STR = {str}
 _TAGGED = operator.methodcaller("startswith", "$")  # a key spelt like a tag: the dict is saved as pairs
+_LEAVES = frozenset((str, int, bool, type(None)))  # read as they are (a float only when finite)
+_SHAPES = {"$float": {"$float"}, "$tuple": {"$tuple"}, "$set": {"$set"}, "$frozenset": {"$frozenset"},
+           "$dict": {"$dict"}, "$bytes": {"$bytes"}, "$array": {"$array", "dtype", "shape"},
+           "$scalar": {"$scalar", "dtype"}, "$value": {"$value", "items"}}  # a tagged entry's keys, by its tag
+_MADE = {"$tuple": tuple, "$set": set, "$frozenset": frozenset}
 
 
 # ---- writing ----
@@ -121,11 +126,6 @@ def _refuse_constant(name: str):
     raise ValueError(f"{name} is not a JSON number")
 
 
-def _finite_float(text: str) -> float:
-    value = float(text)
-    if not math.isfinite(value):  # 1e999: infinities are written {"$float": "inf"}
-        raise ValueError(f"{text[:40]} is not a finite number")
-    return value
 
 
 class _Reader:
@@ -141,20 +141,27 @@ class _Reader:
         if depth > MAX_DEPTH:
             raise StateError(f"a damaged cotwin state (nested deeper than {MAX_DEPTH} levels)")
         cls = node.__class__
-        if node is None or cls in (bool, int, float, str):
+        if cls in _LEAVES:
             return node
+        if cls is float:
+            if node - node == 0.0:
+                return node
+            raise StateError(f"a damaged cotwin state ({node!r} is not a finite number)")  # 1e999 in the JSON
+        # items read as they are, without a call each: plain scalars and finite floats (the writer's `_KEPT`),
+        # unless they would lie deeper than the limit (then each raises, as before)
+        inline = depth < MAX_DEPTH
         if cls is list:
-            return [self.decode(v, depth + 1) for v in node]
-        if any(k.startswith("$") for k in node):
+            return [v if inline and (v.__class__ in _LEAVES or v.__class__ is float and v - v == 0.0)
+                    else self.decode(v, depth + 1) for v in node]
+        if node and min(node) < "%" and any(map(_TAGGED, node)):  # a tag's key sorts below "%": most keys do not
             return self._tagged(node, depth)
-        return {k: self.decode(v, depth + 1) for k, v in node.items()}
+        return {k: v if inline and (v.__class__ in _LEAVES or v.__class__ is float and v - v == 0.0)
+                else self.decode(v, depth + 1) for k, v in node.items()}
 
     def _tagged(self, node: dict, depth: int):
-        tag = next(k for k in node if k.startswith("$"))
-        shapes = {"$float": {"$float"}, "$tuple": {"$tuple"}, "$set": {"$set"}, "$frozenset": {"$frozenset"},
-                  "$dict": {"$dict"}, "$bytes": {"$bytes"}, "$array": {"$array", "dtype", "shape"},
-                  "$scalar": {"$scalar", "dtype"}, "$value": {"$value", "items"}}
-        if tag not in shapes or set(node) != shapes[tag]:
+        tag = next(filter(_TAGGED, node))
+        keys = _SHAPES.get(tag)
+        if keys is None or node.keys() != keys:
             raise StateError(f"a damaged cotwin state (an entry {sorted(node)!r:.80} is not plain data)")
         body = node[tag]
         if tag == "$float":
@@ -179,7 +186,9 @@ class _Reader:
                 except TypeError:  # an unhashable key (a list, a dict)
                     raise StateError(f"a damaged cotwin state (a key {key!r:.60} that cannot be a key)") from None
             return out
-        values = [self.decode(v, depth + 1) for v in items]
+        inline = depth < MAX_DEPTH
+        values = [v if inline and (v.__class__ in _LEAVES or v.__class__ is float and v - v == 0.0)
+                  else self.decode(v, depth + 1) for v in items]
         try:
             if tag == "$value":
                 kind = _VALUES.get(body) if body.__class__ is str else None
@@ -188,7 +197,7 @@ class _Reader:
                 if kind in (SeqValue, SetValue) and len(values) > CAPACITY:
                     raise StateError(f"a damaged cotwin state (a {body} of {len(values)} elements, more than {CAPACITY})")
                 return kind(values)
-            return {"$tuple": tuple, "$set": set, "$frozenset": frozenset}[tag](values)
+            return _MADE[tag](values)
         except TypeError:  # unhashable elements of a set
             raise StateError(f"a damaged cotwin state (a {tag[1:]} of elements that cannot be in one)") from None
 
@@ -226,8 +235,8 @@ def unpack(blob: bytes | bytearray | memoryview, kind: str) -> object:
     if size > min(MAX_JSON, len(view) - at):
         raise StateError(f"a damaged cotwin state (its structure claims {size} bytes, {max(0, len(view) - at)} follow)")
     try:
-        head = json.loads(bytes(view[at:at + size]).decode("utf-8"), parse_constant=_refuse_constant,
-                          parse_float=_finite_float)
+        # floats parsed by json's C, each checked finite where it is read (_Reader.decode: 1e999 is inf)
+        head = json.loads(bytes(view[at:at + size]).decode("utf-8"), parse_constant=_refuse_constant)
     except RecursionError:
         raise StateError("a damaged cotwin state (its structure is nested too deeply)") from None
     except ValueError as err:  # bad UTF-8 or JSON
