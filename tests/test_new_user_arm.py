@@ -187,6 +187,39 @@ def test_an_ik_vector_shorter_than_the_arm_is_a_located_error_not_a_joint_left_u
     assert "vector(real, 6)" in run.stderr and "7 moving joints" in run.stderr and "joint7" in run.stderr
 
 
+def test_cotwin_check_reports_an_ik_vector_shorter_than_the_arm_where_the_run_would(tmp_path):
+    # the p-model's arm and the declared size are both known before a run: check used to say "ok" and leave
+    # the error to the run's first use of the kinematics
+    project = xarm_project(tmp_path, mapping(commanded=6))
+    check = cotwin_in_process("check", project)
+    assert check.returncode != 0
+    line = next(k for k, text in enumerate(mapping(6).splitlines(), 1) if text.startswith("function inverse_kinematics"))
+    said = check.stdout + check.stderr
+    assert f"mapping.pm:{line}:" in said and "error:" in said
+    assert "vector(real, 6)" in said and "7 moving joints" in said and "declare vector(real, 7)" in said
+    # the arm's size checks
+    (tmp_path / "mapping.pm").write_text(mapping(commanded=7))
+    assert cotwin_in_process("check", project).returncode == 0
+
+
+def test_the_runtime_still_refuses_an_ik_vector_of_another_size_when_the_models_were_not_checked_as_a_twin(tmp_path):
+    # the last line of defence: a Mapping made from the models alone (a script, a test) sets its kinematics up
+    # on first use and says the same at the same place
+    from cotwin.diagnostics import CotwinError
+    from cotwin.mapping.endpoint import SimulatedEndpoint
+    from cotwin.mapping.runtime import Mapping
+    from cotwin.pmodel.simulator import PlatformSimulator
+    from cotwin.pmodel.tree import build_tree
+    from cotwin.robosim.check import load_checked
+
+    xarm_project(tmp_path, mapping(commanded=6))
+    project = load_checked([tmp_path / "inspect.rst", tmp_path / "UF_ROBOT.pm", tmp_path / "mapping.pm"])
+    with pytest.raises(CotwinError) as err:  # its q0..q6 mirror the arm: set up with the mapping
+        Mapping(project, SimulatedEndpoint(PlatformSimulator(build_tree(project, "UF_ROBOT"))))
+    line = next(k for k, text in enumerate(mapping(6).splitlines(), 1) if text.startswith("function inverse_kinematics"))
+    assert f"mapping.pm:{line}:" in str(err.value) and "7 moving joints" in str(err.value)
+
+
 def test_the_ik_vector_of_the_arms_size_runs_and_completes(tmp_path):
     project = xarm_project(tmp_path, mapping(commanded=7))
     run = cotwin_in_process("run", project, "-o", tmp_path / "out")

@@ -123,7 +123,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     cell's robots share its [plant] (a joint named applies to the robots that have it), checked against
     them all by cotwin.pmodel.perturbation.perturbed_world."""
     from ...dmodel.program import build_program
-    from ...mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints
+    from ...mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints, uses_kinematics
     from ...pmodel import ik
     from ...mapping.profile import profile_rays
     from ...pmodel.tree import build_tree
@@ -155,6 +155,9 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     variables = [v.name for v in mapping.variables]
     if calibration is not None:  # it names this arm's joints
         _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, ik.find_tool(tree))), None)
+    if uses_kinematics(mapping) or declares_mirrors(variables) and spec.mirror_joints == "arm":  # as a run sets up
+        geometry = calibration.geometry if calibration is not None else getattr(scene, "geometry", None)
+        problems += kinematics_problems(project, mapping, tree, geometry)
     actuated = [j.name for j in tree.actuated]
     unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
     if unknown:  # said at the key, with the nearest joint
@@ -185,6 +188,23 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         raise CotwinError(problems)
     monitored = [*mirror_variables(variables, joints), *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project))
+
+
+def kinematics_problems(project, mapping, tree, geometry=None) -> list[Finding]:
+    """The mapping's declared inverse_kinematics against the arm a run solves for (from the base to the tool
+    `geometry` names: cotwin.mapping.runtime.FunctionRegistry), found before the run: a vector of another size
+    than the arm's joints, at the function's declaration. A tool link the p-model lacks is said where a run
+    uses the kinematics (FunctionRegistry), not here."""
+    from ...mapping.runtime import kinematics_result_problem
+    from ...pmodel import ik
+    from ...pmodel.cell import CellGeometry
+
+    try:
+        tool = (geometry or CellGeometry()).find_tool(tree)
+    except CotwinError:
+        return []
+    problem = kinematics_result_problem(project, mapping, tree.name, tool.link, ik.arm_joints(tree, tool))
+    return [problem] if problem is not None else []
 
 
 def build_scene(spec: TwinProject, mapping, calibration=None):
