@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from conftest import cotwin_in_process
+from cotwin.diagnostics import CotwinError
 from test_urdf_import import robot_data
 
 DMODEL = """
@@ -205,7 +206,6 @@ def test_cotwin_check_reports_an_ik_vector_shorter_than_the_arm_where_the_run_wo
 def test_the_runtime_still_refuses_an_ik_vector_of_another_size_when_the_models_were_not_checked_as_a_twin(tmp_path):
     # the last line of defence: a Mapping made from the models alone (a script, a test) sets its kinematics up
     # on first use and says the same at the same place
-    from cotwin.diagnostics import CotwinError
     from cotwin.mapping.endpoint import SimulatedEndpoint
     from cotwin.mapping.runtime import Mapping
     from cotwin.pmodel.simulator import PlatformSimulator
@@ -256,3 +256,25 @@ def test_a_monitored_reading_named_like_an_operation_argument_is_an_error_at_its
     # another name runs
     project.write_text(text.replace("readings = { z =", "readings = { base_angle ="))
     assert cotwin_in_process("run", project, "-o", tmp_path / "out2").returncode == 0
+
+
+def test_readings_clashing_with_variables_and_ports_get_one_error_per_kind_at_the_first_names_key(tmp_path):
+    # one table of the names taken (the mapping's variables, q<i> mirrors included; operations, their arguments
+    # and events): a reading named like a variable is said as one, never again as a port
+    from cotwin.twin.assembly.run import load
+
+    project = xarm_project(tmp_path, mapping())
+    reading = "UF_ROBOT::link_base::joint1::joint1_position.output_position"
+    lines = ["[monitor.readings]", f'base = "{reading}"', f'z = "{reading}"', f'phase = "{reading}"',
+             f'reached = "{reading}"', f'q3 = "{reading}"']
+    text = project.read_text() + "\n".join(lines) + "\n"
+    project.write_text(text)
+    first = len(text.splitlines()) - len(lines) + 1  # the table's line
+    with pytest.raises(CotwinError) as err:
+        load(project)
+    said = [str(f) for f in err.value.findings]
+    assert len(said) == 2, said
+    assert said[0].startswith(f"{project}:{first + 2}:") and "readings z (already an argument of operation goto), " \
+        "reached (already event reached): each reading needs a name of its own (e.g. 'z_reading')" in said[0], said
+    assert said[1].startswith(f"{project}:{first + 3}:") and \
+        "readings phase, q3: the mapping has variables of these names" in said[1], said

@@ -165,21 +165,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
                                 f"[monitor] joints: {', '.join(unknown)} are not actuated joints of p-model "
                                 f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
     joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) and not unknown else []
-    clash = [n for n in spec.readings if n in variables or n in mirror_variables(variables, joints)]
-    if clash:
-        problems.append(Finding(spec.location("monitor", "readings", clash[0]), Severity.ERROR,
-                                f"[monitor] readings {', '.join(clash)}: the mapping has variables of these names"))
-    # a reading is an output of the mapping's unit: a name the d-model's operations, their argument ports or the
-    # mapping's events already give a port of that unit would be wired twice (a reading `z` and goto(x, y, z))
-    ports = {op.name: f"operation {op.name}" for op in program.operations}
-    ports.update({port: f"an argument of operation {op.name}" for op in program.operations
-                  for args in op.arg_ports for port, _ in args})
-    ports.update({ev.name: f"event {ev.name}" for ev in mapping.input_events})
-    taken = [n for n in spec.readings if n in ports and n not in clash]
-    if taken:
-        problems.append(Finding(spec.location("monitor", "readings", taken[0]), Severity.ERROR,
-                                "[monitor] readings " + ", ".join(f"{n} (already {ports[n]})" for n in taken) +
-                                ": each reading needs a name of its own (e.g. " + repr(f"{taken[0]}_reading") + ")"))
+    problems += reading_clashes(spec, taken_names(program, mapping, [*variables, *mirror_variables(variables, joints)]))
     if problems:
         if spec.plan is not None:  # its problems too, not in a round of their own once these are fixed
             from .scenario import read_scenario
@@ -188,6 +174,38 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         raise CotwinError(problems)
     monitored = [*mirror_variables(variables, joints), *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project))
+
+
+def taken_names(program, mapping, variables: list[str]) -> dict[str, tuple[str, str]]:
+    """The names a [monitor] reading cannot have, each with the kind of clash and what already has it: a
+    reading is a monitored variable of the mapping and an output of the mapping's unit, so neither one of the
+    mapping's `variables` (q<i>/qd<i> mirrors included) nor a port of that unit (a d-model operation, an
+    argument port of one, a mapping event: a reading `z` beside goto(x, y, z) would be wired twice). A variable
+    is said before a port of the same name, an event before an argument before an operation."""
+    taken = {op.name: ("port", f"operation {op.name}") for op in program.operations}
+    taken.update({port: ("port", f"an argument of operation {op.name}") for op in program.operations
+                  for args in op.arg_ports for port, _ in args})
+    taken.update({ev.name: ("port", f"event {ev.name}") for ev in mapping.input_events})
+    taken.update({name: ("variable", f"variable {name}") for name in variables})
+    return taken
+
+
+def reading_clashes(spec: TwinProject, taken: dict[str, tuple[str, str]]) -> list[Finding]:
+    """[monitor] readings named like something `taken` (taken_names): one error per kind of clash, at the key
+    of its first reading."""
+    clashes: dict[str, list[str]] = {}
+    for name in spec.readings:
+        if name in taken:
+            clashes.setdefault(taken[name][0], []).append(name)
+    out = []
+    for kind, names in clashes.items():
+        if kind == "variable":
+            message = f"[monitor] readings {', '.join(names)}: the mapping has variables of these names"
+        else:
+            message = ("[monitor] readings " + ", ".join(f"{n} (already {taken[n][1]})" for n in names) +
+                       ": each reading needs a name of its own (e.g. " + repr(f"{names[0]}_reading") + ")")
+        out.append(Finding(spec.location("monitor", "readings", names[0]), Severity.ERROR, message))
+    return out
 
 
 def kinematics_problems(project, mapping, tree, geometry=None) -> list[Finding]:
