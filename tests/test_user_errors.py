@@ -198,6 +198,8 @@ def test_cotwin_run_of_a_cell_says_which_of_its_tables_it_ignores(tmp_path):
                            ("deviation", "cotwin twin, cotwin fleet")):
         at = lines.index(f"[{table}]") + 1
         assert f"{cell}:{at}:1: warning: [{table}] applies only to {readers}: cotwin run ignores it" in proc.stderr
+    # and, as cotwin check, what its models warn of, once: the Panda's joint 4 starts at its limit
+    assert proc.stderr.count("warning: joint panda_joint4: its zero position is outside its limits") == 1, proc.stderr
 
 
 def test_deviation_variables_get_the_nearest_monitored_one(ur5e, tmp_path):
@@ -261,3 +263,20 @@ def test_ctrl_c_while_the_command_is_still_importing_is_an_interrupt_not_a_trace
     """The first tenths of a second of every command are imports: an interrupt there exits 130 with one line."""
     proc = subprocess.run([sys.executable, "-c", INTERRUPTED_IMPORT], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 130 and proc.stderr == "interrupted\n", proc.stderr[-2000:]
+
+
+def test_cotwin_run_shows_the_warnings_cotwin_check_shows_once(ur5e, tmp_path):
+    """A joint whose limits leave out its zero position starts at its nearest limit, which `cotwin check` warned
+    of and `cotwin run` kept to itself: the robot started off its home posture without a word."""
+    pmodel = ur5e / "ur5e.pm"
+    lines = pmodel.read_text().splitlines()
+    at = next(k for k, line in enumerate(lines) if "limit = Limit { lower = -2*PI" in line and k > 150)
+    lines[at] = lines[at].replace("lower = -2*PI", "lower = 0.2")
+    pmodel.write_text("\n".join(lines) + "\n")
+    warning = "warning: joint elbow_joint: its zero position is outside its limits [0.2, 6.28319]"
+    checked = cotwin_in_process("check", ur5e / "cotwin.toml")
+    assert checked.returncode == 0 and (checked.stdout + checked.stderr).count(warning) == 1, checked
+    ran = cotwin_in_process("run", ur5e / "cotwin.toml", "-o", tmp_path / "out", "--end", "0.2")
+    assert ran.returncode == 0, ran.stderr
+    said = [line for line in ran.stderr.splitlines() if warning in line]
+    assert len(said) == 1 and said[0].startswith(f"{pmodel}:"), ran.stderr

@@ -78,6 +78,9 @@ class TwinModels:
     monitored: list[str]
     calibration: object | None = None  # cotwin.twin.assembly.calibration.Calibration: [platform] calibration
     digests: dict[str, str] = field(default_factory=dict)  # model_digests: what a saved state names
+    #: what `cotwin check` warns of in the models (their checker's and the p-model's tree's readings) and in the
+    #: project against them, each once: `cotwin run` shows them as check does
+    warnings: list[Finding] = field(default_factory=list)
 
 
 def model_digests(spec: TwinProject, project) -> dict[str, str]:
@@ -127,12 +130,13 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     from ...pmodel import ik
     from ...mapping.profile import profile_rays
     from ...pmodel.tree import build_tree
-    from ...robosim.check import load_checked
+    from ...robosim.check import load_checked_warned
     from ...robosim.pmodel_elements import Mapping as MappingModel
 
-    project = load_checked(spec.model_files)
+    project, warnings = load_checked_warned(spec.model_files)
     program = build_program(project, spec.module)
     tree = build_tree(project, spec.pmodel_name, spec.stand_ins, profile_rays(spec.profile))  # the robot's scanner
+    warnings += tree_warnings(tree)
     problems: list[Finding] = []  # the checks below report together (with the plan's, see the end)
     if plant:  # a project's problem for every command, as [plant]'s types are (cotwin plant applies it)
         problems += spec.plant_problems(tree)
@@ -173,7 +177,14 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
             _gather(problems, lambda: read_scenario(spec.plan, program), None)
         raise CotwinError(problems)
     monitored = [*mirror_variables(variables, joints), *spec.readings]
-    return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project))
+    return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project),
+                      list(dict.fromkeys(warnings)))
+
+
+def tree_warnings(tree) -> list[Finding]:
+    """The warnings a simulator's reading of a p-model gives (cotwin.pmodel.tree_build: a joint's zero position
+    outside its limits, an impossible inertia replaced...) that name a place in the project's files."""
+    return [f for f in tree.findings if f.severity is Severity.WARNING and not f.location.path.startswith("<")]
 
 
 def taken_names(program, mapping, variables: list[str]) -> dict[str, tuple[str, str]]:
@@ -322,6 +333,11 @@ class TwinSystem:
             _gather(problems, self._check_panels, None)
         if problems:
             raise CotwinError(problems)
+
+    @property
+    def warnings(self) -> list[Finding]:
+        """What the twin's models and the project against them warn of (TwinModels.warnings)."""
+        return self.models.warnings
 
     def with_plan(self, commands) -> "TwinSystem":
         """This twin with `commands` as its source (the same models, derived once)."""
