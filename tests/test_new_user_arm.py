@@ -278,3 +278,19 @@ def test_readings_clashing_with_variables_and_ports_get_one_error_per_kind_at_th
         "reached (already event reached): each reading needs a name of its own (e.g. 'z_reading')" in said[0], said
     assert said[1].startswith(f"{project}:{first + 3}:") and \
         "readings phase, q3: the mapping has variables of these names" in said[1], said
+
+
+def test_q_variables_past_the_monitored_joints_are_a_warning_at_the_first_of_them(tmp_path):
+    # q0..q6 declared, [monitor] joints naming two: q2..q6 mirrored nothing and were not logged, in silence
+    from cotwin.twin.assembly.run import load
+
+    project = xarm_project(tmp_path, mapping())
+    project.write_text(project.read_text() + '[monitor]\njoints = ["joint1", "joint2"]\n')
+    said = [str(f) for f in load(project).warnings if "mirror no joint" in f.message]
+    line = next(k for k, text in enumerate(mapping().splitlines(), 1) if "var q0: real" in text)
+    assert len(said) == 1 and said[0].startswith(f"{tmp_path / 'mapping.pm'}:{line}:"), said
+    assert "q2, q3, q4, q5, q6 mirror no joint: [monitor] joints gives 2 of p-model UF_ROBOT's (joint1, joint2)" \
+        in said[0], said
+    # the arm's seven (the default) mirror every one
+    project.write_text(project.read_text().replace('joints = ["joint1", "joint2"]', 'joints = "arm"'))
+    assert not [f for f in load(project).warnings if "mirror" in f.message]

@@ -280,3 +280,23 @@ def test_cotwin_run_shows_the_warnings_cotwin_check_shows_once(ur5e, tmp_path):
     assert ran.returncode == 0, ran.stderr
     said = [line for line in ran.stderr.splitlines() if warning in line]
     assert len(said) == 1 and said[0].startswith(f"{pmodel}:"), ran.stderr
+
+
+def test_monitor_joints_for_a_mapping_without_q_variables_is_a_warning_at_its_key(tmp_path):
+    """`[monitor] joints` on a mapping declaring no q0..qN/qd0..qdN mirrored nothing, logged nothing and said
+    nothing: the user who asked for the wheels' angles got a run without them and no reason."""
+    from cotwin.twin.assembly.run import load
+
+    shutil.copytree(ROOT / "examples" / "turtlebot", tmp_path / "tb")
+    project = tmp_path / "tb" / "cotwin.toml"
+    lines = project.read_text().splitlines()
+    at = next(k for k, line in enumerate(lines) if line.startswith("[monitor]")) + 1
+    lines[at - 1] = '[monitor]\njoints = "actuated"'
+    project.write_text("\n".join(lines) + "\n")
+    said = [str(f) for f in load(project).warnings if "[monitor] joints" in f.message]
+    assert len(said) == 1 and said[0].startswith(f"{project}:{at + 1}:1: warning: [monitor] joints: mapping "
+                                                 "WalkMapping declares no variable q0"), said
+    assert "(LeftWheelJoint, RightWheelJoint)" in said[0] and "`var q0: real, q1: real`" in said[0], said
+    assert "or remove [monitor] joints" in said[0]
+    checked = cotwin_in_process("check", project)
+    assert checked.returncode == 0 and (checked.stdout + checked.stderr).count(said[0]) == 1, checked

@@ -170,15 +170,57 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
                                 f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
     joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) and not unknown else []
     problems += reading_clashes(spec, taken_names(program, mapping, [*variables, *mirror_variables(variables, joints)]))
+    own = [] if unknown else mirror_warnings(spec, mapping, tree, joints)  # the project's against the models
+    warnings += own
     if problems:
         if spec.plan is not None:  # its problems too, not in a round of their own once these are fixed
             from .scenario import read_scenario
 
             _gather(problems, lambda: read_scenario(spec.plan, program), None)
-        raise CotwinError(problems)
+        raise CotwinError(problems + own)
     monitored = [*mirror_variables(variables, joints), *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project),
                       list(dict.fromkeys(warnings)))
+
+
+def mirror_warnings(spec: TwinProject, mapping, tree, joints: list[str]) -> list[Finding]:
+    """Joints that would silently show nothing: `[monitor] joints` written for a mapping that declares no q<i>/qd<i>
+    (nothing mirrors them, so nothing of them is logged or compared), or a q<i>/qd<i> past the mirrored joints
+    (`joints`, cotwin.mapping.runtime.mirrored_joints) that no operation assigns: neither set nor logged. Each
+    one warning, at the key or at the first such variable."""
+    from ...mapping.runtime import MIRROR_PREFIXES, declares_mirrors, mirror_variables, mirrored_joints
+    from ...robosim import syntax as s
+
+    variables = [v.name for v in mapping.variables]
+    if not declares_mirrors(variables):
+        if ("monitor", "joints") not in spec.locations:
+            return []
+        try:
+            named = mirrored_joints(tree, spec.mirror_joints)
+        except CotwinError:  # an arm without a tool: the joints cannot be listed
+            named = []
+        which = f" ({', '.join(named)})" if named else ""
+        first = "var " + (", ".join(f"q{i}: real" for i in range(max(len(named), 1))) if len(named) <= 3 else
+                          f"q0: real, ..., q{len(named) - 1}: real")
+        return [Finding(spec.location("monitor", "joints"), Severity.WARNING,
+                        f"[monitor] joints: mapping {mapping.name} declares no variable q0, q1, ... (positions) or "
+                        f"qd0, qd1, ... (velocities), so no joint{which} is mirrored, logged or compared: declare "
+                        f"`{first}` in the mapping (q<i> the i-th joint [monitor] joints gives, qd<i> its "
+                        f"velocity) or remove [monitor] joints")]
+    mirrored = mirror_variables(variables, joints)
+    assigned = {root.name.last for op in mapping.operations for target, _, _ in op.actions
+                for root in [s.root_name(target)] if root is not None}
+    idle = [v for v in mapping.variables if v.name not in mirrored and v.name not in assigned
+            and any(v.name.startswith(p) and v.name[len(p):].isdigit() for p, _ in MIRROR_PREFIXES)]
+    if not idle:
+        return []
+    said = "[monitor] joints gives" if ("monitor", "joints") in spec.locations else \
+        "[monitor] joints (by default the arm's) gives"
+    count = len(joints)
+    return [Finding(idle[0].loc, Severity.WARNING,
+                    f"mapping variable(s) {', '.join(v.name for v in idle)} mirror no joint: {said} {count} of p-model "
+                    f"{tree.name}'s ({', '.join(joints) or 'none'}), one per q<i> and qd<i> from 0; these are "
+                    f"neither set nor logged: remove them or name more joints in [monitor] joints")]
 
 
 def tree_warnings(tree) -> list[Finding]:
