@@ -300,3 +300,24 @@ def test_monitor_joints_for_a_mapping_without_q_variables_is_a_warning_at_its_ke
     assert "or remove [monitor] joints" in said[0]
     checked = cotwin_in_process("check", project)
     assert checked.returncode == 0 and (checked.stdout + checked.stderr).count(said[0]) == 1, checked
+
+
+def test_a_reading_path_the_pmodel_lacks_is_an_error_at_its_key_with_the_nearest_paths(ur5e):
+    """A misspelt [monitor] reading checked ok, then stopped the run's first step with 'error: monitored variable
+    elbow: the platform has no reading ...' and every reading of the platform (22 for the UR5e, 40 and more for
+    a bigger robot), at no place."""
+    path = ur5e / "cotwin.toml"
+    path.write_text(path.read_text() + '[monitor]\nreadings = { elbow = "ur5e::upper_arm_link::PS3.position" }\n')
+    line = len(path.read_text().splitlines())
+    proc = cotwin_in_process("check", path)
+    assert proc.returncode == 1, proc.stdout
+    errors = [line for line in (proc.stdout + proc.stderr).splitlines() if ": error: " in line]
+    assert len(errors) == 1 and errors[0].startswith(
+        f"{path}:{line}:14: error: [monitor] readings elbow: p-model ur5e has no reading "
+        "'ur5e::upper_arm_link::PS3.position' (the nearest: ur5e::upper_arm_link::PS3.output_position, "), errors
+    assert errors[0].endswith(", ... and 17 more)") and errors[0].count("ur5e::") == 6, errors
+    # a free base's pose on a fixed base: said so
+    path.write_text(path.read_text().replace("ur5e::upper_arm_link::PS3.position", "ur5e::base_link.x"))
+    proc = cotwin_in_process("check", path)
+    assert proc.returncode == 1 and "'ur5e::base_link.x' is the pose of a free base, and p-model ur5e's is fixed: " \
+        'set [platform] base = "free"' in proc.stdout + proc.stderr, proc.stdout + proc.stderr

@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from dataclasses import fields
 
+from ..config import nearest_first
 from ..diagnostics import CotwinError, Finding, Severity
 from ..plaindata import count, fields as state_fields, finite, like, of_type
 from ..pmodel import ik
@@ -740,7 +741,7 @@ class Mapping:
             for var, path in self.monitor.items():
                 if path not in readings:
                     raise CotwinError(f"monitored variable {var}: the platform has no reading '{path}' "
-                                      f"(it has {', '.join(sorted(readings)) or 'none'})")
+                                      f"(the nearest: {nearest_first(path, readings)})")
                 self.variables[var] = readings[path]
 
     def sensor_readings(self) -> dict[str, float]:

@@ -170,6 +170,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
                                 f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
     joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) and not unknown else []
     problems += reading_clashes(spec, taken_names(program, mapping, [*variables, *mirror_variables(variables, joints)]))
+    problems += reading_path_problems(spec, tree)
     own = [] if unknown else mirror_warnings(spec, mapping, tree, joints)  # the project's against the models
     warnings += own
     if problems:
@@ -181,6 +182,26 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     monitored = [*mirror_variables(variables, joints), *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project),
                       list(dict.fromkeys(warnings)))
+
+
+def reading_path_problems(spec: TwinProject, tree) -> list[Finding]:
+    """[monitor] readings whose path is no reading of the p-model (cotwin.pmodel.mjcf.reading_paths: its sensor
+    ports, a free base's pose): an error at each one's key with the nearest paths, found before the run (whose
+    first step said it with every path of the platform and no place)."""
+    from ...config import nearest_first
+    from ...pmodel.mjcf import pose_paths, reading_paths
+
+    if not spec.readings:
+        return []
+    known = reading_paths(tree, free_base=spec.base == "free")
+    pose = set(pose_paths(tree))
+    return [Finding(spec.location("monitor", "readings", name), Severity.ERROR,
+                    f"[monitor] readings {name}: " + (
+                        f"'{path}' is the pose of a free base, and p-model {tree.name}'s is fixed: set [platform] "
+                        f"base = \"free\" (a mobile robot) or read a sensor (the nearest: "
+                        if path in pose else f"p-model {tree.name} has no reading '{path}' (the nearest: ") +
+                    f"{nearest_first(path, known - pose)})")
+            for name, path in spec.readings.items() if path not in known]
 
 
 def mirror_warnings(spec: TwinProject, mapping, tree, joints: list[str]) -> list[Finding]:
