@@ -91,6 +91,21 @@ def test_a_sensor_the_platform_stops_providing_is_a_located_error_in_both_forms(
             mapping.get_event("robotStopped")
 
 
+def test_a_monitored_reading_the_platform_lacks_says_the_nearest_few_not_every_reading():
+    """The last line of defence behind load_models' check of [monitor] readings (a Mapping made from the models,
+    a platform that reads less than its p-model): the nearest paths first, then how many more, not all of them."""
+    from conftest import EXAMPLES
+
+    twin = load(EXAMPLES / "ur5e" / "cotwin.toml").models
+    mapping = Mapping(twin.project, SimulatedEndpoint(PlatformSimulator(twin.tree, twin.scene)),
+                      monitor={"elbow": "ur5e::upper_arm_link::PS3.position"})
+    with pytest.raises(CotwinError) as err:  # read as the mapping starts
+        mapping.start_mapping()
+    said = str(err.value)
+    assert "monitored variable elbow: the platform has no reading 'ur5e::upper_arm_link::PS3.position' (the nearest: " \
+        "ur5e::upper_arm_link::PS3.output_position, " in said and said.endswith(", ... and 17 more)"), said
+
+
 def test_a_function_error_is_located_at_its_call_in_the_mapping(monkeypatch):
     """The IK's refusal of a 2-joint arm ('needs 6 or more') named no place: `cotwin run` printed
     'error: inverse_kinematics: ...' without the mapping's file and line. It is placed at the call."""

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from conftest import cotwin_in_process
+from cotwin.diagnostics import CotwinError
 from test_urdf_import import robot_data
 
 DMODEL = """
@@ -187,6 +188,38 @@ def test_an_ik_vector_shorter_than_the_arm_is_a_located_error_not_a_joint_left_u
     assert "vector(real, 6)" in run.stderr and "7 moving joints" in run.stderr and "joint7" in run.stderr
 
 
+def test_cotwin_check_reports_an_ik_vector_shorter_than_the_arm_where_the_run_would(tmp_path):
+    # the p-model's arm and the declared size are both known before a run: check used to say "ok" and leave
+    # the error to the run's first use of the kinematics
+    project = xarm_project(tmp_path, mapping(commanded=6))
+    check = cotwin_in_process("check", project)
+    assert check.returncode != 0
+    line = next(k for k, text in enumerate(mapping(6).splitlines(), 1) if text.startswith("function inverse_kinematics"))
+    said = check.stdout + check.stderr
+    assert f"mapping.pm:{line}:" in said and "error:" in said
+    assert "vector(real, 6)" in said and "7 moving joints" in said and "declare vector(real, 7)" in said
+    # the arm's size checks
+    (tmp_path / "mapping.pm").write_text(mapping(commanded=7))
+    assert cotwin_in_process("check", project).returncode == 0
+
+
+def test_the_runtime_still_refuses_an_ik_vector_of_another_size_when_the_models_were_not_checked_as_a_twin(tmp_path):
+    # the last line of defence: a Mapping made from the models alone (a script, a test) sets its kinematics up
+    # on first use and says the same at the same place
+    from cotwin.mapping.endpoint import SimulatedEndpoint
+    from cotwin.mapping.runtime import Mapping
+    from cotwin.pmodel.simulator import PlatformSimulator
+    from cotwin.pmodel.tree import build_tree
+    from cotwin.robosim.check import load_checked
+
+    xarm_project(tmp_path, mapping(commanded=6))
+    project = load_checked([tmp_path / "inspect.rst", tmp_path / "UF_ROBOT.pm", tmp_path / "mapping.pm"])
+    with pytest.raises(CotwinError) as err:  # its q0..q6 mirror the arm: set up with the mapping
+        Mapping(project, SimulatedEndpoint(PlatformSimulator(build_tree(project, "UF_ROBOT"))))
+    line = next(k for k, text in enumerate(mapping(6).splitlines(), 1) if text.startswith("function inverse_kinematics"))
+    assert f"mapping.pm:{line}:" in str(err.value) and "7 moving joints" in str(err.value)
+
+
 def test_the_ik_vector_of_the_arms_size_runs_and_completes(tmp_path):
     project = xarm_project(tmp_path, mapping(commanded=7))
     run = cotwin_in_process("run", project, "-o", tmp_path / "out")
@@ -223,3 +256,41 @@ def test_a_monitored_reading_named_like_an_operation_argument_is_an_error_at_its
     # another name runs
     project.write_text(text.replace("readings = { z =", "readings = { base_angle ="))
     assert cotwin_in_process("run", project, "-o", tmp_path / "out2").returncode == 0
+
+
+def test_readings_clashing_with_variables_and_ports_get_one_error_per_kind_at_the_first_names_key(tmp_path):
+    # one table of the names taken (the mapping's variables, q<i> mirrors included; operations, their arguments
+    # and events): a reading named like a variable is said as one, never again as a port
+    from cotwin.twin.assembly.run import load
+
+    project = xarm_project(tmp_path, mapping())
+    reading = "UF_ROBOT::link_base::joint1::joint1_position.output_position"
+    lines = ["[monitor.readings]", f'base = "{reading}"', f'z = "{reading}"', f'phase = "{reading}"',
+             f'reached = "{reading}"', f'q3 = "{reading}"']
+    text = project.read_text() + "\n".join(lines) + "\n"
+    project.write_text(text)
+    first = len(text.splitlines()) - len(lines) + 1  # the table's line
+    with pytest.raises(CotwinError) as err:
+        load(project)
+    said = [str(f) for f in err.value.findings]
+    assert len(said) == 2, said
+    assert said[0].startswith(f"{project}:{first + 2}:") and "readings z (already an argument of operation goto), " \
+        "reached (already event reached): each reading needs a name of its own (e.g. 'z_reading')" in said[0], said
+    assert said[1].startswith(f"{project}:{first + 3}:") and \
+        "readings phase, q3: the mapping has variables of these names" in said[1], said
+
+
+def test_q_variables_past_the_monitored_joints_are_a_warning_at_the_first_of_them(tmp_path):
+    # q0..q6 declared, [monitor] joints naming two: q2..q6 mirrored nothing and were not logged, in silence
+    from cotwin.twin.assembly.run import load
+
+    project = xarm_project(tmp_path, mapping())
+    project.write_text(project.read_text() + '[monitor]\njoints = ["joint1", "joint2"]\n')
+    said = [str(f) for f in load(project).warnings if "mirror no joint" in f.message]
+    line = next(k for k, text in enumerate(mapping().splitlines(), 1) if "var q0: real" in text)
+    assert len(said) == 1 and said[0].startswith(f"{tmp_path / 'mapping.pm'}:{line}:"), said
+    assert "q2, q3, q4, q5, q6 mirror no joint: [monitor] joints gives 2 of p-model UF_ROBOT's (joint1, joint2)" \
+        in said[0], said
+    # the arm's seven (the default) mirror every one
+    project.write_text(project.read_text().replace('joints = ["joint1", "joint2"]', 'joints = "arm"'))
+    assert not [f for f in load(project).warnings if "mirror" in f.message]

@@ -198,6 +198,8 @@ def test_cotwin_run_of_a_cell_says_which_of_its_tables_it_ignores(tmp_path):
                            ("deviation", "cotwin twin, cotwin fleet")):
         at = lines.index(f"[{table}]") + 1
         assert f"{cell}:{at}:1: warning: [{table}] applies only to {readers}: cotwin run ignores it" in proc.stderr
+    # and, as cotwin check, what its models warn of, once: the Panda's joint 4 starts at its limit
+    assert proc.stderr.count("warning: joint panda_joint4: its zero position is outside its limits") == 1, proc.stderr
 
 
 def test_deviation_variables_get_the_nearest_monitored_one(ur5e, tmp_path):
@@ -261,3 +263,61 @@ def test_ctrl_c_while_the_command_is_still_importing_is_an_interrupt_not_a_trace
     """The first tenths of a second of every command are imports: an interrupt there exits 130 with one line."""
     proc = subprocess.run([sys.executable, "-c", INTERRUPTED_IMPORT], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 130 and proc.stderr == "interrupted\n", proc.stderr[-2000:]
+
+
+def test_cotwin_run_shows_the_warnings_cotwin_check_shows_once(ur5e, tmp_path):
+    """A joint whose limits leave out its zero position starts at its nearest limit, which `cotwin check` warned
+    of and `cotwin run` kept to itself: the robot started off its home posture without a word."""
+    pmodel = ur5e / "ur5e.pm"
+    lines = pmodel.read_text().splitlines()
+    at = next(k for k, line in enumerate(lines) if "limit = Limit { lower = -2*PI" in line and k > 150)
+    lines[at] = lines[at].replace("lower = -2*PI", "lower = 0.2")
+    pmodel.write_text("\n".join(lines) + "\n")
+    warning = "warning: joint elbow_joint: its zero position is outside its limits [0.2, 6.28319]"
+    checked = cotwin_in_process("check", ur5e / "cotwin.toml")
+    assert checked.returncode == 0 and (checked.stdout + checked.stderr).count(warning) == 1, checked
+    ran = cotwin_in_process("run", ur5e / "cotwin.toml", "-o", tmp_path / "out", "--end", "0.2")
+    assert ran.returncode == 0, ran.stderr
+    said = [line for line in ran.stderr.splitlines() if warning in line]
+    assert len(said) == 1 and said[0].startswith(f"{pmodel}:"), ran.stderr
+
+
+def test_monitor_joints_for_a_mapping_without_q_variables_is_a_warning_at_its_key(tmp_path):
+    """`[monitor] joints` on a mapping declaring no q0..qN/qd0..qdN mirrored nothing, logged nothing and said
+    nothing: the user who asked for the wheels' angles got a run without them and no reason."""
+    from cotwin.twin.assembly.run import load
+
+    shutil.copytree(ROOT / "examples" / "turtlebot", tmp_path / "tb")
+    project = tmp_path / "tb" / "cotwin.toml"
+    lines = project.read_text().splitlines()
+    at = next(k for k, line in enumerate(lines) if line.startswith("[monitor]")) + 1
+    lines[at - 1] = '[monitor]\njoints = "actuated"'
+    project.write_text("\n".join(lines) + "\n")
+    said = [str(f) for f in load(project).warnings if "[monitor] joints" in f.message]
+    assert len(said) == 1 and said[0].startswith(f"{project}:{at + 1}:1: warning: [monitor] joints: mapping "
+                                                 "WalkMapping declares no variable q0"), said
+    assert "(LeftWheelJoint, RightWheelJoint)" in said[0] and "`var q0: real, q1: real`" in said[0], said
+    assert "or remove [monitor] joints" in said[0]
+    checked = cotwin_in_process("check", project)
+    assert checked.returncode == 0 and (checked.stdout + checked.stderr).count(said[0]) == 1, checked
+
+
+def test_a_reading_path_the_pmodel_lacks_is_an_error_at_its_key_with_the_nearest_paths(ur5e):
+    """A misspelt [monitor] reading checked ok, then stopped the run's first step with 'error: monitored variable
+    elbow: the platform has no reading ...' and every reading of the platform (22 for the UR5e, 40 and more for
+    a bigger robot), at no place."""
+    path = ur5e / "cotwin.toml"
+    path.write_text(path.read_text() + '[monitor]\nreadings = { elbow = "ur5e::upper_arm_link::PS3.position" }\n')
+    line = len(path.read_text().splitlines())
+    proc = cotwin_in_process("check", path)
+    assert proc.returncode == 1, proc.stdout
+    errors = [line for line in (proc.stdout + proc.stderr).splitlines() if ": error: " in line]
+    assert len(errors) == 1 and errors[0].startswith(
+        f"{path}:{line}:14: error: [monitor] readings elbow: p-model ur5e has no reading "
+        "'ur5e::upper_arm_link::PS3.position' (the nearest: ur5e::upper_arm_link::PS3.output_position, "), errors
+    assert errors[0].endswith(", ... and 17 more)") and errors[0].count("ur5e::") == 6, errors
+    # a free base's pose on a fixed base: said so
+    path.write_text(path.read_text().replace("ur5e::upper_arm_link::PS3.position", "ur5e::base_link.x"))
+    proc = cotwin_in_process("check", path)
+    assert proc.returncode == 1 and "'ur5e::base_link.x' is the pose of a free base, and p-model ur5e's is fixed: " \
+        'set [platform] base = "free"' in proc.stdout + proc.stderr, proc.stdout + proc.stderr

@@ -186,6 +186,17 @@ def did_you_mean(value, known) -> str:
     return f"; did you mean '{near[0]}'?" if near else ""
 
 
+def nearest_first(value: str, known, shown: int = 5) -> str:
+    """The `shown` names of `known` closest to `value` (difflib's ratio, the nearest first), then "... and N more":
+    a short list where the whole one would bury the answer (a p-model's forty readings); "none" if none."""
+    choices = sorted(dict.fromkeys(str(k) for k in known))
+    if not choices:
+        return "none"
+    near = difflib.get_close_matches(str(value), choices, n=shown, cutoff=0)
+    rest = len(choices) - len(near)
+    return ", ".join(near) + (f", ... and {rest} more" if rest else "")
+
+
 def table_name(at: tuple) -> str:
     """`[scenario.rabbitmq]`, `[[command]] 2`, or `the file` for the top level."""
     if not at:

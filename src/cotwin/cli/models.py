@@ -40,6 +40,7 @@ def check(paths: tuple[str, ...]) -> None:
         twins = [twin_problems(project) for project in projects]  # the project against its models: its plan, ...
         findings += [f for found in twins for f in found]
         ok = not any(f.severity is Severity.ERROR for found in twins for f in found)
+    findings = list(dict.fromkeys(findings))  # the models' warnings again from the project's twin: once
     report(findings)
     if not ok:
         errors = sum(f.severity is Severity.ERROR for f in findings)
@@ -62,14 +63,18 @@ def check(paths: tuple[str, ...]) -> None:
 
 def twin_problems(project: str) -> list:
     """What a project says against its models once they check (its plan's columns and rows, its tables'
-    names of joints and variables, a cell's robots...): the checks `cotwin run` makes before it runs."""
+    names of joints and variables, a cell's robots...): the checks `cotwin run` makes before it runs, and the
+    warnings it shows."""
     from ..twin.assembly.run import load
 
-    try:
-        load(project, cells=True)
+    import os
+    from dataclasses import replace
+
+    try:  # the models' warnings at their paths as check names them (normalised), so that each is said once
+        return [replace(f, location=replace(f.location, path=os.path.normpath(f.location.path)))
+                for f in load(project, cells=True).warnings]
     except CotwinError as err:
         return list(err.findings)
-    return []
 
 
 def cell_project(path: str) -> str | None:
@@ -102,6 +107,7 @@ def tree_findings(project) -> list:
     axis moved, an impossible inertia replaced...), for those that build."""
     from ..pmodel.tree import build_tree
     from ..robosim.pmodel_elements import PModel
+    from ..twin.assembly.system import tree_warnings
 
     pmodels = project.elements(PModel)
     used = {p.pmodel.last for pm in pmodels for p in pm.parts}
@@ -113,7 +119,7 @@ def tree_findings(project) -> list:
             tree = build_tree(project, "::".join(project.qualified_name(pmodel)))
         except CotwinError:
             continue  # a p-model the simulator cannot take says so when it is run
-        out.extend(f for f in tree.findings if f.severity is Severity.WARNING and not f.location.path.startswith("<"))
+        out.extend(tree_warnings(tree))
     return out
 
 

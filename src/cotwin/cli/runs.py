@@ -66,6 +66,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
                                  param_hint="--cycle-period")
     system = load(project, cells=True, reader="cotwin run")
     check_timing(system.spec, step, end)
+    show_warnings(system.warnings)  # what cotwin check says of the models and the project (a joint out of limits...)
     reader = "cotwin run --dashboard" if dashboard and not system.spec.robots else "cotwin run"  # a cell: no history
     show_warnings(system.spec.ignored_sections(reader))
     if system.spec.robots:

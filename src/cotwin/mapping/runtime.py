@@ -34,7 +34,8 @@ from __future__ import annotations
 import math
 from dataclasses import fields
 
-from ..diagnostics import CotwinError
+from ..config import nearest_first
+from ..diagnostics import CotwinError, Finding, Severity
 from ..plaindata import count, fields as state_fields, finite, like, of_type
 from ..pmodel import ik
 from ..pmodel.ikcache import SolutionCache
@@ -82,6 +83,42 @@ def mirrored_joints(tree, which="arm", tool: str = "fingertips") -> list[str]:
         raise CotwinError(f"mirrored joints {', '.join(unknown)} are not actuated joints of p-model {tree.name} "
                           f"(joints: {', '.join(sorted(known))})")
     return list(which)
+
+
+KINEMATICS_FUNCTIONS = ("inverse_kinematics", "reachable")
+
+
+def uses_kinematics(model: MappingModel) -> bool:
+    """Does the mapping call a kinematics function (`inverse_kinematics`, `reachable`) anywhere, so that a run
+    sets up its arm's kinematics (FunctionRegistry)?"""
+    exprs = [v.init for v in model.variables if v.init is not None]
+    for op in model.operations:
+        exprs += [v.init for v in op.variables if v.init is not None]
+        exprs += [*op.equations, *(value for _, value, _ in op.actions)]
+    for ev in model.input_events:
+        exprs += [v.init for v in ev.variables if v.init is not None]
+        exprs += [*ev.equations, *ev.predicates]
+    return any(isinstance(node, s.Call) and isinstance(node.function, s.Name)
+               and node.function.name.last in KINEMATICS_FUNCTIONS for e in exprs for node in s.walk(e))
+
+
+def kinematics_result_problem(project, model: MappingModel, pmodel: str, tool_link: str,
+                              arm: list[str]) -> Finding | None:
+    """The mapping's declared `inverse_kinematics(...): vector(real, N)` must have one value per arm joint:
+    with fewer, the last joints would never be commanded (and the tool miss its target while moves
+    'complete'); with more, the values past the arm's would be read as nothing. An error at the function's
+    declaration, or None. `arm`: the joints from p-model `pmodel`'s base to the tool link, in kinematic order."""
+    source = project.file_of(model)
+    fn = project.visible_functions(source).get("inverse_kinematics")
+    if fn is None:
+        return None
+    ty = TypeResolver(project, source, Diagnostics()).resolve(fn.result)
+    if not isinstance(ty, VectorTy) or ty.size is None or ty.size == len(arm):
+        return None
+    return Finding(fn.loc, Severity.ERROR,
+                   f"inverse_kinematics is declared to return {ty}, but p-model {pmodel}'s arm from its base to "
+                   f"the tool link {tool_link} has {len(arm)} moving joints ({', '.join(arm) or 'none'}): declare "
+                   f"vector(real, {len(arm)}) and command every one of them")
 
 
 class FunctionRegistry:
@@ -519,18 +556,12 @@ class Mapping:
         return self._registry
 
     def _check_kinematics_result(self, registry: FunctionRegistry) -> None:
-        """The mapping's declared `inverse_kinematics(...): vector(real, N)` must have one value per arm joint:
-        with fewer, the last joints would never be commanded (and the tool miss its target while moves
-        'complete'); with more, the values past the arm's would be read as nothing."""
-        fn = self.project.visible_functions(self.source).get("inverse_kinematics")
-        if fn is None:
-            return
-        ty = self.resolver.resolve(fn.result)
-        if isinstance(ty, VectorTy) and ty.size is not None and ty.size != len(registry.arm):
-            raise CotwinError(f"{fn.loc}: inverse_kinematics is declared to return {ty}, but p-model "
-                              f"{registry.tree.name}'s arm from its base to the tool link {registry.tool.link} has "
-                              f"{len(registry.arm)} moving joints ({', '.join(registry.arm)}): declare "
-                              f"vector(real, {len(registry.arm)}) and command every one of them")
+        """`kinematics_result_problem` at run time: the last line of defence (cotwin check and load_models
+        report it before, cotwin.twin.assembly.system)."""
+        problem = kinematics_result_problem(self.project, self.model, registry.tree.name, registry.tool.link,
+                                            registry.arm)
+        if problem is not None:
+            raise CotwinError([problem])
 
     def _kinematics(self, name: str):
         def call(*args):
@@ -718,7 +749,7 @@ class Mapping:
             for var, path in self.monitor.items():
                 if path not in readings:
                     raise CotwinError(f"monitored variable {var}: the platform has no reading '{path}' "
-                                      f"(it has {', '.join(sorted(readings)) or 'none'})")
+                                      f"(the nearest: {nearest_first(path, readings)})")
                 self.variables[var] = readings[path]
 
     def sensor_readings(self) -> dict[str, float]:

@@ -78,6 +78,17 @@ def pose_paths(tree: KinematicTree) -> list[str]:
     return [f"{tree.name}::{tree.root.source}.{p}" for p in POSE_PORTS]
 
 
+def reading_paths(tree: KinematicTree, free_base: bool = False) -> set[str]:
+    """Every path a platform of this p-model may read by (a mapping's `sref.port`, a [monitor] reading): each
+    sensor port's (`sensor_name`; also without its joint, as the UR's RTDE and a replay name a joint's sensor),
+    and a free base's pose (`pose_paths`)."""
+    out = set(pose_paths(tree)) if free_base else set()
+    for s in tree.sensors:
+        out.add(sensor_name(tree.name, s.link, s.name, s.port, s.via))
+        out.add(sensor_name(tree.name, s.link, s.name, s.port))
+    return out
+
+
 def servo_mode(joint: TJoint) -> str:
     return joint.servos[0].mode if joint.servos else "position"
 

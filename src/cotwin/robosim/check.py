@@ -60,8 +60,14 @@ def check_paths(paths: Iterable[str | Path]) -> CheckResult:
 def load_checked(paths: Iterable[str | Path]) -> Project:
     """One project made of all the model files under `paths`, with no errors, or CotwinError
     listing every finding."""
+    return load_checked_warned(paths)[0]
+
+
+def load_checked_warned(paths: Iterable[str | Path]) -> tuple[Project, list[Finding]]:
+    """`load_checked` and the warnings found on the way (what `cotwin check` shows), for a command that
+    shows them too (`cotwin run`)."""
     diag = Diagnostics()
     project = load_project(paths, diag)
     check_project(project, diag)
     diag.raise_if_errors()
-    return project
+    return project, [f for f in diag.findings if f.severity is Severity.WARNING]

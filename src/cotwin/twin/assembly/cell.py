@@ -299,6 +299,12 @@ class CellSystem:
             self.parameters[names[unit]] = dict(values)
 
     @property
+    def warnings(self) -> list:
+        """What each robot's models and the project against them warn of (TwinModels.warnings), the shared
+        d-model's once."""
+        return list(dict.fromkeys(f for robot in self.robots for f in robot.system.warnings))
+
+    @property
     def digests(self) -> dict[str, str]:
         return {k: v for robot in self.robots for k, v in robot.system.models.digests.items()}
 

@@ -78,6 +78,9 @@ class TwinModels:
     monitored: list[str]
     calibration: object | None = None  # cotwin.twin.assembly.calibration.Calibration: [platform] calibration
     digests: dict[str, str] = field(default_factory=dict)  # model_digests: what a saved state names
+    #: what `cotwin check` warns of in the models (their checker's and the p-model's tree's readings) and in the
+    #: project against them, each once: `cotwin run` shows them as check does
+    warnings: list[Finding] = field(default_factory=list)
 
 
 def model_digests(spec: TwinProject, project) -> dict[str, str]:
@@ -123,16 +126,17 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     cell's robots share its [plant] (a joint named applies to the robots that have it), checked against
     them all by cotwin.pmodel.perturbation.perturbed_world."""
     from ...dmodel.program import build_program
-    from ...mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints
+    from ...mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints, uses_kinematics
     from ...pmodel import ik
     from ...mapping.profile import profile_rays
     from ...pmodel.tree import build_tree
-    from ...robosim.check import load_checked
+    from ...robosim.check import load_checked_warned
     from ...robosim.pmodel_elements import Mapping as MappingModel
 
-    project = load_checked(spec.model_files)
+    project, warnings = load_checked_warned(spec.model_files)
     program = build_program(project, spec.module)
     tree = build_tree(project, spec.pmodel_name, spec.stand_ins, profile_rays(spec.profile))  # the robot's scanner
+    warnings += tree_warnings(tree)
     problems: list[Finding] = []  # the checks below report together (with the plan's, see the end)
     if plant:  # a project's problem for every command, as [plant]'s types are (cotwin plant applies it)
         problems += spec.plant_problems(tree)
@@ -155,6 +159,9 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     variables = [v.name for v in mapping.variables]
     if calibration is not None:  # it names this arm's joints
         _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, ik.find_tool(tree))), None)
+    if uses_kinematics(mapping) or declares_mirrors(variables) and spec.mirror_joints == "arm":  # as a run sets up
+        geometry = calibration.geometry if calibration is not None else getattr(scene, "geometry", None)
+        problems += kinematics_problems(project, mapping, tree, geometry)
     actuated = [j.name for j in tree.actuated]
     unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
     if unknown:  # said at the key, with the nearest joint
@@ -162,29 +169,134 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
                                 f"[monitor] joints: {', '.join(unknown)} are not actuated joints of p-model "
                                 f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
     joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) and not unknown else []
-    clash = [n for n in spec.readings if n in variables or n in mirror_variables(variables, joints)]
-    if clash:
-        problems.append(Finding(spec.location("monitor", "readings", clash[0]), Severity.ERROR,
-                                f"[monitor] readings {', '.join(clash)}: the mapping has variables of these names"))
-    # a reading is an output of the mapping's unit: a name the d-model's operations, their argument ports or the
-    # mapping's events already give a port of that unit would be wired twice (a reading `z` and goto(x, y, z))
-    ports = {op.name: f"operation {op.name}" for op in program.operations}
-    ports.update({port: f"an argument of operation {op.name}" for op in program.operations
-                  for args in op.arg_ports for port, _ in args})
-    ports.update({ev.name: f"event {ev.name}" for ev in mapping.input_events})
-    taken = [n for n in spec.readings if n in ports and n not in clash]
-    if taken:
-        problems.append(Finding(spec.location("monitor", "readings", taken[0]), Severity.ERROR,
-                                "[monitor] readings " + ", ".join(f"{n} (already {ports[n]})" for n in taken) +
-                                ": each reading needs a name of its own (e.g. " + repr(f"{taken[0]}_reading") + ")"))
+    problems += reading_clashes(spec, taken_names(program, mapping, [*variables, *mirror_variables(variables, joints)]))
+    problems += reading_path_problems(spec, tree)
+    own = [] if unknown else mirror_warnings(spec, mapping, tree, joints)  # the project's against the models
+    warnings += own
     if problems:
         if spec.plan is not None:  # its problems too, not in a round of their own once these are fixed
             from .scenario import read_scenario
 
             _gather(problems, lambda: read_scenario(spec.plan, program), None)
-        raise CotwinError(problems)
+        raise CotwinError(problems + own)
     monitored = [*mirror_variables(variables, joints), *spec.readings]
-    return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project))
+    return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project),
+                      list(dict.fromkeys(warnings)))
+
+
+def reading_path_problems(spec: TwinProject, tree) -> list[Finding]:
+    """[monitor] readings whose path is no reading of the p-model (cotwin.pmodel.mjcf.reading_paths: its sensor
+    ports, a free base's pose): an error at each one's key with the nearest paths, found before the run (whose
+    first step said it with every path of the platform and no place)."""
+    from ...config import nearest_first
+    from ...pmodel.mjcf import pose_paths, reading_paths
+
+    if not spec.readings:
+        return []
+    known = reading_paths(tree, free_base=spec.base == "free")
+    pose = set(pose_paths(tree))
+    return [Finding(spec.location("monitor", "readings", name), Severity.ERROR,
+                    f"[monitor] readings {name}: " + (
+                        f"'{path}' is the pose of a free base, and p-model {tree.name}'s is fixed: set [platform] "
+                        f"base = \"free\" (a mobile robot) or read a sensor (the nearest: "
+                        if path in pose else f"p-model {tree.name} has no reading '{path}' (the nearest: ") +
+                    f"{nearest_first(path, known - pose)})")
+            for name, path in spec.readings.items() if path not in known]
+
+
+def mirror_warnings(spec: TwinProject, mapping, tree, joints: list[str]) -> list[Finding]:
+    """Joints that would silently show nothing: `[monitor] joints` written for a mapping that declares no q<i>/qd<i>
+    (nothing mirrors them, so nothing of them is logged or compared), or a q<i>/qd<i> past the mirrored joints
+    (`joints`, cotwin.mapping.runtime.mirrored_joints) that no operation assigns: neither set nor logged. Each
+    one warning, at the key or at the first such variable."""
+    from ...mapping.runtime import MIRROR_PREFIXES, declares_mirrors, mirror_variables, mirrored_joints
+    from ...robosim import syntax as s
+
+    variables = [v.name for v in mapping.variables]
+    if not declares_mirrors(variables):
+        if ("monitor", "joints") not in spec.locations:
+            return []
+        try:
+            named = mirrored_joints(tree, spec.mirror_joints)
+        except CotwinError:  # an arm without a tool: the joints cannot be listed
+            named = []
+        which = f" ({', '.join(named)})" if named else ""
+        first = "var " + (", ".join(f"q{i}: real" for i in range(max(len(named), 1))) if len(named) <= 3 else
+                          f"q0: real, ..., q{len(named) - 1}: real")
+        return [Finding(spec.location("monitor", "joints"), Severity.WARNING,
+                        f"[monitor] joints: mapping {mapping.name} declares no variable q0, q1, ... (positions) or "
+                        f"qd0, qd1, ... (velocities), so no joint{which} is mirrored, logged or compared: declare "
+                        f"`{first}` in the mapping (q<i> the i-th joint [monitor] joints gives, qd<i> its "
+                        f"velocity) or remove [monitor] joints")]
+    mirrored = mirror_variables(variables, joints)
+    assigned = {root.name.last for op in mapping.operations for target, _, _ in op.actions
+                for root in [s.root_name(target)] if root is not None}
+    idle = [v for v in mapping.variables if v.name not in mirrored and v.name not in assigned
+            and any(v.name.startswith(p) and v.name[len(p):].isdigit() for p, _ in MIRROR_PREFIXES)]
+    if not idle:
+        return []
+    said = "[monitor] joints gives" if ("monitor", "joints") in spec.locations else \
+        "[monitor] joints (by default the arm's) gives"
+    count = len(joints)
+    return [Finding(idle[0].loc, Severity.WARNING,
+                    f"mapping variable(s) {', '.join(v.name for v in idle)} mirror no joint: {said} {count} of p-model "
+                    f"{tree.name}'s ({', '.join(joints) or 'none'}), one per q<i> and qd<i> from 0; these are "
+                    f"neither set nor logged: remove them or name more joints in [monitor] joints")]
+
+
+def tree_warnings(tree) -> list[Finding]:
+    """The warnings a simulator's reading of a p-model gives (cotwin.pmodel.tree_build: a joint's zero position
+    outside its limits, an impossible inertia replaced...) that name a place in the project's files."""
+    return [f for f in tree.findings if f.severity is Severity.WARNING and not f.location.path.startswith("<")]
+
+
+def taken_names(program, mapping, variables: list[str]) -> dict[str, tuple[str, str]]:
+    """The names a [monitor] reading cannot have, each with the kind of clash and what already has it: a
+    reading is a monitored variable of the mapping and an output of the mapping's unit, so neither one of the
+    mapping's `variables` (q<i>/qd<i> mirrors included) nor a port of that unit (a d-model operation, an
+    argument port of one, a mapping event: a reading `z` beside goto(x, y, z) would be wired twice). A variable
+    is said before a port of the same name, an event before an argument before an operation."""
+    taken = {op.name: ("port", f"operation {op.name}") for op in program.operations}
+    taken.update({port: ("port", f"an argument of operation {op.name}") for op in program.operations
+                  for args in op.arg_ports for port, _ in args})
+    taken.update({ev.name: ("port", f"event {ev.name}") for ev in mapping.input_events})
+    taken.update({name: ("variable", f"variable {name}") for name in variables})
+    return taken
+
+
+def reading_clashes(spec: TwinProject, taken: dict[str, tuple[str, str]]) -> list[Finding]:
+    """[monitor] readings named like something `taken` (taken_names): one error per kind of clash, at the key
+    of its first reading."""
+    clashes: dict[str, list[str]] = {}
+    for name in spec.readings:
+        if name in taken:
+            clashes.setdefault(taken[name][0], []).append(name)
+    out = []
+    for kind, names in clashes.items():
+        if kind == "variable":
+            message = f"[monitor] readings {', '.join(names)}: the mapping has variables of these names"
+        else:
+            message = ("[monitor] readings " + ", ".join(f"{n} (already {taken[n][1]})" for n in names) +
+                       ": each reading needs a name of its own (e.g. " + repr(f"{names[0]}_reading") + ")")
+        out.append(Finding(spec.location("monitor", "readings", names[0]), Severity.ERROR, message))
+    return out
+
+
+def kinematics_problems(project, mapping, tree, geometry=None) -> list[Finding]:
+    """The mapping's declared inverse_kinematics against the arm a run solves for (from the base to the tool
+    `geometry` names: cotwin.mapping.runtime.FunctionRegistry), found before the run: a vector of another size
+    than the arm's joints, at the function's declaration. A tool link the p-model lacks is said where a run
+    uses the kinematics (FunctionRegistry), not here."""
+    from ...mapping.runtime import kinematics_result_problem
+    from ...pmodel import ik
+    from ...pmodel.cell import CellGeometry
+
+    try:
+        tool = (geometry or CellGeometry()).find_tool(tree)
+    except CotwinError:
+        return []
+    problem = kinematics_result_problem(project, mapping, tree.name, tool.link, ik.arm_joints(tree, tool))
+    return [problem] if problem is not None else []
 
 
 def build_scene(spec: TwinProject, mapping, calibration=None):
@@ -284,6 +396,11 @@ class TwinSystem:
             _gather(problems, self._check_panels, None)
         if problems:
             raise CotwinError(problems)
+
+    @property
+    def warnings(self) -> list[Finding]:
+        """What the twin's models and the project against them warn of (TwinModels.warnings)."""
+        return self.models.warnings
 
     def with_plan(self, commands) -> "TwinSystem":
         """This twin with `commands` as its source (the same models, derived once)."""
