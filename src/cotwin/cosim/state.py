@@ -179,8 +179,13 @@ class _Reader:
             if not all(p.__class__ is list and len(p) == 2 for p in items):
                 raise StateError("a damaged cotwin state ($dict holds no [key, value] pairs)")
             out = {}
+            inline = depth + 1 < MAX_DEPTH
             for key, value in items:
-                key = self.decode(key, depth + 1)
+                if inline and key.__class__ is dict and len(key) == 1 and key.get("$tuple").__class__ is list and \
+                        all(k.__class__ in _LEAVES for k in key["$tuple"]):  # (unit, port): a tuple of plain items
+                    key = tuple(key["$tuple"])
+                else:
+                    key = self.decode(key, depth + 1)
                 try:
                     out[key] = self.decode(value, depth + 1)
                 except TypeError:  # an unhashable key (a list, a dict)
