@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ..diagnostics import CotwinError, Diagnostics
+from ..memo import once_per
 from ..robosim import functions as fns
 from ..robosim import syntax as s
 from ..robosim.consteval import ConstEnv, ConstError, evaluate
@@ -302,7 +303,9 @@ class Program:
         return "state" if len(self.machines) == 1 else f"state_{machine.name}"
 
     def leaf_names(self, machine: MachineInstance) -> list[str]:
-        return [".".join(n.path) for n in machine.graph.leaves]
+        """The machine's leaf states by index (the value of its state port), named by their paths (found once per
+        machine: observers name a state at every change)."""
+        return list(once_per(machine.graph, "leaf names", lambda: tuple(".".join(n.path) for n in machine.graph.leaves)))
 
     def type_of(self, expr: s.Expr) -> Ty | None:
         return self.project.readings.type_of(expr)

@@ -670,8 +670,7 @@ class Mapping:
         if name not in self.answers or name in self.pending:
             return None
         ev = self.events[name]
-        constants = {v.name for v in self.model.variables if v.is_const}
-        false = ev.false_request_part(set(self.assigners), constants)
+        false = ev.false_request_part(set(self.assigners), self._constants())
         if false is not None:
             reads = sorted(n.name.last for n in s.walk(false) if isinstance(n, s.Name) and n.name.last in self.assigners)
             by = sorted({op for v in reads for op in self.assigners[v]})
@@ -688,8 +687,13 @@ class Mapping:
         it comes: it waits for no step (not pending), does not hold (it comes by coming to hold, so it cannot
         hold without having come) and no condition of it on what operations assign is false (those variables
         change only when an operation runs). `cannot_come` says None at each such step."""
-        return name in self.answers and name not in self.pending and not self.held.get(name, (False, None))[0] \
-            and self.cannot_come(name) is None
+        if name not in self.answers or name in self.pending or self.held.get(name, (False, None))[0]:
+            return False
+        return self.events[name].false_request_part(set(self.assigners), self._constants()) is None
+
+    def _constants(self) -> set[str]:
+        """The mapping's constants (what a request condition may read besides what operations assign)."""
+        return {v.name for v in self.model.variables if v.is_const}
 
     def event_value(self, name: str):
         """The value the event carried when it last occurred (None before, or for an event without one)."""
