@@ -705,23 +705,32 @@ def test_a_pmodel_the_importer_wrote_wrongly_is_reported_as_its_bug(own_arm, tmp
     assert "a bug of the importer" in str(err.value) and "my_arm.pm:2:" in str(err.value)
 
 
-def test_an_arm_of_fewer_than_six_joints_is_told_why_the_ik_cannot_serve_it(own_arm, tmp_path):
-    """A 2-joint arm imported and twinned found every hole 'infeasible' without a word why: the IK says at its
-    first use that it reaches a full pose and needs 6 joints, naming the arm's."""
-    from cotwin.diagnostics import CotwinError
+def test_an_arm_of_fewer_than_six_joints_reaches_what_its_joints_can_and_is_told_once(own_arm, tmp_path, caplog,
+                                                                                      monkeypatch):
+    """A 2-joint arm imported and twinned found every hole 'infeasible' (the IK reached for a full pose), then was
+    refused ('needs 6 or more'): it now reaches the points its joints reach, the orientation as near as they allow,
+    `reachable` judging by that, and is told once what the IK holds for it."""
+    import logging
+
     from cotwin.mapping.endpoint import SimulatedEndpoint
     from cotwin.mapping.runtime import FunctionRegistry
     from cotwin.pmodel.simulator import PlatformSimulator
     from cotwin.pmodel.tree import build_tree
     from cotwin.robosim.check import load_checked
 
+    monkeypatch.setenv("COTWIN_CACHE", str(tmp_path / "cache"))
     result = import_urdf(own_arm, tmp_path / "out", [tmp_path / "src"])
     tree = build_tree(load_checked([result.file]))
     registry = FunctionRegistry(SimulatedEndpoint(PlatformSimulator(tree, None)))  # a mapping mirroring q<i> makes one
-    assert registry.arm == ["link", "elbow_joint"]
-    for call in (registry.inverse_kinematics, registry.reachable):
-        with pytest.raises(CotwinError, match=r"has 2 moving joint\(s\) \(link, elbow_joint\).*needs 6 or more"):
-            call(0.1, 0.0, 0.2)
+    assert registry.arm == ["link", "elbow_joint"] and registry.solver.task == "position"
+    point = registry.solver.chain.pose(np.array([0.4, 0.7]))[:3, 3]  # where its fingertips are at that posture
+    with caplog.at_level(logging.WARNING, logger="cotwin.ik"):
+        assert registry.reachable(*point)
+        q = registry.inverse_kinematics(*point)
+        assert not registry.reachable(*(point + [0.0, 0.0, 0.05]))  # off the surface its two joints sweep
+    assert np.linalg.norm(registry.solver.chain.pose(np.array(q))[:3, 3] - point) < 1e-9
+    told = [r.getMessage() for r in caplog.records if r.name == "cotwin.ik"]
+    assert len(told) == 1 and "has 2 moving joints (link, elbow_joint)" in told[0] and "as near" in told[0], told
 
 
 def test_a_mesh_path_spelled_otherwise_is_among_the_renamings(own_arm, tmp_path):
