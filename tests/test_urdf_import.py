@@ -841,3 +841,22 @@ def test_the_import_says_which_tool_link_and_arm_joints_the_ik_takes_by_default(
     assert run.exit_code == 0, run.output
     assert ("inverse_kinematics: tool link jaw (the end of the longest chain of moving joints), arm joints j1, j2, j3, "
             "j4, j5, j6, j7 (7); another tool link: [tool] link in the cell geometry (docs/calibration.md)") in run.output
+
+
+def test_the_import_says_what_the_ik_reaches_for_an_arm_of_five_joints(tmp_path):
+    """A 5-joint arm was left without the IK note (the IK refused it); the note now names its tool and arm and
+    what the IK reaches for it: the position and approach axis, the roll left free."""
+    def link(name):
+        return (f"<link name='{name}'><inertial><mass value='1'/><inertia ixx='0.01' ixy='0' ixz='0' iyy='0.01' iyz='0' "
+                f"izz='0.01'/></inertial></link>")
+
+    names = ["base", "l1", "l2", "l3", "l4", "hand"]
+    joints = [_joint(f"j{k + 1}", names[k], names[k + 1], "revolute",
+                     f"<origin xyz='0 0 0.1'/><axis xyz='{'0 0 1' if k % 2 == 0 else '0 1 0'}'/>"
+                     "<limit lower='-3' upper='3' effort='10' velocity='1'/>") for k in range(5)]
+    urdf = tmp_path / "five.urdf"
+    urdf.write_text("<robot name='five'>" + "".join(map(link, names)) + "".join(joints) + "</robot>")
+    run = CliRunner().invoke(main, ["import-urdf", str(urdf), "-o", str(tmp_path / "out")])
+    assert run.exit_code == 0, run.output
+    assert ("inverse_kinematics: tool link hand (the end of the longest chain of moving joints), arm joints j1, j2, j3, "
+            "j4, j5 (5: the position and approach axis, the roll left free); another tool link") in run.output
