@@ -705,23 +705,32 @@ def test_a_pmodel_the_importer_wrote_wrongly_is_reported_as_its_bug(own_arm, tmp
     assert "a bug of the importer" in str(err.value) and "my_arm.pm:2:" in str(err.value)
 
 
-def test_an_arm_of_fewer_than_six_joints_is_told_why_the_ik_cannot_serve_it(own_arm, tmp_path):
-    """A 2-joint arm imported and twinned found every hole 'infeasible' without a word why: the IK says at its
-    first use that it reaches a full pose and needs 6 joints, naming the arm's."""
-    from cotwin.diagnostics import CotwinError
+def test_an_arm_of_fewer_than_six_joints_reaches_what_its_joints_can_and_is_told_once(own_arm, tmp_path, caplog,
+                                                                                      monkeypatch):
+    """A 2-joint arm imported and twinned found every hole 'infeasible' (the IK reached for a full pose), then was
+    refused ('needs 6 or more'): it now reaches the points its joints reach, the orientation as near as they allow,
+    `reachable` judging by that, and is told once what the IK holds for it."""
+    import logging
+
     from cotwin.mapping.endpoint import SimulatedEndpoint
     from cotwin.mapping.runtime import FunctionRegistry
     from cotwin.pmodel.simulator import PlatformSimulator
     from cotwin.pmodel.tree import build_tree
     from cotwin.robosim.check import load_checked
 
+    monkeypatch.setenv("COTWIN_CACHE", str(tmp_path / "cache"))
     result = import_urdf(own_arm, tmp_path / "out", [tmp_path / "src"])
     tree = build_tree(load_checked([result.file]))
     registry = FunctionRegistry(SimulatedEndpoint(PlatformSimulator(tree, None)))  # a mapping mirroring q<i> makes one
-    assert registry.arm == ["link", "elbow_joint"]
-    for call in (registry.inverse_kinematics, registry.reachable):
-        with pytest.raises(CotwinError, match=r"has 2 moving joint\(s\) \(link, elbow_joint\).*needs 6 or more"):
-            call(0.1, 0.0, 0.2)
+    assert registry.arm == ["link", "elbow_joint"] and registry.solver.task == "position"
+    point = registry.solver.chain.pose(np.array([0.4, 0.7]))[:3, 3]  # where its fingertips are at that posture
+    with caplog.at_level(logging.WARNING, logger="cotwin.ik"):
+        assert registry.reachable(*point)
+        q = registry.inverse_kinematics(*point)
+        assert not registry.reachable(*(point + [0.0, 0.0, 0.05]))  # off the surface its two joints sweep
+    assert np.linalg.norm(registry.solver.chain.pose(np.array(q))[:3, 3] - point) < 1e-9
+    told = [r.getMessage() for r in caplog.records if r.name == "cotwin.ik"]
+    assert len(told) == 1 and "has 2 moving joints (link, elbow_joint)" in told[0] and "as near" in told[0], told
 
 
 def test_a_mesh_path_spelled_otherwise_is_among_the_renamings(own_arm, tmp_path):
@@ -832,3 +841,22 @@ def test_the_import_says_which_tool_link_and_arm_joints_the_ik_takes_by_default(
     assert run.exit_code == 0, run.output
     assert ("inverse_kinematics: tool link jaw (the end of the longest chain of moving joints), arm joints j1, j2, j3, "
             "j4, j5, j6, j7 (7); another tool link: [tool] link in the cell geometry (docs/calibration.md)") in run.output
+
+
+def test_the_import_says_what_the_ik_reaches_for_an_arm_of_five_joints(tmp_path):
+    """A 5-joint arm was left without the IK note (the IK refused it); the note now names its tool and arm and
+    what the IK reaches for it: the position and approach axis, the roll left free."""
+    def link(name):
+        return (f"<link name='{name}'><inertial><mass value='1'/><inertia ixx='0.01' ixy='0' ixz='0' iyy='0.01' iyz='0' "
+                f"izz='0.01'/></inertial></link>")
+
+    names = ["base", "l1", "l2", "l3", "l4", "hand"]
+    joints = [_joint(f"j{k + 1}", names[k], names[k + 1], "revolute",
+                     f"<origin xyz='0 0 0.1'/><axis xyz='{'0 0 1' if k % 2 == 0 else '0 1 0'}'/>"
+                     "<limit lower='-3' upper='3' effort='10' velocity='1'/>") for k in range(5)]
+    urdf = tmp_path / "five.urdf"
+    urdf.write_text("<robot name='five'>" + "".join(map(link, names)) + "".join(joints) + "</robot>")
+    run = CliRunner().invoke(main, ["import-urdf", str(urdf), "-o", str(tmp_path / "out")])
+    assert run.exit_code == 0, run.output
+    assert ("inverse_kinematics: tool link hand (the end of the longest chain of moving joints), arm joints j1, j2, j3, "
+            "j4, j5 (5: the position and approach axis, the roll left free); another tool link") in run.output

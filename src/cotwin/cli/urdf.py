@@ -46,6 +46,9 @@ def import_urdf(urdf: str, output: str, package_path: tuple[str, ...], force: bo
     report(result.findings)
 
 
+ARM_JOINTS = 4  # fewer moving joints to the IK's default tool: no arm (a mobile base's wheels), nothing to say
+
+
 def _ik_tool(pmodel) -> str | None:
     """Which link inverse_kinematics takes as the tool by default and so which joints are its arm: a jaw or a
     sensor frame at the end of the longest chain was taken silently (a gripper's revolute jaw as a 7th arm joint)."""
@@ -60,9 +63,11 @@ def _ik_tool(pmodel) -> str | None:
     except CotwinError:  # the p-model's own problems are reported with the import's findings
         return None
     arm = ik.arm_joints(tree, tool)
-    if len(arm) < ik.FULL_POSE_JOINTS:  # no arm for the IK (a mobile base, a hand): nothing to say
+    if len(arm) < ARM_JOINTS:  # no arm for the IK (a mobile base, a hand): nothing to say
         return None
     why = (f"the link carrying the fingers {', '.join(tool.fingers)}" if tool.fingers
            else "the end of the longest chain of moving joints")
-    return (f"inverse_kinematics: tool link {tool.link} ({why}), arm joints {', '.join(arm)} ({len(arm)}); "
+    reaches = {"pose": "", "axis": ": the position and approach axis, the roll left free",
+               "position": ": the position, the orientation as near as they allow"}[ik.task_for(len(arm))]
+    return (f"inverse_kinematics: tool link {tool.link} ({why}), arm joints {', '.join(arm)} ({len(arm)}{reaches}); "
             "another tool link: [tool] link in the cell geometry (docs/calibration.md)")

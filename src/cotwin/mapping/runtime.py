@@ -31,6 +31,7 @@ Readings of the mapping (see also docs/robosim-notation.md, section 8):
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import fields
 
@@ -51,6 +52,11 @@ from ..robosim.types import EnumTy, TypeResolver, VectorTy
 from ..diagnostics import Diagnostics
 
 MIRROR_PREFIXES = (("q", "position"), ("qd", "velocity"))
+TASKS = {"axis": "it reaches the tool point with the approach axis (tool z) as the cell geometry's [tool] rpy "
+                 "gives it, the roll about that axis is what the joints make it",
+         "position": "it reaches the tool point, the tool's orientation as near the cell geometry's [tool] rpy as "
+                     "the joints allow"}  # what cotwin.pmodel.ik reaches for an arm of fewer than 6 joints
+log = logging.getLogger("cotwin.ik")
 
 
 def mirror_variables(variables: list[str], joints: list[str]) -> dict[str, tuple[str, str]]:
@@ -124,7 +130,8 @@ def kinematics_result_problem(project, model: MappingModel, pmodel: str, tool_li
 class FunctionRegistry:
     """Implementations of functions the models leave abstract, bound to the platform's kinematics and
     the cell's geometry: `inverse_kinematics(x, y, z)` takes the point the mapping computes in the
-    plate's (grid) frame, places it in the robot's frame and solves for the full tool pose there."""
+    plate's (grid) frame, places it in the robot's frame and solves for the tool pose there (as much of it as
+    the arm's joints fix: cotwin.pmodel.ik); `reachable` judges by the same."""
 
     def __init__(self, endpoint, geometry: CellGeometry | None = None):
         self.endpoint = endpoint
@@ -138,13 +145,17 @@ class FunctionRegistry:
         self._cache: dict[tuple, ik.IKResult] = {}
         self.stored = SolutionCache(self.solver.fingerprint())  # solutions of earlier runs, exact
         self.requests: list[tuple[float, float, float]] = []  # grid points asked of inverse_kinematics, in order
+        self._told = False  # an arm of fewer than 6 joints is told once what the IK reaches for it
 
     def _solve(self, x, y, z) -> ik.IKResult:
-        if len(self.arm) < ik.FULL_POSE_JOINTS:  # every target would be 'infeasible' without a word why
-            raise CotwinError(f"inverse_kinematics: p-model {self.tree.name}'s arm from its base to the tool link "
-                              f"{self.tool.link} has {len(self.arm)} moving joint(s) ({', '.join(self.arm) or 'none'}); "
-                              f"cotwin's IK reaches a full tool pose (position and orientation) and needs "
-                              f"{ik.FULL_POSE_JOINTS} or more (docs/new-robot.md)")
+        if not self.arm:
+            raise CotwinError(f"inverse_kinematics: p-model {self.tree.name} has no moving joint from its base to the "
+                              f"tool link {self.tool.link}: nothing to solve for (docs/new-robot.md)")
+        if not self._told and self.solver.task != "pose":
+            self._told = True
+            log.warning("inverse_kinematics: p-model %s's arm from its base to the tool link %s has %d moving joints "
+                        "(%s): %s (docs/new-robot.md)", self.tree.name, self.tool.link, len(self.arm),
+                        ", ".join(self.arm), TASKS[self.solver.task])
         key = (round(float(x), 9), round(float(y), 9), round(float(z), 9))
         if key not in self._cache:
             pose = self.geometry.target_pose(key)

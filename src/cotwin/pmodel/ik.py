@@ -1,6 +1,16 @@
-"""Inverse kinematics on a p-model's kinematic tree: the tool frame reaches a full pose (position and
-orientation, the last wrist joint included), deterministically, for any serial arm (6 joints, or 7 and
-more: a redundant arm).
+"""Inverse kinematics on a p-model's kinematic tree: the tool frame reaches a target pose as far as the
+arm's joints can, deterministically, for any serial arm.
+
+The task follows the number of joints from the base to the tool (`task_for`):
+- 6 or more ("pose"): the full pose, position and orientation (6 constraints; 7 and more: a redundant arm);
+- 5 ("axis"): the position and the approach axis (the tool frame's z), the roll about it left free, as
+  the arm gives it (5 constraints: a 5-axis arm such as the SO-ARM100 points its tool but cannot also
+  choose its roll);
+- 4 or fewer ("position"): the position first; then, holding it, the orientation as near the target's as
+  the joints allow (least squares on the rotation error, moving only along postures that keep the
+  position: a SCARA or palletiser turns its tool about the vertical, nothing more).
+`IKResult.angle_error` is the error in what the task holds (the orientation, the approach axis, nothing:
+0 for "position"), so `IKResult.ok` judges a target by the same task the solver reached it for.
 
 The tool: a link named by the caller (`find_tool(tree, point, link=...)`, a cell geometry's `[tool] link`),
 else the link that carries two or more prismatic joints (the gripper body), else the leaf link with the
@@ -127,6 +137,15 @@ def _tool_frame(approach: np.ndarray, tip: np.ndarray, point) -> np.ndarray:
 
 
 FULL_POSE_JOINTS = 6  # an arm with fewer cannot reach a full pose (3 for position, 3 for orientation)
+AXIS_JOINTS = 5  # position and approach axis (3 + 2): the roll about the axis is what the joints make it
+
+
+def task_for(joints: int) -> str:
+    """What an arm of `joints` moving joints reaches (see the module's docstring): "pose", "axis" or
+    "position"."""
+    if joints >= FULL_POSE_JOINTS:
+        return "pose"
+    return "axis" if joints == AXIS_JOINTS else "position"
 
 
 def arm_joints(tree: KinematicTree, tool: Tool) -> list[str]:
@@ -236,6 +255,31 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
 
 
+def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b of two 3-vectors (np.cross costs a 5-axis arm's IK a third of its time)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _across(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors completing the unit vector z to a right-handed frame (fixed by z alone)."""
+    other = np.zeros(3)
+    other[int(np.argmin(np.abs(z)))] = 1.0
+    u = _cross3(z, other)
+    u /= np.linalg.norm(u)
+    return u, _cross3(z, u)
+
+
+def _axis_error(z_target: np.ndarray, z: np.ndarray, across: np.ndarray) -> np.ndarray:
+    """Rotation vector (model frame) of the smallest turn taking the axis z onto z_target (a half turn: about
+    `across`, a unit vector across z)."""
+    axis = _cross3(z, z_target)
+    s, c = float(np.linalg.norm(axis)), float(z @ z_target)
+    angle = float(np.arctan2(s, c))
+    if s < 1e-12:
+        return axis if c > 0 else across * angle
+    return axis * (angle / s)
+
+
 def rotation_error(R_target: np.ndarray, R: np.ndarray) -> np.ndarray:
     """Rotation vector (model frame) turning R onto R_target."""
     E = R_target @ R.T
@@ -256,7 +300,8 @@ def rotation_error(R_target: np.ndarray, R: np.ndarray) -> np.ndarray:
 class IKResult:
     q: dict[str, float]
     position_error: float  # m
-    angle_error: float  # rad between the reached and the requested tool orientation
+    angle_error: float  # rad off what the arm's task holds: the tool orientation (6 joints and more), the
+    # approach axis (5), nothing (4 or fewer: 0.0); see the module's docstring
     iterations: int
 
     def ok(self, position_tol: float = 1e-3, angle_tol: float = 1e-2) -> bool:
@@ -264,9 +309,10 @@ class IKResult:
 
 
 class Solver:
-    """Deterministic full-pose IK on a chain (see the module's docstring)."""
+    """Deterministic IK on a chain, the task chosen from its number of joints (see the module's docstring)."""
 
     SEEDS = 8  # fixed pseudo-random starts besides the reference-based ones
+    MORE_SEEDS = 32  # further fixed starts of an arm of fewer than 6 joints (see __init__)
     TOLERANCE = 1e-10
 
     def __init__(self, tree: KinematicTree, tool: Tool | None = None, reference: dict[str, float] | None = None,
@@ -276,6 +322,7 @@ class Solver:
         self.joints = self.chain.joints
         self.reference = None if reference is None else np.array([float(reference.get(j, 0.0)) for j in self.joints])
         self.max_iterations = max_iterations
+        self.task = task_for(len(self.joints))
         rng = np.random.default_rng(20240531)
         lo, hi = np.maximum(self.chain.lower, -np.pi), np.minimum(self.chain.upper, np.pi)
         # the last joint (a 6-axis arm's tool roll) defines no branch: it only breaks ties
@@ -283,6 +330,13 @@ class Solver:
         if len(self.joints) > 1:
             self._weights[-1] = 1e-2
         self._random = [lo + (hi - lo) * rng.random(len(self.joints)) for _ in range(self.SEEDS)]
+        self._middle = (lo + hi) / 2.0  # every joint in the middle of its range (within a turn either way)
+        # an arm of fewer than 6 joints: further starts, tried only when none of the first reaches the target
+        # (the SO-ARM100's joint limits leave each start a small basin: the first starts missed 2 of 60 of its
+        # own poses, these reach them)
+        more = np.random.default_rng(20261128)
+        self._more = [] if self.task == "pose" else [lo + (hi - lo) * more.random(len(self.joints))
+                                                     for _ in range(self.MORE_SEEDS)]
 
     def fingerprint(self) -> str:
         """What the solver's answers depend on (the chain, the tool, the reference, the seeds, this
@@ -297,7 +351,7 @@ class Solver:
         c = self.chain
         for part in (c.joints, c.kinds, c.limits, self.max_iterations, self.SEEDS, self.TOLERANCE):
             h.update(repr(part).encode())
-        for array in (c.base, c.tail, *c.axes, *c.before, *c.after, *self._random, *( [self.reference] if self.reference is not None else [])):
+        for array in (c.base, c.tail, *c.axes, *c.before, *c.after, *self._random, *self._more, *( [self.reference] if self.reference is not None else [])):
             h.update(np.ascontiguousarray(array, dtype=float).tobytes())
         return h.hexdigest()
 
@@ -311,9 +365,30 @@ class Solver:
         return ref
 
     def _yaw(self, target: np.ndarray) -> float:
-        """Direction of the target seen from the base (about the base frame's z)."""
+        """Direction of the target seen from the base (about the base frame's z); an arm of fewer than 6
+        joints: the base joint's angle facing the middle posture's tool towards it (`_facing`)."""
+        if self.task != "pose":
+            facing = self._facing(target, self._middle)
+            if facing is not None:
+                return facing
         p = inverse(self.chain.base) @ np.append(target[:3, 3], 1.0)
         return float(np.arctan2(p[1], p[0]))
+
+    def _facing(self, target: np.ndarray, posture: np.ndarray) -> float | None:
+        """The base joint's angle that turns the tool of `posture` towards the target, about the base joint's
+        own axis (None: the tool or the target on that axis). The base frame's x (`_yaw`) is not where every
+        arm faces: the SO-ARM100 faces its base frame's -y, and at zero it is folded back over its base, so its
+        yaw seeds started it facing away. Of 60 of its own poses, the first starts missed 4 without these
+        seeds, 2 with them (0 with the further starts, 1 of 60 without these)."""
+        chain = self.chain
+        B = chain.base @ chain.before[0]
+        axis = B[:3, :3] @ (chain.axes[0] / np.linalg.norm(chain.axes[0]))
+        across = np.eye(3) - np.outer(axis, axis)
+        tool = across @ (chain.pose(posture)[:3, 3] - B[:3, 3])
+        aim = across @ (target[:3, 3] - B[:3, 3])
+        if min(np.linalg.norm(tool), np.linalg.norm(aim)) < 1e-6:
+            return None
+        return float(self._wrap(posture[0] + np.arctan2(np.cross(tool, aim) @ axis, tool @ aim)))
 
     def solve(self, target, current: dict[str, float] | None = None) -> IKResult:
         """Joints putting the tool frame at `target` (4x4 pose, or a point reached pointing down), the
@@ -346,12 +421,28 @@ class Solver:
                 seed = ref.copy()
                 seed[0] = base
                 seeds.append(seed)
+        if self.task != "pose" and self.chain.kinds[0] == "revolute":  # the middle of every joint's range, facing
+            facing = self._facing(target, self._middle)  # the target and away from it (see _facing)
+            for base in () if facing is None else (facing, facing + np.pi):
+                seed = self._middle.copy()
+                seed[0] = self._wrap(base)  # within a turn of 0, not clipped to a limit beyond it
+                seeds.append(seed)
         seeds.extend(self._random)
+        if self.task == "position":
+            found = candidates + [self.newton(target, seed) for seed in seeds]
+            if not any(f[1] < 1e-7 for f in found) and not self._beyond(target):  # none reached it: further starts
+                found += [self.newton(target, seed) for seed in self._more]
+            return self._position_branch(target, ref, found)
+        start = self.newton if self.task == "pose" else self._staged
         best, best_distance, best_error = None, np.inf, None
         fallback = None
         moved: list[np.ndarray] = []  # a redundant arm's converged solutions already moved towards the reference
-        for found in candidates + [None] * len(seeds):
-            q, pos, ang, iterations = found if found is not None else self.newton(target, seeds.pop(0))
+        for found in candidates + [None] * (len(seeds) + len(self._more)):
+            if found is None and not seeds:  # a 5-axis arm's first starts all missed: the further starts
+                if best is not None or self._beyond(target):
+                    break
+                seeds = list(self._more)
+            q, pos, ang, iterations = found if found is not None else start(target, seeds.pop(0))
             if pos < 1e-7 and ang < 1e-7:
                 q = self._wind(q, ref)
                 if self.redundant:
@@ -369,6 +460,69 @@ class Solver:
         else:
             q, (pos, ang, iterations) = best, best_error
         return IKResult(dict(zip(self.joints, map(float, q))), float(pos), float(ang), iterations)
+
+    def _beyond(self, target: np.ndarray) -> bool:
+        """Is the target's position farther from the base joint than the arm reaches stretched out (the lengths
+        between its joints, the tool's and its slides' travel added up)? Then no start reaches it: an arm of
+        fewer than 6 joints skips its further starts (the SO-ARM100 took 5 s on a point 2 m away)."""
+        c = self.chain
+        reach = sum(float(np.linalg.norm(A[:3, 3])) for A in c.after) + float(np.linalg.norm(c.tail[:3, 3]))
+        reach += sum(float(np.linalg.norm(B[:3, 3])) for B in c.before[1:])
+        reach += sum(max(abs(lo), abs(hi)) for kind, (lo, hi) in zip(c.kinds, c.limits) if kind != "revolute")
+        origin = (c.base @ c.before[0])[:3, 3]
+        return float(np.linalg.norm(target[:3, 3] - origin)) > reach + 1e-3
+
+    def _position_branch(self, target: np.ndarray, ref: np.ndarray, found: list) -> IKResult:
+        """An arm of 4 joints or fewer: among the starts that reach the position, the postures turned (the
+        position held) to the orientation nearest the target's; of those within 1e-6 rad of the nearest, the one
+        nearest the reference. No start reaching it: the closest approach found."""
+        reached = []
+        for q, pos, _, iterations in found:
+            if pos < 1e-7:
+                q, pos, turned = self._orient(target, q)
+                reached.append((self._wind(q, ref), pos, turned, iterations))
+        if not reached:
+            q, pos, _, iterations = min(found, key=lambda f: f[1])  # the first of equals: the order is fixed
+            return IKResult(dict(zip(self.joints, map(float, q))), float(pos), 0.0, iterations)
+        least = min(r[2] for r in reached)
+        best, best_distance = None, np.inf
+        for q, pos, turned, iterations in reached:
+            distance = self._distance(q, ref)
+            if turned <= least + 1e-6 and distance < best_distance - 1e-9:
+                best, best_distance = (q, pos, iterations), distance
+        q, pos, iterations = best
+        return IKResult(dict(zip(self.joints, map(float, q))), float(pos), 0.0, iterations)
+
+    def _orient(self, target: np.ndarray, q: np.ndarray, steps: int = 30):
+        """A posture reaching the target's position turned, the position held, to lower its rotation error: a
+        Gauss-Newton step on the rotation error within the position's null space, then Newton back onto the
+        position, each step halved until it lowers the error. (q, position error, rotation error left) of the
+        best found."""
+        chain = self.chain
+        T, J = chain.forward(q)
+        pos = float(np.linalg.norm(target[:3, 3] - T[:3, 3]))
+        error = rotation_error(target[:3, :3], T[:3, :3])
+        angle = float(np.linalg.norm(error))
+        eye = np.eye(len(q))
+        for _ in range(steps):
+            free = eye - np.linalg.pinv(J[:3]) @ J[:3]  # joint motions that keep the position (to first order)
+            step = free @ np.linalg.pinv(J[3:] @ free, rcond=1e-8) @ error
+            largest = np.abs(step).max() if len(step) else 0.0
+            if largest < 1e-12:
+                break
+            if largest > 0.5:
+                step *= 0.5 / largest
+            for scale in (1.0, 0.5, 0.25, 0.125):
+                trial, p, _, _ = self.newton(target, np.clip(q + scale * step, chain.lower, chain.upper), 20)
+                T2, J2 = chain.forward(trial)
+                e2 = rotation_error(target[:3, :3], T2[:3, :3])
+                a2 = float(np.linalg.norm(e2))
+                if p < 1e-9 and a2 < angle - 1e-13:
+                    q, pos, J, error, angle = trial, p, J2, e2, a2
+                    break
+            else:
+                break
+        return q, pos, angle
 
     # ---- internals ----
     @staticmethod
@@ -440,31 +594,42 @@ class Solver:
             total += iterations
         return q, pos, ang, total
 
-    def newton(self, target: np.ndarray, seed: np.ndarray, max_iterations: int | None = None):
-        """Damped Newton iterations from one start (no branch choice): (q, position error, angle error,
-        iterations)."""
+    def _staged(self, target: np.ndarray, seed: np.ndarray):
+        """A 5-axis arm's start: Newton on the position alone, then on the position and the approach axis (from
+        the same starts, the axis at once reached 33 of the SO-ARM100's 40 own poses, staged 37)."""
+        q, _, _, first = self.newton(target, seed, task="position")
+        q, pos, ang, iterations = self.newton(target, q)
+        return q, pos, ang, first + iterations
+
+    def newton(self, target: np.ndarray, seed: np.ndarray, max_iterations: int | None = None,
+               task: str | None = None):
+        """Damped Newton iterations from one start (no branch choice) on the solver's task (or `task`): (q,
+        position error, angle error, iterations)."""
         chain = self.chain
+        task = task or self.task
+        residual = lambda target, T, J: self._residual(target, T, J, task)  # noqa: E731
         q = np.clip(seed.astype(float), chain.lower, chain.upper)
         damping = 1e-4
         T, J = chain.forward(q)
-        e = np.concatenate([target[:3, 3] - T[:3, 3], rotation_error(target[:3, :3], T[:3, :3])])
+        e, J = residual(target, T, J)
+        eye = np.eye(len(e))
         norm = float(np.linalg.norm(e))
         iterations = 0
         for iterations in range(1, (max_iterations or self.max_iterations) + 1):
             if norm < self.TOLERANCE:
                 break
-            step = J.T @ np.linalg.solve(J @ J.T + damping * np.eye(6), e)
+            step = J.T @ np.linalg.solve(J @ J.T + damping * eye, e)
             pinned = ((q <= chain.lower) & (step < 0)) | ((q >= chain.upper) & (step > 0))
             if pinned.any():  # a joint at its limit pushed beyond it: solve without it (else the clipped step
                 # never lowers the error and the damping grows until the start is given up)
                 free = J * ~pinned
-                step = free.T @ np.linalg.solve(free @ free.T + damping * np.eye(6), e)
+                step = free.T @ np.linalg.solve(free @ free.T + damping * eye, e)
             largest = np.abs(step).max()
             if largest > 0.5:
                 step *= 0.5 / largest
             trial = np.clip(q + step, chain.lower, chain.upper)
             T2, J2 = chain.forward(trial)
-            e2 = np.concatenate([target[:3, 3] - T2[:3, 3], rotation_error(target[:3, :3], T2[:3, :3])])
+            e2, J2 = residual(target, T2, J2)
             norm2 = float(np.linalg.norm(e2))
             if norm2 < norm:
                 q, T, J, e, norm = trial, T2, J2, e2, norm2
@@ -474,6 +639,20 @@ class Solver:
                 if damping > 1e4:
                     break
         return q, float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:])), iterations
+
+    @staticmethod
+    def _residual(target: np.ndarray, T: np.ndarray, J: np.ndarray, task: str) -> tuple[np.ndarray, np.ndarray]:
+        """The error `task` drives to zero (position first, then what the task holds of the orientation as a
+        rotation vector: all of it, its two components turning the approach axis, none) and its Jacobian rows."""
+        if task == "pose":
+            return np.concatenate([target[:3, 3] - T[:3, 3], rotation_error(target[:3, :3], T[:3, :3])]), J
+        if task == "position":
+            return target[:3, 3] - T[:3, 3], J[:3]
+        z = T[:3, 2]
+        u, v = _across(z)
+        turn = _axis_error(target[:3, 2], z, u)
+        plane = np.stack([u, v])  # a turn about z itself moves no axis: only these two components count
+        return np.concatenate([target[:3, 3] - T[:3, 3], plane @ turn]), np.vstack([J[:3], plane @ J[3:]])
 
 
 def solve(tree: KinematicTree, target, tool: Tool | None = None, reference: dict[str, float] | None = None,
