@@ -96,6 +96,20 @@ def test_an_fmi3_state_without_its_clock_is_refused_saying_what_to_do(system, fm
         predict(system, [], state, horizon=1.0, step=0.2)  # the saved clock cannot tick on this fork's steps
 
 
+def test_an_fmi3_state_restored_into_a_dmodel_clocked_otherwise_is_refused_naming_both(system, fmi3_run):
+    from cotwin.cosim.algorithm import algorithm
+    from cotwin.cosim.execution import Execution
+    from cotwin.twin.assembly.clocked import clocked_system
+    from cotwin.twin.assembly.run import simulated_endpoint
+    from cotwin.twin.assembly.system import MAPPING
+
+    out, state, _ = fmi3_run
+    fork = Execution(clocked_system(system, out / "dmodel3.fmu", simulated_endpoint(system), 0.2), algorithm("jacobi"),
+                     0.1, 5.0)
+    with pytest.raises(StateError, match="ticks clock cycle every 0.3 s, this one every 0.2 s"):
+        fork.set_state(state, units=[DMODEL.name, MAPPING.name])
+
+
 def test_whatif_from_an_fmi3_run_on_the_command_line(tmp_path):
     """`cotwin run --fmi 3` then `cotwin whatif --from` its state: the move is predicted from the end of the run."""
     project = EXAMPLES / "ur5e" / "cotwin.toml"
