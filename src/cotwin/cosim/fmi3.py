@@ -347,11 +347,13 @@ class FMU3Unit(Unit):
             self._call("fmi3FreeFMUState", self.fmu.freeFMUState, handle)
         return pack("FMU3", {"guid": self.md.guid, "time": self.time, "fmu": raw, "mode": self.mode,
                              "ticks": [c.next for c in self.clocks], "offered": dict(self.offered),
-                             "shown": dict(self.shown), "pending": self._pending})
+                             "shown": dict(self.shown), "pending": self._pending, "start": self.start,
+                             "intervals": [c.interval for c in self.clocks]})
 
     def set_state(self, state: bytes) -> None:
         what = f"unit {self.name}"
-        data = fields(unpack(state, "FMU3"), what, ("guid", "time", "fmu", "mode", "ticks", "offered", "shown", "pending"))
+        data = fields(unpack(state, "FMU3"), what, ("guid", "time", "fmu", "mode", "ticks", "offered", "shown", "pending"),
+                      ("start", "intervals"))  # both absent from states of an earlier cotwin
         if data["guid"] != self.md.guid:
             raise UnitError(self.name, self.time, "fmi3SetFMUState",
                             f"the state is of another FMU (GUID {str(data['guid'])[:60]}, this one is {self.md.guid})")
@@ -363,6 +365,16 @@ class FMU3Unit(Unit):
             raise StateError(f"the saved state's {what} has {len(ticks)} clocks, this FMU {len(self.clocks)}")
         for clock, k in zip(self.clocks, ticks):
             count(k, f"{what}'s tick of clock {clock.name}")
+        start = finite(data.get("start", self.start), f"{what}'s start")
+        intervals = clock_intervals(data, what)
+        if intervals is not None:
+            if len(intervals) != len(self.clocks):
+                raise StateError(f"the saved state's {what} has {len(intervals)} clock intervals, this FMU {len(self.clocks)} "
+                                 "clocks")
+            for clock, interval in zip(self.clocks, intervals):
+                if clock.interval is not None and abs(interval - clock.interval) > 1e-9 * max(1.0, interval):
+                    raise StateError(f"the saved state's {what} ticks clock {clock.name} every {interval:g} s, this "
+                                     f"one every {clock.interval:g} s: give it the saved period (cycle_period)")
         for key in ("offered", "shown"):
             for name, value in of_type(data[key], dict, f"{what}'s {key} values").items():
                 if name not in self.ports:
@@ -376,6 +388,7 @@ class FMU3Unit(Unit):
         finally:
             self._call("fmi3FreeFMUState", self.fmu.freeFMUState, handle)
         self.time, self.mode, self._pending = data["time"], data["mode"], data["pending"]
+        self.start = start  # the ticks' origin: a fork instantiated at the saved time ticks in the saved phase
         for clock, k in zip(self.clocks, data["ticks"]):
             clock.next = k
         self.offered.clear()
@@ -384,4 +397,16 @@ class FMU3Unit(Unit):
         self.shown.update(data["shown"])
 
 
-__all__ = ["FMU3Unit", "fmi_version", "fmu_unit"]
+def clock_intervals(data: dict, what: str = "FMU3 unit") -> list[float] | None:
+    """The clocks' intervals (s) in an FMU3Unit's state data (`unpack(state, "FMU3")`), None in a state of an
+    earlier cotwin, which did not save them; StateError unless each is a positive number of seconds."""
+    if "intervals" not in data:
+        return None
+    intervals = of_type(data["intervals"], list, f"{what}'s clock intervals")
+    out = [finite(v, f"{what}'s clock interval") for v in intervals]
+    if not all(v > 0 for v in out):
+        raise StateError(f"the saved state's {what} has clock intervals {out!r:.60}, not positive numbers of seconds")
+    return out
+
+
+__all__ = ["FMU3Unit", "clock_intervals", "fmi_version", "fmu_unit"]

@@ -223,6 +223,13 @@ class _Reader:
 
 def unpack(blob: bytes | bytearray | memoryview, kind: str) -> object:
     """The plain data packed as `kind`, or StateError saying why the bytes are not such a state."""
+    return unpacked(blob, (kind,))[1]
+
+
+def unpacked(blob: bytes | bytearray | memoryview, kinds: tuple[str, ...]) -> tuple[str, object]:
+    """The kind (one of `kinds`) and the plain data of a state, or StateError saying why the bytes are not a
+    state of one of them: for a reader that takes several (the d-model's state, FMI 2.0's or FMI 3.0's)."""
+    kind = " or ".join(kinds)
     view = memoryview(bytes(blob))
     if bytes(view[:len(OLD_MAGIC)]) == OLD_MAGIC:
         raise StateError(f"a state saved by an earlier cotwin (a pickle, which this cotwin never reads: it could "
@@ -256,6 +263,6 @@ def unpack(blob: bytes | bytearray | memoryview, kind: str) -> object:
     for n in head["blobs"]:
         blobs.append(view[at:at + n])
         at += n
-    if head["kind"] != kind:
+    if head["kind"] not in kinds:
         raise StateError(f"a state of a {str(head['kind'])[:60]}, not of a {kind}")
-    return _Reader(blobs).decode(head["data"])
+    return head["kind"], _Reader(blobs).decode(head["data"])

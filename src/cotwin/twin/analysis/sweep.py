@@ -231,14 +231,18 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         artefacts = scratch = tempfile.mkdtemp(prefix="cotwin-sweep-")
     try:
         system = load(project, reader=READER)
+        fmi = 2
         if state is not None:  # a state of other models fails every what-if alike: said once, before any runs
             from ...cosim.execution import check_models, saved_execution
+            from ..assembly.clocked import saved_clock
 
-            check_models(saved_execution(state)["models"], system.models.digests)
+            saved = saved_execution(state)
+            check_models(saved["models"], system.models.digests)
+            fmi = 2 if saved_clock(saved) is None else 3  # the d-model the state was saved from, forked as it ran
         from ..services.whatif import physics_timing
 
         physics_step = physics_timing(system.spec.step if step is None else step, physics_step)  # once, not per what-if
-        dmodel_fmu(system, artefacts)  # built once, before the workers share it
+        dmodel_fmu(system, artefacts, fmi=fmi)  # built once, before the workers share it
         artefacts = str(artefacts)
         if ray is not None:
             return _on_ray(project, plans, state, horizon, step, ray, artefacts, report, physics_step)

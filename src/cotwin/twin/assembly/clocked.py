@@ -76,6 +76,32 @@ def clock_period(spec, step: float, period: float | None = None) -> float:
     return float(period)
 
 
+def saved_clock(saved: dict) -> float | None:
+    """The clock period (s) of the FMI 3.0 d-model in a saved execution (`saved_execution(state)`), None when its
+    d-model is FMI 2.0's (or the state has none): what a fork of the DT as it ran builds (cotwin.twin.services.whatif).
+    StateError for a state of an FMI 3.0 d-model saved by an earlier cotwin, which kept neither the clock's period
+    nor its phase."""
+    from ...cosim.fmi3 import clock_intervals
+    from ...cosim.state import unpacked
+    from ...plaindata import StateError
+    from .system import DMODEL
+
+    blob = saved["units"].get(DMODEL.name)
+    if blob is None:
+        return None
+    try:
+        kind, data = unpacked(blob, ("FMU", "FMU3"))
+    except StateError:
+        return None  # not a d-model's state: restoring it says why
+    if kind != "FMU3":
+        return None
+    intervals = clock_intervals(data, f"unit {DMODEL.name}") if isinstance(data, dict) else None
+    if not intervals or "start" not in data:
+        raise StateError(f"a state of an FMI 3.0 d-model saved by an earlier cotwin, without its clock's period and "
+                         "phase: run the twin again (cotwin run --fmi 3) to save one a what-if can fork")
+    return intervals[0]
+
+
 def clocked_system(system, fmu, endpoint, period: float, source=None):
     """The twin's co-simulation with `fmu` (the FMI 3.0 d-model) clocked every `period` seconds, and the
     scenario as a ClockedScenario (unless `source` is given)."""

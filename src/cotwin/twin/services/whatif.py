@@ -3,7 +3,9 @@
 `predict` builds a fresh DT of the same TwinSystem (same d-model FMU, same mapping, the embedded
 simulator) whose command source plays the plan, restores the saved state of the live DT into its
 d-model and mapping (the simulator, the trajectory in flight, the mapping's variables), and runs it
-as fast as it goes. The live twin is never touched: a state is bytes (cotwin.cosim.state), taken
+as fast as it goes. A state of a twin run with the FMI 3.0 d-model (`cotwin run --fmi 3`) is forked with that
+d-model, its clock ticking at the saved period in the saved phase (cotwin.twin.assembly.clocked.saved_clock), as
+the algorithm is the saved one: the fork goes on as the DT ran. The live twin is never touched: a state is bytes (cotwin.cosim.state), taken
 between two of its steps. A plan's times are relative to the fork.
 
 The answer (`Prediction`): the predicted trajectory of the monitored variables, the d-model's state
@@ -149,7 +151,8 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
             step: float | None = None, algorithm: str | None = None, artefacts: str | Path | None = None,
             settle: float = 0.3, decimate: int = 1, cc: str = "cc", fused: bool = True,
             physics_step: float | None = None) -> Prediction:
-    """Run `plan` on a fork of the DT at `state` (None: from the project's initial state); see module doc.
+    """Run `plan` on a fork of the DT at `state` (None: from the project's initial state) under the state's algorithm
+    and with its d-model (FMI 2.0's, or FMI 3.0's clocked as it was); see module doc.
     `fused`: in the fused loop (cotwin.cosim.fused, the same prediction), else step by step. `physics_step`:
     the fork's physics steps (s; None: cotwin's 1 ms; see `physics_timing`)."""
     import tempfile
@@ -160,19 +163,27 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
     spec = system.spec
     step = spec.step if step is None else step
     physics_step = physics_timing(step, physics_step)
-    start = 0.0
+    start, period = 0.0, None
     if state is not None:
         from ...cosim.execution import saved_execution
+        from ..assembly.clocked import saved_clock
 
         saved = saved_execution(state)
         start, algorithm = saved["time"], algorithm or saved["algorithm"]  # the fork goes on as the DT ran
+        period = saved_clock(saved)  # an FMI 3.0 d-model's clock, as it ticked (None: FMI 2.0's)
     algorithm = algorithm or spec.algorithm
     shifted = sorted((Command(start + c.time, c.values, c.where) for c in plan), key=lambda c: c.time)
     fork = system.with_plan(shifted)
     with tempfile.TemporaryDirectory(prefix="cotwin-whatif-") as tmp:
-        fmu = dmodel_fmu(fork, Path(artefacts) if artefacts is not None else Path(tmp), cc)
+        folder = Path(artefacts) if artefacts is not None else Path(tmp)
         endpoint = simulated_endpoint(fork, physics_step)
-        cosim = fork.instantiate(fmu, endpoint)
+        if period is None:
+            cosim = fork.instantiate(dmodel_fmu(fork, folder, cc), endpoint)
+        else:  # the FMI 3.0 d-model, its clock's period and phase restored with its state (as run_twin built it)
+            from ..assembly.clocked import clock_period, clocked_system
+
+            period = clock_period(spec, step, period)  # a whole number of this fork's steps, else said here
+            cosim = clocked_system(fork, dmodel_fmu(fork, folder, cc, fmi=3), endpoint, period)
         watch, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
         execution = Execution(cosim, make_algorithm(algorithm), step, start, [watch, ledger], fused=fused)
         try:
@@ -201,12 +212,14 @@ class Forks:
         self.step = system.spec.step if step is None else step
         self.physics_step = physics_timing(self.step, physics_step)
         self.artefacts = artefacts
-        self.start = 0.0
+        self.start, self.period = 0.0, None
         if state is not None:
             from ...cosim.execution import saved_execution
+            from ..assembly.clocked import saved_clock
 
             saved = saved_execution(state)
             self.start, algorithm = saved["time"], algorithm or saved["algorithm"]  # as the DT ran
+            self.period = saved_clock(saved)  # an FMI 3.0 d-model's clock period (None: FMI 2.0's), as `predict`
         self.algorithm = algorithm or system.spec.algorithm
         self._forks: dict[frozenset, tuple] = {}  # plan shape -> (fork, execution, endpoint, saved state)
         self._shared: dict[tuple, tuple] = {}  # (shape, steps, decimate, horizon) -> (state, watches' progress) then
@@ -274,10 +287,15 @@ class Forks:
             if self._scratch is None:
                 self._scratch = tempfile.TemporaryDirectory(prefix="cotwin-whatif-")
             artefacts = self._scratch.name
-        fmu = dmodel_fmu(fork, Path(artefacts), self.cc)
         endpoint = simulated_endpoint(fork, self.physics_step)
-        execution = Execution(fork.instantiate(fmu, endpoint), make_algorithm(self.algorithm), self.step, self.start,
-                              [], fused=True)
+        if self.period is None:
+            cosim = fork.instantiate(dmodel_fmu(fork, Path(artefacts), self.cc), endpoint)
+        else:  # the FMI 3.0 d-model, clocked as the saved run was (`predict`)
+            from ..assembly.clocked import clock_period, clocked_system
+
+            self.period = clock_period(self.system.spec, self.step, self.period)
+            cosim = clocked_system(fork, dmodel_fmu(fork, Path(artefacts), self.cc, fmi=3), endpoint, self.period)
+        execution = Execution(cosim, make_algorithm(self.algorithm), self.step, self.start, [], fused=True)
         try:
             if self.state is not None:
                 execution.set_state(self.state, units=[DMODEL.name, MAPPING.name])
