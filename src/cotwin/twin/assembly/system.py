@@ -153,8 +153,9 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         calibration = _gather(problems, lambda: Calibration.read(spec.calibration), None)
     scene = _gather(problems, lambda: build_scene(spec, mapping, calibration), None)
     variables = [v.name for v in mapping.variables]
-    if calibration is not None:  # it names this arm's joints
-        _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, ik.find_tool(tree))), None)
+    if calibration is not None:  # it names this arm's joints: those up to its own [tool] link, as the mapping's IK
+        geometry = calibration.geometry  # takes them (cotwin.mapping.runtime.FunctionRegistry)
+        _gather(problems, lambda: geometry.check_joints(ik.arm_joints(tree, geometry.find_tool(tree))), None)
     actuated = [j.name for j in tree.actuated]
     unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
     if unknown:  # said at the key, with the nearest joint

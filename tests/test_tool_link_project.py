@@ -1,0 +1,153 @@
+"""A twin project whose cell geometry names the tool link (`[tool] link`) is read against that tool: the arm
+of the IK is the joints from the base to that link, and `[ik] reference` must give one value per such joint.
+
+Found on the Unitree Z1 (example-robot-data): its jaw is a revolute joint after the wrist, so the default
+tool (the end of the longest chain) counts it as a 7th arm joint. Naming the gripper's fixed body as the
+tool link gives the 6-joint arm the mapping's IK then solves for; but the project check compared
+`[ik] reference` with the default tool's 7 joints, and the mapping with the named tool's 6: no reference
+passed both (6 values refused before the run, 7 at the first IK call). The models here are written by
+the test: a 6-joint arm with a revolute jaw, as a URDF imported by cotwin."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cotwin.diagnostics import CotwinError
+from cotwin.mapping.runtime import FunctionRegistry
+from cotwin.pmodel import ik
+from cotwin.pmodel.urdf_import import import_urdf
+from cotwin.twin.assembly.system import load_models
+from cotwin.twin.project import load_project
+
+# joint name, parent, child, origin xyz, axis: a Z1-like arm, its jaw a revolute joint after a fixed stator
+CHAIN = [
+    ("joint1", "base", "l1", "0 0 0.1", "0 0 1"),
+    ("joint2", "l1", "l2", "0 0 0.05", "0 1 0"),
+    ("joint3", "l2", "l3", "0.35 0 0", "0 1 0"),
+    ("joint4", "l3", "l4", "0.2 0 0", "0 1 0"),
+    ("joint5", "l4", "l5", "0.07 0 0", "0 0 1"),
+    ("joint6", "l5", "l6", "0.05 0 0", "1 0 0"),
+    ("jaw", "stator", "mover", "0.05 0 0", "0 1 0"),
+]
+
+
+def _urdf() -> str:
+    links = ["base", "l1", "l2", "l3", "l4", "l5", "l6", "stator", "mover"]
+    text = ['<?xml version="1.0"?>', '<robot name="arm">']
+    for name in links:
+        text.append(f'<link name="{name}"><inertial><mass value="0.5"/>'
+                    '<inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial>'
+                    '<collision><geometry><sphere radius="0.02"/></geometry></collision></link>')
+    for name, parent, child, xyz, axis in CHAIN:
+        text.append(f'<joint name="{name}" type="revolute"><parent link="{parent}"/><child link="{child}"/>'
+                    f'<origin xyz="{xyz}"/><axis xyz="{axis}"/>'
+                    '<limit lower="-2.6" upper="2.6" effort="30" velocity="3"/></joint>')
+    text.append('<joint name="stator_fixed" type="fixed"><parent link="l6"/><child link="stator"/>'
+                '<origin xyz="0.05 0 0"/></joint>')
+    text.append("</robot>")
+    return "\n".join(text)
+
+
+DMODEL = """
+datatype Spot {
+	x: real
+	y: real
+	z: real
+}
+interface Motion { reach(x: real, y: real, z: real) }
+interface Orders { event goTo: Spot }
+interface Answers { event arrived }
+stm Mover {
+	cycleDef cycle == 1
+	var goal: Spot
+	input context { uses Orders uses Answers }
+	output context { requires Motion }
+	initial i0
+	state Idle { }
+	state Moving { entry $reach(goal.x, goal.y, goal.z) }
+	transition init { from i0 to Idle }
+	transition idle { from Idle to Idle exec condition not $goTo }
+	transition go { from Idle to Moving condition $goTo?goal }
+	transition wait { from Moving to Idle exec }
+}
+controller Ctl {
+	cycleDef cycle == 1
+	uses Orders uses Answers requires Motion
+	sref s = Mover
+	connection Ctl on goTo to s on goTo (_async)
+	connection Ctl on arrived to s on arrived (_async)
+}
+module Arm {
+	cycleDef cycle == 1
+	robotic platform ArmPlatform { provides Motion uses Orders uses Answers }
+	cref c = Ctl
+	connection ArmPlatform on goTo to c on goTo (_async)
+	connection ArmPlatform on arrived to c on arrived (_async)
+}
+"""
+
+
+def _mapping() -> str:
+    joints = [(parent, name) for name, parent, _, _, _ in CHAIN[:6]]
+    equations = "\n".join(f"\t\tequation arm::{link}::{j}::{j}_motor.dangle == q[{k}]"
+                          for k, (link, j) in enumerate(joints))
+    return f"""import physmod::math::*
+map ArmMap dmodel Arm to pmodel arm {{
+	var q: vector(real, 6) = [| 0.0, 0.0, 0.0, 0.0, 0.0, 0.0 |]
+	operation reach {{
+		action q = inverse_kinematics(x, y, z)
+{equations}
+	}}
+	input event arrived {{ predicate false }}
+	input event goTo {{ predicate false }}
+}}
+function inverse_kinematics(x: real, y: real, z: real): vector(real, 6) {{ }}
+"""
+
+
+def _project(folder: Path, reference: list[float]) -> Path:
+    (folder / "arm.urdf").write_text(_urdf())
+    import_urdf(folder / "arm.urdf", folder, check=False)
+    (folder / "arm.rst").write_text(DMODEL)
+    (folder / "mapping.pm").write_text(_mapping())
+    (folder / "cell.toml").write_text(f'[tool]\nlink = "stator"\npoint = "flange"\n[ik]\nreference = {reference}\n')
+    (folder / "cotwin.toml").write_text('[models]\ndmodel = "arm.rst"\npmodel = "arm.pm"\nmapping = "mapping.pm"\n'
+                                        '[platform]\ncalibration = "cell.toml"\n[cosim]\nstep = 0.1\nend = 1.0\n')
+    return folder / "cotwin.toml"
+
+
+REFERENCE = [0.0, 1.0, -1.0, 0.5, 0.0, 0.0]  # one value per arm joint, base to the stator: joint1..joint6
+
+
+def test_the_reference_posture_is_checked_against_the_tool_link_the_cell_names(tmp_path):
+    models = load_models(load_project(_project(tmp_path, REFERENCE)))
+    tool = models.calibration.geometry.find_tool(models.tree)
+    assert tool.link == "stator"
+    assert ik.arm_joints(models.tree, tool) == [f"joint{k}" for k in range(1, 7)]
+    assert ik.arm_joints(models.tree, ik.find_tool(models.tree))[-1] == "jaw"  # the default tool's arm: 7
+
+
+def test_a_reference_of_the_default_tools_arm_is_refused_at_its_key(tmp_path):
+    with pytest.raises(CotwinError) as err:
+        load_models(load_project(_project(tmp_path, REFERENCE + [0.0])))
+    assert "cell.toml:5:1" in str(err.value)
+    assert "the reference posture has 7 values, the arm has 6 joints (joint1, " in str(err.value)
+
+
+class _Endpoint:
+    """The mapping registry's view of the platform: the tree and where the joints are."""
+
+    def __init__(self, tree):
+        self.tree, self.geometry = tree, None
+
+    def joint_positions(self):
+        return {j.name: 0.0 for j in self.tree.actuated}
+
+
+def test_the_mapping_solves_for_the_same_arm_the_project_checked(tmp_path):
+    models = load_models(load_project(_project(tmp_path, REFERENCE)))
+    registry = FunctionRegistry(_Endpoint(models.tree), models.calibration.geometry)
+    assert registry.arm == [f"joint{k}" for k in range(1, 7)]
+    assert len(registry.inverse_kinematics(0.3, 0.0, 0.2)) == 6
