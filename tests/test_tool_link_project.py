@@ -6,7 +6,8 @@ tool (the end of the longest chain) counts it as a 7th arm joint. Naming the gri
 tool link gives the 6-joint arm the mapping's IK then solves for; but the project check compared
 `[ik] reference` with the default tool's 7 joints, and the mapping with the named tool's 6: no reference
 passed both (6 values refused before the run, 7 at the first IK call). The models here are written by
-the test: a 6-joint arm with a revolute jaw, as a URDF imported by cotwin."""
+the test: a 6-joint arm with a revolute jaw, as a URDF imported by cotwin. On the same arm: a mapping goal
+beyond a joint's limits (the jaw commanded past its stop) is said where the mapping commands it."""
 
 from __future__ import annotations
 
@@ -56,7 +57,7 @@ datatype Spot {
 	y: real
 	z: real
 }
-interface Motion { reach(x: real, y: real, z: real) }
+interface Motion { reach(x: real, y: real, z: real) grip(width: real) }
 interface Orders { event goTo: Spot }
 interface Answers { event arrived }
 stm Mover {
@@ -99,6 +100,9 @@ map ArmMap dmodel Arm to pmodel arm {{
 	operation reach {{
 		action q = inverse_kinematics(x, y, z)
 {equations}
+	}}
+	operation grip {{
+		equation arm::stator::jaw::jaw_motor.dangle == width * 10.0
 	}}
 	input event arrived {{ predicate false }}
 	input event goTo {{ predicate false }}
@@ -151,3 +155,28 @@ def test_the_mapping_solves_for_the_same_arm_the_project_checked(tmp_path):
     registry = FunctionRegistry(_Endpoint(models.tree), models.calibration.geometry)
     assert registry.arm == [f"joint{k}" for k in range(1, 7)]
     assert len(registry.inverse_kinematics(0.3, 0.0, 0.2)) == 6
+
+
+def test_a_goal_beyond_a_joints_limits_is_said_at_the_equation_commanding_it(tmp_path, caplog):
+    """The jaw's limits are [-2.6, 2.6] rad: grip(0.3) commands 3 rad, where the simulated joint stops at 2.6 and
+    an event waiting for the jaw to get there never comes; the run only said the command never completed."""
+    import logging
+
+    from cotwin.mapping.runtime import Mapping
+    from cotwin.twin.assembly.run import load, simulated_endpoint
+
+    system = load(_project(tmp_path, REFERENCE))
+    mapping = Mapping(system.models.project, simulated_endpoint(system))
+    mapping.start_mapping()
+    with caplog.at_level(logging.WARNING, logger="cotwin.twin"):
+        mapping.execute_operation("grip", {"width": 0.1})  # 1 rad: within the limits, nothing said
+        assert not caplog.records
+        mapping.execute_operation("grip", {"width": 0.3})
+        mapping.execute_operation("grip", {"width": 0.4})  # said once per actuator
+    said = [r.getMessage() for r in caplog.records]
+    assert len(said) == 1, said
+    line, column = next((k, text.index("arm::") + 1) for k, text in enumerate(_mapping().splitlines(), 1)
+                        if "jaw_motor.dangle" in text)
+    assert f"mapping.pm:{line}:{column}: warning: operation grip commands joint jaw to 3 rad, beyond its limits " \
+           "[-2.6, 2.6]: it stops at 2.6" in said[0]
+    mapping.stop_mapping()

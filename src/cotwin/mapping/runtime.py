@@ -31,6 +31,7 @@ Readings of the mapping (see also docs/robosim-notation.md, section 8):
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import fields
 
@@ -380,6 +381,10 @@ def _definition(eq: s.Expr, bind: str) -> s.Expr | None:
     return None
 
 
+log = logging.getLogger("cotwin.twin")
+LIMIT_SLACK = 1e-9  # a goal this far beyond a limit (rad or m) is the limit written another way, not beyond it
+
+
 class Operation:
     """An operation of the platform: sets mapping variables and commands actuators."""
 
@@ -390,10 +395,13 @@ class Operation:
         self.params = params
         self.commands: list[tuple[str, s.Expr]] = []
         self.constraints: list[s.Expr] = []
+        self.where: dict[str, object] = {}  # actuator path -> the equation commanding it
+        self.beyond_said: set[str] = set()  # actuator paths whose goal beyond the joint's limits was said
         for eq in model.equations:
             target = _actuator_port(eq)
             if target is not None:
                 self.commands.append((target, eq.right))
+                self.where[target] = eq.left.base.loc  # the actuator path, where the equation starts
             else:
                 self.constraints.append(eq)
 
@@ -421,7 +429,29 @@ class Operation:
             rt.asked.add(root.name.last)
         goals = {path: float(rt.env.eval(value, scope)) for path, value in self.commands}
         if goals:
+            self._say_beyond_limits(goals)
             rt.endpoint.command(goals)
+
+    def _say_beyond_limits(self, goals: dict[str, float]) -> None:
+        """Warn (once per actuator) of a position goal outside its joint's limits: the simulated joint stops at
+        the limit (a real controller refuses the goal), so an event waiting for the joint to get there never
+        comes, and the run would only say that the command never completed."""
+        rt = self.runtime
+        for path, goal in goals.items():
+            if path in self.beyond_said or not math.isfinite(goal):
+                continue
+            joint = rt.joint_limits(path)
+            if joint is None:
+                continue
+            name, lower, upper, unit = joint
+            if (lower is not None and goal < lower - LIMIT_SLACK) or (upper is not None and goal > upper + LIMIT_SLACK):
+                self.beyond_said.add(path)
+                low = "-inf" if lower is None else f"{lower:g}"
+                high = "inf" if upper is None else f"{upper:g}"
+                stop = lower if lower is not None and goal < lower else upper
+                log.warning("%s: warning: operation %s commands joint %s to %g %s, beyond its limits [%s, %s]: it "
+                            "stops at %g, and an event waiting for it to get to %g never comes", self.where[path],
+                            self.name, name, goal, unit, low, high, stop, goal)
 
 
 def _actuator_port(eq: s.Expr) -> str | None:
@@ -657,6 +687,21 @@ class Mapping:
         if name not in self.events:
             raise CotwinError(f"mapping {self.model.name} has no input event '{name}'")
         return self.events[name].value
+
+    def joint_limits(self, path: str) -> tuple[str, float | None, float | None, str] | None:
+        """The joint an actuator path commands by position, with its limits and their unit (None: no such joint,
+        one driven by speed or effort, or one without limits)."""
+        cache = self.__dict__.setdefault("_limits", {})
+        if path not in cache:
+            from ..pmodel.mjcf import servo_mode
+
+            name = self.endpoint.joint(path)
+            joint = next((j for j in self.endpoint.tree.joints if j.name == name), None)
+            positioned = joint is not None and servo_mode(joint) == "position" and \
+                (joint.lower is not None or joint.upper is not None)
+            cache[path] = (name, joint.lower, joint.upper, "m" if joint.kind == "prismatic" else "rad") \
+                if positioned else None
+        return cache[path]
 
     def execute_operation(self, name: str, args=None) -> None:
         if name not in self.operations:
