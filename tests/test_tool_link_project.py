@@ -111,14 +111,15 @@ function inverse_kinematics(x: real, y: real, z: real): vector(real, 6) {{ }}
 """
 
 
-def _project(folder: Path, reference: list[float]) -> Path:
+def _project(folder: Path, reference: list[float] | None) -> Path:
     (folder / "arm.urdf").write_text(_urdf())
     import_urdf(folder / "arm.urdf", folder, check=False)
     (folder / "arm.rst").write_text(DMODEL)
     (folder / "mapping.pm").write_text(_mapping())
     (folder / "cell.toml").write_text(f'[tool]\nlink = "stator"\npoint = "flange"\n[ik]\nreference = {reference}\n')
+    platform = '[platform]\ncalibration = "cell.toml"\n' if reference is not None else ""  # None: no cell geometry
     (folder / "cotwin.toml").write_text('[models]\ndmodel = "arm.rst"\npmodel = "arm.pm"\nmapping = "mapping.pm"\n'
-                                        '[platform]\ncalibration = "cell.toml"\n[cosim]\nstep = 0.1\nend = 1.0\n')
+                                        f'{platform}[cosim]\nstep = 0.1\nend = 1.0\n')
     return folder / "cotwin.toml"
 
 
@@ -180,3 +181,20 @@ def test_a_goal_beyond_a_joints_limits_is_said_at_the_equation_commanding_it(tmp
     assert f"mapping.pm:{line}:{column}: warning: operation grip commands joint jaw to 3 rad, beyond its limits " \
            "[-2.6, 2.6]: it stops at 2.6" in said[0]
     mapping.stop_mapping()
+
+
+def test_an_ik_of_the_wrong_size_for_the_default_tool_says_how_to_name_the_tool(tmp_path):
+    """Without a cell geometry the tool is the end of the longest chain, the jaw's link: 7 joints, where the mapping
+    declares the wrist's 6. The error said only 'declare vector(real, 7) and command every one of them', which
+    would make the IK swing the jaw to reach a target."""
+    from cotwin.mapping.runtime import Mapping
+    from cotwin.twin.assembly.run import load, simulated_endpoint
+
+    system = load(_project(tmp_path, None))
+    mapping = Mapping(system.models.project, simulated_endpoint(system))
+    mapping.start_mapping()
+    with pytest.raises(CotwinError) as err:
+        mapping.execute_operation("reach", {"x": 0.3, "y": 0.0, "z": 0.2})
+    said = str(err.value)
+    assert "has 7 moving joints (joint1, joint2, joint3, joint4, joint5, joint6, jaw)" in said
+    assert "name it by [tool] link in the cell geometry" in said

@@ -560,7 +560,9 @@ class Mapping:
             raise CotwinError(f"{fn.loc}: inverse_kinematics is declared to return {ty}, but p-model "
                               f"{registry.tree.name}'s arm from its base to the tool link {registry.tool.link} has "
                               f"{len(registry.arm)} moving joints ({', '.join(registry.arm)}): declare "
-                              f"vector(real, {len(registry.arm)}) and command every one of them")
+                              f"vector(real, {len(registry.arm)}) and command every one of them, or, if the tool "
+                              f"is another link (a gripper's joint is no arm joint), name it by [tool] link in the "
+                              f"cell geometry ([platform] calibration, docs/calibration.md)")
 
     def _kinematics(self, name: str):
         def call(*args):
