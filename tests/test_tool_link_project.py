@@ -90,14 +90,15 @@ module Arm {
 """
 
 
-def _mapping() -> str:
+def _mapping(mirrors: int = 0) -> str:
     joints = [(parent, name) for name, parent, _, _, _ in CHAIN[:6]]
+    variables = "".join(f"\tvar q{k}: real\n" for k in range(mirrors))
     equations = "\n".join(f"\t\tequation arm::{link}::{j}::{j}_motor.dangle == q[{k}]"
                           for k, (link, j) in enumerate(joints))
     return f"""import physmod::math::*
 map ArmMap dmodel Arm to pmodel arm {{
 	var q: vector(real, 6) = [| 0.0, 0.0, 0.0, 0.0, 0.0, 0.0 |]
-	operation reach {{
+{variables}	operation reach {{
 		action q = inverse_kinematics(x, y, z)
 {equations}
 	}}
@@ -111,11 +112,11 @@ function inverse_kinematics(x: real, y: real, z: real): vector(real, 6) {{ }}
 """
 
 
-def _project(folder: Path, reference: list[float] | None) -> Path:
+def _project(folder: Path, reference: list[float] | None, mirrors: int = 0) -> Path:
     (folder / "arm.urdf").write_text(_urdf())
     import_urdf(folder / "arm.urdf", folder, check=False)
     (folder / "arm.rst").write_text(DMODEL)
-    (folder / "mapping.pm").write_text(_mapping())
+    (folder / "mapping.pm").write_text(_mapping(mirrors))
     (folder / "cell.toml").write_text(f'[tool]\nlink = "stator"\npoint = "flange"\n[ik]\nreference = {reference}\n')
     platform = '[platform]\ncalibration = "cell.toml"\n' if reference is not None else ""  # None: no cell geometry
     (folder / "cotwin.toml").write_text('[models]\ndmodel = "arm.rst"\npmodel = "arm.pm"\nmapping = "mapping.pm"\n'
@@ -198,3 +199,19 @@ def test_an_ik_of_the_wrong_size_for_the_default_tool_says_how_to_name_the_tool(
     said = str(err.value)
     assert "has 7 moving joints (joint1, joint2, joint3, joint4, joint5, joint6, jaw)" in said
     assert "name it by [tool] link in the cell geometry" in said
+
+
+def test_the_arm_mirrors_are_the_named_tools_arm_in_the_project_as_in_the_mapping(tmp_path):
+    """`[monitor] joints = "arm"`: q<i> mirror the joints from the base to the tool. A mapping declaring q0..q6
+    on the arm whose cell names the stator as its tool: the mapping mirrored q0..q5 (its IK's arm), the project
+    logged q0..q6 (the default tool's, the jaw as q6), and `cotwin run` ended with 'logVariables: unit
+    {mapping}.mapping has no variable 'q6''."""
+    from cotwin.mapping.runtime import Mapping
+    from cotwin.twin.assembly.run import load, monitored_units, simulated_endpoint
+
+    system = load(_project(tmp_path, REFERENCE, mirrors=7))
+    mapping = Mapping(system.models.project, simulated_endpoint(system), geometry=system.models.calibration.geometry)
+    assert list(mapping.mirrors) == [f"q{k}" for k in range(6)]
+    assert system.models.monitored == list(mapping.mirrors)
+    assert {joint for joint, _ in mapping.mirrors.values()} == {f"joint{k}" for k in range(1, 7)}
+    assert set(monitored_units(system)) == set(mapping.mirrors)

@@ -70,11 +70,12 @@ def declares_mirrors(variables: list[str]) -> bool:
                if v.startswith(prefix) and len(v) > len(prefix))
 
 
-def mirrored_joints(tree, which="arm", tool: str = "fingertips") -> list[str]:
-    """The joints q<i>/qd<i> mirror: "arm" (the actuated joints from the base to the tool, cotwin.pmodel.ik),
-    "actuated" (every actuated joint, in the tree's order), or a list of joint names."""
+def mirrored_joints(tree, which="arm", tool: str = "fingertips", tool_link: str | None = None) -> list[str]:
+    """The joints q<i>/qd<i> mirror: "arm" (the actuated joints from the base to the tool, cotwin.pmodel.ik: the
+    link a cell geometry's [tool] link names, as the mapping's IK takes it, else the default tool's), "actuated"
+    (every actuated joint, in the tree's order), or a list of joint names."""
     if which == "arm":
-        return ik.arm_joints(tree, ik.find_tool(tree, tool))
+        return ik.arm_joints(tree, ik.find_tool(tree, tool, tool_link))
     if which == "actuated":
         return [j.name for j in tree.actuated]
     known = {j.name for j in tree.actuated}

@@ -162,7 +162,9 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         problems.append(Finding(spec.location("monitor", "joints"), Severity.ERROR,
                                 f"[monitor] joints: {', '.join(unknown)} are not actuated joints of p-model "
                                 f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
-    joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) and not unknown else []
+    tool_link = calibration.geometry.tool_link or None if calibration is not None else None  # the mapping's arm
+    joints = mirrored_joints(tree, spec.mirror_joints, tool_link=tool_link) \
+        if declares_mirrors(variables) and not unknown else []
     clash = [n for n in spec.readings if n in variables or n in mirror_variables(variables, joints)]
     if clash:
         problems.append(Finding(spec.location("monitor", "readings", clash[0]), Severity.ERROR,
