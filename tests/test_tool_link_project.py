@@ -187,18 +187,19 @@ def test_a_goal_beyond_a_joints_limits_is_said_at_the_equation_commanding_it(tmp
 def test_an_ik_of_the_wrong_size_for_the_default_tool_says_how_to_name_the_tool(tmp_path):
     """Without a cell geometry the tool is the end of the longest chain, the jaw's link: 7 joints, where the mapping
     declares the wrist's 6. The error said only 'declare vector(real, 7) and command every one of them', which
-    would make the IK swing the jaw to reach a target."""
-    from cotwin.mapping.runtime import Mapping
-    from cotwin.twin.assembly.run import load, simulated_endpoint
-
-    system = load(_project(tmp_path, None))
-    mapping = Mapping(system.models.project, simulated_endpoint(system))
-    mapping.start_mapping()
+    would make the IK swing the jaw to reach a target; and it came at the first call of inverse_kinematics, after
+    the FMU was built and the first rows run, prefixed by the call's place ('mapping.pm:L:C: error: mapping.pm:..').
+    Now the project check says it, once, at the declaration."""
+    project = _project(tmp_path, None)
     with pytest.raises(CotwinError) as err:
-        mapping.execute_operation("reach", {"x": 0.3, "y": 0.0, "z": 0.2})
+        load_models(load_project(project))
     said = str(err.value)
-    assert "has 7 moving joints (joint1, joint2, joint3, joint4, joint5, joint6, jaw)" in said
+    line = next(k for k, text in enumerate(_mapping().splitlines(), 1) if text.startswith("function inverse_kinematics"))
+    assert f"mapping.pm:{line}:10: error: inverse_kinematics is declared to return vector(real, 6), but p-model " \
+           "arm's arm from its base to the tool link mover has 7 moving joints " \
+           "(joint1, joint2, joint3, joint4, joint5, joint6, jaw)" in said
     assert "name it by [tool] link in the cell geometry" in said
+    assert said.count("mapping.pm:") == 1, said
 
 
 def test_the_arm_mirrors_are_the_named_tools_arm_in_the_project_as_in_the_mapping(tmp_path):

@@ -386,6 +386,26 @@ log = logging.getLogger("cotwin.twin")
 LIMIT_SLACK = 1e-9  # a goal this far beyond a limit (rad or m) is the limit written another way, not beyond it
 
 
+def kinematics_result_problem(project, model, tree, tool) -> tuple[object, str] | None:
+    """What is wrong with a mapping's declared `inverse_kinematics(...): vector(real, N)` for the arm from the
+    base of `tree` to `tool`: (the declaration's location, the message), or None. It must have one value per arm joint: with fewer, the last joints
+    would never be commanded (and the tool miss its target while moves 'complete'); with more, the values past
+    the arm's would be read as nothing. Asked before a run (load_models) and at the first call."""
+    source = project.file_of(model)
+    fn = project.visible_functions(source).get("inverse_kinematics")
+    if fn is None:
+        return None
+    ty = TypeResolver(project, source, Diagnostics()).resolve(fn.result)
+    arm = ik.arm_joints(tree, tool)
+    if isinstance(ty, VectorTy) and ty.size is not None and ty.size != len(arm):
+        return fn.loc, (f"inverse_kinematics is declared to return {ty}, but p-model {tree.name}'s arm from its "
+                f"base to the tool link {tool.link} has {len(arm)} moving joints ({', '.join(arm)}): declare "
+                f"vector(real, {len(arm)}) and command every one of them, or, if the tool is another link (a "
+                f"gripper's joint is no arm joint), name it by [tool] link in the cell geometry ([platform] "
+                f"calibration, docs/calibration.md)")
+    return None
+
+
 class Operation:
     """An operation of the platform: sets mapping variables and commands actuators."""
 
@@ -550,20 +570,10 @@ class Mapping:
         return self._registry
 
     def _check_kinematics_result(self, registry: FunctionRegistry) -> None:
-        """The mapping's declared `inverse_kinematics(...): vector(real, N)` must have one value per arm joint:
-        with fewer, the last joints would never be commanded (and the tool miss its target while moves
-        'complete'); with more, the values past the arm's would be read as nothing."""
-        fn = self.project.visible_functions(self.source).get("inverse_kinematics")
-        if fn is None:
-            return
-        ty = self.resolver.resolve(fn.result)
-        if isinstance(ty, VectorTy) and ty.size is not None and ty.size != len(registry.arm):
-            raise CotwinError(f"{fn.loc}: inverse_kinematics is declared to return {ty}, but p-model "
-                              f"{registry.tree.name}'s arm from its base to the tool link {registry.tool.link} has "
-                              f"{len(registry.arm)} moving joints ({', '.join(registry.arm)}): declare "
-                              f"vector(real, {len(registry.arm)}) and command every one of them, or, if the tool "
-                              f"is another link (a gripper's joint is no arm joint), name it by [tool] link in the "
-                              f"cell geometry ([platform] calibration, docs/calibration.md)")
+        """See kinematics_result_problem: raised at the first call of a kinematics function."""
+        problem = kinematics_result_problem(self.project, self.model, registry.tree, registry.tool)
+        if problem is not None:
+            raise CotwinError(f"{problem[0]}: {problem[1]}")
 
     def _kinematics(self, name: str):
         def call(*args):

@@ -123,7 +123,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     cell's robots share its [plant] (a joint named applies to the robots that have it), checked against
     them all by cotwin.pmodel.perturbation.perturbed_world."""
     from ...dmodel.program import build_program
-    from ...mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints
+    from ...mapping.runtime import declares_mirrors, kinematics_result_problem, mirror_variables, mirrored_joints
     from ...pmodel import ik
     from ...mapping.profile import profile_rays
     from ...pmodel.tree import build_tree
@@ -153,9 +153,15 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         calibration = _gather(problems, lambda: Calibration.read(spec.calibration), None)
     scene = _gather(problems, lambda: build_scene(spec, mapping, calibration), None)
     variables = [v.name for v in mapping.variables]
-    if calibration is not None:  # it names this arm's joints: those up to its own [tool] link, as the mapping's IK
-        geometry = calibration.geometry  # takes them (cotwin.mapping.runtime.FunctionRegistry)
-        _gather(problems, lambda: geometry.check_joints(ik.arm_joints(tree, geometry.find_tool(tree))), None)
+    # the mapping's IK takes the arm up to the cell geometry's own [tool] link (cotwin.mapping.runtime.FunctionRegistry)
+    tool = _gather(problems, lambda: calibration.geometry.find_tool(tree), None) if calibration is not None \
+        else ik.find_tool(tree)
+    if calibration is not None and tool is not None:  # it names this arm's joints
+        _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, tool)), None)
+    if tool is not None:  # the IK's declared size, before the run rather than at its first call with the rows so far
+        ik_problem = kinematics_result_problem(project, mapping, tree, tool)
+        if ik_problem is not None:
+            problems.append(Finding(ik_problem[0], Severity.ERROR, ik_problem[1]))
     actuated = [j.name for j in tree.actuated]
     unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
     if unknown:  # said at the key, with the nearest joint
