@@ -529,6 +529,29 @@ def test_vectors_and_matrices(tmp_path):
     assert trace[1][0] == "error" and trace[1][1].endswith("index 4 out of range 1..3 in state machine M (cycle 2)")
 
 
+def test_an_index_out_of_range_of_a_0_based_statement_names_that_statements_range(tmp_path):
+    # `v[0]` makes the statement 0-based, `v[3]` in it too (docs/robosim-notation.md, section 5): its range is 0..2, which the
+    # interpreter and the C both said as 1..3, where 3 was the index refused
+    files = machine("""	var v: vector(int, 3) = [|1, 2, 3|]
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $go action v[0] = v[3] }
+	transition t2 { from A to A exec condition not $go }""")
+    trace = run_both(tmp_path, files, [{"go": 1}, {}])  # the exec transition's action runs in cycle 2
+    assert trace[1][0] == "error" and trace[1][1].endswith("index 3 out of range 0..2 in state machine M (cycle 2)")
+
+
+def test_a_mapping_index_out_of_range_names_the_0_based_range_mappings_count_in():
+    from cotwin.robosim.evaluator import index
+    from cotwin.robosim.values import EvalError
+
+    with pytest.raises(EvalError, match=r"index 6 out of range 0\.\.5"):  # q[6] of a 6-joint arm's vector
+        index((0.0,) * 6, 6, None, first=0)
+    with pytest.raises(EvalError, match=r"index 4 out of range 1\.\.3"):  # RoboChart's, from 1
+        index((0.0,) * 3, 4, None)
+
+
 def test_sets_sequences_and_toolkits(tmp_path):
     files = machine("""	var s: Set(int) = {1, 2}
 	var q: Seq(int) = <5>

@@ -1435,7 +1435,7 @@ static int64_t ck_ceil(Model *M, double x, int at) {
 }
 /* the zero-based position of index i (counting from `first`) in n elements */
 static int64_t ck_index(Model *M, int64_t i, int first, int64_t n, int at) {
-    if (i - first < 0 || i - first >= n) { fail_atf(M, at, "index %lld out of range 1..%lld", (long long)i, (long long)n); return 0; }
+    if (i - first < 0 || i - first >= n) { fail_atf(M, at, "index %lld out of range %lld..%lld", (long long)i, (long long)first, (long long)(n + first - 1)); return 0; }
     return i - first;
 }
 

@@ -56,7 +56,7 @@ TASKS = {"axis": "it reaches the tool point with the approach axis (tool z) as t
                  "gives it, the roll about that axis is what the joints make it",
          "position": "it reaches the tool point, the tool's orientation as near the cell geometry's [tool] rpy as "
                      "the joints allow"}  # what cotwin.pmodel.ik reaches for an arm of fewer than 6 joints
-log = logging.getLogger("cotwin.ik")
+ik_log = logging.getLogger("cotwin.ik")  # what the IK reaches for an arm of fewer than 6 joints
 
 
 def mirror_variables(variables: list[str], joints: list[str]) -> dict[str, tuple[str, str]]:
@@ -76,11 +76,12 @@ def declares_mirrors(variables: list[str]) -> bool:
                if v.startswith(prefix) and len(v) > len(prefix))
 
 
-def mirrored_joints(tree, which="arm", tool: str = "fingertips") -> list[str]:
-    """The joints q<i>/qd<i> mirror: "arm" (the actuated joints from the base to the tool, cotwin.pmodel.ik),
-    "actuated" (every actuated joint, in the tree's order), or a list of joint names."""
+def mirrored_joints(tree, which="arm", tool: str = "fingertips", tool_link: str | None = None) -> list[str]:
+    """The joints q<i>/qd<i> mirror: "arm" (the actuated joints from the base to the tool, cotwin.pmodel.ik: the
+    link a cell geometry's [tool] link names, as the mapping's IK takes it, else the default tool's), "actuated"
+    (every actuated joint, in the tree's order), or a list of joint names."""
     if which == "arm":
-        return ik.arm_joints(tree, ik.find_tool(tree, tool))
+        return ik.arm_joints(tree, ik.find_tool(tree, tool, tool_link))
     if which == "actuated":
         return [j.name for j in tree.actuated]
     known = {j.name for j in tree.actuated}
@@ -124,7 +125,9 @@ def kinematics_result_problem(project, model: MappingModel, pmodel: str, tool_li
     return Finding(fn.loc, Severity.ERROR,
                    f"inverse_kinematics is declared to return {ty}, but p-model {pmodel}'s arm from its base to "
                    f"the tool link {tool_link} has {len(arm)} moving joints ({', '.join(arm) or 'none'}): declare "
-                   f"vector(real, {len(arm)}) and command every one of them")
+                   f"vector(real, {len(arm)}) and command every one of them, or, if the tool is another link (a "
+                   f"gripper's joint is no arm joint), name it by [tool] link in the cell geometry ([platform] "
+                   f"calibration, docs/calibration.md)")
 
 
 class FunctionRegistry:
@@ -153,7 +156,7 @@ class FunctionRegistry:
                               f"tool link {self.tool.link}: nothing to solve for (docs/new-robot.md)")
         if not self._told and self.solver.task != "pose":
             self._told = True
-            log.warning("inverse_kinematics: p-model %s's arm from its base to the tool link %s has %d moving joints "
+            ik_log.warning("inverse_kinematics: p-model %s's arm from its base to the tool link %s has %d moving joints "
                         "(%s): %s (docs/new-robot.md)", self.tree.name, self.tool.link, len(self.arm),
                         ", ".join(self.arm), TASKS[self.solver.task])
         key = (round(float(x), 9), round(float(y), 9), round(float(z), 9))
@@ -428,6 +431,10 @@ def _definition(eq: s.Expr, bind: str) -> s.Expr | None:
     return None
 
 
+log = logging.getLogger("cotwin.twin")
+LIMIT_SLACK = 1e-9  # a goal this far beyond a limit (rad or m) is the limit written another way, not beyond it
+
+
 class Operation:
     """An operation of the platform: sets mapping variables and commands actuators."""
 
@@ -438,10 +445,13 @@ class Operation:
         self.params = params
         self.commands: list[tuple[str, s.Expr]] = []
         self.constraints: list[s.Expr] = []
+        self.where: dict[str, object] = {}  # actuator path -> the equation commanding it
+        self.beyond_said: set[str] = set()  # actuator paths whose goal beyond the joint's limits was said
         for eq in model.equations:
             target = _actuator_port(eq)
             if target is not None:
                 self.commands.append((target, eq.right))
+                self.where[target] = eq.left.base.loc  # the actuator path, where the equation starts
             else:
                 self.constraints.append(eq)
 
@@ -469,7 +479,29 @@ class Operation:
             rt.asked.add(root.name.last)
         goals = {path: float(rt.env.eval(value, scope)) for path, value in self.commands}
         if goals:
+            self._say_beyond_limits(goals)
             rt.endpoint.command(goals)
+
+    def _say_beyond_limits(self, goals: dict[str, float]) -> None:
+        """Warn (once per actuator) of a position goal outside its joint's limits: the simulated joint stops at
+        the limit (a real controller refuses the goal), so an event waiting for the joint to get there never
+        comes, and the run would only say that the command never completed."""
+        rt = self.runtime
+        for path, goal in goals.items():
+            if path in self.beyond_said or not math.isfinite(goal):
+                continue
+            joint = rt.joint_limits(path)
+            if joint is None:
+                continue
+            name, lower, upper, unit = joint
+            if (lower is not None and goal < lower - LIMIT_SLACK) or (upper is not None and goal > upper + LIMIT_SLACK):
+                self.beyond_said.add(path)
+                low = "-inf" if lower is None else f"{lower:g}"
+                high = "inf" if upper is None else f"{upper:g}"
+                stop = lower if lower is not None and goal < lower else upper
+                log.warning("%s: warning: operation %s commands joint %s to %g %s, beyond its limits [%s, %s]: it "
+                            "stops at %g, and an event waiting for it to get to %g never comes", self.where[path],
+                            self.name, name, goal, unit, low, high, stop, goal)
 
 
 def _actuator_port(eq: s.Expr) -> str | None:
@@ -711,6 +743,21 @@ class Mapping:
         if name not in self.events:
             raise CotwinError(f"mapping {self.model.name} has no input event '{name}'")
         return self.events[name].value
+
+    def joint_limits(self, path: str) -> tuple[str, float | None, float | None, str] | None:
+        """The joint an actuator path commands by position, with its limits and their unit (None: no such joint,
+        one driven by speed or effort, or one without limits)."""
+        cache = self.__dict__.setdefault("_limits", {})
+        if path not in cache:
+            from ..pmodel.mjcf import servo_mode
+
+            name = self.endpoint.joint(path)
+            joint = next((j for j in self.endpoint.tree.joints if j.name == name), None)
+            positioned = joint is not None and servo_mode(joint) == "position" and \
+                (joint.lower is not None or joint.upper is not None)
+            cache[path] = (name, joint.lower, joint.upper, "m" if joint.kind == "prismatic" else "rad") \
+                if positioned else None
+        return cache[path]
 
     def execute_operation(self, name: str, args=None) -> None:
         if name not in self.operations:

@@ -29,7 +29,7 @@ def index(base, position, loc, first: int = 1):
         k = position - first
         if 0 <= k < len(base):
             return base[k]
-        raise EvalError("index", f"index {position} out of range 1..{len(base)}", loc)
+        raise EvalError("index", f"index {position} out of range {first}..{len(base) + first - 1}", loc)
     raise EvalError("type", f"cannot index {base!r}", loc)
 
 

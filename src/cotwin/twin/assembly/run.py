@@ -211,7 +211,9 @@ def monitored_units(system: TwinSystem) -> dict[str, tuple[str, str]]:
     out: dict[str, tuple[str, str]] = {}
     mirrors = [v for v in system.models.monitored if v not in system.spec.readings]
     if mirrors:
-        joints = mirrored_joints(tree, system.spec.mirror_joints)
+        calibration = system.models.calibration
+        joints = mirrored_joints(tree, system.spec.mirror_joints, tool_link=calibration.geometry.tool_link or None
+                                 if calibration is not None else None)
         for name, (joint, kind) in mirror_variables(variables, joints).items():
             linear = kinds.get(joint) == "prismatic"
             out[name] = (("joint position", "m") if linear else ("joint angle", "rad")) if kind == "position" else \

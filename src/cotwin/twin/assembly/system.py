@@ -157,18 +157,23 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         calibration = _gather(problems, lambda: Calibration.read(spec.calibration), None)
     scene = _gather(problems, lambda: build_scene(spec, mapping, calibration), None)
     variables = [v.name for v in mapping.variables]
-    if calibration is not None:  # it names this arm's joints
-        _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, ik.find_tool(tree))), None)
-    if uses_kinematics(mapping) or declares_mirrors(variables) and spec.mirror_joints == "arm":  # as a run sets up
+    # the mapping's IK takes the arm up to the cell geometry's own [tool] link (cotwin.mapping.runtime.FunctionRegistry)
+    tool = _gather(problems, lambda: calibration.geometry.find_tool(tree), None) if calibration is not None \
+        else ik.find_tool(tree)
+    if calibration is not None and tool is not None:  # it names this arm's joints
+        _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, tool)), None)
+    if tool is not None and (uses_kinematics(mapping) or declares_mirrors(variables) and spec.mirror_joints == "arm"):
         geometry = calibration.geometry if calibration is not None else getattr(scene, "geometry", None)
-        problems += kinematics_problems(project, mapping, tree, geometry)
+        problems += kinematics_problems(project, mapping, tree, geometry)  # as a run sets up its kinematics
     actuated = [j.name for j in tree.actuated]
     unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
     if unknown:  # said at the key, with the nearest joint
         problems.append(Finding(spec.location("monitor", "joints"), Severity.ERROR,
                                 f"[monitor] joints: {', '.join(unknown)} are not actuated joints of p-model "
                                 f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
-    joints = mirrored_joints(tree, spec.mirror_joints) if declares_mirrors(variables) and not unknown else []
+    tool_link = calibration.geometry.tool_link or None if calibration is not None else None  # the mapping's arm
+    joints = mirrored_joints(tree, spec.mirror_joints, tool_link=tool_link) \
+        if declares_mirrors(variables) and not unknown else []
     problems += reading_clashes(spec, taken_names(program, mapping, [*variables, *mirror_variables(variables, joints)]))
     problems += reading_path_problems(spec, tree)
     own = [] if unknown else mirror_warnings(spec, mapping, tree, joints)  # the project's against the models
