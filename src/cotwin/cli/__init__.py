@@ -7,7 +7,7 @@ import sys
 import click
 
 from ..diagnostics import CotwinError, Interrupted
-from . import access, analysis, fleet, history, live, models, runs, testing, urdf  # noqa: F401 - each module registers its commands
+from . import access, analysis, cachecmd, fleet, history, live, models, runs, testing, urdf  # noqa: F401 - each module registers its commands
 from .common import main, report
 
 __all__ = ["main", "entry"]

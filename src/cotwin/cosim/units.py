@@ -33,6 +33,7 @@ from fmpy.fmi1 import printLogMessage
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
                        fmi2CallbackLoggerTYPE)
 
+from ..cache import Held, bound, hold
 from ..diagnostics import CotwinError
 from .state import fields, finite, of_type, pack, port_value, unpack
 from .pythonfmu_exit import install as _release_pythonfmu_at_exit
@@ -309,24 +310,30 @@ def fmu_state(md, serialized: bytes, time: float) -> bytes:
     return pack("FMU", {"guid": md.guid, "model": md.modelName, "time": time, "fmu": serialized})
 
 
-def _unpacked(path: Path, md, unzip_dir: str | None) -> tuple[str, bool]:
-    """Where an FMU's files are, and whether they are this instance's own (removed at its end). A cotwin-built
-    FMU that may be instantiated more than once per process is extracted once per machine into cotwin's cache,
-    under the digest of its bytes, and shared by every instance of it: its C keeps no state outside an instance
-    and writes nothing into its folder, and extracting and removing its nine files cost each run about two
-    milliseconds. Any other FMU, no cache (COTWIN_CACHE=off), or a cache that cannot be written (read-only, full,
-    a file) gets a folder of its own, as FMPy makes it: the cache is an optimisation, never a failure."""
+def _unpacked(path: Path, md, unzip_dir: str | None) -> tuple[str, bool, Held | None]:
+    """Where an FMU's files are, whether they are this instance's own (removed at its end), and the hold on them
+    when they are the cache's (released at its end). A cotwin-built FMU that may be instantiated more than once
+    per process is extracted once per machine into cotwin's cache, under the digest of its bytes, and shared by
+    every instance of it: its C keeps no state outside an instance and writes nothing into its folder, and
+    extracting and removing its nine files cost each run about two milliseconds. The cached folder is held while an instance uses it (cotwin.cache.hold: the cache's bound never
+    removes it); one removed between being found and held is extracted again. Any other FMU, no cache
+    (COTWIN_CACHE=off), or a cache that cannot be written (read-only, full, a file) gets a folder of its own, as
+    FMPy makes it: the cache is an optimisation, never a failure."""
     from ..files import cache_dir
 
     folder = cache_dir()
     if (unzip_dir is not None or folder is None or md.generationTool != "cotwin"
             or md.coSimulation is None or md.coSimulation.canBeInstantiatedOnlyOncePerProcess):
-        return str(extract(str(path), unzip_dir)), True
+        return str(extract(str(path), unzip_dir)), True, None
     data = path.read_bytes()
     target = folder / "fmu" / hashlib.sha256(data).hexdigest()[:24]
     binary = target / "binaries" / fmpy.platform / f"{md.coSimulation.modelIdentifier}{fmpy.sharedLibraryExtension}"
     if binary.is_file():
-        return str(target), False
+        held = hold(target)
+        if held is not None and binary.is_file():
+            return str(target), False, held
+        if held is not None:
+            held.release()
     staged = target.with_name(f".{target.name}.{os.getpid()}.{threading.get_ident()}")
     shutil.rmtree(staged, ignore_errors=True)  # a killed run's with this process's and thread's id
     try:
@@ -338,9 +345,13 @@ def _unpacked(path: Path, md, unzip_dir: str | None) -> tuple[str, bool]:
         pass  # a cache that cannot be written
     finally:
         shutil.rmtree(staged, ignore_errors=True)
-    if not binary.is_file():  # not cached, or a folder of that name without the binary (damaged): this instance's own
-        return str(extract(str(path), None)), True
-    return str(target), False
+    held = hold(target) if binary.is_file() else None
+    if held is None or not binary.is_file():  # not cached, or a folder of that name without the binary (damaged),
+        if held is not None:  # or removed again at once: this instance's own
+            held.release()
+        return str(extract(str(path), None)), True, None
+    bound(target)
+    return str(target), False, held
 
 
 class FMUUnit(BoundByNames, Unit):
@@ -358,6 +369,7 @@ class FMUUnit(BoundByNames, Unit):
         self.component = None
         self.folder = None
         self._own_folder = True  # removed at terminate (not a shared, cached extraction: see _unpacked)
+        self._held = None  # the hold on a shared, cached extraction, released at terminate
         self.time = 0.0
         self.status = "new"  # new | instantiated | error | fatal
         self.messages: deque[tuple[str, str, str]] = deque(maxlen=50)  # (status, category, message) logged
@@ -445,7 +457,7 @@ class FMUUnit(BoundByNames, Unit):
     def instantiate(self, start: float) -> None:
         self.time = start
         try:
-            self.folder, self._own_folder = _unpacked(self.path, self.md, self.unzip_dir)
+            self.folder, self._own_folder, self._held = _unpacked(self.path, self.md, self.unzip_dir)
         except Exception as err:  # a bad zip
             raise UnitError(self.name, start, "extract", str(err)) from None
         self.fmu = self._call("load", lambda: FMU2Slave(
@@ -494,6 +506,9 @@ class FMUUnit(BoundByNames, Unit):
             if self._own_folder:
                 shutil.rmtree(self.folder, ignore_errors=True)
             self.folder = None
+        if self._held is not None:
+            self._held.release()
+            self._held = None
 
     # ---- port values ----
     def _plan(self, names: tuple[str, ...]) -> list[_Block]:

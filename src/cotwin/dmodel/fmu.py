@@ -30,6 +30,7 @@ from xml.sax.saxutils import escape
 import fmpy
 
 from .. import __version__
+from ..cache import bound, touch
 from ..diagnostics import CotwinError
 from ..files import cache_dir, output as files_output
 from . import cnames
@@ -242,14 +243,19 @@ def compile_binary(sources: dict[str, str], ident: str, folder: Path, cc: str = 
     folder.mkdir(parents=True, exist_ok=True)
     out = folder / f"{ident}.so"
     if kept.is_file():
-        shutil.copyfile(kept, out)
-        return out
+        try:
+            shutil.copyfile(kept, out)
+            touch(kept)  # used now: the last the cache's bound removes (cotwin.cache)
+            return out
+        except OSError:  # removed since (the cache's bound, `cotwin cache --clear`): compiled again
+            pass
     built = _compile(sources, ident, folder, cc)
     try:  # kept whole or not at all (two builds may finish at once); a cache that cannot be written is skipped
         kept.parent.mkdir(parents=True, exist_ok=True)
         spare = kept.with_name(f"{kept.name}.{uuid.uuid4().hex}.part")
         shutil.copyfile(built, spare)
         spare.replace(kept)
+        bound(kept)
     except OSError:
         pass
     return built
