@@ -321,3 +321,15 @@ def test_a_reading_path_the_pmodel_lacks_is_an_error_at_its_key_with_the_nearest
     proc = cotwin_in_process("check", path)
     assert proc.returncode == 1 and "'ur5e::base_link.x' is the pose of a free base, and p-model ur5e's is fixed: " \
         'set [platform] base = "free"' in proc.stdout + proc.stderr, proc.stdout + proc.stderr
+
+
+def test_a_plan_separated_by_semicolons_is_named_so(ur5e):
+    """A plan saved by a spreadsheet in a locale that separates by ';' was refused for its header's first column
+    ('timestep', which it has): the error names the separator, at the header's first one."""
+    plan = ur5e / "plan.csv"
+    text = plan.read_text()
+    plan.write_text(text.replace(",", ";"))
+    proc = cotwin_in_process("check", ur5e / "cotwin.toml")
+    assert proc.returncode == 1, proc.stderr
+    assert f"{plan}:1:9: error: the plan's columns are separated by ';': a plan is comma-separated (CSV), " \
+           "e.g. 'timestep,moveDiscreteCommand" in proc.stderr, proc.stderr

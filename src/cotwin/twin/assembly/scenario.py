@@ -158,6 +158,12 @@ def plan_rows(path: Path, text: str) -> tuple[list[str], list[list[str]]]:
     except csv.Error as err:
         raise CotwinError([Finding(Location(str(path), max(reader.line_num, 1), 1), Severity.ERROR,
                                    f"bad CSV: {err}")]) from None
+    if rows and len(rows[0]) == 1:  # one cell: another separator than the comma (a spreadsheet's ';', a tab)?
+        other = next((sep for sep in (";", "\t", "|") if sep in rows[0][0]), None)
+        if other is not None and rows[0][0].split(other)[0].strip() == "timestep":
+            raise CotwinError([Finding(Location(str(path), 1, len(rows[0][0].split(other)[0]) + 1), Severity.ERROR,
+                                       f"the plan's columns are separated by {other!r}: a plan is comma-separated "
+                                       f"(CSV), e.g. 'timestep,{rows[0][0].split(other)[1].strip()[:40]}'")])
     if not rows or not rows[0] or rows[0][0].strip() != "timestep":
         raise CotwinError([Finding(Location(str(path), 1, 1), Severity.ERROR,
                                    "a plan starts with a header whose first column is 'timestep' (ms)")])
