@@ -216,3 +216,34 @@ def test_the_arm_mirrors_are_the_named_tools_arm_in_the_project_as_in_the_mappin
     assert system.models.monitored == list(mapping.mirrors)
     assert {joint for joint, _ in mapping.mirrors.values()} == {f"joint{k}" for k in range(1, 7)}
     assert set(monitored_units(system)) == set(mapping.mirrors)
+
+
+def _monitoring(project: Path, joints: str) -> Path:
+    """The project with `[monitor] joints = <joints>` (TOML)."""
+    project.write_text(project.read_text() + f"[monitor]\njoints = {joints}\n")
+    return project
+
+
+def test_the_page_moves_the_joints_the_mapping_mirrors(tmp_path):
+    """The page's robot and its variables' joints came from the default tool's arm whatever [monitor] joints said:
+    with `joints = ["jaw"]` the mapping mirrored q0 onto the jaw (and the log's units said so) while the page drew
+    q0 as joint1 and swung the shoulder. One table now (TwinModels.mirrors) for the mapping's run, the log's units
+    and the page."""
+    from cotwin.twin.assembly.run import load, monitored_units
+    from cotwin.twin.services.dashboard.describe import describe, observed_joints
+
+    system = load(_monitoring(_project(tmp_path, REFERENCE, mirrors=1), '["jaw"]'))
+    assert observed_joints(system) == {"q0": ("jaw", "position")}
+    assert monitored_units(system)["q0"] == ("joint angle", "rad")
+    page = describe(system, ["twin"], "run")
+    assert [(v["name"], v["joint"]) for v in page["variables"]] == [("q0", "jaw")]
+
+
+def test_joints_mirrored_by_no_variable_are_named_by_the_cells_tool(tmp_path):
+    """A mapping declaring no q<i> with `[monitor] joints = "arm"`: the warning lists the arm the mapping would
+    mirror, up to the cell's [tool] link (the stator: joint1..joint6), not the default tool's (the jaw as a 7th)."""
+    models = load_models(load_project(_monitoring(_project(tmp_path, REFERENCE), '"arm"')))
+    said = [f.message for f in models.warnings if "[monitor] joints" in f.message]
+    assert len(said) == 1, said
+    assert "no joint (joint1, joint2, joint3, joint4, joint5, joint6) is mirrored" in said[0]
+    assert "`var q0: real, ..., q5: real`" in said[0]

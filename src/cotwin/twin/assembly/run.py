@@ -202,22 +202,15 @@ POSE_UNITS = {"x": "m", "y": "m", "z": "m", "yaw": "rad"}
 def monitored_units(system: TwinSystem) -> dict[str, tuple[str, str]]:
     """Each monitored mapping variable's quantity and unit (q0: joint angle, rad; qd0: joint speed,
     rad/s; a reading: its sensor's), so that a figure draws each unit on its own axis."""
-    from ...mapping.runtime import mirror_variables, mirrored_joints
     from ...pmodel.mjcf import pose_paths, sensor_name
 
     tree = system.models.tree
     kinds = {j.name: j.kind for j in tree.actuated}
-    variables = [v.name for v in system.models.mapping_model.variables]
     out: dict[str, tuple[str, str]] = {}
-    mirrors = [v for v in system.models.monitored if v not in system.spec.readings]
-    if mirrors:
-        calibration = system.models.calibration
-        joints = mirrored_joints(tree, system.spec.mirror_joints, tool_link=calibration.geometry.tool_link or None
-                                 if calibration is not None else None)
-        for name, (joint, kind) in mirror_variables(variables, joints).items():
-            linear = kinds.get(joint) == "prismatic"
-            out[name] = (("joint position", "m") if linear else ("joint angle", "rad")) if kind == "position" else \
-                (("joint speed", "m/s") if linear else ("joint speed", "rad/s"))
+    for name, (joint, kind) in system.models.mirrors.items():  # the joints the mapping mirrors
+        linear = kinds.get(joint) == "prismatic"
+        out[name] = (("joint position", "m") if linear else ("joint angle", "rad")) if kind == "position" else \
+            (("joint speed", "m/s") if linear else ("joint speed", "rad/s"))
     sensors = {sensor_name(tree.name, s.link, s.name, s.port, s.via): s for s in tree.sensors}
     pose = dict(zip(pose_paths(tree), POSE_UNITS))
     for name, path in system.spec.readings.items():

@@ -81,6 +81,10 @@ class TwinModels:
     #: what `cotwin check` warns of in the models (their checker's and the p-model's tree's readings) and in the
     #: project against them, each once: `cotwin run` shows them as check does
     warnings: list[Finding] = field(default_factory=list)
+    #: the mapping's variables mirroring joints -> (joint, "position" | "velocity"): q<i>/qd<i> on the joints
+    #: [monitor] joints gives (by default the arm up to the cell geometry's [tool] link, as the mapping's IK takes
+    #: it), found once here so that the log's units, the page's robot and the mapping agree
+    mirrors: dict[str, tuple[str, str]] = field(default_factory=dict)
 
 
 def model_digests(spec: TwinProject, project) -> dict[str, str]:
@@ -174,9 +178,10 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     tool_link = calibration.geometry.tool_link or None if calibration is not None else None  # the mapping's arm
     joints = mirrored_joints(tree, spec.mirror_joints, tool_link=tool_link) \
         if declares_mirrors(variables) and not unknown else []
-    problems += reading_clashes(spec, taken_names(program, mapping, [*variables, *mirror_variables(variables, joints)]))
+    mirrors = mirror_variables(variables, joints)
+    problems += reading_clashes(spec, taken_names(program, mapping, [*variables, *mirrors]))
     problems += reading_path_problems(spec, tree)
-    own = [] if unknown else mirror_warnings(spec, mapping, tree, joints)  # the project's against the models
+    own = [] if unknown else mirror_warnings(spec, mapping, tree, joints, tool_link)  # the project's against the models
     warnings += own
     if problems:
         if spec.plan is not None:  # its problems too, not in a round of their own once these are fixed
@@ -184,9 +189,9 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
 
             _gather(problems, lambda: read_scenario(spec.plan, program), None)
         raise CotwinError(problems + own)
-    monitored = [*mirror_variables(variables, joints), *spec.readings]
+    monitored = [*mirrors, *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project),
-                      list(dict.fromkeys(warnings)))
+                      list(dict.fromkeys(warnings)), mirrors)
 
 
 def reading_path_problems(spec: TwinProject, tree) -> list[Finding]:
@@ -209,11 +214,11 @@ def reading_path_problems(spec: TwinProject, tree) -> list[Finding]:
             for name, path in spec.readings.items() if path not in known]
 
 
-def mirror_warnings(spec: TwinProject, mapping, tree, joints: list[str]) -> list[Finding]:
+def mirror_warnings(spec: TwinProject, mapping, tree, joints: list[str], tool_link: str | None = None) -> list[Finding]:
     """Joints that would silently show nothing: `[monitor] joints` written for a mapping that declares no q<i>/qd<i>
     (nothing mirrors them, so nothing of them is logged or compared), or a q<i>/qd<i> past the mirrored joints
     (`joints`, cotwin.mapping.runtime.mirrored_joints) that no operation assigns: neither set nor logged. Each
-    one warning, at the key or at the first such variable."""
+    one warning, at the key or at the first such variable. `tool_link`: the cell geometry's [tool] link (the arm's end)."""
     from ...mapping.runtime import MIRROR_PREFIXES, declares_mirrors, mirror_variables, mirrored_joints
     from ...robosim import syntax as s
 
@@ -222,7 +227,7 @@ def mirror_warnings(spec: TwinProject, mapping, tree, joints: list[str]) -> list
         if ("monitor", "joints") not in spec.locations:
             return []
         try:
-            named = mirrored_joints(tree, spec.mirror_joints)
+            named = mirrored_joints(tree, spec.mirror_joints, tool_link=tool_link)
         except CotwinError:  # an arm without a tool: the joints cannot be listed
             named = []
         which = f" ({', '.join(named)})" if named else ""

@@ -140,12 +140,9 @@ def scene_drawing(scene) -> dict | None:
 
 
 def observed_joints(system: TwinSystem) -> dict[str, tuple[str, str]]:
-    """Monitored mapping variable -> (arm joint, position | velocity)."""
-    from ....mapping.runtime import mirror_variables
-    from ....pmodel import ik
-
-    tree = system.models.tree
-    return mirror_variables(system.models.monitored, ik.arm_joints(tree, ik.find_tool(tree)))
+    """Monitored mapping variable -> (the joint it mirrors, position | velocity): TwinModels.mirrors, the joints
+    [monitor] joints gives (the arm up to the cell geometry's [tool] link by default), as the mapping mirrors them."""
+    return dict(system.models.mirrors)
 
 
 def _range(sc) -> dict:
@@ -209,15 +206,13 @@ def describe_cell(cell, sides: list[str], mode: str, features: dict | None = Non
     """What the page draws of a cell of several robots (cotwin.twin.assembly.cell): every robot at its base pose, its
     variables and d-model state machines scoped by its name (`ROBOT.q0`, "ROBOT: Machine"); commands from the
     page to the robot it names when the cell's commands come from the broker (cell_commands)."""
-    from ....mapping.runtime import mirror_variables
-    from ....pmodel import ik
     from ...assembly.cell import CELL_MAPPING
 
     spec, program = cell.spec, cell.program
     variables, machines, robots = [], [], []
     for robot in cell.robots:
         models = robot.system.models
-        joints = mirror_variables(models.monitored, ik.arm_joints(models.tree, ik.find_tool(models.tree)))
+        joints = models.mirrors  # as the robot's mapping mirrors them
         for v in models.monitored:
             variables.append({"name": robot.scoped(v), "key": f"{CELL_MAPPING.name}.{robot.scoped(v)}",
                               "joint": joints[v][0] if v in joints else None,
