@@ -588,6 +588,7 @@ class Mapping:
                 ev.occurs = compile_event(ev, self.env._compiler)
         self.started = False
         self._shape_cache: dict | None = None  # _shapes, worked out on first use
+        self._limits: dict[str, tuple | None] = {}  # actuator path -> joint_limits, worked out on first use
 
     @property
     def registry(self) -> FunctionRegistry:
@@ -747,7 +748,7 @@ class Mapping:
     def joint_limits(self, path: str) -> tuple[str, float | None, float | None, str] | None:
         """The joint an actuator path commands by position, with its limits and their unit (None: no such joint,
         one driven by speed or effort, or one without limits)."""
-        cache = self.__dict__.setdefault("_limits", {})
+        cache = self._limits
         if path not in cache:
             from ..pmodel.mjcf import servo_mode
 

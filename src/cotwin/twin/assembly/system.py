@@ -167,7 +167,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     if calibration is not None and tool is not None:  # it names this arm's joints
         _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, tool)), None)
     if tool is not None and (uses_kinematics(mapping) or declares_mirrors(variables) and spec.mirror_joints == "arm"):
-        geometry = calibration.geometry if calibration is not None else getattr(scene, "geometry", None)
+        geometry = calibration.geometry if calibration is not None else (scene.geometry if scene is not None else None)
         problems += kinematics_problems(project, mapping, tree, geometry)  # as a run sets up its kinematics
     actuated = [j.name for j in tree.actuated]
     unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
