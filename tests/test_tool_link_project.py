@@ -247,3 +247,21 @@ def test_joints_mirrored_by_no_variable_are_named_by_the_cells_tool(tmp_path):
     assert len(said) == 1, said
     assert "no joint (joint1, joint2, joint3, joint4, joint5, joint6) is mirrored" in said[0]
     assert "`var q0: real, ..., q5: real`" in said[0]
+
+
+def test_a_joints_sensor_read_without_its_joint_is_refused_at_its_key_before_the_run(tmp_path):
+    """The project check took `arm::base::joint1_position.output_position` (the sensor declared in joint1, named
+    without the joint, as the UR's RTDE and a replay name it), but the DT's simulator reads it only as
+    `arm::base::joint1::joint1_position.output_position`: the run's first step stopped with 'monitored variable r:
+    the platform has no reading', at no place. The check now takes what the simulator reads."""
+    project = _project(tmp_path, REFERENCE)
+    text = project.read_text()
+    project.write_text(text + '[monitor]\nreadings = { r = "arm::base::joint1_position.output_position" }\n')
+    with pytest.raises(CotwinError) as err:
+        load_models(load_project(project))
+    line = len(text.splitlines()) + 2
+    assert f"cotwin.toml:{line}:14: error: [monitor] readings r: p-model arm has no reading " \
+           "'arm::base::joint1_position.output_position' (the nearest: " \
+           "arm::base::joint1::joint1_position.output_position, " in str(err.value), str(err.value)
+    project.write_text(text + '[monitor]\nreadings = { r = "arm::base::joint1::joint1_position.output_position" }\n')
+    assert load_models(load_project(project)).monitored[-1] == "r"

@@ -79,13 +79,13 @@ def pose_paths(tree: KinematicTree) -> list[str]:
 
 
 def reading_paths(tree: KinematicTree, free_base: bool = False) -> set[str]:
-    """Every path a platform of this p-model may read by (a mapping's `sref.port`, a [monitor] reading): each
-    sensor port's (`sensor_name`; also without its joint, as the UR's RTDE and a replay name a joint's sensor),
-    and a free base's pose (`pose_paths`)."""
+    """Every path the simulated platform of this p-model reads (cotwin.pmodel.simulator's read_sensors: what a
+    [monitor] reading names, read by the DT of every project): each sensor port's `sensor_name`, a sensor declared
+    in a joint with that joint in its path, and a free base's pose (`pose_paths`). A joint's sensor without its joint
+    (as the UR's RTDE and a replay name it) is no path of the simulator's: the DT's first step refused it."""
     out = set(pose_paths(tree)) if free_base else set()
     for s in tree.sensors:
         out.add(sensor_name(tree.name, s.link, s.name, s.port, s.via))
-        out.add(sensor_name(tree.name, s.link, s.name, s.port))
     return out
 
 
