@@ -265,3 +265,15 @@ def test_a_joints_sensor_read_without_its_joint_is_refused_at_its_key_before_the
            "arm::base::joint1::joint1_position.output_position, " in str(err.value), str(err.value)
     project.write_text(text + '[monitor]\nreadings = { r = "arm::base::joint1::joint1_position.output_position" }\n')
     assert load_models(load_project(project)).monitored[-1] == "r"
+
+
+def test_a_tool_link_the_pmodel_lacks_is_said_at_its_key_with_arm_mirrors(tmp_path):
+    """A misspelt [tool] link and a mapping declaring q<i>: the project's arm mirrors asked for that link again, so
+    load_models ended with its unlocated 'tool link ... is not a link' (and nothing else gathered) instead of the
+    error at the cell geometry's key."""
+    project = _project(tmp_path, REFERENCE, mirrors=2)
+    (tmp_path / "cell.toml").write_text((tmp_path / "cell.toml").read_text().replace('"stator"', '"statr"'))
+    with pytest.raises(CotwinError) as err:
+        load_models(load_project(project))
+    assert [f"{f.location.path.rsplit('/', 1)[-1]}:{f.location.line}" for f in err.value.findings] == ["cell.toml:2"]
+    assert "tool link 'statr' is not a link of p-model arm" in str(err.value)

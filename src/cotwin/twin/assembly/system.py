@@ -176,12 +176,13 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
                                 f"[monitor] joints: {', '.join(unknown)} are not actuated joints of p-model "
                                 f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
     tool_link = calibration.geometry.tool_link or None if calibration is not None else None  # the mapping's arm
+    listed = not unknown and tool is not None  # a tool link the p-model lacks is said above, at its key
     joints = mirrored_joints(tree, spec.mirror_joints, tool_link=tool_link) \
-        if declares_mirrors(variables) and not unknown else []
+        if declares_mirrors(variables) and listed else []
     mirrors = mirror_variables(variables, joints)
     problems += reading_clashes(spec, taken_names(program, mapping, [*variables, *mirrors]))
     problems += reading_path_problems(spec, tree)
-    own = [] if unknown else mirror_warnings(spec, mapping, tree, joints, tool_link)  # the project's against the models
+    own = mirror_warnings(spec, mapping, tree, joints, tool_link) if listed else []  # the project's against the models
     warnings += own
     if problems:
         if spec.plan is not None:  # its problems too, not in a round of their own once these are fixed
