@@ -277,3 +277,18 @@ def test_a_tool_link_the_pmodel_lacks_is_said_at_its_key_with_arm_mirrors(tmp_pa
         load_models(load_project(project))
     assert [f"{f.location.path.rsplit('/', 1)[-1]}:{f.location.line}" for f in err.value.findings] == ["cell.toml:2"]
     assert "tool link 'statr' is not a link of p-model arm" in str(err.value)
+
+
+def test_the_arm_of_a_robots_log_profile_and_calibration_is_the_one_the_mapping_solves_for(tmp_path):
+    """One arm for the project (TwinModels.arm, up to the cell's [tool] link): a replayed or live robot's joint
+    order (its profile's convention), `cotwin calibrate`'s start geometry and its replays counted the default tool's
+    arm, the jaw as a 7th joint, where the mapping's IK and the log have 6."""
+    from cotwin.pmodel.cell import CellGeometry
+    from cotwin.twin.assembly.replay import DigitalTwin
+
+    six = [f"joint{k}" for k in range(1, 7)]
+    models = load_models(load_project(_project(tmp_path, REFERENCE)))
+    assert models.arm == six
+    twin = DigitalTwin(models.project, models.tree, models.scene, None, models.calibration.geometry)
+    assert twin.arm() == six
+    assert twin.arm(CellGeometry()) == [*six, "jaw"]  # a geometry naming no tool link: the default tool's arm

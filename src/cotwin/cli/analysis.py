@@ -238,7 +238,6 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
 
     from ..mapping.profile import robot_convention
     from ..mapping.rtde import read_arm_log
-    from ..pmodel import ik
     from ..pmodel.cell import CellGeometry
     from ..twin.assembly import calibration as cal
     from ..twin.project import load_project
@@ -261,12 +260,13 @@ def calibrate(project: str, pt_log: str | None, out: str | None, calibration: st
     if out is not None:  # the project's own calibration too: a fit never replaces what it started from
         check_outputs([out], [*system.spec.inputs, pt_log, check_log, calibration])
     twin, program, commands = cal.project_twin(system)
-    arm = ik.arm_joints(system.models.tree, ik.find_tool(system.models.tree))
+    arm = system.models.arm  # up to the cell geometry's [tool] link, as the mapping's IK counts the arm
     convention = robot_convention(system.spec.profile, len(arm), system.spec.location("robot", "profile"))
     fitted = None
     if pt_log is not None:
         with ProgressReport("calibrating", "stages") as progress:
-            report = cal.calibrate(twin, program, commands, read_arm_log(pt_log, convention), CellGeometry(tool=point),
+            report = cal.calibrate(twin, program, commands, read_arm_log(pt_log, convention),
+                                   CellGeometry(tool=point, tool_link=twin.geometry.tool_link if twin.geometry else ""),
                                    log_start, progress=progress)
         fitted = report.calibration
         late = [x for x in fitted.timing.latencies if not -cal.SECONDS <= x <= cal.SECONDS]

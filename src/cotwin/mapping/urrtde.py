@@ -37,7 +37,9 @@ class RTDEEndpoint(Endpoint):
     """The platform endpoint of a UR robot at `host` (needs `pip install cotwin[rtde]`)."""
 
     def __init__(self, tree, host: str, speed: float = 1.05, acceleration: float = 1.4,
-                 convention: Convention = IDENTITY):
+                 convention: Convention = IDENTITY, arm: list[str] | None = None):
+        """`arm`: the joints the robot reports, from the base to the tool (the project's: TwinModels.arm; None:
+        up to cotwin.pmodel.ik.find_tool's default tool)."""
         try:
             import rtde_control
             import rtde_receive
@@ -46,7 +48,7 @@ class RTDEEndpoint(Endpoint):
         from ..pmodel import ik
 
         self.tree = tree
-        self.arm = ik.arm_joints(tree, ik.find_tool(tree))
+        self.arm = list(arm) if arm is not None else ik.arm_joints(tree, ik.find_tool(tree))
         self.speed, self.acceleration, self.convention = speed, acceleration, convention
         host = host.removeprefix("rtde://").split(":")[0]
         try:

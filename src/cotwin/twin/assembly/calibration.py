@@ -183,7 +183,7 @@ def fit_geometry(tree: KinematicTree, points: np.ndarray, postures: np.ndarray, 
     if len(points) < 3 or np.linalg.matrix_rank(points[1:] - points[0], tol=1e-6) < 2:
         raise CotwinError(f"fitting the plate's pose needs at least three commanded targets not on one line; "
                           f"got {len(points)}")
-    base_tool = ik.find_tool(tree, start.tool)
+    base_tool = start.find_tool(tree)  # its [tool] link too: the arm the mapping's IK takes
     arm = ik.arm_joints(tree, base_tool)
     n = len(arm)
     tool0 = base_tool.offset[:3, 3].copy()
@@ -241,9 +241,10 @@ def fit_geometry(tree: KinematicTree, points: np.ndarray, postures: np.ndarray, 
     joint_offsets = {j: tuple(float(v) + 0.0 for v in d) for j, d in zip(arm, offsets.reshape(n, 3))
                      if np.abs(d).max() > 1e-7}
     geometry = CellGeometry(tool=tool, tool_rpy=tuple(map(float, matrix_rpy(Rt))), reference=tuple(map(float, postures[0])),
-                            reference_name=reference_name, joint_offsets=joint_offsets).with_plate(plate)
+                            reference_name=reference_name, joint_offsets=joint_offsets,
+                            tool_link=start.tool_link).with_plate(plate)
     r = residuals(solution.x)[: 6 * len(points)].reshape(len(points), 6)
-    solver = ik.Solver(tree, ik.find_tool(tree, geometry.tool), dict(zip(arm, postures[0])), geometry.joint_offsets)
+    solver = ik.Solver(tree, geometry.find_tool(tree), dict(zip(arm, postures[0])), geometry.joint_offsets)
     errors, current = [], postures[0]
     for p, q in zip(points, postures):
         result = solver.solve(geometry.target_pose(p), dict(zip(arm, current)))
@@ -264,7 +265,7 @@ def robot_touches_plate(twin: DigitalTwin, geometry: CellGeometry, postures: np.
     except KeyError:
         return False
     sim.model.geom_margin[plate] = CLEARANCE  # contacts are reported this far out
-    arm = ik.arm_joints(twin.tree, ik.find_tool(twin.tree))
+    arm = twin.arm(geometry)
     for q in postures:
         sim.reset(dict(zip(arm, map(float, q))))
         data = sim.data
@@ -503,7 +504,7 @@ def calibrate(twin: DigitalTwin, program: Program, commands: list[Command], log:
     next_stage()
     before_q = replay(twin, schedule, log.t, log.q[0])  # the DT as it is
     after_q = replay(twin, schedule, log.t, log.q[0], calibration.geometry, calibration.profile)
-    joints = ik.arm_joints(twin.tree, ik.find_tool(twin.tree))
+    joints = twin.arm()
     before = joint_errors(log, before_q, joints, motions)
     after = joint_errors(log, after_q, joints, motions)
     calibration.fit = {"rmse_motion_before": [float(v) for v in before.motion],
@@ -539,7 +540,7 @@ def check(twin: DigitalTwin, program: Program, commands: list[Command], log: Arm
         onsets = [m.onset for m in motions]
     schedule = [(onset, call) for onset, move in zip(onsets, moves) for call in move.calls]
     q = replay(twin, schedule, log.t, log.q[0], calibration.geometry, profile)
-    joints = ik.arm_joints(twin.tree, ik.find_tool(twin.tree))
+    joints = twin.arm()
     return CheckReport(Path(log.path).name, onsets, joint_errors(log, q, joints, motions))
 
 

@@ -115,10 +115,7 @@ def make_endpoint(system: "TwinSystem", side: str) -> "Endpoint":
 
 # ---- core's kinds ----
 def _arm_convention(system: "TwinSystem"):
-    from ...pmodel import ik
-
-    tree = system.models.tree
-    arm = ik.arm_joints(tree, ik.find_tool(tree))
+    arm = system.models.arm  # up to the cell geometry's [tool] link, as the mapping's IK counts the arm
     return arm, robot_convention(system.spec.profile, len(arm), system.spec.location("robot", "profile"))
 
 
@@ -148,8 +145,8 @@ def _replay(system: "TwinSystem", settings: PTSettings):
 def _rtde(system: "TwinSystem", settings: PTSettings):
     from ...mapping.urrtde import RTDEEndpoint
 
-    _, convention = _arm_convention(system)
-    return RTDEEndpoint(system.models.tree, settings.url, convention=convention)
+    arm, convention = _arm_convention(system)
+    return RTDEEndpoint(system.models.tree, settings.url, convention=convention, arm=arm)
 
 
 def _mujoco(system: "TwinSystem", settings: PTSettings):

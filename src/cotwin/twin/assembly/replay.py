@@ -67,6 +67,14 @@ class DigitalTwin:
     geometry: CellGeometry | None = None  # the DT's cell geometry (None: the scene's)
     mapping_name: str | None = None
 
+    def arm(self, geometry: CellGeometry | None = None) -> list[str]:
+        """The arm's joints, from the base to the tool the cell geometry names (`geometry`, else the DT's, else the
+        scene's: its [tool] link, as the mapping's IK takes it; else the default tool), in kinematic order."""
+        from ...pmodel import ik
+
+        geometry = geometry or self.geometry or (self.scene.geometry if self.scene is not None else None) or CellGeometry()
+        return ik.arm_joints(self.tree, geometry.find_tool(self.tree))
+
     def mapping(self, geometry: CellGeometry | None = None, profile: MotionProfile | None = None,
                 timestep: float | None = None) -> Mapping:
         """A fresh mapping runtime over a fresh simulator, the cell at `geometry`, moving by `profile`

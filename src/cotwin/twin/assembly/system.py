@@ -85,6 +85,10 @@ class TwinModels:
     #: [monitor] joints gives (by default the arm up to the cell geometry's [tool] link, as the mapping's IK takes
     #: it), found once here so that the log's units, the page's robot and the mapping agree
     mirrors: dict[str, tuple[str, str]] = field(default_factory=dict)
+    #: the arm's joints, from the base to the tool the cell geometry names ([tool] link, as the mapping's IK takes
+    #: it; else cotwin.pmodel.ik.find_tool's default), in kinematic order: what a robot's log, its profile's joint
+    #: order and a calibration count as the arm (a revolute jaw is no arm joint when the tool link is before it)
+    arm: list[str] = field(default_factory=list)
 
 
 def model_digests(spec: TwinProject, project) -> dict[str, str]:
@@ -192,7 +196,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         raise CotwinError(problems + own)
     monitored = [*mirrors, *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project),
-                      list(dict.fromkeys(warnings)), mirrors)
+                      list(dict.fromkeys(warnings)), mirrors, ik.arm_joints(tree, tool))
 
 
 def reading_path_problems(spec: TwinProject, tree) -> list[Finding]:
