@@ -67,7 +67,7 @@ def _ik_tool(pmodel) -> str | None:
         return None
     why = (f"the link carrying the fingers {', '.join(tool.fingers)}" if tool.fingers
            else "the end of the longest chain of moving joints")
-    reaches = {"pose": "", "axis": ": the position and approach axis, the roll left free",
-               "position": ": the position, the orientation as near as they allow"}[ik.task_for(len(arm))]
+    task = ik.task_for(len(arm))
+    reaches = f": {ik.REACHES[task]}" if task != "pose" else ""
     return (f"inverse_kinematics: tool link {tool.link} ({why}), arm joints {', '.join(arm)} ({len(arm)}{reaches}); "
             "another tool link: [tool] link in the cell geometry (docs/calibration.md)")

@@ -52,10 +52,6 @@ from ..robosim.types import EnumTy, TypeResolver, VectorTy
 from ..diagnostics import Diagnostics
 
 MIRROR_PREFIXES = (("q", "position"), ("qd", "velocity"))
-TASKS = {"axis": "it reaches the tool point with the approach axis (tool z) as the cell geometry's [tool] rpy "
-                 "gives it, the roll about that axis is what the joints make it",
-         "position": "it reaches the tool point, the tool's orientation as near the cell geometry's [tool] rpy as "
-                     "the joints allow"}  # what cotwin.pmodel.ik reaches for an arm of fewer than 6 joints
 ik_log = logging.getLogger("cotwin.ik")  # what the IK reaches for an arm of fewer than 6 joints
 
 
@@ -157,8 +153,8 @@ class FunctionRegistry:
         if not self._told and self.solver.task != "pose":
             self._told = True
             ik_log.warning("inverse_kinematics: p-model %s's arm from its base to the tool link %s has %d moving joints "
-                        "(%s): %s (docs/new-robot.md)", self.tree.name, self.tool.link, len(self.arm),
-                        ", ".join(self.arm), TASKS[self.solver.task])
+                           "(%s): it reaches %s of the cell geometry's [tool] (docs/new-robot.md)", self.tree.name,
+                           self.tool.link, len(self.arm), ", ".join(self.arm), ik.REACHES[self.solver.task])
         key = (round(float(x), 9), round(float(y), 9), round(float(z), 9))
         if key not in self._cache:
             pose = self.geometry.target_pose(key)

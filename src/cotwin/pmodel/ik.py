@@ -140,6 +140,10 @@ FULL_POSE_JOINTS = 6  # an arm with fewer cannot reach a full pose (3 for positi
 AXIS_JOINTS = 5  # position and approach axis (3 + 2): the roll about the axis is what the joints make it
 
 
+REACHES = {"pose": "the full tool pose", "axis": "the position and approach axis, the roll left free",
+           "position": "the position, the orientation as near as they allow"}  # each task, in words (messages)
+
+
 def task_for(joints: int) -> str:
     """What an arm of `joints` moving joints reaches (see the module's docstring): "pose", "axis" or
     "position"."""
