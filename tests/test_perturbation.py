@@ -139,7 +139,7 @@ def test_plant_table_is_read_strictly_with_locations(tmp_path):
 
 @pytest.mark.parametrize("other, where, message", [
     ("[cosim]\nstpe = 0.1\n", "9:1", "unknown key 'stpe' in [cosim]"),  # the project's schema
-    ("[monitor]\njoints = [\"wrist\"]\n", "9:1", "[monitor] joints: wrist are not actuated joints"),  # its models
+    ("[monitor]\njoints = [\"wrist\"]\n", "9:1", "[monitor] joints: wrist is not an actuated joint"),  # its models
 ], ids=["schema", "models"])
 def test_cotwin_plant_reports_an_unknown_plant_joint_with_the_projects_other_errors(tmp_path, other, where, message):
     """One run names every error: the [plant] joint the p-model lacks beside a schema error (found before

@@ -135,7 +135,7 @@ def test_monitor_joints_and_figure_panels_are_said_at_their_keys_with_the_neares
     path.write_text(text)
     with pytest.raises(CotwinError) as err:
         load(path)
-    assert str(err.value).startswith(f"{path}:6:1: error: [monitor] joints: shoulder_pan_jont are not actuated joints "
+    assert str(err.value).startswith(f"{path}:6:1: error: [monitor] joints: shoulder_pan_jont is not an actuated joint "
                                      "of p-model ur5e; did you mean 'shoulder_pan_joint'?")
     path.write_text(text.replace("jont", "joint"))
     with pytest.raises(CotwinError) as err:

@@ -83,7 +83,8 @@ def mirrored_joints(tree, which="arm", tool: str = "fingertips", tool_link: str 
     known = {j.name for j in tree.actuated}
     unknown = [j for j in which if j not in known]
     if unknown:
-        raise CotwinError(f"mirrored joints {', '.join(unknown)} are not actuated joints of p-model {tree.name} "
+        raise CotwinError(f"mirrored joints {', '.join(unknown)} "
+                          f"{'is not an actuated joint' if len(unknown) == 1 else 'are not actuated joints'} of p-model {tree.name} "
                           f"(joints: {', '.join(sorted(known))})")
     return list(which)
 

@@ -177,7 +177,8 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
     if unknown:  # said at the key, with the nearest joint
         problems.append(Finding(spec.location("monitor", "joints"), Severity.ERROR,
-                                f"[monitor] joints: {', '.join(unknown)} are not actuated joints of p-model "
+                                f"[monitor] joints: {', '.join(unknown)} "
+                                f"{'is not an actuated joint' if len(unknown) == 1 else 'are not actuated joints'} of p-model "
                                 f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
     tool_link = calibration.geometry.tool_link or None if calibration is not None else None  # the mapping's arm
     listed = not unknown and tool is not None  # a tool link the p-model lacks is said above, at its key
