@@ -333,3 +333,15 @@ def test_a_plan_separated_by_semicolons_is_named_so(ur5e):
     assert proc.returncode == 1, proc.stderr
     assert f"{plan}:1:9: error: the plan's columns are separated by ';': a plan is comma-separated (CSV), " \
            "e.g. 'timestep,moveDiscreteCommand" in proc.stderr, proc.stderr
+
+
+def test_a_whatif_or_sweep_horizon_shorter_than_a_step_is_refused_once(ur5e):
+    """A what-if runs whole steps: `--horizon 0.05` with the twin's 0.1 s step ran one step to 0.1 s in silence;
+    a sweep would have refused every what-if alike. Both say so once, before any what-if runs."""
+    proc = cotwin_in_process("whatif", ur5e / "cotwin.toml", "--plan", ur5e / "plan.csv", "--horizon", "0.05")
+    assert proc.returncode == 1 and "a what-if's horizon of 0.05 s is shorter than one step of the twin (0.1 s)" \
+        in proc.stderr, proc.stderr
+    proc = cotwin_in_process("sweep", ur5e / "cotwin.toml", "--event", "moveDiscreteCommand", "--arg", "target_X=0..1",
+                             "--arg", "target_Y=2", "--arg", "target_Z=0", "--horizon", "0.05", "--workers", "1",
+                             "-o", ur5e / "sweep.csv")
+    assert proc.returncode == 1 and proc.stderr.count("shorter than one step") == 1, proc.stderr

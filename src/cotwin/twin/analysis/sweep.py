@@ -239,8 +239,9 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
             saved = saved_execution(state)
             check_models(saved["models"], system.models.digests)
             fmi = 2 if saved_clock(saved) is None else 3  # the d-model the state was saved from, forked as it ran
-        from ..services.whatif import physics_timing
+        from ..services.whatif import check_horizon, physics_timing
 
+        check_horizon(horizon, system.spec.step if step is None else step)  # said once, not by every what-if
         physics_step = physics_timing(system.spec.step if step is None else step, physics_step)  # once, not per what-if
         dmodel_fmu(system, artefacts, fmi=fmi)  # built once, before the workers share it
         artefacts = str(artefacts)

@@ -147,6 +147,13 @@ class _Contacts:
             entry["depth"] = max(entry["depth"], -float(dist[k]))
 
 
+def check_horizon(horizon: float, step: float) -> None:
+    """A what-if runs whole steps of the twin: a horizon shorter than one would run one step past it in silence."""
+    if not horizon >= step * (1 - 1e-9):
+        raise CotwinError(f"a what-if's horizon of {horizon:g} s is shorter than one step of the twin ({step:g} s): it "
+                          f"runs whole steps; give a horizon of {step:g} s or more")
+
+
 def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None, horizon: float = 60.0,
             step: float | None = None, algorithm: str | None = None, artefacts: str | Path | None = None,
             settle: float = 0.3, decimate: int = 1, cc: str = "cc", fused: bool = True,
@@ -162,6 +169,7 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
     started = wallclock.perf_counter()
     spec = system.spec
     step = spec.step if step is None else step
+    check_horizon(horizon, step)
     physics_step = physics_timing(step, physics_step)
     start, period = 0.0, None
     if state is not None:
@@ -234,6 +242,7 @@ class Forks:
 
     def predict(self, plan: list[Command], horizon: float = 60.0, settle: float = 0.3, decimate: int = 1) -> Prediction:
         started = wallclock.perf_counter()
+        check_horizon(horizon, self.step)
         start = self.start
         shifted = sorted((Command(start + c.time, c.values, c.where) for c in plan), key=lambda c: c.time)
         shape = frozenset(p for c in shifted for p, _ in c.values)
