@@ -87,3 +87,27 @@ def test_clear_refuses_a_cache_that_is_a_file_or_off(root, monkeypatch, setting)
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
     assert proc.stderr.startswith(f"{where}: error: ")
     assert setting == "off" or root.read_text() == "not a folder"
+
+
+def test_clear_removes_a_partial_folder_a_killed_process_left_without_leaving_one_of_no_name_of_cotwins(root,
+                                                                                                     monkeypatch):
+    """A folder left under a partial name (an extraction or a removal cut short) is cotwin's and is cleared. It was
+    renamed again before its removal, to '..NAME...': had that removal failed, the folder bore no name of cotwin's,
+    and every later --clear refused the cache as holding a foreign file."""
+    import shutil
+
+    from cotwin import cache
+
+    left = entry(root, "fmu", 7)
+    partial = left.with_name(f".{left.name}.4242.0")  # as a killed removal leaves it
+    left.rename(partial)
+    made = []
+    real = shutil.rmtree
+    monkeypatch.setattr(shutil, "rmtree", lambda path, ignore_errors=False: made.append(Path(path)))  # removal fails
+    found = cache.contents(root)
+    assert [e.path for e in found.entries] == [partial] and found.entries[0].partial
+    assert cache.remove(found.entries[0])
+    assert not cache.contents(root).foreign, made  # what a failed removal leaves is still cotwin's
+    monkeypatch.setattr(shutil, "rmtree", real)
+    proc = cotwin("cache", "--clear")
+    assert proc.returncode == 0 and not root.exists(), proc.stdout + proc.stderr

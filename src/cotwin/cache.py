@@ -206,8 +206,11 @@ def remove(entry: Entry) -> bool:
         if not _same(entry.path, fd):
             return False
         if stat.S_ISDIR(os.fstat(fd).st_mode):
-            gone = entry.path.with_name(f".{entry.path.name}.{os.getpid()}.0")  # kind.partial's form
-            os.rename(entry.path, gone)
+            if entry.partial:  # already under a partial name, which no reader takes: removed where it is
+                gone = entry.path  # (renamed again, '..name' would be no name of cotwin's: a folder left foreign)
+            else:
+                gone = entry.path.with_name(f".{entry.path.name}.{os.getpid()}.0")  # kind.partial's form
+                os.rename(entry.path, gone)
             shutil.rmtree(gone, ignore_errors=True)
         else:
             os.unlink(entry.path)
@@ -270,7 +273,8 @@ def bound(written: str | Path | None = None) -> None:
 
 # ---- the command's work -------------------------------------------------------------------------
 
-def _refusal(path: Path, message: str) -> CotwinError:
+def refusal(path: Path, message: str) -> CotwinError:
+    """A refusal of the cache command, located at `path` (the cache folder, or COTWIN_CACHE)."""
     return CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR, message)])
 
 
@@ -281,9 +285,9 @@ def located(off_ok: bool = False) -> Path | None:
     if root is None and off_ok:
         return None
     if root is None:
-        raise _refusal(Path("COTWIN_CACHE"), "COTWIN_CACHE=off: cotwin keeps no cache, so there is none to clear")
+        raise refusal(Path("COTWIN_CACHE"), "COTWIN_CACHE=off: cotwin keeps no cache, so there is none to clear")
     if root.exists() and not root.is_dir():
-        raise _refusal(root, "COTWIN_CACHE names a file, not a folder: cotwin keeps no cache there (and will not "
+        raise refusal(root, "COTWIN_CACHE names a file, not a folder: cotwin keeps no cache there (and will not "
                              "remove it); name a folder")
     return root
 
@@ -301,11 +305,11 @@ def clear(root: Path) -> Cleared:
     try:
         found = contents(root)
     except OSError as err:
-        raise _refusal(root, f"cannot read the cache: {err.strerror or err}") from None
+        raise refusal(root, f"cannot read the cache: {err.strerror or err}") from None
     if found.foreign:
         names = ", ".join(str(p.relative_to(root)) for p in found.foreign[:5])
         more = f" and {len(found.foreign) - 5} more" if len(found.foreign) > 5 else ""
-        raise _refusal(root, f"not cotwin's cache alone: it holds {len(found.foreign)} file(s) cotwin did not write "
+        raise refusal(root, f"not cotwin's cache alone: it holds {len(found.foreign)} file(s) cotwin did not write "
                              f"({names}{more}), so nothing was removed; move them out, or point COTWIN_CACHE at a "
                              "folder of cotwin's own")
     now = time.time()

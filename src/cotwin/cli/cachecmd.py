@@ -34,7 +34,7 @@ def cache_command(clear: bool) -> None:
     try:
         found = cache.contents(root)
     except OSError as err:
-        raise cache._refusal(root, f"cannot read the cache: {err.strerror or err}") from None
+        raise cache.refusal(root, f"cannot read the cache: {err.strerror or err}") from None
     state = "" if root.is_dir() else " (not made yet)"
     click.echo(f"{root}{state}: {cache.size_text(found.size)}, at most {cache.size_text(cap)} (COTWIN_CACHE_MAX_MB)")
     for kind in cache.KINDS:
