@@ -345,3 +345,20 @@ def test_a_whatif_or_sweep_horizon_shorter_than_a_step_is_refused_once(ur5e):
                              "--arg", "target_Y=2", "--arg", "target_Z=0", "--horizon", "0.05", "--workers", "1",
                              "-o", ur5e / "sweep.csv")
     assert proc.returncode == 1 and proc.stderr.count("shorter than one step") == 1, proc.stderr
+
+
+def test_a_mapping_index_past_its_vector_is_said_by_check_in_the_range_mappings_count_in(tmp_path):
+    """A mapping's vectors count from 0 (q[0] is the first joint's): `target_q[6]` of a 6-vector was said only by
+    the run, at its first evaluation; check compared with RoboChart's 1..6 and found it in range."""
+    for name in ("ur3e", "ur5e"):  # the UR3e's project takes the UR5e's d-model
+        shutil.copytree(ROOT / "examples" / name, tmp_path / name)
+    project = tmp_path / "ur3e"
+    mapping = project / "mapping.pm"
+    text = mapping.read_text()
+    line = "M6.dangle == target_q[5]"
+    assert line in text
+    mapping.write_text(text.replace(line, "M6.dangle == target_q[6]", 1))
+    proc = cotwin_in_process("check", project / "cotwin.toml")
+    at = next(k for k, row in enumerate(mapping.read_text().splitlines(), start=1) if "target_q[6]" in row)
+    assert f"{mapping}:{at}:" in proc.stdout + proc.stderr and "index 6 is out of range 0..5" in proc.stdout + proc.stderr, \
+        proc.stdout + proc.stderr

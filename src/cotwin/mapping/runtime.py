@@ -48,6 +48,7 @@ from ..robosim.operators import MATH
 from ..robosim.values import EvalError
 from ..robosim.declarations import EnumDecl
 from ..robosim.pmodel_elements import Mapping as MappingModel
+from ..robosim.check_mapping import MAPPING_FIRST_INDEX
 from ..robosim.types import EnumTy, TypeResolver, VectorTy
 from ..diagnostics import Diagnostics
 
@@ -217,7 +218,7 @@ class _MappingNames:
     sensor reading of the platform; functions come from the registry. Vectors index from 0 here, as
     cotwin's mapping notation has always read them (d-models follow RoboChart and count from 1)."""
 
-    FIRST_INDEX = 0
+    FIRST_INDEX = MAPPING_FIRST_INDEX  # the checker counts alike (cotwin.robosim.check_mapping)
 
     @staticmethod
     def sensor_key(e: s.FieldAccess) -> str | None:

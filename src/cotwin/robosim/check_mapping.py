@@ -20,6 +20,8 @@ from .pmodel_elements import Mapping, PModel
 from .typecheck import ExprChecker, Scope, Symbol
 from .types import BOOL, UNKNOWN, DeviceTy, Ty
 
+MAPPING_FIRST_INDEX = 0  # a platform mapping's vectors count from 0 (q[0] is the first joint's: cotwin.mapping.runtime)
+
 
 def mapping_targets(project, mapping: Mapping, source: SourceFile | None, diag: Diagnostics | None = None):
     """The module and p-model a mapping connects, and the module's platform members."""
@@ -155,7 +157,8 @@ class MappingChecker(Checker):
                 return UNKNOWN
             return DeviceTy(found[2])
 
-        return ExprChecker(self.types, self.diag, scope, self.functions, None, qualified)
+        return ExprChecker(self.types, self.diag, scope, self.functions, None, qualified,
+                           first_index=MAPPING_FIRST_INDEX)
 
 
 def platform_outputs(module: Module) -> set[str]:

@@ -102,7 +102,10 @@ class ExprChecker(ExprVisitor):
         qualified: Callable[[s.QName], Ty | None] | None = None,
         clocks: set[str] | frozenset[str] = frozenset(),
         states: set[str] | frozenset[str] | None = None,
+        first_index: int = 1,
     ):
+        """`first_index`: the index of a vector's first element where the expressions are evaluated (RoboChart's 1;
+        a platform mapping's 0, as cotwin.mapping.runtime evaluates it)."""
         self.resolver = resolver
         self.diag = diag
         self.scope = scope
@@ -111,11 +114,12 @@ class ExprChecker(ExprVisitor):
         self.qualified = qualified
         self.clocks = clocks
         self.states = states
+        self.first_index = first_index
         self.readings: Readings = getattr(resolver.project, "readings", None) or Readings()
 
     def with_scope(self, scope: Scope) -> "ExprChecker":
         return ExprChecker(self.resolver, self.diag, scope, self.functions, self.events, self.qualified,
-                           self.clocks, self.states)
+                           self.clocks, self.states, self.first_index)
 
     @property
     def project(self):
@@ -363,9 +367,11 @@ class ExprChecker(ExprVisitor):
 
     def _constant_index(self, e: s.IndexAccess, size: int | None) -> None:
         if isinstance(e.index, s.Literal) and isinstance(e.index.value, int) and size is not None:
-            k = e.index.value
-            if k > size:
-                self.diag.warning(e.index.loc, f"index {k} is out of range 1..{size}: evaluating it is an error")
+            k, first = e.index.value, self.first_index
+            # (an index 0 where vectors count from 1 is check_dmodel's: a statement may be written 0-based)
+            if k > size + first - 1 or first == 0 and k < 0:
+                self.diag.warning(e.index.loc, f"index {k} is out of range {first}..{size + first - 1}: evaluating "
+                                               "it is an error")
 
     # ---- calls ----
     def visit_Call(self, e: s.Call) -> Ty:
