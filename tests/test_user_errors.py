@@ -362,3 +362,16 @@ def test_a_mapping_index_past_its_vector_is_said_by_check_in_the_range_mappings_
     at = next(k for k, row in enumerate(mapping.read_text().splitlines(), start=1) if "target_q[6]" in row)
     assert f"{mapping}:{at}:" in proc.stdout + proc.stderr and "index 6 is out of range 0..5" in proc.stdout + proc.stderr, \
         proc.stdout + proc.stderr
+
+
+def test_a_plan_row_raising_two_commands_says_they_are_applied_a_step_apart(ur5e, tmp_path):
+    """Two command events true in one row were applied one per step without a word, where two rows of one time
+    are said to be (the source applies one command per step)."""
+    (ur5e / "plan.csv").write_text("timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,"
+                                   "MovementArgs_target_Z,openGripperCommand\n1000,true,0,23,1,true\n"
+                                   "2000,false,0,0,0,true\n")
+    proc = cotwin_in_process("run", ur5e / "cotwin.toml", "--end", "2.5", "-o", tmp_path / "out")
+    assert proc.returncode == 0, proc.stderr
+    said = [line for line in (proc.stdout + proc.stderr).splitlines() if "one command is applied per step" in line]
+    assert said == [f"{ur5e / 'plan.csv'}:2:1: warning: this row raises moveDiscreteCommand, openGripperCommand: one "
+                    "command is applied per step, moveDiscreteCommand first and each other in a later step"], said

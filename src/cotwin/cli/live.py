@@ -69,7 +69,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
 
     show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, spec.end if end is None else end))
-    show_warnings(plan_order(system.commands))
+    show_warnings(plan_order(system.commands, system.command_events))
     dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
                            broker if whatif else None, serving)
     progress = ProgressReport("twin", "s").__enter__()
@@ -132,7 +132,7 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
     cell = CellSystem(spec)
     show_warnings(nothing_planned(cell.spec.plan, cell.commands))
     show_warnings(after_end(cell.commands, spec.end if end is None else end))
-    show_warnings(dict.fromkeys(f for r in cell.robots for f in plan_order(r.system.commands)))
+    show_warnings(dict.fromkeys(f for r in cell.robots for f in plan_order(r.system.commands, r.system.command_events)))
     stop, looping = threading.Event(), threading.Event()
 
     class Looping(TwinObserver):

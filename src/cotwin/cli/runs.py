@@ -81,7 +81,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
 
     show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, system.spec.end if end is None else end))
-    show_warnings(plan_order(system.commands))
+    show_warnings(plan_order(system.commands, system.command_events))
     dash = start_dashboard(system, dashboard, "run", history, serving=serving)
     try:
         with ProgressReport("co-simulating", "steps") as progress:
@@ -110,7 +110,7 @@ def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: 
         raise click.UsageError("a cell of several robots runs with --fmi 2 (not done yet with 3)")
     show_warnings(nothing_planned(cell.spec.plan, cell.commands))
     show_warnings(after_end(cell.commands, cell.spec.end if end is None else end))
-    show_warnings(dict.fromkeys(f for r in cell.robots for f in plan_order(r.system.commands)))
+    show_warnings(dict.fromkeys(f for r in cell.robots for f in plan_order(r.system.commands, r.system.command_events)))
     dash = start_dashboard(cell, dashboard, "run", None, serving=serving)
     try:
         with ProgressReport("co-simulating", "steps") as progress:

@@ -116,10 +116,11 @@ def after_end(commands: list[Command], end: float, h: float = 0.0) -> list[Findi
     return out
 
 
-def plan_order(commands: list[Command]) -> list[Finding]:
-    """Warnings for a plan whose rows are not in time order (commands are sent in time order, not the file's)
-    and for rows that share a time (a source applies one command per step: the others wait for the next
-    steps). One per plan row (a cell's row holds several robots' commands), the first AFTER_END_SHOWN."""
+def plan_order(commands: list[Command], events: set[str] | frozenset[str] = frozenset()) -> list[Finding]:
+    """Warnings for a plan whose rows are not in time order (commands are sent in time order, not the file's),
+    for rows that share a time and for a row raising several of the command `events` (a source applies one
+    command per step: the others wait for the next steps). One per plan row (a cell's row holds several robots'
+    commands), the first AFTER_END_SHOWN."""
     rows = sorted(dict.fromkeys((_location(c.where), c.time) for c in commands),
                   key=lambda row: (row[0].path, row[0].line))
     out, latest, seen = [], None, {}
@@ -133,6 +134,12 @@ def plan_order(commands: list[Command]) -> list[Finding]:
         if latest is None or time >= latest[1]:
             latest = (where, time)
         seen.setdefault(time, where)
+    for c in commands:
+        raised = [port for port, value in c.values if port in events and value is True]
+        if len(raised) > 1:
+            out.append(Finding(_location(c.where), Severity.WARNING, f"this row raises {', '.join(raised)}: one "
+                               f"command is applied per step, {raised[0]} first and each other in a later step"))
+    out.sort(key=lambda f: (f.location.path, f.location.line))
     return out[:AFTER_END_SHOWN]
 
 
