@@ -292,3 +292,15 @@ def test_the_arm_of_a_robots_log_profile_and_calibration_is_the_one_the_mapping_
     twin = DigitalTwin(models.project, models.tree, models.scene, None, models.calibration.geometry)
     assert twin.arm() == six
     assert twin.arm(CellGeometry()) == [*six, "jaw"]  # a geometry naming no tool link: the default tool's arm
+
+
+def test_a_target_that_is_not_a_finite_point_is_not_reachable_and_has_no_posture(tmp_path):
+    """A grid point of nan or inf (0/0 in the mapping, a range sensor that sees nothing): `reachable` said False,
+    but `inverse_kinematics` gave a posture all the same, which a mapping not guarding the call commanded."""
+    models = load_models(load_project(_project(tmp_path, REFERENCE)))
+    registry = FunctionRegistry(_Endpoint(models.tree), models.calibration.geometry)
+    for bad in (float("nan"), float("inf")):
+        assert registry.reachable(bad, 0.0, 0.2) is False
+        with pytest.raises(CotwinError, match="the target is not a finite point"):
+            registry.inverse_kinematics(0.3, bad, 0.2)
+    assert len(registry.inverse_kinematics(0.3, 0.0, 0.2)) == 6 and registry.requests == [(0.3, 0.0, 0.2)]

@@ -173,12 +173,20 @@ class FunctionRegistry:
         return self.solver.near(self._cache[key], self.endpoint.joint_positions())
 
     def inverse_kinematics(self, x, y, z):
-        """Joint values (arm joints, kinematic order) putting the tool frame at grid point (x, y, z)."""
+        """Joint values (arm joints, kinematic order) putting the tool frame at grid point (x, y, z); an error for a
+        point that is not finite (no posture puts the tool there: the solver's answer would be a posture anyway)."""
+        if not all(math.isfinite(float(v)) for v in (x, y, z)):
+            raise CotwinError(f"inverse_kinematics({float(x)!r}, {float(y)!r}, {float(z)!r}): the target is not a "
+                              "finite point, so no posture reaches it (guard the call with reachable(x, y, z))")
         self.requests.append((float(x), float(y), float(z)))
         result = self._solve(x, y, z)
         return tuple(result.q[j] for j in self.arm)
 
     def reachable(self, x, y, z) -> bool:
+        """Whether the tool frame can be put at grid point (x, y, z) (as the arm's task counts it); a point that is
+        not finite (a range sensor seeing nothing reads inf) is not reachable."""
+        if not all(math.isfinite(float(v)) for v in (x, y, z)):
+            return False
         return self._solve(x, y, z).ok(position_tol=1e-3, angle_tol=1e-2)
 
     def functions(self) -> dict:
