@@ -824,19 +824,23 @@ def test_a_massless_tool_frame_is_imported_massless_not_as_a_one_kg_m2_flywheel(
     assert "mass of link tip is 0" in said and "1 kg m^2" not in said
 
 
-def test_the_import_says_which_tool_link_and_arm_joints_the_ik_takes_by_default(tmp_path):
-    """Unitree's Z1 ends in a revolute jaw: the IK's default tool was the jaw, and the jaw its arm's 7th joint, without a
-    word. The import names the tool link and the arm's joints, and where another tool link is named."""
+def _serial_arm(path: Path, names: list[str]) -> Path:
+    """A URDF of a serial chain of revolute joints j1.. between the links `names`, axes alternating z and y."""
     def link(name):
         return (f"<link name='{name}'><inertial><mass value='1'/><inertia ixx='0.01' ixy='0' ixz='0' iyy='0.01' iyz='0' "
                 f"izz='0.01'/></inertial></link>")
 
-    names = ["base", "l1", "l2", "l3", "l4", "l5", "stator", "jaw"]
     joints = [_joint(f"j{k + 1}", names[k], names[k + 1], "revolute",
                      f"<origin xyz='0 0 0.1'/><axis xyz='{'0 0 1' if k % 2 == 0 else '0 1 0'}'/>"
-                     "<limit lower='-3' upper='3' effort='10' velocity='1'/>") for k in range(7)]
-    urdf = tmp_path / "jaw.urdf"
-    urdf.write_text("<robot name='jaw_arm'>" + "".join(map(link, names)) + "".join(joints) + "</robot>")
+                     "<limit lower='-3' upper='3' effort='10' velocity='1'/>") for k in range(len(names) - 1)]
+    path.write_text(f"<robot name='{path.stem}'>" + "".join(map(link, names)) + "".join(joints) + "</robot>")
+    return path
+
+
+def test_the_import_says_which_tool_link_and_arm_joints_the_ik_takes_by_default(tmp_path):
+    """Unitree's Z1 ends in a revolute jaw: the IK's default tool was the jaw, and the jaw its arm's 7th joint, without a
+    word. The import names the tool link and the arm's joints, and where another tool link is named."""
+    urdf = _serial_arm(tmp_path / "jaw_arm.urdf", ["base", "l1", "l2", "l3", "l4", "l5", "stator", "jaw"])
     run = CliRunner().invoke(main, ["import-urdf", str(urdf), "-o", str(tmp_path / "out")])
     assert run.exit_code == 0, run.output
     assert ("inverse_kinematics: tool link jaw (the end of the longest chain of moving joints), arm joints j1, j2, j3, "
@@ -846,16 +850,7 @@ def test_the_import_says_which_tool_link_and_arm_joints_the_ik_takes_by_default(
 def test_the_import_says_what_the_ik_reaches_for_an_arm_of_five_joints(tmp_path):
     """A 5-joint arm was left without the IK note (the IK refused it); the note now names its tool and arm and
     what the IK reaches for it: the position and approach axis, the roll left free."""
-    def link(name):
-        return (f"<link name='{name}'><inertial><mass value='1'/><inertia ixx='0.01' ixy='0' ixz='0' iyy='0.01' iyz='0' "
-                f"izz='0.01'/></inertial></link>")
-
-    names = ["base", "l1", "l2", "l3", "l4", "hand"]
-    joints = [_joint(f"j{k + 1}", names[k], names[k + 1], "revolute",
-                     f"<origin xyz='0 0 0.1'/><axis xyz='{'0 0 1' if k % 2 == 0 else '0 1 0'}'/>"
-                     "<limit lower='-3' upper='3' effort='10' velocity='1'/>") for k in range(5)]
-    urdf = tmp_path / "five.urdf"
-    urdf.write_text("<robot name='five'>" + "".join(map(link, names)) + "".join(joints) + "</robot>")
+    urdf = _serial_arm(tmp_path / "five.urdf", ["base", "l1", "l2", "l3", "l4", "hand"])
     run = CliRunner().invoke(main, ["import-urdf", str(urdf), "-o", str(tmp_path / "out")])
     assert run.exit_code == 0, run.output
     assert ("inverse_kinematics: tool link hand (the end of the longest chain of moving joints), arm joints j1, j2, j3, "

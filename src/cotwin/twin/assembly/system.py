@@ -134,7 +134,9 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     cell's robots share its [plant] (a joint named applies to the robots that have it), checked against
     them all by cotwin.pmodel.perturbation.perturbed_world."""
     from ...dmodel.program import build_program
-    from ...mapping.runtime import declares_mirrors, mirror_variables, mirrored_joints, uses_kinematics
+    from ...mapping.runtime import (declares_mirrors, kinematics_result_problem, mirror_variables, mirrored_joints,
+                                    uses_kinematics)
+    from ...pmodel.cell import CellGeometry
     from ...pmodel import ik
     from ...mapping.profile import profile_rays
     from ...pmodel.tree import build_tree
@@ -165,14 +167,18 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         calibration = _gather(problems, lambda: Calibration.read(spec.calibration), None)
     scene = _gather(problems, lambda: build_scene(spec, mapping, calibration), None)
     variables = [v.name for v in mapping.variables]
-    # the mapping's IK takes the arm up to the cell geometry's own [tool] link (cotwin.mapping.runtime.FunctionRegistry)
-    tool = _gather(problems, lambda: calibration.geometry.find_tool(tree), None) if calibration is not None \
-        else ik.find_tool(tree)
+    # the arm: from the base to the tool the cell geometry names (the calibration's, else the scene's: its [tool] link),
+    # as the mapping's IK takes it (cotwin.mapping.runtime.FunctionRegistry); found once, for every use below
+    geometry = calibration.geometry if calibration is not None else scene.geometry if scene is not None else None
+    geometry = geometry or CellGeometry()
+    tool = _gather(problems, lambda: geometry.find_tool(tree), None)
+    arm = ik.arm_joints(tree, tool) if tool is not None else []
     if calibration is not None and tool is not None:  # it names this arm's joints
-        _gather(problems, lambda: calibration.geometry.check_joints(ik.arm_joints(tree, tool)), None)
+        _gather(problems, lambda: calibration.geometry.check_joints(arm), None)
     if tool is not None and (uses_kinematics(mapping) or declares_mirrors(variables) and spec.mirror_joints == "arm"):
-        geometry = calibration.geometry if calibration is not None else (scene.geometry if scene is not None else None)
-        problems += kinematics_problems(project, mapping, tree, geometry)  # as a run sets up its kinematics
+        problem = kinematics_result_problem(project, mapping, tree.name, tool.link, arm)  # as a run sets up its IK
+        if problem is not None:
+            problems.append(problem)
     actuated = [j.name for j in tree.actuated]
     unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
     if unknown:  # said at the key, with the nearest joint
@@ -180,7 +186,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
                                 f"[monitor] joints: {', '.join(unknown)} "
                                 f"{'is not an actuated joint' if len(unknown) == 1 else 'are not actuated joints'} of p-model "
                                 f"{tree.name}{did_you_mean(unknown[0], actuated)} (joints: {', '.join(actuated)})"))
-    tool_link = calibration.geometry.tool_link or None if calibration is not None else None  # the mapping's arm
+    tool_link = geometry.tool_link or None  # the mapping's arm
     listed = not unknown and tool is not None  # a tool link the p-model lacks is said above, at its key
     joints = mirrored_joints(tree, spec.mirror_joints, tool_link=tool_link) \
         if declares_mirrors(variables) and listed else []
@@ -197,7 +203,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         raise CotwinError(problems + own)
     monitored = [*mirrors, *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project),
-                      list(dict.fromkeys(warnings)), mirrors, ik.arm_joints(tree, tool))
+                      list(dict.fromkeys(warnings)), mirrors, arm)
 
 
 def reading_path_problems(spec: TwinProject, tree) -> list[Finding]:
@@ -296,23 +302,6 @@ def reading_clashes(spec: TwinProject, taken: dict[str, tuple[str, str]]) -> lis
                        ": each reading needs a name of its own (e.g. " + repr(f"{names[0]}_reading") + ")")
         out.append(Finding(spec.location("monitor", "readings", names[0]), Severity.ERROR, message))
     return out
-
-
-def kinematics_problems(project, mapping, tree, geometry=None) -> list[Finding]:
-    """The mapping's declared inverse_kinematics against the arm a run solves for (from the base to the tool
-    `geometry` names: cotwin.mapping.runtime.FunctionRegistry), found before the run: a vector of another size
-    than the arm's joints, at the function's declaration. A tool link the p-model lacks is said where a run
-    uses the kinematics (FunctionRegistry), not here."""
-    from ...mapping.runtime import kinematics_result_problem
-    from ...pmodel import ik
-    from ...pmodel.cell import CellGeometry
-
-    try:
-        tool = (geometry or CellGeometry()).find_tool(tree)
-    except CotwinError:
-        return []
-    problem = kinematics_result_problem(project, mapping, tree.name, tool.link, ik.arm_joints(tree, tool))
-    return [problem] if problem is not None else []
 
 
 def build_scene(spec: TwinProject, mapping, calibration=None):
