@@ -147,36 +147,79 @@ def refuse_special(path: str | Path) -> None:
         raise error(path, f"is {kind}, not a file: cotwin writes its output as a new file in its place; name a file")
 
 
+class Reserved:
+    """An output made now and put in place later (see module doc): the new file beside `path`, open, so that a
+    place it cannot be written is found before the work whose result it holds (a run's state: before its
+    first step, not after its last), and the work's end only writes and renames. `discard` removes it."""
+
+    def __init__(self, path: str | Path, inputs: Iterable[str | Path | None] = (), mode: int | None = None):
+        self.path = path = Path(path)
+        check_outputs([path], inputs)
+        refuse_special(path)
+        if path.is_dir():  # else the error would name the temporary file beside it
+            raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR, "is a folder: cannot write a file there")])
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            # a name of 255 bytes has a temporary one too: its first 200 bytes as the file system spells them (a name
+            # that is not UTF-8 has surrogates, which a strict encode refused; a cut character stays bytes)
+            stem = os.fsdecode(os.fsencode(path.name)[:200])
+            self.fd, self.part = tempfile.mkstemp(prefix=f".{stem}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
+        except OSError as err:  # named by the file asked for, not the temporary one beside it
+            raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR,
+                                       f"cannot write here: {err.strerror or err}")]) from None
+        try:
+            os.fchmod(self.fd, mode if mode is not None else 0o666 & ~_umask())
+        except BaseException:
+            self.discard()
+            raise
+
+    def open(self, text: bool = False, newline: str | None = None):
+        """The new file, open for writing (binary, or text with `text`); closing it closes the reservation's."""
+        return os.fdopen(self.fd, "w" if text else "wb", **({"encoding": "utf-8", "newline": newline} if text else {}))
+
+    def put(self, data: bytes) -> Path:
+        """`data` written to the new file, which then replaces `path`; removed instead if that fails."""
+        try:
+            with self.open() as f:
+                self.fd = None
+                f.write(data)
+            os.replace(self.part, self.path)
+        except BaseException:
+            self.discard()
+            raise
+        self.part = None
+        return self.path
+
+    def discard(self) -> None:
+        """The new file removed, `path` left as it was (idempotent)."""
+        if self.fd is not None:
+            try:
+                os.close(self.fd)
+            except OSError:
+                pass
+            self.fd = None
+        if self.part is not None:
+            try:
+                os.unlink(self.part)
+            except OSError:
+                pass
+            self.part = None
+
+
 @contextmanager
 def output(path: str | Path, inputs: Iterable[str | Path | None] = (), mode: int | None = None, text: bool = False,
            newline: str | None = None):
     """A file to write `path` through (see module doc): yields an open file (binary, or text with
     `text`), renamed over `path` when the block ends without an error, removed otherwise."""
-    path = Path(path)
-    check_outputs([path], inputs)
-    refuse_special(path)
-    if path.is_dir():  # else the error would name the temporary file beside it
-        raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR, "is a folder: cannot write a file there")])
+    reserved = Reserved(path, inputs, mode)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        # a name of 255 bytes has a temporary one too: its first 200 bytes as the file system spells them (a name
-        # that is not UTF-8 has surrogates, which a strict encode refused; a cut character stays bytes)
-        stem = os.fsdecode(os.fsencode(path.name)[:200])
-        fd, part = tempfile.mkstemp(prefix=f".{stem}.", suffix=".part", dir=path.parent)  # O_EXCL, mode 600
-    except OSError as err:  # named by the file asked for, not the temporary one beside it
-        raise CotwinError([Finding(Location(str(path), 0, 0), Severity.ERROR,
-                                   f"cannot write here: {err.strerror or err}")]) from None
-    try:
-        os.fchmod(fd, mode if mode is not None else 0o666 & ~_umask())
-        with os.fdopen(fd, "w" if text else "wb", **({"encoding": "utf-8", "newline": newline} if text else {})) as f:
+        with reserved.open(text, newline) as f:
+            reserved.fd = None
             yield f
-        os.replace(part, path)
-    except BaseException:
-        try:
-            os.unlink(part)
-        except OSError:
-            pass
-        raise
+        os.replace(reserved.part, reserved.path)
+        reserved.part = None
+    finally:
+        reserved.discard()
 
 
 def write_bytes(path: str | Path, data: bytes, inputs: Iterable[str | Path | None] = (), mode: int | None = None) -> Path:

@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from ..diagnostics import CotwinError
-from ..files import open_exclusive, refuse_special, write_bytes
+from ..files import Reserved, open_exclusive, refuse_special, write_bytes
 from .algorithm import UNSET
 
 
@@ -410,11 +410,18 @@ class LiveFeed(Observer):
 class StateFile(Observer):
     """Saves the execution's state (cotwin.cosim.state bytes) to `path` after its last step, so that a
     what-if can start where the run ended (`cotwin whatif --from`). A system that cannot save its
-    state (e.g. a remote robot) is noted in `skipped` and nothing is written."""
+    state (e.g. a remote robot) is noted in `skipped` and nothing is written. The file is made when the run
+    starts (files.Reserved): a place it cannot be written fails the run before its first step, not after
+    its last, and the run's end only writes it; a run that ends without saving leaves `path` as it was."""
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
         self.skipped: str | None = None
+        self._reserved: Reserved | None = None
+
+    def simulation_initialized(self, execution) -> None:
+        self._discard()
+        self._reserved = Reserved(self.path)
 
     def step_complete(self, execution) -> None:
         if execution.total_steps and execution.steps >= execution.total_steps:
@@ -429,4 +436,16 @@ class StateFile(Observer):
         except CotwinError as err:
             self.skipped = "; ".join(f.message for f in err.findings)
             return
-        write_bytes(self.path, blob)
+        reserved, self._reserved = self._reserved, None
+        if reserved is None:  # saved again, or outside a run
+            write_bytes(self.path, blob)
+        else:
+            reserved.put(blob)
+
+    def simulation_ended(self, execution, error: BaseException | None) -> None:
+        self._discard()
+
+    def _discard(self) -> None:
+        if self._reserved is not None:
+            self._reserved.discard()
+            self._reserved = None
