@@ -15,7 +15,7 @@ ORDER = list(PARTS)  # the parts of cotwin.twin, lowest first
 # Lowest first. A name is a subpackage of cotwin or a module at its top level.
 LAYERS: list[tuple[str, ...]] = [
     ("__init__", "diagnostics", "files", "config", "settings", "safejson", "logcap", "listeners", "plot",
-     "service", "cache", "cbuild", "memo"),
+     "service", "cache", "cbuild", "memo", "interrupts"),
     ("robosim",),
     ("plaindata",),  # checks of saved plain data against robosim values, used by every layer that saves state
     ("dmodel",),

@@ -466,6 +466,36 @@ def test_a_failure_during_the_final_write_of_a_suite_leaves_the_earlier_suite_wh
     assert read_suite(out).data["criterion"] == "transitions"
 
 
+def test_an_interrupt_while_a_suite_moves_into_place_comes_after_its_last_file(graph, tmp_path, monkeypatch):
+    """^C between two of the renames that put a suite in place left the folder with some case files of the new
+    suite beside the earlier suite's index and other files: the interrupt now comes once all are moved."""
+    import os
+    import signal
+
+    from cotwin.dmodel import testgen_files
+
+    out = tmp_path / "tests"
+    write_suite(generate(graph, "transitions"), out)
+    suite = generate(graph, "transition-pairs", split="length")
+    moved, real_replace = [], os.replace
+
+    def replace(src, dst):  # os is one module: files.output's renames into the stage come here too
+        real_replace(src, dst)
+        if Path(dst).parent != out:
+            return
+        moved.append(dst)
+        if len(moved) == 2:
+            os.kill(os.getpid(), signal.SIGINT)  # Python's handler raises KeyboardInterrupt at once, unless held
+
+    monkeypatch.setattr(testgen_files.os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        write_suite(suite, out)
+    monkeypatch.undo()
+    assert len(moved) == 1 + 2 * len(suite.cases)  # every file, the index last
+    read = read_suite(out)
+    assert read.criterion == "transition-pairs" and [c.name for c in read.cases] == [c.name for c in suite.cases]
+
+
 def test_test_and_mutants_never_write_over_what_they_read(tmp_path, stub_suite):
     """cotwin test --junit and cotwin mutants -o naming the project file, a model or a file of the suite are
     refused by name before anything runs (the JUnit XML replaced cotwin.toml; the JSON replaced arm.rst)."""

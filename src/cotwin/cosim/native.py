@@ -29,15 +29,13 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
-import signal
-import threading
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 from ..cbuild import compile_library, compiler
+from ..interrupts import signals_held
 from .algorithm import UNSET, GaussSeidel, Jacobi
 from .observers import Observer, hears_repeats
 
@@ -399,35 +397,6 @@ class NativeLoop:
         return array
 
 
-@contextmanager
-def signals_held():
-    """SIGINT and SIGTERM, where Python handles them, held until the block ends, then handled as they would
-    have been: an interrupt never falls between a stretch's steps committed and told (main thread only)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    held: list[tuple[int, object]] = []
-    previous = {sig: _raw_signal.getsignal(sig) for sig in _HELD_SIGNALS}
-    caught = {sig: handler for sig, handler in previous.items() if callable(handler)}
-    hold = lambda signum, frame: held.append((signum, frame))  # noqa: E731
-    for sig in caught:
-        _raw_signal.signal(sig, hold)
-    try:
-        yield
-    finally:
-        for sig, handler in caught.items():
-            _raw_signal.signal(sig, handler)
-        for signum, frame in held[:1]:
-            caught[signum](signum, frame)
-
-
-# signal's own functions, without the module's enum wrapping (which costs a caught ValueError per call, ~5 us:
-# a tenth of a segment's Python time); the handlers the same objects
-try:
-    import _signal as _raw_signal
-except ImportError:  # another Python than CPython
-    _raw_signal = signal
-_HELD_SIGNALS = (int(signal.SIGINT), int(signal.SIGTERM))
 
 
 _PLAIN = (bool, int, float)

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..files import write_text
+from ..interrupts import signals_held
 from .interpreter import Output
 from .program import Program, get_path
 from .testgen import Case, Suite, model_digest
@@ -144,7 +145,8 @@ def write_suite(suite: Suite, folder: str | Path, period: float = 0.1, settle: f
 
     Every file is written whole (files.write_text) in a folder of its own beside the suite, and only then
     moved over the earlier suite's, the index last: a write that fails or is interrupted (a full disk, ^C)
-    leaves the earlier suite as it was, with no part-written file among it."""
+    leaves the earlier suite as it was, with no part-written file among it. The moves are one block for ^C
+    and SIGTERM (held until the last is done), so an interrupt never leaves a suite of old and new files."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     commands = set(suite.commands)
@@ -159,9 +161,10 @@ def write_suite(suite: Suite, folder: str | Path, period: float = 0.1, settle: f
         for name, text in files.items():
             write_text(Path(stage) / name, text)
         written = []
-        for name in files:  # renames within one file system: no file is ever part-written
-            os.replace(Path(stage) / name, folder / name)
-            written.append(folder / name)
+        with signals_held():  # renames within one file system: no file is ever part-written, no ^C between them
+            for name in files:
+                os.replace(Path(stage) / name, folder / name)
+                written.append(folder / name)
     for stale in folder.glob("case_*"):
         if stale.name not in files and stale.name not in keep and stale.suffix in (".csv", ".json", ".fmu"):
             stale.unlink()
