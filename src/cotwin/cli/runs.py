@@ -56,8 +56,10 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
         on_unit_failure: str, version: str, cycle_period: float | None, fmu_path: bool) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
-    from ..twin.services.history import database_url
+    from ..dmodel.program import time_readings
     from ..twin.assembly.run import load, run_twin
+    from ..twin.project import cycle_time_warnings
+    from ..twin.services.history import database_url
     from .progress import ProgressReport
 
     check_finite(step=step, end=end, **{"cycle-period": cycle_period})
@@ -66,6 +68,8 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
                                  param_hint="--cycle-period")
     system = load(project, cells=True, reader="cotwin run")
     check_timing(system.spec, step, end)
+    if step is not None and cycle_period is None and not system.spec.robots:
+        show_warnings(cycle_time_warnings(system.spec, time_readings(system.models.program), step))
     show_warnings(system.warnings)  # what cotwin check says of the models and the project (a joint out of limits...)
     reader = "cotwin run --dashboard" if dashboard and not system.spec.robots else "cotwin run"  # a cell: no history
     show_warnings(system.spec.ignored_sections(reader))

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..diagnostics import CotwinError, Diagnostics
+from ..diagnostics import CotwinError, Diagnostics, Location
 from ..memo import once_per
 from ..robosim import functions as fns
 from ..robosim import syntax as s
@@ -735,6 +735,19 @@ class _Builder:
                     writers.setdefault(name, []).append(op.name)
         for op in operations:
             op.shares = {other: name for name, ops in sorted(writers.items()) if op.name in ops for other in ops if other != op.name}
+
+
+def time_readings(program: "Program") -> list[Location]:
+    """Where the d-model reads time (`since`, `sinceEntry`), in source order: counted in cycles, so what it reads
+    in seconds follows the cycle's length (a communication step, unless [cosim] parameters cycle_period says)."""
+    found = set()
+    for inst in program.machines:
+        for body in (inst, *inst.frames):
+            roots = [t.condition for t in body.graph.transitions if t.condition is not None]
+            roots += [e for st in _body_statements(body.machine) for e in s.statement_expressions(st)]
+            found.update(node.loc for root in roots for node in s.walk(root)
+                         if isinstance(node, (s.SinceExpr, s.SinceEntryExpr)))
+    return sorted(found, key=lambda loc: (loc.path, loc.line, loc.column))
 
 
 def _body_statements(machine: StateMachine):

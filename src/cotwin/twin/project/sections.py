@@ -14,7 +14,7 @@ from urllib.parse import urlsplit
 from ...config import Key, did_you_mean, is_number, shown, unique, within
 from ...cosim.execution import step_count
 from ...cosim.isolated import DEFAULT_TIMEOUT
-from ...diagnostics import CotwinError
+from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...pmodel.mjcf import TIMESTEP as PHYSICS_STEP
 from ...pmodel.perturbation import SCHEMA as PLANT
 from ...settings import setting
@@ -87,6 +87,24 @@ def timing_problems(step: float, end: float, cycle_period: float | None = None) 
             out.append((CYCLE_PERIOD, f"{cycle_period!r} s does not divide the step of {step:g} s into whole "
                                       "d-model cycles"))
     return out
+
+
+def cycle_time_warnings(spec: "TwinProject", readings: list[Location], step: float) -> list[Finding]:
+    """A warning at the d-model's first reading of time when a run's step (`--step`) is not the project's and no
+    cycle_period fixes the d-model's cycle: one cycle per step, so its `since` and `sinceEntry` count faster or
+    slower in seconds than the project was written for."""
+    period = cycle_period(spec)
+    if not readings or (period is not None and period > 0) or math.isclose(step, spec.step, rel_tol=1e-9):
+        return []  # (a cycle_period of 0: a cycle per step)
+    ratio = spec.step / step
+    shorter, pace = (f"{ratio:.3g} times shorter", f"{ratio:.3g} times sooner") if ratio > 1 else \
+        (f"{1 / ratio:.3g} times longer", f"{1 / ratio:.3g} times later")
+    others = f" (and {len(readings) - 1} other reading(s) of time)" if len(readings) > 1 else ""
+    return [Finding(readings[0], Severity.WARNING,
+                    f"the d-model counts time in cycles, one per step: at a step of {step:g} s a cycle is {shorter} "
+                    f"than at the project's step of {spec.step:g} s, so this reading of time{others} reaches a value "
+                    f"{pace} in seconds; give "
+                    f"[cosim] parameters {CYCLE_PERIOD} = {spec.step:g} to keep its timing")]
 
 
 def _name(value: str) -> str | None:
@@ -308,7 +326,9 @@ class Cosim:
     log: tuple[str, ...] | None = setting("mapping variables to log (default: every monitored one)",
                                           Key("list[str]", check=unique("variable", empty=True)))
     parameters: dict = setting("d-model FMU parameters: its random seed, constants without value; cycle_period, "
-                               "if given, divides the step into whole cycles", Key("table", {}, check=_parameters))
+                               "if given, divides the step into whole cycles (else a cycle a step: a run at another "
+                               "step changes what the d-model's since and sinceEntry mean in seconds; cotwin run "
+                               "warns of it)", Key("table", {}, check=_parameters))
     isolate: bool | None = setting("the d-model FMU in a process of its own (cotwin.cosim.isolated), a crash or "
                                    "hang in it a located error (default: only an FMU cotwin did not build)",
                                    Key("bool"))
