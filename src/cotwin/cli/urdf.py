@@ -69,5 +69,15 @@ def _ik_tool(pmodel) -> str | None:
            else "the end of the longest chain of moving joints")
     task = ik.task_for(len(arm))
     reaches = f": {ik.REACHES[task]}" if task != "pose" else ""
-    return (f"inverse_kinematics: tool link {tool.link} ({why}), arm joints {', '.join(arm)} ({len(arm)}{reaches}); "
-            "another tool link: [tool] link in the cell geometry (docs/calibration.md)")
+    others = [g for g in grippers(tree) if g != tool.link] if tool.fingers else []
+    choice = (f"; it is one of {len(others) + 1} grippers (also {', '.join(others)}): to drive another arm, name its "
+              "gripper by [tool] link in the cell geometry (docs/calibration.md)") if others else \
+        "; another tool link: [tool] link in the cell geometry (docs/calibration.md)"
+    return f"inverse_kinematics: tool link {tool.link} ({why}), arm joints {', '.join(arm)} ({len(arm)}{reaches}){choice}"
+
+
+def grippers(tree) -> list[str]:
+    """The links carrying two prismatic fingers or more, in the tree's order: the tools inverse_kinematics takes for a
+    gripper (cotwin.pmodel.ik.find_tool takes the last of them by default); a robot of two arms has two."""
+    return [link.name for link in tree.links
+            if sum(1 for j in tree.joints if j.parent == link.name and j.kind == "prismatic") >= 2]

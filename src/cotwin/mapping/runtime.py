@@ -128,6 +128,53 @@ def kinematics_result_problem(project, model: MappingModel, pmodel: str, tool_li
                    f"calibration, docs/calibration.md)")
 
 
+def commanded_joints(model: MappingModel) -> dict[str, object]:
+    """The joints the mapping's operations command (`P::L::J::ACT.port == e`), each with where its first such
+    equation is, in the mapping's order."""
+    out: dict[str, object] = {}
+    for op in model.operations:
+        for eq in op.equations:
+            path = _actuator_port(eq)
+            if path is not None:
+                out.setdefault(path.split("::")[2], eq.left.base.loc)
+    return out
+
+
+def calls_inverse_kinematics(model: MappingModel) -> bool:
+    """Does an operation of the mapping call `inverse_kinematics` (so that its values drive joints)?"""
+    exprs = [e for op in model.operations for e in (*(v.init for v in op.variables if v.init is not None),
+                                                    *op.equations, *(value for _, value, _ in op.actions))]
+    return any(isinstance(node, s.Call) and isinstance(node.function, s.Name)
+               and node.function.name.last == "inverse_kinematics" for e in exprs for node in s.walk(e))
+
+
+def ik_arm_problem(model: MappingModel, tree, tool_link: str, arm: list[str]) -> Finding | None:
+    """A mapping calling `inverse_kinematics` that commands joints of the p-model but none of the arm the IK
+    solves for (base to `tool_link`): the values solved for one arm would drive another's joints (a robot of two
+    arms, the IK's default tool the other arm's gripper), every move 'completing' with the tool elsewhere. An
+    error at the first equation commanding a joint, naming both arms, or None."""
+    if not arm or not calls_inverse_kinematics(model):
+        return None
+    actuated = {j.name for j in tree.actuated}
+    commanded = {j: loc for j, loc in commanded_joints(model).items() if j in actuated}
+    if not commanded or set(commanded) & set(arm):
+        return None
+    by_name = {j.name: j for j in tree.joints}
+    parent_of = {j.child: j.parent for j in tree.joints}
+
+    def depth(link: str) -> int:  # joints from the root to the link
+        return 0 if link not in parent_of else 1 + depth(parent_of[link])
+
+    turning = [j for j in commanded if by_name[j].kind in ("revolute", "continuous")] or list(commanded)
+    last = max(turning, key=lambda j: depth(by_name[j].child))  # the commanded arm joint furthest from the base
+    return Finding(next(iter(commanded.values())), Severity.ERROR,
+                   f"mapping {model.name} commands {', '.join(commanded)} of p-model {tree.name}, but inverse_kinematics "
+                   f"solves for the arm from its base to the tool link {tool_link} ({', '.join(arm)}), none of whose "
+                   f"joints it commands: the values solved for one arm would move the other. Name the tool of the "
+                   f"arm it commands by [tool] link in the cell geometry ([platform] calibration, docs/calibration.md), "
+                   f"e.g. {by_name[last].child} (the link {last} moves) or a link fixed beyond it")
+
+
 class FunctionRegistry:
     """Implementations of functions the models leave abstract, bound to the platform's kinematics and
     the cell's geometry: `inverse_kinematics(x, y, z)` takes the point the mapping computes in the
@@ -609,7 +656,8 @@ class Mapping:
         """`kinematics_result_problem` at run time: the last line of defence (cotwin check and load_models
         report it before, cotwin.twin.assembly.system)."""
         problem = kinematics_result_problem(self.project, self.model, registry.tree.name, registry.tool.link,
-                                            registry.arm)
+                                            registry.arm) or ik_arm_problem(self.model, registry.tree,
+                                                                            registry.tool.link, registry.arm)
         if problem is not None:
             raise CotwinError([problem])
 

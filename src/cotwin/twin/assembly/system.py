@@ -134,8 +134,8 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     cell's robots share its [plant] (a joint named applies to the robots that have it), checked against
     them all by cotwin.pmodel.perturbation.perturbed_world."""
     from ...dmodel.program import build_program
-    from ...mapping.runtime import (declares_mirrors, kinematics_result_problem, mirror_variables, mirrored_joints,
-                                    uses_kinematics)
+    from ...mapping.runtime import (declares_mirrors, ik_arm_problem, kinematics_result_problem, mirror_variables,
+                                    mirrored_joints, uses_kinematics)
     from ...pmodel.cell import CellGeometry
     from ...pmodel import ik
     from ...mapping.profile import profile_rays
@@ -177,6 +177,10 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         _gather(problems, lambda: calibration.geometry.check_joints(arm), None)
     if tool is not None and (uses_kinematics(mapping) or declares_mirrors(variables) and spec.mirror_joints == "arm"):
         problem = kinematics_result_problem(project, mapping, tree.name, tool.link, arm)  # as a run sets up its IK
+        if problem is not None:
+            problems.append(problem)
+    if tool is not None:  # the IK's arm is the one the mapping drives (a robot of two arms: the other's gripper)
+        problem = ik_arm_problem(mapping, tree, tool.link, arm)
         if problem is not None:
             problems.append(problem)
     actuated = [j.name for j in tree.actuated]
