@@ -227,3 +227,22 @@ def test_naming_the_right_gripper_as_the_tool_checks_and_the_right_arm_reaches(i
     run = cotwin_in_process("run", project, "-o", tmp_path / "out")
     assert run.returncode == 0, run.stderr
     assert "commands: 1, 1 completed" in run.stdout, run.stdout
+
+
+def test_a_cell_of_robots_running_a_dmodel_of_ones_own_says_which_moves_completed(imported, tmp_path):
+    # two Baxters in one cell, each reaching with its right arm: the cell's outcomes counted the paper's
+    # `moveCompleted` events and its `collision`, so a d-model of other names had '0 move(s) completed' for moves
+    # that completed; now each robot's commands are judged as a single robot's (taken, done, back at rest)
+    project = baxter_project(imported, tmp_path, tool_link="right_gripper_base_link")
+    project.write_text('[models]\ndmodel = "reach.rst"\n'
+                       '[[robots]]\nname = "a"\npmodel = "baxter.pm"\nmapping = "mapping.pm"\ncalibration = "cell.toml"\n'
+                       '[[robots]]\nname = "b"\npmodel = "baxter.pm"\nmapping = "mapping.pm"\ncalibration = "cell.toml"\n'
+                       'xyz = [0.0, 3.0, 0.0]\n'
+                       '[scenario]\nplan = "cell.csv"\n[cosim]\nstep = 0.1\nend = 4.0\n')
+    (tmp_path / "cell.csv").write_text("timestep,a.goCommand,a.Point_px,a.Point_py,a.Point_pz,"
+                                       "b.goCommand,b.Point_px,b.Point_py,b.Point_pz\n"
+                                       "500,true,0.7,-0.4,0.1,true,0.7,2.6,0.1\n")
+    run = cotwin_in_process("run", project, "-o", tmp_path / "out")
+    assert run.returncode == 0, run.stderr
+    assert "a: 1 command(s) applied, 1 move(s) completed, no collision" in run.stdout, run.stdout
+    assert "b: 1 command(s) applied, 1 move(s) completed, no collision" in run.stdout, run.stdout

@@ -150,10 +150,18 @@ class Summary:
 class CommandLedger(Observer):
     """Follows every command a run applies (see module doc); `outcomes` grows as the run goes."""
 
-    def __init__(self, system: TwinSystem):
+    def __init__(self, system: TwinSystem, units: dict[str, str] | None = None, scope=None):
+        """`units`: the co-simulation's name of each of the twin's units where it differs (a robot of a cell: its
+        own d-model and source units, the cell's one mapping unit); `scope`: the mapping unit's name of one of the
+        twin's mapping ports (a cell's: `ROBOT.port`)."""
         program = system.models.program
         self.program = program
         self.system = system
+        units = units or {}
+        self._dmodel = units.get(DMODEL.name, DMODEL.name)
+        self._mapping = units.get(MAPPING.name, MAPPING.name)
+        self._source = units.get(system.source.name, system.source.name) if system.source is not None else None
+        self._scope = scope or (lambda port: port)
         self.rest = once_per(program, "rest states", lambda: rest_states(program))  # the same for every what-if
         self.cycles = once_per(program, "cycle reads", lambda: CycleReads(program))
         position = {m.index: k for k, m in enumerate(program.machines)}  # a machine's place among the state ports
@@ -166,12 +174,12 @@ class CommandLedger(Observer):
                         and c.output in {ev.name for ev in program.inputs}]
 
     def simulation_initialized(self, execution) -> None:
-        source = execution.system.units.get(self.system.source.name) if self.system.source is not None else None
+        source = execution.system.units.get(self._source) if self._source is not None else None
         self._queue = source.command_queue if source is not None else None  # cotwin.twin.assembly.commands.CommandQueue
         self._seen = self._count()
         # a clocked d-model (FMI 3.0) reads a command at its clock's first tick from the point it was applied:
         # in that point's event phase, or at a later one when the clock is slower than the step
-        self._cycles = DModelCycles(execution)
+        self._cycles = DModelCycles(execution, self._dmodel)
         # a run's first event phase (at its start, before any step) may have applied commands and ticked: the
         # d-model's first cycle, from its initial junction, read them (judged below, not passed over as old)
         first = self._seen if self._cycles.clocked and execution.steps == 0 and self._cycles.seen else 0
@@ -182,9 +190,10 @@ class CommandLedger(Observer):
         # change then spans cycles, on paths past `exec` (CycleReads `several`)
         self._several = isinstance(period, (int, float)) and 0 < period < execution.step_size * (1 - 1e-9)
         slots = execution.algorithm.slots
-        self._calls_read = execution.reader([(DMODEL.name, c) for c in self._calls if (DMODEL.name, c) in slots])
-        self._events_read = execution.reader([(MAPPING.name, e) for e in self._events])
-        self._state_read = execution.reader([(DMODEL.name, port) for port, _ in self._states])
+        self._calls = [c for c in self._calls if (self._dmodel, c) in slots]  # read in this order
+        self._calls_read = execution.reader([(self._dmodel, c) for c in self._calls])
+        self._events_read = execution.reader([(self._mapping, self._scope(e)) for e in self._events])
+        self._state_read = execution.reader([(self._dmodel, port) for port, _ in self._states])
         self._before = self._state_read()
         # the platform events of the last steps seen: those in none of them were absent when the d-model's cycle
         # before the one judged read its exec guards (a step not seen repeats the one before it)
