@@ -246,3 +246,27 @@ def test_a_cell_of_robots_running_a_dmodel_of_ones_own_says_which_moves_complete
     assert run.returncode == 0, run.stderr
     assert "a: 1 command(s) applied, 1 move(s) completed, no collision" in run.stdout, run.stdout
     assert "b: 1 command(s) applied, 1 move(s) completed, no collision" in run.stdout, run.stdout
+
+
+def test_outcomes_names_a_dmodels_own_answers_so_a_refused_command_is_not_completed(imported, tmp_path):
+    # the reaching d-model answers `refused` for a target out of reach: the outcomes knew only the paper's names
+    # (nonfeasible*, infeasible*, unreachable*), so the refused command, back at rest, was 'completed'
+    project = baxter_project(imported, tmp_path, tool_link="right_gripper_base_link",
+                             plan="timestep,goCommand,Point_px,Point_py,Point_pz\n500,true,3.0,0.0,0.0\n", end=2.0)
+    project.write_text(project.read_text() + '[outcomes]\ninfeasible = ["refused"]\nfeasible = ["accepted"]\n')
+    run = cotwin_in_process("run", project, "-o", tmp_path / "out")
+    assert "commands: 1, 1 infeasible" in run.stdout, run.stdout + run.stderr
+    assert "infeasible (refused)" in run.stdout and "completed at" not in run.stdout
+    whatif = cotwin_in_process("whatif", project, "--plan", tmp_path / "plan.csv")
+    assert "NOT feasible" in whatif.stdout and "1 infeasible" in whatif.stdout, whatif.stdout + whatif.stderr
+
+
+def test_an_outcomes_name_that_is_no_event_of_the_dmodel_is_an_error_at_its_key(imported, tmp_path):
+    project = baxter_project(imported, tmp_path, tool_link="right_gripper_base_link")
+    text = project.read_text() + '[outcomes]\ninfeasible = ["refuse"]\n'
+    project.write_text(text)
+    check = cotwin_in_process("check", project)
+    said = check.stdout + check.stderr
+    assert check.returncode != 0
+    line = text.splitlines().index('infeasible = ["refuse"]') + 1
+    assert f"cotwin.toml:{line}:" in said and "did you mean 'refused'" in said, said

@@ -511,11 +511,11 @@ class RobotOutcome:
 class CellOutcomes(Observer):
     """Per robot: the commands its source applied, what became of each (a CommandLedger per robot, on its own
     d-model instance and its ports of the cell's mapping: completed, infeasible, ...), and the steps its d-model
-    was told of a collision (an event of its mapping whose name says a move stopped: cotwin.twin.assembly.outcomes.
-    stopping). Nothing here knows a d-model's event names: any d-model's commands are judged as a single robot's."""
+    was told of a collision (an event of its mapping that stops a move: [outcomes] stops, else one whose name says
+    so, cotwin.twin.assembly.outcomes.EventRoles). Nothing here knows a d-model's event names: any d-model's commands are judged as a single robot's."""
 
     def __init__(self, cell: CellSystem):
-        from .outcomes import CommandLedger, stopping
+        from .outcomes import CommandLedger
 
         self.cell = cell
         self.robots = {r.name: RobotOutcome(r.name, planned=len(r.system.commands) if cell.spec.plan is not None else None)
@@ -524,7 +524,8 @@ class CellOutcomes(Observer):
         # per robot, made once (the observer runs every step): its source, command events and scoped stopping events
         self._watch = [(r.name, r.source.name if r.source is not None else None, sorted(r.system.command_events),
                         [r.scoped(ev.name) for ev in r.system.models.mapping_model.input_events
-                         if stopping(ev.name) and ev.name in {i.name for i in r.system.models.program.inputs}])
+                         if self.ledgers[r.name].roles.stops(ev.name)
+                         and ev.name in {i.name for i in r.system.models.program.inputs}])
                        for r in cell.robots]
         self._before: dict[str, bool] = {}
 

@@ -11,11 +11,12 @@
   slower than the step, the same event was applied again: the tick reads one occurrence, with the last one's
   values, so the earlier is *replaced*). A command taken is
   `accepted`; the operations and platform events that follow, until the next command taken, are its own;
-- *infeasible*: among its events one named `nonfeasible*`, `infeasible*`, `unreachable*` (feasible:
-  `feasible*`, `reachable*`), a naming convention of mappings such as the paper's;
-- *stopped*: among its events, before it completed, one that stops a move (a word of its name is collision,
-  fault, emergency or protective and none says the opposite: `stopping`): the d-model then returns to rest
-  having not done it, which is no completion;
+- *infeasible*: among its events one the project's `[outcomes] infeasible` names, else (the key left out) one
+  named `nonfeasible*`, `infeasible*`, `unreachable*` (feasible: `[outcomes] feasible`, else `feasible*`,
+  `reachable*`), a naming convention of mappings such as the paper's;
+- *stopped*: among its events, before it completed, one that stops a move (`[outcomes] stops`, else one a word
+  of whose name is collision, fault, emergency or protective and none says the opposite: `stopping`): the
+  d-model then returns to rest having not done it, which is no completion;
 - *completed at t*: taken, not infeasible, not stopped, and the d-model back at rest (the leaf each machine
   rests in after its first cycle without inputs, e.g. Idle) at t, or passed through it in the cycle at t that
   took the next command (AwaitClosed -> Idle -> Requested: CycleReads.passes); *never completed* otherwise.
@@ -43,10 +44,12 @@ STOPS = {"collision", "fault", "emergency", "protective"}  # a word of the name 
 NOT_STOPS = {"no", "not", "non", "free", "clear", "cleared", "reset", "ok", "none"}  # ... unless it says the opposite
 
 
-def answers_feasibility(program) -> bool:
-    """Whether a d-model takes feasibility answers (an input event named feasible*, infeasible*, ...): only then
-    is a command without one of unknown feasibility; for others feasibility is not a question."""
-    return any(FEASIBLE.match(ev.name) or INFEASIBLE.match(ev.name) for ev in program.inputs)
+def answers_feasibility(program, roles: "EventRoles | None" = None) -> bool:
+    """Whether a d-model takes feasibility answers (an input event named feasible*, infeasible*, ..., or one the
+    project's [outcomes] names): only then is a command without one of unknown feasibility; for others
+    feasibility is not a question."""
+    roles = roles or EventRoles()
+    return any(roles.feasible(ev.name) or roles.infeasible(ev.name) for ev in program.inputs)
 
 
 @lru_cache(maxsize=None)  # asked of the events of every step: a mapping has a few names
@@ -56,6 +59,35 @@ def stopping(event: str) -> bool:
     says the opposite (`noCollision`, `collisionFree`, `faultCleared`, `resetFault`; `setDefault` has no such word)."""
     words = {w.lower() for w in re.findall(r"[A-Z]?[a-z0-9]+|[A-Z]+(?![a-z])", event)}
     return bool(words & STOPS) and not words & NOT_STOPS
+
+
+@dataclass(frozen=True)
+class EventRoles:
+    """Which of the d-model's input events say a command is infeasible, feasible, or stopped: the project's
+    `[outcomes]` lists where given (a d-model of one's own names its answers as it likes), else the naming
+    convention above."""
+
+    infeasible_events: frozenset[str] | None = None
+    feasible_events: frozenset[str] | None = None
+    stop_events: frozenset[str] | None = None
+
+    @classmethod
+    def of(cls, spec) -> "EventRoles":
+        """The roles a project's `[outcomes]` gives (cotwin.twin.project: TwinProject.outcome_events)."""
+        given = getattr(spec, "outcome_events", None) or {}
+        named = {role: frozenset(given[role]) if role in given else None for role in ("infeasible", "feasible", "stops")}
+        return cls(named["infeasible"], named["feasible"], named["stops"])
+
+    def infeasible(self, event: str) -> bool:
+        return event in self.infeasible_events if self.infeasible_events is not None else bool(INFEASIBLE.match(event))
+
+    def feasible(self, event: str) -> bool:
+        return event in self.feasible_events if self.feasible_events is not None else bool(FEASIBLE.match(event))
+
+    def stops(self, event: str) -> bool:
+        return event in self.stop_events if self.stop_events is not None else stopping(event)
+
+
 STRICT_EXIT = 3  # `--strict`: a command applied but not completed, or none at all completed (docs/interop.md)
 
 
@@ -83,6 +115,7 @@ class CommandOutcome:
     busy: str | None = None  # the d-model's state when it was not taken
     stopped: tuple[str, float] | None = None  # (event, time): a stopping event came before it completed
     replaced: float | None = None  # not taken: the same event applied at this time reached the d-model's cycle instead
+    refused_by: str | None = None  # infeasible: the answer that said so
 
     @property
     def verdict(self) -> str:
@@ -102,7 +135,7 @@ class CommandOutcome:
         if verdict == "completed":
             how = f"completed at t = {self.done:g} s"
         elif verdict == "infeasible":
-            how = f"infeasible ({', '.join(e for e in self.events if INFEASIBLE.match(e))})"
+            how = f"infeasible ({self.refused_by})" if self.refused_by else "infeasible"
         elif verdict == "not taken" and self.replaced is not None:
             how = f"not taken (replaced by the one applied at t = {self.replaced:g} s before the d-model's cycle read it)"
         elif verdict == "not taken":
@@ -162,6 +195,7 @@ class CommandLedger(Observer):
         self._mapping = units.get(MAPPING.name, MAPPING.name)
         self._source = units.get(system.source.name, system.source.name) if system.source is not None else None
         self._scope = scope or (lambda port: port)
+        self.roles = EventRoles.of(system.spec)
         self.rest = once_per(program, "rest states", lambda: rest_states(program))  # the same for every what-if
         self.cycles = once_per(program, "cycle reads", lambda: CycleReads(program))
         position = {m.index: k for k, m in enumerate(program.machines)}  # a machine's place among the state ports
@@ -233,11 +267,11 @@ class CommandLedger(Observer):
             for e in events:
                 if e not in current.events:
                     current.events.append(e)
-                if current.feasible is None and INFEASIBLE.match(e):
-                    current.feasible = False
-                elif current.feasible is None and FEASIBLE.match(e):
+                if current.feasible is None and self.roles.infeasible(e):
+                    current.feasible, current.refused_by = False, e
+                elif current.feasible is None and self.roles.feasible(e):
                     current.feasible = True
-                if current.done is None and current.stopped is None and stopping(e):
+                if current.done is None and current.stopped is None and self.roles.stops(e):
                     current.stopped = (e, t)
             if current.done is None and self.resting(states):
                 current.done = t

@@ -197,6 +197,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     mirrors = mirror_variables(variables, joints)
     problems += reading_clashes(spec, taken_names(program, mapping, [*variables, *mirrors]))
     problems += reading_path_problems(spec, tree)
+    problems += outcome_event_problems(spec, program)
     own = mirror_warnings(spec, mapping, tree, joints, tool_link) if listed else []  # the project's against the models
     warnings += own
     if problems:
@@ -208,6 +209,22 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     monitored = [*mirrors, *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project),
                       list(dict.fromkeys(warnings)), mirrors, arm)
+
+
+def outcome_event_problems(spec: TwinProject, program) -> list[Finding]:
+    """[outcomes] names that are no input event of the d-model: an error at the key with the nearest event (a name
+    misspelt would leave every command of that role judged as if it had none)."""
+    events = [ev.name for ev in program.inputs]
+    out = []
+    for role, named in spec.outcome_events.items():
+        unknown = [e for e in named if e not in events]
+        if unknown:
+            what = "is not an input event" if len(unknown) == 1 else "are not input events"
+            out.append(Finding(spec.location("outcomes", role), Severity.ERROR,
+                               f"[outcomes] {role}: {', '.join(unknown)} {what} "
+                               f"of d-model module {program.module.name}{did_you_mean(unknown[0], events)} "
+                               f"(its input events: {', '.join(events)})"))
+    return out
 
 
 def reading_path_problems(spec: TwinProject, tree) -> list[Finding]:
