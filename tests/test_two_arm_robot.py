@@ -270,3 +270,21 @@ def test_an_outcomes_name_that_is_no_event_of_the_dmodel_is_an_error_at_its_key(
     assert check.returncode != 0
     line = text.splitlines().index('infeasible = ["refuse"]') + 1
     assert f"cotwin.toml:{line}:" in said and "did you mean 'refused'" in said, said
+
+
+def test_holding_a_joint_that_stands_at_its_limit_is_no_goal_beyond_it(imported, tmp_path, caplog):
+    # the IK puts right_w2 at its lower limit for this target; `halt` commands every joint to its reading, which
+    # the simulated joint at its limit exceeds by a hair: a warning said halt commanded it beyond its limits
+    import csv
+    import logging
+
+    project = baxter_project(imported, tmp_path, tool_link="right_gripper_base_link",
+                             plan="timestep,goCommand,Point_px,Point_py,Point_pz\n0,true,0.8,-0.3,0.1\n", end=3.0)
+    with caplog.at_level(logging.WARNING, logger="cotwin.twin"):
+        run = cotwin_in_process("run", project, "-o", tmp_path / "out")
+    assert run.returncode == 0, run.stderr
+    assert "commands: 1, 1 completed" in run.stdout, run.stdout
+    rows = list(csv.DictReader((tmp_path / "out" / "outputs.csv").open()))
+    assert abs(float(rows[-1]["{mapping}.mapping.q6"]) - -3.059) < 1e-3  # the premise: right_w2 at its limit
+    said = [r.getMessage() for r in caplog.records] + [run.stderr]
+    assert not [m for m in said if "beyond its limits" in m], said

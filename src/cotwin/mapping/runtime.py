@@ -486,6 +486,7 @@ def _definition(eq: s.Expr, bind: str) -> s.Expr | None:
 
 log = logging.getLogger("cotwin.twin")
 LIMIT_SLACK = 1e-9  # a goal this far beyond a limit (rad or m) is the limit written another way, not beyond it
+HOLD_SLACK = 1e-6  # a goal this near its joint's position (rad or m) holds the joint where it is
 
 
 class Operation:
@@ -538,8 +539,11 @@ class Operation:
     def _say_beyond_limits(self, goals: dict[str, float]) -> None:
         """Warn (once per actuator) of a position goal outside its joint's limits: the simulated joint stops at
         the limit (a real controller refuses the goal), so an event waiting for the joint to get there never
-        comes, and the run would only say that the command never completed."""
+        comes, and the run would only say that the command never completed. A goal where the joint already is
+        (an operation holding the arm where it stands, its goal the joint's reading, which the simulated joint
+        at its limit exceeds by a hair) is no such mistake: nothing is said of it."""
         rt = self.runtime
+        where: dict[str, float] | None = None  # the joints' positions, read once and only for a goal beyond
         for path, goal in goals.items():
             if path in self.beyond_said or not math.isfinite(goal):
                 continue
@@ -548,6 +552,11 @@ class Operation:
                 continue
             name, lower, upper, unit = joint
             if (lower is not None and goal < lower - LIMIT_SLACK) or (upper is not None and goal > upper + LIMIT_SLACK):
+                if where is None:
+                    positions = getattr(rt.endpoint, "joint_positions", None)
+                    where = positions() if positions is not None else {}
+                if name in where and abs(goal - where[name]) <= HOLD_SLACK:
+                    continue
                 self.beyond_said.add(path)
                 low = "-inf" if lower is None else f"{lower:g}"
                 high = "inf" if upper is None else f"{upper:g}"
