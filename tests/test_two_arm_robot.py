@@ -288,3 +288,18 @@ def test_holding_a_joint_that_stands_at_its_limit_is_no_goal_beyond_it(imported,
     assert abs(float(rows[-1]["{mapping}.mapping.q6"]) - -3.059) < 1e-3  # the premise: right_w2 at its limit
     said = [r.getMessage() for r in caplog.records] + [run.stderr]
     assert not [m for m in said if "beyond its limits" in m], said
+
+
+def test_cotwin_test_counts_as_collisions_the_events_the_project_says_stop_a_move(imported, tmp_path):
+    # a suite's platform report counted events with 'collision' in their names: a d-model of one's own whose stop
+    # is named otherwise had 'collisions 0' whatever happened; [outcomes] stops names them (here, for the test's
+    # sake, `settled`, which every case's halt brings)
+    project = baxter_project(imported, tmp_path, tool_link="right_gripper_base_link")
+    project.write_text(project.read_text() + '[outcomes]\nstops = ["settled"]\n')
+    made = cotwin_in_process("testgen", tmp_path / "reach.rst", tmp_path / "baxter.pm", tmp_path / "mapping.pm",
+                             "--project", project, "--answers", "auto", "-o", tmp_path / "suite")
+    assert made.returncode == 0, made.stderr
+    ran = cotwin_in_process("test", project, tmp_path / "suite")
+    reports = [line for line in ran.stdout.splitlines() if "platform:" in line]
+    assert reports and all("settled x" in line for line in reports), ran.stdout + ran.stderr
+    assert all("collisions 0" not in line for line in reports), ran.stdout
