@@ -90,13 +90,14 @@ RIGHT = [("right_arm_mount", "right_s0"), ("right_upper_shoulder", "right_s1"), 
 READY = "0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0"
 
 
-def mapping() -> str:
-    """The reaching mapping on Baxter's right arm, from the paths `import-urdf` prints."""
+def mapping(reached: int = 7) -> str:
+    """The reaching mapping on Baxter's right arm, from the paths `import-urdf` prints; `reached`: how many of the
+    arm's joints `reach` commands (fewer: the new user's slip of a joint left out)."""
     def path(i: int, port: str) -> str:
         link, joint = RIGHT[i]
         return f"baxter::{link}::{joint}::{joint}_{port}"
 
-    command = "\n".join(f"\t\tequation {path(i, 'motor.dangle')} == target_q[{i}]" for i in range(7))
+    command = "\n".join(f"\t\tequation {path(i, 'motor.dangle')} == target_q[{i}]" for i in range(reached))
     hold = "\n".join(f"\t\tequation {path(i, 'motor.dangle')} == {path(i, 'position.output_position')}"
                      for i in range(7))
     there = "\n".join(f"\t\tequation abs({path(i, 'position.output_position')} - target_q[{i}]) < 0.003"
@@ -303,3 +304,18 @@ def test_cotwin_test_counts_as_collisions_the_events_the_project_says_stop_a_mov
     reports = [line for line in ran.stdout.splitlines() if "platform:" in line]
     assert reports and all("settled x" in line for line in reports), ran.stdout + ran.stderr
     assert all("collisions 0" not in line for line in reports), ran.stdout
+
+
+def test_an_operation_solving_the_ik_but_leaving_an_arm_joint_uncommanded_is_warned_at_its_first_command(
+        imported, tmp_path):
+    # `reach` commands right_s0..right_w1 with the IK's values and leaves right_w2 where it is: check said ok
+    project = baxter_project(imported, tmp_path, tool_link="right_gripper_base_link")
+    (tmp_path / "mapping.pm").write_text(mapping(reached=6))
+    check = cotwin_in_process("check", project)
+    said = check.stdout + check.stderr
+    assert check.returncode == 0, said
+    assert f"mapping.pm:{first_command_line()}:" in said and "warning: operation reach" in said, said
+    assert "does not command right_w2" in said
+    (tmp_path / "mapping.pm").write_text(mapping())  # every joint commanded: nothing said
+    again = cotwin_in_process("check", project)
+    assert again.returncode == 0 and "does not command" not in again.stdout + again.stderr

@@ -175,6 +175,33 @@ def ik_arm_problem(model: MappingModel, tree, tool_link: str, arm: list[str]) ->
                    f"e.g. {by_name[last].child} (the link {last} moves) or a link fixed beyond it")
 
 
+def ik_joints_left_out(model: MappingModel, tree, tool_link: str, arm: list[str]) -> Finding | None:
+    """An operation calling `inverse_kinematics` that commands some of the IK's arm joints but not others: the IK
+    solves with every joint of the arm, so a joint left where it is puts the tool off the target while the move
+    'completes' (a 6-joint arm's operation reused on a 7-joint arm). A warning at the operation's first command,
+    or None."""
+    if not arm:
+        return None
+    for op in model.operations:
+        exprs = [*(v.init for v in op.variables if v.init is not None), *op.equations,
+                 *(value for _, value, _ in op.actions)]
+        if not any(isinstance(node, s.Call) and isinstance(node.function, s.Name)
+                   and node.function.name.last == "inverse_kinematics" for e in exprs for node in s.walk(e)):
+            continue
+        commanded: dict[str, object] = {}
+        for eq in op.equations:
+            path = _actuator_port(eq)
+            if path is not None:
+                commanded.setdefault(path.split("::")[2], eq.left.base.loc)
+        missing = [j for j in arm if j not in commanded]
+        if missing and len(missing) < len(arm):  # none commanded: stored for another operation, or ik_arm_problem's
+            return Finding(next(iter(commanded.values())), Severity.WARNING,
+                           f"operation {op.name} calls inverse_kinematics but does not command {', '.join(missing)} of "
+                           f"the arm it solves for (p-model {tree.name}, base to the tool link {tool_link}: "
+                           f"{', '.join(arm)}): a joint left where it is puts the tool off the target the IK reached")
+    return None
+
+
 class FunctionRegistry:
     """Implementations of functions the models leave abstract, bound to the platform's kinematics and
     the cell's geometry: `inverse_kinematics(x, y, z)` takes the point the mapping computes in the

@@ -134,8 +134,8 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     cell's robots share its [plant] (a joint named applies to the robots that have it), checked against
     them all by cotwin.pmodel.perturbation.perturbed_world."""
     from ...dmodel.program import build_program
-    from ...mapping.runtime import (declares_mirrors, ik_arm_problem, kinematics_result_problem, mirror_variables,
-                                    mirrored_joints, uses_kinematics)
+    from ...mapping.runtime import (declares_mirrors, ik_arm_problem, ik_joints_left_out, kinematics_result_problem,
+                                    mirror_variables, mirrored_joints, uses_kinematics)
     from ...pmodel.cell import CellGeometry
     from ...pmodel import ik
     from ...mapping.profile import profile_rays
@@ -183,6 +183,9 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         problem = ik_arm_problem(mapping, tree, tool.link, arm)
         if problem is not None:
             problems.append(problem)
+        left_out = ik_joints_left_out(mapping, tree, tool.link, arm)
+        if left_out is not None:
+            warnings.append(left_out)
     actuated = [j.name for j in tree.actuated]
     unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
     if unknown:  # said at the key, with the nearest joint
