@@ -200,7 +200,7 @@ def test_a_mapping_driving_the_arm_the_ik_does_not_solve_for_is_a_located_error(
     assert check.returncode != 0, said
     assert f"mapping.pm:{first_command_line()}:" in said and "error:" in said
     assert "right_s0" in said and "left_gripper_base_link" in said and "left_s0" in said
-    assert "[tool] link" in said and "right_wrist" in said
+    assert "[tool] link" in said and "e.g. right_gripper_base_link (the gripper right_w2 moves)" in said
     run = cotwin_in_process("run", project, "-o", tmp_path / "out")
     assert run.returncode != 0 and "completed" not in run.stdout
     assert f"mapping.pm:{first_command_line()}:" in run.stderr

@@ -39,6 +39,7 @@ from ..config import nearest_first
 from ..diagnostics import CotwinError, Finding, Severity
 from ..plaindata import count, fields as state_fields, finite, like, of_type
 from ..pmodel import ik
+from ..pmodel.grippers import beyond
 from ..pmodel.ikcache import SolutionCache
 from ..pmodel.cell import CellGeometry
 from ..robosim import syntax as s
@@ -167,12 +168,15 @@ def ik_arm_problem(model: MappingModel, tree, tool_link: str, arm: list[str]) ->
 
     turning = [j for j in commanded if by_name[j].kind in ("revolute", "continuous")] or list(commanded)
     last = max(turning, key=lambda j: depth(by_name[j].child))  # the commanded arm joint furthest from the base
+    grippers = beyond(tree, last)
+    suggestion = f"{grippers[0]} (the gripper {last} moves)" if grippers else \
+        f"{by_name[last].child} (the link {last} moves) or a link fixed beyond it"
     return Finding(next(iter(commanded.values())), Severity.ERROR,
                    f"mapping {model.name} commands {', '.join(commanded)} of p-model {tree.name}, but inverse_kinematics "
                    f"solves for the arm from its base to the tool link {tool_link} ({', '.join(arm)}), none of whose "
                    f"joints it commands: the values solved for one arm would move the other. Name the tool of the "
                    f"arm it commands by [tool] link in the cell geometry ([platform] calibration, docs/calibration.md), "
-                   f"e.g. {by_name[last].child} (the link {last} moves) or a link fixed beyond it")
+                   f"e.g. {suggestion}")
 
 
 def ik_joints_left_out(model: MappingModel, tree, tool_link: str, arm: list[str]) -> Finding | None:
