@@ -236,8 +236,10 @@ def test_a_cell_of_robots_running_a_dmodel_of_ones_own_says_which_moves_complete
     # that completed; now each robot's commands are judged as a single robot's (taken, done, back at rest)
     project = baxter_project(imported, tmp_path, tool_link="right_gripper_base_link")
     project.write_text('[models]\ndmodel = "reach.rst"\n'
-                       '[[robots]]\nname = "a"\npmodel = "baxter.pm"\nmapping = "mapping.pm"\ncalibration = "cell.toml"\n'
-                       '[[robots]]\nname = "b"\npmodel = "baxter.pm"\nmapping = "mapping.pm"\ncalibration = "cell.toml"\n'
+                       '[[robots]]\nname = "a"\npmodel = "baxter.pm"\nmapping = "mapping.pm"\n'
+                       'calibration = "cell.toml"\n'
+                       '[[robots]]\nname = "b"\npmodel = "baxter.pm"\nmapping = "mapping.pm"\n'
+                       'calibration = "cell.toml"\n'
                        'xyz = [0.0, 3.0, 0.0]\n'
                        '[scenario]\nplan = "cell.csv"\n[cosim]\nstep = 0.1\nend = 4.0\n')
     (tmp_path / "cell.csv").write_text("timestep,a.goCommand,a.Point_px,a.Point_py,a.Point_pz,"

@@ -74,5 +74,6 @@ def _ik_tool(pmodel) -> str | None:
     choice = (f"; it is one of {len(others) + 1} grippers (also {', '.join(others)}): to drive another arm, name its "
               "gripper by [tool] link in the cell geometry (docs/calibration.md)") if others else \
         "; another tool link: [tool] link in the cell geometry (docs/calibration.md)"
-    return f"inverse_kinematics: tool link {tool.link} ({why}), arm joints {', '.join(arm)} ({len(arm)}{reaches}){choice}"
+    return (f"inverse_kinematics: tool link {tool.link} ({why}), arm joints {', '.join(arm)} ({len(arm)}{reaches})"
+            f"{choice}")
 

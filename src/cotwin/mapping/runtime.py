@@ -172,11 +172,11 @@ def ik_arm_problem(model: MappingModel, tree, tool_link: str, arm: list[str]) ->
     suggestion = f"{grippers[0]} (the gripper {last} moves)" if grippers else \
         f"{by_name[last].child} (the link {last} moves) or a link fixed beyond it"
     return Finding(next(iter(commanded.values())), Severity.ERROR,
-                   f"mapping {model.name} commands {', '.join(commanded)} of p-model {tree.name}, but inverse_kinematics "
-                   f"solves for the arm from its base to the tool link {tool_link} ({', '.join(arm)}), none of whose "
+                   f"mapping {model.name} commands {', '.join(commanded)} of p-model {tree.name}, but "
+                   f"inverse_kinematics solves for the arm from its base to the tool link {tool_link} ({', '.join(arm)}), none of whose "
                    f"joints it commands: the values solved for one arm would move the other. Name the tool of the "
-                   f"arm it commands by [tool] link in the cell geometry ([platform] calibration, docs/calibration.md), "
-                   f"e.g. {suggestion}")
+                   f"arm it commands by [tool] link in the cell geometry ([platform] calibration, "
+                   f"docs/calibration.md), e.g. {suggestion}")
 
 
 def ik_joints_left_out(model: MappingModel, tree, tool_link: str, arm: list[str]) -> Finding | None:

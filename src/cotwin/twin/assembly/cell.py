@@ -512,7 +512,8 @@ class CellOutcomes(Observer):
     """Per robot: the commands its source applied, what became of each (a CommandLedger per robot, on its own
     d-model instance and its ports of the cell's mapping: completed, infeasible, ...), and the steps its d-model
     was told of a collision (an event of its mapping that stops a move: [outcomes] stops, else one whose name says
-    so, cotwin.twin.assembly.outcomes.EventRoles). Nothing here knows a d-model's event names: any d-model's commands are judged as a single robot's."""
+    so, cotwin.twin.assembly.outcomes.EventRoles). Nothing here knows a d-model's event names: any d-model's
+    commands are judged as a single robot's."""
 
     def __init__(self, cell: CellSystem):
         from .outcomes import CommandLedger

@@ -75,7 +75,8 @@ class EventRoles:
     def of(cls, spec) -> "EventRoles":
         """The roles a project's `[outcomes]` gives (cotwin.twin.project: TwinProject.outcome_events)."""
         given = getattr(spec, "outcome_events", None) or {}
-        named = {role: frozenset(given[role]) if role in given else None for role in ("infeasible", "feasible", "stops")}
+        named = {role: frozenset(given[role]) if role in given else None
+                 for role in ("infeasible", "feasible", "stops")}
         return cls(named["infeasible"], named["feasible"], named["stops"])
 
     def infeasible(self, event: str) -> bool:
