@@ -173,7 +173,8 @@ def ik_arm_problem(model: MappingModel, tree, tool_link: str, arm: list[str]) ->
         f"{by_name[last].child} (the link {last} moves) or a link fixed beyond it"
     return Finding(next(iter(commanded.values())), Severity.ERROR,
                    f"mapping {model.name} commands {', '.join(commanded)} of p-model {tree.name}, but "
-                   f"inverse_kinematics solves for the arm from its base to the tool link {tool_link} ({', '.join(arm)}), none of whose "
+                   f"inverse_kinematics solves for the arm from its base to the tool link {tool_link} "
+                   f"({', '.join(arm)}), none of whose "
                    f"joints it commands: the values solved for one arm would move the other. Name the tool of the "
                    f"arm it commands by [tool] link in the cell geometry ([platform] calibration, "
                    f"docs/calibration.md), e.g. {suggestion}")
