@@ -73,14 +73,14 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
         check_outputs([out], [*system.spec.inputs, plan, state])
     commands = plan_file(plan, system.models.program)
     blob = read_bytes(state, "state") if state is not None else None  # capped: a state is a few MiB
-    from ..twin.assembly.outcomes import Summary, answers_feasibility
+    from ..twin.assembly.outcomes import EventRoles, Summary, answers_feasibility
 
     from ..twin.assembly.scenario import nothing_planned
 
     show_warnings(nothing_planned(Path(plan), commands))
     with about(state, StateError):
         prediction = predict(system, commands, blob, horizon=horizon, physics_step=physics_step)
-    unknown = "feasibility unknown, " if answers_feasibility(system.models.program) else ""
+    unknown = "feasibility unknown, " if answers_feasibility(system.models.program, EventRoles.of(system.spec)) else ""
     for c in prediction.commands:
         args = ", ".join(f"{k}={v}" for k, v in c.args.items())
         verdict = {True: "feasible, ", False: "NOT feasible, ", None: unknown}[c.feasible]

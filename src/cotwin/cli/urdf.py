@@ -54,6 +54,7 @@ def _ik_tool(pmodel) -> str | None:
     sensor frame at the end of the longest chain was taken silently (a gripper's revolute jaw as a 7th arm joint)."""
     from ..diagnostics import CotwinError
     from ..pmodel import ik
+    from ..pmodel.grippers import gripper_links
     from ..pmodel.tree import build_tree
     from ..robosim.check import load_checked
 
@@ -69,5 +70,10 @@ def _ik_tool(pmodel) -> str | None:
            else "the end of the longest chain of moving joints")
     task = ik.task_for(len(arm))
     reaches = f": {ik.REACHES[task]}" if task != "pose" else ""
-    return (f"inverse_kinematics: tool link {tool.link} ({why}), arm joints {', '.join(arm)} ({len(arm)}{reaches}); "
-            "another tool link: [tool] link in the cell geometry (docs/calibration.md)")
+    others = [g for g in gripper_links(tree) if g != tool.link] if tool.fingers else []
+    choice = (f"; it is one of {len(others) + 1} grippers (also {', '.join(others)}): to drive another arm, name its "
+              "gripper by [tool] link in the cell geometry (docs/calibration.md)") if others else \
+        "; another tool link: [tool] link in the cell geometry (docs/calibration.md)"
+    return (f"inverse_kinematics: tool link {tool.link} ({why}), arm joints {', '.join(arm)} ({len(arm)}{reaches})"
+            f"{choice}")
+

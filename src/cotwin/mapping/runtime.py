@@ -39,6 +39,7 @@ from ..config import nearest_first
 from ..diagnostics import CotwinError, Finding, Severity
 from ..plaindata import count, fields as state_fields, finite, like, of_type
 from ..pmodel import ik
+from ..pmodel.grippers import beyond
 from ..pmodel.ikcache import SolutionCache
 from ..pmodel.cell import CellGeometry
 from ..robosim import syntax as s
@@ -126,6 +127,84 @@ def kinematics_result_problem(project, model: MappingModel, pmodel: str, tool_li
                    f"vector(real, {len(arm)}) and command every one of them, or, if the tool is another link (a "
                    f"gripper's joint is no arm joint), name it by [tool] link in the cell geometry ([platform] "
                    f"calibration, docs/calibration.md)")
+
+
+def commanded_joints(model: MappingModel) -> dict[str, object]:
+    """The joints the mapping's operations command (`P::L::J::ACT.port == e`), each with where its first such
+    equation is, in the mapping's order."""
+    out: dict[str, object] = {}
+    for op in model.operations:
+        for eq in op.equations:
+            path = _actuator_port(eq)
+            if path is not None:
+                out.setdefault(path.split("::")[2], eq.left.base.loc)
+    return out
+
+
+def calls_inverse_kinematics(model: MappingModel) -> bool:
+    """Does an operation of the mapping call `inverse_kinematics` (so that its values drive joints)?"""
+    exprs = [e for op in model.operations for e in (*(v.init for v in op.variables if v.init is not None),
+                                                    *op.equations, *(value for _, value, _ in op.actions))]
+    return any(isinstance(node, s.Call) and isinstance(node.function, s.Name)
+               and node.function.name.last == "inverse_kinematics" for e in exprs for node in s.walk(e))
+
+
+def ik_arm_problem(model: MappingModel, tree, tool_link: str, arm: list[str]) -> Finding | None:
+    """A mapping calling `inverse_kinematics` that commands joints of the p-model but none of the arm the IK
+    solves for (base to `tool_link`): the values solved for one arm would drive another's joints (a robot of two
+    arms, the IK's default tool the other arm's gripper), every move 'completing' with the tool elsewhere. An
+    error at the first equation commanding a joint, naming both arms, or None."""
+    if not arm or not calls_inverse_kinematics(model):
+        return None
+    actuated = {j.name for j in tree.actuated}
+    commanded = {j: loc for j, loc in commanded_joints(model).items() if j in actuated}
+    if not commanded or set(commanded) & set(arm):
+        return None
+    by_name = {j.name: j for j in tree.joints}
+    parent_of = {j.child: j.parent for j in tree.joints}
+
+    def depth(link: str) -> int:  # joints from the root to the link
+        return 0 if link not in parent_of else 1 + depth(parent_of[link])
+
+    turning = [j for j in commanded if by_name[j].kind in ("revolute", "continuous")] or list(commanded)
+    last = max(turning, key=lambda j: depth(by_name[j].child))  # the commanded arm joint furthest from the base
+    grippers = beyond(tree, last)
+    suggestion = f"{grippers[0]} (the gripper {last} moves)" if grippers else \
+        f"{by_name[last].child} (the link {last} moves) or a link fixed beyond it"
+    return Finding(next(iter(commanded.values())), Severity.ERROR,
+                   f"mapping {model.name} commands {', '.join(commanded)} of p-model {tree.name}, but "
+                   f"inverse_kinematics solves for the arm from its base to the tool link {tool_link} "
+                   f"({', '.join(arm)}), none of whose "
+                   f"joints it commands: the values solved for one arm would move the other. Name the tool of the "
+                   f"arm it commands by [tool] link in the cell geometry ([platform] calibration, "
+                   f"docs/calibration.md), e.g. {suggestion}")
+
+
+def ik_joints_left_out(model: MappingModel, tree, tool_link: str, arm: list[str]) -> Finding | None:
+    """An operation calling `inverse_kinematics` that commands some of the IK's arm joints but not others: the IK
+    solves with every joint of the arm, so a joint left where it is puts the tool off the target while the move
+    'completes' (a 6-joint arm's operation reused on a 7-joint arm). A warning at the operation's first command,
+    or None."""
+    if not arm:
+        return None
+    for op in model.operations:
+        exprs = [*(v.init for v in op.variables if v.init is not None), *op.equations,
+                 *(value for _, value, _ in op.actions)]
+        if not any(isinstance(node, s.Call) and isinstance(node.function, s.Name)
+                   and node.function.name.last == "inverse_kinematics" for e in exprs for node in s.walk(e)):
+            continue
+        commanded: dict[str, object] = {}
+        for eq in op.equations:
+            path = _actuator_port(eq)
+            if path is not None:
+                commanded.setdefault(path.split("::")[2], eq.left.base.loc)
+        missing = [j for j in arm if j not in commanded]
+        if missing and len(missing) < len(arm):  # none commanded: stored for another operation, or ik_arm_problem's
+            return Finding(next(iter(commanded.values())), Severity.WARNING,
+                           f"operation {op.name} calls inverse_kinematics but does not command {', '.join(missing)} of "
+                           f"the arm it solves for (p-model {tree.name}, base to the tool link {tool_link}: "
+                           f"{', '.join(arm)}): a joint left where it is puts the tool off the target the IK reached")
+    return None
 
 
 class FunctionRegistry:
@@ -439,6 +518,7 @@ def _definition(eq: s.Expr, bind: str) -> s.Expr | None:
 
 log = logging.getLogger("cotwin.twin")
 LIMIT_SLACK = 1e-9  # a goal this far beyond a limit (rad or m) is the limit written another way, not beyond it
+HOLD_SLACK = 1e-6  # a goal this near its joint's position (rad or m) holds the joint where it is
 
 
 class Operation:
@@ -491,8 +571,11 @@ class Operation:
     def _say_beyond_limits(self, goals: dict[str, float]) -> None:
         """Warn (once per actuator) of a position goal outside its joint's limits: the simulated joint stops at
         the limit (a real controller refuses the goal), so an event waiting for the joint to get there never
-        comes, and the run would only say that the command never completed."""
+        comes, and the run would only say that the command never completed. A goal where the joint already is
+        (an operation holding the arm where it stands, its goal the joint's reading, which the simulated joint
+        at its limit exceeds by a hair) is no such mistake: nothing is said of it."""
         rt = self.runtime
+        where: dict[str, float] | None = None  # the joints' positions, read once and only for a goal beyond
         for path, goal in goals.items():
             if path in self.beyond_said or not math.isfinite(goal):
                 continue
@@ -501,6 +584,11 @@ class Operation:
                 continue
             name, lower, upper, unit = joint
             if (lower is not None and goal < lower - LIMIT_SLACK) or (upper is not None and goal > upper + LIMIT_SLACK):
+                if where is None:
+                    positions = getattr(rt.endpoint, "joint_positions", None)
+                    where = positions() if positions is not None else {}
+                if name in where and abs(goal - where[name]) <= HOLD_SLACK:
+                    continue
                 self.beyond_said.add(path)
                 low = "-inf" if lower is None else f"{lower:g}"
                 high = "inf" if upper is None else f"{upper:g}"
@@ -609,7 +697,8 @@ class Mapping:
         """`kinematics_result_problem` at run time: the last line of defence (cotwin check and load_models
         report it before, cotwin.twin.assembly.system)."""
         problem = kinematics_result_problem(self.project, self.model, registry.tree.name, registry.tool.link,
-                                            registry.arm)
+                                            registry.arm) or ik_arm_problem(self.model, registry.tree,
+                                                                            registry.tool.link, registry.arm)
         if problem is not None:
             raise CotwinError([problem])
 

@@ -39,6 +39,7 @@ from ...dmodel.runner import inputs_of, outputs_of
 from ...dmodel.testgen import model_digest, replay_items
 from ...dmodel.testgen_files import SuiteCase, SuiteFile, output_record, plain
 from ...dmodel.testgen_graph import _Sequence
+from ..assembly.outcomes import EventRoles
 from ..assembly.scenario import Command, ScenarioUnit, scenario_ports
 from ..assembly.system import CONTROLLER, DMODEL, MAPPING, TwinSystem
 
@@ -451,7 +452,9 @@ class CaseRun:
         executed = {}
         for _, op, _ in self.mapping.executed:
             executed[op] = executed.get(op, 0) + 1
-        collisions = sum(n for e, n in self.platform_events.items() if "collision" in e.lower())
+        stops = EventRoles.of(self.system.spec).stop_events  # the project's [outcomes] stops, if it names them
+        collisions = sum(n for e, n in self.platform_events.items()
+                         if (e in stops if stops is not None else "collision" in e.lower()))
         return {"operations": executed, "events": dict(self.platform_events), "collisions": collisions}
 
 

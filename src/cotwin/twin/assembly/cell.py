@@ -35,7 +35,6 @@ from ...cosim.units import Port, PythonUnit
 from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...files import read_text
 from ..project import TwinProject, check_timing
-from .outcomes import INFEASIBLE
 from .scenario import Command, _column_at, _column_starts, data_rows, parse_value, plan_rows, row_time, scenario_ports
 from .system import (DMODEL, MAPPING, CommandPorts, MachinePort, TwinSystem, UnitSpec, build_scene, load_models,
                      multimodel)
@@ -494,8 +493,8 @@ class RobotOutcome:
 
     name: str
     commands: int = 0  # commands its source applied
-    completed: int = 0  # moveCompleted-like events (answers) that came
-    infeasible: int = 0  # answers saying a command cannot be done (events named nonfeasible*, infeasible*, ...)
+    completed: int = 0  # of them, those completed (cotwin.twin.assembly.outcomes: taken, done, back at rest)
+    infeasible: int = 0  # of them, those an answer said cannot be done (events named nonfeasible*, infeasible*, ...)
     collisions: list[float] = field(default_factory=list)  # when its d-model heard of a collision (steps it began)
     planned: int | None = None  # its plan's commands (None: they come from the broker)
 
@@ -510,33 +509,52 @@ class RobotOutcome:
 
 
 class CellOutcomes(Observer):
-    """Per robot: the commands its source applied, the moves completed (its `moveCompleted` event) and
-    the steps its d-model was told of a collision (its `collision` event), from the units' ports."""
+    """Per robot: the commands its source applied, what became of each (a CommandLedger per robot, on its own
+    d-model instance and its ports of the cell's mapping: completed, infeasible, ...), and the steps its d-model
+    was told of a collision (an event of its mapping that stops a move: [outcomes] stops, else one whose name says
+    so, cotwin.twin.assembly.outcomes.EventRoles). Nothing here knows a d-model's event names: any d-model's
+    commands are judged as a single robot's."""
 
-    def __init__(self, cell: CellSystem, completed: str = "moveCompleted", collision: str = "collision"):
+    def __init__(self, cell: CellSystem):
+        from .outcomes import CommandLedger
+
         self.cell = cell
-        self.completed, self.collision = completed, collision
         self.robots = {r.name: RobotOutcome(r.name, planned=len(r.system.commands) if cell.spec.plan is not None else None)
                        for r in cell.robots}
-        # per robot, made once (the observer runs every step): its source, command events and scoped answers
+        self.ledgers = {r.name: CommandLedger(r.system, self._units(r), r.scoped) for r in cell.robots}
+        # per robot, made once (the observer runs every step): its source, command events and scoped stopping events
         self._watch = [(r.name, r.source.name if r.source is not None else None, sorted(r.system.command_events),
-                        r.scoped(completed), r.scoped(collision),
                         [r.scoped(ev.name) for ev in r.system.models.mapping_model.input_events
-                         if INFEASIBLE.match(ev.name)]) for r in cell.robots]
+                         if self.ledgers[r.name].roles.stops(ev.name)
+                         and ev.name in {i.name for i in r.system.models.program.inputs}])
+                       for r in cell.robots]
         self._before: dict[str, bool] = {}
+
+    @staticmethod
+    def _units(robot: CellRobot) -> dict[str, str]:
+        """The cell's names of the units of the robot's twin alone (as CellSystem._add names them)."""
+        units = {DMODEL.name: dmodel_of(robot.name).name, MAPPING.name: CELL_MAPPING.name}
+        if robot.system.source is not None:
+            units[robot.system.source.name] = robot.source.name
+        return units
+
+    def simulation_initialized(self, execution) -> None:
+        for ledger in self.ledgers.values():
+            ledger.simulation_initialized(execution)
 
     def step_complete(self, execution) -> None:
         units = execution.system.units
         answers = units[CELL_MAPPING.name].values
-        for name, source, events, completed, collision, refusals in self._watch:
+        for name, source, events, stops in self._watch:
             out = self.robots[name]
             if source in units:
                 commanded = units[source].values
                 out.commands += sum(1 for e in events if commanded.get(e) is True)
-            if answers.get(completed) is True:
-                out.completed += 1
-            out.infeasible += sum(1 for e in refusals if answers.get(e) is True)
-            hit = answers.get(collision) is True
+            ledger = self.ledgers[name]
+            ledger.step_complete(execution)
+            verdicts = [o.verdict for o in ledger.outcomes]
+            out.completed, out.infeasible = verdicts.count("completed"), verdicts.count("infeasible")
+            hit = any(answers.get(e) is True for e in stops)
             if hit and not self._before.get(name):
                 out.collisions.append(round(execution.time, 9))
             self._before[name] = hit

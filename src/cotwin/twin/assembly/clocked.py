@@ -45,10 +45,11 @@ class DModelCycles:
     (FMI 3.0) runs one at each tick of its clock (`Unit.ticks`, counted by the unit), in the event phase before
     the step's results; one that is not clocked runs one every step."""
 
-    def __init__(self, execution) -> None:
+    def __init__(self, execution, dmodel: str | None = None) -> None:
+        """`dmodel`: the d-model's unit (default the twin's, {dmodel}.dmodel; a cell's robot has its own)."""
         from .system import DMODEL
 
-        unit = execution.system.units.get(DMODEL.name)
+        unit = execution.system.units.get(dmodel or DMODEL.name)
         self.unit = unit if unit is not None and unit.ticks is not None else None
         self.seen = self.unit.ticks if self.unit is not None else 0  # ticks when last looked (at the start: before it)
 

@@ -11,11 +11,12 @@
   slower than the step, the same event was applied again: the tick reads one occurrence, with the last one's
   values, so the earlier is *replaced*). A command taken is
   `accepted`; the operations and platform events that follow, until the next command taken, are its own;
-- *infeasible*: among its events one named `nonfeasible*`, `infeasible*`, `unreachable*` (feasible:
-  `feasible*`, `reachable*`), a naming convention of mappings such as the paper's;
-- *stopped*: among its events, before it completed, one that stops a move (a word of its name is collision,
-  fault, emergency or protective and none says the opposite: `stopping`): the d-model then returns to rest
-  having not done it, which is no completion;
+- *infeasible*: among its events one the project's `[outcomes] infeasible` names, else (the key left out) one
+  named `nonfeasible*`, `infeasible*`, `unreachable*` (feasible: `[outcomes] feasible`, else `feasible*`,
+  `reachable*`), a naming convention of mappings such as the paper's;
+- *stopped*: among its events, before it completed, one that stops a move (`[outcomes] stops`, else one a word
+  of whose name is collision, fault, emergency or protective and none says the opposite: `stopping`): the
+  d-model then returns to rest having not done it, which is no completion;
 - *completed at t*: taken, not infeasible, not stopped, and the d-model back at rest (the leaf each machine
   rests in after its first cycle without inputs, e.g. Idle) at t, or passed through it in the cycle at t that
   took the next command (AwaitClosed -> Idle -> Requested: CycleReads.passes); *never completed* otherwise.
@@ -43,10 +44,12 @@ STOPS = {"collision", "fault", "emergency", "protective"}  # a word of the name 
 NOT_STOPS = {"no", "not", "non", "free", "clear", "cleared", "reset", "ok", "none"}  # ... unless it says the opposite
 
 
-def answers_feasibility(program) -> bool:
-    """Whether a d-model takes feasibility answers (an input event named feasible*, infeasible*, ...): only then
-    is a command without one of unknown feasibility; for others feasibility is not a question."""
-    return any(FEASIBLE.match(ev.name) or INFEASIBLE.match(ev.name) for ev in program.inputs)
+def answers_feasibility(program, roles: "EventRoles | None" = None) -> bool:
+    """Whether a d-model takes feasibility answers (an input event named feasible*, infeasible*, ..., or one the
+    project's [outcomes] names): only then is a command without one of unknown feasibility; for others
+    feasibility is not a question."""
+    roles = roles or EventRoles()
+    return any(roles.feasible(ev.name) or roles.infeasible(ev.name) for ev in program.inputs)
 
 
 @lru_cache(maxsize=None)  # asked of the events of every step: a mapping has a few names
@@ -56,6 +59,36 @@ def stopping(event: str) -> bool:
     says the opposite (`noCollision`, `collisionFree`, `faultCleared`, `resetFault`; `setDefault` has no such word)."""
     words = {w.lower() for w in re.findall(r"[A-Z]?[a-z0-9]+|[A-Z]+(?![a-z])", event)}
     return bool(words & STOPS) and not words & NOT_STOPS
+
+
+@dataclass(frozen=True)
+class EventRoles:
+    """Which of the d-model's input events say a command is infeasible, feasible, or stopped: the project's
+    `[outcomes]` lists where given (a d-model of one's own names its answers as it likes), else the naming
+    convention above."""
+
+    infeasible_events: frozenset[str] | None = None
+    feasible_events: frozenset[str] | None = None
+    stop_events: frozenset[str] | None = None
+
+    @classmethod
+    def of(cls, spec) -> "EventRoles":
+        """The roles a project's `[outcomes]` gives (cotwin.twin.project: TwinProject.outcome_events)."""
+        given = getattr(spec, "outcome_events", None) or {}
+        named = {role: frozenset(given[role]) if role in given else None
+                 for role in ("infeasible", "feasible", "stops")}
+        return cls(named["infeasible"], named["feasible"], named["stops"])
+
+    def infeasible(self, event: str) -> bool:
+        return event in self.infeasible_events if self.infeasible_events is not None else bool(INFEASIBLE.match(event))
+
+    def feasible(self, event: str) -> bool:
+        return event in self.feasible_events if self.feasible_events is not None else bool(FEASIBLE.match(event))
+
+    def stops(self, event: str) -> bool:
+        return event in self.stop_events if self.stop_events is not None else stopping(event)
+
+
 STRICT_EXIT = 3  # `--strict`: a command applied but not completed, or none at all completed (docs/interop.md)
 
 
@@ -83,6 +116,7 @@ class CommandOutcome:
     busy: str | None = None  # the d-model's state when it was not taken
     stopped: tuple[str, float] | None = None  # (event, time): a stopping event came before it completed
     replaced: float | None = None  # not taken: the same event applied at this time reached the d-model's cycle instead
+    refused_by: str | None = None  # infeasible: the answer that said so
 
     @property
     def verdict(self) -> str:
@@ -102,7 +136,7 @@ class CommandOutcome:
         if verdict == "completed":
             how = f"completed at t = {self.done:g} s"
         elif verdict == "infeasible":
-            how = f"infeasible ({', '.join(e for e in self.events if INFEASIBLE.match(e))})"
+            how = f"infeasible ({self.refused_by})" if self.refused_by else "infeasible"
         elif verdict == "not taken" and self.replaced is not None:
             how = f"not taken (replaced by the one applied at t = {self.replaced:g} s before the d-model's cycle read it)"
         elif verdict == "not taken":
@@ -150,10 +184,19 @@ class Summary:
 class CommandLedger(Observer):
     """Follows every command a run applies (see module doc); `outcomes` grows as the run goes."""
 
-    def __init__(self, system: TwinSystem):
+    def __init__(self, system: TwinSystem, units: dict[str, str] | None = None, scope=None):
+        """`units`: the co-simulation's name of each of the twin's units where it differs (a robot of a cell: its
+        own d-model and source units, the cell's one mapping unit); `scope`: the mapping unit's name of one of the
+        twin's mapping ports (a cell's: `ROBOT.port`)."""
         program = system.models.program
         self.program = program
         self.system = system
+        units = units or {}
+        self._dmodel = units.get(DMODEL.name, DMODEL.name)
+        self._mapping = units.get(MAPPING.name, MAPPING.name)
+        self._source = units.get(system.source.name, system.source.name) if system.source is not None else None
+        self._scope = scope or (lambda port: port)
+        self.roles = EventRoles.of(system.spec)
         self.rest = once_per(program, "rest states", lambda: rest_states(program))  # the same for every what-if
         self.cycles = once_per(program, "cycle reads", lambda: CycleReads(program))
         position = {m.index: k for k, m in enumerate(program.machines)}  # a machine's place among the state ports
@@ -166,12 +209,12 @@ class CommandLedger(Observer):
                         and c.output in {ev.name for ev in program.inputs}]
 
     def simulation_initialized(self, execution) -> None:
-        source = execution.system.units.get(self.system.source.name) if self.system.source is not None else None
+        source = execution.system.units.get(self._source) if self._source is not None else None
         self._queue = source.command_queue if source is not None else None  # cotwin.twin.assembly.commands.CommandQueue
         self._seen = self._count()
         # a clocked d-model (FMI 3.0) reads a command at its clock's first tick from the point it was applied:
         # in that point's event phase, or at a later one when the clock is slower than the step
-        self._cycles = DModelCycles(execution)
+        self._cycles = DModelCycles(execution, self._dmodel)
         # a run's first event phase (at its start, before any step) may have applied commands and ticked: the
         # d-model's first cycle, from its initial junction, read them (judged below, not passed over as old)
         first = self._seen if self._cycles.clocked and execution.steps == 0 and self._cycles.seen else 0
@@ -182,9 +225,10 @@ class CommandLedger(Observer):
         # change then spans cycles, on paths past `exec` (CycleReads `several`)
         self._several = isinstance(period, (int, float)) and 0 < period < execution.step_size * (1 - 1e-9)
         slots = execution.algorithm.slots
-        self._calls_read = execution.reader([(DMODEL.name, c) for c in self._calls if (DMODEL.name, c) in slots])
-        self._events_read = execution.reader([(MAPPING.name, e) for e in self._events])
-        self._state_read = execution.reader([(DMODEL.name, port) for port, _ in self._states])
+        self._calls = [c for c in self._calls if (self._dmodel, c) in slots]  # read in this order
+        self._calls_read = execution.reader([(self._dmodel, c) for c in self._calls])
+        self._events_read = execution.reader([(self._mapping, self._scope(e)) for e in self._events])
+        self._state_read = execution.reader([(self._dmodel, port) for port, _ in self._states])
         self._before = self._state_read()
         # the platform events of the last steps seen: those in none of them were absent when the d-model's cycle
         # before the one judged read its exec guards (a step not seen repeats the one before it)
@@ -224,11 +268,11 @@ class CommandLedger(Observer):
             for e in events:
                 if e not in current.events:
                     current.events.append(e)
-                if current.feasible is None and INFEASIBLE.match(e):
-                    current.feasible = False
-                elif current.feasible is None and FEASIBLE.match(e):
+                if current.feasible is None and self.roles.infeasible(e):
+                    current.feasible, current.refused_by = False, e
+                elif current.feasible is None and self.roles.feasible(e):
                     current.feasible = True
-                if current.done is None and current.stopped is None and stopping(e):
+                if current.done is None and current.stopped is None and self.roles.stops(e):
                     current.stopped = (e, t)
             if current.done is None and self.resting(states):
                 current.done = t

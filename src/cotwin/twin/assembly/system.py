@@ -134,8 +134,8 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     cell's robots share its [plant] (a joint named applies to the robots that have it), checked against
     them all by cotwin.pmodel.perturbation.perturbed_world."""
     from ...dmodel.program import build_program
-    from ...mapping.runtime import (declares_mirrors, kinematics_result_problem, mirror_variables, mirrored_joints,
-                                    uses_kinematics)
+    from ...mapping.runtime import (declares_mirrors, ik_arm_problem, ik_joints_left_out, kinematics_result_problem,
+                                    mirror_variables, mirrored_joints, uses_kinematics)
     from ...pmodel.cell import CellGeometry
     from ...pmodel import ik
     from ...mapping.profile import profile_rays
@@ -179,6 +179,13 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         problem = kinematics_result_problem(project, mapping, tree.name, tool.link, arm)  # as a run sets up its IK
         if problem is not None:
             problems.append(problem)
+    if tool is not None:  # the IK's arm is the one the mapping drives (a robot of two arms: the other's gripper)
+        problem = ik_arm_problem(mapping, tree, tool.link, arm)
+        if problem is not None:
+            problems.append(problem)
+        left_out = ik_joints_left_out(mapping, tree, tool.link, arm)
+        if left_out is not None:
+            warnings.append(left_out)
     actuated = [j.name for j in tree.actuated]
     unknown = [j for j in spec.mirror_joints if j not in actuated] if isinstance(spec.mirror_joints, list) else []
     if unknown:  # said at the key, with the nearest joint
@@ -193,6 +200,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     mirrors = mirror_variables(variables, joints)
     problems += reading_clashes(spec, taken_names(program, mapping, [*variables, *mirrors]))
     problems += reading_path_problems(spec, tree)
+    problems += outcome_event_problems(spec, program)
     own = mirror_warnings(spec, mapping, tree, joints, tool_link) if listed else []  # the project's against the models
     warnings += own
     if problems:
@@ -204,6 +212,22 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     monitored = [*mirrors, *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project),
                       list(dict.fromkeys(warnings)), mirrors, arm)
+
+
+def outcome_event_problems(spec: TwinProject, program) -> list[Finding]:
+    """[outcomes] names that are no input event of the d-model: an error at the key with the nearest event (a name
+    misspelt would leave every command of that role judged as if it had none)."""
+    events = [ev.name for ev in program.inputs]
+    out = []
+    for role, named in spec.outcome_events.items():
+        unknown = [e for e in named if e not in events]
+        if unknown:
+            what = "is not an input event" if len(unknown) == 1 else "are not input events"
+            out.append(Finding(spec.location("outcomes", role), Severity.ERROR,
+                               f"[outcomes] {role}: {', '.join(unknown)} {what} "
+                               f"of d-model module {program.module.name}{did_you_mean(unknown[0], events)} "
+                               f"(its input events: {', '.join(events)})"))
+    return out
 
 
 def reading_path_problems(spec: TwinProject, tree) -> list[Finding]:

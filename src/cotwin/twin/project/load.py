@@ -83,6 +83,7 @@ class TwinProject:
     stand_ins: dict = field(default_factory=dict)  # mesh file as written -> [cotwin.pmodel.tree.StandIn]
     mirror_joints: object = "arm"  # [monitor] joints
     readings: dict[str, str] = field(default_factory=dict)  # [monitor] readings
+    outcome_events: dict[str, tuple[str, ...]] = field(default_factory=dict)  # [outcomes]: role -> events, as written
     parameters: dict[str, object] = field(default_factory=dict)  # [cosim] parameters of the d-model FMU
     panels: list[tuple[str, list[str], str]] | None = None  # [figure] panels: (label, unit.variable, style)
     convergence: object | None = None  # [convergence] (project.sections.Convergence): the DT pulled towards its PT
@@ -321,6 +322,8 @@ def _load(file: TomlFile, pt_log: Path | None, reader: str | None = None) -> Twi
     spec.world, spec.world_file, spec.base, spec.stand_ins = world, world_file, platform.base, stand_ins
     spec.mirror_joints = list(monitor.joints) if isinstance(monitor.joints, tuple) else monitor.joints
     spec.readings = dict(monitor.readings)
+    spec.outcome_events = {role: tuple(events) for role, events in dataclasses.asdict(s.outcomes).items()
+                           if events is not None}
     spec.parameters, spec.panels = dict(cosim.parameters), panels
     spec.fmu = fmu
     spec.isolate, spec.unit_timeout = cosim.isolate, float(cosim.unit_timeout)

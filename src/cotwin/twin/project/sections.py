@@ -313,6 +313,25 @@ class Monitor:
                              Key("table", {}, check=_readings))
 
 
+def _events(value) -> str | None:
+    return unique("event", empty=True)(value)
+
+
+@_section
+class Outcomes:
+    """Which input events answer a command infeasible or feasible, or stop it (a key left out: by their names)."""
+
+    infeasible: tuple[str, ...] | None = setting(
+        "input events answering that a command cannot be done (default: those named nonfeasible*, infeasible*, "
+        "unreachable*)", Key("list[str]", check=_events))
+    feasible: tuple[str, ...] | None = setting(
+        "input events answering that a command can be done (default: those named feasible*, reachable*)",
+        Key("list[str]", check=_events))
+    stops: tuple[str, ...] | None = setting(
+        "input events that stop a move, which is then no completion (default: those a word of whose name is "
+        "collision, fault, emergency or protective)", Key("list[str]", check=_events))
+
+
 @_section
 class Cosim:
     """How the co-simulation runs."""
@@ -482,6 +501,7 @@ SECTIONS: dict[str, Any] = {
     "scene": setting("The scene's own keys, read by the kind [platform] scene names (docs/scenes.md); a key "
                      "that kind does not read is an error.", Key("table")),
     "monitor": setting("What the mapping monitors.", section=Monitor),
+    "outcomes": setting("What the d-model's events say of its commands.", section=Outcomes),
     "cosim": setting("The co-simulation.", section=Cosim),
     "figure": setting("The run's figure.", section=Figure),
     "robot": setting("The real robot's conventions.", section=Robot),
