@@ -438,7 +438,7 @@ def test_logic_comparisons_and_binding_forms(tmp_path):
 	state B { }
 	transition t3 { from B to A exec }
 	transition t1 { from A to B condition $go?n action
-		$flag!((0 < n <= 10 => n != 3) iff (let m == n * 2 @ m > 0 /\\ not (m == 6)));
+		$flag!((0 < n <= 10 => n != 3) iff (let m == n * 2 @ (m > 0 /\\ not (m == 6))));
 		$out!(if 1 <= n < 5 then (the k: int | k in {1, 2, 3} /\\ k == n @ k * 100) else n end);
 		$real_out!(n as real) }
 	transition t2 { from A to A exec condition not $go }""")
@@ -448,6 +448,66 @@ def test_logic_comparisons_and_binding_forms(tmp_path):
                                          ["flag!true", "out!7", "real_out!7.0"]]
     # `the` with no value: the same located error from both
     assert trace[3][0] == "error" and "'the' found 0 values, not exactly one" in trace[3][1]
+
+
+def test_let_and_the_bind_tighter_than_comparisons_as_robotool_reads_them(tmp_path):
+    """RoboChart.xtext's DefiniteDescription and LetExpression sit between Comp and TypedExpression: a body ends
+    where a comparison or a logical operator begins, and a let or `the` may be an operand of one. cotwin read
+    them as the loosest forms: `let x == n @ x + 0 == x` was `n + 0 == n` (always true), where RoboTool compares
+    n with the constant x; `true /\\ let ...` and `n == the ...` were syntax errors."""
+    files = machine("""	const x: int = 10
+	var n: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $go?n action
+		$flag!(let x == n @ x + 0 == x);
+		$out!((if the x: int | x in {n} @ x * 1 == x then 1 else 0 end)
+			+ (if true /\\ let y == n @ y > 1 then 10 else 0 end)
+			+ (if n + 0 == the k: int | k in {n, 10} /\\ k > 5 @ k then 100 else 0 end)) }
+	transition t2 { from A to A exec condition not $go }""")
+    trace = run_both(tmp_path, files, [{"go": 2}, {"go": 10}, {"go": 1}, {}])
+    assert [t[0] for t in trace] == [[], ["flag!false", "out!10"], ["flag!true", "out!111"], ["flag!false", "out!0"]]
+
+
+def test_a_name_past_the_end_of_its_lets_body_is_located_with_the_fix(tmp_path):
+    """RoboTool does not resolve `m` in `let m == n @ m > 0 /\\ m < 9` (the let's body is `m`): one error where
+    it is used, naming the let and the parentheses that bind it; in a function's postcondition, which cotwin
+    only checks (the published UR5e mapping's IK function is written so), a warning."""
+    files = machine("""	var n: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $go?n /\\ let m == n @ m > 0 /\\ m < 9 /\\ m != 3 }""",
+                    "function f(a: int): int { postcondition let b == a @ result == b + 1 }\n")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    result = check_paths([tmp_path])
+    hint = ("'m' is bound by the let at line 33, whose body ends before '>' (a let binds tighter than a comparison "
+            "or a logical operator, as in RoboChart; RoboTool does not resolve 'm' here): to bind it, put the body in "
+            "parentheses, 'let ... @ (... > ...)'")
+    assert errors(result) == [("m.rst", 33, 76, hint)]
+    [warning] = [f for f in result.findings if f.severity is Severity.WARNING]
+    assert (warning.location.line, warning.location.column) == (24, 64)
+    assert warning.message.startswith("'b' is bound by the let at line 24, whose body ends before '=='")
+    assert warning.message.endswith("cotwin reads it as the let's in this pre/postcondition")
+
+
+@pytest.mark.parametrize("written, column, fixed", [
+    ("1 + let x == 1 @ x == 2", 43, "1 + (let x == 1 @ x) == 2"),
+    ("- the x: int | x in {1} @ x == -1", 41, "-(the x: int | x in {1} @ x) == -1"),
+    ("let x == 1 @ the y: int | y in {x} @ y == 1", 52, "let x == 1 @ (the y: int | y in {x} @ y) == 1")])
+def test_a_let_or_the_where_robotool_refuses_it_is_located(written, column, fixed):
+    """RoboChart's grammar refuses a let or `the` as an operand of arithmetic or of unary minus, and a `the` as a
+    let's body: the error is at the word, saying so (the lexer had read it as a name, and the error fell on the
+    next token); in parentheses, as the message says, each is read."""
+    from cotwin.robosim.parser import parse_text
+
+    word = written[column - 39:column - 36]
+    _, findings = parse_text(f"function f(): boolean {{ postcondition {written} }}\n", "f.rct")
+    assert [(f.location.line, f.location.column) for f in findings] == [(1, column)]
+    assert findings[0].message.startswith(f"'{word}' cannot start here") and f"'({word} ... @ ...)'" in findings[0].message
+    assert parse_text(f"function f(): boolean {{ postcondition {fixed} }}\n", "f.rct")[1] == []
 
 
 def test_equality_chains_nest_to_the_left_as_robotool_reads_them(tmp_path):

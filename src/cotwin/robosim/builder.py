@@ -296,6 +296,10 @@ class Builder(PModelBuilder):
         such = next((r.value for r in rest[:-1] if isinstance(r, _Tagged)), None)
         return s.Quantified(kind, binders, rest[-1], self._loc(meta), such)
 
+    def definite_description(self, meta, *rest):
+        """`the x: T | p @ e` (RoboChart's DefiniteDescription, a level of its own: see common.lark)."""
+        return self.quantified(meta, "the", *rest)
+
     def let_binding(self, meta, name, _eq, value):
         return (_ident(name), value)
 

@@ -85,6 +85,7 @@ class DModelChecker(Checker):
         scope = Scope({p.name: Symbol(p.name, "param", self.types.resolve(p.type), p.loc) for p in fn.params})
         scope.symbols["result"] = Symbol("result", "param", result, fn.loc)
         checker = self.expressions(scope)
+        checker.strays_read = True  # only checked, never evaluated (a definition `result == e` holds no stray)
         for cond in (*fn.preconditions, *fn.postconditions):
             checker.condition(cond, "pre/postcondition")
 

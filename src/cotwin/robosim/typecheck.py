@@ -52,6 +52,42 @@ class Scope:
         return Scope(dict(symbols or {}), self)
 
 
+@dataclass(frozen=True)
+class Stray:
+    """A name a let (or `the`) binds, used past the end of that binder's body: RoboChart's let and `the` bind
+    tighter than a comparison or a logical operator, so in `let x == 1 @ y == x` the second x is outside
+    the let and RoboTool does not resolve it (the let's body is `y`)."""
+
+    symbol: Symbol
+    binder: object  # the s.LetExpr or s.Quantified
+    op: str  # the operator before which the binder's body ended
+
+
+def binders_ended_in(left: s.Expr, op: str, types: dict[int, Ty], resolve) -> dict[str, Stray]:
+    """The names bound by the lets and `the`s written in `left` outside brackets (`$go /\\ let m == n @ m > 0`):
+    each body has ended by the end of `left` (at the operator after it), where cotwin once read them as reaching
+    to the end of the expression. The textually last binder of a name wins; `types` holds the checked types."""
+    found: dict[str, Stray] = {}
+
+    def collect(node, after: str) -> None:
+        if isinstance(node, s.Binary):
+            collect(node.left, node.op)
+            collect(node.right, after)
+        elif isinstance(node, s.Unary):
+            collect(node.operand, after)
+        elif isinstance(node, s.LetExpr):
+            for name, value in node.bindings:
+                found[name] = Stray(Symbol(name, "binding", types.get(id(value), UNKNOWN), value.loc), node, after)
+            collect(node.body, after)
+        elif isinstance(node, s.Quantified) and node.kind == "the":
+            for name, type_ref in node.binders:
+                found[name] = Stray(Symbol(name, "binding", resolve(type_ref), node.loc), node, after)
+            collect(node.body, after)
+
+    collect(left, op)
+    return found
+
+
 _LOGICAL = ("\\/", "/\\", "=>", "iff")
 _ORDER = ("<", "<=", ">", ">=")
 
@@ -116,10 +152,18 @@ class ExprChecker(ExprVisitor):
         self.states = states
         self.first_index = first_index
         self.readings: Readings = getattr(resolver.project, "readings", None) or Readings()
+        #: names of lets and `the`s whose bodies ended before (Stray): RoboTool leaves them unresolved
+        self.strays: dict[str, Stray] = {}
+        #: True where the expressions are only checked, never evaluated (pre/postconditions): a stray name is a
+        #: warning and read as the binder's (the published UR5e mapping's IK postcondition is written so)
+        self.strays_read = False
+        self._strays_said: set[int] = set()
 
     def with_scope(self, scope: Scope) -> "ExprChecker":
-        return ExprChecker(self.resolver, self.diag, scope, self.functions, self.events, self.qualified,
-                           self.clocks, self.states, self.first_index)
+        inner = ExprChecker(self.resolver, self.diag, scope, self.functions, self.events, self.qualified,
+                            self.clocks, self.states, self.first_index)
+        inner.strays, inner.strays_read, inner._strays_said = self.strays, self.strays_read, self._strays_said
+        return inner
 
     @property
     def project(self):
@@ -170,6 +214,8 @@ class ExprChecker(ExprVisitor):
             fn = self.functions.get(name.last)
             if fn is not None:
                 return self._function_type(fn)
+            if name.last in self.strays:
+                return self._stray(e, self.strays[name.last])
             self.diag.error(e.loc, f"unknown name '{name}'")
             return UNKNOWN
         enum = self.enum_literal(name)
@@ -184,6 +230,23 @@ class ExprChecker(ExprVisitor):
                 return ty
         self.diag.error(e.loc, f"unknown name '{name}'")
         return UNKNOWN
+
+    def _stray(self, e: s.Name, stray: Stray) -> Ty:
+        """A name only a binder that ended before it binds: an error saying where the body ended (once per
+        binder); in a pre/postcondition a warning, the name read as the binder's."""
+        if id(stray.binder) not in self._strays_said:
+            self._strays_said.add(id(stray.binder))
+            word = "let" if isinstance(stray.binder, s.LetExpr) else "the"
+            kind = "let" if word == "let" else "'the'"
+            message = (f"'{e.name}' is bound by the {kind} at line {stray.binder.loc.line}, whose body ends before "
+                       f"'{stray.op}' (a {kind} binds tighter than a comparison or a logical operator, as in RoboChart; "
+                       f"RoboTool does not resolve '{e.name}' here): to bind it, put the body in parentheses, "
+                       f"'{word} ... @ (... {stray.op} ...)'")
+            if self.strays_read:
+                self.diag.warning(e.loc, message + f"; cotwin reads it as the {kind}'s in this pre/postcondition")
+            else:
+                self.diag.error(e.loc, message)
+        return stray.symbol.ty if self.strays_read else UNKNOWN
 
     def enum_literal(self, name: s.QName) -> Ty | None:
         decl = self.project.lookup("type", s.QName(name.parts[:-1], name.loc), self.source)
@@ -275,7 +338,14 @@ class ExprChecker(ExprVisitor):
         return INT if ty == NAT else ty
 
     def visit_Binary(self, e: s.Binary) -> Ty:
-        left, right = self.check(e.left), self.check(e.right)
+        left = self.check(e.left)
+        strays = binders_ended_in(e.left, e.op, self.readings.types, self.resolver.resolve)
+        if strays:
+            after = self.with_scope(self.scope)
+            after.strays = {**self.strays, **strays}
+            right = after.check(e.right)
+        else:
+            right = self.check(e.right)
         if e.op in _LOGICAL:
             for side, ty in ((e.left, left), (e.right, right)):
                 if not assignable(BOOL, ty):
