@@ -102,6 +102,17 @@ def test_caret_is_a_power_in_pmodels(tmp_path):
     assert link.mass == pytest.approx(12.0)  # 2^3 + (-2)^2: `^` sits at RoboChart's `cat` level, above unary minus
 
 
+def test_dollar_names_a_constant_and_its_field_in_pmodels(tmp_path):
+    """RoboSim's `$v` and `$p.f` (SimRefExp on a name with a value: the value, its field) in a p-model's constants
+    and poses (cotwin refused `$p.f` and could not evaluate `$v` there)."""
+    (tmp_path / "dollar.pm").write_text(
+        "datatype Dim { w: real h: real }\npmodel P {\n  const D : Dim = Dim(|w = 0.5, h = 2.0|)\n"
+        "  const K : real = $D.h * 3\n  local link L { def { inertial information { mass $K } }\n"
+        "    pose { x=$D.w y=0 z=0 roll=0 pitch=0 yaw=0 } } }\n")
+    link = build_tree(load_checked([tmp_path])).link("L")
+    assert link.mass == pytest.approx(6.0) and link.pose[0, 3] == pytest.approx(0.5)
+
+
 def test_joints_from_the_sko_library_and_local_definitions(rover):
     tree = build_tree(rover)
     joints = {j.name: j for j in tree.joints}

@@ -364,19 +364,36 @@ def test_robosim_dollar_index_alone_is_no_statement(tmp_path):
         ("m.rst", 31, 37, "'$v[...]' is not a statement: assign it ('$v[i] = e')")]
 
 
-def test_robosim_dollar_field_of_a_variable_is_one_clear_error(tmp_path):
-    """RoboSim's scope provider reads `$p.a` on a record variable p as p's field a; cotwin does not, and says
-    so once, where it was written (was: 'unknown input event' and a type error about the comparison)."""
+def test_robosim_dollar_field_of_a_variable_is_its_field(tmp_path):
+    """RoboSim's scope provider reads `$p.a` on a record variable (or constant) p as p's field a, of the field's
+    type (RoboSimTypeProvider); cotwin refused it ('write p.a'). It runs, in the interpreter and the C alike."""
     files = machine("""	var p: Pair
+	const c: Pair = Pair(|a = 5, b = 7|)
+	var n: int
 	initial i
 	state A { }
 	transition t0 { from i to A }
-	transition t1 { from A to A exec condition $p.a == 1 }""", "datatype Pair { a: int b: int }\n")
+	transition t1 { from A to A exec condition $go?n /\\ $p.a == 0 action
+		p = Pair(|a = n, b = $c.b|); $out!($p.a * 100 + $p.b + $c.a) }
+	transition t2 { from A to A exec condition not $go \\/ $p.a != 0 }""", "datatype Pair { a: int b: int }\n")
+    trace = run_both(tmp_path, files, [{"go": 3}, {"go": 4}, {}])
+    assert [t[0] for t in trace] == [[], ["out!312"], []]  # p.a is 3 after the first: the condition is false
+
+
+@pytest.mark.parametrize("written", ["$p.3", "$p.f(1)"])
+def test_robosim_dollar_on_a_variable_takes_a_field_name_only(tmp_path, written):
+    """After `$p.` RoboSim's scope offers the fields of p's type: anything else is one located error."""
+    files = machine(f"""	var p: Pair
+	initial i
+	state A {{ }}
+	transition t0 {{ from i to A }}
+	transition t1 {{ from A to A exec condition {written} == 1 }}""", "datatype Pair { a: int b: int }\n")
     for name, text in files.items():
         (tmp_path / name).write_text(text)
-    assert errors(check_paths([tmp_path])) == [
-        ("m.rst", 33, 45, "'$p.a': 'p' is not an input event but a name with a value (RoboTool reads its field "
-                          "'a'): write 'p.a'")]
+    [(path, line, column, message)] = errors(check_paths([tmp_path]))
+    assert (path, line, column) == ("m.rst", 33, 48), message
+    assert message == "'$p.': 'p' is not an input event but a name with a value, and after '$p.' RoboSim reads the " \
+                      "name of a field of its type"
 
 
 def test_strings_take_xtext_escapes_and_stay_on_one_line(tmp_path):

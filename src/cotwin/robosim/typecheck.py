@@ -266,10 +266,11 @@ class ExprChecker(ExprVisitor):
         symbol = self.scope.lookup(name) if len(e.event.parts) == 1 else None
         if symbol is not None and e.bind is None and e.predicate is None and e.value is None:
             return symbol.ty  # `$v`: the value of (required) variable v
-        if symbol is not None and isinstance(e.value, s.Name) and len(e.value.name.parts) == 1:
-            # RoboSim's scope reads `$p.f` on a variable p as its field f; cotwin reads `$e.v` on events only
-            self.diag.error(e.loc, f"'${name}.{e.value.name}': '{name}' is not an input event but a name with a value "
-                                   f"(RoboTool reads its field '{e.value.name}'): write '{name}.{e.value.name}'")
+        if symbol is not None and (field := s.dollar_field(e)) is not None:
+            return self._field(symbol.ty, field, e.value.loc)  # `$p.f`: RoboSim reads p's field f
+        if symbol is not None and e.value is not None and e.bind is None:
+            self.diag.error(e.value.loc, f"'${name}.': '{name}' is not an input event but a name with a value, and "
+                                         f"after '${name}.' RoboSim reads the name of a field of its type")
             return UNKNOWN
         if self.events is None:
             self.diag.error(e.loc, f"'${e.event}' tests an input event; not allowed here")
@@ -392,22 +393,25 @@ class ExprChecker(ExprVisitor):
 
     # ---- selections ----
     def visit_FieldAccess(self, e: s.FieldAccess) -> Ty:
-        base = self.check(e.base)
+        return self._field(self.check(e.base), e.field, e.loc)
+
+    def _field(self, base: Ty, field: str, loc: Location) -> Ty:
+        """The type of field `field` of a value of type `base` (a record's field, a device's port)."""
         if base == UNKNOWN:
             return UNKNOWN
         if isinstance(base, RecordTy):
-            f = base.decl.field(e.field)
+            f = base.decl.field(field)
             if f is None:
-                self.diag.error(e.loc, f"record '{base.decl.name}' has no field '{e.field}'")
+                self.diag.error(loc, f"record '{base.decl.name}' has no field '{field}'")
                 return UNKNOWN
             return self.resolver.resolve(f.type)
         if isinstance(base, DeviceTy):
-            port = base.device.port(e.field)
+            port = base.device.port(field)
             if port is None:
-                self.diag.error(e.loc, f"{base.device.kind} '{base.device.name}' has no port '{e.field}'")
+                self.diag.error(loc, f"{base.device.kind} '{base.device.name}' has no port '{field}'")
                 return UNKNOWN
             return self.resolver.resolve(port.type)
-        self.diag.error(e.loc, f"'.{e.field}' on a value of type {base}")
+        self.diag.error(loc, f"'.{field}' on a value of type {base}")
         return UNKNOWN
 
     def visit_IndexAccess(self, e: s.IndexAccess) -> Ty:
