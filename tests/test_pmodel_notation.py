@@ -113,6 +113,21 @@ def test_dollar_names_a_constant_and_its_field_in_pmodels(tmp_path):
     assert link.mass == pytest.approx(6.0) and link.pose[0, 3] == pytest.approx(0.5)
 
 
+def test_declarations_directly_in_a_joints_block(tmp_path):
+    """RoboTool's serializer writes `local number : real = 3` directly in a jref's block (its FourBarPlanarLinkage
+    case study's eqnComp-gen output), outside `def`: read as the joint's own declarations, seen by its relations
+    (a syntax error before)."""
+    (tmp_path / "j.pm").write_text(
+        "import physmod::joints::*\npmodel P {\n  local link A { def { inertial information { mass 1.0 } }\n"
+        "    jref J = Revolute { flexibly connected to B\n      local number : real = 3\n      relation number == 3\n"
+        "      pose { x=0 y=0 z=0.5 roll=0 pitch=0 yaw=0 } } }\n"
+        "  local link B { def { inertial information { mass 1.0 } } } }\n")
+    result = check_paths([tmp_path])
+    assert not _findings(result, Severity.ERROR) and not _findings(result, Severity.WARNING)
+    [joint] = build_tree(load_checked([tmp_path])).joints
+    assert (joint.name, joint.kind) == ("J", "revolute")
+
+
 def test_joints_from_the_sko_library_and_local_definitions(rover):
     tree = build_tree(rover)
     joints = {j.name: j for j in tree.joints}
