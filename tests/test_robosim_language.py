@@ -396,6 +396,49 @@ def test_robosim_dollar_on_a_variable_takes_a_field_name_only(tmp_path, written)
                       "name of a field of its type"
 
 
+ANN_DECLARATIONS = """package nets
+interface Ctl { event go: int }
+anncontroller Net {
+	params {
+		inputcontext { event in0: real }
+		outputcontext { event out0: real }
+		layerstructure <1, 1>
+		weights <<<0.5>>, <<1.0>>>
+		biases <<-1.0>, <0.0>>
+		activationfunction relu
+	}
+}
+annoperation Approx(x: real) {
+	requires Ctl
+	params { inputcontext { event in0: real } outputcontext { event out0: real } file "net.json" }
+}
+generalcontroller Abstract { uses Ctl var k: int }
+generaloperation Black(x: int) { terminates precondition x > 0 }
+"""
+
+
+def test_robochart_general_and_ann_components_are_read_and_refused_where_used(tmp_path):
+    """RoboChart.xtext's GeneralController, GeneralOperation, ANNController and ANNOperation (RoboSim's grammar
+    inherits them): a RoboTool project holding them was a syntax error for cotwin. They are read; a `cref` or
+    `opref` to one is an error there, saying what it is, since cotwin has no behaviour of it to run."""
+    (tmp_path / "nets.rct").write_text(ANN_DECLARATIONS)
+    files = machine("""	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec }""")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    assert errors(check_paths([tmp_path])) == []  # declared, unused: the project is RoboTool's and cotwin's
+    files["m.rst"] = "import nets::*\n" + files["m.rst"].replace("\tcref c = C\n", "\tcref c = C\n\tcref n = Net\n")
+    files["m.rst"] = files["m.rst"].replace("\tsref m = M\n", "\tsref m = M\n\topref o = Approx\n")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    why = "RoboTool reads it, and cotwin cannot run it (it has no state machine to simulate)"
+    assert errors(check_paths([tmp_path])) == [
+        ("m.rst", 9, 12, f"'Approx' is a RoboChart ANN operation (declared at {tmp_path / 'nets.rct'}:13:14): {why}"),
+        ("m.rst", 20, 11, f"'Net' is a RoboChart ANN controller (declared at {tmp_path / 'nets.rct'}:3:15): {why}")]
+
+
 def test_strings_take_xtext_escapes_and_stay_on_one_line(tmp_path):
     """Xtext's STRING terminal decodes \\" \\' \\\\ \\n \\t \\uXXXX; cotwin keeps a string on its line so that
     an unclosed quote is reported where it is."""

@@ -15,7 +15,8 @@ from .declarations import (
     PrimitiveDecl, RecordDecl, SourceFile, VarDecl,
 )
 from .dmodel_elements import (
-    Communication, Connection, Controller, Final, Initial, Interface, InterfaceUse, Junction, MachineRef, Module,
+    Communication, Connection, Controller, Final, ForeignComponent, Initial, Interface, InterfaceUse, Junction,
+    MachineRef, Module,
     OperationDef, OperationRef, PlatformRef, ProbabilisticJunction, RoboticPlatform, State, StateMachine, Transition,
 )
 from .build_items import _Args, _Group, _Params, _Tagged, _flatten, _ident, _of, _string, _tagged
@@ -506,6 +507,18 @@ class Builder(PModelBuilder):
             _of(items, MachineRef), _of(items, Connection), self._tok_loc(name),
             _of(items, OperationRef), _of(items, ClockDecl),
         )
+
+    def general_controller(self, meta, name, *_items):
+        return ForeignComponent(_ident(name), "general controller", self._tok_loc(name))
+
+    def ann_controller(self, meta, name, *_items):
+        return ForeignComponent(_ident(name), "ANN controller", self._tok_loc(name))
+
+    def general_operation(self, meta, name, *_items):
+        return ForeignComponent(_ident(name), "general operation", self._tok_loc(name))
+
+    def ann_operation(self, meta, name, *_items):
+        return ForeignComponent(_ident(name), "ANN operation", self._tok_loc(name))
 
     def input_context(self, meta, *items):
         return _Tagged("input", tuple(items), self._loc(meta))
