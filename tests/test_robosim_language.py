@@ -539,18 +539,20 @@ def test_a_name_past_the_end_of_its_lets_body_is_located_with_the_fix(tmp_path):
 	state A { }
 	transition t0 { from i to A }
 	transition t1 { from A to A exec condition $go?n /\\ let m == n @ m > 0 /\\ m < 9 /\\ m != 3 }""",
-                    "function f(a: int): int { postcondition let b == a @ result == b + 1 }\n")
+                    "function f(a: int): int { postcondition let b == a @ result == b + 1 }\n"
+                    "operation op(k: int) { postcondition let j == k @ j > 0 /\\ j < 9 initial i final e "
+                    "transition t { from i to e } }\n")
     for name, text in files.items():
         (tmp_path / name).write_text(text)
     result = check_paths([tmp_path])
-    hint = ("'m' is bound by the let at line 33, whose body ends before '>' (a let binds tighter than a comparison "
+    hint = ("'m' is bound by the let at line 34, whose body ends before '>' (a let binds tighter than a comparison "
             "or a logical operator, as in RoboChart; RoboTool does not resolve 'm' here): to bind it, put the body in "
             "parentheses, 'let ... @ (... > ...)'")
-    assert errors(result) == [("m.rst", 33, 76, hint)]
-    [warning] = [f for f in result.findings if f.severity is Severity.WARNING]
-    assert (warning.location.line, warning.location.column) == (24, 64)
-    assert warning.message.startswith("'b' is bound by the let at line 24, whose body ends before '=='")
-    assert warning.message.endswith("cotwin reads it as the let's in this pre/postcondition")
+    assert errors(result) == [("m.rst", 34, 76, hint)]
+    warnings = [f for f in result.findings if f.severity is Severity.WARNING]
+    assert [(w.location.line, w.location.column, w.message.split(",")[0]) for w in warnings] == [
+        (24, 64, "'b' is bound by the let at line 24"), (25, 60, "'j' is bound by the let at line 25")]
+    assert all(w.message.endswith("cotwin reads it as the let's in this pre/postcondition") for w in warnings)
 
 
 @pytest.mark.parametrize("written, column, fixed", [

@@ -358,8 +358,10 @@ class DModelChecker(Checker):
             if t.probability is not None:
                 checker.check(t.probability)
         if isinstance(machine, OperationDef):
+            conditions = checker.with_scope(checker.scope)
+            conditions.strays_read = True  # only checked, never evaluated
             for cond in (*machine.preconditions, *machine.postconditions):
-                checker.condition(cond, f"pre/postcondition of operation {machine.name}")
+                conditions.condition(cond, f"pre/postcondition of operation {machine.name}")
 
     def _action_expressions(self, stmt, checker: ExprChecker) -> None:
         """Timed expressions are not allowed in actions (RoboChart TE1); 0-based vector readings."""
