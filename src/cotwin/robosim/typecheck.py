@@ -63,28 +63,28 @@ class Stray:
     op: str  # the operator before which the binder's body ended
 
 
-def binders_ended_in(left: s.Expr, op: str, types: dict[int, Ty], resolve) -> dict[str, Stray]:
-    """The names bound by the lets and `the`s written in `left` outside brackets (`$go /\\ let m == n @ m > 0`):
-    each body has ended by the end of `left` (at the operator after it), where cotwin once read them as reaching
-    to the end of the expression. The textually last binder of a name wins; `types` holds the checked types."""
-    found: dict[str, Stray] = {}
-
-    def collect(node, after: str) -> None:
+def ended_binder(name: str, left: s.Expr, op: str, types: dict[int, Ty], resolve) -> Stray | None:
+    """The let or `the` binding `name` written in `left` outside brackets (`$go /\\ let m == n @ m > 0`), whose
+    body has ended by the end of `left` (where cotwin once read it as reaching to the end of the expression);
+    the textually last such binder, None if none. `types` holds the checked types of the bound values."""
+    found = None
+    pending: list[tuple[s.Expr, str]] = [(left, op)]  # a walk in textual order, without recursion
+    while pending:
+        node, after = pending.pop()
         if isinstance(node, s.Binary):
-            collect(node.left, node.op)
-            collect(node.right, after)
+            pending += [(node.right, after), (node.left, node.op)]
         elif isinstance(node, s.Unary):
-            collect(node.operand, after)
+            pending.append((node.operand, after))
         elif isinstance(node, s.LetExpr):
-            for name, value in node.bindings:
-                found[name] = Stray(Symbol(name, "binding", types.get(id(value), UNKNOWN), value.loc), node, after)
-            collect(node.body, after)
+            for bound, value in node.bindings:
+                if bound == name:
+                    found = Stray(Symbol(bound, "binding", types.get(id(value), UNKNOWN), value.loc), node, after)
+            pending.append((node.body, after))
         elif isinstance(node, s.Quantified) and node.kind == "the":
-            for name, type_ref in node.binders:
-                found[name] = Stray(Symbol(name, "binding", resolve(type_ref), node.loc), node, after)
-            collect(node.body, after)
-
-    collect(left, op)
+            for bound, type_ref in node.binders:
+                if bound == name:
+                    found = Stray(Symbol(bound, "binding", resolve(type_ref), node.loc), node, after)
+            pending.append((node.body, after))
     return found
 
 
@@ -152,8 +152,9 @@ class ExprChecker(ExprVisitor):
         self.states = states
         self.first_index = first_index
         self.readings: Readings = getattr(resolver.project, "readings", None) or Readings()
-        #: names of lets and `the`s whose bodies ended before (Stray): RoboTool leaves them unresolved
-        self.strays: dict[str, Stray] = {}
+        #: the left operands of the binary operators whose right operand is being checked, innermost first, as
+        #: (left, operator, outer) links: a let or `the` in one has ended, and RoboTool leaves its names unresolved
+        self.lefts: tuple | None = None
         #: True where the expressions are only checked, never evaluated (pre/postconditions): a stray name is a
         #: warning and read as the binder's (the published UR5e mapping's IK postcondition is written so)
         self.strays_read = False
@@ -162,7 +163,7 @@ class ExprChecker(ExprVisitor):
     def with_scope(self, scope: Scope) -> "ExprChecker":
         inner = ExprChecker(self.resolver, self.diag, scope, self.functions, self.events, self.qualified,
                             self.clocks, self.states, self.first_index)
-        inner.strays, inner.strays_read, inner._strays_said = self.strays, self.strays_read, self._strays_said
+        inner.lefts, inner.strays_read, inner._strays_said = self.lefts, self.strays_read, self._strays_said
         return inner
 
     @property
@@ -214,8 +215,9 @@ class ExprChecker(ExprVisitor):
             fn = self.functions.get(name.last)
             if fn is not None:
                 return self._function_type(fn)
-            if name.last in self.strays:
-                return self._stray(e, self.strays[name.last])
+            stray = self._ended_binder(name.last)
+            if stray is not None:
+                return self._stray(e, stray)
             self.diag.error(e.loc, f"unknown name '{name}'")
             return UNKNOWN
         enum = self.enum_literal(name)
@@ -230,6 +232,16 @@ class ExprChecker(ExprVisitor):
                 return ty
         self.diag.error(e.loc, f"unknown name '{name}'")
         return UNKNOWN
+
+    def _ended_binder(self, name: str) -> Stray | None:
+        """The nearest let or `the` before this place that binds `name` and has ended (see `lefts`)."""
+        link = self.lefts
+        while link is not None:
+            left, op, link = link
+            found = ended_binder(name, left, op, self.readings.types, self.resolver.resolve)
+            if found is not None:
+                return found
+        return None
 
     def _stray(self, e: s.Name, stray: Stray) -> Ty:
         """A name only a binder that ended before it binds: an error saying where the body ended (once per
@@ -340,13 +352,11 @@ class ExprChecker(ExprVisitor):
 
     def visit_Binary(self, e: s.Binary) -> Ty:
         left = self.check(e.left)
-        strays = binders_ended_in(e.left, e.op, self.readings.types, self.resolver.resolve)
-        if strays:
-            after = self.with_scope(self.scope)
-            after.strays = {**self.strays, **strays}
-            right = after.check(e.right)
-        else:
+        outer, self.lefts = self.lefts, (e.left, e.op, self.lefts)
+        try:
             right = self.check(e.right)
+        finally:
+            self.lefts = outer
         if e.op in _LOGICAL:
             for side, ty in ((e.left, left), (e.right, right)):
                 if not assignable(BOOL, ty):
