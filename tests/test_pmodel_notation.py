@@ -102,6 +102,19 @@ def test_caret_is_a_power_in_pmodels(tmp_path):
     assert link.mass == pytest.approx(12.0)  # 2^3 + (-2)^2: `^` sits at RoboChart's `cat` level, above unary minus
 
 
+def test_let_and_the_bind_as_in_robochart_in_pmodel_constants(tmp_path):
+    """A p-model's constants take RoboChart's levels too: `let a == 2 @ a + 0 == a` is `(let a == 2 @ a + 0) == a`,
+    the second a the constant 10 (cotwin read 2 + 0 == 2, true), and `2 == the k: int | k in {2} @ k` is read
+    (a syntax error before)."""
+    (tmp_path / "levels.pm").write_text(
+        "pmodel P {\n  const a : real = 10\n  const M : real = if let a == 2 @ a + 0 == a then 1 else 5 end\n"
+        "  const X : real = if 2 == the k: int | k in {2, 3} /\\ k < 3 @ k then 0.25 else 0.5 end\n"
+        "  local link L { def { inertial information { mass M } }\n"
+        "    pose { x=X y=0 z=0 roll=0 pitch=0 yaw=0 } } }\n")
+    link = build_tree(load_checked([tmp_path])).link("L")
+    assert link.mass == pytest.approx(5.0) and link.pose[0, 3] == pytest.approx(0.25)
+
+
 def test_dollar_names_a_constant_and_its_field_in_pmodels(tmp_path):
     """RoboSim's `$v` and `$p.f` (SimRefExp on a name with a value: the value, its field) in a p-model's constants
     and poses (cotwin refused `$p.f` and could not evaluate `$v` there)."""
