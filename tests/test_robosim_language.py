@@ -437,6 +437,12 @@ def test_robochart_general_and_ann_components_are_read_and_refused_where_used(tm
     assert errors(check_paths([tmp_path])) == [
         ("m.rst", 9, 12, f"'Approx' is a RoboChart ANN operation (declared at {tmp_path / 'nets.rct'}:13:14): {why}"),
         ("m.rst", 20, 11, f"'Net' is a RoboChart ANN controller (declared at {tmp_path / 'nets.rct'}:3:15): {why}")]
+    # one written in the module itself (RoboChart's ConnectionNode)
+    files["m.rst"] = files["m.rst"].replace("\tcref n = Net\n", "\tgeneralcontroller G { uses In }\n")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    assert errors(check_paths([tmp_path]))[1:] == [
+        ("m.rst", 20, 20, f"G in module Mod is a RoboChart general controller: {why}")]
 
 
 def test_strings_take_xtext_escapes_and_stay_on_one_line(tmp_path):

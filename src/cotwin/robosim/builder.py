@@ -480,6 +480,9 @@ class Builder(PModelBuilder):
         for extra in platforms[1:]:
             self.diag.error(extra.loc, f"more than one robotic platform in {where}")
         platform = platforms[0] if platforms else None
+        for foreign in _of(items, ForeignComponent):
+            self.diag.error(foreign.loc, f"{foreign.name} in {where} is a RoboChart {foreign.kind}: RoboTool reads it, "
+                                         "and cotwin cannot run it (it has no state machine to simulate)")
         return Module(_ident(name), self._single(_tagged(items, "cycleDef"), "cycleDef", where),
                       platform if isinstance(platform, RoboticPlatform) else None, _of(items, Controller),
                       tuple(t.value for t in _tagged(items, "cref")), _of(items, Connection), self._tok_loc(name),
