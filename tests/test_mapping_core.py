@@ -126,3 +126,29 @@ def test_a_function_error_is_located_at_its_call_in_the_mapping(monkeypatch):
         [finding] = err.value.findings
         assert finding.location.path.endswith("mapping.pm") and finding.location.line > 0, str(err.value)
         assert "needs 6 or more" in finding.message
+
+
+def test_dollar_names_a_value_and_its_field_in_a_mapping(tmp_path):
+    """RoboSim's SimRefExp on a name with a value: `$v` is v, `$p.f` p's field f (its scope reads the name after
+    '.' among the fields of p's type). cotwin refused `$p.f` ("write 'p.f'") and could not evaluate `$v` in a
+    mapping; the example's mapping written with them runs as written without, in both forms."""
+    import shutil
+
+    from conftest import EXAMPLES
+
+    shutil.copytree(EXAMPLES / "ur5e", tmp_path / "ur5e")
+    mapping_file = tmp_path / "ur5e" / "mapping.pm"
+    text = mapping_file.read_text()
+    for old, new in [("enumeration Motion {", "datatype Pt { x: real y: real }\n\nenumeration Motion {"),
+                     ("\tconst HOLE_DIST: real = 0.05\n", "\tconst HOLE_DIST: real = 0.05\n\tconst P0: Pt = "
+                      "Pt(|x = 0.05, y = 0.2|)\n\tvar probe: real = $P0.y + $HOLE_DIST\n"),
+                     ("(target_Y + 1) * HOLE_DIST", "($target_Y + 1) * $P0.x")]:
+        assert old in text
+        text = text.replace(old, new)
+    mapping_file.write_text(text)
+    written = load(tmp_path / "ur5e" / "cotwin.toml").models
+    plain = load(EXAMPLES / "ur5e" / "cotwin.toml").models
+    runs = [_run(_mapping(twin, compiled)) for twin in (written, plain) for compiled in (True, False)]
+    for _, variables in runs[0] + runs[1]:
+        assert variables.pop("probe") == pytest.approx(0.25) and variables.pop("P0") == {"x": 0.05, "y": 0.2}
+    assert runs[0] == runs[1] == runs[2] == runs[3]

@@ -102,6 +102,45 @@ def test_caret_is_a_power_in_pmodels(tmp_path):
     assert link.mass == pytest.approx(12.0)  # 2^3 + (-2)^2: `^` sits at RoboChart's `cat` level, above unary minus
 
 
+def test_let_and_the_bind_as_in_robochart_in_pmodel_constants(tmp_path):
+    """A p-model's constants take RoboChart's levels too: `let a == 2 @ a + 0 == a` is `(let a == 2 @ a + 0) == a`,
+    the second a the constant 10 (cotwin read 2 + 0 == 2, true), and `2 == the k: int | k in {2} @ k` is read
+    (a syntax error before)."""
+    (tmp_path / "levels.pm").write_text(
+        "pmodel P {\n  const a : real = 10\n  const M : real = if let a == 2 @ a + 0 == a then 1 else 5 end\n"
+        "  const X : real = if 2 == the k: int | k in {2, 3} /\\ k < 3 @ k then 0.25 else 0.5 end\n"
+        "  local link L { def { inertial information { mass M } }\n"
+        "    pose { x=X y=0 z=0 roll=0 pitch=0 yaw=0 } } }\n")
+    link = build_tree(load_checked([tmp_path])).link("L")
+    assert link.mass == pytest.approx(5.0) and link.pose[0, 3] == pytest.approx(0.25)
+
+
+def test_dollar_names_a_constant_and_its_field_in_pmodels(tmp_path):
+    """RoboSim's `$v` and `$p.f` (SimRefExp on a name with a value: the value, its field) in a p-model's constants
+    and poses (cotwin refused `$p.f` and could not evaluate `$v` there)."""
+    (tmp_path / "dollar.pm").write_text(
+        "datatype Dim { w: real h: real }\npmodel P {\n  const D : Dim = Dim(|w = 0.5, h = 2.0|)\n"
+        "  const K : real = $D.h * 3\n  local link L { def { inertial information { mass $K } }\n"
+        "    pose { x=$D.w y=0 z=0 roll=0 pitch=0 yaw=0 } } }\n")
+    link = build_tree(load_checked([tmp_path])).link("L")
+    assert link.mass == pytest.approx(6.0) and link.pose[0, 3] == pytest.approx(0.5)
+
+
+def test_declarations_directly_in_a_joints_block(tmp_path):
+    """RoboTool's serializer writes `local number : real = 3` directly in a jref's block (its FourBarPlanarLinkage
+    case study's eqnComp-gen output), outside `def`: read as the joint's own declarations, seen by its relations
+    (a syntax error before)."""
+    (tmp_path / "j.pm").write_text(
+        "import physmod::joints::*\npmodel P {\n  local link A { def { inertial information { mass 1.0 } }\n"
+        "    jref J = Revolute { flexibly connected to B\n      local number : real = 3\n      relation number == 3\n"
+        "      pose { x=0 y=0 z=0.5 roll=0 pitch=0 yaw=0 } } }\n"
+        "  local link B { def { inertial information { mass 1.0 } } } }\n")
+    result = check_paths([tmp_path])
+    assert not _findings(result, Severity.ERROR) and not _findings(result, Severity.WARNING)
+    [joint] = build_tree(load_checked([tmp_path])).joints
+    assert (joint.name, joint.kind) == ("J", "revolute")
+
+
 def test_joints_from_the_sko_library_and_local_definitions(rover):
     tree = build_tree(rover)
     joints = {j.name: j for j in tree.joints}

@@ -364,19 +364,85 @@ def test_robosim_dollar_index_alone_is_no_statement(tmp_path):
         ("m.rst", 31, 37, "'$v[...]' is not a statement: assign it ('$v[i] = e')")]
 
 
-def test_robosim_dollar_field_of_a_variable_is_one_clear_error(tmp_path):
-    """RoboSim's scope provider reads `$p.a` on a record variable p as p's field a; cotwin does not, and says
-    so once, where it was written (was: 'unknown input event' and a type error about the comparison)."""
+def test_robosim_dollar_field_of_a_variable_is_its_field(tmp_path):
+    """RoboSim's scope provider reads `$p.a` on a record variable (or constant) p as p's field a, of the field's
+    type (RoboSimTypeProvider); cotwin refused it ('write p.a'). It runs, in the interpreter and the C alike."""
     files = machine("""	var p: Pair
+	const c: Pair = Pair(|a = 5, b = 7|)
+	var n: int
 	initial i
 	state A { }
 	transition t0 { from i to A }
-	transition t1 { from A to A exec condition $p.a == 1 }""", "datatype Pair { a: int b: int }\n")
+	transition t1 { from A to A exec condition $go?n /\\ $p.a == 0 action
+		p = Pair(|a = n, b = $c.b|); $out!($p.a * 100 + $p.b + $c.a) }
+	transition t2 { from A to A exec condition not $go \\/ $p.a != 0 }""", "datatype Pair { a: int b: int }\n")
+    trace = run_both(tmp_path, files, [{"go": 3}, {"go": 4}, {}])
+    assert [t[0] for t in trace] == [[], ["out!312"], []]  # p.a is 3 after the first: the condition is false
+
+
+@pytest.mark.parametrize("written", ["$p.3", "$p.f(1)"])
+def test_robosim_dollar_on_a_variable_takes_a_field_name_only(tmp_path, written):
+    """After `$p.` RoboSim's scope offers the fields of p's type: anything else is one located error."""
+    files = machine(f"""	var p: Pair
+	initial i
+	state A {{ }}
+	transition t0 {{ from i to A }}
+	transition t1 {{ from A to A exec condition {written} == 1 }}""", "datatype Pair { a: int b: int }\n")
     for name, text in files.items():
         (tmp_path / name).write_text(text)
+    [(path, line, column, message)] = errors(check_paths([tmp_path]))
+    assert (path, line, column) == ("m.rst", 33, 48), message
+    assert message == "'$p.': 'p' is not an input event but a name with a value, and after '$p.' RoboSim reads the " \
+                      "name of a field of its type"
+
+
+ANN_DECLARATIONS = """package nets
+interface Ctl { event go: int }
+anncontroller Net {
+	params {
+		inputcontext { event in0: real }
+		outputcontext { event out0: real }
+		layerstructure <1, 1>
+		weights <<<0.5>>, <<1.0>>>
+		biases <<-1.0>, <0.0>>
+		activationfunction relu
+	}
+}
+annoperation Approx(x: real) {
+	requires Ctl
+	params { inputcontext { event in0: real } outputcontext { event out0: real } file "net.json" }
+}
+generalcontroller Abstract { uses Ctl var k: int }
+generaloperation Black(x: int) { terminates precondition x > 0 }
+"""
+
+
+def test_robochart_general_and_ann_components_are_read_and_refused_where_used(tmp_path):
+    """RoboChart.xtext's GeneralController, GeneralOperation, ANNController and ANNOperation (RoboSim's grammar
+    inherits them): a RoboTool project holding them was a syntax error for cotwin. They are read; a `cref` or
+    `opref` to one is an error there, saying what it is, since cotwin has no behaviour of it to run."""
+    (tmp_path / "nets.rct").write_text(ANN_DECLARATIONS)
+    files = machine("""	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec }""")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    assert errors(check_paths([tmp_path])) == []  # declared, unused: the project is RoboTool's and cotwin's
+    files["m.rst"] = "import nets::*\n" + files["m.rst"].replace("\tcref c = C\n", "\tcref c = C\n\tcref n = Net\n")
+    files["m.rst"] = files["m.rst"].replace("\tsref m = M\n", "\tsref m = M\n\topref o = Approx\n")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    why = "RoboTool reads it, and cotwin cannot run it (it has no state machine to simulate)"
     assert errors(check_paths([tmp_path])) == [
-        ("m.rst", 33, 45, "'$p.a': 'p' is not an input event but a name with a value (RoboTool reads its field "
-                          "'a'): write 'p.a'")]
+        ("m.rst", 9, 12, f"'Approx' is a RoboChart ANN operation (declared at {tmp_path / 'nets.rct'}:13:14): {why}"),
+        ("m.rst", 20, 11, f"'Net' is a RoboChart ANN controller (declared at {tmp_path / 'nets.rct'}:3:15): {why}")]
+    # one written in the module itself (RoboChart's ConnectionNode)
+    files["m.rst"] = files["m.rst"].replace("\tcref n = Net\n", "\tgeneralcontroller G { uses In }\n")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    assert errors(check_paths([tmp_path]))[1:] == [
+        ("m.rst", 20, 20, f"G in module Mod is a RoboChart general controller: {why}")]
 
 
 def test_strings_take_xtext_escapes_and_stay_on_one_line(tmp_path):
@@ -438,7 +504,7 @@ def test_logic_comparisons_and_binding_forms(tmp_path):
 	state B { }
 	transition t3 { from B to A exec }
 	transition t1 { from A to B condition $go?n action
-		$flag!((0 < n <= 10 => n != 3) iff (let m == n * 2 @ m > 0 /\\ not (m == 6)));
+		$flag!((0 < n <= 10 => n != 3) iff (let m == n * 2 @ (m > 0 /\\ not (m == 6))));
 		$out!(if 1 <= n < 5 then (the k: int | k in {1, 2, 3} /\\ k == n @ k * 100) else n end);
 		$real_out!(n as real) }
 	transition t2 { from A to A exec condition not $go }""")
@@ -448,6 +514,68 @@ def test_logic_comparisons_and_binding_forms(tmp_path):
                                          ["flag!true", "out!7", "real_out!7.0"]]
     # `the` with no value: the same located error from both
     assert trace[3][0] == "error" and "'the' found 0 values, not exactly one" in trace[3][1]
+
+
+def test_let_and_the_bind_tighter_than_comparisons_as_robotool_reads_them(tmp_path):
+    """RoboChart.xtext's DefiniteDescription and LetExpression sit between Comp and TypedExpression: a body ends
+    where a comparison or a logical operator begins, and a let or `the` may be an operand of one. cotwin read
+    them as the loosest forms: `let x == n @ x + 0 == x` was `n + 0 == n` (always true), where RoboTool compares
+    n with the constant x; `true /\\ let ...` and `n == the ...` were syntax errors."""
+    files = machine("""	const x: int = 10
+	var n: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $go?n action
+		$flag!(let x == n @ x + 0 == x);
+		$out!((if the x: int | x in {n} @ x * 1 == x then 1 else 0 end)
+			+ (if true /\\ let y == n @ y > 1 then 10 else 0 end)
+			+ (if n + 0 == the k: int | k in {n, 10} /\\ k > 5 @ k then 100 else 0 end)) }
+	transition t2 { from A to A exec condition not $go }""")
+    trace = run_both(tmp_path, files, [{"go": 2}, {"go": 10}, {"go": 1}, {}])
+    assert [t[0] for t in trace] == [[], ["flag!false", "out!10"], ["flag!true", "out!111"], ["flag!false", "out!0"]]
+
+
+def test_a_name_past_the_end_of_its_lets_body_is_located_with_the_fix(tmp_path):
+    """RoboTool does not resolve `m` in `let m == n @ m > 0 /\\ m < 9` (the let's body is `m`): one error where
+    it is used, naming the let and the parentheses that bind it; in a function's postcondition, which cotwin
+    only checks (the published UR5e mapping's IK function is written so), a warning."""
+    files = machine("""	var n: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $go?n /\\ let m == n @ m > 0 /\\ m < 9 /\\ m != 3 }""",
+                    "function f(a: int): int { postcondition let b == a @ result == b + 1 }\n"
+                    "operation op(k: int) { postcondition let j == k @ j > 0 /\\ j < 9 initial i final e "
+                    "transition t { from i to e } }\n")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    result = check_paths([tmp_path])
+    hint = ("'m' is bound by the let at line 34, whose body ends before '>' (a let binds tighter than a comparison "
+            "or a logical operator, as in RoboChart; RoboTool does not resolve 'm' here): to bind it, put the body in "
+            "parentheses, 'let ... @ (... > ...)'")
+    assert errors(result) == [("m.rst", 34, 76, hint)]
+    warnings = [f for f in result.findings if f.severity is Severity.WARNING]
+    assert [(w.location.line, w.location.column, w.message.split(",")[0]) for w in warnings] == [
+        (24, 64, "'b' is bound by the let at line 24"), (25, 60, "'j' is bound by the let at line 25")]
+    assert all(w.message.endswith("cotwin reads it as the let's in this pre/postcondition") for w in warnings)
+
+
+@pytest.mark.parametrize("written, column, fixed", [
+    ("1 + let x == 1 @ x == 2", 43, "1 + (let x == 1 @ x) == 2"),
+    ("- the x: int | x in {1} @ x == -1", 41, "-(the x: int | x in {1} @ x) == -1"),
+    ("let x == 1 @ the y: int | y in {x} @ y == 1", 52, "let x == 1 @ (the y: int | y in {x} @ y) == 1")])
+def test_a_let_or_the_where_robotool_refuses_it_is_located(written, column, fixed):
+    """RoboChart's grammar refuses a let or `the` as an operand of arithmetic or of unary minus, and a `the` as a
+    let's body: the error is at the word, saying so (the lexer had read it as a name, and the error fell on the
+    next token); in parentheses, as the message says, each is read."""
+    from cotwin.robosim.parser import parse_text
+
+    word = written[column - 39:column - 36]
+    _, findings = parse_text(f"function f(): boolean {{ postcondition {written} }}\n", "f.rct")
+    assert [(f.location.line, f.location.column) for f in findings] == [(1, column)]
+    assert findings[0].message.startswith(f"'{word}' cannot start here") and f"'({word} ... @ ...)'" in findings[0].message
+    assert parse_text(f"function f(): boolean {{ postcondition {fixed} }}\n", "f.rct")[1] == []
 
 
 def test_equality_chains_nest_to_the_left_as_robotool_reads_them(tmp_path):

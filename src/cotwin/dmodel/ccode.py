@@ -185,8 +185,13 @@ class CExpr(ExprVisitor):
 
     def visit_EventTest(self, e: s.EventTest) -> str:
         name = e.event.last
-        if name not in self.ctx.m.inputs:
-            return self.ctx.name(name, e.loc)[0]
+        if name not in self.ctx.m.inputs:  # `$v`, `$v.f`: the variable's value, its field f
+            field = s.dollar_field(e)
+            value, ty = self.ctx.name(name, e.loc)
+            if field is None:
+                return value
+            base = self.temp(self.types.c(ty), value) if value.startswith("(") else value
+            return f"{base}.{ident(field)}"
         flag = f"in->{ident(name)}.on"
         value = f"in->{ident(name)}.v"
         event_ty = self.ctx.m.inputs[name]

@@ -248,7 +248,7 @@ class MachineEvaluator(Evaluator):
                 finally:
                     self.bound = saved
             return True
-        return self.lookup(name, e.loc)
+        return self.dollar_value(e, self.lookup(name, e.loc))
 
     def first_index(self, e: s.IndexAccess) -> int:
         return self.readings.first_index.get(id(e), 1)

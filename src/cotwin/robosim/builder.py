@@ -15,7 +15,8 @@ from .declarations import (
     PrimitiveDecl, RecordDecl, SourceFile, VarDecl,
 )
 from .dmodel_elements import (
-    Communication, Connection, Controller, Final, Initial, Interface, InterfaceUse, Junction, MachineRef, Module,
+    Communication, Connection, Controller, Final, ForeignComponent, Initial, Interface, InterfaceUse, Junction,
+    MachineRef, Module,
     OperationDef, OperationRef, PlatformRef, ProbabilisticJunction, RoboticPlatform, State, StateMachine, Transition,
 )
 from .build_items import _Args, _Group, _Params, _Tagged, _flatten, _ident, _of, _string, _tagged
@@ -296,6 +297,10 @@ class Builder(PModelBuilder):
         such = next((r.value for r in rest[:-1] if isinstance(r, _Tagged)), None)
         return s.Quantified(kind, binders, rest[-1], self._loc(meta), such)
 
+    def definite_description(self, meta, *rest):
+        """`the x: T | p @ e` (RoboChart's DefiniteDescription, a level of its own: see common.lark)."""
+        return self.quantified(meta, "the", *rest)
+
     def let_binding(self, meta, name, _eq, value):
         return (_ident(name), value)
 
@@ -475,6 +480,9 @@ class Builder(PModelBuilder):
         for extra in platforms[1:]:
             self.diag.error(extra.loc, f"more than one robotic platform in {where}")
         platform = platforms[0] if platforms else None
+        for foreign in _of(items, ForeignComponent):
+            self.diag.error(foreign.loc, f"{foreign.name} in {where} is a RoboChart {foreign.kind}: RoboTool reads it, "
+                                         "and cotwin cannot run it (it has no state machine to simulate)")
         return Module(_ident(name), self._single(_tagged(items, "cycleDef"), "cycleDef", where),
                       platform if isinstance(platform, RoboticPlatform) else None, _of(items, Controller),
                       tuple(t.value for t in _tagged(items, "cref")), _of(items, Connection), self._tok_loc(name),
@@ -502,6 +510,18 @@ class Builder(PModelBuilder):
             _of(items, MachineRef), _of(items, Connection), self._tok_loc(name),
             _of(items, OperationRef), _of(items, ClockDecl),
         )
+
+    def general_controller(self, meta, name, *_items):
+        return ForeignComponent(_ident(name), "general controller", self._tok_loc(name))
+
+    def ann_controller(self, meta, name, *_items):
+        return ForeignComponent(_ident(name), "ANN controller", self._tok_loc(name))
+
+    def general_operation(self, meta, name, *_items):
+        return ForeignComponent(_ident(name), "general operation", self._tok_loc(name))
+
+    def ann_operation(self, meta, name, *_items):
+        return ForeignComponent(_ident(name), "ANN operation", self._tok_loc(name))
 
     def input_context(self, meta, *items):
         return _Tagged("input", tuple(items), self._loc(meta))

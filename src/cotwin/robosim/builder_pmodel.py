@@ -272,6 +272,7 @@ class PModelBuilder(Transformer):
 
     def _joint(self, name, joint, items, local: Device | None) -> JointRef:
         where = f"joint {name}"
+        items = _flatten(items)
         child = self._single(_tagged(items, "child"), "flexibly connected to", where)
         refs = _of(items, DeviceRef)
         return JointRef(
@@ -279,7 +280,7 @@ class PModelBuilder(Transformer):
             self._values(items, "instantiation"), tuple(r for r in refs if r.kind == "aref"),
             child[0] if child else None, child[1] if child else None, child[2] if child else None,
             self._one_pose(items, where), self._tok_loc(name), local, tuple(r for r in refs if r.kind == "sref"),
-            self._values(items, "relation"), self._one(items, Index, "index", where),
+            self._values(items, "relation"), self._one(items, Index, "index", where), _of(items, VarDecl),
         )
 
     def jref(self, meta, name, joint, *items):

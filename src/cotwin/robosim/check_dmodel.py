@@ -85,6 +85,7 @@ class DModelChecker(Checker):
         scope = Scope({p.name: Symbol(p.name, "param", self.types.resolve(p.type), p.loc) for p in fn.params})
         scope.symbols["result"] = Symbol("result", "param", result, fn.loc)
         checker = self.expressions(scope)
+        checker.strays_read = True  # only checked, never evaluated (a definition `result == e` holds no stray)
         for cond in (*fn.preconditions, *fn.postconditions):
             checker.condition(cond, "pre/postcondition")
 
@@ -115,6 +116,14 @@ class DModelChecker(Checker):
 
     def expressions(self, scope: Scope, events=None, clocks=frozenset(), states=None) -> ExprChecker:
         return ExprChecker(self.types, self.diag, scope, self.functions, events, clocks=clocks, states=states)
+
+    def _foreign(self, name: s.QName) -> str | None:
+        """Why a reference to a RoboChart general or ANN component cannot be followed, None if it names none."""
+        found = self.project.lookup("foreign", name, self.source)
+        if found is None:
+            return None
+        return (f"'{name}' is a RoboChart {found.kind} (declared at {found.loc}): RoboTool reads it, and cotwin cannot "
+                f"run it (it has no state machine to simulate)")
 
     def _cycle_def(self, expr: s.Expr | None, where: str) -> None:
         """RoboTool accepts any expression (`cycleDef cycle == 1`, `cycleDef 1`); it must be typeable."""
@@ -157,7 +166,7 @@ class DModelChecker(Checker):
         for ref in module.controller_refs:
             ctrl = self.project.lookup("controller", ref.target, self.source)
             if ctrl is None:
-                self.diag.error(ref.target.loc, f"unknown controller '{ref.target}'")
+                self.diag.error(ref.target.loc, self._foreign(ref.target) or f"unknown controller '{ref.target}'")
                 endpoints[ref.name] = None
             else:
                 endpoints[ref.name] = self._controller_events(ctrl)
@@ -254,7 +263,7 @@ class DModelChecker(Checker):
         self._unique([*ctrl.machine_refs, *ctrl.machines, *ctrl.operations, *ctrl.operation_refs], "machine", where)
         for ref in ctrl.operation_refs:
             if self.project.lookup("operation", ref.target, self.source) is None:
-                self.diag.error(ref.target.loc, f"unknown operation '{ref.target}'")
+                self.diag.error(ref.target.loc, self._foreign(ref.target) or f"unknown operation '{ref.target}'")
         if not ctrl.machine_refs and not ctrl.machines:
             self.diag.error(ctrl.loc, f"{ctrl.name} must have at least one state machine")
         endpoints: dict[str, dict | None] = {ctrl.name: self._controller_events(ctrl)}
@@ -349,8 +358,10 @@ class DModelChecker(Checker):
             if t.probability is not None:
                 checker.check(t.probability)
         if isinstance(machine, OperationDef):
+            conditions = checker.with_scope(checker.scope)
+            conditions.strays_read = True  # only checked, never evaluated
             for cond in (*machine.preconditions, *machine.postconditions):
-                checker.condition(cond, f"pre/postcondition of operation {machine.name}")
+                conditions.condition(cond, f"pre/postcondition of operation {machine.name}")
 
     def _action_expressions(self, stmt, checker: ExprChecker) -> None:
         """Timed expressions are not allowed in actions (RoboChart TE1); 0-based vector readings."""

@@ -363,8 +363,8 @@ class PModelChecker(Checker):
     def joint(self, joint: JointRef, link: Link | None, pmodel: PModel, env: ConstEnv,
               children: dict[str, str], known: set[str]) -> None:
         where = f"joint {joint.name}"
-        self._unique(where, actuator=joint.actuators, sensor=joint.sensors)
-        env = self.index(joint.index, env, where)
+        self._unique(where, variable=joint.variables, actuator=joint.actuators, sensor=joint.sensors)
+        env = self.scope.decls_env(joint.variables, self.index(joint.index, env, where))
         device = self.scope.joint_device(joint)
         if joint.local is not None:
             self.device(joint.local, env, known)
@@ -384,7 +384,8 @@ class PModelChecker(Checker):
                     self.diag.error(xyz.loc, f"axis of joint {joint.name} must be a non-zero 3-vector (|x, y, z|)")
         if joint.pose is not None:
             self.pose(joint.pose, env, where)
-        names = known | {joint.name} | ({p.name for p in device.ports} if device else set())
+        names = (known | {joint.name} | ({p.name for p in device.ports} if device else set())
+                 | self._scope_names(joint.variables))
         self._names(joint.relations, names, f"a relation of {where}")
         if joint.child is None:
             self.diag.warning(joint.loc, f"joint {joint.name} is not connected to a child link "

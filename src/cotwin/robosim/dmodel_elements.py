@@ -201,3 +201,13 @@ class Module:
     machines: tuple[StateMachine, ...] = ()  # RoboTool rejects machines directly in a module
     machine_refs: tuple[MachineRef, ...] = ()
     variables: tuple[VarDecl, ...] = ()  # `const` declarations of the module (RoboSim's ConstCycle)
+
+
+@dataclass(frozen=True)
+class ForeignComponent:
+    """RoboChart's `generalcontroller`, `generaloperation` and its ANN extension's `anncontroller`, `annoperation`:
+    RoboTool reads them; cotwin reads their names only and cannot run them (a reference to one is an error)."""
+
+    name: str
+    kind: str  # "general controller" | "ANN controller" | "general operation" | "ANN operation"
+    loc: Location

@@ -68,7 +68,20 @@ class Evaluator(ExprVisitor):
         raise EvalError("name", f"'{e.name}' has no value here", e.loc)
 
     def dollar(self, e: s.EventTest):
+        """`$v` on a name with a value (no input event where this evaluator runs: a mapping, a p-model) is v's
+        value, `$v.f` its field f (RoboSim's SimRefExp on a variable)."""
+        if e.bind is None and e.predicate is None and (e.value is None or s.dollar_field(e) is not None):
+            return self.dollar_value(e, self.name(s.Name(e.event, e.loc)))
         raise EvalError("unsupported", f"'${e.event}' cannot be evaluated here", e.loc)
+
+    def dollar_value(self, e: s.EventTest, value):
+        """The value of `$v` (value) or of `$v.f` (its field f)."""
+        field = s.dollar_field(e)
+        if field is None:
+            return value
+        if isinstance(value, dict) and field in value:
+            return value[field]
+        raise EvalError("type", f"no field '{field}' in {value!r}", e.value.loc)
 
     def function(self, e: s.Call) -> Callable | None:
         return None

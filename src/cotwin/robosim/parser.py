@@ -100,6 +100,19 @@ _OPENERS = frozenset(
 
 def _keyword_before(err: UnexpectedToken, text: str) -> tuple[int, int, str] | None:
     """A block keyword that the lexer read as a name right before the unexpected token."""
+    found = _word_before(err, text)
+    return found if found is not None and found[2] in _OPENERS else None
+
+
+def _binder_word_before(err: UnexpectedToken, text: str) -> tuple[int, int, str] | None:
+    """`let` or `the` right before the unexpected token, where the lexer read it as a name: written as an
+    operand of arithmetic (`1 + let ...`), of unary minus, or as a let's body (`let x == 1 @ the ...`)."""
+    found = _word_before(err, text)
+    return found if found is not None and found[2] in ("let", "the") else None
+
+
+def _word_before(err: UnexpectedToken, text: str) -> tuple[int, int, str] | None:
+    """The word right before the unexpected token, with its line and column."""
     start = getattr(err.token, "start_pos", None)
     if start is None or err.token.type == "$END":
         return None
@@ -109,12 +122,11 @@ def _keyword_before(err: UnexpectedToken, text: str) -> tuple[int, int, str] | N
     begin = end
     while begin > 0 and (text[begin - 1].isalnum() or text[begin - 1] == "_"):
         begin -= 1
-    word = text[begin:end]
-    if word not in _OPENERS or begin == end:
+    if begin == end:
         return None
     line = text.count("\n", 0, begin) + 1
     column = begin - (text.rfind("\n", 0, begin) + 1) + 1
-    return line, column, word
+    return line, column, text[begin:end]
 
 
 def _syntax_finding(err: UnexpectedInput, path: str, parser: lark.Lark, text: str = "") -> Finding:
@@ -129,6 +141,12 @@ def _syntax_finding(err: UnexpectedInput, path: str, parser: lark.Lark, text: st
         return Finding(Location(path, max(line, 1), max(column, 1)), Severity.ERROR,
                        f"unterminated string: {err.char} without a closing {err.char} on its line "
                        "(a line break in a string is written \\n)")
+    if isinstance(err, UnexpectedToken) and (binder := _binder_word_before(err, text)) is not None:
+        line, column, word = binder
+        return Finding(Location(path, line, column), Severity.ERROR,
+                       f"'{word}' cannot start here: as in RoboChart, '{word} ... @ ...' is an operand of a comparison "
+                       f"or of a logical operator, not of arithmetic, and a let's body is a let, an 'if' or arithmetic: "
+                       f"put it in parentheses, '({word} ... @ ...)'")
     if isinstance(err, UnexpectedToken) and (opener := _keyword_before(err, text)) is not None:
         line, column, word = opener
         return Finding(Location(path, line, column), Severity.ERROR,

@@ -159,6 +159,8 @@ class JointRef:
     sensors: tuple[DeviceRef, ...] = ()
     relations: tuple[Expr, ...] = ()
     index: Index | None = None
+    #: declared in the joint's block itself, outside `def` (visible to its relations)
+    variables: tuple[VarDecl, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,9 @@ from typing import Iterable
 
 from ..diagnostics import CotwinError, Diagnostics, Finding, Location, Severity
 from .declarations import EnumDecl, FunctionDecl, Import, PrimitiveDecl, RecordDecl, SourceFile
-from .dmodel_elements import Controller, Interface, Module, OperationDef, RoboticPlatform, StateMachine
+from .dmodel_elements import (
+    Controller, ForeignComponent, Interface, Module, OperationDef, RoboticPlatform, StateMachine,
+)
 from .functions import SUBSTITUTE_PACKAGES
 from .parser import notation_of, parse_file, parse_text
 from .pmodel_elements import AnnotationTemplate, BodyDecl, Device, Fragment, LinkDecl, Mapping, PModel
@@ -38,13 +40,14 @@ KIND_OF = {
     FunctionDecl: "function", Module: "module", Controller: "controller", StateMachine: "stm",
     OperationDef: "operation", RoboticPlatform: "platform", PModel: "pmodel", Mapping: "mapping",
     LinkDecl: "link", BodyDecl: "body", Fragment: "fragment", AnnotationTemplate: "annotation",
+    ForeignComponent: "foreign",
 }
 KIND_WORD = {
     "type": "type", "interface": "interface", "function": "function", "module": "module",
     "controller": "controller", "stm": "state machine", "operation": "operation",
     "platform": "robotic platform", "pmodel": "p-model", "mapping": "mapping", "sensor": "sensor",
     "actuator": "actuator", "joint": "joint", "link": "link", "body": "body", "fragment": "fragment",
-    "annotation": "annotation template",
+    "annotation": "annotation template", "foreign": "component",
 }
 
 

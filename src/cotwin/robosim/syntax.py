@@ -469,3 +469,11 @@ def conjuncts(e) -> list:
     if isinstance(e, Binary) and e.op == "/\\":
         return conjuncts(e.left) + conjuncts(e.right)
     return [e]
+
+
+def dollar_field(e: EventTest) -> str | None:
+    """The field f of `$v.f` (RoboSim's SimRefExp on a variable v: its scope reads the name after '.' among
+    the fields of v's type, and its type is the field's), None for any other `$` form."""
+    if e.bind is None and e.predicate is None and isinstance(e.value, Name) and len(e.value.name.parts) == 1:
+        return e.value.name.last
+    return None

@@ -52,6 +52,42 @@ class Scope:
         return Scope(dict(symbols or {}), self)
 
 
+@dataclass(frozen=True)
+class Stray:
+    """A name a let (or `the`) binds, used past the end of that binder's body: RoboChart's let and `the` bind
+    tighter than a comparison or a logical operator, so in `let x == 1 @ y == x` the second x is outside
+    the let and RoboTool does not resolve it (the let's body is `y`)."""
+
+    symbol: Symbol
+    binder: object  # the s.LetExpr or s.Quantified
+    op: str  # the operator before which the binder's body ended
+
+
+def ended_binder(name: str, left: s.Expr, op: str, types: dict[int, Ty], resolve) -> Stray | None:
+    """The let or `the` binding `name` written in `left` outside brackets (`$go /\\ let m == n @ m > 0`), whose
+    body has ended by the end of `left` (where cotwin once read it as reaching to the end of the expression);
+    the textually last such binder, None if none. `types` holds the checked types of the bound values."""
+    found = None
+    pending: list[tuple[s.Expr, str]] = [(left, op)]  # a walk in textual order, without recursion
+    while pending:
+        node, after = pending.pop()
+        if isinstance(node, s.Binary):
+            pending += [(node.right, after), (node.left, node.op)]
+        elif isinstance(node, s.Unary):
+            pending.append((node.operand, after))
+        elif isinstance(node, s.LetExpr):
+            for bound, value in node.bindings:
+                if bound == name:
+                    found = Stray(Symbol(bound, "binding", types.get(id(value), UNKNOWN), value.loc), node, after)
+            pending.append((node.body, after))
+        elif isinstance(node, s.Quantified) and node.kind == "the":
+            for bound, type_ref in node.binders:
+                if bound == name:
+                    found = Stray(Symbol(bound, "binding", resolve(type_ref), node.loc), node, after)
+            pending.append((node.body, after))
+    return found
+
+
 _LOGICAL = ("\\/", "/\\", "=>", "iff")
 _ORDER = ("<", "<=", ">", ">=")
 
@@ -116,10 +152,19 @@ class ExprChecker(ExprVisitor):
         self.states = states
         self.first_index = first_index
         self.readings: Readings = getattr(resolver.project, "readings", None) or Readings()
+        #: the left operands of the binary operators whose right operand is being checked, innermost first, as
+        #: (left, operator, outer) links: a let or `the` in one has ended, and RoboTool leaves its names unresolved
+        self.lefts: tuple | None = None
+        #: True where the expressions are only checked, never evaluated (pre/postconditions): a stray name is a
+        #: warning and read as the binder's (the published UR5e mapping's IK postcondition is written so)
+        self.strays_read = False
+        self._strays_said: set[int] = set()
 
     def with_scope(self, scope: Scope) -> "ExprChecker":
-        return ExprChecker(self.resolver, self.diag, scope, self.functions, self.events, self.qualified,
-                           self.clocks, self.states, self.first_index)
+        inner = ExprChecker(self.resolver, self.diag, scope, self.functions, self.events, self.qualified,
+                            self.clocks, self.states, self.first_index)
+        inner.lefts, inner.strays_read, inner._strays_said = self.lefts, self.strays_read, self._strays_said
+        return inner
 
     @property
     def project(self):
@@ -170,6 +215,9 @@ class ExprChecker(ExprVisitor):
             fn = self.functions.get(name.last)
             if fn is not None:
                 return self._function_type(fn)
+            stray = self._ended_binder(name.last)
+            if stray is not None:
+                return self._stray(e, stray)
             self.diag.error(e.loc, f"unknown name '{name}'")
             return UNKNOWN
         enum = self.enum_literal(name)
@@ -184,6 +232,33 @@ class ExprChecker(ExprVisitor):
                 return ty
         self.diag.error(e.loc, f"unknown name '{name}'")
         return UNKNOWN
+
+    def _ended_binder(self, name: str) -> Stray | None:
+        """The nearest let or `the` before this place that binds `name` and has ended (see `lefts`)."""
+        link = self.lefts
+        while link is not None:
+            left, op, link = link
+            found = ended_binder(name, left, op, self.readings.types, self.resolver.resolve)
+            if found is not None:
+                return found
+        return None
+
+    def _stray(self, e: s.Name, stray: Stray) -> Ty:
+        """A name only a binder that ended before it binds: an error saying where the body ended (once per
+        binder); in a pre/postcondition a warning, the name read as the binder's."""
+        if id(stray.binder) not in self._strays_said:
+            self._strays_said.add(id(stray.binder))
+            word = "let" if isinstance(stray.binder, s.LetExpr) else "the"
+            kind = "let" if word == "let" else "'the'"
+            message = (f"'{e.name}' is bound by the {kind} at line {stray.binder.loc.line}, whose body ends before "
+                       f"'{stray.op}' (a {kind} binds tighter than a comparison or a logical operator, as in RoboChart; "
+                       f"RoboTool does not resolve '{e.name}' here): to bind it, put the body in parentheses, "
+                       f"'{word} ... @ (... {stray.op} ...)'")
+            if self.strays_read:
+                self.diag.warning(e.loc, message + f"; cotwin reads it as the {kind}'s in this pre/postcondition")
+            else:
+                self.diag.error(e.loc, message)
+        return stray.symbol.ty if self.strays_read else UNKNOWN
 
     def enum_literal(self, name: s.QName) -> Ty | None:
         decl = self.project.lookup("type", s.QName(name.parts[:-1], name.loc), self.source)
@@ -203,10 +278,11 @@ class ExprChecker(ExprVisitor):
         symbol = self.scope.lookup(name) if len(e.event.parts) == 1 else None
         if symbol is not None and e.bind is None and e.predicate is None and e.value is None:
             return symbol.ty  # `$v`: the value of (required) variable v
-        if symbol is not None and isinstance(e.value, s.Name) and len(e.value.name.parts) == 1:
-            # RoboSim's scope reads `$p.f` on a variable p as its field f; cotwin reads `$e.v` on events only
-            self.diag.error(e.loc, f"'${name}.{e.value.name}': '{name}' is not an input event but a name with a value "
-                                   f"(RoboTool reads its field '{e.value.name}'): write '{name}.{e.value.name}'")
+        if symbol is not None and (field := s.dollar_field(e)) is not None:
+            return self._field(symbol.ty, field, e.value.loc)  # `$p.f`: RoboSim reads p's field f
+        if symbol is not None and e.value is not None and e.bind is None:
+            self.diag.error(e.value.loc, f"'${name}.': '{name}' is not an input event but a name with a value, and "
+                                         f"after '${name}.' RoboSim reads the name of a field of its type")
             return UNKNOWN
         if self.events is None:
             self.diag.error(e.loc, f"'${e.event}' tests an input event; not allowed here")
@@ -275,7 +351,12 @@ class ExprChecker(ExprVisitor):
         return INT if ty == NAT else ty
 
     def visit_Binary(self, e: s.Binary) -> Ty:
-        left, right = self.check(e.left), self.check(e.right)
+        left = self.check(e.left)
+        outer, self.lefts = self.lefts, (e.left, e.op, self.lefts)
+        try:
+            right = self.check(e.right)
+        finally:
+            self.lefts = outer
         if e.op in _LOGICAL:
             for side, ty in ((e.left, left), (e.right, right)):
                 if not assignable(BOOL, ty):
@@ -322,22 +403,25 @@ class ExprChecker(ExprVisitor):
 
     # ---- selections ----
     def visit_FieldAccess(self, e: s.FieldAccess) -> Ty:
-        base = self.check(e.base)
+        return self._field(self.check(e.base), e.field, e.loc)
+
+    def _field(self, base: Ty, field: str, loc: Location) -> Ty:
+        """The type of field `field` of a value of type `base` (a record's field, a device's port)."""
         if base == UNKNOWN:
             return UNKNOWN
         if isinstance(base, RecordTy):
-            f = base.decl.field(e.field)
+            f = base.decl.field(field)
             if f is None:
-                self.diag.error(e.loc, f"record '{base.decl.name}' has no field '{e.field}'")
+                self.diag.error(loc, f"record '{base.decl.name}' has no field '{field}'")
                 return UNKNOWN
             return self.resolver.resolve(f.type)
         if isinstance(base, DeviceTy):
-            port = base.device.port(e.field)
+            port = base.device.port(field)
             if port is None:
-                self.diag.error(e.loc, f"{base.device.kind} '{base.device.name}' has no port '{e.field}'")
+                self.diag.error(loc, f"{base.device.kind} '{base.device.name}' has no port '{field}'")
                 return UNKNOWN
             return self.resolver.resolve(port.type)
-        self.diag.error(e.loc, f"'.{e.field}' on a value of type {base}")
+        self.diag.error(loc, f"'.{field}' on a value of type {base}")
         return UNKNOWN
 
     def visit_IndexAccess(self, e: s.IndexAccess) -> Ty:
