@@ -156,7 +156,7 @@ class ExprChecker(ExprVisitor):
         #: (left, operator, outer) links: a let or `the` in one has ended, and RoboTool leaves its names unresolved
         self.lefts: tuple | None = None
         #: True where the expressions are only checked, never evaluated (pre/postconditions): a stray name is a
-        #: warning and read as the binder's (the published UR5e mapping's IK postcondition is written so)
+        #: warning and read as the binder's (published mappings write IK postconditions so)
         self.strays_read = False
         self._strays_said: set[int] = set()
 
