@@ -159,3 +159,41 @@ def test_rtde_field_mapping_agrees_with_the_logs_own_tcp_poses(recorded):
     # one rigid tool point, to 6 mm: a real arm's kinematics differ from the nominal model by millimetres;
     # a wrong joint offset or sign would move the point by tens of centimetres
     assert np.all(spread < 0.006), spread
+
+
+def test_the_runs_history_is_read_through_the_live_twins_public_accessors(tmp_path):
+    """A fleet's host and the CLI read the run's history id, its store's problem and a stop request through
+    LiveTwin.run_id, .history_problem and .stop_requested (they read its private _history and _stop)."""
+    from conftest import EXAMPLES
+    from cotwin.mapping.endpoint import SimulatedEndpoint
+    from cotwin.pmodel.simulator import PlatformSimulator
+    from cotwin.twin.analysis.fleet.host import _history_problem
+
+    system = load(EXAMPLES / "ur5e" / "cotwin.toml")
+    live = LiveTwin(system, tmp_path, pt=SimulatedEndpoint(PlatformSimulator(system.models.tree)), end=1.0)
+    assert (live.run_id, live.history_problem, live.stop_requested) == (None, None, False)  # no store opened yet
+    result = live.run()
+    assert live.run_id == result.run_id == list_runs(result.history_url)[-1]["id"]
+    assert live.history_problem is None is result.history_problem and _history_problem(live) is None
+    live.stop()
+    assert live.stop_requested
+
+
+def test_nothing_outside_the_live_runtime_reads_a_live_twins_private_state():
+    """`live._history` and `live._stop` were read by cotwin.twin.analysis.fleet.host and cotwin.cli.live: a live
+    twin's state is read through its public accessors (the test above), so that the runtime may change its own."""
+    import ast
+
+    src = Path(__file__).resolve().parents[1] / "src" / "cotwin"
+    runtime = src / "twin" / "live" / "runtime.py"
+    found = []
+    for path in sorted(src.rglob("*.py")):
+        if path == runtime:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__"):
+                base = node.value
+                named = base.id if isinstance(base, ast.Name) else base.attr if isinstance(base, ast.Attribute) else ""
+                if named == "live":
+                    found.append(f"{path.relative_to(src)}:{node.lineno}: {ast.unparse(node)}")
+    assert not found, found

@@ -105,7 +105,8 @@ def test_an_interrupt_while_the_threads_start_keeps_the_sweep_not_a_bug(tmp_path
 def test_a_second_interrupt_ends_the_process_without_finalising_under_the_threads(tmp_path):
     """A second Ctrl-C does not wait for the what-ifs in hand: the partial answers are written and the process ends
     at once, without the interpreter's exit (which, under a thread still in the native loop or a compile, crashed:
-    SIGSEGV instead of exit 130). The what-ifs here hold a thread in C (outside the GIL) for 20 s each."""
+    SIGSEGV instead of exit 130). The what-ifs here hold a thread in C (outside the GIL) for 20 s each. The sweep's
+    scratch folder, which those threads hold, is removed all the same before the process ends."""
     script = tmp_path / "held.py"
     script.write_text(
         "import atexit, ctypes, sys, threading, time\n"
@@ -126,7 +127,9 @@ def test_a_second_interrupt_ends_the_process_without_finalising_under_the_thread
 
     out = tmp_path / "sweep.csv"
     here = str(Path(cotwin.__file__).resolve().parents[1])  # this cotwin, whatever PYTHONPATH says from another folder
-    env = {**os.environ, "COTWIN_PROGRESS_SECONDS": "0", "PYTHONPATH": here}
+    scratch = tmp_path / "tmp"  # where the sweep makes its scratch folder (and Python its other temporary files)
+    scratch.mkdir()
+    env = {**os.environ, "COTWIN_PROGRESS_SECONDS": "0", "PYTHONPATH": here, "TMPDIR": str(scratch)}
     proc = subprocess.Popen([sys.executable, str(script), "sweep", str(PROJECT), "--event", "moveDiscreteCommand",
                              "--arg", "target_X=0..3", "--arg", "target_Y=0", "--arg", "target_Z=0", "-o", str(out),
                              "--threads", "2", "--horizon", "2"],
@@ -146,6 +149,7 @@ def test_a_second_interrupt_ends_the_process_without_finalising_under_the_thread
     assert "error: interrupted after 1 of 4 what-ifs; the 1 answered are in" in rest
     assert len((tmp_path / "sweep.partial.csv").read_text().splitlines()) == 2
     assert "FINALISED" not in rest and "Traceback" not in rest, rest
+    assert list(scratch.glob("cotwin-sweep-*")) == []
 
 
 def test_an_interrupt_waits_for_every_threads_whatif_in_hand(tmp_path, monkeypatch):

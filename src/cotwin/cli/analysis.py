@@ -190,7 +190,8 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         with ProgressReport("sweeping", "what-ifs") as progress:
             with about(state, StateError):
                 rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress,
-                                 physics_step=physics_step, threads=threads)
+                                 physics_step=physics_step, threads=threads,
+                                 warn=lambda message: click.echo(f"warning: --threads {threads}: {message}", err=True))
     except SweepInterrupted as err:  # the what-ifs answered are kept beside the output
         partial = Path(out).with_name(Path(out).stem + ".partial.csv")
         if err.rows:
@@ -198,9 +199,12 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         stopped = Interrupted(f"{err.findings[0].message}; " + (f"the {len(err.rows)} answered are in {partial}"
                                                                   if err.rows else "none was answered"))
         if err.running:  # threads left in their what-ifs: the interpreter's exit under them crashed (SIGSEGV)
+            from ..twin.analysis.scratch import remove_left
+
             report(stopped.findings)
             sys.stdout.flush()
             sys.stderr.flush()
+            remove_left()  # the scratch folder those threads hold, which no atexit hook removes after os._exit
             os._exit(130)
         raise stopped from None
     wall = time.perf_counter() - started

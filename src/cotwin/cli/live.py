@@ -81,10 +81,10 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         live = LiveTwin(system, out, step=step, end=end, algorithm=algorithm, realtime=realtime, history_url=history,
                         observers=[*([dash.feed] if dash else ()), TwinProgress(progress)], cc=cc,
                         whatif_url=broker if whatif else None, restart=on_unit_failure == "restart-from-state")
-        with interruptible(lambda: live.looping, lambda: live._stop, live.stop):
+        with interruptible(lambda: live.looping, lambda: live.stop_requested, live.stop):
             result = live.run()
         if dash is not None:
-            dash.finish("stopped" if live._stop else "done")
+            dash.finish("stopped" if live.stop_requested else "done")
     except BaseException as err:
         if dash is not None:
             dash.finish("failed", str(err) or type(err).__name__)
@@ -95,7 +95,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
             dash.stop()
     r = result.pt
     said_restarts(unit for side in live.sides.values() for unit in side.execution.system.units.values())
-    state = "stopped early" if r.steps < live.steps or live._stop else "done"
+    state = "stopped early" if r.steps < live.steps or live.stop_requested else "done"
     click.echo(f"{result.out}: PT and DT, {r.steps} steps each to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f}), {state}")
     click.echo(f"deviation: {result.deviation['alarms']} alarm(s); report {result.out / 'deviation.json'}; "

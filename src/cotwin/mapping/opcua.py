@@ -41,8 +41,8 @@ from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
 
 from ..diagnostics import CotwinError, PicklableError
-from ..pmodel.mjcf import pose_paths, sensor_name
-from ..pmodel.tree import KinematicTree
+from ..pmodel.mjcf import pose_paths
+from ..pmodel.tree import KinematicTree, reading_path
 from ..service import LoopThread
 from .opcua_auth import client_credentials, parse_url
 from .platform import Endpoint
@@ -279,7 +279,7 @@ class OPCUAEndpoint(Endpoint):
         if sorted(joints) != sorted(ours):
             raise CotwinError(f"the plant at {self.url} has joints {', '.join(joints)}; p-model {self.tree.name} "
                               f"has {', '.join(ours)}")
-        known = {sensor_name(self.tree.name, s.link, s.name, s.port, s.via) for s in self.tree.sensors} | \
+        known = {reading_path(self.tree.name, s) for s in self.tree.sensors} | \
             set(pose_paths(self.tree))
         unknown = [s for s in sensors if s not in known]
         if unknown:

@@ -11,9 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..diagnostics import CotwinError
-from ..pmodel.mjcf import sensor_name
 from ..pmodel.perturbation import QUANTITIES, Perturbation, perturbed_simulator
-from ..pmodel.tree import KinematicTree
+from ..pmodel.tree import KinematicTree, reading_path
 from .endpoint import SimulatedEndpoint
 from .platform import Endpoint
 
@@ -41,7 +40,7 @@ class PerturbedEndpoint(Endpoint):
         self.latency = steps * self.sim.timestep
         self._pending: list[_Pending] = []
         self._rng = np.random.default_rng(perturbation.seed)
-        self._quantity = {sensor_name(self.tree.name, s.link, s.name, s.port, s.via):
+        self._quantity = {reading_path(self.tree.name, s):
                           NOISE_OF.get(s.quantity, s.quantity) for s in self.tree.sensors}
         self._std = {q: perturbation.noise_std(q) for q in QUANTITIES}
         self._noisy = any(self._std.values())

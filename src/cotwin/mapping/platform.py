@@ -91,3 +91,16 @@ class Endpoint:
 
     def restore(self, snapshot: dict) -> None:
         raise CotwinError(f"the platform ({type(self).__name__}) cannot continue from a saved state")
+
+
+def joint_readings(tree: "KinematicTree", positions: dict[str, float],
+                   velocities: dict[str, float]) -> dict[str, float]:
+    """The sensor readings of a robot that reports only its joints (a UR over RTDE, a replayed log of one): each
+    joint sensor's port, named as the simulator names it (cotwin.pmodel.tree.reading_path), reads its joint's
+    position or velocity, an effort 0 (a UR reports currents, not torques); so a mapping's or [monitor]'s path
+    of a joint's sensor reads on the PT as on the DT."""
+    from ..pmodel.tree import reading_path
+
+    by_quantity = {"position": positions, "velocity": velocities}
+    return {reading_path(tree.name, s): float(by_quantity.get(s.quantity, {}).get(s.joint, 0.0))
+            for s in tree.sensors if s.joint is not None}

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..diagnostics import CotwinError
 from ..pmodel.tree import KinematicTree
-from .platform import Endpoint
+from .platform import Endpoint, joint_readings
 from .profile import IDENTITY, Convention
 
 
@@ -157,14 +157,7 @@ class ReplayEndpoint(Endpoint):
             {j: v for j, v in self._held.items() if j not in held}
 
     def read_sensors(self) -> dict[str, float]:
-        positions, velocities = self.joint_positions(), self.joint_velocities()
-        out = {}
-        for s in self.tree.sensors:
-            if s.joint is None:
-                continue
-            value = {"position": positions, "velocity": velocities}.get(s.quantity, {}).get(s.joint, 0.0)
-            out[f"{self.tree.name}::{s.link}::{s.name}.{s.port}"] = value
-        return out
+        return joint_readings(self.tree, self.joint_positions(), self.joint_velocities())
 
 
 def read_rtde_log(path, joints: list[str], convention: Convention = IDENTITY) -> Recording:

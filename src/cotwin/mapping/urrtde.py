@@ -15,7 +15,7 @@ import time as wallclock
 from typing import Mapping
 
 from ..diagnostics import CotwinError
-from .platform import Endpoint
+from .platform import Endpoint, joint_readings
 from .profile import IDENTITY, Convention
 
 
@@ -101,10 +101,4 @@ class RTDEEndpoint(Endpoint):
         return fields_to_state(self._fields(), self.arm, self.convention)[1]
 
     def read_sensors(self) -> dict[str, float]:
-        positions, velocities = fields_to_state(self._fields(), self.arm, self.convention)
-        out = {}
-        for s in self.tree.sensors:
-            if s.joint is not None:
-                value = {"position": positions, "velocity": velocities}.get(s.quantity, {}).get(s.joint, 0.0)
-                out[f"{self.tree.name}::{s.link}::{s.name}.{s.port}"] = value
-        return out
+        return joint_readings(self.tree, *fields_to_state(self._fields(), self.arm, self.convention))

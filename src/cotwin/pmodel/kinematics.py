@@ -150,6 +150,14 @@ class Sensor:
     ray: RaySpec | None = None  # the beams of a ray sensor (a LiDAR, a sonar), for its ray quantities
 
 
+def reading_path(pmodel: str, sensor: Sensor) -> str:
+    """The one name of a sensor port's reading, on every platform (the simulator, a replayed log, a live robot)
+    and in every mapping and [monitor] reading: `pmodel::link::sref.port`, or `pmodel::link::joint::sref.port`
+    for a sensor declared inside a joint, so that a PT and a DT name the same reading alike."""
+    via = f"{sensor.via}::" if sensor.via else ""
+    return f"{pmodel}::{sensor.link}::{via}{sensor.name}.{sensor.port}"
+
+
 @dataclass
 class PlacedDevice:
     """A sensor or actuator placed on a link, for SDF <sensor> elements: one per sref/aref."""

@@ -48,7 +48,7 @@ import numpy as np
 
 from ..diagnostics import CotwinError, Finding, Severity
 from .scenes import EARTH
-from .tree import Geom, KinematicTree, TJoint, inverse
+from .tree import Geom, KinematicTree, TJoint, inverse, reading_path
 from .xmltext import num, nums, quat, sub, to_text
 
 DEFAULT_KP = {"revolute": 5000.0, "prismatic": 2000.0}
@@ -63,12 +63,6 @@ OWN_FRICTION = "2"  # priority of a geom whose p-model gives its friction: above
 WORLD_CONTYPE, WORLD_CONAFFINITY = 1, 3
 
 
-def sensor_name(pmodel: str, link: str, sref: str, port: str, via: str = "") -> str:
-    """The MJCF name of a p-model sensor port: the mapping's path, `pmodel::link::sref.port`
-    (`pmodel::link::joint::sref.port` for a sensor declared inside a joint)."""
-    return f"{pmodel}::{link}::{via + '::' if via else ''}{sref}.{port}"
-
-
 POSE_PORTS = ("x", "y", "z", "yaw")  # a free base's pose readings (m, m, m, rad)
 
 
@@ -80,12 +74,11 @@ def pose_paths(tree: KinematicTree) -> list[str]:
 
 def reading_paths(tree: KinematicTree, free_base: bool = False) -> set[str]:
     """Every path the simulated platform of this p-model reads (cotwin.pmodel.simulator's read_sensors: what a
-    [monitor] reading names, read by the DT of every project): each sensor port's `sensor_name`, a sensor declared
-    in a joint with that joint in its path, and a free base's pose (`pose_paths`). A joint's sensor without its joint
-    (as the UR's RTDE and a replay name it) is no path of the simulator's: the DT's first step refused it."""
+    [monitor] reading names, read by the DT of every project): each sensor port's `reading_path` (a sensor declared
+    in a joint with that joint in its path, as every platform names it), and a free base's pose (`pose_paths`)."""
     out = set(pose_paths(tree)) if free_base else set()
     for s in tree.sensors:
-        out.add(sensor_name(tree.name, s.link, s.name, s.port, s.via))
+        out.add(reading_path(tree.name, s))
     return out
 
 
@@ -263,7 +256,7 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
     sensor = sub(root, "sensor")
     kinds = {"position": "jointpos", "velocity": "jointvel", "effort": "jointactuatorfrc"}
     for s_ in tree.sensors:
-        name = sensor_name(tree.name, s_.link, s_.name, s_.port, s_.via)
+        name = reading_path(tree.name, s_)  # the MJCF sensor is named by the reading it gives
         if s_.quantity in BODY_SENSORS:
             sub(sensor, s_.quantity, name=name, site=_site_name(tree, s_))
         elif s_.joint is not None and s_.quantity in kinds:

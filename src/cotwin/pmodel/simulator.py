@@ -32,8 +32,8 @@ import numpy as np
 
 from ..diagnostics import CotwinError
 from ..files import write_text
-from .mjcf import TIMESTEP, load, pose_paths, sensor_name, servo_mode, servo_name, site_name, to_mjcf
-from .tree import KinematicTree
+from .mjcf import TIMESTEP, load, pose_paths, servo_mode, servo_name, site_name, to_mjcf
+from .tree import KinematicTree, reading_path
 
 
 CONTACT_PERIOD = 0.005  # s between checks for contacts with the scene's obstacles
@@ -127,7 +127,7 @@ class PlatformSimulator:
                 self._actuator[f"{tree.name}::{j.source_link}::{j.source}::{servo.name}.{servo.port}"] = index
         self._sensors: dict[str, tuple[int, int]] = {}
         for sensor in tree.sensors:
-            name = sensor_name(tree.name, sensor.link, sensor.name, sensor.port, sensor.via)
+            name = reading_path(tree.name, sensor)
             try:
                 s = self.model.sensor(prefix + name)
             except KeyError:
@@ -158,7 +158,7 @@ class PlatformSimulator:
         for sensor in tree.sensors:
             if sensor.ray is not None:
                 site = site_name(tree, sensor)
-                path = sensor_name(tree.name, sensor.link, sensor.name, sensor.port, sensor.via)
+                path = reading_path(tree.name, sensor)
                 groups.setdefault(site, (sensor.ray, {}))[1][path] = sensor.quantity
         self.scanners = [RayScanner(self, prefix + site, spec, ports) for site, (spec, ports) in groups.items()]
         self._root = self.model.body(prefix + tree.root.name).id

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from .kinematics import (  # noqa: F401 (the tree's API)
     Geom, KinematicTree, PlacedDevice, Sensor, Servo, StandIn, TJoint, TLink, axis_angle, inverse, matrix_rpy,
-    rpy_matrix, transform,
+    reading_path, rpy_matrix, transform,
 )
 from .kinds import SENSOR_QUANTITIES, RaySpec, sensor_quantity  # noqa: F401
 from .tree_build import build_tree  # noqa: F401

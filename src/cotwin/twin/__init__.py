@@ -15,8 +15,9 @@ it in PARTS, each part a subpackage (tests/test_layering.py checks both, import 
   the page (`dashboard`).
 - live: the live twin, PT and DT in lockstep (`runtime`), its services as its observers (`live_observers`);
   that of a cell of several robots (`cell_live`).
-- analysis: many runs or runs judged: sweeps, generated tests run on a twin, walks, fleets of live
-  twins (`fleet`: on Ray, supervised, with an overview page).
+- analysis: many runs or runs judged: sweeps (`sweep`, its scratch folder `scratch`, its threads against the
+  machine `thread_budget`), generated tests run on a twin, walks, fleets of live twins (`fleet`: on Ray,
+  supervised, with an overview page).
 """
 
 PARTS: dict[str, tuple[str, ...]] = {
@@ -26,5 +27,5 @@ PARTS: dict[str, tuple[str, ...]] = {
                  "broker_access"),
     "services": ("deviation", "history", "whatif", "publisher", "plant", "dashboard"),
     "live": ("live_observers", "runtime", "cell_live"),
-    "analysis": ("sweep", "testing", "walks", "fleet"),
+    "analysis": ("sweep", "scratch", "thread_budget", "testing", "walks", "fleet"),
 }

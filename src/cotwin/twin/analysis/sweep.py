@@ -12,18 +12,22 @@ process pool would have reported per what-if.
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 import os
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import nullcontext
 from multiprocessing import get_context
 from pathlib import Path
+from typing import Callable
 
 from ...config import did_you_mean
 from ...diagnostics import CotwinError, Interrupted
 from ..assembly.scenario import Command, scalar_value
+from .scratch import ScratchFolder
 
 _SYSTEM = None  # the worker's TwinSystem, loaded once per process
 MAX_PLANS = 100_000  # what-ifs of one sweep: a grid larger than this is a mistake, not a sweep
@@ -199,7 +203,7 @@ def _ray_run(project: str, artefacts: str | None, plan, state, horizon, step, ph
 def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | None = None, horizon: float = 30.0,
               step: float | None = None, workers: int | None = None, ray: str | None = None,
               artefacts: str | Path | None = None, progress=None, physics_step: float | None = None,
-              threads: int = 1) -> list[dict]:
+              threads: int = 1, warn: Callable[[str], None] | None = None) -> list[dict]:
     """Run every plan as a what-if; `ray` is a Ray address ("auto" joins the local cluster) or None
     for a local process pool of `workers` processes (default: one per CPU; 1 runs in this process), or, with
     `threads` > 1, `threads` what-ifs at once in this process (see the module doc).
@@ -207,13 +211,9 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
     One row per plan, in the plans' order: `summary` of its prediction, or (a what-if that failed) its
     grid point and the error in the ERROR column (`failures` lists them). `progress(done, total)` is
     called as what-ifs finish. `physics_step`: the what-ifs' physics steps (s; None: cotwin's 1 ms; see
-    cotwin.twin.services.whatif.physics_timing)."""
-    import shutil
-    import tempfile
-
-    from ..assembly.build import dmodel_fmu
-    from ..assembly.run import load
-
+    cotwin.twin.services.whatif.physics_timing). `warn(message)` is told what is unwise about the threads asked
+    for (cotwin.twin.analysis.thread_budget; default: the cotwin.twin logger's warning). Without `artefacts`, the
+    d-model FMU is built in a scratch folder removed however the sweep ends (cotwin.twin.analysis.scratch)."""
     if threads < 1:
         raise CotwinError(f"a sweep runs on one thread or more, not {threads}")
     if threads > 1 and (ray is not None or workers not in (None, 1)):
@@ -226,79 +226,139 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         saved_execution(state)
     project = str(Path(project).resolve())
     report = progress or (lambda done, total: None)
-    scratch = None
-    if artefacts is None:
-        artefacts = scratch = tempfile.mkdtemp(prefix="cotwin-sweep-")
+    warn = warn or logging.getLogger("cotwin.twin").warning
+    scratch = ScratchFolder("cotwin-sweep-") if artefacts is None else None
     try:
-        system = load(project, reader=READER)
-        fmi = 2
-        if state is not None:  # a state of other models fails every what-if alike: said once, before any runs
-            from ...cosim.execution import check_models, saved_execution
-            from ..assembly.clocked import saved_clock
-
-            saved = saved_execution(state)
-            check_models(saved["models"], system.models.digests)
-            fmi = 2 if saved_clock(saved) is None else 3  # the d-model the state was saved from, forked as it ran
-        from ..services.whatif import check_horizon, physics_timing
-
-        check_horizon(horizon, system.spec.step if step is None else step)  # said once, not by every what-if
-        physics_step = physics_timing(system.spec.step if step is None else step, physics_step)  # once, not per what-if
-        dmodel_fmu(system, artefacts, fmi=fmi)  # built once, before the workers share it
-        artefacts = str(artefacts)
-        if ray is not None:
-            return _on_ray(project, plans, state, horizon, step, ray, artefacts, report, physics_step)
-        workers = max(1, min(workers or os.cpu_count() or 1, len(plans)))  # no idle processes
-        rows: list[dict] = []
-        report(0, len(plans))
-        if workers == 1:
-            global _SYSTEM
-            _SYSTEM = (system, artefacts)  # the project loaded above (loading it again costed a parse)
-            if threads > 1:
-                return _threaded(_SYSTEM, plans, state, horizon, step, physics_step, min(threads, len(plans)), report)
-            try:
-                with _forks(state, step, physics_step) as forks:
-                    for plan in plans:
-                        rows.append(_run(plan, state, horizon, step, forks))
-                        report(len(rows), len(plans))
-            except KeyboardInterrupt:
-                raise SweepInterrupted(rows, len(plans)) from None
-            return rows
-        size = max(1, min(len(plans) // (workers * 8), 64))  # small chunks: progress and balance
-        chunks = [plans[k:k + size] for k in range(0, len(plans), size)]
-        answers: dict[int, list[dict]] = {}
-        pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
-                                   initargs=(project, artefacts))
-        try:
-            futures = {pool.submit(_run_chunk, chunk, state, horizon, step, physics_step): k
-                       for k, chunk in enumerate(chunks)}
-            done = 0
-            for future in as_completed(futures):
-                k = futures[future]
-                try:
-                    answers[k] = future.result()
-                except BrokenProcessPool:  # a worker died (a signal, out of memory): its what-ifs say so
-                    answers[k] = [{**point(plan), ERROR: DIED} for plan in chunks[k]]
-                done += len(answers[k])
-                report(done, len(plans))
-        except KeyboardInterrupt:  # the answers so far are kept (in the plans' order), not lost
-            _stop(pool)
-            raise SweepInterrupted([row for k in sorted(answers) for row in answers[k]], len(plans)) from None
-        except BaseException:
-            _stop(pool)
-            raise
-        pool.shutdown()
-        return [row for k in range(len(chunks)) for row in answers[k]]
-    finally:
+        rows = _sweep(project, plans, state, horizon, step, workers, ray, scratch.path if scratch else artefacts,
+                      report, physics_step, threads, warn, scratch)
+    except BaseException:
         if scratch is not None:
-            shutil.rmtree(scratch, ignore_errors=True)
+            scratch.close()  # an interrupt meanwhile is not raised: the exception under way says how the sweep ended
+        raise
+    if scratch is not None and scratch.close():  # interrupted as it was cleaned up: the answers are all there
+        raise SweepInterrupted(rows, len(plans))
+    return rows
+
+
+def _sweep(project: str, plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None,
+           workers: int | None, ray: str | None, artefacts: str | Path, report, physics_step: float | None,
+           threads: int, warn: Callable[[str], None], scratch: ScratchFolder | None) -> list[dict]:
+    """run_sweep's work, its FMU built in `artefacts` (`scratch`'s path when the sweep made one)."""
+    from ..assembly.build import dmodel_fmu
+    from ..assembly.run import load
+
+    system = load(project, reader=READER)
+    fmi = 2
+    if state is not None:  # a state of other models fails every what-if alike: said once, before any runs
+        from ...cosim.execution import check_models, saved_execution
+        from ..assembly.clocked import saved_clock
+
+        saved = saved_execution(state)
+        check_models(saved["models"], system.models.digests)
+        fmi = 2 if saved_clock(saved) is None else 3  # the d-model the state was saved from, forked as it ran
+    from ..services.whatif import check_horizon, physics_timing
+
+    check_horizon(horizon, system.spec.step if step is None else step)  # said once, not by every what-if
+    physics_step = physics_timing(system.spec.step if step is None else step, physics_step)  # once, not per what-if
+    dmodel_fmu(system, artefacts, fmi=fmi)  # built once, before the workers share it
+    artefacts = str(artefacts)
+    if ray is not None:
+        return _on_ray(project, plans, state, horizon, step, ray, artefacts, report, physics_step)
+    workers = max(1, min(workers or os.cpu_count() or 1, len(plans)))  # no idle processes
+    rows: list[dict] = []
+    if workers == 1:
+        global _SYSTEM
+        _SYSTEM = (system, artefacts)  # the project loaded above (loading it again costed a parse)
+    threads = min(threads, len(plans))
+    if threads > 1:  # on one worker: this process
+        try:
+            for message in _thread_warnings(_SYSTEM, plans[0], state, step, physics_step, threads):
+                warn(message)
+        except KeyboardInterrupt:
+            raise SweepInterrupted([], len(plans)) from None
+        report(0, len(plans))
+        return _threaded(_SYSTEM, plans, state, horizon, step, physics_step, threads, report,
+                         scratch.use if scratch is not None else nullcontext)
+    report(0, len(plans))
+    if workers == 1:
+        try:
+            with _forks(state, step, physics_step) as forks:
+                for plan in plans:
+                    rows.append(_run(plan, state, horizon, step, forks))
+                    report(len(rows), len(plans))
+        except KeyboardInterrupt:
+            raise SweepInterrupted(rows, len(plans)) from None
+        return rows
+    size = max(1, min(len(plans) // (workers * 8), 64))  # small chunks: progress and balance
+    chunks = [plans[k:k + size] for k in range(0, len(plans), size)]
+    answers: dict[int, list[dict]] = {}
+    pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
+                               initargs=(project, artefacts))
+    try:
+        futures = {pool.submit(_run_chunk, chunk, state, horizon, step, physics_step): k
+                   for k, chunk in enumerate(chunks)}
+        done = 0
+        for future in as_completed(futures):
+            k = futures[future]
+            try:
+                answers[k] = future.result()
+            except BrokenProcessPool:  # a worker died (a signal, out of memory): its what-ifs say so
+                answers[k] = [{**point(plan), ERROR: DIED} for plan in chunks[k]]
+            done += len(answers[k])
+            report(done, len(plans))
+    except KeyboardInterrupt:  # the answers so far are kept (in the plans' order), not lost
+        try:
+            _stop(pool)
+        except KeyboardInterrupt:  # a second interrupt as the workers are stopped: the answers all the same
+            pass
+        raise SweepInterrupted([row for k in sorted(answers) for row in answers[k]], len(plans)) from None
+    except BaseException:
+        _stop(pool)
+        raise
+    pool.shutdown()
+    return [row for k in range(len(chunks)) for row in answers[k]]
+
+
+def _thread_warnings(loaded: tuple, plan: list[Command], state: bytes | None, step: float | None,
+                     physics: float | None, threads: int) -> list[str]:
+    """What is unwise about `threads` threads here (cotwin.twin.analysis.thread_budget): more than the CPUs by far,
+    or more forks than the memory holds; a fork is measured only for more threads than CPUs (fewer are sized as a
+    pool of one process per CPU would be, and the measure costs two forks' set-up)."""
+    from .thread_budget import available_memory, thread_warnings, usable_cpus
+
+    cpus = usable_cpus()
+    per_thread = fork_footprint(loaded, plan, state, step, physics) if threads > cpus else None
+    return thread_warnings(threads, cpus, per_thread, available_memory())
+
+
+def fork_footprint(loaded: tuple, plan: list[Command], state: bytes | None, step: float | None,
+                   physics: float | None = None) -> int | None:
+    """Bytes one more thread's forks take: how much this process's resident memory grew while a second fork of
+    `loaded` was set up (a what-if of `plan` one step long), the first set up before so that what the process
+    loads once (the FMU's library, MuJoCo's first model) is not counted. None where it cannot be told (no
+    /proc/self/statm, or the what-if fails: its error is the sweep's to say)."""
+    from .thread_budget import resident_memory
+
+    horizon = loaded[0].spec.step if step is None else step
+    try:
+        with _forks(state, step, physics, loaded) as first, _forks(state, step, physics, loaded) as second:
+            first.predict(plan, horizon=horizon, decimate=10**9)
+            before = resident_memory()
+            second.predict(plan, horizon=horizon, decimate=10**9)
+            after = resident_memory()
+    except Exception:  # noqa: BLE001 - not measured; the sweep's what-ifs say what fails
+        return None
+    return None if before is None or after is None else max(after - before, 0)
 
 
 def _threaded(loaded: tuple, plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None,
-              physics: float | None, threads: int, report) -> list[dict]:
+              physics: float | None, threads: int, report, hold=nullcontext) -> list[dict]:
     """The what-ifs on `threads` threads of this process, each taking the next plan and keeping its own forks of
     `loaded` (the twin and artefacts: not _SYSTEM, which another sweep of this process may set meanwhile);
     rows in the plans' order. An interrupt keeps the answers so far (SweepInterrupted) once each thread has
-    ended the what-if in hand and closed its forks."""
+    ended the what-if in hand and closed its forks. Each thread holds the artefacts' folder while it runs
+    (`hold()`: cotwin.twin.analysis.scratch.ScratchFolder.use), so that one left running by a second interrupt
+    does not have its FMU removed from under it, and the last to end removes the folder."""
     rows: list[dict | None] = [None] * len(plans)
     pending = iter(range(len(plans)))
     lock, stop = threading.Lock(), threading.Event()
@@ -310,7 +370,7 @@ def _threaded(loaded: tuple, plans: list[list[Command]], state: bytes | None, ho
     def work(ends: threading.Event) -> None:
         nonlocal done
         try:
-            with _forks(state, step, physics, loaded) as forks:
+            with hold(), _forks(state, step, physics, loaded) as forks:
                 while not stop.is_set():
                     with lock:
                         k = next(pending, None)

@@ -162,13 +162,13 @@ class PayloadEstimator:
 
 def effort_sensors(tree) -> dict[str, str]:
     """Joint -> the mapping path of the p-model sensor reading its torque (or force), for actuated joints."""
-    from ...pmodel.mjcf import sensor_name
+    from ...pmodel.tree import reading_path
 
     actuated = {j.name for j in tree.actuated}
     out = {}
     for s in tree.sensors:
         if s.quantity == "effort" and s.joint in actuated:
-            out.setdefault(s.joint, sensor_name(tree.name, s.link, s.name, s.port, s.via))
+            out.setdefault(s.joint, reading_path(tree.name, s))
     return out
 
 

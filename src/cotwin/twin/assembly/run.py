@@ -202,7 +202,8 @@ POSE_UNITS = {"x": "m", "y": "m", "z": "m", "yaw": "rad"}
 def monitored_units(system: TwinSystem) -> dict[str, tuple[str, str]]:
     """Each monitored mapping variable's quantity and unit (q0: joint angle, rad; qd0: joint speed,
     rad/s; a reading: its sensor's), so that a figure draws each unit on its own axis."""
-    from ...pmodel.mjcf import pose_paths, sensor_name
+    from ...pmodel.mjcf import pose_paths
+    from ...pmodel.tree import reading_path
 
     tree = system.models.tree
     kinds = {j.name: j.kind for j in tree.actuated}
@@ -211,7 +212,7 @@ def monitored_units(system: TwinSystem) -> dict[str, tuple[str, str]]:
         linear = kinds.get(joint) == "prismatic"
         out[name] = (("joint position", "m") if linear else ("joint angle", "rad")) if kind == "position" else \
             (("joint speed", "m/s") if linear else ("joint speed", "rad/s"))
-    sensors = {sensor_name(tree.name, s.link, s.name, s.port, s.via): s for s in tree.sensors}
+    sensors = {reading_path(tree.name, s): s for s in tree.sensors}
     pose = dict(zip(pose_paths(tree), POSE_UNITS))
     for name, path in system.spec.readings.items():
         if path in pose:

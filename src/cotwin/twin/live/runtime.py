@@ -158,6 +158,23 @@ class LiveTwin:
         """Ask the run to end after the current step (from another thread, e.g. a signal handler)."""
         self._stop = True
 
+    @property
+    def stop_requested(self) -> bool:
+        """Whether `stop()` was asked: the run ends (or ended) after the step under way, as "stopped"."""
+        return self._stop
+
+    # ---- the run's history (read by a fleet's host and the CLI while the run lasts and after) ----
+    @property
+    def run_id(self) -> int | None:
+        """The history store's id of this run; None until `run()` has opened the store."""
+        return self._history.run_id if self._history is not None else None
+
+    @property
+    def history_problem(self) -> str | None:
+        """Why this run is not (wholly) recorded in the history store, if it is not: the recorder keeps the twin
+        running when the store refuses or loses its writes and says so only here (None: recorded, or not started)."""
+        return self._history.problem if self._history is not None else None
+
     # ---- building ----
     def _sources(self):
         pt, dt, self._bridge = paired_sources(self.system, "cotwin live twin", lambda: self._stop)
@@ -298,8 +315,8 @@ class LiveTwin:
                            *(lambda o=o: o.twin_ended(self, status) for o in self._watchers)])
         report = self.deviation.report
         result = LiveResult(pt.execution.result(), dt.execution.result(), report, self.out, url,
-                            self._history.run_id if self._history else None, dict(self.sides), list(self.monitor.events),
-                            report.get("convergence", {}), self._history.problem if self._history else None)
+                            self.run_id, dict(self.sides), list(self.monitor.events), report.get("convergence", {}),
+                            self.history_problem)
         if status in ("done", "stopped"):  # a run stopped as asked is kept as a finished run's, its figure too
             self._figure()
         return result

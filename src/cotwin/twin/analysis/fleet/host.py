@@ -150,7 +150,7 @@ class RunningTwin(BackgroundService):
             self.live.monitor.twin = job.entry.name  # alarms name the twin, not its project file
             self.state = "running"
             self.live.run()
-            self.state = "stopped" if self.live._stop else "done"
+            self.state = "stopped" if self.live.stop_requested else "done"
             if dash is not None:
                 dash.finish(self.state)
         except BaseException as err:  # noqa: BLE001 - a twin's failure is its status, the host goes on
@@ -163,8 +163,8 @@ class RunningTwin(BackgroundService):
                 dash.finish("failed", self.message)
         finally:
             self._started()
-            if self.live is not None and self.live._history is not None:
-                self.run_id = self.live._history.run_id
+            if self.live is not None and self.live.run_id is not None:
+                self.run_id = self.live.run_id
             if dash is not None:
                 dash.stop()
 
@@ -179,8 +179,8 @@ class RunningTwin(BackgroundService):
         one handed over."""
         w, live = self.watch, self.live
         monitor = live.monitor if live is not None else None
-        if live is not None and live._history is not None:
-            self.run_id = live._history.run_id
+        if live is not None and live.run_id is not None:
+            self.run_id = live.run_id
         out = {"name": self.job.entry.name, "attempt": self.job.attempt, "state": self.state, "message": self.message,
                "time": w.time, "end": self.end, "real_time_factor": w.real_time_factor, "lag": w.lag,
                "worst_lag": w.worst_lag, "realtime": w.realtime, "page": self.page, "run_id": self.run_id,
@@ -197,8 +197,7 @@ class RunningTwin(BackgroundService):
 def _history_problem(live) -> str | None:
     """Why the twin's run is not (wholly) recorded in the fleet's store, if it is not: its recorder keeps the twin
     running when the store refuses or loses its writes, and says so only by its `problem`."""
-    history = live._history if live is not None else None
-    return history.problem if history is not None else None
+    return live.history_problem if live is not None else None
 
 
 def _worst(monitor) -> float | None:
