@@ -28,11 +28,10 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
-from ..robosim import syntax as s
-from ..robosim.dmodel_elements import State
 from ..robosim.types import BOOL, REAL, EnumTy, RecordTy
 from .interpreter import ExecutionError, Frame, Interpreter
 from .program import Program, Scalar, scalars
+from .steering import condition_variables, input_event_tests
 
 
 PROGRESS_CYCLES = 2_000  # cycles between two calls of verify's progress
@@ -128,68 +127,13 @@ def growth_hint(program: Program, snapshots) -> str:
             "bound it in the model (e.g. a modulus) or compare it with a constant")
 
 
-def condition_variables(program: Program) -> set[str]:
-    """Variables whose value steers control: read by a transition guard or an `if` condition, of a machine or of
-    an operation it calls, or assigned to one that is (`leg = BIN0 + item % 3` where a guard reads `leg`: item's
-    value then steers too, though no condition names it), also as an operation's argument (`place(item)` where
-    place's guards read its parameter)."""
-    names: set[str] = set()
-    flows: list[tuple[str, set[str]]] = []  # (variable assigned, the variables its value reads)
-
-    def read(e) -> set[str]:
-        return {node.name.last for node in s.walk(e) if isinstance(node, s.Name) and len(node.name.parts) == 1}
-
-    def visit_stmt(st):
-        if isinstance(st, s.Sequence):
-            for item in st.statements:
-                visit_stmt(item)
-        elif isinstance(st, s.IfStmt):
-            names.update(read(st.condition))
-            visit_stmt(st.then)
-            if st.otherwise is not None:
-                visit_stmt(st.otherwise)
-        elif isinstance(st, s.Assign) and s.root_name(st.target) is not None:
-            flows.append((s.root_name(st.target).name.last, read(st.value)))
-        elif isinstance(st, s.CallStmt) and (callee := calls.get(st.operation.last)) is not None:
-            flows.extend((param, read(arg)) for (param, _), arg in zip(callee.params, st.args))
-
-    for m in program.machines:
-        for body in (m, *m.frames):
-            calls = body.calls
-            for t in body.graph.transitions:
-                if t.condition is not None:
-                    names.update(read(t.condition))
-                if t.action is not None:
-                    visit_stmt(t.action)
-            for n in body.graph.nodes:
-                if isinstance(n.node, State):
-                    for st in (n.node.entry, n.node.during, n.node.exit):
-                        if st is not None:
-                            visit_stmt(st)
-    grown = True
-    while grown:  # what flows into a steering variable steers too
-        before = len(names)
-        for target, sources in flows:
-            if target in names:
-                names |= sources
-        grown = len(names) > before
-    return names
-
-
-def _event_tests(program: Program, event: str) -> list[s.EventTest]:
-    """The tests `$e`, `$e?x`, `$e.v` of input event `event` in the guards of the machines it reaches."""
-    return [node for machine, name in program.input_routes.get(event, ())
-            for t in program.machines[machine].graph.transitions if t.condition is not None
-            for node in s.walk(t.condition) if isinstance(node, s.EventTest) and node.event.last == name]
-
-
 def _bound_variables(program: Program, event: str) -> set[str]:
-    return {node.bind for node in _event_tests(program, event) if node.bind}
+    return {node.bind for node in input_event_tests(program, event) if node.bind}
 
 
 def _value_tested(program: Program, event: str) -> bool:
     """Whether a guard compares the event's value itself (`$sort.1`): that value steers control, no variable bound."""
-    return any(node.value is not None for node in _event_tests(program, event))
+    return any(node.value is not None for node in input_event_tests(program, event))
 
 
 def _default_domain(sc: Scalar) -> list:
