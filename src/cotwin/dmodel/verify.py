@@ -16,8 +16,9 @@ verifier makes each draw a choice point instead and explores every choice (Mathe
 each of RANDOM_VALUES, or --random; an uninterpreted function's result each value of its type's
 default domain, as an input's), so what it checks holds for any sequence of draws from those values.
 
-A search stops at `max_states`: it is then incomplete, and reports what it did not reach as not
-reached within the limit, never as a failure.
+A search stops at `max_states`, or as soon as a counter is proven to grow without bound (growth.py: the
+search could never end): it is then incomplete, and reports what it did not reach as not reached,
+never as a failure.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from ..robosim.types import BOOL, REAL, EnumTy, RecordTy
+from .growth import GrowthWatch
 from .interpreter import ExecutionError, Frame, Interpreter
 from .program import Program, Scalar, scalars
 from .steering import condition_variables, input_event_tests
@@ -97,6 +99,7 @@ class Report:
     sampled: list[str] = field(default_factory=list)  # value ports explored with a default domain only
     random_values: tuple = ()  # what a real random draw took (empty: the model draws none)
     growth: str = ""  # an incomplete search: the variables that grew (growth_hint)
+    unbounded: str = ""  # a search stopped early: the counter that grows without bound, where and how (growth.py)
 
     @property
     def ok(self) -> bool:
@@ -266,6 +269,7 @@ def verify(program: Program, domains: dict[str, list] | None = None, max_states:
     queue = deque([root])
     found: dict[tuple[str, str], Violation] = {}
     drew = False
+    watch = GrowthWatch(program, interp)
 
     def trace_to(snap, last):
         path = [last]
@@ -318,8 +322,17 @@ def verify(program: Program, domains: dict[str, list] | None = None, max_states:
                     parent[nxt] = (snap, (inputs, tuple(draws.drawn)))
                     depth[nxt] = depth[snap] + 1
                     queue.append(nxt)
+                    grows = watch.add(nxt, parent, depth)
+                    if grows is not None:  # the search cannot end: stop now, not at max_states
+                        report.complete = False
+                        report.unbounded = grows.message(format_trace)
+                        queue.clear()
+                        choices.clear()
+                        break
+            if report.unbounded:
+                break
     report.states = len(parent)
-    if not report.complete:
+    if not report.complete and not report.unbounded:
         report.growth = growth_hint(program, parent)
     report.random_values = draws.reals if drew else ()
     report.violations = sorted(found.values(), key=lambda v: (len(v.trace), v.property))
@@ -346,10 +359,14 @@ def format_report(program: Program, report: Report) -> str:
                      "each value of its type's default domain")
     sampled = (f"{', '.join(report.sampled)} took only sample values (0 and 1): give the values that matter "
                f"with --domain {report.sampled[0]}=V1,V2,...") if report.sampled else ""
-    if not report.complete:
+    if report.unbounded:
+        lines.append(f"  INCOMPLETE: the search stopped after {report.states} states: {report.unbounded}"
+                     + (f" ({sampled})" if sampled else ""))
+    elif not report.complete:
         lines.append(f"  INCOMPLETE: the search stopped at its limit of {report.max_states} states: what it "
                      "found holds, what it did not reach is not judged (raise --max-states"
                      + (f"; {sampled}" if sampled else "") + report.growth + ")")
+    scope = "in the states explored" if report.unbounded else "within the limit"
     props = [("timelock", "deadlock/timelock freedom"), ("determinism", "determinism"),
              ("divergence", "divergence freedom"), ("repeated-output", "at most one of each output per cycle")]
     for key, title in props:
@@ -357,7 +374,7 @@ def format_report(program: Program, report: Report) -> str:
         if bad:
             lines.append(f"FAIL {title}: {len(bad)} violation(s)")
         else:
-            lines.append(f"ok   {title}" if report.complete else f"?    {title}: no violation within the limit")
+            lines.append(f"ok   {title}" if report.complete else f"?    {title}: no violation {scope}")
     others = [v for v in report.violations if v.property not in dict(props)]
     for v in others:
         lines.append(f"FAIL {v.property}")
@@ -369,7 +386,7 @@ def format_report(program: Program, report: Report) -> str:
         elif report.complete:
             lines.append(f"FAIL {title}: never {verb} " + ", ".join(missing) + (f" ({sampled})" if sampled else ""))
         else:
-            lines.append(f"?    {title}: not {verb} within the limit: " + ", ".join(missing))
+            lines.append(f"?    {title}: not {verb} {scope}: " + ", ".join(missing))
     for v in report.violations:
         lines.append("")
         lines.append(v.format())
