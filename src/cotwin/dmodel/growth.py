@@ -190,6 +190,18 @@ def _source(e: s.Expr) -> str:
     return "..."
 
 
+def _where(machine, frames: tuple) -> str:
+    """Where a machine is in a state (its frames as Frame.freeze wrote them): its active node, or the node it is
+    entering when the last cycle ended inside a transition."""
+    if not frames:
+        return "not started"
+    _, active, tasks = frames[0][:3]
+    if active >= 0:
+        return ".".join(machine.graph.nodes[active].path)
+    node = next((task[1] for task in tasks if task[0] in ("enter", "settle", "wait")), None)
+    return f"entering {'.'.join(machine.graph.nodes[node].path)}" if node is not None else "not started"
+
+
 def _frame_with(data: tuple, variables: tuple) -> tuple:
     """A frame as Frame.freeze wrote it, with other variables."""
     return (*data[:3], variables, *data[4:])
@@ -310,11 +322,7 @@ class GrowthWatch:
                 if name in series[0] and any(row.get(name) != series[0][name] for row in series):
                     values[f"{m.machine.name}.{name}"] = [row.get(name) for row in series]
         grown = {tuple(name.split(".", 1)) for name in values}
-        control = []
-        for m in machines:
-            frames = chain[-1][0][m.index][1]
-            if frames and frames[0][1] >= 0:
-                control.append(f"{m.machine.name}: {'.'.join(m.graph.nodes[frames[0][1]].path)}")
+        control = [f"{m.machine.name}: {_where(m, chain[-1][0][m.index][1])}" for m in machines]
         trace = []
         cursor = snap
         while parent[cursor] is not None:
