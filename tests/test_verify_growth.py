@@ -83,3 +83,36 @@ def test_a_counter_whose_value_can_fail_is_not_watched(tmp_path):
     assert growth.counters(program) == {}
     report = verify(program, max_states=100)
     assert not report.complete and not report.unbounded and "M.count took" in report.growth
+
+
+GRID = """interface Ev { event a event b event report: int }
+controller C { uses Ev sref m = M
+	connection C on a to m on a connection C on b to m on b connection m on report to C on report }
+module Mod { robotic platform P { uses Ev } cref c = C
+	connection P on a to c on a (_async) connection P on b to c on b (_async)
+	connection c on report to P on report (_async) }
+stm M {
+	input context { uses Ev }
+	output context { uses Ev }
+	var x: int = 0
+	var y: real = 0
+	initial i
+	state A { }
+	state B { }
+	transition t0 { from i to A }
+	transition t1 { from A to B exec condition $a action x = x + 1 ; $report!(x * 2 + 1) }
+	transition t2 { from A to A exec condition not $a /\\ $b action y = y - 0.5 }
+	transition t3 { from A to A exec condition not $a /\\ not $b }
+	transition t4 { from B to A exec }
+}
+"""
+
+
+def test_two_counters_on_two_inputs_are_found_among_a_grid_of_states(tmp_path):
+    """Every state is (control, x, y): many states alike but for counters, most of them no ancestor of the new one.
+    A round of two cycles (A, B) or one cycle stepping a real counter down is found all the same."""
+    (tmp_path / "g.rst").write_text(GRID)
+    program = build_program(load_checked([tmp_path / "g.rst"]))
+    assert set(growth.counters(program)) == {"x", "y"}
+    report = verify(program)
+    assert not report.complete and report.states < 100 and "grows without bound" in report.unbounded, report.states

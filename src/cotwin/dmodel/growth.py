@@ -34,6 +34,7 @@ from .steering import bodies, body_statements, condition_variables, read
 REPETITIONS = 3  # rounds of one cycle, each adding to a counter, before the search stops
 MAX_PERIOD = 1_000  # the longest cycle looked for (in cycles between two states alike but for counters)
 CANDIDATES = 4  # the most recent states alike but for counters that are tried as an ancestor
+NEAR = 16  # the nearest ancestors tried too
 
 
 @dataclass
@@ -237,6 +238,7 @@ class GrowthWatch:
         self.counters = counters(program)
         self.enabled = bool(self.counters)
         self.seen: dict[int, list] = {}  # hash of a state's key -> the states with that key, oldest first
+        self.digests: dict = {}  # state -> the hash of its key
         self.rounds: dict = {}  # state -> (the ancestor alike but for counters, rounds so far)
 
     def key(self, snap) -> tuple:
@@ -256,8 +258,9 @@ class GrowthWatch:
         if not self.enabled:
             return None
         key = self.key(snap)
-        same = self.seen.setdefault(hash(key), [])
-        for earlier in reversed(same[-CANDIDATES:]):
+        digest = self.digests[snap] = hash(key)
+        same = self.seen.setdefault(digest, [])
+        for earlier in self.candidates(snap, digest, same, parent):
             period = depth[snap] - depth[earlier]
             if not 0 < period <= MAX_PERIOD or self.key(earlier) != key:
                 continue
@@ -278,6 +281,22 @@ class GrowthWatch:
             break
         same.append(snap)
         return None
+
+    def candidates(self, snap, digest: int, same: list, parent: dict):
+        """The states that may be an ancestor alike but for counters: the nearest ancestors' (a short cycle), then
+        the latest states alike (a longer one; siblings alike are tried at no cost)."""
+        tried, cursor = set(), snap
+        for _ in range(NEAR):
+            step = parent[cursor]
+            if step is None:
+                break
+            cursor = step[0]
+            if self.digests.get(cursor) == digest:
+                tried.add(cursor)
+                yield cursor
+        for earlier in reversed(same[-CANDIDATES:]):
+            if earlier not in tried:
+                yield earlier
 
     def replay(self, snap, cycle: int, steps: list):
         """The state after the round's inputs and draws from `snap`, or None if the round cannot be repeated."""
