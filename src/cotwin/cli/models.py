@@ -202,7 +202,7 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
     """Explore every state of a d-model module under every input combination; check the core
     properties (timelock, determinism, divergence, repeated outputs) and reachability. Exit 0: all
     hold; 1: a violation (or, in a complete search, something unreachable); 3: the search stopped at
-    --max-states without finding a violation (not verified)."""
+    --max-states, or at a counter that grows without bound, without finding a violation (not verified)."""
     from ..dmodel.program import build_program
     from ..dmodel.verify import RANDOM_VALUES, format_report, verify as explore
     from ..robosim.check import load_checked

@@ -16,8 +16,9 @@ verifier makes each draw a choice point instead and explores every choice (Mathe
 each of RANDOM_VALUES, or --random; an uninterpreted function's result each value of its type's
 default domain, as an input's), so what it checks holds for any sequence of draws from those values.
 
-A search stops at `max_states`: it is then incomplete, and reports what it did not reach as not
-reached within the limit, never as a failure.
+A search stops at `max_states`, or as soon as a counter is proven to grow without bound (growth.py: the
+search could never end): it is then incomplete, and reports what it did not reach as not reached,
+never as a failure.
 """
 
 from __future__ import annotations
@@ -28,11 +29,11 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
-from ..robosim import syntax as s
-from ..robosim.dmodel_elements import State
 from ..robosim.types import BOOL, REAL, EnumTy, RecordTy
+from .growth import GrowthWatch
 from .interpreter import ExecutionError, Frame, Interpreter
 from .program import Program, Scalar, scalars
+from .steering import condition_variables, input_event_tests
 
 
 PROGRESS_CYCLES = 2_000  # cycles between two calls of verify's progress
@@ -98,6 +99,7 @@ class Report:
     sampled: list[str] = field(default_factory=list)  # value ports explored with a default domain only
     random_values: tuple = ()  # what a real random draw took (empty: the model draws none)
     growth: str = ""  # an incomplete search: the variables that grew (growth_hint)
+    unbounded: str = ""  # a search stopped early: the counter that grows without bound, where and how (growth.py)
 
     @property
     def ok(self) -> bool:
@@ -128,68 +130,13 @@ def growth_hint(program: Program, snapshots) -> str:
             "bound it in the model (e.g. a modulus) or compare it with a constant")
 
 
-def condition_variables(program: Program) -> set[str]:
-    """Variables whose value steers control: read by a transition guard or an `if` condition, of a machine or of
-    an operation it calls, or assigned to one that is (`leg = BIN0 + item % 3` where a guard reads `leg`: item's
-    value then steers too, though no condition names it), also as an operation's argument (`place(item)` where
-    place's guards read its parameter)."""
-    names: set[str] = set()
-    flows: list[tuple[str, set[str]]] = []  # (variable assigned, the variables its value reads)
-
-    def read(e) -> set[str]:
-        return {node.name.last for node in s.walk(e) if isinstance(node, s.Name) and len(node.name.parts) == 1}
-
-    def visit_stmt(st):
-        if isinstance(st, s.Sequence):
-            for item in st.statements:
-                visit_stmt(item)
-        elif isinstance(st, s.IfStmt):
-            names.update(read(st.condition))
-            visit_stmt(st.then)
-            if st.otherwise is not None:
-                visit_stmt(st.otherwise)
-        elif isinstance(st, s.Assign) and s.root_name(st.target) is not None:
-            flows.append((s.root_name(st.target).name.last, read(st.value)))
-        elif isinstance(st, s.CallStmt) and (callee := calls.get(st.operation.last)) is not None:
-            flows.extend((param, read(arg)) for (param, _), arg in zip(callee.params, st.args))
-
-    for m in program.machines:
-        for body in (m, *m.frames):
-            calls = body.calls
-            for t in body.graph.transitions:
-                if t.condition is not None:
-                    names.update(read(t.condition))
-                if t.action is not None:
-                    visit_stmt(t.action)
-            for n in body.graph.nodes:
-                if isinstance(n.node, State):
-                    for st in (n.node.entry, n.node.during, n.node.exit):
-                        if st is not None:
-                            visit_stmt(st)
-    grown = True
-    while grown:  # what flows into a steering variable steers too
-        before = len(names)
-        for target, sources in flows:
-            if target in names:
-                names |= sources
-        grown = len(names) > before
-    return names
-
-
-def _event_tests(program: Program, event: str) -> list[s.EventTest]:
-    """The tests `$e`, `$e?x`, `$e.v` of input event `event` in the guards of the machines it reaches."""
-    return [node for machine, name in program.input_routes.get(event, ())
-            for t in program.machines[machine].graph.transitions if t.condition is not None
-            for node in s.walk(t.condition) if isinstance(node, s.EventTest) and node.event.last == name]
-
-
 def _bound_variables(program: Program, event: str) -> set[str]:
-    return {node.bind for node in _event_tests(program, event) if node.bind}
+    return {node.bind for node in input_event_tests(program, event) if node.bind}
 
 
 def _value_tested(program: Program, event: str) -> bool:
     """Whether a guard compares the event's value itself (`$sort.1`): that value steers control, no variable bound."""
-    return any(node.value is not None for node in _event_tests(program, event))
+    return any(node.value is not None for node in input_event_tests(program, event))
 
 
 def _default_domain(sc: Scalar) -> list:
@@ -322,6 +269,7 @@ def verify(program: Program, domains: dict[str, list] | None = None, max_states:
     queue = deque([root])
     found: dict[tuple[str, str], Violation] = {}
     drew = False
+    watch = GrowthWatch(program, interp)
 
     def trace_to(snap, last):
         path = [last]
@@ -374,8 +322,17 @@ def verify(program: Program, domains: dict[str, list] | None = None, max_states:
                     parent[nxt] = (snap, (inputs, tuple(draws.drawn)))
                     depth[nxt] = depth[snap] + 1
                     queue.append(nxt)
+                    grows = watch.add(nxt, parent, depth)
+                    if grows is not None:  # the search cannot end: stop now, not at max_states
+                        report.complete = False
+                        report.unbounded = grows.message(format_trace)
+                        queue.clear()
+                        choices.clear()
+                        break
+            if report.unbounded:
+                break
     report.states = len(parent)
-    if not report.complete:
+    if not report.complete and not report.unbounded:
         report.growth = growth_hint(program, parent)
     report.random_values = draws.reals if drew else ()
     report.violations = sorted(found.values(), key=lambda v: (len(v.trace), v.property))
@@ -402,10 +359,14 @@ def format_report(program: Program, report: Report) -> str:
                      "each value of its type's default domain")
     sampled = (f"{', '.join(report.sampled)} took only sample values (0 and 1): give the values that matter "
                f"with --domain {report.sampled[0]}=V1,V2,...") if report.sampled else ""
-    if not report.complete:
+    if report.unbounded:
+        lines.append(f"  INCOMPLETE: the search stopped after {report.states} states: {report.unbounded}"
+                     + (f" ({sampled})" if sampled else ""))
+    elif not report.complete:
         lines.append(f"  INCOMPLETE: the search stopped at its limit of {report.max_states} states: what it "
                      "found holds, what it did not reach is not judged (raise --max-states"
                      + (f"; {sampled}" if sampled else "") + report.growth + ")")
+    scope = "in the states explored" if report.unbounded else "within the limit"
     props = [("timelock", "deadlock/timelock freedom"), ("determinism", "determinism"),
              ("divergence", "divergence freedom"), ("repeated-output", "at most one of each output per cycle")]
     for key, title in props:
@@ -413,7 +374,7 @@ def format_report(program: Program, report: Report) -> str:
         if bad:
             lines.append(f"FAIL {title}: {len(bad)} violation(s)")
         else:
-            lines.append(f"ok   {title}" if report.complete else f"?    {title}: no violation within the limit")
+            lines.append(f"ok   {title}" if report.complete else f"?    {title}: no violation {scope}")
     others = [v for v in report.violations if v.property not in dict(props)]
     for v in others:
         lines.append(f"FAIL {v.property}")
@@ -425,7 +386,7 @@ def format_report(program: Program, report: Report) -> str:
         elif report.complete:
             lines.append(f"FAIL {title}: never {verb} " + ", ".join(missing) + (f" ({sampled})" if sampled else ""))
         else:
-            lines.append(f"?    {title}: not {verb} within the limit: " + ", ".join(missing))
+            lines.append(f"?    {title}: not {verb} {scope}: " + ", ".join(missing))
     for v in report.violations:
         lines.append("")
         lines.append(v.format())
