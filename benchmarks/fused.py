@@ -127,17 +127,20 @@ def physics_moving(twin, setpoints: np.ndarray) -> float:
 
 
 def profile(twin, build_dir: Path, folder: Path, step: float, physics: float) -> dict[str, float]:
-    """Microseconds per communication step of each part of one 20 s run at this step: the native loop's C
-    (every unit's quiet step, physics included; the physics given as the same-motion peer's share), the
-    CSV text of its rows, the steps made in Python (the fused loop: where something changed), observers
-    told at the ends of stretches and of repeats, and the rest."""
+    """Microseconds per communication step of each part of one 20 s run at this step: the native loop's C and the
+    physics of the steps made in Python together, less the same-motion peer's physics (what the twin's C costs
+    beyond MuJoCo), the CSV text of its rows, the steps made in Python (the fused loop: where something changed)
+    less their physics, observers told at the ends of stretches and of repeats, and the rest."""
     from cotwin.cosim import fused, native, rowtext
+    from cotwin.mapping.endpoint import SimulatedEndpoint
+    from cotwin.pmodel.simulator import PlatformSimulator
 
     folder.mkdir(exist_ok=True)
     for name in ("dmodel.fmu", "build.json"):
         shutil.copy(build_dir / name, folder / name)
     timers = {}
-    saved = (native._compiled, rowtext.rows_text, fused.FusedLoop.run, native.NativeLoop._tell)
+    saved = (native._compiled, rowtext.rows_text, fused.FusedLoop.run, native.NativeLoop._tell,
+             SimulatedEndpoint._advance_natively, PlatformSimulator.step)
 
     def compiled(source, include_dirs=()):
         timers["c"] = Timed(saved[0](source, include_dirs))
@@ -146,22 +149,29 @@ def profile(twin, build_dir: Path, folder: Path, step: float, physics: float) ->
     timers["text"] = Timed(saved[1])
     timers["python"] = Timed(saved[2])
     timers["told"] = Timed(saved[3])
+    timers["moved"] = Timed(saved[4])  # a Python step's physics: a move's set-points in C ...
+    timers["held"] = Timed(saved[5])  # ... or the servos holding, in one mj_step call
     native._compiled, rowtext.rows_text = compiled, timers["text"]
     fused.FusedLoop.run = lambda self, *a: timers["python"](self, *a)
     native.NativeLoop._tell = lambda self, *a: timers["told"](self, *a)
+    SimulatedEndpoint._advance_natively = lambda self, *a: timers["moved"](self, *a)
+    PlatformSimulator.step = lambda self, *a: timers["held"](self, *a)
     native._CACHE.clear()
     watch = Stopwatch()
     try:
         ran = run_twin(twin, folder, step=step, plot=False, observers=[watch])
     finally:
-        native._compiled, rowtext.rows_text, fused.FusedLoop.run, native.NativeLoop._tell = saved
+        (native._compiled, rowtext.rows_text, fused.FusedLoop.run, native.NativeLoop._tell,
+         SimulatedEndpoint._advance_natively, PlatformSimulator.step) = saved
     steps = ran.result.steps
     per = lambda s: s / steps * 1e6  # noqa: E731
-    c = timers["c"].seconds
+    c, stepped = timers["c"].seconds, timers["moved"].seconds + timers["held"].seconds
     parts = {"physics (the same-motion peer's time)": physics,
-             "the native loop's C less that physics (d-model, events, mirrors, slots)": c - physics,
+             "the native loop's C and the Python steps' physics, less that physics (d-model, events, mirrors, "
+             "slots)": c + stepped - physics,
              "observers told of stretches": timers["told"].seconds,
-             f"steps made in Python (the fused loop: {timers['python'].calls} calls)": timers["python"].seconds}
+             f"steps made in Python, their physics aside (the fused loop: {timers['python'].calls} calls)":
+                 timers["python"].seconds - stepped}
     parts["the rest (segments set up, slots moved, the CSV text and file, the state saved ...)"] = \
         watch.seconds - sum(parts.values())
     out = {name: per(s) for name, s in parts.items()}
@@ -201,7 +211,7 @@ def main() -> None:
               f"a moving arm costs MuJoCo {100 * (moving / rest - 1):.0f}% more than one at rest")
         figure("physics alone doing the twin's motion (set-points replayed in C)", moving, "s",
                peer="physics alone at rest (one mj_step call)", peer_value=rest)
-        for step in (0.01, 0.001):
+        for step in (0.1, 0.01, 0.001):
             prof = profile(twin, out / "build", out / f"profile{step}", step, moving)
             total, share = prof.pop("total"), prof.pop("native share of steps")
             for name, us in prof.items():
