@@ -959,3 +959,23 @@ def test_forms_robotool_refuses_keep_running_as_before(tmp_path):
     trace = run_both(tmp_path, files, [{"go": 3}, {"go": 7}, {}])
     assert [t[0] for t in trace] == [[], ["flag!false", "out!6"], ["flag!true", "out!114"]]
 
+
+def test_a_qualified_name_after_dollar_and_to_from_are_errors_saying_why(tmp_path):
+    """RoboSim.xtext's SimRefExp reads `'$' element=[NamedElement|QualifiedName]`, but RoboSimScopeProvider scopes
+    the element by simple names only (Scopes::scopeFor over the machine's contexts, NULLSCOPE outside), so
+    `$In::go` never resolves in RoboTool: the error says to write `$go`. `to` and `from` are RoboChart's Atomic
+    ToExp and FromExp (inherited by RoboSim), which RoboCalcTypeProvider gives no type: an error saying so."""
+    files = machine("""	var n: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $In::go?n action $out!n }
+	transition t2 { from A to A exec condition to == 1 \\/ from == 2 }""")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    found = errors(check_paths([tmp_path]))
+    assert [(line, column) for _, line, column, _ in found] == [(32, 46), (33, 45), (33, 56)]
+    assert found[0][3] == ("'$In::go': RoboTool resolves the name after '$' by its simple name among the machine's "
+                           "events and variables (RoboSim's scope offers no qualified name there): write '$go'")
+    assert found[1][3].startswith("'to' is RoboChart's ToExp") and "gives it no type" in found[1][3]
+    assert found[2][3].startswith("'from' is RoboChart's FromExp")
