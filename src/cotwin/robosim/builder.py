@@ -192,9 +192,11 @@ class Builder(PModelBuilder):
         return s.EventTest(name, None, self._loc(meta), value=value)
 
     def dollar_bind(self, meta, name, predicate=None):
+        self.forms.if_operand(predicate, "a '$e?x:' predicate (a CallExp in RoboSim's SimRefExp)")
         return ("bind", name, predicate)
 
     def dollar_value(self, meta, value):
+        self.forms.if_operand(value, "'$e.' (a CallExp in RoboSim's SimRefExp)")
         return ("value", value, None)
 
     def such_that(self, meta, expr):
