@@ -317,7 +317,9 @@ def test_dollar_expressions_sends_and_platform_calls(tmp_path):
 
 def test_robosim_dollar_forms_as_robotool_reads_them(tmp_path):
     """RoboSim.xtext: SimRefExp is an Atomic (`$v[1]`), its value and predicate are CallExps (`$e.f(x)`,
-    `$e?x:ok(x)`), and OutputCommunication sends with `.` as with `!` (`$e.v`, `$e.(n + 1)`, `$e.r.a`, `$e.f(x)`)."""
+    `$e?x:ok(x)`), and OutputCommunication sends with `.` as with `!` (`$e.v`, `$e.(n + 1)`, `$e.f(x)`; `$e.r.a` and
+    `$e.v[1]`, whose value is no CallExp there, are read too, with a warning: see
+    test_an_output_value_robotool_refuses_is_warned_with_the_fix)."""
     files = machine("""	var x: int
 	var v: vector(int, 2) = [| 5, 6 |]
 	var r: Pair
@@ -866,3 +868,117 @@ def test_a_variables_field_alone_as_a_statement_is_one_clear_error(tmp_path):
         [(path, line, _, message)] = errors(check_paths([tmp_path]))
         assert (path, line) == ("m.rst", 32), message
         assert message.startswith("'p' is not an output event but a name with a value"), message
+
+
+FUNCTION = "function f(n: int): int { postcondition result == "
+
+
+@pytest.mark.parametrize("written, at, says, fixed", [
+    ("1 + if n > 0 then 1 else 2 end", "if", "'if ... end' as an operand of '+'", "1 + (if n > 0 then 1 else 2 end)"),
+    ("if n > 0 then 1 else 2 end * 2", "if", "'if ... end' as an operand of '*'", "(if n > 0 then 1 else 2 end) * 2"),
+    ("-if n > 0 then 1 else 2 end", "if", "'if ... end' as an operand of '-'", "-(if n > 0 then 1 else 2 end)"),
+    ("size(<if n > 0 then 1 else 2 end>)", "if", "operand of a sequence", "size(<(if n > 0 then 1 else 2 end)>)"),
+    ("if n > 0 then r else r end.a", "if", "operand of a selection", "(if n > 0 then r else r end).a"),
+    ("r.v[1]", "r", "an index after a field", "(r.v)[1]"),
+    ("g($go?x:if n > 0 then true else false end)", "if", "operand of a '$e?x:' predicate",
+     "g($go?x:(if n > 0 then true else false end))"),
+    ("g($go.if n > 0 then 1 else 2 end)", "if", "operand of '$e.'", "g($go.(if n > 0 then 1 else 2 end))"),
+    ("m[1][2]", "m", "an index of an index", "m[1, 2]"),
+    ("g(n)(n)", "g", "a call of a call", "(g(n))(n)"),
+    ("r.f(1)", "r", "a call of a call, an index or a field ('a.f(x)'", "(r.f)(1)"),
+    ("m[1](2)", "m", "a call of a call, an index or a field ('a[i](x)'", "(m[1])(2)"),
+])
+def test_expressions_robotool_refuses_are_warned_with_the_fix(written, at, says, fixed):
+    """RoboChart.xtext's levels: IfExpression sits between LetExpression and TypedExpression (an operand of a
+    comparison or a logical operator, not of arithmetic, `-`, a selection, a call or a sequence's PlusMinus
+    values); Selection = ArrayExp ('.' member)*, ArrayExp = CallExp ('[' ... ']')?, CallExp = Atomic ('(' ... ')')?.
+    cotwin reads each form (models that run keep running) with one warning at it saying how both read it; the
+    parenthesised form RoboTool reads (ParExp is an Atomic) has none, and the if as a comparison's or a logical
+    operator's operand, or as an argument, has none."""
+    from cotwin.robosim.parser import parse_text
+
+    source, findings = parse_text(FUNCTION + written + " }\n", "f.rst")
+    assert source is not None
+    [warning] = findings
+    assert warning.severity is Severity.WARNING
+    assert (warning.location.line, warning.location.column) == (1, len(FUNCTION) + written.index(at) + 1)
+    assert warning.message.startswith("RoboTool refuses") and says in warning.message, warning.message
+    assert parse_text(FUNCTION + fixed + " }\n", "f.rst")[1] == []
+    for accepted in ("if n > 0 then 1 else 2 end == n /\\ if n > 0 then true else false end",
+                     "g(if n > 0 then 1 else 2 end) + (if n > 0 then 1 else 2 end)", "g(n)[1].a.b", "$n"):
+        assert parse_text(FUNCTION + accepted + " }\n", "f.rst")[1] == [], accepted
+
+
+@pytest.mark.parametrize("written, fixed", [
+    ("$out!n + 1", "$out!(n + 1)"), ("$out!-n", "$out!(-n)"), ("send $out!r.a", "send $out!(r.a)"),
+    ("$out.r.a", "$out.(r.a)"), ("$out!(r.v)[1]", "$out!((r.v)[1])"), ("$out!n == 1", "$out!(n == 1)"),
+])
+def test_an_output_value_robotool_refuses_is_warned_with_the_fix(written, fixed):
+    """RoboSim.xtext's OutputCommunication is `'$' event ('!'|'.') value=CallExp` (and RoboChart's Communication
+    `e!v` takes a CallExp too): a name, a literal, a call or a parenthesised expression. cotwin sends any value
+    (the model runs as before) with a warning at the value; in parentheses, none. Calls and names need none."""
+    from cotwin.robosim.parser import parse_text
+
+    def found(statement: str, path: str = "m.rst"):
+        text = f"stm M {{ initial i state A {{ entry {statement} }} transition t {{ from i to A }} }}\n"
+        return text.index(statement), parse_text(text, path)[1]
+
+    start, [warning] = found(written)
+    value = written.split("!", 1)[-1] if "!" in written else written.split(".", 1)[1]
+    assert warning.severity is Severity.WARNING and warning.location.column == start + written.index(value) + 1
+    event = written.removeprefix("send ").split("!")[0].split(".")[0]
+    mark = "!" if "!" in written else "."
+    assert warning.message.startswith(f"RoboTool refuses this value after '{event}{mark}'")
+    assert warning.message.endswith(f"write '{event}{mark}(...)' so that both read it")
+    assert found(fixed)[1] == []
+    assert found("$out!g(n); $out!3; $out!r; $out.g(n); $out!E::a; $out!{1, 2}")[1] == []
+    _, [rct] = found(written.replace("$", ""), "m.rct")  # RoboChart's synchronisation, alike
+    assert rct.message.startswith(f"RoboTool refuses this value after '{event.lstrip('$')}{mark}'")
+
+
+@pytest.mark.parametrize("kind", ["Set", "Seq"])
+def test_a_collection_type_with_a_space_before_its_parenthesis_is_warned(kind):
+    """RoboChart.xtext's type keywords are 'Set(' and 'Seq(' (TypeRef: {SetType} 'Set(' domain=Type ')'), single
+    tokens: Xtext's lexer skips whitespace between tokens, not inside one, so `Set (int)` is the type name Set
+    followed by '(' there, a syntax error. cotwin reads it, with a warning at the word."""
+    from cotwin.robosim.parser import parse_text
+
+    source, [warning] = parse_text(f"stm M {{ var s: {kind} (int) var t: {kind}(int) }}\n", "m.rst")
+    assert source is not None and warning.severity is Severity.WARNING
+    assert (warning.location.line, warning.location.column) == (1, 16)
+    assert warning.message.startswith(f"RoboTool refuses '{kind}' apart from its '('") and f"'{kind}(T)'" in warning.message
+
+
+def test_forms_robotool_refuses_keep_running_as_before(tmp_path):
+    """The warned forms are read as before: a model written with them runs alike in the interpreter and the FMU."""
+    files = machine("""	var n: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $go?n action $out!n * 2 + if n > 5 then 100 else 0 end; $flag!n == 7 }
+	transition t2 { from A to A exec condition not $go }""")
+    project, warnings = checked(tmp_path, files)
+    assert len(warnings) == 3  # the value after '$out!', the if as an operand of '+', the value after '$flag!'
+    trace = run_both(tmp_path, files, [{"go": 3}, {"go": 7}, {}])
+    assert [t[0] for t in trace] == [[], ["flag!false", "out!6"], ["flag!true", "out!114"]]
+
+
+def test_a_qualified_name_after_dollar_and_to_from_are_errors_saying_why(tmp_path):
+    """RoboSim.xtext's SimRefExp reads `'$' element=[NamedElement|QualifiedName]`, but RoboSimScopeProvider scopes
+    the element by simple names only (Scopes::scopeFor over the machine's contexts, NULLSCOPE outside), so
+    `$In::go` never resolves in RoboTool: the error says to write `$go`. `to` and `from` are RoboChart's Atomic
+    ToExp and FromExp (inherited by RoboSim), which RoboCalcTypeProvider gives no type: an error saying so."""
+    files = machine("""	var n: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition t1 { from A to A exec condition $In::go?n action $out!n }
+	transition t2 { from A to A exec condition to == 1 \\/ from == 2 }""")
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    found = errors(check_paths([tmp_path]))
+    assert [(line, column) for _, line, column, _ in found] == [(32, 46), (33, 45), (33, 56)]
+    assert found[0][3] == ("'$In::go': RoboTool resolves the name after '$' by its simple name among the machine's "
+                           "events and variables (RoboSim's scope offers no qualified name there): write '$go'")
+    assert found[1][3].startswith("'to' is RoboChart's ToExp") and "gives it no type" in found[1][3]
+    assert found[2][3].startswith("'from' is RoboChart's FromExp")

@@ -21,6 +21,7 @@ from .dmodel_elements import (
 )
 from .build_items import _Args, _Group, _Params, _Tagged, _flatten, _ident, _of, _string, _tagged
 from .builder_pmodel import PModelBuilder
+from .robotool_forms import ARITHMETIC, RoboToolForms
 
 
 _NODES = (State, Initial, Junction, Final, ProbabilisticJunction)
@@ -29,11 +30,14 @@ _ORDERINGS = frozenset(("<", "<=", ">", ">="))
 
 @v_args(meta=True, inline=True)
 class Builder(PModelBuilder):
-    def __init__(self, path: str, notation: str, diagnostics: Diagnostics):
+    def __init__(self, path: str, notation: str, diagnostics: Diagnostics, text: str = ""):
         super().__init__()
         self.path = path
         self.notation = notation
         self.diag = diagnostics
+        self.text = text
+        #: warnings at forms RoboTool's grammar refuses (d-models and RoboChart files: see robotool_forms)
+        self.forms = RoboToolForms(diagnostics, text, notation in ("rst", "rct"))
 
     # ---- helpers ----
     def _loc(self, meta) -> Location:
@@ -67,9 +71,11 @@ class Builder(PModelBuilder):
         return s.MatrixType(element, rows, columns, self._loc(meta))
 
     def set_type(self, meta, element):
+        self.forms.collection_type("Set", getattr(meta, "start_pos", None), self._loc(meta))
         return s.CollectionType("Set", element, self._loc(meta))
 
     def seq_type(self, meta, element):
+        self.forms.collection_type("Seq", getattr(meta, "start_pos", None), self._loc(meta))
         return s.CollectionType("Seq", element, self._loc(meta))
 
     def product_type(self, meta, *items):
@@ -143,6 +149,9 @@ class Builder(PModelBuilder):
     def binary(self, meta, left, op, right):
         """`^` is RoboChart's concatenation in .rst/.rct files and a power in p-models (RoboTool's physmod)."""
         text = "cat" if op.type == "CAT" or (op.type == "CARET" and self.notation != "pm") else str(op)
+        if text in ARITHMETIC:
+            self.forms.if_operand(left, f"'{op}'")
+            self.forms.if_operand(right, f"'{op}'")
         return s.Binary(text, left, right, self._loc(meta))
 
     def compare_op(self, meta, token):
@@ -167,9 +176,11 @@ class Builder(PModelBuilder):
         return result
 
     def as_expr(self, meta, expr, type_):
+        self.forms.if_operand(expr, "'as'")
         return s.TypeTest(expr, type_, "as", self._loc(meta))
 
     def is_expr(self, meta, expr, type_):
+        self.forms.if_operand(expr, "'is'")
         return s.TypeTest(expr, type_, "is", self._loc(meta))
 
     def dollar_expr(self, meta, name, suffix=None):
@@ -181,9 +192,11 @@ class Builder(PModelBuilder):
         return s.EventTest(name, None, self._loc(meta), value=value)
 
     def dollar_bind(self, meta, name, predicate=None):
+        self.forms.if_operand(predicate, "a '$e?x:' predicate (a CallExp in RoboSim's SimRefExp)")
         return ("bind", name, predicate)
 
     def dollar_value(self, meta, value):
+        self.forms.if_operand(value, "'$e.' (a CallExp in RoboSim's SimRefExp)")
         return ("value", value, None)
 
     def such_that(self, meta, expr):
@@ -216,7 +229,10 @@ class Builder(PModelBuilder):
         return s.SetComprehension(binders, such, body, self._loc(meta))
 
     def seq_expr(self, meta, *items):
-        return s.SeqExpr(tuple(i for i in items if not isinstance(i, Token)), self._loc(meta))
+        values = tuple(i for i in items if not isinstance(i, Token))
+        for value in values:
+            self.forms.if_operand(value, "a sequence '<...>'")
+        return s.SeqExpr(values, self._loc(meta))
 
     def closed_range(self, meta, low, high, close):
         return s.RangeExpr(low, high, True, str(close) == "]", self._loc(meta))
@@ -228,13 +244,16 @@ class Builder(PModelBuilder):
         return s.Unary("not", operand, self._loc(meta))
 
     def neg_expr(self, meta, _minus, operand):
+        self.forms.if_operand(operand, "'-'")
         return s.Unary("-", operand, self._loc(meta))
 
     def field_expr(self, meta, base, name):
+        self.forms.if_operand(base, "a selection '.'")
         return s.FieldAccess(base, _ident(name), self._tok_loc(name))
 
     def index_expr(self, meta, base, indices):
         """`m[i, j]` is `m[i][j]`."""
+        self.forms.indexed(base, self._loc(meta))
         for index in indices:
             base = s.IndexAccess(base, index, self._loc(meta))
         return base
@@ -242,6 +261,7 @@ class Builder(PModelBuilder):
     def call_expr(self, meta, function, args=()):
         """Calls, and RoboChart's built-in forms written like calls: sinceEntry(S), transpose(m), inverse(m)."""
         args = tuple(args)
+        self.forms.called(function, self._loc(meta))
         if isinstance(function, s.Name) and len(function.name.parts) == 1 and len(args) == 1:
             name = function.name.last
             if name == "sinceEntry" and isinstance(args[0], s.Name):
@@ -286,6 +306,10 @@ class Builder(PModelBuilder):
     def if_expr(self, meta, condition, then, otherwise):
         return s.IfExpr(condition, then, otherwise, self._loc(meta))
 
+    def paren_expr(self, meta, expr):
+        """`(e)`: e itself (its parentheses recorded: RoboTool reads a parenthesised expression as an Atomic)."""
+        return self.forms.parenthesised(expr)
+
     def args(self, meta, *items):
         return _Args(items)
 
@@ -329,7 +353,15 @@ class Builder(PModelBuilder):
         return s.Skip(self._loc(meta))
 
     def send_stmt(self, meta, event, value=None):
+        self.forms.sent(self._written_event(meta, event), "!", value)
         return s.Send(event, value, self._loc(meta))
+
+    def _written_event(self, meta, event) -> str:
+        """The event of a send as written, `$e` (RoboSim's OutputCommunication) or `e` (RoboChart's)."""
+        start = getattr(meta, "start_pos", None)
+        head = self.text[start:start + 80].lstrip() if start is not None else ""
+        head = head.removeprefix("send").lstrip() if head.startswith("send") and not head[4:5].isalnum() else head
+        return "$" * head.startswith("$") + str(event)
 
     def platform_call_stmt(self, meta, operation, args=()):
         return s.PlatformCall(operation, tuple(args), self._loc(meta))
@@ -375,6 +407,7 @@ class Builder(PModelBuilder):
     def dot_value_send(self, meta, *items):
         """`$e.3`, `e.(x + 1)`: RoboSim's output `$e.v` (RoboChart's synchronisation `e.v`), read as `$e!v`."""
         event = next(i for i in items if isinstance(i, Token) and i.type == "ID")
+        self.forms.sent(self._written_event(meta, _ident(event)), ".", items[-1])
         return s.Send(s.QName((_ident(event),), self._tok_loc(event)), items[-1], self._loc(meta))
 
     def dot_call_send(self, meta, *items):
@@ -396,6 +429,7 @@ class Builder(PModelBuilder):
             return s.Skip(self._loc(meta))
         parts = first if kind == "qualified" else (first,)
         value = self._selected(s.Name(s.QName(parts, where), where), suffixes[1:])
+        self.forms.sent(self._written_event(meta, _ident(event)), ".", value)
         return s.Send(s.QName((_ident(event),), self._tok_loc(event)), value, self._loc(meta))
 
     def qualified_suffix(self, meta, *names):

@@ -185,7 +185,7 @@ def parse_text(text: str, path: str, notation: str | None = None) -> tuple[Sourc
         return None, [_syntax_finding(err, path, parser, text)]
     diagnostics = Diagnostics()
     try:
-        source = Builder(path, notation, diagnostics).transform(tree)
+        source = Builder(path, notation, diagnostics, text).transform(tree)
     except VisitError as err:  # a builder bug must still not escape as a traceback
         inner = err.orig_exc
         if isinstance(inner, RecursionError):

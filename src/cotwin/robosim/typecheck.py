@@ -218,6 +218,11 @@ class ExprChecker(ExprVisitor):
             stray = self._ended_binder(name.last)
             if stray is not None:
                 return self._stray(e, stray)
+            if name.last in ("to", "from"):
+                self.diag.error(e.loc, f"'{name}' is RoboChart's {name.last.capitalize()}Exp (RoboSim inherits it as an "
+                                       "expression) but has no value: RoboTool reads it and gives it no type (its type "
+                                       "provider has no case for it), and cotwin cannot evaluate it")
+                return UNKNOWN
             self.diag.error(e.loc, f"unknown name '{name}'")
             return UNKNOWN
         enum = self.enum_literal(name)
@@ -286,6 +291,10 @@ class ExprChecker(ExprVisitor):
             return UNKNOWN
         if self.events is None:
             self.diag.error(e.loc, f"'${e.event}' tests an input event; not allowed here")
+        elif len(e.event.parts) > 1 and (name in self.events or self.scope.lookup(name) is not None):
+            self.diag.error(e.event.loc, f"'${e.event}': RoboTool resolves the name after '$' by its simple name among "
+                                         "the machine's events and variables (RoboSim's scope offers no qualified "
+                                         f"name there): write '${name}'")
         else:
             self.diag.error(e.event.loc, f"unknown input event '{e.event}'")
         return BOOL
