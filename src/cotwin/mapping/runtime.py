@@ -455,7 +455,7 @@ class InputEvent:
             raise CotwinError(f"{model.loc}: input event {model.name} binds '{model.bind}' but no equation "
                               f"'{model.bind} == ...' says what its value is")
         self.value = None
-        self._requests: dict[tuple, list] = {}  # false_request_part's conditions, per (assigned, constants)
+        self._requests: dict[frozenset, list] = {}  # false_request_part's conditions, per set of names they may read
         local = {v.name for v in model.variables} | ({model.bind} if model.bind else set())
         expressions = [*model.equations, *model.predicates, *(v.init for v in model.variables if v.init is not None)]
         #: the mapping variables its definition reads (an answer when an operation assigns one of them)
@@ -463,15 +463,15 @@ class InputEvent:
                                if isinstance(n, s.Name) and len(n.name.parts) == 1 and n.name.last not in local
                                and n.name.last in runtime.declared)
 
-    def false_request_part(self, assigned: set[str], constants: set[str]) -> s.Expr | None:
-        """A condition of its definition that reads only variables operations assign (and constants), no
-        sensor, function or local name, and is false now: then no motion of the platform makes the event
-        occur, only an operation that assigns one of those variables (None if there is no such condition)."""
-        key = (frozenset(assigned), frozenset(constants))
-        candidates = self._requests.get(key)
+    def false_request_part(self, readable: frozenset[str]) -> s.Expr | None:
+        """A condition of its definition that reads only `readable` names (the variables operations assign and
+        constants), no sensor, function or local name, and is false now: then no motion of the platform makes
+        the event occur, only an operation that assigns one of those variables (None if there is no such
+        condition)."""
+        candidates = self._requests.get(readable)
         if candidates is None:  # the conditions of that form, found once (the names are the model's)
-            candidates = self._requests[key] = [c for e in self.conditions for c in s.conjuncts(e)
-                                                if _reads_only(c, key[0] | key[1])]
+            candidates = self._requests[readable] = [c for e in self.conditions for c in s.conjuncts(e)
+                                                     if _reads_only(c, readable)]
         for condition in candidates:
             if not bool(self.runtime.env.eval(condition, {})):
                 return condition
@@ -655,6 +655,8 @@ class Mapping:
                     self.assigners[root.name.last].append(op.name)
         #: answers: events reading a variable an operation assigns (see `report`)
         self.answers = {name for name, ev in self.events.items() if ev.reads & set(self.assigners)}
+        #: what a request condition may read besides sensors: what operations assign, and the constants
+        self._requestable = frozenset(self.assigners) | frozenset(v.name for v in model.variables if v.is_const)
         self.operations = {op.name: Operation(self, op, [p.name for p in members.operations[op.name].params])
                            for op in model.operations if op.name in members.operations}
         self.variables: dict[str, object] = {}
@@ -809,7 +811,7 @@ class Mapping:
         if name not in self.answers or name in self.pending:
             return None
         ev = self.events[name]
-        false = ev.false_request_part(set(self.assigners), self._constants())
+        false = ev.false_request_part(self._requestable)
         if false is not None:
             reads = sorted(n.name.last for n in s.walk(false) if isinstance(n, s.Name) and n.name.last in self.assigners)
             by = sorted({op for v in reads for op in self.assigners[v]})
@@ -828,11 +830,7 @@ class Mapping:
         change only when an operation runs). `cannot_come` says None at each such step."""
         if name not in self.answers or name in self.pending or self.held.get(name, (False, None))[0]:
             return False
-        return self.events[name].false_request_part(set(self.assigners), self._constants()) is None
-
-    def _constants(self) -> set[str]:
-        """The mapping's constants (what a request condition may read besides what operations assign)."""
-        return {v.name for v in self.model.variables if v.is_const}
+        return self.events[name].false_request_part(self._requestable) is None
 
     def event_value(self, name: str):
         """The value the event carried when it last occurred (None before, or for an event without one)."""
