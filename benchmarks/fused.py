@@ -283,28 +283,28 @@ def sweep(twin, out: Path) -> None:
     own forks, the native loop outside the GIL) against a fresh fork per what-if stepped by the master's loop (as
     before issue 23, one thread: its time is Python's, which threads would not share out), alternating, best of
     two each; then run_sweep with a 2 ms physics step (which benchmarks/calibration.py finds keeps the calibrated
-    fidelity), its answers compared with the 1 ms ones. The goal is judged on the threads, with the same answers."""
-    project = ROOT / "examples" / "ur5e" / "cotwin.toml"
+    fidelity), its answers compared with the 1 ms ones. The goal is judged on the threads, with the same answers. Every
+    way starts from the twin loaded once (`twin`), as the peer does: none reads the project again."""
     plans = grid(twin.models.program, "moveDiscreteCommand",
                  {"target_X": list(range(16)), "target_Y": list(range(24)), "target_Z": [0]})
     artefacts = out / "sweep"
     artefacts.mkdir()
     threads = os.cpu_count() or 1
-    run_sweep(project, plans, horizon=8.0, workers=1, artefacts=artefacts)  # untimed: IK cache, FMU built
+    run_sweep(twin, plans, horizon=8.0, workers=1, artefacts=artefacts)  # untimed: IK cache, FMU built
     now = then = coarse = threaded = 1e9
     for _ in range(2):
         t0 = time.perf_counter()
-        rows = run_sweep(project, plans, horizon=8.0, workers=1, artefacts=artefacts)
+        rows = run_sweep(twin, plans, horizon=8.0, workers=1, artefacts=artefacts)
         now = min(now, time.perf_counter() - t0)
         t0 = time.perf_counter()
-        rows_threaded = run_sweep(project, plans, horizon=8.0, threads=threads, artefacts=artefacts)
+        rows_threaded = run_sweep(twin, plans, horizon=8.0, threads=threads, artefacts=artefacts)
         threaded = min(threaded, time.perf_counter() - t0)
         t0 = time.perf_counter()
         before = [summary(predict(twin, plan, None, horizon=8.0, artefacts=artefacts, decimate=10**9, fused=False))
                   for plan in plans]
         then = min(then, time.perf_counter() - t0)
         t0 = time.perf_counter()
-        rows2 = run_sweep(project, plans, horizon=8.0, workers=1, artefacts=artefacts, physics_step=0.002)
+        rows2 = run_sweep(twin, plans, horizon=8.0, workers=1, artefacts=artefacts, physics_step=0.002)
         coarse = min(coarse, time.perf_counter() - t0)
     same = rows == before
     same_threaded = rows_threaded == before

@@ -32,6 +32,22 @@ def test_threads_give_the_answers_of_one_thread_in_the_plans_order(tmp_path):
     assert {r["feasible"] for r in one} == {True, False}  # both kinds of answer, not 16 alike
 
 
+def test_a_loaded_twin_is_swept_as_it_is_not_loaded_again(tmp_path, monkeypatch):
+    """run_sweep given a TwinSystem (as predict takes one) answers as given the project file, on one thread and on
+    threads, without reading the project again (it parsed the models anew at every sweep)."""
+    twin = load(PROJECT)
+    plans = grid(twin.models.program, "moveDiscreteCommand", {"target_X": [8, 15], "target_Y": [10], "target_Z": [0]})
+    by_file = run_sweep(PROJECT, plans, horizon=3.0, workers=1, artefacts=tmp_path)
+    from cotwin.twin.assembly import run as assembly_run
+
+    def no_load(*args, **kwargs):
+        raise AssertionError("the project was loaded again")
+
+    monkeypatch.setattr(assembly_run, "load", no_load)
+    assert run_sweep(twin, plans, horizon=3.0, workers=1, artefacts=tmp_path) == by_file
+    assert run_sweep(twin, plans, horizon=3.0, threads=2, artefacts=tmp_path) == by_file
+
+
 def test_threads_are_one_process_not_with_a_pool_or_ray():
     plans = grid(load(PROJECT).models.program, "moveDiscreteCommand", {"target_X": [0], "target_Y": [0], "target_Z": [0]})
     with pytest.raises(CotwinError, match="threads run the what-ifs in this process: not with a pool"):

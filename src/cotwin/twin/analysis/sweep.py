@@ -22,11 +22,14 @@ from concurrent.futures.process import BrokenProcessPool
 from contextlib import nullcontext
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from ...config import did_you_mean
 from ...diagnostics import CotwinError, Interrupted
 from ..assembly.scenario import Command, scalar_value
+
+if TYPE_CHECKING:
+    from ..assembly.system import TwinSystem
 from .scratch import ScratchFolder
 
 _SYSTEM = None  # the worker's TwinSystem, loaded once per process
@@ -200,7 +203,7 @@ def _ray_run(project: str, artefacts: str | None, plan, state, horizon, step, ph
     return _run(plan, state, horizon, step, physics=physics)
 
 
-def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | None = None, horizon: float = 30.0,
+def run_sweep(project: "str | Path | TwinSystem", plans: list[list[Command]], state: bytes | None = None, horizon: float = 30.0,
               step: float | None = None, workers: int | None = None, ray: str | None = None,
               artefacts: str | Path | None = None, progress=None, physics_step: float | None = None,
               threads: int = 1, warn: Callable[[str], None] | None = None) -> list[dict]:
@@ -211,7 +214,9 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
     One row per plan, in the plans' order: `summary` of its prediction, or (a what-if that failed) its
     grid point and the error in the ERROR column (`failures` lists them). `progress(done, total)` is
     called as what-ifs finish. `physics_step`: the what-ifs' physics steps (s; None: cotwin's 1 ms; see
-    cotwin.twin.services.whatif.physics_timing). `warn(message)` is told what is unwise about the threads asked
+    cotwin.twin.services.whatif.physics_timing). `project` may be a twin already loaded (a TwinSystem, as
+    `predict` takes): what-ifs in this process use it as it is, a pool's processes and Ray load its project file.
+    `warn(message)` is told what is unwise about the threads asked
     for (cotwin.twin.analysis.thread_budget; default: the cotwin.twin logger's warning). Without `artefacts`, the
     d-model FMU is built in a scratch folder removed however the sweep ends (cotwin.twin.analysis.scratch)."""
     if threads < 1:
@@ -224,13 +229,16 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
         from ...cosim.execution import saved_execution
 
         saved_execution(state)
-    project = str(Path(project).resolve())
+    from ..assembly.system import TwinSystem
+
+    loaded = project if isinstance(project, TwinSystem) else None
+    project = str(Path(loaded.spec.path if loaded is not None else project).resolve())
     report = progress or (lambda done, total: None)
     warn = warn or logging.getLogger("cotwin.twin").warning
     scratch = ScratchFolder("cotwin-sweep-") if artefacts is None else None
     try:
         rows = _sweep(project, plans, state, horizon, step, workers, ray, scratch.path if scratch else artefacts,
-                      report, physics_step, threads, warn, scratch)
+                      report, physics_step, threads, warn, scratch, loaded)
     except BaseException:
         if scratch is not None:
             scratch.close()  # an interrupt meanwhile is not raised: the exception under way says how the sweep ended
@@ -242,12 +250,14 @@ def run_sweep(project: str | Path, plans: list[list[Command]], state: bytes | No
 
 def _sweep(project: str, plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None,
            workers: int | None, ray: str | None, artefacts: str | Path, report, physics_step: float | None,
-           threads: int, warn: Callable[[str], None], scratch: ScratchFolder | None) -> list[dict]:
-    """run_sweep's work, its FMU built in `artefacts` (`scratch`'s path when the sweep made one)."""
+           threads: int, warn: Callable[[str], None], scratch: ScratchFolder | None,
+           loaded: "TwinSystem | None" = None) -> list[dict]:
+    """run_sweep's work, its FMU built in `artefacts` (`scratch`'s path when the sweep made one), on the twin
+    `loaded` when given, else on `project` loaded here."""
     from ..assembly.build import dmodel_fmu
     from ..assembly.run import load
 
-    system = load(project, reader=READER)
+    system = loaded if loaded is not None else load(project, reader=READER)
     fmi = 2
     if state is not None:  # a state of other models fails every what-if alike: said once, before any runs
         from ...cosim.execution import check_models, saved_execution
