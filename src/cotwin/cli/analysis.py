@@ -189,7 +189,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     try:
         with ProgressReport("sweeping", "what-ifs") as progress:
             with about(state, StateError):
-                rows = run_sweep(project, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress,
+                rows = run_sweep(system, plans, blob, horizon=horizon, workers=workers, ray=ray, progress=progress,
                                  physics_step=physics_step, threads=threads,
                                  warn=lambda message: click.echo(f"warning: --threads {threads}: {message}", err=True))
     except SweepInterrupted as err:  # the what-ifs answered are kept beside the output
