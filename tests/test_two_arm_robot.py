@@ -321,3 +321,22 @@ def test_an_operation_solving_the_ik_but_leaving_an_arm_joint_uncommanded_is_war
     (tmp_path / "mapping.pm").write_text(mapping())  # every joint commanded: nothing said
     again = cotwin_in_process("check", project)
     assert again.returncode == 0 and "does not command" not in again.stdout + again.stderr
+
+
+def test_a_whatifs_contact_check_spares_the_fingers_of_the_projects_tool_not_the_default_ones(imported, tmp_path):
+    """With [tool] link naming the right gripper, a what-if's contacts of the robot with the scene left out the
+    fingers of the IK's default tool (the left gripper's) and counted the right gripper's touching what it grips."""
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.services.whatif import Forks
+
+    twin = load(baxter_project(imported, tmp_path, tool_link="right_gripper_base_link"))
+    assert twin.models.tool.link == "right_gripper_base_link"
+    with Forks(twin, artefacts=tmp_path / "forks") as forks:
+        forks.predict(twin.commands[:1], horizon=0.3)
+        (contacts,) = forks._contacts.values()
+        model = contacts.sim.model
+        checked = {model.body(model.geom_bodyid[g]).name for g in contacts.robot}
+    fingers = {j.child for j in twin.models.tree.joints if j.name in twin.models.tool.fingers}
+    assert fingers and all(f.startswith("r_gripper") for f in fingers) and not fingers & checked
+    left = {j.child for j in twin.models.tree.joints if j.kind == "prismatic" and j.child.startswith("l_gripper")}
+    assert left and left <= checked  # the other gripper is robot like the rest

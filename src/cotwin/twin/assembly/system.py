@@ -89,6 +89,9 @@ class TwinModels:
     #: it; else cotwin.pmodel.ik.find_tool's default), in kinematic order: what a robot's log, its profile's joint
     #: order and a calibration count as the arm (a revolute jaw is no arm joint when the tool link is before it)
     arm: list[str] = field(default_factory=list)
+    #: the arm's tool (cotwin.pmodel.ik.Tool: its link, frame and fingers), found with `arm`; None where it could
+    #: not be found (a robot without one)
+    tool: object | None = None
 
 
 def model_digests(spec: TwinProject, project) -> dict[str, str]:
@@ -211,7 +214,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
         raise CotwinError(problems + own)
     monitored = [*mirrors, *spec.readings]
     return TwinModels(project, program, tree, mapping, scene, monitored, calibration, model_digests(spec, project),
-                      list(dict.fromkeys(warnings)), mirrors, arm)
+                      list(dict.fromkeys(warnings)), mirrors, arm, tool)
 
 
 def outcome_event_problems(spec: TwinProject, program) -> list[Finding]:

@@ -98,9 +98,10 @@ DEPTH = 0.001  # m: a contact of the robot recorded when it is this deep (MuJoCo
 
 
 class _Contacts:
-    """Contacts of the robot's bodies (its fingers excepted) with the scene, in the embedded simulator."""
+    """Contacts of the robot's bodies (its tool's fingers excepted: the project's tool, as its IK takes it, else
+    cotwin.pmodel.ik.find_tool's default) with the scene, in the embedded simulator."""
 
-    def __init__(self, endpoint, tree):
+    def __init__(self, endpoint, tree, tool=None):
         from ...pmodel import ik
         from ...pmodel.mjcf import ROBOT_CONTYPE
 
@@ -108,8 +109,8 @@ class _Contacts:
         if self.sim is None:
             return
         model = self.sim.model
-        fingers = once_per(tree, "fingers", lambda: frozenset(j.child for j in tree.joints
-                                                               if j.name in ik.find_tool(tree).fingers))
+        tool = tool if tool is not None else once_per(tree, "default tool", lambda: ik.find_tool(tree))
+        fingers = frozenset(j.child for j in tree.joints if j.name in tool.fingers)
         self.robot = frozenset(g for g in range(model.ngeom) if model.geom_contype[g] == ROBOT_CONTYPE
                                and model.body(model.geom_bodyid[g]).name not in fingers)
         self._robot = np.array(sorted(self.robot), dtype=np.int64)
@@ -346,7 +347,7 @@ class Watch(Stop):
         self.monitored = list(fork.log[MAPPING.name])
         self.state_ports = [(program.state_port(m), m) for m in program.machines]
         self.collision_events = [e for e in platform if e.lower() == "collision"]
-        self.contacts = contacts.again() if contacts is not None else _Contacts(endpoint, fork.models.tree)
+        self.contacts = contacts.again() if contacts is not None else _Contacts(endpoint, fork.models.tree, fork.models.tool)
         self.trajectory: dict[str, list[float]] = {"time": [], **{v: [] for v in self.monitored}}
         self.states: list[tuple[float, str, str]] = []
         self.collisions: list[dict] = []
