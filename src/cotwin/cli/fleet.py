@@ -43,7 +43,7 @@ def fleet(fleet_file: str, out: str, ray: str, history: str | None, page: tuple[
         click.echo(f"fleet page: {served.url}", err=True)
 
     def interrupt(*_) -> None:
-        if runner._stop:
+        if runner.stop_requested:
             raise KeyboardInterrupt
         runner.stop()
         click.echo("stopping every twin after its step (interrupt again to stop at once)", err=True)

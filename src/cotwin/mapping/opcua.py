@@ -24,7 +24,8 @@ any OPC UA server offering this address space (namespace `urn:cotwin:plant`, str
       STATE = Time: Double, Positions: Double[], Velocities: Double[], Sensors: Double[], Goals: Double[]
               (arrays in Describe's order of Joints and Sensors)
 
-Actuators are named as the mapping names them (joint, servo or `pmodel::link::joint::aref.dangle`).
+Actuators are named as the mapping names them (joint, servo or `pmodel::link::joint::aref.port`, the port being
+the actuator's command input: cotwin.pmodel.tree.actuator_names, as the simulator names them).
 A refused call returns Bad_InvalidArgument with the offending argument's own status (Bad_TypeMismatch,
 Bad_OutOfRange, Bad_NoMatch) and a diagnostic naming the problem, or a Bad_ status of its own (e.g.
 Bad_UserAccessDenied for an anonymous caller); the plant's LastError variable holds the same text.
@@ -104,7 +105,7 @@ def check_goals(goals: dict, argument: int) -> dict[str, float]:
 def goal_range(joint) -> tuple[float, float, str]:
     """The goals a joint's servo takes (low, high, unit): a position within the joint's limits, a speed
     or an effort within its velocity or effort limit; MAX_GOAL either way where the p-model gives none."""
-    from ..pmodel.mjcf import servo_mode
+    from ..pmodel.tree import servo_mode
 
     mode = servo_mode(joint)
     base = "rad" if joint.kind == "revolute" else "m"

@@ -8,6 +8,9 @@ without one, the recording is aligned on its first motion: the first command the
 starts the recorded move, so a planned time and the controller's clock need not agree. Before the
 recording starts and after it ends, the first and last samples hold. Sensors read what the log
 has: joint position and velocity; an effort sensor reads 0 (a UR log has currents, not torques).
+Actuators are named as the simulator names them (cotwin.pmodel.tree.actuator_names), whatever drives them;
+a joint the log does not record holds the last position commanded to it (a speed or an effort command
+leaves it where it is: the log does not say where that took it).
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import CotwinError
-from ..pmodel.tree import KinematicTree
+from ..pmodel.tree import KinematicTree, actuator_names, servo_mode
 from .platform import Endpoint, joint_readings
 from .profile import IDENTITY, Convention
 
@@ -73,12 +76,9 @@ class ReplayEndpoint(Endpoint):
     goals: list[tuple[float, dict[str, float]]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        self._path_to_joint: dict[str, str] = {}
-        for j in self.tree.actuated:
-            self._path_to_joint[j.name] = j.name
-            for servo in j.servos:
-                self._path_to_joint[servo.name] = j.name
-                self._path_to_joint[f"{self.tree.name}::{j.source_link}::{j.source}::{servo.name}.dangle"] = j.name
+        actuators = actuator_names(self.tree)  # the names the simulator takes, a speed's or an effort's too
+        self._path_to_joint = {name: j.name for name, j in actuators.items()}
+        self._positioned = {j.name for j in actuators.values() if servo_mode(j) == "position"}
         unknown = [j for j in self.recording.joints if j not in {a.name for a in self.tree.actuated}]
         if unknown:
             raise CotwinError(f"{self.recording.source}: the recording's joints {', '.join(unknown)} are not joints "
@@ -108,7 +108,7 @@ class ReplayEndpoint(Endpoint):
         self.goals.append((self.time, dict(goals)))
         for name, value in goals.items():
             joint = self.joint(name)
-            if joint not in self.recording.joints:
+            if joint not in self.recording.joints and joint in self._positioned:
                 self._held[joint] = float(value)  # e.g. gripper fingers the log does not record
 
     def advance(self, dt: float) -> None:

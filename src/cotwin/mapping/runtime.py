@@ -843,7 +843,7 @@ class Mapping:
         one driven by speed or effort, or one without limits)."""
         cache = self._limits
         if path not in cache:
-            from ..pmodel.mjcf import servo_mode
+            from ..pmodel.tree import servo_mode
 
             name = self.endpoint.joint(path)
             joint = next((j for j in self.endpoint.tree.joints if j.name == name), None)

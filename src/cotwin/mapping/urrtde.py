@@ -3,9 +3,11 @@
 One field mapping serves the live robot and its recorded logs (cotwin.mapping.rtde, the replay
 endpoint): RTDE's `actual_q_k` / `actual_qd_k` (k = 0..5, the controller's convention) become the
 p-model's arm joints with the project's robot profile (cotwin.mapping.profile; identity without one);
-goals go the other way. A command is a synchronised joint move (URScript's movej through ur-rtde's moveJ, with the
-project's speed and acceleration), asynchronous so the twin keeps stepping; `advance(dt)` waits until
-dt of wall time has passed since the last step, since a real robot runs on its own clock.
+goals go the other way, their actuators named as the simulator names them (cotwin.pmodel.tree.actuator_names).
+A command is a synchronised joint move (URScript's movej through ur-rtde's moveJ, with the project's speed and
+acceleration), asynchronous so the twin keeps stepping: the robot takes joint positions only, so an actuator
+that sets a speed or an effort is refused by name, at its p-model joint. `advance(dt)` waits until dt of wall
+time has passed since the last step, since a real robot runs on its own clock.
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ import math
 import time as wallclock
 from typing import Mapping
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, Finding, Severity
+from ..pmodel.tree import actuator_names, servo_mode
 from .platform import Endpoint, joint_readings
 from .profile import IDENTITY, Convention
 
@@ -31,6 +34,17 @@ def fields_to_state(fields: Mapping[str, float], arm: list[str],
     if not all(math.isfinite(v) for v in q + qd):
         raise CotwinError("RTDE data with a non-finite joint value")
     return dict(zip(arm, map(float, convention.to_model(q)))), dict(zip(arm, qd))
+
+
+COMMANDED = {"velocity": "speed", "effort": "effort"}  # what an actuator's command sets, as a message says it
+
+
+def undrivable(actuator: str, joint: str, mode: str) -> str:
+    """Why a UR over RTDE refuses an actuator that sets its joint's speed or effort (it takes positions only)."""
+    what = COMMANDED.get(mode, mode)
+    return (f"a UR robot over RTDE cannot take {what} commands: actuator '{actuator}' sets joint {joint}'s {what}, "
+            f"and the RTDE endpoint moves the arm to joint positions (moveJ); drive {joint} by a position servo "
+            f"(a ServoMotor's dangle) in the p-model, or run this mapping on a simulated platform")
 
 
 class RTDEEndpoint(Endpoint):
@@ -57,6 +71,7 @@ class RTDEEndpoint(Endpoint):
         except RuntimeError as err:
             raise CotwinError(f"cannot reach the robot's RTDE interface at {host}: {err}") from None
         self.time = 0.0
+        self._actuators = actuator_names(tree)
         self._goal = None
         self._last = wallclock.monotonic()
 
@@ -71,11 +86,19 @@ class RTDEEndpoint(Endpoint):
         self.control.stopJ(self.acceleration)
 
     def joint(self, name: str) -> str:
-        for j in self.tree.actuated:
-            if name == j.name or any(name in (s.name, f"{self.tree.name}::{j.source_link}::{j.source}::{s.name}.dangle")
-                                     for s in j.servos):
-                return j.name
-        raise CotwinError(f"the robot has no actuator '{name}'")
+        """The joint an actuator name (cotwin.pmodel.tree.actuator_names, the simulator's) commands; a speed- or
+        effort-driven actuator is refused at its p-model joint, since the robot takes joint positions only."""
+        joint = self._actuators.get(name)
+        if joint is None:
+            raise CotwinError(f"the robot has no actuator '{name}'")
+        mode = servo_mode(joint)
+        if mode != "position":
+            raise CotwinError([Finding(joint.loc, Severity.ERROR, undrivable(name, joint.name, mode))])
+        return joint.name
+
+    def actuator_names(self) -> list[str]:
+        """The actuator names it takes: those of the position-driven joints."""
+        return [name for name, joint in self._actuators.items() if servo_mode(joint) == "position"]
 
     def command(self, goals: dict[str, float]) -> None:
         current = self.joint_positions()

@@ -284,3 +284,37 @@ class KinematicTree:
     def geom_poses(self, q: dict[str, float] | None = None) -> dict[str, np.ndarray]:
         links = self.forward(q)
         return {g.name: links[l.name] @ g.pose for l in self.links for g in l.geoms}
+
+
+# ---- actuators: what a mapping commands ----
+
+def servo_mode(joint: TJoint) -> str:
+    """What a joint's command sets: its first servo's mode (position, velocity or effort); position without one."""
+    return joint.servos[0].mode if joint.servos else "position"
+
+
+def servo_name(joint: TJoint) -> str:
+    """The name of the servo driving a joint (its first aref; `J_servo` for a joint declaring none)."""
+    return joint.servos[0].name if joint.servos else f"{joint.name}_servo"
+
+
+def command_path(pmodel: str, joint: TJoint, servo: Servo) -> str:
+    """The one name of an actuator's command, on every platform (the simulator, a replayed log, a live robot)
+    and in every mapping: `pmodel::link::joint::aref.port`, the port being the actuator's own command input
+    (`dangle` of a ServoMotor, `speed` of a SpeedControlMotor, `ControlIn` of a ControlledMotor...), so that a
+    PT and a DT take a speed- or effort-driven actuator's command by the same name."""
+    return f"{pmodel}::{joint.source_link}::{joint.source}::{servo.name}.{servo.port}"
+
+
+def actuator_names(tree: KinematicTree) -> dict[str, TJoint]:
+    """Every name an actuator answers to -> the joint it moves: the joint's name, its servo's (servo_name), each
+    aref's name and command_path. Every platform endpoint takes these names (or refuses one it cannot drive by
+    name), so a mapping commands the PT as it commands the DT."""
+    out: dict[str, TJoint] = {}
+    for joint in tree.actuated:
+        out[joint.name] = joint
+        out[servo_name(joint)] = joint
+        for servo in joint.servos:
+            out.setdefault(servo.name, joint)
+            out[command_path(tree.name, joint, servo)] = joint
+    return out

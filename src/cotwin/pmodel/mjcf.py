@@ -48,7 +48,7 @@ import numpy as np
 
 from ..diagnostics import CotwinError, Finding, Severity
 from .scenes import EARTH
-from .tree import Geom, KinematicTree, TJoint, inverse, reading_path
+from .tree import Geom, KinematicTree, TJoint, inverse, reading_path, servo_mode, servo_name
 from .xmltext import num, nums, quat, sub, to_text
 
 DEFAULT_KP = {"revolute": 5000.0, "prismatic": 2000.0}
@@ -82,16 +82,8 @@ def reading_paths(tree: KinematicTree, free_base: bool = False) -> set[str]:
     return out
 
 
-def servo_mode(joint: TJoint) -> str:
-    return joint.servos[0].mode if joint.servos else "position"
-
-
 def armature(joint: TJoint) -> float:
     return ARMATURE[joint.kind] if servo_mode(joint) == "position" else DRIVEN_ARMATURE
-
-
-def servo_name(joint: TJoint) -> str:
-    return joint.servos[0].name if joint.servos else f"{joint.name}_servo"
 
 
 def _pose_attrs(T: np.ndarray) -> dict:

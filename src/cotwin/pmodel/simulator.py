@@ -32,8 +32,8 @@ import numpy as np
 
 from ..diagnostics import CotwinError
 from ..files import write_text
-from .mjcf import TIMESTEP, load, pose_paths, servo_mode, servo_name, site_name, to_mjcf
-from .tree import KinematicTree, reading_path
+from .mjcf import TIMESTEP, load, pose_paths, site_name, to_mjcf
+from .tree import KinematicTree, actuator_names, reading_path, servo_mode, servo_name
 
 
 CONTACT_PERIOD = 0.005  # s between checks for contacts with the scene's obstacles
@@ -118,13 +118,9 @@ class PlatformSimulator:
         self._inertial0 = (self.model.body_mass.copy(), self.model.body_inertia.copy())  # as compiled
         self._joint_qpos = {j.name: self.model.joint(prefix + j.name).qposadr[0] for j in tree.actuated}
         self._joint_dof = {j.name: self.model.joint(prefix + j.name).dofadr[0] for j in tree.actuated}
-        self._actuator: dict[str, int] = {}
-        for j in tree.actuated:
-            index = self.model.actuator(prefix + servo_name(j)).id
-            self._actuator[j.name] = index
-            self._actuator[servo_name(j)] = index
-            for servo in j.servos:
-                self._actuator[f"{tree.name}::{j.source_link}::{j.source}::{servo.name}.{servo.port}"] = index
+        # every name an actuator answers to (cotwin.pmodel.tree.actuator_names, as every platform's) -> its control
+        servo_of = {j.name: self.model.actuator(prefix + servo_name(j)).id for j in tree.actuated}
+        self._actuator: dict[str, int] = {name: servo_of[j.name] for name, j in actuator_names(tree).items()}
         self._sensors: dict[str, tuple[int, int]] = {}
         for sensor in tree.sensors:
             name = reading_path(tree.name, sensor)
@@ -184,7 +180,8 @@ class PlatformSimulator:
         return list(self._joint_qpos)
 
     def actuators(self) -> dict[str, str]:
-        """Every name an actuator answers to (joint, servo, `pmodel::link::joint::aref.dangle`) -> joint."""
+        """Every name an actuator answers to (cotwin.pmodel.tree.actuator_names: joint, servo, the command_path
+        `pmodel::link::joint::aref.port`) -> joint."""
         joint_of = {self._actuator[j]: j for j in self._joint_qpos}
         return {name: joint_of[index] for name, index in self._actuator.items()}
 

@@ -8,8 +8,8 @@ imports it.
 from __future__ import annotations
 
 from .kinematics import (  # noqa: F401 (the tree's API)
-    Geom, KinematicTree, PlacedDevice, Sensor, Servo, StandIn, TJoint, TLink, axis_angle, inverse, matrix_rpy,
-    reading_path, rpy_matrix, transform,
+    Geom, KinematicTree, PlacedDevice, Sensor, Servo, StandIn, TJoint, TLink, actuator_names, axis_angle,
+    command_path, inverse, matrix_rpy, reading_path, rpy_matrix, servo_mode, servo_name, transform,
 )
 from .kinds import SENSOR_QUANTITIES, RaySpec, sensor_quantity  # noqa: F401
 from .tree_build import build_tree  # noqa: F401

@@ -190,6 +190,12 @@ class Fleet:
         """End every twin after its current step (from a signal handler)."""
         self._stop = True
 
+    @property
+    def stop_requested(self) -> bool:
+        """Whether `stop()` was asked: every twin ends after its step under way (the command line stops at once on
+        a second interrupt), as LiveTwin.stop_requested says it of one twin."""
+        return self._stop
+
     def _build(self) -> dict[str, str]:
         """The d-model FMU of each project, built once into DIR/.build/<digest> for its twins to copy. Every
         project's models are read first and all their problems reported together, each naming the twins
