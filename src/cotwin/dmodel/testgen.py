@@ -394,6 +394,9 @@ def generate(graph: StateGraph, criterion: str = "transitions", max_cycles: int 
     reached_transitions = {(m, e) for cycles in graph.cycles for c in cycles for m, e in c.taken}
     if graph.complete:
         unreachable = [(cov.name(i), cov.why_unreached(i, reached_transitions)) for i in universe if i not in reached]
+    elif graph.unbounded:  # a counter grows for ever: the exploration stopped early, located
+        limit = f"not reached: the exploration stopped after {len(graph.snapshots)} states: {graph.unbounded}"
+        unreachable = [(cov.name(i), limit) for i in universe if i not in reached]
     else:  # nothing is known of what lies beyond the limit
         from .verify import growth_hint
 

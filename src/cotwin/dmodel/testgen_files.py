@@ -118,7 +118,7 @@ def suite_record(suite: Suite, period: float, settle: float, drivers: bool = Fal
         "max_cycles": suite.max_cycles,
         "exploration": {"states": len(graph.snapshots), "cycles": graph.edges, "complete": graph.complete,
                         "input_combinations": graph.input_combinations, "notes": graph.value_notes,
-                        "domains": graph.domains},
+                        "domains": graph.domains, **({"unbounded": graph.unbounded} if graph.unbounded else {})},
         "commands": suite.commands,
         "answers": [ev.name for ev in program.inputs if ev.name not in suite.commands],
         "items": {"total": len(suite.total), "reachable": len(suite.reached), "covered": len(suite.covered)},

@@ -16,9 +16,10 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 
+from .growth import GrowthWatch
 from .interpreter import ExecutionError, Interpreter, Output, freeze
 from .program import Program
-from .verify import event_values, input_combinations
+from .verify import event_values, format_trace, input_combinations
 
 
 class _Sequence(list):
@@ -65,6 +66,7 @@ class StateGraph:
     value_notes: list[str] = field(default_factory=list)
     domains: dict[str, list] = field(default_factory=dict)  # the value domains given (--domain)
     stopped: str = ""  # why the exploration ended before the last state (every transition taken)
+    unbounded: str = ""  # the exploration stopped early: a counter grows without bound, where and how (growth.py)
     seconds: float = 0.0
 
     @property
@@ -82,8 +84,9 @@ def explore(program: Program, domains: dict[str, list] | None = None, max_states
     `until_all_taken` the exploration adds no state once every transition of the model has been taken (every
     state has then been entered, and the graph holds a path to each); the states found are still expanded,
     so that walks can go on from each: a model with endless data (a counter, a random source) then needs
-    only the states up to there. `progress(states done, states found)` is
-    called every 100 states."""
+    only the states up to there. A counter proven to grow without bound (growth.py, the verifier's watch) stops
+    the adding of states at once, as the state limit would, with `unbounded` saying which and where.
+    `progress(states done, states found)` is called every 100 states."""
     started = time.perf_counter()
     graph = StateGraph(program, domains=dict(domains or {}))
     values, graph.value_notes = event_values(program, domains or {})
@@ -96,6 +99,9 @@ def explore(program: Program, domains: dict[str, list] | None = None, max_states
     graph.snapshots.append(root)
     graph.cycles.append([])
     queue = deque([0])
+    watch = GrowthWatch(program, interp)
+    parent: dict = {root: None}  # snapshot -> (parent snapshot, (inputs, draws)), for the watch
+    depths: dict = {root: 0}
     edges = {(m.index, e.index) for m in program.machines for e in m.graph.edges}
     taken_all: set = set()
     closing = False  # every transition taken: the states found are expanded, no new one is added
@@ -120,10 +126,11 @@ def explore(program: Program, domains: dict[str, list] | None = None, max_states
                 continue
             nxt = interp.snapshot()
             target = ids.get(nxt)
+            fresh = False  # a new state for the growth watch (after this cycle's transitions and states are read)
             if target is None:
                 if closing:
                     continue
-                if len(ids) >= max_states:
+                if len(ids) >= max_states or graph.unbounded:
                     graph.complete = False
                     continue
                 target = ids[nxt] = len(graph.snapshots)
@@ -131,9 +138,17 @@ def explore(program: Program, domains: dict[str, list] | None = None, max_states
                 graph.cycles.append([])
                 depth.append(depth[node] + 1)
                 queue.append(target)
+                fresh = watch.enabled
             taken = tuple(interp.taken)
             taken_all.update(taken)
             states = tuple(interp.state_index(m.index) for m in program.machines)
+            if fresh:  # the watch replays a round on the interpreter: only now
+                parent[nxt], depths[nxt] = (snap, (dict(inputs), ())), depth[target]
+                grows = watch.add(nxt, parent, depths)
+                if grows is not None:  # the state space is infinite: add no more states
+                    graph.complete = False
+                    graph.unbounded = grows.message(format_trace)
+                    graph.stopped = graph.stopped or f"after {len(graph.snapshots)} states: {graph.unbounded}"
             key = (target, tuple((o.kind, o.name, freeze(o.args)) for o in outputs), taken)
             if key not in seen:
                 seen[key] = Cycle(node, target, _frozen(inputs), outputs, taken, states)
