@@ -58,6 +58,7 @@ def test_the_cli_summary_and_suite_json_name_the_counter(tmp_path):
     suite = generate(explore(build_program(load_checked([tmp_path / "t.rst"]))), "transitions")
     header = format_suite(suite, 0.1, "", str(tmp_path / "s")).splitlines()[0]
     assert "(stopped: after " in header and "M.ticks grows without bound" in header, header
+    assert "INCOMPLETE: a counter grows without bound" in header and "state limit" not in header, header
     write_suite(suite, tmp_path / "s", 0.1, 0)
     import json
     assert json.loads((tmp_path / "s" / "suite.json").read_text())["exploration"]["unbounded"].startswith("M.ticks")

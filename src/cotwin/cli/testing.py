@@ -150,7 +150,8 @@ def format_suite(suite, period: float, why: str, out: str, drivers: bool = False
     graph = suite.graph
     reached, covered = len(suite.reached), len(suite.covered)
     lines = [f"module {suite.program.module.name}: {len(graph.snapshots)} states, {graph.edges} distinct cycles explored "
-             f"in {graph.seconds:.2f} s" + ("" if graph.complete else
+             f"in {graph.seconds:.2f} s" + ("" if graph.complete else " (INCOMPLETE: a counter grows without bound)"
+                                            if graph.unbounded else
                                             f" (INCOMPLETE: the state limit was reached{growth_hint(suite.program, graph.snapshots)})")
              + (f" (stopped: {graph.stopped})" if graph.stopped else "")]
     lines += [f"  note: {n}" for n in graph.value_notes]
