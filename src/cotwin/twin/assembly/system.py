@@ -230,6 +230,22 @@ def outcome_event_problems(spec: TwinProject, program) -> list[Finding]:
                                f"[outcomes] {role}: {', '.join(unknown)} {what} "
                                f"of d-model module {program.module.name}{did_you_mean(unknown[0], events)} "
                                f"(its input events: {', '.join(events)})"))
+    out += outcome_role_clashes(spec)
+    return out
+
+
+def outcome_role_clashes(spec: TwinProject) -> list[Finding]:
+    """[outcomes] events named in two roles: an error at the later key (an event both infeasible and feasible was
+    judged infeasible in silence, whatever the project meant)."""
+    out, seen = [], {}
+    for role, named in spec.outcome_events.items():
+        for event in named:
+            if event in seen:
+                out.append(Finding(spec.location("outcomes", role), Severity.ERROR,
+                                   f"[outcomes] {role}: {event} is already named in [outcomes] {seen[event]}: "
+                                   f"an event has one role (name it in one list)"))
+            else:
+                seen[event] = role
     return out
 
 
