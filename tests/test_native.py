@@ -43,6 +43,9 @@ class Seen(Observer):
         for _ in rows.replay(execution):  # it reads only the values on the connections
             self.step_complete(execution)
 
+    def whole_changes(self, execution) -> tuple:
+        return ()  # every row is told to it: no change need end a stretch
+
 
 class Saves(Observer):
     """Saves the execution's state after step `at` (it reads the units themselves: it needs the step live)."""
@@ -181,6 +184,44 @@ def test_the_rows_text_made_in_c_is_the_text_repr_makes():
     assert rows_text(column, [0], "r", [0.0] * len(edges)) == reference([0.0] * len(edges), column.tolist(), "r")
     # columns picked out of a wider row, in another order
     assert rows_text(rows, [3, 0], "br", times[:]) == reference(times, [[r[3], r[0]] for r in values], "br")
+
+
+class Told(Observer):
+    """Counts the steps told whole (`step_complete`) and made at once (`repeated`); `whole`: what whole_changes
+    says (None: the default, every discrete change a step told whole)."""
+
+    def __init__(self, whole):
+        self.whole, self.told, self.repeats = whole, 0, 0
+
+    def step_complete(self, execution) -> None:
+        self.told += 1
+
+    def repeated(self, execution, rows) -> None:
+        self.repeats += len(rows)
+
+    def whole_changes(self, execution):
+        return self.whole
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+def test_an_answer_and_the_d_models_reply_to_it_share_a_stretch(built, tmp_path, algorithm):
+    """A change a unit's C reads step by step (the mapping's answer, read by the d-model) need not end a stretch
+    when no observer must see it whole: the stretch goes on to the d-model's reply (an operation called, which
+    Python runs), one stretch end fewer per command; the run is the same, byte for byte, as with an observer that
+    must see every discrete change whole."""
+    twins, built_dir = built
+    runs = []
+    for whole in (None, ()):
+        told = Told(whole)
+        out = artefacts(built_dir, tmp_path / str(whole))
+        ran = run_twin(twins["cotwin.toml"], out, plot=False, observers=[told], step=0.1, algorithm=algorithm)
+        runs.append((told, (out / "outputs.csv").read_bytes(), (out / "state").read_bytes(),
+                     [o.__dict__ for o in ran.outcomes.outcomes]))
+    (every, *every_run), (some, *some_run) = runs
+    commands = len(runs[0][3])
+    assert some_run == every_run
+    assert every.told + every.repeats == some.told + some.repeats == 200  # every step told, once
+    assert every.told - some.told >= commands >= 4  # a stretch end fewer per command at least
 
 
 def test_an_observer_that_must_see_every_step_live_keeps_the_run_in_the_fused_loop(built, tmp_path):

@@ -9,14 +9,18 @@ order (Jacobi: inputs from the previous step's outputs, every unit steps, every 
 unit by unit, its delayed outputs copied at the step's start), the slots kept as doubles.
 
 A stretch (a *segment*) ends after the first step in which a value other than a continuous one (a unit's
-`continuous` outputs, e.g. the mapping's q0..qd5) changed, or in which a unit asked for it (`END_AFTER`:
-an answer came), or when a unit says it cannot make the next step natively (a command due, an answer
-waiting): the fused loop then makes the next step in Python. A unit may also pause a step before doing
-anything of it (`PAUSE`, Gauss-Seidel: an operation called within it), which Python then finishes. So every
-discrete change is a step the Python objects see whole, and the steps made natively are the repeats between
-them. Observers hear of a segment's steps at once: all but the last through `Observer.repeated` (rows of the
-slots), the last through `step_complete`, as always; an observer that defines no `repeated` keeps the run
-out of the native loop.
+`continuous` outputs, e.g. the mapping's q0..qd5) changed that something must see on a whole step: a unit
+whose C does not read it step by step (the mapping's operation calls: Python runs the operation), or an
+observer that says so (`Observer.whole_changes`; one that does not say takes none inside a stretch's rows).
+It also ends after a step in which a unit asked for it (`END_AFTER`: answers came together, a watched
+contact) or after the step following one in which a unit asked for that (`END_NEXT`: an answer came, and the
+d-model's reply to it is a step later), or when a unit says it cannot make the next step natively (a command
+due, an answer waiting): the fused loop then makes the next step in Python. A unit may also pause a step
+before doing anything of it (`PAUSE`, Gauss-Seidel: an operation called within it), which Python then
+finishes. So every discrete change a Python object must see is a step it sees whole, and the steps made
+natively are the others. Observers hear of a segment's steps at once: all but the last through
+`Observer.repeated` (rows of the slots), the last through `step_complete`, as always; an observer that
+defines no `repeated` keeps the run out of the native loop.
 
 The C source is a function of the system's structure alone (addresses are passed at each call), built once
 per machine and cached (cotwin.cbuild). A run gives the same values, byte for byte in its CSV, as the fused
@@ -54,12 +58,14 @@ class NativePart:
     values), and use `PP[i]` (pointers) and `DD[i]` (doubles) given in `pointers` and `doubles`. `FAIL(code)`:
     the step failed (not counted; `failed(code, t)` raises the error the step in Python raises). `PAUSE()`:
     before anything of the step is done, leave it to Python from this unit on (Gauss-Seidel). `END_AFTER()`:
-    end the segment after this step. `decls` holds file-scope C (static functions, prefixed) the step calls.
+    end the segment after this step; `END_NEXT()`: after the next one. `decls` holds file-scope C (static functions, prefixed) the step calls.
     `quiet(n)`: how many of the next n steps the unit can make natively now (0: none). `begin()`: refresh
     `pointers`/`doubles` before a segment. `end(first, made, rows, doubles)`: bring the Python object up to
     date after it made `made` steps natively from step index `first` (rows: the slots after each complete
     step; doubles: its `DD` as the steps left them). `continuous`: outputs whose change does not end a
-    segment. `sets_inputs`: the C writes the unit's inputs itself (its Python setter is not called after).
+    segment. `takes`: inputs whose changes the C reads step by step (a change of another input it is fed ends
+    the segment after its step, so that Python sees it). `sets_inputs`: the C writes the unit's inputs itself
+    (its Python setter is not called after).
     `refusal()`: why `quiet` last said 0, in a few words. `include_dirs`: where the headers `decls` includes are.
     """
 
@@ -73,6 +79,7 @@ class NativePart:
     failed: Callable[[int, float], None] = lambda code, t: None
     continuous: tuple[str, ...] = ()
     writes: frozenset[str] = frozenset()
+    takes: frozenset[str] = frozenset()
     sets_inputs: bool = False
     refusal: Callable[[], str] = lambda: "it was not quiet"  # why `quiet` last said 0
     include_dirs: tuple[str, ...] = ()
@@ -139,6 +146,11 @@ class NativeLoop:
                       for name in part.continuous if (unit.name, name) in algorithm.slots}
         shadows = {shadow for _, shadow in self.copies}
         self.discrete = [i for i in self.written if i not in continuous and i not in shadows]
+        shadow_of = {shadow: source for source, shadow in self.copies}
+        fed = {shadow_of.get(slot, slot) for unit, part in zip(algorithm.units, self.parts)
+               for name, slot in feeds(execution, unit) if name not in part.takes}
+        self._fed = frozenset(i for i in self.discrete if i in fed)  # changes a unit's C does not read: Python must
+        self._masks: dict[frozenset | None, object] = {}  # the slots whose change ends a segment, as the C reads them
         self._data, self._observers = algorithm.data, list(execution.observers)
         self._still = [i for i in range(self.width) if i not in written]  # the slots no C writes
         self._kinds: dict[tuple, list[str]] = {}  # the rows' kinds by the classes of the values held still
@@ -158,6 +170,25 @@ class NativeLoop:
         repeats (they define `repeated`): the others have nothing to say or do there."""
         return ([o for o in observers if type(o).quiet_for is not Observer.quiet_for],
                 [o for o in observers if type(o).repeated is not Observer.repeated])
+
+    def _ends(self, telling: list):
+        """The slots whose change ends this segment, as the C array it reads: those a unit's C does not read,
+        and those an observer told of the repeats must see on a whole step (every discrete one for an observer
+        that does not say)."""
+        whole: set[int] | None = set()
+        slots = self.execution.algorithm.slots
+        for o in telling:
+            ports = o.whole_changes(self.execution)
+            if ports is None:
+                whole = None
+                break
+            whole.update(slots[port] for port in ports if port in slots)
+        key = None if whole is None else frozenset(whole)
+        mask = self._masks.get(key)
+        if mask is None:
+            ends = set(self.discrete) if key is None else self._fed | (key & set(self.discrete))
+            mask = self._masks[key] = (ctypes.c_ubyte * max(1, self.width))(*(i in ends for i in range(self.width)))
+        return mask
 
     def _source(self) -> str:
         algorithm = self.execution.algorithm
@@ -181,24 +212,26 @@ class NativeLoop:
             pbase += len(part.pointers)
             dbase += len(part.doubles)
         self._sizes = (pbase, dbase)
-        changed = " || ".join(f"N[{i}] != S[{i}]" for i in self.discrete) or "0"
+        changed = " || ".join(f"(E[{i}] && N[{i}] != S[{i}])" for i in self.discrete) or "0"
         lines = [_PRELUDE,
                  "#define IN(slot) " + ("N[slot]" if self.seidel else "S[slot]") +
                  ("  /* Gauss-Seidel: this step's outputs of the units before */" if self.seidel else
                   "  /* Jacobi: the outputs of the step before */"),
                  "#define END_AFTER() (end_here = 1)",
+                 "#define END_NEXT() (end_next = 1)",
                  *decls,
                  "/* Up to n steps from step `base` (since `origin`); returns the steps made. `failed`: unit * 1000 + code",
                  "   of a step that failed; `paused`: 1 + the unit that paused the step after them (rows[return] holds",
-                 "   its slots so far). rows: the slots after each step. */",
+                 "   its slots so far). rows: the slots after each step. E: whether a slot's change ends the segment. */",
                  "int cotwin_segment(void **P, double *D, double *S, double *rows, int n, double origin, long long base,",
-                 "                   double H, int *failed, int *paused) {",
+                 "                   double H, int *failed, int *paused, const unsigned char *E) {",
                  f"  double N[{max(1, width)}];",
+                 "  int ending = 0;  /* a unit asked, in the step before, to end after this one */",
                  "  *failed = 0;",
                  "  *paused = 0;",
                  "  for (int j = 0; j < n; j++) {",
                  "    double t = origin + (double)(base + j) * H;",
-                 "    int end_here = 0;",
+                 "    int end_here = ending, end_next = 0;",
                  f"    memcpy(N, S, sizeof(double) * {width});",
                  *(f"    N[{shadow}] = N[{source}];" for source, shadow in self.copies),
                  *body,
@@ -206,6 +239,7 @@ class NativeLoop:
                  f"    memcpy(S, N, sizeof(double) * {width});",
                  f"    memcpy(rows + (size_t)j * {width}, S, sizeof(double) * {width});",
                  "    if (changed || end_here) return j + 1;",
+                 "    ending = end_next;",
                  "  }",
                  "  return n;",
                  "}"]
@@ -286,8 +320,10 @@ class NativeLoop:
         flags = self._flags
         origin, done = execution._origin
         first = execution.steps
+        observers = execution.observers
+        ends = self._ends(self._telling if observers == self._observers else self._listeners(observers)[1])
         k = self._fn(P, D.ctypes.data, S.ctypes.data, rows.ctypes.data, n, float(origin), first - done,
-                     execution.step_size, *self._flag_addresses)
+                     execution.step_size, *self._flag_addresses, ends)
         failed, paused = flags[0], flags[1]
         failing, code = divmod(failed, 1000) if failed else (-1, 0)
         stopped = paused - 1 if paused else failing  # the unit that ended step k early, or -1
@@ -306,17 +342,17 @@ class NativeLoop:
             base += len(part.doubles)
         if failed or errors:
             if k:
-                self._tell(rows[:-1], kinds)
+                self._tell(rows[:-1], kinds, before)
             if errors:
                 raise errors[0]
             self.parts[failing].failed(code, origin + (first + k - done) * execution.step_size)
             raise RuntimeError(f"unit {algorithm.units[failing].name} failed in the native loop (code {code})")
         if paused:
             self._finish(half, stopped, held)
-            self._tell(rows, kinds)
+            self._tell(rows, kinds, before)
             return k + 1
         if k:
-            self._tell(rows[:-1], kinds)
+            self._tell(rows[:-1], kinds, before)
         return k
 
     def _finish(self, half: np.ndarray, pause: int, held: dict[int, object]) -> None:
@@ -354,12 +390,13 @@ class NativeLoop:
                 setter, pick = write
                 setter(pick(typed))
 
-    def _tell(self, repeats: np.ndarray, kinds: list[str]) -> None:
-        """Observers hear of the repeated steps (the rows before the current step), then of the current one."""
+    def _tell(self, repeats: np.ndarray, kinds: list[str], before: np.ndarray) -> None:
+        """Observers hear of the repeated steps (the rows before the current step; `before`: the slots before the
+        first), then of the current one."""
         execution = self.execution
         observers = execution.observers
         if len(repeats):
-            batch = StepRows(execution, repeats, kinds)
+            batch = StepRows(execution, repeats, kinds, before)
             for o in self._telling if observers == self._observers else self._listeners(observers)[1]:
                 o.repeated(execution, batch)  # the others have nothing to do after a step
         for o in observers:
@@ -406,11 +443,12 @@ _KIND = {bool: "b", int: "i", float: "r"}
 class StepRows:
     """Steps an observer hears of at once: the slots after each (`rows`, doubles), each row's `steps` (its
     start index) and `times` (its end), counted as the execution counts them (`counted`: origin, the first
-    row's steps since it, the step size); `replay` makes each the execution's current step in turn (values
-    typed as the ports hold them), and puts the current one back after."""
+    row's steps since it, the step size); `before`: the slots before the first; `replay` makes each the
+    execution's current step in turn (values typed as the ports hold them), and puts the current one back after."""
 
-    def __init__(self, execution, rows: np.ndarray, kinds: list[str]):
+    def __init__(self, execution, rows: np.ndarray, kinds: list[str], before: np.ndarray | None = None):
         self.rows, self.kinds = rows, kinds
+        self.before = before
         origin, done = execution._origin
         self.first = execution.steps - 1 - len(rows)  # the rows are the steps before the current one
         self.counted = (origin, self.first + 1 - done, execution.step_size)
@@ -433,16 +471,32 @@ class StepRows:
         columns = [_column(self.rows[:, i], kind) for i, kind in zip(slots, kinds)]
         return list(zip(*columns)) if columns else [() for _ in self.rows]
 
+    def changes(self, slots: list[int]) -> list[int]:
+        """The rows in which a value at these slots differs from the row before (the first: from `before`; all
+        of them when it is not known)."""
+        if not slots or not len(self.rows):
+            return []
+        column = self.rows[:, slots]
+        if self.before is None:
+            return list(range(len(self.rows)))
+        previous = np.vstack([self.before[slots][None, :], column[:-1]])
+        return np.flatnonzero((column != previous).any(axis=1)).tolist()
+
     def row(self, k: int, slots: list[int]) -> tuple:
         """Row k's values at these slots, typed (one row read, not the stretch's columns)."""
         row, kinds = self.rows[k].tolist(), self.kinds
         return tuple((row[i] != 0.0) if kinds[i] == "b" else int(row[i]) if kinds[i] == "i" else row[i] for i in slots)
 
-    def replay(self, execution):
+    def replay(self, execution, only: list[int] | None = None):
+        """Each row (or those of `only`, in order) made the execution's current step in turn."""
         data = execution.algorithm.data
         kept = (list(data), execution.steps, execution.time)
+        rows = zip(self.rows, self.steps, self.times)
+        if only is not None:
+            times = self.times
+            rows = [(self.rows[k], self.first + k, times[k]) for k in only]
         try:
-            for row, steps, time in zip(self.rows, self.steps, self.times):
+            for row, steps, time in rows:
                 data[:] = _typed(row, self.kinds)
                 execution.steps, execution.time = steps + 1, time
                 yield
@@ -488,7 +542,7 @@ def _compiled(source: str, include_dirs: tuple[str, ...] = ()):
     fn = lib.cotwin_segment
     address = ctypes.c_void_p  # the arrays' addresses as integers (no pointer object made per call)
     fn.argtypes = [ctypes.POINTER(ctypes.c_void_p), address, address, address, ctypes.c_int, ctypes.c_double,
-                   ctypes.c_longlong, ctypes.c_double, address, address]
+                   ctypes.c_longlong, ctypes.c_double, address, address, ctypes.POINTER(ctypes.c_ubyte)]
     fn.restype = ctypes.c_int
     _CACHE[digest] = fn
     return fn

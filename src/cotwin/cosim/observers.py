@@ -12,7 +12,7 @@ import queue
 from itertools import chain
 import time as wallclock
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Collection
 
 import numpy as np
 
@@ -29,12 +29,19 @@ class Observer:
     def step_complete(self, execution) -> None: ...
 
     def repeated(self, execution, rows) -> None:
-        """Steps the native loop made at once in which only continuous values changed (cotwin.cosim.native:
-        `rows` is a StepRows of the values on the connections); told before the last step of the stretch,
-        which comes to `step_complete` as it is made. An observer that does not define it must see every
-        step as it is made (it may read a unit's state, save the execution's ...): then the native loop does
-        not run. One that reads only the values may tell itself each row in turn (`rows.replay`)."""
+        """Steps the native loop made at once (cotwin.cosim.native: `rows` is a StepRows of the values on the
+        connections), in which nothing changed but continuous values and the discrete ones `whole_changes`
+        lets pass; told before the last step of the stretch, which comes to `step_complete` as it is made. An
+        observer that does not define it must see every step as it is made (it may read a unit's state, save
+        the execution's ...): then the native loop does not run. One that reads only the values may tell
+        itself each row in turn (`rows.replay`)."""
         raise NotImplementedError
+
+    def whole_changes(self, execution) -> Collection[tuple[str, str]] | None:
+        """The ports (unit, port) whose discrete changes this observer must be told of by `step_complete`, on a
+        step made whole (the native loop ends a stretch after such a change); None: every port, as an observer
+        that does not say. Asked before each stretch."""
+        return None
 
     def quiet_for(self, execution) -> int | None:
         """How many steps from now the native loop may make, the last of them told to `step_complete` as it is
@@ -153,6 +160,9 @@ class CSVWriter(Observer):
                 self._rows = []
             self._lines.append(_Stretch(rows.rows.copy(), slots, "".join(rows.kinds[i] for i in slots), rows.counted))
         self.rows += len(rows)
+
+    def whole_changes(self, execution) -> tuple:
+        return ()  # every row is written as it is
 
     def _slot_list(self, execution) -> list[int]:
         slots = execution.algorithm.slots
@@ -303,6 +313,9 @@ class Progress(Observer):
     def repeated(self, execution, rows) -> None:
         return None  # the stretch's last step reports
 
+    def whole_changes(self, execution) -> tuple:
+        return ()
+
 
 def epoch_of(units, now: float, slack: float = 1.0) -> float | None:
     """The wall-clock time (time.time()) of simulation time 0 announced by a unit (`epoch`, e.g. the
@@ -357,6 +370,9 @@ class RealTimePacer(Observer, Pacer):
         for time in rows.times:  # (never more than the last step: see quiet_for)
             self.wait(time)
 
+    def whole_changes(self, execution) -> tuple:
+        return ()
+
 
 class LiveFeed(Observer):
     """Publishes a sample {time, wall, values} per step to subscribers' bounded queues, never blocking
@@ -388,6 +404,9 @@ class LiveFeed(Observer):
     def repeated(self, execution, rows) -> None:
         for _ in rows.replay(execution):  # it reads only the values on the connections
             self.step_complete(execution)
+
+    def whole_changes(self, execution) -> tuple:
+        return ()  # each row is published as it is
 
     def _publish(self, execution) -> None:
         if not self.subscribers:
@@ -429,6 +448,9 @@ class StateFile(Observer):
 
     def repeated(self, execution, rows) -> None:
         return None  # never the last step: a stretch's last step comes to step_complete
+
+    def whole_changes(self, execution) -> tuple:
+        return ()
 
     def save(self, execution) -> None:
         try:

@@ -666,7 +666,8 @@ class FMUUnit(BoundByNames, Unit):
             self._failed("fmi2DoStep", status, f"returned {STATUS[status] if 0 <= status < len(STATUS) else status}")
 
         return NativePart("\n".join(lines), pointers=pointers, begin=begin, end=end, failed=failed,
-                          writes=frozenset(outputs(execution, self)), sets_inputs=True)
+                          writes=frozenset(outputs(execution, self)), takes=frozenset(name for name, _ in inputs),
+                          sets_inputs=True)
 
     # ---- state ----
     def get_state(self) -> bytes:

@@ -216,9 +216,11 @@ def variable_values(mapping: Mapping, variables: list, kinds: list[str]) -> list
 
 
 # The step's doubles (DD): these scalars, then per input event whether it held at the last step and the
-# answers that came in it, then the variables the events read (EventsInC.variables).
-TIME, TIMESTEP, PHYSICS_TIMESTEP, STEPS, PERIOD, MOVING, MOVE_HELD, JOINTS, NQ, DONE, CAME, DEPTH = range(12)
-SCALARS = 12
+# answers that came in it, then the variables the events read (EventsInC.variables). MADE counts the segment's
+# steps; DELIVERED is the first answer delivered in it (-1: none) and DELIVERED_AT the step (MADE) it came in.
+TIME, TIMESTEP, PHYSICS_TIMESTEP, STEPS, PERIOD, MOVING, MOVE_HELD, JOINTS, NQ, DONE, CAME, DEPTH, MADE, DELIVERED, \
+    DELIVERED_AT = range(15)
+SCALARS = 15
 # Its pointers (PP): MuJoCo's mj_step, model and data, the data's arrays, the move's arrays (cotwin.mapping.native)
 MJ_STEP, MODEL, DATA, CTRL, QPOS, QVEL, SENSORDATA, WATCH, MOVE = range(9)  # WATCH: the watched geoms (a mask)
 POINTERS = MOVE + 6  # the move: shape, joints' control indices, starts, deltas, lows, highs
@@ -280,6 +282,7 @@ class QuietStep:
         sim, layout, mapping = self.sim, self.events.variables, self.mapping
         ops = " || ".join(f"IN({i}) != 0.0" for i in self.op_slots) or "0"
         lines = [f"if ({ops}) PAUSE();  /* an operation to run: Python runs it */",
+                 f"DD[{MADE}] += 1.0;",
                  f"double *time = &DD[{TIME}];",
                  f"int steps = (int)DD[{STEPS}], period = (int)DD[{PERIOD}];",
                  f"cotwin_mj_step mjstep = (cotwin_mj_step)PP[{MJ_STEP}];",
@@ -321,7 +324,10 @@ class QuietStep:
             else:
                 lines.append(f"outs[{i}] = occ[{i}] ? 1.0 : 0.0;")
             lines.append(f"DD[{self.held_at + i}] = occ[{i}] ? 1.0 : 0.0;")
-        lines += [f"if (came) {{ outs[(int)DD[{self.came_at}]] = 1.0; END_AFTER(); }}  /* the first answer delivered */",
+        lines += [f"if (came) {{ outs[(int)DD[{self.came_at}]] = 1.0;  /* the first answer delivered */",
+                  f"    if (DD[{DELIVERED}] < 0.0) {{ DD[{DELIVERED}] = DD[{self.came_at}]; DD[{DELIVERED_AT}] = DD[{MADE}]; }}",
+                  "    if (came > 1) END_AFTER(); else END_NEXT(); }  /* others wait for Python; else the reply is seen",
+                  "                                                      whole, with the mapping as it left it */",
                   f"DD[{CAME}] = came;"]
         lines += [f"N[{slot}] = outs[{self.names.index(name)}];" for name, slot in event_slots.items()]
         return lines
@@ -374,7 +380,7 @@ class QuietStep:
         self._move = move or None  # kept: its arrays stay alive while the C loop reads them
         self.doubles[:SCALARS] = [float(d.time), float(sim.timestep), float(sim.model.opt.timestep), float(self.steps),
                                   float(self.period), 1.0 if move else 0.0, 0.0, float(joints), float(d.qpos.size),
-                                  0.0, 0.0, -watch[1] if watch is not None else 0.0]
+                                  0.0, 0.0, -watch[1] if watch is not None else 0.0, 0.0, -1.0, 0.0]
         for i, name in enumerate(self.names):
             self.doubles[self.held_at + i] = 1.0 if mapping.held.get(name, (False, None))[0] else 0.0
             self.doubles[self.came_at + i] = 0.0
@@ -391,7 +397,9 @@ class QuietStep:
             held_at, came_at = self.held_at, self.came_at
             held = {name: dd[held_at + i] != 0.0 for i, name in enumerate(self.names)}
             came = [self.names[int(dd[came_at + j])] for j in range(int(dd[CAME]))]
-            self.mapping.reported_elsewhere(made, held, came)
+            first, at = int(dd[DELIVERED]), int(dd[DELIVERED_AT])
+            earlier = (self.names[first], at) if first >= 0 and at < made else None  # not the last step's
+            self.mapping.reported_elsewhere(made, held, came, earlier)
 
     def failed(self, code: int, t: float) -> None:
         """Raise the error the step made in Python raises: the physics unstable (2), a set-point not finite (1)."""

@@ -869,10 +869,14 @@ class Mapping:
         """Mirrored variables: name -> (joint, "position" or "velocity"), in the order `monitored` lists them."""
         return dict(self._mirrors)
 
-    def reported_elsewhere(self, reports: int, held: dict[str, bool], came: list[str]) -> None:
+    def reported_elsewhere(self, reports: int, held: dict[str, bool], came: list[str],
+                           earlier: tuple[str, int] | None = None) -> None:
         """`reports` steps made and reported by a native loop (cotwin.mapping.cstep) with nothing asked: the
         events that held at the last of them, the answers that came in it (the first delivered, the others
-        waiting, in order); the sensor readings and mirrored variables read again."""
+        waiting, in order), and `earlier`: an answer delivered alone in an earlier one (its name and the step
+        counted from 1); the sensor readings and mirrored variables read again."""
+        if earlier is not None:
+            self.delivered[earlier[0]] = self.reports + earlier[1]
         self.reports += reports
         for name, occurs in held.items():
             self.held[name] = (True, self.events[name].value) if occurs else (False, None)

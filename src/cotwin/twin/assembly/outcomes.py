@@ -229,6 +229,9 @@ class CommandLedger(Observer):
         self._calls_read = execution.reader([(self._dmodel, c) for c in self._calls])
         self._events_read = execution.reader([(self._mapping, self._scope(e)) for e in self._events])
         self._state_read = execution.reader([(self._dmodel, port) for port, _ in self._states])
+        read = [(self._dmodel, port) for port, _ in self._states] + [(self._dmodel, c) for c in self._calls] + \
+            [(self._mapping, self._scope(e)) for e in self._events]
+        self._slots = [slots[port] for port in read if port in slots]  # what it reads, in a native stretch's rows
         self._before = self._state_read()
         # the platform events of the last steps seen: those in none of them were absent when the d-model's cycle
         # before the one judged read its exec guards (a step not seen repeats the one before it)
@@ -314,12 +317,25 @@ class CommandLedger(Observer):
         else:
             outcome.busy = self._names(before)
 
+    def whole_changes(self, execution) -> tuple:
+        return ()  # the steps in which what it reads changed are told to it from the rows (`repeated`)
+
     def repeated(self, execution, rows) -> None:
-        """Steps in which no state, call or event changed: each would find what the step before found (a
-        command taken, done or stopped is decided at a change), unless a command applied waits to be read."""
+        """Steps made at once. Each in which a state, a call or an event it reads changed is told to it as a step,
+        with the two after it (it remembers the platform events of the last three steps); each of the others
+        would find what the step before it found (a command taken, done or stopped is decided at a change), so
+        it only repeats the events remembered. While a command applied waits to be read, every step is told."""
         if self._waiting:
-            for _ in rows.replay(execution):  # it reads only the values on the connections
-                self.step_complete(execution)
+            only = None
+        else:
+            changed = rows.changes(self._slots)
+            only = sorted({k + d for k in changed for d in (0, 1, 2) if k + d < len(rows)})
+            if self._recent:  # the steps before the first told (all of them, with none told) repeat the last seen
+                self._recent.extend([self._recent[-1]] * min(only[0] if only else len(rows), 3))
+            if not only:
+                return
+        for _ in rows.replay(execution, only):  # it reads only the values on the connections
+            self.step_complete(execution)
 
     def _absent(self) -> frozenset[str]:
         """The platform events that occurred in none of the last steps: the cycle before the one judged read its

@@ -98,7 +98,8 @@ class WaitWatch(Observer):
     def _passes(self, m: int, leaf) -> bool:
         """Whether the judgement of machine m waiting in `leaf` finds it not blocked at any step of a stretch
         starting now: an answer it waits for may come and stays so until it comes (Mapping.stays_possible),
-        and its coming ends the stretch. A stretch of the native loop calls no operation (one called ends it
+        and the stretch ends the step after it comes (the judgement there and then finds that it may come: it
+        was delivered a step before). A stretch of the native loop calls no operation (one called ends it
         first). The judgement then changes nothing, so its step need not be seen whole: each command's move
         was cut in two here, a stretch end per command (issue 23)."""
         return any(self.mapping.stays_possible(event) for event in self.waits[(m, leaf)].events)
@@ -107,6 +108,11 @@ class WaitWatch(Observer):
         """Whether machine m waiting in `leaf` would be judged (see _judge: a wait no command ends)."""
         wait = self.waits.get((m, leaf)) if isinstance(leaf, int) else None
         return wait is not None and not wait.events & self.commands
+
+    def whole_changes(self, execution) -> list:
+        """Its machines' states and the operation calls: each change of them is a step it sees whole (the mapping
+        it asks is then as that step left it)."""
+        return [*self._ports, *self._calls]
 
     def repeated(self, execution, rows) -> None:
         """Steps in which no state changed and nothing was called: each machine idles one more step per row
