@@ -34,7 +34,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Iterable
 
 import numpy as np
 
@@ -213,6 +213,7 @@ class NativeLoop:
             dbase += len(part.doubles)
         self._sizes = (pbase, dbase)
         changed = " || ".join(f"(E[{i}] && N[{i}] != S[{i}])" for i in self.discrete) or "0"
+        moved = " || ".join(f"N[{i}] != S[{i}]" for i in self.discrete) or "0"
         lines = [_PRELUDE,
                  "#define IN(slot) " + ("N[slot]" if self.seidel else "S[slot]") +
                  ("  /* Gauss-Seidel: this step's outputs of the units before */" if self.seidel else
@@ -222,9 +223,10 @@ class NativeLoop:
                  *decls,
                  "/* Up to n steps from step `base` (since `origin`); returns the steps made. `failed`: unit * 1000 + code",
                  "   of a step that failed; `paused`: 1 + the unit that paused the step after them (rows[return] holds",
-                 "   its slots so far). rows: the slots after each step. E: whether a slot's change ends the segment. */",
+                 "   its slots so far). rows: the slots after each step. E: whether a slot's change ends the segment;",
+                 "   moved: whether a discrete slot changed in each step. */",
                  "int cotwin_segment(void **P, double *D, double *S, double *rows, int n, double origin, long long base,",
-                 "                   double H, int *failed, int *paused, const unsigned char *E) {",
+                 "                   double H, int *failed, int *paused, const unsigned char *E, unsigned char *moved) {",
                  f"  double N[{max(1, width)}];",
                  "  int ending = 0;  /* a unit asked, in the step before, to end after this one */",
                  "  *failed = 0;",
@@ -236,6 +238,7 @@ class NativeLoop:
                  *(f"    N[{shadow}] = N[{source}];" for source, shadow in self.copies),
                  *body,
                  f"    int changed = {changed};",
+                 f"    moved[j] = {moved};",
                  f"    memcpy(S, N, sizeof(double) * {width});",
                  f"    memcpy(rows + (size_t)j * {width}, S, sizeof(double) * {width});",
                  "    if (changed || end_here) return j + 1;",
@@ -317,13 +320,14 @@ class NativeLoop:
         S = np.array([float(v) for v in data], dtype=np.float64)
         before = S.copy()
         rows = np.empty((n, self.width), dtype=np.float64)
+        moved = np.zeros(n + 1, dtype=np.uint8)
         flags = self._flags
         origin, done = execution._origin
         first = execution.steps
         observers = execution.observers
         ends = self._ends(self._telling if observers == self._observers else self._listeners(observers)[1])
         k = self._fn(P, D.ctypes.data, S.ctypes.data, rows.ctypes.data, n, float(origin), first - done,
-                     execution.step_size, *self._flag_addresses, ends)
+                     execution.step_size, *self._flag_addresses, ends, moved.ctypes.data)
         failed, paused = flags[0], flags[1]
         failing, code = divmod(failed, 1000) if failed else (-1, 0)
         stopped = paused - 1 if paused else failing  # the unit that ended step k early, or -1
@@ -342,17 +346,17 @@ class NativeLoop:
             base += len(part.doubles)
         if failed or errors:
             if k:
-                self._tell(rows[:-1], kinds, before)
+                self._tell(rows[:-1], kinds, before, moved)
             if errors:
                 raise errors[0]
             self.parts[failing].failed(code, origin + (first + k - done) * execution.step_size)
             raise RuntimeError(f"unit {algorithm.units[failing].name} failed in the native loop (code {code})")
         if paused:
             self._finish(half, stopped, held)
-            self._tell(rows, kinds, before)
+            self._tell(rows, kinds, before, moved)
             return k + 1
         if k:
-            self._tell(rows[:-1], kinds, before)
+            self._tell(rows[:-1], kinds, before, moved)
         return k
 
     def _finish(self, half: np.ndarray, pause: int, held: dict[int, object]) -> None:
@@ -390,13 +394,13 @@ class NativeLoop:
                 setter, pick = write
                 setter(pick(typed))
 
-    def _tell(self, repeats: np.ndarray, kinds: list[str], before: np.ndarray) -> None:
+    def _tell(self, repeats: np.ndarray, kinds: list[str], before: np.ndarray, moved: np.ndarray) -> None:
         """Observers hear of the repeated steps (the rows before the current step; `before`: the slots before the
-        first), then of the current one."""
+        first; `moved`: the steps in which a discrete value changed), then of the current one."""
         execution = self.execution
         observers = execution.observers
         if len(repeats):
-            batch = StepRows(execution, repeats, kinds, before)
+            batch = StepRows(execution, repeats, kinds, before, moved[:len(repeats)])
             for o in self._telling if observers == self._observers else self._listeners(observers)[1]:
                 o.repeated(execution, batch)  # the others have nothing to do after a step
         for o in observers:
@@ -443,12 +447,14 @@ _KIND = {bool: "b", int: "i", float: "r"}
 class StepRows:
     """Steps an observer hears of at once: the slots after each (`rows`, doubles), each row's `steps` (its
     start index) and `times` (its end), counted as the execution counts them (`counted`: origin, the first
-    row's steps since it, the step size); `before`: the slots before the first; `replay` makes each the
-    execution's current step in turn (values typed as the ports hold them), and puts the current one back after."""
+    row's steps since it, the step size); `before`: the slots before the first; `moved`: whether a discrete
+    value changed in each (None: not known); `replay` makes each the execution's current step in turn (values
+    typed as the ports hold them), and puts the current one back after."""
 
-    def __init__(self, execution, rows: np.ndarray, kinds: list[str], before: np.ndarray | None = None):
+    def __init__(self, execution, rows: np.ndarray, kinds: list[str], before: np.ndarray | None = None,
+                 moved: np.ndarray | None = None):
         self.rows, self.kinds = rows, kinds
-        self.before = before
+        self.before, self.moved = before, moved
         origin, done = execution._origin
         self.first = execution.steps - 1 - len(rows)  # the rows are the steps before the current one
         self.counted = (origin, self.first + 1 - done, execution.step_size)
@@ -471,34 +477,39 @@ class StepRows:
         columns = [_column(self.rows[:, i], kind) for i, kind in zip(slots, kinds)]
         return list(zip(*columns)) if columns else [() for _ in self.rows]
 
-    def changes(self, slots: list[int]) -> list[int]:
-        """The rows in which a value at these slots differs from the row before (the first: from `before`; all
-        of them when it is not known)."""
-        if not slots or not len(self.rows):
-            return []
-        column = self.rows[:, slots]
-        if self.before is None:
+    def changed(self) -> list[int]:
+        """The rows in which a discrete value changed (all of them when it is not known)."""
+        if self.moved is None or self.before is None:
             return list(range(len(self.rows)))
-        previous = np.vstack([self.before[slots][None, :], column[:-1]])
-        return np.flatnonzero((column != previous).any(axis=1)).tolist()
+        return np.flatnonzero(self.moved).tolist()
+
+    def changes(self, slots: list[int]) -> list[int]:
+        """The rows in which a discrete value at these slots differs from the row before (the first: from
+        `before`; every row when that is not known)."""
+        if not slots:
+            return []
+        out = []
+        for k in self.changed():
+            row, previous = self.rows[k].tolist(), (self.rows[k - 1] if k else self.before).tolist()
+            if any(row[i] != previous[i] for i in slots):
+                out.append(k)
+        return out
 
     def row(self, k: int, slots: list[int]) -> tuple:
         """Row k's values at these slots, typed (one row read, not the stretch's columns)."""
         row, kinds = self.rows[k].tolist(), self.kinds
         return tuple((row[i] != 0.0) if kinds[i] == "b" else int(row[i]) if kinds[i] == "i" else row[i] for i in slots)
 
-    def replay(self, execution, only: list[int] | None = None):
-        """Each row (or those of `only`, in order) made the execution's current step in turn."""
+    def replay(self, execution, only: Iterable[int] | None = None):
+        """Each row (or those `only` names, in order; it is read as the rows are told, so a generator may choose
+        the next row by what the last one did) made the execution's current step in turn."""
         data = execution.algorithm.data
         kept = (list(data), execution.steps, execution.time)
-        rows = zip(self.rows, self.steps, self.times)
-        if only is not None:
-            times = self.times
-            rows = [(self.rows[k], self.first + k, times[k]) for k in only]
+        times = self.times
         try:
-            for row, steps, time in rows:
-                data[:] = _typed(row, self.kinds)
-                execution.steps, execution.time = steps + 1, time
+            for k in range(len(self.rows)) if only is None else only:
+                data[:] = _typed(self.rows[k], self.kinds)
+                execution.steps, execution.time = self.first + k + 1, times[k]
                 yield
         finally:
             data[:], execution.steps, execution.time = kept
@@ -542,7 +553,7 @@ def _compiled(source: str, include_dirs: tuple[str, ...] = ()):
     fn = lib.cotwin_segment
     address = ctypes.c_void_p  # the arrays' addresses as integers (no pointer object made per call)
     fn.argtypes = [ctypes.POINTER(ctypes.c_void_p), address, address, address, ctypes.c_int, ctypes.c_double,
-                   ctypes.c_longlong, ctypes.c_double, address, address, ctypes.POINTER(ctypes.c_ubyte)]
+                   ctypes.c_longlong, ctypes.c_double, address, address, ctypes.POINTER(ctypes.c_ubyte), address]
     fn.restype = ctypes.c_int
     _CACHE[digest] = fn
     return fn

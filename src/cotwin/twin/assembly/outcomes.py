@@ -229,9 +229,12 @@ class CommandLedger(Observer):
         self._calls_read = execution.reader([(self._dmodel, c) for c in self._calls])
         self._events_read = execution.reader([(self._mapping, self._scope(e)) for e in self._events])
         self._state_read = execution.reader([(self._dmodel, port) for port, _ in self._states])
-        read = [(self._dmodel, port) for port, _ in self._states] + [(self._dmodel, c) for c in self._calls] + \
-            [(self._mapping, self._scope(e)) for e in self._events]
-        self._slots = [slots[port] for port in read if port in slots]  # what it reads, in a native stretch's rows
+        read = [(self._dmodel, port) for port, _ in self._states] + [(self._dmodel, c) for c in self._calls]
+        events = [(e, (self._mapping, self._scope(e))) for e in self._events]
+        self._slots = [slots[port] for port in read if port in slots]  # what it reads, in a native stretch's rows:
+        self._read_events = len(self._slots)  # the states and calls, then the events
+        self._slots += [slots[port] for _, port in events if port in slots]
+        self._read_names = [e for e, port in events if port in slots]
         self._before = self._state_read()
         # the platform events of the last steps seen: those in none of them were absent when the d-model's cycle
         # before the one judged read its exec guards (a step not seen repeats the one before it)
@@ -321,21 +324,38 @@ class CommandLedger(Observer):
         return ()  # the steps in which what it reads changed are told to it from the rows (`repeated`)
 
     def repeated(self, execution, rows) -> None:
-        """Steps made at once. Each in which a state, a call or an event it reads changed is told to it as a step,
-        with the two after it (it remembers the platform events of the last three steps); each of the others
-        would find what the step before it found (a command taken, done or stopped is decided at a change), so
-        it only repeats the events remembered. While a command applied waits to be read, every step is told."""
-        if self._waiting:
-            only = None
-        else:
-            changed = rows.changes(self._slots)
-            only = sorted({k + d for k in changed for d in (0, 1, 2) if k + d < len(rows)})
-            if self._recent:  # the steps before the first told (all of them, with none told) repeat the last seen
-                self._recent.extend([self._recent[-1]] * min(only[0] if only else len(rows), 3))
-            if not only:
-                return
-        for _ in rows.replay(execution, only):  # it reads only the values on the connections
+        """Steps made at once. Each in which a state or a call changed or an event came is told to it as a step,
+        and each while a command applied waits to be read; each of the others would find what the step before it
+        found (a command taken, done or stopped is decided at such a step), so only the events it held are
+        remembered (of the last three steps, before a step told: `_absent`)."""
+        states, events = self._slots[:self._read_events], self._slots[self._read_events:]
+        told = []
+        for k in rows.changed():
+            row, previous = rows.rows[k].tolist(), (rows.rows[k - 1] if k else rows.before).tolist()
+            if any(row[i] != previous[i] for i in states) or any(row[i] and not previous[i] for i in events):
+                told.append(k)
+        if not told and not self._waiting:
+            self._recent.extend(self._held(row) for row in rows.rows[-3:])
+            return
+        marks = told + [len(rows)]  # and the stretch's last step, told after
+
+        def chosen():
+            mark = 0
+            for k in range(len(rows)):
+                while marks[mark] < k:
+                    mark += 1
+                if self._waiting or marks[mark] == k:
+                    yield k
+                elif marks[mark] - k <= 2:  # the events of the two steps before a step told (it keeps three)
+                    self._recent.append(self._held(rows.rows[k]))
+
+        for _ in rows.replay(execution, chosen()):  # it reads only the values on the connections
             self.step_complete(execution)
+
+    def _held(self, row) -> frozenset[str]:
+        """The events held in a row of a stretch."""
+        row = row.tolist()
+        return frozenset(e for e, i in zip(self._read_names, self._slots[self._read_events:]) if row[i])
 
     def _absent(self) -> frozenset[str]:
         """The platform events that occurred in none of the last steps: the cycle before the one judged read its
