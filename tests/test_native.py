@@ -204,11 +204,11 @@ class Told(Observer):
 
 
 @pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
-def test_an_answer_and_the_d_models_reply_to_it_share_a_stretch(built, tmp_path, algorithm):
-    """A change a unit's C reads step by step (the mapping's answer, read by the d-model) need not end a stretch
-    when no observer must see it whole: the stretch goes on to the d-model's reply (an operation called, which
-    Python runs), one stretch end fewer per command; the run is the same, byte for byte, as with an observer that
-    must see every discrete change whole."""
+def test_changes_the_units_c_reads_need_not_end_a_stretch(built, tmp_path, algorithm):
+    """A change a unit's C reads step by step (the mapping's answer, a command shown, both read by the d-model)
+    need not end a stretch when no observer must see it whole: the stretch goes on to the d-model's reply (an
+    operation called, which Python runs); the run is the same, byte for byte, as with an observer that must see
+    every discrete change whole, with a stretch end fewer per command at least."""
     twins, built_dir = built
     runs = []
     for whole in (None, ()):
@@ -222,6 +222,20 @@ def test_an_answer_and_the_d_models_reply_to_it_share_a_stretch(built, tmp_path,
     assert some_run == every_run
     assert every.told + every.repeats == some.told + some.repeats == 200  # every step told, once
     assert every.told - some.told >= commands >= 4  # a stretch end fewer per command at least
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+def test_a_command_is_shown_and_taken_inside_a_stretch(built, tmp_path, algorithm):
+    """The controller's step is C too (cotwin.twin.assembly.native_commands): a command due is shown in its step
+    and the d-model takes it natively, so Python makes only the steps that run an operation (the move and the
+    stop of each command), and the run is the FMU path's byte for byte (CSV, state, outcomes)."""
+    twins, built_dir = built
+    fmu = run(twins["cotwin.toml"], built_dir, tmp_path / "fmu", step=0.1, fused=False, algorithm=algorithm)
+    native = run(twins["cotwin.toml"], built_dir, tmp_path / "native", step=0.1, algorithm=algorithm)
+    result, commands = native[0].result, len(native[0].outcomes.outcomes)
+    assert commands >= 4 and result.steps - result.native_steps <= 2 * commands, result.describe_stepping()
+    assert native[1:] == fmu[1:]
+    assert [o.__dict__ for o in native[0].outcomes.outcomes] == [o.__dict__ for o in fmu[0].outcomes.outcomes]
 
 
 def test_an_observer_that_must_see_every_step_live_keeps_the_run_in_the_fused_loop(built, tmp_path):
@@ -320,7 +334,7 @@ def test_a_step_failing_inside_a_stretch_keeps_every_row_before_it(built, tmp_pa
 
     def failing_part(self, execution):
         native = part(self, execution)
-        native.step = f"if (t >= {due!r}) FAIL(7);"
+        native.step = f"if (t >= {due!r}) FAIL(7);\n" + native.step  # before the step shows anything
 
         def failed(code, t):
             raise CotwinError(f"the scenario fails at t = {t:g}")

@@ -153,6 +153,9 @@ class NativeLoop:
         self._masks: dict[frozenset | None, object] = {}  # the slots whose change ends a segment, as the C reads them
         self._data, self._observers = algorithm.data, list(execution.observers)
         self._still = [i for i in range(self.width) if i not in written]  # the slots no C writes
+        # the slots C writes, with the class their port's values have: one holding another (a scenario's Real port
+        # still at the integer 0 it starts with) is held as it is for a stretch, whose C must leave it be
+        self._classes = [(i, _CLASS[self.kinds[i]]) for i in self.written]
         self._kinds: dict[tuple, list[str]] = {}  # the rows' kinds by the classes of the values held still
         self._bools = [i for i in self.written if self.kinds[i] == "b"]  # slots C writes as Booleans
         self._ints = [i for i in self.written if self.kinds[i] == "i"]  # ... as Integers
@@ -269,7 +272,7 @@ class NativeLoop:
         for value in data:
             if value is UNSET:
                 return 0
-        for i in self._still:
+        for i in self._held(data):
             value = data[i]
             if value.__class__ not in _PLAIN or (value.__class__ is int and abs(value) > 2 ** 53):
                 why = "a value on a connection is not a number a double carries exactly"
@@ -287,6 +290,11 @@ class NativeLoop:
                 self.refusals[why] = self.refusals.get(why, 0) + 1
                 return 0
         return n
+
+    def _held(self, data: list) -> list[int]:
+        """The slots held as they are in a stretch starting now: those no C writes, and those holding a value of
+        another class than their port's (the unit's `quiet` sees that its C leaves them be)."""
+        return self._still + [i for i, cls in self._classes if data[i].__class__ is not cls]
 
     def idle(self) -> str:
         """Why steps were left to Python, the most frequent reason first (for a run that made none here)."""
@@ -309,7 +317,8 @@ class NativeLoop:
         data = algorithm.data
         # the rows' kinds this segment: C writes its slots as their ports' types; the others hold still, as
         # the Python objects they are (an Integer 0 in a Real port stays 0), and are put back as they were
-        held = {i: data[i] for i in self._still}
+        held = {i: data[i] for i in self._held(data)}
+        kept = [i for i, cls in self._classes if data[i].__class__ is not cls]  # C-written slots held this stretch
         kinds = self._kinds_of(held)
         for part in self.parts:
             part.begin()
@@ -333,6 +342,9 @@ class NativeLoop:
         stopped = paused - 1 if paused else failing  # the unit that ended step k early, or -1
         half = rows[k].copy() if paused else None
         rows = rows[:k]
+        for i in kept:
+            if (rows[:, i] != float(held[i])).any():
+                raise RuntimeError(f"a unit's C wrote slot {i} in a stretch that held its value {held[i]!r} as it was")
         if k:
             self._commit(rows, before if k == 1 else rows[k - 2], held)
         errors = []
@@ -442,6 +454,7 @@ class NativeLoop:
 
 _PLAIN = (bool, int, float)
 _KIND = {bool: "b", int: "i", float: "r"}
+_CLASS = {"b": bool, "i": int, "r": float}
 
 
 class StepRows:

@@ -257,7 +257,7 @@ class CommandLedger(Observer):
         calls = [c for c, v in zip(self._calls, self._calls_read()) if v is True]
         events = [e for e, v in zip(self._events, self._events_read()) if v is True]
         self._recent.append(frozenset(events))
-        for outcome in self._fresh():
+        for outcome in self._fresh(t + 0.5 * execution.step_size):
             self._waiting.append((self._lag, outcome, self._before))
         still, read = [], []
         for steps, outcome, before in self._waiting:
@@ -295,12 +295,15 @@ class CommandLedger(Observer):
                 o.replaced = last[o.event].delivered
         return [o for o in outcomes if o.replaced is None]
 
-    def _fresh(self) -> list[CommandOutcome]:
-        """The outcomes of the commands applied since the last look, recorded."""
+    def _fresh(self, before: float | None = None) -> list[CommandOutcome]:
+        """The outcomes of the commands applied since the last look (those applied `before` that time, when given:
+        a native stretch's command is looked at in its step), recorded."""
         if self._count() <= self._seen:
             return []
         fresh = list(self._queue.applied)[-(self._count() - self._seen):]
-        self._seen = self._count()
+        if before is not None:
+            fresh = [a for a in fresh if a.time < before]
+        self._seen += len(fresh)
         outcomes = [CommandOutcome(a.command.due, a.command.event, dict(a.command.values), a.time,
                                    origin=a.command.origin) for a in fresh]
         self.outcomes.extend(outcomes)
@@ -334,6 +337,13 @@ class CommandLedger(Observer):
             row, previous = rows.rows[k].tolist(), (rows.rows[k - 1] if k else rows.before).tolist()
             if any(row[i] != previous[i] for i in states) or any(row[i] and not previous[i] for i in events):
                 told.append(k)
+        if self._count() > self._seen:  # commands applied among the steps (cotwin.twin.assembly.native_commands)
+            times, half = rows.times, 0.5 * execution.step_size
+            for a in list(self._queue.applied)[-(self._count() - self._seen):]:
+                k = next((k for k, t in enumerate(times) if a.time < t + half), None)
+                if k is not None:
+                    told.append(k)
+            told = sorted(set(told))
         if not told and not self._waiting:
             self._recent.extend(self._held(row) for row in rows.rows[-3:])
             return

@@ -471,25 +471,11 @@ class ScenarioUnit(PythonUnit):
             self.values.update(occurrence.values)
 
     def native_part(self, execution):
-        """Its step for the native loop (cotwin.cosim.native): nothing to do while no command is due and none
-        waits (its outputs stay as they are); `quiet` counts the steps before the next command is due."""
-        from ...cosim.native import NativePart
+        """Its step for the native loop (cotwin.twin.assembly.native_commands): events reset, and the next command
+        shown in the step it is due in where the C can show it as `step` does."""
+        from .native_commands import NativeCommands
 
-        def quiet(n: int) -> int:
-            if len(self.queue) or any(self.values[ev] is True for ev in self.events):
-                return 0
-            if self._next >= len(self.commands):
-                return n
-            origin, done = execution._origin
-            return steps_before_due(self.commands[self._next].time, origin, execution.steps - done,
-                                    execution.step_size, n)
-
-        def end(first: int, made: int, rows, doubles) -> None:
-            if made:  # as `step` leaves it: the last step's start plus its size
-                origin, done = execution._origin
-                self.time = origin + (first + made - 1 - done) * execution.step_size + execution.step_size
-
-        return NativePart("", quiet=quiet, end=end, refusal=lambda: "a command is due or waits")
+        return NativeCommands(self, execution).part()
 
     # ---- state: the port values, the time reached, the next command to play and those waiting ----
     STATE_KEYS = (*PythonUnit.STATE_KEYS, "next", "plan", "queue")
