@@ -58,6 +58,33 @@ def check_texts(tmp_path):
     return run
 
 
+@pytest.fixture
+def ur_rtde(monkeypatch):
+    """ur-rtde's two client classes, standing in for a UR controller whose arm is at rest at zero; the control
+    client keeps each moveJ's joints in `moves` (an RTDEEndpoint's `control.moves`)."""
+    import types
+
+    class Receive:
+        def __init__(self, host):
+            pass
+
+        def getActualQ(self):
+            return [0.0] * 6
+
+        def getActualQd(self):
+            return [0.0] * 6
+
+    class Control:
+        def __init__(self, host):
+            self.moves = []
+
+        def moveJ(self, q, speed, acceleration, asynchronous):
+            self.moves.append(list(q))
+
+    monkeypatch.setitem(sys.modules, "rtde_receive", types.SimpleNamespace(RTDEReceiveInterface=Receive))
+    monkeypatch.setitem(sys.modules, "rtde_control", types.SimpleNamespace(RTDEControlInterface=Control))
+
+
 def listening(port: int, host: str = "127.0.0.1") -> bool:
     import socket
 
