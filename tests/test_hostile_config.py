@@ -89,6 +89,20 @@ def test_timing_a_run_cannot_keep_exactly_is_refused_at_its_key(ur5e, cosim, lin
     assert f"hostile.toml:{line}:" in text and message in text, text
 
 
+@pytest.mark.parametrize("value, said", [('"x"', "'x'"), ("nan", "nan"), ("[0.1]", "[0.1]"), ("true", "True"),
+                                         ('"' + 'x' * 5000 + '"', "(5002 characters)")])
+def test_a_cycle_period_that_is_no_number_is_one_error_at_its_value(ur5e, value, said):
+    """It was two: one at the parameters' table (each parameter a number or a Boolean), one at cycle_period's value,
+    which quoted a long value whole."""
+    (ur5e / "hostile.toml").write_text(MODELS + f"[cosim]\nparameters = {{ seed = 7, cycle_period = {value} }}\n")
+    with pytest.raises(CotwinError) as err:
+        load_project(ur5e / "hostile.toml")
+    [finding] = err.value.findings
+    assert str(finding).startswith(f"{ur5e / 'hostile.toml'}:6:26: error: [cosim] parameters cycle_period must be a "
+                                   "number >= 0 (s per d-model cycle; 0: one cycle per step), got "), str(finding)
+    assert str(finding).endswith(said) and len(str(finding)) < 500, str(finding)
+
+
 def test_timing_from_the_command_line_is_checked_with_the_project(ur5e, tmp_path):
     project = ur5e / "cotwin.toml"
     assert "--end: 20.05 s is not a whole number of steps of 0.1 s" in option_error(

@@ -434,7 +434,7 @@ def _timing(file: TomlFile, cosim, problems: list[Finding]) -> None:
     where = ("cosim", "parameters", CYCLE_PERIOD)
     if period is not None and (not is_number(period) or period < 0):
         problems.append(Finding(file.location(where), Severity.ERROR, f"[cosim] parameters {CYCLE_PERIOD} must be "
-                                f"a number >= 0 (s per d-model cycle; 0: one cycle per step), got {period!r}"))
+                                f"a number >= 0 (s per d-model cycle; 0: one cycle per step), got {shown(period)}"))
         period = None
     for key, message in timing_problems(float(cosim.step), float(cosim.end), period):
         at = where if key == CYCLE_PERIOD else ("cosim", key)

@@ -191,8 +191,10 @@ def _readings(value) -> str | None:
 
 
 def _parameters(value) -> str | None:
-    bad = [k for k, v in value.items() if isinstance(v, (dict, list, str)) or
-           (isinstance(v, float) and not math.isfinite(v))]
+    """Why the d-model's parameters are not numbers or Booleans; cycle_period is checked at its own value, against
+    the step (cotwin.twin.project.load), so that one wrong value is one error."""
+    bad = [k for k, v in value.items() if k != CYCLE_PERIOD and (isinstance(v, (dict, list, str)) or
+                                                                 (isinstance(v, float) and not math.isfinite(v)))]
     if bad:
         return f"each parameter is a number or a Boolean: {', '.join(bad)}"
     return None
