@@ -113,6 +113,27 @@ def test_timing_from_the_command_line_is_checked_with_the_project(ur5e, tmp_path
     assert not (tmp_path / "o").exists()  # refused before anything is written
 
 
+def test_a_cycle_period_is_checked_against_the_step_the_run_takes(ur5e, tmp_path):
+    """[cosim] step 0.1 and cycle_period 0.03 do not go together; a run at `--step 0.3` (ten cycles a step) runs, one
+    at `--step 0.25` is refused quoting 0.25 s: both were refused quoting the project's 0.1 s, which they replace."""
+    from conftest import cotwin_in_process
+
+    path = ur5e / "timing.toml"
+    path.write_text(MODELS + "[cosim]\nstep = 0.1\nend = 3.0\nparameters = { cycle_period = 0.03 }\n")
+    with pytest.raises(CotwinError, match="cycle_period: 0.03 s does not divide the step of 0.1 s"):
+        load_project(path)
+    with pytest.raises(CotwinError, match="does not divide the step of 0.1 s"):
+        load_project(path, end=0.6)  # the project's step, which the run takes
+    assert load_project(path, step=0.3).step == 0.1  # the project as written; the run takes 0.3
+    load_project(path, step=0.3).with_overrides(realtime=True)  # a command's change to it (cotwin twin --rabbitmq)
+    for command in ("run", "twin"):
+        said = " ".join(option_error(command, path, "-o", tmp_path / "o", "--step", "0.25").replace("'", "").split())
+        assert f"--step: [cosim] parameters cycle_period ({path}:8:16):" in said, said
+        assert "0.03 s does not divide the step of 0.25 s into whole d-model cycles" in said and "0.1 s" not in said
+    proc = cotwin_in_process("run", path, "-o", tmp_path / "ran", "--step", "0.3", "--end", "0.6")
+    assert proc.returncode == 0 and "0.6 s" in proc.stdout and "error" not in proc.stderr, proc.stdout + proc.stderr
+
+
 @pytest.mark.parametrize("deviation, message", [
     ("lag_steps = 1000000000000000000000", "[deviation] lag_steps: must be in [0, 1e+06] steps"),
     ("lag_steps = -1", "[deviation] lag_steps: must be in [0, 1e+06] steps, got -1"),

@@ -165,8 +165,8 @@ def check_timing(spec, step: float | None, end: float | None) -> None:
         return
     for key, message in timing_problems(spec.step if step is None else step, spec.end if end is None else end,
                                         cycle_period(spec)):
-        if key == CYCLE_PERIOD:
-            message += " ([cosim] parameters cycle_period)"
+        if key == CYCLE_PERIOD:  # the project's value, said where it is written, against the step the run takes
+            message = f"[cosim] parameters {CYCLE_PERIOD} ({spec.location('cosim', 'parameters', CYCLE_PERIOD)}): {message}"
         raise click.BadParameter(message, param_hint="--end" if key == "end" and end is not None else "--step")
 
 

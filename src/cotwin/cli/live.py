@@ -46,7 +46,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     check_finite(step=step, end=end)
     if pt_log is not None and not Path(pt_log).is_file():
         raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
-    spec = load_project(project, pt_log)
+    spec = load_project(project, pt_log, step=step, end=end)
     check_timing(spec, step, end)
     if exchange is not None:
         spec = spec.with_overrides(scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange,

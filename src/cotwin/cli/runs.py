@@ -57,6 +57,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
     from ..twin.assembly.run import load, run_twin, step_warnings
+    from ..twin.project import load_project
     from ..twin.services.history import database_url
     from .progress import ProgressReport
 
@@ -64,8 +65,9 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     if cycle_period is not None and version != "3":
         raise click.BadParameter("only with --fmi 3 (an FMI 2.0 d-model takes [cosim] parameters cycle_period)",
                                  param_hint="--cycle-period")
-    system = load(project, cells=True, reader="cotwin run")
-    check_timing(system.spec, step, end)
+    spec = load_project(project, reader="cotwin run", step=step, end=end)
+    check_timing(spec, step, end)
+    system = load(spec, cells=True)
     if not system.spec.robots:
         show_warnings(step_warnings(system, step, cycle_period))
     show_warnings(system.warnings)  # what cotwin check says of the models and the project (a joint out of limits...)
