@@ -134,6 +134,25 @@ def test_a_cycle_period_is_checked_against_the_step_the_run_takes(ur5e, tmp_path
     assert proc.returncode == 0 and "0.6 s" in proc.stdout and "error" not in proc.stderr, proc.stdout + proc.stderr
 
 
+def test_a_fleet_twins_cycle_period_is_checked_against_the_step_its_entry_gives(ur5e, tmp_path):
+    """As `cotwin twin --step` (above): a fleet entry's step replaces the project's, with which the cycle_period
+    did not go."""
+    from cotwin.twin.analysis.fleet.spec import read_fleet
+
+    project = ur5e / "timing.toml"
+    project.write_text(MODELS + "[cosim]\nstep = 0.1\nend = 3.0\nparameters = { cycle_period = 0.03 }\n"
+                                '[pt]\nendpoint = "opcua"\nurl = "opc.tcp://127.0.0.1:4841"\n')
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text(f'[[twin]]\nname = "a"\nproject = "{project}"\nstep = 0.3\n')
+    assert [t.name for t in read_fleet(fleet).twins] == ["a"]
+    fleet.write_text(f'[[twin]]\nname = "a"\nproject = "{project}"\nstep = 0.25\n')
+    with pytest.raises(CotwinError) as err:
+        read_fleet(fleet)
+    [finding] = err.value.findings
+    assert str(finding).startswith(f"{fleet}:4:") and "0.03 s does not divide the step of 0.25 s" in str(finding), \
+        str(finding)
+
+
 @pytest.mark.parametrize("deviation, message", [
     ("lag_steps = 1000000000000000000000", "[deviation] lag_steps: must be in [0, 1e+06] steps"),
     ("lag_steps = -1", "[deviation] lag_steps: must be in [0, 1e+06] steps, got -1"),

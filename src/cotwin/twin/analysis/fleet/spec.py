@@ -112,7 +112,7 @@ class FleetSpec:
 def twin_project(entry: TwinEntry) -> TwinProject:
     """The project of a fleet entry with the entry's overrides applied (as `cotwin twin`'s options do)."""
     o = entry.overrides
-    spec = load_project(entry.project, o.get("pt_log"))
+    spec = load_project(entry.project, o.get("pt_log"), step=o.get("step"), end=o.get("end"))  # the entry's run's
     if o.get("pt_log") is not None:
         log = Path(o["pt_log"])
         spec.pt = replace(spec.pt, endpoint="replay", log=log, url=None) if spec.pt else PTSettings("replay", log=log)
