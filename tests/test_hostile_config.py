@@ -149,8 +149,8 @@ def test_a_fleet_twins_cycle_period_is_checked_against_the_step_its_entry_gives(
     with pytest.raises(CotwinError) as err:
         read_fleet(fleet)
     [finding] = err.value.findings
-    assert str(finding).startswith(f"{fleet}:4:") and "0.03 s does not divide the step of 0.25 s" in str(finding), \
-        str(finding)
+    assert str(finding) == f"{fleet}:4:1: error: twin 'a': [cosim] parameters cycle_period ({project}:8:16): 0.03 s " \
+        "does not divide the step of 0.25 s into whole d-model cycles"
 
 
 @pytest.mark.parametrize("deviation, message", [

@@ -34,7 +34,7 @@ from pathlib import Path
 from ....config import Key, Schema, TomlFile, raise_problems, within
 from ....diagnostics import CotwinError, Finding, Severity
 from ...project import (PTSettings, TwinProject, cycle_period, history_url_problem, load_project, pt_url_problem,
-                        timing_problems)
+                        run_timing_message, timing_problems)
 
 MAX_TWINS = 1000
 _NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789-_")
@@ -231,5 +231,6 @@ def _fits(file: TomlFile, at: tuple, name: str, spec: TwinProject, overrides: di
                 say("pt_url", f"{problem} (for [pt] endpoint '{spec.pt.endpoint}')")
     if "step" in overrides or "end" in overrides:
         for key, message in timing_problems(spec.step, spec.end, cycle_period(spec)):
-            say(key if key in overrides else next(iter(k for k in ("step", "end") if k in overrides)), message)
+            say(key if key in overrides else next(iter(k for k in ("step", "end") if k in overrides)),
+                run_timing_message(spec, key, message))
     return out
