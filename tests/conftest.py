@@ -58,6 +58,50 @@ def check_texts(tmp_path):
     return run
 
 
+def one_machine(inputs: tuple[str, str], body: str) -> str:
+    """A d-model's text: state machine M in controller C in module Mod, taking two input events `inputs` and
+    sending `report: int`, each asynchronous at the platform; `body` is M's variables, states and transitions,
+    which start at line 10 (where a test reads a finding's line)."""
+    a, b = inputs
+    return (f"interface Ev {{ event {a} event {b} event report: int }}\n"
+            "controller C { uses Ev sref m = M\n"
+            f"\tconnection C on {a} to m on {a} connection C on {b} to m on {b} connection m on report to C on report }}\n"
+            "module Mod { robotic platform P { uses Ev } cref c = C\n"
+            f"\tconnection P on {a} to c on {a} (_async) connection P on {b} to c on {b} (_async)\n"
+            "\tconnection c on report to P on report (_async) }\n"
+            "stm M {\n"
+            "\tinput context { uses Ev }\n"
+            "\toutput context { uses Ev }\n"
+            f"{body.lstrip(chr(10))}}}\n")
+
+
+@pytest.fixture
+def ur_rtde(monkeypatch):
+    """ur-rtde's two client classes, standing in for a UR controller whose arm is at rest at zero; the control
+    client keeps each moveJ's joints in `moves` (an RTDEEndpoint's `control.moves`)."""
+    import types
+
+    class Receive:
+        def __init__(self, host):
+            pass
+
+        def getActualQ(self):
+            return [0.0] * 6
+
+        def getActualQd(self):
+            return [0.0] * 6
+
+    class Control:
+        def __init__(self, host):
+            self.moves = []
+
+        def moveJ(self, q, speed, acceleration, asynchronous):
+            self.moves.append(list(q))
+
+    monkeypatch.setitem(sys.modules, "rtde_receive", types.SimpleNamespace(RTDEReceiveInterface=Receive))
+    monkeypatch.setitem(sys.modules, "rtde_control", types.SimpleNamespace(RTDEControlInterface=Control))
+
+
 def listening(port: int, host: str = "127.0.0.1") -> bool:
     import socket
 

@@ -10,8 +10,6 @@ its wheel driven by a SpeedControlMotor and its press by a TorqueControlMotor.""
 
 from __future__ import annotations
 
-import sys
-import types
 from pathlib import Path
 
 import numpy as np
@@ -63,31 +61,6 @@ def _tree(folder: Path):
         text = text.replace(old, new)
     pmodel.write_text(text)
     return build_tree(load_checked([pmodel])), pmodel
-
-
-@pytest.fixture
-def ur_rtde(monkeypatch):
-    """ur-rtde's two client classes, standing in for a UR controller whose arm is at rest at zero."""
-
-    class Receive:
-        def __init__(self, host):
-            pass
-
-        def getActualQ(self):
-            return [0.0] * 6
-
-        def getActualQd(self):
-            return [0.0] * 6
-
-    class Control:
-        def __init__(self, host):
-            self.moves = []
-
-        def moveJ(self, q, speed, acceleration, asynchronous):
-            self.moves.append(list(q))
-
-    monkeypatch.setitem(sys.modules, "rtde_receive", types.SimpleNamespace(RTDEReceiveInterface=Receive))
-    monkeypatch.setitem(sys.modules, "rtde_control", types.SimpleNamespace(RTDEControlInterface=Control))
 
 
 def test_the_simulator_names_each_actuator_by_its_own_command_port(tmp_path):

@@ -1,6 +1,7 @@
 """A d-model counts time in cycles, one per communication step unless [cosim] parameters cycle_period fixes it: a
 `cotwin run --step` other than the project's changed what its `since` and `sinceEntry` mean in seconds in
-silence (a new user's dwell of 5 cycles lasted 0.05 s instead of 0.5 s). It is a warning at the first reading."""
+silence (a new user's dwell of 5 cycles lasted 0.05 s instead of 0.5 s). It is a warning at the first reading, which
+`cotwin run` and `cotwin twin` both say before running (cotwin.twin.assembly.run.step_warnings)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import pytest
 
 from conftest import EXAMPLES, cotwin_in_process
 from cotwin.dmodel.program import time_readings
-from cotwin.twin.assembly.run import load
+from cotwin.twin.assembly.run import load, step_warnings
 from cotwin.twin.project import cycle_time_warnings
 
 TURTLEBOT = EXAMPLES / "turtlebot"  # random_walk.rst reads since(T) in four guards; the project's step is 0.2 s
@@ -57,3 +58,27 @@ def test_cotwin_run_says_it_before_running(tmp_path):
     assert f"{copy / 'random_walk.rst'}:60:14: warning: the d-model counts time in cycles" in proc.stderr
     same = cotwin_in_process("run", copy / "cotwin.toml", "-o", tmp_path / "same", "--step", "0.2", "--end", "0.4")
     assert same.returncode == 0 and "counts time in cycles" not in same.stderr, same.stderr
+
+
+def test_a_twins_step_warnings_are_those_of_its_project_and_d_model_unless_a_clock_fixes_the_cycle(walker):
+    """The one function both commands call: nothing without --step, nor with an FMI 3.0 clock's --cycle-period."""
+    assert [str(w) for w in step_warnings(walker, 0.01)] == \
+        [str(w) for w in cycle_time_warnings(walker.spec, time_readings(walker.models.program), 0.01)]
+    assert len(step_warnings(walker, 0.01)) == 1
+    assert step_warnings(walker, None) == [] and step_warnings(walker, 0.2) == []
+    assert step_warnings(walker, 0.01, cycle_period=0.2) == []
+
+
+def test_cotwin_twin_says_it_before_running(tmp_path):
+    """The live twin's PT (an OPC UA plant) is not there: the warning comes before the twin tries to reach it."""
+    copy = tmp_path / "turtlebot"
+    shutil.copytree(TURTLEBOT, copy)
+    absent = "opc.tcp://127.0.0.1:9"  # the discard port: nothing listens there
+    proc = cotwin_in_process("twin", copy / "live.toml", "-o", tmp_path / "out", "--pt-url", absent,
+                             "--step", "0.01", "--end", "0.1")
+    assert proc.returncode != 0 and f"the plant at {absent} failed connect" in proc.stderr, proc.stderr
+    warning = f"{copy / 'random_walk.rst'}:60:14: warning: the d-model counts time in cycles"
+    assert warning in proc.stderr and proc.stderr.index(warning) < proc.stderr.index("failed connect"), proc.stderr
+    same = cotwin_in_process("twin", copy / "live.toml", "-o", tmp_path / "same", "--pt-url", absent,
+                             "--step", "0.2", "--end", "0.4")
+    assert "failed connect" in same.stderr and "counts time in cycles" not in same.stderr, same.stderr

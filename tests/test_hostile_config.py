@@ -89,6 +89,20 @@ def test_timing_a_run_cannot_keep_exactly_is_refused_at_its_key(ur5e, cosim, lin
     assert f"hostile.toml:{line}:" in text and message in text, text
 
 
+@pytest.mark.parametrize("value, said", [('"x"', "'x'"), ("nan", "nan"), ("[0.1]", "[0.1]"), ("true", "True"),
+                                         ('"' + 'x' * 5000 + '"', "(5002 characters)")])
+def test_a_cycle_period_that_is_no_number_is_one_error_at_its_value(ur5e, value, said):
+    """It was two: one at the parameters' table (each parameter a number or a Boolean), one at cycle_period's value,
+    which quoted a long value whole."""
+    (ur5e / "hostile.toml").write_text(MODELS + f"[cosim]\nparameters = {{ seed = 7, cycle_period = {value} }}\n")
+    with pytest.raises(CotwinError) as err:
+        load_project(ur5e / "hostile.toml")
+    [finding] = err.value.findings
+    assert str(finding).startswith(f"{ur5e / 'hostile.toml'}:6:26: error: [cosim] parameters cycle_period must be a "
+                                   "number >= 0 (s per d-model cycle; 0: one cycle per step), got "), str(finding)
+    assert str(finding).endswith(said) and len(str(finding)) < 500, str(finding)
+
+
 def test_timing_from_the_command_line_is_checked_with_the_project(ur5e, tmp_path):
     project = ur5e / "cotwin.toml"
     assert "--end: 20.05 s is not a whole number of steps of 0.1 s" in option_error(
@@ -97,6 +111,46 @@ def test_timing_from_the_command_line_is_checked_with_the_project(ur5e, tmp_path
         "run", project, "-o", tmp_path / "o", "--step", "0.0005")
     assert "more than 1e+08" in option_error("twin", project, "-o", tmp_path / "o", "--end", "1e300")
     assert not (tmp_path / "o").exists()  # refused before anything is written
+
+
+def test_a_cycle_period_is_checked_against_the_step_the_run_takes(ur5e, tmp_path):
+    """[cosim] step 0.1 and cycle_period 0.03 do not go together; a run at `--step 0.3` (ten cycles a step) runs, one
+    at `--step 0.25` is refused quoting 0.25 s: both were refused quoting the project's 0.1 s, which they replace."""
+    from conftest import cotwin_in_process
+
+    path = ur5e / "timing.toml"
+    path.write_text(MODELS + "[cosim]\nstep = 0.1\nend = 3.0\nparameters = { cycle_period = 0.03 }\n")
+    with pytest.raises(CotwinError, match="cycle_period: 0.03 s does not divide the step of 0.1 s"):
+        load_project(path)
+    with pytest.raises(CotwinError, match="does not divide the step of 0.1 s"):
+        load_project(path, end=0.6)  # the project's step, which the run takes
+    assert load_project(path, step=0.3).step == 0.1  # the project as written; the run takes 0.3
+    load_project(path, step=0.3).with_overrides(realtime=True)  # a command's change to it (cotwin twin --rabbitmq)
+    for command in ("run", "twin"):
+        said = " ".join(option_error(command, path, "-o", tmp_path / "o", "--step", "0.25").replace("'", "").split())
+        assert f"--step: [cosim] parameters cycle_period ({path}:8:16):" in said, said
+        assert "0.03 s does not divide the step of 0.25 s into whole d-model cycles" in said and "0.1 s" not in said
+    proc = cotwin_in_process("run", path, "-o", tmp_path / "ran", "--step", "0.3", "--end", "0.6")
+    assert proc.returncode == 0 and "0.6 s" in proc.stdout and "error" not in proc.stderr, proc.stdout + proc.stderr
+
+
+def test_a_fleet_twins_cycle_period_is_checked_against_the_step_its_entry_gives(ur5e, tmp_path):
+    """As `cotwin twin --step` (above): a fleet entry's step replaces the project's, with which the cycle_period
+    did not go."""
+    from cotwin.twin.analysis.fleet.spec import read_fleet
+
+    project = ur5e / "timing.toml"
+    project.write_text(MODELS + "[cosim]\nstep = 0.1\nend = 3.0\nparameters = { cycle_period = 0.03 }\n"
+                                '[pt]\nendpoint = "opcua"\nurl = "opc.tcp://127.0.0.1:4841"\n')
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text(f'[[twin]]\nname = "a"\nproject = "{project}"\nstep = 0.3\n')
+    assert [t.name for t in read_fleet(fleet).twins] == ["a"]
+    fleet.write_text(f'[[twin]]\nname = "a"\nproject = "{project}"\nstep = 0.25\n')
+    with pytest.raises(CotwinError) as err:
+        read_fleet(fleet)
+    [finding] = err.value.findings
+    assert str(finding) == f"{fleet}:4:1: error: twin 'a': [cosim] parameters cycle_period ({project}:8:16): 0.03 s " \
+        "does not divide the step of 0.25 s into whole d-model cycles"
 
 
 @pytest.mark.parametrize("deviation, message", [

@@ -7,8 +7,6 @@ the replay and the RTDE endpoint left out, so such a reading ran on the DT and s
 from __future__ import annotations
 
 import csv
-import sys
-import types
 
 import numpy as np
 import pytest
@@ -34,28 +32,6 @@ def _log(path, duration: float = 3.0):
     q = np.array(REFERENCE, float) + qd * t[:, None]
     write_rtde(path, t, q, qd)
     return t, q
-
-
-@pytest.fixture
-def ur_rtde(monkeypatch):
-    """ur-rtde's two client classes, standing in for a UR controller whose arm is at rest at zero."""
-
-    class Receive:
-        def __init__(self, host):
-            pass
-
-        def getActualQ(self):
-            return [0.0] * 6
-
-        def getActualQd(self):
-            return [0.0] * 6
-
-    class Control:
-        def __init__(self, host):
-            pass
-
-    monkeypatch.setitem(sys.modules, "rtde_receive", types.SimpleNamespace(RTDEReceiveInterface=Receive))
-    monkeypatch.setitem(sys.modules, "rtde_control", types.SimpleNamespace(RTDEControlInterface=Control))
 
 
 def test_every_live_endpoint_names_a_joints_sensor_as_the_simulator_does(tmp_path, ur_rtde):

@@ -3,20 +3,13 @@
 
 from __future__ import annotations
 
+from conftest import one_machine
 from cotwin.dmodel.program import build_program
 from cotwin.dmodel.testgen import generate
 from cotwin.dmodel.testgen_graph import explore
 from cotwin.robosim.check import load_checked
 
-TICKS = """interface Ev { event tick event go event report: int }
-controller C { uses Ev sref m = M
-	connection C on tick to m on tick connection C on go to m on go connection m on report to C on report }
-module Mod { robotic platform P { uses Ev } cref c = C
-	connection P on tick to c on tick (_async) connection P on go to c on go (_async)
-	connection c on report to P on report (_async) }
-stm M {
-	input context { uses Ev }
-	output context { uses Ev }
+TICKS = one_machine(("tick", "go"), """
 	var ticks: int = 0
 	initial i
 	state Idle { }
@@ -27,8 +20,7 @@ stm M {
 	transition t3 { from Busy to Busy exec condition $tick /\\ not $go action ticks = ticks + 1 ; $report!ticks }
 	transition t4 { from Idle to Idle exec condition not $go }
 	transition t5 { from Busy to Busy exec condition not $go /\\ not $tick }
-}
-"""
+""")
 
 
 def test_an_unbounded_counter_stops_testgen_early_naming_it_and_where_it_steps(tmp_path):

@@ -12,6 +12,7 @@ beyond a joint's limits (the jaw commanded past its stop) is said where the mapp
 from __future__ import annotations
 
 from pathlib import Path
+from typing import get_type_hints
 
 import pytest
 
@@ -19,7 +20,7 @@ from cotwin.diagnostics import CotwinError
 from cotwin.mapping.runtime import FunctionRegistry
 from cotwin.pmodel import ik
 from cotwin.pmodel.urdf_import import import_urdf
-from cotwin.twin.assembly.system import load_models
+from cotwin.twin.assembly.system import TwinModels, load_models
 from cotwin.twin.project import load_project
 
 # joint name, parent, child, origin xyz, axis: a Z1-like arm, its jaw a revolute joint after a fixed stator
@@ -289,6 +290,7 @@ def test_the_arm_of_a_robots_log_profile_and_calibration_is_the_one_the_mapping_
     six = [f"joint{k}" for k in range(1, 7)]
     models = load_models(load_project(_project(tmp_path, REFERENCE)))
     assert models.arm == six
+    assert isinstance(models.tool, ik.Tool) and get_type_hints(TwinModels)["tool"] == ik.Tool | None  # typed as held
     twin = DigitalTwin(models.project, models.tree, models.scene, None, models.calibration.geometry)
     assert twin.arm() == six
     assert twin.arm(CellGeometry()) == [*six, "jaw"]  # a geometry naming no tool link: the default tool's arm

@@ -6,21 +6,13 @@ from __future__ import annotations
 
 import pytest
 
-from conftest import cotwin_in_process
+from conftest import cotwin_in_process, one_machine
 from cotwin.dmodel import growth
 from cotwin.dmodel.program import build_program
 from cotwin.dmodel.verify import format_report, verify
 from cotwin.robosim.check import load_checked
 
-COUNTER = """interface Ev { event tick event clear event report: int }
-controller C { uses Ev sref m = M
-	connection C on tick to m on tick connection C on clear to m on clear connection m on report to C on report }
-module Mod { robotic platform P { uses Ev } cref c = C
-	connection P on tick to c on tick (_async) connection P on clear to c on clear (_async)
-	connection c on report to P on report (_async) }
-stm M {
-	input context { uses Ev }
-	output context { uses Ev }
+COUNTER = one_machine(("tick", "clear"), """
 	var count: int = 0
 	initial i
 	state A { }
@@ -28,8 +20,7 @@ stm M {
 	transition t1 { from A to A exec condition $tick%(guard)s action count = %(step)s ; $report!count }
 	transition t2 { from A to A exec condition not $tick%(otherwise)s }
 	transition t3 { from A to A exec condition $clear /\\ not $tick action count = 0 }
-}
-"""
+""")
 
 
 def program_of(tmp_path, step: str, guard: str = "", otherwise: str = " /\\ not $clear"):
@@ -85,15 +76,7 @@ def test_a_counter_whose_value_can_fail_is_not_watched(tmp_path):
     assert not report.complete and not report.unbounded and "M.count took" in report.growth
 
 
-GRID = """interface Ev { event a event b event report: int }
-controller C { uses Ev sref m = M
-	connection C on a to m on a connection C on b to m on b connection m on report to C on report }
-module Mod { robotic platform P { uses Ev } cref c = C
-	connection P on a to c on a (_async) connection P on b to c on b (_async)
-	connection c on report to P on report (_async) }
-stm M {
-	input context { uses Ev }
-	output context { uses Ev }
+GRID = one_machine(("a", "b"), """
 	var x: int = 0
 	var y: real = 0
 	initial i
@@ -104,8 +87,7 @@ stm M {
 	transition t2 { from A to A exec condition not $a /\\ $b action y = y - 0.5 }
 	transition t3 { from A to A exec condition not $a /\\ not $b }
 	transition t4 { from B to A exec }
-}
-"""
+""")
 
 
 def test_two_counters_on_two_inputs_are_found_among_a_grid_of_states(tmp_path):

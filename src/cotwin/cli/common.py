@@ -159,15 +159,14 @@ def history_url(ctx, param, value: str | None) -> str | None:
 
 def check_timing(spec, step: float | None, end: float | None) -> None:
     """--step and --end checked with the project's other timing (cotwin.twin.project.timing_problems)."""
-    from ..twin.project import CYCLE_PERIOD, cycle_period, timing_problems
+    from ..twin.project import cycle_period, run_timing_message, timing_problems
 
     if step is None and end is None:
         return
     for key, message in timing_problems(spec.step if step is None else step, spec.end if end is None else end,
                                         cycle_period(spec)):
-        if key == CYCLE_PERIOD:
-            message += " ([cosim] parameters cycle_period)"
-        raise click.BadParameter(message, param_hint="--end" if key == "end" and end is not None else "--step")
+        raise click.BadParameter(run_timing_message(spec, key, message),
+                                 param_hint="--end" if key == "end" and end is not None else "--step")
 
 
 def address(ctx, param, value: str | None) -> tuple[str, int] | None:

@@ -39,14 +39,14 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     with deviation checking, alarms and history."""
     from ..twin.services.history import database_url
     from ..twin.project import load_project
-    from ..twin.assembly.run import load
+    from ..twin.assembly.run import load, step_warnings
     from ..twin.live.runtime import LiveTwin
     from .progress import ProgressReport
 
     check_finite(step=step, end=end)
     if pt_log is not None and not Path(pt_log).is_file():
         raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
-    spec = load_project(project, pt_log)
+    spec = load_project(project, pt_log, step=step, end=end)
     check_timing(spec, step, end)
     if exchange is not None:
         spec = spec.with_overrides(scenario_plan=None, scenario_commands=None, scenario_rabbitmq_exchange=exchange,
@@ -65,12 +65,9 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
                                    "or --pt-log LOG (a recorded run) or --pt-url opc.tcp://HOST:PORT (an OPC UA plant)")])
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
-    from ..dmodel.program import time_readings
     from ..twin.assembly.scenario import after_end, nothing_planned, plan_order
-    from ..twin.project import cycle_time_warnings
 
-    if step is not None:
-        show_warnings(cycle_time_warnings(system.spec, time_readings(system.models.program), step))
+    show_warnings(step_warnings(system, step))
     show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, spec.end if end is None else end))
     show_warnings(plan_order(system.commands, system.command_events))

@@ -56,9 +56,8 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
         on_unit_failure: str, version: str, cycle_period: float | None, fmu_path: bool) -> None:
     """Build if needed and co-simulate a twin project; write outputs.csv and figure.png."""
 
-    from ..dmodel.program import time_readings
-    from ..twin.assembly.run import load, run_twin
-    from ..twin.project import cycle_time_warnings
+    from ..twin.assembly.run import load, run_twin, step_warnings
+    from ..twin.project import load_project
     from ..twin.services.history import database_url
     from .progress import ProgressReport
 
@@ -66,10 +65,11 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     if cycle_period is not None and version != "3":
         raise click.BadParameter("only with --fmi 3 (an FMI 2.0 d-model takes [cosim] parameters cycle_period)",
                                  param_hint="--cycle-period")
-    system = load(project, cells=True, reader="cotwin run")
-    check_timing(system.spec, step, end)
-    if step is not None and cycle_period is None and not system.spec.robots:
-        show_warnings(cycle_time_warnings(system.spec, time_readings(system.models.program), step))
+    spec = load_project(project, reader="cotwin run", step=step, end=end)
+    check_timing(spec, step, end)
+    system = load(spec, cells=True)
+    if not system.spec.robots:
+        show_warnings(step_warnings(system, step, cycle_period))
     show_warnings(system.warnings)  # what cotwin check says of the models and the project (a joint out of limits...)
     reader = "cotwin run --dashboard" if dashboard and not system.spec.robots else "cotwin run"  # a cell: no history
     show_warnings(system.spec.ignored_sections(reader))

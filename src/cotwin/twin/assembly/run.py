@@ -11,9 +11,10 @@ from ...cosim.algorithm import algorithm as make_algorithm
 from ...cosim.execution import Execution, RunResult, ended_early
 from ...cosim.observers import CSVWriter, Observer, Progress, RealTimePacer, StateFile
 from ...cosim.system import System
-from ...diagnostics import CotwinError, Interrupted
+from ...diagnostics import CotwinError, Finding, Interrupted
+from ...dmodel.program import time_readings
 from .build import ARTEFACTS, dmodel_fmu, folder_lock
-from ..project import TwinProject, check_timing, load_project
+from ..project import TwinProject, check_timing, cycle_time_warnings, load_project
 from .system import MAPPING, TwinSystem
 from .outcomes import CommandLedger, not_applied
 from .waits import WaitWatch
@@ -256,4 +257,13 @@ def load(project: str | Path | TwinProject, cells: bool = False, reader: str | N
     return TwinSystem(spec)
 
 
-__all__ = ["MAPPING", "TwinRun", "dt_endpoint", "load", "python_unit", "run_twin"]
+def step_warnings(system: TwinSystem, step: float | None, cycle_period: float | None = None) -> list[Finding]:
+    """What a run of `system` at a command's `step` (None: the project's own) says before it starts: a warning at
+    the d-model's first reading of time when the step is not the project's and no cycle_period fixes the d-model's
+    cycle (cotwin.twin.project.cycle_time_warnings); `cycle_period` given (an FMI 3.0 clock's) fixes it."""
+    if step is None or cycle_period is not None:
+        return []
+    return cycle_time_warnings(system.spec, time_readings(system.models.program), step)
+
+
+__all__ = ["MAPPING", "TwinRun", "dt_endpoint", "load", "python_unit", "run_twin", "step_warnings"]

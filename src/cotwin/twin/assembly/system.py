@@ -21,6 +21,7 @@ from ...cosim.isolated import DEFAULT_TIMEOUT
 from ...cosim.system import Connection, System
 from ...cosim.units import Unit
 from ...diagnostics import CotwinError, Finding, Location, Severity
+from ...pmodel.ik import Tool
 from ..project import TwinProject
 
 
@@ -89,9 +90,9 @@ class TwinModels:
     #: it; else cotwin.pmodel.ik.find_tool's default), in kinematic order: what a robot's log, its profile's joint
     #: order and a calibration count as the arm (a revolute jaw is no arm joint when the tool link is before it)
     arm: list[str] = field(default_factory=list)
-    #: the arm's tool (cotwin.pmodel.ik.Tool: its link, frame and fingers), found with `arm`; None where it could
-    #: not be found (a robot without one)
-    tool: object | None = None
+    #: the arm's tool (its link, frame and fingers), found with `arm`; None where it could not be found (a robot
+    #: without one)
+    tool: Tool | None = None
 
 
 def model_digests(spec: TwinProject, project) -> dict[str, str]:

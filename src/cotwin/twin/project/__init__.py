@@ -10,10 +10,11 @@ from .sections import (AMQP_MAX, CYCLE_PERIOD, ENDPOINTS, MAX_CYCLES_PER_STEP, M
                        MAX_WAIT_S, PT_ENDPOINTS, SECTIONS, SHAPES, STAND_IN_EXTENT, URL, DeviationSettings,
                        ProjectSettings, RabbitMQSettings, amqp_name_problem, check_timing, cycle_period,
                        cycle_time_warnings,
-                       history_url_problem, project_settings, routing_key_problem, timing_problems)
+                       history_url_problem, project_settings, routing_key_problem, run_timing_message,
+                       timing_problems)
 
 __all__ = ["PT_KEYS", "PTSettings", "TwinProject", "load_project", "override_path", "pt_url_problem", "AMQP_MAX",
            "CYCLE_PERIOD", "ENDPOINTS", "MAX_CYCLES_PER_STEP", "MAX_LAG_STEPS", "MAX_WAIT_S", "PT_ENDPOINTS",
            "SECTIONS", "SHAPES", "STAND_IN_EXTENT", "URL", "DeviationSettings", "ProjectSettings",
            "RabbitMQSettings", "amqp_name_problem", "check_timing", "cycle_period", "cycle_time_warnings", "history_url_problem", "project_settings",
-           "routing_key_problem", "timing_problems"]
+           "routing_key_problem", "run_timing_message", "timing_problems"]

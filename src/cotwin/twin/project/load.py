@@ -96,6 +96,7 @@ class TwinProject:
     file: TomlFile | None = field(default=None, repr=False)  # the file read (its data and where each key is)
     pt_log: Path | None = None  # a command's --pt-log, in place of [pt] log
     reader: str | None = None  # the command that read it (load_project)
+    run_timing: tuple[float | None, float | None] = (None, None)  # a command's --step and --end (load_project)
     profile: Path | None = None  # [robot] profile: the controller's conventions (cotwin.mapping.profile)
     robots: tuple[RobotSpec, ...] = ()  # [[robots]]: a cell of several (pmodel, mapping: the first one's)
 
@@ -163,7 +164,7 @@ class TwinProject:
                 table[path[-1]] = _as_toml(value)
         file = copy.copy(self.file)
         file.data = data
-        return _load(file, self.pt_log, self.reader)
+        return _load(file, self.pt_log, self.reader, self.run_timing)
 
     def current_settings(self):
         """The settings as this project now holds them: the file's, with the fields a caller may have set
@@ -233,12 +234,16 @@ def _as_toml(value):
 
 
 
-def load_project(path: str | Path, pt_log: str | Path | None = None, reader: str | None = None) -> TwinProject:
+def load_project(path: str | Path, pt_log: str | Path | None = None, reader: str | None = None,
+                 step: float | None = None, end: float | None = None) -> TwinProject:
     """Read and check cotwin.toml; every problem is reported at its key, all together. `pt_log` (a command's
     --pt-log) replaces [pt] log, which is then not looked for: the PT replays it. `reader`: the command reading
     it (as READ_ONLY_BY names them); one that ignores [pt] does not look for its log either (a replay project
-    copied without its recording still runs, predicts and sweeps its DT)."""
-    return _load(TomlFile(path, "project file"), None if pt_log is None else Path(pt_log), reader)
+    copied without its recording still runs, predicts and sweeps its DT). `step`, `end`: a command's --step and
+    --end, which its run takes in place of [cosim]'s: a timing problem one of them is part of (a cycle_period
+    that does not divide the step) is the command's to say with the values the run takes (cotwin.cli.common.
+    check_timing), not the project's with the values it replaces."""
+    return _load(TomlFile(path, "project file"), None if pt_log is None else Path(pt_log), reader, (step, end))
 
 
 def file_problem(path: Path) -> str | None:
@@ -255,8 +260,10 @@ def file_problem(path: Path) -> str | None:
         return f"{shown} cannot be looked up: {err}"
 
 
-def _load(file: TomlFile, pt_log: Path | None, reader: str | None = None) -> TwinProject:
-    """The project `file.data` describes, resolved against the files it names (see load_project: `reader`)."""
+def _load(file: TomlFile, pt_log: Path | None, reader: str | None = None,
+          run_timing: tuple[float | None, float | None] = (None, None)) -> TwinProject:
+    """The project `file.data` describes, resolved against the files it names (see load_project: `reader`, and
+    `run_timing`, its `step` and `end`)."""
     if "models" not in file.data and isinstance(file.data.get("twin"), list):  # a fleet file given for a project
         raise CotwinError([Finding(file.location(("twin",)), Severity.ERROR, "this is a fleet file ([[twin]] entries "
                                    "naming projects), not a twin project: run it with `cotwin fleet "
@@ -304,7 +311,7 @@ def _load(file: TomlFile, pt_log: Path | None, reader: str | None = None) -> Twi
     stand_ins = _stand_ins(file, platform.stand_in, problems)
     panels = _panels(file, s.figure.panels, problems) if "panels" in _table(file.data, "figure") else None
     _scene(file, s, problems)
-    _timing(file, cosim, problems)
+    _timing(file, cosim, problems, run_timing)
     if s.pt is not None:  # [pt] as written, against its own endpoint (a --pt-log replays in its place)
         problems.extend(_pt_keys(file, s.pt))
     plant = Perturbation.from_table(dataclasses.asdict(s.plant)) if s.plant is not None else None
@@ -335,7 +342,7 @@ def _load(file: TomlFile, pt_log: Path | None, reader: str | None = None) -> Twi
     spec.locations = {key: file.location(key) for key in file.where}
     spec.raw = {"world": world.table if world is not None else None,
                 "stand_in": [_thawed(item) for item in platform.stand_in], "figure": _table(file.data, "figure")}
-    spec.settings, spec.file, spec.pt_log, spec.reader = s, file, pt_log, reader
+    spec.settings, spec.file, spec.pt_log, spec.reader, spec.run_timing = s, file, pt_log, reader, run_timing
     return spec
 
 
@@ -421,9 +428,11 @@ def _pt(file: TomlFile, pt, pt_log: Path | None, existing, problems: list[Findin
     return PTSettings(pt.endpoint, pt.url, existing("pt", "log", pt.log), pt.queue, pt.offset)
 
 
-def _timing(file: TomlFile, cosim, problems: list[Finding]) -> None:
+def _timing(file: TomlFile, cosim, problems: list[Finding],
+            run_timing: tuple[float | None, float | None] = (None, None)) -> None:
     """[cosim] step, end and the d-model's cycle_period checked together (`timing_problems`), when each
-    was read well (a wrong value is already reported, and its default would mislead)."""
+    was read well (a wrong value is already reported, and its default would mislead), and where a command's
+    step or end (`run_timing`) does not take part: what the run does not take is not a problem of the run."""
     raw = _table(file.data, "cosim")
     parameters = raw.get("parameters") if isinstance(raw.get("parameters"), dict) else {}
     if "cosim" in file.data and not isinstance(file.data["cosim"], dict):
@@ -434,9 +443,12 @@ def _timing(file: TomlFile, cosim, problems: list[Finding]) -> None:
     where = ("cosim", "parameters", CYCLE_PERIOD)
     if period is not None and (not is_number(period) or period < 0):
         problems.append(Finding(file.location(where), Severity.ERROR, f"[cosim] parameters {CYCLE_PERIOD} must be "
-                                f"a number >= 0 (s per d-model cycle; 0: one cycle per step), got {period!r}"))
+                                f"a number >= 0 (s per d-model cycle; 0: one cycle per step), got {shown(period)}"))
         period = None
+    step, end = run_timing
     for key, message in timing_problems(float(cosim.step), float(cosim.end), period):
+        if step is not None or key == "end" and end is not None:
+            continue  # the command's step takes part in each problem, its end in the end's: it says them
         at = where if key == CYCLE_PERIOD else ("cosim", key)
         name = f"parameters {key}" if key == CYCLE_PERIOD else key
         problems.append(Finding(file.location(at), Severity.ERROR, f"[cosim] {name}: {message}"))

@@ -89,6 +89,14 @@ def timing_problems(step: float, end: float, cycle_period: float | None = None) 
     return out
 
 
+def run_timing_message(spec: "TwinProject", key: str, message: str) -> str:
+    """A `timing_problems` message as said of a run's own step or end (a command's option, a fleet entry's key):
+    one about the project's cycle_period names it and where it is written."""
+    if key != CYCLE_PERIOD:
+        return message
+    return f"[cosim] parameters {CYCLE_PERIOD} ({spec.location('cosim', 'parameters', CYCLE_PERIOD)}): {message}"
+
+
 def cycle_time_warnings(spec: "TwinProject", readings: list[Location], step: float) -> list[Finding]:
     """A warning at the d-model's first reading of time when a run's step (`--step`) is not the project's and no
     cycle_period fixes the d-model's cycle: one cycle per step, so its `since` and `sinceEntry` count faster or
@@ -191,8 +199,10 @@ def _readings(value) -> str | None:
 
 
 def _parameters(value) -> str | None:
-    bad = [k for k, v in value.items() if isinstance(v, (dict, list, str)) or
-           (isinstance(v, float) and not math.isfinite(v))]
+    """Why the d-model's parameters are not numbers or Booleans; cycle_period is checked at its own value, against
+    the step (cotwin.twin.project.load), so that one wrong value is one error."""
+    bad = [k for k, v in value.items() if k != CYCLE_PERIOD and (isinstance(v, (dict, list, str)) or
+                                                                 (isinstance(v, float) and not math.isfinite(v)))]
     if bad:
         return f"each parameter is a number or a Boolean: {', '.join(bad)}"
     return None

@@ -34,7 +34,7 @@ from pathlib import Path
 from ....config import Key, Schema, TomlFile, raise_problems, within
 from ....diagnostics import CotwinError, Finding, Severity
 from ...project import (PTSettings, TwinProject, cycle_period, history_url_problem, load_project, pt_url_problem,
-                        timing_problems)
+                        run_timing_message, timing_problems)
 
 MAX_TWINS = 1000
 _NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789-_")
@@ -112,7 +112,7 @@ class FleetSpec:
 def twin_project(entry: TwinEntry) -> TwinProject:
     """The project of a fleet entry with the entry's overrides applied (as `cotwin twin`'s options do)."""
     o = entry.overrides
-    spec = load_project(entry.project, o.get("pt_log"))
+    spec = load_project(entry.project, o.get("pt_log"), step=o.get("step"), end=o.get("end"))  # the entry's run's
     if o.get("pt_log") is not None:
         log = Path(o["pt_log"])
         spec.pt = replace(spec.pt, endpoint="replay", log=log, url=None) if spec.pt else PTSettings("replay", log=log)
@@ -231,5 +231,6 @@ def _fits(file: TomlFile, at: tuple, name: str, spec: TwinProject, overrides: di
                 say("pt_url", f"{problem} (for [pt] endpoint '{spec.pt.endpoint}')")
     if "step" in overrides or "end" in overrides:
         for key, message in timing_problems(spec.step, spec.end, cycle_period(spec)):
-            say(key if key in overrides else next(iter(k for k in ("step", "end") if k in overrides)), message)
+            say(key if key in overrides else next(iter(k for k in ("step", "end") if k in overrides)),
+                run_timing_message(spec, key, message))
     return out
