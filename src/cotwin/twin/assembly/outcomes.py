@@ -347,17 +347,17 @@ class CommandLedger(Observer):
         if not told and not self._waiting:
             self._recent.extend(self._held(row) for row in rows.rows[-3:])
             return
-        marks = told + [len(rows)]  # and the stretch's last step, told after
-
-        def chosen():
-            mark = 0
-            for k in range(len(rows)):
-                while marks[mark] < k:
-                    mark += 1
-                if self._waiting or marks[mark] == k:
+        def chosen():  # read as the rows are told: a command taken waits to be read from the next one on
+            k = 0  # the first row not looked at
+            for mark in [*told, len(rows)]:  # and the stretch's last step, told after
+                while self._waiting and k < mark:
                     yield k
-                elif marks[mark] - k <= 2:  # the events of the two steps before a step told (it keeps three)
-                    self._recent.append(self._held(rows.rows[k]))
+                    k += 1
+                for j in range(max(k, mark - 2), mark):  # the events of the two steps before (it keeps three)
+                    self._recent.append(self._held(rows.rows[j]))
+                if k <= mark < len(rows):
+                    yield mark
+                k = max(k, mark + 1)
 
         for _ in rows.replay(execution, chosen()):  # it reads only the values on the connections
             self.step_complete(execution)
