@@ -210,6 +210,33 @@ def test_a_wait_for_an_answer_that_cannot_come_is_said_naming_the_state_and_the_
 
 
 @pytest.mark.parametrize("algorithm", ALGORITHMS)
+def test_a_blocked_wait_is_found_at_the_same_step_in_the_native_loop_as_step_by_step(tmp_path, algorithm):
+    """The native loop lets a wait entered among a stretch's steps pass only where the judgement could not find it
+    blocked (Observer.whole_values, checkpoints): a wait that is blocked is found at the step the step-by-step
+    loop finds it, with the same reasons, and the run's outcomes and CSV are the same."""
+    import shutil
+
+    from conftest import EXAMPLES
+
+    project = tmp_path / "ur5e"
+    shutil.copytree(EXAMPLES / "ur5e", project)
+    mapping = project / "mapping.pm"
+    text = mapping.read_text()
+    mapping.write_text(text.replace("\t\taction motion = if ok then Motion::moving else motion end\n", ""))
+    (project / "plan.csv").write_text("timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,"
+                                      "MovementArgs_target_Z\n1000,true,0,23,1\n3000,true,8,10,0\n")
+    twin = load(project / "cotwin.toml")
+    found = []
+    for fused in (False, True):
+        out = tmp_path / str(fused)
+        ran = run_twin(twin, out, end=5.0, step=0.1, algorithm=algorithm, plot=False, fused=fused)
+        found.append(([b.__dict__ for b in ran.blocked], [o.__dict__ for o in ran.outcomes.outcomes],
+                      (out / "outputs.csv").read_bytes()))
+    assert ran.result.native_steps > 0.6 * ran.result.steps
+    assert len(found[1][0]) == 1 and found[1] == found[0]
+
+
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
 @pytest.mark.parametrize("plan", [[(1.0, 0, 23, 1), (5.0, 15, 23, 3), (9.0, 8, 10, 0)], [(1.0, 0, 23, 1), (4.2, 3, 20, 2)]])
 def test_no_wait_is_said_blocked_in_a_run_that_completes(twin, built, tmp_path, algorithm, plan):
     """The second plan's move completes three steps into Moving: the completion, just delivered, is not

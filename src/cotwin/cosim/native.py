@@ -169,29 +169,51 @@ class NativeLoop:
 
     @staticmethod
     def _listeners(observers: list) -> tuple[list, list]:
-        """The observers that bound the steps of a segment (they define `quiet_for`) and those told of its
-        repeats (they define `repeated`): the others have nothing to say or do there."""
-        return ([o for o in observers if type(o).quiet_for is not Observer.quiet_for],
+        """The observers that bound the steps of a segment (they define `quiet_for` or `checkpoints`) and those
+        told of its repeats (they define `repeated`): the others have nothing to say or do there."""
+        return ([o for o in observers if type(o).quiet_for is not Observer.quiet_for
+                 or type(o).checkpoints is not Observer.checkpoints],
                 [o for o in observers if type(o).repeated is not Observer.repeated])
 
-    def _ends(self, telling: list):
-        """The slots whose change ends this segment, as the C array it reads: those a unit's C does not read,
-        and those an observer told of the repeats must see on a whole step (every discrete one for an observer
-        that does not say)."""
+    def _ends(self, telling: list) -> tuple:
+        """Which changes end this segment, as the C arrays it reads (E per slot: 0 none, 1 any, 2 a change to a
+        value M's bits name, or to one beyond them): those of the slots a unit's C does not read, and those an
+        observer told of the repeats must see on a whole step (every discrete one for an observer that does not
+        say; the arrival of some values only, for a port it gives `whole_values` of)."""
+        execution, slots = self.execution, self.execution.algorithm.slots
         whole: set[int] | None = set()
-        slots = self.execution.algorithm.slots
+        values: dict[int, int] = {}  # slot -> the bits of the values whose arrival ends the segment
         for o in telling:
-            ports = o.whole_changes(self.execution)
+            ports = o.whole_changes(execution)
             if ports is None:
                 whole = None
                 break
-            whole.update(slots[port] for port in ports if port in slots)
-        key = None if whole is None else frozenset(whole)
-        mask = self._masks.get(key)
-        if mask is None:
-            ends = set(self.discrete) if key is None else self._fed | (key & set(self.discrete))
-            mask = self._masks[key] = (ctypes.c_ubyte * max(1, self.width))(*(i in ends for i in range(self.width)))
-        return mask
+            some = o.whole_values(execution)
+            for port in ports:
+                if port not in slots:
+                    continue
+                if port in some:
+                    values[slots[port]] = values.get(slots[port], 0) | sum(1 << v for v in some[port] if 0 <= v < 64)
+                else:
+                    whole.add(slots[port])
+        key = None if whole is None else (frozenset(whole), frozenset(values.items()))
+        arrays = self._masks.get(key)
+        if arrays is None:
+            discrete = set(self.discrete)
+            ends = discrete if whole is None else self._fed | (whole & discrete)
+            codes = [1 if i in ends else 2 if i in values and i in discrete else 0 for i in range(self.width)]
+            arrays = self._masks[key] = ((ctypes.c_ubyte * max(1, self.width))(*codes),
+                                         (ctypes.c_ulonglong * max(1, self.width))(*(values.get(i, 0) for i in range(self.width))))
+        return arrays
+    def _checks(self, asking: list) -> tuple[int, int]:
+        """The observers' checkpoints (Observer.checkpoints) as the C reads them: their array's address and count."""
+        slots, found = self.execution.algorithm.slots, []
+        for o in asking:
+            for port, value, steps in o.checkpoints(self.execution):
+                if port in slots and value.__class__ in _PLAIN:
+                    found += [float(steps), float(slots[port]), float(value)]
+        self._checked = np.array(found or [0.0], dtype=np.float64)  # kept alive while the C reads it
+        return self._checked.ctypes.data, len(found) // 3
 
     def _source(self) -> str:
         algorithm = self.execution.algorithm
@@ -215,7 +237,8 @@ class NativeLoop:
             pbase += len(part.pointers)
             dbase += len(part.doubles)
         self._sizes = (pbase, dbase)
-        changed = " || ".join(f"(E[{i}] && N[{i}] != S[{i}])" for i in self.discrete) or "0"
+        changed = " || ".join(f"(E[{i}] && N[{i}] != S[{i}] && (E[{i}] == 1 || N[{i}] < 0.0 || N[{i}] >= 64.0 || "
+                              f"((M[{i}] >> (int)N[{i}]) & 1ULL)))" for i in self.discrete) or "0"
         moved = " || ".join(f"N[{i}] != S[{i}]" for i in self.discrete) or "0"
         lines = [_PRELUDE,
                  "#define IN(slot) " + ("N[slot]" if self.seidel else "S[slot]") +
@@ -226,10 +249,13 @@ class NativeLoop:
                  *decls,
                  "/* Up to n steps from step `base` (since `origin`); returns the steps made. `failed`: unit * 1000 + code",
                  "   of a step that failed; `paused`: 1 + the unit that paused the step after them (rows[return] holds",
-                 "   its slots so far). rows: the slots after each step. E: whether a slot's change ends the segment;",
-                 "   moved: whether a discrete slot changed in each step. */",
+                 "   its slots so far). rows: the slots after each step. E: whether a slot's change ends the segment",
+                 "   (1: any change; 2: one to a value whose bit M has, or beyond 63); moved: whether a discrete slot",
+                 "   changed in each step; checks: the step (counted from 1) after which the segment ends if a slot",
+                 "   holds a value then, (step, slot, value) for each of `nchecks`. */",
                  "int cotwin_segment(void **P, double *D, double *S, double *rows, int n, double origin, long long base,",
-                 "                   double H, int *failed, int *paused, const unsigned char *E, unsigned char *moved) {",
+                 "                   double H, int *failed, int *paused, const unsigned char *E,",
+                 "                   const unsigned long long *M, unsigned char *moved, const double *checks, int nchecks) {",
                  f"  double N[{max(1, width)}];",
                  "  int ending = 0;  /* a unit asked, in the step before, to end after this one */",
                  "  *failed = 0;",
@@ -244,6 +270,8 @@ class NativeLoop:
                  f"    moved[j] = {moved};",
                  f"    memcpy(S, N, sizeof(double) * {width});",
                  f"    memcpy(rows + (size_t)j * {width}, S, sizeof(double) * {width});",
+                 "    for (int c = 0; c < nchecks; c++)",
+                 "      if (checks[3 * c] == (double)(j + 1) && S[(int)checks[3 * c + 1]] == checks[3 * c + 2]) end_here = 1;",
                  "    if (changed || end_here) return j + 1;",
                  "    ending = end_next;",
                  "  }",
@@ -335,8 +363,9 @@ class NativeLoop:
         first = execution.steps
         observers = execution.observers
         ends = self._ends(self._telling if observers == self._observers else self._listeners(observers)[1])
+        checks = self._checks(self._asking if observers == self._observers else self._listeners(observers)[0])
         k = self._fn(P, D.ctypes.data, S.ctypes.data, rows.ctypes.data, n, float(origin), first - done,
-                     execution.step_size, *self._flag_addresses, ends, moved.ctypes.data)
+                     execution.step_size, *self._flag_addresses, *ends, moved.ctypes.data, *checks)
         failed, paused = flags[0], flags[1]
         failing, code = divmod(failed, 1000) if failed else (-1, 0)
         stopped = paused - 1 if paused else failing  # the unit that ended step k early, or -1
@@ -566,7 +595,8 @@ def _compiled(source: str, include_dirs: tuple[str, ...] = ()):
     fn = lib.cotwin_segment
     address = ctypes.c_void_p  # the arrays' addresses as integers (no pointer object made per call)
     fn.argtypes = [ctypes.POINTER(ctypes.c_void_p), address, address, address, ctypes.c_int, ctypes.c_double,
-                   ctypes.c_longlong, ctypes.c_double, address, address, ctypes.POINTER(ctypes.c_ubyte), address]
+                   ctypes.c_longlong, ctypes.c_double, address, address, ctypes.POINTER(ctypes.c_ubyte),
+                   ctypes.POINTER(ctypes.c_ulonglong), address, address, ctypes.c_int]
     fn.restype = ctypes.c_int
     _CACHE[digest] = fn
     return fn

@@ -43,10 +43,22 @@ class Observer:
         that does not say. Asked before each stretch."""
         return None
 
+    def whole_values(self, execution) -> dict[tuple[str, str], Collection[int]]:
+        """Of the ports `whole_changes` names, those of which only the arrival of some values must be told whole
+        (a machine entering some of its leaves): port -> those values (0..63; a change to a value beyond them is
+        told whole too). Asked before each stretch, after `whole_changes`."""
+        return {}
+
     def quiet_for(self, execution) -> int | None:
         """How many steps from now the native loop may make, the last of them told to `step_complete` as it is
         made (the others to `repeated`); None: any number."""
         return None
+
+    def checkpoints(self, execution) -> list[tuple[tuple[str, str], object, int]]:
+        """Steps it must be told whole if a port still holds a value then: (port, value, steps from now), e.g. a
+        machine judged `patience` steps after it entered a state, if it is still there (a change of the port
+        before is told whole or counted from the rows, as `whole_changes` says). Asked before each stretch."""
+        return []
 
     def simulation_ended(self, execution, error: BaseException | None) -> None: ...
 

@@ -65,6 +65,9 @@ class WaitWatch(Observer):
         slots = execution.algorithm.slots
         self._states = execution.reader(self._ports)
         self._called = execution.reader([c for c in self._calls if c in slots])
+        self._call_slots = [slots[c] for c in self._calls if c in slots]
+        self._judged_leaves = [[leaf for (k, leaf) in self.waits if k == m and self._judged(m, leaf)]
+                               for m in range(len(self._ports))]
         self._since = [(None, execution.time, 0)] * len(self._ports)  # (leaf, entered at, steps idle)
         self._cycles = DModelCycles(execution)  # a clocked d-model changes and reads at its ticks: idle counted in them
 
@@ -85,15 +88,22 @@ class WaitWatch(Observer):
                 self._judge(m, leaf, entered, execution.time)
 
     def quiet_for(self, execution) -> int | None:
-        """A machine not yet judged is judged `patience` idle steps after it entered its state: that step
-        must be made as the observer sees it (it asks the mapping, whose state is the step's). A state with
-        nothing to judge (no wait, one a command ends, or one the judgement lets pass whenever it falls among
-        the stretch's steps: `_passes`) bounds nothing; one not seen yet does."""
+        """A machine whose state is not known yet (a run's first steps) is judged `patience` steps from now: that
+        step must be made as the observer sees it (it asks the mapping, whose state is the step's)."""
         if self.mapping is None:
             return None
-        waiting = [self.patience - idle for m, (leaf, _, idle) in enumerate(self._since)
-                   if idle < self.patience and (leaf is None or self._judged(m, leaf) and not self._passes(m, leaf))]
+        waiting = [self.patience - idle for leaf, _, idle in self._since if leaf is None and idle < self.patience]
         return min(waiting) if waiting else None
+
+    def checkpoints(self, execution) -> list:
+        """A machine not yet judged in its state is judged `patience` idle steps after it entered it, if it is
+        still there: that step must be made as the observer sees it. A state with nothing to judge (no wait, one
+        a command ends, or one the judgement lets pass whenever it falls among the stretch's steps: `_passes`)
+        has no such step."""
+        if self.mapping is None:
+            return []
+        return [(self._ports[m], leaf, self.patience - idle) for m, (leaf, _, idle) in enumerate(self._since)
+                if leaf is not None and idle < self.patience and self._judged(m, leaf) and not self._passes(m, leaf)]
 
     def _passes(self, m: int, leaf) -> bool:
         """Whether the judgement of machine m waiting in `leaf` finds it not blocked at any step of a stretch
@@ -110,18 +120,36 @@ class WaitWatch(Observer):
         return wait is not None and not wait.events & self.commands
 
     def whole_changes(self, execution) -> list:
-        """Its machines' states and the operation calls: each change of them is a step it sees whole (the mapping
-        it asks is then as that step left it)."""
+        """Its machines' states and the operation calls: a change of them is a step it sees whole (the mapping
+        it asks is then as that step left it), but a state's only where `whole_values` says."""
         return [*self._ports, *self._calls]
 
+    def whole_values(self, execution) -> dict:
+        """A machine entering a wait it would judge is a step it sees whole, unless the judgement lets the wait
+        pass at any step of a stretch starting now (`_passes`): then the judgement can only pass wherever it
+        falls among the stretch's steps, and the wait is counted from them (`repeated`)."""
+        if self.mapping is None:
+            return {}
+        return {port: [leaf for leaf in self._judged_leaves[m] if not self._passes(m, leaf)]
+                for m, port in enumerate(self._ports)}
+
     def repeated(self, execution, rows) -> None:
-        """Steps in which no state changed and nothing was called: each machine idles one more step per row
-        (no judgement falls among them: see quiet_for)."""
+        """Steps made at once: each machine's state, since when, and its idle steps counted from them. No
+        judgement that could find a wait blocked falls among them: a wait entered among them is one the
+        judgement lets pass (whole_values), and one entered before them ends the stretch at its judgement
+        (checkpoints)."""
         if self.mapping is None:
             return
         slots = execution.algorithm.slots
-        first = rows.row(0, [slots[port] for port in self._ports])  # the stretch's states (a run's first rows: seen here)
+        ports = [slots[port] for port in self._ports]
         times = rows.times
+        if rows.changes(ports + self._call_slots):  # a state entered or a call made among them: counted row by row
+            for k, values in enumerate(rows.values(ports + self._call_slots)):
+                calling = any(v is True for v in values[len(ports):])
+                self._since = [(leaf, times[k], 0) if leaf != previous else (leaf, entered, 0 if calling else idle + 1)
+                               for leaf, (previous, entered, idle) in zip(values, self._since)]
+            return
+        first = rows.row(0, ports)  # the stretch's states (a run's first rows: seen here)
         self._since = [(leaf, entered, idle + len(rows)) if leaf == previous else (leaf, times[0], len(rows) - 1)
                        for leaf, (previous, entered, idle) in zip(first, self._since)]
 
