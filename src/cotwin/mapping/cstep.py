@@ -13,6 +13,8 @@ Python.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from ..diagnostics import CotwinError
 from ..robosim import syntax as s
 from ..robosim.operators import MATH
@@ -197,6 +199,34 @@ def _special(value: float) -> str:
     return "(1.0 / 0.0)" if value > 0 else "(-1.0 / 0.0)"
 
 
+@dataclass(frozen=True)
+class SpeltEvents:
+    """What EventsInC made of a mapping's events: its C `source`, the `variables` V holds and their `kinds`."""
+    source: str
+    variables: tuple
+    kinds: tuple[str, ...]
+
+
+def events_in_c(mapping: Mapping, sensor_address: dict[str, int], prefix: str) -> SpeltEvents:
+    """EventsInC's result, made once per mapping model, sensor layout and kinds of the variables' values (a run,
+    a what-if and a sweep's plans of one twin spell the same C), or Unsupported."""
+    from ..memo import once_per
+
+    kinds = tuple((name, value.__class__.__name__, tuple(v.__class__.__name__ for v in value)
+                   if value.__class__ in (list, tuple) else None) for name, value in sorted(mapping.variables.items()))
+    key = (kinds, tuple(sorted(sensor_address.items())), prefix)
+    spelt = once_per(mapping.model, "events in C", dict)
+    if key not in spelt:
+        try:
+            made = EventsInC(mapping, sensor_address, prefix)
+            spelt[key] = SpeltEvents(made.source, tuple(made.variables), tuple(made.kinds))
+        except Unsupported as why:
+            spelt[key] = why
+    if isinstance(spelt[key], Unsupported):
+        raise Unsupported(str(spelt[key]))
+    return spelt[key]
+
+
 def variable_values(mapping: Mapping, variables: list, kinds: list[str]) -> list[float] | None:
     """The values `EventsInC.variables` name, as doubles; None when one is no longer of the kind it was
     spelt for, or an integer beyond 2^53 (then the step stays in Python, which says what is wrong)."""
@@ -257,7 +287,7 @@ class QuietStep:
             self.why = "the endpoint's control loop cannot be built here (no C compiler?)"
             return
         try:
-            self.events = EventsInC(mapping, sim.sensor_addresses(), "m_")
+            self.events = events_in_c(mapping, sim.sensor_addresses(), "m_")
         except Unsupported as why:
             self.why = f"an input event's definition has a form the C spelling does not cover: {why}"
             return

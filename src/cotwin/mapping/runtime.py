@@ -238,13 +238,18 @@ class FunctionRegistry:
                            self.tool.link, len(self.arm), ", ".join(self.arm), ik.REACHES[self.solver.task])
         key = (round(float(x), 9), round(float(y), 9), round(float(z), 9))
         if key not in self._cache:
-            pose = self.geometry.target_pose(key)
-            name = SolutionCache.key(pose.ravel())
+            geometry = self.geometry  # a grid point's target is the same run after run: its stored name kept
+            target = (geometry.plate_xyz, geometry.plate_rpy, geometry.tool_rpy, key)
+            name = _TARGETS.get(target)
+            if name is None:
+                if len(_TARGETS) >= 4096:
+                    _TARGETS.clear()
+                name = _TARGETS[target] = SolutionCache.key(geometry.target_pose(key).ravel())
             known = self.stored.get(name)
             if known is not None:
                 self._cache[key] = ik.IKResult(**known)
             else:
-                self._cache[key] = self.solver.branch(pose)
+                self._cache[key] = self.solver.branch(geometry.target_pose(key))
                 found = self._cache[key]
                 self.stored.put(name, {"q": {j: float(v) for j, v in found.q.items()},
                                        "position_error": float(found.position_error),
@@ -297,6 +302,9 @@ class FunctionRegistry:
                                      angle_error=finite(values["angle_error"], f"{what}'s angle error", 0.0),
                                      iterations=count(values["iterations"], f"{what}'s iterations"))
         self._cache = cache
+
+
+_TARGETS: dict[tuple, str] = {}  # (plate pose, tool orientation, grid point) -> its target's SolutionCache key
 
 
 class _MappingNames:

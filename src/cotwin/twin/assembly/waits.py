@@ -105,14 +105,21 @@ class WaitWatch(Observer):
         return [(self._ports[m], leaf, self.patience - idle) for m, (leaf, _, idle) in enumerate(self._since)
                 if leaf is not None and idle < self.patience and self._judged(m, leaf) and not self._passes(m, leaf)]
 
-    def _passes(self, m: int, leaf) -> bool:
+    def _passes(self, m: int, leaf, possible: dict[str, bool] | None = None) -> bool:
         """Whether the judgement of machine m waiting in `leaf` finds it not blocked at any step of a stretch
         starting now: an answer it waits for may come and stays so until it comes (Mapping.stays_possible),
         and the stretch ends the step after it comes (the judgement there and then finds that it may come: it
         was delivered a step before). A stretch of the native loop calls no operation (one called ends it
         first). The judgement then changes nothing, so its step need not be seen whole: each command's move
         was cut in two here, a stretch end per command (issue 23)."""
-        return any(self.mapping.stays_possible(event) for event in self.waits[(m, leaf)].events)
+        if possible is None:
+            return any(self.mapping.stays_possible(event) for event in self.waits[(m, leaf)].events)
+        for event in self.waits[(m, leaf)].events:
+            if event not in possible:
+                possible[event] = self.mapping.stays_possible(event)
+            if possible[event]:
+                return True
+        return False
 
     def _judged(self, m: int, leaf) -> bool:
         """Whether machine m waiting in `leaf` would be judged (see _judge: a wait no command ends)."""
@@ -130,7 +137,8 @@ class WaitWatch(Observer):
         falls among the stretch's steps, and the wait is counted from them (`repeated`)."""
         if self.mapping is None:
             return {}
-        return {port: [leaf for leaf in self._judged_leaves[m] if not self._passes(m, leaf)]
+        possible: dict[str, bool] = {}  # each answer asked once
+        return {port: [leaf for leaf in self._judged_leaves[m] if not self._passes(m, leaf, possible)]
                 for m, port in enumerate(self._ports)}
 
     def repeated(self, execution, rows) -> None:
@@ -143,11 +151,20 @@ class WaitWatch(Observer):
         slots = execution.algorithm.slots
         ports = [slots[port] for port in self._ports]
         times = rows.times
-        if rows.changes(ports + self._call_slots):  # a state entered or a call made among them: counted row by row
-            for k, values in enumerate(rows.values(ports + self._call_slots)):
+        changes = rows.changes(ports + self._call_slots)
+        if changes:  # a state entered or a call made among them: counted from each change to the next
+            calls, calling = self._call_slots, False
+            last = -1  # the row whose values hold until the next change
+            for k in [*sorted({0, *changes}), len(rows)]:
+                held = k - last - 1  # rows repeating row `last`
+                self._since = [(leaf, entered, 0 if calling else idle + held) for leaf, entered, idle in self._since]
+                if k == len(rows):
+                    break
+                values = rows.row(k, ports + calls)
                 calling = any(v is True for v in values[len(ports):])
                 self._since = [(leaf, times[k], 0) if leaf != previous else (leaf, entered, 0 if calling else idle + 1)
                                for leaf, (previous, entered, idle) in zip(values, self._since)]
+                last = k
             return
         first = rows.row(0, ports)  # the stretch's states (a run's first rows: seen here)
         self._since = [(leaf, entered, idle + len(rows)) if leaf == previous else (leaf, times[0], len(rows) - 1)
