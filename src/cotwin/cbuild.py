@@ -12,6 +12,7 @@ one removed between being found and held is built again.
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import os
 import shutil
@@ -27,8 +28,13 @@ FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-
 
 
 def compiler() -> str | None:
-    """The C compiler found on the PATH (cc or gcc), or None."""
-    return shutil.which("cc") or shutil.which("gcc")
+    """The C compiler found on the PATH (cc or gcc), or None (looked up once per PATH: a run asks it)."""
+    return _found(os.environ.get("PATH"))
+
+
+@functools.lru_cache(maxsize=8)
+def _found(path: str | None) -> str | None:
+    return shutil.which("cc", path=path) or shutil.which("gcc", path=path)
 
 
 def _folder() -> Path:
