@@ -205,6 +205,7 @@ class NativeLoop:
             arrays = self._masks[key] = ((ctypes.c_ubyte * max(1, self.width))(*codes),
                                          (ctypes.c_ulonglong * max(1, self.width))(*(values.get(i, 0) for i in range(self.width))))
         return arrays
+
     def _checks(self, asking: list) -> tuple[int, int]:
         """The observers' checkpoints (Observer.checkpoints) as the C reads them: their array's address and count."""
         slots, found = self.execution.algorithm.slots, []
@@ -237,8 +238,9 @@ class NativeLoop:
             pbase += len(part.pointers)
             dbase += len(part.doubles)
         self._sizes = (pbase, dbase)
-        changed = " || ".join(f"(E[{i}] && N[{i}] != S[{i}] && (E[{i}] == 1 || N[{i}] < 0.0 || N[{i}] >= 64.0 || "
-                              f"((M[{i}] >> (int)N[{i}]) & 1ULL)))" for i in self.discrete) or "0"
+        changed = " || ".join(f"(E[{i}] && N[{i}] != S[{i}] && (E[{i}] == 1 || !(N[{i}] >= 0.0 && N[{i}] < 64.0) || "
+                              f"N[{i}] != (double)(int)N[{i}] || ((M[{i}] >> (int)N[{i}]) & 1ULL)))"
+                              for i in self.discrete) or "0"
         moved = " || ".join(f"N[{i}] != S[{i}]" for i in self.discrete) or "0"
         lines = [_PRELUDE,
                  "#define IN(slot) " + ("N[slot]" if self.seidel else "S[slot]") +
