@@ -332,10 +332,12 @@ class Forks:
 class Watch(Stop):
     """What a what-if sees after each step (its trajectory, the d-model's state changes, collisions, contacts,
     how long the arm has rested) and whether it has seen enough (`reached`): the plan applied and then done,
-    blocked, or ignored, or the horizon passed. Told of a native stretch's repeated steps at once, in which
-    nothing but continuous values changed: the state and collision ports are the stretch's first, the arm rests
-    or moves as at its start, and the simulator's contact watch ended the stretch at any step with a contact
-    (cotwin.mapping.cstep); `quiet_for` ends a stretch at the first step at which the what-if could be over."""
+    blocked, or ignored, or the horizon passed. Told of a native stretch's repeated steps at once, in which no
+    state changed and no command was shown (`whole_changes`: those are steps it sees whole), so the arm rests or
+    moves as at its start; a collision event is read from the rows, and the simulator's contact watch ended the
+    stretch at any step with a contact (cotwin.mapping.cstep). What it asks of the ledger (a command applied,
+    taken, done) changes only at such steps, or in time: `quiet_for` ends a stretch at the first step at which
+    the what-if could be over."""
 
     def __init__(self, fork, endpoint, plan, start: float, horizon: float, settle: float, decimate: int,
                  waits: WaitWatch, ledger: CommandLedger, contacts: _Contacts | None = None):
@@ -346,6 +348,8 @@ class Watch(Stop):
                     and c.output in {ev.name for ev in program.inputs}]
         self.monitored = list(fork.log[MAPPING.name])
         self.state_ports = [(program.state_port(m), m) for m in program.machines]
+        self.whole = [(DMODEL.name, port) for port, _ in self.state_ports] + \
+            [(fork.source.name, event) for event in sorted(fork.command_events)] if fork.source is not None else None
         self.collision_events = [e for e in platform if e.lower() == "collision"]
         self.contacts = contacts.again() if contacts is not None else _Contacts(endpoint, fork.models.tree, fork.models.tool)
         self.trajectory: dict[str, list[float]] = {"time": [], **{v: [] for v in self.monitored}}
@@ -424,6 +428,9 @@ class Watch(Stop):
             self.collisions.extend({"kind": "event", "event": e, "time": t} for t, held in zip(times, column) if held)
         if self.resting and self.at_rest_since is None:
             self.at_rest_since = times[0]
+
+    def whole_changes(self, execution) -> list | None:
+        return self.whole  # the states and the commands shown (see the class doc); None without a command source
 
     def quiet_for(self, execution) -> int | None:
         """Steps until the first at which the what-if could be over, its discrete values as they are now: the
