@@ -1,4 +1,6 @@
-"""[outcomes]: an event named in two roles is an error at its key (it was judged infeasible in silence)."""
+"""[outcomes]: which events say a command was infeasible, feasible or stopped. An event named in two roles is an error
+at its key (it was judged infeasible in silence); one named for a role is no other role's by its name; an empty list
+gives a role no event; an output event is refused saying what to do; a cell says a problem of it once."""
 import shutil
 from pathlib import Path
 
@@ -19,3 +21,37 @@ def test_an_event_in_two_outcome_roles_is_an_error_at_the_later_key(tmp_path):
     assert result.exit_code != 0, result.output
     assert f"cotwin.toml:{line}:" in result.output, result.output
     assert "moveCompleted is already named in [outcomes] infeasible" in result.output, result.output
+
+
+EXAMPLES = EXAMPLE.parent
+BAD_PLAN = ("timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,MovementArgs_target_Z\n"
+            "1000,true,0,23,1\n5500,true,99,99,9\n")  # the second out of the mapping's reach: nonfeasible...
+
+
+def _ur5e(tmp_path, outcomes: str) -> Path:
+    """A copy of examples/ur5e whose project ends with `outcomes` (its [outcomes] table)."""
+    shutil.copytree(EXAMPLE, tmp_path / "ur5e")
+    project = tmp_path / "ur5e" / "cotwin.toml"
+    project.write_text(project.read_text() + "\n" + outcomes)
+    return project
+
+
+def test_an_event_named_for_one_role_is_never_another_roles_by_its_name(tmp_path):
+    # `feasible = ["nonfeasibleMoveDiscreteCommand"]` left the infeasible default on, which matched the name: the
+    # command the project says was answered feasible was judged infeasible anyway
+    from cotwin.twin.assembly.outcomes import EventRoles
+    from cotwin.twin.project import load_project
+
+    project = _ur5e(tmp_path, '[outcomes]\nfeasible = ["nonfeasibleMoveDiscreteCommand"]\n')
+    roles = EventRoles.of(load_project(project))
+    assert roles.feasible("nonfeasibleMoveDiscreteCommand") and not roles.infeasible("nonfeasibleMoveDiscreteCommand")
+    assert roles.infeasible("unreachableTarget") and roles.stops("collision")  # names no list gives: by their names
+    named = EventRoles(infeasible_events=frozenset({"collisionAhead"}))
+    assert named.infeasible("collisionAhead") and not named.stops("collisionAhead")  # a stop by its name, but named
+    (tmp_path / "ur5e" / "bad.csv").write_text(BAD_PLAN)
+    project.write_text(project.read_text().replace("plan.csv", "bad.csv").replace("end = 20.0", "end = 8.0"))
+    result = CliRunner().invoke(main, ["run", str(project), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    assert "commands: 2, 2 completed" in result.output and "infeasible (" not in result.output, result.output
+
+
