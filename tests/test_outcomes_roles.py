@@ -55,3 +55,16 @@ def test_an_event_named_for_one_role_is_never_another_roles_by_its_name(tmp_path
     assert "commands: 2, 2 completed" in result.output and "infeasible (" not in result.output, result.output
 
 
+def test_an_empty_list_gives_a_role_no_event(tmp_path):
+    # `stops = []`: no event stops a move, not even one named collision (the defaults are for a key left out);
+    # docs/project.md says so, from the schema
+    from cotwin.twin.assembly.outcomes import EventRoles
+    from cotwin.twin.project import load_project
+
+    roles = EventRoles.of(load_project(_ur5e(tmp_path, "[outcomes]\nstops = []\ninfeasible = []\n")))
+    assert not roles.stops("collision") and not roles.infeasible("nonfeasibleMoveDiscreteCommand")
+    assert roles.feasible("feasibleMoveDiscreteCommand")  # the key left out: by its name
+    doc = (EXAMPLES.parent / "docs" / "project.md").read_text()
+    assert "an empty list: no event has that role" in doc
+
+
