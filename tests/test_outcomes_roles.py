@@ -68,3 +68,35 @@ def test_an_empty_list_gives_a_role_no_event(tmp_path):
     assert "an empty list: no event has that role" in doc
 
 
+def _with_output_event(arm: str) -> str:
+    """examples/ur5e's d-model sending the platform an output event armIdle when back at rest from a move."""
+    edits = [("interface Feedback {", "interface Status {\n\tevent armIdle\n}\n\ninterface Feedback {"),
+             ("\toutput context {\n\t\trequires ArmOperations", "\toutput context {\n\t\tuses Status\n\t\trequires ArmOperations"),
+             ("condition $robotStopped }", "condition $robotStopped action $armIdle }"),
+             ("\tuses Feedback\n\trequires ArmOperations", "\tuses Feedback\n\tuses Status\n\trequires ArmOperations"),
+             ("to stm_ref on collision (_async)\n}", "to stm_ref on collision (_async)\n"
+                                                     "\tconnection stm_ref on armIdle to ArmControl on armIdle (_async)\n}"),
+             ("\t\tuses Feedback\n\t}\n\tcref ctrl", "\t\tuses Feedback\n\t\tuses Status\n\t}\n\tcref ctrl"),
+             ("to ctrl on collision (_async)\n}", "to ctrl on collision (_async)\n"
+                                                 "\tconnection ctrl on armIdle to UR5eWithGripper on armIdle (_async)\n}")]
+    for old, new in edits:
+        assert arm.count(old) == 1, old
+        arm = arm.replace(old, new)
+    return arm
+
+
+def test_an_output_event_in_outcomes_says_what_to_do_at_its_key(tmp_path):
+    # it said only "armIdle is not an input event", as for a misspelt name
+    project = _ur5e(tmp_path, '[outcomes]\nstops = ["armIdle"]\n')
+    arm = tmp_path / "ur5e" / "arm.rst"
+    arm.write_text(_with_output_event(arm.read_text()))
+    result = CliRunner().invoke(main, ["check", str(project)])
+    line = project.read_text().splitlines().index('stops = ["armIdle"]') + 1
+    assert result.exit_code != 0, result.output
+    said = [s for s in result.output.splitlines() if "armIdle" in s]
+    assert len(said) == 1 and f"cotwin.toml:{line}:" in said[0], result.output
+    assert "[outcomes] stops: armIdle is an output event of d-model module FlexCellArm" in said[0], said
+    assert "remove it from [outcomes] stops or name an input event" in said[0], said
+    assert "(its input events: moveDiscreteCommand, " in said[0] and "collision)" in said[0], said
+
+
