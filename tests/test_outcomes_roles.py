@@ -100,3 +100,18 @@ def test_an_output_event_in_outcomes_says_what_to_do_at_its_key(tmp_path):
     assert "(its input events: moveDiscreteCommand, " in said[0] and "collision)" in said[0], said
 
 
+def test_a_cells_outcomes_problem_is_said_once_at_its_key(tmp_path):
+    # each robot's models are checked alone, against the shared d-model: the same [outcomes] error came once per
+    # robot, each said of its robot ("robot panda (...): [outcomes] stops: ...")
+    shutil.copytree(EXAMPLE, tmp_path / "ur5e")
+    shutil.copytree(EXAMPLES / "flexcell2", tmp_path / "flexcell2")
+    project = tmp_path / "flexcell2" / "cotwin.toml"
+    text = project.read_text() + '\n[outcomes]\nstops = ["colision"]\n'
+    project.write_text(text)
+    result = CliRunner().invoke(main, ["check", str(project)])
+    line = text.splitlines().index('stops = ["colision"]') + 1
+    assert result.exit_code != 0, result.output
+    said = [s for s in result.output.splitlines() if "colision" in s]
+    assert len(said) == 1, result.output
+    assert f"cotwin.toml:{line}:1: error: [outcomes] stops: colision is not an input event" in said[0], said
+    assert "did you mean 'collision'" in said[0], said
