@@ -192,8 +192,9 @@ def reference(cls: type, at: tuple = (), level: int = 2) -> list[str]:
                 lines += ["", f"{'#' * level} `[{path}]`", "", spec.meaning]
             continue
         header = f"[[{path}]]" if spec.items is not None else f"[{path}]"
-        doc = (table.__doc__ or "").strip().splitlines()
-        about = f"{spec.meaning} {doc[0]}" if not at and doc else doc[0] if doc else spec.meaning
+        first = (table.__doc__ or "").strip().split("\n\n")[0]  # the docstring's first paragraph, however wrapped
+        doc = " ".join(line.strip() for line in first.splitlines())
+        about = f"{spec.meaning} {doc}" if not at and doc else doc or spec.meaning
         lines += ["", f"{'#' * level} `{header}`", "", about]
         if spec.key.required:
             lines[-1] += " Required."

@@ -234,12 +234,14 @@ class CellSystem:
         check_cell_settings(spec)
         self.spec = spec
         alone, problems = [], []
+        # [outcomes] is checked against the shared d-model alone: its problems are the cell's, said once
+        whole = {spec.location("outcomes", role) for role in spec.outcome_events}
         for r in spec.robots:  # every robot's models, their problems together, each said of its robot
             try:
                 alone.append((r, load_models(robot_project(spec, r))))
             except CotwinError as err:  # the shared d-model's own problems once, the rest said of their robot
                 shared = str(spec.dmodel)
-                problems += [f if f.location.path == shared else
+                problems += [f if f.location.path == shared or f.location in whole else
                              replace(f, message=f"robot {r.name} ({Path(r.mapping).name} on {Path(r.pmodel).name}): "
                                                 f"{f.message}") for f in err.findings]
         if problems:

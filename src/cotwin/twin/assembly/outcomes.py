@@ -13,7 +13,7 @@
   `accepted`; the operations and platform events that follow, until the next command taken, are its own;
 - *infeasible*: among its events one the project's `[outcomes] infeasible` names, else (the key left out) one
   named `nonfeasible*`, `infeasible*`, `unreachable*` (feasible: `[outcomes] feasible`, else `feasible*`,
-  `reachable*`), a naming convention of mappings such as the paper's;
+  `reachable*`), a naming convention of mappings such as the paper's, for events no key names;
 - *stopped*: among its events, before it completed, one that stops a move (`[outcomes] stops`, else one a word
   of whose name is collision, fault, emergency or protective and none says the opposite: `stopping`): the
   d-model then returns to rest having not done it, which is no completion;
@@ -64,8 +64,9 @@ def stopping(event: str) -> bool:
 @dataclass(frozen=True)
 class EventRoles:
     """Which of the d-model's input events say a command is infeasible, feasible, or stopped: the project's
-    `[outcomes]` lists where given (a d-model of one's own names its answers as it likes), else the naming
-    convention above."""
+    `[outcomes]` lists where given (a d-model of one's own names its answers as it likes; an empty list: no event
+    has that role), else the naming convention above, which never claims an event a list names for another role
+    (`feasible = ["nonfeasibleX"]` makes nonfeasibleX feasible only)."""
 
     infeasible_events: frozenset[str] | None = None
     feasible_events: frozenset[str] | None = None
@@ -80,13 +81,20 @@ class EventRoles:
         return cls(named["infeasible"], named["feasible"], named["stops"])
 
     def infeasible(self, event: str) -> bool:
-        return event in self.infeasible_events if self.infeasible_events is not None else bool(INFEASIBLE.match(event))
+        return self._has(self.infeasible_events, event, lambda e: bool(INFEASIBLE.match(e)))
 
     def feasible(self, event: str) -> bool:
-        return event in self.feasible_events if self.feasible_events is not None else bool(FEASIBLE.match(event))
+        return self._has(self.feasible_events, event, lambda e: bool(FEASIBLE.match(e)))
 
     def stops(self, event: str) -> bool:
-        return event in self.stop_events if self.stop_events is not None else stopping(event)
+        return self._has(self.stop_events, event, stopping)
+
+    def _has(self, named: frozenset[str] | None, event: str, by_name) -> bool:
+        """`event` in the role's list when given, else by its name unless a list names it (for another role)."""
+        if named is not None:
+            return event in named
+        given = (self.infeasible_events, self.feasible_events, self.stop_events)
+        return not any(event in g for g in given if g is not None) and by_name(event)
 
 
 STRICT_EXIT = 3  # `--strict`: a command applied but not completed, or none at all completed (docs/interop.md)

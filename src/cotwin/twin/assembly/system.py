@@ -220,11 +220,19 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
 
 def outcome_event_problems(spec: TwinProject, program) -> list[Finding]:
     """[outcomes] names that are no input event of the d-model: an error at the key with the nearest event (a name
-    misspelt would leave every command of that role judged as if it had none)."""
+    misspelt would leave every command of that role judged as if it had none), or, for one of its output events
+    (which only the d-model sends), what to do instead."""
     events = [ev.name for ev in program.inputs]
+    sent = {ev.name for ev in program.outputs}
     out = []
     for role, named in spec.outcome_events.items():
-        unknown = [e for e in named if e not in events]
+        for event in (e for e in named if e in sent and e not in events):  # said as a step to take
+            out.append(Finding(spec.location("outcomes", role), Severity.ERROR,
+                               f"[outcomes] {role}: {event} is an output event of d-model module "
+                               f"{program.module.name}: the d-model sends it, the platform never does, so it "
+                               f"answers no command; remove it from [outcomes] {role} or name an input event "
+                               f"(its input events: {', '.join(events)})"))
+        unknown = [e for e in named if e not in events and e not in sent]
         if unknown:
             what = "is not an input event" if len(unknown) == 1 else "are not input events"
             out.append(Finding(spec.location("outcomes", role), Severity.ERROR,

@@ -329,7 +329,9 @@ def _events(value) -> str | None:
 
 @_section
 class Outcomes:
-    """Which input events answer a command infeasible or feasible, or stop it (a key left out: by their names)."""
+    """Which input events answer a command infeasible or feasible, or stop it. A key left out: by their names (the
+    defaults below), never an event another key lists; an empty list: no event has that role (`stops = []`: no
+    event stops a move, not even one named collision)."""
 
     infeasible: tuple[str, ...] | None = setting(
         "input events answering that a command cannot be done (default: those named nonfeasible*, infeasible*, "
