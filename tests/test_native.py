@@ -238,6 +238,35 @@ def test_a_command_is_shown_and_taken_inside_a_stretch(built, tmp_path, algorith
     assert [o.__dict__ for o in native[0].outcomes.outcomes] == [o.__dict__ for o in fmu[0].outcomes.outcomes]
 
 
+@pytest.mark.parametrize("goes_on", [True, False])
+def test_an_operation_called_is_run_by_python_and_its_step_made_natively(built, tmp_path, monkeypatch, goes_on):
+    """Jacobi: the mapping's operations called in a step are run by Python before the next stretch's first step
+    (NativePart.prepare), which the C then makes, so no step of the paper's run is made in Python; where the C
+    cannot go on after them (here: said so by QuietStep.acted), the step is made in Python, the operations not
+    run twice. Either way the run is the FMU path's, byte for byte."""
+    from cotwin.mapping.cstep import QuietStep
+    from cotwin.twin.assembly.mapping_unit import MappingUnit
+
+    if not goes_on:
+        monkeypatch.setattr(QuietStep, "acted", lambda self: False)
+    executed = []
+    act = MappingUnit.act
+
+    def counted(self, t):
+        before = len(self.executed)
+        act(self, t)
+        executed.extend(self.executed[before:])
+    monkeypatch.setattr(MappingUnit, "act", counted)
+    twins, built_dir = built
+    native = run(twins["cotwin.toml"], built_dir, tmp_path / "native", step=0.1)
+    ran_native, executed[:] = list(executed), []
+    fmu = run(twins["cotwin.toml"], built_dir, tmp_path / "fmu", step=0.1, fused=False)
+    assert ran_native == executed and len(executed) == 8  # each operation once: 4 moves, 4 stops
+    assert native[1:] == fmu[1:]
+    python_steps = native[0].result.steps - native[0].result.native_steps
+    assert python_steps == 0 if goes_on else python_steps == len(executed)
+
+
 def test_an_observer_that_must_see_every_step_live_keeps_the_run_in_the_fused_loop(built, tmp_path):
     """An observer without `repeated` (here one saving the state mid-run) sees the units at its own step:
     the native loop steps aside, says so, and the state saved is the step-by-step loop's."""

@@ -64,7 +64,10 @@ class NativePart:
     date after it made `made` steps natively from step index `first` (rows: the slots after each complete
     step; doubles: its `DD` as the steps left them). `continuous`: outputs whose change does not end a
     segment. `takes`: inputs whose changes the C reads step by step (a change of another input it is fed ends
-    the segment after its step, so that Python sees it). `sets_inputs`: the C writes the unit's inputs itself
+    the segment after its step, so that Python sees it). `ready`: a C condition (over `IN` and `DD`, Jacobi)
+    asked at each step's start, before any unit's step: false, the segment ends before the step. `prepare()`:
+    Python's share of the segment's first step, done before it runs (the mapping runs the operations called);
+    False: the step is then made in Python (which must not do that share again). `sets_inputs`: the C writes the unit's inputs itself
     (its Python setter is not called after).
     `refusal()`: why `quiet` last said 0, in a few words. `include_dirs`: where the headers `decls` includes are.
     """
@@ -80,6 +83,8 @@ class NativePart:
     continuous: tuple[str, ...] = ()
     writes: frozenset[str] = frozenset()
     takes: frozenset[str] = frozenset()
+    ready: str = ""
+    prepare: Callable[[], bool] = lambda: True
     sets_inputs: bool = False
     refusal: Callable[[], str] = lambda: "it was not quiet"  # why `quiet` last said 0
     include_dirs: tuple[str, ...] = ()
@@ -218,11 +223,13 @@ class NativeLoop:
 
     def _source(self) -> str:
         algorithm = self.execution.algorithm
-        decls, body = [], []
+        decls, body, ready = [], [], []
         pbase = dbase = 0
         width = self.width
         for k, (unit, part) in enumerate(zip(algorithm.units, self.parts)):
             decls.append(part.decls)
+            if part.ready and not self.seidel:
+                ready.append(f"    {{ double *DD = D + {dbase}; (void)DD; if (!({part.ready})) return j; }}  /* {unit.name} */")
             body.append(f"    /* unit {unit.name} */")
             body.append(f"    {{ void **PP = P + {pbase}; double *DD = D + {dbase}; (void)PP; (void)DD;")
             body.append(f"#define FAIL(code) do {{ *failed = {k} * 1000 + (code); return j; }} while (0)")
@@ -265,6 +272,7 @@ class NativeLoop:
                  "  for (int j = 0; j < n; j++) {",
                  "    double t = origin + (double)(base + j) * H;",
                  "    int end_here = ending, end_next = 0;",
+                 *ready,
                  f"    memcpy(N, S, sizeof(double) * {width});",
                  *(f"    N[{shadow}] = N[{source}];" for source, shadow in self.copies),
                  *body,
@@ -339,6 +347,9 @@ class NativeLoop:
         n = self.quiet(min(n, MAX_SEGMENT))
         if n <= 0:
             return 0
+        for part in self.parts:
+            if not part.prepare():
+                return 0
         with signals_held():
             return self._run(n)
 

@@ -246,11 +246,13 @@ def variable_values(mapping: Mapping, variables: list, kinds: list[str]) -> list
 
 
 # The step's doubles (DD): these scalars, then per input event whether it held at the last step and the
-# answers that came in it, then the variables the events read (EventsInC.variables). MADE counts the segment's
-# steps; DELIVERED is the first answer delivered in it (-1: none) and DELIVERED_AT the step (MADE) it came in.
+# answers that came in it and whether each was asked anew (by an operation run before the segment's first step),
+# then the variables the events read (EventsInC.variables). MADE counts the segment's steps; DELIVERED is the
+# first answer delivered in it (-1: none) and DELIVERED_AT the step (MADE) it came in; ACTED: Python ran the
+# operations called before the first step (Mapping.act), which the step then does not pause for.
 TIME, TIMESTEP, PHYSICS_TIMESTEP, STEPS, PERIOD, MOVING, MOVE_HELD, JOINTS, NQ, DONE, CAME, DEPTH, MADE, DELIVERED, \
-    DELIVERED_AT = range(15)
-SCALARS = 15
+    DELIVERED_AT, ACTED = range(16)
+SCALARS = 16
 # Its pointers (PP): MuJoCo's mj_step, model and data, the data's arrays, the move's arrays (cotwin.mapping.native)
 MJ_STEP, MODEL, DATA, CTRL, QPOS, QVEL, SENSORDATA, WATCH, MOVE = range(9)  # WATCH: the watched geoms (a mask)
 POINTERS = MOVE + 6  # the move: shape, joints' control indices, starts, deltas, lows, highs
@@ -296,7 +298,8 @@ class QuietStep:
         self.steps = sim.steps_for(step_size)
         self.period = max(1, int(round(CONTROL_PERIOD / sim.timestep)))
         E = len(self.names)
-        self.held_at, self.came_at, self.variables_at = SCALARS, SCALARS + E, SCALARS + 2 * E
+        self.held_at, self.came_at, self.again_at = SCALARS, SCALARS + E, SCALARS + 2 * E
+        self.variables_at = SCALARS + 3 * E
         self.pointers: list = [0] * POINTERS
         self.doubles: list = [0.0] * (self.variables_at + len(self.events.variables))
         self.headers = mujoco_headers()
@@ -305,13 +308,15 @@ class QuietStep:
         self._values: list[float] = []
         self._move = None
         self._addressed: tuple | None = None  # (model, data, controls, move arrays, watch) `pointers` has addresses of
+        self._acted = False  # Python ran the operations called before the next segment
         self.refusal = ""  # why `quiet` last said 0
 
     def _lines(self, event_slots: dict[str, int], monitored_slots: dict[str, int]) -> list[str]:
         """One quiet step in C (inside the native loop's step: IN, N, PP, DD, FAIL, PAUSE, END_AFTER)."""
         sim, layout, mapping = self.sim, self.events.variables, self.mapping
         ops = " || ".join(f"IN({i}) != 0.0" for i in self.op_slots) or "0"
-        lines = [f"if ({ops}) PAUSE();  /* an operation to run: Python runs it */",
+        lines = [f"if (({ops}) && DD[{ACTED}] == 0.0) PAUSE();  /* an operation to run: Python runs it */",
+                 f"DD[{ACTED}] = 0.0;",
                  f"DD[{MADE}] += 1.0;",
                  f"double *time = &DD[{TIME}];",
                  f"int steps = (int)DD[{STEPS}], period = (int)DD[{PERIOD}];",
@@ -347,10 +352,13 @@ class QuietStep:
         E = len(self.names)
         lines += [f"int occ[{max(1, E)}]; m_events(V, (const double *)PP[{SENSORDATA}], occ);",
                   f"int came = 0; double outs[{max(1, E)}];"]
-        for i, name in enumerate(self.names):  # Mapping.report with nothing asked
+        for i, name in enumerate(self.names):  # Mapping.report: the answers asked anew first, then those that came
             if name in mapping.answers:
-                lines.append(f"if (occ[{i}] && DD[{self.held_at + i}] == 0.0) DD[{self.came_at} + came++] = {i}; "
-                             f"outs[{i}] = 0.0;")
+                lines.append(f"if (occ[{i}] && DD[{self.again_at + i}] != 0.0) DD[{self.came_at} + came++] = {i};")
+        for i, name in enumerate(self.names):
+            if name in mapping.answers:
+                lines.append(f"if (occ[{i}] && DD[{self.again_at + i}] == 0.0 && DD[{self.held_at + i}] == 0.0) "
+                             f"DD[{self.came_at} + came++] = {i}; outs[{i}] = 0.0; DD[{self.again_at + i}] = 0.0;")
             else:
                 lines.append(f"outs[{i}] = occ[{i}] ? 1.0 : 0.0;")
             lines.append(f"DD[{self.held_at + i}] = occ[{i}] ? 1.0 : 0.0;")
@@ -362,12 +370,13 @@ class QuietStep:
         lines += [f"N[{slot}] = outs[{self.names.index(name)}];" for name, slot in event_slots.items()]
         return lines
 
-    def quiet(self, n: int, data: list, jacobi: bool) -> int:
+    def quiet(self, n: int, data: list, jacobi: bool, acting: bool = False) -> int:
         """How many of the next n steps the mapping can make natively now: none while an answer waits, an
-        operation was asked, or (Jacobi) is called; none when the move in flight cannot run in C or a
-        variable the events read is not a plain number; at most about 20 000 physics steps."""
+        operation was asked, or (Jacobi) is called, unless `acting`: Python runs it before the first step
+        (Mapping.act, then `acted`); none when the move in flight cannot run in C or a variable the events read
+        is not a plain number; at most about 20 000 physics steps."""
         mapping = self.mapping
-        if mapping.pending or mapping.asked or (jacobi and any(data[i] is True for i in self.op_slots)):
+        if mapping.pending or mapping.asked or (jacobi and not acting and any(data[i] is True for i in self.op_slots)):
             self.refusal = "an operation runs or an answer waits"
             return 0
         if self.endpoint.native_move() is False:
@@ -383,8 +392,21 @@ class QuietStep:
         self._values = values
         return min(n, max(1, MAX_PHYSICS // max(1, self.steps)))
 
+    def acted(self) -> bool:
+        """After Python ran the operations called (before the segment's first step): whether the segment can go on
+        in C (the new move runs in C, the variables are plain numbers, no answer waits); its first step then
+        reports the answers the operations asked anew."""
+        mapping = self.mapping
+        if mapping.pending or self.endpoint.native_move() is False:
+            return False
+        values = variable_values(mapping, self.events.variables, self.events.kinds)
+        if values is None:
+            return False
+        self._values, self._acted = values, True
+        return True
+
     def begin(self) -> None:
-        """The pointers and doubles of the segment about to run (after `quiet`)."""
+        """The pointers and doubles of the segment about to run (after `quiet`, and `acted` where operations ran)."""
         sim, mapping = self.sim, self.mapping
         move = self.endpoint.native_move()
         d = sim.data
@@ -410,10 +432,15 @@ class QuietStep:
         self._move = move or None  # kept: its arrays stay alive while the C loop reads them
         self.doubles[:SCALARS] = [float(d.time), float(sim.timestep), float(sim.model.opt.timestep), float(self.steps),
                                   float(self.period), 1.0 if move else 0.0, 0.0, float(joints), float(d.qpos.size),
-                                  0.0, 0.0, -watch[1] if watch is not None else 0.0, 0.0, -1.0, 0.0]
+                                  0.0, 0.0, -watch[1] if watch is not None else 0.0, 0.0, -1.0, 0.0,
+                                  1.0 if self._acted else 0.0]
+        requested = mapping.asked  # the variables an operation just assigned: answers reading them are asked anew
         for i, name in enumerate(self.names):
             self.doubles[self.held_at + i] = 1.0 if mapping.held.get(name, (False, None))[0] else 0.0
             self.doubles[self.came_at + i] = 0.0
+            self.doubles[self.again_at + i] = 1.0 if requested and not mapping.events[name].reads.isdisjoint(requested) \
+                else 0.0
+        self._acted = False
         self.doubles[self.variables_at:] = self._values
 
     def end(self, made: int, dd) -> None:

@@ -834,9 +834,12 @@ class Mapping:
     def stays_possible(self, name: str) -> bool:
         """Whether the answer `name` may come now and stays so over any steps made without an operation until
         it comes: it waits for no step (not pending), does not hold (it comes by coming to hold, so it cannot
-        hold without having come) and no condition of it on what operations assign is false (those variables
-        change only when an operation runs). `cannot_come` says None at each such step."""
-        if name not in self.answers or name in self.pending or self.held.get(name, (False, None))[0]:
+        hold without having come) or is asked anew by an operation just run (then it comes at the next report if
+        it holds), and no condition of it on what operations assign is false (those variables change only when
+        an operation runs). `cannot_come` says None at each such step."""
+        if name not in self.answers or name in self.pending:
+            return False
+        if self.held.get(name, (False, None))[0] and self.events[name].reads.isdisjoint(self.asked):
             return False
         return self.events[name].false_request_part(self._requestable) is None
 
@@ -885,6 +888,8 @@ class Mapping:
         counted from 1); the sensor readings and mirrored variables read again."""
         if earlier is not None:
             self.delivered[earlier[0]] = self.reports + earlier[1]
+        if reports:
+            self.asked.clear()  # the first report read what operations run before it asked
         self.reports += reports
         for name, occurs in held.items():
             self.held[name] = (True, self.events[name].value) if occurs else (False, None)

@@ -54,6 +54,7 @@ class MappingUnit(PythonUnit):
                             if ev.name in self.ports and ev.name in events and ev.value_ports}
         self.calls: list = []
         self.executed: list[tuple[float, str, dict]] = []  # (step start time, operation, arguments)
+        self._ran: float | None = None  # the start of the step the native loop ran the operations of and left to Python
 
     def instantiate(self, start: float) -> None:
         super().instantiate(start)
@@ -71,7 +72,11 @@ class MappingUnit(PythonUnit):
 
     def act(self, t: float) -> None:
         """The step's first half: run the operations the d-model called (a cell of several robots acts
-        for each, steps their shared world once, then has each report: cotwin.twin.assembly.cell)."""
+        for each, steps their shared world once, then has each report: cotwin.twin.assembly.cell); once for
+        the step starting at t (the native loop may have run them before the step it then left to Python)."""
+        ran, self._ran = self._ran, None
+        if ran == t:
+            return
         for op, params in self.calls:
             if self.values.get(op):
                 args = {p: assemble(group, self.values.__getitem__) for p, group in params}
@@ -99,7 +104,7 @@ class MappingUnit(PythonUnit):
         """Its quiet step for the native loop (cotwin.mapping.cstep.QuietStep: the platform moves, the mirrors and
         events in C), or why it has none; after a stretch, its ports and time as `step` leaves them."""
         from ...cosim.native import NativePart, feeds, outputs
-        from ...mapping.cstep import QuietStep
+        from ...mapping.cstep import ACTED, QuietStep
 
         out = outputs(execution, self)
         if any(p.name not in out for p in self.event_ports) or any(m not in out for m in self.monitored):
@@ -112,6 +117,29 @@ class MappingUnit(PythonUnit):
         data, jacobi = execution.algorithm.data, execution.algorithm.name == "jacobi"
         events = [(p.name, out[p.name]) for p in self.event_ports]
         monitored = [(name, out[name]) for name in self.monitored]
+        called = [slot for name, slot in feeds(execution, self) if name in calls]
+        acting = [False]  # Jacobi: an operation called in the step before, which `prepare` runs
+
+        def ready(n: int) -> int:
+            acting[0] = jacobi and any(data[i] is True for i in called)
+            return quiet.quiet(n, data, jacobi, acting=acting[0])
+
+        def prepare() -> bool:
+            """The operations called, run as the step's first half (act) before the segment's first step."""
+            if not acting[0]:
+                return True
+            acting[0] = False
+            origin, done = execution._origin
+            write = execution.algorithm.writes[execution.algorithm.units.index(self)]
+            if write is not None:  # its inputs as the step reads them (the native loop set those of the step before)
+                setter, pick = write
+                setter(pick(data))
+            t = origin + (execution.steps - done) * execution.step_size
+            self.act(t)
+            if quiet.acted():
+                return True
+            self._ran = t  # the step is made in Python, which must not run them again
+            return False
 
         def end(first: int, made: int, rows, doubles) -> None:
             quiet.end(made, doubles)
@@ -125,8 +153,11 @@ class MappingUnit(PythonUnit):
                 origin, done = execution._origin
                 self.time = origin + (first + made - 1 - done) * execution.step_size + execution.step_size
 
+        ops = " || ".join(f"IN({slot}) != 0.0" for slot in called)
         return NativePart("\n".join(quiet.lines), decls=quiet.decls, pointers=quiet.pointers, doubles=quiet.doubles,
-                          quiet=lambda n: quiet.quiet(n, data, jacobi), begin=quiet.begin, end=end,
+                          quiet=ready, begin=quiet.begin, end=end, prepare=prepare,
+                          ready=f"!(({ops}) && DD[{ACTED}] == 0.0)" if ops else "",
+                          takes=frozenset(name for name, _ in feeds(execution, self)),
                           failed=quiet.failed, continuous=tuple(self.monitored),
                           writes=frozenset(p.name for p in self.event_ports) | frozenset(self.monitored),
                           refusal=lambda: quiet.refusal, include_dirs=quiet.headers[0] if quiet.headers else ())

@@ -127,9 +127,9 @@ class WaitWatch(Observer):
         return wait is not None and not wait.events & self.commands
 
     def whole_changes(self, execution) -> list:
-        """Its machines' states and the operation calls: a change of them is a step it sees whole (the mapping
-        it asks is then as that step left it), but a state's only where `whole_values` says."""
-        return [*self._ports, *self._calls]
+        """Its machines' states: a change of them is a step it sees whole (the mapping it asks is then as that step
+        left it), where `whole_values` says; the operation calls it counts from the rows."""
+        return list(self._ports)
 
     def whole_values(self, execution) -> dict:
         """A machine entering a wait it would judge is a step it sees whole, unless the judgement lets the wait
