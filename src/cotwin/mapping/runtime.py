@@ -477,11 +477,24 @@ class InputEvent:
         the event occur, only an operation that assigns one of those variables (None if there is no such
         condition)."""
         candidates = self._requests.get(readable)
-        if candidates is None:  # the conditions of that form, found once (the names are the model's)
-            candidates = self._requests[readable] = [c for e in self.conditions for c in s.conjuncts(e)
-                                                     if _reads_only(c, readable)]
-        for condition in candidates:
-            if not bool(self.runtime.env.eval(condition, {})):
+        if candidates is None:  # the conditions of that form, found once (the names are the model's), with the
+            # variables each reads: its truth is a function of their values, kept per values (a wait judged at
+            # every native stretch asks it again and again while no operation runs)
+            candidates = self._requests[readable] = [
+                (c, sorted({n.name.last for n in s.walk(c) if isinstance(n, s.Name) and len(n.name.parts) == 1}), {})
+                for e in self.conditions for c in s.conjuncts(e) if _reads_only(c, readable)]
+        variables = self.runtime.variables
+        for condition, names, known in candidates:
+            key = tuple((v.__class__, v) for v in map(variables.get, names))  # True and 1 are not one key
+            try:
+                true = known.get(key)
+            except TypeError:  # a value that is no key (a vector): asked anew
+                true = key = None
+            if true is None:
+                true = bool(self.runtime.env.eval(condition, {}))
+                if key is not None and len(known) < 64:
+                    known[key] = true
+            if not true:
                 return condition
         return None
 
