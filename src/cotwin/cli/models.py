@@ -202,7 +202,8 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
     """Explore every state of a d-model module under every input combination; check the core
     properties (timelock, determinism, divergence, repeated outputs) and reachability. Exit 0: all
     hold; 1: a violation (or, in a complete search, something unreachable); 3: the search stopped at
-    --max-states, or at a counter that grows without bound, without finding a violation (not verified)."""
+    --max-states, or at a counter that grows without bound, or tried only sample values (0 and 1) of an input a
+    condition reads (give them with --domain), without finding a violation (not verified)."""
     from ..dmodel.program import build_program
     from ..dmodel.verify import RANDOM_VALUES, format_report, verify as explore
     from ..robosim.check import load_checked
@@ -221,4 +222,5 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
 
         report = explore(program, resolved, max_states=max_states, random_values=draws, progress=report_progress)
     click.echo(format_report(program, report))
-    sys.exit(0 if report.ok else 1 if report.violations or report.complete else 3)
+    # a complete search of sampled values found nothing wrong for them, which verifies nothing beyond them
+    sys.exit(1 if report.violations or report.complete and not report.ok else 0 if report.ok and not report.sampled else 3)
