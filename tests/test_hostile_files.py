@@ -245,3 +245,20 @@ def test_an_output_whose_name_is_not_utf8_or_is_cut_inside_a_character_is_writte
         write_text(tmp_path / name, "{}\n")
         assert (tmp_path / name).read_text() == "{}\n"
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".part")]
+
+
+def test_a_file_written_into_a_folder_a_run_holds_is_refused_naming_the_run(tmp_path):
+    """`cotwin whatif -o DIR/state` (or a sweep's -o DIR/outputs.csv) while `cotwin run -o DIR` ran: the what-if said
+    its answer was written, and the run's own file of that name replaced it at the end (found by the hostile probe).
+    An output file in a folder another run holds is refused before anything runs; once the run is over, it is not."""
+    from cotwin.twin.assembly.build import folder_lock
+
+    out = tmp_path / "run"
+    with folder_lock(out):
+        proc = cotwin_in_process("whatif", UR5E / "cotwin.toml", "--plan", UR5E / "plan.csv", "-o", out / "state")
+        assert proc.returncode == 2, proc.stdout + proc.stderr
+        assert (f"{out / 'state'}: {out} is in use by another cotwin run (pid {os.getpid()}), which writes its files "
+                "there") in proc.stderr
+        assert not (out / "state").exists()
+    proc = cotwin_in_process("whatif", UR5E / "cotwin.toml", "--plan", UR5E / "plan.csv", "-o", out / "state")
+    assert proc.returncode == 0 and (out / "state").read_text().startswith("{"), proc.stderr

@@ -105,6 +105,12 @@ def output_file(ctx, param, value: str | None) -> str | None:
     existing = next(p for p in path.parents if p.exists())
     if not os.access(existing, os.W_OK | os.X_OK):
         raise click.BadParameter(f"{value}: cannot write into {existing} (no permission)", param_hint=_hint(param))
+    from ..twin.assembly.build import folder_holder
+
+    holder = folder_holder(path.parent)
+    if holder is not None:  # the run would put its own file of that name over this one, which said it was written
+        raise click.BadParameter(f"{value}: {path.parent} is in use by another cotwin run ({holder}), which writes "
+                                 "its files there: write elsewhere or wait for it to finish", param_hint=_hint(param))
     return value
 
 
