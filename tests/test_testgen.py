@@ -502,6 +502,29 @@ def test_an_interrupt_while_a_suite_moves_into_place_comes_after_its_last_file(g
     assert read.criterion == "transition-pairs" and [c.name for c in read.cases] == [c.name for c in suite.cases]
 
 
+def test_a_suite_removes_its_predecessors_files_and_no_other(graph, tmp_path):
+    """A suite written into a folder removed every case_* .csv/.json/.fmu it did not write, a user's case_study.csv
+    and case_99.csv too, where no suite had ever been (found by the hostile probe). Only files the earlier suite's
+    index names go: a suite of fewer cases, or without drivers, leaves none of the earlier one behind."""
+    out = tmp_path / "tests"
+    out.mkdir()
+    mine = {"case_study.csv": b"precious", "case_99.csv": b"mine", "case_notes.json": b"{}", "case_1.fmu": b"PK"}
+    for name, data in mine.items():
+        (out / name).write_bytes(data)
+    many = generate(graph, "transitions")
+    write_suite(many, out)
+    assert all((out / name).read_bytes() == data for name, data in mine.items())
+    (out / "case_01.fmu").write_bytes(b"a driver")  # as testgen puts a stub case's driver beside it
+    suite = json.loads((out / "suite.json").read_text())
+    suite["cases"][0]["driver"] = "case_01.fmu"
+    (out / "suite.json").write_text(json.dumps(suite))
+    few = generate(graph, "transitions", max_cycles=100, split="length")
+    assert len(few.cases) < len(many.cases)
+    write_suite(few, out)
+    left = {p.name for p in out.iterdir()}
+    assert left == set(mine) | {"suite.json"} | {f"{c.name}{ext}" for c in few.cases for ext in (".csv", ".oracle.json")}
+
+
 def test_a_testgen_into_a_folder_another_run_is_writing_is_refused(tmp_path):
     """Two testgens into one folder at once both said their suite was written there, and the folder held one of
     them (found by the hostile probe): testgen holds the folder as cotwin run does, and one into a folder held
