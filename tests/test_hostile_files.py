@@ -262,3 +262,22 @@ def test_a_file_written_into_a_folder_a_run_holds_is_refused_naming_the_run(tmp_
         assert not (out / "state").exists()
     proc = cotwin_in_process("whatif", UR5E / "cotwin.toml", "--plan", UR5E / "plan.csv", "-o", out / "state")
     assert proc.returncode == 0 and (out / "state").read_text().startswith("{"), proc.stderr
+
+
+def test_an_output_on_a_read_only_file_system_says_so(tmp_path, monkeypatch):
+    """-o into a read-only mount said 'no permission', which sent root to chmod in vain (found by the hostile probe
+    on a tmpfs mounted ro); it says the file system is read-only, and 'no permission' where that is why."""
+    real_access, real_statvfs = os.access, os.statvfs
+
+    class ReadOnly:
+        f_flag = os.ST_RDONLY
+
+    monkeypatch.setattr(os, "access", lambda path, mode, **kw: False if Path(path) == tmp_path else real_access(path, mode, **kw))
+    monkeypatch.setattr(os, "statvfs", lambda path: ReadOnly() if Path(path) == tmp_path else real_statvfs(path))
+    for args in (["whatif", UR5E / "cotwin.toml", "--plan", UR5E / "plan.csv", "-o", tmp_path / "w.json"],
+                 ["run", UR5E / "cotwin.toml", "-o", tmp_path / "run"]):
+        proc = cotwin_in_process(*args)
+        assert proc.returncode == 2 and f"cannot write into {tmp_path} (a read-only file system)" in proc.stderr, proc.stderr
+    monkeypatch.setattr(os, "statvfs", real_statvfs)
+    proc = cotwin_in_process("run", UR5E / "cotwin.toml", "-o", tmp_path / "run")
+    assert proc.returncode == 2 and f"cannot write into {tmp_path} (no permission)" in proc.stderr, proc.stderr
