@@ -348,3 +348,12 @@ def test_a_search_stopped_by_a_clock_compared_with_a_variable_says_so(tmp_path):
     program = build_program(load_checked([tmp_path / "clock.rst"]))
     report = verify(program, max_states=500)
     assert report.complete and report.ok, format_report(program, report)
+
+
+@pytest.mark.parametrize("values, named", [("0.5,1", "1"), ("2,3", "2"), ("-0.25,0", "-0.25")])
+def test_random_values_random_never_draws_are_refused(values, named):
+    """`--random 2,3` explored draws random() never makes (it draws from [0, 1), as the FMU): the search judged
+    behaviour no run has, and none it has (found by the hostile probe). Refused, naming the value."""
+    proc = cotwin_in_process("verify", WALK, "--random", values, "--max-states", 10)
+    assert proc.returncode == 2 and f"Invalid value for --random: {named}: random() draws from [0, 1)" in proc.stderr, \
+        proc.stderr

@@ -196,7 +196,7 @@ def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, out
 @click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1, max=10 ** 8),
               help="stop exploring after this many states")
 @click.option("--random", "random_values", metavar="V1,V2,...", help="the values Mathematics::random() takes in "
-              "the search, each draw a choice (default: 0,0.5)")
+              "the search, each draw a choice, each in [0, 1) (default: 0,0.5)")
 def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, ...], max_states: int,
            random_values: str | None) -> None:
     """Explore every state of a d-model module under every input combination; check the core
@@ -212,6 +212,10 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
     program = build_program(load_checked(model), module_name)
     resolved = value_domains(program, domains)
     draws = RANDOM_VALUES if random_values is None else tuple(named_values(f"random={random_values}", "--random")[1])
+    impossible = [v for v in draws if not 0 <= v < 1]  # explored, they found what no run of the model can do
+    if impossible:
+        raise click.BadParameter(f"{impossible[0]:g}: random() draws from [0, 1) (as the FMU does): give values in it",
+                                 param_hint="--random")
     with ProgressReport("verifying", "states") as progress:
         started = time.monotonic()
 
