@@ -357,3 +357,23 @@ def test_random_values_random_never_draws_are_refused(values, named):
     proc = cotwin_in_process("verify", WALK, "--random", values, "--max-states", 10)
     assert proc.returncode == 2 and f"Invalid value for --random: {named}: random() draws from [0, 1)" in proc.stderr, \
         proc.stderr
+
+
+def test_more_input_combinations_than_a_search_holds_are_refused_before_any_is_made(tmp_path, monkeypatch):
+    """`--domain MovementArgs_target_X=0..99999` on the UR5e arm made 204 million input combinations for each state,
+    and MemoryError ('a cotwin bug') after 20 s and 3 GB (found by the hostile probe): refused at once, saying how
+    many and which event brings them, by verify and testgen alike; testgen leaves no folder of its own behind.
+    (Here the limit is lowered, so that a regression fails without filling the memory.)"""
+    from cotwin.dmodel import verify as search
+
+    monkeypatch.setattr(search, "MAX_COMBINATIONS", 5000)
+    arm = ROOT / "examples" / "ur5e" / "arm.rst"
+    domain = ("--domain", "MovementArgs_target_X=0..9")  # 40 values with Y and Z sampled: 512 x 41 combinations
+    proc = cotwin_in_process("verify", arm, *domain)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert ("20,992 input combinations in each state, more than 5,000 (10 input events; values: moveDiscreteCommand "
+            "40): give fewer values with --domain") in proc.stderr
+    proc = cotwin_in_process("testgen", arm, *domain, "--no-drivers", "-o", tmp_path / "tests")
+    assert proc.returncode == 1 and "more than 5,000" in proc.stderr, proc.stderr
+    assert not (tmp_path / "tests").exists()
+    assert search.MAX_COMBINATIONS == 5000 and cotwin_in_process("verify", arm).returncode == 0  # 1024: explored

@@ -24,11 +24,13 @@ never as a failure.
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
+from ..diagnostics import CotwinError
 from ..robosim.types import BOOL, REAL, EnumTy, RecordTy
 from .growth import GrowthWatch
 from .interpreter import ExecutionError, Frame, Interpreter
@@ -207,8 +209,20 @@ def event_values(program: Program, domains: dict[str, list],
     return out, notes
 
 
+MAX_COMBINATIONS = 1_000_000  # input combinations tried in each state: more is neither held nor ever expanded
+
+
 def input_combinations(program: Program, values: dict[str, list]):
+    """Every set of input events with every choice of their values (one cycle's inputs). More than MAX_COMBINATIONS
+    is refused before any is made, saying how many each event brings (--domain X=0..99999 of the UR5e's command
+    was 51 million, and MemoryError after 20 s)."""
     names = [ev.name for ev in program.inputs]
+    ways = {n: 1 + len(values.get(n, [None])) for n in names}  # absent, or present with each of its values
+    total = math.prod(ways.values())
+    if total > MAX_COMBINATIONS:
+        counts = ", ".join(f"{n} {k - 1}" for n, k in sorted(ways.items(), key=lambda item: -item[1]) if k > 2)
+        raise CotwinError(f"{total:,} input combinations in each state, more than {MAX_COMBINATIONS:,} "
+                          f"({len(names)} input events; values: {counts}): give fewer values with --domain")
     for mask in range(1 << len(names)):
         present = [n for i, n in enumerate(names) if mask >> i & 1]
         axes = [values.get(n, [None]) for n in present]
