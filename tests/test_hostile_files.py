@@ -245,3 +245,39 @@ def test_an_output_whose_name_is_not_utf8_or_is_cut_inside_a_character_is_writte
         write_text(tmp_path / name, "{}\n")
         assert (tmp_path / name).read_text() == "{}\n"
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".part")]
+
+
+def test_a_file_written_into_a_folder_a_run_holds_is_refused_naming_the_run(tmp_path):
+    """`cotwin whatif -o DIR/state` (or a sweep's -o DIR/outputs.csv) while `cotwin run -o DIR` ran: the what-if said
+    its answer was written, and the run's own file of that name replaced it at the end (found by the hostile probe).
+    An output file in a folder another run holds is refused before anything runs; once the run is over, it is not."""
+    from cotwin.twin.assembly.build import folder_lock
+
+    out = tmp_path / "run"
+    with folder_lock(out):
+        proc = cotwin_in_process("whatif", UR5E / "cotwin.toml", "--plan", UR5E / "plan.csv", "-o", out / "state")
+        assert proc.returncode == 2, proc.stdout + proc.stderr
+        assert (f"{out / 'state'}: {out} is in use by another cotwin run (pid {os.getpid()}), which writes its files "
+                "there") in proc.stderr
+        assert not (out / "state").exists()
+    proc = cotwin_in_process("whatif", UR5E / "cotwin.toml", "--plan", UR5E / "plan.csv", "-o", out / "state")
+    assert proc.returncode == 0 and (out / "state").read_text().startswith("{"), proc.stderr
+
+
+def test_an_output_on_a_read_only_file_system_says_so(tmp_path, monkeypatch):
+    """-o into a read-only mount said 'no permission', which sent root to chmod in vain (found by the hostile probe
+    on a tmpfs mounted ro); it says the file system is read-only, and 'no permission' where that is why."""
+    real_access, real_statvfs = os.access, os.statvfs
+
+    class ReadOnly:
+        f_flag = os.ST_RDONLY
+
+    monkeypatch.setattr(os, "access", lambda path, mode, **kw: False if Path(path) == tmp_path else real_access(path, mode, **kw))
+    monkeypatch.setattr(os, "statvfs", lambda path: ReadOnly() if Path(path) == tmp_path else real_statvfs(path))
+    for args in (["whatif", UR5E / "cotwin.toml", "--plan", UR5E / "plan.csv", "-o", tmp_path / "w.json"],
+                 ["run", UR5E / "cotwin.toml", "-o", tmp_path / "run"]):
+        proc = cotwin_in_process(*args)
+        assert proc.returncode == 2 and f"cannot write into {tmp_path} (a read-only file system)" in proc.stderr, proc.stderr
+    monkeypatch.setattr(os, "statvfs", real_statvfs)
+    proc = cotwin_in_process("run", UR5E / "cotwin.toml", "-o", tmp_path / "run")
+    assert proc.returncode == 2 and f"cannot write into {tmp_path} (no permission)" in proc.stderr, proc.stderr

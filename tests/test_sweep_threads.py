@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import EXAMPLES, interrupted_sweep
+from conftest import EXAMPLES, cotwin_in_process, interrupted_sweep
 from cotwin.diagnostics import CotwinError
 from cotwin.twin.analysis.sweep import grid, run_sweep
 from cotwin.twin.assembly.run import load
@@ -275,3 +275,14 @@ def test_options_that_would_be_ignored_are_refused_and_one_worker_goes_with_thre
     one = subprocess.run([*base, "--threads", "2", "--workers", "1"], capture_output=True, text=True, timeout=300)
     assert one.returncode == 0, one.stderr
     assert "1 what-ifs" in one.stdout
+
+
+def test_the_summary_says_how_many_threads_or_processes_ran(tmp_path):
+    """`--threads 1024` on 2 what-ifs said '(this process, 1024 threads)', 2 having run, and a sweep of one what-if,
+    run in this process, said 'local pool' (found by the hostile probe): it says what ran."""
+    base = ["sweep", PROJECT, "--event", "moveDiscreteCommand", "--arg", "target_Y=3", "--arg", "target_Z=0",
+            "--horizon", "1", "-o", tmp_path / "a.csv"]
+    two = cotwin_in_process(*base, "--arg", "target_X=0..1", "--threads", "1024")
+    assert two.returncode == 0 and "2 what-ifs in" in two.stdout and "(this process, 2 threads)" in two.stdout, two.stdout
+    one = cotwin_in_process(*base, "--arg", "target_X=0")
+    assert one.returncode == 0 and "(this process)" in one.stdout, one.stdout

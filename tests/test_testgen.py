@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import EXAMPLES
+from conftest import EXAMPLES, cotwin_in_process
 from cotwin.diagnostics import CotwinError
 from cotwin.dmodel.program import build_program
 from cotwin.dmodel.testgen import generate
@@ -27,6 +27,14 @@ UR5E = EXAMPLES / "ur5e"
 MODELS = [UR5E / "arm.rst", UR5E / "mapping.pm", UR5E / "ur5e.pm"]
 FEASIBLE = ["--domain", "MovementArgs_target_X=8", "--domain", "MovementArgs_target_Y=10",
             "--domain", "MovementArgs_target_Z=1"]
+
+
+LOCK = ".cotwin.lock"  # the folder's lock (cotwin.twin.assembly.build.folder_lock), not a file of the suite
+
+
+def suite_files(folder: Path) -> dict[str, bytes]:
+    """The files of the suite in `folder`, by name, without the lock a testgen leaves there."""
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.name != LOCK}
 
 
 def cotwin(*args, cwd=None) -> subprocess.CompletedProcess:
@@ -128,9 +136,7 @@ def test_the_suite_is_byte_identical_from_any_directory_and_its_plans_are_projec
     elsewhere.mkdir()
     proc = cotwin("testgen", *[m.resolve() for m in MODELS], "--no-drivers", "-o", b.resolve(), cwd=elsewhere)
     assert proc.returncode == 0, proc.stderr
-    names = sorted(p.name for p in a.iterdir())
-    assert names == sorted(p.name for p in b.iterdir())
-    assert all((a / n).read_bytes() == (b / n).read_bytes() for n in names)
+    assert suite_files(a) == suite_files(b)
     assert "transitions: 25 of 25 reachable covered (100%)" in proc.stdout
     commands = read_plan(a / "case_01.csv", arm)  # the project's plan reader takes the case as it is
     assert [c.time for c in commands] == [0.1, 0.3, 0.5, 0.7]
@@ -404,13 +410,13 @@ def test_a_failed_testgen_leaves_the_earlier_suite_whole(tmp_path):
     tests = tmp_path / "tests"
     proc = cotwin("testgen", UR5E / "arm.rst", "-o", tests)
     assert proc.returncode == 0, proc.stderr
-    before = {p.name: p.read_bytes() for p in tests.iterdir()}
+    before = suite_files(tests)
     assert "case_01.fmu" in before
     proc = cotwin("testgen", UR5E / "arm.rst", "--max-cycles", "5", "--cc", "false", "-o", tests)
     assert proc.returncode == 1 and "the C compiler 'false' failed" in proc.stderr
     proc = cotwin("testgen", *MODELS, "--answers", "auto", "--project", tmp_path / "none.toml", "-o", tests)
     assert proc.returncode == 1 and "none.toml" in proc.stderr
-    assert {p.name: p.read_bytes() for p in tests.iterdir()} == before
+    assert suite_files(tests) == before
     proc = cotwin("testgen", *MODELS, "--answers", "auto", "--project", tmp_path / "none.toml", "-o", tmp_path / "new")
     assert proc.returncode == 1 and not (tmp_path / "new").exists()
 
@@ -494,6 +500,110 @@ def test_an_interrupt_while_a_suite_moves_into_place_comes_after_its_last_file(g
     assert len(moved) == 1 + 2 * len(suite.cases)  # every file, the index last
     read = read_suite(out)
     assert read.criterion == "transition-pairs" and [c.name for c in read.cases] == [c.name for c in suite.cases]
+
+
+def test_a_suite_removes_its_predecessors_files_and_no_other(graph, tmp_path):
+    """A suite written into a folder removed every case_* .csv/.json/.fmu it did not write, a user's case_study.csv
+    and case_99.csv too, where no suite had ever been (found by the hostile probe). Only files the earlier suite's
+    index names go: a suite of fewer cases, or without drivers, leaves none of the earlier one behind."""
+    out = tmp_path / "tests"
+    out.mkdir()
+    mine = {"case_study.csv": b"precious", "case_99.csv": b"mine", "case_notes.json": b"{}", "case_1.fmu": b"PK"}
+    for name, data in mine.items():
+        (out / name).write_bytes(data)
+    many = generate(graph, "transitions")
+    write_suite(many, out)
+    assert all((out / name).read_bytes() == data for name, data in mine.items())
+    (out / "case_01.fmu").write_bytes(b"a driver")  # as testgen puts a stub case's driver beside it
+    suite = json.loads((out / "suite.json").read_text())
+    suite["cases"][0]["driver"] = "case_01.fmu"
+    (out / "suite.json").write_text(json.dumps(suite))
+    few = generate(graph, "transitions", max_cycles=100, split="length")
+    assert len(few.cases) < len(many.cases)
+    write_suite(few, out)
+    left = {p.name for p in out.iterdir()}
+    assert left == set(mine) | {"suite.json"} | {f"{c.name}{ext}" for c in few.cases for ext in (".csv", ".oracle.json")}
+
+
+def test_a_testgen_into_a_folder_another_run_is_writing_is_refused(tmp_path):
+    """Two testgens into one folder at once both said their suite was written there, and the folder held one of
+    them (found by the hostile probe): testgen holds the folder as cotwin run does, and one into a folder held
+    is refused naming it, writing nothing there."""
+    from cotwin.twin.assembly.build import folder_lock
+
+    out = tmp_path / "tests"
+    with folder_lock(out):
+        proc = cotwin_in_process("testgen", UR5E / "arm.rst", "--no-drivers", "-o", out)
+    assert proc.returncode == 1 and f"{out} is in use by another cotwin run" in proc.stderr
+    assert suite_files(out) == {}
+
+
+@pytest.fixture
+def interrupt_restored():
+    """SIGINT's handler put back after a test whose in-process command ended interrupted (cotwin.cli.entry then
+    ignores a second one)."""
+    import signal
+
+    handler = signal.getsignal(signal.SIGINT)
+    yield
+    signal.signal(signal.SIGINT, handler)
+
+
+def test_an_interrupt_as_a_suite_moves_into_place_keeps_its_drivers_with_it(tmp_path, monkeypatch, interrupt_restored):
+    """^C as testgen's suite moved into place came once its plans, oracles and index were there, before its driver
+    FMUs: the folder held the new index beside the earlier suite's drivers (found by the hostile probe). The
+    drivers now move in with the rest, and the interrupt is said once the suite is whole."""
+    import os
+    import signal
+
+    out, reference = tmp_path / "tests", tmp_path / "reference"
+    assert cotwin_in_process("testgen", UR5E / "arm.rst", "--coverage", "states", "--max-cycles", "3",
+                             "-o", out).returncode == 0
+    assert cotwin_in_process("testgen", UR5E / "arm.rst", "-o", reference).returncode == 0
+    expected = suite_files(reference)
+    assert expected["case_01.fmu"] != suite_files(out)["case_01.fmu"]  # the earlier suite's drivers are others
+    real_replace = os.replace
+
+    def replace(src, dst):  # os is one module: every rename comes here
+        real_replace(src, dst)
+        if Path(dst) == out / "suite.json":
+            os.kill(os.getpid(), signal.SIGINT)  # raised at once, unless held
+
+    monkeypatch.setattr(os, "replace", replace)
+    proc = cotwin_in_process("testgen", UR5E / "arm.rst", "-o", out)
+    monkeypatch.undo()
+    assert proc.returncode == 130, proc.stderr
+    assert f"{out}: interrupted after the suite was written (it is whole there)" in proc.stderr
+    assert suite_files(out) == expected
+
+
+def test_an_interrupted_testgen_says_that_nothing_was_written(tmp_path, monkeypatch, interrupt_restored):
+    """^C during a long exploration said 'interrupted' and no more (found by the hostile probe): it says that none
+    of the suite was written and the earlier one is as it was."""
+    from cotwin.dmodel import testgen_graph
+
+    out = tmp_path / "tests"
+    assert cotwin_in_process("testgen", UR5E / "arm.rst", "--no-drivers", "-o", out).returncode == 0
+    before = suite_files(out)
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(testgen_graph, "explore", interrupted)
+    proc = cotwin_in_process("testgen", UR5E / "arm.rst", "--coverage", "states", "-o", out)
+    assert proc.returncode == 130
+    assert (f"{out}: interrupted before the suite was written: none of it is there; the earlier suite there is as it "
+            "was") in proc.stderr
+    assert suite_files(out) == before
+
+
+def test_testgen_in_a_log_says_how_far_its_exploration_is(tmp_path):
+    """testgen's exploration showed its progress on a terminal only: in a log, 12 minutes of exploring printed
+    nothing (found by the hostile probe); it writes a progress line there as verify does."""
+    proc = cotwin_in_process("testgen", UR5E / "arm.rst", "--no-drivers", "-o", tmp_path / "tests",
+                             env={"COTWIN_PROGRESS_SECONDS": "0"})
+    assert proc.returncode == 0, proc.stderr
+    assert "exploring the d-model's states: " in proc.stderr and "states (" in proc.stderr
 
 
 def test_test_and_mutants_never_write_over_what_they_read(tmp_path, stub_suite):

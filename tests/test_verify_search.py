@@ -271,3 +271,109 @@ def test_a_value_a_guard_tests_directly_or_in_an_operation_is_not_data_independe
     assert notes[0].endswith("2 value(s) from its domain"), notes
     report = verify(program)
     assert not report.unreached_states, report.unreached_states
+
+
+SPEED = """interface Ev { event speed: real event warn }
+controller C { uses Ev sref m = M
+	connection C on speed to m on speed connection m on warn to C on warn }
+module Mod { robotic platform P { uses Ev } cref c = C
+	connection P on speed to c on speed (_async) connection c on warn to P on warn (_async) }
+stm M {
+	input context { uses Ev }
+	output context { uses Ev }
+	var v: real = 0
+	initial i
+	state A { }
+	state Fast { }
+	state Slow { }
+	transition t0 { from i to A }
+	transition t1 { from A to Fast exec condition $speed?v /\\ v > 0.5 }
+	transition t2 { from A to Slow exec condition $speed?v /\\ (v < 0.5 \\/ v > 2.0) }
+	transition t3 { from A to A exec condition not $speed }
+	transition t4 { from Fast to A exec action $warn }
+	transition t5 { from Slow to A exec }
+}
+"""
+
+
+def test_a_complete_search_of_sampled_values_is_not_called_verified(tmp_path):
+    """A user's model whose two guards on a real are both enabled at 3 only: without --domain the search tried 0 and
+    1, printed ok on every line and exited 0, 'all hold' (found by the hostile probe). It says the values were only
+    sampled and exits 3 (not verified); with the values that matter, the nondeterminism is found."""
+    (tmp_path / "speed.rst").write_text(SPEED)
+    proc = cotwin_in_process("verify", tmp_path / "speed.rst")
+    assert proc.returncode == 3, proc.stdout + proc.stderr
+    assert ("  NOT VERIFIED for every value: v took only sample values (0 and 1): give the values that matter with "
+            "--domain v=V1,V2,...; what holds below holds for those values only") in proc.stdout
+    assert "ok   determinism" in proc.stdout
+    given = cotwin_in_process("verify", tmp_path / "speed.rst", "--domain", "speed=0,1,3")
+    assert given.returncode == 1 and "FAIL determinism" in given.stdout and "NOT VERIFIED" not in given.stdout
+    enough = cotwin_in_process("verify", tmp_path / "speed.rst", "--domain", "speed=0,1")
+    assert enough.returncode == 0 and "NOT VERIFIED" not in enough.stdout  # values given: the user's choice
+
+
+CLOCKED = """interface Ev { event tick event report: int }
+controller C { uses Ev sref m = M
+	connection C on tick to m on tick connection m on report to C on report }
+module Mod { robotic platform P { uses Ev } cref c = C
+	connection P on tick to c on tick (_async) connection c on report to P on report (_async) }
+stm M {
+	input context { uses Ev }
+	output context { uses Ev }
+	%s limit: int = 3
+	clock T
+	initial i
+	state A { }
+	state B { }
+	transition t0 { from i to A }
+	transition t1 { from A to B exec condition $tick }
+	transition tA { from A to A exec condition not $tick }
+	transition tB { from B to B exec condition since(T) <= limit }
+	transition t4 { from B to A exec condition since(T) > limit action #T ; $report!1 }
+}
+"""
+
+
+def test_a_search_stopped_by_a_clock_compared_with_a_variable_says_so(tmp_path):
+    """`since(T) > limit` with `var limit`: T's count is never capped and A never resets it, so every cycle is a new
+    state; the search ran to its limit advising only 'raise --max-states' (found by the hostile probe). It names the
+    clock; compared with a constant, the same model is explored to the end."""
+    (tmp_path / "clock.rst").write_text(CLOCKED % "var")
+    program = build_program(load_checked([tmp_path / "clock.rst"]))
+    text = format_report(program, verify(program, max_states=500))
+    assert ("INCOMPLETE: the search stopped at its limit of 500 states: what it found holds, what it did not reach is "
+            "not judged (raise --max-states; clock M.T is compared with other than a constant, so its count is never "
+            "capped and, while it is not reset, every cycle is a new state: the search may never end") in text, text
+    (tmp_path / "clock.rst").write_text(CLOCKED % "const")
+    program = build_program(load_checked([tmp_path / "clock.rst"]))
+    report = verify(program, max_states=500)
+    assert report.complete and report.ok, format_report(program, report)
+
+
+@pytest.mark.parametrize("values, named", [("0.5,1", "1"), ("2,3", "2"), ("-0.25,0", "-0.25")])
+def test_random_values_random_never_draws_are_refused(values, named):
+    """`--random 2,3` explored draws random() never makes (it draws from [0, 1), as the FMU): the search judged
+    behaviour no run has, and none it has (found by the hostile probe). Refused, naming the value."""
+    proc = cotwin_in_process("verify", WALK, "--random", values, "--max-states", 10)
+    assert proc.returncode == 2 and f"Invalid value for --random: {named}: random() draws from [0, 1)" in proc.stderr, \
+        proc.stderr
+
+
+def test_more_input_combinations_than_a_search_holds_are_refused_before_any_is_made(tmp_path, monkeypatch):
+    """`--domain MovementArgs_target_X=0..99999` on the UR5e arm made 204 million input combinations for each state,
+    and MemoryError ('a cotwin bug') after 20 s and 3 GB (found by the hostile probe): refused at once, saying how
+    many and which event brings them, by verify and testgen alike; testgen leaves no folder of its own behind.
+    (Here the limit is lowered, so that a regression fails without filling the memory.)"""
+    from cotwin.dmodel import verify as search
+
+    monkeypatch.setattr(search, "MAX_COMBINATIONS", 5000)
+    arm = ROOT / "examples" / "ur5e" / "arm.rst"
+    domain = ("--domain", "MovementArgs_target_X=0..9")  # 40 values with Y and Z sampled: 512 x 41 combinations
+    proc = cotwin_in_process("verify", arm, *domain)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert ("20,992 input combinations in each state, more than 5,000 (10 input events; values: moveDiscreteCommand "
+            "40): give fewer values with --domain") in proc.stderr
+    proc = cotwin_in_process("testgen", arm, *domain, "--no-drivers", "-o", tmp_path / "tests")
+    assert proc.returncode == 1 and "more than 5,000" in proc.stderr, proc.stderr
+    assert not (tmp_path / "tests").exists()
+    assert search.MAX_COMBINATIONS == 5000 and cotwin_in_process("verify", arm).returncode == 0  # 1024: explored

@@ -67,6 +67,18 @@ def _file_on_the_way(path: Path) -> Path | None:
     return None
 
 
+def _unwritable(folder: Path) -> str:
+    """Why this user cannot write into `folder`: its file system is mounted read-only (which 'no permission' sent
+    a root user to chmod in vain), or no permission."""
+    import os
+
+    try:
+        read_only = bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except OSError:
+        read_only = False
+    return "a read-only file system" if read_only else "no permission"
+
+
 def output_folder(ctx, param, value: str | None) -> str | None:
     """An -o option naming a folder to write into: refused before anything runs if it (or a folder it would
     be made in) is a file, or is a folder this user cannot write into."""
@@ -81,7 +93,8 @@ def output_folder(ctx, param, value: str | None) -> str | None:
         raise click.BadParameter(f"{value}: {what}, not a folder: name a folder to write into", param_hint="-o/--output")
     existing = next(p for p in [Path(value), *Path(value).parents] if p.exists())
     if not os.access(existing, os.W_OK | os.X_OK):
-        raise click.BadParameter(f"{value}: cannot write into {existing} (no permission)", param_hint="-o/--output")
+        raise click.BadParameter(f"{value}: cannot write into {existing} ({_unwritable(existing)})",
+                                 param_hint="-o/--output")
     return value
 
 
@@ -104,7 +117,14 @@ def output_file(ctx, param, value: str | None) -> str | None:
         raise click.BadParameter(f"{value}: would be made inside {blocking}, a file", param_hint=_hint(param))
     existing = next(p for p in path.parents if p.exists())
     if not os.access(existing, os.W_OK | os.X_OK):
-        raise click.BadParameter(f"{value}: cannot write into {existing} (no permission)", param_hint=_hint(param))
+        raise click.BadParameter(f"{value}: cannot write into {existing} ({_unwritable(existing)})",
+                                 param_hint=_hint(param))
+    from ..twin.assembly.build import folder_holder
+
+    holder = folder_holder(path.parent)
+    if holder is not None:  # the run would put its own file of that name over this one, which said it was written
+        raise click.BadParameter(f"{value}: {path.parent} is in use by another cotwin run ({holder}), which writes "
+                                 "its files there: write elsewhere or wait for it to finish", param_hint=_hint(param))
     return value
 
 

@@ -196,13 +196,14 @@ def export_pmodel(model: tuple[str, ...], pmodel_name: str | None, fmt: str, out
 @click.option("--max-states", default=100_000, show_default=True, type=click.IntRange(min=1, max=10 ** 8),
               help="stop exploring after this many states")
 @click.option("--random", "random_values", metavar="V1,V2,...", help="the values Mathematics::random() takes in "
-              "the search, each draw a choice (default: 0,0.5)")
+              "the search, each draw a choice, each in [0, 1) (default: 0,0.5)")
 def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, ...], max_states: int,
            random_values: str | None) -> None:
     """Explore every state of a d-model module under every input combination; check the core
     properties (timelock, determinism, divergence, repeated outputs) and reachability. Exit 0: all
     hold; 1: a violation (or, in a complete search, something unreachable); 3: the search stopped at
-    --max-states, or at a counter that grows without bound, without finding a violation (not verified)."""
+    --max-states, or at a counter that grows without bound, or tried only sample values (0 and 1) of an input a
+    condition reads (give them with --domain), without finding a violation (not verified)."""
     from ..dmodel.program import build_program
     from ..dmodel.verify import RANDOM_VALUES, format_report, verify as explore
     from ..robosim.check import load_checked
@@ -211,6 +212,10 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
     program = build_program(load_checked(model), module_name)
     resolved = value_domains(program, domains)
     draws = RANDOM_VALUES if random_values is None else tuple(named_values(f"random={random_values}", "--random")[1])
+    impossible = [v for v in draws if not 0 <= v < 1]  # explored, they found what no run of the model can do
+    if impossible:
+        raise click.BadParameter(f"{impossible[0]:g}: random() draws from [0, 1) (as the FMU does): give values in it",
+                                 param_hint="--random")
     with ProgressReport("verifying", "states") as progress:
         started = time.monotonic()
 
@@ -221,4 +226,5 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
 
         report = explore(program, resolved, max_states=max_states, random_values=draws, progress=report_progress)
     click.echo(format_report(program, report))
-    sys.exit(0 if report.ok else 1 if report.violations or report.complete else 3)
+    # a complete search of sampled values found nothing wrong for them, which verifies nothing beyond them
+    sys.exit(1 if report.violations or report.complete and not report.ok else 0 if report.ok and not report.sampled else 3)

@@ -1,6 +1,6 @@
 """Progress of a long command on stderr: a live bar on a terminal, else a plain line now and then.
 
-Long commands (verify, calibrate, sweep, a paced twin) call `update(done, total, detail)` as they go.
+Long commands (verify, testgen, calibrate, sweep, a paced twin) call `update(done, total, detail)` as they go.
 On a terminal the line is redrawn in place (rich) and removed at the end; in a log (stderr not a
 terminal) one line is written every COTWIN_PROGRESS_SECONDS seconds (default 10; 0: every update,
 "off": never), so that a CI log shows that a run is alive and how far it is.

@@ -86,40 +86,67 @@ def testgen(model: tuple[str, ...], module_name: str | None, criterion: str, dom
         from ..twin.assembly.run import load
 
         system = load(project, reader="cotwin testgen")
-    from rich.progress import Progress
-
-    with Progress(transient=True, disable=not sys.stderr.isatty()) as bar:
-        task = bar.add_task("exploring the d-model's states", total=max_states)
-        graph = explore(program, parsed, max_states=max_states, until_all_taken=criterion != "transition-pairs",
-                        progress=lambda done, found: bar.update(task, completed=found))
-    suite = generate(graph, criterion, max_cycles, chosen, "platform" if answers == "auto" else answers, split)
     import os
     import tempfile
 
-    # The suite is made in a folder of its own inside `out` and only then written over the suite there: a run
-    # that fails (a project the cases cannot run on, a C compiler that fails) or is interrupted leaves the
-    # earlier suite (its driver FMUs too) as it was, never a suite without its drivers.
-    Path(out).mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix=".cotwin-testgen-", dir=out) as stage:
-        write_suite(suite, stage, period, settle)
-        if answers == "auto":
-            try_on_platform(suite, system, stage, period, settle)
-        built = []
-        if drivers:
-            from ..dmodel.testgen_driver import build_driver
-            from ..dmodel.testgen_files import oracle
+    from ..diagnostics import Interrupted
+    from ..interrupts import signals_held
+    from ..twin.assembly.build import folder_lock
+    from .progress import ProgressReport
 
-            for case in suite.cases:
-                if case.answers == "stub":
-                    built.append(build_driver(program, case.name, oracle(case)["cycles"],
-                                              Path(stage) / f"{case.name}.fmu", cc))
-        write_suite(suite, out, period, settle, drivers=drivers)
-        for fmu in built:
-            os.replace(fmu, Path(out) / Path(fmu).name)
+    earlier = os.path.isfile(os.path.join(out, "suite.json"))
+    made = not os.path.lexists(out)  # a folder this testgen makes is removed again if it writes no suite there
+    placed = False
+    try:
+        try:
+            # one testgen (or run) in the folder at a time: two at once each said its suite was written, one was not
+            with folder_lock(Path(out)):
+                with ProgressReport("exploring the d-model's states", "states") as progress:
+                    graph = explore(program, parsed, max_states=max_states,
+                                    until_all_taken=criterion != "transition-pairs",
+                                    progress=lambda done, found: progress(found, max_states, f"{done} expanded"))
+                suite = generate(graph, criterion, max_cycles, chosen, "platform" if answers == "auto" else answers, split)
+                # The suite is made in a folder of its own inside `out` and only then moved over the suite there, its
+                # driver FMUs with it: a run that fails (a project the cases cannot run on, a C compiler that fails) or
+                # is interrupted leaves the earlier suite (its driver FMUs too) as it was, never a suite without its
+                # drivers or beside the earlier suite's.
+                with tempfile.TemporaryDirectory(prefix=".cotwin-testgen-", dir=out) as stage:
+                    write_suite(suite, stage, period, settle)
+                    if answers == "auto":
+                        try_on_platform(suite, system, stage, period, settle)
+                    built = []
+                    if drivers:
+                        from ..dmodel.testgen_driver import build_driver
+                        from ..dmodel.testgen_files import oracle
+
+                        for case in suite.cases:
+                            if case.answers == "stub":
+                                built.append(build_driver(program, case.name, oracle(case)["cycles"],
+                                                          Path(stage) / f"{case.name}.fmu", cc))
+                    with signals_held():  # an interrupt meanwhile comes once the suite is in place, said below
+                        write_suite(suite, out, period, settle, drivers=drivers, fmus=built)
+                        placed = True
+        finally:
+            if made and not placed:
+                _unmake(Path(out))
+    except KeyboardInterrupt:
+        raise Interrupted(f"{out}: interrupted after the suite was written (it is whole there)" if placed else
+                          f"{out}: interrupted before the suite was written: none of it is there"
+                          + ("; the earlier suite there is as it was" if earlier else "")) from None
     click.echo(format_suite(suite, period, why, out, drivers))
     if not suite.cases:
         click.echo("no case: nothing is reachable to cover", err=True)
         sys.exit(1)
+
+
+def _unmake(folder: Path) -> None:
+    """Remove the folder a testgen made and wrote no suite into (its lock the only file left); kept if anything else
+    is there."""
+    try:
+        (folder / ".cotwin.lock").unlink(missing_ok=True)
+        folder.rmdir()
+    except OSError:
+        pass
 
 
 def try_on_platform(suite, system, out: str, period: float, settle: float) -> dict[str, str]:

@@ -23,6 +23,7 @@ import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterable
 
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..files import write_text
@@ -138,15 +139,18 @@ def _dump(data) -> str:
 
 
 def write_suite(suite: Suite, folder: str | Path, period: float = 0.1, settle: float = 10.0,
-                drivers: bool = False) -> list[Path]:
+                drivers: bool = False, fmus: Iterable[Path] = ()) -> list[Path]:
     """Write the suite into `folder` (see module doc); returns the files written. Files of an earlier suite
-    that this one does not have (more cases then) are removed, so the folder holds one suite. With `drivers`
+    that this one does not have (more cases then), as its index names them, are removed, so the folder holds one
+    suite; no other file is (every case_* file was, a user's case_study.csv too). With `drivers`
     the index names each stub case's test driver FMU (cotwin.dmodel.testgen_driver builds them).
 
     Every file is written whole (files.write_text) in a folder of its own beside the suite, and only then
     moved over the earlier suite's, the index last: a write that fails or is interrupted (a full disk, ^C)
     leaves the earlier suite as it was, with no part-written file among it. The moves are one block for ^C
-    and SIGTERM (held until the last is done), so an interrupt never leaves a suite of old and new files."""
+    and SIGTERM (held until the last is done), so an interrupt never leaves a suite of old and new files.
+    `fmus`, the stub cases' driver FMUs built on the same file system, are moved in within that block, before the
+    index: moved after it, an interrupt in between left the new index beside the earlier suite's drivers."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     commands = set(suite.commands)
@@ -157,18 +161,34 @@ def write_suite(suite: Suite, folder: str | Path, period: float = 0.1, settle: f
         files[f"{case.name}.csv"] = "\n".join(",".join(r) for r in [header, *rows]) + "\n"
         files[f"{case.name}.oracle.json"] = _dump(oracle(case))
     files["suite.json"] = _dump(suite_record(suite, period, settle, drivers))  # last: it names the cases
+    earlier = _suite_files(folder)  # read before the new index replaces it
     with tempfile.TemporaryDirectory(prefix=".cotwin-suite-", dir=folder) as stage:
         for name, text in files.items():
             write_text(Path(stage) / name, text)
+        moves = [*((Path(f), folder / Path(f).name) for f in fmus), *((Path(stage) / n, folder / n) for n in files)]
         written = []
         with signals_held():  # renames within one file system: no file is ever part-written, no ^C between them
-            for name in files:
-                os.replace(Path(stage) / name, folder / name)
-                written.append(folder / name)
-    for stale in folder.glob("case_*"):
-        if stale.name not in files and stale.name not in keep and stale.suffix in (".csv", ".json", ".fmu"):
+            for source, target in moves:
+                os.replace(source, target)
+                written.append(target)
+    for name in sorted(earlier - set(files) - keep):
+        stale = folder / name
+        if stale.is_file() or stale.is_symlink():
             stale.unlink()
     return written
+
+
+def _suite_files(folder: Path) -> set[str]:
+    """The files the suite index in `folder` names (plans, oracles, drivers), each a name in the folder; none when
+    there is no index or it cannot be read as one."""
+    try:
+        data = _read_json(folder / "suite.json", "test suite index")
+    except (CotwinError, OSError):
+        return set()
+    entries = data.get("cases") if isinstance(data, dict) and data.get("format") == FORMAT else None
+    return {entry[key] for entry in entries if isinstance(entry, dict) for key in ("plan", "oracle", "driver")
+            if isinstance(entry.get(key), str) and entry[key] == Path(entry[key]).name and entry[key] != "suite.json"
+            } if isinstance(entries, list) else set()
 
 
 # ---- reading a suite back ----

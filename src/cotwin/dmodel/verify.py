@@ -24,11 +24,13 @@ never as a failure.
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
+from ..diagnostics import CotwinError
 from ..robosim.types import BOOL, REAL, EnumTy, RecordTy
 from .growth import GrowthWatch
 from .interpreter import ExecutionError, Frame, Interpreter
@@ -120,14 +122,27 @@ def widest_variables(program: Program, snapshots, top: int = 2) -> list[tuple[st
     return [(name, n) for name, n in ranked[:top] if n >= 10]
 
 
+def uncapped_clocks(program: Program) -> list[str]:
+    """The clocks (M.T) a condition compares with other than a constant (`since(T) > limit`, a variable): their counts
+    are never capped (program.count_caps), so while one is not reset every cycle is a new state."""
+    return [f"{m.machine.name}.{clock}" for m in program.machines for clock, cap in m.clock_caps.items() if cap is None]
+
+
 def growth_hint(program: Program, snapshots) -> str:
-    """What to say of a search that hit its state limit: the variables taking the most values, if any grows."""
+    """What to say of a search that hit its state limit: the variables taking the most values, if any grows, and
+    the clocks whose counts are never capped (a higher limit was no help for either)."""
     wide = widest_variables(program, snapshots)
-    if not wide:
-        return ""
-    named = ", ".join(f"{name} took {n} values" for name, n in wide)
-    return (f"; {named} in the states explored: a variable that grows without bound makes every state new, so "
-            "bound it in the model (e.g. a modulus) or compare it with a constant")
+    clocks = uncapped_clocks(program)
+    hint = ""
+    if wide:
+        named = ", ".join(f"{name} took {n} values" for name, n in wide)
+        hint = (f"; {named} in the states explored: a variable that grows without bound makes every state new, so "
+                "bound it in the model (e.g. a modulus) or compare it with a constant")
+    if clocks:
+        hint += (f"; clock {', '.join(clocks)} is compared with other than a constant, so its count is never capped "
+                 "and, while it is not reset, every cycle is a new state: the search may never end (compare it with "
+                 "a constant to verify the rest)")
+    return hint
 
 
 def _bound_variables(program: Program, event: str) -> set[str]:
@@ -194,8 +209,20 @@ def event_values(program: Program, domains: dict[str, list],
     return out, notes
 
 
+MAX_COMBINATIONS = 1_000_000  # input combinations tried in each state: more is neither held nor ever expanded
+
+
 def input_combinations(program: Program, values: dict[str, list]):
+    """Every set of input events with every choice of their values (one cycle's inputs). More than MAX_COMBINATIONS
+    is refused before any is made, saying how many each event brings (a domain of 100 000 values on a
+    record command with ten input events made 204 million, and MemoryError after 20 s)."""
     names = [ev.name for ev in program.inputs]
+    ways = {n: 1 + len(values.get(n, [None])) for n in names}  # absent, or present with each of its values
+    total = math.prod(ways.values())
+    if total > MAX_COMBINATIONS:
+        counts = ", ".join(f"{n} {k - 1}" for n, k in sorted(ways.items(), key=lambda item: -item[1]) if k > 2)
+        raise CotwinError(f"{total:,} input combinations in each state, more than {MAX_COMBINATIONS:,} "
+                          f"({len(names)} input events; values: {counts}): give fewer values with --domain")
     for mask in range(1 << len(names)):
         present = [n for i, n in enumerate(names) if mask >> i & 1]
         axes = [values.get(n, [None]) for n in present]
@@ -359,6 +386,8 @@ def format_report(program: Program, report: Report) -> str:
                      "each value of its type's default domain")
     sampled = (f"{', '.join(report.sampled)} took only sample values (0 and 1): give the values that matter "
                f"with --domain {report.sampled[0]}=V1,V2,...") if report.sampled else ""
+    if sampled and report.complete:  # else the INCOMPLETE line says it; "ok" alone claimed every value
+        lines.append(f"  NOT VERIFIED for every value: {sampled}; what holds below holds for those values only")
     if report.unbounded:
         lines.append(f"  INCOMPLETE: the search stopped after {report.states} states: {report.unbounded}"
                      + (f" ({sampled})" if sampled else ""))

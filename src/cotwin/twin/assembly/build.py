@@ -55,6 +55,25 @@ def folder_lock(folder: Path, writes: Iterable[str | Path] = (), reads: Iterable
         os.close(fd)
 
 
+def folder_holder(folder: str | Path) -> str | None:
+    """Who holds `folder` now (`folder_lock`: 'pid N'), or None when no cotwin run does or it cannot be told; a file
+    written into a folder a run holds was replaced by the run's own of that name, the command having said it was
+    written. (The lock is taken shared for an instant: a run starting in that instant is refused as in use.)"""
+    try:
+        fd = os.open(Path(folder) / ".cotwin.lock", os.O_RDONLY | os.O_NOFOLLOW)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return os.pread(fd, 64, 0).decode(errors="replace").strip() or "another process"
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    return None
+
+
 def _digest(*parts: bytes | str) -> str:
     h = hashlib.sha256()
     for part in parts:
