@@ -66,7 +66,9 @@ def _ik_tool(pmodel) -> str | None:
     arm = ik.arm_joints(tree, tool)
     if len(arm) < ARM_JOINTS:  # no arm for the IK (a mobile base, a hand): nothing to say
         return None
+    carried = [j.name for j in tree.joints if j.parent == tool.link]  # a hand's fingers (cotwin.pmodel.ik.hand_link)
     why = (f"the link carrying the fingers {', '.join(tool.fingers)}" if tool.fingers
+           else f"the hand at the end of the longest chain of moving joints, carrying {', '.join(carried)}" if carried
            else "the end of the longest chain of moving joints")
     task = ik.task_for(len(arm))
     reaches = f": {ik.REACHES[task]}" if task != "pose" else ""
