@@ -13,6 +13,7 @@ from click.testing import CliRunner
 
 from cotwin.cli import main
 from cotwin.pmodel import ik
+from cotwin.pmodel.grippers import gripper_links
 from cotwin.pmodel.tree import build_tree
 from cotwin.pmodel.urdf_import import import_urdf
 from cotwin.robosim.check import load_checked
@@ -96,3 +97,12 @@ def test_continuous_wrist_joints_take_the_short_way_between_neighbouring_holes(k
     assert first.ok() and second.ok()
     turned = {j: abs(second.q[j] - first.q[j]) for j in arm}
     assert max(turned.values()) < 1.0, turned
+
+
+def test_a_mobile_bases_two_suspensions_are_no_gripper(tmp_path_factory):
+    """TIAGo dual's base_link carries its two prismatic wheel suspensions: it was taken for the gripper, the IK's
+    tool the base and its arm empty. A gripper is below a moving joint."""
+    tree = _tree("robots/tiago_description/robots/tiago_dual.urdf", tmp_path_factory)
+    assert "base_link" not in gripper_links(tree)
+    tool = ik.find_tool(tree)
+    assert tool.link == "hand_right_palm_link" and len(ik.arm_joints(tree, tool)) == 8

@@ -13,7 +13,8 @@ The task follows the number of joints from the base to the tool (`task_for`):
 0 for "position"), so `IKResult.ok` judges a target by the same task the solver reached it for.
 
 The tool: a link named by the caller (`find_tool(tree, point, link=...)`, a cell geometry's `[tool] link`),
-else the link that carries two or more prismatic joints (the gripper body), else the hand on the way to the
+else the link below a moving joint that carries two or more prismatic joints (the gripper body; a mobile base's
+two prismatic suspensions are none), else the hand on the way to the
 leaf link with the most moving joints on its path from the base (the last such in the tree's order): the first
 link there that branches into two or more unbranched fingers, moving ones shorter than the arm (a hand's) or
 fixed bodies of two links or more (a gripper of fixed fingers; `hand_link`), else that leaf. Its tool point is
@@ -47,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from ..diagnostics import CotwinError
+from .grippers import gripper_links
 from .tree import KinematicTree, axis_angle, inverse
 
 TWO_PI = 2.0 * np.pi
@@ -96,9 +98,11 @@ def find_tool(tree: KinematicTree, point="fingertips", link: str | None = None) 
         candidates = [tree.link(link)]
     else:
         candidates = list(reversed(tree.links))
+    named = {c.name for c in candidates} if link is not None else set()
+    grippers = set(gripper_links(tree))  # below a moving joint: a mobile base's two suspensions are no gripper
     for link in candidates:
         fingers = [j for j in tree.joints if j.parent == link.name and j.kind == "prismatic"]
-        if len(fingers) >= 2:
+        if len(fingers) >= 2 and (link.name in named or link.name in grippers):
             branches = [[tree.link(j.child)] for j in fingers]
             return Tool(link.name, _hand_frame(tree, link, branches, point), tuple(j.name for j in fingers))
     end = candidates[0].name if len(candidates) == 1 else _chain_end(tree)
