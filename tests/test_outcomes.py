@@ -287,17 +287,30 @@ def test_a_move_that_never_completes_says_which_joint_is_at_its_effort_limit(pro
     gave, and the run said only 'accepted, never completed'. It now names the joints pushing at their effort
     limit at the end. Here the UR5e's shoulder lift is given 0.05 N m, too weak to swing the arm (its weight
     compensated) to its goal in time."""
-    pm = project / "ur5e.pm"
-    text = pm.read_text()
-    lift = text.index("jref shoulder_lift_joint")
-    at = text.index("effort = 150", lift)
-    pm.write_text(text[:at] + "effort = 0.05" + text[at + len("effort = 150"):])
+    _weaken_shoulder_lift(project)
     (project / "plan.csv").write_text(HEADER + "1000,true,0,23,1\n")
     proc = cotwin("run", project / "cotwin.toml", "-o", tmp_path / "out", "--end", "8")
     assert proc.returncode == 0, proc.stderr
     assert "accepted, never completed" in proc.stdout
     assert ("warning: 1 command(s) never completed, and at the end these joints pushed at their effort limit: "
             "shoulder_lift_joint (0.05)") in proc.stderr
+
+
+def test_a_whatif_that_never_completes_says_which_joint_is_at_its_effort_limit(project, tmp_path):
+    _weaken_shoulder_lift(project)
+    (tmp_path / "plan.csv").write_text(HEADER + "1000,true,0,23,1\n")
+    proc = cotwin("whatif", project / "cotwin.toml", "--plan", tmp_path / "plan.csv", "--horizon", "8")
+    assert proc.returncode == 0, proc.stderr
+    assert ("warning: 1 command(s) never completed, and at the end these joints pushed at their effort limit: "
+            "shoulder_lift_joint (0.05)") in proc.stderr
+
+
+def _weaken_shoulder_lift(project) -> None:
+    """The UR5e example's shoulder lift given 0.05 N m instead of 150."""
+    pm = project / "ur5e.pm"
+    text = pm.read_text()
+    at = text.index("effort = 150", text.index("jref shoulder_lift_joint"))
+    pm.write_text(text[:at] + "effort = 0.05" + text[at + len("effort = 150"):])
 
 
 def test_a_completed_run_says_nothing_of_effort_limits(project, tmp_path):
