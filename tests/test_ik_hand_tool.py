@@ -106,3 +106,14 @@ def test_a_mobile_bases_two_suspensions_are_no_gripper(tmp_path_factory):
     assert "base_link" not in gripper_links(tree)
     tool = ik.find_tool(tree)
     assert tool.link == "hand_right_palm_link" and len(ik.arm_joints(tree, tool)) == 8
+
+
+def test_the_import_names_the_other_hand_of_a_two_armed_robot(tmp_path):
+    """TIAGo dual has a hand on each arm: the import said which the IK takes, not that there is another."""
+    urdf = robot_data() / "robots/tiago_description/robots/tiago_dual.urdf"
+    if not urdf.is_file():
+        pytest.skip(f"example-robot-data has no {urdf}")
+    run = CliRunner().invoke(main, ["import-urdf", str(urdf), "-o", str(tmp_path / "tiago_dual")])
+    assert run.exit_code == 0, run.output
+    assert "inverse_kinematics: tool link hand_right_palm_link (the hand " in run.output
+    assert "; it is one of 2 hands (also hand_left_palm_link): to drive another arm" in run.output

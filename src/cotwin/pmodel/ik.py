@@ -155,6 +155,14 @@ def _chain(tree: KinematicTree, link: str) -> list[str] | None:
         links.append(below[0].child)
 
 
+def hands(tree: KinematicTree) -> list[str]:
+    """Every hand of the tree (`hand_link` on the way to each leaf), in the tree's order: a robot of two arms with
+    hands has two, the IK's default tool is one of them."""
+    parents = {j.parent for j in tree.joints}
+    found = {hand_link(tree, l.name) for l in tree.links if l.name not in parents and l.name != tree.root.name}
+    return [l.name for l in tree.links if l.name in found]
+
+
 def hand_link(tree: KinematicTree, end: str) -> str | None:
     """The hand on the way to the leaf `end`: the first link below a moving joint that branches into two or more
     unbranched fingers, either moving ones (a hand's: each of fewer moving joints than the arm up to it, so a
