@@ -280,3 +280,40 @@ def test_a_plan_rows_cells_for_an_event_it_does_not_raise_leave_the_last_command
         calls = [(r["time"], *(r["{dmodel}.dmodel.target_" + a] for a in "XYZ")) for r in csv.DictReader(f)
                  if r["{dmodel}.dmodel.movediscrete"] == "true"]
     assert calls == [("0.6", "3", "13", "2")]
+
+
+def test_a_move_that_never_completes_says_which_joint_is_at_its_effort_limit(project, tmp_path):
+    """Found on TIAGo (example-robot-data): its arm_3_joint, limited to 17.86 N m, could not hold a posture the IK
+    gave, and the run said only 'accepted, never completed'. It now names the joints pushing at their effort
+    limit at the end. Here the UR5e's shoulder lift is given 0.05 N m, too weak to swing the arm (its weight
+    compensated) to its goal in time."""
+    _weaken_shoulder_lift(project)
+    (project / "plan.csv").write_text(HEADER + "1000,true,0,23,1\n")
+    proc = cotwin("run", project / "cotwin.toml", "-o", tmp_path / "out", "--end", "8")
+    assert proc.returncode == 0, proc.stderr
+    assert "accepted, never completed" in proc.stdout
+    assert ("warning: 1 command(s) never completed, and at the end these joints pushed at their effort limit: "
+            "shoulder_lift_joint (0.05)") in proc.stderr
+
+
+def test_a_whatif_that_never_completes_says_which_joint_is_at_its_effort_limit(project, tmp_path):
+    _weaken_shoulder_lift(project)
+    (tmp_path / "plan.csv").write_text(HEADER + "1000,true,0,23,1\n")
+    proc = cotwin("whatif", project / "cotwin.toml", "--plan", tmp_path / "plan.csv", "--horizon", "8")
+    assert proc.returncode == 0, proc.stderr
+    assert ("warning: 1 command(s) never completed, and at the end these joints pushed at their effort limit: "
+            "shoulder_lift_joint (0.05)") in proc.stderr
+
+
+def _weaken_shoulder_lift(project) -> None:
+    """The UR5e example's shoulder lift given 0.05 N m instead of 150."""
+    pm = project / "ur5e.pm"
+    text = pm.read_text()
+    at = text.index("effort = 150", text.index("jref shoulder_lift_joint"))
+    pm.write_text(text[:at] + "effort = 0.05" + text[at + len("effort = 150"):])
+
+
+def test_a_completed_run_says_nothing_of_effort_limits(project, tmp_path):
+    (project / "plan.csv").write_text(HEADER + "1000,true,0,23,1\n")
+    proc = cotwin("run", project / "cotwin.toml", "-o", tmp_path / "out", "--end", "8")
+    assert proc.returncode == 0 and "completed at t = " in proc.stdout and "effort limit" not in proc.stderr

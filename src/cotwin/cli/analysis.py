@@ -93,7 +93,8 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
                f"{prediction.wall_seconds:.2f} s)")
     if out:
         write_text(out, json.dumps(prediction.as_dict(), indent=1) + "\n", [*system.spec.inputs, plan, state])
-    outcomes({"": Summary(prediction.commands, prediction.blocked)}, strict, per_command=False)  # said above
+    outcomes({"": Summary(prediction.commands, prediction.blocked, prediction.saturated)}, strict,
+             per_command=False)  # said above
 
 
 NEVER_DONE = ("not taken", "infeasible", "stopped")  # verdicts no longer horizon would change

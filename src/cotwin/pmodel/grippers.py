@@ -6,9 +6,20 @@ from __future__ import annotations
 
 
 def gripper_links(tree) -> list[str]:
-    """The links carrying two prismatic joints or more, in the tree's order."""
-    return [link.name for link in tree.links
-            if sum(1 for j in tree.joints if j.parent == link.name and j.kind == "prismatic") >= 2]
+    """The links below a moving joint carrying two prismatic joints or more, in the tree's order: a gripper is on an
+    arm (TIAGo dual's base_link, carrying its two wheel suspensions, was taken for its gripper, the IK's arm empty)."""
+    parent_of = {j.child: j for j in tree.joints}
+
+    def moved(link: str) -> bool:
+        while link in parent_of:
+            joint = parent_of[link]
+            if joint.kind != "fixed":
+                return True
+            link = joint.parent
+        return False
+
+    return [link.name for link in tree.links if moved(link.name)
+            and sum(1 for j in tree.joints if j.parent == link.name and j.kind == "prismatic") >= 2]
 
 
 def beyond(tree, joint: str) -> list[str]:

@@ -13,21 +13,25 @@ The task follows the number of joints from the base to the tool (`task_for`):
 0 for "position"), so `IKResult.ok` judges a target by the same task the solver reached it for.
 
 The tool: a link named by the caller (`find_tool(tree, point, link=...)`, a cell geometry's `[tool] link`),
-else the link that carries two or more prismatic joints (the gripper body), else the leaf link with the
-most moving joints on its path from the base (the last such in the tree's order). Its tool point is
+else the link below a moving joint that carries two or more prismatic joints (the gripper body; a mobile base's
+two prismatic suspensions are none), else the hand on the way to the
+leaf link with the most moving joints on its path from the base (the last such in the tree's order): the first
+link there that branches into two or more unbranched fingers, moving ones shorter than the arm (a hand's) or
+fixed bodies of two links or more (a gripper of fixed fingers; `hand_link`), else that leaf. Its tool point is
 the flange (the tool link's origin), the fingertips (a gripper's: between the fingers, where their
 geometry ends along the approach axis; the flange for a link without fingers) or an explicit offset
 (x, y, z) in the tool link's frame; the tool frame has the tool link's orientation turned so that its
-z axis is the approach axis (from the flange towards the fingers; the link's own z without fingers).
+z axis is the approach axis (from the flange towards the fingers, a hand's too; the link's own z without).
 
 Determinism: the same target gives the same joints whatever the arm's current posture. The solver
 starts damped Newton iterations from a fixed set of seeds (the reference posture, the reference
 turned towards the target, and fixed pseudo-random postures), keeps the converged solution nearest
 the reference posture (the branch: shoulder, elbow and wrist configuration; the last joint, a
 6-axis arm's tool roll, only breaks ties), puts every joint on the
-turn (q + 2 pi k, within limits) nearest the reference, and only the base joint on the turn nearest
-its current angle, so that the arm never unwinds a full turn to reach a target (a base whose limits
-allow one turn only is never moved: the same joints, bit for bit, from any start).
+turn (q + 2 pi k, within limits) nearest the reference, and only the base joint and the joints without
+limits (URDF continuous: unbounded here, not one turn) on the turn nearest their current angle, so that the
+arm never unwinds a full turn to reach a target (a base whose limits allow one turn only is never moved: the
+same joints, bit for bit, from any start).
 
 Redundant arms (more joints than the 6 a pose fixes): each converged solution is moved along its
 self-motion (the Jacobian's null space), the pose held and joint limits respected, to the posture
@@ -44,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from ..diagnostics import CotwinError
+from .grippers import gripper_links
 from .tree import KinematicTree, axis_angle, inverse
 
 TWO_PI = 2.0 * np.pi
@@ -93,24 +98,38 @@ def find_tool(tree: KinematicTree, point="fingertips", link: str | None = None) 
         candidates = [tree.link(link)]
     else:
         candidates = list(reversed(tree.links))
+    named = {c.name for c in candidates} if link is not None else set()
+    grippers = set(gripper_links(tree))  # below a moving joint: a mobile base's two suspensions are no gripper
     for link in candidates:
         fingers = [j for j in tree.joints if j.parent == link.name and j.kind == "prismatic"]
-        if len(fingers) >= 2:
-            centres, corners = [], []
-            for j in fingers:
-                child = tree.link(j.child)
-                local = inverse(link.pose) @ child.pose
-                points = [local @ g.pose[:, 3] for g in child.geoms] or [local[:, 3]]
-                centres.append(np.mean(points, axis=0)[:3])
-                for g in child.geoms:
-                    corners.extend((local @ g.pose @ np.append(c, 1.0))[:3] for c in _corners(g))
-            mid = np.mean(centres, axis=0)
-            approach = mid / np.linalg.norm(mid) if np.linalg.norm(mid) > 1e-9 else np.array([0.0, 0.0, 1.0])
-            reach = max((c @ approach for c in corners), default=mid @ approach)
-            tip = mid + (reach - mid @ approach) * approach
-            return Tool(link.name, _tool_frame(approach, tip, point), tuple(j.name for j in fingers))
+        if len(fingers) >= 2 and (link.name in named or link.name in grippers):
+            branches = [[tree.link(j.child)] for j in fingers]
+            return Tool(link.name, _hand_frame(tree, link, branches, point), tuple(j.name for j in fingers))
     end = candidates[0].name if len(candidates) == 1 else _chain_end(tree)
+    hand = None if len(candidates) == 1 else hand_link(tree, end)
+    if hand is not None:
+        branches = [[tree.link(name) for name in _chain(tree, j.child)] for j in tree.joints if j.parent == hand]
+        return Tool(hand, _hand_frame(tree, tree.link(hand), branches, point), ())
     return Tool(end, _tool_frame(np.array([0.0, 0.0, 1.0]), np.zeros(3), point), ())
+
+
+def _hand_frame(tree: KinematicTree, link, branches: list[list], point) -> np.ndarray:
+    """The tool frame of a link carrying fingers (each branch the links of one finger): approach from the link
+    towards the fingers' middle, the tip where their geometry ends along it."""
+    centres, corners = [], []
+    for finger in branches:
+        points = []
+        for child in finger:
+            local = inverse(link.pose) @ child.pose
+            points.extend(local @ g.pose[:, 3] for g in child.geoms)
+            for g in child.geoms:
+                corners.extend((local @ g.pose @ np.append(c, 1.0))[:3] for c in _corners(g))
+        centres.append(np.mean(points or [(inverse(link.pose) @ finger[0].pose)[:, 3]], axis=0)[:3])
+    mid = np.mean(centres, axis=0)
+    approach = mid / np.linalg.norm(mid) if np.linalg.norm(mid) > 1e-9 else np.array([0.0, 0.0, 1.0])
+    reach = max((c @ approach for c in corners), default=mid @ approach)
+    tip = mid + (reach - mid @ approach) * approach
+    return _tool_frame(approach, tip, point)
 
 
 def _chain_end(tree: KinematicTree) -> str:
@@ -122,6 +141,52 @@ def _chain_end(tree: KinematicTree) -> str:
     leaves = [l.name for l in tree.links if l.name not in parents]
     most = max(moving[l] for l in leaves)
     return [l for l in leaves if moving[l] == most][-1]
+
+
+def _chain(tree: KinematicTree, link: str) -> list[str] | None:
+    """The links from `link` down while each has one child joint at most (a finger); None where it branches."""
+    links = [link]
+    while True:
+        below = [j for j in tree.joints if j.parent == links[-1]]
+        if len(below) > 1:
+            return None
+        if not below:
+            return links
+        links.append(below[0].child)
+
+
+def hands(tree: KinematicTree) -> list[str]:
+    """Every hand of the tree (`hand_link` on the way to each leaf), in the tree's order: a robot of two arms with
+    hands has two, the IK's default tool is one of them."""
+    parents = {j.parent for j in tree.joints}
+    found = {hand_link(tree, l.name) for l in tree.links if l.name not in parents and l.name != tree.root.name}
+    return [l.name for l in tree.links if l.name in found]
+
+
+def hand_link(tree: KinematicTree, end: str) -> str | None:
+    """The hand on the way to the leaf `end`: the first link below a moving joint that branches into two or more
+    unbranched fingers, either moving ones (a hand's: each of fewer moving joints than the arm up to it, so a
+    torso's arms are no fingers) or, with no moving joint below, bodies of two links or more (a gripper's fixed
+    fingers and their tips; a flange's tool0 beside its ee_link are no fingers). None: no hand, the leaf is the
+    tool.
+    Without this, the tool was one fingertip (the Kinova's, its approach axis sideways) or a finger's joints
+    were the arm's last (TIAGo's)."""
+    arm = 0
+    for joint in _path(tree, end):
+        arm += joint.kind != "fixed"
+        below = [j for j in tree.joints if j.parent == joint.child]
+        if not arm or len(below) < 2:
+            continue
+        fingers = [_chain(tree, j.child) for j in below]
+        if any(f is None for f in fingers):
+            continue
+        moving = [sum(j.kind != "fixed" for j in tree.joints if j.child in f) for f in fingers]
+        if any(moving):
+            if sum(1 for m in moving if m) >= 2 and max(moving) < arm:
+                return joint.child
+        elif sum(1 for f in fingers if len(f) >= 2 and any(tree.link(name).geoms for name in f)) >= 2:
+            return joint.child
+    return None
 
 
 def _tool_frame(approach: np.ndarray, tip: np.ndarray, point) -> np.ndarray:
@@ -196,8 +261,11 @@ class Chain:
             self.joints.append(joint.name)
             self.kinds.append(joint.kind)
             self.axes.append(np.asarray(joint.axis, float))
-            lower = joint.lower if joint.lower is not None else -np.pi
-            upper = joint.upper if joint.upper is not None else np.pi
+            # a joint without limits (URDF continuous) is unbounded: bounded to one turn, a wrist crossing pi
+            # unwound a full turn (the Kinova Jaco2's, 10 s at its 0.63 rad/s) for a target a degree away
+            free = np.inf if joint.kind == "revolute" else np.pi
+            lower = joint.lower if joint.lower is not None else -free
+            upper = joint.upper if joint.upper is not None else free
             self.limits.append((float(lower), float(upper)))
             self.before.append(pending @ before)
             self.after.append(after)
@@ -400,12 +468,16 @@ class Solver:
         return self.near(self.branch(target), current)
 
     def near(self, result: IKResult, current: dict[str, float] | None) -> IKResult:
-        """The same solution with the base joint on the turn nearest its current angle."""
-        base = self.joints[0] if self.joints else None
-        if current is None or base is None or self.chain.kinds[0] != "revolute" or base not in current:
+        """The same solution with the base joint, and every joint without limits (a continuous wrist), on the
+        turn nearest its current angle: a continuous tool roll on the reference's nearest turn swung a full
+        turn between neighbouring targets whose roll straddled the reference's opposite angle."""
+        if current is None:
             return result
         q = dict(result.q)
-        q[base] = self._nearest_turn(q[base], float(current[base]), 0)
+        for k, joint in enumerate(self.joints):
+            unlimited = np.isinf(self.chain.limits[k]).all()
+            if self.chain.kinds[k] == "revolute" and (k == 0 or unlimited) and joint in current:
+                q[joint] = self._nearest_turn(q[joint], float(current[joint]), k)
         return IKResult(q, result.position_error, result.angle_error, result.iterations)
 
     def branch(self, target) -> IKResult:

@@ -185,6 +185,19 @@ class PlatformSimulator:
         joint_of = {self._actuator[j]: j for j in self._joint_qpos}
         return {name: joint_of[index] for name, index in self._actuator.items()}
 
+    def saturated(self) -> list[tuple[str, float]]:
+        """The joints whose actuator pushes at its force limit now (the URDF's effort), each with that limit: a
+        servo too weak to hold or reach its goal, why a move can never complete."""
+        out = []
+        for name in self._joint_qpos:
+            index = self._actuator[name]
+            if not self.model.actuator_forcelimited[index]:
+                continue
+            limit = float(self.model.actuator_forcerange[index][1])
+            if limit > 0 and abs(float(self.data.actuator_force[index])) >= limit * (1.0 - 1e-6):
+                out.append((name, limit))
+        return out
+
     # ---- the API ----
     def reset(self, q: dict[str, float] | None = None) -> None:
         """Back to the model's initial state (joints at q, default their start: 0 or the limit nearest it),

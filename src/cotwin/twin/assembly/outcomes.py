@@ -161,6 +161,8 @@ class CommandOutcome:
 class Summary:
     outcomes: list[CommandOutcome]
     blocked: list[str] = field(default_factory=list)  # cotwin.twin.assembly.waits: waits for answers that cannot come
+    saturated: list[tuple[str, float]] = field(default_factory=list)  # joints at their effort limit at the end, each
+    # with it (cotwin.pmodel.simulator.PlatformSimulator.saturated): why a move may never complete
 
     def counts(self) -> dict[str, int]:
         out = {"completed": 0, "stopped": 0, "infeasible": 0, "not taken": 0, "never completed": 0, "not applied": 0}
@@ -182,6 +184,11 @@ class Summary:
             applied = len(self.outcomes) - counts["not applied"]  # one due after the end was never applied
             out.append(f"no command completed ({applied} applied)" if applied == len(self.outcomes) else
                        f"no command completed ({applied} of {len(self.outcomes)} applied)")
+        if counts["never completed"] and self.saturated:
+            joints = ", ".join(f"{name} ({limit:g})" for name, limit in self.saturated)
+            out.append(f"{counts['never completed']} command(s) never completed, and at the end these joints pushed "
+                       f"at their effort limit: {joints}: too weak to reach or hold the goal against its inertia, a "
+                       "load or a contact (the p-model's limit effort, the URDF's <limit effort>)")
         return out
 
     def strict_failures(self) -> list[str]:
@@ -418,9 +425,10 @@ class CommandLedger(Observer):
             names.append(leaves[index] if isinstance(index, int) and 0 <= index < len(leaves) else "none")
         return ", ".join(names)
 
-    def summary(self, blocked=(), waiting=()) -> Summary:
-        """The outcomes so far, the commands `waiting` (not applied by the end) after them."""
-        return Summary([*self.outcomes, *waiting], [str(b) for b in blocked])
+    def summary(self, blocked=(), waiting=(), saturated=()) -> Summary:
+        """The outcomes so far, the commands `waiting` (not applied by the end) after them; `saturated`: the joints
+        at their effort limit at the end (Summary.saturated)."""
+        return Summary([*self.outcomes, *waiting], [str(b) for b in blocked], list(saturated))
 
 
 def not_applied(source) -> list[CommandOutcome]:

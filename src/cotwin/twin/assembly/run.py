@@ -148,7 +148,8 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
             raise Interrupted(f"interrupted while drawing the figure; the run is complete: {result.rows} row(s) "
                               f"to t = {result.end_time:g} s in {out / 'outputs.csv'}") from None
         return TwinRun(result, out / "outputs.csv", figure, cosim, units, watch.found,
-                       ledger.summary(watch.found, not_applied(units.get("source"))))
+                       ledger.summary(watch.found, not_applied(units.get("source")),
+                                      endpoint.sim.saturated() if endpoint.sim is not None else ()))
 
 
 def path_columns(system: TwinSystem) -> tuple[str, str] | None:

@@ -62,6 +62,7 @@ class Prediction:
     wall_seconds: float
     blocked: list[str] = field(default_factory=list)  # waits for answers that cannot come (cotwin.twin.assembly.waits)
     native_steps: int = 0  # of its steps, those made in the native loop (cotwin.cosim.native)
+    saturated: list = field(default_factory=list)  # (joint, limit): at their effort limit at the end (Summary.saturated)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -479,7 +480,8 @@ class Watch(Stop):
         completion = max(done) if done and all(d is not None for d in done) else (None if outcomes else execution.time)
         return Prediction(start, execution.time, execution.step_size, outcomes, self.states, self.trajectory,
                           collisions, completion, wallclock.perf_counter() - started,
-                          [str(b) for b in self.waits.found])
+                          [str(b) for b in self.waits.found],
+                          saturated=self.contacts.sim.saturated() if self.contacts.sim is not None else [])
 
 
 def occurrences(program, events: set[str], plan: list[Command]) -> list[tuple[Command, str, dict]]:
