@@ -18,12 +18,15 @@ speed as a share of the same scene's physics alone, measured in this run.
   (`cotwin sweep --threads`), against a fresh fork per what-if stepped by the master's loop (the way before
   issue 23; 44 s on this machine then): goal >= 5x on the threads, and the same answers.
 Times are the best of a few repetitions, the peers measured between the twin's runs (the machine is a shared
-VM whose speed drifts by 10-50% within minutes); the shares of physics-only speed the goals judge are the median
+VM whose speed drifts by 10-50% within minutes), each timed run and peer started with Python's collector emptied
+(pyperf's practice: a collection of older generations left over from earlier work, the FMU path's motion run
+above all, cost one timed run 1.2 to 38 ms); the shares of physics-only speed the goals judge are the median
 of paired ratios (each twin run against the peer run right after it), the best against the best printed beside.
 """
 
 from __future__ import annotations
 
+import gc
 import os
 import shutil
 import statistics
@@ -120,6 +123,7 @@ def physics_moving(twin, setpoints: np.ndarray) -> float:
     periods = min(len(setpoints), int(round(END / CONTROL_PERIOD)))
     flat = np.ascontiguousarray(setpoints[:periods])
     assert flat.shape[1] == sim.model.nu
+    gc.collect()
     t0 = time.perf_counter()
     fn(ctypes.c_void_p(_mj_step()), ctypes.c_void_p(sim.model._address), ctypes.c_void_p(sim.data._address),
        ctypes.c_void_p(sim.data.ctrl.ctypes.data), ctypes.c_void_p(flat.ctypes.data), periods, sim.model.nu, per)
@@ -158,6 +162,7 @@ def profile(twin, build_dir: Path, folder: Path, step: float, physics: float) ->
     PlatformSimulator.step = lambda self, *a: timers["held"](self, *a)
     native._CACHE.clear()
     watch = Stopwatch()
+    gc.collect()
     try:
         ran = run_twin(twin, folder, step=step, plot=False, observers=[watch])
     finally:
@@ -189,6 +194,7 @@ def experiment(twin, build_dir: Path, folder: Path, step: float, fused: bool = T
     for name in ("dmodel.fmu", "build.json"):
         shutil.copy(build_dir / name, folder / name)
     watch = Stopwatch()
+    gc.collect()  # every timed run (and peer) starts with the collector empty: see the module doc
     ran = run_twin(twin, folder, step=step, plot=False, observers=[watch], fused=fused)
     assert ran.result.stepping == ("fused" if fused else "step by step"), ran.result.stepping
     return watch.seconds
@@ -262,6 +268,7 @@ def whatif(twin, out: Path, peer) -> None:
     for k in range(6):
         limit = min(limit, peer())
         for fused in (True, False):
+            gc.collect()
             t0 = time.perf_counter()
             prediction = predict(twin, twin.commands, state, horizon=25.0, artefacts=folder, fused=fused)
             if k:

@@ -13,6 +13,7 @@ Figures are the best of a few repetitions: the machine is shared; ratios are tak
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import shutil
@@ -53,6 +54,7 @@ def physics_alone(twin) -> float:
     """Seconds for END s of the twin's scene physics: the simulator's model, one mj_step call."""
     sim = PlatformSimulator(twin.models.tree, twin.models.scene)
     steps = int(round(END / sim.timestep))
+    gc.collect()
     t0 = time.perf_counter()
     mujoco.mj_step(sim.model, sim.data, steps)
     return time.perf_counter() - t0
