@@ -334,11 +334,11 @@ class Watch(Stop):
     """What a what-if sees after each step (its trajectory, the d-model's state changes, collisions, contacts,
     how long the arm has rested) and whether it has seen enough (`reached`): the plan applied and then done,
     blocked, or ignored, or the horizon passed. Told of a native stretch's repeated steps at once, in which no
-    state changed and no command was shown (`whole_changes`: those are steps it sees whole), so the arm rests or
-    moves as at its start; a collision event is read from the rows, and the simulator's contact watch ended the
-    stretch at any step with a contact (cotwin.mapping.cstep). What it asks of the ledger (a command applied,
-    taken, done) changes only at such steps, or in time: `quiet_for` ends a stretch at the first step at which
-    the what-if could be over."""
+    command was shown and no machine came to rest (`whole_changes`, `whole_values`: those are steps it sees
+    whole); the states entered among them, a collision event and the trajectory are read from the rows, and the
+    simulator's contact watch ended the stretch at any step with a contact (cotwin.mapping.cstep). What it asks of
+    the ledger (a command applied, done) and of the wait watch (a wait blocked) changes only at such steps, or
+    in time: `quiet_for` ends a stretch at the first step at which the what-if could be over."""
 
     def __init__(self, fork, endpoint, plan, start: float, horizon: float, settle: float, decimate: int,
                  waits: WaitWatch, ledger: CommandLedger, contacts: _Contacts | None = None):
@@ -351,6 +351,7 @@ class Watch(Stop):
         self.state_ports = [(program.state_port(m), m) for m in program.machines]
         self.whole = [(DMODEL.name, port) for port, _ in self.state_ports] + \
             [(fork.source.name, event) for event in sorted(fork.command_events)] if fork.source is not None else None
+        self.rest_leaves = {(DMODEL.name, port): [ledger.rest[port]] for port, _ in self.state_ports}
         self.collision_events = [e for e in platform if e.lower() == "collision"]
         self.contacts = contacts.again() if contacts is not None else _Contacts(endpoint, fork.models.tree, fork.models.tool)
         self.trajectory: dict[str, list[float]] = {"time": [], **{v: [] for v in self.monitored}}
@@ -420,6 +421,12 @@ class Watch(Stop):
         the rest the arm took from the first of them (see the class doc)."""
         times, steps = rows.times, rows.steps
         self._entered(times[0], list(rows.row(0, self._state_slots)))  # a run's first rows: its states seen here
+        for k in rows.changes(self._state_slots):  # states entered among them (none a machine's rest: whole_values)
+            current = list(rows.row(k, self._state_slots))
+            self._entered(times[k], current)
+            self.resting = self.ledger.resting(current)
+            if not self.resting:
+                self.at_rest_since = None
         kept = [k for k, s in enumerate(steps) if (s + 1) % self.decimate == 0]
         if kept:
             self.trajectory["time"].extend(times[k] for k in kept)
@@ -432,6 +439,10 @@ class Watch(Stop):
 
     def whole_changes(self, execution) -> list | None:
         return self.whole  # the states and the commands shown (see the class doc); None without a command source
+
+    def whole_values(self, execution) -> dict:
+        """Of the states, the leaf each machine rests in: coming to rest starts the settling it times."""
+        return self.rest_leaves
 
     def quiet_for(self, execution) -> int | None:
         """Steps until the first at which the what-if could be over, its discrete values as they are now: the
@@ -446,7 +457,7 @@ class Watch(Stop):
         if since is not None:
             turns.append((lambda x: x - since >= settle, since + settle))
         outcomes = self.ledger.outcomes
-        if outcomes and outcomes[-1].delivered is not None:
+        if outcomes and outcomes[-1].delivered is not None and not outcomes[-1].accepted:  # taken: for good
             delivered = outcomes[-1].delivered
             turns.append((lambda x: x - delivered >= settle + 3 * h, delivered + settle + 3 * h))
         bounds = [_first(lambda k: turned(at(k)), (about - t) / h) for turned, about in turns if not turned(t)]
