@@ -310,7 +310,7 @@ class NativeLoop:
         for value in data:
             if value is UNSET:
                 return 0
-        for i in self._held(data):
+        for i in self._still + self._kept(data):
             value = data[i]
             if value.__class__ not in _PLAIN or (value.__class__ is int and abs(value) > 2 ** 53):
                 why = "a value on a connection is not a number a double carries exactly"
@@ -329,10 +329,10 @@ class NativeLoop:
                 return 0
         return n
 
-    def _held(self, data: list) -> list[int]:
-        """The slots held as they are in a stretch starting now: those no C writes, and those holding a value of
-        another class than their port's (the unit's `quiet` sees that its C leaves them be)."""
-        return self._still + [i for i, cls in self._classes if data[i].__class__ is not cls]
+    def _kept(self, data: list) -> list[int]:
+        """The slots C writes that a stretch starting now holds as they are, besides those no C writes: they hold a
+        value of another class than their port's (the unit's `quiet` sees that its C leaves them be)."""
+        return [i for i, cls in self._classes if data[i].__class__ is not cls]
 
     def idle(self) -> str:
         """Why steps were left to Python, the most frequent reason first (for a run that made none here)."""
@@ -358,8 +358,8 @@ class NativeLoop:
         data = algorithm.data
         # the rows' kinds this segment: C writes its slots as their ports' types; the others hold still, as
         # the Python objects they are (an Integer 0 in a Real port stays 0), and are put back as they were
-        held = {i: data[i] for i in self._held(data)}
-        kept = [i for i, cls in self._classes if data[i].__class__ is not cls]  # C-written slots held this stretch
+        kept = self._kept(data)
+        held = {i: data[i] for i in self._still + kept}
         kinds = self._kinds_of(held)
         for part in self.parts:
             part.begin()

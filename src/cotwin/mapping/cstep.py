@@ -309,6 +309,7 @@ class QuietStep:
         self._move = None
         self._addressed: tuple | None = None  # (model, data, controls, move arrays, watch) `pointers` has addresses of
         self._acted = False  # Python ran the operations called before the next segment
+        self.calling = False  # (Jacobi) an operation is called, which Python runs before the next segment
         self.refusal = ""  # why `quiet` last said 0
 
     def _lines(self, event_slots: dict[str, int], monitored_slots: dict[str, int]) -> list[str]:
@@ -370,40 +371,52 @@ class QuietStep:
         lines += [f"N[{slot}] = outs[{self.names.index(name)}];" for name, slot in event_slots.items()]
         return lines
 
-    def quiet(self, n: int, data: list, jacobi: bool, acting: bool = False) -> int:
-        """How many of the next n steps the mapping can make natively now: none while an answer waits, an
-        operation was asked, or (Jacobi) is called, unless `acting`: Python runs it before the first step
-        (Mapping.act, then `acted`); none when the move in flight cannot run in C or a variable the events read
-        is not a plain number; at most about 20 000 physics steps."""
+    def quiet(self, n: int, data: list, jacobi: bool) -> int:
+        """How many of the next n steps the mapping can make natively now: none while an answer waits or an
+        operation was asked (its report not made yet), when the move in flight cannot run in C or a variable the
+        events read is not a plain number; at most about 20 000 physics steps. `calling`: (Jacobi) an operation is
+        called, which Python runs before the first step (Mapping.act, then `acted`)."""
         mapping = self.mapping
-        if mapping.pending or mapping.asked or (jacobi and not acting and any(data[i] is True for i in self.op_slots)):
+        self.calling = jacobi and any(data[i] is True for i in self.op_slots)
+        if mapping.asked:
             self.refusal = "an operation runs or an answer waits"
-            return 0
-        if self.endpoint.native_move() is False:
-            self.refusal = "the move in flight cannot run in C"
             return 0
         if self.sim.contact_watch is not None and not self.headers:
             self.refusal = "its contacts are watched after each step and MuJoCo's C headers are not installed"
             return 0
-        values = variable_values(mapping, self.events.variables, self.events.kinds)
-        if values is None:
-            self.refusal = "a variable its events read is no longer a number of its kind a double carries exactly"
+        if not self._goes_on():
             return 0
-        self._values = values
         return min(n, max(1, MAX_PHYSICS // max(1, self.steps)))
 
     def acted(self) -> bool:
         """After Python ran the operations called (before the segment's first step): whether the segment can go on
-        in C (the new move runs in C, the variables are plain numbers, no answer waits); its first step then
-        reports the answers the operations asked anew."""
+        in C; its first step then reports the answers the operations asked anew."""
+        self._acted = self._goes_on()
+        return self._acted
+
+    def _goes_on(self) -> bool:
+        """Whether the C can make the mapping's next steps as it is now: no answer waits, the move in flight runs in
+        C, the variables the events read are plain numbers (kept for `begin`); else `refusal` says why not."""
         mapping = self.mapping
-        if mapping.pending or self.endpoint.native_move() is False:
+        if mapping.pending:
+            self.refusal = "an operation runs or an answer waits"
+            return False
+        if self.endpoint.native_move() is False:
+            self.refusal = "the move in flight cannot run in C"
             return False
         values = variable_values(mapping, self.events.variables, self.events.kinds)
         if values is None:
+            self.refusal = "a variable its events read is no longer a number of its kind a double carries exactly"
             return False
-        self._values, self._acted = values, True
+        self._values = values
         return True
+
+    @property
+    def ready(self) -> str:
+        """The C condition a step starts on (Jacobi, NativePart.ready): no operation called, unless Python ran it
+        before the segment's first step (ACTED); "" where nothing is called."""
+        ops = " || ".join(f"IN({i}) != 0.0" for i in self.op_slots)
+        return f"!(({ops}) && DD[{ACTED}] == 0.0)" if ops else ""
 
     def begin(self) -> None:
         """The pointers and doubles of the segment about to run (after `quiet`, and `acted` where operations ran)."""

@@ -104,36 +104,30 @@ class MappingUnit(PythonUnit):
         """Its quiet step for the native loop (cotwin.mapping.cstep.QuietStep: the platform moves, the mirrors and
         events in C), or why it has none; after a stretch, its ports and time as `step` leaves them."""
         from ...cosim.native import NativePart, feeds, outputs
-        from ...mapping.cstep import ACTED, QuietStep
+        from ...mapping.cstep import QuietStep
 
         out = outputs(execution, self)
         if any(p.name not in out for p in self.event_ports) or any(m not in out for m in self.monitored):
             return "an output of the mapping is not observed"
         calls = {op for op, _ in self.calls}
-        quiet = QuietStep(self.mapping, execution.step_size, [slot for name, slot in feeds(execution, self) if name in calls],
+        fed = feeds(execution, self)
+        quiet = QuietStep(self.mapping, execution.step_size, [slot for name, slot in fed if name in calls],
                           {p.name: out[p.name] for p in self.event_ports}, {m: out[m] for m in self.monitored})
         if quiet.why is not None:
             return quiet.why
         data, jacobi = execution.algorithm.data, execution.algorithm.name == "jacobi"
         events = [(p.name, out[p.name]) for p in self.event_ports]
         monitored = [(name, out[name]) for name in self.monitored]
-        called = [slot for name, slot in feeds(execution, self) if name in calls]
-        acting = [False]  # Jacobi: an operation called in the step before, which `prepare` runs
-
-        def ready(n: int) -> int:
-            acting[0] = jacobi and any(data[i] is True for i in called)
-            return quiet.quiet(n, data, jacobi, acting=acting[0])
+        write = execution.algorithm.writes[execution.algorithm.units.index(self)]
 
         def prepare() -> bool:
             """The operations called, run as the step's first half (act) before the segment's first step."""
-            if not acting[0]:
+            if not quiet.calling:
                 return True
-            acting[0] = False
-            origin, done = execution._origin
-            write = execution.algorithm.writes[execution.algorithm.units.index(self)]
             if write is not None:  # its inputs as the step reads them (the native loop set those of the step before)
                 setter, pick = write
                 setter(pick(data))
+            origin, done = execution._origin
             t = origin + (execution.steps - done) * execution.step_size
             self.act(t)
             if quiet.acted():
@@ -153,11 +147,9 @@ class MappingUnit(PythonUnit):
                 origin, done = execution._origin
                 self.time = origin + (first + made - 1 - done) * execution.step_size + execution.step_size
 
-        ops = " || ".join(f"IN({slot}) != 0.0" for slot in called)
         return NativePart("\n".join(quiet.lines), decls=quiet.decls, pointers=quiet.pointers, doubles=quiet.doubles,
-                          quiet=ready, begin=quiet.begin, end=end, prepare=prepare,
-                          ready=f"!(({ops}) && DD[{ACTED}] == 0.0)" if ops else "",
-                          takes=frozenset(name for name, _ in feeds(execution, self)),
+                          quiet=lambda n: quiet.quiet(n, data, jacobi), begin=quiet.begin, end=end, prepare=prepare,
+                          ready=quiet.ready, takes=frozenset(name for name, _ in fed),
                           failed=quiet.failed, continuous=tuple(self.monitored),
                           writes=frozenset(p.name for p in self.event_ports) | frozenset(self.monitored),
                           refusal=lambda: quiet.refusal, include_dirs=quiet.headers[0] if quiet.headers else ())

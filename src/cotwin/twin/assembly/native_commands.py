@@ -14,7 +14,7 @@ at its step's end, the values it set, the events as the last step left them.
 from __future__ import annotations
 
 from ...cosim.native import NativePart, outputs
-from .commands import Occurrence
+from .scenario import occurrences, steps_before_due
 
 _CLASS = {"Real": float, "Integer": int, "Boolean": bool}
 
@@ -41,8 +41,6 @@ class NativeCommands:
     def quiet(self, n: int) -> int:
         """How many of the next n steps the controller can make natively: up to the step of the command after
         the next when the C can apply the next, else up to the next one's step."""
-        from .scenario import steps_before_due
-
         unit, execution = self.unit, self.execution
         self.due = None
         if len(unit.queue) or (unit.together and any(unit.values[ev] is True for ev in unit.events)):
@@ -69,8 +67,6 @@ class NativeCommands:
     def _values(self, command, start: float) -> list[tuple[str, object]] | None:
         """The values the step starting at `start` shows for `command` (its other ports, then its event and the
         event's arguments), or None when the C cannot show them as Python does (see module doc)."""
-        from .scenario import occurrences
-
         unit = self.unit
         if command.time < start - 1e-9:
             return None
@@ -99,10 +95,9 @@ class NativeCommands:
                 doubles[1 + 2 * k], doubles[2 + 2 * k] = 1.0, float(value)
 
     def end(self, first: int, made: int, rows, doubles) -> None:
-        """The unit as `step` leaves it after `made` steps from step `first`: its time, the command applied (offered
-        and taken at its step's end), the values shown, its events as the last step left them."""
-        from .scenario import occurrences
-
+        """The unit as `step` leaves it after `made` steps from step `first`: the step a command was due in made by
+        `step` itself (the command offered and taken at its end, its values shown), its events reset by the
+        steps after, its time that of the last."""
         unit, execution = self.unit, self.execution
         due, self.due = self.due, None
         if not made:
@@ -110,18 +105,10 @@ class NativeCommands:
         origin, done = execution._origin
         h = execution.step_size
         last = first - done + made - 1  # the last step made, counted from the origin
-        unit.time = origin + last * h + h
-        shown = None
-        if due is not None and due[0] <= last:
-            step, command, values = due
-            unit._next += 1
-            for event, args in occurrences(command, unit.events, unit.arguments):
-                unit.queue.offer(Occurrence(event, tuple(args.items()), command.where, command.time))
-            t = origin + step * h
-            taken = unit.queue.take(t + h)
-            unit.values.update(values)
-            if taken is not None and step == last:
-                shown = taken.event
-        for event in unit.events:
-            if event != shown:
+        shown = due is not None and due[0] <= last
+        if shown:
+            unit.step(origin + due[0] * h, h)
+        if not shown or due[0] < last:
+            for event in unit.events:
                 unit.values[event] = False
+        unit.time = origin + last * h + h

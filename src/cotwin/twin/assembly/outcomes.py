@@ -241,15 +241,14 @@ class CommandLedger(Observer):
         self._several = isinstance(period, (int, float)) and 0 < period < execution.step_size * (1 - 1e-9)
         slots = execution.algorithm.slots
         self._calls = [c for c in self._calls if (self._dmodel, c) in slots]  # read in this order
-        self._calls_read = execution.reader([(self._dmodel, c) for c in self._calls])
-        self._events_read = execution.reader([(self._mapping, self._scope(e)) for e in self._events])
-        self._state_read = execution.reader([(self._dmodel, port) for port, _ in self._states])
-        read = [(self._dmodel, port) for port, _ in self._states] + [(self._dmodel, c) for c in self._calls]
-        events = [(e, (self._mapping, self._scope(e))) for e in self._events]
-        self._slots = [slots[port] for port in read if port in slots]  # what it reads, in a native stretch's rows:
-        self._read_events = len(self._slots)  # the states and calls, then the events
-        self._slots += [slots[port] for _, port in events if port in slots]
-        self._read_names = [e for e, port in events if port in slots]
+        calls = [(self._dmodel, c) for c in self._calls]
+        events = [(self._mapping, self._scope(e)) for e in self._events]
+        states = [(self._dmodel, port) for port, _ in self._states]
+        self._calls_read, self._events_read, self._state_read = map(execution.reader, (calls, events, states))
+        # what it reads in a native stretch's rows: states and calls (a change is a step it is told), events (one
+        # coming is)
+        self._changing = [slots[port] for port in states + calls if port in slots]
+        self._coming = [(e, slots[port]) for e, port in zip(self._events, events) if port in slots]
         self._before = self._state_read()
         # the platform events of the last steps seen: those in none of them were absent when the d-model's cycle
         # before the one judged read its exec guards (a step not seen repeats the one before it)
@@ -346,11 +345,11 @@ class CommandLedger(Observer):
         and each while a command applied waits to be read; each of the others would find what the step before it
         found (a command taken, done or stopped is decided at such a step), so only the events it held are
         remembered (of the last three steps, before a step told: `_absent`)."""
-        states, events = self._slots[:self._read_events], self._slots[self._read_events:]
         told = []
         for k in rows.changed():
             row, previous = rows.rows[k].tolist(), (rows.rows[k - 1] if k else rows.before).tolist()
-            if any(row[i] != previous[i] for i in states) or any(row[i] and not previous[i] for i in events):
+            if any(row[i] != previous[i] for i in self._changing) or \
+                    any(row[i] and not previous[i] for _, i in self._coming):
                 told.append(k)
         if self._count() > self._seen:  # commands applied among the steps (cotwin.twin.assembly.native_commands)
             times, half = rows.times, 0.5 * execution.step_size
@@ -359,7 +358,7 @@ class CommandLedger(Observer):
                 if k is not None:
                     told.append(k)
             told = sorted(set(told))
-        if not told and not self._waiting:
+        if not told and not self._waiting:  # it would find what it found: only the events held are remembered
             self._recent.extend(self._held(row) for row in rows.rows[-3:])
             return
         def chosen():  # read as the rows are told: a command taken waits to be read from the next one on
@@ -380,7 +379,7 @@ class CommandLedger(Observer):
     def _held(self, row) -> frozenset[str]:
         """The events held in a row of a stretch."""
         row = row.tolist()
-        return frozenset(e for e, i in zip(self._read_names, self._slots[self._read_events:]) if row[i])
+        return frozenset(e for e, i in self._coming if row[i])
 
     def _absent(self) -> frozenset[str]:
         """The platform events that occurred in none of the last steps: the cycle before the one judged read its

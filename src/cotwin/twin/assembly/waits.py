@@ -109,11 +109,10 @@ class WaitWatch(Observer):
         """Whether the judgement of machine m waiting in `leaf` finds it not blocked at any step of a stretch
         starting now: an answer it waits for may come and stays so until it comes (Mapping.stays_possible),
         and the stretch ends the step after it comes (the judgement there and then finds that it may come: it
-        was delivered a step before). A stretch of the native loop calls no operation (one called ends it
-        first). The judgement then changes nothing, so its step need not be seen whole: each command's move
-        was cut in two here, a stretch end per command (issue 23)."""
-        if possible is None:
-            return any(self.mapping.stays_possible(event) for event in self.waits[(m, leaf)].events)
+        was delivered a step before). No operation runs within a stretch (one called stops it before the next
+        step: NativePart.ready). The judgement then changes nothing, so its step need not be seen whole.
+        `possible`: the answers asked so far, kept across the waits of one question."""
+        possible = {} if possible is None else possible
         for event in self.waits[(m, leaf)].events:
             if event not in possible:
                 possible[event] = self.mapping.stays_possible(event)
