@@ -58,17 +58,19 @@ def check_texts(tmp_path):
     return run
 
 
-def one_machine(inputs: tuple[str, str], body: str) -> str:
-    """A d-model's text: state machine M in controller C in module Mod, taking two input events `inputs` and
-    sending `report: int`, each asynchronous at the platform; `body` is M's variables, states and transitions,
-    which start at line 10 (where a test reads a finding's line)."""
-    a, b = inputs
-    return (f"interface Ev {{ event {a} event {b} event report: int }}\n"
+def one_machine(inputs: tuple[str, ...], body: str, outputs: tuple[str, ...] = ("report: int",)) -> str:
+    """A d-model's text: state machine M in controller C in module Mod, taking the input events `inputs` and sending
+    `outputs` (each "name" or "name: type"), each asynchronous at the platform; `body` is M's variables, states and
+    transitions, which start at line 10 (where a test reads a finding's line)."""
+    ins, outs = ([d.split(":")[0].strip() for d in decls] for decls in (inputs, outputs))
+    events = " ".join(f"event {d}" for d in (*inputs, *outputs))
+    return (f"interface Ev {{ {events} }}\n"
             "controller C { uses Ev sref m = M\n"
-            f"\tconnection C on {a} to m on {a} connection C on {b} to m on {b} connection m on report to C on report }}\n"
+            f"\t{' '.join(f'connection C on {e} to m on {e}' for e in ins)} "
+            f"{' '.join(f'connection m on {e} to C on {e}' for e in outs)} }}\n"
             "module Mod { robotic platform P { uses Ev } cref c = C\n"
-            f"\tconnection P on {a} to c on {a} (_async) connection P on {b} to c on {b} (_async)\n"
-            "\tconnection c on report to P on report (_async) }\n"
+            f"\t{' '.join(f'connection P on {e} to c on {e} (_async)' for e in ins)}\n"
+            f"\t{' '.join(f'connection c on {e} to P on {e} (_async)' for e in outs)} }}\n"
             "stm M {\n"
             "\tinput context { uses Ev }\n"
             "\toutput context { uses Ev }\n"

@@ -12,12 +12,8 @@ EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "ur5e"
 
 
 def test_an_event_in_two_outcome_roles_is_an_error_at_the_later_key(tmp_path):
-    shutil.copytree(EXAMPLE, tmp_path / "ur5e")
-    project = tmp_path / "ur5e" / "cotwin.toml"
-    text = project.read_text() + '\n[outcomes]\ninfeasible = ["moveCompleted"]\nfeasible = ["moveCompleted"]\n'
-    project.write_text(text)
-    result = CliRunner().invoke(main, ["check", str(project)])
-    line = text.splitlines().index('feasible = ["moveCompleted"]') + 1
+    project = _ur5e(tmp_path, '[outcomes]\ninfeasible = ["moveCompleted"]\nfeasible = ["moveCompleted"]\n')
+    result, line = _check(project, 'feasible = ["moveCompleted"]')
     assert result.exit_code != 0, result.output
     assert f"cotwin.toml:{line}:" in result.output, result.output
     assert "moveCompleted is already named in [outcomes] infeasible" in result.output, result.output
@@ -26,6 +22,11 @@ def test_an_event_in_two_outcome_roles_is_an_error_at_the_later_key(tmp_path):
 EXAMPLES = EXAMPLE.parent
 BAD_PLAN = ("timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,MovementArgs_target_Z\n"
             "1000,true,0,23,1\n5500,true,99,99,9\n")  # the second out of the mapping's reach: nonfeasible...
+
+
+def _check(project: Path, key: str):
+    """`cotwin check` of the project, and the line of its file that reads `key` (where an error must be said)."""
+    return CliRunner().invoke(main, ["check", str(project)]), project.read_text().splitlines().index(key) + 1
 
 
 def _ur5e(tmp_path, outcomes: str) -> Path:
@@ -90,8 +91,7 @@ def test_an_output_event_in_outcomes_says_what_to_do_at_its_key(tmp_path):
     project = _ur5e(tmp_path, '[outcomes]\nstops = ["armIdle"]\n')
     arm = tmp_path / "ur5e" / "arm.rst"
     arm.write_text(_with_output_event(arm.read_text()))
-    result = CliRunner().invoke(main, ["check", str(project)])
-    line = project.read_text().splitlines().index('stops = ["armIdle"]') + 1
+    result, line = _check(project, 'stops = ["armIdle"]')
     assert result.exit_code != 0, result.output
     said = [s for s in result.output.splitlines() if "armIdle" in s]
     assert len(said) == 1 and f"cotwin.toml:{line}:" in said[0], result.output
@@ -106,10 +106,8 @@ def test_a_cells_outcomes_problem_is_said_once_at_its_key(tmp_path):
     shutil.copytree(EXAMPLE, tmp_path / "ur5e")
     shutil.copytree(EXAMPLES / "flexcell2", tmp_path / "flexcell2")
     project = tmp_path / "flexcell2" / "cotwin.toml"
-    text = project.read_text() + '\n[outcomes]\nstops = ["colision"]\n'
-    project.write_text(text)
-    result = CliRunner().invoke(main, ["check", str(project)])
-    line = text.splitlines().index('stops = ["colision"]') + 1
+    project.write_text(project.read_text() + '\n[outcomes]\nstops = ["colision"]\n')
+    result, line = _check(project, 'stops = ["colision"]')
     assert result.exit_code != 0, result.output
     said = [s for s in result.output.splitlines() if "colision" in s]
     assert len(said) == 1, result.output

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import cotwin_in_process
+from conftest import cotwin_in_process, one_machine
 from cotwin.dmodel.interpreter import Interpreter
 from cotwin.dmodel.program import build_program
 from cotwin.dmodel.verify import format_report, verify
@@ -273,14 +273,7 @@ def test_a_value_a_guard_tests_directly_or_in_an_operation_is_not_data_independe
     assert not report.unreached_states, report.unreached_states
 
 
-SPEED = """interface Ev { event speed: real event warn }
-controller C { uses Ev sref m = M
-	connection C on speed to m on speed connection m on warn to C on warn }
-module Mod { robotic platform P { uses Ev } cref c = C
-	connection P on speed to c on speed (_async) connection c on warn to P on warn (_async) }
-stm M {
-	input context { uses Ev }
-	output context { uses Ev }
+SPEED = one_machine(("speed: real",), """
 	var v: real = 0
 	initial i
 	state A { }
@@ -292,8 +285,7 @@ stm M {
 	transition t3 { from A to A exec condition not $speed }
 	transition t4 { from Fast to A exec action $warn }
 	transition t5 { from Slow to A exec }
-}
-"""
+""", outputs=("warn",))
 
 
 def test_a_complete_search_of_sampled_values_is_not_called_verified(tmp_path):
@@ -312,14 +304,7 @@ def test_a_complete_search_of_sampled_values_is_not_called_verified(tmp_path):
     assert enough.returncode == 0 and "NOT VERIFIED" not in enough.stdout  # values given: the user's choice
 
 
-CLOCKED = """interface Ev { event tick event report: int }
-controller C { uses Ev sref m = M
-	connection C on tick to m on tick connection m on report to C on report }
-module Mod { robotic platform P { uses Ev } cref c = C
-	connection P on tick to c on tick (_async) connection c on report to P on report (_async) }
-stm M {
-	input context { uses Ev }
-	output context { uses Ev }
+CLOCKED = one_machine(("tick",), """
 	%s limit: int = 3
 	clock T
 	initial i
@@ -330,8 +315,7 @@ stm M {
 	transition tA { from A to A exec condition not $tick }
 	transition tB { from B to B exec condition since(T) <= limit }
 	transition t4 { from B to A exec condition since(T) > limit action #T ; $report!1 }
-}
-"""
+""")
 
 
 def test_a_search_stopped_by_a_clock_compared_with_a_variable_says_so(tmp_path):
