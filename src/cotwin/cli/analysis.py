@@ -152,7 +152,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
     import time
 
     from ..twin.assembly.run import load
-    from ..twin.analysis.sweep import ERROR, SweepInterrupted, failures, grid, run_sweep, tally, unswept
+    from ..twin.analysis.sweep import ERROR, SweepInterrupted, failures, grid, run_sweep, sweep_shape, tally, unswept
     from ..twin.services.whatif import physics_timing
     from .progress import ProgressReport
 
@@ -216,8 +216,7 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         click.echo(f"what-if {k + 1} of {len(rows)} ({where}) failed: {row[ERROR]}", err=True)
     if len(bad) > MAX_REPORTED:
         click.echo(f"... and {len(bad) - MAX_REPORTED} more failed what-if(s) (the {ERROR} column of {out})", err=True)
-    # as _sweep ran them: no more threads or processes than what-ifs (--threads 1024 on 4 said 1024 threads)
-    used, processes = min(threads, len(plans)), min(workers or os.cpu_count() or 1, len(plans))
+    used, processes = sweep_shape(threads, workers, len(plans))  # as run_sweep ran them (--threads 1024 on 4: 4)
     ran_on = ("Ray" if ray else f"this process, {used} threads" if used > 1 else "this process" if processes <= 1
               else f"local pool of {processes} processes")
     click.echo(f"{out}: {len(rows)} what-ifs in {wall:.1f} s ({ran_on}), {tally(rows)}"

@@ -19,10 +19,9 @@ import numpy as np
 from ..diagnostics import CotwinError
 from ..plaindata import fields, finite, of_type
 from ..pmodel.cell import CellGeometry
-from ..pmodel.mjcf import servo_mode
 from ..pmodel.simulator import PlatformSimulator, SimState
 from .motion import MotionProfile, Quintic, Segment
-from .platform import Endpoint
+from .platform import Endpoint, NamedActuators
 
 CONTROL_PERIOD = 0.002  # s between trajectory set-points sent to the servos
 
@@ -58,7 +57,7 @@ def advance_shared(world, endpoints: list[SharedEndpoint], dt: float) -> None:
         endpoint.apply_due()
 
 
-class SimulatedEndpoint(Endpoint):
+class SimulatedEndpoint(NamedActuators, Endpoint):
     """The embedded MuJoCo platform with a trajectory generator in front of its servos. The cell's
     geometry (for the mapping's kinematics functions) is the scene's unless given."""
 
@@ -68,8 +67,7 @@ class SimulatedEndpoint(Endpoint):
         self.tree = simulator.tree
         self.profile: MotionProfile = profile or Quintic()
         self.geometry = geometry or (simulator.scene.geometry if simulator.scene is not None else None)
-        self._path_to_joint = simulator.actuators()
-        self._positioned = {j.name for j in self.tree.actuated if servo_mode(j) == "position"}
+        self._name_actuators(self.tree, "the endpoint")
         self.segment: Segment | None = None
         self._held = None  # the segment whose final set-point the servos already hold
         self._plan: tuple | None = None  # (segment, per joint (control index, start, goal - start, low, high))
@@ -112,14 +110,6 @@ class SimulatedEndpoint(Endpoint):
 
     def joint_velocities(self) -> dict[str, float]:
         return self.sim.joint_velocities()
-
-    def actuator_names(self) -> list[str]:
-        return list(self._path_to_joint)
-
-    def joint(self, name: str) -> str:
-        if name not in self._path_to_joint:
-            raise CotwinError(f"the endpoint has no actuator '{name}'")
-        return self._path_to_joint[name]
 
     def command(self, goals: dict[str, float]) -> None:
         """New servo goals (by actuator path, servo or joint name); joints not named keep their goal.

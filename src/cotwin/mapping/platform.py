@@ -104,3 +104,24 @@ def joint_readings(tree: "KinematicTree", positions: dict[str, float],
     by_quantity = {"position": positions, "velocity": velocities}
     return {reading_path(tree.name, s): float(by_quantity.get(s.quantity, {}).get(s.joint, 0.0))
             for s in tree.sensors if s.joint is not None}
+
+
+class NamedActuators:
+    """For an endpoint whose actuators answer to every name the simulator's do (cotwin.pmodel.tree.actuator_names:
+    joint, servo, command path): `joint` and `actuator_names` from one table, and the joints driven by position."""
+
+    def _name_actuators(self, tree, who: str) -> None:
+        from ..pmodel.tree import actuator_names, servo_mode
+
+        actuators = actuator_names(tree)
+        self._path_to_joint = {name: j.name for name, j in actuators.items()}
+        self._positioned = {j.name for j in actuators.values() if servo_mode(j) == "position"}
+        self._who = who  # how an unknown actuator's error names the platform
+
+    def joint(self, name: str) -> str:
+        if name not in self._path_to_joint:
+            raise CotwinError(f"{self._who} has no actuator '{name}'")
+        return self._path_to_joint[name]
+
+    def actuator_names(self) -> list[str]:
+        return list(self._path_to_joint)

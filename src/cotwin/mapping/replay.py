@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import CotwinError
-from ..pmodel.tree import KinematicTree, actuator_names, servo_mode
-from .platform import Endpoint, joint_readings
+from ..pmodel.tree import KinematicTree
+from .platform import Endpoint, NamedActuators, joint_readings
 from .profile import IDENTITY, Convention
 
 
@@ -68,7 +68,7 @@ class Recording:
 
 
 @dataclass
-class ReplayEndpoint(Endpoint):
+class ReplayEndpoint(NamedActuators, Endpoint):
     tree: KinematicTree
     recording: Recording
     offset: float | None = None  # recording time at simulation time 0 (None: align on the first command)
@@ -76,9 +76,7 @@ class ReplayEndpoint(Endpoint):
     goals: list[tuple[float, dict[str, float]]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        actuators = actuator_names(self.tree)  # the names the simulator takes, a speed's or an effort's too
-        self._path_to_joint = {name: j.name for name, j in actuators.items()}
-        self._positioned = {j.name for j in actuators.values() if servo_mode(j) == "position"}
+        self._name_actuators(self.tree, "the recorded robot")  # the names the simulator takes, a speed's or an effort's too
         unknown = [j for j in self.recording.joints if j not in {a.name for a in self.tree.actuated}]
         if unknown:
             raise CotwinError(f"{self.recording.source}: the recording's joints {', '.join(unknown)} are not joints "
@@ -93,14 +91,6 @@ class ReplayEndpoint(Endpoint):
 
     def stop(self) -> None:
         pass
-
-    def joint(self, name: str) -> str:
-        if name not in self._path_to_joint:
-            raise CotwinError(f"the recorded robot has no actuator '{name}'")
-        return self._path_to_joint[name]
-
-    def actuator_names(self) -> list[str]:
-        return list(self._path_to_joint)
 
     def command(self, goals: dict[str, float]) -> None:
         if self.offset is None:

@@ -120,7 +120,9 @@ class PlatformSimulator:
         self._joint_dof = {j.name: self.model.joint(prefix + j.name).dofadr[0] for j in tree.actuated}
         # every name an actuator answers to (cotwin.pmodel.tree.actuator_names, as every platform's) -> its control
         servo_of = {j.name: self.model.actuator(prefix + servo_name(j)).id for j in tree.actuated}
-        self._actuator: dict[str, int] = {name: servo_of[j.name] for name, j in actuator_names(tree).items()}
+        names = actuator_names(tree)
+        self._actuator: dict[str, int] = {name: servo_of[j.name] for name, j in names.items()}
+        self._actuator_joint = {name: j.name for name, j in names.items()}
         self._sensors: dict[str, tuple[int, int]] = {}
         for sensor in tree.sensors:
             name = reading_path(tree.name, sensor)
@@ -182,8 +184,7 @@ class PlatformSimulator:
     def actuators(self) -> dict[str, str]:
         """Every name an actuator answers to (cotwin.pmodel.tree.actuator_names: joint, servo, the command_path
         `pmodel::link::joint::aref.port`) -> joint."""
-        joint_of = {self._actuator[j]: j for j in self._joint_qpos}
-        return {name: joint_of[index] for name, index in self._actuator.items()}
+        return dict(self._actuator_joint)
 
     def saturated(self) -> list[tuple[str, float]]:
         """The joints whose actuator pushes at its force limit now (the URDF's effort), each with that limit: a

@@ -203,6 +203,11 @@ def _ray_run(project: str, artefacts: str | None, plan, state, horizon, step, ph
     return _run(plan, state, horizon, step, physics=physics)
 
 
+def sweep_shape(threads: int, workers: int | None, plans: int) -> tuple[int, int]:
+    """The threads and the processes a sweep of `plans` what-ifs runs on: no more of either than what-ifs."""
+    return min(threads, plans), max(1, min(workers or os.cpu_count() or 1, plans))
+
+
 def run_sweep(project: "str | Path | TwinSystem", plans: list[list[Command]], state: bytes | None = None, horizon: float = 30.0,
               step: float | None = None, workers: int | None = None, ray: str | None = None,
               artefacts: str | Path | None = None, progress=None, physics_step: float | None = None,
@@ -274,12 +279,11 @@ def _sweep(project: str, plans: list[list[Command]], state: bytes | None, horizo
     artefacts = str(artefacts)
     if ray is not None:
         return _on_ray(project, plans, state, horizon, step, ray, artefacts, report, physics_step)
-    workers = max(1, min(workers or os.cpu_count() or 1, len(plans)))  # no idle processes
+    threads, workers = sweep_shape(threads, workers, len(plans))
     rows: list[dict] = []
     if workers == 1:
         global _SYSTEM
         _SYSTEM = (system, artefacts)  # the project loaded above (loading it again costed a parse)
-    threads = min(threads, len(plans))
     if threads > 1:  # on one worker: this process
         try:
             for message in _thread_warnings(_SYSTEM, plans[0], state, step, physics_step, threads):
