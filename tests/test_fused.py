@@ -183,7 +183,8 @@ def test_a_what_if_in_the_fused_loop_predicts_what_the_step_by_step_loop_predict
 @pytest.mark.parametrize("from_state", [False, True])
 def test_forks_reused_for_plan_after_plan_predict_what_a_fresh_fork_predicts(built, tmp_path, from_state):
     """A sweep's what-ifs on one fork restored plan after plan: each prediction is `predict`'s, in any order,
-    reachable holes and not, from the initial state and from the end of the paper's run."""
+    reachable holes and not, from the initial state and from the end of the paper's run, the physics steps the
+    plans share taken from the fork's memo."""
     from cotwin.twin.analysis.sweep import grid
     from cotwin.twin.services.whatif import Forks, predict
 
@@ -199,6 +200,8 @@ def test_forks_reused_for_plan_after_plan_predict_what_a_fresh_fork_predicts(bui
     plans += [plans[0], random_plan(7)[:3]]  # the same plan again; another shape (gripper commands too)
     with Forks(twin, state, artefacts=tmp_path) as forks:
         reused = [forks.predict(plan, horizon=6.0).as_dict() for plan in plans]
+        remembered, stepped = forks.remembered
+    assert remembered > 0 and stepped > 0  # the plans' shared held steps were taken from the memo (cotwin.pmodel.memo)
     fresh = [predict(twin, plan, state, horizon=6.0, artefacts=tmp_path).as_dict() for plan in plans]
     for data in reused + fresh:
         data.pop("wall_seconds")

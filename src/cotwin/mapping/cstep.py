@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..diagnostics import CotwinError
+from ..pmodel import memo
 from ..robosim import syntax as s
 from ..robosim.operators import MATH
 from .runtime import Mapping, _MappingNames
@@ -253,8 +254,9 @@ def variable_values(mapping: Mapping, variables: list, kinds: list[str]) -> list
 TIME, TIMESTEP, PHYSICS_TIMESTEP, STEPS, PERIOD, MOVING, MOVE_HELD, JOINTS, NQ, DONE, CAME, DEPTH, MADE, DELIVERED, \
     DELIVERED_AT, ACTED = range(16)
 SCALARS = 16
-# Its pointers (PP): MuJoCo's mj_step, model and data, the data's arrays, the move's arrays (cotwin.mapping.native)
-MJ_STEP, MODEL, DATA, CTRL, QPOS, QVEL, SENSORDATA, WATCH, MOVE = range(9)  # WATCH: the watched geoms (a mask)
+# Its pointers (PP): MuJoCo's mj_step, model and data, the data's arrays, the held steps' memo (cotwin.pmodel.memo,
+# or none), the move's arrays (cotwin.mapping.native)
+MJ_STEP, MODEL, DATA, CTRL, QPOS, QVEL, SENSORDATA, WATCH, MEMO, MOVE = range(10)  # WATCH: the watched geoms (a mask)
 POINTERS = MOVE + 6  # the move: shape, joints' control indices, starts, deltas, lows, highs
 
 
@@ -303,11 +305,11 @@ class QuietStep:
         self.pointers: list = [0] * POINTERS
         self.doubles: list = [0.0] * (self.variables_at + len(self.events.variables))
         self.headers = mujoco_headers()
-        self.decls = native.SOURCE + "\n" + self.events.source + (self.headers[1] if self.headers else "")
+        self.decls = native.SOURCE + "\n" + memo.SOURCE + "\n" + self.events.source + (self.headers[1] if self.headers else "")
         self.lines = self._lines(event_slots, monitored_slots)
         self._values: list[float] = []
         self._move = None
-        self._addressed: tuple | None = None  # (model, data, controls, move arrays, watch) `pointers` has addresses of
+        self._addressed: tuple | None = None  # (model, data, controls, move arrays, watch, memo) `pointers` has addresses of
         self._acted = False  # Python ran the operations called before the next segment
         self.calling = False  # (Jacobi) an operation is called, which Python runs before the next segment
         self.refusal = ""  # why `quiet` last said 0
@@ -334,7 +336,8 @@ class QuietStep:
                  f"    if (held) DD[{MOVE_HELD}] = 1.0;",
                  "    if (status != 0) FAIL(status);  /* 1: a set-point not finite; 2: the state not finite */",
                  "} else if (steps > 0) {  /* the servos hold: the physics steps in one go, then the check */",
-                 f"    for (int s = 0; s < steps; s++) {{ mjstep(PP[{MODEL}], PP[{DATA}]); *time += DD[{PHYSICS_TIMESTEP}]; }}",
+                 f"    cotwin_held(mjstep, PP[{MODEL}], PP[{DATA}], steps, (cotwin_memo *)PP[{MEMO}]);",
+                 f"    for (int s = 0; s < steps; s++) *time += DD[{PHYSICS_TIMESTEP}];",
                  f"    DD[{DONE}] += steps;",
                  f"    const double *q = (const double *)PP[{QPOS}]; double sum = 0.0;",
                  f"    for (int s = 0; s < (int)DD[{NQ}]; s++) sum += q[s] * q[s];",
@@ -427,7 +430,8 @@ class QuietStep:
         joints, arrays = (move[2], move[1]) if move else (0, None)
         addressed = self._addressed  # the objects whose addresses `pointers` holds: looked up again when one changed
         if addressed is None or addressed[0] is not sim.model or addressed[1] is not d or \
-                addressed[2] is not sim.controls or addressed[3] is not arrays or addressed[4] is not watch:
+                addressed[2] is not sim.controls or addressed[3] is not arrays or addressed[4] is not watch or \
+                addressed[5] is not sim.memo:
             import ctypes
 
             from . import native
@@ -435,12 +439,13 @@ class QuietStep:
             _, mj_step = native.advance_function()
             self.pointers[:MOVE] = [mj_step, sim.model._address, d._address, sim.controls.ctypes.data,
                                     d.qpos.ctypes.data, d.qvel.ctypes.data, d.sensordata.ctypes.data,
-                                    watch[0].ctypes.data if watch is not None else 0]
+                                    watch[0].ctypes.data if watch is not None else 0,
+                                    sim.memo.address if sim.memo is not None else 0]
             if move:
                 self.pointers[MOVE:] = [ctypes.cast(a, ctypes.c_void_p).value for a in arrays]
             else:
                 self.pointers[MOVE:] = [0] * (POINTERS - MOVE)
-            self._addressed = (sim.model, d, sim.controls, arrays, watch)
+            self._addressed = (sim.model, d, sim.controls, arrays, watch, sim.memo)
         self._watch = watch  # kept: its mask stays alive while the C loop reads it
         self._move = move or None  # kept: its arrays stay alive while the C loop reads them
         self.doubles[:SCALARS] = [float(d.time), float(sim.timestep), float(sim.model.opt.timestep), float(self.steps),

@@ -33,6 +33,7 @@ import numpy as np
 from ..diagnostics import CotwinError
 from ..files import write_text
 from .mjcf import TIMESTEP, load, pose_paths, site_name, to_mjcf
+from .memo import StepMemo
 from .tree import KinematicTree, actuator_names, reading_path, servo_mode, servo_name
 
 
@@ -116,6 +117,7 @@ class PlatformSimulator:
             self.data = mujoco.MjData(self.model)
         self.timestep = timestep
         self._inertial0 = (self.model.body_mass.copy(), self.model.body_inertia.copy())  # as compiled
+        self.memo: StepMemo | None = None  # held steps remembered (cotwin.pmodel.memo: a sweep's forks turn it on)
         self._joint_qpos = {j.name: self.model.joint(prefix + j.name).qposadr[0] for j in tree.actuated}
         self._joint_dof = {j.name: self.model.joint(prefix + j.name).dofadr[0] for j in tree.actuated}
         # every name an actuator answers to (cotwin.pmodel.tree.actuator_names, as every platform's) -> its control
@@ -361,8 +363,21 @@ class PlatformSimulator:
                 raise CotwinError(f"the saved state's mass and inertia of body {name!r} are not 4 finite numbers >= 0")
             checked[body] = values
         for body, (mass, *inertia) in checked.items():
+            if self.memo is not None and (self.model.body_mass[body] != mass or
+                                          (self.model.body_inertia[body] != inertia).any()):
+                self.memo.clear()  # its steps were of the model before
             self.model.body_mass[body] = mass
             self.model.body_inertia[body] = inertia
+
+    def remember_held_steps(self) -> StepMemo | None:
+        """Turn on the memo of held steps (cotwin.pmodel.memo) for the native loop, on a simulator of its own
+        world; None where it cannot be (a view of a shared world, MuJoCo's library not found)."""
+        if self.memo is None and self.shared is None:
+            try:
+                self.memo = StepMemo(self.model)
+            except ValueError:
+                return None
+        return self.memo
 
     def steps_for(self, dt: float) -> int:
         """The number of physics steps in dt seconds (dt rounded to whole steps)."""

@@ -299,6 +299,7 @@ class Forks:
                 self._scratch = tempfile.TemporaryDirectory(prefix="cotwin-whatif-")
             artefacts = self._scratch.name
         endpoint = simulated_endpoint(fork, self.physics_step)
+        endpoint.sim.remember_held_steps()  # the steps its plans share, while they hold the arm alike, made once
         if self.period is None:
             cosim = fork.instantiate(dmodel_fmu(fork, Path(artefacts), self.cc), endpoint)
         else:  # the FMI 3.0 d-model, clocked as the saved run was (`predict`)
@@ -318,6 +319,13 @@ class Forks:
             raise
         self._counted = (*execution._origin, execution.steps)  # the start's steps, as counted (all forks alike)
         return fork, execution, endpoint, saved, True  # fresh: the first plan runs without a restore
+
+    @property
+    def remembered(self) -> tuple[int, int]:
+        """(taken from a memo, stepped in full) of the forks' held stretches (cotwin.pmodel.memo): the physics
+        the plans shared after their start."""
+        memos = [endpoint.sim.memo for _, _, endpoint, _, _ in self._forks.values() if endpoint.sim.memo is not None]
+        return sum(m.hits for m in memos), sum(m.misses for m in memos)
 
     def close(self) -> None:
         for _, execution, _, _, _ in self._forks.values():

@@ -1,0 +1,145 @@
+"""Held physics steps remembered by the state they start from: what a sweep's forks share after their start.
+
+A sweep's what-ifs start from one state and, until their controllers act on their different commands (a
+feasibility check, a move), hold the robot where it is: each fork makes the same physics steps from the same
+MuJoCo state. MuJoCo's step is a function of the model and of its integration state (time, positions,
+velocities, actuator states, warm start, controls, applied forces: mjSTATE_INTEGRATION, the state forks are
+restored from), so n steps held from a state seen before end where they ended then. A `StepMemo` keeps, for
+each such stretch (its state and its n), the state one step before its end: met again, that state is restored
+and the last step made anew, which computes what is read after it (sensors, poses, contacts) as the first
+stretch's last step did. The steps are the same, bit for bit; MuJoCo's diagnostics of the skipped steps
+(warnings, solver counters, timers) are not repeated.
+
+The C (`SOURCE`, inside the native loop: cotwin.mapping.cstep) looks a stretch up by a hash of its state and
+compares the whole state; the memo keeps its first `capacity` stretches (a sweep's shared ones come first).
+The model must not change while a memo is kept: `PlatformSimulator.set_bodies` clears it when it changes a
+body; only forks turn a memo on (cotwin.twin.services.whatif.Forks), on simulators of their own.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+SOURCE = r"""
+#include <string.h>
+
+typedef void (*cotwin_get_state)(const void *, const void *, double *, int);  /* mj_getState */
+typedef void (*cotwin_set_state)(const void *, void *, const double *, int);  /* mj_setState */
+
+typedef struct {
+    cotwin_get_state get;
+    cotwin_set_state set;
+    int sig, size, capacity, count, mask;  /* size: the state's numbers; mask: the table's size - 1 */
+    double *keys;    /* capacity x (size + 1): each stretch's first state and its steps */
+    double *states;  /* capacity x size: the state one step before each stretch's end */
+    int *table;      /* mask + 1 slots: an entry's index, or -1 */
+    double *scratch; /* size + 1 */
+    double hits, misses;
+} cotwin_memo;
+
+static unsigned long long cotwin_memo_hash(const double *x, int n) {
+    unsigned long long h = 1469598103934665603ULL, word;
+    for (int i = 0; i < n; i++) {
+        memcpy(&word, x + i, sizeof word);
+        h = (h ^ word) * 1099511628211ULL;
+        h ^= h >> 29;
+    }
+    return h;
+}
+
+/* n physics steps with the servos holding their set-points, through `memo` when there is one (see
+   cotwin.pmodel.memo). */
+static void cotwin_held(void (*step)(const void *, void *), const void *model, void *data, int n,
+                        cotwin_memo *memo) {
+    if (memo == NULL || n < 2) {
+        for (int k = 0; k < n; k++) step(model, data);
+        return;
+    }
+    int width = memo->size + 1;
+    double *key = memo->scratch;
+    memo->get(model, data, key, memo->sig);
+    key[memo->size] = (double)n;
+    int at = (int)(cotwin_memo_hash(key, width) & (unsigned long long)memo->mask);
+    for (int e; (e = memo->table[at]) >= 0; at = (at + 1) & memo->mask) {
+        if (memcmp(memo->keys + (size_t)e * width, key, (size_t)width * sizeof(double)) == 0) {
+            memo->set(model, data, memo->states + (size_t)e * memo->size, memo->sig);
+            step(model, data);
+            memo->hits += 1;
+            return;
+        }
+    }
+    for (int k = 0; k < n - 1; k++) step(model, data);
+    if (memo->count < memo->capacity) {
+        int e = memo->count++;
+        memcpy(memo->keys + (size_t)e * width, key, (size_t)width * sizeof(double));
+        memo->get(model, data, memo->states + (size_t)e * memo->size, memo->sig);
+        memo->table[at] = e;
+    }
+    memo->misses += 1;
+    step(model, data);
+}
+"""
+
+STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # as cotwin.pmodel.simulator saves and restores forks
+BUDGET = 8 << 20  # bytes a memo keeps at most
+MAX_STRETCHES = 4096
+
+
+class _Memo(ctypes.Structure):
+    _fields_ = [("get", ctypes.c_void_p), ("set", ctypes.c_void_p), ("sig", ctypes.c_int), ("size", ctypes.c_int),
+                ("capacity", ctypes.c_int), ("count", ctypes.c_int), ("mask", ctypes.c_int),
+                ("keys", ctypes.c_void_p), ("states", ctypes.c_void_p), ("table", ctypes.c_void_p),
+                ("scratch", ctypes.c_void_p), ("hits", ctypes.c_double), ("misses", ctypes.c_double)]
+
+
+def _functions() -> tuple[int, int] | None:
+    """The addresses of mj_getState and mj_setState in the library the mujoco module loaded."""
+    libraries = sorted(Path(mujoco.__file__).parent.glob("libmujoco.so*"))
+    if not libraries:
+        return None
+    lib = ctypes.CDLL(str(libraries[0]))
+    return ctypes.cast(lib["mj_getState"], ctypes.c_void_p).value, ctypes.cast(lib["mj_setState"], ctypes.c_void_p).value
+
+
+class StepMemo:
+    """The held stretches of one simulator's model (see the module doc); `address` is what the C takes."""
+
+    def __init__(self, model: mujoco.MjModel, budget: int = BUDGET):
+        functions = _functions()
+        if functions is None:
+            raise ValueError("MuJoCo's library was not found beside the mujoco module")
+        size = mujoco.mj_stateSize(model, STATE)
+        capacity = max(1, min(MAX_STRETCHES, budget // ((2 * size + 1) * 8)))
+        slots = 1 << (2 * capacity - 1).bit_length()  # at least twice the entries: the table is never full
+        self.keys = np.zeros((capacity, size + 1))
+        self.states = np.zeros((capacity, size))
+        self.table = np.full(slots, -1, dtype=np.int32)
+        self.scratch = np.zeros(size + 1)
+        self._memo = _Memo(functions[0], functions[1], int(STATE), size, capacity, 0, slots - 1,
+                           self.keys.ctypes.data, self.states.ctypes.data, self.table.ctypes.data,
+                           self.scratch.ctypes.data, 0.0, 0.0)
+        self.address = ctypes.addressof(self._memo)
+
+    @property
+    def hits(self) -> int:
+        """Stretches taken from the memo."""
+        return int(self._memo.hits)
+
+    @property
+    def misses(self) -> int:
+        """Stretches of two steps or more stepped in full."""
+        return int(self._memo.misses)
+
+    @property
+    def stretches(self) -> int:
+        """Stretches kept."""
+        return self._memo.count
+
+    def clear(self) -> None:
+        """Forget every stretch (the model changed)."""
+        self.table.fill(-1)
+        self._memo.count = 0

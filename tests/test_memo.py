@@ -1,0 +1,144 @@
+"""The memo of held physics steps (cotwin.pmodel.memo): a stretch met again ends as stepping it would, bit for bit,
+and nothing is taken from it for another stretch, another model or another number of steps."""
+
+from __future__ import annotations
+
+import ctypes
+
+import mujoco
+import numpy as np
+import pytest
+
+from cotwin.cbuild import compile_library
+from cotwin.mapping import native
+from cotwin.pmodel import memo
+from cotwin.pmodel.simulator import STATE, PlatformSimulator
+from cotwin.twin.assembly.run import load
+
+HARNESS = memo.SOURCE + r"""
+void held_steps(void (*step)(const void *, void *), const void *model, void *data, int n, cotwin_memo *memo) {
+    cotwin_held(step, model, data, n, memo);
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def held():
+    """n held steps of a simulator, through its memo when it has one (the C the native loop calls)."""
+    try:
+        lib = compile_library(HARNESS, "memo-test", keep_gil=False)
+    except ValueError as why:
+        pytest.skip(f"the memo's C cannot be built here: {why}")
+    step = native._mj_step()
+    fn = lib.held_steps
+    fn.argtypes = [ctypes.c_void_p] * 3 + [ctypes.c_int, ctypes.c_void_p]
+
+    def steps(sim: PlatformSimulator, n: int) -> None:
+        fn(step, sim.model._address, sim.data._address, n, sim.memo.address if sim.memo is not None else None)
+
+    return steps
+
+
+@pytest.fixture(scope="module")
+def twin():
+    from conftest import EXAMPLES
+
+    return load(EXAMPLES / "ur5e" / "cotwin.toml")
+
+
+def simulator(twin) -> PlatformSimulator:
+    sim = PlatformSimulator(twin.models.tree, twin.models.scene)
+    sim.data.ctrl[:6] = [0.4, -1.2, 1.1, -1.3, -1.4, 0.2]  # a pose away from the start: the arm moves to it
+    mujoco.mj_step(sim.model, sim.data, 37)
+    return sim
+
+
+def state(sim: PlatformSimulator) -> np.ndarray:
+    vector = np.empty(mujoco.mj_stateSize(sim.model, STATE))
+    mujoco.mj_getState(sim.model, sim.data, vector, STATE)
+    return vector
+
+
+def restore(sim: PlatformSimulator, vector: np.ndarray) -> None:
+    """`vector` restored, what is read between steps computed at it (as a fork's restore does)."""
+    mujoco.mj_setState(sim.model, sim.data, vector, STATE)
+    mujoco.mj_forward(sim.model, sim.data)
+
+
+def after(sim: PlatformSimulator) -> list[bytes]:
+    """What anyone reads after the steps: the state, sensors, poses, contacts and their distances."""
+    d = sim.data
+    return [state(sim).tobytes(), d.sensordata.tobytes(), d.xpos.tobytes(), d.xmat.tobytes(), d.qacc.tobytes(),
+            d.actuator_force.tobytes(), bytes([d.ncon]), d.contact.dist[:d.ncon].tobytes()]
+
+
+def test_a_stretch_met_again_ends_where_stepping_it_ends_bit_for_bit(twin, held):
+    plain, remembering = simulator(twin), simulator(twin)
+    start = state(plain)
+    held(plain, 120)  # no memo: MuJoCo's steps
+    expected = after(plain)
+    memo = remembering.remember_held_steps()
+    held(remembering, 120)  # a stretch not seen: stepped, and kept
+    assert (memo.hits, memo.misses, memo.stretches) == (0, 1, 1)
+    assert after(remembering) == expected
+    for _ in range(2):  # met again: from the memo, the same to the bit
+        restore(remembering, start)
+        held(remembering, 120)
+        assert after(remembering) == expected
+    assert memo.hits == 2
+    held(remembering, 120)  # and on from there, as MuJoCo goes on
+    held(plain, 120)
+    assert after(remembering) == after(plain)
+
+
+def test_another_state_or_number_of_steps_is_stepped_not_taken_from_the_memo(twin, held):
+    sim = simulator(twin)
+    memo = sim.remember_held_steps()
+    start = state(sim)
+    held(sim, 50)
+    restore(sim, start)
+    held(sim, 60)  # the same state, more steps
+    restore(sim, start)
+    sim.data.ctrl[0] += 1e-12  # the same positions, another control
+    held(sim, 50)
+    assert memo.hits == 0 and memo.stretches == 3
+    reference = simulator(twin)
+    restore(reference, start)
+    reference.data.ctrl[0] += 1e-12
+    mujoco.mj_step(reference.model, reference.data, 50)
+    assert after(sim) == after(reference)
+
+
+def test_a_body_given_another_mass_forgets_the_steps_of_the_model_before(twin, held):
+    """A fork restored with a payload (PlatformSimulator.set_bodies) steps its model as it now is."""
+    sim = simulator(twin)
+    memo = sim.remember_held_steps()
+    start = state(sim)
+    held(sim, 80)
+    body = sim.model.body(sim.model.nbody - 1).name
+    sim.set_bodies({body: [float(sim.model.body_mass[-1]), *map(float, sim.model.body_inertia[-1])]})
+    assert memo.stretches == 1  # the same mass: the memo kept
+    sim.set_bodies({body: [3.5, 0.01, 0.01, 0.01]})
+    assert memo.stretches == 0
+    restore(sim, start)
+    held(sim, 80)
+    assert memo.hits == 0
+    reference = simulator(twin)
+    reference.set_bodies({body: [3.5, 0.01, 0.01, 0.01]})
+    restore(reference, start)
+    mujoco.mj_step(reference.model, reference.data, 80)
+    assert after(sim) == after(reference)
+
+
+def test_a_full_memo_keeps_its_stretches_and_steps_the_new_ones(twin, held):
+    sim = simulator(twin)
+    sim.memo = memo.StepMemo(sim.model, budget=1)  # room for one stretch
+    kept = sim.memo
+    start = state(sim)
+    held(sim, 30)
+    first = after(sim)
+    held(sim, 30)  # another stretch: stepped, not kept
+    assert (kept.stretches, kept.misses) == (1, 2)
+    restore(sim, start)
+    held(sim, 30)
+    assert kept.hits == 1 and after(sim) == first
