@@ -66,14 +66,17 @@ def _ik_tool(pmodel) -> str | None:
     arm = ik.arm_joints(tree, tool)
     if len(arm) < ARM_JOINTS:  # no arm for the IK (a mobile base, a hand): nothing to say
         return None
-    carried = [j.name for j in tree.joints if j.parent == tool.link]  # a hand's fingers (cotwin.pmodel.ik.hand_link)
+    hand = tool.hand or tool.link  # a declared grasp frame's hand (cotwin.pmodel.ik.declared_frame)
+    carried = [j.name for j in tree.joints if j.parent == hand]  # a hand's fingers (cotwin.pmodel.ik.hand_link)
     why = (f"the link carrying the fingers {', '.join(tool.fingers)}" if tool.fingers
            else f"the hand at the end of the longest chain of moving joints, carrying {', '.join(carried)}" if carried
            else "the end of the longest chain of moving joints")
+    if tool.hand:
+        why = f"the grasp frame the URDF declares on {hand}, {why}"
     task = ik.task_for(len(arm))
     reaches = f": {ik.REACHES[task]}" if task != "pose" else ""
-    others = [g for g in gripper_links(tree) if g != tool.link] if tool.fingers else \
-        [h for h in ik.hands(tree) if h != tool.link] if carried else []
+    others = [g for g in gripper_links(tree) if g != hand] if tool.fingers else \
+        [h for h in ik.hands(tree) if h != hand] if carried else []
     kind = "grippers" if tool.fingers else "hands"
     choice = (f"; it is one of {len(others) + 1} {kind} (also {', '.join(others)}): to drive another arm, name its "
               "gripper by [tool] link in the cell geometry (docs/calibration.md)") if others else \
