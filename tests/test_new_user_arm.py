@@ -294,3 +294,33 @@ def test_q_variables_past_the_monitored_joints_are_a_warning_at_the_first_of_the
     # the arm's seven (the default) mirror every one
     project.write_text(project.read_text().replace('joints = ["joint1", "joint2"]', 'joints = "arm"'))
     assert not [f for f in load(project).warnings if "mirror" in f.message]
+
+
+def _weaken(project: Path, joint: str, effort: str = "0.001") -> None:
+    """The imported p-model's `joint` given a servo too weak to move its arm (its URDF <limit effort>)."""
+    pm = project.parent / "UF_ROBOT.pm"
+    text = pm.read_text()
+    at = text.index("effort = ", text.index(f"jref {joint} "))
+    end = text.index(" ", at + len("effort = "))
+    pm.write_text(text[:at] + f"effort = {effort}" + text[end:])
+
+
+def test_the_live_twin_names_the_joints_at_their_effort_limit_as_a_run_does(tmp_path):
+    """`cotwin run` and `whatif` said which joints pushed at their effort limit when a move never completed; the
+    live twin, on the same models, said only 'accepted, never completed' for its PT and its DT."""
+    from cotwin.mapping.endpoint import SimulatedEndpoint
+    from cotwin.pmodel.simulator import PlatformSimulator
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import LiveTwin
+
+    project = xarm_project(tmp_path / "xarm", mapping(), end=3.0)
+    _weaken(project, "joint2")
+    run = cotwin_in_process("run", project, "-o", tmp_path / "run")
+    warning = ("1 command(s) never completed, and at the end these joints pushed at their effort limit: joint2 "
+               "(0.001): too weak")
+    assert warning in run.stderr + run.stdout
+    system = load(project)
+    pt = SimulatedEndpoint(PlatformSimulator(system.models.tree, system.models.scene))
+    result = LiveTwin(system, tmp_path / "live", pt=pt).run()
+    for side in ("pt", "dt"):
+        assert any(w.startswith(warning) for w in result.sides[side].summary().warnings()), side
