@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from conftest import cotwin_in_process
@@ -324,3 +325,36 @@ def test_the_live_twin_names_the_joints_at_their_effort_limit_as_a_run_does(tmp_
     result = LiveTwin(system, tmp_path / "live", pt=pt).run()
     for side in ("pt", "dt"):
         assert any(w.startswith(warning) for w in result.sides[side].summary().warnings()), side
+
+
+def _payload_at(sim, prefix: str = "") -> tuple[str, list[float]]:
+    """Where a simulator's payload body is (a world's robot's: its names after `prefix`): its parent body and its
+    position there."""
+    from cotwin.pmodel.perturbation import PAYLOAD_BODY
+
+    body = sim.model.body(prefix + PAYLOAD_BODY)
+    return sim.model.body(int(body.parentid[0])).name, [round(float(v), 9) for v in body.pos]
+
+
+def test_a_payload_sits_at_the_projects_tool_not_the_iks_default(tmp_path):
+    """The project names its tool ([tool] link and point in its cell geometry); a plant's payload, a cell's and the
+    DT's body of an estimated payload ([convergence]) were welded at cotwin.pmodel.ik.find_tool's default instead
+    (the xArm7's link_eef origin), so the perturbation loaded another point than the one the IK moves."""
+    from cotwin.pmodel.perturbation import Perturbation, perturbed_world
+    from cotwin.pmodel.shared import PlacedRobot
+    from cotwin.twin.assembly.run import load, simulated_endpoint
+    from cotwin.twin.services.plant import load_plant
+
+    project = xarm_project(tmp_path / "xarm", mapping())
+    (project.parent / "cell.toml").write_text('[tool]\nlink = "link7"\npoint = [0.0, 0.0, 0.05]\n')
+    project.write_text(project.read_text() + '[platform]\ncalibration = "cell.toml"\n')
+    expected = ("link7", [0.0, 0.0, 0.05])
+    plant = load_plant(project, payload=2.0)
+    assert _payload_at(plant.endpoint.sim) == expected
+    system = load(project)
+    assert system.models.tool.link == "link7"
+    world = perturbed_world([PlacedRobot("arm", system.models.tree, np.eye(4))], None, Perturbation(payload=2.0),
+                            tools={"arm": system.models.tool})
+    assert _payload_at(world, "arm/") == ("arm/link7", [0.0, 0.0, 0.05])
+    project.write_text(project.read_text() + '[convergence]\nestimate = "payload"\n')
+    assert _payload_at(simulated_endpoint(load(project)).sim) == expected

@@ -44,7 +44,8 @@ def simulated_endpoint(system: TwinSystem, timestep: float | None = None):
     models = system.models
     calibration = models.calibration
     physics = {} if timestep is None else {"timestep": timestep}
-    sim = payload_simulator(models.tree, models.scene, system.spec.base, **physics) if estimates_payload(system.spec) \
+    sim = payload_simulator(models.tree, models.scene, system.spec.base, tool=models.tool, **physics) \
+        if estimates_payload(system.spec) \
         else PlatformSimulator(models.tree, models.scene, base=system.spec.base, **physics)  # [convergence]: a payload
     return SimulatedEndpoint(sim, calibration and calibration.profile, calibration and calibration.geometry)
 
