@@ -358,3 +358,39 @@ def test_a_payload_sits_at_the_projects_tool_not_the_iks_default(tmp_path):
     assert _payload_at(world, "arm/") == ("arm/link7", [0.0, 0.0, 0.05])
     project.write_text(project.read_text() + '[convergence]\nestimate = "payload"\n')
     assert _payload_at(simulated_endpoint(load(project)).sim) == expected
+
+
+def test_an_arm_on_a_free_base_is_said_not_weight_compensated(tmp_path):
+    """A mobile arm ([platform] base = "free"; the xArm7 here, TIAGo alike) got no gravity compensation, silently: a
+    fixed arm's (MuJoCo's gravcomp) would lift the free base by the arm's weight. Its servos carry the arm, so its
+    joints sag where a fixed arm's hold; the check and the run now say so, naming the robot and its arm."""
+    from cotwin.pmodel.simulator import PlatformSimulator
+    from cotwin.pmodel.tree import build_tree
+    from cotwin.pmodel.urdf_import import import_urdf
+    from cotwin.pmodel.world import World
+    from cotwin.robosim.check import load_checked
+
+    project = xarm_project(tmp_path / "xarm", mapping())
+    fixed = cotwin_in_process("check", project, cwd=tmp_path)
+    assert fixed.returncode == 0 and "not weight-compensated" not in fixed.stdout + fixed.stderr
+    project.write_text(project.read_text() + '[platform]\nbase = "free"\n')
+    check = cotwin_in_process("check", project, cwd=tmp_path)
+    said = check.stdout + check.stderr
+    assert check.returncode == 0, said
+    assert "cotwin.toml:" in said and ("warning: p-model UF_ROBOT is a free-base mobile arm: its arm (joint1, joint2, "
+                                       "joint3, joint4, joint5, joint6, joint7) is not weight-compensated") in said
+    # what it warns of, on TIAGo (a mobile arm whose heavy base stands where the xArm's tips): a posture held on a
+    # fixed base and on a free one on a floor
+    tiago = robot_data() / "robots/tiago_description/robots/tiago.urdf"
+    if not tiago.is_file():
+        pytest.skip(f"example-robot-data has no {tiago}")
+    tree = build_tree(load_checked([import_urdf(tiago, tmp_path / "tiago", check=False).file]))
+    held = {"torso_lift_joint": 0.1, "arm_1_joint": 0.2, "arm_4_joint": 0.5}
+    sag = {}
+    for base, scene in (("fixed", None), ("free", World(name="floor"))):
+        sim = PlatformSimulator(tree, scene, base=base)
+        sim.reset(held)
+        sim.write_actuators(held)
+        sim.advance(2.0)
+        sag[base] = abs(sim.joint_positions()["torso_lift_joint"] - held["torso_lift_joint"])
+    assert sag["fixed"] < 1e-4 and sag["free"] > 0.01, sag  # its torso lift sank 9 cm under the arm's weight

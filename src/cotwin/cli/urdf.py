@@ -46,9 +46,6 @@ def import_urdf(urdf: str, output: str, package_path: tuple[str, ...], force: bo
     report(result.findings)
 
 
-ARM_JOINTS = 4  # fewer moving joints to the IK's default tool: no arm (a mobile base's wheels), nothing to say
-
-
 def _ik_tool(pmodel) -> str | None:
     """Which link inverse_kinematics takes as the tool by default and so which joints are its arm: a jaw or a
     sensor frame at the end of the longest chain was taken silently (a gripper's revolute jaw as a 7th arm joint)."""
@@ -64,7 +61,7 @@ def _ik_tool(pmodel) -> str | None:
     except CotwinError:  # the p-model's own problems are reported with the import's findings
         return None
     arm = ik.arm_joints(tree, tool)
-    if len(arm) < ARM_JOINTS:  # no arm for the IK (a mobile base, a hand): nothing to say
+    if len(arm) < ik.ARM_JOINTS:  # no arm for the IK (a mobile base, a hand): nothing to say
         return None
     hand = tool.hand or tool.link  # a declared grasp frame's hand (cotwin.pmodel.ik.declared_frame)
     carried = [j.name for j in tree.joints if j.parent == hand]  # a hand's fingers (cotwin.pmodel.ik.hand_link)

@@ -255,6 +255,7 @@ def _tool_frame(approach: np.ndarray, tip: np.ndarray, point) -> np.ndarray:
     return T
 
 
+ARM_JOINTS = 4  # fewer moving joints from the base to the default tool: no arm (a mobile base's wheels, a leg)
 FULL_POSE_JOINTS = 6  # an arm with fewer cannot reach a full pose (3 for position, 3 for orientation)
 AXIS_JOINTS = 5  # position and approach axis (3 + 2): the roll about the axis is what the joints make it
 
