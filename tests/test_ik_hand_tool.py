@@ -131,6 +131,7 @@ def test_a_grasp_frame_the_urdf_declares_on_the_hand_is_the_tool(tmp_path_factor
     tool = ik.find_tool(tree)
     assert (tool.link, tool.hand) == ("hand_grasping_frame", "hand_palm_link")
     assert np.allclose(tool.offset[:3, 3], 0.0) and np.allclose(tool.offset[:3, 2], (1.0, 0.0, 0.0))
+    assert np.isclose(np.linalg.det(tool.offset[:3, :3]), 1.0)  # a frame, its roll the hand's (x near the palm's -z)
     target = np.eye(4)
     target[:3, :3] = ik.DOWN
     target[:3, 3] = (0.6, -0.2, 0.5)

@@ -107,7 +107,7 @@ def test_the_tool_point_is_named_by_link_and_offset(panda, tmp_path):
     # by default the TCP the URDF declares on the gripper, its fingers kept; the gripper link named: its fingertips
     default, gripper = ik.find_tool(panda), ik.find_tool(panda, link="panda_hand")
     assert (default.link, default.hand, default.fingers) == ("panda_hand_tcp", "panda_hand", gripper.fingers)
-    assert np.array_equal(default.offset, np.eye(4)) and gripper.offset[2, 3] > 0.1034
+    assert np.allclose(default.offset, np.eye(4), atol=1e-12) and gripper.offset[2, 3] > 0.1034
     with pytest.raises(CotwinError, match="tool link 'hand' is not a link of p-model panda"):
         ik.find_tool(panda, link="hand")
     # a cell geometry names it: [tool] link, read back, used by the mapping's inverse_kinematics

@@ -154,17 +154,21 @@ def declared_frame(tree: KinematicTree, hand: str) -> str | None:
 def _at_declared_frame(tree: KinematicTree, tool: Tool, point) -> Tool:
     """The tool moved to the grasp frame its hand declares (`declared_frame`), else unchanged. The frame's origin is
     the tool point (an explicit point is in its axes); its approach axis is the frame's own axis nearest the hand's
-    (URDFs say a grasp frame's approach by x, PAL's and Kinova's, or by z, Franka's), so the target's orientation
-    means what it meant on the hand."""
+    (URDFs say a grasp frame's approach by x, PAL's and Kinova's, or by z, Franka's) and its roll about it the hand's
+    tool frame's, so a target's orientation means what it meant on the hand."""
     frame = declared_frame(tree, tool.link)
     if frame is None:
         return tool
     in_hand = inverse(tree.link(tool.link).pose) @ tree.link(frame).pose
-    approach = in_hand[:3, :3].T @ tool.offset[:3, 2]
-    axis = np.zeros(3)
-    k = int(np.argmax(np.abs(approach)))
-    axis[k] = np.sign(approach[k])
-    return Tool(frame, _tool_frame(axis, np.zeros(3), point), tool.fingers, tool.link)
+    hand = in_hand[:3, :3].T @ tool.offset[:3, :3]  # the hand's tool axes in the frame's
+    k = int(np.argmax(np.abs(hand[:, 2])))
+    z = np.zeros(3)
+    z[k] = np.sign(hand[k, 2])
+    x = hand[:, 0] - (hand[:, 0] @ z) * z  # never zero: z is within 55 degrees of the hand's approach, its x at 90
+    x /= np.linalg.norm(x)
+    T = _tool_frame(z, np.zeros(3), point)
+    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    return Tool(frame, T, tool.fingers, tool.link)
 
 
 def _hand_frame(tree: KinematicTree, link, branches: list[list], point) -> np.ndarray:
