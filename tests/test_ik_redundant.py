@@ -104,8 +104,10 @@ def test_the_tool_point_is_named_by_link_and_offset(panda, tmp_path):
     offset = ik.find_tool(panda, (0.0, 0.0, 0.02), link="panda_hand_tcp")
     q = {j: 0.1 for j in ik.arm_joints(panda, tcp)}
     assert np.allclose(ik.tool_pose(panda, offset, q)[:3, 3], (ik.tool_pose(panda, tcp, q) @ [0, 0, 0.02, 1.0])[:3])
-    # the gripper link named: its fingertips, as by default
-    assert np.array_equal(ik.find_tool(panda, link="panda_hand").offset, ik.find_tool(panda).offset)
+    # by default the TCP the URDF declares on the gripper, its fingers kept; the gripper link named: its fingertips
+    default, gripper = ik.find_tool(panda), ik.find_tool(panda, link="panda_hand")
+    assert (default.link, default.hand, default.fingers) == ("panda_hand_tcp", "panda_hand", gripper.fingers)
+    assert np.allclose(default.offset, np.eye(4), atol=1e-12) and gripper.offset[2, 3] > 0.1034
     with pytest.raises(CotwinError, match="tool link 'hand' is not a link of p-model panda"):
         ik.find_tool(panda, link="hand")
     # a cell geometry names it: [tool] link, read back, used by the mapping's inverse_kinematics
@@ -127,7 +129,7 @@ def test_the_tool_point_is_named_by_link_and_offset(panda, tmp_path):
 def test_the_default_tool_of_an_arm_without_gripper_ends_its_longest_chain(panda):
     # a UR-like tree: tool0 and ee_link both end the six-joint chain; base hangs off the root
     arm = ik.find_tool(panda, "flange", link=None)
-    assert arm.link == "panda_hand"  # the gripper (two prismatic fingers) wins
+    assert arm.hand == "panda_hand"  # the gripper (two prismatic fingers) wins; the tool its declared TCP
     from cotwin.pmodel.ik import _chain_end
 
     assert _chain_end(panda) in ("panda_leftfinger", "panda_rightfinger")  # 8 moving joints on their path
@@ -148,7 +150,7 @@ def test_the_ik_cache_is_keyed_on_what_determines_the_answer(panda, solver, tmp_
     same = ik.Solver(panda, tool, dict(zip(solver.joints, READY)))
     assert same.fingerprint() == solver.fingerprint()
     other_reference = ik.Solver(panda, tool, dict(zip(solver.joints, np.zeros(7))))
-    other_tool = ik.Solver(panda, ik.find_tool(panda, "flange", link="panda_hand_tcp"), dict(zip(solver.joints, READY)))
+    other_tool = ik.Solver(panda, ik.find_tool(panda, link="panda_hand"), dict(zip(solver.joints, READY)))
     assert len({solver.fingerprint(), other_reference.fingerprint(), other_tool.fingerprint()}) == 3
     # a solution stored and read back is what solving gives
     target = transform((0.4, 0.0, 0.3), (np.pi, 0.0, 0.0))

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from conftest import cotwin_in_process
@@ -294,3 +295,102 @@ def test_q_variables_past_the_monitored_joints_are_a_warning_at_the_first_of_the
     # the arm's seven (the default) mirror every one
     project.write_text(project.read_text().replace('joints = ["joint1", "joint2"]', 'joints = "arm"'))
     assert not [f for f in load(project).warnings if "mirror" in f.message]
+
+
+def _weaken(project: Path, joint: str, effort: str = "0.001") -> None:
+    """The imported p-model's `joint` given a servo too weak to move its arm (its URDF <limit effort>)."""
+    pm = project.parent / "UF_ROBOT.pm"
+    text = pm.read_text()
+    at = text.index("effort = ", text.index(f"jref {joint} "))
+    end = text.index(" ", at + len("effort = "))
+    pm.write_text(text[:at] + f"effort = {effort}" + text[end:])
+
+
+def test_the_live_twin_names_the_joints_at_their_effort_limit_as_a_run_does(tmp_path):
+    """`cotwin run` and `whatif` said which joints pushed at their effort limit when a move never completed; the
+    live twin, on the same models, said only 'accepted, never completed' for its PT and its DT."""
+    from cotwin.mapping.endpoint import SimulatedEndpoint
+    from cotwin.pmodel.simulator import PlatformSimulator
+    from cotwin.twin.assembly.run import load
+    from cotwin.twin.live.runtime import LiveTwin
+
+    project = xarm_project(tmp_path / "xarm", mapping(), end=3.0)
+    _weaken(project, "joint2")
+    run = cotwin_in_process("run", project, "-o", tmp_path / "run")
+    warning = ("1 command(s) never completed, and at the end these joints pushed at their effort limit: joint2 "
+               "(0.001): too weak")
+    assert warning in run.stderr + run.stdout
+    system = load(project)
+    pt = SimulatedEndpoint(PlatformSimulator(system.models.tree, system.models.scene))
+    result = LiveTwin(system, tmp_path / "live", pt=pt).run()
+    for side in ("pt", "dt"):
+        assert any(w.startswith(warning) for w in result.sides[side].summary().warnings()), side
+
+
+def _payload_at(sim, prefix: str = "") -> tuple[str, list[float]]:
+    """Where a simulator's payload body is (a world's robot's: its names after `prefix`): its parent body and its
+    position there."""
+    from cotwin.pmodel.perturbation import PAYLOAD_BODY
+
+    body = sim.model.body(prefix + PAYLOAD_BODY)
+    return sim.model.body(int(body.parentid[0])).name, [round(float(v), 9) for v in body.pos]
+
+
+def test_a_payload_sits_at_the_projects_tool_not_the_iks_default(tmp_path):
+    """The project names its tool ([tool] link and point in its cell geometry); a plant's payload, a cell's and the
+    DT's body of an estimated payload ([convergence]) were welded at cotwin.pmodel.ik.find_tool's default instead
+    (the xArm7's link_eef origin), so the perturbation loaded another point than the one the IK moves."""
+    from cotwin.pmodel.perturbation import Perturbation, perturbed_world
+    from cotwin.pmodel.shared import PlacedRobot
+    from cotwin.twin.assembly.run import load, simulated_endpoint
+    from cotwin.twin.services.plant import load_plant
+
+    project = xarm_project(tmp_path / "xarm", mapping())
+    (project.parent / "cell.toml").write_text('[tool]\nlink = "link7"\npoint = [0.0, 0.0, 0.05]\n')
+    project.write_text(project.read_text() + '[platform]\ncalibration = "cell.toml"\n')
+    expected = ("link7", [0.0, 0.0, 0.05])
+    plant = load_plant(project, payload=2.0)
+    assert _payload_at(plant.endpoint.sim) == expected
+    system = load(project)
+    assert system.models.tool.link == "link7"
+    world = perturbed_world([PlacedRobot("arm", system.models.tree, np.eye(4))], None, Perturbation(payload=2.0),
+                            tools={"arm": system.models.tool})
+    assert _payload_at(world, "arm/") == ("arm/link7", [0.0, 0.0, 0.05])
+    project.write_text(project.read_text() + '[convergence]\nestimate = "payload"\n')
+    assert _payload_at(simulated_endpoint(load(project)).sim) == expected
+
+
+def test_an_arm_on_a_free_base_is_said_not_weight_compensated(tmp_path):
+    """A mobile arm ([platform] base = "free"; the xArm7 here, TIAGo alike) got no gravity compensation, silently: a
+    fixed arm's (MuJoCo's gravcomp) would lift the free base by the arm's weight. Its servos carry the arm, so its
+    joints sag where a fixed arm's hold; the check and the run now say so, naming the robot and its arm."""
+    from cotwin.pmodel.simulator import PlatformSimulator
+    from cotwin.pmodel.tree import build_tree
+    from cotwin.pmodel.urdf_import import import_urdf
+    from cotwin.pmodel.world import World
+    from cotwin.robosim.check import load_checked
+
+    project = xarm_project(tmp_path / "xarm", mapping())
+    fixed = cotwin_in_process("check", project, cwd=tmp_path)
+    assert fixed.returncode == 0 and "not weight-compensated" not in fixed.stdout + fixed.stderr
+    project.write_text(project.read_text() + '[platform]\nbase = "free"\n')
+    check = cotwin_in_process("check", project, cwd=tmp_path)
+    said = check.stdout + check.stderr
+    assert check.returncode == 0, said
+    assert "cotwin.toml:" in said and ("warning: p-model UF_ROBOT is a free-base mobile arm: its arm (joint1, joint2, "
+                                       "joint3, joint4, joint5, joint6, joint7) is not weight-compensated") in said
+    # what it warns of, on TIAGo (a mobile arm whose heavy base stands where the xArm's tips): a posture held on a
+    # fixed base and on a free one on a floor
+    tiago = robot_data() / "robots/tiago_description/robots/tiago.urdf"
+    if not tiago.is_file():
+        pytest.skip(f"example-robot-data has no {tiago}")
+    tree = build_tree(load_checked([import_urdf(tiago, tmp_path / "tiago", check=False).file]))
+    held = {"torso_lift_joint": 0.1, "arm_1_joint": 0.2, "arm_4_joint": 0.5}
+    sag = {}
+    for base, scene in (("fixed", None), ("free", World(name="floor"))):
+        sim = PlatformSimulator(tree, scene, base=base)
+        sim.reset(held)
+        sim.write_actuators(held)
+        sim.advance(2.0)
+        sag[base] = abs(sim.joint_positions()["torso_lift_joint"] - held["torso_lift_joint"])
+    assert sag["fixed"] < 1e-4 and sag["free"] > 0.01, sag  # its torso lift sank 9 cm under the arm's weight

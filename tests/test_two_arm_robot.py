@@ -187,7 +187,7 @@ def test_the_import_says_the_ik_took_one_of_two_grippers_and_names_the_other(imp
     # it used to name the left gripper as the tool with no word of the right one
     _, said = imported
     line = next(text for text in said.splitlines() if text.startswith("inverse_kinematics:"))
-    assert "tool link left_gripper_base_link" in line
+    assert "tool link left_gripper (the grasp frame the URDF declares on left_gripper_base_link" in line
     assert "one of 2 grippers (also right_gripper_base_link)" in line and "[tool] link" in line
 
 
@@ -199,7 +199,7 @@ def test_a_mapping_driving_the_arm_the_ik_does_not_solve_for_is_a_located_error(
     said = check.stdout + check.stderr
     assert check.returncode != 0, said
     assert f"mapping.pm:{first_command_line()}:" in said and "error:" in said
-    assert "right_s0" in said and "left_gripper_base_link" in said and "left_s0" in said
+    assert "right_s0" in said and "tool link left_gripper " in said and "left_s0" in said
     assert "[tool] link" in said and "e.g. right_gripper_base_link (the gripper right_w2 moves)" in said
     run = cotwin_in_process("run", project, "-o", tmp_path / "out")
     assert run.returncode != 0 and "completed" not in run.stdout
@@ -218,7 +218,7 @@ def test_the_runtime_refuses_the_other_arm_when_the_models_were_not_checked_as_a
     project = load_checked([tmp_path / "reach.rst", tmp_path / "baxter.pm", tmp_path / "mapping.pm"])
     with pytest.raises(CotwinError) as err:
         Mapping(project, SimulatedEndpoint(PlatformSimulator(build_tree(project, "baxter"))))
-    assert f"mapping.pm:{first_command_line()}:" in str(err.value) and "left_gripper_base_link" in str(err.value)
+    assert f"mapping.pm:{first_command_line()}:" in str(err.value) and "tool link left_gripper " in str(err.value)
 
 
 def test_naming_the_right_gripper_as_the_tool_checks_and_the_right_arm_reaches(imported, tmp_path):

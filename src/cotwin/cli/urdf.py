@@ -46,9 +46,6 @@ def import_urdf(urdf: str, output: str, package_path: tuple[str, ...], force: bo
     report(result.findings)
 
 
-ARM_JOINTS = 4  # fewer moving joints to the IK's default tool: no arm (a mobile base's wheels), nothing to say
-
-
 def _ik_tool(pmodel) -> str | None:
     """Which link inverse_kinematics takes as the tool by default and so which joints are its arm: a jaw or a
     sensor frame at the end of the longest chain was taken silently (a gripper's revolute jaw as a 7th arm joint)."""
@@ -64,16 +61,19 @@ def _ik_tool(pmodel) -> str | None:
     except CotwinError:  # the p-model's own problems are reported with the import's findings
         return None
     arm = ik.arm_joints(tree, tool)
-    if len(arm) < ARM_JOINTS:  # no arm for the IK (a mobile base, a hand): nothing to say
+    if len(arm) < ik.ARM_JOINTS:  # no arm for the IK (a mobile base, a hand): nothing to say
         return None
-    carried = [j.name for j in tree.joints if j.parent == tool.link]  # a hand's fingers (cotwin.pmodel.ik.hand_link)
+    hand = tool.hand or tool.link  # a declared grasp frame's hand (cotwin.pmodel.ik.declared_frame)
+    carried = [j.name for j in tree.joints if j.parent == hand]  # a hand's fingers (cotwin.pmodel.ik.hand_link)
     why = (f"the link carrying the fingers {', '.join(tool.fingers)}" if tool.fingers
            else f"the hand at the end of the longest chain of moving joints, carrying {', '.join(carried)}" if carried
            else "the end of the longest chain of moving joints")
+    if tool.hand:
+        why = f"the grasp frame the URDF declares on {hand}, {why}"
     task = ik.task_for(len(arm))
     reaches = f": {ik.REACHES[task]}" if task != "pose" else ""
-    others = [g for g in gripper_links(tree) if g != tool.link] if tool.fingers else \
-        [h for h in ik.hands(tree) if h != tool.link] if carried else []
+    others = [g for g in gripper_links(tree) if g != hand] if tool.fingers else \
+        [h for h in ik.hands(tree) if h != hand] if carried else []
     kind = "grippers" if tool.fingers else "hands"
     choice = (f"; it is one of {len(others) + 1} {kind} (also {', '.join(others)}): to drive another arm, name its "
               "gripper by [tool] link in the cell geometry (docs/calibration.md)") if others else \

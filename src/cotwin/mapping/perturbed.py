@@ -47,8 +47,11 @@ class PerturbedEndpoint(Endpoint):
         self._sample()
 
     @classmethod
-    def build(cls, tree: KinematicTree, scene, perturbation: Perturbation, base: str = "fixed") -> "PerturbedEndpoint":
-        return cls(SimulatedEndpoint(perturbed_simulator(tree, scene, perturbation, base=base)), perturbation)
+    def build(cls, tree: KinematicTree, scene, perturbation: Perturbation, base: str = "fixed",
+              tool=None) -> "PerturbedEndpoint":
+        """The perturbed simulator of `tree`, its payload at `tool` (the project's, cotwin.pmodel.perturbation.
+        with_payload)."""
+        return cls(SimulatedEndpoint(perturbed_simulator(tree, scene, perturbation, base=base, tool=tool)), perturbation)
 
     # ---- noise ----
     def _sample(self) -> None:

@@ -17,11 +17,15 @@ else the link below a moving joint that carries two or more prismatic joints (th
 two prismatic suspensions are none), else the hand on the way to the
 leaf link with the most moving joints on its path from the base (the last such in the tree's order): the first
 link there that branches into two or more unbranched fingers, moving ones shorter than the arm (a hand's) or
-fixed bodies of two links or more (a gripper of fixed fingers; `hand_link`), else that leaf. Its tool point is
+fixed bodies of two links or more (a gripper of fixed fingers; `hand_link`), else that leaf. A gripper or hand
+that carries a declared grasp frame (`declared_frame`: a bodiless link fixed to it, named as a tool point, such as
+TIAGo's hand_grasping_frame or a Franka hand's TCP) gives way to that frame: the URDF's author says there
+where the hand grasps. Its tool point is
 the flange (the tool link's origin), the fingertips (a gripper's: between the fingers, where their
-geometry ends along the approach axis; the flange for a link without fingers) or an explicit offset
-(x, y, z) in the tool link's frame; the tool frame has the tool link's orientation turned so that its
-z axis is the approach axis (from the flange towards the fingers, a hand's too; the link's own z without).
+geometry ends along the approach axis; the flange for a link without fingers, a declared frame's origin too) or an
+explicit offset (x, y, z) in the tool link's frame; the tool frame has the tool link's orientation turned so that
+its z axis is the approach axis (from the flange towards the fingers, a hand's too; a declared frame's own axis
+nearest the hand's; the link's own z without).
 
 Determinism: the same target gives the same joints whatever the arm's current posture. The solver
 starts damped Newton iterations from a fixed set of seeds (the reference posture, the reference
@@ -41,6 +45,7 @@ nearest the reference there (weighted as above); the nearest of those is the ans
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 from pathlib import Path
@@ -60,6 +65,7 @@ class Tool:
     link: str
     offset: np.ndarray  # tool frame in the link frame (z = approach)
     fingers: tuple[str, ...]  # prismatic finger joints
+    hand: str = ""  # the gripper or hand a declared grasp frame (the tool link) is fixed to; "": none
 
 
 def _rotation_onto_z(z: np.ndarray) -> np.ndarray:
@@ -104,13 +110,65 @@ def find_tool(tree: KinematicTree, point="fingertips", link: str | None = None) 
         fingers = [j for j in tree.joints if j.parent == link.name and j.kind == "prismatic"]
         if len(fingers) >= 2 and (link.name in named or link.name in grippers):
             branches = [[tree.link(j.child)] for j in fingers]
-            return Tool(link.name, _hand_frame(tree, link, branches, point), tuple(j.name for j in fingers))
+            tool = Tool(link.name, _hand_frame(tree, link, branches, point), tuple(j.name for j in fingers))
+            return tool if link.name in named else _at_declared_frame(tree, tool, point)
     end = candidates[0].name if len(candidates) == 1 else _chain_end(tree)
     hand = None if len(candidates) == 1 else hand_link(tree, end)
     if hand is not None:
         branches = [[tree.link(name) for name in _chain(tree, j.child)] for j in tree.joints if j.parent == hand]
-        return Tool(hand, _hand_frame(tree, tree.link(hand), branches, point), ())
+        return _at_declared_frame(tree, Tool(hand, _hand_frame(tree, tree.link(hand), branches, point), ()), point)
     return Tool(end, _tool_frame(np.array([0.0, 0.0, 1.0]), np.zeros(3), point), ())
+
+
+TOOL_WORDS = frozenset({"grasp", "grasping", "tcp", "tool", "ee", "eef", "effector", "endeffector", "gripper"})
+FRAME_WORDS = frozenset({"frame", "link", "point"})  # a name's last words that say nothing of what it is
+
+
+def _words(name: str) -> list[str]:
+    """The words of a link's name, lower case: snake_case, CamelCase and digits split (tool0 -> tool)."""
+    return [w.lower() for w in re.findall(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+", name)]
+
+
+def names_a_tool_point(name: str) -> bool:
+    """Whether a link's name says it is a tool point: its last word (a trailing frame/link aside) is a tool word
+    (hand_grasping_frame, a Franka hand's *_hand_tcp, l_gripper_tool_frame, j2s6s200_end_effector, left_gripper; not
+    l_gripper_led_frame or an accelerometer's link fixed to the same hand)."""
+    words = _words(name)
+    while words and words[-1] in FRAME_WORDS:
+        words.pop()
+    return bool(words) and words[-1] in TOOL_WORDS
+
+
+def declared_frame(tree: KinematicTree, hand: str) -> str | None:
+    """The grasp or tool frame a URDF declares on a gripper or hand: a link fixed to it (through fixed joints only)
+    without a body (a frame, not a finger) whose name says it is a tool point (`names_a_tool_point`); the nearest,
+    then the first in the tree's order. None: the hand declares none, its own tool frame stands."""
+    level, found = [hand], []
+    while level and not found:
+        below = [j.child for j in tree.joints if j.parent in level and j.kind == "fixed"]
+        found = [c for c in below if not tree.link(c).geoms and names_a_tool_point(c)]
+        level = below
+    return found[0] if found else None
+
+
+def _at_declared_frame(tree: KinematicTree, tool: Tool, point) -> Tool:
+    """The tool moved to the grasp frame its hand declares (`declared_frame`), else unchanged. The frame's origin is
+    the tool point (an explicit point is in its axes); its approach axis is the frame's own axis nearest the hand's
+    (URDFs say a grasp frame's approach by x, PAL's and Kinova's, or by z, Franka's) and its roll about it the hand's
+    tool frame's, so a target's orientation means what it meant on the hand."""
+    frame = declared_frame(tree, tool.link)
+    if frame is None:
+        return tool
+    in_hand = inverse(tree.link(tool.link).pose) @ tree.link(frame).pose
+    hand = in_hand[:3, :3].T @ tool.offset[:3, :3]  # the hand's tool axes in the frame's
+    k = int(np.argmax(np.abs(hand[:, 2])))
+    z = np.zeros(3)
+    z[k] = np.sign(hand[k, 2])
+    x = hand[:, 0] - (hand[:, 0] @ z) * z  # never zero: z is within 55 degrees of the hand's approach, its x at 90
+    x /= np.linalg.norm(x)
+    T = _tool_frame(z, np.zeros(3), point)
+    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    return Tool(frame, T, tool.fingers, tool.link)
 
 
 def _hand_frame(tree: KinematicTree, link, branches: list[list], point) -> np.ndarray:
@@ -201,6 +259,7 @@ def _tool_frame(approach: np.ndarray, tip: np.ndarray, point) -> np.ndarray:
     return T
 
 
+ARM_JOINTS = 4  # fewer moving joints from the base to the default tool: no arm (a mobile base's wheels, a leg)
 FULL_POSE_JOINTS = 6  # an arm with fewer cannot reach a full pose (3 for position, 3 for orientation)
 AXIS_JOINTS = 5  # position and approach axis (3 + 2): the roll about the axis is what the joints make it
 

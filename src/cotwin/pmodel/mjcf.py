@@ -19,7 +19,8 @@ Documented defaults, used where the p-model gives no value:
   against the scrub of its tyre when it turns slowly), one taking an effort by a motor; such joints get an
   armature of 0.001;
 - the base is fixed to the world unless `base="free"` (a mobile robot): then it gets a free joint and
-  no weight compensation; a root link beside the base (a free body of the p-model, no joint leading to
+  no weight compensation (a body's gravcomp pushes through every joint above it, the free joint's too: it would lift
+  the robot by its arm's weight; a twin project says so, cotwin.twin.assembly.system.free_base_arm_warning); a root link beside the base (a free body of the p-model, no joint leading to
   it) gets a free joint and falls;
 - a mesh file cotwin can read becomes a mesh asset; one it cannot is a placeholder sphere that never
   collides (or the project's stand-in shapes);

@@ -2,8 +2,8 @@
 from its digital twin. Payload, friction and damping are applied to the generated MuJoCo model
 (here), latency and noise around the endpoint (cotwin.mapping.perturbed); never to the RoboSim models.
 
-- `payload` (kg): a point mass at the tool frame (`cotwin.pmodel.ik.find_tool`), welded to the tool's
-  link as its own MJCF body with no gravity compensation: the servos feel its weight and inertia,
+- `payload` (kg): a point mass at the tool frame (the project's tool, its cell geometry's [tool] link and point;
+  for a p-model alone `cotwin.pmodel.ik.find_tool`'s default), welded to the tool's link as its own MJCF body with no gravity compensation: the servos feel its weight and inertia,
   as a real arm carrying an unannounced load does. The arm's own compensation is unchanged. On a
   free base (a mobile robot) the load sits at the base link's centre of mass.
 - `friction` (N m for revolute, N for prismatic joints): Coulomb friction, MuJoCo's `frictionloss` of
@@ -32,7 +32,7 @@ from typing import Callable
 
 from ..config import Key, Schema, TomlFile, did_you_mean, is_number, raise_problems
 from ..diagnostics import CotwinError, Finding, Location, Severity
-from .ik import find_tool
+from .ik import Tool, find_tool
 from .mjcf import TIMESTEP, to_mjcf
 from .simulator import PlatformSimulator
 from .tree import KinematicTree
@@ -188,15 +188,16 @@ def check_joints(perturbation: Perturbation, tree: KinematicTree, file: TomlFile
 
 # ---- application -------------------------------------------------------------------------------------
 
-def with_payload(xml: str, tree: KinematicTree, kg: float, base: str = "fixed") -> str:
+def with_payload(xml: str, tree: KinematicTree, kg: float, base: str = "fixed", tool: Tool | None = None) -> str:
     """The MJCF with a point mass of `kg` welded at the tool frame (no gravity compensation), or at the
-    base link's centre of mass for a free base."""
+    base link's centre of mass for a free base. `tool`: the project's (TwinModels.tool: its [tool] link and point),
+    the one its IK moves; None: find_tool's default, for a p-model without a project."""
     if kg <= 0:
         return xml
     if base == "free":
         link, at = tree.root.name, tree.root.com[:3, 3]
     else:
-        tool = find_tool(tree)
+        tool = tool if tool is not None else find_tool(tree)
         link, at = tool.link, tool.offset[:3, 3]
     root = ET.fromstring(xml)
     body = next((b for b in root.iter("body") if b.get("name") == link), None)
@@ -209,10 +210,12 @@ def with_payload(xml: str, tree: KinematicTree, kg: float, base: str = "fixed") 
 
 
 def perturbed_simulator(tree: KinematicTree, scene, perturbation: Perturbation,
-                        timestep: float = TIMESTEP, base: str = "fixed") -> PlatformSimulator:
-    """The MuJoCo platform with the perturbation's payload, friction and damping in its model."""
+                        timestep: float = TIMESTEP, base: str = "fixed", tool: Tool | None = None) -> PlatformSimulator:
+    """The MuJoCo platform with the perturbation's payload (at `tool`, see with_payload), friction and damping in
+    its model."""
     check_joints(perturbation, tree)
-    xml = with_payload(to_mjcf(tree, scene, timestep, visual=False, base=base), tree, perturbation.payload, base)
+    xml = with_payload(to_mjcf(tree, scene, timestep, visual=False, base=base), tree, perturbation.payload, base,
+                       tool)
     sim = PlatformSimulator(tree, scene, timestep, mjcf=xml, base=base)
     joints = [j.name for j in tree.actuated]
     for name, value in perturbation.per_joint("friction", joints).items():
@@ -242,9 +245,10 @@ def cell_joint_problems(perturbation: Perturbation, robots: list,
     return out
 
 
-def perturbed_world(robots: list, scene, perturbation: Perturbation, timestep: float = TIMESTEP):
+def perturbed_world(robots: list, scene, perturbation: Perturbation, timestep: float = TIMESTEP,
+                    tools: dict[str, Tool] | None = None):
     """A world of several robots (cotwin.pmodel.shared.SharedWorld) with the perturbation's payload at each
-    robot's tool and its friction and damping on each robot's joints (a table by joint: the joints of that
+    robot's tool (`tools`, by robot name: each robot's project's; see with_payload) and its friction and damping on each robot's joints (a table by joint: the joints of that
     name, on the robots that have them; a name no robot has is an error). Latency and noise are an
     endpoint's (cotwin.mapping.perturbed), not the world's."""
     from .shared import SharedWorld
@@ -252,8 +256,9 @@ def perturbed_world(robots: list, scene, perturbation: Perturbation, timestep: f
     problems = cell_joint_problems(perturbation, robots)
     if problems:
         raise CotwinError(problems)
+    tools = tools or {}
     placed = [replace(r, mjcf=with_payload(to_mjcf(r.tree, None, timestep, visual=False), r.tree,
-                                           perturbation.payload)) for r in robots]
+                                           perturbation.payload, tool=tools.get(r.name))) for r in robots]
     world = SharedWorld(placed, scene, timestep)
     for r in robots:
         joints = [j.name for j in r.tree.actuated]

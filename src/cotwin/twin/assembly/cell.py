@@ -318,7 +318,8 @@ class CellSystem:
         if perturbation is not None:
             from ...pmodel.perturbation import perturbed_world
 
-            return perturbed_world(robots, self.scene, perturbation)
+            return perturbed_world(robots, self.scene, perturbation,
+                                   tools={r.name: r.system.models.tool for r in self.robots})  # each project's tool
         return SharedWorld(robots, self.scene)
 
     def mapping_unit(self, world, perturbation=None) -> "CellMappingUnit":

@@ -48,8 +48,9 @@ def estimates_payload(spec) -> bool:
     return settings is not None and settings.estimate == "payload"
 
 
-def payload_simulator(tree, scene, base: str = "fixed", timestep: float | None = None):
-    """The embedded simulator with a payload body at the tool (cotwin.pmodel.perturbation.with_payload) of no
+def payload_simulator(tree, scene, base: str = "fixed", timestep: float | None = None, tool=None):
+    """The embedded simulator with a payload body at the tool (the project's `tool`, cotwin.pmodel.perturbation.
+    with_payload) of no
     mass until an estimate is applied: the DT of a twin estimating its payload, and its what-if forks (a
     saved state holds every body's pose, so the fork's model must have the same bodies)."""
     from ...pmodel.mjcf import TIMESTEP, to_mjcf
@@ -57,7 +58,7 @@ def payload_simulator(tree, scene, base: str = "fixed", timestep: float | None =
     from ...pmodel.simulator import PlatformSimulator
 
     timestep = TIMESTEP if timestep is None else timestep
-    xml = with_payload(to_mjcf(tree, scene, timestep, visual=False, base=base), tree, PLACEHOLDER_KG, base)
+    xml = with_payload(to_mjcf(tree, scene, timestep, visual=False, base=base), tree, PLACEHOLDER_KG, base, tool)
     sim = PlatformSimulator(tree, scene, timestep, mjcf=xml, base=base)
     body = sim.model.body(PAYLOAD_BODY).id
     sim.model.body_mass[body] = 0.0

@@ -430,6 +430,13 @@ class CommandLedger(Observer):
         return Summary([*self.outcomes, *waiting], [str(b) for b in blocked], list(saturated))
 
 
+def saturated_joints(endpoint) -> list[tuple[str, float]]:
+    """The joints of a platform's simulator pushing at their effort limit now, each with it
+    (cotwin.pmodel.simulator.PlatformSimulator.saturated; Summary.saturated): none on a platform without one
+    in this process (a real robot, a replayed log: cotwin.mapping.platform.Endpoint.sim is None)."""
+    return endpoint.sim.saturated() if endpoint.sim is not None else []
+
+
 def not_applied(source) -> list[CommandOutcome]:
     """The commands a run's source (unit) accepted but did not apply before the end: still in its queue."""
     queue = source.command_queue if source is not None else None

@@ -16,7 +16,7 @@ from ...dmodel.program import time_readings
 from .build import ARTEFACTS, dmodel_fmu, folder_lock
 from ..project import TwinProject, check_timing, cycle_time_warnings, load_project
 from .system import MAPPING, TwinSystem
-from .outcomes import CommandLedger, not_applied
+from .outcomes import CommandLedger, not_applied, saturated_joints
 from .waits import WaitWatch
 
 
@@ -44,7 +44,8 @@ def simulated_endpoint(system: TwinSystem, timestep: float | None = None):
     models = system.models
     calibration = models.calibration
     physics = {} if timestep is None else {"timestep": timestep}
-    sim = payload_simulator(models.tree, models.scene, system.spec.base, **physics) if estimates_payload(system.spec) \
+    sim = payload_simulator(models.tree, models.scene, system.spec.base, tool=models.tool, **physics) \
+        if estimates_payload(system.spec) \
         else PlatformSimulator(models.tree, models.scene, base=system.spec.base, **physics)  # [convergence]: a payload
     return SimulatedEndpoint(sim, calibration and calibration.profile, calibration and calibration.geometry)
 
@@ -148,8 +149,7 @@ def run_twin(system: TwinSystem, out: str | Path, step: float | None = None, end
             raise Interrupted(f"interrupted while drawing the figure; the run is complete: {result.rows} row(s) "
                               f"to t = {result.end_time:g} s in {out / 'outputs.csv'}") from None
         return TwinRun(result, out / "outputs.csv", figure, cosim, units, watch.found,
-                       ledger.summary(watch.found, not_applied(units.get("source")),
-                                      endpoint.sim.saturated() if endpoint.sim is not None else ()))
+                       ledger.summary(watch.found, not_applied(units.get("source")), saturated_joints(endpoint)))
 
 
 def path_columns(system: TwinSystem) -> tuple[str, str] | None:

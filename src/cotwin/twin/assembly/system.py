@@ -207,6 +207,7 @@ def load_models(spec: TwinProject, plant: bool = False) -> TwinModels:
     problems += outcome_event_problems(spec, program)
     own = mirror_warnings(spec, mapping, tree, joints, tool_link) if listed else []  # the project's against the models
     warnings += own
+    warnings += [w for w in [free_base_arm_warning(spec, tree, arm)] if w is not None]
     if problems:
         if spec.plan is not None:  # its problems too, not in a round of their own once these are fixed
             from .scenario import read_scenario
@@ -316,6 +317,24 @@ def mirror_warnings(spec: TwinProject, mapping, tree, joints: list[str], tool_li
                     f"mapping variable(s) {', '.join(v.name for v in idle)} mirror no joint: {said} {count} of p-model "
                     f"{tree.name}'s ({', '.join(joints) or 'none'}), one per q<i> and qd<i> from 0; these are "
                     f"neither set nor logged: remove them or name more joints in [monitor] joints")]
+
+
+def free_base_arm_warning(spec: TwinProject, tree, arm: list[str]) -> Finding | None:
+    """An arm on a free base (a mobile manipulator: TIAGo) is not weight-compensated as a fixed arm is
+    (cotwin.pmodel.mjcf): MuJoCo's gravcomp pushes a body up through every joint above it, the free base's too, so it
+    would lift the whole robot by its arm's weight; compensating the arm's joints alone takes their gravity torques
+    anew at every physics step. Said at [platform] base, naming the robot and its arm; None for a fixed base or a
+    free one without an arm (a wheeled or legged base: fewer than ik.ARM_JOINTS joints to its tool)."""
+    from ...pmodel import ik
+
+    if spec.base != "free" or len(arm) < ik.ARM_JOINTS:
+        return None
+    return Finding(spec.location("platform", "base"), Severity.WARNING,
+                   f"p-model {tree.name} is a free-base mobile arm: its arm ({', '.join(arm)}) is not weight-compensated "
+                   "as an arm on a fixed base is (MuJoCo's gravity compensation would also lift the free base by the "
+                   "arm's weight); its servos carry the weight, so a joint sags by its load over its servo's stiffness "
+                   "and a move may never come within the mapping's tolerance: give those joints stiffer servos (Kp on "
+                   "their ServoMotor, docs/pmodel-notation.md) or a looser tolerance")
 
 
 def tree_warnings(tree) -> list[Finding]:

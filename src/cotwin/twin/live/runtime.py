@@ -34,7 +34,7 @@ from .live_observers import AlarmPublisher, DeviationCheck, HistoryRecording, Pa
 from .lockstep import lockstep
 from ..assembly.observing import TwinObserver
 from ..assembly.system import MAPPING, RABBITMQ, TwinSystem
-from ..assembly.outcomes import CommandLedger
+from ..assembly.outcomes import CommandLedger, saturated_joints
 from ..assembly.waits import WaitWatch
 
 log = logging.getLogger("cotwin.twin")
@@ -73,11 +73,17 @@ class Side:
     units: dict[str, object]
     watch: object = None  # cotwin.twin.assembly.waits.WaitWatch: blocked waits of this side's d-model
     ledger: object = None  # cotwin.twin.assembly.outcomes.CommandLedger: what became of every command on this side
+    saturated: list = field(default_factory=list)  # (joint, limit): at their effort limit at the end (Summary.saturated)
+
+    @property
+    def endpoint(self):
+        """This side's platform endpoint (the PT's, the DT's), as its mapping unit drives it."""
+        return self.units["mapping"].mapping.endpoint
 
     def summary(self):
         from ..assembly.outcomes import not_applied
 
-        return self.ledger.summary(self.watch.found, not_applied(self.units.get("source")))
+        return self.ledger.summary(self.watch.found, not_applied(self.units.get("source")), self.saturated)
 
     def values(self, unit: str, names: list[str]) -> dict[str, float]:
         values = self.execution.values
@@ -294,13 +300,14 @@ class LiveTwin:
                 self.steps, self.time = pt.execution.steps, pt.execution.time
             else:
                 pt.execution.initialize()
-                dt_platform = dt.units["mapping"].mapping.endpoint
-                if dt_platform.placeable:  # the DT starts where the PT is
-                    dt_platform.place(pt.units["mapping"].mapping.endpoint.joint_positions())
+                if dt.endpoint.placeable:  # the DT starts where the PT is
+                    dt.endpoint.place(pt.endpoint.joint_positions())
                 dt.execution.initialize()
             pt.execution.total_steps = dt.execution.total_steps = total
             self.looping = True  # a stop request from now on ends the run after the step under way
             status = lockstep(self, [pt.execution, dt.execution], total, self._watchers, lambda: self._stop)
+            for side in (pt, dt):  # as a run's summary says them (cotwin.twin.assembly.run), before the platforms close
+                side.saturated = saturated_joints(side.endpoint)
         except CotwinError as err:
             message = "; ".join(f.message for f in err.findings)
             raise

@@ -529,7 +529,8 @@ def load_plant(project, url: str | None = None, free_running: bool = False,
     if url is None:
         url = spec.pt.url if spec.pt is not None and spec.pt.endpoint == "opcua" and spec.pt.url else \
             "opc.tcp://127.0.0.1:4840"
-    endpoint = PerturbedEndpoint.build(system.models.tree, system.models.scene, perturbation, spec.base)
+    endpoint = PerturbedEndpoint.build(system.models.tree, system.models.scene, perturbation, spec.base,
+                                       system.models.tool)  # its payload at the project's tool
     return Plant(endpoint, url, free_running, reset_on_connect=reset_on_connect)
 
 
