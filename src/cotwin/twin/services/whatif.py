@@ -41,7 +41,7 @@ from ...memo import once_per
 from ...service import BackgroundService
 from ..assembly.scenario import Command
 from ..assembly.system import DMODEL, MAPPING, TwinSystem
-from ..assembly.outcomes import CommandLedger, CommandOutcome
+from ..assembly.outcomes import CommandLedger, CommandOutcome, saturated_joints
 from ..assembly.waits import WaitWatch
 from ...cosim.observers import Stop
 
@@ -352,7 +352,7 @@ class Watch(Stop):
                  waits: WaitWatch, ledger: CommandLedger, contacts: _Contacts | None = None):
         program = fork.models.program
         self.program, self.plan, self.settle, self.decimate = program, plan, settle, decimate
-        self.waits, self.ledger = waits, ledger
+        self.waits, self.ledger, self.endpoint = waits, ledger, endpoint
         platform = [c.output for c in fork.connections if c.source == MAPPING.name and c.target == DMODEL.name
                     and c.output in {ev.name for ev in program.inputs}]
         self.monitored = list(fork.log[MAPPING.name])
@@ -500,7 +500,7 @@ class Watch(Stop):
         return Prediction(start, execution.time, execution.step_size, outcomes, self.states, self.trajectory,
                           collisions, completion, wallclock.perf_counter() - started,
                           [str(b) for b in self.waits.found],
-                          saturated=self.contacts.sim.saturated() if self.contacts.sim is not None else [])
+                          saturated=saturated_joints(self.endpoint))
 
 
 def occurrences(program, events: set[str], plan: list[Command]) -> list[tuple[Command, str, dict]]:
