@@ -11,6 +11,7 @@ import pytest
 
 from cotwin.cosim.algorithm import Jacobi
 from cotwin.cosim.execution import Execution
+from cotwin.diagnostics import CotwinError
 from cotwin.cosim.fused import FusedLoop, applicable
 from cotwin.twin.assembly.build import build
 from cotwin.twin.assembly.run import load, run_twin
@@ -208,6 +209,28 @@ def test_forks_reused_for_plan_after_plan_predict_what_a_fresh_fork_predicts(bui
         data.pop("native_steps")
     assert reused == fresh
     assert {c["feasible"] for p in fresh for c in p["commands"]} >= {True, False}
+
+
+def test_a_forks_checkpoint_is_not_changed_by_the_plans_run_from_it(built, tmp_path):
+    """Forks go back to their start with Execution.rollback, which takes each Python unit's snapshot as it is (no
+    bytes): plan after plan (operations run, answers held, a move made), the kept snapshots stay as they were."""
+    from cotwin.cosim.state import pack
+    from cotwin.twin.analysis.sweep import grid
+    from cotwin.twin.services.whatif import Forks
+
+    twins, _ = built
+    twin = twins["cotwin.toml"]
+    plans = grid(twin.models.program, "moveDiscreteCommand", {"target_X": [0, 15], "target_Y": [2, 23], "target_Z": [0]})
+    with Forks(twin, None, artefacts=tmp_path) as forks:
+        forks.predict(plans[0], horizon=6.0)
+        (_, execution, _, start, _), = forks._forks.values()
+        shared = [value[0] for value in forks._shared.values()]
+        kept = [pack("checkpoint", {"units": c.units, "values": c.values}) for c in [start, *shared]]
+        for plan in plans[1:]:
+            forks.predict(plan, horizon=6.0)
+        assert [pack("checkpoint", {"units": c.units, "values": c.values}) for c in [start, *shared]] == kept
+        with pytest.raises(CotwinError, match="only to the execution that kept it"):
+            forks._build(plans[0])[1].rollback(start)
 
 
 def test_contacts_read_from_the_arrays_are_those_read_contact_by_contact(built):

@@ -164,6 +164,17 @@ def model_differences(saved: dict[str, str], here: dict[str, str]) -> list[str]:
     return out
 
 
+@dataclass(frozen=True)
+class Checkpoint:
+    """An execution's state kept in memory (Execution.checkpoint): only that execution goes back to it."""
+    execution: "Execution"
+    time: float
+    steps: int
+    origin: tuple
+    values: dict
+    units: dict
+
+
 class Execution:
     def __init__(self, system: System, algorithm: Algorithm, step_size: float, start: float = 0.0,
                  observers: list[Observer] | tuple[Observer, ...] = (), fused: bool = False):
@@ -425,6 +436,33 @@ class Execution:
             self._first = (self.time, self.steps)
             for o in self.observers:
                 o.simulation_initialized(self)
+
+    def checkpoint(self) -> "Checkpoint":
+        """The co-simulation as it is now, kept in memory for `rollback` on this same execution (as libcosim's
+        save_state beside export_state): each unit's checkpoint, the values on the connections, the time and
+        steps. No bytes are made or read and nothing is checked again: a sweep's fork goes back to its start
+        plan after plan (cotwin.twin.services.whatif.Forks)."""
+        if not self.initialized or self.closed:
+            raise CotwinError("only a running execution (initialised, not closed) has a state to keep")
+        return Checkpoint(self, self.time, self.steps, self._origin, self.algorithm.snapshot(),
+                          {name: unit.checkpoint() for name, unit in self.system.units.items()})
+
+    def rollback(self, checkpoint: "Checkpoint") -> None:
+        """Continue from a `checkpoint` of this execution (observers see time jump, as after `set_state`)."""
+        if checkpoint.execution is not self:
+            raise CotwinError("a checkpoint goes back only to the execution that kept it (another one: save its "
+                              "state with get_state and restore it with set_state)")
+        if self.closed:
+            raise CotwinError("a closed execution cannot go back to a checkpoint")
+        try:
+            for name, unit in self.system.units.items():
+                unit.rollback(checkpoint.units[name])
+            self.algorithm.restore(checkpoint.values)
+        except BaseException as err:
+            self.close(err)
+            raise
+        self.steps = self.total_steps = checkpoint.steps
+        self.time, self._origin = checkpoint.time, checkpoint.origin
 
     def close(self, error: BaseException | None = None) -> None:
         """Terminate every unit (each unit knows which FMI calls its state still allows) and tell the

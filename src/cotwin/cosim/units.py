@@ -140,6 +140,15 @@ class Unit:
         """Continue from a state `get_state` returned (of this unit or another instance of it)."""
         raise CotwinError(f"unit {self.name} cannot restore a state")
 
+    def checkpoint(self) -> object:
+        """The unit's whole state kept in memory for `rollback` on this same unit (a fork restored plan after
+        plan): its `get_state` bytes unless a unit keeps something cheaper."""
+        return self.get_state()
+
+    def rollback(self, checkpoint: object) -> None:
+        """Continue from a `checkpoint` of this unit."""
+        self.set_state(checkpoint)
+
 
 # FMI 2.0 status codes and the C prototypes of the calls made on every step (fmi2FunctionTypes.h)
 FMI2_OK, FMI2_WARNING, FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL, FMI2_PENDING = range(6)
@@ -783,6 +792,14 @@ class PythonUnit(Unit):
         self.values.clear()  # in place: bound setters and getters keep working
         self.values.update(values)
         self.time = time
+
+    def checkpoint(self) -> dict:
+        """The snapshot itself (no bytes made): `restore` checks it and builds the unit's state anew from it, and
+        nothing the unit runs changes it (tests/test_fused.py)."""
+        return self.snapshot()
+
+    def rollback(self, checkpoint: dict) -> None:
+        self.restore(checkpoint)
 
     def get_state(self) -> bytes:
         return pack(type(self).__name__, self.snapshot())

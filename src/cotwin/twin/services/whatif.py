@@ -208,11 +208,12 @@ def predict(system: TwinSystem, plan: list[Command], state: bytes | None = None,
 
 class Forks:
     """What-ifs from one state, one after another, on forks built once (a sweep's many plans): the first plan
-    of a shape (the ports its commands drive) builds its fork as `predict` does and saves the fork's state
+    of a shape (the ports its commands drive) builds its fork as `predict` does and keeps a checkpoint of it
     right after it is set up; every later plan of that shape swaps its commands into the fork's command
-    source and restores that state (the d-model FMU's, the simulator's, the mapping's, the values on the
-    connections: cotwin.cosim.state, at native speed), instead of building the simulator, the mapping and the
-    FMU instance anew. Each prediction is the one `predict` gives (tests/test_fused.py). A what-if that fails
+    source and goes back to that checkpoint (Execution.rollback: the d-model FMU's state, the simulator's, the
+    mapping's, the values on the connections, kept in memory), instead of building the simulator, the mapping
+    and the FMU instance anew. The fork's simulator remembers the held steps its plans share
+    (cotwin.pmodel.memo). Each prediction is the one `predict` gives (tests/test_fused.py). A what-if that fails
     drops its fork (the next one of its shape builds anew). `close` ends them all (a context manager)."""
 
     def __init__(self, system: TwinSystem, state: bytes | None = None, step: float | None = None,
@@ -258,9 +259,9 @@ class Forks:
             key = (shape, quiet, decimate, horizon)  # a start shared as long as the what-if lasts past it
             shared = self._shared.get(key) if quiet > 1 else None
             if shared is not None:
-                execution.set_state(shared[0])  # the start this plan shares with the plans before it
+                execution.rollback(shared[0])  # the start this plan shares with the plans before it
             elif not fresh:
-                execution.set_state(saved)  # the fork as it was set up (the source: this plan from its start)
+                execution.rollback(saved)  # the fork as it was set up (the source: this plan from its start)
             waits, ledger = WaitWatch(fork, prefix="what-if: "), CommandLedger(fork)
             watch = Watch(fork, endpoint, shifted, start, horizon, settle, decimate, waits, ledger,
                           self._contacts.get(shape))
@@ -275,7 +276,7 @@ class Forks:
             elif quiet > 1:
                 _advance(execution, watch, quiet)
                 if not watch.over and not ledger.outcomes:
-                    self._shared[key] = (execution.get_state(), waits.progress(), watch.progress())
+                    self._shared[key] = (execution.checkpoint(), waits.progress(), watch.progress())
             prediction = _advance(execution, watch).prediction(execution, fork, shifted, start, started)
             prediction.native_steps = execution.native_steps - native
         except BaseException:
@@ -313,7 +314,7 @@ class Forks:
                 execution.set_state(self.state, units=[DMODEL.name, MAPPING.name])
             else:
                 execution.initialize()
-            saved = execution.get_state()
+            saved = execution.checkpoint()
         except BaseException:
             execution.close()
             raise
