@@ -16,8 +16,9 @@ from cotwin.pmodel.simulator import STATE, PlatformSimulator
 from cotwin.twin.assembly.run import load
 
 HARNESS = memo.SOURCE + r"""
-void held_steps(void (*step)(const void *, void *), const void *model, void *data, int n, cotwin_memo *memo) {
-    cotwin_held(step, model, data, n, memo);
+void held_steps(void (*step)(const void *, void *), const void *model, void *data, int n, cotwin_memo *memo,
+                int *flags) {
+    cotwin_held(step, model, data, n, memo, flags);
 }
 """
 
@@ -31,10 +32,11 @@ def held():
         pytest.skip(f"the memo's C cannot be built here: {why}")
     step = native._mj_step()
     fn = lib.held_steps
-    fn.argtypes = [ctypes.c_void_p] * 3 + [ctypes.c_int, ctypes.c_void_p]
+    fn.argtypes = [ctypes.c_void_p] * 3 + [ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p]
 
-    def steps(sim: PlatformSimulator, n: int) -> None:
-        fn(step, sim.model._address, sim.data._address, n, sim.memo.address if sim.memo is not None else None)
+    def steps(sim: PlatformSimulator, n: int) -> None:  # the sensors in the last step only, as the native loop has them
+        fn(step, sim.model._address, sim.data._address, n, sim.memo.address if sim.memo is not None else None,
+           sim.sensor_flags())
 
     return steps
 

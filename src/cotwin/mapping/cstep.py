@@ -256,7 +256,8 @@ TIME, TIMESTEP, PHYSICS_TIMESTEP, STEPS, PERIOD, MOVING, MOVE_HELD, JOINTS, NQ, 
 SCALARS = 16
 # Its pointers (PP): MuJoCo's mj_step, model and data, the data's arrays, the held steps' memo (cotwin.pmodel.memo,
 # or none), the move's arrays (cotwin.mapping.native)
-MJ_STEP, MODEL, DATA, CTRL, QPOS, QVEL, SENSORDATA, WATCH, MEMO, MOVE = range(10)  # WATCH: the watched geoms (a mask)
+MJ_STEP, MODEL, DATA, CTRL, QPOS, QVEL, SENSORDATA, WATCH, MEMO, FLAGS, MOVE = range(11)  # WATCH: the watched geoms
+# (a mask); FLAGS: the model's opt.disableflags, for sensors computed in a stretch's last step (cotwin.pmodel.sensing)
 POINTERS = MOVE + 6  # the move: shape, joints' control indices, starts, deltas, lows, highs
 
 
@@ -331,12 +332,12 @@ class QuietStep:
                  f"        (const double *)PP[{MOVE}], (int)DD[{JOINTS}], (const int *)PP[{MOVE + 1}], "
                  f"(const double *)PP[{MOVE + 2}],",
                  f"        (const double *)PP[{MOVE + 3}], (const double *)PP[{MOVE + 4}], (const double *)PP[{MOVE + 5}],",
-                 f"        (double *)PP[{CTRL}], (const double *)PP[{QPOS}], (int)DD[{NQ}], &held, &done);",
+                 f"        (double *)PP[{CTRL}], (const double *)PP[{QPOS}], (int)DD[{NQ}], &held, &done, (int *)PP[{FLAGS}]);",
                  f"    DD[{DONE}] += done;",
                  f"    if (held) DD[{MOVE_HELD}] = 1.0;",
                  "    if (status != 0) FAIL(status);  /* 1: a set-point not finite; 2: the state not finite */",
                  "} else if (steps > 0) {  /* the servos hold: the physics steps in one go, then the check */",
-                 f"    cotwin_held(mjstep, PP[{MODEL}], PP[{DATA}], steps, (cotwin_memo *)PP[{MEMO}]);",
+                 f"    cotwin_held(mjstep, PP[{MODEL}], PP[{DATA}], steps, (cotwin_memo *)PP[{MEMO}], (int *)PP[{FLAGS}]);",
                  f"    for (int s = 0; s < steps; s++) *time += DD[{PHYSICS_TIMESTEP}];",
                  f"    DD[{DONE}] += steps;",
                  f"    const double *q = (const double *)PP[{QPOS}]; double sum = 0.0;",
@@ -440,7 +441,7 @@ class QuietStep:
             self.pointers[:MOVE] = [mj_step, sim.model._address, d._address, sim.controls.ctypes.data,
                                     d.qpos.ctypes.data, d.qvel.ctypes.data, d.sensordata.ctypes.data,
                                     watch[0].ctypes.data if watch is not None else 0,
-                                    sim.memo.address if sim.memo is not None else 0]
+                                    sim.memo.address if sim.memo is not None else 0, sim.sensor_flags() or 0]
             if move:
                 self.pointers[MOVE:] = [ctypes.cast(a, ctypes.c_void_p).value for a in arrays]
             else:

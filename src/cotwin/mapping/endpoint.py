@@ -184,7 +184,8 @@ class SimulatedEndpoint(NamedActuators, Endpoint):
         data, model_address, data_address, timestep, ctrl, qpos, nq, time, held, done = memory
         time.value, held.value = data.time, 0
         fn(mj_step, model_address, data_address, time, sim.timestep, timestep, steps, period, arrays[0], n,
-           *arrays[1:], ctrl, qpos, nq, held, done)  # 1: a set-point not finite (the Python loop says so); 2: unstable
+           *arrays[1:], ctrl, qpos, nq, held, done, sim.sensor_flags())  # 1: a set-point not finite (the Python
+        # loop says so); 2: unstable
         if done.value:
             sim.stepped(done.value)  # status 2 (the state not finite) raises here, as `step` does
         if time.value != sim.data.time:

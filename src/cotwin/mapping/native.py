@@ -21,8 +21,11 @@ from pathlib import Path
 
 import mujoco
 
+from ..pmodel.sensing import SENSOR
+
 SOURCE = r"""
 #include <math.h>
+#define COTWIN_DSBL_SENSOR @SENSOR@  /* mjDSBL_SENSOR */
 #include <stddef.h>
 
 typedef void (*step_fn)(const void *, void *);
@@ -56,6 +59,10 @@ static double fraction(const double *move, double t) {
     return pow(tau, 3.0) * (10 - 15 * tau + 6 * tau * tau);
 }
 
+static int cotwin_control(step_fn, const void *, void *, double *, double, double, int, int, const double *, int,
+                          const int *, const double *, const double *, const double *, const double *, double *,
+                          const double *, int, int *, int *, int *);
+
 /* Returns 0 when all `steps` are done; 1 when a set-point is not finite (nothing written in that period:
    the caller's Python loop goes on from there and says why); 2 when the state became non-finite. `done`
    counts the physics steps made; `held` is set once the set-point stays at the move's end; `time` is the
@@ -63,8 +70,19 @@ static double fraction(const double *move, double t) {
 int cotwin_advance(step_fn step, const void *model, void *data, double *time, double timestep, double opt_timestep,
                    int steps, int period, const double *move, int joints, const int *index,
                    const double *start, const double *delta, const double *low, const double *high,
-                   double *ctrl, const double *qpos, int nq, int *held, int *done) {
+                   double *ctrl, const double *qpos, int nq, int *held, int *done, int *flags) {
     *done = 0;
+    if (flags) *flags |= COTWIN_DSBL_SENSOR;  /* sensors in the last step only (cotwin.pmodel.sensing) */
+    int status = cotwin_control(step, model, data, time, timestep, opt_timestep, steps, period, move, joints, index,
+                                start, delta, low, high, ctrl, qpos, nq, held, done, flags);
+    if (flags) *flags &= ~COTWIN_DSBL_SENSOR;
+    return status;
+}
+
+static int cotwin_control(step_fn step, const void *model, void *data, double *time, double timestep,
+                          double opt_timestep, int steps, int period, const double *move, int joints, const int *index,
+                          const double *start, const double *delta, const double *low, const double *high,
+                          double *ctrl, const double *qpos, int nq, int *held, int *done, int *flags) {
     while (steps > 0) {
         int n = period < steps ? period : steps;
         if (!*held) {
@@ -82,6 +100,7 @@ int cotwin_advance(step_fn step, const void *model, void *data, double *time, do
         }
         if (*held) n = steps;
         for (int k = 0; k < n; k++) {
+            if (flags && k == steps - 1) *flags &= ~COTWIN_DSBL_SENSOR;  /* the stretch's last step */
             step(model, data);
             *time += opt_timestep;  /* as mj_step advances data->time (Euler and implicit integrators) */
         }
@@ -94,6 +113,8 @@ int cotwin_advance(step_fn step, const void *model, void *data, double *time, do
     return 0;
 }
 """
+
+SOURCE = SOURCE.replace("@SENSOR@", str(SENSOR))
 
 _LIB: object = None  # the loaded function, False when it cannot be built here, None before trying
 
@@ -132,7 +153,8 @@ def advance_function():
             fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, P(ctypes.c_double), ctypes.c_double,
                            ctypes.c_double, ctypes.c_int, ctypes.c_int, P(ctypes.c_double), ctypes.c_int, P(ctypes.c_int),
                            P(ctypes.c_double), P(ctypes.c_double), P(ctypes.c_double), P(ctypes.c_double),
-                           P(ctypes.c_double), P(ctypes.c_double), ctypes.c_int, P(ctypes.c_int), P(ctypes.c_int)]
+                           P(ctypes.c_double), P(ctypes.c_double), ctypes.c_int, P(ctypes.c_int), P(ctypes.c_int),
+                           ctypes.c_void_p]
             fn.restype = ctypes.c_int
             _LIB = (fn, step)
     return _LIB or None

@@ -24,8 +24,13 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from .sensing import SENSOR
+
 SOURCE = r"""
 #include <string.h>
+#ifndef COTWIN_DSBL_SENSOR
+#define COTWIN_DSBL_SENSOR @SENSOR@  /* mjDSBL_SENSOR */
+#endif
 
 typedef void (*cotwin_get_state)(const void *, const void *, double *, int);  /* mj_getState */
 typedef void (*cotwin_set_state)(const void *, void *, const double *, int);  /* mj_setState */
@@ -51,12 +56,24 @@ static unsigned long long cotwin_memo_hash(const double *x, int n) {
     return h;
 }
 
+/* n physics steps, the sensors computed in the last only when `flags` (the model's opt.disableflags) is given
+   (cotwin.pmodel.sensing) */
+static void cotwin_steps(void (*step)(const void *, void *), const void *model, void *data, int n, int *flags) {
+    if (flags && n > 1) {
+        *flags |= COTWIN_DSBL_SENSOR;
+        for (int k = 0; k < n - 1; k++) step(model, data);
+        *flags &= ~COTWIN_DSBL_SENSOR;
+        n = 1;
+    }
+    for (int k = 0; k < n; k++) step(model, data);
+}
+
 /* n physics steps with the servos holding their set-points, through `memo` when there is one (see
    cotwin.pmodel.memo). */
 static void cotwin_held(void (*step)(const void *, void *), const void *model, void *data, int n,
-                        cotwin_memo *memo) {
+                        cotwin_memo *memo, int *flags) {
     if (memo == NULL || n < 2) {
-        for (int k = 0; k < n; k++) step(model, data);
+        cotwin_steps(step, model, data, n, flags);
         return;
     }
     int width = memo->size + 1;
@@ -72,6 +89,7 @@ static void cotwin_held(void (*step)(const void *, void *), const void *model, v
             return;
         }
     }
+    if (flags) *flags |= COTWIN_DSBL_SENSOR;  /* the last step's sensors are computed below, after the state is kept */
     for (int k = 0; k < n - 1; k++) step(model, data);
     if (memo->count < memo->capacity) {
         int e = memo->count++;
@@ -80,10 +98,12 @@ static void cotwin_held(void (*step)(const void *, void *), const void *model, v
         memo->table[at] = e;
     }
     memo->misses += 1;
+    if (flags) *flags &= ~COTWIN_DSBL_SENSOR;
     step(model, data);
 }
 """
 
+SOURCE = SOURCE.replace("@SENSOR@", str(SENSOR))
 STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # as cotwin.pmodel.simulator saves and restores forks
 BUDGET = 8 << 20  # bytes a memo keeps at most
 MAX_STRETCHES = 4096

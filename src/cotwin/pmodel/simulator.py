@@ -34,6 +34,7 @@ from ..diagnostics import CotwinError
 from ..files import write_text
 from .mjcf import TIMESTEP, load, pose_paths, site_name, to_mjcf
 from .memo import StepMemo
+from .sensing import flags_address
 from .tree import KinematicTree, actuator_names, reading_path, servo_mode, servo_name
 
 
@@ -118,6 +119,7 @@ class PlatformSimulator:
         self.timestep = timestep
         self._inertial0 = (self.model.body_mass.copy(), self.model.body_inertia.copy())  # as compiled
         self.memo: StepMemo | None = None  # held steps remembered (cotwin.pmodel.memo: a sweep's forks turn it on)
+        self._sensor_flags: int | None | bool = False  # sensor_flags(): not looked up yet
         self._joint_qpos = {j.name: self.model.joint(prefix + j.name).qposadr[0] for j in tree.actuated}
         self._joint_dof = {j.name: self.model.joint(prefix + j.name).dofadr[0] for j in tree.actuated}
         # every name an actuator answers to (cotwin.pmodel.tree.actuator_names, as every platform's) -> its control
@@ -368,6 +370,13 @@ class PlatformSimulator:
                 self.memo.clear()  # its steps were of the model before
             self.model.body_mass[body] = mass
             self.model.body_inertia[body] = inertia
+
+    def sensor_flags(self) -> int | None:
+        """The address of the model's opt.disableflags for native loops that compute the sensors in a stretch's
+        last step only (cotwin.pmodel.sensing), or None where every step computes them; found once."""
+        if self._sensor_flags is False:
+            self._sensor_flags = flags_address(self.model) if self.shared is None else None
+        return self._sensor_flags
 
     def remember_held_steps(self) -> StepMemo | None:
         """Turn on the memo of held steps (cotwin.pmodel.memo) for the native loop, on a simulator of its own
