@@ -64,3 +64,17 @@ def test_no_sensor_skipping_where_sensors_may_keep_state_or_are_off_already():
     assert address is not None and ctypes.c_int.from_address(address).value == model.opt.disableflags
     model.opt.disableflags |= SENSOR  # the user's choice: left alone
     assert flags_address(model) is None
+
+
+def test_the_simulators_own_steps_read_what_every_step_computing_sensors_reads(twin):
+    """PlatformSimulator.step (the FMU path's held steps, calibration's runs): sensors in each call's last step."""
+    sims = [PlatformSimulator(twin.models.tree, twin.models.scene) for _ in range(2)]
+    sims[1]._sensor_flags = None  # every step computes the sensors
+    assert sims[0].sensor_flags() is not None
+    for sim in sims:
+        sim.data.ctrl[:6] = [0.4, -1.2, 1.1, -1.3, -1.4, 0.2]
+    for n in (1, 2, 37, 100):
+        for sim in sims:
+            sim.step(n)
+        assert after(sims[0]) == after(sims[1])
+    assert sims[0].model.opt.disableflags & SENSOR == 0

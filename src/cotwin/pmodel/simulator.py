@@ -34,7 +34,7 @@ from ..diagnostics import CotwinError
 from ..files import write_text
 from .mjcf import TIMESTEP, load, pose_paths, site_name, to_mjcf
 from .memo import StepMemo
-from .sensing import flags_address
+from .sensing import SENSOR, flags_address
 from .tree import KinematicTree, actuator_names, reading_path, servo_mode, servo_name
 
 
@@ -388,6 +388,19 @@ class PlatformSimulator:
                 return None
         return self.memo
 
+    def _mj_steps(self, n: int) -> None:
+        """n of MuJoCo's steps, the sensors computed in the last only (cotwin.pmodel.sensing), as the native loops
+        make them: whoever reads them reads them after the call."""
+        if n > 1 and self.sensor_flags() is not None:
+            opt = self.model.opt
+            opt.disableflags |= SENSOR
+            try:
+                mujoco.mj_step(self.model, self.data, n - 1)
+            finally:
+                opt.disableflags &= ~SENSOR
+            n = 1
+        mujoco.mj_step(self.model, self.data, n)
+
     def steps_for(self, dt: float) -> int:
         """The number of physics steps in dt seconds (dt rounded to whole steps)."""
         if not (math.isfinite(dt) and dt >= 0):
@@ -406,7 +419,7 @@ class PlatformSimulator:
             raise CotwinError(f"robot {self.tree.name} shares its world with other robots: the world steps, not one robot")
         if not self.scanners and not self._obstacles:
             if steps > 0:
-                mujoco.mj_step(self.model, self.data, steps)
+                self._mj_steps(steps)
                 self._steps += steps
                 self._check()
             return self.data.time
@@ -414,7 +427,7 @@ class PlatformSimulator:
             n = steps
             for period in [s.period_steps for s in self.scanners] + ([self._contact_steps] if self._obstacles else []):
                 n = min(n, period - self._steps % period)
-            mujoco.mj_step(self.model, self.data, n)
+            self._mj_steps(n)
             self._steps += n
             steps -= n
             self._check()
