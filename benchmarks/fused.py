@@ -46,7 +46,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from cotwin.twin.assembly.build import build  # noqa: E402
 from cotwin.twin.assembly.run import load, run_twin  # noqa: E402
 from cotwin.twin.analysis.sweep import grid, run_sweep, summary  # noqa: E402
-from cotwin.twin.services.whatif import predict  # noqa: E402
+from cotwin.twin.services.whatif import Forks, predict  # noqa: E402
 from figures import figure, goal  # noqa: E402
 from twin import END, Stopwatch, physics_alone  # noqa: E402
 
@@ -313,6 +313,14 @@ def sweep(twin, out: Path) -> None:
         t0 = time.perf_counter()
         rows2 = run_sweep(twin, plans, horizon=8.0, workers=1, artefacts=artefacts, physics_step=0.002)
         coarse = min(coarse, time.perf_counter() - t0)
+    with Forks(twin, None, artefacts=artefacts) as forks:  # untimed: what the memo of held steps took (48 plans)
+        for plan in plans[:48]:
+            forks.predict(plan, horizon=8.0, decimate=10**9)
+        remembered, stepped = forks.remembered
+    figure("sweep: held stretches taken from the forks' memo (cotwin.pmodel.memo), first 48 plans", remembered,
+           "stretches", stepped_in_full=stepped)
+    print(f"sweep: of the first 48 plans' held stretches (two physics steps or more), {remembered} were taken from the "
+          f"forks' memo and {stepped} stepped in full")
     same = rows == before
     same_threaded = rows_threaded == before
     differ = sum(a != b for a, b in zip(rows2, rows))
