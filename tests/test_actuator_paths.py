@@ -127,3 +127,28 @@ def test_the_perturbed_robot_and_the_opcua_plant_take_the_simulators_names_and_d
     robot.command({SPEED: 2.0})
     robot.advance(0.2)
     assert robot.joint_velocities()["spin"] == pytest.approx(2.0, abs=0.2)
+
+
+def test_a_ur_over_rtde_warns_that_the_grippers_goals_move_the_dt_alone(tmp_path):
+    """The UR5e's fingers are position-driven joints past its arm: RTDE's moveJ does not carry them, and `cotwin twin`
+    says so at [pt] endpoint before it runs (EndpointKind.advice); a kind without advice says nothing."""
+    import shutil
+
+    from conftest import EXAMPLES
+
+    from cotwin.twin.assembly.endpoints import endpoint_advice
+    from cotwin.twin.assembly.run import load
+
+    project = tmp_path / "ur5e"
+    shutil.copytree(EXAMPLES / "ur5e", project)
+    text = (project / "cotwin.toml").read_text()
+    (project / "cotwin.toml").write_text(text + '\n[pt]\nendpoint = "rtde"\nurl = "10.0.0.7"\n')
+    system = load(project / "cotwin.toml")
+    fingers = [j.name for j in system.models.tree.actuated if j.name not in system.models.arm]
+    assert fingers, "the example's p-model has a gripper"
+    (advice,) = endpoint_advice(system, "pt")
+    line = text.count("\n") + 3  # endpoint = "rtde"
+    assert (advice.location.line, advice.severity.name) == (line, "WARNING")
+    assert all(f in advice.message for f in fingers) and "move the DT alone" in advice.message
+    (project / "cotwin.toml").write_text(text + '\n[pt]\nendpoint = "opcua"\nurl = "opc.tcp://127.0.0.1:4840"\n')
+    assert endpoint_advice(load(project / "cotwin.toml"), "pt") == []

@@ -65,12 +65,14 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
                                    "or --pt-log LOG (a recorded run) or --pt-url opc.tcp://HOST:PORT (an OPC UA plant)")])
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
+    from ..twin.assembly.endpoints import endpoint_advice
     from ..twin.assembly.scenario import after_end, nothing_planned, plan_order
 
     show_warnings(step_warnings(system, step))
     show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, spec.end if end is None else end))
     show_warnings(plan_order(system.commands, system.command_events))
+    show_warnings(endpoint_advice(system, "pt"))  # what the PT's kind cannot carry
     dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
                            broker if whatif else None, serving)
     progress = ProgressReport("twin", "s").__enter__()

@@ -39,6 +39,7 @@ class EndpointKind:
     sides: tuple[str, ...] = ("pt", "dt")
     doc: str = ""
     keys: tuple[str, ...] | None = None
+    advice: Callable[["TwinSystem"], list[Finding]] | None = None  # warnings about the project for this kind
 
 
 _KINDS: dict[str, EndpointKind] = {}
@@ -107,6 +108,12 @@ def check_endpoints(system: "TwinSystem", *sides: str) -> None:
                                            f"{', '.join(kind.keys) or 'no other key'})") for key in ignored])
 
 
+def endpoint_advice(system: "TwinSystem", side: str) -> list[Finding]:
+    """The warnings of the kind the project names for `side` (EndpointKind.advice); none for a kind without."""
+    kind = endpoint_kind(system, side, side_settings(system, side).endpoint)
+    return kind.advice(system) if kind.advice is not None else []
+
+
 def make_endpoint(system: "TwinSystem", side: str) -> "Endpoint":
     """The endpoint of a side of the twin, as the project names it."""
     settings = side_settings(system, side)
@@ -149,6 +156,24 @@ def _rtde(system: "TwinSystem", settings: PTSettings):
     return RTDEEndpoint(system.models.tree, settings.url, convention=convention, arm=arm)
 
 
+def _rtde_advice(system: "TwinSystem") -> list[Finding]:
+    """A UR over RTDE moves its arm's joints (moveJ): the p-model's other position-driven joints (a gripper's
+    fingers) are not sent, so the goals the mapping gives them reach the DT alone."""
+    from ...pmodel.tree import servo_mode
+
+    arm = set(system.models.arm)
+    tree = system.models.tree
+    others = [j.name for j in tree.actuated if j.name not in arm and servo_mode(j) == "position"]
+    if not others:
+        return []
+    return [Finding(system.spec.location("pt", "endpoint"), Severity.WARNING,
+                    f"[pt] endpoint = \"rtde\": the robot over RTDE moves its arm ({', '.join(system.models.arm)}) by "
+                    f"joint positions (moveJ) only; p-model {tree.name}'s {', '.join(others)} "
+                    f"{'is' if len(others) == 1 else 'are'} not sent to it, so the mapping's goals for "
+                    f"{'it' if len(others) == 1 else 'them'} move the DT alone (a gripper on a UR is driven through "
+                    "its tool I/O or its URCap, which this endpoint does not drive)")]
+
+
 def _mujoco(system: "TwinSystem", settings: PTSettings):
     from .run import simulated_endpoint
 
@@ -160,6 +185,7 @@ register_endpoint(EndpointKind("opcua", _opcua, ("pt",), "a plant served over OP
 register_endpoint(EndpointKind("replay", _replay, ("pt",), "a recorded RTDE log, replayed", PT_KEYS["replay"]))
 register_endpoint(EndpointKind("broker", _broker, ("pt", "dt"), "a robot behind RabbitMQ, on its request queue",
                                PT_KEYS["broker"]))
-register_endpoint(EndpointKind("rtde", _rtde, ("pt",), "a UR robot over RTDE at url", PT_KEYS["rtde"]))
+register_endpoint(EndpointKind("rtde", _rtde, ("pt",), "a UR robot over RTDE at url", PT_KEYS["rtde"],
+                               advice=_rtde_advice))
 register_endpoint(EndpointKind("mujoco", _mujoco, ("dt",), "the embedded MuJoCo simulator (calibrated when the "
                                                         "project names a calibration)", ()))
