@@ -4,7 +4,7 @@ cotwin reads a simulator's sensors after a stretch of physics steps (a communica
 never between them, and a sensor feeds nothing back into the dynamics; MuJoCo computes every sensor in every
 mj_step all the same. The native loops (cotwin.mapping.native's control loop, cotwin.pmodel.memo's held steps)
 set mjDSBL_SENSOR for all but a stretch's last step: the states are the same, bit for bit, and so are the
-readings (tests/test_sensing.py); on the UR5e's 22 joint sensors a step costs about 4% less.
+readings (tests/test_sensing.py); with a robot arm's joint sensors a step costs a few per cent less.
 
 They write the flag through its address in the model (`flags_address`), found with the offsets of MuJoCo's
 installed headers and checked against the model before use; None where the headers are not installed, where
