@@ -696,3 +696,26 @@ def test_a_cell_rolls_back_and_a_fork_reruns_bit_for_bit_through_a_collision(tmp
     assert run(fork, 4.0) == straight and fork.system.units["{mapping}.cell"].world.contacts == world.contacts
     for ex in (live, fork):
         ex.close()
+
+
+def test_a_cells_run_and_live_twin_name_the_robot_and_joint_at_its_effort_limit(tmp_path):
+    """A single robot's run and live twin named the joints pushing at their effort limit when a move never
+    completed (cotwin.twin.assembly.outcomes.saturated_joints); a cell's run and live twin said only '0 move(s)
+    completed'. The Panda's joint2 given 0.001 N m: both name the Panda and its joint, on each side."""
+    from conftest import cotwin_in_process
+
+    from cotwin.twin.live.cell_live import run_cell_twin
+
+    project = cell_copy(tmp_path, "twin.toml", lambda text: text.replace("end = 16.0", "end = 3.0"))
+    pm = tmp_path / "panda.pm"
+    text = pm.read_text()
+    at = text.index("effort = ", text.index("jref panda_joint2 "))
+    pm.write_text(text[:at] + "effort = 0.001" + text[text.index(" ", at + len("effort = ")):])
+    said = ("panda: 1 command(s) never completed, and at the end these joints pushed at their effort limit: "
+            "panda_joint2 (0.001): too weak")
+    ran = cotwin_in_process("run", project, "-o", tmp_path / "run")
+    assert ran.returncode == 0, ran.stderr[-2000:]
+    assert f"warning: {said}" in ran.stderr and "ur5e: 1 command(s) never" not in ran.stderr
+    result = run_cell_twin(CellSystem(load_project(project)), tmp_path / "twin")
+    for side in ("pt", "dt"):
+        assert [w[:len(said)] for w in result.outcomes[side].warnings()] == [said], side

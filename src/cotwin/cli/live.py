@@ -165,6 +165,8 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
     for side, summary in result.outcomes.items():
         for line in summary.lines():
             click.echo(f"{side.upper()}: {line}")
+        for warning in summary.warnings():
+            click.echo(f"{side.upper()}: warning: {warning}", err=True)
     incomplete_history(result)
     failures = [f"{side.upper()}: {f}" for side, summary in result.outcomes.items() for f in summary.strict_failures()]
     if strict and failures:

@@ -128,6 +128,8 @@ def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: 
                f"(real-time factor {r.real_time_factor:.1f})")
     for line in ran.outcomes.lines():
         click.echo(line)
+    for warning in ran.outcomes.warnings():
+        click.echo(f"warning: {warning}", err=True)
     for time, first, second in ran.contacts:
         click.echo(f"contact: {first} and {second} at t = {time:.3f} s")
     show_warnings(contacts_from_the_start(cell.spec, ran.contacts, step or cell.spec.step))

@@ -22,6 +22,9 @@ Documented defaults, used where the p-model gives no value:
   no weight compensation (a body's gravcomp pushes through every joint above it, the free joint's too: it would lift
   the robot by its arm's weight; a twin project says so, cotwin.twin.assembly.system.free_base_arm_warning); a root link beside the base (a free body of the p-model, no joint leading to
   it) gets a free joint and falls;
+- a massless link (mass 0: a URDF link without `<inertial>`, a tool or sensor frame) is a body of no mass and
+  no inertia: MuJoCo accepts one where a joint moves a body of mass fixed to it, and the tree gives a link a moving
+  joint carries alone a gram (cotwin.pmodel.tree_build.carry_massless);
 - a mesh file cotwin can read becomes a mesh asset; one it cannot is a placeholder sphere that never
   collides (or the project's stand-in shapes);
 - joints closing a kinematic loop become equality constraints (weld for fixed, connect otherwise);
@@ -202,10 +205,13 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
         bodies[link.name] = body
         if link.name not in parents and (link is not tree.root or base == "free"):
             sub(body, "freejoint", name=f"{link.name}_free")
-        R = link.com[:3, :3]  # MJCF takes a full inertia in the body's axes only (no quat beside it)
-        I = R @ link.inertia @ R.T
-        sub(body, "inertial", mass=num(link.mass), fullinertia=nums([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]]),
-            pos=nums(link.com[:3, 3]))
+        if link.mass > 0:
+            R = link.com[:3, :3]  # MJCF takes a full inertia in the body's axes only (no quat beside it)
+            I = R @ link.inertia @ R.T
+            sub(body, "inertial", mass=num(link.mass),
+                fullinertia=nums([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]]), pos=nums(link.com[:3, 3]))
+        else:  # a massless frame (its geoms must not give it a mass); MuJoCo refuses a zero fullinertia
+            sub(body, "inertial", mass="0", pos="0 0 0", diaginertia="0 0 0")
         if link.name in parents:
             joint = parents[link.name]
             if joint.kind != "fixed":

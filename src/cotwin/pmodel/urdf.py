@@ -44,13 +44,14 @@ def to_urdf(tree: KinematicTree) -> str:
     for link in tree.links:
         el = sub(robot, "link", name=link.name)
         local = inverse(frames[link.name]) @ link.pose  # p-model link frame in the URDF link frame
-        inertial = sub(el, "inertial")
-        com = local @ link.com
-        _origin(inertial, com)
-        sub(inertial, "mass", value=num(link.mass))
-        I = link.inertia
-        sub(inertial, "inertia", ixx=num(I[0, 0]), ixy=num(I[0, 1]), ixz=num(I[0, 2]), iyy=num(I[1, 1]),
-            iyz=num(I[1, 2]), izz=num(I[2, 2]))
+        if link.mass > 0:  # a massless frame has no <inertial>, as URDF says one
+            inertial = sub(el, "inertial")
+            com = local @ link.com
+            _origin(inertial, com)
+            sub(inertial, "mass", value=num(link.mass))
+            I = link.inertia
+            sub(inertial, "inertia", ixx=num(I[0, 0]), ixy=num(I[0, 1]), ixz=num(I[0, 2]), iyy=num(I[1, 1]),
+                iyz=num(I[1, 2]), izz=num(I[2, 2]))
         for g in link.geoms:
             for tag in ("visual",) if g.placeholder else ("visual", "collision"):
                 part = sub(el, tag, name=f"{g.name}_{tag}")

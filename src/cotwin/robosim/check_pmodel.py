@@ -340,7 +340,8 @@ class PModelChecker(Checker):
             if mass is not None and mass < 0:
                 self.diag.error(inertial.mass.loc, f"mass of {where} must be positive, is {mass}")
             elif mass == 0:
-                self.diag.warning(inertial.mass.loc, f"mass of {where} is 0: simulators use a default mass")
+                self.diag.warning(inertial.mass.loc, f"mass of {where} is 0: a massless frame, no mass in the "
+                                  "simulator (a link a moving joint carries alone gets 1 g, docs/pmodel-notation.md)")
         if inertial.unit is not None and inertial.unit not in UNITS:
             self.diag.error(inertial.loc, f"unknown unit '{inertial.unit}' (known: {', '.join(UNITS)})")
         for key, value, loc in inertial.inertia:

@@ -525,6 +525,7 @@ class CellOutcomes(Observer):
         self.robots = {r.name: RobotOutcome(r.name, planned=len(r.system.commands) if cell.spec.plan is not None else None)
                        for r in cell.robots}
         self.ledgers = {r.name: CommandLedger(r.system, self._units(r), r.scoped) for r in cell.robots}
+        self.saturated: dict[str, list[tuple[str, float]]] = {}  # robot -> its joints at their effort limit at the end
         # per robot, made once (the observer runs every step): its source, command events and scoped stopping events
         self._watch = [(r.name, r.source.name if r.source is not None else None, sorted(r.system.command_events),
                         [r.scoped(ev.name) for ev in r.system.models.mapping_model.input_events
@@ -562,8 +563,25 @@ class CellOutcomes(Observer):
                 out.collisions.append(round(execution.time, 9))
             self._before[name] = hit
 
+    def simulation_ended(self, execution, error) -> None:
+        """Each robot's joints pushing at their effort limit as the run ended, read from its platform's simulator
+        (outcomes.saturated_joints, as a single robot's run and live twin read them); none where the cell's
+        mapping runs out of this process (an FMU in another master)."""
+        from .outcomes import saturated_joints
+
+        units = getattr(execution.system.units.get(CELL_MAPPING.name), "units", None)
+        for name, unit in (units or {}).items():
+            self.saturated[name] = saturated_joints(unit.mapping.endpoint)
+
     def lines(self) -> list[str]:
         return [r.line() for r in self.robots.values()]
+
+    def warnings(self) -> list[str]:
+        """Per robot, named: its commands that never completed with joints at their effort limit at the end
+        (outcomes.Summary.saturation, what a single robot's run says)."""
+        said = {name: ledger.summary(saturated=self.saturated.get(name, ())).saturation()
+                for name, ledger in self.ledgers.items()}
+        return [f"{name}: {saturation}" for name, saturation in said.items() if saturation is not None]
 
     def strict_failures(self) -> list[str]:
         """What `--strict` refuses, per robot: commands applied that no completed move answered (stopped by a

@@ -184,12 +184,21 @@ class Summary:
             applied = len(self.outcomes) - counts["not applied"]  # one due after the end was never applied
             out.append(f"no command completed ({applied} applied)" if applied == len(self.outcomes) else
                        f"no command completed ({applied} of {len(self.outcomes)} applied)")
-        if counts["never completed"] and self.saturated:
-            joints = ", ".join(f"{name} ({limit:g})" for name, limit in self.saturated)
-            out.append(f"{counts['never completed']} command(s) never completed, and at the end these joints pushed "
-                       f"at their effort limit: {joints}: too weak to reach or hold the goal against its inertia, a "
-                       "load or a contact (the p-model's limit effort, the URDF's <limit effort>)")
+        saturation = self.saturation()
+        if saturation is not None:
+            out.append(saturation)
         return out
+
+    def saturation(self) -> str | None:
+        """Why commands never completed, where joints pushed at their effort limit at the end (None otherwise):
+        one of `warnings`, and a cell's per robot (cotwin.twin.assembly.cell.CellOutcomes)."""
+        never = self.counts()["never completed"]
+        if not never or not self.saturated:
+            return None
+        joints = ", ".join(f"{name} ({limit:g})" for name, limit in self.saturated)
+        return (f"{never} command(s) never completed, and at the end these joints pushed at their effort limit: "
+                f"{joints}: too weak to reach or hold the goal against its inertia, a load or a contact (the "
+                "p-model's limit effort, the URDF's <limit effort>)")
 
     def strict_failures(self) -> list[str]:
         """What `--strict` refuses: every command that did not complete, and blocked waits."""
