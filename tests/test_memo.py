@@ -71,7 +71,8 @@ def after(sim: PlatformSimulator) -> list[bytes]:
     """What anyone reads after the steps: the state, sensors, poses, contacts and their distances."""
     d = sim.data
     return [state(sim).tobytes(), d.sensordata.tobytes(), d.xpos.tobytes(), d.xmat.tobytes(), d.qacc.tobytes(),
-            d.actuator_force.tobytes(), bytes([d.ncon]), d.contact.dist[:d.ncon].tobytes()]
+            d.actuator_force.tobytes(), d.ncon.to_bytes(4, "little"), d.contact.dist[:d.ncon].tobytes(),
+            d.efc_force.tobytes()]
 
 
 def test_a_stretch_met_again_ends_where_stepping_it_ends_bit_for_bit(twin, held):
@@ -144,3 +145,63 @@ def test_a_full_memo_keeps_its_stretches_and_steps_the_new_ones(twin, held):
     restore(sim, start)
     held(sim, 30)
     assert kept.hits == 1 and after(sim) == first
+
+
+def test_a_stretch_in_contact_met_again_ends_as_stepping_it_ends(twin, held):
+    """The arm driven into the table and the plate: constraint forces and contacts after a hit are MuJoCo's."""
+    rng = np.random.default_rng(1)
+    tried = 0
+    for _ in range(60):
+        ctrl = rng.uniform(-2.5, 2.5, 6).tolist()
+        sims = [PlatformSimulator(twin.models.tree, twin.models.scene) for _ in range(2)]
+        for sim in sims:
+            sim.data.ctrl[:6] = ctrl
+            mujoco.mj_step(sim.model, sim.data, 400)
+        plain, remembering = sims
+        if plain.data.ncon == 0:
+            continue
+        start = state(plain)
+        held(plain, 50)
+        memo = remembering.remember_held_steps()
+        held(remembering, 50)
+        restore(remembering, start)
+        held(remembering, 50)
+        assert memo.hits == 1 and after(remembering) == after(plain)
+        tried += 1
+        if tried == 3:
+            break
+    assert tried == 3, "random set-points drive the arm into the scene"
+
+
+@pytest.mark.parametrize("change", ["gravity", "damping", "gain"])
+def test_a_change_of_the_models_numbers_forgets_the_steps_of_the_model_before(twin, held, change):
+    """The native loop checks the model's digest before each stretch (StepMemo.check): a calibrated gain, damping
+    or gravity changed on the fork's model is stepped as it now is."""
+    sim = simulator(twin)
+    memo = sim.remember_held_steps()
+    start = state(sim)
+    held(sim, 60)
+    memo.check(sim.model)
+    assert memo.stretches == 1  # nothing changed: kept
+    edit = {"gravity": lambda m: m.opt.gravity.__setitem__(2, -9.7),
+            "damping": lambda m: m.dof_damping.__setitem__(0, m.dof_damping[0] + 1.0),
+            "gain": lambda m: m.actuator_gainprm.__setitem__((0, 0), m.actuator_gainprm[0, 0] * 1.1)}[change]
+    edit(sim.model)
+    memo.check(sim.model)
+    assert memo.stretches == 0
+    restore(sim, start)
+    held(sim, 60)
+    reference = simulator(twin)
+    edit(reference.model)
+    restore(reference, start)
+    mujoco.mj_step(reference.model, reference.data, 60)
+    assert memo.hits == 0 and after(sim) == after(reference)
+
+
+def test_no_memo_where_mujoco_keeps_state_outside_the_integration_state(twin):
+    sleep = getattr(mujoco.mjtEnableBit, "mjENBL_SLEEP", None)
+    if sleep is None:
+        pytest.skip(f"MuJoCo {mujoco.__version__} has no sleeping bodies")
+    sim = simulator(twin)
+    sim.model.opt.enableflags |= int(sleep)
+    assert not memo.remembers(sim.model) and sim.remember_held_steps() is None

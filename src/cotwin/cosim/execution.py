@@ -164,7 +164,7 @@ def model_differences(saved: dict[str, str], here: dict[str, str]) -> list[str]:
     return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Checkpoint:
     """An execution's state kept in memory (Execution.checkpoint): only that execution goes back to it."""
     execution: "Execution"
@@ -440,8 +440,9 @@ class Execution:
     def checkpoint(self) -> "Checkpoint":
         """The co-simulation as it is now, kept in memory for `rollback` on this same execution (as libcosim's
         save_state beside export_state): each unit's checkpoint, the values on the connections, the time and
-        steps. No bytes are made or read and nothing is checked again: a sweep's fork goes back to its start
-        plan after plan (cotwin.twin.services.whatif.Forks)."""
+        steps. The execution's own state is not packed, parsed or checked again (each unit's `rollback` does
+        what it must: a Python unit checks its snapshot, an FMU deserialises its bytes): a sweep's fork goes back
+        to its start plan after plan (cotwin.twin.services.whatif.Forks)."""
         if not self.initialized or self.closed:
             raise CotwinError("only a running execution (initialised, not closed) has a state to keep")
         return Checkpoint(self, self.time, self.steps, self._origin, self.algorithm.snapshot(),

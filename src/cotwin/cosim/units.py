@@ -794,8 +794,9 @@ class PythonUnit(Unit):
         self.time = time
 
     def checkpoint(self) -> dict:
-        """The snapshot itself (no bytes made): `restore` checks it and builds the unit's state anew from it, and
-        nothing the unit runs changes it (tests/test_fused.py)."""
+        """The snapshot itself (no bytes made). The contract that makes it safe: `snapshot` shares no mutable
+        object with the live unit, and `restore` copies what it keeps or keeps only what the unit rebinds and
+        never changes in place, so the runs that follow leave the checkpoint as it was (tests/test_fused.py)."""
         return self.snapshot()
 
     def rollback(self, checkpoint: dict) -> None:

@@ -447,6 +447,8 @@ class QuietStep:
             else:
                 self.pointers[MOVE:] = [0] * (POINTERS - MOVE)
             self._addressed = (sim.model, d, sim.controls, arrays, watch, sim.memo)
+        if sim.memo is not None:
+            sim.memo.check(sim.model)  # its stretches were of this model's numbers (cotwin.pmodel.memo)
         self._watch = watch  # kept: its mask stays alive while the C loop reads it
         self._move = move or None  # kept: its arrays stay alive while the C loop reads them
         self.doubles[:SCALARS] = [float(d.time), float(sim.timestep), float(sim.model.opt.timestep), float(self.steps),

@@ -59,26 +59,10 @@ static double fraction(const double *move, double t) {
     return pow(tau, 3.0) * (10 - 15 * tau + 6 * tau * tau);
 }
 
-static int cotwin_control(step_fn, const void *, void *, double *, double, double, int, int, const double *, int,
-                          const int *, const double *, const double *, const double *, const double *, double *,
-                          const double *, int, int *, int *, int *);
-
 /* Returns 0 when all `steps` are done; 1 when a set-point is not finite (nothing written in that period:
    the caller's Python loop goes on from there and says why); 2 when the state became non-finite. `done`
    counts the physics steps made; `held` is set once the set-point stays at the move's end; `time` is the
    simulation time, advanced as MuJoCo advances it (the caller checks that they agree). */
-int cotwin_advance(step_fn step, const void *model, void *data, double *time, double timestep, double opt_timestep,
-                   int steps, int period, const double *move, int joints, const int *index,
-                   const double *start, const double *delta, const double *low, const double *high,
-                   double *ctrl, const double *qpos, int nq, int *held, int *done, int *flags) {
-    *done = 0;
-    if (flags) *flags |= COTWIN_DSBL_SENSOR;  /* sensors in the last step only (cotwin.pmodel.sensing) */
-    int status = cotwin_control(step, model, data, time, timestep, opt_timestep, steps, period, move, joints, index,
-                                start, delta, low, high, ctrl, qpos, nq, held, done, flags);
-    if (flags) *flags &= ~COTWIN_DSBL_SENSOR;
-    return status;
-}
-
 static int cotwin_control(step_fn step, const void *model, void *data, double *time, double timestep,
                           double opt_timestep, int steps, int period, const double *move, int joints, const int *index,
                           const double *start, const double *delta, const double *low, const double *high,
@@ -111,6 +95,19 @@ static int cotwin_control(step_fn step, const void *model, void *data, double *t
         if (!(sum - sum == 0.0)) return 2;
     }
     return 0;
+}
+
+int cotwin_advance(step_fn step, const void *model, void *data, double *time, double timestep, double opt_timestep,
+                   int steps, int period, const double *move, int joints, const int *index,
+                   const double *start, const double *delta, const double *low, const double *high,
+                   double *ctrl, const double *qpos, int nq, int *held, int *done, int *flags) {
+    *done = 0;
+    if (flags) *flags |= COTWIN_DSBL_SENSOR;  /* sensors in the last step only (cotwin.pmodel.sensing) */
+    /* after status 1 or 2 the last step made may have had its sensors off: the caller raises, reading nothing */
+    int status = cotwin_control(step, model, data, time, timestep, opt_timestep, steps, period, move, joints, index,
+                                start, delta, low, high, ctrl, qpos, nq, held, done, flags);
+    if (flags) *flags &= ~COTWIN_DSBL_SENSOR;
+    return status;
 }
 """
 

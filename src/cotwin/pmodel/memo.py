@@ -12,13 +12,18 @@ stretch's last step did. The steps are the same, bit for bit; MuJoCo's diagnosti
 
 The C (`SOURCE`, inside the native loop: cotwin.mapping.cstep) looks a stretch up by a hash of its state and
 compares the whole state; the memo keeps its first `capacity` stretches (a sweep's shared ones come first).
-The model must not change while a memo is kept: `PlatformSimulator.set_bodies` clears it when it changes a
-body; only forks turn a memo on (cotwin.twin.services.whatif.Forks), on simulators of their own.
+A memo's stretches are of the model as it was: the native loop checks a digest of the model's numbers (its
+buffer and options, `model_digest`) before each stretch and clears the memo when they changed (a payload
+given to the fork, a calibrated gain), and `PlatformSimulator.set_bodies` clears it at once. There is no memo
+where MuJoCo keeps state outside the integration state (sleeping bodies, plugins) or where the digest cannot be
+made (MuJoCo's headers not installed); only forks turn one on (cotwin.twin.services.whatif.Forks), on
+simulators of their own.
 """
 
 from __future__ import annotations
 
 import ctypes
+import functools
 from pathlib import Path
 
 import mujoco
@@ -43,7 +48,7 @@ typedef struct {
     double *states;  /* capacity x size: the state one step before each stretch's end */
     int *table;      /* mask + 1 slots: an entry's index, or -1 */
     double *scratch; /* size + 1 */
-    double hits, misses;
+    long long hits, misses;
 } cotwin_memo;
 
 static unsigned long long cotwin_memo_hash(const double *x, int n) {
@@ -85,7 +90,7 @@ static void cotwin_held(void (*step)(const void *, void *), const void *model, v
         if (memcmp(memo->keys + (size_t)e * width, key, (size_t)width * sizeof(double)) == 0) {
             memo->set(model, data, memo->states + (size_t)e * memo->size, memo->sig);
             step(model, data);
-            memo->hits += 1;
+            memo->hits++;
             return;
         }
     }
@@ -97,7 +102,7 @@ static void cotwin_held(void (*step)(const void *, void *), const void *model, v
         memo->get(model, data, memo->states + (size_t)e * memo->size, memo->sig);
         memo->table[at] = e;
     }
-    memo->misses += 1;
+    memo->misses++;
     if (flags) *flags &= ~COTWIN_DSBL_SENSOR;
     step(model, data);
 }
@@ -105,7 +110,7 @@ static void cotwin_held(void (*step)(const void *, void *), const void *model, v
 
 SOURCE = SOURCE.replace("@SENSOR@", str(SENSOR))
 STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # as cotwin.pmodel.simulator saves and restores forks
-BUDGET = 8 << 20  # bytes a memo keeps at most
+BUDGET = 8 << 20  # bytes a memo's stretches take at most (its table and a scratch row besides)
 MAX_STRETCHES = 4096
 
 
@@ -113,7 +118,63 @@ class _Memo(ctypes.Structure):
     _fields_ = [("get", ctypes.c_void_p), ("set", ctypes.c_void_p), ("sig", ctypes.c_int), ("size", ctypes.c_int),
                 ("capacity", ctypes.c_int), ("count", ctypes.c_int), ("mask", ctypes.c_int),
                 ("keys", ctypes.c_void_p), ("states", ctypes.c_void_p), ("table", ctypes.c_void_p),
-                ("scratch", ctypes.c_void_p), ("hits", ctypes.c_double), ("misses", ctypes.c_double)]
+                ("scratch", ctypes.c_void_p), ("hits", ctypes.c_longlong), ("misses", ctypes.c_longlong)]
+
+
+_DIGEST = r"""
+#include <stddef.h>
+#include <string.h>
+#include <mujoco/mjmodel.h>
+/* MuJoCo @VERSION@ */
+unsigned long long cotwin_model_digest(const mjModel *m) {
+    unsigned long long h = 1469598103934665603ULL, word;
+    const unsigned char *parts[2] = {(const unsigned char *)m->buffer, (const unsigned char *)&m->opt};
+    size_t sizes[2] = {(size_t)m->nbuffer, sizeof(mjOption)};
+    for (int p = 0; p < 2; p++) {
+        size_t i = 0;
+        for (; i + sizeof word <= sizes[p]; i += sizeof word) {
+            memcpy(&word, parts[p] + i, sizeof word);
+            h = (h ^ word) * 1099511628211ULL;
+            h ^= h >> 29;
+        }
+        for (; i < sizes[p]; i++) h = (h ^ parts[p][i]) * 1099511628211ULL;
+    }
+    return h;
+}
+"""
+
+
+@functools.lru_cache(maxsize=1)
+def _digest_function():
+    """The C digest of an mjModel's numbers, or None (MuJoCo's headers not installed, no compiler)."""
+    from ..cbuild import compile_library
+
+    folder = Path(mujoco.__file__).parent / "include"
+    if not (folder / "mujoco" / "mjmodel.h").is_file():
+        return None
+    try:
+        lib = compile_library(_DIGEST.replace("@VERSION@", mujoco.__version__), "model-digest", keep_gil=False,
+                              include_dirs=(str(folder),))
+    except (ValueError, OSError):
+        return None
+    fn = lib.cotwin_model_digest
+    fn.argtypes, fn.restype = [ctypes.c_void_p], ctypes.c_ulonglong
+    return fn
+
+
+def model_digest(model: mujoco.MjModel) -> int | None:
+    """A digest of everything in `model` that its steps read (its buffer of arrays and its options), or None."""
+    fn = _digest_function()
+    return fn(model._address) if fn is not None else None
+
+
+def remembers(model: mujoco.MjModel) -> bool:
+    """Whether a memo can stand for `model`'s steps: MuJoCo keeps no state of its own outside the integration
+    state (no sleeping bodies, no plugins) and the model's digest can be made."""
+    sleep = getattr(mujoco.mjtEnableBit, "mjENBL_SLEEP", None)
+    if sleep is not None and model.opt.enableflags & int(sleep):
+        return False
+    return model.nplugin == 0 and model_digest(model) is not None
 
 
 def _functions() -> tuple[int, int] | None:
@@ -132,6 +193,9 @@ class StepMemo:
         functions = _functions()
         if functions is None:
             raise ValueError("MuJoCo's library was not found beside the mujoco module")
+        if not remembers(model):
+            raise ValueError("this model's steps depend on more than its integration state, or its digest cannot be made")
+        self.digest = model_digest(model)
         size = mujoco.mj_stateSize(model, STATE)
         capacity = max(1, min(MAX_STRETCHES, budget // ((2 * size + 1) * 8)))
         slots = 1 << (2 * capacity - 1).bit_length()  # at least twice the entries: the table is never full
@@ -141,18 +205,18 @@ class StepMemo:
         self.scratch = np.zeros(size + 1)
         self._memo = _Memo(functions[0], functions[1], int(STATE), size, capacity, 0, slots - 1,
                            self.keys.ctypes.data, self.states.ctypes.data, self.table.ctypes.data,
-                           self.scratch.ctypes.data, 0.0, 0.0)
+                           self.scratch.ctypes.data, 0, 0)
         self.address = ctypes.addressof(self._memo)
 
     @property
     def hits(self) -> int:
         """Stretches taken from the memo."""
-        return int(self._memo.hits)
+        return self._memo.hits
 
     @property
     def misses(self) -> int:
         """Stretches of two steps or more stepped in full."""
-        return int(self._memo.misses)
+        return self._memo.misses
 
     @property
     def stretches(self) -> int:
@@ -163,3 +227,10 @@ class StepMemo:
         """Forget every stretch (the model changed)."""
         self.table.fill(-1)
         self._memo.count = 0
+
+    def check(self, model: mujoco.MjModel) -> None:
+        """Forget every stretch if `model`'s numbers changed since they were kept (before a native stretch)."""
+        digest = model_digest(model)
+        if digest != self.digest:
+            self.clear()
+            self.digest = digest

@@ -8,8 +8,8 @@ readings (tests/test_sensing.py); with a robot arm's joint sensors a step costs 
 
 They write the flag through its address in the model (`flags_address`), found with the offsets of MuJoCo's
 installed headers and checked against the model before use; None where the headers are not installed, where
-the model's sensors may keep state between steps (plugin sensors) or are computed by a callback (user
-sensors), or where the user has turned sensors off already: then every step computes them, as before.
+the model has plugins (they may keep state or read sensors between steps) or user sensors (a callback
+computes them), or where the user has turned sensors off already: then every step computes them, as before.
 """
 
 from __future__ import annotations
@@ -54,8 +54,8 @@ def flags_address(model: mujoco.MjModel) -> int | None:
     if offset is None or model.opt.disableflags & SENSOR:
         return None
     kinds = set(model.sensor_type.tolist())
-    if int(mujoco.mjtSensor.mjSENS_PLUGIN) in kinds or int(mujoco.mjtSensor.mjSENS_USER) in kinds:
-        return None
+    if model.nplugin or int(mujoco.mjtSensor.mjSENS_PLUGIN) in kinds or int(mujoco.mjtSensor.mjSENS_USER) in kinds:
+        return None  # a plugin may read sensors between steps; a user sensor is a callback's
     flags = ctypes.c_int.from_address(model._address + offset)
     before = model.opt.disableflags
     if flags.value != before:

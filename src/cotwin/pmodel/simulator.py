@@ -41,6 +41,7 @@ from .tree import KinematicTree, actuator_names, reading_path, servo_mode, servo
 CONTACT_PERIOD = 0.005  # s between checks for contacts with the scene's obstacles
 STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # time, positions, velocities, actuator states and history,
 # solver warm start, controls, applied forces, mocap poses, equality activations, user and plugin data
+_UNKNOWN = object()  # a value not looked up yet
 DERIVED = ("sensordata", "xpos", "xmat")  # what cotwin reads between steps besides STATE, as mj_step left it
 
 
@@ -119,7 +120,7 @@ class PlatformSimulator:
         self.timestep = timestep
         self._inertial0 = (self.model.body_mass.copy(), self.model.body_inertia.copy())  # as compiled
         self.memo: StepMemo | None = None  # held steps remembered (cotwin.pmodel.memo: a sweep's forks turn it on)
-        self._sensor_flags: int | None | bool = False  # sensor_flags(): not looked up yet
+        self._sensor_flags: int | None | object = _UNKNOWN  # sensor_flags(): not looked up yet
         self._joint_qpos = {j.name: self.model.joint(prefix + j.name).qposadr[0] for j in tree.actuated}
         self._joint_dof = {j.name: self.model.joint(prefix + j.name).dofadr[0] for j in tree.actuated}
         # every name an actuator answers to (cotwin.pmodel.tree.actuator_names, as every platform's) -> its control
@@ -374,7 +375,7 @@ class PlatformSimulator:
     def sensor_flags(self) -> int | None:
         """The address of the model's opt.disableflags for native loops that compute the sensors in a stretch's
         last step only (cotwin.pmodel.sensing), or None where every step computes them; found once."""
-        if self._sensor_flags is False:
+        if self._sensor_flags is _UNKNOWN:
             self._sensor_flags = flags_address(self.model) if self.shared is None else None
         return self._sensor_flags
 
