@@ -198,7 +198,8 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         if err.rows:
             write(partial, err.rows)
         stopped = Interrupted(f"{err.findings[0].message}; " + (f"the {len(err.rows)} answered are in {partial}"
-                                                                  if err.rows else "none was answered"))
+                                                                  if err.rows else "none was answered")
+                              + f"; {err.total - len(err.rows)} not run")
         if err.running:  # threads left in their what-ifs: the interpreter's exit under them crashed (SIGSEGV)
             from ..twin.analysis.scratch import remove_left
 
