@@ -27,7 +27,7 @@ def build(project: str, out: str, cc: str) -> None:
 
     system = load(project, cells=True, reader="cotwin build")
     with folder_lock(Path(out)):
-        written = build_all(system, out, cc)
+        written = build_all(system, out, cc, warn=lambda finding: click.echo(str(finding), err=True))
     for path in written.values():
         click.echo(f"{path}")
 
