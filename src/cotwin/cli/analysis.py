@@ -75,9 +75,10 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
     blob = read_bytes(state, "state") if state is not None else None  # capped: a state is a few MiB
     from ..twin.assembly.outcomes import EventRoles, Summary, answers_feasibility
 
-    from ..twin.assembly.scenario import nothing_planned
+    from ..twin.assembly.scenario import no_event_rows, nothing_planned
 
     show_warnings(nothing_planned(Path(plan), commands))
+    show_warnings(no_event_rows(commands, system.models.program))
     with about(state, StateError):
         prediction = predict(system, commands, blob, horizon=horizon, physics_step=physics_step)
     unknown = "feasibility unknown, " if answers_feasibility(system.models.program, EventRoles.of(system.spec)) else ""

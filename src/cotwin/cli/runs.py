@@ -82,11 +82,12 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
-    from ..twin.assembly.scenario import after_end, nothing_planned, plan_order
+    from ..twin.assembly.scenario import after_end, no_event_rows, nothing_planned, plan_order
 
     warned += show_warnings(nothing_planned(system.spec.plan, system.commands))
     warned += show_warnings(after_end(system.commands, system.spec.end if end is None else end))
     warned += show_warnings(plan_order(system.commands, system.command_events))
+    warned += show_warnings(no_event_rows(system.commands, system.models.program))
     dash = start_dashboard(system, dashboard, "run", history, serving=serving)
     try:
         with ProgressReport("co-simulating", "steps") as progress:
@@ -108,7 +109,7 @@ def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: 
               cc: str, dashboard, version: str, serving: dict, strict: bool = False, warned: int = 0) -> None:
     """`cotwin run` of a cell of several robots ([[robots]]): each robot's outcomes and the contacts between them."""
     from ..twin.assembly.cell import run_cell
-    from ..twin.assembly.scenario import after_end, nothing_planned, plan_order
+    from ..twin.assembly.scenario import after_end, no_event_rows, nothing_planned, plan_order
     from .progress import ProgressReport
 
     if version != "2":
@@ -117,6 +118,8 @@ def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: 
     warned += show_warnings(after_end(cell.commands, cell.spec.end if end is None else end))
     warned += show_warnings(dict.fromkeys(f for r in cell.robots
                                           for f in plan_order(r.system.commands, r.system.command_events)))
+    warned += show_warnings(dict.fromkeys(f for r in cell.robots
+                                          for f in no_event_rows(r.system.commands, r.system.models.program)))
     dash = start_dashboard(cell, dashboard, "run", None, serving=serving)
     try:
         with ProgressReport("co-simulating", "steps") as progress:
