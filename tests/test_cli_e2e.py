@@ -324,3 +324,18 @@ def test_broker_permissions_prints_a_vhost_and_one_least_privilege_user_per_role
     assert re.fullmatch(twin[6], "fmi_digital_twin_dt")  # the twin writes to its command exchange
     [publisher] = [c for c in commands if c[1] == "set_permissions" and c[4] == f"{prefix}publisher"]
     assert not re.fullmatch(publisher[6], "cotwin.robot")  # and the publisher cannot reach the robot
+
+
+def test_a_run_closes_with_how_many_errors_and_warnings_it_had(tmp_path):
+    """`cotwin run` ended on its outcomes with no count of what went wrong: a warning scrolled away among the
+    command lines left the run looking clean. Its last line now counts the errors and warnings it said."""
+    from conftest import cotwin_in_process
+
+    clean = cotwin_in_process("run", EXAMPLES / "ur5e" / "cotwin.toml", "-o", tmp_path / "clean", cwd=tmp_path)
+    assert clean.returncode == 0, clean.stderr
+    assert clean.stderr.strip().splitlines()[-1] == "0 error(s), 0 warning(s)"
+    short = cotwin_in_process("run", EXAMPLES / "ur5e" / "cotwin.toml", "--end", "6", "-o", tmp_path / "short",
+                              cwd=tmp_path)  # the plan's last commands come after the end: warned of
+    assert short.returncode == 0, short.stderr
+    said = sum("warning:" in line for line in short.stderr.splitlines())
+    assert said >= 1 and short.stderr.strip().splitlines()[-1] == f"0 error(s), {said} warning(s)", short.stderr

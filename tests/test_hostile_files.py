@@ -281,3 +281,32 @@ def test_an_output_on_a_read_only_file_system_says_so(tmp_path, monkeypatch):
     monkeypatch.setattr(os, "statvfs", real_statvfs)
     proc = cotwin_in_process("run", UR5E / "cotwin.toml", "-o", tmp_path / "run")
     assert proc.returncode == 2 and f"cannot write into {tmp_path} (no permission)" in proc.stderr, proc.stderr
+
+
+def test_a_planted_build_record_removes_no_file_the_build_did_not_write(tmp_path):
+    """build.json's 'written' list named the files a rebuild removes: a planted or edited one had `cotwin build`
+    delete the user's own files in the folder. Now only a file recorded with the digest of what is there is removed
+    (a stale artefact of an earlier build); others are kept, each named in a warning at build.json."""
+    import hashlib
+    import json
+
+    out = tmp_path / "b"
+    assert cotwin_in_process("build", UR5E / "cotwin.toml", "-o", out, cwd=tmp_path).returncode == 0
+    (out / "mynotes.txt").write_text("mine\n")
+    (out / "theirs.txt").write_text("also mine\n")
+    (out / "old.sdf").write_text("an artefact an earlier build wrote\n")
+    record = json.loads((out / "build.json").read_text())
+    planted = {**record, "written": ["mynotes.txt"]}  # names alone, as cotwin recorded them before digests
+    (out / "build.json").write_text(json.dumps(planted))
+    first = cotwin_in_process("build", UR5E / "cotwin.toml", "-o", out, cwd=tmp_path)
+    assert first.returncode == 0 and (out / "mynotes.txt").exists(), first.stderr
+    record = json.loads((out / "build.json").read_text())
+    record["written"] = {**record["written"], "mynotes.txt": None, "theirs.txt": "0" * 64,
+                         "old.sdf": hashlib.sha256((out / "old.sdf").read_bytes()).hexdigest()}
+    (out / "build.json").write_text(json.dumps(record))
+    again = cotwin_in_process("build", UR5E / "cotwin.toml", "-o", out, cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert (out / "mynotes.txt").read_text() == "mine\n" and (out / "theirs.txt").exists()
+    assert not (out / "old.sdf").exists()  # what a build wrote is still cleaned up
+    for name in ("mynotes.txt", "theirs.txt"):
+        assert f"build.json: warning: 'written' names '{name}'" in again.stderr, again.stderr

@@ -175,3 +175,20 @@ def test_the_cli_says_where_too_many_threads_were_asked_for(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert f"warning: --threads {many}: {many} threads on {cpus} CPU" in proc.stderr
     assert f"{many} what-ifs" in proc.stdout
+
+
+def test_an_interrupted_pool_keeps_the_answers_of_its_chunks_in_hand(scratch_root):
+    """Ctrl-C during a process-pool sweep kept only the chunks already collected: the chunks the workers had
+    answered meanwhile, or half answered, were dropped (up to 64 what-ifs each). Here the interrupt comes 3 s
+    after the first chunk is collected: the workers' answers of those 3 s are kept, each with its grid point."""
+    def progress(done, total):
+        if done:
+            time.sleep(3)  # the workers answer on meanwhile
+            raise KeyboardInterrupt
+
+    plans = _plans(1024)  # chunks of 64 on 2 workers
+    caught = _interrupted(plans=plans, horizon=1.0, workers=2, progress=progress)
+    xs = [next(v for k, v in row.items() if k.endswith("target_X")) for row in caught.rows]
+    assert len(xs) > 64 and caught.total == 1024
+    assert xs == sorted(set(xs))  # in the plans' order, none twice
+    assert list(scratch_root.glob("cotwin-sweep-*")) == []

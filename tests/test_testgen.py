@@ -754,3 +754,19 @@ def test_a_stub_cases_cycle_of_several_inputs_reaches_the_d_model_in_one_step():
 
     assert shown(True) == [{"moveCompleted", "collision"}, set()]
     assert shown(False) == [{"moveCompleted"}, {"collision"}]  # a plan's, as a broker's: one per step
+
+
+@pytest.mark.parametrize("events, expected", [
+    ({"noCollision": 3, "collisionFree": 1}, 0),  # said the opposite: no collision
+    ({"protectiveStop": 2, "robotCollision": 1, "moveDone": 4}, 3),  # stops named as the project's rule names them
+])
+def test_a_suites_collision_count_uses_the_projects_rule_for_a_stopping_event(events, expected):
+    """`cotwin test` counted as a collision every platform event whose name held 'collision' (noCollision,
+    collisionFree) and missed protectiveStop: its own rule, not the project's (outcomes.EventRoles.stops)."""
+    from types import SimpleNamespace
+
+    from cotwin.twin.analysis.testing import CaseRun
+
+    run = SimpleNamespace(mapping=SimpleNamespace(executed=[]), platform_events=events,
+                          system=SimpleNamespace(spec=SimpleNamespace(outcome_events={})))
+    assert CaseRun.platform_report(run)["collisions"] == expected

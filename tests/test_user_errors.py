@@ -375,3 +375,22 @@ def test_a_plan_row_raising_two_commands_says_they_are_applied_a_step_apart(ur5e
     said = [line for line in (proc.stdout + proc.stderr).splitlines() if "one command is applied per step" in line]
     assert said == [f"{ur5e / 'plan.csv'}:2:1: warning: this row raises moveDiscreteCommand, openGripperCommand: one "
                     "command is applied per step, moveDiscreteCommand first and each other in a later step"], said
+
+
+def test_a_plan_row_whose_event_is_false_is_warned_of_at_its_line(tmp_path):
+    """A row whose event column is false (or 0) raised nothing, was not counted and not reported: the run said
+    'commands: 1' of a three-row plan, with no word of the others. It is accepted as 'no event this row' and
+    warned of at its file and line, by cotwin run and cotwin whatif alike."""
+    project = tmp_path / "ur5e"
+    shutil.copytree(ROOT / "examples" / "ur5e", project)
+    (project / "plan.csv").write_text("timestep,moveDiscreteCommand,MovementArgs_target_X,MovementArgs_target_Y,"
+                                      "MovementArgs_target_Z\n1000,true,0,23,1\n5500,false,3,20,2\n8000,0,8,10,0\n")
+    ran = cotwin_in_process("run", project / "cotwin.toml", "-o", tmp_path / "out", cwd=tmp_path)
+    assert ran.returncode == 0, ran.stderr
+    for line, time in ((3, "5.5"), (4, "8")):
+        assert f"plan.csv:{line}:1: warning: this row at {time} s raises no event" in ran.stderr, ran.stderr
+    assert "commands: 1, 1 completed" in ran.stdout
+    asked = cotwin_in_process("whatif", project / "cotwin.toml", "--plan", project / "plan.csv", "--horizon", "3",
+                              cwd=tmp_path)
+    assert asked.returncode == 0, asked.stderr
+    assert "plan.csv:3:1: warning: this row at 5.5 s raises no event" in asked.stderr, asked.stderr

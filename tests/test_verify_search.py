@@ -361,3 +361,46 @@ def test_more_input_combinations_than_a_search_holds_are_refused_before_any_is_m
     assert proc.returncode == 1 and "more than 5,000" in proc.stderr, proc.stderr
     assert not (tmp_path / "tests").exists()
     assert search.MAX_COMBINATIONS == 5000 and cotwin_in_process("verify", arm).returncode == 0  # 1024: explored
+
+
+def _interrupt_after(monkeypatch, cycles: int) -> None:
+    """Ctrl-C as the search's cycle `cycles` + 1 starts (the interpreter's step raising KeyboardInterrupt)."""
+    step = Interpreter.step
+    count = [0]
+
+    def stepping(self, inputs):
+        count[0] += 1
+        if count[0] > cycles:
+            raise KeyboardInterrupt
+        return step(self, inputs)
+
+    monkeypatch.setattr(Interpreter, "step", stepping)
+
+
+def test_an_interrupted_search_reports_the_violations_found_so_far(tmp_path, monkeypatch):
+    """Ctrl-C mid-search threw away the division by zero already found (a traceback-free 'interrupted' and
+    nothing else); now the report says what it found, that it was interrupted, and exits 1 (a violation)."""
+    (tmp_path / "coin.rst").write_text(COIN)
+    program = build_program(load_checked([tmp_path / "coin.rst"]))
+    whole = verify(program).cycles
+    _interrupt_after(monkeypatch, whole - 1)
+    report = verify(program)
+    assert report.interrupted and not report.complete and not report.ok
+    assert any("division by zero" in v.message for v in report.violations)
+    text = format_report(program, report)
+    assert "INTERRUPTED" in text and "FAIL deadlock" not in text
+    monkeypatch.undo()
+    _interrupt_after(monkeypatch, whole - 1)
+    result = cotwin("verify", tmp_path / "coin.rst", cwd=tmp_path)
+    assert result.returncode == 1, result.stderr
+    assert "INTERRUPTED" in result.stdout and "division by zero" in result.stdout
+
+
+def test_an_interrupted_search_without_a_violation_is_not_called_verified(tmp_path, monkeypatch):
+    """Interrupted before any violation: the report says so and the exit is 130, not 0 (nothing verified)."""
+    (tmp_path / "coin.rst").write_text(COIN)
+    _interrupt_after(monkeypatch, 1)
+    result = cotwin("verify", tmp_path / "coin.rst", cwd=tmp_path)
+    assert result.returncode == 130, result.stdout + result.stderr
+    assert "INTERRUPTED" in result.stdout and "ok   " not in result.stdout.replace("ok   every", "")
+    assert "nothing is verified" in result.stderr

@@ -75,9 +75,10 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
     blob = read_bytes(state, "state") if state is not None else None  # capped: a state is a few MiB
     from ..twin.assembly.outcomes import EventRoles, Summary, answers_feasibility
 
-    from ..twin.assembly.scenario import nothing_planned
+    from ..twin.assembly.scenario import no_event_rows, nothing_planned
 
     show_warnings(nothing_planned(Path(plan), commands))
+    show_warnings(no_event_rows(commands, system.models.program))
     with about(state, StateError):
         prediction = predict(system, commands, blob, horizon=horizon, physics_step=physics_step)
     unknown = "feasibility unknown, " if answers_feasibility(system.models.program, EventRoles.of(system.spec)) else ""
@@ -198,7 +199,8 @@ def sweep(project: str, event: str, args: tuple[str, ...], state: str | None, ho
         if err.rows:
             write(partial, err.rows)
         stopped = Interrupted(f"{err.findings[0].message}; " + (f"the {len(err.rows)} answered are in {partial}"
-                                                                  if err.rows else "none was answered"))
+                                                                  if err.rows else "none was answered")
+                              + f"; {err.total - len(err.rows)} not run")
         if err.running:  # threads left in their what-ifs: the interpreter's exit under them crashed (SIGSEGV)
             from ..twin.analysis.scratch import remove_left
 

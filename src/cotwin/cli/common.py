@@ -37,14 +37,18 @@ ON_UNIT_FAILURE = click.option(
          "FMU then runs in a process of its own)")
 
 
-def said_restarts(units) -> None:
-    """Say which units were restarted from a state during the run (each restart was logged as it happened)."""
+def said_restarts(units) -> int:
+    """Say which units were restarted from a state during the run (each restart was logged as it happened);
+    how many restarts (each after a failed step: an error recovered)."""
+    count = 0
     for unit in units:
         restarts = unit.restarts
+        count += len(restarts or ())
         if restarts:
             times = ", ".join(f"{t:g}" for t, _ in restarts[:20]) + (", ..." if len(restarts) > 20 else "")
             click.echo(f"unit {unit.name}: restarted {len(restarts)} time(s) from its last good state, at t = {times} s",
                        err=True)
+    return count
 
 
 def _hint(param) -> str:
@@ -138,23 +142,28 @@ STRICT_HELP = ("exit with status 3 unless every command the run applied complete
                "(docs/interop.md, Honest outcomes)")
 
 
-def outcomes(summaries: dict, strict: bool, per_command: bool = True) -> None:
+def outcomes(summaries: dict, strict: bool, per_command: bool = True, counts: tuple[int, int] | None = None) -> int:
     """Each summary's counts and per-command lines (cotwin.twin.assembly.outcomes.Summary, by label: '' or PT, DT),
     its warnings (no command completed, blocked waits), and with `strict` exit STRICT_EXIT if anything did
-    not complete."""
+    not complete. `counts`: the errors and warnings said before, closed with the command's count of them
+    (said_counts) before the exit. Returns the warnings said here."""
     from ..twin.assembly.outcomes import STRICT_EXIT
 
-    failures = 0
+    failures = warned = 0
     for label, summary in summaries.items():
         prefix = f"{label}: " if label else ""
         for line in summary.lines() if per_command else summary.lines()[:1]:
             click.echo(prefix + line)
         for warning in summary.warnings():
             click.echo(f"{prefix}warning: {warning}", err=True)
+            warned += 1
         failures += len(summary.strict_failures())
+    if counts is not None:
+        said_counts(counts[0], counts[1] + warned)
     if strict and failures:
         click.echo(f"--strict: {failures} command(s) or wait(s) did not end well; exit status {STRICT_EXIT}", err=True)
         sys.exit(STRICT_EXIT)
+    return warned
 
 
 def exchange_name(ctx, param, value: str | None) -> str | None:
@@ -243,10 +252,19 @@ def start_dashboard(system, address, mode: str, history_url: str | None, whatif_
     return dash
 
 
-def show_warnings(findings) -> None:
+def show_warnings(findings) -> int:
+    """Print the warnings among `findings`; how many (a command's closing count says them)."""
+    shown = 0
     for f in findings:
         if f.severity is Severity.WARNING:
             click.echo(str(f), err=True)
+            shown += 1
+    return shown
+
+
+def said_counts(errors: int, warnings: int) -> None:
+    """A command's closing line: how many errors and warnings it had (0 and 0 said too: nothing went unsaid)."""
+    click.echo(f"{errors} error(s), {warnings} warning(s)", err=True)
 
 
 def check_step_count(step: float, span: float, hint: str | None, source: str) -> None:

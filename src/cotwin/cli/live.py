@@ -66,12 +66,13 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
     from ..twin.assembly.endpoints import endpoint_advice
-    from ..twin.assembly.scenario import after_end, nothing_planned, plan_order
+    from ..twin.assembly.scenario import after_end, no_event_rows, nothing_planned, plan_order
 
     show_warnings(step_warnings(system, step))
     show_warnings(nothing_planned(system.spec.plan, system.commands))
     show_warnings(after_end(system.commands, spec.end if end is None else end))
     show_warnings(plan_order(system.commands, system.command_events))
+    show_warnings(no_event_rows(system.commands, system.models.program))
     show_warnings(endpoint_advice(system, "pt"))  # what the PT's kind cannot carry
     dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
                            broker if whatif else None, serving)
@@ -123,7 +124,7 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
     import threading
 
     from ..twin.assembly.cell import CellSystem
-    from ..twin.assembly.scenario import after_end, nothing_planned, plan_order
+    from ..twin.assembly.scenario import after_end, no_event_rows, nothing_planned, plan_order
     from ..twin.live.cell_live import run_cell_twin
     from ..twin.services.history import database_url
     from .progress import ProgressReport
@@ -136,6 +137,7 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
     show_warnings(nothing_planned(cell.spec.plan, cell.commands))
     show_warnings(after_end(cell.commands, spec.end if end is None else end))
     show_warnings(dict.fromkeys(f for r in cell.robots for f in plan_order(r.system.commands, r.system.command_events)))
+    show_warnings(dict.fromkeys(f for r in cell.robots for f in no_event_rows(r.system.commands, r.system.models.program)))
     stop, looping = threading.Event(), threading.Event()
 
     class Looping(TwinObserver):

@@ -203,7 +203,8 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
     properties (timelock, determinism, divergence, repeated outputs) and reachability. Exit 0: all
     hold; 1: a violation (or, in a complete search, something unreachable); 3: the search stopped at
     --max-states, or at a counter that grows without bound, or tried only sample values (0 and 1) of an input a
-    condition reads (give them with --domain), without finding a violation (not verified)."""
+    condition reads (give them with --domain), without finding a violation (not verified); 130: interrupted
+    (Ctrl-C) without a violation found so far (what it found is reported all the same)."""
     from ..dmodel.program import build_program
     from ..dmodel.verify import RANDOM_VALUES, format_report, verify as explore
     from ..robosim.check import load_checked
@@ -228,5 +229,8 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
     click.echo(format_report(program, report))
     if report.violations or (report.complete and not report.ok):
         sys.exit(1)
+    if report.interrupted:  # nothing wrong found before the interrupt, which verifies nothing
+        click.echo("interrupted: the search did not end, nothing is verified", err=True)
+        sys.exit(130)
     # a complete search of sampled values found nothing wrong for them, which verifies nothing beyond them
     sys.exit(0 if report.ok and not report.sampled else 3)

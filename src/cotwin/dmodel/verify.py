@@ -102,6 +102,7 @@ class Report:
     random_values: tuple = ()  # what a real random draw took (empty: the model draws none)
     growth: str = ""  # an incomplete search: the variables that grew (growth_hint)
     unbounded: str = ""  # a search stopped early: the counter that grows without bound, where and how (growth.py)
+    interrupted: bool = False  # stopped by an interrupt (Ctrl-C): what it found so far is kept, nothing verified
 
     @property
     def ok(self) -> bool:
@@ -313,53 +314,57 @@ def verify(program: Program, domains: dict[str, list] | None = None, max_states:
             v.draws = []
         return v
 
-    while queue:
-        snap = queue.popleft()
-        for inputs in combos:
-            choices = [()]
-            while choices:
-                prefix = choices.pop()
-                interp.restore(snap)
-                interp.cycle = depth[snap]
-                interp.warnings = []
-                draws.start(prefix)
-                report.cycles += 1
-                if progress is not None and report.cycles % PROGRESS_CYCLES == 0:
-                    progress(len(parent), report.cycles, len(queue))
-                try:
-                    interp.step(inputs)
-                except ExecutionError as err:
+    try:
+        while queue:
+            snap = queue.popleft()
+            for inputs in combos:
+                choices = [()]
+                while choices:
+                    prefix = choices.pop()
+                    interp.restore(snap)
+                    interp.cycle = depth[snap]
+                    interp.warnings = []
+                    draws.start(prefix)
+                    report.cycles += 1
+                    if progress is not None and report.cycles % PROGRESS_CYCLES == 0:
+                        progress(len(parent), report.cycles, len(queue))
+                    try:
+                        interp.step(inputs)
+                    except ExecutionError as err:
+                        choices.extend(draws.alternatives())
+                        drew = drew or bool(draws.sizes)
+                        key = (err.kind, err.site or err.findings[0].message)
+                        if key not in found:  # breadth first: the first one found has a shortest trace
+                            found[key] = violation(err.kind, err.findings[0].message, snap, inputs)
+                        continue
                     choices.extend(draws.alternatives())
                     drew = drew or bool(draws.sizes)
-                    key = (err.kind, err.site or err.findings[0].message)
-                    if key not in found:  # breadth first: the first one found has a shortest trace
-                        found[key] = violation(err.kind, err.findings[0].message, snap, inputs)
-                    continue
-                choices.extend(draws.alternatives())
-                drew = drew or bool(draws.sizes)
-                for w in interp.warnings:
-                    key = ("determinism", w.site)
-                    if key not in found:
-                        found[key] = violation("determinism", str(w), snap, inputs)
-                nxt = interp.snapshot()
-                if nxt not in parent:
-                    if len(parent) >= max_states:
-                        report.complete = False
-                        continue
-                    parent[nxt] = (snap, (inputs, tuple(draws.drawn)))
-                    depth[nxt] = depth[snap] + 1
-                    queue.append(nxt)
-                    grows = watch.add(nxt, parent, depth)
-                    if grows is not None:  # the search cannot end: stop now, not at max_states
-                        report.complete = False
-                        report.unbounded = grows.message(format_trace)
-                        queue.clear()
-                        choices.clear()
-                        break
-            if report.unbounded:
-                break
+                    for w in interp.warnings:
+                        key = ("determinism", w.site)
+                        if key not in found:
+                            found[key] = violation("determinism", str(w), snap, inputs)
+                    nxt = interp.snapshot()
+                    if nxt not in parent:
+                        if len(parent) >= max_states:
+                            report.complete = False
+                            continue
+                        parent[nxt] = (snap, (inputs, tuple(draws.drawn)))
+                        depth[nxt] = depth[snap] + 1
+                        queue.append(nxt)
+                        grows = watch.add(nxt, parent, depth)
+                        if grows is not None:  # the search cannot end: stop now, not at max_states
+                            report.complete = False
+                            report.unbounded = grows.message(format_trace)
+                            queue.clear()
+                            choices.clear()
+                            break
+                if report.unbounded:
+                    break
+    except KeyboardInterrupt:  # Ctrl-C mid-search: the violations found so far are reported, not lost
+        report.complete = False
+        report.interrupted = True
     report.states = len(parent)
-    if not report.complete and not report.unbounded:
+    if not report.complete and not report.unbounded and not report.interrupted:
         report.growth = growth_hint(program, parent)
     report.random_values = draws.reals if drew else ()
     report.violations = sorted(found.values(), key=lambda v: (len(v.trace), v.property))
@@ -388,14 +393,17 @@ def format_report(program: Program, report: Report) -> str:
                f"with --domain {report.sampled[0]}=V1,V2,...") if report.sampled else ""
     if sampled and report.complete:  # else the INCOMPLETE line says it; "ok" alone claimed every value
         lines.append(f"  NOT VERIFIED for every value: {sampled}; what holds below holds for those values only")
-    if report.unbounded:
+    if report.interrupted:
+        lines.append(f"  INTERRUPTED: the search was stopped by an interrupt after {report.states} states: what it "
+                     "found so far holds, nothing else is verified" + (f" ({sampled})" if sampled else ""))
+    elif report.unbounded:
         lines.append(f"  INCOMPLETE: the search stopped after {report.states} states: {report.unbounded}"
                      + (f" ({sampled})" if sampled else ""))
     elif not report.complete:
         lines.append(f"  INCOMPLETE: the search stopped at its limit of {report.max_states} states: what it "
                      "found holds, what it did not reach is not judged (raise --max-states"
                      + (f"; {sampled}" if sampled else "") + report.growth + ")")
-    scope = "in the states explored" if report.unbounded else "within the limit"
+    scope = "in the states explored" if report.unbounded or report.interrupted else "within the limit"
     props = [("timelock", "deadlock/timelock freedom"), ("determinism", "determinism"),
              ("divergence", "divergence freedom"), ("repeated-output", "at most one of each output per cycle")]
     for key, title in props:

@@ -189,10 +189,33 @@ def _forks(state: bytes | None, step: float | None, physics: float | None = None
     return Forks(system, state, step=step, artefacts=artefacts, physics_step=physics)
 
 
+_STOP = None  # a pool worker's: the sweep's event set when it is interrupted (see _pool_load)
+
+
+def _pool_load(project: str, artefacts: str | None, stop) -> None:
+    """A pool worker's start: deaf to Ctrl-C (the terminal's interrupt reaches the whole process group, and a
+    worker cut in the middle of its chunk lost the answers of that chunk's plans already run); the sweep stops
+    its workers' chunks through `stop` instead, keeping what they answered."""
+    import signal
+
+    global _STOP
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _STOP = stop
+    _load(project, artefacts)
+
+
 def _run_chunk(plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None,
                physics: float | None = None) -> list[dict]:
+    """The rows of a chunk's plans, in order; fewer (the first ones) when the sweep is stopped meanwhile."""
+    rows: list[dict] = []
+    if _STOP is not None and _STOP.is_set():
+        return rows
     with _forks(state, step, physics) as forks:
-        return [_run(plan, state, horizon, step, forks) for plan in plans]
+        for plan in plans:
+            rows.append(_run(plan, state, horizon, step, forks))
+            if _STOP is not None and _STOP.is_set():
+                break
+    return rows
 
 
 def _ray_run(project: str, artefacts: str | None, plan, state, horizon, step, physics=None) -> dict:
@@ -307,11 +330,14 @@ def _sweep(project: str, plans: list[list[Command]], state: bytes | None, horizo
     size = max(1, min(len(plans) // (workers * 8), 64))  # small chunks: progress and balance
     chunks = [plans[k:k + size] for k in range(0, len(plans), size)]
     answers: dict[int, list[dict]] = {}
-    pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_load,
-                               initargs=(project, artefacts))
+    context = get_context("spawn")
+    stop = context.Event()  # set on an interrupt: each worker ends its chunk after the what-if in hand
+    pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_pool_load,
+                               initargs=(project, artefacts, stop))
+    futures: dict = {}
     try:
-        futures = {pool.submit(_run_chunk, chunk, state, horizon, step, physics_step): k
-                   for k, chunk in enumerate(chunks)}
+        for k, chunk in enumerate(chunks):
+            futures[pool.submit(_run_chunk, chunk, state, horizon, step, physics_step)] = k
         done = 0
         for future in as_completed(futures):
             k = futures[future]
@@ -322,6 +348,10 @@ def _sweep(project: str, plans: list[list[Command]], state: bytes | None, horizo
             done += len(answers[k])
             report(done, len(plans))
     except KeyboardInterrupt:  # the answers so far are kept (in the plans' order), not lost
+        try:
+            _collect_stopped(pool, stop, futures, answers)
+        except KeyboardInterrupt:  # a second interrupt: the chunks in hand not waited for
+            pass
         try:
             _stop(pool)
         except KeyboardInterrupt:  # a second interrupt as the workers are stopped: the answers all the same
@@ -431,6 +461,23 @@ def _threaded(loaded: tuple, plans: list[list[Command]], state: bytes | None, ho
     if errors:
         raise errors[0]
     return rows  # type: ignore[return-value] - every plan answered when no thread failed
+
+
+def _collect_stopped(pool: ProcessPoolExecutor, stop, futures: dict, answers: dict[int, list[dict]]) -> None:
+    """After an interrupt: the chunks not started dropped, those in hand told to end after their what-if in hand
+    (`stop`) and their answers so far kept in `answers` (a chunk's first plans: an interrupted sweep dropped every
+    plan of the chunks in hand, up to 64 each, though most were answered). A worker that died meanwhile answers
+    nothing."""
+    from concurrent.futures import wait
+
+    stop.set()
+    for future in futures:  # cancelled here, not by shutdown's cancel_futures: its late cancelling hung wait()
+        future.cancel()
+    in_hand = [future for future, k in futures.items() if k not in answers and not future.cancelled()]
+    wait(in_hand)
+    for future in in_hand:
+        if not future.cancelled() and future.exception() is None:
+            answers[futures[future]] = future.result()
 
 
 def _stop(pool: ProcessPoolExecutor) -> None:

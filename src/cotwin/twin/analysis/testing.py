@@ -452,9 +452,10 @@ class CaseRun:
         executed = {}
         for _, op, _ in self.mapping.executed:
             executed[op] = executed.get(op, 0) + 1
-        stops = EventRoles.of(self.system.spec).stop_events  # the project's [outcomes] stops, if it names them
-        collisions = sum(n for e, n in self.platform_events.items()
-                         if (e in stops if stops is not None else "collision" in e.lower()))
+        # the project's one rule for an event that stops a move (its [outcomes] stops, else outcomes.stopping's
+        # naming convention): a substring 'collision' counted noCollision and collisionFree, and missed protectiveStop
+        roles = EventRoles.of(self.system.spec)
+        collisions = sum(n for e, n in self.platform_events.items() if roles.stops(e))
         return {"operations": executed, "events": dict(self.platform_events), "collisions": collisions}
 
 

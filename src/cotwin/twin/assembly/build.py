@@ -20,15 +20,15 @@ import uuid
 import zipfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterable
+from typing import Callable, Iterable
 
 from ... import __version__
-from ...diagnostics import CotwinError
+from ...diagnostics import CotwinError, Finding, Location, Severity
 from ...files import check_outputs, open_exclusive, output, write_bytes, write_text
 from .system import TwinSystem
 
 RECORD = "build.json"
-WRITTEN = "written"  # build.json's list of the files the last `build` wrote (no artefact has that name)
+WRITTEN = "written"  # build.json's files the last `build` wrote, name -> digest of what it wrote (no artefact has that name)
 ARTEFACTS = ("dmodel.fmu", RECORD)  # and build()'s: the p-model files, the Python FMUs, multimodel.json
 _GENERATORS = ("dmodel/ccode.py", "dmodel/fmu.py", "dmodel/fmi2_wrapper.c", "dmodel/ports.py", "dmodel/program.py",
                "dmodel/interpreter.py")
@@ -119,22 +119,51 @@ class Record:
     def forget(self, target: Path) -> None:
         self.keys.pop(target.name, None)
 
-    def settle(self, written) -> list[Path]:
+    def settle(self, written, warn: Callable[[Finding], None] | None = None) -> list[Path]:
         """Remove the files an earlier build wrote here that this one did not (a robot no longer in the cell,
-        a p-model renamed), and remember what this one wrote; only files a build wrote are ever removed.
-        Returns those removed."""
+        a p-model renamed), and remember what this one wrote, with each file's digest; only files a build wrote
+        are ever removed: a name of this folder recorded with the digest of what is there now. Any other name
+        (a build.json planted or edited, or from a cotwin that recorded no digests) is kept and `warn`ed of
+        (default: the cotwin.twin logger). Returns those removed."""
         names = sorted({Path(p).name for p in written} | {RECORD})
-        before = self.keys.get(WRITTEN, [])
+        before = self.keys.get(WRITTEN, {})
+        if isinstance(before, list):  # an older record: names without digests, not proof that a build wrote them
+            before = {name: None for name in before}
         folder, gone = self.path.parent, []
-        for name in before if isinstance(before, list) else []:
-            path = folder / name if isinstance(name, str) and name == Path(name).name else None
-            if path is not None and name not in names and path.is_file() and not path.is_symlink():
+        for name, digest in before.items() if isinstance(before, dict) else []:
+            if not isinstance(name, str) or name in names:
+                continue
+            path = folder / name if name == Path(name).name and name not in ("", ".", "..") else None
+            if path is not None and not (path.is_file() or path.is_symlink()):
+                continue  # gone already: nothing to remove
+            if path is not None and path.is_file() and not path.is_symlink() and digest == _file_digest(path):
                 path.unlink()
                 gone.append(path)
                 self.keys.pop(name, None)
-        self.keys[WRITTEN] = names
+                continue
+            why = ("not a file of this folder" if path is None else
+                   "not a file this build wrote here (its content is not what cotwin wrote, or no digest is recorded)")
+            (warn or _log_warning)(Finding(Location(str(self.path), 0, 0), Severity.WARNING,
+                                           f"{WRITTEN!r} names {name!r}, {why}: kept, not removed"))
+        self.keys[WRITTEN] = {name: _file_digest(folder / name) for name in names if name != RECORD}
         write_text(self.path, json.dumps(self.keys, indent=1, sort_keys=True) + "\n")
         return gone
+
+
+def _file_digest(path: Path) -> str | None:
+    """The SHA-256 of a regular file's content (None: not one, or unreadable)."""
+    try:
+        if path.is_symlink() or not path.is_file():
+            return None
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def _log_warning(finding: Finding) -> None:
+    import logging
+
+    logging.getLogger("cotwin.twin").warning(str(finding))
 
 
 def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: Record | None = None,
@@ -179,15 +208,17 @@ def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: R
     return target
 
 
-def build(system: TwinSystem, out: str | Path, cc: str = "cc") -> dict[str, Path]:
-    """Every artefact: the d-model FMU, SDF/URDF/MJCF, the Python FMUs and multimodel.json."""
+def build(system: TwinSystem, out: str | Path, cc: str = "cc",
+          warn: Callable[[Finding], None] | None = None) -> dict[str, Path]:
+    """Every artefact: the d-model FMU, SDF/URDF/MJCF, the Python FMUs and multimodel.json; `warn` is told of
+    files build.json names that this build keeps (Record.settle)."""
     from ...pmodel.mjcf import to_mjcf
     from ...pmodel.sdf import to_sdf
     from ...pmodel.urdf import to_urdf
 
     out = Path(out)
     if system.spec.robots:
-        return build_cell(system, out, cc)
+        return build_cell(system, out, cc, warn)
     tree, scene = system.models.tree, system.models.scene
     check_outputs([out / name for name in (*ARTEFACTS, f"{tree.name}.sdf", f"{tree.name}.urdf", f"{tree.name}_scene.xml",
                                            "multimodel.json", *(u.fmu for u in system.units))], system.spec.inputs)
@@ -199,11 +230,11 @@ def build(system: TwinSystem, out: str | Path, cc: str = "cc") -> dict[str, Path
         written[name] = write_text(out / name, text)
     written.update(python_fmus(system, out, record))
     written["multimodel"] = write_text(out / "multimodel.json", json.dumps(system.multimodel(), indent=2) + "\n")
-    record.settle(written.values())
+    record.settle(written.values(), warn)
     return written
 
 
-def build_cell(cell, out: Path, cc: str = "cc") -> dict[str, Path]:
+def build_cell(cell, out: Path, cc: str = "cc", warn: Callable[[Finding], None] | None = None) -> dict[str, Path]:
     """Every artefact of a cell of several robots (cotwin.twin.assembly.cell): the d-model FMU (one file, an instance
     per robot), each robot's SDF and URDF, the cell's world as MJCF, the Python FMUs and multimodel.json."""
     trees = [r.system.models.tree for r in cell.robots]
@@ -222,7 +253,7 @@ def build_cell(cell, out: Path, cc: str = "cc") -> dict[str, Path]:
     written["cell_scene.xml"] = write_text(out / "cell_scene.xml", cell.world().xml)
     written.update(python_fmus(cell, out, record))
     written["multimodel"] = write_text(out / "multimodel.json", json.dumps(cell.multimodel(), indent=2) + "\n")
-    record.settle(written.values())
+    record.settle(written.values(), warn)
     return written
 
 

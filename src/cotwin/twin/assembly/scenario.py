@@ -143,6 +143,24 @@ def plan_order(commands: list[Command], events: set[str] | frozenset[str] = froz
     return out[:AFTER_END_SHOWN]
 
 
+def no_event_rows(commands: list[Command], program: Program) -> list[Finding]:
+    """Warnings for plan rows that raise no event: every event column false (or 0). Such a row is accepted as
+    'no event this row' (a row switched off) but commands nothing, so it is neither sent nor counted: said at its
+    line, not passed over in silence. The first AFTER_END_SHOWN, the rest summed up in one more."""
+    events = {ev.name for ev in program.inputs}
+    silent = [c for c in commands
+              if any(port in events for port, _ in c.values) and not any(port in events and value is True
+                                                                          for port, value in c.values)]
+    out = [Finding(_location(c.where), Severity.WARNING,
+                   f"this row at {c.time:g} s raises no event (its event column(s) "
+                   f"{', '.join(port for port, _ in c.values if port in events)} false): it commands nothing and "
+                   "is not counted") for c in silent[:AFTER_END_SHOWN]]
+    if len(silent) > AFTER_END_SHOWN:
+        out.append(Finding(_location(silent[AFTER_END_SHOWN].where), Severity.WARNING,
+                           f"... and {len(silent) - AFTER_END_SHOWN} more row(s) raising no event"))
+    return out
+
+
 def nothing_planned(plan: Path | None, commands: list[Command]) -> list[Finding]:
     """A warning for a plan (or command list) that holds no command: the run goes ahead without commands from
     outside, which a user who wrote a plan did not mean ("nothing happened" is said, not taken for success)."""
