@@ -131,7 +131,8 @@ def test_a_cycle_period_is_checked_against_the_step_the_run_takes(ur5e, tmp_path
         assert f"--step: [cosim] parameters cycle_period ({path}:8:16):" in said, said
         assert "0.03 s does not divide the step of 0.25 s into whole d-model cycles" in said and "0.1 s" not in said
     proc = cotwin_in_process("run", path, "-o", tmp_path / "ran", "--step", "0.3", "--end", "0.6")
-    assert proc.returncode == 0 and "0.6 s" in proc.stdout and "error" not in proc.stderr, proc.stdout + proc.stderr
+    assert proc.returncode == 0 and "0.6 s" in proc.stdout and "error:" not in proc.stderr and \
+        "0 error(s)" in proc.stderr, proc.stdout + proc.stderr
 
 
 def test_a_fleet_twins_cycle_period_is_checked_against_the_step_its_entry_gives(ur5e, tmp_path):
