@@ -75,6 +75,15 @@ def after(sim: PlatformSimulator) -> list[bytes]:
             d.efc_force.tobytes()]
 
 
+def stepped(twin, start: np.ndarray, n: int, edit=lambda sim: None) -> list[bytes]:
+    """What MuJoCo alone reads after n steps of a fresh simulator restored to `start` and then `edit`-ed."""
+    reference = simulator(twin)
+    restore(reference, start)
+    edit(reference)
+    mujoco.mj_step(reference.model, reference.data, n)
+    return after(reference)
+
+
 def test_a_stretch_met_again_ends_where_stepping_it_ends_bit_for_bit(twin, held):
     plain, remembering = simulator(twin), simulator(twin)
     start = state(plain)
@@ -105,11 +114,7 @@ def test_another_state_or_number_of_steps_is_stepped_not_taken_from_the_memo(twi
     sim.data.ctrl[0] += 1e-12  # the same positions, another control
     held(sim, 50)
     assert memo.hits == 0 and memo.stretches == 3
-    reference = simulator(twin)
-    restore(reference, start)
-    reference.data.ctrl[0] += 1e-12
-    mujoco.mj_step(reference.model, reference.data, 50)
-    assert after(sim) == after(reference)
+    assert after(sim) == stepped(twin, start, 50, lambda reference: reference.data.ctrl.__setitem__(0, sim.data.ctrl[0]))
 
 
 def test_a_body_given_another_mass_forgets_the_steps_of_the_model_before(twin, held):
@@ -126,11 +131,7 @@ def test_a_body_given_another_mass_forgets_the_steps_of_the_model_before(twin, h
     restore(sim, start)
     held(sim, 80)
     assert memo.hits == 0
-    reference = simulator(twin)
-    reference.set_bodies({body: [3.5, 0.01, 0.01, 0.01]})
-    restore(reference, start)
-    mujoco.mj_step(reference.model, reference.data, 80)
-    assert after(sim) == after(reference)
+    assert after(sim) == stepped(twin, start, 80, lambda reference: reference.set_bodies({body: [3.5, 0.01, 0.01, 0.01]}))
 
 
 def test_a_full_memo_keeps_its_stretches_and_steps_the_new_ones(twin, held):
@@ -191,11 +192,7 @@ def test_a_change_of_the_models_numbers_forgets_the_steps_of_the_model_before(tw
     assert memo.stretches == 0
     restore(sim, start)
     held(sim, 60)
-    reference = simulator(twin)
-    edit(reference.model)
-    restore(reference, start)
-    mujoco.mj_step(reference.model, reference.data, 60)
-    assert memo.hits == 0 and after(sim) == after(reference)
+    assert memo.hits == 0 and after(sim) == stepped(twin, start, 60, lambda reference: edit(reference.model))
 
 
 def test_no_memo_where_mujoco_keeps_state_outside_the_integration_state(twin):

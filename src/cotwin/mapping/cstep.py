@@ -505,11 +505,11 @@ static int m_contact(const void *data, const unsigned char *watched, double limi
 def mujoco_headers() -> tuple[tuple[str, ...], str] | None:
     """(include dirs, C declarations) reading MuJoCo's mjData through the headers of the installed version (named
     in the source: another version builds anew), or None where they are not installed."""
-    import os
-
     import mujoco
 
-    folder = os.path.join(os.path.dirname(mujoco.__file__), "include")
-    if not os.path.isfile(os.path.join(folder, "mujoco", "mjdata.h")):
+    from ..pmodel.mujoco_c import include_dir
+
+    folder = include_dir("mjdata.h")
+    if folder is None:
         return None
     return (folder,), f"/* MuJoCo {mujoco.__version__} */\n#include <mujoco/mjdata.h>\n{CONTACT_CHECK}"

@@ -17,10 +17,8 @@ from __future__ import annotations
 
 import ctypes
 import subprocess
-from pathlib import Path
 
-import mujoco
-
+from ..pmodel.mujoco_c import address
 from ..pmodel.sensing import SENSOR
 
 SOURCE = r"""
@@ -127,11 +125,7 @@ def _build() -> ctypes.CDLL | None:
 
 def _mj_step():
     """The address of MuJoCo's mj_step in the library the mujoco module loaded."""
-    folder = Path(mujoco.__file__).parent
-    libraries = sorted(folder.glob("libmujoco.so*"))
-    if not libraries:
-        return None
-    return ctypes.cast(ctypes.CDLL(str(libraries[0]))["mj_step"], ctypes.c_void_p).value
+    return address("mj_step")
 
 
 def advance_function():

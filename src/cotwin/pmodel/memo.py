@@ -23,12 +23,11 @@ simulators of their own.
 from __future__ import annotations
 
 import ctypes
-import functools
-from pathlib import Path
 
 import mujoco
 import numpy as np
 
+from .mujoco_c import address, model_functions
 from .sensing import SENSOR
 
 SOURCE = r"""
@@ -121,51 +120,10 @@ class _Memo(ctypes.Structure):
                 ("scratch", ctypes.c_void_p), ("hits", ctypes.c_longlong), ("misses", ctypes.c_longlong)]
 
 
-_DIGEST = r"""
-#include <stddef.h>
-#include <string.h>
-#include <mujoco/mjmodel.h>
-/* MuJoCo @VERSION@ */
-unsigned long long cotwin_model_digest(const mjModel *m) {
-    unsigned long long h = 1469598103934665603ULL, word;
-    const unsigned char *parts[2] = {(const unsigned char *)m->buffer, (const unsigned char *)&m->opt};
-    size_t sizes[2] = {(size_t)m->nbuffer, sizeof(mjOption)};
-    for (int p = 0; p < 2; p++) {
-        size_t i = 0;
-        for (; i + sizeof word <= sizes[p]; i += sizeof word) {
-            memcpy(&word, parts[p] + i, sizeof word);
-            h = (h ^ word) * 1099511628211ULL;
-            h ^= h >> 29;
-        }
-        for (; i < sizes[p]; i++) h = (h ^ parts[p][i]) * 1099511628211ULL;
-    }
-    return h;
-}
-"""
-
-
-@functools.lru_cache(maxsize=1)
-def _digest_function():
-    """The C digest of an mjModel's numbers, or None (MuJoCo's headers not installed, no compiler)."""
-    from ..cbuild import compile_library
-
-    folder = Path(mujoco.__file__).parent / "include"
-    if not (folder / "mujoco" / "mjmodel.h").is_file():
-        return None
-    try:
-        lib = compile_library(_DIGEST.replace("@VERSION@", mujoco.__version__), "model-digest", keep_gil=False,
-                              include_dirs=(str(folder),))
-    except (ValueError, OSError):
-        return None
-    fn = lib.cotwin_model_digest
-    fn.argtypes, fn.restype = [ctypes.c_void_p], ctypes.c_ulonglong
-    return fn
-
-
 def model_digest(model: mujoco.MjModel) -> int | None:
     """A digest of everything in `model` that its steps read (its buffer of arrays and its options), or None."""
-    fn = _digest_function()
-    return fn(model._address) if fn is not None else None
+    functions = model_functions()
+    return functions[1](model._address) if functions is not None else None
 
 
 def remembers(model: mujoco.MjModel) -> bool:
@@ -177,21 +135,12 @@ def remembers(model: mujoco.MjModel) -> bool:
     return model.nplugin == 0 and model_digest(model) is not None
 
 
-def _functions() -> tuple[int, int] | None:
-    """The addresses of mj_getState and mj_setState in the library the mujoco module loaded."""
-    libraries = sorted(Path(mujoco.__file__).parent.glob("libmujoco.so*"))
-    if not libraries:
-        return None
-    lib = ctypes.CDLL(str(libraries[0]))
-    return ctypes.cast(lib["mj_getState"], ctypes.c_void_p).value, ctypes.cast(lib["mj_setState"], ctypes.c_void_p).value
-
-
 class StepMemo:
     """The held stretches of one simulator's model (see the module doc); `address` is what the C takes."""
 
     def __init__(self, model: mujoco.MjModel, budget: int = BUDGET):
-        functions = _functions()
-        if functions is None:
+        functions = address("mj_getState"), address("mj_setState")
+        if None in functions:
             raise ValueError("MuJoCo's library was not found beside the mujoco module")
         if not remembers(model):
             raise ValueError("this model's steps depend on more than its integration state, or its digest cannot be made")

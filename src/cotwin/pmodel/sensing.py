@@ -15,47 +15,23 @@ computes them), or where the user has turned sensors off already: then every ste
 from __future__ import annotations
 
 import ctypes
-import functools
-import os
 
 import mujoco
 
+from .mujoco_c import model_functions
+
 SENSOR = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
-
-_OFFSET = r"""
-#include <stddef.h>
-#include <mujoco/mjmodel.h>
-/* MuJoCo %s */
-size_t cotwin_flags_offset(void) { return offsetof(mjModel, opt) + offsetof(mjOption, disableflags); }
-"""
-
-
-@functools.lru_cache(maxsize=1)
-def _offset() -> int | None:
-    """The offset of opt.disableflags in the installed MuJoCo's mjModel, or None (no headers, no compiler)."""
-    from ..cbuild import compile_library
-
-    folder = os.path.join(os.path.dirname(mujoco.__file__), "include")
-    if not os.path.isfile(os.path.join(folder, "mujoco", "mjmodel.h")):
-        return None
-    try:
-        lib = compile_library(_OFFSET % mujoco.__version__, "flags-offset", keep_gil=False, include_dirs=(folder,))
-    except (ValueError, OSError):
-        return None
-    fn = lib.cotwin_flags_offset
-    fn.restype = ctypes.c_size_t
-    return int(fn())
-
 
 def flags_address(model: mujoco.MjModel) -> int | None:
     """The address of `model`'s opt.disableflags for a native loop to skip sensors between reads (see the module
     doc), or None where it must not."""
-    offset = _offset()
-    if offset is None or model.opt.disableflags & SENSOR:
+    functions = model_functions()
+    if functions is None or model.opt.disableflags & SENSOR:
         return None
     kinds = set(model.sensor_type.tolist())
     if model.nplugin or int(mujoco.mjtSensor.mjSENS_PLUGIN) in kinds or int(mujoco.mjtSensor.mjSENS_USER) in kinds:
         return None  # a plugin may read sensors between steps; a user sensor is a callback's
+    offset = functions[0]
     flags = ctypes.c_int.from_address(model._address + offset)
     before = model.opt.disableflags
     if flags.value != before:
