@@ -78,14 +78,15 @@ def step_count(span: float, step: float, start: float = 0.0, what: str | None = 
 
 
 def uninterrupted(calls: Iterable[Callable[[], object]]) -> None:
-    """Each of `calls` in turn, even if an interrupt (a second Ctrl-C, SIGTERM) arrives during one: the ending of
-    a run (units ended, result files renamed, its history closed) is never left half-done; the first
-    interrupt is raised once the last call is made."""
+    """Each of `calls` in turn, even if an interrupt (a second Ctrl-C, SIGTERM) arrives during one or one fails
+    (a result file that cannot be written): the ending of a run (units ended, result files renamed, its history
+    closed, temporary files removed) is never left half-done; the first interrupt or error is raised once the
+    last call is made."""
     late = None
     for call in calls:
         try:
             call()
-        except KeyboardInterrupt as err:
+        except BaseException as err:  # noqa: BLE001 -- raised after the others are made
             late = late or err
     if late is not None:
         raise late

@@ -18,7 +18,9 @@ import numpy as np
 
 from ..diagnostics import CotwinError
 from ..files import Reserved, open_exclusive, refuse_special, write_bytes
+from ..interrupts import signals_held
 from .algorithm import UNSET
+from .appender import Appender
 
 
 class Observer:
@@ -99,10 +101,10 @@ class CSVWriter(Observer):
 
     Rows are held as values and formatted `batch` at a time (in C where they are plain numbers, else one repr of
     them all: the per-row cost was a sixth of a 1 kHz step, issue 23); the native loop's stretches are held as
-    its doubles and spelt when written (all at once: between two stretches' physics every call runs with its
-    code and data out of the caches). They go to `<name>.part` in whole lines, written at most every
-    `flush_seconds` (and at the end, also of a failed run),
-    so a crash loses at most that much and never leaves half a line. A run that ends well renames the
+    its doubles and spelt on a thread of the writer's own (cotwin.cosim.appender), in C without the GIL, while
+    the next stretch runs. They go to `<name>.part` in whole lines, handed to that thread every `batch` rows,
+    at most `flush_seconds` after a row was made and at the end (also of a failed run, whose rows are all
+    written before the file is closed), so a crash loses at most that much and never leaves half a line. A run that ends well renames the
     file into place; a failed run leaves the previous result untouched and keeps its own rows in
     `<stem>.partial.csv` (`partial_path`), which the error names.
     """
@@ -118,8 +120,9 @@ class CSVWriter(Observer):
         self.partial_path = self.path.with_name(f"{self.path.stem}.partial{self.path.suffix}")
         self.rows = 0
         self.kept_in: Path | None = None  # where the rows went when the run ended (result or partial file)
+        self.written: int | None = None  # rows in that file when the run ended
         self._fd: int | None = None
-        self._lines: list = []  # in order: lines as the file gets them (bytes), rows of values, native _Stretch-es
+        self._file: Appender | None = None  # writes the lines (bytes) and native _Stretch-es given, in order
         self._rows: list[tuple] = []  # (time, values...) of steps not yet formatted
         self.batch = batch
         self._last_flush = 0.0
@@ -141,9 +144,10 @@ class CSVWriter(Observer):
         os.ftruncate(fd, 0)
         self._fd = fd
         header = ["time"] + [self.column_name(u, v) for u, v in self.columns]
-        self._lines.append((",".join(_csv_cell(h) for h in header) + "\n").encode())
         self._read = execution.reader(list(self.columns))
         self._formats = column_formats(execution.system, list(self.columns))
+        self._file = Appender(fd, self._spell, name=f"cotwin-csv {self.path.name}")
+        self._file.put((",".join(_csv_cell(h) for h in header) + "\n").encode())
         self._row(execution)
         self._flush()
 
@@ -151,26 +155,24 @@ class CSVWriter(Observer):
         rows = self._rows
         rows.append((round(execution.time, 12), *self._read()))
         self.rows += 1
-        if wallclock.monotonic() - self._last_flush >= self.flush_seconds:
+        if len(rows) >= self.batch or wallclock.monotonic() - self._last_flush >= self.flush_seconds:
             self._flush()
-        elif len(rows) >= self.batch:
-            self._format()
 
     def repeated(self, execution, rows) -> None:
-        """The stretch's rows, held as the doubles they are (after the rows held before them) and spelt when the
-        file gets them (cotwin.cosim.rowtext: all at once, not between two stretches' physics)."""
+        """The stretch's rows, as the doubles they are (after the rows held before them), handed to the writer's
+        thread, which spells them (cotwin.cosim.rowtext, without the GIL) while the next stretch runs."""
         from .rowtext import available
 
         slots = self._slots if self._slots is not None else self._slot_list(execution)
         if not available():  # no C here: as step_complete holds them
             self._rows.extend((round(t, 12), *values) for t, values in zip(rows.times, rows.values(slots)))
             if len(self._rows) >= self.batch:
-                self._format()
+                self._flush()
         else:
-            if self._rows:
-                self._lines.append(self._rows)
+            if self._rows:  # the rows before the stretch's (its steps told whole), then the stretch: spelt on the thread
+                self._file.put(self._rows)
                 self._rows = []
-            self._lines.append(_Stretch(rows.rows.copy(), slots, "".join(rows.kinds[i] for i in slots), rows.counted))
+            self._file.put(_Stretch(rows.rows.copy(), slots, "".join(rows.kinds[i] for i in slots), rows.counted))
         self.rows += len(rows)
 
     def whole_changes(self, execution) -> tuple:
@@ -184,38 +186,50 @@ class CSVWriter(Observer):
     def _row(self, execution) -> None:
         self._rows.append((round(execution.time, 12), *self._read()))
         self.rows += 1
-        self._format()
 
-    def _format(self) -> None:
-        """The rows held, as lines."""
-        if self._rows:
-            self._lines.append(_rows_bytes(self._rows, self._formats))
-            self._rows.clear()
+    def _spell(self, piece: list | _Stretch) -> bytes:
+        """Rows (time, values...) or a native stretch as lines (on the writer's thread)."""
+        return piece.text(self._formats) if piece.__class__ is _Stretch else _rows_bytes(piece, self._formats)
 
     def _flush(self) -> None:
-        self._format()
-        if self._fd is not None and self._lines:
-            os.write(self._fd, b"".join([piece if piece.__class__ is bytes else
-                                         _rows_bytes(piece, self._formats) if piece.__class__ is list else
-                                         piece.text(self._formats) for piece in self._lines]))
-            self._lines.clear()
+        """The rows held, as lines handed to the writer's thread."""
+        if self._rows and self._file is not None:
+            self._file.put(_rows_bytes(self._rows, self._formats))
+            self._rows.clear()
         self._last_flush = wallclock.monotonic()
 
     def kept(self) -> str:
         """Where the rows of a run that failed or was interrupted are, for its error message (in the result file
         itself if the run ended as asked before the interrupt came)."""
         if self.rows and self.kept_in is not None and self.kept_in.is_file():
+            if self.written is not None and self.written < self.rows:
+                return (f"the first {self.written} of the {self.rows} row(s) computed are in {self.kept_in} (the file "
+                        "took no more)")
             return f"the {self.rows} row(s) computed are in {self.kept_in}"
         return "no rows computed"
 
     def simulation_ended(self, execution, error: BaseException | None) -> None:
         if self._fd is None:
             return
-        self._flush()
+        file, self._file = self._file, None
+        failed: BaseException | None = None
+        with signals_held():  # every row given is written before the file is closed and put in place
+            try:
+                if self._rows:
+                    file.put(_rows_bytes(self._rows, self._formats))
+                    self._rows.clear()
+                file.close()
+            except Exception as err:  # a write failed: the rows written before it are kept, as a failed run's
+                failed = err
+                file.close_quietly()
         os.close(self._fd)
         self._fd = None
-        self.kept_in = self.partial_path if error is not None else self.path
+        self.written = max(0, file.lines - 1)  # the header's line aside
+        self.kept_in = self.partial_path if error is not None or failed is not None else self.path
         os.replace(self.part, self.kept_in)
+        if failed is not None:
+            raise CotwinError(f"{self.path}: cannot write the results: {getattr(failed, 'strerror', None) or failed}") \
+                from None
         if error is None and self.partial_path.is_file():  # an earlier failed run's rows: this run replaces them
             self.partial_path.unlink()
 

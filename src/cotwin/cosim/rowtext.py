@@ -28,6 +28,11 @@ _TEMPLATE = r"""
 typedef char *(*to_text)(double, char, int, int, int *);
 typedef double (*to_double)(const char *, char **, void *);
 typedef void (*release)(void *);
+/* Python's functions the text falls back on, called holding the GIL (the rows are spelt without it, so that
+   other threads run meanwhile): PyOS_double_to_string, PyOS_string_to_double, PyMem_Free,
+   PyGILState_Ensure, PyGILState_Release, PyErr_Clear (a failure reported as such, no exception left set). */
+typedef struct { to_text text; to_double number; release free_text; int (*take)(void); void (*give)(int);
+                 void (*clear)(void); } python;
 
 /* Appends `text` at out + *at if it fits in cap; returns 0 when out of room. */
 static int put(char *out, size_t cap, size_t *at, const char *text, size_t n) {
@@ -49,32 +54,39 @@ static int decimal(char *out, unsigned long long value, int width) {
 
 @GRISU@
 
-static int real(char *out, size_t cap, size_t *at, double value, to_text text, release free_text) {
+static int real(char *out, size_t cap, size_t *at, double value, const python *py) {
     char fast[40];
     int n = shortest(value, fast);
     if (n > 0) return put(out, cap, at, fast, (size_t)n);
-    char *s = text(value, 'r', 0, 2 /* Py_DTSF_ADD_DOT_0 */, NULL);
-    if (!s) return 0;
-    int ok = put(out, cap, at, s, strlen(s));
-    free_text(s);
+    int gil = py->take();
+    char *s = py->text(value, 'r', 0, 2 /* Py_DTSF_ADD_DOT_0 */, NULL);
+    int ok = s && put(out, cap, at, s, strlen(s));
+    if (s) py->free_text(s); else py->clear();
+    py->give(gil);
     return ok;
 }
 
 /* A column's last real and its text: a value the row before had (most columns hold still) is copied. */
 typedef struct { unsigned long long bits; int n; char text[40]; } memo;
 
-static int real_memo(char *out, size_t cap, size_t *at, double value, memo *m, to_text text, release free_text) {
+static int real_memo(char *out, size_t cap, size_t *at, double value, memo *m, const python *py) {
     unsigned long long bits;
     memcpy(&bits, &value, sizeof bits);
     if (m->n > 0 && m->bits == bits) return put(out, cap, at, m->text, (size_t)m->n);
     int k = shortest(value, m->text);
     if (k > 0) { m->n = k; m->bits = bits; return put(out, cap, at, m->text, (size_t)k); }
-    char *s = text(value, 'r', 0, 2 /* Py_DTSF_ADD_DOT_0 */, NULL);
-    if (!s) return 0;
-    size_t n = strlen(s);
-    int ok = put(out, cap, at, s, n);
-    if (n < sizeof m->text) { memcpy(m->text, s, n); m->n = (int)n; m->bits = bits; } else m->n = 0;
-    free_text(s);
+    int gil = py->take();
+    char *s = py->text(value, 'r', 0, 2 /* Py_DTSF_ADD_DOT_0 */, NULL);
+    int ok = 0;
+    if (s) {
+        size_t n = strlen(s);
+        ok = put(out, cap, at, s, n);
+        if (n < sizeof m->text) { memcpy(m->text, s, n); m->n = (int)n; m->bits = bits; } else m->n = 0;
+        py->free_text(s);
+    } else {
+        py->clear();
+    }
+    py->give(gil);
     return ok;
 }
 
@@ -102,7 +114,7 @@ static int time_text(double t, char *buffer) {
    Returns the bytes written, or (size_t)-1 when cap was too small or text failed. */
 size_t cotwin_rows_text(const double *rows, int nrows, int stride, const int *slots, const char *kinds, int ncols,
                         const double *times, double origin, long long first, double step, char *out, size_t cap,
-                        to_text text, to_double number, release free_text, void *memory) {
+                        const python *py, void *memory) {
     size_t at = 0;
     char buffer[48];
     memo *memos = (memo *)memory;  /* one per column, zeroed by the caller */
@@ -113,11 +125,12 @@ size_t cotwin_rows_text(const double *rows, int nrows, int stride, const int *sl
         if (n > 0) {
             if (!put(out, cap, &at, buffer, (size_t)n)) return (size_t)-1;
         } else {
-            char *rounded = text(time, 'f', 12, 0, NULL);  /* round(t, 12): correctly rounded, read back */
-            if (!rounded) return (size_t)-1;
-            double t = number(rounded, NULL, NULL);
-            free_text(rounded);
-            if (!real(out, cap, &at, t, text, free_text)) return (size_t)-1;
+            int gil = py->take();
+            char *rounded = py->text(time, 'f', 12, 0, NULL);  /* round(t, 12): correctly rounded, read back */
+            double t = rounded ? py->number(rounded, NULL, NULL) : 0.0;
+            if (rounded) py->free_text(rounded); else py->clear();
+            py->give(gil);
+            if (!rounded || !real(out, cap, &at, t, py)) return (size_t)-1;
         }
         const double *row = rows + (size_t)r * stride;
         for (int c = 0; c < ncols; c++) {
@@ -134,7 +147,7 @@ size_t cotwin_rows_text(const double *rows, int nrows, int stride, const int *sl
                     m->bits = bits;
                 }
                 if (!put(out, cap, &at, m->text, (size_t)m->n)) return (size_t)-1;
-            } else if (!real_memo(out, cap, &at, v, &memos[c], text, free_text)) {
+            } else if (!real_memo(out, cap, &at, v, &memos[c], py)) {
                 return (size_t)-1;
             }
         }
@@ -331,19 +344,20 @@ def _function():
         from ..cbuild import compile_library
 
         try:
-            lib = compile_library(SOURCE, "rowtext")
+            lib = compile_library(SOURCE, "rowtext", keep_gil=False)  # other threads run while rows are spelt
         except ValueError:
             _FN = False
             return None
         fn = lib.cotwin_rows_text
         fn.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int,
                        ctypes.c_void_p, ctypes.c_double, ctypes.c_longlong, ctypes.c_double, ctypes.c_char_p,
-                       ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+                       ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p]
         fn.restype = ctypes.c_size_t
-        api = ctypes.pythonapi
-        addresses = [ctypes.cast(getattr(api, name), ctypes.c_void_p).value
-                     for name in ("PyOS_double_to_string", "PyOS_string_to_double", "PyMem_Free")]
-        _FN = (fn, addresses)
+        api = ctypes.pythonapi  # the C struct `python`: the functions it calls holding the GIL
+        python = (ctypes.c_void_p * 6)(*(ctypes.cast(getattr(api, name), ctypes.c_void_p).value for name in (
+            "PyOS_double_to_string", "PyOS_string_to_double", "PyMem_Free", "PyGILState_Ensure", "PyGILState_Release",
+            "PyErr_Clear")))
+        _FN = (fn, python)
     return _FN or None
 
 
@@ -361,7 +375,7 @@ def rows_text(rows: np.ndarray, slots: list[int], kinds: str, times: list[float]
     function = _function()
     if function is None:
         return None
-    fn, (text, number, release) = function
+    fn, python = function
     rows = np.ascontiguousarray(rows, dtype=np.float64)
     columns = np.array(slots, dtype=np.intc)
     at = np.array(times, dtype=np.float64) if times is not None else None
@@ -371,7 +385,7 @@ def rows_text(rows: np.ndarray, slots: list[int], kinds: str, times: list[float]
     memos = ctypes.create_string_buffer(MEMO * max(1, len(slots)))  # zeroed
     n = fn(rows.ctypes.data, len(rows), rows.shape[1] if rows.ndim == 2 else 0, columns.ctypes.data,
            kinds.encode("ascii"), len(slots), at.ctypes.data if at is not None else None, origin, first, step, out,
-           cap, text, number, release, memos)
+           cap, ctypes.addressof(python), memos)
     if n == ctypes.c_size_t(-1).value:
         return None
     text = ctypes.string_at(out, n)
