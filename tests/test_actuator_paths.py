@@ -131,10 +131,10 @@ def test_the_perturbed_robot_and_the_opcua_plant_take_the_simulators_names_and_d
 
 def test_a_ur_over_rtde_warns_that_the_grippers_goals_move_the_dt_alone(tmp_path):
     """The UR5e's fingers are position-driven joints past its arm: RTDE's moveJ does not carry them, and `cotwin twin`
-    says so at [pt] endpoint before it runs (EndpointKind.advice); a kind without advice says nothing."""
+    and `cotwin check` say so at [pt] endpoint (EndpointKind.advice); a kind without advice says nothing."""
     import shutil
 
-    from conftest import EXAMPLES
+    from conftest import EXAMPLES, cotwin_in_process
 
     from cotwin.twin.assembly.endpoints import endpoint_advice
     from cotwin.twin.assembly.run import load
@@ -150,5 +150,8 @@ def test_a_ur_over_rtde_warns_that_the_grippers_goals_move_the_dt_alone(tmp_path
     line = text.count("\n") + 3  # endpoint = "rtde"
     assert (advice.location.line, advice.severity.name) == (line, "WARNING")
     assert all(f in advice.message for f in fingers) and "move the DT alone" in advice.message
+    checked = cotwin_in_process("check", project / "cotwin.toml", cwd=tmp_path)  # `cotwin check` says it too, once
+    assert checked.returncode == 0, checked.stderr
+    assert checked.stderr.count("move the DT alone") == 1 and f"cotwin.toml:{line}:" in checked.stderr
     (project / "cotwin.toml").write_text(text + '\n[pt]\nendpoint = "opcua"\nurl = "opc.tcp://127.0.0.1:4840"\n')
     assert endpoint_advice(load(project / "cotwin.toml"), "pt") == []

@@ -64,15 +64,20 @@ def check(paths: tuple[str, ...]) -> None:
 def twin_problems(project: str) -> list:
     """What a project says against its models once they check (its plan's columns and rows, its tables'
     names of joints and variables, a cell's robots...): the checks `cotwin run` makes before it runs, and the
-    warnings it shows."""
+    warnings it and `cotwin twin` show (what the PT's endpoint cannot carry, EndpointKind.advice)."""
+    from ..twin.assembly.endpoints import endpoint_advice
     from ..twin.assembly.run import load
+    from ..twin.assembly.system import TwinSystem
 
     import os
     from dataclasses import replace
 
     try:  # the models' warnings at their paths as check names them (normalised), so that each is said once
-        return [replace(f, location=replace(f.location, path=os.path.normpath(f.location.path)))
-                for f in load(project, cells=True).warnings]
+        system = load(project, cells=True)
+        found = list(system.warnings)
+        if type(system) is TwinSystem and system.spec.pt is not None:
+            found += endpoint_advice(system, "pt")
+        return [replace(f, location=replace(f.location, path=os.path.normpath(f.location.path))) for f in found]
     except CotwinError as err:
         return list(err.findings)
 
