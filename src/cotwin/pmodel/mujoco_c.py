@@ -25,21 +25,31 @@ _MODEL = r"""
 /* where opt.disableflags lies in an mjModel */
 size_t cotwin_flags_offset(void) { return offsetof(mjModel, opt) + offsetof(mjOption, disableflags); }
 
-/* a digest of everything a model's steps read: its buffer of arrays and its options */
+/* a digest of everything a model's steps read: its buffer of arrays and its options (four lanes of words, each
+   its own chain of multiplications, so that they overlap: the digest is made before every native stretch) */
 unsigned long long cotwin_model_digest(const mjModel *m) {
-    unsigned long long h = 1469598103934665603ULL, word;
+    unsigned long long h[4] = {1469598103934665603ULL, 7809847782465536322ULL, 10723151780598845931ULL,
+                               3162461265461853237ULL}, word[4];
     const unsigned char *parts[2] = {(const unsigned char *)m->buffer, (const unsigned char *)&m->opt};
     size_t sizes[2] = {(size_t)m->nbuffer, sizeof(mjOption)};
     for (int p = 0; p < 2; p++) {
         size_t i = 0;
         for (; i + sizeof word <= sizes[p]; i += sizeof word) {
-            memcpy(&word, parts[p] + i, sizeof word);
-            h = (h ^ word) * 1099511628211ULL;
-            h ^= h >> 29;
+            memcpy(word, parts[p] + i, sizeof word);
+            for (int k = 0; k < 4; k++) {
+                h[k] = (h[k] ^ word[k]) * 1099511628211ULL;
+                h[k] ^= h[k] >> 29;
+            }
         }
-        for (; i < sizes[p]; i++) h = (h ^ parts[p][i]) * 1099511628211ULL;
+        for (; i < sizes[p]; i++) h[0] = (h[0] ^ parts[p][i]) * 1099511628211ULL;
+        h[1] ^= (unsigned long long)sizes[p];  /* where one part ends and the next begins */
     }
-    return h;
+    unsigned long long out = h[0];
+    for (int k = 1; k < 4; k++) {
+        out = (out ^ h[k]) * 1099511628211ULL;
+        out ^= out >> 29;
+    }
+    return out;
 }
 """
 
