@@ -202,3 +202,44 @@ def test_no_memo_where_mujoco_keeps_state_outside_the_integration_state(twin):
     sim = simulator(twin)
     sim.model.opt.enableflags |= int(sleep)
     assert not memo.remembers(sim.model) and sim.remember_held_steps() is None
+
+
+def test_sensors_the_user_turned_off_stay_off_through_the_memo(twin, held):
+    """A held stretch, stepped or taken from the memo, leaves the sensors the user turned off as they were."""
+    sim = simulator(twin)
+    memo = sim.remember_held_steps()
+    assert sim.sensor_flags() is not None  # looked up while the sensors are on
+    sim.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
+    memo.check(sim.model)
+    start = state(sim)
+    for _ in range(2):  # stepped, then taken from the memo
+        restore(sim, start)
+        held(sim, 40)
+        assert sim.model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_SENSOR
+    assert memo.hits == 1
+    for n in (1, 5):  # fewer steps than a memo's stretch: stepped as they are
+        held(sim, n)
+        assert sim.model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_SENSOR
+
+
+def test_a_memo_keeps_and_takes_nothing_once_its_models_bodies_may_sleep(twin, held):
+    """Sleeping bodies are state outside the integration state: a memo made before the model's bodies were let
+    sleep forgets its stretches at the next check and keeps no new one while they may; again once they may not."""
+    sleep = getattr(mujoco.mjtEnableBit, "mjENBL_SLEEP", None)
+    if sleep is None:
+        pytest.skip(f"MuJoCo {mujoco.__version__} has no sleeping bodies")
+    sim = simulator(twin)
+    memo = sim.remember_held_steps()
+    start = state(sim)
+    held(sim, 60)
+    assert memo.stretches == 1
+    sim.model.opt.enableflags |= int(sleep)
+    memo.check(sim.model)
+    for _ in range(2):
+        restore(sim, start)
+        held(sim, 60)
+    assert (memo.hits, memo.stretches) == (0, 0)
+    sim.model.opt.enableflags &= ~int(sleep)
+    memo.check(sim.model)
+    held(sim, 60)
+    assert memo.stretches == 1

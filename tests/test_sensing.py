@@ -78,3 +78,28 @@ def test_the_simulators_own_steps_read_what_every_step_computing_sensors_reads(t
             sim.step(n)
         assert after(sims[0]) == after(sims[1])
     assert sims[0].model.opt.disableflags & SENSOR == 0
+
+
+def test_sensors_the_user_turns_off_after_the_lookup_stay_off_in_every_loop(twin):
+    """The flags' address is looked up once; sensors the user turns off on the model afterwards stay off in the
+    simulator's own steps and in the endpoint's control loop (C), and the readings are those of MuJoCo stepping
+    with them off: not computed again in a stretch's last step."""
+    from cotwin.twin.assembly.run import simulated_endpoint
+
+    reference = PlatformSimulator(twin.models.tree, twin.models.scene)
+    endpoint = simulated_endpoint(twin)
+    sim = endpoint.sim
+    assert sim.sensor_flags() is not None  # looked up while the sensors are on
+    for s in (sim, reference):
+        s.data.ctrl[:6] = [0.4, -1.2, 1.1, -1.3, -1.4, 0.2]
+        mujoco.mj_step(s.model, s.data, 5)
+        s.model.opt.disableflags |= SENSOR  # the user's choice, made now
+    sim.step(37)
+    mujoco.mj_step(reference.model, reference.data, 37)
+    assert sim.model.opt.disableflags & SENSOR, "the simulator's steps turned the user's sensors back on"
+    assert after(sim) == after(reference)
+    if native.advance_function() is None:
+        return  # no C compiler: the control loop is Python's, the steps above
+    endpoint.command({j: 0.2 for j in sim.joint_names[:6]})  # a move: its set-points in the C control loop
+    endpoint.advance(0.05)
+    assert sim.model.opt.disableflags & SENSOR, "the control loop turned the user's sensors back on"

@@ -16,7 +16,8 @@ A memo's stretches are of the model as it was: the native loop checks a digest o
 buffer and options, `model_digest`) before each stretch and clears the memo when they changed (a payload
 given to the fork, a calibrated gain), and `PlatformSimulator.set_bodies` clears it at once. There is no memo
 where MuJoCo keeps state outside the integration state (sleeping bodies, plugins) or where the digest cannot be
-made (MuJoCo's headers not installed); only forks turn one on (cotwin.twin.services.whatif.Forks), on
+made (MuJoCo's headers not installed), and a memo keeps and takes nothing while its model's options, changed
+since, let bodies sleep (`check`); only forks turn one on (cotwin.twin.services.whatif.Forks), on
 simulators of their own.
 """
 
@@ -63,6 +64,7 @@ static unsigned long long cotwin_memo_hash(const double *x, int n) {
 /* n physics steps, the sensors computed in the last only when `flags` (the model's opt.disableflags) is given
    (cotwin.pmodel.sensing) */
 static void cotwin_steps(void (*step)(const void *, void *), const void *model, void *data, int n, int *flags) {
+    if (flags && (*flags & COTWIN_DSBL_SENSOR)) flags = NULL;  /* the user turned sensors off: they stay off */
     if (flags && n > 1) {
         *flags |= COTWIN_DSBL_SENSOR;
         for (int k = 0; k < n - 1; k++) step(model, data);
@@ -80,6 +82,7 @@ static void cotwin_held(void (*step)(const void *, void *), const void *model, v
         cotwin_steps(step, model, data, n, flags);
         return;
     }
+    if (flags && (*flags & COTWIN_DSBL_SENSOR)) flags = NULL;  /* the user turned sensors off: they stay off */
     int width = memo->size + 1;
     double *key = memo->scratch;
     memo->get(model, data, key, memo->sig);
@@ -156,6 +159,7 @@ class StepMemo:
                            self.keys.ctypes.data, self.states.ctypes.data, self.table.ctypes.data,
                            self.scratch.ctypes.data, 0, 0)
         self.address = ctypes.addressof(self._memo)
+        self.capacity = capacity
 
     @property
     def hits(self) -> int:
@@ -178,8 +182,11 @@ class StepMemo:
         self._memo.count = 0
 
     def check(self, model: mujoco.MjModel) -> None:
-        """Forget every stretch if `model`'s numbers changed since they were kept (before a native stretch)."""
+        """Forget every stretch if `model`'s numbers changed since they were kept (before a native stretch); while
+        the model's options let MuJoCo keep state outside the integration state (its bodies may now sleep), keep
+        none and take none: every stretch is stepped in full."""
         digest = model_digest(model)
         if digest != self.digest:
             self.clear()
             self.digest = digest
+            self._memo.capacity = self.capacity if remembers(model) else 0

@@ -392,8 +392,8 @@ class PlatformSimulator:
     def _mj_steps(self, n: int) -> None:
         """n of MuJoCo's steps, the sensors computed in the last only (cotwin.pmodel.sensing), as the native loops
         make them: whoever reads them reads them after the call."""
-        if n > 1 and self.sensor_flags() is not None:
-            opt = self.model.opt
+        opt = self.model.opt
+        if n > 1 and self.sensor_flags() is not None and not opt.disableflags & SENSOR:  # else off by the user: kept
             opt.disableflags |= SENSOR
             try:
                 mujoco.mj_step(self.model, self.data, n - 1)
