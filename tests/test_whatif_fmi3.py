@@ -125,3 +125,22 @@ def test_whatif_from_an_fmi3_run_on_the_command_line(tmp_path):
     assert "t = 4 s moveDiscreteCommand(MovementArgs_target_X=2, MovementArgs_target_Y=20, MovementArgs_target_Z=1): " \
            "feasible, accepted, done at" in proc.stdout, proc.stdout
     assert "forked at t = 3 s" in proc.stdout and "not of a FMU" not in proc.stderr
+
+
+def test_a_command_at_the_forks_own_time_is_applied_and_alike_on_reused_forks(system, fmi3_run):
+    """A command due at the fork's time (0 s into the what-if): the saved run had its event phase at that instant
+    already, so the command is shown at the next communication point, as one due there (not lost to the fresh
+    d-model instance its saved state replaced); a sweep's fork built with that plan or with another answers
+    alike, and as `predict`."""
+    out, state, _ = fmi3_run
+    move = lambda at, x: [Command(at, (("moveDiscreteCommand", True), ("MovementArgs_target_X", x),  # noqa: E731
+                                       ("MovementArgs_target_Y", 20), ("MovementArgs_target_Z", 1)), "test")]
+    outcome = lambda p: [(c.delivered, c.accepted, c.feasible, c.done, c.verdict) for c in p.commands]  # noqa: E731
+    at_once, next_point = (predict(system, move(at, 3), state, horizon=3.0, artefacts=out) for at in (0.0, 0.1))
+    assert outcome(at_once) == outcome(next_point) and at_once.commands[0].verdict == "completed"
+    plans = [move(0.0, 3), move(0.5, 0), move(0.0, 3)]
+    alone = [summary(predict(system, plan, state, horizon=3.0, artefacts=out, decimate=10**9)) for plan in plans]
+    for order in (plans, plans[1:]):  # the fork built with the plan at the fork's time, or with another
+        with Forks(system, state, artefacts=out) as forks:
+            answers = [summary(forks.predict(plan, horizon=3.0, decimate=10**9)) for plan in order]
+        assert answers == alone[len(plans) - len(order):]

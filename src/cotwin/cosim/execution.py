@@ -423,6 +423,8 @@ class Execution:
         try:
             for name in chosen:
                 self.system.units[name].set_state(saved[name])
+            if units is not None:
+                self._forked(chosen)
             if units is not None:  # the restored units' values this system observes; the rest as they are
                 values.update({k: v for k, v in self.algorithm.snapshot().items() if k[0] not in chosen})
             self.algorithm.restore(values)
@@ -437,6 +439,15 @@ class Execution:
             self._first = (self.time, self.steps)
             for o in self.observers:
                 o.simulation_initialized(self)
+
+    def _forked(self, restored: set[str]) -> None:
+        """A fork's units that started afresh, told so (`Unit.forked`) and their outputs read again: the event
+        phase of their initialisation was shown to the restored units' fresh instances, not to them."""
+        algorithm = self.algorithm
+        for k, unit in enumerate(algorithm.units):
+            if unit.name not in restored:
+                unit.forked()
+                algorithm._read(k)
 
     def checkpoint(self) -> "Checkpoint":
         """The co-simulation as it is now, kept in memory for `rollback` on this same execution (as libcosim's

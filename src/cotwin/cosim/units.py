@@ -149,6 +149,13 @@ class Unit:
         """Continue from a `checkpoint` of this unit."""
         self.set_state(checkpoint)
 
+    def forked(self) -> None:
+        """This unit started afresh in a fork whose other units were then restored (Execution.set_state with
+        `units`): what its initialisation showed in the event phase at the fork's time (cotwin.cosim.clocks) went to
+        units since replaced by their saved state, whose instant had passed. A unit that keeps what it showed
+        there (a command source's events) takes it back, to show it again from its first step; most have nothing
+        to do."""
+
 
 # FMI 2.0 status codes and the C prototypes of the calls made on every step (fmi2FunctionTypes.h)
 FMI2_OK, FMI2_WARNING, FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL, FMI2_PENDING = range(6)

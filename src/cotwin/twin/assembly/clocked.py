@@ -15,6 +15,7 @@ import math
 from typing import Callable, Sequence
 
 from ...diagnostics import CotwinError
+from .commands import CommandQueue
 from .scenario import ScenarioUnit
 
 EPS = 1e-9
@@ -38,6 +39,17 @@ class ClockedScenario(ScenarioUnit):
         self._offer_due(t, t + h - EPS)
         self._apply(t + h)
         self.time = t + h
+
+    def forked(self) -> None:
+        """In a fork of a saved run (a what-if), the fork's time is an instant the saved d-model has already had
+        its event phase at: the commands this source showed there reached only the d-model's fresh instance, which
+        its saved state then replaced. They are taken back: nothing is shown at the fork's time, and the commands
+        due from it on are offered from the first step (shown at the next communication point), as when the unit
+        is restored with another plan (`restore`)."""
+        self._next = next((k for k, c in enumerate(self.commands) if c.time >= self.time - EPS), len(self.commands))
+        self.queue = CommandQueue()
+        for ev in self.events:
+            self.values[ev] = False
 
 
 class DModelCycles:
