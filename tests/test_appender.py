@@ -49,7 +49,8 @@ def test_pieces_are_written_in_order_spelt_on_the_thread(tmp_path):
     file = Appender(fd, spell, name="spelling")
     for k in range(500):
         file.put(k if k % 3 else f"b{k}\n".encode())
-    file.close()
+    file.drain()
+    file.stop()
     os.close(fd)
     assert path.read_text().splitlines() == [str(k) if k % 3 else f"b{k}" for k in range(500)]
     assert threads == {"spelling"} and file.lines == 500 and file.size == path.stat().st_size
@@ -62,15 +63,15 @@ def test_a_write_taken_in_part_is_cut_back_to_whole_lines_and_its_error_raised(t
     with file_size_limit(1000):
         file.put(b"x" * 599 + b"\n")
         file.drain()
-        file.put(b"y" * 599 + b"\n")  # 200 bytes of it fit
+        file.put(b"w" * 99 + b"\n" + b"y" * 599 + b"\n")  # 400 bytes of it fit: its first line, and part of the next
         with pytest.raises(OSError):
             file.drain()
         with pytest.raises(OSError):  # and nothing after it is written
             file.put(b"z\n")
-        file.close_quietly()
+        file.stop()
     os.close(fd)
-    assert path.read_bytes() == b"x" * 599 + b"\n"
-    assert file.lines == 1
+    assert path.read_bytes() == b"x" * 599 + b"\n" + b"w" * 99 + b"\n"
+    assert file.lines == 2 and file.size == 700
 
 
 class Count(PythonUnit):

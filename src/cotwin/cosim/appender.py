@@ -1,8 +1,8 @@
 """A file appended to by a thread of its own (issue 23): a result writer hands it pieces in order (bytes, or
 objects it spells), and spelling them and writing them overlap the next native stretch, which runs in C
-without the GIL. Pieces are written in the order given, each write whole or not at all: one the file system
-takes only in part (a full disk, a size limit) is cut back to where it began, so the file never ends in half
-a line. The thread's first error is raised on the caller's thread at its next `put` or `drain`, and nothing
+without the GIL. Pieces are written in the order given; a write the file system takes only in part (a full
+disk, a size limit) is cut back to its last whole line, so the file keeps every line written and never ends
+in half a line. The thread's first error is raised on the caller's thread at its next `put` or `drain`, and nothing
 after it is written.
 """
 
@@ -18,8 +18,8 @@ _STOP = object()
 
 class Appender:
     """Appends pieces to the open file `fd` on a thread of its own: bytes as they are, anything else as
-    `spell(piece)` makes it. `drain` waits until every piece given is written; `close` also ends the thread
-    (the file stays open: its owner closes it)."""
+    `spell(piece)` makes it. `drain` waits until every piece given is written; `stop` ends the thread after
+    them (the file stays open: its owner closes it)."""
 
     def __init__(self, fd: int, spell: Callable[[object], bytes], name: str = "cotwin-appender"):
         self.fd, self._spell = fd, spell
@@ -44,14 +44,7 @@ class Appender:
             self._done.wait_for(lambda: self._written >= self._given)
         self._raise()
 
-    def close(self) -> None:
-        """Drain, then end the thread."""
-        try:
-            self.drain()
-        finally:
-            self.close_quietly()
-
-    def close_quietly(self) -> None:
+    def stop(self) -> None:
         """End the thread after the pieces given, whatever became of them (its error, if any, is not raised)."""
         self._queue.put(_STOP)
         self._thread.join()
@@ -80,7 +73,11 @@ class Appender:
             while view:
                 view = view[os.write(self.fd, view):]
         except BaseException:
-            if len(view) < len(data):  # a part was written: cut back to the last whole write
+            written = len(data) - len(view)
+            if written:  # a part was written: cut back to its last whole line
+                whole = data.rfind(b"\n", 0, written) + 1
+                self.size += whole
+                self.lines += data.count(b"\n", 0, whole)
                 os.ftruncate(self.fd, self.size)
                 os.lseek(self.fd, self.size, os.SEEK_SET)
             raise

@@ -423,9 +423,8 @@ class Execution:
         try:
             for name in chosen:
                 self.system.units[name].set_state(saved[name])
-            if units is not None:
-                self._forked(chosen)
-            if units is not None:  # the restored units' values this system observes; the rest as they are
+            if units is not None:  # the others told they started afresh; the restored units' values this system
+                self._forked(chosen)  # observes, the rest as they are
                 values.update({k: v for k, v in self.algorithm.snapshot().items() if k[0] not in chosen})
             self.algorithm.restore(values)
         except BaseException as err:

@@ -104,8 +104,8 @@ class CSVWriter(Observer):
     its doubles and spelt on a thread of the writer's own (cotwin.cosim.appender), in C without the GIL, while
     the next stretch runs. They go to `<name>.part` in whole lines, handed to that thread every `batch` rows,
     at most `flush_seconds` after a row was made and at the end (also of a failed run, whose rows are all
-    written before the file is closed), so a crash loses at most that much and never leaves half a line. A run that ends well renames the
-    file into place; a failed run leaves the previous result untouched and keeps its own rows in
+    written before the file is closed), so a crash loses at most that much and never leaves half a line. A
+    run that ends well renames the file into place; a failed run leaves the previous result untouched and keeps its own rows in
     `<stem>.partial.csv` (`partial_path`), which the error names.
     """
 
@@ -218,10 +218,11 @@ class CSVWriter(Observer):
                 if self._rows:
                     file.put(_rows_bytes(self._rows, self._formats))
                     self._rows.clear()
-                file.close()
+                file.drain()
             except Exception as err:  # a write failed: the rows written before it are kept, as a failed run's
                 failed = err
-                file.close_quietly()
+            finally:
+                file.stop()
         os.close(self._fd)
         self._fd = None
         self.written = max(0, file.lines - 1)  # the header's line aside

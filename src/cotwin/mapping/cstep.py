@@ -441,12 +441,13 @@ class QuietStep:
             self.pointers[:MOVE] = [mj_step, sim.model._address, d._address, sim.controls.ctypes.data,
                                     d.qpos.ctypes.data, d.qvel.ctypes.data, d.sensordata.ctypes.data,
                                     watch[0].ctypes.data if watch is not None else 0,
-                                    sim.memo.address if sim.memo is not None else 0, sim.sensor_flags() or 0]
+                                    sim.memo.address if sim.memo is not None else 0, 0]
             if move:
                 self.pointers[MOVE:] = [ctypes.cast(a, ctypes.c_void_p).value for a in arrays]
             else:
                 self.pointers[MOVE:] = [0] * (POINTERS - MOVE)
             self._addressed = (sim.model, d, sim.controls, arrays, watch, sim.memo)
+        self.pointers[FLAGS] = sim.sensor_flags() or 0  # asked per stretch: sensors the user turned off stay off
         if sim.memo is not None:
             sim.memo.check(sim.model)  # its stretches were of this model's numbers (cotwin.pmodel.memo)
         self._watch = watch  # kept: its mask stays alive while the C loop reads it

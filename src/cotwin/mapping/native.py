@@ -100,7 +100,6 @@ int cotwin_advance(step_fn step, const void *model, void *data, double *time, do
                    const double *start, const double *delta, const double *low, const double *high,
                    double *ctrl, const double *qpos, int nq, int *held, int *done, int *flags) {
     *done = 0;
-    if (flags && (*flags & COTWIN_DSBL_SENSOR)) flags = NULL;  /* the user turned sensors off: they stay off */
     if (flags) *flags |= COTWIN_DSBL_SENSOR;  /* sensors in the last step only (cotwin.pmodel.sensing) */
     /* after status 1 or 2 the last step made may have had its sensors off: the caller raises, reading nothing */
     int status = cotwin_control(step, model, data, time, timestep, opt_timestep, steps, period, move, joints, index,

@@ -64,7 +64,6 @@ static unsigned long long cotwin_memo_hash(const double *x, int n) {
 /* n physics steps, the sensors computed in the last only when `flags` (the model's opt.disableflags) is given
    (cotwin.pmodel.sensing) */
 static void cotwin_steps(void (*step)(const void *, void *), const void *model, void *data, int n, int *flags) {
-    if (flags && (*flags & COTWIN_DSBL_SENSOR)) flags = NULL;  /* the user turned sensors off: they stay off */
     if (flags && n > 1) {
         *flags |= COTWIN_DSBL_SENSOR;
         for (int k = 0; k < n - 1; k++) step(model, data);
@@ -82,7 +81,6 @@ static void cotwin_held(void (*step)(const void *, void *), const void *model, v
         cotwin_steps(step, model, data, n, flags);
         return;
     }
-    if (flags && (*flags & COTWIN_DSBL_SENSOR)) flags = NULL;  /* the user turned sensors off: they stay off */
     int width = memo->size + 1;
     double *key = memo->scratch;
     memo->get(model, data, key, memo->sig);

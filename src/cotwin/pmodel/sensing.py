@@ -10,8 +10,8 @@ They write the flag through its address in the model (`flags_address`), found wi
 installed headers and checked against the model before use; None where the headers are not installed, where
 the model has plugins (they may keep state or read sensors between steps) or user sensors (a callback
 computes them), or where the user has turned sensors off already: then every step computes them, as before. Sensors the user
-turns off later, on the model, stay off: the loops leave the flag as they find it set (every step as the user
-has it).
+turns off later, on the model, stay off: `PlatformSimulator.sensor_flags` gives no address while they are off,
+and it is asked before each stretch (every step as the user has it).
 """
 
 from __future__ import annotations

@@ -374,10 +374,11 @@ class PlatformSimulator:
 
     def sensor_flags(self) -> int | None:
         """The address of the model's opt.disableflags for native loops that compute the sensors in a stretch's
-        last step only (cotwin.pmodel.sensing), or None where every step computes them; found once."""
+        last step only (cotwin.pmodel.sensing), or None where every step computes them: found once, and None
+        while the user has turned sensors off on the model (asked before each stretch: they stay off)."""
         if self._sensor_flags is _UNKNOWN:
             self._sensor_flags = flags_address(self.model) if self.shared is None else None
-        return self._sensor_flags
+        return None if self.model.opt.disableflags & SENSOR else self._sensor_flags
 
     def remember_held_steps(self) -> StepMemo | None:
         """Turn on the memo of held steps (cotwin.pmodel.memo) for the native loop, on a simulator of its own
@@ -393,7 +394,7 @@ class PlatformSimulator:
         """n of MuJoCo's steps, the sensors computed in the last only (cotwin.pmodel.sensing), as the native loops
         make them: whoever reads them reads them after the call."""
         opt = self.model.opt
-        if n > 1 and self.sensor_flags() is not None and not opt.disableflags & SENSOR:  # else off by the user: kept
+        if n > 1 and self.sensor_flags() is not None:
             opt.disableflags |= SENSOR
             try:
                 mujoco.mj_step(self.model, self.data, n - 1)

@@ -15,7 +15,6 @@ import math
 from typing import Callable, Sequence
 
 from ...diagnostics import CotwinError
-from .commands import CommandQueue
 from .scenario import ScenarioUnit
 
 EPS = 1e-9
@@ -46,8 +45,7 @@ class ClockedScenario(ScenarioUnit):
         its saved state then replaced. They are taken back: nothing is shown at the fork's time, and the commands
         due from it on are offered from the first step (shown at the next communication point), as when the unit
         is restored with another plan (`restore`)."""
-        self._next = next((k for k, c in enumerate(self.commands) if c.time >= self.time - EPS), len(self.commands))
-        self.queue = CommandQueue()
+        self._offer_from_now()
         for ev in self.events:
             self.values[ev] = False
 
@@ -110,7 +108,7 @@ def saved_clock(saved: dict) -> float | None:
         return None
     intervals = clock_intervals(data, f"unit {DMODEL.name}") if isinstance(data, dict) else None
     if not intervals or "start" not in data:
-        raise StateError(f"a state of an FMI 3.0 d-model saved by an earlier cotwin, without its clock's period and "
+        raise StateError("a state of an FMI 3.0 d-model saved by an earlier cotwin, without its clock's period and "
                          "phase: run the twin again (cotwin run --fmi 3) to save one a what-if can fork")
     return intervals[0]
 

@@ -27,7 +27,7 @@ import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 from ...config import Key, Schema, TomlFile, did_you_mean, is_number, raise_problems
 from ...cosim.units import INT32, Port, PythonUnit
@@ -102,18 +102,24 @@ def _location(where: str) -> Location:
 AFTER_END_SHOWN = 10  # warnings of commands after the end, one each; the rest summed up in one more
 
 
+def _capped(rows: list, one: Callable[[object], Finding], more: Callable[[object, int], Finding]) -> list[Finding]:
+    """A warning per row (`one`) for the first AFTER_END_SHOWN rows, then one (`more`: at the next row, with how
+    many are left) for the rest."""
+    out = [one(row) for row in rows[:AFTER_END_SHOWN]]
+    if len(rows) > AFTER_END_SHOWN:
+        out.append(more(rows[AFTER_END_SHOWN], len(rows) - AFTER_END_SHOWN))
+    return out
+
+
 def after_end(commands: list[Command], end: float, h: float = 0.0) -> list[Finding]:
     """Warnings for the commands a run to `end` never sends (the last step covers up to end): a plan
     longer than its run, or a run cut short by --end, should say what it leaves out. One per plan row (a
     cell's row holds several robots' commands), the first AFTER_END_SHOWN of them, then how many more."""
     rows = list(dict.fromkeys((c.where, c.time) for c in commands if c.time >= end - 1e-9))
-    out = [Finding(_location(where), Severity.WARNING, f"this command at {time:g} s is after the run's end "
-                   f"({end:g} s): it is never sent") for where, time in rows[:AFTER_END_SHOWN]]
-    if len(rows) > AFTER_END_SHOWN:
-        out.append(Finding(_location(rows[AFTER_END_SHOWN][0]), Severity.WARNING,
-                           f"and {len(rows) - AFTER_END_SHOWN} more command(s) from here on after the run's end "
-                           f"({end:g} s): never sent"))
-    return out
+    return _capped(rows, lambda row: Finding(_location(row[0]), Severity.WARNING, f"this command at {row[1]:g} s is "
+                                             f"after the run's end ({end:g} s): it is never sent"),
+                   lambda row, left: Finding(_location(row[0]), Severity.WARNING, f"and {left} more command(s) from "
+                                             f"here on after the run's end ({end:g} s): never sent"))
 
 
 def plan_order(commands: list[Command], events: set[str] | frozenset[str] = frozenset()) -> list[Finding]:
@@ -151,14 +157,12 @@ def no_event_rows(commands: list[Command], program: Program) -> list[Finding]:
     silent = [c for c in commands
               if any(port in events for port, _ in c.values) and not any(port in events and value is True
                                                                           for port, value in c.values)]
-    out = [Finding(_location(c.where), Severity.WARNING,
-                   f"this row at {c.time:g} s raises no event (its event column(s) "
-                   f"{', '.join(port for port, _ in c.values if port in events)} false): it commands nothing and "
-                   "is not counted") for c in silent[:AFTER_END_SHOWN]]
-    if len(silent) > AFTER_END_SHOWN:
-        out.append(Finding(_location(silent[AFTER_END_SHOWN].where), Severity.WARNING,
-                           f"... and {len(silent) - AFTER_END_SHOWN} more row(s) raising no event"))
-    return out
+    return _capped(silent, lambda c: Finding(_location(c.where), Severity.WARNING,
+                                             f"this row at {c.time:g} s raises no event (its event column(s) "
+                                             f"{', '.join(port for port, _ in c.values if port in events)} false): it "
+                                             "commands nothing and is not counted"),
+                   lambda c, left: Finding(_location(c.where), Severity.WARNING,
+                                           f"... and {left} more row(s) raising no event"))
 
 
 def nothing_planned(plan: Path | None, commands: list[Command]) -> list[Finding]:
@@ -509,8 +513,13 @@ class ScenarioUnit(PythonUnit):
             self._next = count(snapshot["next"], f"unit {self.name}'s next command", len(self.commands))
             self.queue.restore(snapshot["queue"], self.ports, f"unit {self.name}'s command queue")
         else:
-            self._next = next((k for k, c in enumerate(self.commands) if c.time >= self.time - 1e-9), len(self.commands))
-            self.queue = CommandQueue()
+            self._offer_from_now()
+
+    def _offer_from_now(self) -> None:
+        """The commands due from its time on offered from its next step, none waiting (another plan than the saved
+        one, or a fork's time whose event phase went to units since replaced: ClockedScenario.forked)."""
+        self._next = next((k for k, c in enumerate(self.commands) if c.time >= self.time - 1e-9), len(self.commands))
+        self.queue = CommandQueue()
 
     def _plan(self) -> list[tuple[float, tuple]]:
         return [(c.time, c.values) for c in self.commands]
