@@ -33,6 +33,8 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+from functools import partial
+from operator import is_, itemgetter
 from dataclasses import dataclass, field
 from typing import Callable, Iterable
 
@@ -158,6 +160,7 @@ class NativeLoop:
         self._masks: dict[frozenset | None, object] = {}  # the slots whose change ends a segment, as the C reads them
         self._data, self._observers = algorithm.data, list(execution.observers)
         self._still = [i for i in range(self.width) if i not in written]  # the slots no C writes
+        self._pick_still = _picker(self._still)  # their values, picked in C
         # the slots C writes, with the class their port's values have: one holding another (a scenario's Real port
         # still at the integer 0 it starts with) is held as it is for a stretch, whose C must leave it be
         self._classes = [(i, _CLASS[self.kinds[i]]) for i in self.written]
@@ -307,15 +310,14 @@ class NativeLoop:
         """How many of the next n steps every unit can make natively now (and every observer lets pass)."""
         execution = self.execution
         data = execution.algorithm.data
-        for value in data:
-            if value is UNSET:
-                return 0
-        for i in self._still + self._kept(data):
-            value = data[i]
-            if value.__class__ not in _PLAIN or (value.__class__ is int and abs(value) > 2 ** 53):
-                why = "a value on a connection is not a number a double carries exactly"
-                self.refusals[why] = self.refusals.get(why, 0) + 1
-                return 0
+        if any(map(_IS_UNSET, data)):
+            return 0
+        values = (*self._pick_still(data), *(data[i] for i in self._kept(data)))  # those a stretch holds as they are
+        classes = set(map(type, values))
+        if not _PLAIN.issuperset(classes) or int in classes and any(abs(v) > 2 ** 53 for v in values if v.__class__ is int):
+            why = "a value on a connection is not a number a double carries exactly"
+            self.refusals[why] = self.refusals.get(why, 0) + 1
+            return 0
         observers = execution.observers
         for observer in self._asking if observers == self._observers else observers:
             bound = observer.quiet_for(execution)
@@ -494,7 +496,18 @@ class NativeLoop:
 
 
 
-_PLAIN = (bool, int, float)
+_PLAIN = frozenset((bool, int, float))
+_IS_UNSET = partial(is_, UNSET)  # whether a slot is still unwritten, asked in C over a row
+
+
+def _picker(slots: list[int]) -> Callable[[list], tuple]:
+    """A function giving a row's values at `slots`, as a tuple (operator.itemgetter's, whatever their number)."""
+    if len(slots) > 1:
+        return itemgetter(*slots)
+    if slots:
+        only = slots[0]
+        return lambda row: (row[only],)
+    return lambda row: ()
 _KIND = {bool: "b", int: "i", float: "r"}
 _CLASS = {"b": bool, "i": int, "r": float}
 

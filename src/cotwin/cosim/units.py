@@ -721,7 +721,21 @@ class FMUUnit(BoundByNames, Unit):
                                if data.get("model") == self.md.modelName else ""))
         time = finite(data["time"], f"unit {self.name}'s time")
         of_type(data["fmu"], bytes, f"unit {self.name}'s FMU state")
-        raw = data["fmu"]
+        self._set_serialized(data["fmu"])
+        self.time = time
+
+    def checkpoint(self) -> tuple[float, bytes]:
+        """The unit's time and the FMU's own serialised state, not packed as a state file's are: `rollback` on
+        this same unit takes them back as they are (its GUID is this FMU's)."""
+        return self.time, self.serialized()
+
+    def rollback(self, checkpoint: tuple[float, bytes]) -> None:
+        time, raw = checkpoint
+        self._set_serialized(raw)
+        self.time = time
+
+    def _set_serialized(self, raw: bytes) -> None:
+        """fmi2DeSerializeFMUstate and fmi2SetFMUstate (the FMU checks its own bytes)."""
         fn, handle = self._fn, c_void_p()
         self._call("fmi2DeSerializeFMUstate", fn["fmi2DeSerializeFMUstate"], self.component, raw, len(raw),
                    byref(handle))
@@ -729,7 +743,9 @@ class FMUUnit(BoundByNames, Unit):
             self._call("fmi2SetFMUstate", fn["fmi2SetFMUstate"], self.component, handle)
         finally:
             self._call("fmi2FreeFMUstate", fn["fmi2FreeFMUstate"], self.component, byref(handle))
-        self.time = time
+
+
+_EXACT = {"Boolean": frozenset((bool,)), "Integer": frozenset((int,)), "Real": frozenset((int, float))}  # port_value's
 
 
 class PythonUnit(Unit):
@@ -794,7 +810,11 @@ class PythonUnit(Unit):
         what = f"unit {self.name}"
         fields(snapshot, what, self.STATE_KEYS)
         saved = fields(snapshot["values"], f"{what}'s values", list(self.ports), snapshot["values"])
-        values = {name: port_value(saved[name], port.type, f"{what}'s {name}") for name, port in self.ports.items()}
+        ports = self.ports
+        if all(saved[name].__class__ in _EXACT.get(port.type, ()) for name, port in ports.items()):
+            values = {name: saved[name] for name in ports}  # each a Python value of its type: nothing to say
+        else:
+            values = {name: port_value(saved[name], port.type, f"{what}'s {name}") for name, port in ports.items()}
         time = finite(snapshot["time"], f"{what}'s time")
         self.values.clear()  # in place: bound setters and getters keep working
         self.values.update(values)

@@ -13,6 +13,7 @@ Python.
 
 from __future__ import annotations
 
+import ctypes
 from dataclasses import dataclass
 
 from ..diagnostics import CotwinError
@@ -310,7 +311,9 @@ class QuietStep:
         self.lines = self._lines(event_slots, monitored_slots)
         self._values: list[float] = []
         self._move = None
-        self._addressed: tuple | None = None  # (model, data, controls, move arrays, watch, memo) `pointers` has addresses of
+        self._addressed: tuple | None = None  # (model, data, controls, watch, memo) `pointers` has addresses of
+        self._arrays = None  # the move's arrays `pointers` has the addresses of (None: no move)
+        self._zeros = [0.0] * E
         self._acted = False  # Python ran the operations called before the next segment
         self.calling = False  # (Jacobi) an operation is called, which Python runs before the next segment
         self.refusal = ""  # why `quiet` last said 0
@@ -431,10 +434,7 @@ class QuietStep:
         joints, arrays = (move[2], move[1]) if move else (0, None)
         addressed = self._addressed  # the objects whose addresses `pointers` holds: looked up again when one changed
         if addressed is None or addressed[0] is not sim.model or addressed[1] is not d or \
-                addressed[2] is not sim.controls or addressed[3] is not arrays or addressed[4] is not watch or \
-                addressed[5] is not sim.memo:
-            import ctypes
-
+                addressed[2] is not sim.controls or addressed[3] is not watch or addressed[4] is not sim.memo:
             from . import native
 
             _, mj_step = native.advance_function()
@@ -442,28 +442,29 @@ class QuietStep:
                                     d.qpos.ctypes.data, d.qvel.ctypes.data, d.sensordata.ctypes.data,
                                     watch[0].ctypes.data if watch is not None else 0,
                                     sim.memo.address if sim.memo is not None else 0, 0]
-            if move:
-                self.pointers[MOVE:] = [ctypes.cast(a, ctypes.c_void_p).value for a in arrays]
-            else:
-                self.pointers[MOVE:] = [0] * (POINTERS - MOVE)
-            self._addressed = (sim.model, d, sim.controls, arrays, watch, sim.memo)
+            self._addressed = (sim.model, d, sim.controls, watch, sim.memo)
+        if arrays is not self._arrays:  # a move of its own arrays (each plan's): their addresses
+            self.pointers[MOVE:] = [ctypes.addressof(a) for a in arrays] if move else [0] * (POINTERS - MOVE)
+            self._arrays = arrays
         self.pointers[FLAGS] = sim.sensor_flags() or 0  # asked per stretch: sensors the user turned off stay off
         if sim.memo is not None:
             sim.memo.check(sim.model)  # its stretches were of this model's numbers (cotwin.pmodel.memo)
         self._watch = watch  # kept: its mask stays alive while the C loop reads it
         self._move = move or None  # kept: its arrays stay alive while the C loop reads them
-        self.doubles[:SCALARS] = [float(d.time), float(sim.timestep), float(sim.model.opt.timestep), float(self.steps),
-                                  float(self.period), 1.0 if move else 0.0, 0.0, float(joints), float(d.qpos.size),
-                                  0.0, 0.0, -watch[1] if watch is not None else 0.0, 0.0, -1.0, 0.0,
-                                  1.0 if self._acted else 0.0]
+        doubles, names, E = self.doubles, self.names, len(self.names)
+        doubles[:SCALARS] = [float(d.time), float(sim.timestep), float(sim.model.opt.timestep), float(self.steps),
+                             float(self.period), 1.0 if move else 0.0, 0.0, float(joints), float(d.qpos.size),
+                             0.0, 0.0, -watch[1] if watch is not None else 0.0, 0.0, -1.0, 0.0,
+                             1.0 if self._acted else 0.0]
+        held = mapping.held
+        doubles[self.held_at:self.came_at] = [1.0 if name in held and held[name][0] else 0.0 for name in names]
+        doubles[self.came_at:self.again_at] = self._zeros
         requested = mapping.asked  # the variables an operation just assigned: answers reading them are asked anew
-        for i, name in enumerate(self.names):
-            self.doubles[self.held_at + i] = 1.0 if mapping.held.get(name, (False, None))[0] else 0.0
-            self.doubles[self.came_at + i] = 0.0
-            self.doubles[self.again_at + i] = 1.0 if requested and not mapping.events[name].reads.isdisjoint(requested) \
-                else 0.0
+        events = mapping.events
+        doubles[self.again_at:self.again_at + E] = [0.0 if events[name].reads.isdisjoint(requested) else 1.0
+                                                   for name in names] if requested else self._zeros
         self._acted = False
-        self.doubles[self.variables_at:] = self._values
+        doubles[self.variables_at:] = self._values
 
     def end(self, made: int, dd) -> None:
         """The mapping and its platform after `made` steps made natively (dd: the doubles they left)."""

@@ -23,6 +23,7 @@ root link's frame (two-part paths, which no p-model sensor has). When the scene 
 
 from __future__ import annotations
 
+import ctypes
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -121,6 +122,8 @@ class PlatformSimulator:
         self._inertial0 = (self.model.body_mass.copy(), self.model.body_inertia.copy())  # as compiled
         self.memo: StepMemo | None = None  # held steps remembered (cotwin.pmodel.memo: a sweep's forks turn it on)
         self._sensor_flags: int | None | object = _UNKNOWN  # sensor_flags(): not looked up yet
+        self._flag_word: ctypes.c_int | None = None  # that field, read where it lies (sensor_flags)
+        self._state_size = mujoco.mj_stateSize(self.model, STATE)  # of get_state's vector
         self._joint_qpos = {j.name: self.model.joint(prefix + j.name).qposadr[0] for j in tree.actuated}
         self._joint_dof = {j.name: self.model.joint(prefix + j.name).dofadr[0] for j in tree.actuated}
         # every name an actuator answers to (cotwin.pmodel.tree.actuator_names, as every platform's) -> its control
@@ -378,7 +381,10 @@ class PlatformSimulator:
         while the user has turned sensors off on the model (asked before each stretch: they stay off)."""
         if self._sensor_flags is _UNKNOWN:
             self._sensor_flags = flags_address(self.model) if self.shared is None else None
-        return None if self.model.opt.disableflags & SENSOR else self._sensor_flags
+            self._flag_word = ctypes.c_int.from_address(self._sensor_flags) if self._sensor_flags is not None else None
+        if self._sensor_flags is None:
+            return None
+        return None if self._flag_word.value & SENSOR else self._sensor_flags  # the field itself, read in place
 
     def remember_held_steps(self) -> StepMemo | None:
         """Turn on the memo of held steps (cotwin.pmodel.memo) for the native loop, on a simulator of its own
@@ -464,7 +470,7 @@ class PlatformSimulator:
         return float(self.data.time)
 
     def get_state(self) -> SimState:
-        vector = np.empty(mujoco.mj_stateSize(self.model, STATE))
+        vector = np.empty(self._state_size)
         mujoco.mj_getState(self.model, self.data, vector, STATE)
         return SimState(vector, tuple((dict(s.readings), s.ranges.copy()) for s in self.scanners),
                         tuple(getattr(self.data, name).copy() for name in DERIVED))
@@ -474,12 +480,13 @@ class PlatformSimulator:
         simulator's last step left it, computed before that step's integration (mj_step), not as mj_forward
         would recompute it at the restored positions: a fork then reads what the original read, bit for bit;
         a state without them gets mj_forward's."""
-        size = mujoco.mj_stateSize(self.model, STATE)
+        size = self._state_size
         vector = np.asarray(state.vector, dtype=np.float64)
         if vector.shape != (size,):
             raise CotwinError(f"the simulator state has {vector.size} numbers, this model's has {size}: "
                               "it is a state of another model")
-        if not np.all(np.isfinite(vector)) or not abs(vector[0]) < 1e12 or not np.all(np.abs(vector[1:]) <= mujoco.mjMAXVAL):
+        # (one pass: a NaN fails the comparison, an infinity the bound)
+        if not abs(float(vector[0])) < 1e12 or not np.abs(vector[1:]).max(initial=0.0) <= mujoco.mjMAXVAL:
             raise CotwinError(f"the simulator state holds numbers that are not finite, beyond MuJoCo's {mujoco.mjMAXVAL:g} "
                               "(where it would reset the simulation) or a time beyond 1e12 s")
         scans = self._checked_scans(state.scans)

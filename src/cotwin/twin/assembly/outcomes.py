@@ -80,12 +80,15 @@ class EventRoles:
                  for role in ("infeasible", "feasible", "stops")}
         return cls(named["infeasible"], named["feasible"], named["stops"])
 
+    @lru_cache(maxsize=4096)  # asked at every step an event holds; the roles are values (equal, one entry)
     def infeasible(self, event: str) -> bool:
         return self._has(self.infeasible_events, event, lambda e: bool(INFEASIBLE.match(e)))
 
+    @lru_cache(maxsize=4096)
     def feasible(self, event: str) -> bool:
         return self._has(self.feasible_events, event, lambda e: bool(FEASIBLE.match(e)))
 
+    @lru_cache(maxsize=4096)
     def stops(self, event: str) -> bool:
         return self._has(self.stop_events, event, stopping)
 

@@ -114,7 +114,9 @@ class _Contacts:
         fingers = frozenset(j.child for j in tree.joints if j.name in tool.fingers)
         self.robot = frozenset(g for g in range(model.ngeom) if model.geom_contype[g] == ROBOT_CONTYPE
                                and model.body(model.geom_bodyid[g]).name not in fingers)
-        self._robot = np.array(sorted(self.robot), dtype=np.int64)
+        # per geom, whether it is the robot's (a contact's geoms looked up in it); one more, never, for the -1 of a flex
+        self._mask = np.zeros(model.ngeom + 1, dtype=bool)
+        self._mask[sorted(self.robot)] = True
         self.seen: dict[tuple[str, str], dict] = {}
 
     def again(self) -> "_Contacts":
@@ -140,7 +142,7 @@ class _Contacts:
             return
         contact = data.contact  # the step's contacts as arrays: only the robot's penetrating ones, in order, in Python
         g1, g2, dist = contact.geom1, contact.geom2, contact.dist
-        mine, theirs = np.isin(g1, self._robot), np.isin(g2, self._robot)
+        mine, theirs = self._mask[g1], self._mask[g2]
         for k in np.flatnonzero((mine != theirs) & (dist <= -DEPTH)):
             robot, other = (int(g1[k]), int(g2[k])) if mine[k] else (int(g2[k]), int(g1[k]))
             key = (model.body(model.geom_bodyid[robot]).name, model.body(model.geom_bodyid[other]).name)
@@ -379,6 +381,8 @@ class Watch(Stop):
         self._slots = [slots[(MAPPING.name, v)] for v in self.monitored]
         self._collision_slots = [slots[(MAPPING.name, e)] for e in self.collision_events]
         self._state_slots = [slots[(DMODEL.name, port)] for port, _ in self.state_ports]
+        self._state_keys = [(DMODEL.name, port) for port, _ in self.state_ports]
+        self._collision_keys = [(e, (MAPPING.name, e)) for e in self.collision_events]
         self.resting = self.ledger.resting([self._values.get((DMODEL.name, port)) for port, _ in self.state_ports])
         self.record(execution)
 
@@ -391,9 +395,10 @@ class Watch(Stop):
     def step_complete(self, execution) -> None:
         t, values = execution.time, self._values
         self.record(execution)
-        self.collisions.extend({"kind": "event", "event": e, "time": t} for e in self.collision_events
-                               if values.get((MAPPING.name, e)) is True)
-        current = [values.get((DMODEL.name, port)) for port, _ in self.state_ports]
+        if self._collision_keys:
+            self.collisions.extend({"kind": "event", "event": e, "time": t} for e, key in self._collision_keys
+                                   if values.get(key) is True)
+        current = [values.get(key) for key in self._state_keys]
         self._entered(t, current)
         self.resting = self.ledger.resting(current)
         self.contacts.check(t)
