@@ -251,6 +251,23 @@ class KinematicTree:
     def actuated(self) -> list[TJoint]:
         return [j for j in self.joints if j.kind != "fixed"]
 
+    def moved_alone(self) -> list[tuple[TLink, str]]:
+        """The massless links a moving joint (or a free body's free joint) carries with nothing of mass fixed to them,
+        each with what moves it: MuJoCo refuses such a body, so its model alone gives it a mass (cotwin.pmodel.mjcf);
+        the tree keeps them massless, as the source says (a URDF link without <inertial>)."""
+        fixed_below: dict[str, list[str]] = {}
+        for j in self.joints:
+            if j.kind == "fixed":
+                fixed_below.setdefault(j.parent, []).append(j.child)
+        links = {l.name: l for l in self.links}
+
+        def rigid_mass(name: str) -> float:
+            return links[name].mass + sum(rigid_mass(child) for child in fixed_below.get(name, ()))
+
+        moved = [(j.child, f"joint {j.name}") for j in self.actuated]
+        moved += [(l.name, "its free joint") for l in self.roots[1:]]
+        return [(links[name], mover) for name, mover in moved if rigid_mass(name) <= 0]
+
     def _chain(self):
         """Per joint, the constant transforms around its motion: parent0^-1 J0 and J0^-1 child0."""
         if getattr(self, "_chain_cache", None) is None:

@@ -23,8 +23,9 @@ Documented defaults, used where the p-model gives no value:
   the robot by its arm's weight; a twin project says so, cotwin.twin.assembly.system.free_base_arm_warning); a root link beside the base (a free body of the p-model, no joint leading to
   it) gets a free joint and falls;
 - a massless link (mass 0: a URDF link without `<inertial>`, a tool or sensor frame) is a body of no mass and
-  no inertia: MuJoCo accepts one where a joint moves a body of mass fixed to it, and the tree gives a link a moving
-  joint carries alone a gram (cotwin.pmodel.tree_build.carry_massless);
+  no inertia: MuJoCo accepts one where a joint moves a body of mass fixed to it; one a moving joint carries alone
+  (`KinematicTree.moved_alone`, warned of by the tree builder) gets MOVING_FRAME_MASS (a gram) with the inertia of
+  its geometry here only (`inertials`): the tree and the URDF/SDF exports keep it massless, as its source says;
 - a mesh file cotwin can read becomes a mesh asset; one it cannot is a placeholder sphere that never
   collides (or the project's stand-in shapes);
 - joints closing a kinematic loop become equality constraints (weld for fixed, connect otherwise);
@@ -51,6 +52,8 @@ import mujoco
 import numpy as np
 
 from ..diagnostics import CotwinError, Finding, Severity
+from ..robosim.check_pmodel import MOVING_FRAME_MASS
+from .inertia import default_inertia
 from .scenes import EARTH
 from .tree import Geom, KinematicTree, TJoint, inverse, reading_path, servo_mode, servo_name
 from .xmltext import num, nums, quat, sub, to_text
@@ -124,6 +127,16 @@ def _friction(g: Geom) -> dict:
     return {}
 
 
+def inertials(tree: KinematicTree) -> dict[str, tuple[float, np.ndarray, np.ndarray]]:
+    """Each link's mass, centre of mass and inertia as MuJoCo's model has them: the tree's, except a massless link a
+    moving joint carries alone, which gets MOVING_FRAME_MASS and its geometry's inertia (MuJoCo refuses a moving body
+    without mass)."""
+    out = {l.name: (l.mass, l.com, l.inertia) for l in tree.links}
+    for link, _ in tree.moved_alone():
+        out[link.name] = (MOVING_FRAME_MASS, np.eye(4), default_inertia(MOVING_FRAME_MASS, link.geoms, np.eye(4)))
+    return out
+
+
 def joint_inertia(tree: KinematicTree, joint: TJoint) -> float:
     """Inertia of everything beyond a joint about its axis (or mass along it), at zero: for servo damping."""
     beyond = {joint.child}
@@ -133,18 +146,20 @@ def joint_inertia(tree: KinematicTree, joint: TJoint) -> float:
     axis = joint.pose[:3, :3] @ joint.axis
     origin = joint.pose[:3, 3]
     total = 0.0
+    simulated = inertials(tree)
     for link in tree.links:
         if link.name not in beyond:
             continue
-        com = link.pose @ link.com
+        mass, com_local, inertia = simulated[link.name]
+        com = link.pose @ com_local
         if joint.kind == "prismatic":
-            total += link.mass
+            total += mass
             continue
         R = com[:3, :3]
-        I = R @ link.inertia @ R.T
+        I = R @ inertia @ R.T
         r = com[:3, 3] - origin
         r_perp = r - axis * (r @ axis)
-        total += axis @ I @ axis + link.mass * (r_perp @ r_perp)
+        total += axis @ I @ axis + mass * (r_perp @ r_perp)
     return max(total, 1e-6)
 
 
@@ -193,6 +208,7 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
     bodies = {}
     parents = {j.child: j for j in tree.joints}
     placement = scene.robot_pose(tree) if scene is not None else None
+    simulated = inertials(tree)
     for link in tree.links:
         if link.name not in parents:  # the base, or a free body (a root link beside it)
             parent_el, local = worldbody, (placement @ link.pose if placement is not None else link.pose)
@@ -205,11 +221,12 @@ def to_mjcf(tree: KinematicTree, scene=None, timestep: float = TIMESTEP, visual:
         bodies[link.name] = body
         if link.name not in parents and (link is not tree.root or base == "free"):
             sub(body, "freejoint", name=f"{link.name}_free")
-        if link.mass > 0:
-            R = link.com[:3, :3]  # MJCF takes a full inertia in the body's axes only (no quat beside it)
-            I = R @ link.inertia @ R.T
-            sub(body, "inertial", mass=num(link.mass),
-                fullinertia=nums([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]]), pos=nums(link.com[:3, 3]))
+        mass, com, inertia = simulated[link.name]
+        if mass > 0:
+            R = com[:3, :3]  # MJCF takes a full inertia in the body's axes only (no quat beside it)
+            I = R @ inertia @ R.T
+            sub(body, "inertial", mass=num(mass),
+                fullinertia=nums([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]]), pos=nums(com[:3, 3]))
         else:  # a massless frame (its geoms must not give it a mass); MuJoCo refuses a zero fullinertia
             sub(body, "inertial", mass="0", pos="0 0 0", diaginertia="0 0 0")
         if link.name in parents:

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..diagnostics import CotwinError, Diagnostics, Location
 from ..robosim import syntax as s
+from ..robosim.check_pmodel import MOVING_FRAME_MASS, grams
 from ..robosim.consteval import UNITS, ConstEnv, ParameterNumbering, try_evaluate
 from ..robosim.pmodel_elements import (
     AnnotationRecord, DeviceRef, Inertial, JointRef, Link, PartRef, PModel, Pose, Shape,
@@ -37,7 +38,6 @@ from .kinds import JOINT_KINDS, RaySpec, annotated_sdf_type, body_quantity, join
 from .meshes import READABLE, bounding_box
 
 DEFAULT_MASS = 1.0  # kg: RoboTool's for a link without inertial information
-MOVING_FRAME_MASS = 1e-3  # kg: a massless link a moving joint carries with nothing of mass fixed to it (MuJoCo needs one)
 DEFAULT_INERTIA = np.eye(3)  # kg m^2: RoboTool's (ixx = iyy = izz = 1) for a link without inertial information
 MIN_SIZE = 1e-4  # m: flat shapes (RoboTool accepts a box of height 0) get this thickness
 RESERVED = frozenset({"world"})  # link names a simulator keeps for itself (MuJoCo's world body)
@@ -225,7 +225,7 @@ class TreeBuilder:
         written = None  # the inertia as the model gives it, where the tree has a physical one instead
         if inertial is not None:
             mass, com, I, written = self.inertial(inertial, env, f"link {link.name}", geoms, np.eye(4))
-            if mass is None:  # mass 0: a massless frame (a URDF link without <inertial>); see carry_massless
+            if mass is None:  # mass 0: a massless frame (a URDF link without <inertial>); see warn_moved_alone
                 mass, com, I = 0.0, np.eye(4), np.zeros((3, 3))
         elif masses:
             mass, com, I = self.combine([(m, T, inertia) for m, T, inertia, _ in masses])
@@ -669,34 +669,20 @@ class TreeBuilder:
         for j in loops:
             self.diag.warning(j.loc, f"joint {j.name} closes a kinematic loop ({j.parent} -> {j.child})")
         free = [n for n in ordered if n != ordered[0] and n not in {j.child for j in tree_joints}]
-        self.carry_massless(names, tree_joints, free)
+        tree = KinematicTree(name, [names[n] for n in ordered], tree_joints, self.sensors, loops, self.devices)
+        self.warn_moved_alone(tree)
         if free:
             self.diag.warning(loc, f"p-model {name}: no joint or fixed connection leads to {', '.join(free)}: free "
                               f"bodies beside the base {ordered[0]}, as in RoboTool's SDF")
-        return KinematicTree(name, [names[n] for n in ordered], tree_joints, self.sensors, loops, self.devices)
+        return tree
 
-    def carry_massless(self, links: dict[str, TLink], joints: list[TJoint], free: list[str]) -> None:
-        """A massless link (mass 0) is a frame: fixed to its parent, it adds nothing, as in URDF. MuJoCo needs a
-        mass where a joint moves a body, in that body or in the links fixed to it; where a moving joint (or a free
-        body's) carries only massless links, its child gets MOVING_FRAME_MASS with its geometry's inertia and a
-        warning naming it, never a silent kilogram."""
-        fixed_below = defaultdict(list)
-        for j in joints:
-            if j.kind == "fixed":
-                fixed_below[j.parent].append(j.child)
-
-        def rigid_mass(name: str) -> float:
-            return links[name].mass + sum(rigid_mass(child) for child in fixed_below[name])
-
-        moved = [(j.child, f"joint {j.name}") for j in joints if j.kind != "fixed"] + [(n, "its free joint") for n in free]
-        for name, mover in moved:
-            link = links[name]
-            if link.mass > 0 or rigid_mass(name) > 0:
-                continue
-            link.mass, link.com = MOVING_FRAME_MASS, np.eye(4)
-            link.inertia = default_inertia(MOVING_FRAME_MASS, link.geoms, link.com)
-            self.diag.warning(link.loc, f"link {name} has no mass and {mover} moves it with nothing of mass fixed to "
-                              f"it: MuJoCo needs a mass there, so the simulator gives it {MOVING_FRAME_MASS * 1000:g} g "
+    def warn_moved_alone(self, tree: KinematicTree) -> None:
+        """A massless link (mass 0) is a frame: fixed to its parent, it adds nothing, as in URDF. Where a moving joint
+        (or a free body's) carries one with nothing of mass fixed to it, MuJoCo's model gives it MOVING_FRAME_MASS
+        (cotwin.pmodel.mjcf; the tree keeps it massless): a warning names it, never a silent gram."""
+        for link, mover in tree.moved_alone():
+            self.diag.warning(link.loc, f"link {link.name} has no mass and {mover} moves it with nothing of mass fixed "
+                              f"to it: MuJoCo needs a mass there, so the simulator gives it {grams(MOVING_FRAME_MASS)} "
                               "with the inertia of its geometry (a link a fixed joint carries stays massless); give it "
                               "inertial information with its real mass")
 

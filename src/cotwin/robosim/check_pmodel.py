@@ -31,10 +31,18 @@ SHAPE_PARAMS = {
     "mesh": (),
 }
 INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+#: kg: what MuJoCo's model (cotwin.pmodel.mjcf) gives a massless link a moving joint carries with nothing of mass fixed
+#: to it (MuJoCo refuses a moving body without mass); the kinematic tree and the URDF/SDF exports keep it massless
+MOVING_FRAME_MASS = 1e-3
 TIME = "t"  # the time variable of equations and initial conditions
 #: the operators RoboTool's equations use without declaring them (calculus and matrix algebra of its solver)
 SOLVER_OPERATORS = frozenset({"derivative", "integral", "adj", "submatrix", "transpose", "inverse", "identity",
                               "zeroes", "norm", "dot", "cross"}) | frozenset(MATH)
+
+
+def grams(kg: float) -> str:
+    """A small mass as a warning says it: 0.001 -> "1 g" (MOVING_FRAME_MASS, whatever its value)."""
+    return f"{kg * 1000:g} g"
 
 
 def _is_number(value) -> bool:
@@ -341,7 +349,8 @@ class PModelChecker(Checker):
                 self.diag.error(inertial.mass.loc, f"mass of {where} must be positive, is {mass}")
             elif mass == 0:
                 self.diag.warning(inertial.mass.loc, f"mass of {where} is 0: a massless frame, no mass in the "
-                                  "simulator (a link a moving joint carries alone gets 1 g, docs/pmodel-notation.md)")
+                                  f"simulator (a link a moving joint carries alone gets {grams(MOVING_FRAME_MASS)}, "
+                                  "docs/pmodel-notation.md)")
         if inertial.unit is not None and inertial.unit not in UNITS:
             self.diag.error(inertial.loc, f"unknown unit '{inertial.unit}' (known: {', '.join(UNITS)})")
         for key, value, loc in inertial.inertia:

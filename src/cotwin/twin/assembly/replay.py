@@ -38,9 +38,10 @@ class OperationCall:
 def operation_calls(program: Program, command: Command) -> list[OperationCall]:
     """The platform operations the d-model calls for a command, from its initial (idle) state."""
     values = dict(command.values)
+    raised = command.raises({event.name for event in program.inputs})  # as the controller sends it
     inputs = {}
     for event in program.inputs:
-        if values.get(event.name) is True:
+        if event.name in raised:
             inputs[event.name] = assemble(event.value_ports, values.get) if event.value_ports else None
     interpreter = Interpreter(program)
     interpreter.step({})  # enter the initial state

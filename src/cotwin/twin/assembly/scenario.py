@@ -27,7 +27,7 @@ import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable, Collection, Iterator
 
 from ...config import Key, Schema, TomlFile, did_you_mean, is_number, raise_problems
 from ...cosim.units import INT32, Port, PythonUnit
@@ -45,6 +45,12 @@ class Command:
     time: float  # s
     values: tuple[tuple[str, object], ...]  # port -> value
     where: str
+
+    def raises(self, events: Collection[str]) -> list[str]:
+        """The `events` this command raises, in its order: those it sets True (a plan's `true` or `1` cell is read
+        as True; False, 0 or any other value raises nothing). The one rule the controller sends by (`occurrences`)
+        and the plan's warnings (`no_event_rows`, `plan_order`) count by, so that they never disagree."""
+        return [port for port, value in self.values if port in events and value is True]
 
 
 def scenario_ports(program: Program) -> dict[str, str]:
@@ -125,8 +131,8 @@ def after_end(commands: list[Command], end: float, h: float = 0.0) -> list[Findi
 def plan_order(commands: list[Command], events: set[str] | frozenset[str] = frozenset()) -> list[Finding]:
     """Warnings for a plan whose rows are not in time order (commands are sent in time order, not the file's),
     for rows that share a time and for a row raising several of the command `events` (a source applies one
-    command per step: the others wait for the next steps). One per plan row (a cell's row holds several robots'
-    commands), the first AFTER_END_SHOWN."""
+    command per step: the others wait for the next steps; `Command.raises`, the controller's rule). One per plan row
+    (a cell's row holds several robots' commands), the first AFTER_END_SHOWN, then how many more (`_capped`)."""
     rows = sorted(dict.fromkeys((_location(c.where), c.time) for c in commands),
                   key=lambda row: (row[0].path, row[0].line))
     out, latest, seen = [], None, {}
@@ -141,28 +147,34 @@ def plan_order(commands: list[Command], events: set[str] | frozenset[str] = froz
             latest = (where, time)
         seen.setdefault(time, where)
     for c in commands:
-        raised = [port for port, value in c.values if port in events and value is True]
+        raised = c.raises(events)
         if len(raised) > 1:
             out.append(Finding(_location(c.where), Severity.WARNING, f"this row raises {', '.join(raised)}: one "
                                f"command is applied per step, {raised[0]} first and each other in a later step"))
     out.sort(key=lambda f: (f.location.path, f.location.line))
-    return out[:AFTER_END_SHOWN]
+    return _capped(out, lambda f: f, lambda f, left: Finding(f.location, Severity.WARNING, f"... and {left} more "
+                                                             "warning(s) of rows out of time order, sharing a time or "
+                                                             "raising several events"))
 
 
 def no_event_rows(commands: list[Command], program: Program) -> list[Finding]:
-    """Warnings for plan rows that raise no event: every event column false (or 0). Such a row is accepted as
-    'no event this row' (a row switched off) but commands nothing, so it is neither sent nor counted: said at its
-    line, not passed over in silence. The first AFTER_END_SHOWN, the rest summed up in one more."""
+    """Warnings for plan rows that raise no event (`Command.raises`, the controller's rule): every event column false
+    (or 0), or no event column at all (an event's argument columns alone). Such a row is accepted as 'no event this
+    row' (a row switched off) but commands nothing, so it is neither sent nor counted: said at its line, not passed
+    over in silence. The first AFTER_END_SHOWN, the rest summed up in one more."""
     events = {ev.name for ev in program.inputs}
-    silent = [c for c in commands
-              if any(port in events for port, _ in c.values) and not any(port in events and value is True
-                                                                          for port, value in c.values)]
-    return _capped(silent, lambda c: Finding(_location(c.where), Severity.WARNING,
-                                             f"this row at {c.time:g} s raises no event (its event column(s) "
-                                             f"{', '.join(port for port, _ in c.values if port in events)} false): it "
-                                             "commands nothing and is not counted"),
-                   lambda c, left: Finding(_location(c.where), Severity.WARNING,
-                                           f"... and {left} more row(s) raising no event"))
+    silent = [c for c in commands if not c.raises(events)]
+
+    def one(c: Command) -> Finding:
+        columns = [port for port, _ in c.values if port in events]
+        why = (f"its event column(s) {', '.join(columns)} false" if columns else
+               f"no event column, only {', '.join(port for port, _ in c.values) or 'its time'}: an event's arguments "
+               "are read with the event")
+        return Finding(_location(c.where), Severity.WARNING, f"this row at {c.time:g} s raises no event ({why}): it "
+                       "commands nothing and is not counted")
+
+    return _capped(silent, one, lambda c, left: Finding(_location(c.where), Severity.WARNING,
+                                                        f"... and {left} more row(s) raising no event"))
 
 
 def nothing_planned(plan: Path | None, commands: list[Command]) -> list[Finding]:
@@ -401,8 +413,7 @@ def occurrences(command: Command, events: set[str], arguments: dict[str, list[st
     """The events a command raises (its command events set true), in its order, each with the values of its own
     arguments (`arguments`: event -> its argument ports): what ScenarioUnit offers, one occurrence a step."""
     values = dict(command.values)
-    return [(port, {p: values[p] for p in arguments.get(port, ()) if p in values})
-            for port, value in command.values if port in events and value is True]
+    return [(port, {p: values[p] for p in arguments.get(port, ()) if p in values}) for port in command.raises(events)]
 
 
 def steps_before_due(due: float, origin: float, first: int, h: float, n: int) -> int:
