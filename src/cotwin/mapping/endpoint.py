@@ -295,7 +295,7 @@ class SimulatedEndpoint(NamedActuators, Endpoint):
         fields(snapshot, "platform", ("simulator", "segment"), ("scans", "direct", "derived", "bodies"))
         of_type(snapshot["simulator"], np.ndarray, "platform's simulator state")
         direct = of_type(snapshot.get("direct", {}), dict, "platform's commanded speeds and efforts")
-        commanded = {j.name for j in self.tree.actuated} - self._positioned
+        commanded = {j.name for j in self.tree.actuated} - self._positioned if direct else set()
         for joint, value in direct.items():
             if joint not in commanded:
                 raise CotwinError(f"the saved state commands a speed or effort of {joint!r:.60}, which is not a "

@@ -127,13 +127,13 @@ def model_digest(model: mujoco.MjModel) -> int | None:
     return functions[1](model._address) if functions is not None else None
 
 
-def remembers(model: mujoco.MjModel) -> bool:
+def remembers(model: mujoco.MjModel, digest: int | None = None) -> bool:
     """Whether a memo can stand for `model`'s steps: MuJoCo keeps no state of its own outside the integration
-    state (no sleeping bodies, no plugins) and the model's digest can be made."""
+    state (no sleeping bodies, no plugins) and the model's digest can be made (`digest`: made already)."""
     sleep = getattr(mujoco.mjtEnableBit, "mjENBL_SLEEP", None)
     if sleep is not None and model.opt.enableflags & int(sleep):
         return False
-    return model.nplugin == 0 and model_digest(model) is not None
+    return model.nplugin == 0 and (digest if digest is not None else model_digest(model)) is not None
 
 
 class StepMemo:
@@ -143,9 +143,9 @@ class StepMemo:
         functions = address("mj_getState"), address("mj_setState")
         if None in functions:
             raise ValueError("MuJoCo's library was not found beside the mujoco module")
-        if not remembers(model):
-            raise ValueError("this model's steps depend on more than its integration state, or its digest cannot be made")
         self.digest = model_digest(model)
+        if not remembers(model, self.digest):
+            raise ValueError("this model's steps depend on more than its integration state, or its digest cannot be made")
         size = mujoco.mj_stateSize(model, STATE)
         capacity = max(1, min(MAX_STRETCHES, budget // ((2 * size + 1) * 8)))
         slots = 1 << (2 * capacity - 1).bit_length()  # at least twice the entries: the table is never full
@@ -187,4 +187,4 @@ class StepMemo:
         if digest != self.digest:
             self.clear()
             self.digest = digest
-            self._memo.capacity = self.capacity if remembers(model) else 0
+            self._memo.capacity = self.capacity if remembers(model, digest) else 0
