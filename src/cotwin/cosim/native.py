@@ -369,7 +369,7 @@ class NativeLoop:
         doubles = [d for part in self.parts for d in part.doubles]
         assert len(doubles) == self._sizes[1], "a native part changed its number of doubles"
         D = np.array(doubles or [0.0], dtype=np.float64)
-        S = np.array([float(v) for v in data], dtype=np.float64)
+        S = np.array(data, dtype=np.float64)  # plain numbers all (`quiet`): each as float() makes it
         before = S.copy()
         rows = np.empty((n, self.width), dtype=np.float64)
         moved = np.zeros(n + 1, dtype=np.uint8)
