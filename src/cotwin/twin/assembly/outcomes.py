@@ -208,6 +208,13 @@ class Summary:
         return [o.describe() for o in self.outcomes if o.verdict != "completed"] + [f"blocked: {b}" for b in self.blocked]
 
 
+def event_readers(program) -> dict[str, list[tuple[int, int]]]:
+    """Per input event, the machines whose cycles read it: (machine index, its place among the state ports)."""
+    position = {m.index: k for k, m in enumerate(program.machines)}
+    return {name: sorted({(m, position[m]) for m, _ in routes if m in position})
+            for name, routes in program.input_routes.items()}
+
+
 class CommandLedger(Observer):
     """Follows every command a run applies (see module doc); `outcomes` grows as the run goes."""
 
@@ -226,14 +233,11 @@ class CommandLedger(Observer):
         self.roles = EventRoles.of(system.spec)
         self.rest = once_per(program, "rest states", lambda: rest_states(program))  # the same for every what-if
         self.cycles = once_per(program, "cycle reads", lambda: CycleReads(program))
-        position = {m.index: k for k, m in enumerate(program.machines)}  # a machine's place among the state ports
-        self._readers = {name: sorted({(m, position[m]) for m, _ in routes if m in position})
-                         for name, routes in program.input_routes.items()}
+        self._readers = once_per(program, "event readers", lambda: event_readers(program))
         self.outcomes: list[CommandOutcome] = []
         self._states = [(program.state_port(m), m) for m in program.machines]
         self._calls = [op.name for op in program.operations]
-        self._events = [c.output for c in system.connections if c.source == MAPPING.name and c.target == DMODEL.name
-                        and c.output in {ev.name for ev in program.inputs}]
+        self._events = list(system.platform_events)
 
     def simulation_initialized(self, execution) -> None:
         source = execution.system.units.get(self._source) if self._source is not None else None

@@ -464,6 +464,10 @@ class TwinSystem:
         if self.source is RABBITMQ:  # the bridge publishes the monitored variables back (Listing 5)
             connections += [Connection(MAPPING.name, v, RABBITMQ.name, v) for v in self.models.monitored]
         self.connections = connections
+        inputs = {ev.name for ev in program.inputs}
+        # the d-model's input events the mapping raises (the platform's answers and observations), in connection order
+        self.platform_events = [c.output for c in connections if c.source == MAPPING.name and c.target == DMODEL.name
+                                and c.output in inputs]
         self.delayed = {MAPPING.name}
         self.log = _gather(problems, self._log_variables, None)
         shown = not problems  # the panels are checked against what a run shows: the plan's ports, the log

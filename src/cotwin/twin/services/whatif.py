@@ -356,14 +356,12 @@ class Watch(Stop):
         program = fork.models.program
         self.program, self.plan, self.settle, self.decimate = program, plan, settle, decimate
         self.waits, self.ledger, self.endpoint = waits, ledger, endpoint
-        platform = [c.output for c in fork.connections if c.source == MAPPING.name and c.target == DMODEL.name
-                    and c.output in {ev.name for ev in program.inputs}]
         self.monitored = list(fork.log[MAPPING.name])
         self.state_ports = [(program.state_port(m), m) for m in program.machines]
         self.whole = [(DMODEL.name, port) for port, _ in self.state_ports] + \
             [(fork.source.name, event) for event in sorted(fork.command_events)] if fork.source is not None else None
         self.rest_leaves = {(DMODEL.name, port): [ledger.rest[port]] for port, _ in self.state_ports}
-        self.collision_events = [e for e in platform if e.lower() == "collision"]
+        self.collision_events = [e for e in fork.platform_events if e.lower() == "collision"]
         self.contacts = contacts.again() if contacts is not None else _Contacts(endpoint, fork.models.tree, fork.models.tool)
         self.trajectory: dict[str, list[float]] = {"time": [], **{v: [] for v in self.monitored}}
         self.states: list[tuple[float, str, str]] = []
@@ -515,7 +513,8 @@ def occurrences(program, events: set[str], plan: list[Command]) -> list[tuple[Co
     events or none (a TwinManager plan CSV's row with every event false)."""
     from ..assembly.scenario import occurrences as raised
 
-    arguments = {ev.name: [port for port, _ in ev.value_ports] for ev in program.inputs}
+    arguments = once_per(program, "event arguments", lambda: {ev.name: [port for port, _ in ev.value_ports]
+                                                             for ev in program.inputs})
     return [(c, event, args) for c in plan for event, args in raised(c, events, arguments)]
 
 
