@@ -4,6 +4,7 @@ inputs are named with --domain, and a long search shows progress."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -404,3 +405,81 @@ def test_an_interrupted_search_without_a_violation_is_not_called_verified(tmp_pa
     assert result.returncode == 130, result.stdout + result.stderr
     assert "INTERRUPTED" in result.stdout and "ok   " not in result.stdout.replace("ok   every", "")
     assert "nothing is verified" in result.stderr
+
+
+CHOICE_THEN_TIMELOCK = one_machine(("go",), """
+	initial i
+	state A { }
+	state B { }
+	transition t0 { from i to A }
+	transition idle { from A to A exec condition not $go }
+	transition t1 { from A to B condition $go }
+	transition t2 { from A to A exec condition $go action $report!1 }
+""")
+
+
+def test_a_choice_made_in_a_cycle_that_then_fails_is_reported_as_nondeterminism(tmp_path):
+    """t1 and t2 are both enabled on go; the interpreter takes t1 and the cycle then times out in B. The
+    nondeterminism it noted went with the failed cycle: verify said 'ok determinism' and reported the timelock
+    alone. Both are reported now, each with its shortest trace."""
+    (tmp_path / "m.rst").write_text(CHOICE_THEN_TIMELOCK)
+    program = build_program(load_checked([tmp_path / "m.rst"]))
+    report = verify(program)
+    assert sorted(v.property for v in report.violations) == ["determinism", "timelock"]
+    [choice] = [v for v in report.violations if v.property == "determinism"]
+    assert "t1, t2 enabled" in choice.message and choice.trace == [{"go": None}]
+    assert "FAIL determinism: 1 violation(s)" in format_report(program, report)
+
+
+KINDS = "enumeration Mode { Slow Fast }\n" + one_machine(("flag: boolean", "mode: Mode", "level: int", "count: nat"), """
+	var b: boolean
+	var m: Mode
+	var k: int
+	var c: nat
+	initial i
+	state A { }
+	state B { }
+	transition t0 { from i to A }
+	transition idle { from A to A exec condition else }
+	transition f { from A to B condition $flag?b:b }
+	transition md { from A to B condition $mode?m:(m == Mode::Fast) }
+	transition l { from A to B condition $level?k:(k > 2) }
+	transition n { from A to B condition $count?c:(c > 2) }
+	transition back { from B to A exec }
+""")
+
+
+@pytest.mark.parametrize("domain, port, value, said", [
+    ("b=0..3", "b", 2, "b: 2 is not a value of its type boolean: give 0 (false) or 1 (true)"),
+    ("m=0..5", "m", 2, "m: 2 is not a value of its type Mode: give a literal's index: 0 (Slow), 1 (Fast)"),
+    ("mode=-1", "m", -1, "m: -1 is not a value of its type Mode"),
+    ("k=0.5,3", "k", 0.5, "k: 0.5 is not a value of its type int: give an integer from -2147483648 to 2147483647"),
+    ("k=1e300", "k", 1e300, "k: 1e+300 is not a value of its type int"),
+    ("level=99999999999999999999", "k", 99999999999999999999, "k: 99999999999999999999 is not a value of its type int"),
+    ("c=-1..3", "c", -1, "c: -1 is not a value of its type nat: give an integer from 0 to 2147483647"),
+])
+def test_a_domain_value_its_port_cannot_carry_is_refused_naming_the_values_it_can(tmp_path, domain, port, value, said):
+    """--domain b=0..3 for a Boolean, m=0..5 for an enumeration of two literals, k=0.5 for an int: the search
+    explored them as inputs (a Boolean 2, a third literal), states no run can reach, and reported on them. The
+    command refuses the option; verify() and testgen's exploration (event_values) a CotwinError."""
+    from cotwin.diagnostics import CotwinError
+    from cotwin.dmodel.verify import event_values
+
+    (tmp_path / "k.rst").write_text(KINDS)
+    proc = cotwin("verify", tmp_path / "k.rst", "--domain", domain)
+    assert proc.returncode == 2 and f"Invalid value for --domain: {said}" in proc.stderr, proc.stderr
+    program = build_program(load_checked([tmp_path / "k.rst"]))
+    with pytest.raises(CotwinError, match=re.escape(said)):
+        event_values(program, {port: [value]})
+
+
+def test_domain_values_of_every_kind_of_port_are_taken_as_its_type_holds_them(tmp_path):
+    (tmp_path / "k.rst").write_text(KINDS)
+    program = build_program(load_checked([tmp_path / "k.rst"]))
+    from cotwin.dmodel.verify import event_values
+
+    values, _ = event_values(program, {"b": [0, 1], "m": [0, 1.0], "k": [3.0, -5], "c": [0, 2 ** 31 - 1]})
+    assert values == {"flag": [False, True], "mode": [0, 1], "level": [3, -5], "count": [0, 2 ** 31 - 1]}
+    assert all(type(v) is bool for v in values["flag"]) and all(type(v) is int for v in values["level"])
+    report = verify(program, {"b": [0, 1], "m": [0, 1], "k": [3], "c": [3]})
+    assert not report.unreached_transitions and not report.sampled

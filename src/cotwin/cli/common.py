@@ -366,7 +366,13 @@ def value_domains(program, domains: tuple[str, ...]) -> dict[str, list]:
     resolved = {ports[name]: values for name, values in parsed.items()}
     if len(resolved) < len(parsed):
         raise click.BadParameter("a port is given twice (by its name and by its event's)", param_hint="--domain")
-    return resolved
+    from ..dmodel.verify import port_domain
+
+    scalars = {port: sc for ev in program.inputs for port, sc in ev.value_ports}
+    try:  # values of the port's type only: a Boolean 2 or an int 0.5 would be explored as if a run could send it
+        return {port: port_domain(port, scalars[port], values) for port, values in resolved.items()}
+    except CotwinError as err:
+        raise click.BadParameter(err.findings[0].message, param_hint="--domain") from None
 
 
 @contextmanager
