@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..diagnostics import CotwinError, Diagnostics, Location
+from ..diagnostics import CotwinError, Diagnostics, Finding, Location, Severity
 from ..memo import once_per
 from ..robosim import functions as fns
 from ..robosim import syntax as s
@@ -810,19 +810,22 @@ def state_index(graph: MachineGraph, state: s.QName) -> int:
 def build_program(project: Project, module_name: str | None = None) -> Program:
     """The executable view of a module (the only one, or the one named)."""
     modules = project.elements(Module)
-    if module_name is not None:
-        module = project.lookup("module", module_name)
-        if module is None:
-            module = next((m for m in modules if m.name == module_name.split("::")[-1]), None)
-        if module is None:
-            raise CotwinError(f"no module '{module_name}' (modules: {', '.join(m.name for m in modules) or 'none'})")
-    elif len(modules) == 1:
-        module = modules[0]
-    elif not modules:
-        raise CotwinError("the model has no module to execute")
+    named = {id(m): "::".join(project.qualified_name(m)) for m in modules}
+    module = project.lookup("module", module_name) if module_name is not None else None
+    if module is None and module_name is not None:  # `Mod` for P::Mod: the modules whose name ends so
+        parts = tuple(module_name.split("::"))
+        candidates = [m for m in modules if tuple(named[id(m)].split("::"))[-len(parts):] == parts]
+        if not candidates:
+            raise CotwinError(f"no module '{module_name}' (modules: {', '.join(named.values()) or 'none'})")
     else:
-        raise CotwinError(f"several modules ({', '.join(m.name for m in modules)}): choose one with --module")
-    return _Builder(project, module).build()
+        candidates = [module] if module is not None else modules
+    if not candidates:
+        raise CotwinError("the model has no module to execute")
+    if len(candidates) > 1:  # each named where it is declared, as --module takes it (`Mod` of two packages chose one)
+        which = f"modules named '{module_name}'" if module_name is not None else "modules"
+        raise CotwinError([Finding(m.loc, Severity.ERROR, f"{len(candidates)} {which}: this is {named[id(m)]}: choose "
+                                                          f"one with --module {named[id(m)]}") for m in candidates])
+    return _Builder(project, candidates[0]).build()
 
 
 __all__ = [
