@@ -344,6 +344,22 @@ def test_random_values_random_never_draws_are_refused(values, named):
         proc.stderr
 
 
+@pytest.mark.parametrize("values, said", [("0.1,,0.2", "'0.1,,0.2': values must be numbers"),
+                                          ("", "'': expected LOW..HIGH or v1,v2,..."),
+                                          ("0.5,nan", "'0.5,nan': values must be finite numbers")])
+def test_random_values_that_are_no_numbers_are_quoted_as_written(values, said):
+    """`--random 0.1,,0.2` was refused as ''random=0.1,,0.2'', a NAME= the user never wrote (the option takes the
+    values alone); the refusal quotes what was written."""
+    proc = cotwin_in_process("verify", WALK, "--random", values, "--max-states", 10)
+    assert proc.returncode == 2 and f"Invalid value for --random: {said}" in proc.stderr, proc.stderr
+    assert "random=" not in proc.stderr
+
+
+def module_line(path: Path) -> int:
+    """The line of the module declared in `path`."""
+    return next(n for n, line in enumerate(path.read_text().splitlines(), 1) if line.lstrip().startswith("module "))
+
+
 def test_more_input_combinations_than_a_search_holds_are_refused_before_any_is_made(tmp_path, monkeypatch):
     """`--domain MovementArgs_target_X=0..99999` on the UR5e arm made 204 million input combinations for each state,
     and MemoryError ('a cotwin bug') after 20 s and 3 GB (found by the hostile probe): refused at once, saying how
@@ -356,8 +372,8 @@ def test_more_input_combinations_than_a_search_holds_are_refused_before_any_is_m
     domain = ("--domain", "MovementArgs_target_X=0..9")  # 40 values with Y and Z sampled: 512 x 41 combinations
     proc = cotwin_in_process("verify", arm, *domain)
     assert proc.returncode == 1, proc.stdout + proc.stderr
-    assert ("20,992 input combinations in each state, more than 5,000 (10 input events; values: moveDiscreteCommand "
-            "40): give fewer values with --domain") in proc.stderr
+    assert (f"{arm}:{module_line(arm)}:8: error: 20,992 input combinations in each state, more than 5,000 (10 input "
+            "events; values: moveDiscreteCommand 40): give fewer values with --domain") in proc.stderr  # at the module
     proc = cotwin_in_process("testgen", arm, *domain, "--no-drivers", "-o", tmp_path / "tests")
     assert proc.returncode == 1 and "more than 5,000" in proc.stderr, proc.stderr
     assert not (tmp_path / "tests").exists()

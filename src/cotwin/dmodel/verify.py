@@ -31,7 +31,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, Finding, Severity
 from ..robosim.types import BOOL, NAT, REAL, EnumTy, RecordTy
 from .growth import GrowthWatch
 from .interpreter import ExecutionError, Frame, Interpreter
@@ -254,8 +254,9 @@ def input_combinations(program: Program, values: dict[str, list]):
     total = math.prod(ways.values())
     if total > MAX_COMBINATIONS:
         counts = ", ".join(f"{n} {k - 1}" for n, k in sorted(ways.items(), key=lambda item: -item[1]) if k > 2)
-        raise CotwinError(f"{total:,} input combinations in each state, more than {MAX_COMBINATIONS:,} "
-                          f"({len(names)} input events; values: {counts}): give fewer values with --domain")
+        raise CotwinError([Finding(program.module.loc, Severity.ERROR,  # the module whose inputs they are
+                                   f"{total:,} input combinations in each state, more than {MAX_COMBINATIONS:,} "
+                                   f"({len(names)} input events; values: {counts}): give fewer values with --domain")])
     for mask in range(1 << len(names)):
         present = [n for i, n in enumerate(names) if mask >> i & 1]
         axes = [values.get(n, [None]) for n in present]
