@@ -499,3 +499,46 @@ def test_domain_values_of_every_kind_of_port_are_taken_as_its_type_holds_them(tm
     assert all(type(v) is bool for v in values["flag"]) and all(type(v) is int for v in values["level"])
     report = verify(program, {"b": [0, 1], "m": [0, 1], "k": [3], "c": [3]})
     assert not report.unreached_transitions and not report.sampled
+
+
+SEQUENCES = """package Sq
+import sequence_toolkit::*
+interface I { event go: Seq(int) event v: vector(real, 3) }
+interface O { event done }
+stm M {
+	var s: Seq(int)
+	input context { uses I }
+	output context { uses O }
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition idle { from A to A exec condition not $go }
+	transition g { from A to A exec condition %s action $done }
+}
+controller C { uses I uses O sref m = M
+	connection C on go to m on go (_async) connection C on v to m on v (_async) connection m on done to C on done (_async) }
+module Mod { robotic platform P { uses I uses O } cref c = C
+	connection P on go to c on go (_async) connection P on v to c on v (_async) connection c on done to P on done (_async) }
+"""
+
+
+def test_an_input_event_of_a_sequence_or_vector_is_explored_or_refused_at_its_declaration(tmp_path):
+    """An input event whose type has no FMU ports (Seq(int), vector(real, 3)) ended `cotwin verify` and `testgen`
+    with an internal error (KeyError: ()). A value no condition reads is one representative value (data
+    independence, as for numbers); one a condition reads is refused where the event is declared, and
+    build-dmodel's refusal of such events is located there too."""
+    model = tmp_path / "seq.rst"
+    model.write_text(SEQUENCES % "$go?s")
+    proc = cotwin("verify", model)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    note = "note: go: its value is not read by any condition (data independent): 1 representative value (<>)"
+    assert note in proc.stdout and "ok   every transition can be taken" in proc.stdout
+    model.write_text(SEQUENCES % "$go?s:(size(s) > 0)")
+    proc = cotwin("verify", model)
+    assert proc.returncode == 1 and "internal error" not in proc.stderr, proc.stderr
+    assert (f"{model}:3:21: error: event go: values of type Seq(int) cannot be FMU ports (only boolean, int, nat, real, "
+            "enumerations and records of them), and a condition reads its value: the search has no values of its "
+            "type to try") in proc.stderr
+    proc = cotwin("build-dmodel", model, "-o", tmp_path / "seq.fmu")
+    assert proc.returncode == 1 and f"{model}:3:21: error: event go: values of type Seq(int)" in proc.stderr
+    assert f"{model}:3:40: error: event v: values of type vector(real, 3)" in proc.stderr

@@ -196,6 +196,7 @@ class EventPort:
     value_ports: list[tuple[str, Scalar]] = field(default_factory=list)  # (port name, scalar)
     unportable: str | None = None  # why its value cannot be FMU ports (a set, a vector...)
     bound: set[str] = field(default_factory=set)  # the variables the machines bind its value to ($e?x)
+    loc: Location | None = None  # where the event is declared (what is said of it is said there)
 
 
 @dataclass
@@ -204,6 +205,7 @@ class OperationPort:
     params: list[tuple[str, Ty]]
     arg_ports: list[list[tuple[str, Scalar]]] = field(default_factory=list)  # per parameter
     unportable: str | None = None  # why an argument cannot be FMU ports
+    loc: Location | None = None  # where the operation is declared
     shares: dict[str, str] = field(default_factory=dict)  # other operation -> an argument port both write
 
 
@@ -388,11 +390,12 @@ class _Builder:
                                 used_outputs.add(mc.target_event)
                             else:
                                 internal.setdefault(src, []).extend(into_controller(mc.target, mc.target_event))
-        input_ports = [self.event_port(name, inputs[name], _bound_names(machines, input_routes[name]))
-                       for name in inputs if name in input_routes]
-        output_ports = [self.event_port(name, inputs[name]) for name in inputs if name in used_outputs]
+        input_ports = [self.event_port(name, inputs[name], _bound_names(machines, input_routes[name]),
+                                       members.events[name].loc) for name in inputs if name in input_routes]
+        output_ports = [self.event_port(name, inputs[name], loc=members.events[name].loc)
+                        for name in inputs if name in used_outputs]
         self.disambiguate([*input_ports, *output_ports])
-        operations = [OperationPort(op.name, [(p.name, platform_resolver.resolve(p.type)) for p in op.params])
+        operations = [OperationPort(op.name, [(p.name, platform_resolver.resolve(p.type)) for p in op.params], loc=op.loc)
                       for op in members.operations.values()]
         self.argument_ports(operations)
         self.name_after_bindings(input_ports, {p.name for p in (*input_ports, *output_ports, *operations)}
@@ -666,8 +669,9 @@ class _Builder:
         return None
 
     # ---- ports ----
-    def event_port(self, name: str, ty: Ty | None, bound: set[str] | None = None) -> EventPort:
-        port = EventPort(name, ty)
+    def event_port(self, name: str, ty: Ty | None, bound: set[str] | None = None,
+                   loc: Location | None = None) -> EventPort:
+        port = EventPort(name, ty, loc=loc)
         port.bound = bound or set()
         if ty is not None:
             base = ty.decl.name if isinstance(ty, RecordTy) else f"{name}_value"

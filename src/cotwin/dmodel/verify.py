@@ -35,7 +35,7 @@ from ..diagnostics import CotwinError, Finding, Severity
 from ..robosim.types import BOOL, NAT, REAL, EnumTy, RecordTy
 from .growth import GrowthWatch
 from .interpreter import ExecutionError, Frame, Interpreter
-from .program import Program, Scalar, scalars
+from .program import Program, Scalar, default_value, scalars
 from .steering import condition_variables, input_event_tests
 
 
@@ -228,6 +228,15 @@ def event_values(program: Program, domains: dict[str, list],
         ports = ev.value_ports
         explicit = {port: port_domain(port, sc, domains[port]) for port, sc in ports if port in domains}
         steers = bool(_bound_variables(program, ev.name) & relevant) or _value_tested(program, ev.name)
+        if ev.unportable:  # a sequence, a set, a vector: no scalars to range over
+            if steers:
+                raise CotwinError([Finding(ev.loc or program.module.loc, Severity.ERROR,
+                                           f"{ev.unportable}, and a condition reads its value: the search has no "
+                                           "values of its type to try")])
+            out[ev.name] = [default_value(ev.ty, program.resolver)]
+            notes.append(f"{ev.name}: its value is not read by any condition (data independent): 1 representative "
+                         f"value ({out[ev.name][0]}) explores every behaviour")
+            continue
         if steers:
             sampled.extend(port for port, sc in ports if port not in explicit and not _whole_domain(sc))
         if not explicit and not steers:
