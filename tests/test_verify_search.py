@@ -542,3 +542,28 @@ def test_an_input_event_of_a_sequence_or_vector_is_explored_or_refused_at_its_de
     proc = cotwin("build-dmodel", model, "-o", tmp_path / "seq.fmu")
     assert proc.returncode == 1 and f"{model}:3:21: error: event go: values of type Seq(int)" in proc.stderr
     assert f"{model}:3:40: error: event v: values of type vector(real, 3)" in proc.stderr
+
+
+UNSET = one_machine(("go: int",), """
+	const lim: int
+	var k: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition idle { from A to A exec condition not $go }
+	transition g { from A to A exec condition $go?k:(k > lim) action $report!k }
+	transition h { from A to A exec condition $go?k:(k <= lim) }
+""")
+
+
+def test_a_constant_without_a_value_is_said_at_the_value_the_search_took(tmp_path):
+    """`const lim: int` with no value is an FMU parameter; verify took its default 0 without a word and said 'ok'
+    for every property, which holds for lim = 0 only (with lim = 5 and k in {0, 1}, g is never taken)."""
+    (tmp_path / "p.rst").write_text(UNSET)
+    program = build_program(load_checked([tmp_path / "p.rst"]))
+    text = format_report(program, verify(program))
+    assert ("note: constant M.lim has no value in the model: the search takes 0, its default (FMU parameter lim); "
+            "what holds below holds for that value") in text, text
+    report = verify(program, {"k": [0, 1]}, parameters={"lim": 5})
+    assert "the search takes 5, as given" in format_report(program, report)
+    assert report.unreached_transitions == ["M: transition g"]

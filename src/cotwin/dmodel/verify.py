@@ -321,6 +321,13 @@ def verify(program: Program, domains: dict[str, list] | None = None, max_states:
     started = time.perf_counter()
     report = Report(max_states=max_states)
     values, report.value_notes = event_values(program, domains or {}, report.sampled)
+    given, machines = parameters or {}, {m.index: m.machine.name for m in program.machines}
+    for par in program.parameters:  # constants without a value: what holds below holds for the value taken
+        if par.machine >= 0:
+            report.value_notes.append(
+                f"constant {machines[par.machine]}.{par.name} has no value in the model: the "
+                f"search takes {given.get(par.port, par.default)!r}, {'as given' if par.port in given else 'its default'} "
+                f"(FMU parameter {par.port}); what holds below holds for that value")
     combos = list(input_combinations(program, values))
     report.input_combinations = len(combos)
     interp = Interpreter(program, parameters)
