@@ -531,7 +531,8 @@ def test_an_input_event_of_a_sequence_or_vector_is_explored_or_refused_at_its_de
     model.write_text(SEQUENCES % "$go?s")
     proc = cotwin("verify", model)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    note = "note: go: its value is not read by any condition (data independent): 1 representative value (<>)"
+    note = ("note: go: its value is read by no condition and can make no cycle fail (data independent): "
+            "1 representative value (<>)")
     assert note in proc.stdout and "ok   every transition can be taken" in proc.stdout
     model.write_text(SEQUENCES % "$go?s:(size(s) > 0)")
     proc = cotwin("verify", model)
@@ -567,3 +568,31 @@ def test_a_constant_without_a_value_is_said_at_the_value_the_search_took(tmp_pat
     report = verify(program, {"k": [0, 1]}, parameters={"lim": 5})
     assert "the search takes 5, as given" in format_report(program, report)
     assert report.unreached_transitions == ["M: transition g"]
+
+
+DIVIDES = one_machine(("go: int",), """
+	var x: int
+	var k: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition idle { from A to A exec condition not $go }
+	transition g { from A to A exec condition $go?x action k = 10 / (x - 5); $report!k }
+""")
+
+
+def test_a_value_that_can_make_a_cycle_fail_is_not_data_independent(tmp_path):
+    """`k = 10 / (x - 5)` with x bound from go: verify said go's value was read by no condition, explored 0 alone
+    and called the model verified (exit 0), though go(5) divides by zero. A value read by a divisor, an index or a
+    function's argument decides whether a cycle fails: it is explored over its domain (sampled without one: exit 3),
+    and the division is found where the domain holds 5."""
+    from cotwin.dmodel.verify import event_values
+
+    (tmp_path / "d.rst").write_text(DIVIDES)
+    program = build_program(load_checked([tmp_path / "d.rst"]))
+    assert event_values(program, {})[1] == ["go: 2 value(s) from its domain"]
+    proc = cotwin("verify", tmp_path / "d.rst")
+    assert proc.returncode == 3 and "NOT VERIFIED for every value: x took only sample values" in proc.stdout, \
+        proc.stdout + proc.stderr
+    report = verify(program, {"x": [0, 5]})
+    assert [v.property for v in report.violations] == ["division"] and report.violations[0].trace[0] == {"go": 5}

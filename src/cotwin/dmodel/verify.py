@@ -218,7 +218,7 @@ def event_values(program: Program, domains: dict[str, list],
                  sampled: list[str] | None = None) -> tuple[dict[str, list], list[str]]:
     """The values each typed input event takes during exploration, and notes saying why; the value
     ports whose default domain is only a sample of their type are added to `sampled`."""
-    relevant = condition_variables(program)
+    relevant = condition_variables(program, failures=True)  # a value that can make a cycle fail is not one of many
     out: dict[str, list] = {}
     notes = []
     sampled = [] if sampled is None else sampled
@@ -234,14 +234,14 @@ def event_values(program: Program, domains: dict[str, list],
                                            f"{ev.unportable}, and a condition reads its value: the search has no "
                                            "values of its type to try")])
             out[ev.name] = [default_value(ev.ty, program.resolver)]
-            notes.append(f"{ev.name}: its value is not read by any condition (data independent): 1 representative "
+            notes.append(f"{ev.name}: its value is read by no condition and can make no cycle fail (data independent): 1 representative "
                          f"value ({out[ev.name][0]}) explores every behaviour")
             continue
         if steers:
             sampled.extend(port for port, sc in ports if port not in explicit and not _whole_domain(sc))
         if not explicit and not steers:
             combos = [{sc.path: default_domain(sc.ty)[0] for _, sc in ports}]
-            notes.append(f"{ev.name}: its value is not read by any condition (data independent): "
+            notes.append(f"{ev.name}: its value is read by no condition and can make no cycle fail (data independent): "
                          f"1 representative value explores every behaviour")
         else:
             axes = [explicit.get(port, default_domain(sc.ty)) for port, sc in ports]
