@@ -252,6 +252,33 @@ def test_build_dmodel_without_module_is_a_clean_error(tmp_path):
     assert proc.returncode == 1 and "no module" in proc.stderr and "Traceback" not in proc.stderr
 
 
+def _module_in(package: str) -> str:
+    return (f"package {package}\ninterface I {{ event e }}\n"
+            "stm M { input context { uses I } initial i state A { } transition t0 { from i to A }\n"
+            "\ttransition t1 { from A to A exec } }\n"
+            "controller C { uses I sref m = M connection C on e to m on e }\n"
+            "module Mod { robotic platform P { uses I } cref c = C connection P on e to c on e (_async) }\n")
+
+
+def test_a_module_name_two_packages_declare_is_refused_naming_each_where_it_is(tmp_path):
+    """--module Mod with Mod in packages A and B took A's silently (the first of that name), and --module Z::Mod did
+    too (its last part matched); several modules were listed as 'Mod, Mod'. Each is now named as --module takes it,
+    at its declaration; a name matches a module's qualified name or its end only."""
+    for package in ("A", "B"):
+        (tmp_path / f"{package.lower()}.rst").write_text(_module_in(package))
+    files = load_checked([tmp_path / "a.rst", tmp_path / "b.rst"])
+    for name in (None, "Mod"):
+        with pytest.raises(CotwinError) as err:
+            build_program(files, name)
+        found = [(f.location.path, f.location.line, f.message) for f in err.value.findings]
+        which = "modules named 'Mod'" if name else "modules"
+        assert found == [(str(tmp_path / f"{p.lower()}.rst"), 6, f"2 {which}: this is {p}::Mod: choose one with "
+                          f"--module {p}::Mod") for p in ("A", "B")], found
+    with pytest.raises(CotwinError, match=r"no module 'Z::Mod' \(modules: A::Mod, B::Mod\)"):
+        build_program(files, "Z::Mod")
+    assert build_program(files, "B::Mod").module is files.lookup("module", "B::Mod")
+
+
 def test_unsupported_variable_types_are_located(tmp_path):
     text = TIMELOCK.replace("input context { uses I }", "var v: string\n\tinput context { uses I }")
     (tmp_path / "v.rst").write_text(text)

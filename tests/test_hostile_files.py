@@ -310,3 +310,39 @@ def test_a_planted_build_record_removes_no_file_the_build_did_not_write(tmp_path
     assert not (out / "old.sdf").exists()  # what a build wrote is still cleaned up
     for name in ("mynotes.txt", "theirs.txt"):
         assert f"build.json: warning: 'written' names '{name}'" in again.stderr, again.stderr
+
+
+def test_a_reused_artefact_edited_since_is_recorded_as_cotwin_wrote_it_and_not_removed(tmp_path):
+    """build.json's digests were read back from the files after every build: a reused FMU the user had replaced
+    since was recorded with the digest of the user's file, and a later build that no longer wrote it removed the
+    user's file. A digest is now that of what cotwin wrote (known, not read back), so that file is kept; a
+    digests entry planted or of another key is not believed."""
+    import hashlib
+    import json
+
+    from cotwin.twin.assembly.build import Record, build
+    from cotwin.twin.assembly.run import load
+
+    def sha(path: Path) -> str:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+
+    out, system = tmp_path / "b", load(str(UR5E / "cotwin.toml"), cells=True)
+    written = build(system, out)
+    ours = sha(out / "mapping.fmu")
+    (out / "mapping.fmu").write_bytes(b"the user's own\n")  # same key: the next build reuses it
+    build(system, out)
+    record = json.loads((out / "build.json").read_text())
+    assert record["written"]["mapping.fmu"] == ours
+    assert all(digest == sha(out / name) for name, digest in record["written"].items() if name != "mapping.fmu")
+    warned = []
+    gone = Record(out).settle([path for role, path in written.items() if role != "mapping"], warned.append)
+    assert gone == [] and (out / "mapping.fmu").read_bytes() == b"the user's own\n"
+    assert [f.location.path for f in warned] == [str(out / "build.json")] and "'mapping.fmu'" in warned[0].message
+
+    record = json.loads((out / "build.json").read_text())
+    record["digests"] = {"controller.fmu": {"key": "another", "sha256": "0" * 64}, "dmodel.fmu": "junk"}
+    (out / "build.json").write_text(json.dumps(record))
+    build(system, out)
+    record = json.loads((out / "build.json").read_text())
+    assert record["written"]["controller.fmu"] == sha(out / "controller.fmu")
+    assert record["written"]["dmodel.fmu"] == sha(out / "dmodel.fmu")

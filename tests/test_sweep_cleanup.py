@@ -192,3 +192,52 @@ def test_an_interrupted_pool_keeps_the_answers_of_its_chunks_in_hand(scratch_roo
     assert len(xs) > 64 and caught.total == 1024
     assert xs == sorted(set(xs))  # in the plans' order, none twice
     assert list(scratch_root.glob("cotwin-sweep-*")) == []
+
+
+_FOOTPRINT = """
+import json, sys, tempfile
+from cotwin.twin.analysis.sweep import _forks, fork_footprint
+from cotwin.twin.assembly.run import load
+
+system = load(sys.argv[1])
+with tempfile.TemporaryDirectory() as tmp:
+    with _forks(None, None, None, (system, tmp)) as forks:
+        forks.predict([], horizon=system.spec.step)
+        memos = [memo.full for memo in forks.memos]
+    print(json.dumps([memos, fork_footprint((system, tmp), [], None, None)]))
+"""
+
+
+def _mujoco_without_headers(folder: Path) -> Path:
+    """The installed MuJoCo package without its C headers (links to its files but include/), as pip can leave it:
+    a model's digest cannot be made, so no simulator has a memo of held steps (cotwin.pmodel.memo.remembers)."""
+    import mujoco
+
+    package = folder / "mujoco"
+    package.mkdir(parents=True)
+    for entry in Path(mujoco.__file__).parent.iterdir():
+        if entry.name != "include":
+            (package / entry.name).symlink_to(entry)
+    return folder
+
+
+@pytest.mark.parametrize("headers", [True, False], ids=["memo", "no-memo"])
+def test_a_forks_footprint_counts_a_memo_of_held_steps_only_where_the_fork_has_one(tmp_path, headers):
+    """fork_footprint added a memo's budget (8 MB) to what a second fork was measured to take, also where the fork
+    has no memo (here MuJoCo without its headers): a sweep judged such a fork at 20 times what it takes and warned
+    that threads which fit would not. A fork with a memo counts what that memo takes once full."""
+    import json
+
+    import cotwin
+    from cotwin.pmodel import memo
+
+    src = str(Path(cotwin.__file__).parents[1])
+    path = src if headers else os.pathsep.join([str(_mujoco_without_headers(tmp_path / "site")), src])
+    proc = subprocess.run([sys.executable, "-c", _FOOTPRINT, str(PROJECT)], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": path}, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    memos, footprint = json.loads(proc.stdout.splitlines()[-1])
+    if headers:
+        assert len(memos) == 1 and 0 < memos[0] <= memo.BUDGET and footprint >= memos[0]
+    else:
+        assert memos == [] and footprint is not None and footprint < memo.BUDGET  # a few hundred KB

@@ -4,6 +4,7 @@ inputs are named with --domain, and a long search shows progress."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -343,6 +344,22 @@ def test_random_values_random_never_draws_are_refused(values, named):
         proc.stderr
 
 
+@pytest.mark.parametrize("values, said", [("0.1,,0.2", "'0.1,,0.2': values must be numbers"),
+                                          ("", "'': expected LOW..HIGH or v1,v2,..."),
+                                          ("0.5,nan", "'0.5,nan': values must be finite numbers")])
+def test_random_values_that_are_no_numbers_are_quoted_as_written(values, said):
+    """`--random 0.1,,0.2` was refused as ''random=0.1,,0.2'', a NAME= the user never wrote (the option takes the
+    values alone); the refusal quotes what was written."""
+    proc = cotwin_in_process("verify", WALK, "--random", values, "--max-states", 10)
+    assert proc.returncode == 2 and f"Invalid value for --random: {said}" in proc.stderr, proc.stderr
+    assert "random=" not in proc.stderr
+
+
+def module_line(path: Path) -> int:
+    """The line of the module declared in `path`."""
+    return next(n for n, line in enumerate(path.read_text().splitlines(), 1) if line.lstrip().startswith("module "))
+
+
 def test_more_input_combinations_than_a_search_holds_are_refused_before_any_is_made(tmp_path, monkeypatch):
     """`--domain MovementArgs_target_X=0..99999` on the UR5e arm made 204 million input combinations for each state,
     and MemoryError ('a cotwin bug') after 20 s and 3 GB (found by the hostile probe): refused at once, saying how
@@ -355,8 +372,8 @@ def test_more_input_combinations_than_a_search_holds_are_refused_before_any_is_m
     domain = ("--domain", "MovementArgs_target_X=0..9")  # 40 values with Y and Z sampled: 512 x 41 combinations
     proc = cotwin_in_process("verify", arm, *domain)
     assert proc.returncode == 1, proc.stdout + proc.stderr
-    assert ("20,992 input combinations in each state, more than 5,000 (10 input events; values: moveDiscreteCommand "
-            "40): give fewer values with --domain") in proc.stderr
+    assert (f"{arm}:{module_line(arm)}:8: error: 20,992 input combinations in each state, more than 5,000 (10 input "
+            "events; values: moveDiscreteCommand 40): give fewer values with --domain") in proc.stderr  # at the module
     proc = cotwin_in_process("testgen", arm, *domain, "--no-drivers", "-o", tmp_path / "tests")
     assert proc.returncode == 1 and "more than 5,000" in proc.stderr, proc.stderr
     assert not (tmp_path / "tests").exists()
@@ -404,3 +421,178 @@ def test_an_interrupted_search_without_a_violation_is_not_called_verified(tmp_pa
     assert result.returncode == 130, result.stdout + result.stderr
     assert "INTERRUPTED" in result.stdout and "ok   " not in result.stdout.replace("ok   every", "")
     assert "nothing is verified" in result.stderr
+
+
+CHOICE_THEN_TIMELOCK = one_machine(("go",), """
+	initial i
+	state A { }
+	state B { }
+	transition t0 { from i to A }
+	transition idle { from A to A exec condition not $go }
+	transition t1 { from A to B condition $go }
+	transition t2 { from A to A exec condition $go action $report!1 }
+""")
+
+
+def test_a_choice_made_in_a_cycle_that_then_fails_is_reported_as_nondeterminism(tmp_path):
+    """t1 and t2 are both enabled on go; the interpreter takes t1 and the cycle then times out in B. The
+    nondeterminism it noted went with the failed cycle: verify said 'ok determinism' and reported the timelock
+    alone. Both are reported now, each with its shortest trace."""
+    (tmp_path / "m.rst").write_text(CHOICE_THEN_TIMELOCK)
+    program = build_program(load_checked([tmp_path / "m.rst"]))
+    report = verify(program)
+    assert sorted(v.property for v in report.violations) == ["determinism", "timelock"]
+    [choice] = [v for v in report.violations if v.property == "determinism"]
+    assert "t1, t2 enabled" in choice.message and choice.trace == [{"go": None}]
+    assert "FAIL determinism: 1 violation(s)" in format_report(program, report)
+
+
+KINDS = "enumeration Mode { Slow Fast }\n" + one_machine(("flag: boolean", "mode: Mode", "level: int", "count: nat"), """
+	var b: boolean
+	var m: Mode
+	var k: int
+	var c: nat
+	initial i
+	state A { }
+	state B { }
+	transition t0 { from i to A }
+	transition idle { from A to A exec condition else }
+	transition f { from A to B condition $flag?b:b }
+	transition md { from A to B condition $mode?m:(m == Mode::Fast) }
+	transition l { from A to B condition $level?k:(k > 2) }
+	transition n { from A to B condition $count?c:(c > 2) }
+	transition back { from B to A exec }
+""")
+
+
+@pytest.mark.parametrize("domain, port, value, said", [
+    ("b=0..3", "b", 2, "b: 2 is not a value of its type boolean: give 0 (false) or 1 (true)"),
+    ("m=0..5", "m", 2, "m: 2 is not a value of its type Mode: give a literal's index: 0 (Slow), 1 (Fast)"),
+    ("mode=-1", "m", -1, "m: -1 is not a value of its type Mode"),
+    ("k=0.5,3", "k", 0.5, "k: 0.5 is not a value of its type int: give an integer from -2147483648 to 2147483647"),
+    ("k=1e300", "k", 1e300, "k: 1e+300 is not a value of its type int"),
+    ("level=99999999999999999999", "k", 99999999999999999999, "k: 99999999999999999999 is not a value of its type int"),
+    ("c=-1..3", "c", -1, "c: -1 is not a value of its type nat: give an integer from 0 to 2147483647"),
+])
+def test_a_domain_value_its_port_cannot_carry_is_refused_naming_the_values_it_can(tmp_path, domain, port, value, said):
+    """--domain b=0..3 for a Boolean, m=0..5 for an enumeration of two literals, k=0.5 for an int: the search
+    explored them as inputs (a Boolean 2, a third literal), states no run can reach, and reported on them. The
+    command refuses the option; verify() and testgen's exploration (event_values) a CotwinError."""
+    from cotwin.diagnostics import CotwinError
+    from cotwin.dmodel.verify import event_values
+
+    (tmp_path / "k.rst").write_text(KINDS)
+    proc = cotwin("verify", tmp_path / "k.rst", "--domain", domain)
+    assert proc.returncode == 2 and f"Invalid value for --domain: {said}" in proc.stderr, proc.stderr
+    program = build_program(load_checked([tmp_path / "k.rst"]))
+    with pytest.raises(CotwinError, match=re.escape(said)):
+        event_values(program, {port: [value]})
+
+
+def test_domain_values_of_every_kind_of_port_are_taken_as_its_type_holds_them(tmp_path):
+    (tmp_path / "k.rst").write_text(KINDS)
+    program = build_program(load_checked([tmp_path / "k.rst"]))
+    from cotwin.dmodel.verify import event_values
+
+    values, _ = event_values(program, {"b": [0, 1], "m": [0, 1.0], "k": [3.0, -5], "c": [0, 2 ** 31 - 1]})
+    assert values == {"flag": [False, True], "mode": [0, 1], "level": [3, -5], "count": [0, 2 ** 31 - 1]}
+    assert all(type(v) is bool for v in values["flag"]) and all(type(v) is int for v in values["level"])
+    report = verify(program, {"b": [0, 1], "m": [0, 1], "k": [3], "c": [3]})
+    assert not report.unreached_transitions and not report.sampled
+
+
+SEQUENCES = """package Sq
+import sequence_toolkit::*
+interface I { event go: Seq(int) event v: vector(real, 3) }
+interface O { event done }
+stm M {
+	var s: Seq(int)
+	input context { uses I }
+	output context { uses O }
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition idle { from A to A exec condition not $go }
+	transition g { from A to A exec condition %s action $done }
+}
+controller C { uses I uses O sref m = M
+	connection C on go to m on go (_async) connection C on v to m on v (_async) connection m on done to C on done (_async) }
+module Mod { robotic platform P { uses I uses O } cref c = C
+	connection P on go to c on go (_async) connection P on v to c on v (_async) connection c on done to P on done (_async) }
+"""
+
+
+def test_an_input_event_of_a_sequence_or_vector_is_explored_or_refused_at_its_declaration(tmp_path):
+    """An input event whose type has no FMU ports (Seq(int), vector(real, 3)) ended `cotwin verify` and `testgen`
+    with an internal error (KeyError: ()). A value no condition reads is one representative value (data
+    independence, as for numbers); one a condition reads is refused where the event is declared, and
+    build-dmodel's refusal of such events is located there too."""
+    model = tmp_path / "seq.rst"
+    model.write_text(SEQUENCES % "$go?s")
+    proc = cotwin("verify", model)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    note = ("note: go: its value is read by no condition and can make no cycle fail (data independent): "
+            "1 representative value (<>)")
+    assert note in proc.stdout and "ok   every transition can be taken" in proc.stdout
+    model.write_text(SEQUENCES % "$go?s:(size(s) > 0)")
+    proc = cotwin("verify", model)
+    assert proc.returncode == 1 and "internal error" not in proc.stderr, proc.stderr
+    assert (f"{model}:3:21: error: event go: values of type Seq(int) cannot be FMU ports (only boolean, int, nat, real, "
+            "enumerations and records of them), and a condition reads its value: the search has no values of its "
+            "type to try") in proc.stderr
+    proc = cotwin("build-dmodel", model, "-o", tmp_path / "seq.fmu")
+    assert proc.returncode == 1 and f"{model}:3:21: error: event go: values of type Seq(int)" in proc.stderr
+    assert f"{model}:3:40: error: event v: values of type vector(real, 3)" in proc.stderr
+
+
+UNSET = one_machine(("go: int",), """
+	const lim: int
+	var k: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition idle { from A to A exec condition not $go }
+	transition g { from A to A exec condition $go?k:(k > lim) action $report!k }
+	transition h { from A to A exec condition $go?k:(k <= lim) }
+""")
+
+
+def test_a_constant_without_a_value_is_said_at_the_value_the_search_took(tmp_path):
+    """`const lim: int` with no value is an FMU parameter; verify took its default 0 without a word and said 'ok'
+    for every property, which holds for lim = 0 only (with lim = 5 and k in {0, 1}, g is never taken)."""
+    (tmp_path / "p.rst").write_text(UNSET)
+    program = build_program(load_checked([tmp_path / "p.rst"]))
+    text = format_report(program, verify(program))
+    assert ("note: constant M.lim has no value in the model: the search takes 0, its default (FMU parameter lim); "
+            "what holds below holds for that value") in text, text
+    report = verify(program, {"k": [0, 1]}, parameters={"lim": 5})
+    assert "the search takes 5, as given" in format_report(program, report)
+    assert report.unreached_transitions == ["M: transition g"]
+
+
+DIVIDES = one_machine(("go: int",), """
+	var x: int
+	var k: int
+	initial i
+	state A { }
+	transition t0 { from i to A }
+	transition idle { from A to A exec condition not $go }
+	transition g { from A to A exec condition $go?x action k = 10 / (x - 5); $report!k }
+""")
+
+
+def test_a_value_that_can_make_a_cycle_fail_is_not_data_independent(tmp_path):
+    """`k = 10 / (x - 5)` with x bound from go: verify said go's value was read by no condition, explored 0 alone
+    and called the model verified (exit 0), though go(5) divides by zero. A value read by a divisor, an index or a
+    function's argument decides whether a cycle fails: it is explored over its domain (sampled without one: exit 3),
+    and the division is found where the domain holds 5."""
+    from cotwin.dmodel.verify import event_values
+
+    (tmp_path / "d.rst").write_text(DIVIDES)
+    program = build_program(load_checked([tmp_path / "d.rst"]))
+    assert event_values(program, {})[1] == ["go: 2 value(s) from its domain"]
+    proc = cotwin("verify", tmp_path / "d.rst")
+    assert proc.returncode == 3 and "NOT VERIFIED for every value: x took only sample values" in proc.stdout, \
+        proc.stdout + proc.stderr
+    report = verify(program, {"x": [0, 5]})
+    assert [v.property for v in report.violations] == ["division"] and report.violations[0].trace[0] == {"go": 5}

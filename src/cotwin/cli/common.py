@@ -289,14 +289,17 @@ def check_finite(**options) -> None:
             raise click.BadParameter(f"{value!r} is not a finite number", param_hint=f"--{name}")
 
 
-def named_values(text: str, hint: str) -> tuple[str, list]:
+def named_values(text: str, hint: str, given: str | None = None) -> tuple[str, list]:
     """NAME=LOW..HIGH (integers) or NAME=v1,v2,... (numbers) from an option; finite values only, at least
-    one and at most MAX_VALUES of them."""
+    one and at most MAX_VALUES of them. `given`: what the user wrote, where the option takes the values alone
+    and the caller named them (a refusal quotes it, not a NAME= they never typed)."""
+    quoted = (text if given is None else given)[:80]
     from ..config import is_number
 
     name, sep, values = text.partition("=")
     if not sep or not name or not values:
-        raise click.BadParameter(f"'{text}': expected NAME=LOW..HIGH or NAME=v1,v2,...", param_hint=hint)
+        raise click.BadParameter(f"'{quoted}': expected " + ("NAME=LOW..HIGH or NAME=v1,v2,..." if given is None
+                                                             else "LOW..HIGH or v1,v2,..."), param_hint=hint)
     try:
         if ".." in values:
             low, high = (int(v) for v in values.split("..", 1))
@@ -319,23 +322,23 @@ def named_values(text: str, hint: str) -> tuple[str, list]:
                     continue
                 shown = bound.strip()[:40]
                 if not math.isfinite(number) or abs(number) >= 2 ** 53:
-                    raise click.BadParameter(f"'{text[:80]}': the range is too large: bound {shown} is beyond what an "
+                    raise click.BadParameter(f"'{quoted}': the range is too large: bound {shown} is beyond what an "
                                              f"integer domain LOW..HIGH can hold (at most {MAX_VALUES} values)",
                                              param_hint=hint) from None
-                raise click.BadParameter(f"'{text[:80]}': bound {shown} is not written as an integer (LOW..HIGH "
+                raise click.BadParameter(f"'{quoted}': bound {shown} is not written as an integer (LOW..HIGH "
                                          "takes integers; NAME=v1,v2,... takes other numbers)", param_hint=hint) from None
-        raise click.BadParameter(f"'{text[:80]}': values must be numbers", param_hint=hint) from None
+        raise click.BadParameter(f"'{quoted}': values must be numbers", param_hint=hint) from None
     count = high - low + 1 if out is None else len(out)
     if count < 1:
-        raise click.BadParameter(f"'{text[:80]}': {name} takes no value (an empty range: LOW..HIGH needs LOW <= HIGH)",
+        raise click.BadParameter(f"'{quoted}': {name} takes no value (an empty range: LOW..HIGH needs LOW <= HIGH)",
                                  param_hint=hint)
     if count > MAX_VALUES:
-        raise click.BadParameter(f"'{text[:80]}': {name} takes {count if count < 10 ** 12 else 'countless'} values, more than "
+        raise click.BadParameter(f"'{quoted}': {name} takes {count if count < 10 ** 12 else 'countless'} values, more than "
                                  f"{MAX_VALUES}",
                                  param_hint=hint)
     out = list(range(low, high + 1)) if out is None else out
     if not all(is_number(v) for v in out):  # also an integer too large for any float
-        raise click.BadParameter(f"'{text[:80]}': values must be finite numbers", param_hint=hint)
+        raise click.BadParameter(f"'{quoted}': values must be finite numbers", param_hint=hint)
     return name, out
 
 
@@ -366,7 +369,13 @@ def value_domains(program, domains: tuple[str, ...]) -> dict[str, list]:
     resolved = {ports[name]: values for name, values in parsed.items()}
     if len(resolved) < len(parsed):
         raise click.BadParameter("a port is given twice (by its name and by its event's)", param_hint="--domain")
-    return resolved
+    from ..dmodel.verify import port_domain
+
+    scalars = {port: sc for ev in program.inputs for port, sc in ev.value_ports}
+    try:  # values of the port's type only: a Boolean 2 or an int 0.5 would be explored as if a run could send it
+        return {port: port_domain(port, scalars[port], values) for port, values in resolved.items()}
+    except CotwinError as err:
+        raise click.BadParameter(err.findings[0].message, param_hint="--domain") from None
 
 
 @contextmanager

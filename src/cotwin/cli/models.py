@@ -217,7 +217,7 @@ def verify(model: tuple[str, ...], module_name: str | None, domains: tuple[str, 
 
     program = build_program(load_checked(model), module_name)
     resolved = value_domains(program, domains)
-    draws = RANDOM_VALUES if random_values is None else tuple(named_values(f"random={random_values}", "--random")[1])
+    draws = RANDOM_VALUES if random_values is None else tuple(named_values(f"random={random_values}", "--random", random_values)[1])
     impossible = [v for v in draws if not 0 <= v < 1]  # explored, they found what no run of the model can do
     if impossible:
         raise click.BadParameter(f"{impossible[0]:g}: random() draws from [0, 1) (as the FMU does): give values in it",

@@ -17,6 +17,7 @@ two cycles of one step (two occurrences one step cannot carry) is logged once as
 from __future__ import annotations
 
 import hashlib
+import io
 import re
 import shlex
 import shutil
@@ -32,7 +33,7 @@ import fmpy
 from .. import __version__
 from ..cache import bound, touch
 from ..diagnostics import CotwinError
-from ..files import cache_dir, output as files_output
+from ..files import Reserved, cache_dir
 from . import cnames
 from .ccode import generate_c
 from .ports import SLOT_ARRAY, PortLayout, Variable
@@ -292,12 +293,23 @@ def build_fmu(program: Program, output: str | Path, cc: str = "cc", root: str | 
 
 
 def package_fmu(files: dict[str, str], ident: str, output: str | Path, cc: str = "cc", platform: str = "linux64") -> Path:
-    """Compile the sources and zip them with the text files: binaries/<platform>/<ident>.so (FMI 2.0 names the
-    platform linux64, FMI 3.0 x86_64-linux), deterministically (fixed dates, sorted names)."""
-    output = Path(output)
+    """Compile the sources and zip them with the text files into `output` (`fmu_archive`); a place `output` cannot
+    be written is found before the compiler runs."""
+    reserved = Reserved(output)
+    try:
+        return reserved.put(fmu_archive(files, ident, cc, platform))
+    finally:
+        reserved.discard()
+
+
+def fmu_archive(files: dict[str, str], ident: str, cc: str = "cc", platform: str = "linux64") -> bytes:
+    """The FMU zip of the sources compiled and the text files: binaries/<platform>/<ident>.so (FMI 2.0 names the
+    platform linux64, FMI 3.0 x86_64-linux), deterministically (fixed dates, sorted names); bytes, so that a
+    build records their digest without reading the file back."""
+    archive = io.BytesIO()
     with tempfile.TemporaryDirectory(prefix="cotwin-fmu-") as tmp:
         binary = compile_binary(files, ident, Path(tmp), cc)
-        with files_output(output) as f, zipfile.ZipFile(f, "w", zipfile.ZIP_DEFLATED) as zf:
+        with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as zf:
             for name in sorted(files):
                 info = zipfile.ZipInfo(name, date_time=_ZIP_TIME)
                 info.compress_type = zipfile.ZIP_DEFLATED
@@ -306,4 +318,4 @@ def package_fmu(files: dict[str, str], ident: str, output: str | Path, cc: str =
             info.compress_type = zipfile.ZIP_DEFLATED
             info.external_attr = 0o755 << 16
             zf.writestr(info, binary.read_bytes())
-    return output
+    return archive.getvalue()

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..diagnostics import CotwinError
+from ..diagnostics import CotwinError, Finding, Severity
 from .program import Program, fmi_type
 
 SLOT_ARRAY = {"Real": "r", "Integer": "i", "Boolean": "b"}
@@ -83,9 +83,11 @@ class PortLayout:
         p = self.program
         self.period = self._add("cycle_period", "Real", "parameter", "fixed", 0.0,
                                 "seconds per d-model cycle; 0 = one cycle per FMU step")
-        for port in (*p.inputs, *p.outputs, *p.operations):
-            if port.unportable:
-                raise CotwinError(f"{port.unportable}: it cannot cross the FMU boundary")
+        unportable = list(dict.fromkeys((port.loc, f"{port.unportable}: it cannot cross the FMU boundary")
+                                        for port in (*p.inputs, *p.outputs, *p.operations) if port.unportable))
+        if unportable:  # each where its event or operation is declared
+            raise CotwinError([Finding(loc, Severity.ERROR, message) if loc is not None else message
+                               for loc, message in unportable])
         for par in p.parameters:
             owner = (f"constant {par.name} of state machine {p.machines[par.machine].machine.name}"
                      if par.machine >= 0 else "seed of the pseudo-random source (uninterpreted functions, "

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..diagnostics import CotwinError, Diagnostics, Location
+from ..diagnostics import CotwinError, Diagnostics, Finding, Location, Severity
 from ..memo import once_per
 from ..robosim import functions as fns
 from ..robosim import syntax as s
@@ -196,6 +196,7 @@ class EventPort:
     value_ports: list[tuple[str, Scalar]] = field(default_factory=list)  # (port name, scalar)
     unportable: str | None = None  # why its value cannot be FMU ports (a set, a vector...)
     bound: set[str] = field(default_factory=set)  # the variables the machines bind its value to ($e?x)
+    loc: Location | None = None  # where the event is declared (what is said of it is said there)
 
 
 @dataclass
@@ -204,6 +205,7 @@ class OperationPort:
     params: list[tuple[str, Ty]]
     arg_ports: list[list[tuple[str, Scalar]]] = field(default_factory=list)  # per parameter
     unportable: str | None = None  # why an argument cannot be FMU ports
+    loc: Location | None = None  # where the operation is declared
     shares: dict[str, str] = field(default_factory=dict)  # other operation -> an argument port both write
 
 
@@ -388,11 +390,12 @@ class _Builder:
                                 used_outputs.add(mc.target_event)
                             else:
                                 internal.setdefault(src, []).extend(into_controller(mc.target, mc.target_event))
-        input_ports = [self.event_port(name, inputs[name], _bound_names(machines, input_routes[name]))
-                       for name in inputs if name in input_routes]
-        output_ports = [self.event_port(name, inputs[name]) for name in inputs if name in used_outputs]
+        input_ports = [self.event_port(name, inputs[name], _bound_names(machines, input_routes[name]),
+                                       members.events[name].loc) for name in inputs if name in input_routes]
+        output_ports = [self.event_port(name, inputs[name], loc=members.events[name].loc)
+                        for name in inputs if name in used_outputs]
         self.disambiguate([*input_ports, *output_ports])
-        operations = [OperationPort(op.name, [(p.name, platform_resolver.resolve(p.type)) for p in op.params])
+        operations = [OperationPort(op.name, [(p.name, platform_resolver.resolve(p.type)) for p in op.params], loc=op.loc)
                       for op in members.operations.values()]
         self.argument_ports(operations)
         self.name_after_bindings(input_ports, {p.name for p in (*input_ports, *output_ports, *operations)}
@@ -666,8 +669,9 @@ class _Builder:
         return None
 
     # ---- ports ----
-    def event_port(self, name: str, ty: Ty | None, bound: set[str] | None = None) -> EventPort:
-        port = EventPort(name, ty)
+    def event_port(self, name: str, ty: Ty | None, bound: set[str] | None = None,
+                   loc: Location | None = None) -> EventPort:
+        port = EventPort(name, ty, loc=loc)
         port.bound = bound or set()
         if ty is not None:
             base = ty.decl.name if isinstance(ty, RecordTy) else f"{name}_value"
@@ -810,19 +814,22 @@ def state_index(graph: MachineGraph, state: s.QName) -> int:
 def build_program(project: Project, module_name: str | None = None) -> Program:
     """The executable view of a module (the only one, or the one named)."""
     modules = project.elements(Module)
-    if module_name is not None:
-        module = project.lookup("module", module_name)
-        if module is None:
-            module = next((m for m in modules if m.name == module_name.split("::")[-1]), None)
-        if module is None:
-            raise CotwinError(f"no module '{module_name}' (modules: {', '.join(m.name for m in modules) or 'none'})")
-    elif len(modules) == 1:
-        module = modules[0]
-    elif not modules:
-        raise CotwinError("the model has no module to execute")
+    named = {id(m): "::".join(project.qualified_name(m)) for m in modules}
+    module = project.lookup("module", module_name) if module_name is not None else None
+    if module is None and module_name is not None:  # `Mod` for P::Mod: the modules whose name ends so
+        parts = tuple(module_name.split("::"))
+        candidates = [m for m in modules if tuple(named[id(m)].split("::"))[-len(parts):] == parts]
+        if not candidates:
+            raise CotwinError(f"no module '{module_name}' (modules: {', '.join(named.values()) or 'none'})")
     else:
-        raise CotwinError(f"several modules ({', '.join(m.name for m in modules)}): choose one with --module")
-    return _Builder(project, module).build()
+        candidates = [module] if module is not None else modules
+    if not candidates:
+        raise CotwinError("the model has no module to execute")
+    if len(candidates) > 1:  # each named where it is declared, as --module takes it (`Mod` of two packages chose one)
+        which = f"modules named '{module_name}'" if module_name is not None else "modules"
+        raise CotwinError([Finding(m.loc, Severity.ERROR, f"{len(candidates)} {which}: this is {named[id(m)]}: choose "
+                                                          f"one with --module {named[id(m)]}") for m in candidates])
+    return _Builder(project, candidates[0]).build()
 
 
 __all__ = [

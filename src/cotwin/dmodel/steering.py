@@ -30,6 +30,21 @@ def read(e: s.Expr) -> set[str]:
     return names
 
 
+def failing_operands(e: s.Expr) -> set[str]:
+    """The simple names an expression reads where a value can make the cycle fail (a violation the verifier reports):
+    a divisor (`10 / (x - 5)`), an index, a function's argument (`log(x)`, `floor(y)` of nan)."""
+    names = set()
+    for node in s.walk(e):
+        if isinstance(node, s.Binary) and node.op in ("/", "%"):
+            names |= read(node.right)
+        elif isinstance(node, s.IndexAccess):
+            names |= read(node.index)
+        elif isinstance(node, s.Call):
+            for arg in node.args:
+                names |= read(arg)
+    return names
+
+
 def bodies(machine: MachineInstance) -> tuple[Body, ...]:
     """A machine and the operations it calls: what runs in its frames."""
     return (machine, *machine.frames)
@@ -58,12 +73,14 @@ def input_event_tests(program: Program, event: str) -> list[s.EventTest]:
             for node in event_tests_in(program.machines[machine], name)]
 
 
-def condition_variables(program: Program) -> set[str]:
+def condition_variables(program: Program, failures: bool = False) -> set[str]:
     """Variables whose value steers control: read by a transition guard or an `if` condition, of a machine or of
     an operation it calls, or assigned to one that is (`leg = BIN0 + item % 3` where a guard reads `leg`: item's
     value then steers too, though no condition names it), also as an operation's argument (`place(item)` where
     place's guards read its parameter) or as the value of an event another machine binds (`$fwd!item` where the
-    receiver's guard reads the k of its `$fwd?k`) or compares (`$fwd.1`)."""
+    receiver's guard reads the k of its `$fwd?k`) or compares (`$fwd.1`). With `failures`, also those read where
+    a value can make a cycle fail (`failing_operands`: `k = 10 / (x - 5)` fails for x = 5 only), which decide
+    whether a run fails as a guard decides where it goes."""
     names: set[str] = set()
     flows: list[tuple[str, set[str]]] = []  # (variable assigned, the variables its value reads)
     for m in program.machines:
@@ -71,7 +88,12 @@ def condition_variables(program: Program) -> set[str]:
             for t in body.graph.transitions:
                 if t.condition is not None:
                     names.update(read(t.condition))
+                    if failures:
+                        names.update(failing_operands(t.condition))
             for st in body_statements(body):
+                if failures:
+                    for e in s.statement_expressions(st):
+                        names.update(failing_operands(e))
                 if isinstance(st, s.IfStmt):
                     names.update(read(st.condition))
                 elif isinstance(st, s.Assign) and s.root_name(st.target) is not None:

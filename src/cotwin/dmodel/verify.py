@@ -25,16 +25,17 @@ from __future__ import annotations
 
 import itertools
 import math
+import sys
 import time
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
-from ..diagnostics import CotwinError
-from ..robosim.types import BOOL, REAL, EnumTy, RecordTy
+from ..diagnostics import CotwinError, Finding, Severity
+from ..robosim.types import BOOL, NAT, REAL, EnumTy, RecordTy
 from .growth import GrowthWatch
 from .interpreter import ExecutionError, Frame, Interpreter
-from .program import Program, Scalar, scalars
+from .program import Program, Scalar, default_value, scalars
 from .steering import condition_variables, input_event_tests
 
 
@@ -155,14 +156,45 @@ def _value_tested(program: Program, event: str) -> bool:
     return any(node.value is not None for node in input_event_tests(program, event))
 
 
-def _default_domain(sc: Scalar) -> list:
-    if sc.ty == BOOL:
+def default_domain(ty) -> list:
+    """The values a scalar of type `ty` takes without --domain: every Boolean and enumeration literal (its index),
+    a number only 0 and 1 (a sample); an input's, and an uninterpreted function's result (Draws.value)."""
+    if ty == BOOL:
         return [False, True]
-    if isinstance(sc.ty, EnumTy):
-        return list(range(len(sc.ty.decl.literals)))
-    if sc.ty == REAL:
+    if isinstance(ty, EnumTy):
+        return list(range(len(ty.decl.literals)))
+    if ty == REAL:
         return [0.0, 1.0]
     return [0, 1]
+
+
+INTEGER_PORT = (-2 ** 31, 2 ** 31 - 1)  # what an FMI Integer port (an int, a nat, an enumeration) carries
+
+
+def port_domain(port: str, sc: Scalar, values: list) -> list:
+    """`values` given for value port `port` (--domain) as its type holds them: a Boolean 0 or 1 (false, true), an
+    enumeration a literal's index, an int or a nat an integer its FMI Integer port carries (a nat not negative), a
+    real any finite number. A value no run can send (a Boolean 2, a fourth literal of three, an int 0.5) would be
+    explored as if it could: a CotwinError names the first."""
+    ty = sc.ty
+    if ty == REAL:
+        wanted, low, high, make = "a finite number", -sys.float_info.max, sys.float_info.max, None
+    elif ty == BOOL:
+        wanted, low, high, make = "0 (false) or 1 (true)", 0, 1, bool
+    elif isinstance(ty, EnumTy):
+        wanted = "a literal's index: " + ", ".join(f"{k} ({lit.name})" for k, lit in enumerate(ty.decl.literals))
+        low, high, make = 0, len(ty.decl.literals) - 1, int
+    else:
+        low, high, make = 0 if ty == NAT else INTEGER_PORT[0], INTEGER_PORT[1], int
+        wanted = f"an integer from {low} to {high} (what its FMI Integer port carries)"
+    out = []
+    for v in values:
+        number = isinstance(v, int) or (isinstance(v, float) and math.isfinite(v))  # an int past any float: no isfinite
+        if not number or not low <= v <= high or (make is not None and not float(v).is_integer()):
+            shown = repr(v) if len(repr(v)) <= 40 else repr(v)[:37] + "..."
+            raise CotwinError(f"{port}: {shown} is not a value of its type {ty}: give {wanted}")
+        out.append(v if make is None else make(v))
+    return out
 
 
 def _build_value(ty, values: dict[tuple[str, ...], object], resolver):
@@ -186,7 +218,7 @@ def event_values(program: Program, domains: dict[str, list],
                  sampled: list[str] | None = None) -> tuple[dict[str, list], list[str]]:
     """The values each typed input event takes during exploration, and notes saying why; the value
     ports whose default domain is only a sample of their type are added to `sampled`."""
-    relevant = condition_variables(program)
+    relevant = condition_variables(program, failures=True)  # a value that can make a cycle fail is not one of many
     out: dict[str, list] = {}
     notes = []
     sampled = [] if sampled is None else sampled
@@ -194,16 +226,25 @@ def event_values(program: Program, domains: dict[str, list],
         if ev.ty is None:
             continue
         ports = ev.value_ports
-        explicit = {port: domains[port] for port, _ in ports if port in domains}
+        explicit = {port: port_domain(port, sc, domains[port]) for port, sc in ports if port in domains}
         steers = bool(_bound_variables(program, ev.name) & relevant) or _value_tested(program, ev.name)
+        if ev.unportable:  # a sequence, a set, a vector: no scalars to range over
+            if steers:
+                raise CotwinError([Finding(ev.loc or program.module.loc, Severity.ERROR,
+                                           f"{ev.unportable}, and a condition reads its value: the search has no "
+                                           "values of its type to try")])
+            out[ev.name] = [default_value(ev.ty, program.resolver)]
+            notes.append(f"{ev.name}: its value is read by no condition and can make no cycle fail (data independent): 1 representative "
+                         f"value ({out[ev.name][0]}) explores every behaviour")
+            continue
         if steers:
             sampled.extend(port for port, sc in ports if port not in explicit and not _whole_domain(sc))
         if not explicit and not steers:
-            combos = [{sc.path: _default_domain(sc)[0] for _, sc in ports}]
-            notes.append(f"{ev.name}: its value is not read by any condition (data independent): "
+            combos = [{sc.path: default_domain(sc.ty)[0] for _, sc in ports}]
+            notes.append(f"{ev.name}: its value is read by no condition and can make no cycle fail (data independent): "
                          f"1 representative value explores every behaviour")
         else:
-            axes = [explicit.get(port, _default_domain(sc)) for port, sc in ports]
+            axes = [explicit.get(port, default_domain(sc.ty)) for port, sc in ports]
             combos = [{sc.path: v for (_, sc), v in zip(ports, choice)} for choice in itertools.product(*axes)]
             notes.append(f"{ev.name}: {len(combos)} value(s) from its domain")
         out[ev.name] = [_build_value(ev.ty, c, program.resolver) for c in combos]
@@ -222,8 +263,9 @@ def input_combinations(program: Program, values: dict[str, list]):
     total = math.prod(ways.values())
     if total > MAX_COMBINATIONS:
         counts = ", ".join(f"{n} {k - 1}" for n, k in sorted(ways.items(), key=lambda item: -item[1]) if k > 2)
-        raise CotwinError(f"{total:,} input combinations in each state, more than {MAX_COMBINATIONS:,} "
-                          f"({len(names)} input events; values: {counts}): give fewer values with --domain")
+        raise CotwinError([Finding(program.module.loc, Severity.ERROR,  # the module whose inputs they are
+                                   f"{total:,} input combinations in each state, more than {MAX_COMBINATIONS:,} "
+                                   f"({len(names)} input events; values: {counts}): give fewer values with --domain")])
     for mask in range(1 << len(names)):
         present = [n for i, n in enumerate(names) if mask >> i & 1]
         axes = [values.get(n, [None]) for n in present]
@@ -257,13 +299,7 @@ class Draws:
 
     def value(self, ty):
         """An uninterpreted function's result: each value of its type's default domain."""
-        if ty == REAL:
-            return self._choose((0.0, 1.0))
-        if ty == BOOL:
-            return self._choose((False, True))
-        if isinstance(ty, EnumTy):
-            return self._choose(tuple(range(len(ty.decl.literals))))
-        return self._choose((0, 1))
+        return self._choose(default_domain(ty))
 
     def start(self, prefix: tuple[int, ...]) -> None:
         self.prefix, self.sizes, self.drawn = prefix, [], []
@@ -285,6 +321,13 @@ def verify(program: Program, domains: dict[str, list] | None = None, max_states:
     started = time.perf_counter()
     report = Report(max_states=max_states)
     values, report.value_notes = event_values(program, domains or {}, report.sampled)
+    given, machines = parameters or {}, {m.index: m.machine.name for m in program.machines}
+    for par in program.parameters:  # constants without a value: what holds below holds for the value taken
+        if par.machine >= 0:
+            report.value_notes.append(
+                f"constant {machines[par.machine]}.{par.name} has no value in the model: the "
+                f"search takes {given.get(par.port, par.default)!r}, {'as given' if par.port in given else 'its default'} "
+                f"(FMU parameter {par.port}); what holds below holds for that value")
     combos = list(input_combinations(program, values))
     report.input_combinations = len(combos)
     interp = Interpreter(program, parameters)
@@ -330,19 +373,21 @@ def verify(program: Program, domains: dict[str, list] | None = None, max_states:
                         progress(len(parent), report.cycles, len(queue))
                     try:
                         interp.step(inputs)
+                        failed = None
                     except ExecutionError as err:
-                        choices.extend(draws.alternatives())
-                        drew = drew or bool(draws.sizes)
-                        key = (err.kind, err.site or err.findings[0].message)
-                        if key not in found:  # breadth first: the first one found has a shortest trace
-                            found[key] = violation(err.kind, err.findings[0].message, snap, inputs)
-                        continue
+                        failed = err
                     choices.extend(draws.alternatives())
                     drew = drew or bool(draws.sizes)
+                    # a choice made before the cycle failed is nondeterminism all the same (it was lost with the cycle)
                     for w in interp.warnings:
                         key = ("determinism", w.site)
-                        if key not in found:
+                        if key not in found:  # breadth first: the first one found has a shortest trace
                             found[key] = violation("determinism", str(w), snap, inputs)
+                    if failed is not None:
+                        key = (failed.kind, failed.site or failed.findings[0].message)
+                        if key not in found:
+                            found[key] = violation(failed.kind, failed.findings[0].message, snap, inputs)
+                        continue
                     nxt = interp.snapshot()
                     if nxt not in parent:
                         if len(parent) >= max_states:

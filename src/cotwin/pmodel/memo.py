@@ -174,6 +174,12 @@ class StepMemo:
         """Stretches kept."""
         return self._memo.count
 
+    @property
+    def full(self) -> int:
+        """Bytes its stretches take once it has kept `capacity` of them (its arrays of states: made untouched, resident
+        only as stretches are kept; the table and the scratch row are touched when it is made)."""
+        return self.keys.nbytes + self.states.nbytes
+
     def clear(self) -> None:
         """Forget every stretch (the model changed)."""
         self.table.fill(-1)

@@ -26,7 +26,6 @@ from typing import TYPE_CHECKING, Callable
 
 from ...config import did_you_mean
 from ...diagnostics import CotwinError, Interrupted
-from ...pmodel.memo import BUDGET as MEMO_BUDGET
 from ..assembly.scenario import Command, scalar_value
 
 if TYPE_CHECKING:
@@ -380,9 +379,10 @@ def fork_footprint(loaded: tuple, plan: list[Command], state: bytes | None, step
                    physics: float | None = None) -> int | None:
     """Bytes one more thread's forks take: how much this process's resident memory grew while a second fork of
     `loaded` was set up (a what-if of `plan` one step long), the first set up before so that what the process
-    loads once (the FMU's library, MuJoCo's first model) is not counted, and the most its memo of held steps takes
-    as plans run (untouched after one step). None where it cannot be told (no /proc/self/statm, or the what-if
-    fails: its error is the sweep's to say)."""
+    loads once (the FMU's library, MuJoCo's first model) is not counted, and, where the fork has a memo of held
+    steps (not every simulator can: cotwin.pmodel.simulator.remember_held_steps), what it takes once full (untouched
+    after one step). None where it cannot be told (no /proc/self/statm, or the what-if fails: its error is the
+    sweep's to say)."""
     from .thread_budget import resident_memory
 
     horizon = loaded[0].spec.step if step is None else step
@@ -392,11 +392,12 @@ def fork_footprint(loaded: tuple, plan: list[Command], state: bytes | None, step
             before = resident_memory()
             second.predict(plan, horizon=horizon, decimate=10**9)
             after = resident_memory()
+            memos = sum(memo.full for memo in second.memos)  # fills as plans run (cotwin.pmodel.memo)
     except Exception:  # noqa: BLE001 - not measured; the sweep's what-ifs say what fails
         return None
     if before is None or after is None:
         return None
-    return max(after - before, 0) + MEMO_BUDGET  # its memo of held steps fills as plans run (cotwin.pmodel.memo)
+    return max(after - before, 0) + memos
 
 
 def _threaded(loaded: tuple, plans: list[list[Command]], state: bytes | None, horizon: float, step: float | None,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import fcntl
 import hashlib
+import io
 import json
 import os
 import re
@@ -24,11 +25,12 @@ from typing import Callable, Iterable
 
 from ... import __version__
 from ...diagnostics import CotwinError, Finding, Location, Severity
-from ...files import check_outputs, open_exclusive, output, write_bytes, write_text
+from ...files import check_outputs, open_exclusive, write_bytes, write_text
 from .system import TwinSystem
 
 RECORD = "build.json"
 WRITTEN = "written"  # build.json's files the last `build` wrote, name -> digest of what it wrote (no artefact has that name)
+DIGESTS = "digests"  # build.json's digest of each keyed artefact as written, name -> {key, sha256}: a reused one is not read
 ARTEFACTS = ("dmodel.fmu", RECORD)  # and build()'s: the p-model files, the Python FMUs, multimodel.json
 _GENERATORS = ("dmodel/ccode.py", "dmodel/fmu.py", "dmodel/fmi2_wrapper.c", "dmodel/ports.py", "dmodel/program.py",
                "dmodel/interpreter.py")
@@ -98,10 +100,12 @@ def _cotwin_sources(names=_GENERATORS) -> list[bytes]:
 
 
 class Record:
-    """DIR/build.json: artefact name -> the key it was built with."""
+    """DIR/build.json: artefact name -> the key it was built with; and the digests of what this process wrote
+    (`write`) and of each keyed artefact as written, so that `settle` records them without reading files back."""
 
     def __init__(self, folder: Path):
         self.path = folder / RECORD
+        self.known: dict[str, str] = {}  # name -> sha256 of the bytes `write` put there in this process
         try:
             self.keys = json.loads(self.path.read_text()) if self.path.is_file() else {}
             if not isinstance(self.keys, dict):
@@ -112,16 +116,44 @@ class Record:
     def fresh(self, target: Path, key: str) -> bool:
         return target.is_file() and self.keys.get(target.name) == key
 
+    def write(self, target: Path, data: bytes) -> Path:
+        """`data` written to `target` (cotwin.files.write_bytes), its digest kept for `done` and `settle`."""
+        write_bytes(target, data)
+        self.known[target.name] = hashlib.sha256(data).hexdigest()
+        return target
+
     def done(self, target: Path, key: str) -> None:
+        """`target` built with `key`; its digest recorded with the key when this process `write`s it."""
         self.keys[target.name] = key
+        digests = self.keys.get(DIGESTS)
+        digests = self.keys[DIGESTS] = digests if isinstance(digests, dict) else {}
+        if target.name in self.known:
+            digests[target.name] = {"key": key, "sha256": self.known[target.name]}
+        else:
+            digests.pop(target.name, None)
         write_text(self.path, json.dumps(self.keys, indent=1, sort_keys=True) + "\n")
 
     def forget(self, target: Path) -> None:
         self.keys.pop(target.name, None)
+        self.known.pop(target.name, None)
+        if isinstance(self.keys.get(DIGESTS), dict):
+            self.keys[DIGESTS].pop(target.name, None)
+
+    def digest(self, name: str) -> str | None:
+        """The SHA-256 of what cotwin wrote as `name` here: written by this process, or recorded by `done` with the
+        key the artefact still has (it was reused); else that of the file as it is now (None: none there)."""
+        if name in self.known:
+            return self.known[name]
+        digests, key = self.keys.get(DIGESTS), self.keys.get(name)
+        entry = digests.get(name) if isinstance(digests, dict) else None
+        if isinstance(entry, dict) and isinstance(key, str) and entry.get("key") == key and isinstance(entry.get("sha256"), str):
+            return entry["sha256"]
+        return _file_digest(self.path.parent / name)
 
     def settle(self, written, warn: Callable[[Finding], None] | None = None) -> list[Path]:
         """Remove the files an earlier build wrote here that this one did not (a robot no longer in the cell,
-        a p-model renamed), and remember what this one wrote, with each file's digest; only files a build wrote
+        a p-model renamed), and remember what this one wrote, with the digest of what it wrote (`digest`: known, not
+        read back, so an artefact reused here and since edited is not taken for cotwin's); only files a build wrote
         are ever removed: a name of this folder recorded with the digest of what is there now. Any other name
         (a build.json planted or edited, or from a cotwin that recorded no digests) is kept and `warn`ed of
         (default: the cotwin.twin logger). Returns those removed."""
@@ -139,13 +171,13 @@ class Record:
             if path is not None and path.is_file() and not path.is_symlink() and digest == _file_digest(path):
                 path.unlink()
                 gone.append(path)
-                self.keys.pop(name, None)
+                self.forget(path)
                 continue
             why = ("not a file of this folder" if path is None else
                    "not a file this build wrote here (its content is not what cotwin wrote, or no digest is recorded)")
             (warn or _log_warning)(Finding(Location(str(self.path), 0, 0), Severity.WARNING,
                                            f"{WRITTEN!r} names {name!r}, {why}: kept, not removed"))
-        self.keys[WRITTEN] = {name: _file_digest(folder / name) for name in names if name != RECORD}
+        self.keys[WRITTEN] = {name: self.digest(name) for name in names if name != RECORD}
         write_text(self.path, json.dumps(self.keys, indent=1, sort_keys=True) + "\n")
         return gone
 
@@ -171,7 +203,7 @@ def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: R
     """DIR/dmodel.fmu (FMI 2.0) or DIR/dmodel3.fmu (FMI 3.0, the cycle a clock), rebuilt only when its sources
     (the models, the module, where the model files lie in the project), the compiler or cotwin changed; a
     copy of [models] fmu when the project names one."""
-    from ...dmodel.fmu import build_fmu, fmu_sources
+    from ...dmodel.fmu import fmu_archive, fmu_sources, model_identifier
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -185,25 +217,24 @@ def dmodel_fmu(system: TwinSystem, folder: str | Path, cc: str = "cc", record: R
         key = _digest("given", given)
         if not record.fresh(target, key):
             record.forget(target)
-            write_bytes(target, given)  # a new file renamed into place: never through a link left there
+            record.write(target, given)  # a new file renamed into place: never through a link left there
             record.done(target, key)
         return target
     root = system.spec.path.parent
     program = system.models.program
     if fmi == 2:
-        sources, generators = _sources(program, root, 2, fmu_sources), _cotwin_sources()
+        sources, generators, platform = _sources(program, root, 2, fmu_sources), _cotwin_sources(), "linux64"
     else:
-        from ...dmodel.fmi3 import build_fmu3, fmu3_sources
+        from ...dmodel.fmi3 import PLATFORM, fmu3_sources
 
         sources = _sources(program, root, 3, lambda program, root: fmu3_sources(program, root=root))
         generators = _cotwin_sources((*_GENERATORS, "dmodel/fmi3.py", "dmodel/fmi3_wrapper.c"))
+        platform = PLATFORM
     key = _digest(__version__, *(part for name in sorted(sources) for part in (name, sources[name])), cc, *generators)
     if not record.fresh(target, key):
         record.forget(target)
-        if fmi == 2:
-            build_fmu(program, target, cc=cc, root=root)
-        else:
-            build_fmu3(program, target, cc=cc, root=root)
+        # the sources generated above, compiled (dmodel.fmu.build_fmu and fmi3.build_fmu3 generate them again)
+        record.write(target, fmu_archive(sources, model_identifier(program), cc, platform))
         record.done(target, key)
     return target
 
@@ -227,9 +258,9 @@ def build(system: TwinSystem, out: str | Path, cc: str = "cc",
     written = {"dmodel": dmodel_fmu(system, out, cc, record)}
     for name, text in ((f"{tree.name}.sdf", to_sdf(tree)), (f"{tree.name}.urdf", to_urdf(tree)),
                        (f"{tree.name}_scene.xml", to_mjcf(tree, scene, base=system.spec.base))):
-        written[name] = write_text(out / name, text)
+        written[name] = record.write(out / name, text.encode("utf-8"))
     written.update(python_fmus(system, out, record))
-    written["multimodel"] = write_text(out / "multimodel.json", json.dumps(system.multimodel(), indent=2) + "\n")
+    written["multimodel"] = record.write(out / "multimodel.json", (json.dumps(system.multimodel(), indent=2) + "\n").encode())
     record.settle(written.values(), warn)
     return written
 
@@ -248,11 +279,12 @@ def build_cell(cell, out: Path, cc: str = "cc", warn: Callable[[Finding], None] 
     from ...pmodel.urdf import to_urdf
 
     for robot, tree in zip(cell.robots, trees):
-        written[f"{robot.name}.sdf"] = write_text(out / f"{robot.name}.sdf", to_sdf(tree))
-        written[f"{robot.name}.urdf"] = write_text(out / f"{robot.name}.urdf", to_urdf(tree))
-    written["cell_scene.xml"] = write_text(out / "cell_scene.xml", cell.world().xml)
+        written[f"{robot.name}.sdf"] = record.write(out / f"{robot.name}.sdf", to_sdf(tree).encode("utf-8"))
+        written[f"{robot.name}.urdf"] = record.write(out / f"{robot.name}.urdf", to_urdf(tree).encode("utf-8"))
+    written["cell_scene.xml"] = record.write(out / "cell_scene.xml", cell.world().xml.encode("utf-8"))
     written.update(python_fmus(cell, out, record))
-    written["multimodel"] = write_text(out / "multimodel.json", json.dumps(cell.multimodel(), indent=2) + "\n")
+    written["multimodel"] = record.write(out / "multimodel.json",
+                                         (json.dumps(cell.multimodel(), indent=2) + "\n").encode())
     record.settle(written.values(), warn)
     return written
 
@@ -330,8 +362,9 @@ def python_fmus(system: TwinSystem, out: str | Path, record: Record | None = Non
             fmu = FmuBuilder.build_FMU(work / "fmu_slave.py", dest=work,
                                        project_files=[work / "twin", work / "cotwin_unit.json"],
                                        canGetAndSetFMUstate=True, canSerializeFMUstate=True)
-            with output(target) as f:  # a new file renamed into place: never through a link left there
-                reproducible_fmu(Path(fmu), f)
+            archive = io.BytesIO()
+            reproducible_fmu(Path(fmu), archive)
+            record.write(target, archive.getvalue())  # a new file renamed into place: never through a link left there
             record.done(target, key)
     return written
 

@@ -324,10 +324,15 @@ class Forks:
         return fork, execution, endpoint, saved, True  # fresh: the first plan runs without a restore
 
     @property
+    def memos(self) -> list:
+        """The forks' memos of held steps (cotwin.pmodel.memo); a fork whose simulator cannot have one has none."""
+        return [endpoint.sim.memo for _, _, endpoint, _, _ in self._forks.values() if endpoint.sim.memo is not None]
+
+    @property
     def remembered(self) -> tuple[int, int]:
         """(taken from a memo, stepped in full) of the forks' held stretches (cotwin.pmodel.memo): the physics
         the plans shared after their start."""
-        memos = [endpoint.sim.memo for _, _, endpoint, _, _ in self._forks.values() if endpoint.sim.memo is not None]
+        memos = self.memos
         return sum(m.hits for m in memos), sum(m.misses for m in memos)
 
     def close(self) -> None:
