@@ -346,3 +346,19 @@ def test_showing_outcomes_counts_their_warnings_and_only_the_strict_check_exits(
         strict_exit(summaries, strict=True)
     assert stop.value.code == STRICT_EXIT
     assert capsys.readouterr().err == "--strict: 3 command(s) or wait(s) did not end well; exit status 3\n"
+
+
+def test_a_failed_commands_count_takes_each_error_at_a_place_and_a_failure_told_in_lines_as_one(capsys):
+    """The closing count of a command that ended in an error: a run that failed midway says its cause and where its
+    rows are (two lines, one error); a project's problems are each an error at its place."""
+    from cotwin.cli.common import close_failed, closing_tally
+    from cotwin.cosim.execution import ended_early
+
+    closing_tally().warn([Finding(Location("p.toml", 1, 1), Severity.WARNING, "said before")])
+    close_failed(ended_early(CotwinError("unit X failed a step"), 3.0, "the 30 row(s) computed are in o.csv").findings)
+    problems = [Finding(Location("p.toml", line, 1), Severity.ERROR, "bad") for line in (2, 3, 4)]
+    closing_tally()
+    close_failed([*problems, Finding(Location("p.toml", 5, 1), Severity.WARNING, "odd")])
+    close_failed(problems)  # no command keeping a count is running any more: nothing said
+    assert capsys.readouterr().err.splitlines() == ["p.toml:1:1: warning: said before", "1 error(s), 1 warning(s)",
+                                                    "3 error(s), 1 warning(s)"]

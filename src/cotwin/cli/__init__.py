@@ -30,7 +30,7 @@ def _interrupted() -> None:
 
 def entry() -> None:
     """Entry point: every error escaping a command is reported as a message, never a traceback, and a command
-    that counts its errors and warnings (common.closing_tally: cotwin run, twin) closes with the count after it.
+    that counts its errors and warnings (common.closing_tally: cotwin run, twin, build) closes with the count after it.
     SIGTERM ends a run like Ctrl-C: units are ended properly and the rows so far are kept."""
     import signal
 

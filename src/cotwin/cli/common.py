@@ -327,13 +327,16 @@ def closing_tally() -> Tally:
 
 def close_failed(findings: Iterable[Finding] = ()) -> None:
     """After the error that ended the command was shown (its `findings`, or a message): the command's closing
-    count, if it keeps one (closing_tally), that error one of them however many lines said it (a failed run's
-    cause and where its rows are), the warnings said with it counted too; then no command is running."""
+    count, if it keeps one (closing_tally), with the errors in it: each at a place of the inputs (a project's
+    problems, counted as `report` counts them), else one however many lines said it (a failed run's cause and
+    where its rows are); the warnings said with it counted too. Then no command is running."""
     global _closing
     tally, _closing = _closing, None
     if tally is None:
         return
-    tally.errors += 1
+    findings = list(findings)
+    errors = [f for f in findings if f.severity is Severity.ERROR]
+    tally.errors += max(1, sum(not f.location.path.startswith("<") for f in errors))
     tally.warnings += sum(f.severity is Severity.WARNING for f in findings)
     tally.close()
 
