@@ -300,10 +300,12 @@ class Tally:
         self.warnings += finding.severity is Severity.WARNING
 
     def warning(self, message: str, prefix: str = "") -> None:
+        """Show a warning that is no finding (a run's outcomes: no command completed...), `prefix` its side's."""
         click.echo(f"{prefix}warning: {message}", err=True)
         self.warnings += 1
 
     def error(self, message: str) -> None:
+        """Show an error the command ends on without raising (a twin's failed history store), counted."""
         click.echo(f"error: {message}", err=True)
         self.errors += 1
 
