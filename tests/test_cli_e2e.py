@@ -339,3 +339,46 @@ def test_a_run_closes_with_how_many_errors_and_warnings_it_had(tmp_path):
     assert short.returncode == 0, short.stderr
     said = sum("warning:" in line for line in short.stderr.splitlines())
     assert said >= 1 and short.stderr.strip().splitlines()[-1] == f"0 error(s), {said} warning(s)", short.stderr
+
+
+def test_a_failed_run_closes_with_its_count_too_the_error_one_of_them(tmp_path):
+    """A run that ended in an error closed with no count: the warnings said before the error went uncounted. The
+    C compiler fails after the plan's two warnings (its last commands come after the end): the count still closes
+    the run, the error that ended it one error."""
+    from conftest import cotwin_in_process
+
+    failed = cotwin_in_process("run", EXAMPLES / "ur5e" / "cotwin.toml", "--end", "6", "--cc", "false",
+                               "-o", tmp_path / "out", cwd=tmp_path)
+    assert failed.returncode == 1 and "error: the C compiler 'false' failed" in failed.stderr, failed.stderr
+    said = sum(": warning: " in line for line in failed.stderr.splitlines())
+    assert said == 2 and failed.stderr.strip().splitlines()[-1] == "1 error(s), 2 warning(s)", failed.stderr
+
+
+def test_a_live_twin_that_fails_closes_with_its_count_as_a_run_does(tmp_path):
+    """`cotwin twin` printed no closing count, nor when it failed. The turtlebot's live twin at --step 0.01 warns
+    that its d-model counts time in cycles, then cannot reach its plant: the warning and the error counted."""
+    from conftest import cotwin_in_process
+
+    copy = tmp_path / "turtlebot"
+    shutil.copytree(EXAMPLES / "turtlebot", copy)
+    absent = "opc.tcp://127.0.0.1:9"  # the discard port: nothing listens there
+    failed = cotwin_in_process("twin", copy / "live.toml", "-o", tmp_path / "out", "--pt-url", absent,
+                               "--step", "0.01", "--end", "0.1")
+    assert failed.returncode == 1 and "failed connect" in failed.stderr, failed.stderr
+    assert "warning: the d-model counts time in cycles" in failed.stderr
+    assert failed.stderr.strip().splitlines()[-1] == "1 error(s), 1 warning(s)", failed.stderr
+
+
+def test_a_live_twin_closes_with_how_many_errors_and_warnings_it_had(tmp_path):
+    """`cotwin twin` ended on its outcomes with no count, where `cotwin run` closes with one: the plan's four
+    commands come after the half second replayed, each warned of, and counted."""
+    from conftest import cotwin_in_process
+
+    log = ROOT.parent / "shared" / "data" / "ur5e" / "rtde_run1.csv"
+    if not log.is_file():
+        pytest.skip(f"the recorded UR5e run is not at {log} (only in the project workspace)")
+    twin = cotwin_in_process("twin", EXAMPLES / "ur5e" / "replay.toml", "-o", tmp_path / "out", "--end", "0.5",
+                             "--pt-log", log, cwd=tmp_path)
+    assert twin.returncode == 0, twin.stderr
+    said = sum("warning:" in line for line in twin.stderr.splitlines())
+    assert said == 4 and twin.stderr.strip().splitlines()[-1] == "0 error(s), 4 warning(s)", twin.stderr

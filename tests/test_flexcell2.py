@@ -698,6 +698,17 @@ def test_a_cell_rolls_back_and_a_fork_reruns_bit_for_bit_through_a_collision(tmp
         ex.close()
 
 
+def weak_panda(folder: Path) -> Path:
+    """The cell's twin project in `folder` (3 s), the Panda's joint2 given 0.001 N m: its move never completes,
+    the joint pushing at its effort limit at the end."""
+    project = cell_copy(folder, "twin.toml", lambda text: text.replace("end = 16.0", "end = 3.0"))
+    pm = folder / "panda.pm"
+    text = pm.read_text()
+    at = text.index("effort = ", text.index("jref panda_joint2 "))
+    pm.write_text(text[:at] + "effort = 0.001" + text[text.index(" ", at + len("effort = ")):])
+    return project
+
+
 def test_a_cells_run_and_live_twin_name_the_robot_and_joint_at_its_effort_limit(tmp_path):
     """A single robot's run and live twin named the joints pushing at their effort limit when a move never
     completed (cotwin.twin.assembly.outcomes.saturated_joints); a cell's run and live twin said only '0 move(s)
@@ -706,11 +717,7 @@ def test_a_cells_run_and_live_twin_name_the_robot_and_joint_at_its_effort_limit(
 
     from cotwin.twin.live.cell_live import run_cell_twin
 
-    project = cell_copy(tmp_path, "twin.toml", lambda text: text.replace("end = 16.0", "end = 3.0"))
-    pm = tmp_path / "panda.pm"
-    text = pm.read_text()
-    at = text.index("effort = ", text.index("jref panda_joint2 "))
-    pm.write_text(text[:at] + "effort = 0.001" + text[text.index(" ", at + len("effort = ")):])
+    project = weak_panda(tmp_path)
     said = ("panda: 1 command(s) never completed, and at the end these joints pushed at their effort limit: "
             "panda_joint2 (0.001): too weak")
     ran = cotwin_in_process("run", project, "-o", tmp_path / "run")
@@ -719,3 +726,45 @@ def test_a_cells_run_and_live_twin_name_the_robot_and_joint_at_its_effort_limit(
     result = run_cell_twin(CellSystem(load_project(project)), tmp_path / "twin")
     for side in ("pt", "dt"):
         assert [w[:len(said)] for w in result.outcomes[side].warnings()] == [said], side
+
+
+def test_a_cells_live_twin_says_its_outcomes_and_closes_with_its_count_as_a_run_does(tmp_path):
+    """`cotwin twin` of a cell printed its sides' outcomes by a copy of the shared code and closed with no count.
+    The weak Panda's saturation warned of on each side, counted in the closing line with the plan's commands after
+    the end (three)."""
+    from conftest import cotwin_in_process
+
+    twin = cotwin_in_process("twin", weak_panda(tmp_path), "-o", tmp_path / "twin")
+    assert twin.returncode == 0, twin.stderr[-2000:]
+    assert "PT: panda: 1 command(s) applied" in twin.stdout and "DT: panda: 1 command(s) applied" in twin.stdout
+    for side in ("PT", "DT"):
+        assert f"{side}: warning: panda: 1 command(s) never completed" in twin.stderr, twin.stderr
+    said = sum("warning:" in line for line in twin.stderr.splitlines())
+    assert said == 5 and twin.stderr.strip().splitlines()[-1] == "0 error(s), 5 warning(s)", twin.stderr
+
+
+def test_a_cells_outcomes_make_each_robots_summary_once_from_the_cells_own_mapping_unit(tmp_path):
+    """CellOutcomes.warnings made a Summary per robot each time it was asked, and took any unit at the cell
+    mapping's name that had a `units` attribute for the cell's mapping. Each robot's Summary is made once, as the
+    run ends, its joints read only from the cell's CellMappingUnit."""
+    from cotwin.cosim.algorithm import algorithm
+    from cotwin.cosim.execution import Execution
+    from cotwin.cosim.units import PythonUnit
+    from cotwin.twin.assembly.cell import CELL_MAPPING, CellOutcomes
+    from cotwin.twin.assembly.outcomes import Summary
+
+    cell = CellSystem(load_project(weak_panda(tmp_path)))
+    ran = run_cell(cell, tmp_path / "run", plot=False)
+    summaries = ran.outcomes.summaries
+    assert set(summaries) == set(ROBOTS) and all(isinstance(s, Summary) for s in summaries.values())
+    assert [joint for joint, _ in summaries["panda"].saturated] == ["panda_joint2"]
+    assert ran.outcomes.warnings() == [f"panda: {summaries['panda'].saturation()}"]
+    summaries["panda"] = Summary([], saturated=summaries["panda"].saturated)  # warnings() reads the summaries
+    assert ran.outcomes.warnings() == []  # made, not the ledgers again (whose move never completed)
+    look_alike = PythonUnit(CELL_MAPPING.name, [])  # at the mapping's name, not the cell's mapping unit
+    look_alike.units = ran.system.units[CELL_MAPPING.name].units
+    ran.system.units[CELL_MAPPING.name] = look_alike
+    other = CellOutcomes(cell)
+    other.simulation_ended(Execution(ran.system, algorithm("jacobi"), cell.spec.step), None)
+    assert set(other.summaries) == set(ROBOTS) and all(s.saturated == [] for s in other.summaries.values())
+    assert other.warnings() == []

@@ -294,8 +294,9 @@ def test_a_file_with_thousands_of_problems_prints_fifty_and_counts_the_rest(ur5e
     proc = cotwin("build", path, "-o", tmp_path / "o")
     assert clean(proc), proc.stderr
     lines = proc.stderr.splitlines()
-    assert len(lines) == 51 and all("many.toml:" in line for line in lines[:50])
-    assert lines[-1] == "... and 2950 more problem(s) not shown (2950 error(s))"
+    assert len(lines) == 52 and all("many.toml:" in line for line in lines[:50])
+    assert lines[-2] == "... and 2950 more problem(s) not shown (2950 error(s))"
+    assert lines[-1] == "3000 error(s), 0 warning(s)"  # the command's closing count: each problem one
     assert not (tmp_path / "o").exists()
 
 

@@ -346,3 +346,21 @@ def test_a_reused_artefact_edited_since_is_recorded_as_cotwin_wrote_it_and_not_r
     record = json.loads((out / "build.json").read_text())
     assert record["written"]["controller.fmu"] == sha(out / "controller.fmu")
     assert record["written"]["dmodel.fmu"] == sha(out / "dmodel.fmu")
+
+
+def test_the_files_a_build_keeps_are_warnings_counted_in_its_closing_line(tmp_path):
+    """Record.settle's warnings (a file build.json names that the build keeps) were shown outside any count; they
+    go through the command's counted warnings now, and `cotwin build` closes with the count as `cotwin run` does."""
+    import json
+
+    out = tmp_path / "b"
+    first = cotwin_in_process("build", UR5E / "cotwin.toml", "-o", out, cwd=tmp_path)
+    assert first.returncode == 0 and first.stderr.strip().splitlines()[-1] == "0 error(s), 0 warning(s)", first.stderr
+    (out / "mynotes.txt").write_text("mine\n")
+    record = json.loads((out / "build.json").read_text())
+    record["written"] = {**record["written"], "mynotes.txt": None}  # no digest: not proof a build wrote it
+    (out / "build.json").write_text(json.dumps(record))
+    again = cotwin_in_process("build", UR5E / "cotwin.toml", "-o", out, cwd=tmp_path)
+    assert again.returncode == 0 and (out / "mynotes.txt").exists(), again.stderr
+    assert "build.json: warning: 'written' names 'mynotes.txt'" in again.stderr, again.stderr
+    assert again.stderr.strip().splitlines()[-1] == "0 error(s), 1 warning(s)", again.stderr

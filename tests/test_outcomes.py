@@ -10,7 +10,7 @@ import json
 import pytest
 
 from conftest import cotwin_in_process
-from cotwin.diagnostics import CotwinError
+from cotwin.diagnostics import CotwinError, Finding, Location, Severity
 from cotwin.twin.assembly.run import load
 from cotwin.twin.services.whatif import predict
 from test_reliability import project  # noqa: F401 - a copy of the UR5e example in tmp_path/ur5e
@@ -317,3 +317,48 @@ def test_a_completed_run_says_nothing_of_effort_limits(project, tmp_path):
     (project / "plan.csv").write_text(HEADER + "1000,true,0,23,1\n")
     proc = cotwin("run", project / "cotwin.toml", "-o", tmp_path / "out", "--end", "8")
     assert proc.returncode == 0 and "completed at t = " in proc.stdout and "effort limit" not in proc.stderr
+
+
+def test_showing_outcomes_counts_their_warnings_and_only_the_strict_check_exits(capsys):
+    """common.outcomes printed the outcomes, closed the run's count and exited under --strict, in one; each command
+    kept its own `warned += show_warnings(...)` tally. Showing outcomes counts their warnings in the command's Tally
+    and never exits; the --strict check exits, and only with --strict."""
+    from cotwin.cli.common import Tally, show_outcomes, strict_exit
+    from cotwin.twin.assembly.outcomes import STRICT_EXIT, CommandOutcome, Summary
+
+    refused = CommandOutcome(1.0, "moveDiscreteCommand", {"X": 15}, delivered=1.1, accepted=True, feasible=False)
+    summaries = {"PT": Summary([refused]), "DT": Summary([refused], blocked=["a wait"])}
+    said = Tally()
+    said.warn([Finding(Location("p.toml", 1, 1), Severity.WARNING, "before"),
+               Finding(Location("p.toml", 2, 1), Severity.ERROR, "not a warning")])
+    show_outcomes(summaries, said)
+    strict_exit(summaries, strict=False)
+    assert (said.errors, said.warnings) == (0, 4)  # 'before', PT's none completed, DT's blocked wait and none completed
+    shown = capsys.readouterr()
+    assert shown.out.splitlines()[:2] == ["PT: commands: 1, 1 infeasible", "PT:   applied at t = 1.1 s "
+                                          "moveDiscreteCommand(X=15): infeasible"]
+    assert shown.err.splitlines() == ["p.toml:1:1: warning: before", "PT: warning: no command completed (1 applied)",
+                                      "DT: warning: blocked: a wait", "DT: warning: no command completed (1 applied)"]
+    said.close()
+    said.close()
+    assert capsys.readouterr().err == "0 error(s), 4 warning(s)\n"  # said once
+    with pytest.raises(SystemExit) as stop:
+        strict_exit(summaries, strict=True)
+    assert stop.value.code == STRICT_EXIT
+    assert capsys.readouterr().err == "--strict: 3 command(s) or wait(s) did not end well; exit status 3\n"
+
+
+def test_a_failed_commands_count_takes_each_error_at_a_place_and_a_failure_told_in_lines_as_one(capsys):
+    """The closing count of a command that ended in an error: a run that failed midway says its cause and where its
+    rows are (two lines, one error); a project's problems are each an error at its place."""
+    from cotwin.cli.common import close_failed, closing_tally
+    from cotwin.cosim.execution import ended_early
+
+    closing_tally().warn([Finding(Location("p.toml", 1, 1), Severity.WARNING, "said before")])
+    close_failed(ended_early(CotwinError("unit X failed a step"), 3.0, "the 30 row(s) computed are in o.csv").findings)
+    problems = [Finding(Location("p.toml", line, 1), Severity.ERROR, "bad") for line in (2, 3, 4)]
+    closing_tally()
+    close_failed([*problems, Finding(Location("p.toml", 5, 1), Severity.WARNING, "odd")])
+    close_failed(problems)  # no command keeping a count is running any more: nothing said
+    assert capsys.readouterr().err.splitlines() == ["p.toml:1:1: warning: said before", "1 error(s), 1 warning(s)",
+                                                    "3 error(s), 1 warning(s)"]

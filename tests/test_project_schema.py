@@ -259,7 +259,8 @@ def test_a_live_twin_without_a_pt_says_how_to_give_one_before_anything_else(ur5e
     assert proc.returncode == 1
     assert proc.stderr == (f"{ur5e / 'cotwin.toml'}: error: a live twin needs a PT: a [pt] table (endpoint = opcua | "
                            "replay | broker | rtde), or --pt-log LOG (a recorded run) or --pt-url opc.tcp://HOST:PORT "
-                           "(an OPC UA plant)\n")  # not after the plan's warnings, nor without the options
+                           "(an OPC UA plant)\n"
+                           "1 error(s), 0 warning(s)\n")  # not after the plan's warnings, nor without the options
 
 
 def test_a_plan_holding_no_command_is_said_not_taken_for_success(ur5e, tmp_path):

@@ -12,8 +12,8 @@ from .. import safejson
 from ..diagnostics import CotwinError, Interrupted, Location, placed
 from ..plaindata import StateError
 from ..files import CAPS, check_outputs, output, read_bytes, write_text
-from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, check_finite, main, named_values, outcomes, output_file,
-                     report, show_warnings, tool_point)
+from .common import (MAX_HORIZON, MAX_REPORTED, STRICT_HELP, Tally, check_finite, main, named_values, output_file,
+                     report, show_outcomes, show_warnings, strict_exit, tool_point)
 
 
 def located(err: CotwinError, path: str | None) -> CotwinError:
@@ -94,8 +94,9 @@ def whatif(project: str, plan: str, state: str | None, horizon: float, physics_s
                f"{prediction.wall_seconds:.2f} s)")
     if out:
         write_text(out, json.dumps(prediction.as_dict(), indent=1) + "\n", [*system.spec.inputs, plan, state])
-    outcomes({"": Summary(prediction.commands, prediction.blocked, prediction.saturated)}, strict,
-             per_command=False)  # said above
+    summary = {"": Summary(prediction.commands, prediction.blocked, prediction.saturated)}
+    show_outcomes(summary, Tally(), per_command=False)  # each command said above; a what-if closes with no count
+    strict_exit(summary, strict)
 
 
 NEVER_DONE = ("not taken", "infeasible", "stopped")  # verdicts no longer horizon would change

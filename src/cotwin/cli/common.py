@@ -7,11 +7,11 @@ import signal
 import sys
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable, Protocol
 
 import click
 
-from ..diagnostics import CotwinError, Severity
+from ..diagnostics import CotwinError, Finding, Severity
 from ..files import special_file
 
 MAX_HORIZON = 86_400.0  # s: the longest a what-if looks ahead
@@ -142,28 +142,40 @@ STRICT_HELP = ("exit with status 3 unless every command the run applied complete
                "(docs/interop.md, Honest outcomes)")
 
 
-def outcomes(summaries: dict, strict: bool, per_command: bool = True, counts: tuple[int, int] | None = None) -> int:
-    """Each summary's counts and per-command lines (cotwin.twin.assembly.outcomes.Summary, by label: '' or PT, DT),
-    its warnings (no command completed, blocked waits), and with `strict` exit STRICT_EXIT if anything did
-    not complete. `counts`: the errors and warnings said before, closed with the command's count of them
-    (said_counts) before the exit. Returns the warnings said here."""
-    from ..twin.assembly.outcomes import STRICT_EXIT
+class Outcomes(Protocol):
+    """What a run says became of its commands (a single robot's cotwin.twin.assembly.outcomes.Summary, a cell's
+    cotwin.twin.assembly.cell.CellOutcomes): its lines, its warnings, what `--strict` refuses."""
 
-    failures = warned = 0
+    def lines(self) -> list[str]: ...
+
+    def warnings(self) -> list[str]: ...
+
+    def strict_failures(self) -> list[str]: ...
+
+
+def show_outcomes(summaries: dict[str, Outcomes], tally: Tally, per_command: bool = True) -> None:
+    """Each summary's lines by label ('' or PT, DT), only its first (the counts) unless `per_command`, and its
+    warnings (no command completed, blocked waits), counted in `tally`."""
     for label, summary in summaries.items():
         prefix = f"{label}: " if label else ""
-        for line in summary.lines() if per_command else summary.lines()[:1]:
+        lines = summary.lines()
+        for line in lines if per_command else lines[:1]:
             click.echo(prefix + line)
         for warning in summary.warnings():
-            click.echo(f"{prefix}warning: {warning}", err=True)
-            warned += 1
-        failures += len(summary.strict_failures())
-    if counts is not None:
-        said_counts(counts[0], counts[1] + warned)
+            tally.warning(warning, prefix)
+
+
+def strict_exit(summaries: dict[str, Outcomes], strict: bool, named: bool = False) -> None:
+    """With `strict`, exit STRICT_EXIT if a command or wait of `summaries` did not end well, saying how many, or
+    `named` each (a cell's, whose lines say each robot's counts, not its commands)."""
+    from ..twin.assembly.outcomes import STRICT_EXIT
+
+    failures = [f"{label}: {f}" if label else f for label, summary in summaries.items()
+                for f in summary.strict_failures()]
     if strict and failures:
-        click.echo(f"--strict: {failures} command(s) or wait(s) did not end well; exit status {STRICT_EXIT}", err=True)
+        said = "; ".join(failures) if named else f"{len(failures)} command(s) or wait(s) did not end well"
+        click.echo(f"--strict: {said}; exit status {STRICT_EXIT}", err=True)
         sys.exit(STRICT_EXIT)
-    return warned
 
 
 def exchange_name(ctx, param, value: str | None) -> str | None:
@@ -252,8 +264,8 @@ def start_dashboard(system, address, mode: str, history_url: str | None, whatif_
     return dash
 
 
-def show_warnings(findings) -> int:
-    """Print the warnings among `findings`; how many (a command's closing count says them)."""
+def show_warnings(findings: Iterable[Finding]) -> int:
+    """Print the warnings among `findings`; how many (a command's closing count says them: Tally.warn)."""
     shown = 0
     for f in findings:
         if f.severity is Severity.WARNING:
@@ -265,6 +277,87 @@ def show_warnings(findings) -> int:
 def said_counts(errors: int, warnings: int) -> None:
     """A command's closing line: how many errors and warnings it had (0 and 0 said too: nothing went unsaid)."""
     click.echo(f"{errors} error(s), {warnings} warning(s)", err=True)
+
+
+class Tally:
+    """The errors and warnings a command shows the user, each counted as it is shown, for its closing line
+    (said_counts): every warning said is in the count."""
+
+    def __init__(self) -> None:
+        self.errors = 0
+        self.warnings = 0
+        self.closed = False
+
+    def warn(self, *groups: Iterable[Finding]) -> None:
+        """Show the warnings among each group of findings, counted."""
+        for findings in groups:
+            self.warnings += show_warnings(findings)
+
+    def finding(self, finding: Finding) -> None:
+        """Show one finding, counted by its severity (a `warn` callback's: cotwin.twin.assembly.build.build)."""
+        click.echo(str(finding), err=True)
+        self.errors += finding.severity is Severity.ERROR
+        self.warnings += finding.severity is Severity.WARNING
+
+    def warning(self, message: str, prefix: str = "") -> None:
+        """Show a warning that is no finding (a run's outcomes: no command completed...), `prefix` its side's."""
+        click.echo(f"{prefix}warning: {message}", err=True)
+        self.warnings += 1
+
+    def error(self, message: str) -> None:
+        """Show an error the command ends on without raising (a twin's failed history store), counted."""
+        click.echo(f"error: {message}", err=True)
+        self.errors += 1
+
+    def close(self) -> None:
+        """The closing line, said once."""
+        if not self.closed:
+            self.closed = True
+            said_counts(self.errors, self.warnings)
+
+
+_closing: Tally | None = None  # the Tally of the command running, closed by cotwin.cli.entry if it ends in an error
+
+
+def closing_tally() -> Tally:
+    """A Tally for the command now running that closes with its count however it ends: the command closes it
+    when it ends well, cotwin.cli.entry (`close_failed`) after the error that ended it."""
+    global _closing
+    _closing = Tally()
+    return _closing
+
+
+def close_failed(findings: Iterable[Finding] = ()) -> None:
+    """After the error that ended the command was shown (its `findings`, or a message): the command's closing
+    count, if it keeps one (closing_tally), with the errors in it: each at a place of the inputs (a project's
+    problems, counted as `report` counts them), else one however many lines said it (a failed run's cause and
+    where its rows are); the warnings said with it counted too. Then no command is running."""
+    global _closing
+    tally, _closing = _closing, None
+    if tally is None:
+        return
+    findings = list(findings)
+    errors = [f for f in findings if f.severity is Severity.ERROR]
+    tally.errors += max(1, sum(not f.location.path.startswith("<") for f in errors))
+    tally.warnings += sum(f.severity is Severity.WARNING for f in findings)
+    tally.close()
+
+
+def no_command_running() -> None:
+    """Forget the Tally of a command before (cotwin.cli.entry, run again in one process)."""
+    global _closing
+    _closing = None
+
+
+def plan_warnings(system, end: float) -> list[Finding]:
+    """What a run says of its plan before it starts (cotwin.twin.assembly.scenario): nothing planned, commands
+    after `end`, commands out of order, rows of no event; a cell's robots' each said once."""
+    from ..twin.assembly.scenario import after_end, no_event_rows, nothing_planned, plan_order
+
+    twins = [r.system for r in system.robots] if system.spec.robots else [system]
+    return [*nothing_planned(system.spec.plan, system.commands), *after_end(system.commands, end),
+            *dict.fromkeys(f for t in twins for f in plan_order(t.commands, t.command_events)),
+            *dict.fromkeys(f for t in twins for f in no_event_rows(t.commands, t.models.program))]
 
 
 def check_step_count(step: float, span: float, hint: str | None, source: str) -> None:

@@ -9,9 +9,9 @@ import click
 
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..twin.assembly.observing import TwinObserver
-from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_timing, exchange_name,
-                     history_url, interruptible, main, outcomes, output_folder, said_restarts, serving_options,
-                     show_warnings, start_dashboard)
+from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, Tally, address, check_finite, check_timing,
+                     closing_tally, exchange_name, history_url, interruptible, main, output_folder, plan_warnings,
+                     said_restarts, serving_options, show_outcomes, start_dashboard, strict_exit)
 
 
 @main.command()
@@ -43,6 +43,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     from ..twin.live.runtime import LiveTwin
     from .progress import ProgressReport
 
+    said = closing_tally()  # the errors and warnings shown, counted in the twin's closing line, a failed twin's too
     check_finite(step=step, end=end)
     if pt_log is not None and not Path(pt_log).is_file():
         raise click.BadParameter(f"no file {pt_log}", param_hint="--pt-log")
@@ -56,7 +57,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
             raise click.BadParameter("a cell of several robots cannot save its state yet, so a failed step cannot be "
                                      "retried from it", param_hint="--on-unit-failure")
         return _cell_twin(spec, out, step, end, algorithm, realtime, pt_log, pt_url, history, whatif,
-                          dashboard, cc, serving, strict)
+                          dashboard, cc, serving, strict, said)
     if pt_url is not None:
         spec = pt_with_url(spec, pt_url, pt_log is not None)
     if spec.pt is None:  # said before the models are read and the plan's warnings shown
@@ -66,14 +67,9 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
     broker = spec.rabbitmq.url if spec.rabbitmq else "amqp://127.0.0.1:5672/%2F"
     system = load(spec)
     from ..twin.assembly.endpoints import endpoint_advice
-    from ..twin.assembly.scenario import after_end, no_event_rows, nothing_planned, plan_order
 
-    show_warnings(step_warnings(system, step))
-    show_warnings(nothing_planned(system.spec.plan, system.commands))
-    show_warnings(after_end(system.commands, spec.end if end is None else end))
-    show_warnings(plan_order(system.commands, system.command_events))
-    show_warnings(no_event_rows(system.commands, system.models.program))
-    show_warnings(endpoint_advice(system, "pt"))  # what the PT's kind cannot carry
+    said.warn(step_warnings(system, step), plan_warnings(system, spec.end if end is None else end),
+              endpoint_advice(system, "pt"))  # the last: what the PT's kind cannot carry
     dash = start_dashboard(system, dashboard, "twin", database_url(history or spec.history_url, Path(out)),
                            broker if whatif else None, serving)
     progress = ProgressReport("twin", "s").__enter__()
@@ -94,7 +90,7 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         if dash is not None:
             dash.stop()
     r = result.pt
-    said_restarts(unit for side in live.sides.values() for unit in side.execution.system.units.values())
+    said.errors += said_restarts(unit for side in live.sides.values() for unit in side.execution.system.units.values())
     state = "stopped early" if r.steps < live.steps or live.stop_requested else "done"
     click.echo(f"{result.out}: PT and DT, {r.steps} steps each to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f}), {state}")
@@ -104,27 +100,31 @@ def twin(project: str, out: str, step: float | None, end: float | None, algorith
         from ..twin.assembly.convergence import summary
 
         click.echo(summary(result.convergence))
-    incomplete_history(result)
-    outcomes({name.upper(): side.summary() for name, side in result.sides.items()}, strict)
+    ended(result, {name.upper(): side.summary() for name, side in result.sides.items()}, said, strict)
+
+
+def ended(result, summaries: dict, said: Tally, strict: bool, named: bool = False) -> None:
+    """How a twin's run ended, as a run's does: each side's outcomes, that its history store failed during the
+    run if it did (an error: its outputs are whole, the store is not), the closing count, and its exit status
+    (--strict's, else 1 for the failed store). `named`: the strict failures named (a cell's)."""
+    if result.history_problem is not None:
+        said.error(f"{result.history_problem}; the run's outputs in {result.out} are whole")
+    show_outcomes(summaries, said)
+    said.close()
+    strict_exit(summaries, strict, named)
     if result.history_problem is not None:
         sys.exit(1)
 
 
-def incomplete_history(result) -> None:
-    """Say that a twin's history store failed during the run: its outputs are whole, the store is not."""
-    if result.history_problem is not None:
-        click.echo(f"error: {result.history_problem}; the run's outputs in {result.out} are whole", err=True)
-
-
 def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, history, whatif, dashboard,
-               cc: str, serving: dict, strict: bool = False) -> None:
+               cc: str, serving: dict, strict: bool, said: Tally) -> None:
     """`cotwin twin` of a cell of several robots ([[robots]]): its perturbed plant as the PT (cotwin.twin.live.cell_live).
     An interrupt in the step loop ends the run after the step, its results kept as a finished run's; before
-    the loop, or a second one, at once (rows so far kept as partial results), as a single robot's twin does."""
+    the loop, or a second one, at once (rows so far kept as partial results), as a single robot's twin does.
+    `said`: the twin's count of the errors and warnings shown."""
     import threading
 
     from ..twin.assembly.cell import CellSystem
-    from ..twin.assembly.scenario import after_end, no_event_rows, nothing_planned, plan_order
     from ..twin.live.cell_live import run_cell_twin
     from ..twin.services.history import database_url
     from .progress import ProgressReport
@@ -134,10 +134,7 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
         raise click.UsageError(f"a cell of several robots is twinned with its own perturbed plant as the PT: "
                                f"{', '.join(unsupported)} not done yet")
     cell = CellSystem(spec)
-    show_warnings(nothing_planned(cell.spec.plan, cell.commands))
-    show_warnings(after_end(cell.commands, spec.end if end is None else end))
-    show_warnings(dict.fromkeys(f for r in cell.robots for f in plan_order(r.system.commands, r.system.command_events)))
-    show_warnings(dict.fromkeys(f for r in cell.robots for f in no_event_rows(r.system.commands, r.system.models.program)))
+    said.warn(plan_warnings(cell, spec.end if end is None else end))
     stop, looping = threading.Event(), threading.Event()
 
     class Looping(TwinObserver):
@@ -164,20 +161,7 @@ def _cell_twin(spec, out: str, step, end, algorithm, realtime, pt_log, pt_url, h
                f"(real-time factor {r.real_time_factor:.1f}), {'stopped early' if result.stopped else 'done'}")
     click.echo(f"deviation: {result.alarm_count} alarm(s); report {result.out / 'deviation.json'}; "
                f"history run {result.run_id} in {result.history_url.split('://', 1)[0]}")
-    for side, summary in result.outcomes.items():
-        for line in summary.lines():
-            click.echo(f"{side.upper()}: {line}")
-        for warning in summary.warnings():
-            click.echo(f"{side.upper()}: warning: {warning}", err=True)
-    incomplete_history(result)
-    failures = [f"{side.upper()}: {f}" for side, summary in result.outcomes.items() for f in summary.strict_failures()]
-    if strict and failures:
-        from ..twin.assembly.outcomes import STRICT_EXIT
-
-        click.echo(f"--strict: {'; '.join(failures)}; exit status {STRICT_EXIT}", err=True)
-        sys.exit(STRICT_EXIT)
-    if result.history_problem is not None:
-        sys.exit(1)
+    ended(result, {side.upper(): summary for side, summary in result.outcomes.items()}, said, strict, named=True)
 
 
 class TwinProgress(TwinObserver):

@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-import sys
-
 from pathlib import Path
 
 import click
 
 from ..diagnostics import CotwinError, Finding, Location, Severity
 from ..files import check_outputs
-from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, address, check_finite, check_step_count,
-                     check_timing, main, outcomes, output_file, output_folder, said_counts, said_restarts,
-                     serving_options, show_warnings, start_dashboard)
+from .common import (DASHBOARD_HELP, ON_UNIT_FAILURE, STRICT_HELP, Tally, address, check_finite, check_step_count,
+                     check_timing, closing_tally, main, output_file, output_folder, plan_warnings, said_restarts,
+                     serving_options, show_outcomes, start_dashboard, strict_exit)
 
 
 @main.command()
@@ -25,11 +23,13 @@ def build(project: str, out: str, cc: str) -> None:
     from ..twin.assembly.build import build as build_all, folder_lock
     from ..twin.assembly.run import load
 
+    said = closing_tally()  # build.json's files kept (Record.settle) are warned of, counted
     system = load(project, cells=True, reader="cotwin build")
     with folder_lock(Path(out)):
-        written = build_all(system, out, cc, warn=lambda finding: click.echo(str(finding), err=True))
+        written = build_all(system, out, cc, warn=said.finding)
     for path in written.values():
         click.echo(f"{path}")
+    said.close()
 
 
 @main.command()
@@ -61,6 +61,7 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     from ..twin.services.history import database_url
     from .progress import ProgressReport
 
+    said = closing_tally()  # the errors and warnings shown, counted in the run's closing line, a failed run's too
     check_finite(step=step, end=end, **{"cycle-period": cycle_period})
     if cycle_period is not None and version != "3":
         raise click.BadParameter("only with --fmi 3 (an FMI 2.0 d-model takes [cosim] parameters cycle_period)",
@@ -68,26 +69,20 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
     spec = load_project(project, reader="cotwin run", step=step, end=end)
     check_timing(spec, step, end)
     system = load(spec, cells=True)
-    warned = 0  # the warnings said, counted in the run's closing line
     if not system.spec.robots:
-        warned += show_warnings(step_warnings(system, step, cycle_period))
-    warned += show_warnings(system.warnings)  # what cotwin check says of the models and the project (a joint out of limits...)
+        said.warn(step_warnings(system, step, cycle_period))
+    said.warn(system.warnings)  # what cotwin check says of the models and the project (a joint out of limits...)
     reader = "cotwin run --dashboard" if dashboard and not system.spec.robots else "cotwin run"  # a cell: no history
-    warned += show_warnings(system.spec.ignored_sections(reader))
+    said.warn(system.spec.ignored_sections(reader))
     if system.spec.robots:
         if on_unit_failure != "stop":
             raise click.BadParameter("a cell of several robots cannot save its state yet, so a failed step cannot be "
                                      "retried from it", param_hint="--on-unit-failure")
-        return _run_cell(system, out, step, end, algorithm, realtime, cc, dashboard, version, serving, strict, warned)
+        return _run_cell(system, out, step, end, algorithm, realtime, cc, dashboard, version, serving, strict, said)
     history = None  # one run records no history; the page lists the store's runs when there is one
     if system.spec.history_url is not None or (Path(out) / "history.sqlite").is_file():
         history = database_url(system.spec.history_url, Path(out))
-    from ..twin.assembly.scenario import after_end, no_event_rows, nothing_planned, plan_order
-
-    warned += show_warnings(nothing_planned(system.spec.plan, system.commands))
-    warned += show_warnings(after_end(system.commands, system.spec.end if end is None else end))
-    warned += show_warnings(plan_order(system.commands, system.command_events))
-    warned += show_warnings(no_event_rows(system.commands, system.models.program))
+    said.warn(plan_warnings(system, system.spec.end if end is None else end))
     dash = start_dashboard(system, dashboard, "run", history, serving=serving)
     try:
         with ProgressReport("co-simulating", "steps") as progress:
@@ -99,27 +94,24 @@ def run(project: str, out: str, step: float | None, end: float | None, algorithm
         if dash is not None:
             dash.stop()
     r = ran.result
-    errors = said_restarts(ran.system.units.values())  # each restart recovered a failed step
+    said.errors += said_restarts(ran.system.units.values())  # each restart recovered a failed step
     click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f}; stepping: {r.describe_stepping()})")
-    outcomes({"": ran.outcomes}, strict, counts=(errors, warned))  # closed with how many errors and warnings
+    show_outcomes({"": ran.outcomes}, said)
+    said.close()
+    strict_exit({"": ran.outcomes}, strict)
 
 
 def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: str | None, realtime: bool | None,
-              cc: str, dashboard, version: str, serving: dict, strict: bool = False, warned: int = 0) -> None:
-    """`cotwin run` of a cell of several robots ([[robots]]): each robot's outcomes and the contacts between them."""
+              cc: str, dashboard, version: str, serving: dict, strict: bool, said: Tally) -> None:
+    """`cotwin run` of a cell of several robots ([[robots]]): each robot's outcomes and the contacts between them;
+    `said`: the run's count of the errors and warnings shown."""
     from ..twin.assembly.cell import run_cell
-    from ..twin.assembly.scenario import after_end, no_event_rows, nothing_planned, plan_order
     from .progress import ProgressReport
 
     if version != "2":
         raise click.UsageError("a cell of several robots runs with --fmi 2 (not done yet with 3)")
-    warned += show_warnings(nothing_planned(cell.spec.plan, cell.commands))
-    warned += show_warnings(after_end(cell.commands, cell.spec.end if end is None else end))
-    warned += show_warnings(dict.fromkeys(f for r in cell.robots
-                                          for f in plan_order(r.system.commands, r.system.command_events)))
-    warned += show_warnings(dict.fromkeys(f for r in cell.robots
-                                          for f in no_event_rows(r.system.commands, r.system.models.program)))
+    said.warn(plan_warnings(cell, cell.spec.end if end is None else end))
     dash = start_dashboard(cell, dashboard, "run", None, serving=serving)
     try:
         with ProgressReport("co-simulating", "steps") as progress:
@@ -131,20 +123,12 @@ def _run_cell(cell, out: str, step: float | None, end: float | None, algorithm: 
     r = ran.result
     click.echo(f"{ran.csv}: {r.rows} rows to t = {r.end_time:g} s in {r.wall_seconds:.2f} s "
                f"(real-time factor {r.real_time_factor:.1f})")
-    for line in ran.outcomes.lines():
-        click.echo(line)
-    for warning in ran.outcomes.warnings():
-        click.echo(f"warning: {warning}", err=True)
+    show_outcomes({"": ran.outcomes}, said)
     for time, first, second in ran.contacts:
         click.echo(f"contact: {first} and {second} at t = {time:.3f} s")
-    warned += show_warnings(contacts_from_the_start(cell.spec, ran.contacts, step or cell.spec.step))
-    said_counts(0, warned)  # a cell's run that ended: no error (one raised), its warnings counted
-    failures = ran.outcomes.strict_failures()
-    if strict and failures:
-        from ..twin.assembly.outcomes import STRICT_EXIT
-
-        click.echo(f"--strict: {'; '.join(failures)}; exit status {STRICT_EXIT}", err=True)
-        sys.exit(STRICT_EXIT)
+    said.warn(contacts_from_the_start(cell.spec, ran.contacts, step or cell.spec.step))
+    said.close()
+    strict_exit({"": ran.outcomes}, strict, named=True)  # its lines count each robot's moves: the failures named
 
 
 def contacts_from_the_start(spec, contacts, step: float) -> list[Finding]:

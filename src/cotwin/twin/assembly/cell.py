@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -38,6 +39,10 @@ from ..project import TwinProject, check_timing
 from .scenario import Command, _column_at, _column_starts, data_rows, parse_value, plan_rows, row_time, scenario_ports
 from .system import (DMODEL, MAPPING, CommandPorts, MachinePort, TwinSystem, UnitSpec, build_scene, load_models,
                      multimodel)
+
+if TYPE_CHECKING:  # for the annotations: this module imports them where it uses them
+    from .mapping_unit import MappingUnit
+    from .outcomes import Summary
 
 CELL_MAPPING = UnitSpec("{mapping}", "cell", "mapping.fmu", "mapping")
 
@@ -405,12 +410,12 @@ class CellMappingUnit(PythonUnit):
     """Every robot's mapping unit (cotwin.twin.assembly.mapping_unit) in one, over one world: ports scoped by robot;
     in a step each robot acts (its operations), the world steps once, each robot reports."""
 
-    def __init__(self, name: str, world, units: dict):
+    def __init__(self, name: str, world, units: dict[str, MappingUnit]):
         ports = [Port(f"{robot}.{p.name}", p.type, p.causality) for robot, unit in units.items()
                  for p in unit.ports.values()]
         super().__init__(name, ports)
         self.world = world
-        self.units = units
+        self.units = units  # robot -> its mapping unit
         # (scoped name, the robot's name) of every input and output, made once: the step reads them all
         self.inputs = {robot: [(f"{robot}.{p.name}", p.name) for p in unit.ports.values() if p.causality == "input"]
                        for robot, unit in units.items()}
@@ -525,7 +530,7 @@ class CellOutcomes(Observer):
         self.robots = {r.name: RobotOutcome(r.name, planned=len(r.system.commands) if cell.spec.plan is not None else None)
                        for r in cell.robots}
         self.ledgers = {r.name: CommandLedger(r.system, self._units(r), r.scoped) for r in cell.robots}
-        self.saturated: dict[str, list[tuple[str, float]]] = {}  # robot -> its joints at their effort limit at the end
+        self.summaries: dict[str, Summary] = {}  # robot -> what became of its commands, made once as the run ended
         # per robot, made once (the observer runs every step): its source, command events and scoped stopping events
         self._watch = [(r.name, r.source.name if r.source is not None else None, sorted(r.system.command_events),
                         [r.scoped(ev.name) for ev in r.system.models.mapping_model.input_events
@@ -564,23 +569,26 @@ class CellOutcomes(Observer):
             self._before[name] = hit
 
     def simulation_ended(self, execution, error) -> None:
-        """Each robot's joints pushing at their effort limit as the run ended, read from its platform's simulator
-        (outcomes.saturated_joints, as a single robot's run and live twin read them); none where the cell's
-        mapping runs out of this process (an FMU in another master)."""
+        """Each robot's summary, made once: its commands' outcomes and its joints pushing at their effort limit
+        as the run ended, read from its platform's simulator (outcomes.saturated_joints, as a single robot's run
+        and live twin read them); none where the cell's mapping is not this process's CellMappingUnit (an FMU
+        in another master)."""
         from .outcomes import saturated_joints
 
-        units = getattr(execution.system.units.get(CELL_MAPPING.name), "units", None)
-        for name, unit in (units or {}).items():
-            self.saturated[name] = saturated_joints(unit.mapping.endpoint)
+        mapping = execution.system.units.get(CELL_MAPPING.name)
+        hosted = mapping.units if isinstance(mapping, CellMappingUnit) else {}
+        for name, ledger in self.ledgers.items():
+            robot = hosted.get(name)
+            self.summaries[name] = ledger.summary(
+                saturated=saturated_joints(robot.mapping.endpoint) if robot is not None else ())
 
     def lines(self) -> list[str]:
         return [r.line() for r in self.robots.values()]
 
     def warnings(self) -> list[str]:
         """Per robot, named: its commands that never completed with joints at their effort limit at the end
-        (outcomes.Summary.saturation, what a single robot's run says)."""
-        said = {name: ledger.summary(saturated=self.saturated.get(name, ())).saturation()
-                for name, ledger in self.ledgers.items()}
+        (outcomes.Summary.saturation, what a single robot's run says); none before the run ended."""
+        said = {name: summary.saturation() for name, summary in self.summaries.items()}
         return [f"{name}: {saturation}" for name, saturation in said.items() if saturation is not None]
 
     def strict_failures(self) -> list[str]:
