@@ -70,7 +70,8 @@ def test_a_changed_dmodel_is_rebuilt_not_reused(project, tmp_path):
     with zipfile.ZipFile(out / "dmodel.fmu") as z:  # the state names of the new model
         assert "Resting" in z.read("modelDescription.xml").decode()
     built = json.loads((out / "build.json").read_text())
-    assert set(built) == {"dmodel.fmu"}
+    assert set(built) == {"dmodel.fmu", "digests"}  # the key of what was built, and the digest of what was written
+    assert set(built["digests"]) == {"dmodel.fmu"} and built["digests"]["dmodel.fmu"]["key"] == built["dmodel.fmu"]
     # an interrupted build (an artefact without its record) is redone
     (out / "build.json").unlink()
     (out / "dmodel.fmu").write_bytes(b"half a zip")
