@@ -61,9 +61,15 @@ def of_type(value, kind: type | tuple, what: str):
     return value
 
 
+PLAIN = {"Boolean": frozenset((bool,)), "Integer": frozenset((int,)), "Real": frozenset((int, float))}  # per FMI
+# type, the Python classes of its values taken as they are (numpy's scalars are checked one by one below)
+
+
 def port_value(value, fmi_type: str, what: str):
     """A port's value of its FMI type: a number for a Real (any float: NaN and infinities are readings too),
     a whole number for an Integer, a Boolean for a Boolean."""
+    if value.__class__ in PLAIN.get(fmi_type, ()):
+        return value
     if fmi_type == "Boolean" and isinstance(value, (bool, np.bool_)):
         return value
     if fmi_type == "Integer" and isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):

@@ -35,6 +35,7 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
 
 from ..cache import Held, bound, hold
 from ..diagnostics import CotwinError
+from ..plaindata import PLAIN
 from .state import fields, finite, of_type, pack, port_value, unpack
 from .pythonfmu_exit import install as _release_pythonfmu_at_exit
 
@@ -745,9 +746,6 @@ class FMUUnit(BoundByNames, Unit):
             self._call("fmi2FreeFMUstate", fn["fmi2FreeFMUstate"], self.component, byref(handle))
 
 
-_EXACT = {"Boolean": frozenset((bool,)), "Integer": frozenset((int,)), "Real": frozenset((int, float))}  # port_value's
-
-
 class PythonUnit(Unit):
     """An in-process unit: subclasses keep their port values in `self.values`.
 
@@ -811,7 +809,7 @@ class PythonUnit(Unit):
         fields(snapshot, what, self.STATE_KEYS)
         saved = fields(snapshot["values"], f"{what}'s values", list(self.ports), snapshot["values"])
         ports = self.ports
-        if all(saved[name].__class__ in _EXACT.get(port.type, ()) for name, port in ports.items()):
+        if all(saved[name].__class__ in PLAIN.get(port.type, ()) for name, port in ports.items()):
             values = {name: saved[name] for name in ports}  # each a Python value of its type: nothing to say
         else:
             values = {name: port_value(saved[name], port.type, f"{what}'s {name}") for name, port in ports.items()}

@@ -121,8 +121,7 @@ class PlatformSimulator:
         self.timestep = timestep
         self._inertial0 = (self.model.body_mass.copy(), self.model.body_inertia.copy())  # as compiled
         self.memo: StepMemo | None = None  # held steps remembered (cotwin.pmodel.memo: a sweep's forks turn it on)
-        self._sensor_flags: int | None | object = _UNKNOWN  # sensor_flags(): not looked up yet
-        self._flag_word: ctypes.c_int | None = None  # that field, read where it lies (sensor_flags)
+        self._flag_word: ctypes.c_int | None | object = _UNKNOWN  # opt.disableflags where it lies (sensor_flags)
         self._state_size = mujoco.mj_stateSize(self.model, STATE)  # of get_state's vector
         self._joint_qpos = {j.name: self.model.joint(prefix + j.name).qposadr[0] for j in tree.actuated}
         self._joint_dof = {j.name: self.model.joint(prefix + j.name).dofadr[0] for j in tree.actuated}
@@ -379,12 +378,11 @@ class PlatformSimulator:
         """The address of the model's opt.disableflags for native loops that compute the sensors in a stretch's
         last step only (cotwin.pmodel.sensing), or None where every step computes them: found once, and None
         while the user has turned sensors off on the model (asked before each stretch: they stay off)."""
-        if self._sensor_flags is _UNKNOWN:
-            self._sensor_flags = flags_address(self.model) if self.shared is None else None
-            self._flag_word = ctypes.c_int.from_address(self._sensor_flags) if self._sensor_flags is not None else None
-        if self._sensor_flags is None:
-            return None
-        return None if self._flag_word.value & SENSOR else self._sensor_flags  # the field itself, read in place
+        if self._flag_word is _UNKNOWN:
+            address = flags_address(self.model) if self.shared is None else None
+            self._flag_word = ctypes.c_int.from_address(address) if address is not None else None
+        word = self._flag_word
+        return None if word is None or word.value & SENSOR else ctypes.addressof(word)  # the field, read in place
 
     def remember_held_steps(self) -> StepMemo | None:
         """Turn on the memo of held steps (cotwin.pmodel.memo) for the native loop, on a simulator of its own
